@@ -1,0 +1,1 @@
+"""Controllers for flexctl plants: one module per controller family."""

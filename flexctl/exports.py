@@ -1,0 +1,107 @@
+"""Thin views of a :class:`~flexctl.model.Model` as python-control and CasADi objects.
+
+Both views evaluate the same equations as :meth:`Model.dynamics`; the tests pin them to it.
+The state, input and output orders are those of :mod:`flexctl.model`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["to_nonlinear_iosystem", "to_casadi", "to_casadi_outputs"]
+
+
+def to_nonlinear_iosystem(model):
+    """The model as a python-control ``NonlinearIOSystem``.
+
+    States :attr:`Model.state_names`, input ``torque`` (N m), outputs
+    :attr:`Model.output_names`. A state at which the mass matrix is singular raises
+    :class:`~flexctl.model.SingularMassMatrixError`.
+
+    Examples
+    --------
+    >>> from flexctl import load_scene, build_model
+    >>> sys = build_model(load_scene("kane-spinup").system, n_modes=2).nonlinear()
+    >>> sys.state_labels
+    ['theta', 'q1', 'q2', 'theta_dot', 'q1_dot', 'q2_dot']
+    """
+    import control
+
+    c_out = model.output_matrix
+
+    def updfcn(t, x, u, params):
+        return model.dynamics(t, x, np.asarray(u, dtype=float).reshape(-1)[0])
+
+    def outfcn(t, x, u, params):
+        return c_out @ np.asarray(x, dtype=float)
+
+    return control.nlsys(updfcn, outfcn, states=list(model.state_names),
+                         inputs=list(model.input_names), outputs=list(model.output_names),
+                         name=f"{model.variant}_N{model.n_modes}")
+
+
+def _symbolic_dynamics(model, x, u):
+    """CasADi expression of ``dx/dt`` in the symbols ``x`` (n,) and ``u`` (1,)."""
+    import casadi as ca
+
+    mat, n = model.matrices, model.n_modes
+    c = model._c
+    q, w, qd = x[1:n + 1], x[n + 1], x[n + 2:]
+    dm = ca.DM
+    f_beam = (-ca.mtimes(dm(mat.C_ff), qd) - ca.mtimes(dm(mat.K_ff), q)
+              + w ** 2 * ca.mtimes(dm(c["stiff_d"]), q))
+    f_hub = u[0] - model.system.hub.friction * w
+    j_eff = c["j_rigid_eff"]
+    if model.variant == "consistent":
+        d = dm(mat.D)
+        f_hub = f_hub - 2.0 * w * ca.dot(q, ca.mtimes(d, qd))
+        j_eff = j_eff + ca.dot(q, ca.mtimes(d, q))
+    g = dm(c["g"])
+    theta_tt = (f_hub - ca.dot(g, f_beam)) / j_eff
+    q_tt = ca.mtimes(dm(c["m_inv"]), f_beam) - g * theta_tt
+    return ca.vertcat(w, qd, theta_tt, q_tt)
+
+
+def to_casadi(model, sx: bool = True):
+    """The dynamics as a CasADi ``Function`` ``f(x, u) -> xdot``.
+
+    Parameters
+    ----------
+    model : Model
+    sx : bool, optional
+        Build on ``SX`` scalar symbols (default, fastest to evaluate for small models) or ``MX``.
+
+    Returns
+    -------
+    casadi.Function
+        Inputs ``x`` (n x 1) and ``u`` (1 x 1), output ``xdot`` (n x 1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from flexctl import load_scene, build_model
+    >>> model = build_model(load_scene("kane-spinup").system, n_modes=2)
+    >>> f = model.casadi()
+    >>> f.name_in(), f.name_out()
+    (['x', 'u'], ['xdot'])
+    >>> x = np.zeros(6)
+    >>> np.allclose(np.array(f(x, 1.0)).ravel(), model.dynamics(0.0, x, 1.0))
+    True
+    """
+    import casadi as ca
+
+    sym = ca.SX.sym if sx else ca.MX.sym
+    x = sym("x", model.n_states)
+    u = sym("u", 1)
+    return ca.Function(f"flexctl_{model.variant}_N{model.n_modes}", [x, u],
+                       [_symbolic_dynamics(model, x, u)], ["x", "u"], ["xdot"])
+
+
+def to_casadi_outputs(model, sx: bool = True):
+    """The outputs as a CasADi ``Function`` ``h(x) -> y`` (y in :attr:`Model.output_names`)."""
+    import casadi as ca
+
+    sym = ca.SX.sym if sx else ca.MX.sym
+    x = sym("x", model.n_states)
+    return ca.Function(f"flexctl_outputs_N{model.n_modes}", [x],
+                       [ca.mtimes(ca.DM(model.output_matrix), x)], ["x"], ["y"])

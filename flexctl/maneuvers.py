@@ -1,0 +1,108 @@
+"""Reference manoeuvres of MODEL.md section 5: spin-up and one-period sine torque.
+
+Each manoeuvre is a frozen dataclass that evaluates exactly at any time (no sampling) and lists
+its ``breakpoints``: the times where it is not smooth, at which the integrator restarts.
+
+Examples
+--------
+>>> from flexctl.maneuvers import SpinUp, SineTorque
+>>> spin = SpinUp(spin_rate=4.0, ramp_time=15.0)
+>>> float(spin.rate(15.0)), float(spin.rate(40.0))
+(4.0, 4.0)
+>>> push = SineTorque(peak_torque=50.0, duration=2.0)
+>>> float(push(0.5)), float(push(3.0))
+(50.0, 0.0)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .parameters import _real
+
+__all__ = ["SpinUp", "SineTorque"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class SpinUp:
+    """Prescribed spin-up of the hub (Kane, Ryan and Banerjee 1987).
+
+    ``theta = (w_s/T_s) [t^2/2 + (T_s/(2 pi))^2 (cos(2 pi t/T_s) - 1)]`` for ``t < T_s``,
+    ``theta = w_s (t - T_s/2)`` afterwards.
+
+    Parameters
+    ----------
+    spin_rate : float
+        Final hub rate ``w_s``, rad/s (finite, may be negative).
+    ramp_time : float
+        Ramp duration ``T_s``, s (> 0).
+    """
+
+    spin_rate: float
+    ramp_time: float
+
+    def __post_init__(self):
+        object.__setattr__(self, "spin_rate", _real("maneuver", "spin_rate", self.spin_rate))
+        object.__setattr__(self, "ramp_time", _real("maneuver", "ramp_time", self.ramp_time,
+                                                    minimum=0.0, strict=True))
+
+    @property
+    def breakpoints(self) -> tuple:
+        """Times (s) where the motion is not smooth."""
+        return (self.ramp_time,)
+
+    def angle(self, t):
+        """Hub angle ``theta(t)``, rad."""
+        t = np.asarray(t, dtype=float)
+        ws, ts = self.spin_rate, self.ramp_time
+        k = 2.0 * np.pi / ts
+        ramp = ws / ts * (0.5 * t ** 2 + (np.cos(k * t) - 1.0) / k ** 2)
+        return np.where(t < ts, ramp, ws * (t - 0.5 * ts))
+
+    def rate(self, t):
+        """Hub rate ``theta_t(t)``, rad/s."""
+        t = np.asarray(t, dtype=float)
+        ws, ts = self.spin_rate, self.ramp_time
+        k = 2.0 * np.pi / ts
+        return np.where(t < ts, ws / ts * (t - np.sin(k * t) / k), ws)
+
+    def acceleration(self, t):
+        """Hub acceleration ``theta_tt(t)``, rad/s^2."""
+        t = np.asarray(t, dtype=float)
+        ws, ts = self.spin_rate, self.ramp_time
+        return np.where(t < ts, ws / ts * (1.0 - np.cos(2.0 * np.pi * t / ts)), 0.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SineTorque:
+    """One period of sine torque: ``T_hm sin(2 pi t / T_m)`` for ``0 <= t <= T_m``, 0 after.
+
+    Parameters
+    ----------
+    peak_torque : float
+        Amplitude ``T_hm``, N m (finite).
+    duration : float
+        Period ``T_m``, s (> 0).
+    """
+
+    peak_torque: float
+    duration: float
+
+    def __post_init__(self):
+        object.__setattr__(self, "peak_torque",
+                           _real("maneuver", "peak_torque", self.peak_torque))
+        object.__setattr__(self, "duration", _real("maneuver", "duration", self.duration,
+                                                   minimum=0.0, strict=True))
+
+    @property
+    def breakpoints(self) -> tuple:
+        """Times (s) where the torque is not smooth."""
+        return (self.duration,)
+
+    def __call__(self, t):
+        """Torque at time(s) ``t``, N m."""
+        t = np.asarray(t, dtype=float)
+        on = (t >= 0.0) & (t <= self.duration)
+        return np.where(on, self.peak_torque * np.sin(2.0 * np.pi * t / self.duration), 0.0)

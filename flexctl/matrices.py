@@ -1,0 +1,170 @@
+"""Modal matrices of the hub-beam-mass system (MODEL.md section 3).
+
+Every integral is piecewise smooth: the tension ``n(x)`` steps at each point mass. The beam is
+cut at the mass positions and each piece is integrated with its own Gauss-Legendre rule, with
+enough points for the highest product of modes, so the steps cost no accuracy.
+
+Notes
+-----
+With ``N`` modes:
+
+========  =========  ==============================================================
+name      shape      meaning
+========  =========  ==============================================================
+J0        scalar     inertia of the undeformed system about O, kg m^2
+M_ff      (N, N)     modal mass, kg
+K_ff      (N, N)     modal bending stiffness (diagonal ``rhoA l omega_i^2``), N/m
+K_g       (N, N)     geometric stiffness per unit ``theta_t^2``, kg
+m_tf      (N,)       rigid-flexible inertia coupling, kg m
+C_ff      (N, N)     modal damping, N s/m
+D         (N, N)     ``M_ff - K_g``, kg
+tip       (N,)       ``phi_i(l)``, tip deflection per modal coordinate
+root      (N,)       ``EI phi_i''(0)``, root bending moment per modal coordinate, N
+========  =========  ==============================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from .modes import cantilever_roots, mode_shapes
+from .parameters import HubBeam
+
+__all__ = ["ModalMatrices", "assemble", "tension"]
+
+
+def tension(system: HubBeam, x) -> np.ndarray:
+    """Centrifugal tension per unit ``theta_t^2``, ``n(x)``, kg m.
+
+    Parameters
+    ----------
+    system : HubBeam
+    x : array_like
+        Positions along the beam, m. At a mass position the tension just outboard of the
+        mass is returned (the mass pulls on the part inboard of it).
+    """
+    x = np.asarray(x, dtype=float)
+    b, l, rho_a = system.hub.radius, system.beam.length, system.beam.linear_density
+    n = rho_a * (b * (l - x) + 0.5 * (l ** 2 - x ** 2))
+    for m in system.masses:
+        n = n + m.mass * (b + m.position) * (x < m.position)
+    return n
+
+
+def _quadrature(system: HubBeam, n_modes: int):
+    """Gauss-Legendre nodes (m) and weights over the beam, cut at every mass position."""
+    l = system.beam.length
+    cuts = sorted({0.0, l, *(m.position for m in system.masses)})
+    z_max = cantilever_roots(n_modes)[-1]
+    nodes, weights = [], []
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        if hi - lo <= 1e-12 * l:
+            continue
+        # products of two modes oscillate at up to 2 z_max / l rad/m; the exponential
+        # parts need a few extra points on short pieces.
+        n_points = int(np.ceil(z_max * (hi - lo) / l)) + 24
+        g, w = np.polynomial.legendre.leggauss(n_points)
+        nodes.append(0.5 * (hi - lo) * g + 0.5 * (hi + lo))
+        weights.append(0.5 * (hi - lo) * w)
+    return np.concatenate(nodes), np.concatenate(weights)
+
+
+@dataclass(frozen=True, eq=False)
+class ModalMatrices:
+    """Assembled modal matrices of a :class:`~flexctl.parameters.HubBeam` (read-only arrays).
+
+    Build with :func:`assemble`; see the module Notes for the symbols and shapes.
+    """
+
+    system: HubBeam
+    n_modes: int
+    roots: np.ndarray
+    clamped_frequencies: np.ndarray
+    J0: float
+    M_ff: np.ndarray
+    K_ff: np.ndarray
+    K_g: np.ndarray
+    m_tf: np.ndarray
+    C_ff: np.ndarray
+    tip: np.ndarray
+    root: np.ndarray
+
+    @property
+    def D(self) -> np.ndarray:
+        """``M_ff - K_g``: net softening minus stiffening per unit ``theta_t^2``, kg."""
+        return self.M_ff - self.K_g
+
+    def deflection_vector(self, position: float) -> np.ndarray:
+        """``phi_i(x)`` at ``position`` (m), so that ``y(x) = phi(x) @ q``. Shape (N,)."""
+        l = self.system.beam.length
+        if not 0.0 <= position <= l:
+            raise ValueError(f"position must lie in [0, beam.length = {l:g}]; got {position!r}")
+        return mode_shapes(self.n_modes, [position / l])[:, 0]
+
+
+def _freeze(*arrays):
+    for a in arrays:
+        a.setflags(write=False)
+
+
+@lru_cache(maxsize=64)
+def assemble(system: HubBeam, n_modes: int) -> ModalMatrices:
+    """Assemble (and cache) the modal matrices of ``system`` on ``n_modes`` cantilever modes.
+
+    Parameters
+    ----------
+    system : HubBeam
+    n_modes : int
+        Number of cantilever modes ``N`` (>= 1).
+
+    Returns
+    -------
+    ModalMatrices
+    """
+    if not isinstance(system, HubBeam):
+        raise TypeError(f"system must be a HubBeam; got {type(system).__name__}")
+    if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) or n_modes < 1:
+        raise ValueError(f"n_modes must be an integer >= 1; got {n_modes!r}")
+    n_modes = int(n_modes)
+    beam, b = system.beam, system.hub.radius
+    l, rho_a, ei = beam.length, beam.linear_density, beam.bending_stiffness
+    z = cantilever_roots(n_modes)
+    omega = z ** 2 * np.sqrt(ei / (rho_a * l ** 4))
+
+    x, w = _quadrature(system, n_modes)
+    phi = mode_shapes(n_modes, x / l)
+    dphi = mode_shapes(n_modes, x / l, derivative=1, length=l)
+
+    M_ff = rho_a * (phi * w) @ phi.T
+    m_tf = rho_a * phi @ (w * (b + x))
+    for m in system.masses:
+        phi_k = mode_shapes(n_modes, [m.position / l])[:, 0]
+        M_ff += m.mass * np.outer(phi_k, phi_k)
+        m_tf += m.mass * (b + m.position) * phi_k
+    K_g = (dphi * (w * tension(system, x))) @ dphi.T
+    M_ff = 0.5 * (M_ff + M_ff.T)
+    K_g = 0.5 * (K_g + K_g.T)
+    # Exact: EI int phi_i'' phi_j'' dx = EI z_i^4 / l^3 delta_ij = rhoA l omega_i^2 delta_ij.
+    K_ff = np.diag(rho_a * l * omega ** 2)
+
+    # Modal damping: ratio zeta on every clamped mode of the beam with its masses,
+    # C = M V diag(2 zeta w) V^T M with V the M-normalised eigenvectors of (K_ff, M_ff).
+    zeta = beam.damping_ratio
+    if zeta > 0.0:
+        from scipy.linalg import eigh
+        w2, vecs = eigh(K_ff, M_ff)
+        mv = M_ff @ vecs
+        C_ff = mv @ np.diag(2.0 * zeta * np.sqrt(np.maximum(w2, 0.0))) @ mv.T
+        C_ff = 0.5 * (C_ff + C_ff.T)
+    else:
+        C_ff = np.zeros((n_modes, n_modes))
+
+    tip = mode_shapes(n_modes, [1.0])[:, 0]
+    root = ei * mode_shapes(n_modes, [0.0], derivative=2, length=l)[:, 0]
+    _freeze(z, omega, M_ff, K_ff, K_g, m_tf, C_ff, tip, root)
+    return ModalMatrices(system=system, n_modes=n_modes, roots=z, clamped_frequencies=omega,
+                         J0=system.rigid_inertia, M_ff=M_ff, K_ff=K_ff, K_g=K_g, m_tf=m_tf,
+                         C_ff=C_ff, tip=tip, root=root)

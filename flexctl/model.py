@@ -1,0 +1,393 @@
+"""Finite-dimensional hub-beam-mass models: first_order, zero_order and consistent.
+
+The three variants share one assembly (:func:`flexctl.matrices.assemble`) and differ in a few
+terms (MODEL.md section 4):
+
+============  ===========================  ==========================================
+variant       beam stiffness at spin         hub equation
+============  ===========================  ==========================================
+first_order   ``K_ff - theta_t^2 (M_ff-K_g)``  ``J_0 theta_tt + m_tf^T q_tt``
+zero_order    ``K_ff - theta_t^2 M_ff``        same as first_order
+consistent    same as first_order            adds ``q^T D q theta_tt + 2 theta_t q^T D q_t``
+============  ===========================  ==========================================
+
+Notes
+-----
+State vector, ``n = 2 N + 2`` entries, in this order::
+
+    x = [theta, q_1 .. q_N, theta_dot, q_1_dot .. q_N_dot]
+
+with ``theta`` in rad, ``q_i`` in m (tip-normalised cantilever modes, ``phi_i(l) = +-2``),
+rates in rad/s and m/s. Input ``u = [torque]``, N m. Outputs, in this order::
+
+    y = [theta, theta_dot, tip_deflection, root_moment, tip_angle]
+
+(rad, rad/s, m, N m, rad), all linear in the state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from .matrices import ModalMatrices, assemble
+from .parameters import HubBeam
+
+__all__ = ["Model", "build_model", "VARIANTS", "SingularMassMatrixError"]
+
+VARIANTS = ("first_order", "zero_order", "consistent")
+OUTPUT_NAMES = ("theta", "theta_dot", "tip_deflection", "root_moment", "tip_angle")
+
+
+class SingularMassMatrixError(ArithmeticError):
+    """The mass matrix of the model is singular at the given state."""
+
+
+def _state_names(n_modes: int) -> tuple:
+    q = [f"q{i}" for i in range(1, n_modes + 1)]
+    return ("theta", *q, "theta_dot", *(f"{name}_dot" for name in q))
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """A hub-beam-mass model of one variant on ``n_modes`` cantilever modes.
+
+    Build with :func:`build_model`. See the module Notes for the order of states and outputs.
+
+    Attributes
+    ----------
+    system : HubBeam
+    n_modes : int
+    variant : str
+        ``"first_order"``, ``"zero_order"`` or ``"consistent"``.
+    matrices : ModalMatrices
+    state_names, input_names, output_names : tuple of str
+    """
+
+    system: HubBeam
+    n_modes: int
+    variant: str
+    matrices: ModalMatrices = field(repr=False)
+    state_names: tuple = field(init=False, repr=False)
+    input_names: tuple = field(init=False, repr=False, default=("torque",))
+    output_names: tuple = field(init=False, repr=False, default=OUTPUT_NAMES)
+
+    def __post_init__(self):
+        mat = self.matrices
+        object.__setattr__(self, "state_names", _state_names(self.n_modes))
+        stiff_d = mat.M_ff if self.variant == "zero_order" else mat.D
+        cho = scipy.linalg.cho_factor(mat.M_ff)
+        m_inv = scipy.linalg.cho_solve(cho, np.eye(self.n_modes))
+        m_inv = 0.5 * (m_inv + m_inv.T)
+        g = m_inv @ mat.m_tf
+        cache = {
+            "stiff_d": stiff_d,                       # D of the beam stiffness term
+            "m_inv": m_inv,                           # M_ff^-1
+            "g": g,                                   # M_ff^-1 m_tf
+            "j_rigid_eff": mat.J0 - mat.m_tf @ g,     # Schur complement at q = 0
+            "c_out": self._output_matrix(),
+        }
+        for a in cache.values():
+            if isinstance(a, np.ndarray):
+                a.setflags(write=False)
+        object.__setattr__(self, "_c", cache)
+
+    # ------------------------------------------------------------------ basics
+    @property
+    def n_states(self) -> int:
+        """Number of states ``2 N + 2``."""
+        return 2 * self.n_modes + 2
+
+    def __repr__(self):
+        return (f"Model(variant={self.variant!r}, n_modes={self.n_modes}, "
+                f"J0={self.matrices.J0:.6g} kg m^2, "
+                f"omega_1={self.matrices.clamped_frequencies[0]:.6g} rad/s)")
+
+    def split(self, x):
+        """Split a state (shape (n,) or (n, P)) into ``theta, q, theta_dot, q_dot``."""
+        x = np.asarray(x, dtype=float)
+        n = self.n_modes
+        return x[0], x[1:n + 1], x[n + 1], x[n + 2:]
+
+    def _check_state(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        if x.shape[:1] != (self.n_states,):
+            raise ValueError(f"state must have shape ({self.n_states},) for {self.n_modes} "
+                             f"modes; got {x.shape}")
+        return x
+
+    # ------------------------------------------------------------------ dynamics
+    def effective_hub_inertia(self, x) -> np.ndarray:
+        """Schur complement ``J(q) - m_tf^T M_ff^-1 m_tf`` of the mass matrix, kg m^2.
+
+        The mass matrix is singular where it reaches 0. Constant except for the consistent
+        variant, where ``J(q) = J_0 + q^T D q``. Accepts shape (n,) or (n, P).
+        """
+        x = self._check_state(x)
+        j = self._c["j_rigid_eff"]
+        if self.variant != "consistent":
+            return np.full(x.shape[1:], j) if x.ndim > 1 else np.float64(j)
+        q = x[1:self.n_modes + 1]
+        return j + np.einsum("i...,ij,j...->...", q, self.matrices.D, q)
+
+    def mass_matrix(self, x) -> np.ndarray:
+        """Mass matrix ``[[J(q), m_tf^T], [m_tf, M_ff]]`` at state ``x``, shape (N+1, N+1)."""
+        x = self._check_state(x)
+        mat = self.matrices
+        j = mat.J0
+        if self.variant == "consistent":
+            q = x[1:self.n_modes + 1]
+            j = j + q @ mat.D @ q
+        top = np.concatenate(([j], mat.m_tf))
+        return np.vstack((top, np.column_stack((mat.m_tf, mat.M_ff))))
+
+    def _forces(self, x, torque):
+        """Generalised forces ``f_hub`` (scalar or (P,)) and ``f_beam`` ((N,) or (N, P))."""
+        mat, c = self.matrices, self._c
+        _, q, w, qd = self.split(x)
+        f_beam = -(mat.C_ff @ qd) - mat.K_ff @ q + w ** 2 * (c["stiff_d"] @ q)
+        f_hub = torque - self.system.hub.friction * w
+        if self.variant == "consistent":
+            f_hub = f_hub - 2.0 * w * np.einsum("i...,ij,j...->...", q, mat.D, qd)
+        return f_hub, f_beam
+
+    def accelerations(self, x, torque):
+        """Hub and modal accelerations ``theta_tt`` (rad/s^2) and ``q_tt`` (m/s^2).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+        torque : float or array_like, shape (P,)
+            Hub torque, N m.
+
+        Raises
+        ------
+        SingularMassMatrixError
+            If the effective hub inertia is not positive (consistent variant, light hub).
+        """
+        x = self._check_state(x)
+        c = self._c
+        f_hub, f_beam = self._forces(x, torque)
+        j_eff = self.effective_hub_inertia(x)
+        if np.any(j_eff <= 0.0):
+            raise SingularMassMatrixError(
+                f"mass matrix is singular: effective hub inertia {np.min(j_eff):.3g} kg m^2 <= 0")
+        theta_tt = (f_hub - c["g"] @ f_beam) / j_eff
+        q_tt = c["m_inv"] @ f_beam - np.multiply.outer(c["g"], theta_tt)
+        return theta_tt, q_tt
+
+    def dynamics(self, t, x, u) -> np.ndarray:
+        """State derivative ``dx/dt`` (python-control argument order, ``params`` omitted).
+
+        Parameters
+        ----------
+        t : float
+            Time, s (the model is time-invariant).
+        x : array_like, shape (n,) or (n, P)
+        u : float or array_like, shape (1,) or (P,)
+            Hub torque, N m.
+
+        Returns
+        -------
+        ndarray, same shape as ``x``
+        """
+        x = self._check_state(x)
+        u = np.asarray(u, dtype=float)
+        torque = u.reshape(()) if u.size == 1 and x.ndim == 1 else u
+        theta_tt, q_tt = self.accelerations(x, torque)
+        n = self.n_modes
+        return np.concatenate((x[n + 1:], np.expand_dims(theta_tt, 0), q_tt), axis=0)
+
+    def beam_accelerations(self, q, q_dot, theta_dot, theta_tt):
+        """Modal accelerations under prescribed hub motion, m/s^2, shape (N,) or (N, P).
+
+        ``M_ff q_tt + C_ff q_t + (K_ff - theta_t^2 D) q = -m_tf theta_tt``.
+        """
+        mat, c = self.matrices, self._c
+        f_beam = -(mat.C_ff @ q_dot) - mat.K_ff @ q + theta_dot ** 2 * (c["stiff_d"] @ q)
+        return c["m_inv"] @ (f_beam - np.multiply.outer(mat.m_tf, theta_tt))
+
+    def hub_torque(self, x, theta_tt, q_tt):
+        """Torque that produces the given accelerations at state ``x`` (the hub equation), N m."""
+        x = self._check_state(x)
+        mat = self.matrices
+        _, q, w, qd = self.split(x)
+        j = mat.J0
+        torque = j * theta_tt + mat.m_tf @ q_tt + self.system.hub.friction * w
+        if self.variant == "consistent":
+            qdq = np.einsum("i...,ij,j...->...", q, mat.D, q)
+            torque = torque + qdq * theta_tt + 2.0 * w * np.einsum(
+                "i...,ij,j...->...", q, mat.D, qd)
+        return torque
+
+    # ------------------------------------------------------------------ outputs and energy
+    def _output_matrix(self) -> np.ndarray:
+        mat, n = self.matrices, self.n_modes
+        c_out = np.zeros((len(OUTPUT_NAMES), 2 * n + 2))
+        c_out[0, 0] = 1.0
+        c_out[1, n + 1] = 1.0
+        c_out[2, 1:n + 1] = mat.tip
+        c_out[3, 1:n + 1] = mat.root
+        c_out[4, 0] = 1.0
+        c_out[4, 1:n + 1] = mat.tip / (self.system.hub.radius + self.system.beam.length)
+        return c_out
+
+    @property
+    def output_matrix(self) -> np.ndarray:
+        """``C`` such that ``y = C x`` for the outputs :attr:`output_names`, shape (5, n)."""
+        return self._c["c_out"]
+
+    def outputs(self, x) -> np.ndarray:
+        """Outputs at state(s) ``x`` (shape (n,) or (n, P)); shape (5,) or (5, P)."""
+        return self.output_matrix @ self._check_state(x)
+
+    def deflection(self, x, position: float) -> np.ndarray:
+        """Beam deflection ``y(position)`` in the hub frame, m, at state(s) ``x``."""
+        x = self._check_state(x)
+        return self.matrices.deflection_vector(position) @ x[1:self.n_modes + 1]
+
+    def energy(self, x) -> np.ndarray:
+        """Mechanical energy of the consistent model, J (MODEL.md section 4).
+
+        ``E = 1/2 theta_t^2 (J_0 + q^T D q) + theta_t m_tf^T q_t + 1/2 q_t^T M_ff q_t
+        + 1/2 q^T K_ff q``; conserved by the consistent variant when unforced and undamped.
+        """
+        x = self._check_state(x)
+        mat = self.matrices
+        _, q, w, qd = self.split(x)
+        qf = lambda a, m, b: np.einsum("i...,ij,j...->...", a, m, b)  # noqa: E731
+        return (0.5 * w ** 2 * (mat.J0 + qf(q, mat.D, q)) + w * (mat.m_tf @ qd)
+                + 0.5 * qf(qd, mat.M_ff, qd) + 0.5 * qf(q, mat.K_ff, q))
+
+    # ------------------------------------------------------------------ linear analysis
+    def stiffness_matrix(self, spin_rate: float = 0.0) -> np.ndarray:
+        """Beam stiffness at a steady spin, ``K_ff - spin_rate^2 D``, N/m, shape (N, N)."""
+        spin_rate = _spin(spin_rate)
+        return self.matrices.K_ff - spin_rate ** 2 * self._c["stiff_d"]
+
+    def linear_matrices(self, spin_rate: float = 0.0):
+        """``A`` (n, n) and ``B`` (n, 1) of the linearisation about a steady spin (``q = 0``)."""
+        spin_rate = _spin(spin_rate)
+        mat, n = self.matrices, self.n_modes
+        mass = self.mass_matrix(np.zeros(self.n_states))
+        stiff = np.zeros((n + 1, n + 1))
+        stiff[1:, 1:] = self.stiffness_matrix(spin_rate)
+        damp = np.zeros((n + 1, n + 1))
+        damp[0, 0] = self.system.hub.friction
+        damp[1:, 1:] = mat.C_ff
+        m_inv_k = np.linalg.solve(mass, np.hstack((stiff, damp, np.eye(n + 1)[:, :1])))
+        a = np.zeros((self.n_states, self.n_states))
+        a[:n + 1, n + 1:] = np.eye(n + 1)
+        a[n + 1:, :n + 1] = -m_inv_k[:, :n + 1]
+        a[n + 1:, n + 1:] = -m_inv_k[:, n + 1:2 * n + 2]
+        b = np.zeros((self.n_states, 1))
+        b[n + 1:, 0] = m_inv_k[:, -1]
+        return a, b
+
+    def natural_frequencies(self, spin_rate: float = 0.0, hub: str = "clamped") -> np.ndarray:
+        """Undamped natural frequencies at a steady spin, rad/s, ascending, shape (N,).
+
+        Parameters
+        ----------
+        spin_rate : float
+            Steady hub rate ``Omega``, rad/s.
+        hub : {"clamped", "free"}
+            ``"clamped"``: the hub held at constant rate (eigenvalues of
+            ``(K_ff - Omega^2 D, M_ff)``). ``"free"``: the hub free to rotate; the rigid-body
+            mode at 0 is left out.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            A mode that has lost its stiffness (zero_order above its first clamped frequency)
+            is returned as a negative number whose magnitude is its exponential growth rate, 1/s.
+        """
+        stiff = self.stiffness_matrix(spin_rate)
+        if hub == "clamped":
+            lam = scipy.linalg.eigh(stiff, self.matrices.M_ff, eigvals_only=True)
+        elif hub == "free":
+            n = self.n_modes
+            full = np.zeros((n + 1, n + 1))
+            full[1:, 1:] = stiff
+            lam = scipy.linalg.eigh(full, self.mass_matrix(np.zeros(self.n_states)),
+                                    eigvals_only=True)
+            lam = np.delete(lam, np.argmin(np.abs(lam)))
+        else:
+            raise ValueError(f"hub must be 'clamped' or 'free'; got {hub!r}")
+        return np.sort(np.sign(lam) * np.sqrt(np.abs(lam)))
+
+    def linearize(self, spin_rate: float = 0.0):
+        """Linear plant about a steady spin, as a python-control ``StateSpace``.
+
+        Parameters
+        ----------
+        spin_rate : float
+            Steady hub rate ``Omega`` (rad/s) about which the model is linearised, ``q = 0``.
+
+        Returns
+        -------
+        control.StateSpace
+            States :attr:`state_names`, input ``torque``, outputs :attr:`output_names`.
+        """
+        import control
+
+        a, b = self.linear_matrices(spin_rate)
+        return control.ss(a, b, self.output_matrix, np.zeros((len(OUTPUT_NAMES), 1)),
+                          states=list(self.state_names), inputs=list(self.input_names),
+                          outputs=list(self.output_names),
+                          name=f"{self.variant}_N{self.n_modes}_spin{float(spin_rate):g}")
+
+    # ------------------------------------------------------------------ exports
+    def nonlinear(self):
+        """Nonlinear plant as a python-control ``NonlinearIOSystem`` (see :mod:`flexctl.exports`)."""
+        from .exports import to_nonlinear_iosystem
+        return to_nonlinear_iosystem(self)
+
+    def casadi(self):
+        """Dynamics as a CasADi ``Function`` ``(x, u) -> dx/dt`` (see :mod:`flexctl.exports`)."""
+        from .exports import to_casadi
+        return to_casadi(self)
+
+
+def _spin(spin_rate) -> float:
+    if isinstance(spin_rate, bool) or not np.isscalar(spin_rate) or not np.isfinite(spin_rate):
+        raise ValueError(f"spin_rate must be a finite number (rad/s); got {spin_rate!r}")
+    return float(spin_rate)
+
+
+def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order") -> Model:
+    """Build a hub-beam-mass model.
+
+    Parameters
+    ----------
+    system : HubBeam
+    n_modes : int, optional
+        Number of cantilever modes ``N`` (1 to 200). Default 4.
+    variant : {"first_order", "zero_order", "consistent"}, optional
+        Default ``"first_order"`` (with dynamic stiffening).
+
+    Returns
+    -------
+    Model
+
+    Examples
+    --------
+    >>> from flexctl import Hub, Beam, HubBeam, build_model
+    >>> kane = HubBeam(hub=Hub(inertia=300.0, radius=0.5),
+    ...                beam=Beam(length=8.0, density=2766.67, area=7.2968e-5,
+    ...                          second_moment=8.2189e-9, youngs_modulus=6.8952e10))
+    >>> model = build_model(kane, n_modes=3)
+    >>> model.natural_frequencies().round(2)
+    array([ 2.91, 18.24, 51.08])
+    """
+    if variant not in VARIANTS:
+        raise ValueError(f"variant must be one of {', '.join(VARIANTS)}; got {variant!r}")
+    if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) \
+            or not 1 <= n_modes <= 200:
+        raise ValueError(f"n_modes must be an integer in [1, 200]; got {n_modes!r}")
+    if not isinstance(system, HubBeam):
+        raise TypeError(f"system must be a HubBeam; got {type(system).__name__}")
+    return Model(system=system, n_modes=int(n_modes), variant=variant,
+                 matrices=assemble(system, int(n_modes)))

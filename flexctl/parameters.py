@@ -1,0 +1,197 @@
+"""Physical parameters of a hub-beam-mass system.
+
+Frozen, keyword-friendly dataclasses validated on construction. SI units throughout.
+Derive variants with :func:`dataclasses.replace`, which re-runs the validation.
+
+Examples
+--------
+>>> from flexctl import Hub, Beam, PointMass, HubBeam
+>>> system = HubBeam(
+...     hub=Hub(inertia=1.16, radius=0.06),
+...     beam=Beam(length=1.8, density=2766.0, area=2.5e-4,
+...               second_moment=1.3021e-10, youngs_modulus=6.9e10),
+...     masses=(PointMass(mass=0.085, position=1.62),),
+... )
+>>> round(system.beam.linear_density, 4)
+0.6915
+>>> Hub(inertia=-1.0, radius=0.0)
+Traceback (most recent call last):
+...
+ValueError: hub.inertia must be finite and >= 0; got -1.0
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from numbers import Real
+
+__all__ = ["Hub", "Beam", "PointMass", "HubBeam"]
+
+
+def _real(owner: str, name: str, value, *, minimum: float | None = None,
+          strict: bool = False, maximum: float | None = None) -> float:
+    """Check that ``value`` is a finite real number within bounds and return it as float."""
+    label = f"{owner}.{name}"
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise TypeError(f"{label} must be a real number; got {value!r} of type "
+                        f"{type(value).__name__}")
+    value = float(value)
+    rule = "finite"
+    if minimum is not None:
+        rule += f" and {'>' if strict else '>='} {minimum:g}"
+    if maximum is not None:
+        rule += f" and <= {maximum:g}"
+    ok = math.isfinite(value)
+    if ok and minimum is not None:
+        ok = value > minimum if strict else value >= minimum
+    if ok and maximum is not None:
+        ok = value <= maximum
+    if not ok:
+        raise ValueError(f"{label} must be {rule}; got {value!r}")
+    return value
+
+
+@dataclass(frozen=True, kw_only=True)
+class Hub:
+    """Rigid hub rotating about the fixed axis O.
+
+    Parameters
+    ----------
+    inertia : float
+        Moment of inertia ``J_h`` of the hub alone about O, kg m^2. May be 0 (massless hub).
+    radius : float
+        Radius ``b`` at which the beam is clamped, m. May be 0.
+    friction : float, optional
+        Viscous friction coefficient ``c_h`` of the hub bearing, N m s/rad. Default 0.
+    """
+
+    inertia: float
+    radius: float
+    friction: float = 0.0
+
+    def __post_init__(self):
+        for name in ("inertia", "radius", "friction"):
+            object.__setattr__(self, name, _real("hub", name, getattr(self, name), minimum=0.0))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Beam:
+    """Uniform Euler-Bernoulli cantilever clamped radially to the hub.
+
+    Parameters
+    ----------
+    length : float
+        Length ``l``, m (> 0).
+    density : float
+        Material density ``rho``, kg/m^3 (> 0).
+    area : float
+        Cross-section area ``A``, m^2 (> 0).
+    second_moment : float
+        Second moment of area ``I`` about the bending axis, m^4 (> 0).
+    youngs_modulus : float
+        Young's modulus ``E``, Pa (> 0).
+    damping_ratio : float, optional
+        Modal damping ratio ``zeta`` of every clamped mode, in ``[0, 1)``. Default 0.
+    """
+
+    length: float
+    density: float
+    area: float
+    second_moment: float
+    youngs_modulus: float
+    damping_ratio: float = 0.0
+
+    def __post_init__(self):
+        for name in ("length", "density", "area", "second_moment", "youngs_modulus"):
+            object.__setattr__(self, name, _real("beam", name, getattr(self, name),
+                                                 minimum=0.0, strict=True))
+        zeta = _real("beam", "damping_ratio", self.damping_ratio, minimum=0.0)
+        if zeta >= 1.0:
+            raise ValueError(f"beam.damping_ratio must be finite and in [0, 1); got {zeta!r}")
+        object.__setattr__(self, "damping_ratio", zeta)
+
+    @property
+    def linear_density(self) -> float:
+        """Mass per unit length ``rhoA``, kg/m."""
+        return self.density * self.area
+
+    @property
+    def bending_stiffness(self) -> float:
+        """Flexural rigidity ``EI``, N m^2."""
+        return self.youngs_modulus * self.second_moment
+
+    @property
+    def mass(self) -> float:
+        """Total beam mass ``rhoA l``, kg."""
+        return self.linear_density * self.length
+
+
+@dataclass(frozen=True, kw_only=True)
+class PointMass:
+    """Point mass carried by the beam.
+
+    Parameters
+    ----------
+    mass : float
+        Mass ``m_k``, kg (>= 0).
+    position : float
+        Distance ``d_k`` from the beam root, m, in ``[0, length]`` (checked by :class:`HubBeam`).
+    """
+
+    mass: float
+    position: float
+
+    def __post_init__(self):
+        object.__setattr__(self, "mass", _real("mass", "mass", self.mass, minimum=0.0))
+        object.__setattr__(self, "position",
+                           _real("mass", "position", self.position, minimum=0.0))
+
+
+@dataclass(frozen=True, kw_only=True)
+class HubBeam:
+    """A hub carrying a cantilever beam with any number of point masses.
+
+    Parameters
+    ----------
+    hub : Hub
+    beam : Beam
+    masses : tuple of PointMass, optional
+        Point masses on the beam, each at a position in ``[0, beam.length]``. Any iterable is
+        accepted and stored as a tuple sorted by position.
+    """
+
+    hub: Hub
+    beam: Beam
+    masses: tuple = field(default=())
+
+    def __post_init__(self):
+        if not isinstance(self.hub, Hub):
+            raise TypeError(f"system.hub must be a Hub; got {type(self.hub).__name__}")
+        if not isinstance(self.beam, Beam):
+            raise TypeError(f"system.beam must be a Beam; got {type(self.beam).__name__}")
+        try:
+            masses = tuple(self.masses)
+        except TypeError:
+            raise TypeError("system.masses must be an iterable of PointMass; got "
+                            f"{type(self.masses).__name__}") from None
+        for k, m in enumerate(masses):
+            if not isinstance(m, PointMass):
+                raise TypeError(f"system.masses[{k}] must be a PointMass; got "
+                                f"{type(m).__name__}")
+            if m.position > self.beam.length:
+                raise ValueError(f"system.masses[{k}].position must lie in [0, beam.length = "
+                                 f"{self.beam.length:g}]; got {m.position!r}")
+        object.__setattr__(self, "masses", tuple(sorted(masses, key=lambda m: m.position)))
+
+    @property
+    def total_point_mass(self) -> float:
+        """Sum of the point masses, kg."""
+        return sum(m.mass for m in self.masses)
+
+    @property
+    def rigid_inertia(self) -> float:
+        """Inertia ``J_0`` of the undeformed system about O, kg m^2 (MODEL.md section 2)."""
+        b, l = self.hub.radius, self.beam.length
+        return (self.hub.inertia + self.beam.linear_density * ((b + l) ** 3 - b ** 3) / 3.0
+                + sum(m.mass * (b + m.position) ** 2 for m in self.masses))

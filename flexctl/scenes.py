@@ -1,0 +1,331 @@
+"""Scenes: a system, a model choice, a manoeuvre and simulation settings in one TOML file.
+
+Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as shown)::
+
+    description = "free text"            # optional
+
+    [hub]                                # Hub fields
+    inertia = 1.16
+    radius = 0.06
+    friction = 0.0                       # optional
+
+    [beam]                               # Beam fields
+    length = 1.8
+    density = 2766.0
+    area = 2.5e-4
+    second_moment = 1.3021e-10
+    youngs_modulus = 6.9e10
+    damping_ratio = 0.0                  # optional
+
+    [[masses]]                           # any number, optional
+    mass = 0.085
+    position = 1.62
+
+    [model]
+    variant = "first_order"              # first_order | zero_order | consistent
+    modes = 4
+
+    [maneuver]
+    kind = "sine_torque"                 # peak_torque, duration
+    # kind = "spin_up"                   # spin_rate, ramp_time
+
+    [simulation]
+    t_final = 20.0
+    output_step = 0.01                   # optional
+    rtol = 1e-8                          # optional
+    method = "DOP853"                    # optional
+
+Unknown keys and bad values raise :class:`SceneError` naming the key.
+
+Examples
+--------
+>>> from flexctl import load_scene
+>>> scene = load_scene("kane-spinup", overrides={"maneuver.spin_rate": "10"})
+>>> scene.maneuver
+SpinUp(spin_rate=10.0, ramp_time=15.0)
+"""
+
+from __future__ import annotations
+
+import copy
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+from .maneuvers import SineTorque, SpinUp
+from .model import VARIANTS, Model, build_model
+from .parameters import Beam, Hub, HubBeam, PointMass
+from .simulation import SimulationResult, simulate
+
+__all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "load_scene", "parse_scene",
+           "builtin_scenes", "run_scene"]
+
+_MANEUVERS = {"spin_up": SpinUp, "sine_torque": SineTorque}
+_SCHEMA = {
+    "description": None,
+    "hub": {"inertia", "radius", "friction"},
+    "beam": {"length", "density", "area", "second_moment", "youngs_modulus", "damping_ratio"},
+    "masses": {"mass", "position"},
+    "model": {"variant", "modes"},
+    "maneuver": {"kind", "spin_rate", "ramp_time", "peak_torque", "duration"},
+    "simulation": {"t_final", "output_step", "rtol", "method"},
+}
+_MANEUVER_KEYS = {"spin_up": {"spin_rate", "ramp_time"},
+                  "sine_torque": {"peak_torque", "duration"}}
+
+
+class SceneError(ValueError):
+    """A scene file or override is malformed; the message names the key."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class ModelSpec:
+    """Which model a scene uses: ``variant`` and number of modes ``modes``."""
+
+    variant: str = "first_order"
+    modes: int = 4
+
+    def __post_init__(self):
+        if self.variant not in VARIANTS:
+            raise SceneError(f"model.variant must be one of {', '.join(VARIANTS)}; "
+                             f"got {self.variant!r}")
+        if isinstance(self.modes, bool) or not isinstance(self.modes, int) \
+                or not 1 <= self.modes <= 200:
+            raise SceneError(f"model.modes must be an integer in [1, 200]; got {self.modes!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimulationSpec:
+    """Simulation settings of a scene (see :func:`flexctl.simulate`)."""
+
+    t_final: float
+    output_step: float | None = None
+    rtol: float = 1e-8
+    method: str = "DOP853"
+
+    def __post_init__(self):
+        for key in ("t_final", "output_step", "rtol"):
+            value = getattr(self, key)
+            if key == "output_step" and value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0 \
+                    or value != value or value == float("inf"):
+                raise SceneError(f"simulation.{key} must be a positive finite number; "
+                                 f"got {value!r}")
+        if not self.rtol < 1:
+            raise SceneError(f"simulation.rtol must be < 1; got {self.rtol!r}")
+        methods = ("DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+        if self.method not in methods:
+            raise SceneError(f"simulation.method must be one of {', '.join(methods)}; "
+                             f"got {self.method!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scene:
+    """A validated scene.
+
+    Attributes
+    ----------
+    name : str
+    system : HubBeam
+    model : ModelSpec
+    maneuver : SpinUp or SineTorque
+    simulation : SimulationSpec
+    description : str
+    data : dict
+        The scene's table form (after overrides), as it would be written to TOML.
+    """
+
+    name: str
+    system: HubBeam
+    model: ModelSpec
+    maneuver: object
+    simulation: SimulationSpec
+    description: str = ""
+    data: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def build_model(self) -> Model:
+        """The model this scene asks for."""
+        return build_model(self.system, n_modes=self.model.modes, variant=self.model.variant)
+
+
+def builtin_scenes() -> dict:
+    """Built-in scenes shipped with the package: ``{name: description}``."""
+    out = {}
+    for entry in sorted(resources.files("flexctl.builtin_scenes").iterdir(), key=str):
+        if entry.name.endswith(".toml"):
+            data = tomllib.loads(entry.read_text())
+            out[entry.name[:-5]] = data.get("description", "")
+    return out
+
+
+def _set_dotted(data: dict, path: str, value):
+    """Set ``data[a][b]... = value`` for the dotted ``path``; list items by index.
+
+    A string ``value`` is read as a TOML value when it is one (``"10"`` -> 10).
+    """
+    if not isinstance(path, str) or not path or any(not p for p in path.split(".")):
+        raise SceneError(f"override key {path!r} is not a dotted path like maneuver.spin_rate")
+    if isinstance(value, str):
+        try:
+            value = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            pass
+    parts = path.split(".")
+    node = data
+    for depth, key in enumerate(parts[:-1]):
+        where = ".".join(parts[:depth + 1])
+        if isinstance(node, list):
+            if not key.isdigit() or int(key) >= len(node):
+                raise SceneError(f"override key {path!r}: {where} is not an index of a list of "
+                                 f"{len(node)}")
+            node = node[int(key)]
+        else:
+            if key not in node:
+                if key not in _SCHEMA or _SCHEMA[key] is None:
+                    raise SceneError(f"override key {path!r}: unknown table {key!r}")
+                node[key] = [] if key == "masses" else {}
+            node = node[key]
+    last = parts[-1]
+    if isinstance(node, list):
+        raise SceneError(f"override key {path!r} must index an item of the list, "
+                         f"e.g. masses.0.mass")
+    node[last] = value
+
+
+def _table(data: dict, name: str, required: bool = True) -> dict:
+    table = data.get(name)
+    if table is None:
+        if required:
+            raise SceneError(f"scene is missing the [{name}] table")
+        return {}
+    if not isinstance(table, dict):
+        raise SceneError(f"scene key {name!r} must be a table; got {type(table).__name__}")
+    return table
+
+
+def _construct(cls, key: str, kwargs: dict):
+    try:
+        return cls(**kwargs)
+    except SceneError:
+        raise
+    except (ValueError, TypeError) as exc:
+        msg = str(exc)
+        for prefix in ("hub.", "beam.", "mass.", "maneuver."):
+            if msg.startswith(prefix):
+                msg = msg[len(prefix):]
+        raise SceneError(f"{key}.{msg}") from None
+
+
+def parse_scene(data: dict, name: str = "scene") -> Scene:
+    """Validate a scene given as nested dictionaries (the TOML tables).
+
+    Raises
+    ------
+    SceneError
+        On an unknown key, a missing table or key, or a bad value; the message names the key.
+    """
+    data = copy.deepcopy(data)
+    for key in data:
+        if key not in _SCHEMA:
+            raise SceneError(f"unknown scene key {key!r}; expected one of "
+                             f"{', '.join(sorted(_SCHEMA))}")
+    for key, allowed in _SCHEMA.items():
+        if allowed is None or key not in data:
+            continue
+        items = data[key]
+        if key == "masses":
+            if not isinstance(items, list):
+                raise SceneError("scene key 'masses' must be an array of tables [[masses]]")
+            tables = [(f"masses.{k}", t) for k, t in enumerate(items)]
+        else:
+            tables = [(key, _table(data, key))]
+        for where, table in tables:
+            if not isinstance(table, dict):
+                raise SceneError(f"scene key {where!r} must be a table")
+            for sub in table:
+                if sub not in allowed:
+                    raise SceneError(f"unknown scene key '{where}.{sub}'; expected one of "
+                                     f"{', '.join(sorted(allowed))}")
+
+    hub = _construct(Hub, "hub", _table(data, "hub"))
+    beam = _construct(Beam, "beam", _table(data, "beam"))
+    masses = [_construct(PointMass, f"masses.{k}", t) for k, t in
+              enumerate(data.get("masses", []))]
+    for k, m in enumerate(masses):
+        if m.position > beam.length:
+            raise SceneError(f"masses.{k}.position must lie in [0, beam.length = "
+                             f"{beam.length:g}]; got {m.position!r}")
+    system = HubBeam(hub=hub, beam=beam, masses=masses)
+    model = _construct(ModelSpec, "model", _table(data, "model", required=False))
+
+    maneuver_table = dict(_table(data, "maneuver"))
+    kind = maneuver_table.pop("kind", None)
+    if kind not in _MANEUVERS:
+        raise SceneError(f"maneuver.kind must be one of {', '.join(_MANEUVERS)}; got {kind!r}")
+    for key in maneuver_table:
+        if key not in _MANEUVER_KEYS[kind]:
+            raise SceneError(f"maneuver.{key} does not apply to kind {kind!r}; expected "
+                             f"{', '.join(sorted(_MANEUVER_KEYS[kind]))}")
+    missing = _MANEUVER_KEYS[kind] - set(maneuver_table)
+    if missing:
+        raise SceneError(f"maneuver.{sorted(missing)[0]} is required for kind {kind!r}")
+    maneuver = _construct(_MANEUVERS[kind], "maneuver", maneuver_table)
+
+    sim_table = _table(data, "simulation")
+    if "t_final" not in sim_table:
+        raise SceneError("simulation.t_final is required")
+    simulation = _construct(SimulationSpec, "simulation", sim_table)
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise SceneError(f"description must be a string; got {description!r}")
+    return Scene(name=name, system=system, model=model, maneuver=maneuver,
+                 simulation=simulation, description=description, data=data)
+
+
+def load_scene(source, overrides: dict | None = None) -> Scene:
+    """Load a scene from a TOML file or a built-in name, with optional overrides.
+
+    Parameters
+    ----------
+    source : str or path-like
+        A path to a ``.toml`` file, or the name of a built-in scene (:func:`builtin_scenes`).
+    overrides : dict, optional
+        ``{"dotted.key": value}``; string values are read as TOML values (``"10"`` -> 10,
+        ``"zero_order"`` stays a string), e.g. ``{"maneuver.spin_rate": "10"}``.
+
+    Returns
+    -------
+    Scene
+    """
+    path = Path(source)
+    if path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise SceneError(f"scene file {str(path)!r} does not exist")
+        try:
+            data = tomllib.loads(path.read_text())
+        except tomllib.TOMLDecodeError as exc:
+            raise SceneError(f"scene file {str(path)!r} is not valid TOML: {exc}") from None
+        name = path.stem
+    else:
+        names = builtin_scenes()
+        if str(source) not in names:
+            raise SceneError(f"scene {str(source)!r} is neither a file nor a built-in scene "
+                             f"({', '.join(names)})")
+        name = str(source)
+        data = tomllib.loads(
+            resources.files("flexctl.builtin_scenes").joinpath(f"{name}.toml").read_text())
+    for key, value in (overrides or {}).items():
+        _set_dotted(data, key, value)
+    return parse_scene(data, name=name)
+
+
+def run_scene(scene: Scene) -> SimulationResult:
+    """Simulate a scene with the model and settings it names."""
+    model = scene.build_model()
+    sim = scene.simulation
+    drive = ({"hub_motion": scene.maneuver} if isinstance(scene.maneuver, SpinUp)
+             else {"torque": scene.maneuver})
+    return simulate(model, sim.t_final, rtol=sim.rtol, method=sim.method,
+                    output_step=sim.output_step, **drive)

@@ -1,0 +1,444 @@
+"""Time simulation of a hub-beam-mass model with error-controlled integration.
+
+Three ways to drive the hub, combined as follows:
+
+- ``torque``: a function of time ``f(t)`` or of time and state ``f(t, x)``, N m;
+- ``controller``: feedback, a callable ``(t, x) -> torque`` or an object following
+  :class:`Controller` (with internal states, e.g. an estimator); its torque adds to ``torque``;
+- ``hub_motion``: a prescribed ``theta(t)`` with ``rate(t)`` and ``acceleration(t)`` (e.g.
+  :class:`~flexctl.maneuvers.SpinUp`); only the beam equation is integrated and the result
+  carries the torque the motion needs. Excludes the other two.
+
+Inputs are evaluated at the integrator's own times (never sampled and interpolated), and the
+integration restarts at every ``breakpoints`` time an input declares (where it is not smooth).
+
+A run stops early, and says so in ``status`` and ``message``, when
+
+- the tip deflection passes the beam length (``"diverged"``): the small-deflection model has
+  left its domain, with the physical reason when known (e.g. the zero_order model spinning
+  above its first clamped frequency);
+- the mass matrix turns singular (``"singular"``): the effective hub inertia of the consistent
+  variant reaches zero (a light hub);
+- the integrator fails (``"diverged"``, with the integrator's message).
+
+The arrays of a stopped run end at the stop time; they never hold NaN or overflowed values.
+"""
+
+from __future__ import annotations
+
+import inspect
+import time
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .model import Model, SingularMassMatrixError
+
+__all__ = ["simulate", "SimulationResult", "Controller"]
+
+#: Integration stops as "singular" when the effective hub inertia falls below this fraction
+#: of the rigid inertia J_0 (the exact singularity cannot be integrated up to).
+SINGULAR_FRACTION = 1e-9
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """Feedback law with optional internal states ``z`` (e.g. an estimator).
+
+    Attributes
+    ----------
+    n_states : int
+        Number of internal states (0 for a static law).
+    """
+
+    n_states: int
+
+    def initial_state(self, x0: np.ndarray) -> np.ndarray:
+        """Internal state at ``t = 0`` given the plant's initial state, shape (n_states,)."""
+
+    def torque(self, t: float, x: np.ndarray, z: np.ndarray) -> float:
+        """Hub torque (N m) at time ``t`` for plant state ``x`` and internal state ``z``."""
+
+    def derivative(self, t: float, x: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """``dz/dt``, shape (n_states,)."""
+
+
+@dataclass(frozen=True)
+class _StaticFeedback:
+    law: object
+    n_states: int = 0
+
+    def initial_state(self, x0):
+        return np.zeros(0)
+
+    def torque(self, t, x, z):
+        return self.law(t, x)
+
+    def derivative(self, t, x, z):
+        return np.zeros(0)
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """Outcome of :func:`simulate`.
+
+    Attributes
+    ----------
+    model : Model
+    t : ndarray, shape (P,)
+        Output times, s.
+    states : ndarray, shape (n, P)
+        Plant states in the order of :attr:`Model.state_names`.
+    torque : ndarray, shape (P,)
+        Hub torque, N m (the torque the prescribed motion needs, for ``hub_motion`` runs).
+    tip_deflection, root_moment : ndarray, shape (P,)
+        m and N m.
+    status : {"ok", "diverged", "singular"}
+    message : str
+        Why the run stopped, with the time and the physical reason.
+    wall_time : float
+        Integration wall time, s.
+    n_evaluations : int
+        Number of right-hand-side evaluations.
+    controller_states : ndarray, shape (n_z, P)
+    """
+
+    model: Model
+    t: np.ndarray
+    states: np.ndarray
+    torque: np.ndarray
+    tip_deflection: np.ndarray
+    root_moment: np.ndarray
+    status: str
+    message: str
+    wall_time: float
+    n_evaluations: int
+    method: str
+    rtol: float
+    controller_states: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    @property
+    def ok(self) -> bool:
+        """True when the run reached ``t_final``."""
+        return self.status == "ok"
+
+    @property
+    def theta(self) -> np.ndarray:
+        """Hub angle, rad, shape (P,)."""
+        return self.states[0]
+
+    @property
+    def theta_dot(self) -> np.ndarray:
+        """Hub rate, rad/s, shape (P,)."""
+        return self.states[self.model.n_modes + 1]
+
+    @property
+    def q(self) -> np.ndarray:
+        """Modal coordinates, m, shape (N, P)."""
+        return self.states[1:self.model.n_modes + 1]
+
+    @property
+    def outputs(self) -> dict:
+        """Every model output by name (:attr:`Model.output_names`), each shape (P,)."""
+        y = self.model.outputs(self.states)
+        return dict(zip(self.model.output_names, y))
+
+    @property
+    def peak_tip_deflection(self) -> float:
+        """Largest ``|tip_deflection|``, m."""
+        return float(np.max(np.abs(self.tip_deflection))) if self.t.size else 0.0
+
+    def __repr__(self):
+        return (f"SimulationResult(status={self.status!r}, t_end={self.t[-1]:.6g} s, "
+                f"points={self.t.size}, peak_tip_deflection={self.peak_tip_deflection:.6g} m, "
+                f"wall_time={self.wall_time:.3g} s)")
+
+
+def _time_function(func, name):
+    """Wrap ``func(t)`` or ``func(t, x)`` as ``g(t, x)``."""
+    if not callable(func):
+        raise TypeError(f"{name} must be callable as {name}(t) or {name}(t, x); "
+                        f"got {type(func).__name__}")
+    try:
+        params = inspect.signature(func).parameters.values()
+        n_required = sum(1 for p in params if p.default is p.empty
+                         and p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD))
+    except (TypeError, ValueError):
+        n_required = 1
+    if n_required >= 2:
+        return lambda t, x: float(func(t, x))
+    if n_required <= 1:
+        return lambda t, x: float(func(t))
+    raise TypeError(f"{name} must take (t) or (t, x)")  # pragma: no cover
+
+
+def _breakpoints(*sources):
+    points = set()
+    for src in sources:
+        points.update(float(b) for b in getattr(src, "breakpoints", ()) or ())
+    return sorted(points)
+
+
+def _default_atol(model: Model, rtol: float, prescribed: bool) -> np.ndarray:
+    """Absolute tolerances scaled to each state's physical size."""
+    n, l = model.n_modes, model.system.beam.length
+    w1 = float(model.matrices.clamped_frequencies[0])
+    q_scale = 1e-3 * l
+    angle = [1e-3] if not prescribed else []
+    rate = [1e-3 * max(w1, 1.0)] if not prescribed else []
+    return rtol * np.array(angle + [q_scale] * n + rate + [q_scale * max(w1, 1.0)] * n)
+
+
+def _stiffness_reason(model: Model, spin: float) -> str:
+    stiff = model.stiffness_matrix(spin)
+    lowest = np.linalg.eigvalsh(stiff)[0]
+    w1 = float(model.matrices.clamped_frequencies[0])
+    if lowest < 0.0:
+        extra = (" (the zero_order model drops dynamic stiffening; use first_order)"
+                 if model.variant == "zero_order" else "")
+        return (f"at hub rate {abs(spin):.4g} rad/s, above the first clamped frequency "
+                f"{w1:.4g} rad/s, the beam stiffness K_ff - theta_dot^2 D has lost positive "
+                f"definiteness and centrifugal softening wins over bending stiffness{extra}")
+    return ("the deflection left the small-deflection range of the model "
+            f"(hub rate {abs(spin):.4g} rad/s, first clamped frequency {w1:.4g} rad/s)")
+
+
+def simulate(model: Model, t_final: float, torque=None, hub_motion=None, controller=None,
+             x0=None, *, rtol: float = 1e-8, atol=None, method: str = "DOP853",
+             output_step: float | None = None, max_step: float = np.inf) -> SimulationResult:
+    """Simulate the nonlinear model.
+
+    Parameters
+    ----------
+    model : Model
+    t_final : float
+        End time, s (> 0).
+    torque : callable, optional
+        Hub torque ``torque(t)`` or ``torque(t, x)``, N m. Default 0.
+    hub_motion : object, optional
+        Prescribed hub motion with methods ``angle(t)``, ``rate(t)``, ``acceleration(t)``
+        (rad, rad/s, rad/s^2), e.g. :class:`~flexctl.maneuvers.SpinUp`.
+    controller : callable or Controller, optional
+        Feedback torque ``controller(t, x)`` or a :class:`Controller` object.
+    x0 : array_like, shape (n,), optional
+        Initial plant state; default rest at zero. With ``hub_motion`` its hub entries are
+        ignored (the motion fixes them).
+    rtol : float, optional
+        Relative tolerance of the error-controlled integrator. Default 1e-8.
+    atol : float or array_like, optional
+        Absolute tolerance; default ``rtol`` times each state's physical scale.
+    method : str, optional
+        A ``scipy.integrate.solve_ivp`` method: ``"DOP853"`` (default), ``"RK45"``,
+        ``"Radau"``, ``"BDF"``, ``"LSODA"``.
+    output_step : float, optional
+        Spacing of the output times, s. Default: the integrator's own steps.
+    max_step : float, optional
+        Largest integration step, s.
+
+    Returns
+    -------
+    SimulationResult
+
+    Examples
+    --------
+    >>> from flexctl import load_scene, build_model, simulate
+    >>> from flexctl.maneuvers import SineTorque
+    >>> model = build_model(load_scene("spacecraft-torque").system, n_modes=4)
+    >>> result = simulate(model, 10.0, torque=SineTorque(peak_torque=50.0, duration=2.0))
+    >>> result.status, round(result.peak_tip_deflection, 2)
+    ('ok', 0.42)
+    """
+    if not isinstance(model, Model):
+        raise TypeError(f"model must be a flexctl Model; got {type(model).__name__}")
+    if isinstance(t_final, bool) or not np.isscalar(t_final) or not np.isfinite(t_final) \
+            or t_final <= 0:
+        raise ValueError(f"t_final must be a positive finite time (s); got {t_final!r}")
+    if not (np.isscalar(rtol) and np.isfinite(rtol) and 1e-14 <= rtol < 1):
+        raise ValueError(f"rtol must lie in [1e-14, 1); got {rtol!r}")
+    if hub_motion is not None and (torque is not None or controller is not None):
+        raise ValueError("hub_motion prescribes the hub: it cannot be combined with torque or "
+                         "controller")
+    if hub_motion is not None:
+        for attr in ("angle", "rate", "acceleration"):
+            if not callable(getattr(hub_motion, attr, None)):
+                raise TypeError(f"hub_motion must have a callable {attr}(t); got "
+                                f"{type(hub_motion).__name__}")
+    if output_step is not None and not (np.isscalar(output_step) and np.isfinite(output_step)
+                                        and output_step > 0):
+        raise ValueError(f"output_step must be a positive time (s); got {output_step!r}")
+    valid_methods = ("DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+    if method not in valid_methods:
+        raise ValueError(f"method must be one of {', '.join(valid_methods)}; got {method!r}")
+
+    n, nx = model.n_modes, model.n_states
+    x_init = np.zeros(nx) if x0 is None else np.array(x0, dtype=float).reshape(-1)
+    if x_init.shape != (nx,) or not np.all(np.isfinite(x_init)):
+        raise ValueError(f"x0 must be {nx} finite numbers (states {', '.join(model.state_names)})"
+                         f"; got {x0!r}")
+
+    torque_fn = _time_function(torque, "torque") if torque is not None else None
+    if controller is not None and not isinstance(controller, Controller):
+        if not callable(controller):
+            raise TypeError("controller must be callable as controller(t, x) or follow the "
+                            f"flexctl Controller protocol; got {type(controller).__name__}")
+        controller = _StaticFeedback(controller)
+    nz = controller.n_states if controller is not None else 0
+    prescribed = hub_motion is not None
+    mat = model.matrices
+    length = model.system.beam.length
+    tip = mat.tip
+
+    if prescribed:
+        beam_slice = np.r_[1:n + 1, n + 2:nx]
+        y_init = x_init[beam_slice]
+
+        def rhs(t, y):
+            q, qd = y[:n], y[n:]
+            qdd = model.beam_accelerations(q, qd, float(hub_motion.rate(t)),
+                                           float(hub_motion.acceleration(t)))
+            return np.concatenate((qd, qdd))
+
+        def plant_state(t, y):
+            t = np.asarray(t)
+            return np.concatenate((np.atleast_2d(hub_motion.angle(t)), y[:n][None] if y.ndim == 1
+                                   else y[:n], np.atleast_2d(hub_motion.rate(t)),
+                                   y[n:][None] if y.ndim == 1 else y[n:]), axis=0)
+    else:
+        z_init = (np.asarray(controller.initial_state(x_init), dtype=float).reshape(-1)
+                  if controller is not None else np.zeros(0))
+        if z_init.shape != (nz,):
+            raise ValueError(f"controller.initial_state must return {nz} values; got "
+                             f"shape {z_init.shape}")
+        y_init = np.concatenate((x_init, z_init))
+
+        def applied_torque(t, x, z):
+            u = torque_fn(t, x) if torque_fn is not None else 0.0
+            if controller is not None:
+                u += float(controller.torque(t, x, z))
+            return u
+
+        def rhs(t, y):
+            x, z = y[:nx], y[nx:]
+            u = applied_torque(t, x, z)
+            dx = model.dynamics(t, x, u)
+            if nz:
+                return np.concatenate((dx, controller.derivative(t, x, z)))
+            return dx
+
+        def plant_state(t, y):
+            return y[:nx]
+
+    def tip_event(t, y):
+        q = y[:n] if prescribed else y[1:n + 1]
+        return length - abs(tip @ q)
+    tip_event.terminal = True
+
+    events = [tip_event]
+    if model.variant == "consistent" and not prescribed:
+        j_floor = SINGULAR_FRACTION * mat.J0
+
+        def singular_event(t, y):
+            return float(model.effective_hub_inertia(y[:nx])) - j_floor
+        singular_event.terminal = True
+        events.append(singular_event)
+
+    if atol is None:
+        atol_vec = _default_atol(model, rtol, prescribed)
+        atol_vec = np.concatenate((atol_vec, np.full(nz, rtol * 1e-3)))
+    else:
+        atol_vec = atol
+
+    cuts = [0.0] + [b for b in _breakpoints(torque, hub_motion, controller)
+                    if 0.0 < b < t_final] + [float(t_final)]
+    grid = None
+    if output_step is not None:
+        grid = np.arange(0.0, t_final + 0.5 * output_step, output_step)
+        grid = grid[grid <= t_final]
+        if grid[-1] < t_final:
+            grid = np.append(grid, t_final)
+
+    status, message = "ok", f"reached t_final = {float(t_final):g} s"
+    ts, ys = [np.array([0.0])], [y_init[:, None]]
+    n_eval = 0
+    y = y_init
+    start = time.perf_counter()
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        t_eval = None
+        if grid is not None:
+            t_eval = grid[(grid > lo) & (grid <= hi)]
+            if t_eval.size == 0 or t_eval[-1] < hi:
+                t_eval = np.append(t_eval, hi)
+        try:
+            with np.errstate(over="raise", invalid="raise"):
+                sol = solve_ivp(rhs, (lo, hi), y, method=method, t_eval=t_eval, rtol=rtol,
+                                atol=atol_vec, events=events, max_step=max_step)
+        except SingularMassMatrixError as exc:
+            status, message = "singular", str(exc)
+            break
+        except FloatingPointError as exc:
+            status = "diverged"
+            message = f"the state overflowed between t = {lo:.6g} s and {hi:.6g} s ({exc})"
+            break
+        n_eval += sol.nfev
+        t_seg, y_seg = sol.t, sol.y
+        hits = [(float(te[0]), k, ye[0]) for k, (te, ye) in
+                enumerate(zip(sol.t_events, sol.y_events)) if te.size]
+        stop_time = None
+        if hits:
+            stop_time, kind, y_stop = min(hits, key=lambda h: h[0])
+            before = t_seg < stop_time
+            t_seg = np.append(t_seg[before], stop_time)
+            y_seg = np.column_stack((y_seg[:, before], y_stop))
+            status = "diverged" if kind == 0 else "singular"
+        if t_seg.size:
+            ts.append(t_seg)
+            ys.append(y_seg)
+        if stop_time is not None:
+            break
+        if sol.status != 0:
+            status = "diverged"
+            message = f"integration failed at t = {sol.t[-1]:.6g} s: {sol.message}"
+            break
+        y = sol.y[:, -1]
+    wall = time.perf_counter() - start
+
+    t_all = np.concatenate(ts)
+    y_all = np.concatenate(ys, axis=1)
+    keep = np.concatenate(([True], np.diff(t_all) > 0))
+    t_all, y_all = t_all[keep], y_all[:, keep]
+    finite = np.all(np.isfinite(y_all), axis=0)
+    if not finite.all():
+        first_bad = int(np.argmin(finite))
+        t_all, y_all = t_all[:first_bad], y_all[:, :first_bad]
+        status = "diverged"
+        message = f"the state became non-finite after t = {t_all[-1]:.6g} s"
+    states = np.asarray(plant_state(t_all, y_all))
+    z_all = y_all[nx:] if not prescribed else np.zeros((0, t_all.size))
+
+    if prescribed:
+        acc = hub_motion.acceleration(t_all)
+        qdd = model.beam_accelerations(states[1:n + 1], states[n + 2:], states[n + 1], acc)
+        torque_out = model.hub_torque(states, acc, qdd)
+    else:
+        torque_out = np.array([applied_torque(t, states[:, k], z_all[:, k])
+                               for k, t in enumerate(t_all)])
+
+    t_end = float(t_all[-1])
+    if status == "diverged" and message.startswith("reached"):
+        spin = float(states[n + 1, -1])
+        message = (f"tip deflection passed the beam length {length:g} m at t = {t_end:.6g} s: "
+                   + _stiffness_reason(model, spin))
+    elif status == "singular" and (message.startswith("reached") or "effective" in message):
+        j_eff = float(model.effective_hub_inertia(states[:, -1]))
+        message = (f"mass matrix singular at t = {t_end:.6g} s: the effective hub inertia "
+                   f"J_0 + q^T D q - m_tf^T M_ff^-1 m_tf fell to {j_eff:.3g} kg m^2 "
+                   f"(J_0 = {mat.J0:.4g} kg m^2); in the consistent model the deflection "
+                   "lowers the hub inertia, and a light hub loses all of it")
+
+    return SimulationResult(model=model, t=t_all, states=states, torque=np.asarray(torque_out,
+                            dtype=float).reshape(-1), tip_deflection=tip @ states[1:n + 1],
+                            root_moment=mat.root @ states[1:n + 1], status=status,
+                            message=message, wall_time=wall, n_evaluations=int(n_eval),
+                            method=method, rtol=float(rtol), controller_states=z_all)
