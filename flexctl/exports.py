@@ -62,6 +62,18 @@ def _symbolic_dynamics(model, x, u):
     return ca.vertcat(w, qd, theta_tt, q_tt)
 
 
+def _symbolic_beam_dynamics(model, y, rate, acceleration):
+    """CasADi ``d[q, q_dot]/dt`` under prescribed hub ``rate`` and ``acceleration``."""
+    import casadi as ca
+
+    mat, n = model.matrices, model.n_modes
+    q, qd = y[:n], y[n:]
+    dm = ca.DM
+    f_beam = (-ca.mtimes(dm(mat.C_ff), qd) - ca.mtimes(dm(mat.K_ff), q)
+              + rate ** 2 * ca.mtimes(dm(model._c["stiff_d"]), q) - dm(mat.m_tf) * acceleration)
+    return ca.vertcat(qd, ca.mtimes(dm(model._c["m_inv"]), f_beam))
+
+
 def to_casadi(model, sx: bool = True):
     """The dynamics as a CasADi ``Function`` ``f(x, u) -> xdot``.
 

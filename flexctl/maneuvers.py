@@ -74,6 +74,16 @@ class SpinUp:
         ws, ts = self.spin_rate, self.ramp_time
         return np.where(t < ts, ws / ts * (1.0 - np.cos(2.0 * np.pi * t / ts)), 0.0)
 
+    def casadi(self, t):
+        """Rate and acceleration as CasADi expressions of the symbol ``t``."""
+        import casadi as ca
+
+        ws, ts = self.spin_rate, self.ramp_time
+        k = 2.0 * np.pi / ts
+        rate = ca.if_else(t < ts, ws / ts * (t - ca.sin(k * t) / k), ws)
+        acceleration = ca.if_else(t < ts, ws / ts * (1.0 - ca.cos(k * t)), 0.0)
+        return rate, acceleration
+
 
 @dataclass(frozen=True, kw_only=True)
 class SineTorque:
@@ -106,3 +116,10 @@ class SineTorque:
         t = np.asarray(t, dtype=float)
         on = (t >= 0.0) & (t <= self.duration)
         return np.where(on, self.peak_torque * np.sin(2.0 * np.pi * t / self.duration), 0.0)
+
+    def casadi(self, t):
+        """The torque as a CasADi expression of the symbol ``t``."""
+        import casadi as ca
+
+        on = ca.logic_and(t >= 0.0, t <= self.duration)
+        return ca.if_else(on, self.peak_torque * ca.sin(2.0 * np.pi * t / self.duration), 0.0)

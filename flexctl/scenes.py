@@ -33,7 +33,7 @@ Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as sh
     t_final = 20.0
     output_step = 0.01                   # optional
     rtol = 1e-8                          # optional
-    method = "DOP853"                    # optional
+    method = "auto"                      # optional: auto | cvodes | a solve_ivp method
 
 Unknown keys and bad values raise :class:`SceneError` naming the key.
 
@@ -56,7 +56,7 @@ from pathlib import Path
 from .maneuvers import SineTorque, SpinUp
 from .model import VARIANTS, Model, build_model
 from .parameters import Beam, Hub, HubBeam, PointMass
-from .simulation import SimulationResult, simulate
+from .simulation import METHODS, SimulationResult, simulate
 
 __all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "load_scene", "parse_scene",
            "builtin_scenes", "run_scene"]
@@ -102,7 +102,7 @@ class SimulationSpec:
     t_final: float
     output_step: float | None = None
     rtol: float = 1e-8
-    method: str = "DOP853"
+    method: str = "auto"
 
     def __post_init__(self):
         for key in ("t_final", "output_step", "rtol"):
@@ -115,9 +115,8 @@ class SimulationSpec:
                                  f"got {value!r}")
         if not self.rtol < 1:
             raise SceneError(f"simulation.rtol must be < 1; got {self.rtol!r}")
-        methods = ("DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
-        if self.method not in methods:
-            raise SceneError(f"simulation.method must be one of {', '.join(methods)}; "
+        if self.method not in METHODS:
+            raise SceneError(f"simulation.method must be one of {', '.join(METHODS)}; "
                              f"got {self.method!r}")
 
 

@@ -34,6 +34,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from .compiled import SegmentIntegrator, is_symbolic
 from .model import Model, SingularMassMatrixError
 
 __all__ = ["simulate", "SimulationResult", "Controller"]
@@ -41,6 +42,13 @@ __all__ = ["simulate", "SimulationResult", "Controller"]
 #: Integration stops as "singular" when the effective hub inertia falls below this fraction
 #: of the rigid inertia J_0 (the exact singularity cannot be integrated up to).
 SINGULAR_FRACTION = 1e-9
+
+#: Integration methods: "auto" (CVODES when every input has a CasADi form, else DOP853),
+#: "cvodes" (compiled, :mod:`flexctl.compiled`) and the ``scipy.integrate.solve_ivp`` methods.
+METHODS = ("auto", "cvodes", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+
+#: Output samples over the run when no ``output_step`` is given.
+DEFAULT_OUTPUT_POINTS = 2000
 
 
 @runtime_checkable
@@ -206,7 +214,7 @@ def _stiffness_reason(model: Model, spin: float) -> str:
 
 
 def simulate(model: Model, t_final: float, torque=None, hub_motion=None, controller=None,
-             x0=None, *, rtol: float = 1e-8, atol=None, method: str = "DOP853",
+             x0=None, *, rtol: float = 1e-8, atol=None, method: str = "auto",
              output_step: float | None = None, max_step: float = np.inf) -> SimulationResult:
     """Simulate the nonlinear model.
 
@@ -230,10 +238,12 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     atol : float or array_like, optional
         Absolute tolerance; default ``rtol`` times each state's physical scale.
     method : str, optional
-        A ``scipy.integrate.solve_ivp`` method: ``"DOP853"`` (default), ``"RK45"``,
-        ``"Radau"``, ``"BDF"``, ``"LSODA"``.
+        ``"auto"`` (default): ``"cvodes"`` when every input has a CasADi form (the built-in
+        manoeuvres), else ``"DOP853"``. ``"cvodes"``: compiled SUNDIALS integration
+        (:mod:`flexctl.compiled`); or a ``scipy.integrate.solve_ivp`` method (``"DOP853"``,
+        ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``).
     output_step : float, optional
-        Spacing of the output times, s. Default: the integrator's own steps.
+        Spacing of the output times, s. Default: ``t_final / 2000``.
     max_step : float, optional
         Largest integration step, s.
 
@@ -268,9 +278,15 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     if output_step is not None and not (np.isscalar(output_step) and np.isfinite(output_step)
                                         and output_step > 0):
         raise ValueError(f"output_step must be a positive time (s); got {output_step!r}")
-    valid_methods = ("DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
-    if method not in valid_methods:
-        raise ValueError(f"method must be one of {', '.join(valid_methods)}; got {method!r}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+    symbolic = is_symbolic(torque, hub_motion, controller)
+    if method == "cvodes" and not symbolic:
+        raise ValueError("method 'cvodes' needs inputs with a CasADi form (the built-in "
+                         "manoeuvres, controllers with casadi_torque); got a Python callable")
+    if method == "auto":
+        method = "cvodes" if symbolic else "DOP853"
+    fallback = "DOP853" if method == "cvodes" else method
 
     n, nx = model.n_modes, model.n_states
     x_init = np.zeros(nx) if x0 is None else np.array(x0, dtype=float).reshape(-1)
@@ -336,8 +352,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     tip_event.terminal = True
 
     events = [tip_event]
+    j_floor = SINGULAR_FRACTION * mat.J0
     if model.variant == "consistent" and not prescribed:
-        j_floor = SINGULAR_FRACTION * mat.J0
 
         def singular_event(t, y):
             return float(model.effective_hub_inertia(y[:nx])) - j_floor
@@ -348,16 +364,25 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         atol_vec = _default_atol(model, rtol, prescribed)
         atol_vec = np.concatenate((atol_vec, np.full(nz, rtol * 1e-3)))
     else:
-        atol_vec = atol
+        atol_vec = np.broadcast_to(np.asarray(atol, dtype=float), (y_init.size,)).copy()
+        if not np.all(np.isfinite(atol_vec)) or np.any(atol_vec <= 0):
+            raise ValueError(f"atol must be positive and finite; got {atol!r}")
 
     cuts = [0.0] + [b for b in _breakpoints(torque, hub_motion, controller)
                     if 0.0 < b < t_final] + [float(t_final)]
-    grid = None
-    if output_step is not None:
-        grid = np.arange(0.0, t_final + 0.5 * output_step, output_step)
-        grid = grid[grid <= t_final]
-        if grid[-1] < t_final:
-            grid = np.append(grid, t_final)
+    step = output_step if output_step is not None else t_final / DEFAULT_OUTPUT_POINTS
+    grid = np.arange(0.0, t_final + 0.5 * step, step)
+    grid = grid[grid <= t_final]
+    if grid[-1] < t_final:
+        grid = np.append(grid, t_final)
+
+    def first_bad_sample(y_seg):
+        """Index of the first output sample past a stopping condition, or None."""
+        q = y_seg[:n] if prescribed else y_seg[1:n + 1]
+        bad = ~np.all(np.isfinite(y_seg), axis=0) | (np.abs(tip @ q) >= length)
+        if len(events) > 1:
+            bad |= np.asarray(model.effective_hub_inertia(y_seg[:nx])) <= j_floor
+        return int(np.argmax(bad)) if bad.any() else None
 
     status, message = "ok", f"reached t_final = {float(t_final):g} s"
     ts, ys = [np.array([0.0])], [y_init[:, None]]
@@ -365,14 +390,34 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     y = y_init
     start = time.perf_counter()
     for lo, hi in zip(cuts[:-1], cuts[1:]):
-        t_eval = None
-        if grid is not None:
-            t_eval = grid[(grid > lo) & (grid <= hi)]
-            if t_eval.size == 0 or t_eval[-1] < hi:
-                t_eval = np.append(t_eval, hi)
+        t_eval = grid[(grid > lo) & (grid <= hi)]
+        if t_eval.size == 0 or t_eval[-1] < hi:
+            t_eval = np.append(t_eval, hi)
+        if method == "cvodes":
+            try:
+                integ = SegmentIntegrator(model, lo, t_eval, atol_vec / rtol, rtol,
+                                          torque=torque, hub_motion=hub_motion,
+                                          controller=controller)
+                y_seg = integ(y)
+                n_eval += integ.n_evaluations
+                bad = first_bad_sample(y_seg)
+            except RuntimeError:
+                y_seg, bad = None, 0
+            if bad is None:
+                ts.append(t_eval)
+                ys.append(y_seg)
+                y = y_seg[:, -1]
+                continue
+            # Something stops the run in this segment: find where, exactly, with SciPy
+            # from the last good sample.
+            if bad > 0:
+                ts.append(t_eval[:bad])
+                ys.append(y_seg[:, :bad])
+                lo, y = float(t_eval[bad - 1]), y_seg[:, bad - 1]
+            t_eval = t_eval[bad:]
         try:
             with np.errstate(over="raise", invalid="raise"):
-                sol = solve_ivp(rhs, (lo, hi), y, method=method, t_eval=t_eval, rtol=rtol,
+                sol = solve_ivp(rhs, (lo, hi), y, method=fallback, t_eval=t_eval, rtol=rtol,
                                 atol=atol_vec, events=events, max_step=max_step)
         except SingularMassMatrixError as exc:
             status, message = "singular", str(exc)
@@ -382,7 +427,9 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             message = f"the state overflowed between t = {lo:.6g} s and {hi:.6g} s ({exc})"
             break
         n_eval += sol.nfev
-        t_seg, y_seg = sol.t, sol.y
+        # (solve_ivp hands back lists when an event fires before the first output time)
+        t_seg = np.asarray(sol.t, dtype=float)
+        y_seg = np.asarray(sol.y, dtype=float).reshape(y.size, t_seg.size)
         hits = [(float(te[0]), k, ye[0]) for k, (te, ye) in
                 enumerate(zip(sol.t_events, sol.y_events)) if te.size]
         stop_time = None

@@ -1,0 +1,238 @@
+"""Command line: ``flexctl run``, ``flexctl scenes``, ``flexctl demo``.
+
+::
+
+    flexctl run SCENE [--set key=value ...] [--out DIR]
+    flexctl scenes
+    flexctl demo [--out DIR]
+    flexctl --version
+
+``SCENE`` is a TOML file or the name of a built-in scene; ``--set`` overrides one value by its
+dotted path (``--set maneuver.spin_rate=10 --set model.variant=zero_order``), the value read as
+TOML. ``run`` writes ``timeseries.csv``, ``summary.json`` and ``response.png`` into ``DIR``
+(default ``flexctl-out/<scene name>``), see :mod:`flexctl.report`.
+
+Exit status: 0 when every run reached its final time (for ``demo``: when every run ended as
+expected), 3 when a run stopped early (diverged or singular; its files are still written), 2 on
+bad input (one line on stderr starting ``flexctl: error:``).
+
+Examples
+--------
+>>> from flexctl.cli import main
+>>> main(["--version"])
+flexctl 0.1.0
+0
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .report import format_summary, write_demo_report, write_run
+from .scenes import SceneError, builtin_scenes, load_scene, run_scene
+
+__all__ = ["main", "parse_overrides", "EXIT_OK", "EXIT_BAD_INPUT", "EXIT_STOPPED"]
+
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2
+EXIT_STOPPED = 3
+PROG = "flexctl"
+DEFAULT_RUN_DIR = Path("flexctl-out")
+DEFAULT_DEMO_DIR = Path("flexctl-demo")
+#: Errors of loading or running a scene that are the user's input, reported in one line.
+INPUT_ERRORS = (SceneError, ValueError, TypeError, FileNotFoundError)
+
+#: Demo runs besides the built-in scenes: (label, scene, overrides, expected status).
+DEMO_COMPARISONS = (
+    ("kane-spinup-zero_order", "kane-spinup", {"model.variant": "zero_order"}, "diverged"),
+)
+DEMO_INTRO = (
+    "Every built-in scene run with its default settings, and the Kane spin-up once more with "
+    "the zero_order model. zero_order leaves out dynamic stiffening (the centrifugal tension "
+    "of the beam), so once the hub rate passes the first clamped frequency of the beam its "
+    "stiffness K_ff - Omega^2 M_ff is no longer positive and the deflection grows without "
+    "bound: that run is expected to diverge.")
+DEMO_FREQUENCY_NOTE = (
+    "Kane beam, hub clamped at a steady spin rate. first_order and consistent share the beam "
+    "stiffness K_ff - Omega^2 (M_ff - K_g), so their curves lie on each other and rise with "
+    "the spin (dynamic stiffening); zero_order softens and its first frequency reaches zero "
+    "where the spin equals the first clamped frequency. Values below zero are modes without "
+    "stiffness, drawn as minus their growth rate (1/s).")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with errors in one line, like the rest of the command line."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f"{PROG}: error: {message} (see '{self.prog} --help')\n")
+
+
+def _error(message) -> int:
+    text = " ".join(str(message).split()) or type(message).__name__
+    print(f"{PROG}: error: {text}", file=sys.stderr)
+    return EXIT_BAD_INPUT
+
+
+def parse_overrides(settings) -> dict:
+    """``["a.b=1", ...]`` from ``--set`` to ``{"a.b": "1"}`` (values stay text for load_scene).
+
+    Raises
+    ------
+    ValueError
+        If a setting has no ``=``.
+
+    Examples
+    --------
+    >>> parse_overrides(["model.variant=zero_order", "maneuver.spin_rate = 10"])
+    {'model.variant': 'zero_order', 'maneuver.spin_rate': '10'}
+    """
+    out = {}
+    for item in settings or ():
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ValueError(f"--set expects key=value, e.g. --set maneuver.spin_rate=10; "
+                             f"got {item!r}")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=PROG, description="Simulate rigid-flexible hub-beam-mass scenes.")
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    run = commands.add_parser("run", help="simulate one scene and write its files",
+                              description="Simulate a scene; write timeseries.csv, "
+                              "summary.json and response.png. Exit 0 when the run reached "
+                              "its final time, 3 when it stopped (diverged or singular), "
+                              "2 on bad input.")
+    run.add_argument("scene", metavar="SCENE", help="TOML file or built-in scene name "
+                     "(see 'flexctl scenes')")
+    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                     help="override a scene value by its dotted path, value read as TOML, "
+                     "e.g. --set model.variant=zero_order (repeatable)")
+    run.add_argument("--out", metavar="DIR", type=Path,
+                     help=f"output directory (default {DEFAULT_RUN_DIR}/<scene name>)")
+    run.set_defaults(func=_cmd_run)
+
+    scenes = commands.add_parser("scenes", help="list the built-in scenes")
+    scenes.set_defaults(func=_cmd_scenes)
+
+    demo = commands.add_parser("demo", help="run every built-in scene and write a report",
+                               description="Run every built-in scene and the Kane spin-up "
+                               "with the zero_order model; write each run's files and "
+                               "report.md.")
+    demo.add_argument("--out", metavar="DIR", type=Path, default=DEFAULT_DEMO_DIR,
+                      help=f"output directory (default {DEFAULT_DEMO_DIR})")
+    demo.set_defaults(func=_cmd_demo)
+    return parser
+
+
+class _InputError(Exception):
+    """Bad input or an unwritable output directory, reported in one line."""
+
+
+def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
+    """Load, simulate and write one scene: the shared step of ``run`` and ``demo``.
+
+    Returns the summary of :func:`flexctl.report.write_run`; raises :class:`_InputError`.
+    """
+    try:
+        scene = load_scene(source, overrides=overrides)
+        result = run_scene(scene)
+    except INPUT_ERRORS as exc:
+        raise _InputError(str(exc)) from None
+    out = out_dir if out_dir is not None else DEFAULT_RUN_DIR / scene.name
+    try:
+        return write_run(scene, result, out, overrides=overrides)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        where = f" ({exc.filename})" if exc.filename else ""
+        raise _InputError(f"cannot write the files of {scene.name} to {out}: "
+                          f"{reason}{where}") from None
+
+
+def _cmd_run(args) -> int:
+    try:
+        overrides = parse_overrides(args.set)
+        summary = _load_and_run(args.scene, overrides, args.out)
+    except (_InputError, ValueError) as exc:
+        return _error(exc)
+    print(format_summary(summary))
+    return EXIT_OK if summary["status"] == "ok" else EXIT_STOPPED
+
+
+def _cmd_scenes(args) -> int:
+    scenes = builtin_scenes()
+    width = max(map(len, scenes), default=0)
+    for name, description in scenes.items():
+        print(f"{name:<{width}}  {description}")
+    return EXIT_OK
+
+
+def _demo_frequency_plot(out: Path, source: str = "kane-spinup") -> Path:
+    from .model import VARIANTS
+    from .plotting import plot_frequencies_vs_spin
+
+    scene = load_scene(source)
+    top = 1.5 * max(abs(getattr(scene.maneuver, "spin_rate", 0.0)), 1.0)
+    fig = plot_frequencies_vs_spin(scene.system, np.linspace(0.0, top, 151), variants=VARIANTS,
+                                   n_modes=scene.model.modes, n_frequencies=2)
+    fig.axes[0].set_title(f"{source}: clamped natural frequencies against spin rate")
+    path = out / "frequencies-vs-spin.png"
+    fig.savefig(path, dpi=100)
+    return path
+
+
+def _cmd_demo(args) -> int:
+    out = args.out
+    plan = [(name, name, {}, "ok") for name in builtin_scenes()]
+    for extra in DEMO_COMPARISONS:
+        after = next((k for k, p in enumerate(plan) if p[1] == extra[1]), len(plan) - 1)
+        plan.insert(after + 1, extra)
+    runs, surprises = [], []
+    start = time.perf_counter()
+    try:
+        for label, source, overrides, expected in plan:
+            summary = _load_and_run(source, overrides, out / label)
+            runs.append((label, summary))
+            note = "" if summary["status"] == expected else f" (expected {expected})"
+            print(f"{label}: {summary['status']}{note}, peak tip deflection "
+                  f"{summary['peak_tip_deflection']:.4g} m, t = {summary['t_end']:.4g} s, "
+                  f"{summary['wall_time_s']:.2f} s", flush=True)
+            if note:
+                surprises.append(f"{label} ended {summary['status']}{note}: "
+                                 f"{summary['message']}")
+        freq_plot = _demo_frequency_plot(out)
+        report = write_demo_report(out, runs, freq_plot, intro=DEMO_INTRO,
+                                   frequency_note=DEMO_FREQUENCY_NOTE)
+    except _InputError as exc:
+        return _error(exc)
+    except OSError as exc:
+        return _error(f"cannot write the demo report to {out}: {exc.strerror or exc}")
+    print(f"report: {report} ({time.perf_counter() - start:.1f} s)")
+    for text in surprises:
+        print(f"{PROG}: unexpected: {text}", file=sys.stderr)
+    return EXIT_STOPPED if surprises else EXIT_OK
+
+
+def main(argv=None) -> int:
+    """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status."""
+    parser = _parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:    # --help, --version and usage errors
+        if exc.code is None:
+            return EXIT_OK
+        return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
+    return args.func(args)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

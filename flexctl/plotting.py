@@ -1,0 +1,268 @@
+"""Plots of simulation results, mode shapes and frequencies (matplotlib).
+
+Every function returns a :class:`matplotlib.figure.Figure` and never calls ``plt.show()``.
+Figures are built as bare ``Figure`` objects, not through ``pyplot``, so that scripts and the
+command line can make many of them without a display and without pyplot's global state;
+each function also draws into axes the caller passes. matplotlib is imported only when a
+function runs, so ``import flexctl`` stays light.
+
+This module draws; it computes nothing physical. Frequencies come from
+:meth:`flexctl.Model.natural_frequencies`, mode shapes from :func:`flexctl.modes.mode_shapes`.
+
+Examples
+--------
+>>> from flexctl import load_scene, run_scene
+>>> from flexctl.plotting import plot_response
+>>> result = run_scene(load_scene("kane-spinup", overrides={"simulation.t_final": "2"}))
+>>> fig = plot_response(result)
+>>> [ax.get_ylabel() for ax in fig.axes]
+['hub angle (rad)', 'torque (N m)', 'tip deflection (m)', 'hub rate (rad/s)']
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["plot_response", "plot_mode_shapes", "plot_frequencies_vs_spin"]
+
+#: Colours of the run status marks.
+_STATUS_COLOURS = {"ok": "tab:green", "diverged": "tab:red", "singular": "tab:purple"}
+#: Line styles that keep overlapping variants visible (first_order and consistent share
+#: their clamped stiffness, so their curves coincide).
+_VARIANT_STYLES = {"first_order": dict(linestyle="-", linewidth=2.2),
+                   "zero_order": dict(linestyle="--", linewidth=1.6),
+                   "consistent": dict(linestyle=":", linewidth=2.0)}
+
+
+def _new_figure(figsize, nrows=1, sharex=False):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    axes = fig.subplots(nrows, 1, sharex=sharex, squeeze=False)[:, 0]
+    return fig, list(axes)
+
+
+def plot_response(result, fig=None, title: str | None = None):
+    """Hub angle and rate, torque and tip deflection against time.
+
+    Parameters
+    ----------
+    result : SimulationResult
+        A run of :func:`flexctl.simulate` (any status).
+    fig : matplotlib.figure.Figure, optional
+        Figure to draw into (it should be empty); default a new 8 x 7.5 in figure.
+    title : str, optional
+        Figure title; default the model variant, mode count and run status.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Three axes sharing the time axis (s): hub angle (rad, left) with hub rate (rad/s,
+        right, a twin axis, the fourth of ``fig.axes``), hub torque (N m) and tip deflection (m).
+        A run that stopped early (status ``"diverged"`` or ``"singular"``) has its stop time
+        marked on every axis and its status written on the deflection plot.
+    """
+    model = result.model
+    if fig is None:
+        fig, axes = _new_figure((8.0, 7.5), nrows=3, sharex=True)
+    else:
+        axes = list(fig.subplots(3, 1, sharex=True))
+    ax_angle, ax_torque, ax_tip = axes
+    t = result.t
+
+    ax_angle.plot(t, result.theta, color="tab:blue", label="hub angle")
+    ax_angle.set_ylabel("hub angle (rad)")
+    ax_rate = ax_angle.twinx()
+    ax_rate.plot(t, result.theta_dot, color="tab:orange", label="hub rate")
+    ax_rate.set_ylabel("hub rate (rad/s)")
+    # The two scales are told apart by colour: a legend would hide data of either curve.
+    ax_angle.tick_params(axis="y", labelcolor="tab:blue")
+    ax_angle.yaxis.label.set_color("tab:blue")
+    ax_rate.tick_params(axis="y", labelcolor="tab:orange")
+    ax_rate.yaxis.label.set_color("tab:orange")
+
+    ax_torque.plot(t, result.torque, color="tab:gray")
+    ax_torque.set_ylabel("torque (N m)")
+
+    ax_tip.plot(t, result.tip_deflection, color="tab:blue")
+    ax_tip.set_ylabel("tip deflection (m)")
+    ax_tip.set_xlabel("time (s)")
+
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        ax.axhline(0.0, color="black", linewidth=0.5)
+
+    status = result.status
+    colour = _STATUS_COLOURS.get(status, "tab:red")
+    if status != "ok" and t.size:
+        t_end = float(t[-1])
+        for ax in axes:
+            ax.axvline(t_end, color=colour, linestyle="--", linewidth=1.2)
+        ax_tip.plot([t_end], [result.tip_deflection[-1]], marker="X", markersize=10,
+                    color=colour, linestyle="none")
+        ax_tip.annotate(f"{status} at t = {t_end:.4g} s", xy=(t_end, result.tip_deflection[-1]),
+                        xytext=(-10, -10), textcoords="offset points", ha="right", va="top",
+                        color=colour, fontweight="bold",
+                        bbox=dict(boxstyle="round", facecolor="white", edgecolor=colour))
+    if title is None:
+        end = f"t = {float(t[-1]):.4g} s" if t.size else "no output"
+        title = f"{model.variant}, {model.n_modes} modes: {status} ({end})"
+    fig.suptitle(title, color="black" if status == "ok" else colour)
+    return fig
+
+
+def plot_mode_shapes(model, n_shapes: int | None = None, n_points: int = 201, ax=None):
+    """Cantilever mode shapes ``phi_i(x)`` used as the model's basis, over the beam.
+
+    Parameters
+    ----------
+    model : Model
+        Model whose basis is drawn (its beam length, mode count and point masses).
+    n_shapes : int, optional
+        Number of shapes to draw (1 to ``model.n_modes``); default all.
+    n_points : int, optional
+        Points along the beam (>= 2). Default 201.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw into; default a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Shapes against the distance from the root ``x`` (m); they are dimensionless and
+        tip-normalised, ``|phi_i(l)| = 2``. Point masses are marked at their positions.
+    """
+    from .modes import mode_shapes
+
+    n_modes = model.n_modes
+    if n_shapes is None:
+        n_shapes = n_modes
+    if isinstance(n_shapes, bool) or not isinstance(n_shapes, (int, np.integer)) \
+            or not 1 <= n_shapes <= n_modes:
+        raise ValueError(f"n_shapes must be an integer in [1, {n_modes}]; got {n_shapes!r}")
+    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 2:
+        raise ValueError(f"n_points must be an integer >= 2; got {n_points!r}")
+    if ax is None:
+        fig, (ax,) = _new_figure((7.0, 4.0))
+    else:
+        fig = ax.figure
+    length = model.system.beam.length
+    xi = np.linspace(0.0, 1.0, int(n_points))
+    shapes = mode_shapes(n_modes, xi)[:n_shapes]
+    for i, shape in enumerate(shapes, start=1):
+        ax.plot(xi * length, shape, label=f"mode {i}")
+    for k, mass in enumerate(model.system.masses):
+        ax.axvline(mass.position, color="black", linestyle=":", linewidth=1.0)
+        ax.annotate(f"{mass.mass:g} kg", xy=(mass.position, 1.0),
+                    xycoords=("data", "axes fraction"), xytext=(3, -12),
+                    textcoords="offset points", fontsize="small")
+    ax.axhline(0.0, color="black", linewidth=0.5)
+    ax.set_xlabel("distance from the root x (m)")
+    ax.set_ylabel("mode shape phi_i(x) (-)")
+    ax.set_title(f"Cantilever basis, {n_shapes} of {n_modes} modes, beam length {length:g} m")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best")
+    return fig
+
+
+def _models_from(models, variants, n_modes):
+    """Normalise the ``models`` argument of :func:`plot_frequencies_vs_spin` to ``{label: Model}``."""
+    from .model import Model, build_model
+    from .parameters import HubBeam
+
+    if isinstance(models, HubBeam):
+        if isinstance(variants, str):
+            variants = (variants,)
+        return {v: build_model(models, n_modes=n_modes, variant=v) for v in variants}
+    if isinstance(models, Model):
+        models = [models]
+    if isinstance(models, Mapping):
+        pairs = list(models.items())
+    elif isinstance(models, Sequence) and not isinstance(models, str):
+        pairs = [(m.variant if isinstance(m, Model) else None, m) for m in models]
+    else:
+        raise TypeError("models must be a HubBeam, a Model, a sequence of Models or a dict "
+                        f"{{label: Model}}; got {type(models).__name__}")
+    out = {}
+    for label, m in pairs:
+        if not isinstance(m, Model):
+            raise TypeError(f"models must hold flexctl Models; got {type(m).__name__}")
+        label = str(label)
+        while label in out:
+            label += "'"
+        out[label] = m
+    if not out:
+        raise ValueError("models must hold at least one Model; got none")
+    return out
+
+
+def plot_frequencies_vs_spin(models, spin_rates, variants=("first_order", "zero_order",
+                                                           "consistent"),
+                             n_modes: int = 4, n_frequencies: int = 2, ax=None):
+    """Campbell-style plot: clamped natural frequencies against steady spin rate.
+
+    Parameters
+    ----------
+    models : HubBeam, Model, sequence of Model or dict of {str: Model}
+        A system (one model is built per entry of ``variants`` on ``n_modes`` modes), or ready
+        models, labelled by their variant (or by the dict keys).
+    spin_rates : array_like, shape (S,)
+        Steady hub rates ``Omega``, rad/s (finite).
+    variants : sequence of str, optional
+        Variants to build when ``models`` is a system. Default all three.
+    n_modes : int, optional
+        Modes of the models built from a system. Default 4.
+    n_frequencies : int, optional
+        Lowest frequencies drawn per model. Default 2.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw into; default a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One line per model and frequency of ``model.natural_frequencies(Omega, hub="clamped")``
+        (rad/s), with the line ``omega = Omega`` for reference. A negative value is a mode that
+        has lost its stiffness (zero_order above its first clamped frequency); it is drawn as
+        it is returned, its magnitude being the exponential growth rate (1/s), in a shaded band
+        with a note. Each line's label is ``"<label> mode <i>"``.
+    """
+    spin = np.asarray(spin_rates, dtype=float).reshape(-1)
+    if spin.size < 2 or not np.all(np.isfinite(spin)):
+        raise ValueError(f"spin_rates must hold at least two finite rates (rad/s); "
+                         f"got {spin_rates!r}")
+    labelled = _models_from(models, variants, n_modes)
+    n_max = min(m.n_modes for m in labelled.values())
+    if isinstance(n_frequencies, bool) or not isinstance(n_frequencies, (int, np.integer)) \
+            or not 1 <= n_frequencies <= n_max:
+        raise ValueError(f"n_frequencies must be an integer in [1, {n_max}]; "
+                         f"got {n_frequencies!r}")
+    if ax is None:
+        fig, (ax,) = _new_figure((7.5, 5.0))
+    else:
+        fig = ax.figure
+
+    lowest = 0.0
+    colours = [f"C{i}" for i in range(10)]
+    for k, (label, model) in enumerate(labelled.items()):
+        freqs = np.array([model.natural_frequencies(w, hub="clamped")[:n_frequencies]
+                          for w in spin])
+        lowest = min(lowest, float(freqs.min()))
+        style = _VARIANT_STYLES.get(model.variant, {})
+        for i in range(n_frequencies):
+            ax.plot(spin, freqs[:, i], color=colours[k % len(colours)],
+                    alpha=1.0 if i == 0 else 0.6, label=f"{label} mode {i + 1}", **style)
+    ax.plot(spin, np.abs(spin), color="black", linewidth=0.8, linestyle="-.",
+            label="omega = Omega")
+    ax.axhline(0.0, color="black", linewidth=0.8)
+    if lowest < 0.0:
+        ax.axhspan(lowest * 1.05, 0.0, color="tab:red", alpha=0.08)
+        ax.text(0.02, 0.03, "below 0: stiffness lost, the mode grows;\n"
+                "value = -(growth rate), 1/s", transform=ax.transAxes, color="tab:red",
+                fontsize="small", va="bottom")
+    ax.set_xlabel("spin rate Omega (rad/s)")
+    ax.set_ylabel("clamped natural frequency (rad/s)")
+    ax.set_title("Clamped natural frequencies against spin rate")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper left", fontsize="small", ncol=2)
+    return fig

@@ -1,0 +1,231 @@
+"""Files written for a run of a scene, and the Markdown report of the demo.
+
+A run directory holds
+
+==================  ===================================================================
+``timeseries.csv``  columns ``t,theta,theta_dot,torque,tip_deflection,q1,...,qN`` (s, rad,
+                    rad/s, N m, m, m); one row per output time, up to the stop time
+``summary.json``    scene, variant, modes, status, message, peak tip deflection, clamped
+                    natural frequencies, overrides, wall time (see :func:`summarize`)
+``response.png``    :func:`flexctl.plotting.plot_response`
+==================  ===================================================================
+
+Nothing here computes physics; the numbers come from the result and the model.
+
+Examples
+--------
+>>> from flexctl.report import timeseries_columns
+>>> timeseries_columns(2)
+['t', 'theta', 'theta_dot', 'torque', 'tip_deflection', 'q1', 'q2']
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .maneuvers import SpinUp
+
+__all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "timeseries_columns", "summarize",
+           "write_run", "format_summary", "write_demo_report"]
+
+TIMESERIES = "timeseries.csv"
+SUMMARY = "summary.json"
+RESPONSE_PLOT = "response.png"
+#: Significant digits written to the CSV file.
+CSV_DIGITS = 12
+
+_UNITS = {"t_end": "s", "t_final": "s", "peak_tip_deflection": "m", "wall_time_s": "s",
+          "spin_rate": "rad/s", "clamped_frequencies": "rad/s (negative: lost stiffness, "
+          "value = -growth rate in 1/s)", "clamped_frequencies_at_spin": "rad/s (negative: lost "
+          "stiffness, value = -growth rate in 1/s)"}
+
+
+def timeseries_columns(n_modes: int) -> list:
+    """Column names of ``timeseries.csv`` for ``n_modes`` modal coordinates."""
+    return ["t", "theta", "theta_dot", "torque", "tip_deflection",
+            *(f"q{i}" for i in range(1, n_modes + 1))]
+
+
+def _maneuver_table(maneuver) -> dict:
+    kind = "spin_up" if isinstance(maneuver, SpinUp) else "sine_torque"
+    fields = {k: float(v) for k, v in vars(maneuver).items()}
+    return {"kind": kind, **fields}
+
+
+def _floats(values) -> list:
+    return [float(v) for v in np.asarray(values, dtype=float).reshape(-1)]
+
+
+def summarize(scene, result, overrides: dict | None = None) -> dict:
+    """The summary of a run, as written to ``summary.json`` (JSON types only).
+
+    Parameters
+    ----------
+    scene : Scene
+    result : SimulationResult
+        The run of ``scene``.
+    overrides : dict, optional
+        The overrides the scene was loaded with, ``{"dotted.key": value}``.
+
+    Returns
+    -------
+    dict
+        Keys ``scene``, ``description``, ``variant``, ``n_modes``, ``maneuver``, ``status``
+        (``ok``, ``diverged`` or ``singular``), ``message``, ``peak_tip_deflection`` (m),
+        ``t_end`` and ``t_final`` (s), ``n_points``, ``wall_time_s`` (integration wall time,
+        s), ``overrides``, ``clamped_frequencies`` (rad/s, at rest, hub clamped) and, for a
+        spin-up, ``spin_rate`` (rad/s) with ``clamped_frequencies_at_spin`` at that rate;
+        ``units`` names the units.
+    """
+    model = result.model
+    summary = {
+        "scene": scene.name,
+        "description": scene.description,
+        "variant": model.variant,
+        "n_modes": int(model.n_modes),
+        "maneuver": _maneuver_table(scene.maneuver),
+        "status": result.status,
+        "message": result.message,
+        "peak_tip_deflection": float(result.peak_tip_deflection),
+        "t_end": float(result.t[-1]) if result.t.size else 0.0,
+        "t_final": float(scene.simulation.t_final),
+        "n_points": int(result.t.size),
+        "wall_time_s": float(result.wall_time),
+        "overrides": dict(overrides or {}),
+        "clamped_frequencies": _floats(model.natural_frequencies(0.0, hub="clamped")),
+    }
+    if isinstance(scene.maneuver, SpinUp):
+        spin = float(scene.maneuver.spin_rate)
+        summary["spin_rate"] = spin
+        summary["clamped_frequencies_at_spin"] = _floats(
+            model.natural_frequencies(spin, hub="clamped"))
+    summary["units"] = {k: v for k, v in _UNITS.items() if k in summary}
+    return summary
+
+
+def write_run(scene, result, out_dir, overrides: dict | None = None) -> dict:
+    """Write ``timeseries.csv``, ``summary.json`` and ``response.png`` of a run.
+
+    A stopped run (``diverged`` or ``singular``) is written like any other, up to its stop time.
+
+    Parameters
+    ----------
+    scene : Scene
+    result : SimulationResult
+    out_dir : str or path-like
+        Directory, created if missing; existing files of the same names are replaced.
+    overrides : dict, optional
+        Recorded in the summary.
+
+    Returns
+    -------
+    dict
+        The summary (:func:`summarize`) with ``files``: the paths written, by kind.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    summary = summarize(scene, result, overrides)
+
+    table = np.column_stack((result.t, result.theta, result.theta_dot, result.torque,
+                             result.tip_deflection, result.q.T))
+    np.savetxt(out / TIMESERIES, table, delimiter=",", fmt=f"%.{CSV_DIGITS}g",
+               header=",".join(timeseries_columns(result.model.n_modes)), comments="")
+    (out / SUMMARY).write_text(json.dumps(summary, indent=2) + "\n")
+
+    from .plotting import plot_response
+    fig = plot_response(result, title=f"{scene.name}: {result.model.variant}, "
+                                      f"{result.model.n_modes} modes, {result.status}")
+    fig.savefig(out / RESPONSE_PLOT, dpi=100)
+
+    summary["files"] = {"timeseries": str(out / TIMESERIES), "summary": str(out / SUMMARY),
+                        "response_plot": str(out / RESPONSE_PLOT)}
+    return summary
+
+
+def format_summary(summary: dict) -> str:
+    """A few lines for people: status, stop reason, peak tip deflection, first frequency."""
+    status = summary["status"]
+    head = (f"{summary['scene']} ({summary['variant']}, {summary['n_modes']} modes): {status}, "
+            f"t = {summary['t_end']:.4g} of {summary['t_final']:.4g} s")
+    lines = [head, f"  {summary['message']}",
+             f"  peak tip deflection {summary['peak_tip_deflection']:.4g} m, "
+             f"integration wall time {summary['wall_time_s']:.3g} s",
+             f"  first clamped frequency {summary['clamped_frequencies'][0]:.4g} rad/s at rest"]
+    if "clamped_frequencies_at_spin" in summary:
+        w = summary["clamped_frequencies_at_spin"][0]
+        note = " (negative: stiffness lost)" if w < 0 else ""
+        lines[-1] += f", {w:.4g} at {summary['spin_rate']:.4g} rad/s{note}"
+    files = summary.get("files")
+    if files:
+        folder = Path(files["summary"]).parent
+        names = ", ".join(Path(p).name for p in files.values())
+        lines.append(f"  wrote {names} in {folder}")
+    return "\n".join(lines)
+
+
+def _relative(path, base: Path) -> str:
+    try:
+        return Path(path).resolve().relative_to(base.resolve()).as_posix()
+    except ValueError:
+        return Path(path).resolve().as_posix()
+
+
+def write_demo_report(out_dir, runs: list, frequency_plot=None, *, title: str = "flexctl demo",
+                      intro: str = "", frequency_note: str = "") -> Path:
+    """Write ``report.md`` for a set of runs.
+
+    Parameters
+    ----------
+    out_dir : str or path-like
+        Directory of the report; links are relative to it.
+    runs : list of (str, dict)
+        ``(label, summary)`` with each summary as returned by :func:`write_run`.
+    frequency_plot : str or path-like, optional
+        A frequency-against-spin plot (:func:`flexctl.plotting.plot_frequencies_vs_spin`)
+        to include.
+    title, intro : str, optional
+        Heading and the paragraph under it.
+    frequency_note : str, optional
+        Paragraph above the frequency plot.
+
+    Returns
+    -------
+    pathlib.Path
+        The report written.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = [f"# {title}", ""] + ([intro, ""] if intro else []) + [
+             "| run | scene | variant | modes | status | t end (s) | peak tip deflection (m) "
+             "| wall time (s) | plot |",
+             "|---|---|---|---:|---|---:|---:|---:|---|"]
+    for label, s in runs:
+        plot = _relative(s["files"]["response_plot"], out)
+        lines.append(f"| {label} | {s['scene']} | {s['variant']} | {s['n_modes']} | "
+                     f"{s['status']} | {s['t_end']:.4g} | {s['peak_tip_deflection']:.4g} | "
+                     f"{s['wall_time_s']:.3g} | [response]({plot}) |")
+    stopped = [(label, s) for label, s in runs if s["status"] != "ok"]
+    lines += ["", "## Stopped runs", ""]
+    if stopped:
+        for label, s in stopped:
+            lines.append(f"- **{label}** ({s['status']} at t = {s['t_end']:.4g} s): "
+                         f"{s['message']}")
+    else:
+        lines.append("None: every run reached its final time.")
+    if frequency_plot is not None:
+        rel = _relative(frequency_plot, out)
+        lines += ["", "## Clamped natural frequencies against spin rate", ""]
+        lines += [frequency_note, ""] if frequency_note else []
+        lines.append(f"![frequencies against spin rate]({rel})")
+    lines += ["", "## Responses", ""]
+    for label, s in runs:
+        plot = _relative(s["files"]["response_plot"], out)
+        lines += [f"### {label}", ""]
+        lines += [s["description"], ""] if s.get("description") else []
+        lines += [f"![{label} response]({plot})", ""]
+    path = out / "report.md"
+    path.write_text("\n".join(lines).rstrip() + "\n")
+    return path
