@@ -82,7 +82,7 @@ class ModalMatrices:
     system: HubBeam
     n_modes: int
     roots: np.ndarray
-    clamped_frequencies: np.ndarray
+    beam_frequencies: np.ndarray
     J0: float
     M_ff: np.ndarray
     K_ff: np.ndarray
@@ -110,9 +110,8 @@ def _freeze(*arrays):
         a.setflags(write=False)
 
 
-@lru_cache(maxsize=64)
 def assemble(system: HubBeam, n_modes: int) -> ModalMatrices:
-    """Assemble (and cache) the modal matrices of ``system`` on ``n_modes`` cantilever modes.
+    """Assemble (cached) the modal matrices of ``system`` on ``n_modes`` cantilever modes.
 
     Parameters
     ----------
@@ -128,7 +127,11 @@ def assemble(system: HubBeam, n_modes: int) -> ModalMatrices:
         raise TypeError(f"system must be a HubBeam; got {type(system).__name__}")
     if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) or n_modes < 1:
         raise ValueError(f"n_modes must be an integer >= 1; got {n_modes!r}")
-    n_modes = int(n_modes)
+    return _assemble(system, int(n_modes))
+
+
+@lru_cache(maxsize=64)
+def _assemble(system: HubBeam, n_modes: int) -> ModalMatrices:
     beam, b = system.beam, system.hub.radius
     l, rho_a, ei = beam.length, beam.linear_density, beam.bending_stiffness
     z = cantilever_roots(n_modes)
@@ -165,6 +168,6 @@ def assemble(system: HubBeam, n_modes: int) -> ModalMatrices:
     tip = mode_shapes(n_modes, [1.0])[:, 0]
     root = ei * mode_shapes(n_modes, [0.0], derivative=2, length=l)[:, 0]
     _freeze(z, omega, M_ff, K_ff, K_g, m_tf, C_ff, tip, root)
-    return ModalMatrices(system=system, n_modes=n_modes, roots=z, clamped_frequencies=omega,
+    return ModalMatrices(system=system, n_modes=n_modes, roots=z, beam_frequencies=omega,
                          J0=system.rigid_inertia, M_ff=M_ff, K_ff=K_ff, K_g=K_g, m_tf=m_tf,
                          C_ff=C_ff, tip=tip, root=root)

@@ -103,7 +103,14 @@ class Model:
     def __repr__(self):
         return (f"Model(variant={self.variant!r}, n_modes={self.n_modes}, "
                 f"J0={self.matrices.J0:.6g} kg m^2, "
-                f"omega_1={self.matrices.clamped_frequencies[0]:.6g} rad/s)")
+                f"first clamped frequency {self.first_clamped_frequency:.6g} rad/s)")
+
+    @property
+    def first_clamped_frequency(self) -> float:
+        """Lowest natural frequency with the hub held, at rest, point masses included, rad/s."""
+        if "w1" not in self._c:
+            self._c["w1"] = float(self.natural_frequencies(0.0, hub="clamped")[0])
+        return self._c["w1"]
 
     def split(self, x):
         """Split a state (shape (n,) or (n, P)) into ``theta, q, theta_dot, q_dot``."""
@@ -337,7 +344,7 @@ class Model:
         return control.ss(a, b, self.output_matrix, np.zeros((len(OUTPUT_NAMES), 1)),
                           states=list(self.state_names), inputs=list(self.input_names),
                           outputs=list(self.output_names),
-                          name=f"{self.variant}_N{self.n_modes}_spin{float(spin_rate):g}")
+                          name=_system_name(f"{self.variant}_N{self.n_modes}_spin{spin_rate:g}"))
 
     # ------------------------------------------------------------------ exports
     def nonlinear(self):
@@ -346,9 +353,19 @@ class Model:
         return to_nonlinear_iosystem(self)
 
     def casadi(self):
-        """Dynamics as a CasADi ``Function`` ``(x, u) -> dx/dt`` (see :mod:`flexctl.exports`)."""
-        from .exports import to_casadi
-        return to_casadi(self)
+        """Dynamics as a CasADi ``Function`` ``(x, u) -> dx/dt`` (see :mod:`flexctl.exports`).
+
+        Built once per model and cached.
+        """
+        if "casadi" not in self._c:
+            from .exports import to_casadi
+            self._c["casadi"] = to_casadi(self)
+        return self._c["casadi"]
+
+
+def _system_name(text: str) -> str:
+    """A python-control system name (no dots allowed): ``1.5`` -> ``1p5``, ``-2`` -> ``m2``."""
+    return text.replace(".", "p").replace("-", "m")
 
 
 def _spin(spin_rate) -> float:

@@ -152,7 +152,7 @@ def plot_mode_shapes(model, n_shapes: int | None = None, n_points: int = 201, ax
     shapes = mode_shapes(n_modes, xi)[:n_shapes]
     for i, shape in enumerate(shapes, start=1):
         ax.plot(xi * length, shape, label=f"mode {i}")
-    for k, mass in enumerate(model.system.masses):
+    for mass in model.system.masses:
         ax.axvline(mass.position, color="black", linestyle=":", linewidth=1.0)
         ax.annotate(f"{mass.mass:g} kg", xy=(mass.position, 1.0),
                     xycoords=("data", "axes fraction"), xytext=(3, -12),
@@ -167,7 +167,7 @@ def plot_mode_shapes(model, n_shapes: int | None = None, n_points: int = 201, ax
 
 
 def _models_from(models, variants, n_modes):
-    """Normalise the ``models`` argument of :func:`plot_frequencies_vs_spin` to ``{label: Model}``."""
+    """The ``models`` argument of :func:`plot_frequencies_vs_spin` as ``{label: Model}``."""
     from .model import Model, build_model
     from .parameters import HubBeam
 

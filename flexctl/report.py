@@ -76,9 +76,9 @@ def summarize(scene, result, overrides: dict | None = None) -> dict:
         Keys ``scene``, ``description``, ``variant``, ``n_modes``, ``maneuver``, ``status``
         (``ok``, ``diverged`` or ``singular``), ``message``, ``peak_tip_deflection`` (m),
         ``t_end`` and ``t_final`` (s), ``n_points``, ``wall_time_s`` (integration wall time,
-        s), ``overrides``, ``clamped_frequencies`` (rad/s, at rest, hub clamped) and, for a
-        spin-up, ``spin_rate`` (rad/s) with ``clamped_frequencies_at_spin`` at that rate;
-        ``units`` names the units.
+        s), ``method`` and ``rtol`` of the integrator, ``overrides``, ``clamped_frequencies``
+        (rad/s, at rest, hub clamped) and, for a spin-up, ``spin_rate`` (rad/s) with
+        ``clamped_frequencies_at_spin`` at that rate; ``units`` names the units.
     """
     model = result.model
     summary = {
@@ -94,6 +94,8 @@ def summarize(scene, result, overrides: dict | None = None) -> dict:
         "t_final": float(scene.simulation.t_final),
         "n_points": int(result.t.size),
         "wall_time_s": float(result.wall_time),
+        "method": str(result.method),
+        "rtol": float(result.rtol),
         "overrides": dict(overrides or {}),
         "clamped_frequencies": _floats(model.natural_frequencies(0.0, hub="clamped")),
     }

@@ -299,7 +299,7 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
     Scene
     """
     path = Path(source)
-    if path.suffix == ".toml" or path.exists():
+    if path.suffix == ".toml" or path.is_file():
         if not path.is_file():
             raise SceneError(f"scene file {str(path)!r} does not exist")
         try:

@@ -192,7 +192,7 @@ def _breakpoints(*sources):
 def _default_atol(model: Model, rtol: float, prescribed: bool) -> np.ndarray:
     """Absolute tolerances scaled to each state's physical size."""
     n, l = model.n_modes, model.system.beam.length
-    w1 = float(model.matrices.clamped_frequencies[0])
+    w1 = model.first_clamped_frequency
     q_scale = 1e-3 * l
     angle = [1e-3] if not prescribed else []
     rate = [1e-3 * max(w1, 1.0)] if not prescribed else []
@@ -202,7 +202,7 @@ def _default_atol(model: Model, rtol: float, prescribed: bool) -> np.ndarray:
 def _stiffness_reason(model: Model, spin: float) -> str:
     stiff = model.stiffness_matrix(spin)
     lowest = np.linalg.eigvalsh(stiff)[0]
-    w1 = float(model.matrices.clamped_frequencies[0])
+    w1 = model.first_clamped_frequency
     if lowest < 0.0:
         extra = (" (the zero_order model drops dynamic stiffening; use first_order)"
                  if model.variant == "zero_order" else "")
@@ -306,12 +306,20 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     length = model.system.beam.length
     tip = mat.tip
 
+    # Inputs are evaluated inside the current smooth segment: at its closed end the integrator
+    # must see the value from the left, not the next piece's.
+    segment_end = [np.inf]
+
+    def inside(t):
+        return min(t, segment_end[0])
+
     if prescribed:
         beam_slice = np.r_[1:n + 1, n + 2:nx]
         y_init = x_init[beam_slice]
 
         def rhs(t, y):
             q, qd = y[:n], y[n:]
+            t = inside(t)
             qdd = model.beam_accelerations(q, qd, float(hub_motion.rate(t)),
                                            float(hub_motion.acceleration(t)))
             return np.concatenate((qd, qdd))
@@ -337,7 +345,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
 
         def rhs(t, y):
             x, z = y[:nx], y[nx:]
-            u = applied_torque(t, x, z)
+            u = applied_torque(inside(t), x, z)
             dx = model.dynamics(t, x, u)
             if nz:
                 return np.concatenate((dx, controller.derivative(t, x, z)))
@@ -393,6 +401,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         t_eval = grid[(grid > lo) & (grid <= hi)]
         if t_eval.size == 0 or t_eval[-1] < hi:
             t_eval = np.append(t_eval, hi)
+        segment_end[0] = np.nextafter(hi, lo)
         if method == "cvodes":
             try:
                 integ = SegmentIntegrator(model, lo, t_eval, atol_vec / rtol, rtol,
@@ -453,7 +462,10 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
 
     t_all = np.concatenate(ts)
     y_all = np.concatenate(ys, axis=1)
-    keep = np.concatenate(([True], np.diff(t_all) > 0))
+    # Only the output grid and the last time (t_final or the stop) are reported; segment
+    # ends at breakpoints off the grid were integration restarts, not outputs.
+    keep = np.concatenate(([True], np.diff(t_all) > 0)) & np.isin(t_all, grid)
+    keep[-1] = True
     t_all, y_all = t_all[keep], y_all[:, keep]
     finite = np.all(np.isfinite(y_all), axis=0)
     if not finite.all():

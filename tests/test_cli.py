@@ -1,0 +1,320 @@
+"""Command line, run files, demo report and plots.
+
+Facts checked: the spacecraft response of paper 001 (sec. 3.2), the cantilever frequencies in
+closed form, the zero_order divergence above the first clamped frequency, and the contracts of
+the command line (files, exit status, one-line errors).
+"""
+
+import csv
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import flexctl
+from flexctl import builtin_scenes, build_model, load_scene
+from flexctl.cli import EXIT_BAD_INPUT, EXIT_OK, EXIT_STOPPED, main, parse_overrides
+from flexctl.plotting import plot_frequencies_vs_spin, plot_mode_shapes, plot_response
+
+#: Paper 001, sec. 3.2: peak tip deflection of the spacecraft under 50 N m for 2 s, 0.42 m,
+#: read off the paper's figure.
+PAPER_PEAK_TIP_DEFLECTION = 0.42
+PAPER_TOLERANCE = 0.05
+#: Roots of cos z cosh z + 1 = 0 (Blevins, Formulas for natural frequency and mode shape).
+CANTILEVER_ROOTS = (1.87510407, 4.69409113)
+ROOT_DIGITS_RTOL = 1e-7
+#: Closed forms against the assembled model (exact up to quadrature and round-off).
+FREQUENCY_RTOL = 1e-6
+#: timeseries.csv keeps 12 significant digits.
+CSV_RTOL = 1e-10
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+BUILTINS = ("kane-spinup", "spacecraft-torque", "hub-beam-mass")
+
+
+def _read_csv(path):
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    return rows[0], np.array(rows[1:], dtype=float)
+
+
+def _cantilever_frequencies(beam):
+    """omega_i = z_i^2 sqrt(EI / (rho A l^4)), rad/s."""
+    scale = np.sqrt(beam.youngs_modulus * beam.second_moment
+                    / (beam.density * beam.area * beam.length ** 4))
+    return np.array(CANTILEVER_ROOTS) ** 2 * scale
+
+
+@pytest.fixture(scope="module")
+def spacecraft_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("spacecraft") / "out"
+    code = main(["run", "spacecraft-torque", "--out", str(out)])
+    return code, out, json.loads((out / "summary.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def zero_order_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("zero_order") / "out"
+    code = main(["run", "kane-spinup", "--set", "model.variant=zero_order", "--out", str(out)])
+    return code, out, json.loads((out / "summary.json").read_text())
+
+
+# ---------------------------------------------------------------------------- run
+def test_spacecraft_run_reaches_paper_peak(spacecraft_run):
+    code, out, summary = spacecraft_run
+    assert code == EXIT_OK
+    assert summary["status"] == "ok"
+    assert summary["scene"] == "spacecraft-torque"
+    assert summary["peak_tip_deflection"] == pytest.approx(PAPER_PEAK_TIP_DEFLECTION,
+                                                           rel=PAPER_TOLERANCE)
+    assert summary["t_end"] == pytest.approx(load_scene("spacecraft-torque").simulation.t_final)
+    for name in ("timeseries.csv", "summary.json", "response.png"):
+        assert (out / name).is_file()
+    assert (out / "response.png").read_bytes()[:8] == PNG_MAGIC
+
+
+def test_summary_has_required_keys(spacecraft_run):
+    _, _, summary = spacecraft_run
+    scene = load_scene("spacecraft-torque")
+    required = {"scene", "variant", "n_modes", "status", "message", "peak_tip_deflection",
+                "t_end", "wall_time_s", "overrides", "clamped_frequencies"}
+    assert required <= set(summary)
+    assert summary["variant"] == scene.model.variant
+    assert summary["n_modes"] == scene.model.modes
+    assert summary["overrides"] == {}
+    assert summary["wall_time_s"] >= 0.0
+
+
+def test_summary_frequencies_are_the_cantilever_frequencies(spacecraft_run):
+    # No point masses: the clamped frequencies at rest are those of a uniform cantilever.
+    _, _, summary = spacecraft_run
+    expected = _cantilever_frequencies(load_scene("spacecraft-torque").system.beam)
+    np.testing.assert_allclose(summary["clamped_frequencies"][:len(expected)], expected,
+                               rtol=max(FREQUENCY_RTOL, 2 * ROOT_DIGITS_RTOL))
+
+
+def test_timeseries_header_and_columns(spacecraft_run):
+    _, out, summary = spacecraft_run
+    n = summary["n_modes"]
+    header, data = _read_csv(out / "timeseries.csv")
+    assert header == ["t", "theta", "theta_dot", "torque", "tip_deflection",
+                      *(f"q{i}" for i in range(1, n + 1))]
+    assert data.shape[1] == 5 + n
+    assert data[0, 0] == 0.0
+    assert np.all(np.diff(data[:, 0]) > 0)
+    assert data[-1, 0] == pytest.approx(summary["t_end"], rel=CSV_RTOL)
+    assert np.max(np.abs(data[:, 4])) == pytest.approx(summary["peak_tip_deflection"],
+                                                       rel=CSV_RTOL)
+
+
+def test_timeseries_torque_is_the_scene_maneuver(spacecraft_run):
+    _, out, _ = spacecraft_run
+    maneuver = load_scene("spacecraft-torque").maneuver
+    _, data = _read_csv(out / "timeseries.csv")
+    t, torque = data[:, 0], data[:, 3]
+    np.testing.assert_allclose(torque, maneuver(t), rtol=CSV_RTOL,
+                               atol=CSV_RTOL * maneuver.peak_torque)
+
+
+def test_zero_order_spinup_diverges(zero_order_run, capsys):
+    code, out, summary = zero_order_run
+    assert code == EXIT_STOPPED
+    assert summary["status"] == "diverged"
+    assert summary["variant"] == "zero_order"
+    assert summary["overrides"] == {"model.variant": "zero_order"}
+    assert re.search(r"clamped frequency", summary["message"])
+    assert re.search(r"stiffening", summary["message"])
+    assert summary["t_end"] < load_scene("kane-spinup").simulation.t_final
+    for name in ("timeseries.csv", "summary.json", "response.png"):
+        assert (out / name).is_file()
+    _, data = _read_csv(out / "timeseries.csv")
+    assert data[-1, 0] == pytest.approx(summary["t_end"], rel=CSV_RTOL)
+
+
+def test_zero_order_diverges_only_above_first_clamped_frequency(zero_order_run):
+    # zero_order beam stiffness K - Omega^2 M: it is lost when the hub rate passes omega_1.
+    _, out, summary = zero_order_run
+    omega_1 = _cantilever_frequencies(load_scene("kane-spinup").system.beam)[0]
+    _, data = _read_csv(out / "timeseries.csv")
+    assert data[-1, 2] > omega_1
+    # At a steady spin Omega its clamped eigenvalues are omega_i^2 - Omega^2 exactly.
+    spin = summary["spin_rate"]
+    assert spin > omega_1
+    assert summary["clamped_frequencies_at_spin"][0] == pytest.approx(
+        -np.sqrt(spin ** 2 - summary["clamped_frequencies"][0] ** 2), rel=FREQUENCY_RTOL)
+
+
+def test_run_default_output_directory(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    code = main(["run", "kane-spinup", "--set", "model.variant=zero_order"])
+    assert code == EXIT_STOPPED
+    out = tmp_path / "flexctl-out" / "kane-spinup"
+    assert sorted(p.name for p in out.iterdir()) == ["response.png", "summary.json",
+                                                     "timeseries.csv"]
+    printed = capsys.readouterr().out
+    assert "diverged" in printed and "kane-spinup" in printed
+
+
+def test_run_scene_file_with_override(tmp_path, capsys):
+    source = tmp_path / "short.toml"
+    source.write_text(
+        (Path(flexctl.__file__).parent / "builtin_scenes" / "kane-spinup.toml").read_text())
+    out = tmp_path / "out"
+    code = main(["run", str(source), "--set", "simulation.t_final=2", "--out", str(out)])
+    assert code == EXIT_OK
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["scene"] == "short"
+    assert summary["t_end"] == pytest.approx(2.0)
+    assert summary["overrides"] == {"simulation.t_final": "2"}
+
+
+# ---------------------------------------------------------------------------- bad input
+BAD_INPUTS = [
+    pytest.param(["run", "no-such-scene"], "no-such-scene", id="unknown-scene"),
+    pytest.param(["run", "missing-file.toml"], "missing-file.toml", id="missing-file"),
+    pytest.param(["run", "kane-spinup", "--set", "beam.lenght=3"], "beam.lenght",
+                 id="unknown-key"),
+    pytest.param(["run", "kane-spinup", "--set", "beam.length=-1"], "beam.length",
+                 id="negative-length"),
+    pytest.param(["run", "kane-spinup", "--set", "beam.length"], "=", id="set-without-equals"),
+    pytest.param(["run", "kane-spinup", "--set", "model.variant=fourth_order"],
+                 "model.variant", id="unknown-variant"),
+    pytest.param(["frobnicate"], "frobnicate", id="unknown-command"),
+]
+
+
+@pytest.mark.parametrize(("argv", "named"), BAD_INPUTS)
+def test_bad_input_is_one_line_and_exit_2(argv, named, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    code = main(argv)
+    captured = capsys.readouterr()
+    assert code == EXIT_BAD_INPUT
+    lines = captured.err.splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith("flexctl: error: ")
+    assert named in lines[0]
+    assert "Traceback" not in captured.err
+    assert captured.out == ""
+    assert not (tmp_path / "flexctl-out").exists()
+
+
+def test_unwritable_output_is_one_line(tmp_path, capsys):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    code = main(["run", "kane-spinup", "--set", "simulation.t_final=1",
+                 "--out", str(blocker / "sub")])
+    err = capsys.readouterr().err
+    assert code == EXIT_BAD_INPUT
+    assert err.count("\n") == 1 and err.startswith("flexctl: error: cannot write")
+
+
+def test_parse_overrides_requires_equals():
+    assert parse_overrides(["a.b=c=d"]) == {"a.b": "c=d"}
+    with pytest.raises(ValueError, match="key=value.*'beam'"):
+        parse_overrides(["beam"])
+
+
+def test_installed_script_reports_bad_input_without_traceback(tmp_path):
+    script = Path(sys.executable).parent / "flexctl"
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    proc = subprocess.run([str(script), "run", "kane-spinup", "--set", "beam.lenght=3"],
+                          capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
+    assert proc.returncode == EXIT_BAD_INPUT
+    assert proc.stderr.startswith("flexctl: error: ") and proc.stderr.count("\n") == 1
+    assert "beam.lenght" in proc.stderr and "Traceback" not in proc.stderr
+
+    proc = subprocess.run([str(script), "--version"], capture_output=True, text=True,
+                          env=env, timeout=120)
+    assert proc.returncode == EXIT_OK
+    assert proc.stdout.strip() == f"flexctl {flexctl.__version__}"
+
+
+# ---------------------------------------------------------------------------- scenes, demo
+def test_scenes_lists_builtins_with_descriptions(capsys):
+    assert main(["scenes"]) == EXIT_OK
+    printed = capsys.readouterr().out
+    listed = {line.split()[0] for line in printed.splitlines() if line.strip()}
+    assert set(BUILTINS) <= listed
+    for name, description in builtin_scenes().items():
+        assert description in printed
+
+
+def test_demo_writes_report_and_plots(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out)]) == EXIT_OK
+    assert str(out / "report.md") in capsys.readouterr().out
+    report = (out / "report.md").read_text()
+
+    links = re.findall(r"\]\(([^)]+\.png)\)", report)
+    assert "frequencies-vs-spin.png" in links
+    for name in BUILTINS:
+        assert f"{name}/response.png" in links
+    for link in set(links):
+        assert (out / link).read_bytes()[:8] == PNG_MAGIC
+
+    rows = {cells[0]: cells for cells in
+            ([c.strip() for c in line.strip("|").split("|")] for line in report.splitlines()
+             if line.startswith("| ") and not line.startswith("| run "))}
+    for name in BUILTINS:
+        assert rows[name][4] == "ok"
+        assert json.loads((out / name / "summary.json").read_text())["status"] == "ok"
+    zero = [cells for cells in rows.values() if cells[2] == "zero_order"]
+    assert len(zero) == 1 and zero[0][1] == "kane-spinup" and zero[0][4] == "diverged"
+    zero_summary = json.loads((out / zero[0][0] / "summary.json").read_text())
+    assert zero_summary["message"] in report
+
+
+# ---------------------------------------------------------------------------- plots
+def test_frequency_plot_keeps_lost_stiffness_negative():
+    system = load_scene("kane-spinup").system
+    omega_1 = _cantilever_frequencies(system.beam)[0]
+    spin = np.linspace(0.0, 2.0 * omega_1, 41)
+    fig = plot_frequencies_vs_spin(system, spin, n_modes=3, n_frequencies=1)
+    lines = {line.get_label(): line for line in fig.axes[0].get_lines()}
+    zero = lines["zero_order mode 1"].get_ydata()
+    # eig(K - Omega^2 M, M) = omega_1^2 - Omega^2: negative above omega_1, drawn as such.
+    # Compared squared: near Omega = omega_1 the square root magnifies round-off.
+    np.testing.assert_allclose(np.sign(zero) * zero ** 2, omega_1 ** 2 - spin ** 2,
+                               rtol=FREQUENCY_RTOL, atol=FREQUENCY_RTOL * omega_1 ** 2)
+    assert np.all(zero[spin > omega_1 * (1 + FREQUENCY_RTOL)] < 0)
+    stiffened = lines["first_order mode 1"].get_ydata()
+    assert np.all(stiffened > 0) and np.all(np.diff(stiffened) > 0)
+    assert any("stiffness lost" in text.get_text() for text in fig.axes[0].texts)
+
+
+def test_response_plot_marks_stop():
+    scene = load_scene("kane-spinup", overrides={"model.variant": "zero_order"})
+    result = flexctl.run_scene(scene)
+    fig = plot_response(result)
+    labels = [ax.get_ylabel() for ax in fig.axes]
+    assert {"hub angle (rad)", "hub rate (rad/s)", "torque (N m)",
+            "tip deflection (m)"} <= set(labels)
+    notes = [t.get_text() for ax in fig.axes for t in ax.texts]
+    assert any(note.startswith("diverged at t =") for note in notes)
+
+
+def test_mode_shapes_plot_is_tip_normalised():
+    model = build_model(load_scene("hub-beam-mass").system, n_modes=3)
+    fig = plot_mode_shapes(model)
+    shapes = [line for line in fig.axes[0].get_lines() if line.get_label().startswith("mode")]
+    assert len(shapes) == 3
+    for line in shapes:
+        assert line.get_xdata()[-1] == pytest.approx(model.system.beam.length)
+        assert abs(line.get_ydata()[-1]) == pytest.approx(2.0)
+
+
+@pytest.mark.parametrize(("call", "match"), [
+    pytest.param(lambda m: plot_frequencies_vs_spin(m, [1.0]), "spin_rates", id="one-rate"),
+    pytest.param(lambda m: plot_frequencies_vs_spin(m, [0, 1], n_frequencies=9),
+                 "n_frequencies", id="too-many-frequencies"),
+    pytest.param(lambda m: plot_frequencies_vs_spin("beam", [0, 1]), "models", id="not-model"),
+    pytest.param(lambda m: plot_mode_shapes(m, n_shapes=0), "n_shapes", id="no-shapes"),
+])
+def test_plots_reject_bad_arguments(call, match):
+    model = build_model(load_scene("kane-spinup").system, n_modes=2)
+    with pytest.raises((ValueError, TypeError), match=match):
+        call(model)

@@ -1,0 +1,97 @@
+"""python-control and CasADi views of a model evaluate the same equations as the model."""
+
+import casadi as ca
+import control
+import numpy as np
+import pytest
+
+from conftest import random_states
+from flexctl import VARIANTS, build_model
+from flexctl.exports import to_casadi, to_casadi_outputs, to_nonlinear_iosystem
+
+#: Three implementations of the same arithmetic agree to round-off.
+EXPORT_RTOL = 1e-9
+N_SAMPLES = 20
+N_MODES = 4
+
+
+def _assert_close(got, expected, what):
+    got, expected = np.asarray(got, dtype=float).ravel(), np.asarray(expected).ravel()
+    scale = np.max(np.abs(expected))
+    np.testing.assert_allclose(got, expected, rtol=EXPORT_RTOL, atol=EXPORT_RTOL * scale,
+                               err_msg=what)
+
+
+@pytest.fixture(scope="module", params=VARIANTS)
+def model(request, lossy_hub_beam_mass_system):
+    """Every variant, with point mass, beam damping and hub friction."""
+    return build_model(lossy_hub_beam_mass_system, n_modes=N_MODES, variant=request.param)
+
+
+def test_casadi_and_nonlinear_iosystem_equal_the_model_dynamics(model, rng):
+    sys = model.nonlinear()
+    f_sx = model.casadi()
+    f_mx = to_casadi(model, sx=False)
+    states = random_states(model, rng, N_SAMPLES)
+    torques = rng.uniform(-5.0, 5.0, N_SAMPLES)
+    for x, u in zip(states.T, torques):
+        reference = model.dynamics(0.0, x, u)
+        _assert_close(sys.updfcn(0.0, x, np.array([u]), {}), reference, "updfcn")
+        _assert_close(sys._rhs(0.0, x, np.array([u])), reference, "_rhs")
+        _assert_close(f_sx(x, u), reference, "casadi SX")
+        _assert_close(f_mx(x, u), reference, "casadi MX")
+
+
+def test_outputs_agree(model, rng):
+    sys = model.nonlinear()
+    h = to_casadi_outputs(model)
+    for x in random_states(model, rng, 5).T:
+        reference = model.outputs(x)
+        _assert_close(sys.outfcn(0.0, x, np.array([0.0]), {}), reference, "outfcn")
+        _assert_close(h(x), reference, "casadi outputs")
+
+
+def test_casadi_jacobian_equals_the_linear_model(model):
+    """The exact symbolic Jacobian at a steady spin is the linearization's A and B."""
+    x, u = ca.SX.sym("x", model.n_states), ca.SX.sym("u", 1)
+    xdot = model.casadi()(x, u)
+    jac = ca.Function("linear_parts", [x, u], [ca.jacobian(xdot, x), ca.jacobian(xdot, u)])
+    for spin in (0.0, 1.5):
+        x0 = np.zeros(model.n_states)
+        x0[model.n_modes + 1] = spin
+        a_sym, b_sym = (np.array(m) for m in jac(x0, 0.0))
+        a, b = model.linear_matrices(spin)
+        _assert_close(a_sym, a, f"A at spin {spin}")
+        _assert_close(b_sym, b, f"B at spin {spin}")
+
+
+def test_export_signatures(model):
+    f = model.casadi()
+    assert f.name_in() == ["x", "u"] and f.name_out() == ["xdot"]
+    assert f.size_in(0) == (model.n_states, 1) and f.size_in(1) == (1, 1)
+    assert f.size_out(0) == (model.n_states, 1)
+    sys = to_nonlinear_iosystem(model)
+    assert isinstance(sys, control.NonlinearIOSystem)
+    assert (sys.nstates, sys.ninputs, sys.noutputs) == (model.n_states, 1,
+                                                        len(model.output_names))
+    assert sys.state_labels == list(model.state_names)
+    assert sys.output_labels == list(model.output_names)
+
+
+def test_nonlinear_iosystem_simulates_like_flexctl(hub_beam_mass_system):
+    """A python-control simulation of the export follows flexctl's own simulation."""
+    from flexctl import simulate
+    from flexctl.maneuvers import SineTorque
+
+    model = build_model(hub_beam_mass_system, n_modes=2)
+    push = SineTorque(peak_torque=2.0, duration=2.0)
+    t = np.linspace(0.0, 2.0, 201)
+    response = control.input_output_response(
+        model.nonlinear(), t, push(t), np.zeros(model.n_states),
+        solve_ivp_kwargs=dict(method="DOP853", rtol=1e-10, atol=1e-12))
+    ours = simulate(model, 2.0, torque=push, output_step=0.01, rtol=1e-10)
+    tip = response.outputs[list(model.output_names).index("tip_deflection")]
+    # python-control interpolates the sampled input linearly: an O(dt^2) torque error
+    scale = np.max(np.abs(ours.tip_deflection))
+    np.testing.assert_allclose(tip, ours.tip_deflection, atol=1e-3 * scale)
+    np.testing.assert_allclose(response.states[0], ours.theta, atol=1e-3 * np.max(ours.theta))

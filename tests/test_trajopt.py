@@ -1,0 +1,286 @@
+"""Trajectory optimisation of rest-to-rest slews (controllers/trajopt.py).
+
+Contracts checked: boundary conditions and bounds of the optimum (to solver tolerance), the
+optimum re-simulated by an independent integrator, residual vibration against a rigid
+bang-bang torque on a plant with more modes, the rigid-body lower bound on the minimum time,
+warm starts, IPOPT failures reported with their status, and tracking on a plant with an error.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+import flexctl
+from controllers.trajopt import (HoldTorque, SlewProblem, TrajectoryOptimizationError,
+                                 TrajectoryTracker, rigid_minimum_time, solve_slew)
+
+SYSTEM = flexctl.load_scene("hub-beam-mass").system
+ANGLE = math.pi / 2            # rad
+DURATION = 2.0                 # s, feasible: above the flexible minimum time (about 1.8 s)
+TORQUE_BOUND = 6.0             # N m
+DESIGN_MODES = 2
+PLANT_MODES = 6                # "truth" plant: more modes than the design model
+SETTLE = 3.0                   # s of coasting after the slew to measure residual vibration
+
+BOUNDARY_TOL = 1e-8            # rad, m, rad/s, m/s: linear equalities, solved exactly
+BOUND_TOL = 1e-6               # relative excess over a bound that IPOPT may leave
+DISCRETISATION_TOL = 1e-3      # final-state error of the re-simulated torque / state scale
+INTERPOLATION_TOL = 1e-3       # Hermite interpolation error / state scale
+RESIDUAL_RATIO = 0.02          # residual tip vibration: optimal / rigid bang-bang
+TRACKING_TOL = 0.02            # relative angle error of the tracked slew
+SIM_RTOL = 1e-8
+
+
+@pytest.fixture(scope="module")
+def design():
+    return flexctl.build_model(SYSTEM, DESIGN_MODES)
+
+
+@pytest.fixture(scope="module")
+def plant():
+    return flexctl.build_model(SYSTEM, PLANT_MODES)
+
+
+@pytest.fixture(scope="module")
+def problem():
+    return SlewProblem(angle=ANGLE, duration=DURATION, torque_bound=TORQUE_BOUND)
+
+
+@pytest.fixture(scope="module")
+def solution(design, problem):
+    return solve_slew(design, problem)
+
+
+def state_scale(states):
+    """Size of the motion, per kind of state: the largest angle, modal deflection, hub rate
+    and modal rate along a trajectory, shape (n, 1). Errors are judged against the motion
+    of their kind, not against a mode that hardly moves."""
+    n = (states.shape[0] - 2) // 2
+    peak = np.max(np.abs(states), axis=1)
+    kinds = [slice(0, 1), slice(1, n + 1), slice(n + 1, n + 2), slice(n + 2, 2 * n + 2)]
+    return np.concatenate([np.full(k.stop - k.start, peak[k].max()) for k in kinds])[:, None]
+
+
+def residual_tip(result, t_end):
+    """Largest |tip deflection| after the end of the slew, m."""
+    return float(np.max(np.abs(result.tip_deflection[result.t >= t_end])))
+
+
+def rigid_bang_bang(model, angle, duration):
+    """Rest-to-rest bang-bang torque of the rigid body: +u on [0, T/2), -u on [T/2, T)."""
+    u = 4.0 * angle * model.matrices.J0 / duration ** 2
+    return HoldTorque(np.array([0.0, duration / 2, duration]), np.array([u, -u]))
+
+
+CASES = [
+    pytest.param(dict(), id="rk4"),
+    # CVODES with sensitivities: 2-4 s per solve on a shared 2-core machine
+    pytest.param(dict(integrator="cvodes"), id="cvodes", marks=pytest.mark.slow),
+    pytest.param(dict(transcription="collocation"), id="radau"),
+    pytest.param(dict(transcription="collocation", collocation_scheme="legendre"),
+                 id="legendre"),
+    pytest.param(dict(torque_rate_bound=30.0), id="rate-bound"),
+    pytest.param(dict(tip_bound=0.45, transcription="collocation"), id="tip-bound"),
+]
+
+
+@pytest.mark.parametrize("options", CASES)
+def test_solution_meets_boundary_conditions_and_bounds(design, options):
+    problem = SlewProblem(angle=ANGLE, duration=DURATION, torque_bound=TORQUE_BOUND, **options)
+    sol = solve_slew(design, problem)
+    target = problem.target_state(design.n_states)
+
+    assert sol.return_status == "Solve_Succeeded"
+    assert sol.t[0] == 0.0 and sol.t[-1] == pytest.approx(DURATION)
+    np.testing.assert_allclose(sol.states[:, 0], 0.0, atol=BOUNDARY_TOL)
+    np.testing.assert_allclose(sol.states[:, -1], target, atol=BOUNDARY_TOL)
+    assert np.max(np.abs(sol.torque)) <= TORQUE_BOUND * (1 + BOUND_TOL)
+    assert sol.cost == pytest.approx(np.sum(sol.torque ** 2) * DURATION / sol.torque.size)
+    if problem.torque_rate_bound is not None:
+        h = DURATION / problem.n_intervals
+        rates = np.abs(np.diff(np.concatenate(([0.0], sol.torque, [0.0])))) / h
+        # the bound must hold, and be active (else the case tests nothing)
+        assert np.max(rates) <= problem.torque_rate_bound * (1 + BOUND_TOL)
+        assert np.max(rates) == pytest.approx(problem.torque_rate_bound, rel=1e-4)
+    if problem.tip_bound is not None:
+        # bounded at the grid and collocation times; active at some collocation time
+        assert np.max(np.abs(sol.tip_deflection)) <= problem.tip_bound * (1 + BOUND_TOL)
+        assert np.max(np.abs(sol.tip_deflection)) > 0.99 * problem.tip_bound
+
+    # The torque, integrated by flexctl's own error-controlled integrator, lands on the target.
+    result = flexctl.simulate(design, DURATION, torque=sol.torque_function(), rtol=SIM_RTOL)
+    assert result.ok
+    error = np.abs(result.states[:, -1] - target) / state_scale(sol.states)[:, 0]
+    assert np.max(error) < DISCRETISATION_TOL, error
+
+
+def test_effort_is_above_the_rigid_body_minimum(solution, design):
+    """``J_0 psi'' = torque`` for ``psi = theta + m_tf.q / J_0``, which also goes rest to rest
+    from 0 to ``angle``: no torque slews with less effort than ``12 angle^2 J_0^2 / T^3``."""
+    rigid = 12.0 * ANGLE ** 2 * design.matrices.J0 ** 2 / DURATION ** 3
+    assert rigid <= solution.cost < 1.5 * rigid, (rigid, solution.cost)
+
+
+def test_hold_torque_is_piecewise_constant_with_breakpoints(solution):
+    torque = solution.torque_function()
+    mid = 0.5 * (solution.t[1:] + solution.t[:-1])
+    np.testing.assert_array_equal(torque(mid), solution.torque)
+    assert torque(-0.1) == 0.0 and torque(DURATION + 1e-9) == 0.0
+    assert torque(solution.t[3]) == solution.torque[3]          # holds are [t_k, t_k+1)
+    assert torque.breakpoints == tuple(solution.t[1:])
+
+
+def test_state_interpolation_follows_the_design_model(design, solution):
+    np.testing.assert_allclose(solution.state_at(solution.t), solution.states, atol=1e-14)
+    result = flexctl.simulate(design, DURATION, torque=solution.torque_function(),
+                              rtol=SIM_RTOL, output_step=DURATION / 400)
+    error = np.abs(solution.state_at(result.t) - result.states)
+    assert np.max(error / state_scale(result.states)) < INTERPOLATION_TOL
+    np.testing.assert_allclose(solution.state_at(DURATION + 5.0), solution.states[:, -1],
+                               atol=1e-14)
+
+
+def test_open_loop_residual_vibration_is_far_below_bang_bang(plant, solution):
+    t_final = DURATION + SETTLE
+    optimal = flexctl.simulate(plant, t_final, torque=solution.torque_function(), rtol=1e-7)
+    bang = flexctl.simulate(plant, t_final, torque=rigid_bang_bang(plant, ANGLE, DURATION),
+                            rtol=1e-7)
+    assert optimal.ok and bang.ok
+    residual_optimal, residual_bang = residual_tip(optimal, DURATION), residual_tip(bang, DURATION)
+    assert residual_optimal < RESIDUAL_RATIO * residual_bang, (residual_optimal, residual_bang)
+    assert abs(optimal.theta[-1] - ANGLE) < 1e-3 * ANGLE
+
+
+@pytest.mark.parametrize("transcription", ["multiple_shooting", "collocation"])
+def test_minimum_time_lies_between_rigid_bound_and_feasible_time(design, transcription):
+    problem = SlewProblem(angle=ANGLE, duration=None, torque_bound=TORQUE_BOUND,
+                          transcription=transcription)
+    sol = solve_slew(design, problem)
+    lower = rigid_minimum_time(ANGLE, design.matrices.J0, TORQUE_BOUND)
+    assert problem.objective == "time" and sol.cost == sol.duration
+    assert lower * (1 - BOUND_TOL) <= sol.duration < DURATION, (lower, sol.duration)
+    np.testing.assert_allclose(sol.states[:, -1], problem.target_state(design.n_states),
+                               atol=BOUNDARY_TOL)
+    assert np.max(np.abs(sol.torque)) <= TORQUE_BOUND * (1 + BOUND_TOL)
+    # minimum time uses the torque: most holds sit on the bound
+    assert np.mean(np.abs(sol.torque) > 0.99 * TORQUE_BOUND) > 0.5
+
+
+def test_rigid_minimum_time_formula():
+    # J theta'' = +-u for T/2 each covers u T^2 / (4 J)
+    assert rigid_minimum_time(1.0, 2.0, 8.0) == pytest.approx(1.0)
+    assert rigid_minimum_time(-1.0, 2.0, 8.0) == pytest.approx(1.0)
+
+
+def test_warm_start_reduces_iterations(design, solution, problem):
+    longer = dataclasses.replace(problem, duration=1.1 * DURATION)
+    cold = solve_slew(design, longer)
+    warm = solve_slew(design, longer, initial_guess=solution)
+    assert warm.iterations < cold.iterations, (warm.iterations, cold.iterations)
+    assert warm.cost == pytest.approx(cold.cost, rel=1e-6)
+    # plain arrays on another grid are accepted too
+    coarse = dataclasses.replace(longer, n_intervals=30)
+    from_arrays = solve_slew(design, coarse, initial_guess=(solution.t, solution.states,
+                                                             solution.torque))
+    assert from_arrays.torque.shape == (30,)
+
+
+@pytest.mark.parametrize("options", [
+    dict(duration=0.5),                       # far below the rigid minimum time 1.74 s
+    dict(duration=DURATION, tip_bound=0.1),   # the hub acceleration needs more bending
+], ids=["too-short", "tip-too-tight"])
+def test_infeasible_problem_raises_with_ipopt_status(design, options):
+    problem = SlewProblem(angle=ANGLE, torque_bound=TORQUE_BOUND, **options)
+    with pytest.raises(TrajectoryOptimizationError) as info:
+        solve_slew(design, problem)
+    status = info.value.return_status
+    assert isinstance(info.value, RuntimeError)
+    assert status not in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    assert repr(status) in str(info.value)
+    if options["duration"] < 1.0:
+        assert "rigid-body minimum time" in str(info.value)
+
+
+def _heavier_hub(system, factor):
+    hub = dataclasses.replace(system.hub, inertia=factor * system.hub.inertia)
+    return dataclasses.replace(system, hub=hub)
+
+
+def test_tracker_reaches_target_on_plant_with_heavier_hub_and_more_modes(solution):
+    plant = flexctl.build_model(_heavier_hub(SYSTEM, 1.2), PLANT_MODES)
+    t_final = DURATION + 2.0
+    open_loop = flexctl.simulate(plant, t_final, torque=solution.torque_function(), rtol=1e-7)
+    tracker = TrajectoryTracker(solution=solution)
+    tracked = flexctl.simulate(plant, t_final, controller=tracker, rtol=1e-7)
+    assert open_loop.ok and tracked.ok
+    # the error in the plant is large enough to matter open loop ...
+    assert abs(open_loop.theta[-1] - ANGLE) > TRACKING_TOL * ANGLE
+    # ... and the feedback takes it out
+    assert abs(tracked.theta[-1] - ANGLE) < TRACKING_TOL * ANGLE
+    assert residual_tip(tracked, DURATION) < residual_tip(open_loop, DURATION)
+
+
+@pytest.mark.parametrize("damping_ratio", [0.0, 0.001], ids=["undamped", "damped"])
+def test_tracker_gain_stabilises_larger_plant(solution, damping_ratio):
+    """Closed loop of the linearised 8-mode plant (heavier hub) with the design-model gain."""
+    system = _heavier_hub(SYSTEM, 1.2)
+    system = dataclasses.replace(system, beam=dataclasses.replace(
+        system.beam, damping_ratio=damping_ratio))
+    plant = flexctl.build_model(system, 8)
+    tracker = TrajectoryTracker(solution=solution)
+    a, b = plant.linear_matrices(0.0)
+    gain = np.array([tracker.design_state(row) @ tracker.gain for row in np.eye(plant.n_states)])
+    poles = np.linalg.eigvals(a - b @ gain[None, :])
+    assert np.max(poles.real) < 0.0, np.max(poles.real)
+
+
+def test_tracker_on_the_design_model_reproduces_the_optimum(design, solution):
+    result = flexctl.simulate(design, DURATION, controller=TrajectoryTracker(solution=solution),
+                              rtol=SIM_RTOL)
+    error = np.abs(result.states[:, -1] - solution.states[:, -1])
+    error /= state_scale(solution.states)[:, 0]
+    assert np.max(error) < DISCRETISATION_TOL
+
+
+@pytest.mark.parametrize("field, value", [
+    ("angle", 0.0), ("angle", float("nan")), ("duration", -1.0), ("torque_bound", 0.0),
+    ("n_intervals", 1), ("n_intervals", 2.5), ("torque_rate_bound", -1.0),
+    ("tip_bound", 0.0), ("objective", "fast"), ("transcription", "shooting"),
+    ("integrator", "euler"), ("substeps", 0), ("collocation_scheme", "gauss"),
+    ("max_duration", 5.0),
+])
+def test_bad_problem_settings_name_the_parameter(field, value):
+    settings = dict(angle=ANGLE, duration=DURATION, torque_bound=TORQUE_BOUND)
+    settings[field] = value
+    with pytest.raises(ValueError, match=field):
+        SlewProblem(**settings)
+
+
+def test_objective_and_duration_must_agree():
+    with pytest.raises(ValueError, match="duration"):
+        SlewProblem(angle=ANGLE, duration=DURATION, torque_bound=1.0, objective="time")
+    with pytest.raises(ValueError, match="duration"):
+        SlewProblem(angle=ANGLE, duration=None, torque_bound=1.0, objective="effort")
+
+
+def test_bad_solver_inputs_name_the_parameter(design, problem, solution):
+    with pytest.raises(ValueError, match="initial_guess"):
+        solve_slew(design, problem, initial_guess=(solution.t, solution.states[:3],
+                                                   solution.torque))
+    with pytest.raises(ValueError, match="ipopt_options"):
+        solve_slew(design, problem, ipopt_options=[("max_iter", 3)])
+    with pytest.raises(TypeError, match="problem"):
+        solve_slew(design, dict(angle=ANGLE))
+    with pytest.raises(ValueError, match="state_weights"):
+        TrajectoryTracker(solution=solution, state_weights=np.ones(3))
+    with pytest.raises(ValueError, match="torque_limit"):
+        TrajectoryTracker(solution=solution, torque_limit=-1.0)
+    with pytest.raises(ValueError, match="plant state"):
+        TrajectoryTracker(solution=solution).torque(0.0, np.zeros(4), np.zeros(0))
+
+
+def test_iteration_limit_is_reported_as_failure(design, problem):
+    with pytest.raises(TrajectoryOptimizationError, match="Maximum_Iterations_Exceeded"):
+        solve_slew(design, problem, ipopt_options={"max_iter": 2})
