@@ -204,10 +204,12 @@ def _stiffness_reason(model: Model, spin: float) -> str:
     lowest = np.linalg.eigvalsh(stiff)[0]
     w1 = model.first_clamped_frequency
     if lowest < 0.0:
-        extra = (" (the zero_order model drops dynamic stiffening; use first_order)"
-                 if model.variant == "zero_order" else "")
+        if model.variant == "zero_order":
+            term, extra = "M_ff", " (the zero_order model drops dynamic stiffening; use first_order)"
+        else:
+            term, extra = "(M_ff - K_g)", ""
         return (f"at hub rate {abs(spin):.4g} rad/s, above the first clamped frequency "
-                f"{w1:.4g} rad/s, the beam stiffness K_ff - theta_dot^2 D has lost positive "
+                f"{w1:.4g} rad/s, the beam stiffness K_ff - theta_dot^2 {term} has lost positive "
                 f"definiteness and centrifugal softening wins over bending stiffness{extra}")
     return ("the deflection left the small-deflection range of the model "
             f"(hub rate {abs(spin):.4g} rad/s, first clamped frequency {w1:.4g} rad/s)")
