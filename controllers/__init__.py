@@ -1,1 +1,44 @@
-"""Controllers for flexctl plants: one module per controller family."""
+"""Controllers for flexctl plants: one module per controller family.
+
+=====================  ==========================================================
+module                 contents
+=====================  ==========================================================
+``reference``          smooth rest-to-rest slew profiles (poly7, cycloidal)
+``pd``                 collocated PD on hub angle and rate
+``lqr``                LQR with Bryson-style physical weights, state truncation
+``lqg``                Kalman filter on hub angle and root moment plus LQR
+``scheduling``         LQR gains scheduled on the spin rate
+``shaping``            rigid bang-bang torque and ZV / ZVD input shaping
+``trajopt``            CasADi/IPOPT slew optimisation and tracking of the optimum
+``factory``            the controller a slew scene's [controller] table asks for
+=====================  ==========================================================
+
+The package depends on :mod:`flexctl` (models and the simulation protocol); flexctl never
+imports it.
+"""
+
+from .reference import SlewProfile, minimum_slew_duration
+from .pd import PD, design_pd, pd_gains
+from .lqr import (LQR, LQRWeights, closed_loop_poles, design_lqr, lqr_weight_matrices,
+                  reference_state, truncate_state, truncation_matrix)
+from .lqg import LQG, NoiseLevels, SumOfSines, design_lqg, estimator_gain
+from .scheduling import ScheduledLQR, design_scheduled_lqr
+from .shaping import (BangBang, ShapedReference, ShapedTorque, Shaper, bang_bang,
+                      design_shaper, shape, zv_shaper, zvd_shaper)
+from .trajopt import (SlewProblem, SlewSolution, TrajectoryOptimizationError,
+                      TrajectoryTracker, rigid_minimum_time, solve_slew)
+from .factory import BuiltController, OpenLoop, from_spec
+
+__all__ = [
+    "SlewProfile", "minimum_slew_duration",
+    "PD", "design_pd", "pd_gains",
+    "LQR", "LQRWeights", "closed_loop_poles", "design_lqr", "lqr_weight_matrices",
+    "reference_state", "truncate_state", "truncation_matrix",
+    "LQG", "NoiseLevels", "SumOfSines", "design_lqg", "estimator_gain",
+    "ScheduledLQR", "design_scheduled_lqr",
+    "BangBang", "ShapedReference", "ShapedTorque", "Shaper", "bang_bang", "design_shaper",
+    "shape", "zv_shaper", "zvd_shaper",
+    "SlewProblem", "SlewSolution", "TrajectoryOptimizationError", "TrajectoryTracker",
+    "rigid_minimum_time", "solve_slew",
+    "BuiltController", "OpenLoop", "from_spec",
+]

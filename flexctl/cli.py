@@ -138,6 +138,23 @@ class _InputError(Exception):
     """Bad input or an unwritable output directory, reported in one line."""
 
 
+def _run_controlled(scene):
+    """Design the controller of a slew scene, run it, and measure the slew."""
+    # The command line sits on top of both packages: controllers are built from the scene
+    # here, never inside flexctl's physics or simulation.
+    from controllers.factory import from_spec
+
+    from .metrics import slew_metrics
+
+    plant = scene.build_model()
+    built = from_spec(scene, plant)
+    result = run_scene(scene, controller=built.controller)
+    slew = slew_metrics(result, scene.maneuver.angle, built.maneuver_end).as_dict()
+    slew.update({"controller": built.kind, "design_modes": built.design_modes,
+                 "maneuver_end": built.maneuver_end, **built.info})
+    return result, {"slew": slew}
+
+
 def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
     """Load, simulate and write one scene: the shared step of ``run`` and ``demo``.
 
@@ -145,12 +162,16 @@ def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
     """
     try:
         scene = load_scene(source, overrides=overrides)
-        result = run_scene(scene)
+        extra = {}
+        if scene.controller is None:
+            result = run_scene(scene)
+        else:
+            result, extra = _run_controlled(scene)
     except INPUT_ERRORS as exc:
         raise _InputError(str(exc)) from None
     out = out_dir if out_dir is not None else DEFAULT_RUN_DIR / scene.name
     try:
-        return write_run(scene, result, out, overrides=overrides)
+        return write_run(scene, result, out, overrides=overrides, extra=extra)
     except OSError as exc:
         reason = exc.strerror or str(exc)
         where = f" ({exc.filename})" if exc.filename else ""

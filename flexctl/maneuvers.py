@@ -22,7 +22,7 @@ import numpy as np
 
 from .parameters import _real
 
-__all__ = ["SpinUp", "SineTorque"]
+__all__ = ["SpinUp", "SineTorque", "Slew"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -123,3 +123,33 @@ class SineTorque:
 
         on = ca.logic_and(t >= 0.0, t <= self.duration)
         return ca.if_else(on, self.peak_torque * ca.sin(2.0 * np.pi * t / self.duration), 0.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Slew:
+    """Rest-to-rest slew of the hub by ``angle``: a goal for a controller, not an input.
+
+    Parameters
+    ----------
+    angle : float
+        Slew angle, rad (finite, non-zero).
+    duration : float or None
+        Time allotted to the manoeuvre, s (> 0); ``None`` asks for the fastest slew the
+        controller can give (minimum time).
+    torque_bound : float or None
+        Largest torque the hub actuator gives, N m (> 0); ``None`` for unbounded.
+    """
+
+    angle: float
+    duration: float | None = None
+    torque_bound: float | None = None
+
+    def __post_init__(self):
+        angle = _real("maneuver", "angle", self.angle)
+        if angle == 0.0:
+            raise ValueError("maneuver.angle must be non-zero; got 0.0")
+        object.__setattr__(self, "angle", angle)
+        for name in ("duration", "torque_bound"):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, _real("maneuver", name, getattr(self, name),
+                                                     minimum=0.0, strict=True))

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .maneuvers import SpinUp
+from .maneuvers import Slew, SpinUp
 
 __all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "timeseries_columns", "summarize",
            "write_run", "format_summary", "write_demo_report"]
@@ -40,7 +40,10 @@ CSV_DIGITS = 12
 _UNITS = {"t_end": "s", "t_final": "s", "peak_tip_deflection": "m", "wall_time_s": "s",
           "spin_rate": "rad/s", "clamped_frequencies": "rad/s (negative: lost stiffness, "
           "value = -growth rate in 1/s)", "clamped_frequencies_at_spin": "rad/s (negative: lost "
-          "stiffness, value = -growth rate in 1/s)"}
+          "stiffness, value = -growth rate in 1/s)",
+          "slew": "settling_time s, overshoot fraction of the angle, final_error rad, "
+          "peak_torque N m, peak_tip_deflection m, residual_vibration m (max |tip| after the "
+          "manoeuvre), solve_time_s s"}
 
 
 def timeseries_columns(n_modes: int) -> list:
@@ -50,8 +53,8 @@ def timeseries_columns(n_modes: int) -> list:
 
 
 def _maneuver_table(maneuver) -> dict:
-    kind = "spin_up" if isinstance(maneuver, SpinUp) else "sine_torque"
-    fields = {k: float(v) for k, v in vars(maneuver).items()}
+    kind = {SpinUp: "spin_up", Slew: "slew"}.get(type(maneuver), "sine_torque")
+    fields = {k: (None if v is None else float(v)) for k, v in vars(maneuver).items()}
     return {"kind": kind, **fields}
 
 
@@ -59,7 +62,7 @@ def _floats(values) -> list:
     return [float(v) for v in np.asarray(values, dtype=float).reshape(-1)]
 
 
-def summarize(scene, result, overrides: dict | None = None) -> dict:
+def summarize(scene, result, overrides: dict | None = None, extra: dict | None = None) -> dict:
     """The summary of a run, as written to ``summary.json`` (JSON types only).
 
     Parameters
@@ -78,7 +81,8 @@ def summarize(scene, result, overrides: dict | None = None) -> dict:
         ``t_end`` and ``t_final`` (s), ``n_points``, ``wall_time_s`` (integration wall time,
         s), ``method`` and ``rtol`` of the integrator, ``overrides``, ``clamped_frequencies``
         (rad/s, at rest, hub clamped) and, for a spin-up, ``spin_rate`` (rad/s) with
-        ``clamped_frequencies_at_spin`` at that rate; ``units`` names the units.
+        ``clamped_frequencies_at_spin`` at that rate; ``units`` names the units; the
+        entries of ``extra`` (e.g. ``slew`` metrics of a controlled slew) are added as given.
     """
     model = result.model
     summary = {
@@ -104,11 +108,13 @@ def summarize(scene, result, overrides: dict | None = None) -> dict:
         summary["spin_rate"] = spin
         summary["clamped_frequencies_at_spin"] = _floats(
             model.natural_frequencies(spin, hub="clamped"))
+    summary.update(extra or {})
     summary["units"] = {k: v for k, v in _UNITS.items() if k in summary}
     return summary
 
 
-def write_run(scene, result, out_dir, overrides: dict | None = None) -> dict:
+def write_run(scene, result, out_dir, overrides: dict | None = None,
+              extra: dict | None = None) -> dict:
     """Write ``timeseries.csv``, ``summary.json`` and ``response.png`` of a run.
 
     A stopped run (``diverged`` or ``singular``) is written like any other, up to its stop time.
@@ -121,6 +127,8 @@ def write_run(scene, result, out_dir, overrides: dict | None = None) -> dict:
         Directory, created if missing; existing files of the same names are replaced.
     overrides : dict, optional
         Recorded in the summary.
+    extra : dict, optional
+        More summary entries (see :func:`summarize`).
 
     Returns
     -------
@@ -129,7 +137,7 @@ def write_run(scene, result, out_dir, overrides: dict | None = None) -> dict:
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    summary = summarize(scene, result, overrides)
+    summary = summarize(scene, result, overrides, extra)
 
     table = np.column_stack((result.t, result.theta, result.theta_dot, result.torque,
                              result.tip_deflection, result.q.T))
@@ -160,6 +168,16 @@ def format_summary(summary: dict) -> str:
         w = summary["clamped_frequencies_at_spin"][0]
         note = " (negative: stiffness lost)" if w < 0 else ""
         lines[-1] += f", {w:.4g} at {summary['spin_rate']:.4g} rad/s{note}"
+    slew = summary.get("slew")
+    if slew:
+        settle = slew["settling_time"]
+        settle = "not settled" if settle is None else f"settled (2 %) at {settle:.3g} s"
+        lines.append(f"  slew by {slew['controller']} (designed on {slew['design_modes']} "
+                     f"modes): {settle}, overshoot {100 * slew['overshoot']:.2g} %, peak torque "
+                     f"{slew['peak_torque']:.3g} N m, residual tip vibration "
+                     f"{slew['residual_vibration']:.3g} m after {slew['maneuver_end']:.3g} s")
+        if "solve_time_s" in slew:
+            lines[-1] += f", solved in {slew['solve_time_s']:.3g} s ({slew['ipopt_status']})"
     files = summary.get("files")
     if files:
         folder = Path(files["summary"]).parent

@@ -48,31 +48,64 @@ SpinUp(spin_rate=10.0, ramp_time=15.0)
 from __future__ import annotations
 
 import copy
+import math
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from .maneuvers import SineTorque, SpinUp
+from .maneuvers import SineTorque, Slew, SpinUp
 from .model import VARIANTS, Model, build_model
 from .parameters import Beam, Hub, HubBeam, PointMass
 from .simulation import METHODS, SimulationResult, simulate
 
-__all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "load_scene", "parse_scene",
+__all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene", "parse_scene",
            "builtin_scenes", "run_scene"]
 
-_MANEUVERS = {"spin_up": SpinUp, "sine_torque": SineTorque}
+def _slew(angle_deg, duration="free", torque_bound=None):
+    if isinstance(duration, str):
+        if duration != "free":
+            raise ValueError(f"maneuver.duration must be a positive time (s) or \"free\"; "
+                             f"got {duration!r}")
+        duration = None
+    if isinstance(angle_deg, bool) or not isinstance(angle_deg, (int, float)):
+        raise ValueError(f"maneuver.angle_deg must be a number (degrees); got {angle_deg!r}")
+    return Slew(angle=math.radians(angle_deg), duration=duration, torque_bound=torque_bound)
+
+
+_MANEUVERS = {"spin_up": SpinUp, "sine_torque": SineTorque, "slew": _slew}
 _SCHEMA = {
     "description": None,
     "hub": {"inertia", "radius", "friction"},
     "beam": {"length", "density", "area", "second_moment", "youngs_modulus", "damping_ratio"},
     "masses": {"mass", "position"},
-    "model": {"variant", "modes"},
-    "maneuver": {"kind", "spin_rate", "ramp_time", "peak_torque", "duration"},
+    "model": {"variant", "modes", "design_modes"},
+    "maneuver": {"kind", "spin_rate", "ramp_time", "peak_torque", "duration", "angle_deg",
+                 "torque_bound"},
     "simulation": {"t_final", "output_step", "rtol", "method"},
+    "controller": None,
 }
 _MANEUVER_KEYS = {"spin_up": {"spin_rate", "ramp_time"},
-                  "sine_torque": {"peak_torque", "duration"}}
+                  "sine_torque": {"peak_torque", "duration"},
+                  "slew": {"angle_deg", "duration", "torque_bound"}}
+_MANEUVER_OPTIONAL = {"slew": {"duration", "torque_bound"}}
+
+#: Settings each controller kind accepts in a scene's [controller] table (the controllers
+#: package builds the controller and checks the values).
+_LQR_KEYS = {"spin_rate", "angle_error", "rate_error", "tip_deflection",
+             "modal_energy", "torque", "reference"}
+CONTROLLER_KEYS = {
+    "pd": {"bandwidth", "damping_ratio", "feedforward", "reference"},
+    "lqr": _LQR_KEYS,
+    "lqg": _LQR_KEYS | {"angle_noise", "moment_noise", "process_torque"},
+    "scheduled": _LQR_KEYS | {"spin_rates"},
+    "trajopt": {"intervals", "objective", "transcription",
+                "torque_rate_bound", "tip_bound"},
+    "bang_bang": set(),
+    "zv": set(),
+    "zvd": set(),
+}
+CONTROLLER_KEYS["trajopt+lqr"] = CONTROLLER_KEYS["trajopt"]
 
 
 class SceneError(ValueError):
@@ -81,12 +114,21 @@ class SceneError(ValueError):
 
 @dataclass(frozen=True, kw_only=True)
 class ModelSpec:
-    """Which model a scene uses: ``variant`` and number of modes ``modes``."""
+    """Which model a scene uses: ``variant`` and number of modes ``modes``.
+
+    ``design_modes`` is the number of modes of the model a controller is designed on
+    (default 2; used by slew scenes).
+    """
 
     variant: str = "first_order"
     modes: int = 4
+    design_modes: int = 2
 
     def __post_init__(self):
+        if isinstance(self.design_modes, bool) or not isinstance(self.design_modes, int) \
+                or not 1 <= self.design_modes <= 200:
+            raise SceneError("model.design_modes must be an integer in [1, 200]; got "
+                             f"{self.design_modes!r}")
         if self.variant not in VARIANTS:
             raise SceneError(f"model.variant must be one of {', '.join(VARIANTS)}; "
                              f"got {self.variant!r}")
@@ -121,6 +163,27 @@ class SimulationSpec:
 
 
 @dataclass(frozen=True, kw_only=True)
+class ControllerSpec:
+    """A scene's ``[controller]`` table: the controller ``kind`` and its ``settings``.
+
+    The :mod:`controllers` package turns it into a controller (``controllers.from_spec``).
+    """
+
+    kind: str
+    settings: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.kind not in CONTROLLER_KEYS:
+            raise SceneError(f"controller.kind must be one of {', '.join(CONTROLLER_KEYS)}; "
+                             f"got {self.kind!r}")
+        for key in self.settings:
+            if key not in CONTROLLER_KEYS[self.kind]:
+                raise SceneError(f"unknown scene key 'controller.{key}' for kind "
+                                 f"{self.kind!r}; expected one of "
+                                 f"{', '.join(sorted(CONTROLLER_KEYS[self.kind]))}")
+
+
+@dataclass(frozen=True, kw_only=True)
 class Scene:
     """A validated scene.
 
@@ -129,8 +192,9 @@ class Scene:
     name : str
     system : HubBeam
     model : ModelSpec
-    maneuver : SpinUp or SineTorque
+    maneuver : SpinUp, SineTorque or Slew
     simulation : SimulationSpec
+    controller : ControllerSpec or None
     description : str
     data : dict
         The scene's table form (after overrides), as it would be written to TOML.
@@ -141,6 +205,7 @@ class Scene:
     model: ModelSpec
     maneuver: object
     simulation: SimulationSpec
+    controller: ControllerSpec | None = None
     description: str = ""
     data: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -182,7 +247,7 @@ def _set_dotted(data: dict, path: str, value):
             node = node[int(key)]
         else:
             if key not in node:
-                if key not in _SCHEMA or _SCHEMA[key] is None:
+                if key not in _SCHEMA or key == "description":
                     raise SceneError(f"override key {path!r}: unknown table {key!r}")
                 node[key] = [] if key == "masses" else {}
             node = node[key]
@@ -267,7 +332,7 @@ def parse_scene(data: dict, name: str = "scene") -> Scene:
         if key not in _MANEUVER_KEYS[kind]:
             raise SceneError(f"maneuver.{key} does not apply to kind {kind!r}; expected "
                              f"{', '.join(sorted(_MANEUVER_KEYS[kind]))}")
-    missing = _MANEUVER_KEYS[kind] - set(maneuver_table)
+    missing = _MANEUVER_KEYS[kind] - _MANEUVER_OPTIONAL.get(kind, set()) - set(maneuver_table)
     if missing:
         raise SceneError(f"maneuver.{sorted(missing)[0]} is required for kind {kind!r}")
     maneuver = _construct(_MANEUVERS[kind], "maneuver", maneuver_table)
@@ -279,8 +344,17 @@ def parse_scene(data: dict, name: str = "scene") -> Scene:
     description = data.get("description", "")
     if not isinstance(description, str):
         raise SceneError(f"description must be a string; got {description!r}")
+    controller = None
+    if "controller" in data:
+        table = dict(_table(data, "controller"))
+        controller = ControllerSpec(kind=table.pop("kind", None), settings=table)
+    if isinstance(maneuver, Slew) and controller is None:
+        raise SceneError("maneuver.kind 'slew' needs a [controller] table")
+    if controller is not None and not isinstance(maneuver, Slew):
+        raise SceneError(f"a [controller] table needs maneuver.kind 'slew'; got {kind!r}")
     return Scene(name=name, system=system, model=model, maneuver=maneuver,
-                 simulation=simulation, description=description, data=data)
+                 simulation=simulation, controller=controller, description=description,
+                 data=data)
 
 
 def load_scene(source, overrides: dict | None = None) -> Scene:
@@ -320,11 +394,26 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
     return parse_scene(data, name=name)
 
 
-def run_scene(scene: Scene) -> SimulationResult:
-    """Simulate a scene with the model and settings it names."""
+def run_scene(scene: Scene, controller=None) -> SimulationResult:
+    """Simulate a scene with the model and settings it names.
+
+    Parameters
+    ----------
+    scene : Scene
+    controller : optional
+        The controller built from ``scene.controller`` (``controllers.from_spec``); required
+        for a slew scene, which is a goal for a controller rather than an input.
+    """
     model = scene.build_model()
     sim = scene.simulation
-    drive = ({"hub_motion": scene.maneuver} if isinstance(scene.maneuver, SpinUp)
-             else {"torque": scene.maneuver})
+    if isinstance(scene.maneuver, Slew):
+        if controller is None:
+            raise SceneError(f"scene {scene.name!r} is a slew: pass the controller built from "
+                             "its [controller] table (controllers.from_spec)")
+        drive = {"controller": controller}
+    elif isinstance(scene.maneuver, SpinUp):
+        drive = {"hub_motion": scene.maneuver}
+    else:
+        drive = {"torque": scene.maneuver}
     return simulate(model, sim.t_final, rtol=sim.rtol, method=sim.method,
                     output_step=sim.output_step, **drive)

@@ -1,0 +1,361 @@
+"""LQG: LQR on the state estimated by a Kalman filter from hub angle and root bending moment.
+
+Only two signals are measured: the hub angle (an encoder) and the root bending moment of the
+beam (a strain gauge). A steady-state Kalman filter (:func:`control.lqe`) on the design model
+estimates the design state from them; the torque is the LQR law of :mod:`controllers.lqr`
+applied to the estimate. The filter runs as the controller's internal state ``z`` inside
+:func:`flexctl.simulate`, driven by the plant's measured outputs (the plant usually has more
+modes than the design model: build the controller for it with :meth:`LQG.for_plant`).
+
+Notes
+-----
+Design model with ``M`` modes, ``n_d = 2 M + 2`` states; plant with ``N >= M`` modes::
+
+    z = x_hat = [theta, q_1..q_M, theta_dot, q_1_dot..q_M_dot]   (design state order)
+    y = [theta, root_moment] = C_meas x + v(t)                  (rad, N m)
+    u = sat(-K (z - x_ref(t)) + J0 acc_ref(t))                  (N m)
+    dz/dt = A z + B u + L (y - C z)
+
+``A``, ``B``, ``C`` are the design model's, ``C_meas`` the plant's rows for ``theta`` and
+``root_moment``. The filter assumes a white disturbance torque of intensity ``torque^2``
+(N^2 m^2 s) entering like the control torque and white measurement noise of intensities
+``angle^2`` (rad^2 s) and ``root_moment^2`` (N^2 m^2 s).
+
+With an undamped beam (``damping_ratio = 0``) the root moment carries the unmodelled modes
+too, and their feedback through the filter may destabilise them (observation spillover);
+check with :meth:`LQG.closed_loop_poles`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .lqr import LQRWeights, _lqr_gain, _model, reference_state
+from .reference import _check_reference, _optional_positive, _real, _saturate
+
+__all__ = ["NoiseLevels", "LQG", "design_lqg", "estimator_gain", "SumOfSines",
+           "MEASURED_OUTPUTS"]
+
+MEASURED_OUTPUTS = ("theta", "root_moment")
+
+
+def _measurement_rows(model) -> np.ndarray:
+    rows = [model.output_names.index(name) for name in MEASURED_OUTPUTS]
+    return np.array(model.output_matrix[rows], dtype=float)
+
+
+@dataclass(frozen=True, kw_only=True)
+class NoiseLevels:
+    """Noise intensities the Kalman filter is designed for, as standard deviations.
+
+    Parameters
+    ----------
+    angle : float
+        Hub angle measurement noise, rad (> 0).
+    root_moment : float
+        Root bending moment measurement noise, N m (> 0).
+    torque : float
+        Process noise: disturbance torque on the hub, N m (> 0).
+    """
+
+    angle: float
+    root_moment: float
+    torque: float
+
+    def __post_init__(self):
+        for name in ("angle", "root_moment", "torque"):
+            object.__setattr__(self, name, _real("noise", name, getattr(self, name),
+                                                 minimum=0.0, strict=True))
+
+    @property
+    def measurement_covariance(self) -> np.ndarray:
+        """``RN = diag(angle^2, root_moment^2)``, shape (2, 2)."""
+        return np.diag([self.angle ** 2, self.root_moment ** 2])
+
+    @property
+    def process_covariance(self) -> np.ndarray:
+        """``QN = [[torque^2]]``, shape (1, 1)."""
+        return np.array([[self.torque ** 2]])
+
+
+def estimator_gain(model, noise: NoiseLevels, spin_rate: float = 0.0) -> tuple:
+    """Steady-state Kalman gain of ``model.linearize(spin_rate)`` measuring theta and root moment.
+
+    Returns
+    -------
+    gain : ndarray, shape (2 M + 2, 2)
+        ``L``, from ``control.lqe(A, B, C_meas, QN, RN)``.
+    poles : ndarray, shape (2 M + 2,)
+        Estimator poles ``eig(A - L C_meas)``, 1/s.
+    """
+    import control
+
+    model = _model("estimator_gain", model)
+    if not isinstance(noise, NoiseLevels):
+        raise TypeError(f"estimator_gain.noise must be NoiseLevels; got {type(noise).__name__}")
+    a, b = model.linear_matrices(_real("estimator_gain", "spin_rate", spin_rate))
+    gain, _, poles = control.lqe(a, b, _measurement_rows(model), noise.process_covariance,
+                                 noise.measurement_covariance)
+    return np.asarray(gain, dtype=float), np.asarray(poles)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class SumOfSines:
+    """Deterministic band-limited noise: per channel a sum of sines with fixed random phases.
+
+    Evaluates exactly at any ``t`` (the integrator may call it at any time, in any order), so a
+    simulation with it is reproducible. Build with :meth:`from_levels`.
+
+    Parameters
+    ----------
+    amplitudes : array_like, shape (C, K)
+    frequencies : array_like, shape (C, K)
+        rad/s.
+    phases : array_like, shape (C, K)
+        rad.
+    """
+
+    amplitudes: np.ndarray
+    frequencies: np.ndarray
+    phases: np.ndarray
+
+    def __post_init__(self):
+        arrays = [np.array(getattr(self, n), dtype=float, ndmin=2)
+                  for n in ("amplitudes", "frequencies", "phases")]
+        if len({a.shape for a in arrays}) != 1 or not all(np.all(np.isfinite(a))
+                                                          for a in arrays):
+            raise ValueError("sum_of_sines.amplitudes, frequencies and phases must be finite "
+                             f"with one shape (C, K); got {[a.shape for a in arrays]}")
+        for name, a in zip(("amplitudes", "frequencies", "phases"), arrays):
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+
+    @classmethod
+    def from_levels(cls, std, bandwidth: float, *, n_sines: int = 32, seed: int = 0):
+        """Noise with standard deviations ``std`` (one per channel) spread over (0, bandwidth).
+
+        Parameters
+        ----------
+        std : array_like, shape (C,)
+            Root-mean-square value of each channel (e.g. rad and N m), >= 0.
+        bandwidth : float
+            Highest frequency, rad/s (> 0).
+        n_sines : int, optional
+            Sines per channel. Default 32.
+        seed : int, optional
+            Seed of the frequencies and phases. Default 0.
+        """
+        std = np.atleast_1d(np.asarray(std, dtype=float))
+        if std.ndim != 1 or not np.all(np.isfinite(std)) or np.any(std < 0):
+            raise ValueError(f"sum_of_sines.std must be finite values >= 0; got {std!r}")
+        bandwidth = _real("sum_of_sines", "bandwidth", bandwidth, minimum=0.0, strict=True)
+        rng = np.random.default_rng(seed)
+        shape = (std.size, int(n_sines))
+        freqs = rng.uniform(0.05, 1.0, shape) * bandwidth
+        phases = rng.uniform(0.0, 2.0 * np.pi, shape)
+        amps = np.repeat((std * np.sqrt(2.0 / n_sines))[:, None], n_sines, axis=1)
+        return cls(amplitudes=amps, frequencies=freqs, phases=phases)
+
+    def __call__(self, t: float) -> np.ndarray:
+        """Noise at time ``t`` (s), shape (C,)."""
+        return np.sum(self.amplitudes * np.sin(self.frequencies * float(t) + self.phases),
+                      axis=1)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class LQG:
+    """Output feedback: Kalman filter plus LQR (a :class:`flexctl.Controller`).
+
+    Build with :func:`design_lqg`; see the module Notes for the equations and orders.
+
+    Attributes
+    ----------
+    gain : ndarray, shape (1, n_d)
+        LQR gain ``K``.
+    estimator_gain : ndarray, shape (n_d, 2)
+        Kalman gain ``L``.
+    a, b, c : ndarray
+        Design model ``A`` (n_d, n_d), ``B`` (n_d, 1), ``C`` (2, n_d) (theta, root_moment).
+    measurement_matrix : ndarray, shape (2, 2 N + 2)
+        Rows of the plant's output matrix that the sensors read.
+    measurement_noise : callable, optional
+        ``v(t)``, shape (2,), added to the measurements (e.g. :class:`SumOfSines`).
+    reference, feedforward_inertia, torque_limit
+        As in :class:`~controllers.lqr.LQR`.
+    initial_estimate : ndarray, shape (n_d,), optional
+        ``z(0)``; default zeros (the filter knows nothing of the initial state).
+    """
+
+    gain: np.ndarray
+    estimator_gain: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    c: np.ndarray
+    measurement_matrix: np.ndarray
+    measurement_noise: object = None
+    reference: object = None
+    feedforward_inertia: float | None = None
+    torque_limit: float | None = None
+    initial_estimate: np.ndarray = field(default=None, repr=False)
+
+    def __post_init__(self):
+        nd = np.asarray(self.a).shape[0]
+        shapes = {"gain": (1, nd), "estimator_gain": (nd, 2), "a": (nd, nd), "b": (nd, 1),
+                  "c": (2, nd)}
+        for name, shape in shapes.items():
+            value = np.array(getattr(self, name), dtype=float)
+            if value.shape != shape or not np.all(np.isfinite(value)):
+                raise ValueError(f"lqg.{name} must be finite with shape {shape}; got "
+                                 f"shape {value.shape}")
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        meas = np.array(self.measurement_matrix, dtype=float)
+        if meas.ndim != 2 or meas.shape[0] != 2 or meas.shape[1] < nd or meas.shape[1] % 2:
+            raise ValueError(f"lqg.measurement_matrix must have shape (2, 2 N + 2) with N >= "
+                             f"{nd // 2 - 1} modes; got shape {meas.shape}")
+        meas.setflags(write=False)
+        object.__setattr__(self, "measurement_matrix", meas)
+        if self.measurement_noise is not None and not callable(self.measurement_noise):
+            raise TypeError("lqg.measurement_noise must be callable as v(t) -> shape (2,); got "
+                            f"{type(self.measurement_noise).__name__}")
+        object.__setattr__(self, "reference", _check_reference("lqg", self.reference))
+        object.__setattr__(self, "feedforward_inertia", _optional_positive(
+            "lqg", "feedforward_inertia", self.feedforward_inertia))
+        object.__setattr__(self, "torque_limit",
+                           _optional_positive("lqg", "torque_limit", self.torque_limit))
+        if self.initial_estimate is not None:
+            z0 = np.array(self.initial_estimate, dtype=float).reshape(-1)
+            if z0.shape != (nd,) or not np.all(np.isfinite(z0)):
+                raise ValueError(f"lqg.initial_estimate must be {nd} finite numbers; got "
+                                 f"shape {z0.shape}")
+            object.__setattr__(self, "initial_estimate", z0)
+
+    @property
+    def n_states(self) -> int:
+        """Number of internal states, ``n_d = 2 M + 2``."""
+        return self.a.shape[0]
+
+    @property
+    def n_modes(self) -> int:
+        """Design modes ``M``."""
+        return self.n_states // 2 - 1
+
+    @property
+    def breakpoints(self) -> tuple:
+        """Times (s) where the reference is not smooth."""
+        return tuple(getattr(self.reference, "breakpoints", ()) or ())
+
+    def for_plant(self, model) -> "LQG":
+        """The same controller reading the sensors of ``model`` (``N >= M`` modes)."""
+        model = _model("lqg.for_plant", model)
+        if model.n_modes < self.n_modes:
+            raise ValueError(f"lqg.for_plant plant must have at least the design's "
+                             f"{self.n_modes} modes; got n_modes = {model.n_modes}")
+        return replace(self, measurement_matrix=_measurement_rows(model))
+
+    def measure(self, t: float, x) -> np.ndarray:
+        """Sensor readings ``[theta, root_moment]`` (rad, N m) of plant state ``x``."""
+        x = np.asarray(x, dtype=float)
+        if x.shape != (self.measurement_matrix.shape[1],):
+            raise ValueError(f"lqg: plant state has shape {x.shape} but the sensors are set "
+                             f"for {self.measurement_matrix.shape[1]} states; use "
+                             "lqg.for_plant(plant_model)")
+        y = self.measurement_matrix @ x
+        if self.measurement_noise is not None:
+            y = y + np.asarray(self.measurement_noise(t), dtype=float).reshape(2)
+        return y
+
+    def initial_state(self, x0) -> np.ndarray:
+        """Initial estimate ``z(0)``, shape (n_d,)."""
+        if self.initial_estimate is None:
+            return np.zeros(self.n_states)
+        return self.initial_estimate.copy()
+
+    def torque(self, t: float, x, z) -> float:
+        """Hub torque, N m, from the estimate ``z`` (the plant state ``x`` is not read)."""
+        x_ref, acc = reference_state(self.reference, t, self.n_modes)
+        u = -float(self.gain[0] @ (np.asarray(z, dtype=float) - x_ref))
+        if self.feedforward_inertia is not None:
+            u += self.feedforward_inertia * acc
+        return _saturate(u, self.torque_limit)
+
+    def derivative(self, t: float, x, z) -> np.ndarray:
+        """``dz/dt = A z + B u + L (y - C z)``, shape (n_d,)."""
+        z = np.asarray(z, dtype=float)
+        u = self.torque(t, x, z)
+        innovation = self.measure(t, x) - self.c @ z
+        return self.a @ z + self.b[:, 0] * u + self.estimator_gain @ innovation
+
+    def compensator(self):
+        """Linear compensator from ``[theta, root_moment]`` to torque (no reference, no
+        saturation), a ``control.StateSpace`` with ``n_d`` states."""
+        import control
+
+        a = self.a - self.b @ self.gain - self.estimator_gain @ self.c
+        return control.ss(a, self.estimator_gain, -self.gain, np.zeros((1, 2)),
+                          inputs=list(MEASURED_OUTPUTS), outputs=["torque"], name="lqg")
+
+    def closed_loop_poles(self, model, spin_rate: float = 0.0) -> np.ndarray:
+        """Poles of ``model.linearize(spin_rate)`` (``N >= M`` modes) under this compensator,
+        shape (2 N + 2 + n_d,), 1/s."""
+        model = _model("lqg.closed_loop_poles", model)
+        meas = self.for_plant(model).measurement_matrix
+        a_p, b_p = model.linear_matrices(spin_rate)
+        top = np.hstack((a_p, -b_p @ self.gain))
+        bottom = np.hstack((self.estimator_gain @ meas,
+                            self.a - self.b @ self.gain - self.estimator_gain @ self.c))
+        return np.linalg.eigvals(np.vstack((top, bottom)))
+
+
+def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float = 0.0, *,
+               plant=None, reference=None, feedforward: bool = True,
+               torque_limit: float | None = None, measurement_noise=None) -> LQG:
+    """LQR gain and Kalman filter on ``model.linearize(spin_rate)``.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        Design model (``M`` modes).
+    weights : LQRWeights
+        Regulator weights (see :func:`controllers.lqr.lqr_weight_matrices`).
+    noise : NoiseLevels
+        Noise the filter is designed for.
+    spin_rate : float, optional
+        rad/s. Default 0.
+    plant : flexctl.Model, optional
+        Model whose sensors the controller reads in simulation (``N >= M`` modes). Default:
+        ``model``.
+    reference, feedforward, torque_limit
+        As in :func:`controllers.lqr.design_lqr`.
+    measurement_noise : callable, optional
+        ``v(t)`` added to the measurements in simulation, shape (2,).
+
+    Returns
+    -------
+    LQG
+
+    Examples
+    --------
+    >>> import flexctl
+    >>> from controllers.lqr import LQRWeights
+    >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    >>> lqg = design_lqg(model, LQRWeights(hub_angle=0.1, hub_rate=0.02, torque=2.0),
+    ...                  NoiseLevels(angle=1e-3, root_moment=0.1, torque=1.0))
+    >>> lqg.n_states, bool(lqg.closed_loop_poles(model).real.max() < 0)
+    (6, True)
+    """
+    model = _model("design_lqg", model)
+    spin_rate = _real("design_lqg", "spin_rate", spin_rate)
+    if not isinstance(weights, LQRWeights):
+        raise TypeError(f"design_lqg.weights must be LQRWeights; got {type(weights).__name__}")
+    gain, _ = _lqr_gain(model, weights, spin_rate)
+    est_gain, _ = estimator_gain(model, noise, spin_rate)
+    a, b = model.linear_matrices(spin_rate)
+    controller = LQG(gain=gain, estimator_gain=est_gain, a=a, b=b, c=_measurement_rows(model),
+                     measurement_matrix=_measurement_rows(model),
+                     measurement_noise=measurement_noise, reference=reference,
+                     feedforward_inertia=float(model.matrices.J0) if feedforward else None,
+                     torque_limit=torque_limit)
+    return controller if plant is None else controller.for_plant(plant)

@@ -1,0 +1,322 @@
+"""Linear-quadratic regulator on a truncated linear plant, with Bryson-style physical weights.
+
+:func:`design_lqr` linearises a model about a steady spin, turns :class:`LQRWeights` (largest
+acceptable hub angle error, hub rate, tip deflection, flexible-mode energy and torque) into
+``Q`` and ``R`` (:func:`lqr_weight_matrices`) and solves the Riccati equation with
+:func:`control.lqr`. The design model usually has fewer modes than the plant it runs on: the
+:class:`LQR` controller reads the design model's states out of the plant's larger state
+(:func:`truncate_state`), so the higher modes are neither fed back nor estimated (spillover).
+
+Notes
+-----
+With ``N`` plant modes and ``M <= N`` design modes, the plant state is
+``x = [theta, q_1..q_N, theta_dot, q_1_dot..q_N_dot]`` (``2 N + 2``) and the design state is
+``x_d = [theta, q_1..q_M, theta_dot, q_1_dot..q_M_dot]`` (``2 M + 2``), ``x_d = P x`` with
+``P = truncation_matrix(N, M)``. A reference slew sets
+``x_ref = [theta_ref, 0..0, rate_ref, 0..0]`` and the torque is
+``u = -K (x_d - x_ref) + J0 acc_ref`` (the feedforward optional), clipped to the torque limit.
+
+Spillover: the modes left out of the design are undamped unless the beam has modal damping.
+To first order a static gain moves the real part of left-out mode ``k`` (mass-normalised
+hub-free mode shape ``phi_k``, hub entry ``phi_k0``) by
+``-1/2 phi_k0 (k_theta_dot phi_k0 + sum_i k_q_dot_i phi_ki)``: the hub-rate gain always
+damps, the flexible-rate gains may not. Weight the hub rate strongly (small ``hub_rate``)
+to keep the hub-rate gain dominant, and check with :func:`closed_loop_poles` on a plant
+with more modes.
+
+Examples
+--------
+>>> import flexctl
+>>> from controllers.lqr import LQRWeights, design_lqr
+>>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+>>> lqr = design_lqr(model, LQRWeights(hub_angle=0.05, torque=5.0, tip_deflection=0.05))
+>>> lqr.gain.shape, bool(lqr.poles.real.max() < 0)
+((1, 6), True)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .reference import (_check_reference, _evaluate, _optional_positive, _real,
+                        _saturate)
+
+__all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation_matrix",
+           "truncate_state", "reference_state", "closed_loop_poles"]
+
+
+def _model(owner: str, model):
+    import flexctl
+
+    if not isinstance(model, flexctl.Model):
+        raise TypeError(f"{owner}.model must be a flexctl Model; got {type(model).__name__}")
+    return model
+
+
+def _n_modes(owner: str, name: str, value, minimum: int = 0) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{owner}.{name} must be an integer >= {minimum}; got {value!r}")
+    return int(value)
+
+
+def truncation_matrix(n_plant_modes: int, n_design_modes: int) -> np.ndarray:
+    """``P`` with ``x_design = P x_plant`` (module Notes), shape (2 M + 2, 2 N + 2).
+
+    Raises
+    ------
+    ValueError
+        If ``n_design_modes > n_plant_modes``.
+    """
+    n = _n_modes("truncation_matrix", "n_plant_modes", n_plant_modes)
+    m = _n_modes("truncation_matrix", "n_design_modes", n_design_modes)
+    if m > n:
+        raise ValueError(f"truncation_matrix.n_design_modes must be <= n_plant_modes = {n} "
+                         f"(the plant must have at least the design's modes); got {m}")
+    rows = np.r_[0:m + 1, n + 1:n + m + 2]
+    return np.eye(2 * n + 2)[rows]
+
+
+def truncate_state(x, n_design_modes: int) -> np.ndarray:
+    """Design-model state ``[theta, q_1..q_M, theta_dot, q_1_dot..q_M_dot]`` of a plant state.
+
+    Parameters
+    ----------
+    x : array_like, shape (2 N + 2,)
+        Plant state with ``N >= M`` modes.
+    n_design_modes : int
+        ``M``.
+
+    Returns
+    -------
+    ndarray, shape (2 M + 2,)
+    """
+    x = np.asarray(x, dtype=float)
+    m = _n_modes("truncate_state", "n_design_modes", n_design_modes)
+    if x.ndim != 1 or x.size < 2 or x.size % 2:
+        raise ValueError("truncate_state.x must be a plant state vector of even length; "
+                         f"got shape {x.shape}")
+    n = x.size // 2 - 1
+    if m > n:
+        raise ValueError(f"truncate_state.n_design_modes must be <= the plant's {n} modes; "
+                         f"got {m}")
+    return np.concatenate((x[:m + 1], x[n + 1:n + m + 2]))
+
+
+def reference_state(reference, t: float, n_modes: int) -> tuple:
+    """``x_ref = [theta_ref, 0..0, rate_ref, 0..0]`` (shape (2 M + 2,)) and ``acc_ref``."""
+    angle, rate, acc = _evaluate(reference, t)
+    x_ref = np.zeros(2 * n_modes + 2)
+    x_ref[0], x_ref[n_modes + 1] = angle, rate
+    return x_ref, acc
+
+
+@dataclass(frozen=True, kw_only=True)
+class LQRWeights:
+    """Largest acceptable values (Bryson's rule) that weight the LQR cost.
+
+    Each term adds ``(value / largest)^2`` to the cost integrand; ``None`` leaves it out.
+
+    Parameters
+    ----------
+    hub_angle : float
+        Hub angle error, rad (> 0).
+    torque : float
+        Hub torque, N m (> 0).
+    hub_rate : float, optional
+        Hub rate error, rad/s (> 0).
+    tip_deflection : float, optional
+        Tip deflection, m (> 0); weighted through its output-matrix row.
+    modal_energy : float, optional
+        Elastic plus relative kinetic energy of the beam,
+        ``E = 1/2 q^T K_ff q + 1/2 q_dot^T M_ff q_dot``, J (> 0); the cost adds
+        ``E / modal_energy``.
+    """
+
+    hub_angle: float
+    torque: float
+    hub_rate: float | None = None
+    tip_deflection: float | None = None
+    modal_energy: float | None = None
+
+    def __post_init__(self):
+        for name in ("hub_angle", "torque"):
+            object.__setattr__(self, name, _real("lqr_weights", name, getattr(self, name),
+                                                 minimum=0.0, strict=True))
+        for name in ("hub_rate", "tip_deflection", "modal_energy"):
+            object.__setattr__(self, name,
+                               _optional_positive("lqr_weights", name, getattr(self, name)))
+
+
+def lqr_weight_matrices(model, weights: LQRWeights) -> tuple:
+    """``Q`` (shape (n, n)) and ``R`` (shape (1, 1)) of :class:`LQRWeights` on ``model``.
+
+    ``x^T Q x = (theta/hub_angle)^2 + (theta_dot/hub_rate)^2 + (tip/tip_deflection)^2
+    + E(q, q_dot)/modal_energy`` and ``R = 1/torque^2``, with states in the model's order.
+    """
+    model = _model("lqr_weight_matrices", model)
+    if not isinstance(weights, LQRWeights):
+        raise TypeError(f"lqr_weight_matrices.weights must be LQRWeights; got "
+                        f"{type(weights).__name__}")
+    n, nx = model.n_modes, model.n_states
+    q_mat = np.zeros((nx, nx))
+    q_mat[0, 0] = weights.hub_angle ** -2
+    if weights.hub_rate is not None:
+        q_mat[n + 1, n + 1] += weights.hub_rate ** -2
+    if weights.tip_deflection is not None:
+        row = model.output_matrix[model.output_names.index("tip_deflection")]
+        q_mat += np.outer(row, row) / weights.tip_deflection ** 2
+    if weights.modal_energy is not None:
+        mat = model.matrices
+        q_mat[1:n + 1, 1:n + 1] += mat.K_ff / (2.0 * weights.modal_energy)
+        q_mat[n + 2:, n + 2:] += mat.M_ff / (2.0 * weights.modal_energy)
+    return 0.5 * (q_mat + q_mat.T), np.array([[weights.torque ** -2]])
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class LQR:
+    """State feedback ``u = -K (x_d - x_ref) + J acc_ref`` (a :class:`flexctl.Controller`).
+
+    Build with :func:`design_lqr`. See the module Notes for the state orders.
+
+    Parameters
+    ----------
+    gain : array_like, shape (1, 2 M + 2)
+        ``K`` on the design state, N m per state unit.
+    reference : object, optional
+        Hub reference with ``angle``, ``rate``, ``acceleration`` (e.g. a
+        :class:`~controllers.reference.SlewProfile`). Default: regulate to 0.
+    feedforward_inertia : float, optional
+        ``J`` of the feedforward term, kg m^2 (> 0). Default none.
+    torque_limit : float, optional
+        Saturation, N m (> 0). Default none.
+    spin_rate : float, optional
+        Spin rate of the design linearisation, rad/s (for the record).
+    poles : ndarray, optional
+        Closed-loop poles of the design model, 1/s (for the record).
+    """
+
+    gain: np.ndarray
+    reference: object = None
+    feedforward_inertia: float | None = None
+    torque_limit: float | None = None
+    spin_rate: float = 0.0
+    poles: np.ndarray = field(default=None, repr=False)
+
+    n_states = 0
+
+    def __post_init__(self):
+        gain = np.array(self.gain, dtype=float)
+        if gain.ndim == 1:
+            gain = gain[None, :]
+        if gain.ndim != 2 or gain.shape[0] != 1 or gain.shape[1] < 2 or gain.shape[1] % 2 \
+                or not np.all(np.isfinite(gain)):
+            raise ValueError("lqr.gain must be finite with shape (1, 2 M + 2); got "
+                             f"shape {gain.shape}")
+        gain.setflags(write=False)
+        object.__setattr__(self, "gain", gain)
+        object.__setattr__(self, "reference", _check_reference("lqr", self.reference))
+        object.__setattr__(self, "feedforward_inertia", _optional_positive(
+            "lqr", "feedforward_inertia", self.feedforward_inertia))
+        object.__setattr__(self, "torque_limit",
+                           _optional_positive("lqr", "torque_limit", self.torque_limit))
+        object.__setattr__(self, "spin_rate", _real("lqr", "spin_rate", self.spin_rate))
+
+    @property
+    def n_modes(self) -> int:
+        """Number of design modes ``M``."""
+        return self.gain.shape[1] // 2 - 1
+
+    @property
+    def breakpoints(self) -> tuple:
+        """Times (s) where the reference is not smooth."""
+        return tuple(getattr(self.reference, "breakpoints", ()) or ())
+
+    def state_gain(self, n_modes: int) -> np.ndarray:
+        """``K P``: the gain on a plant state with ``n_modes >= M`` modes, shape (1, 2N+2)."""
+        return self.gain @ truncation_matrix(n_modes, self.n_modes)
+
+    def initial_state(self, x0) -> np.ndarray:
+        """No internal state: shape (0,)."""
+        return np.zeros(0)
+
+    def torque(self, t: float, x, z=None) -> float:
+        """Hub torque, N m, at time ``t`` (s) for plant state ``x`` (shape (2 N + 2,))."""
+        x_design = truncate_state(x, self.n_modes)
+        x_ref, acc = reference_state(self.reference, t, self.n_modes)
+        u = -float(self.gain[0] @ (x_design - x_ref))
+        if self.feedforward_inertia is not None:
+            u += self.feedforward_inertia * acc
+        return _saturate(u, self.torque_limit)
+
+    def derivative(self, t: float, x, z=None) -> np.ndarray:
+        """No internal state: shape (0,)."""
+        return np.zeros(0)
+
+
+def _lqr_gain(model, weights, spin_rate):
+    import control
+
+    plant = model.linearize(spin_rate)
+    q_mat, r_mat = lqr_weight_matrices(model, weights)
+    gain, _, poles = control.lqr(plant, q_mat, r_mat)
+    return np.asarray(gain, dtype=float), np.asarray(poles)
+
+
+def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=None,
+               feedforward: bool = True, torque_limit: float | None = None) -> LQR:
+    """LQR on ``model.linearize(spin_rate)`` with the weights of :func:`lqr_weight_matrices`.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        Design model (``M`` modes); the plant it later runs on may have more.
+    weights : LQRWeights
+    spin_rate : float, optional
+        Steady hub rate of the linearisation, rad/s. Default 0.
+    reference : object, optional
+        Hub reference (see :class:`LQR`).
+    feedforward : bool, optional
+        Add ``J0 acc_ref`` with the model's rigid inertia ``J0``. Default True.
+    torque_limit : float, optional
+        Saturation, N m.
+
+    Returns
+    -------
+    LQR
+        ``gain`` equals ``control.lqr(model.linearize(spin_rate), Q, R)[0]``.
+    """
+    model = _model("design_lqr", model)
+    spin_rate = _real("design_lqr", "spin_rate", spin_rate)
+    gain, poles = _lqr_gain(model, weights, spin_rate)
+    return LQR(gain=gain, reference=reference,
+               feedforward_inertia=float(model.matrices.J0) if feedforward else None,
+               torque_limit=torque_limit, spin_rate=spin_rate, poles=poles)
+
+
+def closed_loop_poles(model, gain, spin_rate: float = 0.0) -> np.ndarray:
+    """Poles of ``model.linearize(spin_rate)`` under the state feedback ``u = -gain x``.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        Plant with ``N`` modes.
+    gain : array_like, shape (1, 2 N + 2)
+        E.g. ``controller.state_gain(N)`` of a controller designed on fewer modes: the
+        spillover check.
+    spin_rate : float, optional
+        rad/s.
+
+    Returns
+    -------
+    ndarray, shape (2 N + 2,)
+        1/s.
+    """
+    model = _model("closed_loop_poles", model)
+    a, b = model.linear_matrices(spin_rate)
+    gain = np.asarray(gain, dtype=float).reshape(1, -1)
+    if gain.shape[1] != model.n_states:
+        raise ValueError(f"closed_loop_poles.gain must have shape (1, {model.n_states}) for "
+                         f"{model.n_modes} plant modes; got {gain.shape}")
+    return np.linalg.eigvals(a - b @ gain)

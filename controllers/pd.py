@@ -1,0 +1,177 @@
+"""Collocated PD control of the hub angle, with optional reference, feedforward and saturation.
+
+The torque acts on the hub and the law reads only the hub angle and rate (sensor and actuator
+collocated), so for positive gains it is passive: it cannot destabilise any flexible mode,
+however many the plant has, and it damps every mode that moves the hub.
+
+Examples
+--------
+>>> import numpy as np
+>>> import flexctl
+>>> from controllers.pd import design_pd
+>>> from controllers.reference import SlewProfile
+>>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+>>> pd = design_pd(model, bandwidth=3.0, damping_ratio=0.9,
+...                reference=SlewProfile(slew_angle=np.pi / 2, duration=2.0))
+>>> round(pd.kp / model.matrices.J0, 6), round(pd.kd / model.matrices.J0, 6)
+(9.0, 5.4)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .reference import (_check_reference, _evaluate, _hub_state, _optional_positive, _real,
+                        _saturate)
+
+__all__ = ["PD", "pd_gains", "design_pd"]
+
+
+def _rigid_inertia(owner: str, model_or_inertia) -> float:
+    """``model.matrices.J0`` of a flexctl Model, or a given inertia (kg m^2, > 0)."""
+    matrices = getattr(model_or_inertia, "matrices", None)
+    if matrices is not None:
+        return float(matrices.J0)
+    return _real(owner, "inertia", model_or_inertia, minimum=0.0, strict=True)
+
+
+@dataclass(frozen=True, kw_only=True)
+class PD:
+    """Collocated PD law on hub angle and rate (a :class:`flexctl.Controller`, no states).
+
+    ``torque = kp (theta_ref - theta) + kd (rate_ref - theta_dot) + J acc_ref``, clipped to
+    ``[-torque_limit, torque_limit]``.
+
+    Parameters
+    ----------
+    kp : float
+        Angle gain, N m/rad (> 0).
+    kd : float
+        Rate gain, N m s/rad (> 0; with ``kd = 0`` the undamped beam would never settle).
+    reference : object, optional
+        Hub reference with ``angle(t)``, ``rate(t)``, ``acceleration(t)`` (rad, rad/s, rad/s^2),
+        e.g. :class:`~controllers.reference.SlewProfile`. Default: regulate to 0.
+    feedforward_inertia : float, optional
+        ``J`` of the feedforward term, kg m^2 (> 0), normally the rigid inertia ``J0``.
+        Default: no feedforward.
+    torque_limit : float, optional
+        Saturation, N m (> 0). Default: none.
+
+    Notes
+    -----
+    The plant state is ``x = [theta, q_1..q_N, theta_dot, q_1_dot..q_N_dot]`` for any ``N``;
+    only ``x[0]`` and ``x[N + 1]`` are read.
+    """
+
+    kp: float
+    kd: float
+    reference: object = None
+    feedforward_inertia: float | None = None
+    torque_limit: float | None = None
+
+    n_states = 0
+
+    def __post_init__(self):
+        object.__setattr__(self, "kp", _real("pd", "kp", self.kp, minimum=0.0, strict=True))
+        object.__setattr__(self, "kd", _real("pd", "kd", self.kd, minimum=0.0, strict=True))
+        object.__setattr__(self, "reference", _check_reference("pd", self.reference))
+        object.__setattr__(self, "feedforward_inertia", _optional_positive(
+            "pd", "feedforward_inertia", self.feedforward_inertia))
+        object.__setattr__(self, "torque_limit",
+                           _optional_positive("pd", "torque_limit", self.torque_limit))
+
+    @property
+    def breakpoints(self) -> tuple:
+        """Times (s) where the reference is not smooth."""
+        return tuple(getattr(self.reference, "breakpoints", ()) or ())
+
+    def state_gain(self, n_modes: int) -> np.ndarray:
+        """``K`` with ``torque = -K x`` for a plant with ``n_modes`` modes (no reference, no
+        saturation), shape (1, 2 n_modes + 2)."""
+        if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) \
+                or n_modes < 0:
+            raise ValueError(f"pd.state_gain n_modes must be an integer >= 0; got {n_modes!r}")
+        gain = np.zeros((1, 2 * n_modes + 2))
+        gain[0, 0], gain[0, n_modes + 1] = self.kp, self.kd
+        return gain
+
+    def initial_state(self, x0) -> np.ndarray:
+        """No internal state: shape (0,)."""
+        return np.zeros(0)
+
+    def torque(self, t: float, x, z=None) -> float:
+        """Hub torque, N m, at time ``t`` (s) for plant state ``x``."""
+        theta, rate = _hub_state(x)
+        angle_ref, rate_ref, acc_ref = _evaluate(self.reference, t)
+        u = self.kp * (angle_ref - theta) + self.kd * (rate_ref - rate)
+        if self.feedforward_inertia is not None:
+            u += self.feedforward_inertia * acc_ref
+        return _saturate(u, self.torque_limit)
+
+    def derivative(self, t: float, x, z=None) -> np.ndarray:
+        """No internal state: shape (0,)."""
+        return np.zeros(0)
+
+
+def pd_gains(model_or_inertia, bandwidth: float, damping_ratio: float = 0.7) -> tuple:
+    """PD gains that place the rigid-body poles at a wanted bandwidth and damping.
+
+    The rigid hub-beam ``J0 theta_tt = torque`` under PD becomes
+    ``J0 s^2 + kd s + kp = 0``; ``kp = J0 w^2`` and ``kd = 2 zeta w J0`` give natural
+    frequency ``w = bandwidth`` and damping ratio ``zeta``.
+
+    Parameters
+    ----------
+    model_or_inertia : flexctl.Model or float
+        A model (its rigid inertia ``model.matrices.J0`` is used) or the inertia, kg m^2.
+    bandwidth : float
+        Rigid-body natural frequency ``w``, rad/s (> 0).
+    damping_ratio : float, optional
+        ``zeta`` in (0, 1]. Default 0.7.
+
+    Returns
+    -------
+    kp : float
+        N m/rad.
+    kd : float
+        N m s/rad.
+
+    Examples
+    --------
+    >>> pd_gains(2.0, bandwidth=3.0, damping_ratio=1.0)
+    (18.0, 12.0)
+    """
+    inertia = _rigid_inertia("pd_gains", model_or_inertia)
+    w = _real("pd_gains", "bandwidth", bandwidth, minimum=0.0, strict=True)
+    zeta = _real("pd_gains", "damping_ratio", damping_ratio, minimum=0.0, strict=True,
+                 maximum=1.0)
+    return inertia * w ** 2, 2.0 * zeta * w * inertia
+
+
+def design_pd(model, bandwidth: float, damping_ratio: float = 0.7, *, reference=None,
+              feedforward: bool = True, torque_limit: float | None = None) -> PD:
+    """PD controller from :func:`pd_gains`, with the rigid inertia ``J0`` as feedforward.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        Any variant and mode count; only ``model.matrices.J0`` is used.
+    bandwidth, damping_ratio : float
+        See :func:`pd_gains`.
+    reference : object, optional
+        See :class:`PD`.
+    feedforward : bool, optional
+        Add ``J0 acc_ref`` (default True).
+    torque_limit : float, optional
+        N m.
+
+    Returns
+    -------
+    PD
+    """
+    kp, kd = pd_gains(model, bandwidth, damping_ratio)
+    inertia = float(model.matrices.J0) if feedforward else None
+    return PD(kp=kp, kd=kd, reference=reference, feedforward_inertia=inertia,
+              torque_limit=torque_limit)

@@ -1,0 +1,237 @@
+"""Smooth rest-to-rest reference profiles for a hub slew.
+
+A :class:`SlewProfile` moves the hub angle from 0 to ``slew_angle`` in ``duration`` seconds,
+starting at rest and ending at rest. It evaluates exactly at any time (no sampling), accepts
+arrays, and lists its ``breakpoints`` (start and end of the motion), where
+:func:`flexctl.simulate` restarts the integrator. It has the ``angle``, ``rate`` and
+``acceleration`` methods of a prescribed hub motion, so it can also be passed to
+``simulate(model, t_final, hub_motion=profile)``.
+
+Profiles, with ``A = slew_angle``, ``T = duration``, ``tau = (t - start_time) / T`` in
+``[0, 1]`` and ``s(tau)`` the fraction of the slew done:
+
+- ``poly7``: ``s = 35 tau^4 - 84 tau^5 + 70 tau^6 - 20 tau^7``; peak rate ``35/16 A/T``,
+  peak acceleration ``84 sqrt(5)/25 A/T^2`` (about ``7.51 A/T^2``);
+- ``cycloidal``: ``s = tau - sin(2 pi tau) / (2 pi)``; peak rate ``2 A/T``, peak
+  acceleration ``2 pi A/T^2``.
+
+``poly7`` starts and ends with zero rate, acceleration and jerk; ``cycloidal`` with zero rate
+and acceleration (its jerk steps).
+
+Examples
+--------
+>>> import numpy as np
+>>> from controllers.reference import SlewProfile
+>>> slew = SlewProfile(slew_angle=np.pi / 2, duration=2.0)
+>>> float(slew.angle(1.0)), float(slew.rate(0.0)), float(slew.angle(5.0))
+(0.7853981633974483, 0.0, 1.5707963267948966)
+>>> slew.breakpoints
+(0.0, 2.0)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from numbers import Real
+
+import numpy as np
+
+__all__ = ["SlewProfile", "minimum_slew_duration", "SHAPES"]
+
+SHAPES = ("poly7", "cycloidal")
+
+#: Peak |acceleration| of each unit profile (angle 1 rad, duration 1 s), rad/s^2.
+_PEAK_ACCELERATION = {"poly7": 84.0 * math.sqrt(5.0) / 25.0, "cycloidal": 2.0 * math.pi}
+#: Peak rate of each unit profile, rad/s.
+_PEAK_RATE = {"poly7": 35.0 / 16.0, "cycloidal": 2.0}
+
+
+def _real(owner: str, name: str, value, *, minimum: float | None = None,
+          strict: bool = False, maximum: float | None = None) -> float:
+    """Return ``value`` as a float after checking it is a finite real number within bounds.
+
+    Raises ``TypeError`` for a non-number and ``ValueError`` (naming ``owner.name``, the rule and
+    the value) for NaN, infinity or a value out of bounds. Shared by the controller modules.
+    """
+    label = f"{owner}.{name}"
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise TypeError(f"{label} must be a real number; got {value!r} of type "
+                        f"{type(value).__name__}")
+    value = float(value)
+    rule = "finite"
+    if minimum is not None:
+        rule += f" and {'>' if strict else '>='} {minimum:g}"
+    if maximum is not None:
+        rule += f" and <= {maximum:g}"
+    ok = math.isfinite(value)
+    if ok and minimum is not None:
+        ok = value > minimum if strict else value >= minimum
+    if ok and maximum is not None:
+        ok = value <= maximum
+    if not ok:
+        raise ValueError(f"{label} must be {rule}; got {value!r}")
+    return value
+
+
+def _optional_positive(owner: str, name: str, value) -> float | None:
+    """``None`` or a finite number > 0."""
+    return None if value is None else _real(owner, name, value, minimum=0.0, strict=True)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SlewProfile:
+    """Rest-to-rest slew of the hub angle from 0 to ``slew_angle``.
+
+    Parameters
+    ----------
+    slew_angle : float
+        Commanded angle ``A``, rad (finite, either sign).
+    duration : float
+        Slew time ``T``, s (> 0).
+    start_time : float, optional
+        Time the slew starts, s (>= 0). Default 0.
+    shape : {"poly7", "cycloidal"}, optional
+        Profile shape (module table). Default ``"poly7"``.
+
+    Notes
+    -----
+    Before ``start_time`` the reference rests at 0, after ``start_time + duration`` at
+    ``slew_angle``. Every method accepts a float or an array of times and returns the same shape.
+    """
+
+    slew_angle: float
+    duration: float
+    start_time: float = 0.0
+    shape: str = "poly7"
+
+    def __post_init__(self):
+        object.__setattr__(self, "slew_angle", _real("slew", "slew_angle", self.slew_angle))
+        object.__setattr__(self, "duration", _real("slew", "duration", self.duration,
+                                                   minimum=0.0, strict=True))
+        object.__setattr__(self, "start_time", _real("slew", "start_time", self.start_time,
+                                                     minimum=0.0))
+        if self.shape not in SHAPES:
+            raise ValueError(f"slew.shape must be one of {', '.join(SHAPES)}; "
+                             f"got {self.shape!r}")
+
+    @property
+    def end_time(self) -> float:
+        """Time the slew ends, s."""
+        return self.start_time + self.duration
+
+    @property
+    def breakpoints(self) -> tuple:
+        """Times (s) where the profile is not smooth: its start and end."""
+        return (self.start_time, self.end_time)
+
+    @property
+    def peak_rate(self) -> float:
+        """Largest ``|rate|``, rad/s."""
+        return _PEAK_RATE[self.shape] * abs(self.slew_angle) / self.duration
+
+    @property
+    def peak_acceleration(self) -> float:
+        """Largest ``|acceleration|``, rad/s^2."""
+        return _PEAK_ACCELERATION[self.shape] * abs(self.slew_angle) / self.duration ** 2
+
+    def _tau(self, t):
+        t = np.asarray(t, dtype=float)
+        return np.clip((t - self.start_time) / self.duration, 0.0, 1.0)
+
+    def angle(self, t):
+        """Reference hub angle, rad."""
+        tau = self._tau(t)
+        if self.shape == "poly7":
+            s = tau ** 4 * (35.0 + tau * (-84.0 + tau * (70.0 - 20.0 * tau)))
+        else:
+            s = tau - np.sin(2.0 * np.pi * tau) / (2.0 * np.pi)
+        return self.slew_angle * s
+
+    def rate(self, t):
+        """Reference hub rate, rad/s."""
+        tau = self._tau(t)
+        if self.shape == "poly7":
+            ds = 140.0 * (tau * (1.0 - tau)) ** 3
+        else:
+            ds = 1.0 - np.cos(2.0 * np.pi * tau)
+        return self.slew_angle / self.duration * ds
+
+    def acceleration(self, t):
+        """Reference hub acceleration, rad/s^2."""
+        tau = self._tau(t)
+        if self.shape == "poly7":
+            dds = 420.0 * (tau * (1.0 - tau)) ** 2 * (1.0 - 2.0 * tau)
+        else:
+            dds = 2.0 * np.pi * np.sin(2.0 * np.pi * tau)
+        return self.slew_angle / self.duration ** 2 * dds
+
+
+def minimum_slew_duration(slew_angle: float, inertia: float, torque_limit: float,
+                          shape: str = "poly7") -> float:
+    """Shortest duration for which the rigid feedforward ``inertia * acceleration`` of a
+    profile stays within ``torque_limit``.
+
+    Parameters
+    ----------
+    slew_angle : float
+        rad (finite, nonzero).
+    inertia : float
+        Rigid inertia, kg m^2 (> 0), e.g. ``model.matrices.J0``.
+    torque_limit : float
+        N m (> 0).
+    shape : {"poly7", "cycloidal"}, optional
+
+    Returns
+    -------
+    float
+        s.
+
+    Examples
+    --------
+    >>> round(minimum_slew_duration(1.0, 1.0, 2.0 * 3.141592653589793, "cycloidal"), 12)
+    1.0
+    """
+    angle = _real("minimum_slew_duration", "slew_angle", slew_angle)
+    if angle == 0.0:
+        raise ValueError("minimum_slew_duration.slew_angle must be nonzero; got 0.0")
+    inertia = _real("minimum_slew_duration", "inertia", inertia, minimum=0.0, strict=True)
+    limit = _real("minimum_slew_duration", "torque_limit", torque_limit, minimum=0.0,
+                  strict=True)
+    if shape not in SHAPES:
+        raise ValueError(f"minimum_slew_duration.shape must be one of {', '.join(SHAPES)}; "
+                         f"got {shape!r}")
+    return math.sqrt(_PEAK_ACCELERATION[shape] * abs(angle) * inertia / limit)
+
+
+def _check_reference(owner: str, reference):
+    """``reference`` must be ``None`` or have callable ``angle``, ``rate``, ``acceleration``."""
+    if reference is None:
+        return None
+    for attr in ("angle", "rate", "acceleration"):
+        if not callable(getattr(reference, attr, None)):
+            raise TypeError(f"{owner}.reference must have a callable {attr}(t) (e.g. a "
+                            f"SlewProfile); got {type(reference).__name__}")
+    return reference
+
+
+def _evaluate(reference, t: float):
+    """Reference angle (rad), rate (rad/s) and acceleration (rad/s^2) at ``t``; 0 for None."""
+    if reference is None:
+        return 0.0, 0.0, 0.0
+    return (float(reference.angle(t)), float(reference.rate(t)),
+            float(reference.acceleration(t)))
+
+
+def _saturate(torque: float, limit: float | None) -> float:
+    """Clip ``torque`` to ``[-limit, limit]`` (no clipping for ``limit=None``)."""
+    return torque if limit is None else min(max(torque, -limit), limit)
+
+
+def _hub_state(x) -> tuple:
+    """Hub angle and rate from a plant state ``[theta, q, theta_dot, q_dot]`` of any size."""
+    x = np.asarray(x, dtype=float)
+    if x.ndim != 1 or x.size < 2 or x.size % 2:
+        raise ValueError("plant state must be a vector [theta, q_1..q_N, theta_dot, "
+                         f"q_1_dot..q_N_dot] of even length >= 2; got shape {x.shape}")
+    return float(x[0]), float(x[x.size // 2])

@@ -1,0 +1,159 @@
+"""Gain scheduling on the spin rate: LQR gains designed at several steady spins, interpolated.
+
+The beam stiffness of a spinning hub is ``K_ff - Omega^2 D`` (MODEL.md section 4), so the plant
+linearised about a steady spin changes with ``Omega``. :func:`design_scheduled_lqr` solves one
+LQR per design spin rate with :func:`controllers.lqr.design_lqr`; :class:`ScheduledLQR` then
+interpolates the gains linearly in the measured hub rate.
+
+Notes
+-----
+The linearisation depends on ``Omega`` only through ``Omega^2`` (there is no Coriolis coupling
+in the planar model), so the gains are scheduled on ``|theta_dot|`` and the design spin rates
+are ``>= 0``. Outside the designed range the end gains are held. States and the torque law are
+those of :mod:`controllers.lqr` with ``K = K(|theta_dot|)``.
+
+Examples
+--------
+>>> import flexctl
+>>> from controllers.lqr import LQRWeights
+>>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+>>> sched = design_scheduled_lqr(model, LQRWeights(hub_angle=0.1, hub_rate=0.02, torque=2.0),
+...                              spin_rates=[0.0, 1.0, 2.0])
+>>> sched.gains.shape
+(3, 6)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .lqr import LQRWeights, _lqr_gain, _model, reference_state, truncate_state, \
+    truncation_matrix
+from .reference import _check_reference, _optional_positive, _real, _saturate
+
+__all__ = ["ScheduledLQR", "design_scheduled_lqr"]
+
+
+def _spin_rates(owner: str, spin_rates) -> np.ndarray:
+    rates = np.array(spin_rates, dtype=float).reshape(-1)
+    if rates.size < 1 or not np.all(np.isfinite(rates)) or np.any(rates < 0) \
+            or np.any(np.diff(rates) <= 0):
+        raise ValueError(f"{owner}.spin_rates must be finite, >= 0 and strictly increasing "
+                         f"(rad/s); got {spin_rates!r}")
+    return rates
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ScheduledLQR:
+    """LQR whose gain is interpolated in ``|theta_dot|`` (a :class:`flexctl.Controller`).
+
+    Build with :func:`design_scheduled_lqr`.
+
+    Parameters
+    ----------
+    spin_rates : array_like, shape (S,)
+        Design spin rates, rad/s, ``>= 0`` and strictly increasing.
+    gains : array_like, shape (S, 2 M + 2)
+        LQR gain at each design spin rate.
+    reference, feedforward_inertia, torque_limit
+        As in :class:`~controllers.lqr.LQR`.
+    """
+
+    spin_rates: np.ndarray
+    gains: np.ndarray
+    reference: object = None
+    feedforward_inertia: float | None = None
+    torque_limit: float | None = None
+
+    n_states = 0
+
+    def __post_init__(self):
+        rates = _spin_rates("scheduled_lqr", self.spin_rates)
+        gains = np.array(self.gains, dtype=float)
+        if gains.ndim != 2 or gains.shape[0] != rates.size or gains.shape[1] < 2 \
+                or gains.shape[1] % 2 or not np.all(np.isfinite(gains)):
+            raise ValueError(f"scheduled_lqr.gains must be finite with shape ({rates.size}, "
+                             f"2 M + 2); got shape {gains.shape}")
+        for name, value in (("spin_rates", rates), ("gains", gains)):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "reference", _check_reference("scheduled_lqr", self.reference))
+        object.__setattr__(self, "feedforward_inertia", _optional_positive(
+            "scheduled_lqr", "feedforward_inertia", self.feedforward_inertia))
+        object.__setattr__(self, "torque_limit", _optional_positive(
+            "scheduled_lqr", "torque_limit", self.torque_limit))
+
+    @property
+    def n_modes(self) -> int:
+        """Design modes ``M``."""
+        return self.gains.shape[1] // 2 - 1
+
+    @property
+    def breakpoints(self) -> tuple:
+        """Times (s) where the reference is not smooth."""
+        return tuple(getattr(self.reference, "breakpoints", ()) or ())
+
+    def gain_at(self, spin_rate: float) -> np.ndarray:
+        """Interpolated gain at hub rate ``spin_rate`` (rad/s, either sign), shape (1, 2M+2)."""
+        w = abs(_real("scheduled_lqr", "spin_rate", spin_rate))
+        rates = self.spin_rates
+        if rates.size == 1 or w <= rates[0]:
+            return self.gains[:1].copy()
+        if w >= rates[-1]:
+            return self.gains[-1:].copy()
+        k = int(np.searchsorted(rates, w, side="right")) - 1
+        frac = (w - rates[k]) / (rates[k + 1] - rates[k])
+        return ((1.0 - frac) * self.gains[k] + frac * self.gains[k + 1])[None, :]
+
+    def state_gain(self, n_modes: int, spin_rate: float = 0.0) -> np.ndarray:
+        """Gain at ``spin_rate`` on a plant state with ``n_modes`` modes, shape (1, 2N+2)."""
+        return self.gain_at(spin_rate) @ truncation_matrix(n_modes, self.n_modes)
+
+    def initial_state(self, x0) -> np.ndarray:
+        """No internal state: shape (0,)."""
+        return np.zeros(0)
+
+    def torque(self, t: float, x, z=None) -> float:
+        """Hub torque, N m, with the gain at the measured ``|theta_dot|``."""
+        x_design = truncate_state(x, self.n_modes)
+        x_ref, acc = reference_state(self.reference, t, self.n_modes)
+        gain = self.gain_at(x_design[self.n_modes + 1])
+        u = -float(gain[0] @ (x_design - x_ref))
+        if self.feedforward_inertia is not None:
+            u += self.feedforward_inertia * acc
+        return _saturate(u, self.torque_limit)
+
+    def derivative(self, t: float, x, z=None) -> np.ndarray:
+        """No internal state: shape (0,)."""
+        return np.zeros(0)
+
+
+def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=None,
+                         feedforward: bool = True,
+                         torque_limit: float | None = None) -> ScheduledLQR:
+    """One LQR per spin rate on ``model.linearize(spin_rate)``, scheduled on ``|theta_dot|``.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        Design model (``M`` modes).
+    weights : LQRWeights
+        The same weights at every spin rate.
+    spin_rates : array_like, shape (S,)
+        rad/s, ``>= 0``, strictly increasing; the gain at each equals
+        ``design_lqr(model, weights, spin_rate).gain``.
+    reference, feedforward, torque_limit
+        As in :func:`controllers.lqr.design_lqr`.
+
+    Returns
+    -------
+    ScheduledLQR
+    """
+    model = _model("design_scheduled_lqr", model)
+    rates = _spin_rates("design_scheduled_lqr", spin_rates)
+    gains = np.vstack([_lqr_gain(model, weights, float(w))[0] for w in rates])
+    return ScheduledLQR(spin_rates=rates, gains=gains, reference=reference,
+                        feedforward_inertia=float(model.matrices.J0) if feedforward else None,
+                        torque_limit=torque_limit)
