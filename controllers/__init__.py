@@ -9,7 +9,8 @@ module                 contents
 ``lqg``                Kalman filter on hub angle and root moment plus LQR
 ``scheduling``         LQR gains scheduled on the spin rate
 ``shaping``            rigid bang-bang torque and ZV / ZVD input shaping
-``trajopt``            CasADi/IPOPT slew optimisation and tracking of the optimum
+``trajopt``            CasADi/IPOPT slew optimisation
+``tracking``           feedforward plus LQR feedback about an optimal slew
 ``factory``            the controller a slew scene's [controller] table asks for
 =====================  ==========================================================
 
@@ -26,7 +27,8 @@ from .scheduling import ScheduledLQR, design_scheduled_lqr
 from .shaping import (BangBang, ShapedReference, ShapedTorque, Shaper, bang_bang,
                       design_shaper, shape, zv_shaper, zvd_shaper)
 from .trajopt import (SlewProblem, SlewSolution, TrajectoryOptimizationError,
-                      TrajectoryTracker, rigid_minimum_time, solve_slew)
+                      rigid_minimum_time, solve_slew)
+from .tracking import TrajectoryTracker
 from .factory import BuiltController, OpenLoop, from_spec
 
 __all__ = [

@@ -43,7 +43,8 @@ from .pd import design_pd
 from .reference import SlewProfile, minimum_slew_duration
 from .scheduling import design_scheduled_lqr
 from .shaping import bang_bang, design_shaper, shape
-from .trajopt import SlewProblem, TrajectoryTracker, solve_slew
+from .tracking import TrajectoryTracker
+from .trajopt import SlewProblem, solve_slew
 
 __all__ = ["BuiltController", "OpenLoop", "from_spec"]
 

@@ -3,9 +3,8 @@
 :func:`solve_slew` turns a :class:`SlewProblem` into a :class:`SlewSolution`: the hub torque,
 held constant on each of ``K`` intervals, that slews the hub of a :class:`~flexctl.Model`
 by ``angle`` from rest to rest with every flexible state back at zero, at minimum effort over
-a given duration or in minimum time. :class:`TrajectoryTracker` follows such a solution on a
-plant that differs from the design model: the optimal torque as feedforward plus LQR feedback
-on the deviation from the optimal state trajectory.
+a given duration or in minimum time. :class:`controllers.tracking.TrajectoryTracker` follows
+such a solution on a plant that differs from the design model.
 
 Notes
 -----
@@ -53,7 +52,7 @@ import numpy as np
 from flexctl.model import Model
 
 __all__ = ["SlewProblem", "SlewSolution", "TrajectoryOptimizationError", "HoldTorque",
-           "TrajectoryTracker", "solve_slew", "rigid_minimum_time"]
+           "solve_slew", "rigid_minimum_time"]
 
 TRANSCRIPTIONS = ("multiple_shooting", "collocation")
 INTEGRATORS = ("rk4", "cvodes")
@@ -558,116 +557,3 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
         ipopt_time_s=float(stats.get("t_wall_total", np.nan)), iterations=iterations,
         return_status=status,
         multipliers=np.asarray(opti.value(opti.lam_g), dtype=float).reshape(-1))
-
-
-# ---------------------------------------------------------------------------- tracking
-def _default_weights(model: Model, angle: float, torque_bound: float):
-    """Bryson's rule: 5 % of the angle, 3 % of the beam length at the tip, ``u_max``."""
-    mat = model.matrices
-    w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
-    theta = 0.05 * abs(angle)
-    q = 0.03 * model.system.beam.length / np.abs(mat.tip)
-    allowed = np.concatenate(([theta], q, [theta * w[0]], q * w))
-    return 1.0 / allowed ** 2, 1.0 / torque_bound ** 2
-
-
-@dataclass(frozen=True, kw_only=True, eq=False)
-class TrajectoryTracker:
-    """Track a :class:`SlewSolution`: feedforward torque plus LQR state feedback.
-
-    ``torque(t, x) = u_ff(t) - K (P x - x_opt(t))`` with ``u_ff`` the optimal hold torque,
-    ``x_opt`` the optimal state (:meth:`SlewSolution.state_at`, held at the target after the
-    slew), ``P`` the selection of the design model's states from the plant state (theta,
-    the first N ``q``, theta_dot, the first N ``q_dot``; the plant may carry more modes) and
-    ``K`` the LQR gain of the design model linearised at rest. A static law of the
-    :class:`flexctl.Controller` protocol (``n_states = 0``).
-
-    Parameters
-    ----------
-    solution : SlewSolution
-    state_weights : array_like, shape (n,), optional
-        Diagonal of ``Q`` (design states). Default Bryson's rule: 5 % of the angle, 3 % of
-        the beam length at the tip, rates from the flexible frequencies.
-    torque_weight : float, optional
-        ``R``, 1/(N m)^2. Default ``1 / torque_bound^2``.
-    torque_limit : float, optional
-        Saturate the total torque at this magnitude, N m. Default none.
-
-    Attributes
-    ----------
-    gain : ndarray, shape (n,)
-        ``K``, N m per state unit.
-    breakpoints : tuple of float
-        The hold boundaries, s (where the feedforward jumps).
-
-    Notes
-    -----
-    Only ``theta`` and ``theta_dot`` are collocated with the hub torque. Feedback on the
-    truncated modal coordinates is not: the plant's unmodelled modes show up in them
-    (observation spillover), and on an *undamped* plant with more modes some of those modes
-    can be slightly destabilised. With the default weights on the 2-mode hub-beam-mass design,
-    the undamped plant stays stable up to 16 modes; at 24 modes one grows at about 1e-4 1/s.
-    Structural damping removes this: with a damping ratio of 0.1 % every mode of plants with
-    up to 24 modes decays.
-    """
-
-    solution: SlewSolution
-    state_weights: np.ndarray | None = None
-    torque_weight: float | None = None
-    torque_limit: float | None = None
-    gain: np.ndarray = field(init=False, repr=False)
-    breakpoints: tuple = field(init=False, repr=False)
-    n_states: int = field(init=False, default=0)
-    _feedforward: HoldTorque = field(init=False, repr=False)
-
-    def __post_init__(self):
-        import control
-
-        if not isinstance(self.solution, SlewSolution):
-            raise TypeError(f"solution must be a SlewSolution; got "
-                            f"{type(self.solution).__name__}")
-        model, problem = self.solution.model, self.solution.problem
-        q_default, r_default = _default_weights(model, problem.angle, problem.torque_bound)
-        q = q_default if self.state_weights is None else np.asarray(self.state_weights, float)
-        if q.shape != (model.n_states,) or not np.all(np.isfinite(q)) or np.any(q < 0):
-            raise ValueError(f"state_weights must be {model.n_states} finite numbers >= 0; "
-                             f"got {self.state_weights!r}")
-        r = r_default if self.torque_weight is None else _number("torque_weight",
-                                                                 self.torque_weight)
-        _number("torque_limit", self.torque_limit, optional=True)
-        a, b = model.linear_matrices(0.0)
-        gain, _, _ = control.lqr(a, b, np.diag(q), np.array([[r]]))
-        gain = np.asarray(gain, dtype=float).reshape(-1)
-        gain.setflags(write=False)
-        object.__setattr__(self, "gain", gain)
-        object.__setattr__(self, "breakpoints", self.solution.torque_function().breakpoints)
-        object.__setattr__(self, "_feedforward", self.solution.torque_function())
-
-    def design_state(self, x) -> np.ndarray:
-        """The design model's states picked out of a plant state ``x`` (shape (2 M + 2,))."""
-        x = np.asarray(x, dtype=float)
-        n_design = self.solution.model.n_modes
-        n_plant, odd = divmod(x.shape[0] - 2, 2)
-        if odd or n_plant < n_design:
-            raise ValueError(f"plant state must have 2 M + 2 entries with M >= {n_design} "
-                             f"modes; got {x.shape[0]}")
-        return np.concatenate((x[:n_design + 1], x[n_plant + 1:n_plant + 2 + n_design]))
-
-    def initial_state(self, x0) -> np.ndarray:
-        """No internal states: an empty array (also :meth:`derivative`)."""
-        return np.zeros(0)
-
-    def torque(self, t, x, z=None) -> float:
-        """Hub torque at time ``t`` (s) for plant state ``x``, N m."""
-        error = self.design_state(x) - self.solution.state_at(float(t))
-        u = self._feedforward(t) - float(self.gain @ error)
-        if self.torque_limit is not None:
-            u = float(np.clip(u, -self.torque_limit, self.torque_limit))
-        return u
-
-    def derivative(self, t, x, z=None) -> np.ndarray:  # noqa: D102
-        return np.zeros(0)
-
-    def __repr__(self):
-        return (f"TrajectoryTracker(duration={self.solution.duration:.6g} s, design_modes="
-                f"{self.solution.model.n_modes}, torque_limit={self.torque_limit})")

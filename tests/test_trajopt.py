@@ -14,7 +14,8 @@ import pytest
 
 import flexctl
 from controllers.trajopt import (HoldTorque, SlewProblem, TrajectoryOptimizationError,
-                                 TrajectoryTracker, rigid_minimum_time, solve_slew)
+                                 rigid_minimum_time, solve_slew)
+from controllers.tracking import TrajectoryTracker
 
 SYSTEM = flexctl.load_scene("hub-beam-mass").system
 ANGLE = math.pi / 2            # rad
@@ -277,7 +278,7 @@ def test_bad_solver_inputs_name_the_parameter(design, problem, solution):
         TrajectoryTracker(solution=solution, state_weights=np.ones(3))
     with pytest.raises(ValueError, match="torque_limit"):
         TrajectoryTracker(solution=solution, torque_limit=-1.0)
-    with pytest.raises(ValueError, match="plant state"):
+    with pytest.raises(ValueError, match="plant.s 1 modes"):
         TrajectoryTracker(solution=solution).torque(0.0, np.zeros(4), np.zeros(0))
 
 
