@@ -33,9 +33,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from numbers import Real
 
 import numpy as np
+
+from flexctl.parameters import check_real as _real
 
 __all__ = ["SlewProfile", "minimum_slew_duration", "SHAPES"]
 
@@ -45,33 +46,6 @@ SHAPES = ("poly7", "cycloidal")
 _PEAK_ACCELERATION = {"poly7": 84.0 * math.sqrt(5.0) / 25.0, "cycloidal": 2.0 * math.pi}
 #: Peak rate of each unit profile, rad/s.
 _PEAK_RATE = {"poly7": 35.0 / 16.0, "cycloidal": 2.0}
-
-
-def _real(owner: str, name: str, value, *, minimum: float | None = None,
-          strict: bool = False, maximum: float | None = None) -> float:
-    """Return ``value`` as a float after checking it is a finite real number within bounds.
-
-    Raises ``TypeError`` for a non-number and ``ValueError`` (naming ``owner.name``, the rule and
-    the value) for NaN, infinity or a value out of bounds. Shared by the controller modules.
-    """
-    label = f"{owner}.{name}"
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise TypeError(f"{label} must be a real number; got {value!r} of type "
-                        f"{type(value).__name__}")
-    value = float(value)
-    rule = "finite"
-    if minimum is not None:
-        rule += f" and {'>' if strict else '>='} {minimum:g}"
-    if maximum is not None:
-        rule += f" and <= {maximum:g}"
-    ok = math.isfinite(value)
-    if ok and minimum is not None:
-        ok = value > minimum if strict else value >= minimum
-    if ok and maximum is not None:
-        ok = value <= maximum
-    if not ok:
-        raise ValueError(f"{label} must be {rule}; got {value!r}")
-    return value
 
 
 def _optional_positive(owner: str, name: str, value) -> float | None:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .parameters import _real
+from .parameters import check_real as _real
 
 __all__ = ["SpinUp", "SineTorque", "Slew"]
 

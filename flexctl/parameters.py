@@ -26,12 +26,16 @@ import math
 from dataclasses import dataclass, field
 from numbers import Real
 
-__all__ = ["Hub", "Beam", "PointMass", "HubBeam"]
+__all__ = ["Hub", "Beam", "PointMass", "HubBeam", "check_real"]
 
 
-def _real(owner: str, name: str, value, *, minimum: float | None = None,
-          strict: bool = False, maximum: float | None = None) -> float:
-    """Check that ``value`` is a finite real number within bounds and return it as float."""
+def check_real(owner: str, name: str, value, *, minimum: float | None = None,
+               strict: bool = False, maximum: float | None = None) -> float:
+    """Check that ``value`` is a finite real number within bounds and return it as float.
+
+    Raises ``TypeError`` for a non-number (bool included) and ``ValueError`` naming
+    ``owner.name``, the rule and the value for NaN, infinity or a value out of bounds.
+    """
     label = f"{owner}.{name}"
     if isinstance(value, bool) or not isinstance(value, Real):
         raise TypeError(f"{label} must be a real number; got {value!r} of type "
@@ -72,7 +76,8 @@ class Hub:
 
     def __post_init__(self):
         for name in ("inertia", "radius", "friction"):
-            object.__setattr__(self, name, _real("hub", name, getattr(self, name), minimum=0.0))
+            object.__setattr__(self, name,
+                               check_real("hub", name, getattr(self, name), minimum=0.0))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -104,9 +109,9 @@ class Beam:
 
     def __post_init__(self):
         for name in ("length", "density", "area", "second_moment", "youngs_modulus"):
-            object.__setattr__(self, name, _real("beam", name, getattr(self, name),
+            object.__setattr__(self, name, check_real("beam", name, getattr(self, name),
                                                  minimum=0.0, strict=True))
-        zeta = _real("beam", "damping_ratio", self.damping_ratio, minimum=0.0)
+        zeta = check_real("beam", "damping_ratio", self.damping_ratio, minimum=0.0)
         if zeta >= 1.0:
             raise ValueError(f"beam.damping_ratio must be finite and in [0, 1); got {zeta!r}")
         object.__setattr__(self, "damping_ratio", zeta)
@@ -143,9 +148,9 @@ class PointMass:
     position: float
 
     def __post_init__(self):
-        object.__setattr__(self, "mass", _real("mass", "mass", self.mass, minimum=0.0))
+        object.__setattr__(self, "mass", check_real("mass", "mass", self.mass, minimum=0.0))
         object.__setattr__(self, "position",
-                           _real("mass", "position", self.position, minimum=0.0))
+                           check_real("mass", "position", self.position, minimum=0.0))
 
 
 @dataclass(frozen=True, kw_only=True)
