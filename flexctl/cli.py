@@ -1,10 +1,11 @@
-"""Command line: ``flexctl run``, ``flexctl scenes``, ``flexctl demo``.
+"""Command line: ``flexctl run``, ``flexctl scenes``, ``flexctl demo``, ``flexctl bench``.
 
 ::
 
     flexctl run SCENE [--set key=value ...] [--out DIR]
     flexctl scenes
-    flexctl demo [--out DIR]
+    flexctl demo [--out DIR] [--workers N]
+    flexctl bench [--quick] [--scene SCENE ...] [--modes 1-12] [--out DIR] (see --help)
     flexctl --version
 
 ``SCENE`` is a TOML file or the name of a built-in scene; ``--set`` overrides one value by its
@@ -57,7 +58,11 @@ DEMO_INTRO = (
     "the zero_order model. zero_order leaves out dynamic stiffening (the centrifugal tension "
     "of the beam), so once the hub rate passes the first clamped frequency of the beam its "
     "stiffness K_ff - Omega^2 M_ff is no longer positive and the deflection grows without "
-    "bound: that run is expected to diverge.")
+    "bound: that run is expected to diverge. After the frequency plot: the papers' figures "
+    "(paper 001 Figs. 4 and 5, paper 000 Figs. 5 to 8) against their published numbers, and "
+    "every controller kind on slew-90.")
+#: Processes of the demo's pool (sweeps and controller comparison).
+DEMO_WORKERS = 2
 DEMO_FREQUENCY_NOTE = (
     "Kane beam, hub clamped at a steady spin rate. first_order and consistent share the beam "
     "stiffness K_ff - Omega^2 (M_ff - K_g), so their curves lie on each other and rise with "
@@ -126,16 +131,36 @@ def _parser() -> argparse.ArgumentParser:
 
     demo = commands.add_parser("demo", help="run every built-in scene and write a report",
                                description="Run every built-in scene and the Kane spin-up "
-                               "with the zero_order model; write each run's files and "
-                               "report.md.")
+                               "with the zero_order model; reproduce the papers' figures "
+                               "(paper 001 Figs. 4 and 5, paper 000 Figs. 5 to 8 with their "
+                               "sweeps) and compare every controller kind on slew-90; write "
+                               "each run's files, the figures and report.md.")
     demo.add_argument("--out", metavar="DIR", type=Path, default=DEFAULT_DEMO_DIR,
                       help=f"output directory (default {DEFAULT_DEMO_DIR})")
+    demo.add_argument("--workers", metavar="N", type=_worker_count, default=DEMO_WORKERS,
+                      help="processes for the sweeps and the controller comparison "
+                      f"(default {DEMO_WORKERS}; 1 runs everything in this process)")
     demo.set_defaults(func=_cmd_demo)
+
+    # flexctl bench: speed against error sweeps, defined with flexctl.bench
+    from .bench import add_command as add_bench_command
+    add_bench_command(commands)
     return parser
 
 
 class _InputError(Exception):
     """Bad input or an unwritable output directory, reported in one line."""
+
+
+def _worker_count(text: str) -> int:
+    """argparse type of ``demo --workers``: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1; got {text!r}")
+    return value
 
 
 def _run_controlled(scene):
@@ -211,6 +236,34 @@ def _demo_frequency_plot(out: Path, source: str = "kane-spinup") -> Path:
     return path
 
 
+def _demo_sections(out: Path, workers: int, surprises: list) -> list:
+    """The papers' figures and the controller comparison (:mod:`flexctl.demo`), on a pool."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from . import demo
+    from .sweep import SweepError
+
+    cases = (("paper 001 Fig. 4", demo.kane_spinup, True),
+             ("paper 001 Fig. 5", lambda o, pool: demo.spacecraft_torque(o), False),
+             ("paper 000 Figs. 5-8", demo.hub_beam_mass, True),
+             ("controller comparison", demo.slew_comparison, True))
+    pool = ProcessPoolExecutor(max_workers=workers) if workers > 1 else None
+    sections = []
+    try:
+        for label, make, pooled in cases:
+            begin = time.perf_counter()
+            try:
+                sections.append(make(out, pool if pooled else None))
+            except (SweepError, *INPUT_ERRORS) as exc:
+                surprises.append(f"{label} failed: {exc}")
+                continue
+            print(f"{label}: {time.perf_counter() - begin:.1f} s", flush=True)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    return sections
+
+
 def _cmd_demo(args) -> int:
     out = args.out
     plan = [(name, name, {}, "ok") for name in builtin_scenes()]
@@ -231,8 +284,9 @@ def _cmd_demo(args) -> int:
                 surprises.append(f"{label} ended {summary['status']}{note}: "
                                  f"{summary['message']}")
         freq_plot = _demo_frequency_plot(out)
+        sections = _demo_sections(out, args.workers, surprises)
         report = write_demo_report(out, runs, freq_plot, intro=DEMO_INTRO,
-                                   frequency_note=DEMO_FREQUENCY_NOTE)
+                                   frequency_note=DEMO_FREQUENCY_NOTE, sections=sections)
     except _InputError as exc:
         return _error(exc)
     except OSError as exc:

@@ -83,6 +83,9 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         (rad/s, at rest, hub clamped) and, for a spin-up, ``spin_rate`` (rad/s) with
         ``clamped_frequencies_at_spin`` at that rate; ``units`` names the units; the
         entries of ``extra`` (e.g. ``slew`` metrics of a controlled slew) are added as given.
+        A scene with ``modes = "auto"`` adds ``mode_choice``: the number of modes chosen, the
+        estimated relative tip error against the tolerance, the error estimated for each number
+        of modes, the stiffening verdict and why (:meth:`flexctl.fidelity.ModeChoice.to_dict`).
     """
     model = result.model
     summary = {
@@ -108,8 +111,16 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         summary["spin_rate"] = spin
         summary["clamped_frequencies_at_spin"] = _floats(
             model.natural_frequencies(spin, hub="clamped"))
+    choice = scene.mode_choice() if callable(getattr(scene, "mode_choice", None)) else None
+    if choice is not None:
+        summary["mode_choice"] = choice.to_dict()
     summary.update(extra or {})
     summary["units"] = {k: v for k, v in _UNITS.items() if k in summary}
+    if choice is not None:
+        summary["units"]["mode_choice"] = (
+            "estimated_error, error_by_modes, tolerance: relative tip deflection error (largest "
+            "difference from a converged model / largest tip deflection); max_spin_rate: rad/s; "
+            "stiffening_effect: relative shift of the first clamped frequency; t_final: s")
     return summary
 
 
@@ -193,8 +204,24 @@ def _relative(path, base: Path) -> str:
         return Path(path).resolve().as_posix()
 
 
+def _section_lines(section, out: Path) -> list:
+    """Markdown of one :class:`flexctl.demo.Section`: heading, text, table, figures."""
+    lines = ["", f"## {section.title}", ""]
+    for paragraph in section.paragraphs:
+        lines += [paragraph, ""]
+    if section.table:
+        header, rows = section.table
+        lines.append("| " + " | ".join(header) + " |")
+        lines.append("|" + "|".join("---" for _ in header) + "|")
+        lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+        lines.append("")
+    for caption, image in section.images:
+        lines += [f"![{caption}]({_relative(image, out)})", ""]
+    return lines
+
+
 def write_demo_report(out_dir, runs: list, frequency_plot=None, *, title: str = "flexctl demo",
-                      intro: str = "", frequency_note: str = "") -> Path:
+                      intro: str = "", frequency_note: str = "", sections=()) -> Path:
     """Write ``report.md`` for a set of runs.
 
     Parameters
@@ -210,6 +237,9 @@ def write_demo_report(out_dir, runs: list, frequency_plot=None, *, title: str = 
         Heading and the paragraph under it.
     frequency_note : str, optional
         Paragraph above the frequency plot.
+    sections : sequence of flexctl.demo.Section, optional
+        Further sections (the papers' figures, the controller comparison), written after the
+        frequency plot, each with its text, table and figures.
 
     Returns
     -------
@@ -240,6 +270,8 @@ def write_demo_report(out_dir, runs: list, frequency_plot=None, *, title: str = 
         lines += ["", "## Clamped natural frequencies against spin rate", ""]
         lines += [frequency_note, ""] if frequency_note else []
         lines.append(f"![frequencies against spin rate]({rel})")
+    for section in sections:
+        lines += _section_lines(section, out)
     lines += ["", "## Responses", ""]
     for label, s in runs:
         plot = _relative(s["files"]["response_plot"], out)

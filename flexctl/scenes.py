@@ -23,7 +23,8 @@ Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as sh
 
     [model]
     variant = "first_order"              # first_order | zero_order | consistent
-    modes = 4
+    modes = 4                            # or "auto": as few as the manoeuvre needs, see
+    # tolerance = 1e-2                   # flexctl.fidelity.choose_modes (only with "auto")
 
     [maneuver]
     kind = "sine_torque"                 # peak_torque, duration
@@ -54,6 +55,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
+from .fidelity import DEFAULT_TOLERANCE, ModeChoice, choose_modes
 from .maneuvers import SineTorque, Slew, SpinUp
 from .model import VARIANTS, Model, build_model
 from .parameters import Beam, Hub, HubBeam, PointMass
@@ -79,7 +81,7 @@ _SCHEMA = {
     "hub": {"inertia", "radius", "friction"},
     "beam": {"length", "density", "area", "second_moment", "youngs_modulus", "damping_ratio"},
     "masses": {"mass", "position"},
-    "model": {"variant", "modes", "design_modes"},
+    "model": {"variant", "modes", "design_modes", "tolerance"},
     "maneuver": {"kind", "spin_rate", "ramp_time", "peak_torque", "duration", "angle_deg",
                  "torque_bound"},
     "simulation": {"t_final", "output_step", "rtol", "method"},
@@ -116,13 +118,18 @@ class SceneError(ValueError):
 class ModelSpec:
     """Which model a scene uses: ``variant`` and number of modes ``modes``.
 
+    ``modes`` may be ``"auto"``: as few modes as the scene's manoeuvre needs for a relative tip
+    error ``tolerance`` in (0, 1) (default 1e-2; :func:`flexctl.fidelity.choose_modes`).
+    ``tolerance`` applies only then and must be left out otherwise.
+
     ``design_modes`` is the number of modes of the model a controller is designed on
     (default 2; used by slew scenes).
     """
 
     variant: str = "first_order"
-    modes: int = 4
+    modes: int | str = 4
     design_modes: int = 2
+    tolerance: float | None = None
 
     def __post_init__(self):
         if isinstance(self.design_modes, bool) or not isinstance(self.design_modes, int) \
@@ -132,9 +139,26 @@ class ModelSpec:
         if self.variant not in VARIANTS:
             raise SceneError(f"model.variant must be one of {', '.join(VARIANTS)}; "
                              f"got {self.variant!r}")
+        if self.modes == "auto":
+            tolerance = DEFAULT_TOLERANCE if self.tolerance is None else self.tolerance
+            if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) \
+                    or not 0.0 < tolerance < 1.0:
+                raise SceneError("model.tolerance must be a relative tip error in (0, 1); "
+                                 f"got {tolerance!r}")
+            object.__setattr__(self, "tolerance", float(tolerance))
+            return
         if isinstance(self.modes, bool) or not isinstance(self.modes, int) \
                 or not 1 <= self.modes <= 200:
-            raise SceneError(f"model.modes must be an integer in [1, 200]; got {self.modes!r}")
+            raise SceneError("model.modes must be an integer in [1, 200] or \"auto\"; "
+                             f"got {self.modes!r}")
+        if self.tolerance is not None:
+            raise SceneError("model.tolerance applies only with model.modes = \"auto\"; got "
+                             f"tolerance = {self.tolerance!r} with modes = {self.modes!r}")
+
+    @property
+    def auto(self) -> bool:
+        """True when the number of modes is chosen from the manoeuvre."""
+        return self.modes == "auto"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -209,9 +233,22 @@ class Scene:
     description: str = ""
     data: dict = field(default_factory=dict, repr=False, compare=False)
 
+    def mode_choice(self) -> ModeChoice | None:
+        """How many modes ``modes = "auto"`` takes, and why (None for a fixed number).
+
+        Estimated over the scene's horizon for its manoeuvre and variant
+        (:func:`flexctl.fidelity.choose_modes`, cached).
+        """
+        if not self.model.auto:
+            return None
+        return choose_modes(self.system, self.maneuver, self.model.tolerance,
+                            variant=self.model.variant, t_final=self.simulation.t_final)
+
     def build_model(self) -> Model:
-        """The model this scene asks for."""
-        return build_model(self.system, n_modes=self.model.modes, variant=self.model.variant)
+        """The model this scene asks for (its number of modes chosen when ``"auto"``)."""
+        choice = self.mode_choice()
+        n_modes = choice.n_modes if choice is not None else self.model.modes
+        return build_model(self.system, n_modes=n_modes, variant=self.model.variant)
 
 
 def builtin_scenes() -> dict:

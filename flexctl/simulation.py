@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import inspect
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -37,7 +38,7 @@ from scipy.integrate import solve_ivp
 from .compiled import SegmentIntegrator, is_symbolic
 from .model import Model, SingularMassMatrixError
 
-__all__ = ["simulate", "SimulationResult", "Controller"]
+__all__ = ["simulate", "SimulationResult", "Controller", "StiffnessWarning"]
 
 #: Integration stops as "singular" when the effective hub inertia falls below this fraction
 #: of the rigid inertia J_0 (the exact singularity cannot be integrated up to).
@@ -49,6 +50,52 @@ METHODS = ("auto", "cvodes", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
 
 #: Output samples over the run when no ``output_step`` is given.
 DEFAULT_OUTPUT_POINTS = 2000
+
+# ---- stiffness guard -------------------------------------------------------------------
+#: Largest ``omega h`` at which each explicit method stays stable on an undamped mode of
+#: frequency ``omega``: half the extent of its stability region along the imaginary axis
+#: (where ``|R(iy)| <= 1 + 1e-3``: DOP853 5.96, RK45 1.34, RK23 1.73), the margin that error
+#: control keeps in practice.
+EXPLICIT_STABILITY_LIMITS = {"DOP853": 3.0, "RK45": 0.67, "RK23": 0.87}
+#: An explicit method predicted to need more steps than this (about 5 s of DOP853 at ~40 us a
+#: right-hand side) is not used when the compiled implicit path can take the run.
+EXPLICIT_STEP_LIMIT = 10_000
+
+
+class StiffnessWarning(RuntimeWarning):
+    """An explicit method was asked for on a model whose fastest mode makes it crawl."""
+
+
+def _stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
+                     prescribed: bool):
+    """``(method to use, reason)``: reason is empty when ``method`` is kept silently.
+
+    The step of an explicit method on an undamped mode ``omega`` is bounded by
+    ``limit / omega`` whatever the tolerance, so a run needs at least
+    ``omega_max t_final / limit`` steps, ``omega_max`` the highest natural frequency (hub held
+    for a prescribed motion, free otherwise). Past :data:`EXPLICIT_STEP_LIMIT` the run moves to
+    CVODES (BDF, compiled) when the inputs have a CasADi form. Python inputs keep the explicit
+    method with a warning: on these undamped models the fast modes are excited and must be
+    resolved by any method, and LSODA measured 1.8 to 2.9 times slower than DOP853 (Kane,
+    spacecraft and hub-beam-mass scenes, 12 and 16 modes, rtol 1e-5 and 1e-8, with and
+    without beam damping).
+    """
+    limit = EXPLICIT_STABILITY_LIMITS.get(method)
+    if limit is None:
+        return method, ""
+    hub = "clamped" if prescribed else "free"
+    omega_max = float(model.natural_frequencies(0.0, hub=hub)[-1])
+    steps = omega_max * float(t_final) / limit
+    if steps <= EXPLICIT_STEP_LIMIT:
+        return method, ""
+    reason = (f"stiffness: {method} is explicit and the fastest mode of this {model.n_modes}-mode "
+              f"model ({omega_max:.4g} rad/s, hub {'held' if prescribed else 'free'}) bounds its "
+              f"step to about {limit:g}/{omega_max:.4g} s, some {steps:.3g} steps over "
+              f"{float(t_final):g} s (more than {EXPLICIT_STEP_LIMIT})")
+    if symbolic:
+        return "cvodes", reason + "; switched to cvodes (implicit BDF, compiled)"
+    return method, (reason + f"; kept {method} because the inputs have no CasADi form (give "
+                    "them one, e.g. the built-in manoeuvres, to run on cvodes)")
 
 
 @runtime_checkable
@@ -243,7 +290,10 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         ``"auto"`` (default): ``"cvodes"`` when every input has a CasADi form (the built-in
         manoeuvres), else ``"DOP853"``. ``"cvodes"``: compiled SUNDIALS integration
         (:mod:`flexctl.compiled`); or a ``scipy.integrate.solve_ivp`` method (``"DOP853"``,
-        ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``).
+        ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``). An explicit method
+        (DOP853, RK45, RK23) on a model too stiff for it is replaced by ``"cvodes"`` when the
+        inputs allow, with a :class:`StiffnessWarning` and a note in the result's ``message``
+        (``method`` of the result is the one used); see :func:`_stiffness_guard`.
     output_step : float, optional
         Spacing of the output times, s. Default: ``t_final / 2000``.
     max_step : float, optional
@@ -288,6 +338,10 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                          "manoeuvres, controllers with casadi_torque); got a Python callable")
     if method == "auto":
         method = "cvodes" if symbolic else "DOP853"
+    method, stiffness_note = _stiffness_guard(model, t_final, method, symbolic,
+                                              hub_motion is not None)
+    if stiffness_note:
+        warnings.warn(stiffness_note, StiffnessWarning, stacklevel=2)
     fallback = "DOP853" if method == "cvodes" else method
 
     n, nx = model.n_modes, model.n_states
@@ -498,6 +552,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                    f"J_0 + q^T D q - m_tf^T M_ff^-1 m_tf fell to {j_eff:.3g} kg m^2 "
                    f"(J_0 = {mat.J0:.4g} kg m^2); in the consistent model the deflection "
                    "lowers the hub inertia, and a light hub loses all of it")
+    if stiffness_note:
+        message = f"{message} ({stiffness_note})"
 
     return SimulationResult(model=model, t=t_all, states=states, torque=np.asarray(torque_out,
                             dtype=float).reshape(-1), tip_deflection=tip @ states[1:n + 1],

@@ -1,0 +1,200 @@
+"""Benchmark: ``flexctl.simulate`` against a bare CasADi CVODES integration and python-control.
+
+Cases, all on 4-mode first_order models:
+
+A. ``kane-spinup`` (30 s, prescribed spin-up to 4 rad/s): ``flexctl.simulate`` (method "auto",
+   which takes the compiled CVODES path) against a bare CVODES integration of the same beam
+   equations, ``M_ff q'' + (K_ff - theta_t^2 D) q = -m_tf theta_tt``, written below with casadi
+   from ``model.matrices``.
+B. ``hub-beam-mass`` (20 s, one period of 2 N m sine torque): the same two, and python-control's
+   ``control.input_output_response`` on ``model.nonlinear()``. python-control systems are driven
+   by inputs and cannot take a prescribed hub motion, hence a torque-driven scene for it.
+
+Every tool runs at the largest relative tolerance (quarter decades from 1e-4 down) whose tip
+deflection is within 1e-6 of a reference, relative to the peak: ``max |tip - tip_ref| /
+max |tip_ref|`` on the 0.01 s output grid. The reference is SciPy's DOP853 at rtol 1e-13 through
+``flexctl.simulate`` (a different integrator from all those timed). Absolute tolerances: flexctl
+scales its own per state; the bare and python-control runs take ``rtol * 1e-3`` (metres and
+radians).
+
+Times are end to end and the median of several repeats: for CVODES the construction of the
+integrator (symbolic expression, ``casadi.integrator``) plus the run and the tip output; for
+python-control the call of ``input_output_response``. python-control interpolates its input
+linearly between samples, so the torque is sampled every 2e-4 s (on the 0.01 s output grid alone
+the interpolation error of the sine, ~1e-4, would exceed the accuracy asked for); it is run with
+SciPy's RK45 (its default), DOP853 and LSODA, and the fastest is compared.
+
+Targets: flexctl <= 2x the bare CVODES time; python-control >= 10x the flexctl time.
+
+Run: ``python benchmarks/bench_speed.py`` (a few minutes; python-control dominates).
+"""
+
+from __future__ import annotations
+
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import casadi as ca                               # noqa: E402
+import control                                    # noqa: E402
+
+from flexctl import SpinUp, load_scene, simulate  # noqa: E402
+
+TARGET = 1e-6                    # relative tip error asked of every tool
+RTOL_GRID = 10.0 ** (-4.0 - 0.25 * np.arange(29))     # 1e-4 .. 1e-11
+REFERENCE_RTOL = 1e-13
+ATOL_SCALE = 1e-3                # atol = rtol * 1e-3 (m, rad) for the bare and python-control runs
+OUTPUT_STEP = 0.01               # s
+INPUT_STEP = 2e-4                # s, torque samples handed to python-control
+REPEATS = 7                      # CVODES runs (tens of ms each)
+REPEATS_SLOW = 3                 # python-control runs (seconds each)
+PYTHON_CONTROL_METHODS = ("RK45", "DOP853", "LSODA")
+
+
+def output_grid(t_final):
+    grid = np.arange(0.0, t_final + 0.5 * OUTPUT_STEP, OUTPUT_STEP)
+    grid[-1] = t_final
+    return grid
+
+
+def relative_error(tip, reference):
+    return float(np.max(np.abs(tip - reference)) / np.max(np.abs(reference)))
+
+
+def median_time(run, repeats):
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        run()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def tune(run, reference):
+    """Largest rtol of RTOL_GRID whose tip is within TARGET of the reference: (rtol, error)."""
+    for rtol in RTOL_GRID:
+        error = relative_error(run(rtol), reference)
+        if error <= TARGET:
+            return float(rtol), error
+    raise RuntimeError(f"no rtol down to {RTOL_GRID[-1]:g} reaches {TARGET:g}")
+
+
+# ---------------------------------------------------------------------------- the tools
+def flexctl_tip(model, scene, t_final):
+    drive = ({"hub_motion": scene.maneuver} if isinstance(scene.maneuver, SpinUp)
+             else {"torque": scene.maneuver})
+
+    def run(rtol, method="auto"):
+        result = simulate(model, t_final, rtol=rtol, output_step=OUTPUT_STEP, method=method,
+                          **drive)
+        assert result.ok, result.message
+        return result.tip_deflection
+    return run
+
+
+def bare_cvodes_tip(model, scene, t_final):
+    """CVODES on the model's equations written directly with casadi (no flexctl code)."""
+    mat, n = model.matrices, model.n_modes
+    grid = output_grid(t_final)
+    prescribed = isinstance(scene.maneuver, SpinUp)
+
+    def run(rtol):
+        t = ca.SX.sym("t")
+        if prescribed:
+            x = ca.SX.sym("x", 2 * n)
+            q, qd = x[:n], x[n:]
+            rate, acceleration = scene.maneuver.casadi(t)
+            force = (-ca.mtimes(ca.DM(mat.K_ff), q) + rate ** 2 * ca.mtimes(ca.DM(mat.D), q)
+                     - ca.DM(mat.m_tf) * acceleration)
+            ode = ca.vertcat(qd, ca.mtimes(ca.DM(np.linalg.inv(mat.M_ff)), force))
+        else:
+            x = ca.SX.sym("x", 2 * n + 2)
+            q, w, qd = x[1:n + 1], x[n + 1], x[n + 2:]
+            mass = np.block([[np.array([[mat.J0]]), mat.m_tf[None, :]],
+                             [mat.m_tf[:, None], mat.M_ff]])
+            force = ca.vertcat(scene.maneuver.casadi(t),
+                               -ca.mtimes(ca.DM(mat.K_ff), q)
+                               + w ** 2 * ca.mtimes(ca.DM(mat.D), q))
+            ode = ca.vertcat(w, qd, ca.mtimes(ca.DM(np.linalg.inv(mass)), force))
+        integrator = ca.integrator("bare", "cvodes", {"x": x, "t": t, "ode": ode}, 0.0,
+                                   list(grid[1:]), {"reltol": rtol,
+                                                    "abstol": rtol * ATOL_SCALE,
+                                                    "max_num_steps": 10 ** 7})
+        xf = np.array(integrator(x0=np.zeros(x.numel()))["xf"])
+        q_out = xf[:n] if prescribed else xf[1:n + 1]
+        return np.concatenate(([0.0], mat.tip @ q_out))
+    return run
+
+
+def python_control_tip(model, scene, t_final, method):
+    system = model.nonlinear()
+    t_in = np.arange(0.0, t_final + 0.5 * INPUT_STEP, INPUT_STEP)
+    t_in[-1] = t_final
+    u = scene.maneuver(t_in)
+    grid = output_grid(t_final)
+    tip_row = list(model.output_names).index("tip_deflection")
+
+    def run(rtol):
+        response = control.input_output_response(
+            system, t_in, u, np.zeros(model.n_states), evaluation_times=grid,
+            solve_ivp_method=method, solve_ivp_kwargs={"rtol": rtol,
+                                                       "atol": rtol * ATOL_SCALE})
+        return np.asarray(response.outputs)[tip_row]
+    return run
+
+
+# ---------------------------------------------------------------------------- cases
+def compare(name, with_python_control):
+    scene = load_scene(name)
+    model = scene.build_model()
+    t_final = scene.simulation.t_final
+    print(f"\n== {name}: {scene.description}")
+    print(f"   {model.variant}, {model.n_modes} modes, {t_final:g} s; target relative tip "
+          f"error {TARGET:g}")
+    start = time.perf_counter()
+    flex = flexctl_tip(model, scene, t_final)
+    reference = flex(REFERENCE_RTOL, method="DOP853")
+    check = relative_error(flex(1e-12), reference)
+    print(f"   reference: DOP853 at rtol {REFERENCE_RTOL:g} ({time.perf_counter() - start:.1f} s);"
+          f" flexctl cvodes at 1e-12 differs from it by {check:.2g}")
+
+    tools = {"flexctl.simulate (cvodes)": (flex, REPEATS),
+             "bare casadi CVODES": (bare_cvodes_tip(model, scene, t_final), REPEATS)}
+    if with_python_control:
+        for method in PYTHON_CONTROL_METHODS:
+            tools[f"python-control {method}"] = (
+                python_control_tip(model, scene, t_final, method), REPEATS_SLOW)
+    times = {}
+    print(f"   {'tool':<28} {'rtol':>9} {'error':>9} {'median time':>12}")
+    for label, (run, repeats) in tools.items():
+        rtol, error = tune(run, reference)
+        times[label] = median_time(lambda: run(rtol), repeats)
+        print(f"   {label:<28} {rtol:>9.2g} {error:>9.2g} {times[label]:>10.4f} s")
+    flex_time = times["flexctl.simulate (cvodes)"]
+    ratio = flex_time / times["bare casadi CVODES"]
+    print(f"   flexctl / bare CVODES = {ratio:.2f} (target <= 2: "
+          f"{'met' if ratio <= 2 else 'missed'})")
+    if with_python_control:
+        pc = {k: v for k, v in times.items() if k.startswith("python-control")}
+        fastest = min(pc, key=pc.get)
+        speedup = pc[fastest] / flex_time
+        print(f"   fastest python-control ({fastest.split()[-1]}) / flexctl = {speedup:.0f} "
+              f"(target >= 10: {'met' if speedup >= 10 else 'missed'}); with its default RK45: "
+              f"{pc['python-control RK45'] / flex_time:.0f}")
+    return times
+
+
+def main():
+    print(f"flexctl speed benchmark (casadi {ca.__version__}, python-control "
+          f"{control.__version__}); times are medians, end to end")
+    compare("kane-spinup", with_python_control=False)
+    compare("hub-beam-mass", with_python_control=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,597 @@
+"""Speed against error: sweeps of mode count, model variant, integrator and tolerance.
+
+For each scene, :func:`bench_scene` runs the scene's manoeuvre on every combination of number
+of modes ``N`` (default 1 to 12), model variant, integrator (``cvodes``, ``DOP853``, ``LSODA``,
+...) and relative tolerance, and measures the end-to-end wall time of :func:`flexctl.simulate`
+and the tip error against a converged reference: the same variant on ``reference_modes`` modes
+(default 20) at a tight tolerance. The error of a run is kept apart in two parts:
+
+- ``truncation_error``: the ``N``-mode model integrated at the reference tolerance, against
+  the reference (what the model leaves out);
+- ``integration_error``: the run against that same ``N``-mode tight run (what the integrator
+  adds);
+
+each a relative tip error ``max_t |tip - tip_ref| / max_t |tip_ref|``; ``error`` is the run
+against the reference. A run that diverges or turns singular keeps its status and message and is
+measured over the time it lasted; a SciPy run past ``time_limit`` is stopped as ``"timeout"``
+(and not tried on more modes). ``method_used`` tells when :func:`flexctl.simulate` moved an
+explicit method to cvodes for stiffness.
+
+Each scene also gets the modes :func:`flexctl.fidelity.choose_modes` picks, its estimated error
+next to the actual truncation error for every ``N`` swept. :func:`run_bench` writes per scene
+``<scene>.csv``, ``<scene>.md`` and ``<scene>-pareto.png``, and ``report.md`` linking them; the
+command line is ``flexctl bench``.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import math
+import time
+import warnings
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from .fidelity import choose_modes
+from .maneuvers import SineTorque, SpinUp
+from .model import VARIANTS, build_model
+from .scenes import builtin_scenes, load_scene
+from .simulation import METHODS, simulate
+
+__all__ = ["BenchConfig", "BenchRow", "SceneBench", "bench_scene", "run_bench", "pareto_front",
+           "plot_pareto", "write_scene", "BENCH_KINDS"]
+
+#: Manoeuvres the bench can drive a model with (inputs, not goals for a controller).
+BENCH_KINDS = (SpinUp, SineTorque)
+#: Error levels at which the report names the fastest run.
+SUMMARY_LEVELS = (1e-2, 1e-4, 1e-6)
+CSV_COLUMNS = ("scene", "variant", "n_modes", "method", "method_used", "rtol", "status", "t_end",
+               "wall_time_s", "n_evaluations", "error", "truncation_error", "integration_error",
+               "note")
+
+
+def _ints(name, values, low, high):
+    values = tuple(values)
+    if not values or any(isinstance(v, bool) or not isinstance(v, (int, np.integer))
+                         or not low <= v <= high for v in values):
+        raise ValueError(f"{name} must be integers in [{low}, {high}]; got {values!r}")
+    return tuple(sorted(set(int(v) for v in values)))
+
+
+def _positive(name, value, below=math.inf):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not 0.0 < value < below:
+        raise ValueError(f"{name} must be a number in (0, {below:g}); got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True, kw_only=True)
+class BenchConfig:
+    """What :func:`bench_scene` sweeps.
+
+    Parameters
+    ----------
+    scenes : tuple of str
+        Scene names or TOML paths; empty (default) for every built-in scene driven by a torque
+        or a hub motion.
+    modes, variants, methods, rtols : tuple
+        Numbers of modes (1 to 200; default 1 to 12), model variants (default all three),
+        integrators (:data:`flexctl.simulation.METHODS`; default cvodes, DOP853, LSODA) and
+        relative tolerances (in (0, 1); default 1e-4, 1e-6, 1e-8).
+    reference_modes : int
+        Modes of the converged reference, >= every entry of ``modes``. Default 20.
+    reference_rtol : float
+        Tolerance of the reference and of the truncation runs, <= every entry of ``rtols``.
+    time_limit : float
+        Wall time (s) after which a SciPy run is stopped and recorded as a timeout.
+    tolerance : float
+        Relative tip error for the mode choice check. Default 1e-2.
+    t_final : float or None
+        Horizon (s) instead of each scene's own.
+    """
+
+    scenes: tuple = ()
+    modes: tuple = tuple(range(1, 13))
+    variants: tuple = VARIANTS
+    methods: tuple = ("cvodes", "DOP853", "LSODA")
+    rtols: tuple = (1e-4, 1e-6, 1e-8)
+    reference_modes: int = 20
+    reference_rtol: float = 1e-10
+    time_limit: float = 30.0
+    tolerance: float = 1e-2
+    t_final: float | None = None
+
+    def __post_init__(self):
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731
+        set_("scenes", tuple(str(s) for s in self.scenes))
+        set_("modes", _ints("modes", self.modes, 1, 200))
+        for name, allowed in (("variants", VARIANTS), ("methods", METHODS)):
+            values = tuple(dict.fromkeys(getattr(self, name)))
+            bad = [v for v in values if v not in allowed]
+            if not values or bad:
+                raise ValueError(f"{name} must be taken from {', '.join(allowed)}; got "
+                                 f"{values!r}")
+            set_(name, values)
+        set_("rtols", tuple(sorted({_positive("rtols", r, 1.0) for r in self.rtols},
+                                   reverse=True)))
+        if not self.rtols:
+            raise ValueError("rtols must hold at least one tolerance; got ()")
+        set_("reference_modes", _ints("reference_modes", (self.reference_modes,),
+                                      max(self.modes), 200)[0])
+        set_("reference_rtol", _positive("reference_rtol", self.reference_rtol,
+                                         min(self.rtols) * (1 + 1e-12)))
+        set_("time_limit", _positive("time_limit", self.time_limit))
+        set_("tolerance", _positive("tolerance", self.tolerance, 1.0))
+        if self.t_final is not None:
+            set_("t_final", _positive("t_final", self.t_final))
+
+    @classmethod
+    def quick(cls, **changes) -> "BenchConfig":
+        """A small sweep (about two minutes for the built-in scenes): 1, 2, 4, 8 modes,
+        first_order, cvodes and DOP853 at 1e-5 and 1e-8, a 12-mode reference at 1e-9."""
+        return replace(cls(modes=(1, 2, 4, 8), variants=("first_order",), rtols=(1e-5, 1e-8),
+                           methods=("cvodes", "DOP853"), reference_modes=12,
+                           reference_rtol=1e-9, time_limit=10.0), **changes)
+
+
+@dataclass(frozen=True)
+class BenchRow:
+    """One run of the sweep; errors are relative tip errors (see the module docstring)."""
+
+    scene: str
+    variant: str
+    n_modes: int
+    method: str
+    method_used: str
+    rtol: float
+    status: str
+    t_end: float
+    wall_time_s: float
+    n_evaluations: int
+    error: float
+    truncation_error: float
+    integration_error: float
+    note: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class SceneBench:
+    """Everything measured on one ``scene`` (a Scene) over ``t_final`` (s).
+
+    ``rows`` holds a :class:`BenchRow` per run; ``references`` per variant its ``status``,
+    ``t_end`` (s), ``wall_time_s``, ``message`` and ``difference_from_first_order`` (relative
+    tip difference of the references); ``choice`` is :func:`~flexctl.fidelity.choose_modes` for
+    the scene's variant, and ``truncation`` ``{N: actual truncation error}`` of that variant for
+    the modes swept and the mode choice.
+    """
+
+    scene: object
+    config: BenchConfig
+    t_final: float
+    rows: tuple
+    references: dict
+    choice: object
+    truncation: dict = field(default_factory=dict)
+
+    @property
+    def choice_actual_error(self) -> float:
+        """Truncation error of the chosen number of modes against the reference."""
+        return self.truncation.get(self.choice.n_modes, math.nan)
+
+    def front(self, variant: str) -> list:
+        """Pareto front of a variant's finished runs (:func:`pareto_front`)."""
+        return pareto_front([r for r in self.rows if r.variant == variant])
+
+
+def pareto_front(rows) -> list:
+    """Finished runs that no other run beats on both wall time and error, fastest first.
+
+    Runs with the same variant, modes, integrator used and rtol count once (an explicit method
+    moved to cvodes repeats the cvodes run)."""
+    done = sorted((r for r in rows if r.status == "ok" and math.isfinite(r.error)),
+                  key=lambda r: (r.wall_time_s, r.error))
+    seen, front, best = set(), [], math.inf
+    for r in done:
+        key = (r.variant, r.n_modes, r.method_used, r.rtol)
+        if key in seen:
+            continue
+        seen.add(key)
+        if r.error < best:
+            front.append(r)
+            best = r.error
+    return front
+
+
+class _TimeUp(Exception):
+    """A SciPy run passed its time limit."""
+
+
+class _Deadline:
+    """A manoeuvre whose torque or hub rate, evaluated by SciPy runs at every step, raises
+    :class:`_TimeUp` after ``deadline``; the rest (CasADi form included) is passed through."""
+
+    def __init__(self, inner, deadline: float):
+        self._inner, self._deadline = inner, deadline
+
+    def __getattr__(self, name):
+        return getattr(self._inner, name)
+
+    def _check(self):
+        if time.perf_counter() > self._deadline:
+            raise _TimeUp
+
+    def __call__(self, t):
+        self._check()
+        return self._inner(t)
+
+    def rate(self, t):
+        self._check()
+        return self._inner.rate(t)
+
+
+def _relative_tip_error(result, reference) -> float:
+    """``max |tip - tip_ref| / max |tip_ref|`` over the outputs both runs reached.
+
+    Both runs share the output grid; a stopped run ends with its stop time, off the grid.
+    """
+    n = min(result.t.size, reference.t.size)
+    same = np.abs(result.t[:n] - reference.t[:n]) <= 1e-9
+    if n == 0 or not same[:-1].all():
+        return math.nan
+    peak = float(np.max(np.abs(reference.tip_deflection)))
+    diff = float(np.max(np.abs(result.tip_deflection[:n][same]
+                               - reference.tip_deflection[:n][same])))
+    return diff / peak if peak > 0 else diff
+
+
+def _run(model, scene, t_final, method, rtol, time_limit=None):
+    """``(result or None, wall time s, note)``; never raises for a failed run."""
+    maneuver = scene.maneuver
+    if time_limit is not None and method not in ("cvodes", "auto"):
+        maneuver = _Deadline(maneuver, time.perf_counter() + time_limit)
+    drive = ({"hub_motion": maneuver} if isinstance(scene.maneuver, SpinUp)
+             else {"torque": maneuver})
+    start = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")          # the stiffness note is in the message
+            result = simulate(model, t_final, method=method, rtol=rtol,
+                              output_step=scene.simulation.output_step, **drive)
+    except _TimeUp:
+        return None, time.perf_counter() - start, f"stopped after {time_limit:g} s"
+    except Exception as exc:                         # a benchmark records, it does not crash
+        return None, time.perf_counter() - start, f"{type(exc).__name__}: {exc}"
+    return result, time.perf_counter() - start, ""
+
+
+def _drivable(scene):
+    if not isinstance(scene.maneuver, BENCH_KINDS):
+        raise ValueError(f"scene {scene.name!r} has a {type(scene.maneuver).__name__} "
+                         "manoeuvre, a goal for a controller: the bench drives models with a "
+                         "torque or a hub motion (spin_up or sine_torque scenes)")
+    return scene
+
+
+def bench_scene(scene, config: BenchConfig, progress: bool = True) -> SceneBench:
+    """Run the sweep of ``config`` on one scene (see the module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+        Driven by a spin-up or a torque (:data:`BENCH_KINDS`).
+    config : BenchConfig
+    progress : bool, optional
+        Show a tqdm progress bar on stderr.
+
+    Returns
+    -------
+    SceneBench
+    """
+    from tqdm import tqdm
+
+    _drivable(scene)
+    t_final = config.t_final or scene.simulation.t_final
+    variant0 = scene.model.variant
+    choice = choose_modes(scene.system, scene.maneuver, config.tolerance, variant=variant0,
+                          t_final=t_final)
+    chosen_extra = () if choice.n_modes in config.modes else (choice.n_modes,)
+    n_runs = len(config.variants) * (1 + len(config.modes) * (
+        1 + len(config.methods) * len(config.rtols))) + len(chosen_extra)
+    bar = tqdm(total=n_runs, desc=scene.name, unit="run", disable=not progress, leave=True)
+
+    def tight(variant, n):
+        bar.update()
+        return _run(build_model(scene.system, n, variant), scene, t_final, "auto",
+                    config.reference_rtol)
+
+    references, tight_runs = {}, {}
+    for variant in config.variants:
+        ref, wall, note = tight(variant, config.reference_modes)
+        if ref is None:
+            raise RuntimeError(f"the {variant} reference of {scene.name} failed: {note}")
+        references[variant] = ref
+        for n in config.modes:
+            tight_runs[variant, n] = tight(variant, n)[0]
+    truncation = {n: _relative_tip_error(tight_runs[variant0, n], references[variant0])
+                  for n in config.modes if (variant0, n) in tight_runs
+                  and tight_runs[variant0, n] is not None}
+    for n in chosen_extra:
+        run = tight(variant0, n)[0] if variant0 in references else None
+        if run is not None:
+            truncation[n] = _relative_tip_error(run, references[variant0])
+
+    rows, given_up, nan = [], {}, math.nan
+    for variant, n, method, rtol in itertools.product(config.variants, config.modes,
+                                                      config.methods, config.rtols):
+        bar.update()
+        base, key = tight_runs[variant, n], (variant, method, rtol)
+        trunc = _relative_tip_error(base, references[variant]) if base is not None else nan
+        head = (scene.name, variant, n, method)
+        if key in given_up:          # it failed on fewer modes: more would cost more
+            rows.append(BenchRow(*head, method, rtol, "skipped", 0.0, nan, 0, nan, trunc, nan,
+                                 given_up[key]))
+            continue
+        result, wall, note = _run(build_model(scene.system, n, variant), scene, t_final,
+                                  method, rtol, config.time_limit)
+        if result is None:
+            status = "timeout" if note.startswith("stopped") else "error"
+            given_up[key] = f"{method} at rtol {rtol:g}: {status} on {n} modes"
+            rows.append(BenchRow(*head, method, rtol, status, 0.0, wall, 0, nan, trunc, nan,
+                                 note))
+            continue
+        rows.append(BenchRow(
+            *head, result.method, rtol, result.status, float(result.t[-1]), wall,
+            result.n_evaluations, _relative_tip_error(result, references[variant]), trunc,
+            _relative_tip_error(result, base) if base is not None else nan,
+            "" if result.ok and result.method == method else result.message))
+    bar.close()
+
+    first = references.get("first_order")
+    ref_info = {v: {"status": r.status, "t_end": float(r.t[-1]), "wall_time_s": r.wall_time,
+                    "message": r.message, "difference_from_first_order":
+                    _relative_tip_error(r, first) if first is not None else math.nan}
+                for v, r in references.items()}
+    return SceneBench(scene=scene, config=config, t_final=float(t_final), rows=tuple(rows),
+                      references=ref_info, choice=choice, truncation=truncation)
+
+
+# ---------------------------------------------------------------------------- output
+_METHOD_COLOURS = {"cvodes": "tab:blue", "DOP853": "tab:orange", "LSODA": "tab:green",
+                   "RK45": "tab:red", "RK23": "tab:purple", "Radau": "tab:brown",
+                   "BDF": "tab:pink", "auto": "tab:gray"}
+_VARIANT_MARKERS = {"first_order": "o", "zero_order": "s", "consistent": "^"}
+
+
+def plot_pareto(bench: SceneBench):
+    """Wall time against error of every finished run, with each variant's Pareto front.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Log-log axes: wall time (s) across, relative tip error up; colour by integrator used,
+        marker by variant; front points labelled with their number of modes.
+    """
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8.0, 5.5), layout="constrained")
+    ax = fig.subplots()
+    done = [r for r in bench.rows if r.status == "ok" and r.error > 0]
+    for r in done:
+        ax.plot(r.wall_time_s, r.error, _VARIANT_MARKERS.get(r.variant, "o"), alpha=0.55,
+                color=_METHOD_COLOURS.get(r.method_used, "black"))
+    for variant in bench.config.variants:
+        front = [r for r in bench.front(variant) if r.error > 0]
+        if front:
+            ax.step([r.wall_time_s for r in front], [r.error for r in front], where="post",
+                    color="black", linewidth=1.0,
+                    linestyle={"first_order": "-", "zero_order": "--"}.get(variant, ":"))
+            for r in front:
+                ax.annotate(f"N{r.n_modes}", (r.wall_time_s, r.error), fontsize=7,
+                            xytext=(3, 3), textcoords="offset points")
+    used = [m for m in _METHOD_COLOURS if any(r.method_used == m for r in done)]
+    ax.legend(handles=[ax.plot([], [], "o", color=_METHOD_COLOURS[m], label=m)[0] for m in used]
+              + [ax.plot([], [], _VARIANT_MARKERS[v], color="gray", label=v)[0]
+                 for v in bench.config.variants], fontsize=8, loc="upper right")
+    ax.axhline(bench.config.tolerance, color="gray", linewidth=0.8, linestyle=":")
+    ax.set(xscale="log", yscale="log", xlabel="wall time (s)", ylabel="relative tip error")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.set_title(f"{bench.scene.name}: speed against error over {bench.t_final:g} s "
+                 f"(reference {bench.config.reference_modes} modes)")
+    return fig
+
+
+def _g(value, digits=2) -> str:
+    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) \
+        else f"{value:.{digits}g}"
+
+
+def _table(rows, columns) -> list:
+    lines = ["| " + " | ".join(c[0] for c in columns) + " |",
+             "|" + "|".join("---:" if c[2] else "---" for c in columns) + "|"]
+    for r in rows:
+        lines.append("| " + " | ".join(str(c[1](r)) for c in columns) + " |")
+    return lines
+
+
+_RUN_COLUMNS = [  # (heading, cell, right-aligned)
+    ("variant", lambda r: r.variant, False), ("modes", lambda r: r.n_modes, True),
+    ("method", lambda r: r.method + ("" if r.method == r.method_used else
+                                     f" -> {r.method_used}"), False),
+    ("rtol", lambda r: _g(r.rtol, 1), True), ("wall time (s)", lambda r: _g(r.wall_time_s, 3),
+                                              True),
+    ("error", lambda r: _g(r.error), True), ("truncation", lambda r: _g(r.truncation_error),
+                                             True),
+    ("integration", lambda r: _g(r.integration_error), True),
+    ("status", lambda r: r.status, False)]
+
+
+def fastest_within(bench: SceneBench, level: float, variant: str | None = None):
+    """Fastest finished run with ``error <= level`` (of ``variant``, default the scene's)."""
+    variant = variant or bench.scene.model.variant
+    runs = [r for r in bench.front(variant) if r.error <= level]
+    return runs[0] if runs else None
+
+
+def _fastest_text(bench, level) -> str:
+    r = fastest_within(bench, level)
+    return "" if r is None else f"{r.wall_time_s:.3g} s: N{r.n_modes} {r.method_used} {r.rtol:g}"
+
+
+def write_scene(bench: SceneBench, out_dir) -> dict:
+    """Write ``<scene>.csv``, ``<scene>.md`` and ``<scene>-pareto.png``; return their paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    name, cfg, choice = bench.scene.name, bench.config, bench.choice
+    paths = {"csv": out / f"{name}.csv", "markdown": out / f"{name}.md",
+             "plot": out / f"{name}-pareto.png"}
+    with open(paths["csv"], "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=CSV_COLUMNS)
+        writer.writeheader()
+        for r in bench.rows:
+            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v)
+                             for k, v in asdict(r).items()})
+    plot_pareto(bench).savefig(paths["plot"], dpi=100)
+
+    lines = [f"# Bench: {name}", "", bench.scene.description, "",
+             f"Horizon {bench.t_final:g} s. Errors are relative tip errors, max |tip - tip_ref| "
+             "/ max |tip_ref|: *truncation* is the N-mode model at the reference tolerance "
+             "against the reference, *integration* the run against that same N-mode run, "
+             "*error* the run against the reference. Wall time: `flexctl.simulate` end to end, "
+             "one run each on a shared machine.", "",
+             f"## References: {cfg.reference_modes} modes at rtol {cfg.reference_rtol:g}", ""]
+    lines += [f"- {v}: {i['status']} at t = {i['t_end']:.4g} s ({i['wall_time_s']:.3g} s); "
+              f"differs from first_order by {_g(i['difference_from_first_order'])}"
+              for v, i in bench.references.items()]
+    lines += ["", f"## Modes chosen for a tolerance of {cfg.tolerance:g}", "",
+              f"`choose_modes` ({choice.variant}): **{choice.n_modes} mode"
+              f"{'s' if choice.n_modes > 1 else ''}**, estimated error "
+              f"{_g(choice.estimated_error)}, actual {_g(bench.choice_actual_error)}. "
+              + choice.explanation, ""]
+    lines += _table(sorted(bench.truncation.items()), [
+        ("modes", lambda kv: kv[0], True),
+        ("estimated error", lambda kv: _g(choice.error_by_modes[kv[0] - 1])
+         if kv[0] <= len(choice.error_by_modes) else "-", True),
+        ("actual truncation error", lambda kv: _g(kv[1]), True)])
+    lines += ["", "## Pareto front", "", f"![speed against error]({paths['plot'].name})", "",
+              "Runs that no other run of the variant beats on both wall time and error, "
+              "fastest first.", ""]
+    for variant in cfg.variants:
+        lines += [f"### {variant}", ""]
+        front = bench.front(variant)
+        lines += _table(front, _RUN_COLUMNS) if front else ["No run of this variant finished."]
+        lines.append("")
+    stopped = [r for r in bench.rows if r.status != "ok"]
+    lines += ["## Runs that did not finish", ""]
+    lines += (_table(stopped, _RUN_COLUMNS[:4] + [("status", lambda r: r.status, False),
+                                                   ("note", lambda r: r.note[:160], False)])
+              if stopped else ["None."])
+    lines += ["", f"Every run: [{name}.csv]({name}.csv)", ""]
+    paths["markdown"].write_text("\n".join(lines))
+    return {k: str(v) for k, v in paths.items()}
+
+
+def _index(out: Path, benches: list) -> Path:
+    lines = ["# flexctl bench", "", "Modes picked by `flexctl.fidelity.choose_modes` with "
+             "the estimated and actual truncation error; the fastest finished run of the "
+             "scene's variant within each error level.", ""]
+    lines += _table(benches, [
+        ("scene", lambda b: f"[{b.scene.name}]({b.scene.name}.md)", False),
+        ("chosen modes", lambda b: b.choice.n_modes, True),
+        ("estimated", lambda b: _g(b.choice.estimated_error), True),
+        ("actual", lambda b: _g(b.choice_actual_error), True),
+        ("stiffening", lambda b: "matters" if b.choice.stiffening_matters else "negligible",
+         False)] + [(f"fastest within {lv:g}", lambda b, lv=lv: _fastest_text(b, lv) or "-",
+                     False) for lv in SUMMARY_LEVELS])
+    path = out / "report.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def run_bench(config: BenchConfig, out_dir, progress: bool = True) -> list:
+    """Bench every scene of ``config`` and write its files and ``report.md`` to ``out_dir``.
+
+    Returns
+    -------
+    list of SceneBench
+    """
+    scenes = [load_scene(name) for name in config.scenes or builtin_scenes()]
+    if config.scenes:            # every scene named is checked before the first long run
+        scenes = [_drivable(s) for s in scenes]
+    else:                        # every built-in scene the bench can drive
+        scenes = [s for s in scenes if isinstance(s.maneuver, BENCH_KINDS)]
+    benches = []
+    for scene in scenes:
+        benches.append(bench_scene(scene, config, progress=progress))
+        write_scene(benches[-1], out_dir)
+    _index(Path(out_dir), benches)
+    return benches
+
+
+# ---------------------------------------------------------------------------- command line
+def _list(kind):
+    """argparse type: comma-separated values; integers may be ranges like 1-12."""
+    def parse(text):
+        parts = [p.strip() for p in str(text).split(",") if p.strip()]
+        return tuple(v for p in parts for v in (
+            range(int(p.split("-", 1)[0]), int(p.split("-", 1)[1]) + 1)
+            if kind is int and "-" in p[1:] else (kind(p),)))
+    parse.__name__ = f"list of {kind.__name__}"
+    return parse
+
+
+def add_command(commands) -> None:
+    """Add ``flexctl bench`` to the command line's subparsers."""
+    p = commands.add_parser(
+        "bench", help="sweep modes, variants and integrators: speed against error",
+        description="For every built-in scene driven by a torque or a hub motion (or the "
+        "scenes named), sweep the number of modes, the model variants, the integrators and "
+        "their tolerances; write per scene a CSV, a Markdown table and a speed-against-error "
+        "plot, and report.md. Exit 0 when done, 2 on bad input.")
+    p.add_argument("--scene", action="append", default=[], help="scene name or TOML file "
+                   "(repeatable; default every built-in scene with an input manoeuvre)")
+    p.add_argument("--quick", action="store_true", help="a small sweep (BenchConfig.quick); "
+                   "the options below still apply")
+    for flag, kind, text in (
+            ("--modes", _list(int), "numbers of modes, e.g. 1-12 or 1,2,4 (default 1-12)"),
+            ("--variants", _list(str), "default first_order,zero_order,consistent"),
+            ("--methods", _list(str), "default cvodes,DOP853,LSODA"),
+            ("--rtols", _list(float), "default 1e-4,1e-6,1e-8"),
+            ("--reference-modes", int, "modes of the reference (default 20)"),
+            ("--reference-rtol", float, "rtol of the reference (default 1e-10)"),
+            ("--time-limit", float, "s before a SciPy run is stopped (default 30)"),
+            ("--tolerance", float, "relative tip error of the mode choice (default 1e-2)"),
+            ("--t-final", float, "horizon in s instead of each scene's")):
+        p.add_argument(flag, type=kind, help=text)
+    p.add_argument("--out", type=Path, default=Path("flexctl-bench"), metavar="DIR",
+                   help="output directory (default flexctl-bench)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_bench)
+
+
+def _cmd_bench(args) -> int:
+    from .cli import EXIT_OK, _error
+    from .scenes import SceneError
+
+    names = [f.name for f in fields(BenchConfig) if f.name != "scenes"]
+    changes = {k: getattr(args, k) for k in names if getattr(args, k) is not None}
+    if args.scene:
+        changes["scenes"] = tuple(args.scene)
+    start = time.perf_counter()
+    try:
+        config = BenchConfig.quick(**changes) if args.quick else BenchConfig(**changes)
+        benches = run_bench(config, args.out, progress=not args.no_progress)
+    except (SceneError, ValueError, TypeError) as exc:
+        return _error(exc)
+    except OSError as exc:
+        return _error(f"cannot write the bench files to {args.out}: {exc.strerror or exc}")
+    for b in benches:
+        text = ", ".join(f"within {lv:g}: {_fastest_text(b, lv) or 'none'}"
+                         for lv in SUMMARY_LEVELS)
+        print(f"{b.scene.name}: {b.choice.n_modes} modes chosen (estimated error "
+              f"{_g(b.choice.estimated_error)}, actual {_g(b.choice_actual_error)}); fastest "
+              f"{text}")
+    print(f"report: {Path(args.out) / 'report.md'} ({time.perf_counter() - start:.1f} s)")
+    return EXIT_OK
