@@ -7,7 +7,10 @@ each function also draws into axes the caller passes. matplotlib is imported onl
 function runs, so ``import flexctl`` stays light.
 
 This module draws; it computes nothing physical. Frequencies come from
-:meth:`flexctl.Model.natural_frequencies`, mode shapes from :func:`flexctl.modes.mode_shapes`.
+:meth:`flexctl.Model.natural_frequencies`, mode shapes from :func:`flexctl.modes.mode_shapes`,
+slew metrics from :func:`flexctl.metrics.slew_metrics`. Sweep curves and Pareto fronts
+(:func:`plot_sweep`, :func:`plot_pareto`) live in :mod:`flexctl.plotting_sweeps` and are
+importable from here.
 
 Examples
 --------
@@ -25,7 +28,12 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["plot_response", "plot_mode_shapes", "plot_frequencies_vs_spin"]
+# Sweep and Pareto plots live in their own module (which imports this one only inside its
+# functions); they are importable from here too.
+from .plotting_sweeps import plot_pareto, plot_sweep
+
+__all__ = ["plot_response", "plot_mode_shapes", "plot_frequencies_vs_spin",
+           "plot_tip_deflections", "plot_controller_comparison", "plot_sweep", "plot_pareto"]
 
 #: Colours of the run status marks.
 _STATUS_COLOURS = {"ok": "tab:green", "diverged": "tab:red", "singular": "tab:purple"}
@@ -265,4 +273,181 @@ def plot_frequencies_vs_spin(models, spin_rates, variants=("first_order", "zero_
     ax.set_title("Clamped natural frequencies against spin rate")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper left", fontsize="small", ncol=2)
+    return fig
+
+
+def _results_from(results, name: str = "results") -> dict:
+    """``results`` as ``{label: SimulationResult}`` (a dict, or a sequence labelled by index)."""
+    if isinstance(results, Mapping):
+        pairs = [(str(k), v) for k, v in results.items()]
+    elif isinstance(results, Sequence) and not isinstance(results, str):
+        pairs = [(f"run {k}", v) for k, v in enumerate(results)]
+    else:
+        raise TypeError(f"{name} must be a dict {{label: SimulationResult}} or a sequence of "
+                        f"results; got {type(results).__name__}")
+    for label, r in pairs:
+        if not all(hasattr(r, a) for a in ("t", "tip_deflection", "status", "model")):
+            raise TypeError(f"{name}[{label!r}] must be a flexctl SimulationResult; got "
+                            f"{type(r).__name__}")
+    if not pairs:
+        raise ValueError(f"{name} must hold at least one result; got none")
+    return dict(pairs)
+
+
+def plot_tip_deflections(results, ax=None, title: str | None = None,
+                         clip_stopped: bool = True):
+    """Tip deflection of several runs against time, on one axes.
+
+    Parameters
+    ----------
+    results : dict of {str: SimulationResult} or sequence of SimulationResult
+        Runs to overlay, labelled by the dict keys. Line style follows the model variant
+        (first_order solid, zero_order dashed, consistent dotted), colour the run.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw into; default a new figure.
+    title : str, optional
+        Axes title.
+    clip_stopped : bool, optional
+        When some runs reached their final time and others stopped early (diverged or
+        singular), scale the deflection axis to the runs that finished, so that a diverging
+        run leaves the plot instead of flattening the others. Default True.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Tip deflection (m) against time (s). A stopped run ends in an ``X`` at its stop time,
+        and its legend entry says ``diverged at t = ... s`` (or ``singular``).
+    """
+    runs = _results_from(results)
+    if ax is None:
+        fig, (ax,) = _new_figure((8.0, 4.0))
+    else:
+        fig = ax.figure
+    finished = []
+    for k, (label, r) in enumerate(runs.items()):
+        colour = f"C{k % 10}"
+        style = _VARIANT_STYLES.get(r.model.variant, {})
+        text = label if r.status == "ok" else f"{label}: {r.status} at t = {r.t[-1]:.3g} s"
+        ax.plot(r.t, r.tip_deflection, color=colour, label=text, **style)
+        if r.status != "ok" and r.t.size:
+            ax.plot([r.t[-1]], [r.tip_deflection[-1]], marker="X", markersize=9,
+                    color=_STATUS_COLOURS.get(r.status, "tab:red"), linestyle="none")
+        elif r.t.size:
+            finished.append(float(np.max(np.abs(r.tip_deflection))))
+    if clip_stopped and finished and len(finished) < len(runs):
+        top = 1.3 * max(finished)
+        ax.set_ylim(-top, top)
+    ax.axhline(0.0, color="black", linewidth=0.5)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("tip deflection (m)")
+    if title:
+        ax.set_title(title)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    return fig
+
+
+#: Metrics drawn as bars by :func:`plot_controller_comparison`: (key, label, log scale).
+_COMPARISON_BARS = (("residual_vibration", "residual tip vibration (m)", True),
+                    ("settling_time", "2 % settling time (s)", False),
+                    ("peak_torque", "peak torque (N m)", False))
+
+
+def _metric(metrics, key):
+    value = metrics.get(key) if isinstance(metrics, Mapping) else getattr(metrics, key, None)
+    return np.nan if value is None else float(value)
+
+
+def plot_controller_comparison(results, metrics=None, target_angle: float | None = None,
+                               maneuver_end: float | None = None, torque_bound=None,
+                               fig=None, title: str | None = None):
+    """Closed-loop slews of several controllers side by side.
+
+    Parameters
+    ----------
+    results : dict of {str: SimulationResult}
+        One run per controller, labelled (e.g. by controller kind).
+    metrics : dict of {str: SlewMetrics or dict}, optional
+        Metrics per label (:func:`flexctl.metrics.slew_metrics`); when given, a bar chart of
+        residual vibration (m, log scale), settling time (s) and peak torque (N m) is drawn
+        next to the time histories. A settling time of ``inf`` or ``None`` (not settled) is
+        drawn as a hatched bar up to the end of the run.
+    target_angle : float, optional
+        Commanded slew angle, rad, drawn on the hub angle plot.
+    maneuver_end : float, optional
+        Nominal end of the manoeuvre, s, drawn on every time plot.
+    torque_bound : float, optional
+        Actuator bound, N m, drawn on the torque plot (``+-``).
+    fig : matplotlib.figure.Figure, optional
+        Empty figure to draw into; default a new one (8 x 8 in, or 13 x 8 with metrics).
+    title : str, optional
+        Figure title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Hub angle (rad), torque (N m) and tip deflection (m) against time (s), sharing the
+        time axis, in this order in ``fig.axes``; then the metric bars, if any.
+    """
+    runs = _results_from(results)
+    if metrics is not None:
+        if not isinstance(metrics, Mapping):
+            raise TypeError(f"metrics must be a dict {{label: SlewMetrics}}; got "
+                            f"{type(metrics).__name__}")
+        missing = [label for label in runs if label not in metrics]
+        if missing:
+            raise ValueError(f"metrics must hold every label of results; missing {missing}")
+    if fig is None:
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(13.0 if metrics else 8.0, 8.0), layout="constrained")
+    grid = fig.add_gridspec(3, 2 if metrics else 1,
+                            width_ratios=[1.6, 1.0] if metrics else None)
+    ax_angle = fig.add_subplot(grid[0, 0])
+    ax_torque = fig.add_subplot(grid[1, 0], sharex=ax_angle)
+    ax_tip = fig.add_subplot(grid[2, 0], sharex=ax_angle)
+    colours = {label: f"C{k % 10}" for k, label in enumerate(runs)}
+    for label, r in runs.items():
+        c = colours[label]
+        ax_angle.plot(r.t, r.theta, color=c, label=label)
+        ax_torque.plot(r.t, r.torque, color=c, label=label)
+        ax_tip.plot(r.t, r.tip_deflection, color=c, label=label)
+    if target_angle is not None:
+        ax_angle.axhline(target_angle, color="black", linestyle=":", linewidth=1.0,
+                         label="target")
+    if torque_bound is not None:
+        for sign in (1.0, -1.0):
+            ax_torque.axhline(sign * float(torque_bound), color="black", linestyle=":",
+                              linewidth=1.0)
+    for ax, ylabel in ((ax_angle, "hub angle (rad)"), (ax_torque, "torque (N m)"),
+                       (ax_tip, "tip deflection (m)")):
+        if maneuver_end is not None:
+            ax.axvline(maneuver_end, color="black", linestyle="--", linewidth=0.8)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, alpha=0.3)
+    ax_tip.set_xlabel("time (s)")
+    ax_angle.legend(loc="lower right", fontsize="small", ncol=2)
+
+    if metrics:
+        labels = list(runs)
+        positions = np.arange(len(labels))
+        t_end = max(float(r.t[-1]) for r in runs.values())
+        for row, (key, axis_label, log) in enumerate(_COMPARISON_BARS):
+            ax = fig.add_subplot(grid[row, 1])
+            values = np.array([_metric(metrics[label], key) for label in labels])
+            unsettled = ~np.isfinite(values)
+            shown = np.where(unsettled, t_end, values) if key == "settling_time" else values
+            bars = ax.barh(positions, shown, color=[colours[label] for label in labels])
+            for bar, hatch in zip(bars, unsettled):
+                if hatch and key == "settling_time":
+                    bar.set_hatch("//")
+                    bar.set_alpha(0.5)
+            if log and np.all(shown[np.isfinite(shown)] > 0):
+                ax.set_xscale("log")
+            ax.set_yticks(positions, labels, fontsize="small")
+            ax.invert_yaxis()
+            ax.set_xlabel(axis_label)
+            ax.grid(True, axis="x", alpha=0.3)
+    if title:
+        fig.suptitle(title)
     return fig

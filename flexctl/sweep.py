@@ -1,0 +1,540 @@
+"""Parameter sweeps through any ``concurrent.futures``-style executor, as tidy tables.
+
+:func:`sweep` evaluates a task at every point of a parameter grid and returns a
+:class:`SweepResult`: one row per point, with the point's parameters and the task's outputs as
+columns. Where the points run is the caller's choice:
+
+- ``executor=None``: one after the other in this process;
+- a :class:`concurrent.futures.ProcessPoolExecutor` (or a thread pool): the cores of this
+  machine;
+- the executor of a Dask distributed client, ``Client(...).get_executor()``: the workers of a
+  cluster, the way past one machine.
+
+Anything with ``submit(fn, *args)`` returning futures with ``result()`` will do. Tasks go to
+other processes by pickling, so a task must be a module-level function or an instance of a
+module-level class such as the frozen dataclasses here:
+
+- :class:`PointMassAmplitudes`: peak and residual tip amplitude of a torque response with one
+  point mass placed by its position ratio ``d/l`` and mass ratio ``m/(rhoA l)`` (paper 000,
+  Figs. 6 and 8);
+- :class:`SceneTask`: a scene run with overrides (``{"maneuver.spin_rate": 2.0}``), summarised
+  in numbers; slew scenes take the controller factory (``controllers.from_spec``).
+
+Examples
+--------
+>>> from flexctl.sweep import PointMassAmplitudes, sweep
+>>> task = PointMassAmplitudes.from_scene("hub-beam-mass", t_final=6.0)
+>>> table = sweep(task, {"mass_ratio": [0.0, 0.5]}, progress=False)
+>>> table.columns[:3]
+('mass_ratio', 'peak_amplitude', 'residual_amplitude')
+>>> bool(table.column("peak_amplitude")[1] > table.column("peak_amplitude")[0])
+True
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import csv
+import dataclasses
+import io
+import itertools
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .maneuvers import SineTorque
+from .parameters import HubBeam, PointMass
+
+__all__ = ["sweep", "parameter_grid", "SweepResult", "SweepError", "pareto_front",
+           "response_amplitudes", "PointMassAmplitudes", "SceneTask"]
+
+
+class SweepError(RuntimeError):
+    """A task failed at one point of a sweep; the message names the point."""
+
+
+# --------------------------------------------------------------------------- grids
+def parameter_grid(**axes) -> list:
+    """Every combination of the given parameter values, as a list of dicts.
+
+    Parameters
+    ----------
+    **axes : sequence
+        ``name=values``; the first name varies slowest.
+
+    Returns
+    -------
+    list of dict
+        ``len = prod(len(values))`` points ``{name: value}``, values as given (NumPy scalars
+        turned into Python numbers).
+
+    Examples
+    --------
+    >>> parameter_grid(variant=["first_order", "zero_order"], spin_rate=[0.5, 2.0])
+    ... # doctest: +NORMALIZE_WHITESPACE
+    [{'variant': 'first_order', 'spin_rate': 0.5}, {'variant': 'first_order', 'spin_rate': 2.0},
+     {'variant': 'zero_order', 'spin_rate': 0.5}, {'variant': 'zero_order', 'spin_rate': 2.0}]
+    """
+    if not axes:
+        raise ValueError("parameter_grid needs at least one axis, e.g. mass_ratio=[0, 0.5, 1]")
+    names, columns = [], []
+    for name, values in axes.items():
+        if isinstance(values, (str, bytes)) or not isinstance(values, (Sequence, np.ndarray)):
+            raise TypeError(f"parameter_grid axis {name!r} must be a sequence of values; got "
+                            f"{type(values).__name__}")
+        if len(values) == 0:
+            raise ValueError(f"parameter_grid axis {name!r} must hold at least one value; "
+                             "got none")
+        names.append(name)
+        columns.append([_plain(v) for v in values])
+    return [dict(zip(names, combo)) for combo in itertools.product(*columns)]
+
+
+def _plain(value):
+    """NumPy scalars as Python scalars (clean tables, CSV and TOML overrides)."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def _points(grid) -> list:
+    if isinstance(grid, Mapping):
+        return parameter_grid(**grid)
+    if isinstance(grid, (str, bytes)) or not isinstance(grid, Sequence):
+        raise TypeError("parameter_grid must be a dict {name: values} or a sequence of dicts "
+                        f"{{name: value}}; got {type(grid).__name__}")
+    points = []
+    for k, point in enumerate(grid):
+        if not isinstance(point, Mapping):
+            raise TypeError(f"parameter_grid[{k}] must be a dict {{name: value}}; got "
+                            f"{type(point).__name__}")
+        points.append({str(key): _plain(v) for key, v in point.items()})
+    if not points:
+        raise ValueError("parameter_grid must hold at least one point; got none")
+    return points
+
+
+# --------------------------------------------------------------------------- table
+@dataclass(frozen=True, eq=False)
+class SweepResult:
+    """A sweep as a tidy table: one row per grid point, one column per parameter or output.
+
+    Attributes
+    ----------
+    rows : tuple of dict
+        In the order of the grid; each holds the point's parameters, then the task's outputs.
+    parameters : tuple of str
+        Names of the parameter columns.
+    outputs : tuple of str
+        Names of the output columns (the union over rows, in order of first appearance).
+    wall_time : float
+        Wall time of the whole sweep, s.
+    """
+
+    rows: tuple
+    parameters: tuple
+    outputs: tuple
+    wall_time: float = 0.0
+
+    @property
+    def columns(self) -> tuple:
+        """Parameter columns, then output columns."""
+        return self.parameters + tuple(c for c in self.outputs if c not in self.parameters)
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def __iter__(self):
+        return iter(self.rows)
+
+    def __repr__(self):
+        return (f"SweepResult({len(self.rows)} rows, parameters={list(self.parameters)}, "
+                f"outputs={list(self.outputs)}, wall_time={self.wall_time:.3g} s)")
+
+    def column(self, name: str) -> np.ndarray:
+        """The values of one column, shape (rows,): float when all are numbers, else object.
+
+        A row without the column (a task that returned fewer outputs there) gives NaN.
+        """
+        if name not in self.columns:
+            raise KeyError(f"column must be one of {', '.join(self.columns)}; got {name!r}")
+        values = [row.get(name, math.nan) for row in self.rows]
+        if all(isinstance(v, (int, float, np.number)) and not isinstance(v, bool)
+               for v in values):
+            return np.array(values, dtype=float)
+        return np.array(values, dtype=object)
+
+    def where(self, **equal) -> "SweepResult":
+        """The rows whose columns equal the given values, e.g. ``where(variant="zero_order")``."""
+        for name in equal:
+            if name not in self.columns:
+                raise KeyError(f"where: column must be one of {', '.join(self.columns)}; "
+                               f"got {name!r}")
+        rows = tuple(r for r in self.rows if all(r.get(k) == v for k, v in equal.items()))
+        return dataclasses.replace(self, rows=rows)
+
+    def scalar_columns(self) -> tuple:
+        """Columns whose every value is a number, string, bool or None (CSV-ready)."""
+        scalar = (int, float, str, bool, np.number, type(None))
+        return tuple(c for c in self.columns
+                     if all(isinstance(r.get(c), scalar) for r in self.rows))
+
+    def to_csv(self, path=None) -> str:
+        """Write the scalar columns (:meth:`scalar_columns`) as CSV; return the text.
+
+        Parameters
+        ----------
+        path : str or path-like, optional
+            File to write; default none (only the text is returned).
+        """
+        names = self.scalar_columns()
+        buffer = io.StringIO()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(names)
+        for row in self.rows:
+            writer.writerow(["" if row.get(c) is None else _csv_value(row.get(c))
+                             for c in names])
+        text = buffer.getvalue()
+        if path is not None:
+            with open(path, "w", newline="") as handle:
+                handle.write(text)
+        return text
+
+    def to_pandas(self):
+        """The table as a ``pandas.DataFrame`` (pandas is optional: install it to use this)."""
+        try:
+            import pandas
+        except ImportError:
+            raise ImportError("SweepResult.to_pandas needs pandas, which flexctl does not "
+                              "require; install it (pip install pandas) or use to_csv() "
+                              "or column()") from None
+        return pandas.DataFrame(list(self.rows), columns=list(self.columns))
+
+
+def _csv_value(value):
+    if isinstance(value, (float, np.floating)):
+        return repr(float(value))
+    return _plain(value)
+
+
+def pareto_front(*objectives) -> np.ndarray:
+    """Which points no other point beats in every objective (all minimised).
+
+    Parameters
+    ----------
+    *objectives : array_like, each shape (P,)
+        Two or more objectives, e.g. wall time and error; NaN points are never on the front.
+
+    Returns
+    -------
+    ndarray of bool, shape (P,)
+        True for the non-dominated points.
+
+    Examples
+    --------
+    >>> pareto_front([1.0, 2.0, 3.0, 2.5], [3.0, 1.0, 0.5, 2.0]).tolist()
+    [True, True, True, False]
+    """
+    if len(objectives) < 2:
+        raise ValueError(f"pareto_front needs at least two objectives; got {len(objectives)}")
+    costs = np.column_stack([np.asarray(o, dtype=float).reshape(-1) for o in objectives])
+    finite = np.all(np.isfinite(costs), axis=1)
+    front = finite.copy()
+    for i in np.nonzero(finite)[0]:
+        others = costs[finite]
+        beaten = np.all(others <= costs[i], axis=1) & np.any(others < costs[i], axis=1)
+        front[i] = not beaten.any()
+    return front
+
+
+# --------------------------------------------------------------------------- engine
+def _evaluate(task, point: dict) -> dict:
+    """Run ``task(**point)`` and return its outputs as a dict (module level: picklable)."""
+    out = task(**point)
+    if isinstance(out, Mapping):
+        return dict(out)
+    return {"value": out}
+
+
+def _is_executor(obj) -> bool:
+    return callable(getattr(obj, "submit", None))
+
+
+def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
+          description: str | None = None) -> SweepResult:
+    """Evaluate ``task(**point)`` at every point of a grid; return a tidy table.
+
+    Parameters
+    ----------
+    task : callable
+        Called as ``task(**point)``; returns a dict of outputs ``{name: value}`` (or one value,
+        stored in the column ``value``). With an executor that runs in other processes it must
+        be picklable: a module-level function or an instance of a module-level class.
+    parameter_grid : dict or sequence of dict
+        ``{name: values}``: every combination (:func:`parameter_grid`); or the points
+        themselves, ``[{name: value, ...}, ...]``.
+    executor : concurrent.futures.Executor-like, optional
+        Anything with ``submit(fn, *args)`` returning futures with ``result()``: a
+        ``ProcessPoolExecutor``, a ``ThreadPoolExecutor``, or ``dask.distributed``'s
+        ``Client.get_executor()``. Default ``None``: run the points here, in order. The
+        caller owns the executor (the sweep does not shut it down).
+    progress : bool, optional
+        Show a progress bar (tqdm, on stderr). Default True.
+    description : str, optional
+        Label of the progress bar; default the task's name.
+
+    Returns
+    -------
+    SweepResult
+        Rows in the order of the grid, whatever order the points finished in.
+
+    Raises
+    ------
+    SweepError
+        When the task raises at a point; the message names the point, the original exception
+        is its ``__cause__``, and the points not yet started are cancelled.
+    """
+    if not callable(task):
+        raise TypeError(f"task must be callable as task(**point); got {type(task).__name__}")
+    if executor is not None and not _is_executor(executor):
+        raise TypeError("executor must have a submit(fn, *args) method (a "
+                        "concurrent.futures executor or a Dask Client.get_executor()); "
+                        f"got {type(executor).__name__}")
+    points = _points(parameter_grid)
+    from tqdm import tqdm
+
+    name = description or getattr(task, "__name__", type(task).__name__)
+    bar = tqdm(total=len(points), desc=name, disable=not progress, unit="point")
+    outputs = [None] * len(points)
+    start = time.perf_counter()
+
+    def fail(k, exc):
+        raise SweepError(f"sweep task {name} failed at point {k} {points[k]}: "
+                         f"{type(exc).__name__}: {exc}") from exc
+
+    try:
+        if executor is None:
+            for k, point in enumerate(points):
+                try:
+                    outputs[k] = _evaluate(task, point)
+                except Exception as exc:
+                    fail(k, exc)
+                bar.update()
+        else:
+            futures = [executor.submit(_evaluate, task, point) for point in points]
+            index = {id(f): k for k, f in enumerate(futures)}
+            try:
+                if all(isinstance(f, concurrent.futures.Future) for f in futures):
+                    finished = concurrent.futures.as_completed(futures)
+                else:
+                    finished = iter(futures)    # other future types: in order
+                for future in finished:
+                    k = index[id(future)]
+                    try:
+                        outputs[k] = future.result()
+                    except Exception as exc:
+                        fail(k, exc)
+                    bar.update()
+            except BaseException:
+                for future in futures:
+                    future.cancel()
+                raise
+    finally:
+        bar.close()
+
+    parameters = tuple(dict.fromkeys(k for p in points for k in p))
+    names = tuple(dict.fromkeys(k for out in outputs for k in out))
+    rows = tuple({**point, **{k: v for k, v in out.items() if k not in point}}
+                 for point, out in zip(points, outputs))
+    return SweepResult(rows=rows, parameters=parameters, outputs=names,
+                       wall_time=time.perf_counter() - start)
+
+
+# --------------------------------------------------------------------------- tasks
+def response_amplitudes(result, torque_end: float) -> tuple:
+    """Peak and residual tip amplitude of a response to a torque that ends at ``torque_end``.
+
+    Parameters
+    ----------
+    result : SimulationResult
+    torque_end : float
+        Time the torque stops, s (``T_m`` of a one-period sine torque).
+
+    Returns
+    -------
+    peak : float
+        Largest ``|tip deflection|`` while the torque acts (``t <= torque_end``), m: the
+        papers' "maximum response amplitude".
+    residual : float
+        Largest ``|tip deflection|`` after it (``t > torque_end``), m: the papers' "steady
+        state response amplitude" of the free vibration left behind. NaN if the run ended
+        before ``torque_end``.
+    """
+    t, tip = result.t, np.abs(result.tip_deflection)
+    during, after = t <= torque_end, t > torque_end
+    peak = float(tip[during].max()) if during.any() else math.nan
+    residual = float(tip[after].max()) if after.any() else math.nan
+    return peak, residual
+
+
+@dataclass(frozen=True, kw_only=True)
+class PointMassAmplitudes:
+    """Sweep task: tip amplitudes of a torque response with one point mass (paper 000).
+
+    Called as ``task(mass_position_ratio=..., mass_ratio=...)``: the system's point masses are
+    replaced by one mass ``m = mass_ratio * rhoA l`` at ``d = mass_position_ratio * l``, and the
+    model is driven by ``torque``. A ratio left out keeps the value of the system's first
+    point mass (0 when it has none).
+
+    Parameters
+    ----------
+    system : HubBeam
+        The hub and beam (its point masses give the default ratios).
+    torque : SineTorque
+        The torque, N m; the peak amplitude is measured while it acts, the residual after.
+    t_final : float
+        Simulated time, s (> ``torque.duration``).
+    n_modes : int
+        Modes of the model. Default 4.
+    variant : str
+        Model variant. Default ``"first_order"``.
+    output_step : float
+        Output spacing, s (the amplitudes are maxima over these samples). Default 0.005.
+
+    Notes
+    -----
+    A call returns a dict: ``peak_amplitude``, ``residual_amplitude`` (m,
+    :func:`response_amplitudes`), ``mass`` (kg), ``position`` (m), ``first_frequency``
+    (lowest hub-free natural frequency, rad/s) and ``status``.
+    """
+
+    system: HubBeam
+    torque: SineTorque
+    t_final: float = 20.0
+    n_modes: int = 4
+    variant: str = "first_order"
+    output_step: float = 0.005
+
+    def __post_init__(self):
+        if not isinstance(self.system, HubBeam):
+            raise TypeError(f"PointMassAmplitudes.system must be a HubBeam; got "
+                            f"{type(self.system).__name__}")
+        if not isinstance(self.torque, SineTorque):
+            raise TypeError(f"PointMassAmplitudes.torque must be a SineTorque; got "
+                            f"{type(self.torque).__name__}")
+        if not (isinstance(self.t_final, (int, float)) and self.t_final > self.torque.duration):
+            raise ValueError("PointMassAmplitudes.t_final must exceed the torque duration "
+                             f"{self.torque.duration:g} s; got {self.t_final!r}")
+
+    @classmethod
+    def from_scene(cls, name: str = "hub-beam-mass", **kwargs) -> "PointMassAmplitudes":
+        """The task of a sine-torque scene (default paper 000's ``hub-beam-mass``).
+
+        ``kwargs`` override the scene's settings (``t_final``, ``n_modes``, ...).
+        """
+        from .scenes import load_scene
+
+        scene = load_scene(name)
+        if not isinstance(scene.maneuver, SineTorque):
+            raise ValueError(f"PointMassAmplitudes.from_scene needs a sine_torque scene; "
+                             f"{name!r} has {type(scene.maneuver).__name__}")
+        settings = {"system": scene.system, "torque": scene.maneuver,
+                    "t_final": scene.simulation.t_final, "n_modes": scene.model.modes,
+                    "variant": scene.model.variant}
+        settings.update(kwargs)
+        return cls(**settings)
+
+    @property
+    def default_ratios(self) -> tuple:
+        """``(mass_position_ratio, mass_ratio)`` of the system's first point mass."""
+        beam = self.system.beam
+        if not self.system.masses:
+            return 0.0, 0.0
+        first = self.system.masses[0]
+        return first.position / beam.length, first.mass / (beam.density * beam.area
+                                                           * beam.length)
+
+    def __call__(self, mass_position_ratio: float | None = None,
+                 mass_ratio: float | None = None) -> dict:
+        from .model import build_model
+        from .simulation import simulate
+
+        default_position, default_mass = self.default_ratios
+        position = default_position if mass_position_ratio is None else mass_position_ratio
+        ratio = default_mass if mass_ratio is None else mass_ratio
+        for name, value in (("mass_position_ratio", position), ("mass_ratio", ratio)):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not 0.0 <= value <= 1.0:
+                raise ValueError(f"{name} must be a number in [0, 1]; got {value!r}")
+        beam = self.system.beam
+        mass = PointMass(mass=ratio * beam.density * beam.area * beam.length,
+                         position=position * beam.length)
+        system = dataclasses.replace(self.system, masses=(mass,) if mass.mass > 0 else ())
+        model = build_model(system, n_modes=self.n_modes, variant=self.variant)
+        result = simulate(model, self.t_final, torque=self.torque,
+                          output_step=self.output_step)
+        peak, residual = response_amplitudes(result, self.torque.duration)
+        return {"peak_amplitude": peak, "residual_amplitude": residual,
+                "mass": mass.mass, "position": mass.position,
+                "first_frequency": float(model.natural_frequencies(0.0, hub="free")[0]),
+                "status": result.status}
+
+
+@dataclass(frozen=True, kw_only=True)
+class SceneTask:
+    """Sweep task: run a scene with the point's values as overrides; summarise in numbers.
+
+    Called as ``task(**{"maneuver.spin_rate": 2.0, "model.variant": "zero_order"})``: each
+    parameter is a dotted scene key (:func:`flexctl.load_scene` overrides).
+
+    Parameters
+    ----------
+    scene : str
+        Built-in scene name or TOML file path.
+    controller_factory : callable, optional
+        For slew scenes: ``factory(scene, plant)`` returning an object with ``controller``
+        and ``maneuver_end`` (``controllers.from_spec``). flexctl never imports the
+        controllers package itself.
+    keep_result : bool
+        Also return the :class:`~flexctl.SimulationResult` (column ``result``; it travels back
+        from worker processes by pickling). Default False.
+
+    Notes
+    -----
+    A call returns a dict: ``status``, ``t_end`` (s), ``peak_tip_deflection`` (m),
+    ``wall_time_s`` (s, design and simulation); for slews also the
+    :class:`~flexctl.metrics.SlewMetrics` fields and ``maneuver_end`` (s); ``result`` when
+    ``keep_result``.
+    """
+
+    scene: str
+    controller_factory: Callable | None = None
+    keep_result: bool = False
+
+    def __call__(self, **overrides) -> dict:
+        from .maneuvers import Slew
+        from .metrics import slew_metrics
+        from .scenes import SceneError, load_scene, run_scene
+
+        start = time.perf_counter()
+        scene = load_scene(self.scene, overrides=overrides)
+        out = {}
+        if isinstance(scene.maneuver, Slew):
+            if self.controller_factory is None:
+                raise SceneError(f"scene {scene.name!r} is a slew: give SceneTask a "
+                                 "controller_factory (controllers.from_spec)")
+            plant = scene.build_model()
+            built = self.controller_factory(scene, plant)
+            result = run_scene(scene, controller=built.controller)
+            out.update(dataclasses.asdict(slew_metrics(result, scene.maneuver.angle,
+                                                       built.maneuver_end)))
+            out["maneuver_end"] = float(built.maneuver_end)
+        else:
+            result = run_scene(scene)
+        out = {"status": result.status, "t_end": float(result.t[-1]),
+               "peak_tip_deflection": result.peak_tip_deflection, **out,
+               "wall_time_s": time.perf_counter() - start}
+        if self.keep_result:
+            out["result"] = result
+        return out

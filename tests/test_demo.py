@@ -1,0 +1,87 @@
+"""The demo's report sections: the papers' figures and the controller comparison.
+
+Each section is run on a small size (the demo's full run is in ``test_cli.py``) and checked
+against the papers' numbers (MODEL.md section 6) and for the files it links.
+"""
+
+import csv
+import re
+
+import pytest
+
+from flexctl import demo
+from flexctl.report import write_demo_report
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+#: The papers' figures were read off plots: a few percent.
+PAPER_TOLERANCE = 0.03
+
+
+def _cells(section, row):
+    return dict(zip(section.table[0], section.table[1][row]))
+
+
+def _assert_files(section):
+    for _, image in section.images:
+        assert image.read_bytes()[:8] == PNG_MAGIC
+    for path in section.files:
+        assert path.read_text().count("\n") >= 2
+
+
+def test_kane_spinup_section_reproduces_paper_001_fig_4(tmp_path):
+    section = demo.kane_spinup(tmp_path)
+    _assert_files(section)
+    by_rate = {row[0]: dict(zip(section.table[0], row)) for row in section.table[1]}
+    assert set(by_rate) == {"0.5", "2", "4"}
+    assert float(by_rate["2"]["first_order peak tip (m)"]) == pytest.approx(
+        0.28, rel=PAPER_TOLERANCE)
+    assert float(by_rate["2"]["zero_order peak tip (m)"]) == pytest.approx(
+        0.34, rel=PAPER_TOLERANCE)
+    assert by_rate["4"]["first_order status"] == "ok"
+    assert by_rate["4"]["zero_order status"].startswith("diverged")
+
+
+def test_spacecraft_section_reproduces_paper_001_fig_5(tmp_path):
+    section = demo.spacecraft_torque(tmp_path)
+    _assert_files(section)
+    peak = _cells(section, 0)
+    assert float(peak["flexctl"]) == pytest.approx(0.42, rel=PAPER_TOLERANCE)
+    assert float(_cells(section, 1)["flexctl"]) == pytest.approx(0.07, rel=0.05)
+
+
+def test_hub_beam_mass_section_reproduces_paper_000(tmp_path):
+    section = demo.hub_beam_mass(tmp_path, points=4)
+    _assert_files(section)
+    for row in range(4):
+        cells = _cells(section, row)
+        assert float(cells["flexctl"]) == pytest.approx(float(cells["paper 000"]),
+                                                        rel=PAPER_TOLERANCE), cells["quantity"]
+    fig5 = [_cells(section, row)["flexctl"].split(" / ") for row in (4, 5)]
+    assert all(float(near_tip) > float(near_root) for near_root, near_tip in fig5)
+    with open(tmp_path / "paper000-fig8.csv") as handle:
+        rows = list(csv.DictReader(handle))
+    peaks = [float(r["peak_amplitude"]) for r in rows]
+    assert len(rows) == 4 and peaks == sorted(peaks)
+
+
+def test_slew_comparison_section_has_one_row_per_controller(tmp_path):
+    section = demo.slew_comparison(tmp_path, kinds=["zvd", "bang_bang"])
+    _assert_files(section)
+    rows = {row[0]: dict(zip(section.table[0], row)) for row in section.table[1]}
+    assert set(rows) == {"zvd", "bang_bang"}
+    assert all(r["status"] == "ok" for r in rows.values())
+    # Input shaping cancels most of the residual vibration of the rigid bang-bang torque.
+    assert float(rows["zvd"]["residual vibration (m)"]) < \
+        0.1 * float(rows["bang_bang"]["residual vibration (m)"])
+
+
+def test_report_renders_sections_as_markdown(tmp_path):
+    image = tmp_path / "figure.png"
+    image.write_bytes(PNG_MAGIC)
+    section = demo.Section(title="A case", paragraphs=("First.", "Second."),
+                           table=(("a", "b"), [("1", "2"), ("3", "4")]),
+                           images=(("the figure", image),))
+    text = write_demo_report(tmp_path, [], sections=[section]).read_text()
+    assert "## A case\n\nFirst.\n\nSecond.\n\n| a | b |\n|---|---|\n| 1 | 2 |\n| 3 | 4 |" in text
+    assert re.search(r"!\[the figure\]\(figure\.png\)", text)
+    assert text.index("## A case") < text.index("## Responses")

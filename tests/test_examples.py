@@ -1,0 +1,81 @@
+"""The example notebooks: in sync with their scripts, listed in the README, and executed.
+
+Each notebook in ``examples/`` has a percent-format script twin (the source of truth, edited
+by hand; the paired ``.ipynb`` is updated with ``jupytext --sync``). The notebooks assert their
+key numbers (the papers' amplitudes and trends) in their own cells, so executing them here is
+what keeps the examples correct.
+"""
+
+import os
+import re
+from pathlib import Path
+
+import pytest
+
+jupytext = pytest.importorskip("jupytext")
+nbclient = pytest.importorskip("nbclient")
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
+#: Seconds a notebook may run (they take 3 to 20 s alone on 2 cores).
+CELL_TIMEOUT = 240
+#: Notebooks that take more than about 10 s (marked slow; CI still runs them).
+SLOW = {"06_slew_controllers", "07_speed_vs_error"}
+
+
+def _cells(notebook):
+    return [(cell.cell_type, cell.source.strip()) for cell in notebook.cells]
+
+
+def _param(script):
+    marks = [pytest.mark.slow] if script.stem in SLOW else []
+    return pytest.param(script, id=script.stem, marks=marks)
+
+
+def test_there_are_examples():
+    assert len(SCRIPTS) >= 7
+
+
+def test_every_notebook_has_a_script_and_every_script_a_notebook():
+    notebooks = {p.stem for p in EXAMPLES.glob("*.ipynb")}
+    assert notebooks == {p.stem for p in SCRIPTS}
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.stem)
+def test_notebook_is_in_sync_with_its_script(script):
+    from_script = jupytext.read(script)
+    from_notebook = jupytext.read(script.with_suffix(".ipynb"))
+    assert _cells(from_notebook) == _cells(from_script), (
+        f"{script.name} and its notebook differ: update the notebook with "
+        f"jupytext --sync examples/{script.name}")
+    assert from_notebook.metadata["kernelspec"]["name"] == "python3"
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.stem)
+def test_notebook_asserts_its_numbers_and_has_no_stored_outputs(script):
+    notebook = jupytext.read(script.with_suffix(".ipynb"))
+    code = [cell for cell in notebook.cells if cell.cell_type == "code"]
+    assert any(re.search(r"^\s*assert ", cell.source, re.M) for cell in code)
+    assert all(not cell.get("outputs") for cell in code)
+
+
+def test_readme_lists_every_notebook():
+    readme = (ROOT / "README.md").read_text()
+    for script in SCRIPTS:
+        assert f"examples/{script.stem}.ipynb" in readme, script.stem
+
+
+@pytest.mark.parametrize("script", [_param(s) for s in SCRIPTS])
+def test_notebook_executes(script, monkeypatch):
+    # The kernel inherits this environment: no display, and the package from this checkout.
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(
+        [str(ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
+    notebook = jupytext.read(script.with_suffix(".ipynb"))
+    client = nbclient.NotebookClient(notebook, timeout=CELL_TIMEOUT, kernel_name="python3",
+                                     resources={"metadata": {"path": str(EXAMPLES)}})
+    client.execute()       # raises CellExecutionError, with the cell, on a failed assert
+    errors = [out for cell in notebook.cells if cell.cell_type == "code"
+              for out in cell.get("outputs", []) if out.get("output_type") == "error"]
+    assert not errors
