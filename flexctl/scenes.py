@@ -25,10 +25,15 @@ Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as sh
     variant = "first_order"              # first_order | zero_order | consistent
     modes = 4                            # or "auto": as few as the manoeuvre needs, see
     # tolerance = 1e-2                   # flexctl.fidelity.choose_modes (only with "auto")
+    design_modes = 2                     # optional: modes of a controller's design model
 
     [maneuver]
     kind = "sine_torque"                 # peak_torque, duration
     # kind = "spin_up"                   # spin_rate, ramp_time
+    # kind = "slew"                      # angle_deg, duration (s or "free"), torque_bound
+
+    [controller]                         # slew scenes only: kind and its settings
+    kind = "trajopt+lqr"                 # see controllers.factory for kinds and settings
 
     [simulation]
     t_final = 20.0

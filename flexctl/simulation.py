@@ -35,10 +35,10 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .compiled import SegmentIntegrator, is_symbolic
+from .compiled import SegmentIntegrator, is_symbolic, verify_accuracy
 from .model import Model, SingularMassMatrixError
 
-__all__ = ["simulate", "SimulationResult", "Controller", "StiffnessWarning"]
+__all__ = ["simulate", "SimulationResult", "Controller", "StiffnessWarning", "AccuracyWarning"]
 
 #: Integration stops as "singular" when the effective hub inertia falls below this fraction
 #: of the rigid inertia J_0 (the exact singularity cannot be integrated up to).
@@ -60,6 +60,10 @@ EXPLICIT_STABILITY_LIMITS = {"DOP853": 3.0, "RK45": 0.67, "RK23": 0.87}
 #: An explicit method predicted to need more steps than this (about 5 s of DOP853 at ~40 us a
 #: right-hand side) is not used when the compiled implicit path can take the run.
 EXPLICIT_STEP_LIMIT = 10_000
+
+
+class AccuracyWarning(RuntimeWarning):
+    """The accuracy check of a compiled run found it wrong and what was done about it."""
 
 
 class StiffnessWarning(RuntimeWarning):
@@ -158,6 +162,10 @@ class SimulationResult:
     n_evaluations : int
         Number of right-hand-side evaluations.
     controller_states : ndarray, shape (n_z, P)
+    integration_error : float or None
+        Estimated largest integration error of the tip deflection, m: the difference from a
+        check run at 10 times the tolerance (conservative). ``None`` where no check ran (SciPy
+        methods, stopped runs, ``check_accuracy=False``).
     """
 
     model: Model
@@ -173,6 +181,7 @@ class SimulationResult:
     method: str
     rtol: float
     controller_states: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    integration_error: float | None = None
 
     @property
     def ok(self) -> bool:
@@ -264,7 +273,8 @@ def _stiffness_reason(model: Model, spin: float) -> str:
 
 def simulate(model: Model, t_final: float, torque=None, hub_motion=None, controller=None,
              x0=None, *, rtol: float = 1e-8, atol=None, method: str = "auto",
-             output_step: float | None = None, max_step: float = np.inf) -> SimulationResult:
+             output_step: float | None = None, max_step: float = np.inf,
+             check_accuracy: bool = True) -> SimulationResult:
     """Simulate the nonlinear model.
 
     Parameters
@@ -298,6 +308,11 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         Spacing of the output times, s. Default: ``t_final / 2000``.
     max_step : float, optional
         Largest integration step, s.
+    check_accuracy : bool, optional
+        For the compiled (``"cvodes"``) path: repeat the run at 10 times the tolerance to
+        estimate the integration error (``result.integration_error``), and redo it with
+        A-stable BDF2 if the two disagree grossly (:func:`flexctl.compiled.verify_accuracy`).
+        Default True.
 
     Returns
     -------
@@ -451,6 +466,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
 
     status, message = "ok", f"reached t_final = {float(t_final):g} s"
     ts, ys = [np.array([0.0])], [y_init[:, None]]
+    compiled_segments = []
     n_eval = 0
     y = y_init
     start = time.perf_counter()
@@ -472,6 +488,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             if bad is None:
                 ts.append(t_eval)
                 ys.append(y_seg)
+                compiled_segments.append((lo, t_eval))
                 y = y_seg[:, -1]
                 continue
             # Something stops the run in this segment: find where, exactly, with SciPy
@@ -515,6 +532,21 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             message = f"integration failed at t = {sol.t[-1]:.6g} s: {sol.message}"
             break
         y = sol.y[:, -1]
+
+    integration_error, accuracy_note = None, ""
+    if check_accuracy and method == "cvodes" and status == "ok" \
+            and len(compiled_segments) == len(cuts) - 1:
+        tip_map = np.zeros(y_init.size)
+        first_q = 0 if prescribed else 1
+        tip_map[first_q:first_q + n] = tip
+        y_checked, integration_error, accuracy_note, n_check = verify_accuracy(
+            model, compiled_segments, y_init, atol_vec / rtol, rtol,
+            np.concatenate(ys[1:], axis=1), tip_map, n_eval, torque=torque,
+            hub_motion=hub_motion, controller=controller)
+        n_eval += n_check
+        ys = [ys[0], y_checked]
+        if accuracy_note:
+            warnings.warn(accuracy_note, AccuracyWarning, stacklevel=2)
     wall = time.perf_counter() - start
 
     t_all = np.concatenate(ts)
@@ -554,9 +586,12 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                    "lowers the hub inertia, and a light hub loses all of it")
     if stiffness_note:
         message = f"{message} ({stiffness_note})"
+    if accuracy_note:
+        message = f"{message} ({accuracy_note})"
 
     return SimulationResult(model=model, t=t_all, states=states, torque=np.asarray(torque_out,
                             dtype=float).reshape(-1), tip_deflection=tip @ states[1:n + 1],
                             root_moment=mat.root @ states[1:n + 1], status=status,
                             message=message, wall_time=wall, n_evaluations=int(n_eval),
-                            method=method, rtol=float(rtol), controller_states=z_all)
+                            method=method, rtol=float(rtol), controller_states=z_all,
+                            integration_error=integration_error)

@@ -243,6 +243,7 @@ def test_scenes_lists_builtins_with_descriptions(capsys):
         assert description in printed
 
 
+@pytest.mark.slow
 def test_demo_writes_report_and_plots(tmp_path, capsys):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out)]) == EXIT_OK

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
+import flexctl
 from flexctl import VARIANTS, Model, PointMass, SimulationResult, build_model, simulate
 from flexctl.maneuvers import SineTorque, SpinUp
 
@@ -447,3 +448,30 @@ def test_result_accessors(small_model):
                                atol=1e-13)
     assert result.peak_tip_deflection == np.max(np.abs(result.tip_deflection))
     assert "status='ok'" in repr(result)
+
+
+@pytest.mark.parametrize("scene_name, rtol", [("hub-beam-mass", 1e-6), ("kane-spinup", 1e-7),
+                                              ("spacecraft-torque", 1e-6)],
+                         ids=["hub-beam-mass", "kane-spinup", "spacecraft-torque"])
+def test_compiled_runs_know_their_integration_error(scene_name, rtol):
+    """The reported error estimate bounds the actual tip error against a tight reference."""
+    scene = flexctl.load_scene(scene_name)
+    model = scene.build_model()
+    drive = ({"hub_motion": scene.maneuver} if isinstance(scene.maneuver, flexctl.SpinUp)
+             else {"torque": scene.maneuver})
+    t_final = min(scene.simulation.t_final, 10.0)
+    result = flexctl.simulate(model, t_final, rtol=rtol, output_step=0.01, **drive)
+    reference = flexctl.simulate(model, t_final, rtol=1e-11, output_step=0.01,
+                                 check_accuracy=False, **drive)
+    assert result.method == "cvodes" and result.integration_error is not None
+    actual = np.max(np.abs(result.tip_deflection - reference.tip_deflection))
+    assert actual <= result.integration_error
+    assert result.integration_error < 1e3 * rtol * result.peak_tip_deflection
+
+
+def test_scipy_runs_and_opt_out_carry_no_error_estimate(hub_beam_mass_system):
+    model = flexctl.build_model(hub_beam_mass_system, n_modes=2)
+    torque = flexctl.SineTorque(peak_torque=2.0, duration=2.0)
+    assert flexctl.simulate(model, 1.0, torque=torque, method="DOP853").integration_error is None
+    assert flexctl.simulate(model, 1.0, torque=torque,
+                            check_accuracy=False).integration_error is None
