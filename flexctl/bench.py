@@ -39,6 +39,7 @@ from .fidelity import choose_modes
 from .maneuvers import SineTorque, SpinUp
 from .model import VARIANTS, build_model
 from .scenes import builtin_scenes, load_scene
+from .sweep import pareto_front as _dominance
 from .simulation import METHODS, simulate
 
 __all__ = ["BenchConfig", "BenchRow", "SceneBench", "bench_scene", "run_bench", "pareto_front",
@@ -190,19 +191,18 @@ def pareto_front(rows) -> list:
     """Finished runs that no other run beats on both wall time and error, fastest first.
 
     Runs with the same variant, modes, integrator used and rtol count once (an explicit method
-    moved to cvodes repeats the cvodes run)."""
-    done = sorted((r for r in rows if r.status == "ok" and math.isfinite(r.error)),
-                  key=lambda r: (r.wall_time_s, r.error))
-    seen, front, best = set(), [], math.inf
-    for r in done:
-        key = (r.variant, r.n_modes, r.method_used, r.rtol)
-        if key in seen:
-            continue
-        seen.add(key)
-        if r.error < best:
-            front.append(r)
-            best = r.error
-    return front
+    moved to cvodes repeats the cvodes run). Dominance as in
+    :func:`flexctl.sweep.pareto_front`.
+    """
+    unique = {}
+    for r in sorted((r for r in rows if r.status == "ok" and math.isfinite(r.error)),
+                    key=lambda r: (r.wall_time_s, r.error)):
+        unique.setdefault((r.variant, r.n_modes, r.method_used, r.rtol), r)
+    done = list(unique.values())
+    if not done:
+        return []
+    on_front = _dominance([r.wall_time_s for r in done], [r.error for r in done])
+    return [r for r, keep in zip(done, on_front) if keep]
 
 
 class _TimeUp(Exception):

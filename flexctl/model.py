@@ -348,7 +348,7 @@ class Model:
 
     # ------------------------------------------------------------------ exports
     def nonlinear(self):
-        """Nonlinear plant as a python-control ``NonlinearIOSystem`` (see :mod:`flexctl.exports`)."""
+        """Nonlinear plant as a python-control ``NonlinearIOSystem`` (:mod:`flexctl.exports`)."""
         from .exports import to_nonlinear_iosystem
         return to_nonlinear_iosystem(self)
 

@@ -66,7 +66,8 @@ from .model import VARIANTS, Model, build_model
 from .parameters import Beam, Hub, HubBeam, PointMass
 from .simulation import METHODS, SimulationResult, simulate
 
-__all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene", "parse_scene",
+__all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene",
+           "parse_scene",
            "builtin_scenes", "run_scene"]
 
 def _slew(angle_deg, duration="free", torque_bound=None):

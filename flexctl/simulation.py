@@ -261,7 +261,8 @@ def _stiffness_reason(model: Model, spin: float) -> str:
     w1 = model.first_clamped_frequency
     if lowest < 0.0:
         if model.variant == "zero_order":
-            term, extra = "M_ff", " (the zero_order model drops dynamic stiffening; use first_order)"
+            term = "M_ff"
+            extra = " (the zero_order model drops dynamic stiffening; use first_order)"
         else:
             term, extra = "(M_ff - K_g)", ""
         return (f"at hub rate {abs(spin):.4g} rad/s, above the first clamped frequency "
@@ -570,8 +571,17 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         qdd = model.beam_accelerations(states[1:n + 1], states[n + 2:], states[n + 1], acc)
         torque_out = model.hub_torque(states, acc, qdd)
     else:
-        torque_out = np.array([applied_torque(t, states[:, k], z_all[:, k])
-                               for k, t in enumerate(t_all)])
+        torque_out = None
+        if controller is None and (torque is None or symbolic):
+            # no torque, or a manoeuvre with a CasADi form: those evaluate a whole time array
+            # at once (checked, since a user's own class may not)
+            torque_out = (np.zeros(t_all.size) if torque is None
+                          else np.asarray(torque(t_all), dtype=float).reshape(-1))
+            if torque_out.shape != t_all.shape:
+                torque_out = None
+        if torque_out is None:
+            torque_out = np.array([applied_torque(t, states[:, k], z_all[:, k])
+                                   for k, t in enumerate(t_all)])
 
     t_end = float(t_all[-1])
     if status == "diverged" and message.startswith("reached"):
