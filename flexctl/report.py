@@ -37,7 +37,8 @@ RESPONSE_PLOT = "response.png"
 #: Significant digits written to the CSV file.
 CSV_DIGITS = 12
 
-_UNITS = {"t_end": "s", "t_final": "s", "peak_tip_deflection": "m", "wall_time_s": "s",
+_UNITS = {"integration_error": "m (estimated largest tip error of the integration; null where "
+          "no check ran)", "t_end": "s", "t_final": "s", "peak_tip_deflection": "m", "wall_time_s": "s",
           "spin_rate": "rad/s", "clamped_frequencies": "rad/s (negative: lost stiffness, "
           "value = -growth rate in 1/s)", "clamped_frequencies_at_spin": "rad/s (negative: lost "
           "stiffness, value = -growth rate in 1/s)",
@@ -101,6 +102,8 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         "t_final": float(scene.simulation.t_final),
         "n_points": int(result.t.size),
         "wall_time_s": float(result.wall_time),
+        "integration_error": (None if result.integration_error is None
+                              else float(result.integration_error)),
         "method": str(result.method),
         "rtol": float(result.rtol),
         "overrides": dict(overrides or {}),
@@ -173,12 +176,20 @@ def format_summary(summary: dict) -> str:
             f"t = {summary['t_end']:.4g} of {summary['t_final']:.4g} s")
     lines = [head, f"  {summary['message']}",
              f"  peak tip deflection {summary['peak_tip_deflection']:.4g} m, "
-             f"integration wall time {summary['wall_time_s']:.3g} s",
+             f"integration wall time {summary['wall_time_s']:.3g} s"
+             + ("" if summary.get("integration_error") is None else
+                f", estimated integration error {summary['integration_error']:.2g} m"),
              f"  first clamped frequency {summary['clamped_frequencies'][0]:.4g} rad/s at rest"]
     if "clamped_frequencies_at_spin" in summary:
         w = summary["clamped_frequencies_at_spin"][0]
         note = " (negative: stiffness lost)" if w < 0 else ""
         lines[-1] += f", {w:.4g} at {summary['spin_rate']:.4g} rad/s{note}"
+    choice = summary.get("mode_choice")
+    if choice:
+        lines.append(f"  modes chosen automatically: {choice['n_modes']} (estimated truncation "
+                     f"error {choice['estimated_error']:.2g} of the peak, tolerance "
+                     f"{choice['tolerance']:.2g}); stiffening "
+                     f"{'matters' if choice['stiffening_matters'] else 'does not matter'}")
     slew = summary.get("slew")
     if slew:
         settle = slew["settling_time"]
