@@ -175,8 +175,19 @@ def from_spec(scene: Scene, plant: Model | None = None) -> BuiltController:
             duration = minimum_slew_duration(angle, design.matrices.J0, bound)
 
     if kind in ("pd", "lqr", "lqg", "scheduled"):
-        profile = _wrap(SlewProfile, slew_angle=angle, duration=duration,
-                        shape=spec.settings.get("reference", "poly7"))
+        profile_shape = spec.settings.get("reference", "poly7")
+        info = {}
+        if bound is not None:
+            # a smooth reference the actuator cannot follow only winds the loop up: stretch it
+            # to the shortest one the torque bound allows (5 % margin for the feedback)
+            feasible = 1.05 * _wrap(minimum_slew_duration, angle, design.matrices.J0, bound,
+                                    shape=profile_shape)
+            if feasible > duration:
+                info["reference_duration"] = feasible
+                info["note"] = (f"the {profile_shape} reference needs {feasible:.3g} s at "
+                                f"{bound:g} N m; stretched from {duration:.3g} s")
+                duration = feasible
+        profile = _wrap(SlewProfile, slew_angle=angle, duration=duration, shape=profile_shape)
         common = {"reference": profile, "torque_limit": bound}
         if kind == "pd":
             ctrl = _wrap(design_pd, design, _setting(spec, "bandwidth", 2.0),
@@ -194,7 +205,7 @@ def from_spec(scene: Scene, plant: Model | None = None) -> BuiltController:
         else:
             rates = spec.settings.get("spin_rates", [0.0, 1.0, 2.0])
             ctrl = _wrap(design_scheduled_lqr, design, _lqr_weights(spec), rates, **common)
-        return BuiltController(ctrl, kind, float(duration), n_design)
+        return BuiltController(ctrl, kind, float(duration), n_design, info)
 
     if kind in ("bang_bang", "zv", "zvd"):
         limits = {"torque_limit": bound} if duration is None else {"duration": duration}

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .lqr import LQRWeights, _lqr_gain, _model, reference_state
+from .lqr import LQRWeights, _lqr_gain, _model, reference_state, static_deflection_gain
 from .reference import _check_reference, _optional_positive, _real, _saturate
 
 __all__ = ["NoiseLevels", "LQG", "design_lqg", "estimator_gain", "SumOfSines",
@@ -186,6 +186,8 @@ class LQG:
         As in :class:`~controllers.lqr.LQR`.
     initial_estimate : ndarray, shape (n_d,), optional
         ``z(0)``; default zeros (the filter knows nothing of the initial state).
+    deflection_gain : ndarray, shape (M,), optional
+        As in :class:`~controllers.lqr.LQR`.
     """
 
     gain: np.ndarray
@@ -199,6 +201,7 @@ class LQG:
     feedforward_inertia: float | None = None
     torque_limit: float | None = None
     initial_estimate: np.ndarray = field(default=None, repr=False)
+    deflection_gain: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self):
         nd = np.asarray(self.a).shape[0]
@@ -275,7 +278,7 @@ class LQG:
 
     def torque(self, t: float, x, z) -> float:
         """Hub torque, N m, from the estimate ``z`` (the plant state ``x`` is not read)."""
-        x_ref, acc = reference_state(self.reference, t, self.n_modes)
+        x_ref, acc = reference_state(self.reference, t, self.n_modes, self.deflection_gain)
         u = -float(self.gain[0] @ (np.asarray(z, dtype=float) - x_ref))
         if self.feedforward_inertia is not None:
             u += self.feedforward_inertia * acc
@@ -311,7 +314,8 @@ class LQG:
 
 def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float = 0.0, *,
                plant=None, reference=None, feedforward: bool = True,
-               torque_limit: float | None = None, measurement_noise=None) -> LQG:
+               torque_limit: float | None = None, measurement_noise=None,
+               flexible_reference: bool = True) -> LQG:
     """LQR gain and Kalman filter on ``model.linearize(spin_rate)``.
 
     Parameters
@@ -327,7 +331,7 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
     plant : flexctl.Model, optional
         Model whose sensors the controller reads in simulation (``N >= M`` modes). Default:
         ``model``.
-    reference, feedforward, torque_limit
+    reference, feedforward, torque_limit, flexible_reference
         As in :func:`controllers.lqr.design_lqr`.
     measurement_noise : callable, optional
         ``v(t)`` added to the measurements in simulation, shape (2,).
@@ -357,5 +361,7 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
                      measurement_matrix=_measurement_rows(model),
                      measurement_noise=measurement_noise, reference=reference,
                      feedforward_inertia=float(model.matrices.J0) if feedforward else None,
-                     torque_limit=torque_limit)
+                     torque_limit=torque_limit,
+                     deflection_gain=(static_deflection_gain(model) if flexible_reference
+                                      else None))
     return controller if plant is None else controller.for_plant(plant)

@@ -44,7 +44,7 @@ from .reference import (_check_reference, _evaluate, _optional_positive, _real,
                         _saturate)
 
 __all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation_matrix",
-           "truncate_state", "reference_state", "closed_loop_poles"]
+           "truncate_state", "reference_state", "closed_loop_poles", "static_deflection_gain"]
 
 
 def _model(owner: str, model):
@@ -104,11 +104,36 @@ def truncate_state(x, n_design_modes: int) -> np.ndarray:
     return np.concatenate((x[:m + 1], x[n + 1:n + m + 2]))
 
 
-def reference_state(reference, t: float, n_modes: int) -> tuple:
-    """``x_ref = [theta_ref, 0..0, rate_ref, 0..0]`` (shape (2 M + 2,)) and ``acc_ref``."""
+#: Time step of the central difference that gives the reference jerk, s.
+_JERK_STEP = 1e-5
+
+
+def static_deflection_gain(model) -> np.ndarray:
+    """``K_ff^-1 m_tf``: the beam's quasi-static modal deflection per unit hub acceleration.
+
+    Under a slow hub acceleration ``theta_tt`` the beam equation ``M_ff q_tt + K_ff q =
+    -m_tf theta_tt`` leaves ``q = -K_ff^-1 m_tf theta_tt``, m per rad/s^2, shape (M,).
+    """
+    mat = _model("static_deflection_gain", model).matrices
+    return np.linalg.solve(mat.K_ff, mat.m_tf)
+
+
+def reference_state(reference, t: float, n_modes: int, deflection_gain=None) -> tuple:
+    """Reference design state (shape (2 M + 2,)) and hub acceleration ``acc_ref`` at ``t``.
+
+    ``x_ref = [theta_ref, q_ref, rate_ref, q_dot_ref]`` with ``q_ref = 0`` (rigid reference,
+    ``deflection_gain=None``) or the quasi-static deflection ``q_ref = -g acc_ref`` and
+    ``q_dot_ref = -g jerk_ref`` (``g`` from :func:`static_deflection_gain`): a beam that bends
+    as much as the commanded acceleration needs, instead of one held straight against it.
+    """
     angle, rate, acc = _evaluate(reference, t)
     x_ref = np.zeros(2 * n_modes + 2)
     x_ref[0], x_ref[n_modes + 1] = angle, rate
+    if deflection_gain is not None and reference is not None:
+        jerk = (_evaluate(reference, t + _JERK_STEP)[2]
+                - _evaluate(reference, t - _JERK_STEP)[2]) / (2.0 * _JERK_STEP)
+        x_ref[1:n_modes + 1] = -deflection_gain * acc
+        x_ref[n_modes + 2:] = -deflection_gain * jerk
     return x_ref, acc
 
 
@@ -195,6 +220,9 @@ class LQR:
         Spin rate of the design linearisation, rad/s (for the record).
     poles : ndarray, optional
         Closed-loop poles of the design model, 1/s (for the record).
+    deflection_gain : ndarray, shape (M,), optional
+        Track the quasi-static beam deflection of the reference (:func:`reference_state`);
+        default a rigid reference.
     """
 
     gain: np.ndarray
@@ -203,6 +231,7 @@ class LQR:
     torque_limit: float | None = None
     spin_rate: float = 0.0
     poles: np.ndarray = field(default=None, repr=False)
+    deflection_gain: np.ndarray | None = field(default=None, repr=False)
 
     n_states = 0
 
@@ -244,7 +273,7 @@ class LQR:
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, at time ``t`` (s) for plant state ``x`` (shape (2 N + 2,))."""
         x_design = truncate_state(x, self.n_modes)
-        x_ref, acc = reference_state(self.reference, t, self.n_modes)
+        x_ref, acc = reference_state(self.reference, t, self.n_modes, self.deflection_gain)
         u = -float(self.gain[0] @ (x_design - x_ref))
         if self.feedforward_inertia is not None:
             u += self.feedforward_inertia * acc
@@ -265,7 +294,8 @@ def _lqr_gain(model, weights, spin_rate):
 
 
 def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=None,
-               feedforward: bool = True, torque_limit: float | None = None) -> LQR:
+               feedforward: bool = True, torque_limit: float | None = None,
+               flexible_reference: bool = True) -> LQR:
     """LQR on ``model.linearize(spin_rate)`` with the weights of :func:`lqr_weight_matrices`.
 
     Parameters
@@ -281,6 +311,9 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
         Add ``J0 acc_ref`` with the model's rigid inertia ``J0``. Default True.
     torque_limit : float, optional
         Saturation, N m.
+    flexible_reference : bool, optional
+        Track the quasi-static deflection the reference acceleration needs
+        (:func:`reference_state`) rather than a straight beam. Default True.
 
     Returns
     -------
@@ -292,7 +325,8 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
     gain, poles = _lqr_gain(model, weights, spin_rate)
     return LQR(gain=gain, reference=reference,
                feedforward_inertia=float(model.matrices.J0) if feedforward else None,
-               torque_limit=torque_limit, spin_rate=spin_rate, poles=poles)
+               torque_limit=torque_limit, spin_rate=spin_rate, poles=poles,
+               deflection_gain=static_deflection_gain(model) if flexible_reference else None)
 
 
 def closed_loop_poles(model, gain, spin_rate: float = 0.0) -> np.ndarray:

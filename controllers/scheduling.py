@@ -29,8 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .lqr import LQRWeights, _lqr_gain, _model, reference_state, truncate_state, \
-    truncation_matrix
+from .lqr import (LQRWeights, _lqr_gain, _model, reference_state, static_deflection_gain,
+                  truncate_state, truncation_matrix)
 from .reference import _check_reference, _optional_positive, _real, _saturate
 
 __all__ = ["ScheduledLQR", "design_scheduled_lqr"]
@@ -57,7 +57,7 @@ class ScheduledLQR:
         Design spin rates, rad/s, ``>= 0`` and strictly increasing.
     gains : array_like, shape (S, 2 M + 2)
         LQR gain at each design spin rate.
-    reference, feedforward_inertia, torque_limit
+    reference, feedforward_inertia, torque_limit, deflection_gain
         As in :class:`~controllers.lqr.LQR`.
     """
 
@@ -66,6 +66,7 @@ class ScheduledLQR:
     reference: object = None
     feedforward_inertia: float | None = None
     torque_limit: float | None = None
+    deflection_gain: np.ndarray | None = None
 
     n_states = 0
 
@@ -118,7 +119,7 @@ class ScheduledLQR:
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, with the gain at the measured ``|theta_dot|``."""
         x_design = truncate_state(x, self.n_modes)
-        x_ref, acc = reference_state(self.reference, t, self.n_modes)
+        x_ref, acc = reference_state(self.reference, t, self.n_modes, self.deflection_gain)
         gain = self.gain_at(x_design[self.n_modes + 1])
         u = -float(gain[0] @ (x_design - x_ref))
         if self.feedforward_inertia is not None:
@@ -131,8 +132,8 @@ class ScheduledLQR:
 
 
 def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=None,
-                         feedforward: bool = True,
-                         torque_limit: float | None = None) -> ScheduledLQR:
+                         feedforward: bool = True, torque_limit: float | None = None,
+                         flexible_reference: bool = True) -> ScheduledLQR:
     """One LQR per spin rate on ``model.linearize(spin_rate)``, scheduled on ``|theta_dot|``.
 
     Parameters
@@ -144,7 +145,7 @@ def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=No
     spin_rates : array_like, shape (S,)
         rad/s, ``>= 0``, strictly increasing; the gain at each equals
         ``design_lqr(model, weights, spin_rate).gain``.
-    reference, feedforward, torque_limit
+    reference, feedforward, torque_limit, flexible_reference
         As in :func:`controllers.lqr.design_lqr`.
 
     Returns
@@ -156,4 +157,6 @@ def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=No
     gains = np.vstack([_lqr_gain(model, weights, float(w))[0] for w in rates])
     return ScheduledLQR(spin_rates=rates, gains=gains, reference=reference,
                         feedforward_inertia=float(model.matrices.J0) if feedforward else None,
-                        torque_limit=torque_limit)
+                        torque_limit=torque_limit,
+                        deflection_gain=(static_deflection_gain(model) if flexible_reference
+                                         else None))
