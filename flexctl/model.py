@@ -315,12 +315,11 @@ class Model:
         if hub == "clamped":
             lam = scipy.linalg.eigh(stiff, self.matrices.M_ff, eigvals_only=True)
         elif hub == "free":
-            n = self.n_modes
-            full = np.zeros((n + 1, n + 1))
-            full[1:, 1:] = stiff
-            lam = scipy.linalg.eigh(full, self.mass_matrix(np.zeros(self.n_states)),
-                                    eigvals_only=True)
-            lam = np.delete(lam, np.argmin(np.abs(lam)))
+            # The hub carries no stiffness: condensing its coordinate out of the mass matrix
+            # leaves the flexible modes exactly, without the rigid-body zero to remove.
+            mat = self.matrices
+            reduced = mat.M_ff - np.outer(mat.m_tf, mat.m_tf) / mat.J0
+            lam = scipy.linalg.eigh(stiff, reduced, eigvals_only=True)
         else:
             raise ValueError(f"hub must be 'clamped' or 'free'; got {hub!r}")
         return np.sort(np.sign(lam) * np.sqrt(np.abs(lam)))
