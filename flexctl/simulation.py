@@ -129,6 +129,11 @@ class _StaticFeedback:
     law: object
     n_states: int = 0
 
+    @property
+    def breakpoints(self) -> tuple:
+        """The wrapped law's times of non-smoothness, s."""
+        return tuple(getattr(self.law, "breakpoints", ()) or ())
+
     def initial_state(self, x0):
         return np.zeros(0)
 
@@ -367,7 +372,6 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                          f"; got {x0!r}")
 
     torque_fn = _time_function(torque, "torque") if torque is not None else None
-    controller_breaks = controller
     if controller is not None and not isinstance(controller, Controller):
         if not callable(controller):
             raise TypeError("controller must be callable as controller(t, x) or follow the "
@@ -449,7 +453,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         if not np.all(np.isfinite(atol_vec)) or np.any(atol_vec <= 0):
             raise ValueError(f"atol must be positive and finite; got {atol!r}")
 
-    cuts = [0.0] + [b for b in _breakpoints(torque, hub_motion, controller_breaks)
+    cuts = [0.0] + [b for b in _breakpoints(torque, hub_motion, controller)
                     if 0.0 < b < t_final] + [float(t_final)]
     step = output_step if output_step is not None else t_final / DEFAULT_OUTPUT_POINTS
     grid = np.arange(0.0, t_final + 0.5 * step, step)
