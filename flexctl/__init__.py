@@ -10,11 +10,11 @@ from .parameters import Beam, Hub, HubBeam, PointMass
 from .model import VARIANTS, Model, SingularMassMatrixError, build_model
 from .maneuvers import SineTorque, SpinUp
 from .simulation import Controller, SimulationResult, simulate
-from .scenes import Scene, SceneError, builtin_scenes, load_scene, run_scene
+from .scenes import Scene, SceneError, builtin_scenes, load_scene, run_scene, run_slew
 
 __all__ = [
     "Beam", "Hub", "HubBeam", "PointMass", "VARIANTS", "Model", "SingularMassMatrixError",
     "build_model", "SineTorque", "SpinUp", "Controller", "SimulationResult", "simulate",
-    "Scene", "SceneError", "builtin_scenes", "load_scene", "run_scene",
+    "Scene", "SceneError", "builtin_scenes", "load_scene", "run_scene", "run_slew",
 ]
 __version__ = "0.1.0"

@@ -36,7 +36,7 @@ import numpy as np
 
 from . import __version__
 from .report import format_summary, write_demo_report, write_run
-from .scenes import SceneError, builtin_scenes, load_scene, run_scene
+from .scenes import SceneError, builtin_scenes, load_scene, run_scene, run_slew
 
 __all__ = ["main", "parse_overrides", "EXIT_OK", "EXIT_BAD_INPUT", "EXIT_STOPPED"]
 
@@ -169,12 +169,8 @@ def _run_controlled(scene):
     # here, never inside flexctl's physics or simulation.
     from controllers.factory import from_spec
 
-    from .metrics import slew_metrics
-
-    plant = scene.build_model()
-    built = from_spec(scene, plant)
-    result = run_scene(scene, controller=built.controller)
-    slew = slew_metrics(result, scene.maneuver.angle, built.maneuver_end).as_dict()
+    result, built, metrics = run_slew(scene, from_spec)
+    slew = metrics.as_dict()
     slew.update({"controller": built.kind, "design_modes": built.design_modes,
                  "maneuver_end": built.maneuver_end, **built.info})
     return result, {"slew": slew}

@@ -114,7 +114,7 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         summary["spin_rate"] = spin
         summary["clamped_frequencies_at_spin"] = _floats(
             model.natural_frequencies(spin, hub="clamped"))
-    choice = scene.mode_choice() if callable(getattr(scene, "mode_choice", None)) else None
+    choice = scene.mode_choice()
     if choice is not None:
         summary["mode_choice"] = choice.to_dict()
     summary.update(extra or {})

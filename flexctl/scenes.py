@@ -62,13 +62,14 @@ from pathlib import Path
 
 from .fidelity import DEFAULT_TOLERANCE, ModeChoice, choose_modes
 from .maneuvers import SineTorque, Slew, SpinUp
+from .metrics import slew_metrics
 from .model import VARIANTS, Model, build_model
 from .parameters import Beam, Hub, HubBeam, PointMass
 from .simulation import METHODS, SimulationResult, simulate
 
 __all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene",
            "parse_scene",
-           "builtin_scenes", "run_scene"]
+           "builtin_scenes", "run_scene", "run_slew"]
 
 def _slew(angle_deg, duration="free", torque_bound=None):
     if isinstance(duration, str):
@@ -437,7 +438,7 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
     return parse_scene(data, name=name)
 
 
-def run_scene(scene: Scene, controller=None) -> SimulationResult:
+def run_scene(scene: Scene, controller=None, model: Model | None = None) -> SimulationResult:
     """Simulate a scene with the model and settings it names.
 
     Parameters
@@ -446,8 +447,10 @@ def run_scene(scene: Scene, controller=None) -> SimulationResult:
     controller : optional
         The controller built from ``scene.controller`` (``controllers.from_spec``); required
         for a slew scene, which is a goal for a controller rather than an input.
+    model : Model, optional
+        ``scene.build_model()`` when already built.
     """
-    model = scene.build_model()
+    model = scene.build_model() if model is None else model
     sim = scene.simulation
     if isinstance(scene.maneuver, Slew):
         if controller is None:
@@ -460,3 +463,32 @@ def run_scene(scene: Scene, controller=None) -> SimulationResult:
         drive = {"torque": scene.maneuver}
     return simulate(model, sim.t_final, rtol=sim.rtol, method=sim.method,
                     output_step=sim.output_step, **drive)
+
+
+def run_slew(scene: Scene, controller_factory):
+    """Design a slew scene's controller, run it against the scene's plant, measure the slew.
+
+    Parameters
+    ----------
+    scene : Scene
+        A slew scene (``maneuver.kind = "slew"`` with a ``[controller]`` table).
+    controller_factory : callable
+        ``factory(scene, plant)`` returning an object with ``controller`` and
+        ``maneuver_end`` (``controllers.from_spec``); flexctl never imports the controllers
+        package itself.
+
+    Returns
+    -------
+    result : SimulationResult
+    built : object
+        What the factory returned.
+    metrics : SlewMetrics
+        Residual vibration measured after ``built.maneuver_end``.
+    """
+    if not isinstance(scene.maneuver, Slew):
+        raise SceneError(f"scene {scene.name!r} is not a slew; got maneuver "
+                         f"{type(scene.maneuver).__name__}")
+    plant = scene.build_model()
+    built = controller_factory(scene, plant)
+    result = run_scene(scene, controller=built.controller, model=plant)
+    return result, built, slew_metrics(result, scene.maneuver.angle, built.maneuver_end)

@@ -514,8 +514,7 @@ class SceneTask:
 
     def __call__(self, **overrides) -> dict:
         from .maneuvers import Slew
-        from .metrics import slew_metrics
-        from .scenes import SceneError, load_scene, run_scene
+        from .scenes import SceneError, load_scene, run_scene, run_slew
 
         start = time.perf_counter()
         scene = load_scene(self.scene, overrides=overrides)
@@ -524,11 +523,8 @@ class SceneTask:
             if self.controller_factory is None:
                 raise SceneError(f"scene {scene.name!r} is a slew: give SceneTask a "
                                  "controller_factory (controllers.from_spec)")
-            plant = scene.build_model()
-            built = self.controller_factory(scene, plant)
-            result = run_scene(scene, controller=built.controller)
-            out.update(dataclasses.asdict(slew_metrics(result, scene.maneuver.angle,
-                                                       built.maneuver_end)))
+            result, built, metrics = run_slew(scene, self.controller_factory)
+            out.update(dataclasses.asdict(metrics))
             out["maneuver_end"] = float(built.maneuver_end)
         else:
             result = run_scene(scene)
