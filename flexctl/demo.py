@@ -172,7 +172,7 @@ def hub_beam_mass(out: Path, executor=None, points: int = SWEEP_POINTS) -> Secti
     def mass_at(ratio):
         from .parameters import PointMass
 
-        return (PointMass(mass=0.085, position=ratio * system.beam.length),)
+        return (PointMass(mass=system.masses[0].mass, position=ratio * system.beam.length),)
 
     fig5 = {"d = 0.2 l": history(mass_at(0.2)), "d = 0.8 l": history(mass_at(0.8))}
     fig7 = {"m_t = 0.085 kg": history(system.masses), "m_t = 0": history(())}
