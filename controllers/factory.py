@@ -1,6 +1,6 @@
 """Build the controller a slew scene's ``[controller]`` table asks for.
 
-The scene (:class:`flexctl.scenes.Scene`) carries the goal (:class:`flexctl.maneuvers.Slew`:
+The scene (:class:`flexctl.app.scenes.Scene`) carries the goal (:class:`flexctl.sim.maneuvers.Slew`:
 angle, duration or free, actuator torque bound), the plant model and the design model size
 (``[model] design_modes``); :func:`from_spec` designs the controller on a first_order model
 with ``design_modes`` modes and returns it ready for :func:`flexctl.simulate`.
@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from flexctl import Model, build_model
-from flexctl.maneuvers import Slew
-from flexctl.scenes import ControllerSpec, Scene, SceneError
+from flexctl.sim.maneuvers import Slew
+from flexctl.app.scenes import ControllerSpec, Scene, SceneError
 
 from .lqg import NoiseLevels, design_lqg
 from .lqr import LQRWeights, design_lqr
@@ -135,7 +135,7 @@ def from_spec(scene: Scene, plant: Model | None = None) -> BuiltController:
     Parameters
     ----------
     scene : Scene
-        A scene whose manoeuvre is a :class:`~flexctl.maneuvers.Slew` with a ``[controller]``.
+        A scene whose manoeuvre is a :class:`~flexctl.sim.maneuvers.Slew` with a ``[controller]``.
     plant : Model, optional
         The model the controller will run against (needed by LQG for its measurements);
         default ``scene.build_model()``.

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexctl.parameters import check_real as _real
+from flexctl.model.parameters import check_real as _real
 
 __all__ = ["SlewProfile", "minimum_slew_duration", "SHAPES"]
 

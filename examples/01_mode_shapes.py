@@ -32,8 +32,8 @@ import numpy as np
 from scipy.optimize import brentq
 
 import flexctl
-from flexctl.modes import cantilever_roots, mode_shapes
-from flexctl.plotting import plot_mode_shapes
+from flexctl.model.modes import cantilever_roots, mode_shapes
+from flexctl.app.plotting import plot_mode_shapes
 
 # %% [markdown]
 # ## The Kane beam (paper 001, section 3.1)

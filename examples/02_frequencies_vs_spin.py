@@ -32,7 +32,7 @@
 import numpy as np
 
 import flexctl
-from flexctl.plotting import plot_frequencies_vs_spin
+from flexctl.app.plotting import plot_frequencies_vs_spin
 
 kane = flexctl.load_scene("kane-spinup").system
 models = {v: flexctl.build_model(kane, n_modes=4, variant=v) for v in flexctl.VARIANTS}

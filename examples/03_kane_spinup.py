@@ -26,7 +26,7 @@
 # - at 4 rad/s, above the first clamped frequency 2.91 rad/s, ZDM diverges and FDM stays
 #   bounded.
 #
-# The six runs go through `flexctl.sweep` with a scene task: each grid point is a set of
+# The six runs go through `flexctl.app.sweep` with a scene task: each grid point is a set of
 # scene overrides.
 
 # %%
@@ -34,8 +34,8 @@
 from matplotlib.figure import Figure
 
 import flexctl
-from flexctl.plotting import plot_tip_deflections
-from flexctl.sweep import SceneTask, sweep
+from flexctl.app.plotting import plot_tip_deflections
+from flexctl.app.sweep import SceneTask, sweep
 
 SPIN_RATES = (0.5, 2.0, 4.0)        # rad/s, paper 001 Fig. 4
 table = sweep(SceneTask(scene="kane-spinup", keep_result=True),

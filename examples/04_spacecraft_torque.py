@@ -27,8 +27,8 @@
 import numpy as np
 
 import flexctl
-from flexctl.plotting import plot_response, plot_tip_deflections
-from flexctl.sweep import response_amplitudes
+from flexctl.app.plotting import plot_response, plot_tip_deflections
+from flexctl.app.sweep import response_amplitudes
 
 scene = flexctl.load_scene("spacecraft-torque")
 torque = scene.maneuver

@@ -29,7 +29,7 @@
 #   ("approximately logarithmic").
 #
 # The *peak* amplitude is the largest `|tip deflection|` while the torque acts, the
-# *residual* the largest after it (`flexctl.sweep.response_amplitudes`).
+# *residual* the largest after it (`flexctl.app.sweep.response_amplitudes`).
 
 # %%
 # %matplotlib inline
@@ -40,8 +40,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 import flexctl
-from flexctl.plotting import plot_sweep, plot_tip_deflections
-from flexctl.sweep import PointMassAmplitudes, response_amplitudes, sweep
+from flexctl.app.plotting import plot_sweep, plot_tip_deflections
+from flexctl.app.sweep import PointMassAmplitudes, response_amplitudes, sweep
 
 scene = flexctl.load_scene("hub-beam-mass")
 system, torque = scene.system, scene.maneuver
@@ -103,7 +103,7 @@ fig5
 #
 # `PointMassAmplitudes` is a picklable sweep task: called with `mass_position_ratio` and/or
 # `mass_ratio`, it puts one mass on the beam (the other ratio keeps the paper's value) and
-# returns the peak and residual amplitudes. `flexctl.sweep` runs it on any
+# returns the peak and residual amplitudes. `flexctl.app.sweep` runs it on any
 # `concurrent.futures`-style executor; here a pool of two processes. On a cluster, pass the
 # executor of a Dask client instead:
 #

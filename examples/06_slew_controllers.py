@@ -42,8 +42,8 @@ import numpy as np
 
 import flexctl
 from controllers import from_spec
-from flexctl.plotting import plot_controller_comparison
-from flexctl.sweep import SceneTask, sweep
+from flexctl.app.plotting import plot_controller_comparison
+from flexctl.app.sweep import SceneTask, sweep
 
 scene = flexctl.load_scene("slew-90")
 slew = scene.maneuver

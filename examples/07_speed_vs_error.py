@@ -24,7 +24,7 @@
 #   tolerance against the reference);
 # - *integration*: what the integrator adds (the run against that same `N`-mode run).
 #
-# Here the Python API (`flexctl.bench`) runs a small sweep on the Kane spin-up. The same from
+# Here the Python API (`flexctl.app.bench`) runs a small sweep on the Kane spin-up. The same from
 # the shell:
 #
 # ```bash
@@ -40,9 +40,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 import flexctl
-from flexctl.bench import BenchConfig, bench_scene
-from flexctl.plotting import plot_pareto, plot_sweep
-from flexctl.sweep import pareto_front
+from flexctl.app.bench import BenchConfig, bench_scene
+from flexctl.app.plotting import plot_pareto, plot_sweep
+from flexctl.app.sweep import pareto_front
 
 scene = flexctl.load_scene("kane-spinup")
 config = BenchConfig(modes=(1, 2, 3, 4, 6), variants=("first_order",),
@@ -87,7 +87,7 @@ fig
 # %% [markdown]
 # ## How many modes?
 #
-# `flexctl.fidelity.choose_modes` estimates the truncation error from linear responses,
+# `flexctl.sim.fidelity.choose_modes` estimates the truncation error from linear responses,
 # without running the nonlinear model, and picks the fewest modes within a tolerance (1 %
 # here). The bench measures the actual truncation error of that choice.
 
@@ -117,7 +117,7 @@ for method in config.methods:
 assert bench.choice_actual_error <= config.tolerance
 assert 1 / 3 < choice.estimated_error / bench.choice_actual_error < 3
 
-# The bench's Pareto front and flexctl.sweep.pareto_front agree.
+# The bench's Pareto front and flexctl.app.sweep.pareto_front agree.
 done = [r for r in rows if r["status"] == "ok"]
 mine = pareto_front([r["wall_time_s"] for r in done], [r["error"] for r in done])
 ours = {(r["n_modes"], r["method_used"], r["rtol"]) for r, keep in zip(done, mine) if keep}

@@ -1,16 +1,20 @@
 """flexctl: control design for rigid-flexible hub-beam-mass structures.
 
-The flow is one way: physical parameters (:mod:`flexctl.parameters`) -> cantilever modes
-(:mod:`flexctl.modes`) -> modal matrices (:mod:`flexctl.matrices`) -> a model of one variant
-(:mod:`flexctl.model`, exported by :mod:`flexctl.exports`) -> simulation
-(:mod:`flexctl.simulation`) -> scenes, CLI, plots and reports on top.
+Three layers, each a subpackage, and the flow is one way:
+
+- :mod:`flexctl.model`: physical parameters -> cantilever modes -> modal matrices -> a model of
+  one variant, exported to python-control and CasADi;
+- :mod:`flexctl.sim`: manoeuvres, simulation (compiled and SciPy paths), metrics, fidelity;
+- :mod:`flexctl.app`: scenes, sweeps, bench, reports, plots, the CLI and the demo (the only
+  layer that imports :mod:`controllers`).
+
+A lower layer never imports a higher one (``tests/test_architecture.py``).
 """
 
-from .parameters import Beam, Hub, HubBeam, PointMass
-from .model import VARIANTS, Model, SingularMassMatrixError, build_model
-from .maneuvers import SineTorque, SpinUp
-from .simulation import Controller, SimulationResult, simulate
-from .scenes import Scene, SceneError, builtin_scenes, load_scene, run_scene, run_slew
+from .model import (VARIANTS, Beam, Hub, HubBeam, Model, PointMass, SingularMassMatrixError,
+                    build_model)
+from .sim import Controller, SimulationResult, SineTorque, SpinUp, simulate
+from .app.scenes import Scene, SceneError, builtin_scenes, load_scene, run_scene, run_slew
 
 __all__ = [
     "Beam", "Hub", "HubBeam", "PointMass", "VARIANTS", "Model", "SingularMassMatrixError",

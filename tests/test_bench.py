@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from flexctl import load_scene
-from flexctl.bench import (CSV_COLUMNS, BenchConfig, BenchRow, bench_scene, pareto_front,
+from flexctl.app.bench import (CSV_COLUMNS, BenchConfig, BenchRow, bench_scene, pareto_front,
                            run_bench)
-from flexctl.cli import EXIT_BAD_INPUT, EXIT_OK, main
+from flexctl.app.cli import EXIT_BAD_INPUT, EXIT_OK, main
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 #: The Kane spin-up converges with modes: each doubling cuts the truncation error by at least

@@ -18,8 +18,8 @@ import pytest
 
 import flexctl
 from flexctl import builtin_scenes, build_model, load_scene
-from flexctl.cli import EXIT_BAD_INPUT, EXIT_OK, EXIT_STOPPED, main, parse_overrides
-from flexctl.plotting import plot_frequencies_vs_spin, plot_mode_shapes, plot_response
+from flexctl.app.cli import EXIT_BAD_INPUT, EXIT_OK, EXIT_STOPPED, main, parse_overrides
+from flexctl.app.plotting import plot_frequencies_vs_spin, plot_mode_shapes, plot_response
 
 #: Paper 001, sec. 3.2: peak tip deflection of the spacecraft under 50 N m for 2 s, 0.42 m,
 #: read off the paper's figure.
@@ -162,7 +162,7 @@ def test_run_default_output_directory(tmp_path, monkeypatch, capsys):
 def test_run_scene_file_with_override(tmp_path, capsys):
     source = tmp_path / "short.toml"
     source.write_text(
-        (Path(flexctl.__file__).parent / "builtin_scenes" / "kane-spinup.toml").read_text())
+        (Path(flexctl.__file__).parent / "app" / "builtin_scenes" / "kane-spinup.toml").read_text())
     out = tmp_path / "out"
     code = main(["run", str(source), "--set", "simulation.t_final=2", "--out", str(out)])
     assert code == EXIT_OK

@@ -9,8 +9,8 @@ import re
 
 import pytest
 
-from flexctl import demo
-from flexctl.report import write_demo_report
+from flexctl.app import demo
+from flexctl.app.report import write_demo_report
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 #: The papers' figures were read off plots: a few percent.

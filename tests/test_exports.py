@@ -7,7 +7,7 @@ import pytest
 
 from conftest import random_states
 from flexctl import VARIANTS, build_model
-from flexctl.exports import to_casadi, to_casadi_outputs, to_nonlinear_iosystem
+from flexctl.model.exports import to_casadi, to_casadi_outputs, to_nonlinear_iosystem
 
 #: Three implementations of the same arithmetic agree to round-off.
 EXPORT_RTOL = 1e-9
@@ -81,7 +81,7 @@ def test_export_signatures(model):
 def test_nonlinear_iosystem_simulates_like_flexctl(hub_beam_mass_system):
     """A python-control simulation of the export follows flexctl's own simulation."""
     from flexctl import simulate
-    from flexctl.maneuvers import SineTorque
+    from flexctl.sim.maneuvers import SineTorque
 
     model = build_model(hub_beam_mass_system, n_modes=2)
     push = SineTorque(peak_torque=2.0, duration=2.0)

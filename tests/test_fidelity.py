@@ -9,10 +9,10 @@ import pytest
 from scipy.integrate import cumulative_trapezoid
 
 from flexctl import SceneError, SineTorque, SpinUp, build_model, load_scene, simulate
-from flexctl.cli import main
-from flexctl.fidelity import (DEFAULT_TOLERANCE, ModeChoice, choose_modes, largest_spin_rate,
+from flexctl.app.cli import main
+from flexctl.sim.fidelity import (DEFAULT_TOLERANCE, ModeChoice, choose_modes, largest_spin_rate,
                               rigid_slew_torque)
-from flexctl.maneuvers import Slew
+from flexctl.sim.maneuvers import Slew
 
 #: The linear estimate against the tip error of the nonlinear N-mode runs: within a factor of
 #: four either way (frozen spin at its largest value is conservative for a spin-up, ~3x).
@@ -33,7 +33,7 @@ GRID_RTOL = 1e-4
 
 def _builtin_text(name):
     """The TOML text of a built-in scene."""
-    return resources.files("flexctl.builtin_scenes").joinpath(f"{name}.toml").read_text()
+    return resources.files("flexctl.app.builtin_scenes").joinpath(f"{name}.toml").read_text()
 
 
 def _drive(scene):

@@ -13,7 +13,7 @@ from scipy.integrate import quad
 from scipy.optimize import brentq
 
 from flexctl import PointMass, SineTorque, SpinUp, build_model, simulate
-from flexctl.simulation import AccuracyWarning, StiffnessWarning
+from flexctl.sim.simulation import AccuracyWarning, StiffnessWarning
 
 # ------------------------------------------------------------------ tolerances
 #: Paper figures read off plots (MODEL.md section 6).

@@ -9,8 +9,8 @@ from scipy.integrate import quad
 
 from conftest import gauss_legendre
 from flexctl import PointMass
-from flexctl.matrices import assemble
-from flexctl.modes import cantilever_roots, mode_shapes
+from flexctl.model.matrices import assemble
+from flexctl.model.modes import cantilever_roots, mode_shapes
 
 #: Southwell coefficients K_g[i,i]/M_ff[i,i] at b = 0, MODEL.md section 6 (as printed).
 SOUTHWELL = [(0, 1.1933, 5e-5), (1, 6.478, 5e-4)]   # (index, value, half a unit in last digit)

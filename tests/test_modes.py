@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from conftest import gauss_legendre
-from flexctl.modes import cantilever_roots, mode_shapes
+from flexctl.model.modes import cantilever_roots, mode_shapes
 
 #: Roots of cos z cosh z + 1 = 0 as tabulated in MODEL.md section 3 (7 decimals).
 TABULATED_ROOTS = np.array([1.8751041, 4.6940911, 7.8547574, 10.9955407, 14.1371684])

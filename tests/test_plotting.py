@@ -2,7 +2,7 @@
 
 The plots compute nothing physical, so the tests check that what is drawn is the data given:
 line coordinates against the table columns, bar lengths against the metrics, the front against
-:func:`flexctl.sweep.pareto_front`, and that stopped runs are marked as such.
+:func:`flexctl.app.sweep.pareto_front`, and that stopped runs are marked as such.
 """
 
 import io
@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 import flexctl
-from flexctl import plotting, plotting_sweeps
-from flexctl.metrics import slew_metrics
-from flexctl.plotting import (plot_controller_comparison, plot_pareto, plot_sweep,
+from flexctl.app import plotting, plotting_sweeps
+from flexctl.sim.metrics import slew_metrics
+from flexctl.app.plotting import (plot_controller_comparison, plot_pareto, plot_sweep,
                               plot_tip_deflections)
-from flexctl.sweep import SweepResult, pareto_front
+from flexctl.app.sweep import SweepResult, pareto_front
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

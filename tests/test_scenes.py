@@ -6,7 +6,7 @@ import pytest
 
 import flexctl
 from flexctl import Beam, Hub, SceneError, builtin_scenes, load_scene, run_scene
-from flexctl.maneuvers import SineTorque, SpinUp
+from flexctl.sim.maneuvers import SineTorque, SpinUp
 
 BUILTINS = ("hub-beam-mass", "kane-spinup", "slew-90", "spacecraft-torque")
 
@@ -217,7 +217,7 @@ def test_missing_file_and_unknown_name_are_rejected(tmp_path):
 
 def test_scene_data_round_trips_through_parse(tmp_path):
     scene = load_scene("hub-beam-mass", overrides={"maneuver.peak_torque": "3"})
-    again = flexctl.scenes.parse_scene(scene.data, name="copy")
+    again = flexctl.app.scenes.parse_scene(scene.data, name="copy")
     assert again.system == scene.system
     assert again.maneuver == scene.maneuver == SineTorque(peak_torque=3.0, duration=2.0)
 

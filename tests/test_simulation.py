@@ -9,7 +9,7 @@ from scipy.interpolate import CubicSpline
 
 import flexctl
 from flexctl import VARIANTS, Model, PointMass, SimulationResult, build_model, simulate
-from flexctl.maneuvers import SineTorque, SpinUp
+from flexctl.sim.maneuvers import SineTorque, SpinUp
 
 # ------------------------------------------------------------------ tolerances
 #: The papers' amplitudes were read off their plots: a few percent (MODEL.md section 6).

@@ -9,8 +9,8 @@ import pytest
 from controllers import OpenLoop, from_spec, solve_slew, SlewProblem
 from controllers.shaping import bang_bang, design_shaper, shape
 from flexctl import SceneError, build_model, load_scene, run_scene, simulate
-from flexctl.cli import main
-from flexctl.metrics import slew_metrics
+from flexctl.app.cli import main
+from flexctl.sim.metrics import slew_metrics
 
 #: Final hub angle error of a slew, as a fraction of the angle.
 FINAL_ANGLE_FRACTION = 0.03

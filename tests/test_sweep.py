@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import flexctl
-from flexctl.sweep import (PointMassAmplitudes, SceneTask, SweepError, SweepResult,
+from flexctl.app.sweep import (PointMassAmplitudes, SceneTask, SweepError, SweepResult,
                            parameter_grid, pareto_front, response_amplitudes, sweep)
 
 #: Short runs keep the sweeps cheap; the torque acts for 2 s, so 6 s leaves two periods of

@@ -3,7 +3,7 @@
 Examples
 --------
 >>> import numpy as np
->>> from flexctl.metrics import settling_time
+>>> from flexctl.sim.metrics import settling_time
 >>> t = np.linspace(0.0, 10.0, 1001)
 >>> round(settling_time(t, 1.0 - np.exp(-t), target=1.0, band=0.02), 2)
 3.92

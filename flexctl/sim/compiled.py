@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .exports import _symbolic_beam_dynamics, _symbolic_dynamics
+from ..model.exports import _symbolic_beam_dynamics, _symbolic_dynamics
 
 __all__ = ["is_symbolic", "SegmentIntegrator", "integrate_segments"]
 

@@ -74,7 +74,7 @@ def _quadrature(system: HubBeam, n_modes: int):
 
 @dataclass(frozen=True, eq=False)
 class ModalMatrices:
-    """Assembled modal matrices of a :class:`~flexctl.parameters.HubBeam` (read-only arrays).
+    """Assembled modal matrices of a :class:`~flexctl.model.parameters.HubBeam` (read-only arrays).
 
     Build with :func:`assemble`; see the module Notes for the symbols and shapes.
     """

@@ -7,14 +7,14 @@ A run directory holds
                     rad/s, N m, m, m); one row per output time, up to the stop time
 ``summary.json``    scene, variant, modes, status, message, peak tip deflection, clamped
                     natural frequencies, overrides, wall time (see :func:`summarize`)
-``response.png``    :func:`flexctl.plotting.plot_response`
+``response.png``    :func:`flexctl.app.plotting.plot_response`
 ==================  ===================================================================
 
 Nothing here computes physics; the numbers come from the result and the model.
 
 Examples
 --------
->>> from flexctl.report import timeseries_columns
+>>> from flexctl.app.report import timeseries_columns
 >>> timeseries_columns(2)
 ['t', 'theta', 'theta_dot', 'torque', 'tip_deflection', 'q1', 'q2']
 """
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .maneuvers import Slew, SpinUp
+from ..sim.maneuvers import Slew, SpinUp
 
 __all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "timeseries_columns", "summarize",
            "write_run", "format_summary", "write_demo_report"]
@@ -86,7 +86,7 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         entries of ``extra`` (e.g. ``slew`` metrics of a controlled slew) are added as given.
         A scene with ``modes = "auto"`` adds ``mode_choice``: the number of modes chosen, the
         estimated relative tip error against the tolerance, the error estimated for each number
-        of modes, the stiffening verdict and why (:meth:`flexctl.fidelity.ModeChoice.to_dict`).
+        of modes, the stiffening verdict and why (:meth:`flexctl.sim.fidelity.ModeChoice.to_dict`).
     """
     model = result.model
     summary = {
@@ -216,7 +216,7 @@ def _relative(path, base: Path) -> str:
 
 
 def _section_lines(section, out: Path) -> list:
-    """Markdown of one :class:`flexctl.demo.Section`: heading, text, table, figures."""
+    """Markdown of one :class:`flexctl.app.demo.Section`: heading, text, table, figures."""
     lines = ["", f"## {section.title}", ""]
     for paragraph in section.paragraphs:
         lines += [paragraph, ""]
@@ -242,13 +242,13 @@ def write_demo_report(out_dir, runs: list, frequency_plot=None, *, title: str = 
     runs : list of (str, dict)
         ``(label, summary)`` with each summary as returned by :func:`write_run`.
     frequency_plot : str or path-like, optional
-        A frequency-against-spin plot (:func:`flexctl.plotting.plot_frequencies_vs_spin`)
+        A frequency-against-spin plot (:func:`flexctl.app.plotting.plot_frequencies_vs_spin`)
         to include.
     title, intro : str, optional
         Heading and the paragraph under it.
     frequency_note : str, optional
         Paragraph above the frequency plot.
-    sections : sequence of flexctl.demo.Section, optional
+    sections : sequence of flexctl.app.demo.Section, optional
         Further sections (the papers' figures, the controller comparison), written after the
         frequency plot, each with its text, table and figures.
 

@@ -22,7 +22,7 @@ module-level class such as the frozen dataclasses here:
 
 Examples
 --------
->>> from flexctl.sweep import PointMassAmplitudes, sweep
+>>> from flexctl.app.sweep import PointMassAmplitudes, sweep
 >>> task = PointMassAmplitudes.from_scene("hub-beam-mass", t_final=6.0)
 >>> table = sweep(task, {"mass_ratio": [0.0, 0.5]}, progress=False)
 >>> table.columns[:3]
@@ -45,8 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .maneuvers import SineTorque
-from .parameters import HubBeam, PointMass
+from ..sim.maneuvers import SineTorque
+from ..model.parameters import HubBeam, PointMass
 
 __all__ = ["sweep", "parameter_grid", "SweepResult", "SweepError", "pareto_front",
            "response_amplitudes", "PointMassAmplitudes", "SceneTask"]
@@ -457,8 +457,8 @@ class PointMassAmplitudes:
 
     def __call__(self, mass_position_ratio: float | None = None,
                  mass_ratio: float | None = None) -> dict:
-        from .model import build_model
-        from .simulation import simulate
+        from ..model import build_model
+        from ..sim.simulation import simulate
 
         default_position, default_mass = self.default_ratios
         position = default_position if mass_position_ratio is None else mass_position_ratio
@@ -504,7 +504,7 @@ class SceneTask:
     -----
     A call returns a dict: ``status``, ``t_end`` (s), ``peak_tip_deflection`` (m),
     ``wall_time_s`` (s, design and simulation); for slews also the
-    :class:`~flexctl.metrics.SlewMetrics` fields and ``maneuver_end`` (s); ``result`` when
+    :class:`~flexctl.sim.metrics.SlewMetrics` fields and ``maneuver_end`` (s); ``result`` when
     ``keep_result``.
     """
 
@@ -513,7 +513,7 @@ class SceneTask:
     keep_result: bool = False
 
     def __call__(self, **overrides) -> dict:
-        from .maneuvers import Slew
+        from ..sim.maneuvers import Slew
         from .scenes import SceneError, load_scene, run_scene, run_slew
 
         start = time.perf_counter()

@@ -7,15 +7,15 @@ each function also draws into axes the caller passes. matplotlib is imported onl
 function runs, so ``import flexctl`` stays light.
 
 This module draws; it computes nothing physical. Frequencies come from
-:meth:`flexctl.Model.natural_frequencies`, mode shapes from :func:`flexctl.modes.mode_shapes`,
-slew metrics from :func:`flexctl.metrics.slew_metrics`. Sweep curves and Pareto fronts
-(:func:`plot_sweep`, :func:`plot_pareto`) live in :mod:`flexctl.plotting_sweeps` and are
+:meth:`flexctl.Model.natural_frequencies`, mode shapes from :func:`flexctl.model.modes.mode_shapes`,
+slew metrics from :func:`flexctl.sim.metrics.slew_metrics`. Sweep curves and Pareto fronts
+(:func:`plot_sweep`, :func:`plot_pareto`) live in :mod:`flexctl.app.plotting_sweeps` and are
 importable from here.
 
 Examples
 --------
 >>> from flexctl import load_scene, run_scene
->>> from flexctl.plotting import plot_response
+>>> from flexctl.app.plotting import plot_response
 >>> result = run_scene(load_scene("kane-spinup", overrides={"simulation.t_final": "2"}))
 >>> fig = plot_response(result)
 >>> [ax.get_ylabel() for ax in fig.axes]
@@ -141,7 +141,7 @@ def plot_mode_shapes(model, n_shapes: int | None = None, n_points: int = 201, ax
         Shapes against the distance from the root ``x`` (m); they are dimensionless and
         tip-normalised, ``|phi_i(l)| = 2``. Point masses are marked at their positions.
     """
-    from .modes import mode_shapes
+    from ..model.modes import mode_shapes
 
     n_modes = model.n_modes
     if n_shapes is None:
@@ -176,8 +176,8 @@ def plot_mode_shapes(model, n_shapes: int | None = None, n_points: int = 201, ax
 
 def _models_from(models, variants, n_modes):
     """The ``models`` argument of :func:`plot_frequencies_vs_spin` as ``{label: Model}``."""
-    from .model import Model, build_model
-    from .parameters import HubBeam
+    from ..model import Model, build_model
+    from ..model.parameters import HubBeam
 
     if isinstance(models, HubBeam):
         if isinstance(variants, str):
@@ -368,7 +368,7 @@ def plot_controller_comparison(results, metrics=None, target_angle: float | None
     results : dict of {str: SimulationResult}
         One run per controller, labelled (e.g. by controller kind).
     metrics : dict of {str: SlewMetrics or dict}, optional
-        Metrics per label (:func:`flexctl.metrics.slew_metrics`); when given, a bar chart of
+        Metrics per label (:func:`flexctl.sim.metrics.slew_metrics`); when given, a bar chart of
         residual vibration (m, log scale), settling time (s) and peak torque (N m) is drawn
         next to the time histories. A settling time of ``inf`` or ``None`` (not settled) is
         drawn as a hatched bar up to the end of the run.

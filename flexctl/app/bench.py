@@ -17,7 +17,7 @@ measured over the time it lasted; a SciPy run past ``time_limit`` is stopped as 
 (and not tried on more modes). ``method_used`` tells when :func:`flexctl.simulate` moved an
 explicit method to cvodes for stiffness.
 
-Each scene also gets the modes :func:`flexctl.fidelity.choose_modes` picks, its estimated error
+Each scene also gets the modes :func:`flexctl.sim.fidelity.choose_modes` picks, its estimated error
 next to the actual truncation error for every ``N`` swept. :func:`run_bench` writes per scene
 ``<scene>.csv``, ``<scene>.md`` and ``<scene>-pareto.png``, and ``report.md`` linking them; the
 command line is ``flexctl bench``.
@@ -35,12 +35,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .fidelity import choose_modes
-from .maneuvers import SineTorque, SpinUp
-from .model import VARIANTS, build_model
+from ..sim.fidelity import choose_modes
+from ..sim.maneuvers import SineTorque, SpinUp
+from ..model import VARIANTS, build_model
 from .scenes import builtin_scenes, load_scene
 from .sweep import pareto_front as _dominance
-from .simulation import METHODS, simulate
+from ..sim.simulation import METHODS, simulate
 
 __all__ = ["BenchConfig", "BenchRow", "SceneBench", "bench_scene", "run_bench", "pareto_front",
            "plot_pareto", "write_scene", "BENCH_KINDS"]
@@ -80,7 +80,7 @@ class BenchConfig:
         or a hub motion.
     modes, variants, methods, rtols : tuple
         Numbers of modes (1 to 200; default 1 to 12), model variants (default all three),
-        integrators (:data:`flexctl.simulation.METHODS`; default cvodes, DOP853, LSODA) and
+        integrators (:data:`flexctl.sim.simulation.METHODS`; default cvodes, DOP853, LSODA) and
         relative tolerances (in (0, 1); default 1e-4, 1e-6, 1e-8).
     reference_modes : int
         Modes of the converged reference, >= every entry of ``modes``. Default 20.
@@ -164,7 +164,7 @@ class SceneBench:
 
     ``rows`` holds a :class:`BenchRow` per run; ``references`` per variant its ``status``,
     ``t_end`` (s), ``wall_time_s``, ``message`` and ``difference_from_first_order`` (relative
-    tip difference of the references); ``choice`` is :func:`~flexctl.fidelity.choose_modes` for
+    tip difference of the references); ``choice`` is :func:`~flexctl.sim.fidelity.choose_modes` for
     the scene's variant, and ``truncation`` ``{N: actual truncation error}`` of that variant for
     the modes swept and the mode choice.
     """
@@ -192,7 +192,7 @@ def pareto_front(rows) -> list:
 
     Runs with the same variant, modes, integrator used and rtol count once (an explicit method
     moved to cvodes repeats the cvodes run). Dominance as in
-    :func:`flexctl.sweep.pareto_front`.
+    :func:`flexctl.app.sweep.pareto_front`.
     """
     unique = {}
     for r in sorted((r for r in rows if r.status == "ok" and math.isfinite(r.error)),
@@ -494,7 +494,7 @@ def write_scene(bench: SceneBench, out_dir) -> dict:
 
 
 def _index(out: Path, benches: list) -> Path:
-    lines = ["# flexctl bench", "", "Modes picked by `flexctl.fidelity.choose_modes` with "
+    lines = ["# flexctl bench", "", "Modes picked by `flexctl.sim.fidelity.choose_modes` with "
              "the estimated and actual truncation error; the fastest finished run of the "
              "scene's variant within each error level.", ""]
     lines += _table(benches, [

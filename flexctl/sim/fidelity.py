@@ -20,7 +20,7 @@ missing modes and the frequency error of the kept ones, whose phase drift grows 
 On the built-in scenes it lands within a factor of about three of the error of the nonlinear
 runs (``flexctl bench`` reports both).
 
-A slew (:class:`~flexctl.maneuvers.Slew`), a goal for a controller rather than an input, is
+A slew (:class:`~flexctl.sim.maneuvers.Slew`), a goal for a controller rather than an input, is
 judged by the torque of the rigid cycloidal rest-to-rest slew of the same angle and duration
 (one period of sine torque; in the fastest time the torque bound allows when the duration is
 free).
@@ -31,7 +31,7 @@ Stiffening matters when, at that largest spin rate, the first clamped frequency 
 Examples
 --------
 >>> from flexctl import load_scene
->>> from flexctl.fidelity import choose_modes
+>>> from flexctl.sim.fidelity import choose_modes
 >>> scene = load_scene("kane-spinup")
 >>> choice = choose_modes(scene.system, scene.maneuver, 1e-2, t_final=30.0)
 >>> choice.n_modes, choice.stiffening_matters
@@ -48,8 +48,8 @@ import numpy as np
 import scipy.linalg
 
 from .maneuvers import SineTorque, Slew
-from .model import VARIANTS, build_model
-from .parameters import HubBeam
+from ..model import VARIANTS, build_model
+from ..model.parameters import HubBeam
 
 __all__ = ["ModeChoice", "choose_modes", "linear_tip_responses", "largest_spin_rate",
            "rigid_slew_torque",

@@ -17,7 +17,7 @@ that any number of modes stays accurate to machine precision.
 Examples
 --------
 >>> import numpy as np
->>> from flexctl.modes import cantilever_roots
+>>> from flexctl.model.modes import cantilever_roots
 >>> np.round(cantilever_roots(3), 7)
 array([1.8751041, 4.6940911, 7.8547574])
 """

@@ -6,7 +6,7 @@ Three ways to drive the hub, combined as follows:
 - ``controller``: feedback, a callable ``(t, x) -> torque`` or an object following
   :class:`Controller` (with internal states, e.g. an estimator); its torque adds to ``torque``;
 - ``hub_motion``: a prescribed ``theta(t)`` with ``rate(t)`` and ``acceleration(t)`` (e.g.
-  :class:`~flexctl.maneuvers.SpinUp`); only the beam equation is integrated and the result
+  :class:`~flexctl.sim.maneuvers.SpinUp`); only the beam equation is integrated and the result
   carries the torque the motion needs. Excludes the other two.
 
 Inputs are evaluated at the integrator's own times (never sampled and interpolated), and the
@@ -36,7 +36,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .compiled import SegmentIntegrator, is_symbolic, verify_accuracy
-from .model import Model, SingularMassMatrixError
+from ..model import Model, SingularMassMatrixError
 
 __all__ = ["simulate", "SimulationResult", "Controller", "StiffnessWarning", "AccuracyWarning"]
 
@@ -45,7 +45,7 @@ __all__ = ["simulate", "SimulationResult", "Controller", "StiffnessWarning", "Ac
 SINGULAR_FRACTION = 1e-9
 
 #: Integration methods: "auto" (CVODES when every input has a CasADi form, else DOP853),
-#: "cvodes" (compiled, :mod:`flexctl.compiled`) and the ``scipy.integrate.solve_ivp`` methods.
+#: "cvodes" (compiled, :mod:`flexctl.sim.compiled`) and the ``scipy.integrate.solve_ivp`` methods.
 METHODS = ("auto", "cvodes", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
 
 #: Output samples over the run when no ``output_step`` is given.
@@ -292,7 +292,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         Hub torque ``torque(t)`` or ``torque(t, x)``, N m. Default 0.
     hub_motion : object, optional
         Prescribed hub motion with methods ``angle(t)``, ``rate(t)``, ``acceleration(t)``
-        (rad, rad/s, rad/s^2), e.g. :class:`~flexctl.maneuvers.SpinUp`.
+        (rad, rad/s, rad/s^2), e.g. :class:`~flexctl.sim.maneuvers.SpinUp`.
     controller : callable or Controller, optional
         Feedback torque ``controller(t, x)`` or a :class:`Controller` object.
     x0 : array_like, shape (n,), optional
@@ -305,7 +305,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     method : str, optional
         ``"auto"`` (default): ``"cvodes"`` when every input has a CasADi form (the built-in
         manoeuvres), else ``"DOP853"``. ``"cvodes"``: compiled SUNDIALS integration
-        (:mod:`flexctl.compiled`); or a ``scipy.integrate.solve_ivp`` method (``"DOP853"``,
+        (:mod:`flexctl.sim.compiled`); or a ``scipy.integrate.solve_ivp`` method (``"DOP853"``,
         ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``). An explicit method
         (DOP853, RK45, RK23) on a model too stiff for it is replaced by ``"cvodes"`` when the
         inputs allow, with a :class:`StiffnessWarning` and a note in the result's ``message``
@@ -317,7 +317,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     check_accuracy : bool, optional
         For the compiled (``"cvodes"``) path: repeat the run at 10 times the tolerance to
         estimate the integration error (``result.integration_error``), and redo it with
-        A-stable BDF2 if the two disagree grossly (:func:`flexctl.compiled.verify_accuracy`).
+        A-stable BDF2 if the two disagree grossly (:func:`flexctl.sim.compiled.verify_accuracy`).
         Default True.
 
     Returns
@@ -327,7 +327,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     Examples
     --------
     >>> from flexctl import load_scene, build_model, simulate
-    >>> from flexctl.maneuvers import SineTorque
+    >>> from flexctl.sim.maneuvers import SineTorque
     >>> model = build_model(load_scene("spacecraft-torque").system, n_modes=4)
     >>> result = simulate(model, 10.0, torque=SineTorque(peak_torque=50.0, duration=2.0))
     >>> result.status, round(result.peak_tip_deflection, 2)

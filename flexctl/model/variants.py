@@ -1,6 +1,6 @@
 """Finite-dimensional hub-beam-mass models: first_order, zero_order and consistent.
 
-The three variants share one assembly (:func:`flexctl.matrices.assemble`) and differ in a few
+The three variants share one assembly (:func:`flexctl.model.matrices.assemble`) and differ in a few
 terms (MODEL.md section 4):
 
 ============  ===========================  ==========================================
@@ -347,12 +347,12 @@ class Model:
 
     # ------------------------------------------------------------------ exports
     def nonlinear(self):
-        """Nonlinear plant as a python-control ``NonlinearIOSystem`` (:mod:`flexctl.exports`)."""
+        """Nonlinear plant as a python-control ``NonlinearIOSystem`` (:mod:`flexctl.model.exports`)."""
         from .exports import to_nonlinear_iosystem
         return to_nonlinear_iosystem(self)
 
     def casadi(self):
-        """Dynamics as a CasADi ``Function`` ``(x, u) -> dx/dt`` (see :mod:`flexctl.exports`).
+        """Dynamics as a CasADi ``Function`` ``(x, u) -> dx/dt`` (see :mod:`flexctl.model.exports`).
 
         Built once per model and cached.
         """

@@ -1,14 +1,14 @@
 """Plots of sweep tables: curves against a parameter, and Pareto fronts (matplotlib).
 
-Like :mod:`flexctl.plotting` (which re-exports both functions), every function returns a bare
+Like :mod:`flexctl.app.plotting` (which re-exports both functions), every function returns a bare
 :class:`matplotlib.figure.Figure` (no pyplot state), draws into axes the caller passes, and
-computes nothing physical. The data is any table: a :class:`flexctl.sweep.SweepResult`, a dict
+computes nothing physical. The data is any table: a :class:`flexctl.app.sweep.SweepResult`, a dict
 of columns ``{name: values}``, or a sequence of rows ``[{name: value}, ...]`` (as a benchmark
 might write them).
 
 Examples
 --------
->>> from flexctl.plotting_sweeps import plot_sweep
+>>> from flexctl.app.plotting_sweeps import plot_sweep
 >>> table = {"mass_ratio": [0.0, 0.5, 1.0], "peak_amplitude": [0.22, 0.43, 0.51]}
 >>> fig = plot_sweep(table, "mass_ratio", "peak_amplitude")
 >>> fig.axes[0].get_xlabel(), len(fig.axes[0].lines)
@@ -178,7 +178,7 @@ def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | No
     Returns
     -------
     matplotlib.figure.Figure
-        Every point as a dot; the non-dominated ones (:func:`flexctl.sweep.pareto_front`) ringed
+        Every point as a dot; the non-dominated ones (:func:`flexctl.app.sweep.pareto_front`) ringed
         and joined by a staircase line labelled ``Pareto front``.
     """
     from .sweep import pareto_front

@@ -1,8 +1,8 @@
 """The papers' figures and the controller comparison of ``flexctl demo``, as report sections.
 
 Each function runs one case, saves its figures (PNG) and tables (CSV) into the demo directory,
-and returns a :class:`Section` that :func:`flexctl.report.write_demo_report` turns into
-Markdown. The sweeps go through :func:`flexctl.sweep.sweep` on the executor given (the demo
+and returns a :class:`Section` that :func:`flexctl.app.report.write_demo_report` turns into
+Markdown. The sweeps go through :func:`flexctl.app.sweep.sweep` on the executor given (the demo
 passes a process pool). Sizes are chosen to finish in well under a minute on two cores.
 
 ==========================  =================================================================
@@ -160,8 +160,8 @@ def hub_beam_mass(out: Path, executor=None, points: int = SWEEP_POINTS) -> Secti
     by_mass.to_csv(out / "paper000-fig8.csv")
 
     # Figs. 5 and 7: time histories (four short runs, here).
-    from .model import build_model
-    from .simulation import simulate
+    from ..model import build_model
+    from ..sim.simulation import simulate
 
     system, torque = task.system, task.torque
 
@@ -170,7 +170,7 @@ def hub_beam_mass(out: Path, executor=None, points: int = SWEEP_POINTS) -> Secti
         return simulate(model, task.t_final, torque=torque, output_step=task.output_step)
 
     def mass_at(ratio):
-        from .parameters import PointMass
+        from ..model.parameters import PointMass
 
         return (PointMass(mass=system.masses[0].mass, position=ratio * system.beam.length),)
 
@@ -213,7 +213,7 @@ def hub_beam_mass(out: Path, executor=None, points: int = SWEEP_POINTS) -> Secti
     low = position <= 0.3 + 1e-9
     change = max(np.max(np.abs(by_position.column(c)[low] / bare[c] - 1))
                  for c in ("peak_amplitude", "residual_amplitude"))
-    sweep_text = ("Sweeps on %d points each, run through flexctl.sweep on the demo's process "
+    sweep_text = ("Sweeps on %d points each, run through flexctl.app.sweep on the demo's process "
                   "pool (%.2g s and %.2g s). Fig. 6: for d/l <= 0.3 the amplitudes stay within "
                   "%.2g %% of the beam without mass (the paper: negligible); at d/l = 1 the "
                   "peak is %+.0f %% and the residual %+.0f %%. Fig. 8: from R_M = 0 to 1 the "

@@ -11,7 +11,7 @@
 ``SCENE`` is a TOML file or the name of a built-in scene; ``--set`` overrides one value by its
 dotted path (``--set maneuver.spin_rate=10 --set model.variant=zero_order``), the value read as
 TOML. ``run`` writes ``timeseries.csv``, ``summary.json`` and ``response.png`` into ``DIR``
-(default ``flexctl-out/<scene name>``), see :mod:`flexctl.report`.
+(default ``flexctl-out/<scene name>``), see :mod:`flexctl.app.report`.
 
 Exit status: 0 when every run reached its final time (for ``demo``: when every run ended as
 expected), 3 when a run stopped early (diverged or singular; its files are still written), 2 on
@@ -19,7 +19,7 @@ bad input (one line on stderr starting ``flexctl: error:``).
 
 Examples
 --------
->>> from flexctl.cli import main
+>>> from flexctl.app.cli import main
 >>> main(["--version"])
 flexctl 0.1.0
 0
@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
+from .. import __version__
 from .report import format_summary, write_demo_report, write_run
 from .scenes import SceneError, builtin_scenes, load_scene, run_scene, run_slew
 
@@ -142,7 +142,7 @@ def _parser() -> argparse.ArgumentParser:
                       f"(default {DEMO_WORKERS}; 1 runs everything in this process)")
     demo.set_defaults(func=_cmd_demo)
 
-    # flexctl bench: speed against error sweeps, defined with flexctl.bench
+    # flexctl bench: speed against error sweeps, defined with flexctl.app.bench
     from .bench import add_command as add_bench_command
     add_bench_command(commands)
     return parser
@@ -179,7 +179,7 @@ def _run_controlled(scene):
 def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
     """Load, simulate and write one scene: the shared step of ``run`` and ``demo``.
 
-    Returns the summary of :func:`flexctl.report.write_run`; raises :class:`_InputError`.
+    Returns the summary of :func:`flexctl.app.report.write_run`; raises :class:`_InputError`.
     """
     try:
         scene = load_scene(source, overrides=overrides)
@@ -219,7 +219,7 @@ def _cmd_scenes(args) -> int:
 
 
 def _demo_frequency_plot(out: Path, source: str = "kane-spinup") -> Path:
-    from .model import VARIANTS
+    from ..model import VARIANTS
     from .plotting import plot_frequencies_vs_spin
 
     scene = load_scene(source)
@@ -233,7 +233,7 @@ def _demo_frequency_plot(out: Path, source: str = "kane-spinup") -> Path:
 
 
 def _demo_sections(out: Path, workers: int, surprises: list) -> list:
-    """The papers' figures and the controller comparison (:mod:`flexctl.demo`), on a pool."""
+    """The papers' figures and the controller comparison (:mod:`flexctl.app.demo`), on a pool."""
     from concurrent.futures import ProcessPoolExecutor
 
     from . import demo

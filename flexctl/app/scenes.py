@@ -24,7 +24,7 @@ Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as sh
     [model]
     variant = "first_order"              # first_order | zero_order | consistent
     modes = 4                            # or "auto": as few as the manoeuvre needs, see
-    # tolerance = 1e-2                   # flexctl.fidelity.choose_modes (only with "auto")
+    # tolerance = 1e-2                   # flexctl.sim.fidelity.choose_modes (only with "auto")
     design_modes = 2                     # optional: modes of a controller's design model
 
     [maneuver]
@@ -60,12 +60,12 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from .fidelity import DEFAULT_TOLERANCE, ModeChoice, choose_modes
-from .maneuvers import SineTorque, Slew, SpinUp
-from .metrics import slew_metrics
-from .model import VARIANTS, Model, build_model
-from .parameters import Beam, Hub, HubBeam, PointMass
-from .simulation import METHODS, SimulationResult, simulate
+from ..sim.fidelity import DEFAULT_TOLERANCE, ModeChoice, choose_modes
+from ..sim.maneuvers import SineTorque, Slew, SpinUp
+from ..sim.metrics import slew_metrics
+from ..model import VARIANTS, Model, build_model
+from ..model.parameters import Beam, Hub, HubBeam, PointMass
+from ..sim.simulation import METHODS, SimulationResult, simulate
 
 __all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene",
            "parse_scene",
@@ -126,7 +126,7 @@ class ModelSpec:
     """Which model a scene uses: ``variant`` and number of modes ``modes``.
 
     ``modes`` may be ``"auto"``: as few modes as the scene's manoeuvre needs for a relative tip
-    error ``tolerance`` in (0, 1) (default 1e-2; :func:`flexctl.fidelity.choose_modes`).
+    error ``tolerance`` in (0, 1) (default 1e-2; :func:`flexctl.sim.fidelity.choose_modes`).
     ``tolerance`` applies only then and must be left out otherwise.
 
     ``design_modes`` is the number of modes of the model a controller is designed on
@@ -244,7 +244,7 @@ class Scene:
         """How many modes ``modes = "auto"`` takes, and why (None for a fixed number).
 
         Estimated over the scene's horizon for its manoeuvre and variant
-        (:func:`flexctl.fidelity.choose_modes`, cached).
+        (:func:`flexctl.sim.fidelity.choose_modes`, cached).
         """
         if not self.model.auto:
             return None
@@ -261,7 +261,7 @@ class Scene:
 def builtin_scenes() -> dict:
     """Built-in scenes shipped with the package: ``{name: description}``."""
     out = {}
-    for entry in sorted(resources.files("flexctl.builtin_scenes").iterdir(), key=str):
+    for entry in sorted(resources.files("flexctl.app.builtin_scenes").iterdir(), key=str):
         if entry.name.endswith(".toml"):
             data = tomllib.loads(entry.read_text())
             out[entry.name[:-5]] = data.get("description", "")
@@ -432,7 +432,7 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
                              f"({', '.join(names)})")
         name = str(source)
         data = tomllib.loads(
-            resources.files("flexctl.builtin_scenes").joinpath(f"{name}.toml").read_text())
+            resources.files("flexctl.app.builtin_scenes").joinpath(f"{name}.toml").read_text())
     for key, value in (overrides or {}).items():
         _set_dotted(data, key, value)
     return parse_scene(data, name=name)

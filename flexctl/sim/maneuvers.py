@@ -5,7 +5,7 @@ its ``breakpoints``: the times where it is not smooth, at which the integrator r
 
 Examples
 --------
->>> from flexctl.maneuvers import SpinUp, SineTorque
+>>> from flexctl.sim.maneuvers import SpinUp, SineTorque
 >>> spin = SpinUp(spin_rate=4.0, ramp_time=15.0)
 >>> float(spin.rate(15.0)), float(spin.rate(40.0))
 (4.0, 4.0)
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .parameters import check_real as _real
+from ..model.parameters import check_real as _real
 
 __all__ = ["SpinUp", "SineTorque", "Slew"]
 

@@ -1,0 +1,18 @@
+"""The application layer: scenes, sweeps, bench, reports, plots, the CLI and the demo.
+
+The only part of flexctl that imports :mod:`controllers`; it holds no physics.
+
+===================  ========================================================================
+module               contents
+===================  ========================================================================
+``scenes``           scene TOML files parsed into validated ``Scene`` values, and run
+``builtin_scenes``   the scene files shipped with the package
+``sweep``            parameter sweeps on any executor, Pareto fronts
+``bench``            speed-against-error benchmarks of variants, modes and integrators
+``report``           a run's summary, time series and figures written to disk
+``plotting``         figures of responses, modes, frequencies, controller comparisons
+``plotting_sweeps``  sweep curves and Pareto plots
+``cli``              the ``flexctl`` command
+``demo``             the papers' figures and the controller comparison
+===================  ========================================================================
+"""

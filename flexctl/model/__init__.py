@@ -1,0 +1,26 @@
+"""The physics: parameters, cantilever modes, modal matrices, model variants, exports.
+
+Imports nothing from :mod:`flexctl.sim`, :mod:`flexctl.app` or :mod:`controllers`.
+
+=============  ==============================================================================
+module         contents
+=============  ==============================================================================
+``parameters`` ``Hub``, ``Beam``, ``PointMass``, ``HubBeam``: validated physical parameters
+``modes``      cantilever roots and mode shapes at quadrature points
+``matrices``   the modal matrices, assembled once and cached
+``variants``   ``Model`` and ``build_model``: the variants built on one assembly
+``exports``    the model as a python-control system or a CasADi function
+=============  ==============================================================================
+"""
+
+from .parameters import Beam, Hub, HubBeam, PointMass, check_real
+from .modes import cantilever_roots, mode_shapes
+from .matrices import ModalMatrices, assemble, tension
+from .variants import VARIANTS, Model, SingularMassMatrixError, build_model
+
+__all__ = [
+    "Beam", "Hub", "HubBeam", "PointMass", "check_real",
+    "cantilever_roots", "mode_shapes",
+    "ModalMatrices", "assemble", "tension",
+    "VARIANTS", "Model", "SingularMassMatrixError", "build_model",
+]

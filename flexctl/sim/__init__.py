@@ -1,0 +1,27 @@
+"""Running a model: manoeuvres, simulation, metrics and fidelity estimates.
+
+Imports :mod:`flexctl.model` only.
+
+==============  =============================================================================
+module          contents
+==============  =============================================================================
+``maneuvers``   ``SpinUp``, ``SineTorque``, ``Slew``: what drives the hub
+``simulation``  ``simulate`` (compiled and SciPy paths), ``SimulationResult``, ``Controller``
+``compiled``    the CasADi/CVODES integration of a symbolic drive
+``metrics``     slew metrics and settling time
+``fidelity``    how many modes a manoeuvre needs (``choose_modes``)
+==============  =============================================================================
+"""
+
+from .maneuvers import SineTorque, Slew, SpinUp
+from .simulation import (METHODS, AccuracyWarning, Controller, SimulationResult,
+                         StiffnessWarning, simulate)
+from .metrics import SlewMetrics, settling_time, slew_metrics
+from .fidelity import ModeChoice, choose_modes
+
+__all__ = [
+    "SineTorque", "Slew", "SpinUp",
+    "METHODS", "AccuracyWarning", "Controller", "SimulationResult", "StiffnessWarning", "simulate",
+    "SlewMetrics", "settling_time", "slew_metrics",
+    "ModeChoice", "choose_modes",
+]
