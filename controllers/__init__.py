@@ -11,11 +11,12 @@ module                 contents
 ``shaping``            rigid bang-bang torque and ZV / ZVD input shaping
 ``trajopt``            CasADi/IPOPT slew optimisation
 ``tracking``           feedforward plus LQR feedback about an optimal slew
+``spec``               the kinds and settings a scene's [controller] table may hold
 ``factory``            the controller a slew scene's [controller] table asks for
 =====================  ==========================================================
 
-The package depends on :mod:`flexctl` (models and the simulation protocol); flexctl never
-imports it.
+The package depends on :mod:`flexctl.model` and :mod:`flexctl.sim` (models and the simulation
+protocol); only the application layer :mod:`flexctl.app` imports it.
 """
 
 from .reference import SlewProfile, minimum_slew_duration

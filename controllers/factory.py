@@ -1,6 +1,6 @@
 """Build the controller a slew scene's ``[controller]`` table asks for.
 
-The scene (:class:`flexctl.app.scenes.Scene`) carries the goal (:class:`flexctl.sim.maneuvers.Slew`:
+The scene (:class:`flexctl.Scene`) carries the goal (:class:`flexctl.sim.maneuvers.Slew`:
 angle, duration or free, actuator torque bound), the plant model and the design model size
 (``[model] design_modes``); :func:`from_spec` designs the controller on a first_order model
 with ``design_modes`` modes and returns it ready for :func:`flexctl.simulate`.
@@ -33,9 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexctl import Model, build_model
+from flexctl.model import Model, build_model
 from flexctl.sim.maneuvers import Slew
-from flexctl.app.scenes import ControllerSpec, Scene, SceneError
 
 from .lqg import NoiseLevels, design_lqg
 from .lqr import LQRWeights, design_lqr
@@ -43,6 +42,7 @@ from .pd import design_pd
 from .reference import SlewProfile, minimum_slew_duration
 from .scheduling import design_scheduled_lqr
 from .shaping import bang_bang, design_shaper, shape
+from .spec import ControllerSpec, SceneError
 from .tracking import TrajectoryTracker
 from .trajopt import SlewProblem, solve_slew
 
@@ -129,12 +129,12 @@ def _lqr_weights(spec: ControllerSpec) -> LQRWeights:
     return _wrap(LQRWeights, **kwargs)
 
 
-def from_spec(scene: Scene, plant: Model | None = None) -> BuiltController:
+def from_spec(scene, plant: Model | None = None) -> BuiltController:
     """Design the controller of a slew scene.
 
     Parameters
     ----------
-    scene : Scene
+    scene : flexctl.Scene
         A scene whose manoeuvre is a :class:`~flexctl.sim.maneuvers.Slew` with a ``[controller]``.
     plant : Model, optional
         The model the controller will run against (needed by LQG for its measurements);

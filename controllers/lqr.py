@@ -40,6 +40,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexctl.model import Model
+
 from .reference import (_check_reference, _evaluate, _optional_positive, _real,
                         _saturate)
 
@@ -48,9 +50,7 @@ __all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation
 
 
 def _model(owner: str, model):
-    import flexctl
-
-    if not isinstance(model, flexctl.Model):
+    if not isinstance(model, Model):
         raise TypeError(f"{owner}.model must be a flexctl Model; got {type(model).__name__}")
     return model
 

@@ -30,11 +30,13 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 
 from .. import __version__
+from .bench import BenchConfig, run_bench, summary_line
 from .report import format_summary, write_demo_report, write_run
 from .scenes import SceneError, builtin_scenes, load_scene, run_scene, run_slew
 
@@ -142,10 +144,48 @@ def _parser() -> argparse.ArgumentParser:
                       f"(default {DEMO_WORKERS}; 1 runs everything in this process)")
     demo.set_defaults(func=_cmd_demo)
 
-    # flexctl bench: speed against error sweeps, defined with flexctl.app.bench
-    from .bench import add_command as add_bench_command
-    add_bench_command(commands)
+    _add_bench_command(commands)
     return parser
+
+
+def _list(kind):
+    """argparse type: comma-separated values; integers may be ranges like 1-12."""
+    def parse(text):
+        parts = [p.strip() for p in str(text).split(",") if p.strip()]
+        return tuple(v for p in parts for v in (
+            range(int(p.split("-", 1)[0]), int(p.split("-", 1)[1]) + 1)
+            if kind is int and "-" in p[1:] else (kind(p),)))
+    parse.__name__ = f"list of {kind.__name__}"
+    return parse
+
+
+def _add_bench_command(commands) -> None:
+    """``flexctl bench``: speed against error sweeps of :mod:`flexctl.app.bench`."""
+    p = commands.add_parser(
+        "bench", help="sweep modes, variants and integrators: speed against error",
+        description="For every built-in scene driven by a torque or a hub motion (or the "
+        "scenes named), sweep the number of modes, the model variants, the integrators and "
+        "their tolerances; write per scene a CSV, a Markdown table and a speed-against-error "
+        "plot, and report.md. Exit 0 when done, 2 on bad input.")
+    p.add_argument("--scene", action="append", default=[], help="scene name or TOML file "
+                   "(repeatable; default every built-in scene with an input manoeuvre)")
+    p.add_argument("--quick", action="store_true", help="a small sweep (BenchConfig.quick); "
+                   "the options below still apply")
+    for flag, kind, text in (
+            ("--modes", _list(int), "numbers of modes, e.g. 1-12 or 1,2,4 (default 1-12)"),
+            ("--variants", _list(str), "default first_order,zero_order,consistent"),
+            ("--methods", _list(str), "default cvodes,DOP853,LSODA"),
+            ("--rtols", _list(float), "default 1e-4,1e-6,1e-8"),
+            ("--reference-modes", int, "modes of the reference (default 20)"),
+            ("--reference-rtol", float, "rtol of the reference (default 1e-10)"),
+            ("--time-limit", float, "s before a SciPy run is stopped (default 30)"),
+            ("--tolerance", float, "relative tip error of the mode choice (default 1e-2)"),
+            ("--t-final", float, "horizon in s instead of each scene's")):
+        p.add_argument(flag, type=kind, help=text)
+    p.add_argument("--out", type=Path, default=Path("flexctl-bench"), metavar="DIR",
+                   help="output directory (default flexctl-bench)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_bench)
 
 
 class _InputError(Exception):
@@ -215,6 +255,25 @@ def _cmd_scenes(args) -> int:
     width = max(map(len, scenes), default=0)
     for name, description in scenes.items():
         print(f"{name:<{width}}  {description}")
+    return EXIT_OK
+
+
+def _cmd_bench(args) -> int:
+    names = [f.name for f in fields(BenchConfig) if f.name != "scenes"]
+    changes = {k: getattr(args, k) for k in names if getattr(args, k) is not None}
+    if args.scene:
+        changes["scenes"] = tuple(args.scene)
+    start = time.perf_counter()
+    try:
+        config = BenchConfig.quick(**changes) if args.quick else BenchConfig(**changes)
+        benches = run_bench(config, args.out, progress=not args.no_progress)
+    except (SceneError, ValueError, TypeError) as exc:
+        return _error(exc)
+    except OSError as exc:
+        return _error(f"cannot write the bench files to {args.out}: {exc.strerror or exc}")
+    for b in benches:
+        print(summary_line(b))
+    print(f"report: {Path(args.out) / 'report.md'} ({time.perf_counter() - start:.1f} s)")
     return EXIT_OK
 
 

@@ -26,7 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .scenes import CONTROLLER_KEYS, load_scene
+from controllers.spec import CONTROLLER_KEYS
+
+from .scenes import load_scene
 from .sweep import PointMassAmplitudes, SceneTask, response_amplitudes, sweep
 
 __all__ = ["Section", "kane_spinup", "spacecraft_torque", "hub_beam_mass", "slew_comparison",

@@ -28,8 +28,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-# Sweep and Pareto plots live in their own module (which imports this one only inside its
-# functions); they are importable from here too.
+from .figures import new_figure
+# Sweep and Pareto plots live in their own module; they are importable from here too.
 from .plotting_sweeps import plot_pareto, plot_sweep
 
 __all__ = ["plot_response", "plot_mode_shapes", "plot_frequencies_vs_spin",
@@ -42,14 +42,6 @@ _STATUS_COLOURS = {"ok": "tab:green", "diverged": "tab:red", "singular": "tab:pu
 _VARIANT_STYLES = {"first_order": dict(linestyle="-", linewidth=2.2),
                    "zero_order": dict(linestyle="--", linewidth=1.6),
                    "consistent": dict(linestyle=":", linewidth=2.0)}
-
-
-def _new_figure(figsize, nrows=1, sharex=False):
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=figsize, layout="constrained")
-    axes = fig.subplots(nrows, 1, sharex=sharex, squeeze=False)[:, 0]
-    return fig, list(axes)
 
 
 def plot_response(result, fig=None, title: str | None = None):
@@ -74,7 +66,7 @@ def plot_response(result, fig=None, title: str | None = None):
     """
     model = result.model
     if fig is None:
-        fig, axes = _new_figure((8.0, 7.5), nrows=3, sharex=True)
+        fig, axes = new_figure((8.0, 7.5), nrows=3, sharex=True)
     else:
         axes = list(fig.subplots(3, 1, sharex=True))
     ax_angle, ax_torque, ax_tip = axes
@@ -152,7 +144,7 @@ def plot_mode_shapes(model, n_shapes: int | None = None, n_points: int = 201, ax
     if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 2:
         raise ValueError(f"n_points must be an integer >= 2; got {n_points!r}")
     if ax is None:
-        fig, (ax,) = _new_figure((7.0, 4.0))
+        fig, (ax,) = new_figure((7.0, 4.0))
     else:
         fig = ax.figure
     length = model.system.beam.length
@@ -246,7 +238,7 @@ def plot_frequencies_vs_spin(models, spin_rates, variants=("first_order", "zero_
         raise ValueError(f"n_frequencies must be an integer in [1, {n_max}]; "
                          f"got {n_frequencies!r}")
     if ax is None:
-        fig, (ax,) = _new_figure((7.5, 5.0))
+        fig, (ax,) = new_figure((7.5, 5.0))
     else:
         fig = ax.figure
 
@@ -320,7 +312,7 @@ def plot_tip_deflections(results, ax=None, title: str | None = None,
     """
     runs = _results_from(results)
     if ax is None:
-        fig, (ax,) = _new_figure((8.0, 4.0))
+        fig, (ax,) = new_figure((8.0, 4.0))
     else:
         fig = ax.figure
     finished = []

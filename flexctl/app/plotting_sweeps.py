@@ -1,10 +1,10 @@
 """Plots of sweep tables: curves against a parameter, and Pareto fronts (matplotlib).
 
-Like :mod:`flexctl.app.plotting` (which re-exports both functions), every function returns a bare
-:class:`matplotlib.figure.Figure` (no pyplot state), draws into axes the caller passes, and
-computes nothing physical. The data is any table: a :class:`flexctl.app.sweep.SweepResult`, a dict
-of columns ``{name: values}``, or a sequence of rows ``[{name: value}, ...]`` (as a benchmark
-might write them).
+Like :mod:`flexctl.app.plotting` (which re-exports both functions), every function returns a
+bare :class:`matplotlib.figure.Figure` (no pyplot state), draws into axes the caller passes,
+and computes nothing physical. The data is any table: a :class:`flexctl.app.sweep.SweepResult`,
+a dict of columns ``{name: values}``, or a sequence of rows ``[{name: value}, ...]`` (as a
+benchmark might write them).
 
 Examples
 --------
@@ -20,6 +20,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+
+from .figures import new_figure
 
 __all__ = ["plot_sweep", "plot_pareto", "table_column"]
 
@@ -110,9 +112,7 @@ def plot_sweep(table, x: str, y, *, by: str | None = None, ax=None, labels=None,
         keys = table_column(table, by)
         groups = [(value, keys == value) for value in dict.fromkeys(keys.tolist())]
     if ax is None:
-        from .plotting import _new_figure
-
-        fig, (ax,) = _new_figure((7.0, 4.5))
+        fig, (ax,) = new_figure((7.0, 4.5))
     else:
         fig = ax.figure
     labels = dict(labels or {})
@@ -196,9 +196,7 @@ def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | No
         raise ValueError(f"plot_pareto needs at least one point with finite (and, on a log "
                          f"axis, positive) {x!r} and {y!r}; got none")
     if ax is None:
-        from .plotting import _new_figure
-
-        fig, (ax,) = _new_figure((7.0, 5.0))
+        fig, (ax,) = new_figure((7.0, 5.0))
     else:
         fig = ax.figure
     groups = [(None, usable)]

@@ -60,6 +60,9 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
+# the controller kinds and their settings belong to the controllers package
+from controllers.spec import CONTROLLER_KEYS, ControllerSpec, SceneError
+
 from ..sim.fidelity import DEFAULT_TOLERANCE, ModeChoice, choose_modes
 from ..sim.maneuvers import SineTorque, Slew, SpinUp
 from ..sim.metrics import slew_metrics
@@ -98,28 +101,6 @@ _MANEUVER_KEYS = {"spin_up": {"spin_rate", "ramp_time"},
                   "sine_torque": {"peak_torque", "duration"},
                   "slew": {"angle_deg", "duration", "torque_bound"}}
 _MANEUVER_OPTIONAL = {"slew": {"duration", "torque_bound"}}
-
-#: Settings each controller kind accepts in a scene's [controller] table (the controllers
-#: package builds the controller and checks the values).
-_LQR_KEYS = {"spin_rate", "angle_error", "rate_error", "tip_deflection",
-             "modal_energy", "torque", "reference"}
-CONTROLLER_KEYS = {
-    "pd": {"bandwidth", "damping_ratio", "feedforward", "reference"},
-    "lqr": _LQR_KEYS,
-    "lqg": _LQR_KEYS | {"angle_noise", "moment_noise", "process_torque"},
-    "scheduled": _LQR_KEYS | {"spin_rates"},
-    "trajopt": {"intervals", "objective", "transcription",
-                "torque_rate_bound", "tip_bound"},
-    "bang_bang": set(),
-    "zv": set(),
-    "zvd": set(),
-}
-CONTROLLER_KEYS["trajopt+lqr"] = CONTROLLER_KEYS["trajopt"]
-
-
-class SceneError(ValueError):
-    """A scene file or override is malformed; the message names the key."""
-
 
 @dataclass(frozen=True, kw_only=True)
 class ModelSpec:
@@ -191,27 +172,6 @@ class SimulationSpec:
         if self.method not in METHODS:
             raise SceneError(f"simulation.method must be one of {', '.join(METHODS)}; "
                              f"got {self.method!r}")
-
-
-@dataclass(frozen=True, kw_only=True)
-class ControllerSpec:
-    """A scene's ``[controller]`` table: the controller ``kind`` and its ``settings``.
-
-    The :mod:`controllers` package turns it into a controller (``controllers.from_spec``).
-    """
-
-    kind: str
-    settings: dict = field(default_factory=dict)
-
-    def __post_init__(self):
-        if self.kind not in CONTROLLER_KEYS:
-            raise SceneError(f"controller.kind must be one of {', '.join(CONTROLLER_KEYS)}; "
-                             f"got {self.kind!r}")
-        for key in self.settings:
-            if key not in CONTROLLER_KEYS[self.kind]:
-                raise SceneError(f"unknown scene key 'controller.{key}' for kind "
-                                 f"{self.kind!r}; expected one of "
-                                 f"{', '.join(sorted(CONTROLLER_KEYS[self.kind]))}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -474,8 +434,8 @@ def run_slew(scene: Scene, controller_factory):
         A slew scene (``maneuver.kind = "slew"`` with a ``[controller]`` table).
     controller_factory : callable
         ``factory(scene, plant)`` returning an object with ``controller`` and
-        ``maneuver_end`` (``controllers.from_spec``); flexctl never imports the controllers
-        package itself.
+        ``maneuver_end`` (``controllers.from_spec``), passed in so that a caller can
+        give another factory.
 
     Returns
     -------

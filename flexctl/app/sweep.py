@@ -494,8 +494,7 @@ class SceneTask:
         Built-in scene name or TOML file path.
     controller_factory : callable, optional
         For slew scenes: ``factory(scene, plant)`` returning an object with ``controller``
-        and ``maneuver_end`` (``controllers.from_spec``). flexctl never imports the
-        controllers package itself.
+        and ``maneuver_end`` (``controllers.from_spec``).
     keep_result : bool
         Also return the :class:`~flexctl.SimulationResult` (column ``result``; it travels back
         from worker processes by pickling). Default False.

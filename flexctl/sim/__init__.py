@@ -21,7 +21,8 @@ from .fidelity import ModeChoice, choose_modes
 
 __all__ = [
     "SineTorque", "Slew", "SpinUp",
-    "METHODS", "AccuracyWarning", "Controller", "SimulationResult", "StiffnessWarning", "simulate",
+    "METHODS", "AccuracyWarning", "Controller", "SimulationResult", "StiffnessWarning",
+    "simulate",
     "SlewMetrics", "settling_time", "slew_metrics",
     "ModeChoice", "choose_modes",
 ]

@@ -1,0 +1,26 @@
+"""The bare matplotlib figure every plotting function starts from.
+
+A :class:`matplotlib.figure.Figure` with constrained layout, no pyplot and no global state;
+matplotlib is imported only when a figure is made, so importing the plotting modules stays
+light.
+"""
+
+from __future__ import annotations
+
+__all__ = ["new_figure"]
+
+
+def new_figure(figsize, nrows=1, sharex=False):
+    """A figure of ``nrows`` stacked axes; returns ``(figure, list of axes)``.
+
+    Examples
+    --------
+    >>> fig, axes = new_figure((4.0, 3.0), nrows=2)
+    >>> len(axes)
+    2
+    """
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, layout="constrained")
+    axes = fig.subplots(nrows, 1, sharex=sharex, squeeze=False)[:, 0]
+    return fig, list(axes)

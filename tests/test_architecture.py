@@ -1,0 +1,168 @@
+"""The layers import downwards only, and no modules import each other in a cycle.
+
+Layers, lowest first: ``flexctl.model`` (physics) < ``flexctl.sim`` (simulation) <
+``controllers`` < ``flexctl.app`` (scenes, CLI, reports, plots). The top-level ``flexctl``
+package re-exports the application layer's scene functions, so it counts as ``app``: a lower
+layer imports ``flexctl.model`` or ``flexctl.sim``, never ``flexctl`` itself.
+
+Imports are read from the source with :mod:`ast`, including the ones inside functions, so an
+import hidden in a function body to dodge a cycle still counts.
+"""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("flexctl", "controllers")
+#: Layers from the lowest; a module may import its own layer and the ones before it.
+LAYERS = ("model", "sim", "controllers", "app")
+LAYER_PREFIXES = {"flexctl.model": "model", "flexctl.sim": "sim", "controllers": "controllers",
+                  "flexctl.app": "app", "flexctl": "app"}
+
+
+def module_files() -> dict:
+    """Module name -> source file, for every module of the project's packages."""
+    modules = {}
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            modules[".".join(parts)] = path
+    return modules
+
+
+def _known(name: str, modules) -> str | None:
+    """The project module a dotted name refers to (its longest known prefix), or None."""
+    parts = name.split(".")
+    for end in range(len(parts), 0, -1):
+        candidate = ".".join(parts[:end])
+        if candidate in modules:
+            return candidate
+    return None
+
+
+def imported_modules(module: str, path: Path, modules) -> set:
+    """Project modules that ``module`` imports anywhere in its source (functions included)."""
+    is_package = path.name == "__init__.py"
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            targets = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                package = module if is_package else module.rpartition(".")[0]
+                base_parts = package.split(".")[:len(package.split(".")) - node.level + 1]
+                base = ".".join(base_parts + ([node.module] if node.module else []))
+            else:
+                base = node.module
+            # "from package import submodule" imports the submodule
+            targets = [f"{base}.{alias.name}" if f"{base}.{alias.name}" in modules else base
+                       for alias in node.names]
+        else:
+            continue
+        for target in targets:
+            known = _known(target, modules)
+            if known is not None and known != module:
+                found.add(known)
+    return found
+
+
+def import_graph() -> dict:
+    modules = module_files()
+    return {name: imported_modules(name, path, modules) for name, path in modules.items()}
+
+
+def layer(module: str) -> str:
+    for prefix, name in sorted(LAYER_PREFIXES.items(), key=lambda item: -len(item[0])):
+        if module == prefix or module.startswith(prefix + "."):
+            return name
+    raise ValueError(f"module {module!r} belongs to no layer; add it to LAYER_PREFIXES")
+
+
+def upward_imports(graph: dict) -> list:
+    """``(importer, imported)`` pairs where a lower layer imports a higher one."""
+    rank = {name: i for i, name in enumerate(LAYERS)}
+    return sorted((src, dst) for src, targets in graph.items() for dst in targets
+                  if rank[layer(dst)] > rank[layer(src)])
+
+
+def import_cycles(graph: dict) -> list:
+    """Strongly connected groups of more than one module (Tarjan's algorithm), sorted."""
+    index, low, on_stack, stack, cycles = {}, {}, set(), [], []
+
+    def visit(node):
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for succ in graph.get(node, ()):
+            if succ not in index:
+                visit(succ)
+                low[node] = min(low[node], low[succ])
+            elif succ in on_stack:
+                low[node] = min(low[node], index[succ])
+        if low[node] == index[node]:
+            group = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                group.append(member)
+                if member == node:
+                    break
+            if len(group) > 1:
+                cycles.append(sorted(group))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return sorted(cycles)
+
+
+GRAPH = import_graph()
+
+
+def test_every_layer_has_modules():
+    assert {layer(module) for module in GRAPH} == set(LAYERS)
+
+
+@pytest.mark.parametrize("module", sorted(GRAPH), ids=sorted(GRAPH))
+def test_module_imports_only_its_layer_and_lower(module):
+    upward = [dst for src, dst in upward_imports({module: GRAPH[module]})]
+    assert not upward, (f"{module} (layer {layer(module)}) imports "
+                        + ", ".join(f"{dst} (layer {layer(dst)})" for dst in upward))
+
+
+def test_no_import_cycles():
+    cycles = import_cycles(GRAPH)
+    assert not cycles, "import cycles: " + "; ".join(" <-> ".join(c) for c in cycles)
+
+
+def test_only_the_app_layer_imports_controllers():
+    importers = {src for src, targets in GRAPH.items() for dst in targets
+                 if layer(dst) == "controllers" and layer(src) != "controllers"}
+    assert all(layer(src) == "app" for src in importers), importers
+
+
+def test_hidden_imports_inside_functions_are_found(tmp_path):
+    source = tmp_path / "mod.py"
+    source.write_text("def f():\n    from ..app import cli\n    import controllers.pd\n")
+    modules = {"flexctl.sim.mod": source, "flexctl.app.cli": None, "flexctl.app": None,
+               "controllers.pd": None, "controllers": None}
+    assert imported_modules("flexctl.sim.mod", source, modules) == {"flexctl.app.cli",
+                                                                    "controllers.pd"}
+    source.write_text("from ..model import Model\nfrom . import maneuvers\n")
+    modules = {"flexctl.sim.mod": source, "flexctl.model": None, "flexctl.sim.maneuvers": None}
+    assert imported_modules("flexctl.sim.mod", source, modules) == {"flexctl.model",
+                                                                    "flexctl.sim.maneuvers"}
+
+
+def test_checks_catch_an_upward_import_and_a_cycle():
+    graph = {"flexctl.model.variants": {"flexctl.sim.simulation"},
+             "flexctl.sim.simulation": {"flexctl.model.variants"},
+             "flexctl.app.cli": {"flexctl.app.bench"}, "flexctl.app.bench": {"flexctl.app.cli"},
+             "controllers.pd": {"flexctl.model.variants"}}
+    assert upward_imports(graph) == [("flexctl.model.variants", "flexctl.sim.simulation")]
+    assert import_cycles(graph) == [["flexctl.app.bench", "flexctl.app.cli"],
+                                    ["flexctl.model.variants", "flexctl.sim.simulation"]]
