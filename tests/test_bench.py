@@ -8,7 +8,7 @@ import pytest
 
 from flexctl import load_scene
 from flexctl.app.bench import (CSV_COLUMNS, BenchConfig, BenchRow, bench_scene, pareto_front,
-                           run_bench)
+                               run_bench)
 from flexctl.app.cli import EXIT_BAD_INPUT, EXIT_OK, main
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

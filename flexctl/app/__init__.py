@@ -9,7 +9,11 @@ module               contents
 ``builtin_scenes``   the scene files shipped with the package
 ``sweep``            parameter sweeps on any executor, Pareto fronts
 ``bench``            speed-against-error benchmarks of variants, modes and integrators
+``bench_plot``       the bench's speed-against-error figure
+``bench_report``     the bench's CSV, Markdown pages and report.md
 ``report``           a run's summary, time series and figures written to disk
+``markdown``         the one Markdown-table renderer of the reports
+``figures``          the bare matplotlib figure the plots start from
 ``plotting``         figures of responses, modes, frequencies, controller comparisons
 ``plotting_sweeps``  sweep curves and Pareto plots
 ``cli``              the ``flexctl`` command

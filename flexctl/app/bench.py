@@ -19,39 +19,38 @@ explicit method to cvodes for stiffness.
 
 Each scene also gets the modes :func:`flexctl.sim.fidelity.choose_modes` picks, its estimated error
 next to the actual truncation error for every ``N`` swept. :func:`run_bench` writes per scene
-``<scene>.csv``, ``<scene>.md`` and ``<scene>-pareto.png``, and ``report.md`` linking them; the
-command line is ``flexctl bench``.
+``<scene>.csv``, ``<scene>.md`` and ``<scene>-pareto.png``, and ``report.md`` linking them
+(:mod:`flexctl.app.bench_report`, figure by :mod:`flexctl.app.bench_plot`); the command line
+is ``flexctl bench``.
 """
 
 from __future__ import annotations
 
-import csv
 import itertools
 import math
 import time
 import warnings
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from ..model import VARIANTS, build_model
 from ..sim.fidelity import choose_modes
 from ..sim.maneuvers import SineTorque, SpinUp
-from ..model import VARIANTS, build_model
+from ..sim.simulation import METHODS, simulate
+# the figure and the files live in their own modules, importable from here too
+from .bench_plot import plot_pareto
+from .bench_report import (CSV_COLUMNS, SUMMARY_LEVELS, fastest_within, summary_line,
+                           write_index, write_scene)
 from .scenes import builtin_scenes, load_scene
 from .sweep import pareto_front as _dominance
-from ..sim.simulation import METHODS, simulate
 
 __all__ = ["BenchConfig", "BenchRow", "SceneBench", "bench_scene", "run_bench", "pareto_front",
            "plot_pareto", "write_scene", "summary_line", "BENCH_KINDS"]
 
 #: Manoeuvres the bench can drive a model with (inputs, not goals for a controller).
 BENCH_KINDS = (SpinUp, SineTorque)
-#: Error levels at which the report names the fastest run.
-SUMMARY_LEVELS = (1e-2, 1e-4, 1e-6)
-CSV_COLUMNS = ("scene", "variant", "n_modes", "method", "method_used", "rtol", "status", "t_end",
-               "wall_time_s", "n_evaluations", "error", "truncation_error", "integration_error",
-               "note")
 
 
 def _ints(name, values, low, high):
@@ -358,158 +357,6 @@ def bench_scene(scene, config: BenchConfig, progress: bool = True) -> SceneBench
                       references=ref_info, choice=choice, truncation=truncation)
 
 
-# ---------------------------------------------------------------------------- output
-_METHOD_COLOURS = {"cvodes": "tab:blue", "DOP853": "tab:orange", "LSODA": "tab:green",
-                   "RK45": "tab:red", "RK23": "tab:purple", "Radau": "tab:brown",
-                   "BDF": "tab:pink", "auto": "tab:gray"}
-_VARIANT_MARKERS = {"first_order": "o", "zero_order": "s", "consistent": "^"}
-
-
-def plot_pareto(bench: SceneBench):
-    """Wall time against error of every finished run, with each variant's Pareto front.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-        Log-log axes: wall time (s) across, relative tip error up; colour by integrator used,
-        marker by variant; front points labelled with their number of modes.
-    """
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(8.0, 5.5), layout="constrained")
-    ax = fig.subplots()
-    done = [r for r in bench.rows if r.status == "ok" and r.error > 0]
-    for r in done:
-        ax.plot(r.wall_time_s, r.error, _VARIANT_MARKERS.get(r.variant, "o"), alpha=0.55,
-                color=_METHOD_COLOURS.get(r.method_used, "black"))
-    for variant in bench.config.variants:
-        front = [r for r in bench.front(variant) if r.error > 0]
-        if front:
-            ax.step([r.wall_time_s for r in front], [r.error for r in front], where="post",
-                    color="black", linewidth=1.0,
-                    linestyle={"first_order": "-", "zero_order": "--"}.get(variant, ":"))
-            for r in front:
-                ax.annotate(f"N{r.n_modes}", (r.wall_time_s, r.error), fontsize=7,
-                            xytext=(3, 3), textcoords="offset points")
-    used = [m for m in _METHOD_COLOURS if any(r.method_used == m for r in done)]
-    ax.legend(handles=[ax.plot([], [], "o", color=_METHOD_COLOURS[m], label=m)[0] for m in used]
-              + [ax.plot([], [], _VARIANT_MARKERS[v], color="gray", label=v)[0]
-                 for v in bench.config.variants], fontsize=8, loc="upper right")
-    ax.axhline(bench.config.tolerance, color="gray", linewidth=0.8, linestyle=":")
-    ax.set(xscale="log", yscale="log", xlabel="wall time (s)", ylabel="relative tip error")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.set_title(f"{bench.scene.name}: speed against error over {bench.t_final:g} s "
-                 f"(reference {bench.config.reference_modes} modes)")
-    return fig
-
-
-def _g(value, digits=2) -> str:
-    return "-" if value is None or (isinstance(value, float) and math.isnan(value)) \
-        else f"{value:.{digits}g}"
-
-
-def _table(rows, columns) -> list:
-    lines = ["| " + " | ".join(c[0] for c in columns) + " |",
-             "|" + "|".join("---:" if c[2] else "---" for c in columns) + "|"]
-    for r in rows:
-        lines.append("| " + " | ".join(str(c[1](r)) for c in columns) + " |")
-    return lines
-
-
-_RUN_COLUMNS = [  # (heading, cell, right-aligned)
-    ("variant", lambda r: r.variant, False), ("modes", lambda r: r.n_modes, True),
-    ("method", lambda r: r.method + ("" if r.method == r.method_used else
-                                     f" -> {r.method_used}"), False),
-    ("rtol", lambda r: _g(r.rtol, 1), True), ("wall time (s)", lambda r: _g(r.wall_time_s, 3),
-                                              True),
-    ("error", lambda r: _g(r.error), True), ("truncation", lambda r: _g(r.truncation_error),
-                                             True),
-    ("integration", lambda r: _g(r.integration_error), True),
-    ("status", lambda r: r.status, False)]
-
-
-def fastest_within(bench: SceneBench, level: float, variant: str | None = None):
-    """Fastest finished run with ``error <= level`` (of ``variant``, default the scene's)."""
-    variant = variant or bench.scene.model.variant
-    runs = [r for r in bench.front(variant) if r.error <= level]
-    return runs[0] if runs else None
-
-
-def _fastest_text(bench, level) -> str:
-    r = fastest_within(bench, level)
-    return "" if r is None else f"{r.wall_time_s:.3g} s: N{r.n_modes} {r.method_used} {r.rtol:g}"
-
-
-def write_scene(bench: SceneBench, out_dir) -> dict:
-    """Write ``<scene>.csv``, ``<scene>.md`` and ``<scene>-pareto.png``; return their paths."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    name, cfg, choice = bench.scene.name, bench.config, bench.choice
-    paths = {"csv": out / f"{name}.csv", "markdown": out / f"{name}.md",
-             "plot": out / f"{name}-pareto.png"}
-    with open(paths["csv"], "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=CSV_COLUMNS)
-        writer.writeheader()
-        for r in bench.rows:
-            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v)
-                             for k, v in asdict(r).items()})
-    plot_pareto(bench).savefig(paths["plot"], dpi=100)
-
-    lines = [f"# Bench: {name}", "", bench.scene.description, "",
-             f"Horizon {bench.t_final:g} s. Errors are relative tip errors, max |tip - tip_ref| "
-             "/ max |tip_ref|: *truncation* is the N-mode model at the reference tolerance "
-             "against the reference, *integration* the run against that same N-mode run, "
-             "*error* the run against the reference. Wall time: `flexctl.simulate` end to end, "
-             "one run each on a shared machine.", "",
-             f"## References: {cfg.reference_modes} modes at rtol {cfg.reference_rtol:g}", ""]
-    lines += [f"- {v}: {i['status']} at t = {i['t_end']:.4g} s ({i['wall_time_s']:.3g} s); "
-              f"differs from first_order by {_g(i['difference_from_first_order'])}"
-              for v, i in bench.references.items()]
-    lines += ["", f"## Modes chosen for a tolerance of {cfg.tolerance:g}", "",
-              f"`choose_modes` ({choice.variant}): **{choice.n_modes} mode"
-              f"{'s' if choice.n_modes > 1 else ''}**, estimated error "
-              f"{_g(choice.estimated_error)}, actual {_g(bench.choice_actual_error)}. "
-              + choice.explanation, ""]
-    lines += _table(sorted(bench.truncation.items()), [
-        ("modes", lambda kv: kv[0], True),
-        ("estimated error", lambda kv: _g(choice.error_by_modes[kv[0] - 1])
-         if kv[0] <= len(choice.error_by_modes) else "-", True),
-        ("actual truncation error", lambda kv: _g(kv[1]), True)])
-    lines += ["", "## Pareto front", "", f"![speed against error]({paths['plot'].name})", "",
-              "Runs that no other run of the variant beats on both wall time and error, "
-              "fastest first.", ""]
-    for variant in cfg.variants:
-        lines += [f"### {variant}", ""]
-        front = bench.front(variant)
-        lines += _table(front, _RUN_COLUMNS) if front else ["No run of this variant finished."]
-        lines.append("")
-    stopped = [r for r in bench.rows if r.status != "ok"]
-    lines += ["## Runs that did not finish", ""]
-    lines += (_table(stopped, _RUN_COLUMNS[:4] + [("status", lambda r: r.status, False),
-                                                   ("note", lambda r: r.note[:160], False)])
-              if stopped else ["None."])
-    lines += ["", f"Every run: [{name}.csv]({name}.csv)", ""]
-    paths["markdown"].write_text("\n".join(lines))
-    return {k: str(v) for k, v in paths.items()}
-
-
-def _index(out: Path, benches: list) -> Path:
-    lines = ["# flexctl bench", "", "Modes picked by `flexctl.sim.fidelity.choose_modes` with "
-             "the estimated and actual truncation error; the fastest finished run of the "
-             "scene's variant within each error level.", ""]
-    lines += _table(benches, [
-        ("scene", lambda b: f"[{b.scene.name}]({b.scene.name}.md)", False),
-        ("chosen modes", lambda b: b.choice.n_modes, True),
-        ("estimated", lambda b: _g(b.choice.estimated_error), True),
-        ("actual", lambda b: _g(b.choice_actual_error), True),
-        ("stiffening", lambda b: "matters" if b.choice.stiffening_matters else "negligible",
-         False)] + [(f"fastest within {lv:g}", lambda b, lv=lv: _fastest_text(b, lv) or "-",
-                     False) for lv in SUMMARY_LEVELS])
-    path = out / "report.md"
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
 def run_bench(config: BenchConfig, out_dir, progress: bool = True) -> list:
     """Bench every scene of ``config`` and write its files and ``report.md`` to ``out_dir``.
 
@@ -526,14 +373,5 @@ def run_bench(config: BenchConfig, out_dir, progress: bool = True) -> list:
     for scene in scenes:
         benches.append(bench_scene(scene, config, progress=progress))
         write_scene(benches[-1], out_dir)
-    _index(Path(out_dir), benches)
+    write_index(Path(out_dir), benches)
     return benches
-
-
-def summary_line(bench: SceneBench) -> str:
-    """One line per scene: the modes chosen, their errors, and the fastest run per level."""
-    text = ", ".join(f"within {lv:g}: {_fastest_text(bench, lv) or 'none'}"
-                     for lv in SUMMARY_LEVELS)
-    return (f"{bench.scene.name}: {bench.choice.n_modes} modes chosen (estimated error "
-            f"{_g(bench.choice.estimated_error)}, actual {_g(bench.choice_actual_error)}); "
-            f"fastest {text}")

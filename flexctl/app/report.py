@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..sim.maneuvers import Slew, SpinUp
+from .markdown import markdown_table
 
 __all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "timeseries_columns", "summarize",
            "write_run", "format_summary", "write_demo_report"]
@@ -222,9 +223,7 @@ def _section_lines(section, out: Path) -> list:
         lines += [paragraph, ""]
     if section.table:
         header, rows = section.table
-        lines.append("| " + " | ".join(header) + " |")
-        lines.append("|" + "|".join("---" for _ in header) + "|")
-        lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+        lines += markdown_table(header, rows)
         lines.append("")
     for caption, image in section.images:
         lines += [f"![{caption}]({_relative(image, out)})", ""]
@@ -259,15 +258,14 @@ def write_demo_report(out_dir, runs: list, frequency_plot=None, *, title: str = 
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    lines = [f"# {title}", ""] + ([intro, ""] if intro else []) + [
-             "| run | scene | variant | modes | status | t end (s) | peak tip deflection (m) "
-             "| wall time (s) | plot |",
-             "|---|---|---|---:|---|---:|---:|---:|---|"]
-    for label, s in runs:
-        plot = _relative(s["files"]["response_plot"], out)
-        lines.append(f"| {label} | {s['scene']} | {s['variant']} | {s['n_modes']} | "
-                     f"{s['status']} | {s['t_end']:.4g} | {s['peak_tip_deflection']:.4g} | "
-                     f"{s['wall_time_s']:.3g} | [response]({plot}) |")
+    lines = [f"# {title}", ""] + ([intro, ""] if intro else [])
+    lines += markdown_table(
+        ["run", "scene", "variant", "modes", "status", "t end (s)", "peak tip deflection (m)",
+         "wall time (s)", "plot"],
+        [[label, s["scene"], s["variant"], s["n_modes"], s["status"], f"{s['t_end']:.4g}",
+          f"{s['peak_tip_deflection']:.4g}", f"{s['wall_time_s']:.3g}",
+          f"[response]({_relative(s['files']['response_plot'], out)})"] for label, s in runs],
+        right=[False, False, False, True, False, True, True, True, False])
     stopped = [(label, s) for label, s in runs if s["status"] != "ok"]
     lines += ["", "## Stopped runs", ""]
     if stopped:
