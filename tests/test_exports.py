@@ -7,6 +7,7 @@ import pytest
 
 from conftest import random_states
 from flexctl import VARIANTS, build_model
+from flexctl.model.exact import PANEL_TOLERANCE
 from flexctl.model.exports import to_casadi, to_casadi_outputs, to_nonlinear_iosystem
 
 #: Three implementations of the same arithmetic agree to round-off.
@@ -15,11 +16,10 @@ N_SAMPLES = 20
 N_MODES = 4
 
 
-def _assert_close(got, expected, what):
+def _assert_close(got, expected, what, rtol=EXPORT_RTOL):
     got, expected = np.asarray(got, dtype=float).ravel(), np.asarray(expected).ravel()
     scale = np.max(np.abs(expected))
-    np.testing.assert_allclose(got, expected, rtol=EXPORT_RTOL, atol=EXPORT_RTOL * scale,
-                               err_msg=what)
+    np.testing.assert_allclose(got, expected, rtol=rtol, atol=rtol * scale, err_msg=what)
 
 
 @pytest.fixture(scope="module", params=VARIANTS)
@@ -61,8 +61,10 @@ def test_casadi_jacobian_equals_the_linear_model(model):
         x0[model.n_modes + 1] = spin
         a_sym, b_sym = (np.array(m) for m in jac(x0, 0.0))
         a, b = model.linear_matrices(spin)
-        _assert_close(a_sym, a, f"A at spin {spin}")
-        _assert_close(b_sym, b, f"B at spin {spin}")
+        # the exact variant linearises to first_order's matrices up to its own quadrature
+        rtol = 10 * PANEL_TOLERANCE if model.variant == "exact" else EXPORT_RTOL
+        _assert_close(a_sym, a, f"A at spin {spin}", rtol)
+        _assert_close(b_sym, b, f"B at spin {spin}", rtol)
 
 
 def test_export_signatures(model):

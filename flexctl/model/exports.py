@@ -27,13 +27,11 @@ def to_nonlinear_iosystem(model):
     """
     import control
 
-    c_out = model.output_matrix
-
     def updfcn(t, x, u, params):
         return model.dynamics(t, x, np.asarray(u, dtype=float).reshape(-1)[0])
 
     def outfcn(t, x, u, params):
-        return c_out @ np.asarray(x, dtype=float)
+        return model.outputs(np.asarray(x, dtype=float))
 
     return control.nlsys(updfcn, outfcn, states=list(model.state_names),
                          inputs=list(model.input_names), outputs=list(model.output_names),
@@ -44,6 +42,8 @@ def _symbolic_dynamics(model, x, u):
     """CasADi expression of ``dx/dt`` in the symbols ``x`` (n,) and ``u`` (1,)."""
     import casadi as ca
 
+    if model.variant == "exact":
+        return model.geometry.rhs(x, u)
     mat, n = model.matrices, model.n_modes
     c = model._c
     q, w, qd = x[1:n + 1], x[n + 1], x[n + 2:]
@@ -68,6 +68,8 @@ def _symbolic_beam_dynamics(model, y, rate, acceleration):
 
     mat, n = model.matrices, model.n_modes
     q, qd = y[:n], y[n:]
+    if model.variant == "exact":
+        return ca.vertcat(qd, model.geometry.beam(q, qd, rate, acceleration))
     dm = ca.DM
     f_beam = (-ca.mtimes(dm(mat.C_ff), qd) - ca.mtimes(dm(mat.K_ff), q)
               + rate ** 2 * ca.mtimes(dm(model._c["stiff_d"]), q) - dm(mat.m_tf) * acceleration)
@@ -115,5 +117,8 @@ def to_casadi_outputs(model, sx: bool = True):
 
     sym = ca.SX.sym if sx else ca.MX.sym
     x = sym("x", model.n_states)
-    return ca.Function(f"flexctl_outputs_N{model.n_modes}", [x],
-                       [ca.mtimes(ca.DM(model.output_matrix), x)], ["x"], ["y"])
+    y = ca.mtimes(ca.DM(model.output_matrix), x)
+    if model.variant == "exact":
+        tip = model.geometry.tip(x[1:model.n_modes + 1])
+        y = ca.vertcat(y[:2], tip[1], y[3], x[0] + ca.atan2(tip[1], tip[0]))
+    return ca.Function(f"flexctl_outputs_N{model.n_modes}", [x], [y], ["x"], ["y"])

@@ -1,7 +1,7 @@
-"""Finite-dimensional hub-beam-mass models: first_order, zero_order and consistent.
+"""Finite-dimensional hub-beam-mass models: first_order, zero_order, consistent and exact.
 
-The three variants share one assembly (:func:`flexctl.model.matrices.assemble`) and differ in a few
-terms (MODEL.md section 4):
+The variants share one assembly (:func:`flexctl.model.matrices.assemble`). The first three
+differ in a few terms (MODEL.md section 4):
 
 ============  ===========================  ==========================================
 variant       beam stiffness at spin         hub equation
@@ -10,6 +10,11 @@ first_order   ``K_ff - theta_t^2 (M_ff-K_g)``  ``J_0 theta_tt + m_tf^T q_tt``
 zero_order    ``K_ff - theta_t^2 M_ff``        same as first_order
 consistent    same as first_order            adds ``q^T D q theta_tt + 2 theta_t q^T D q_t``
 ============  ===========================  ==========================================
+
+``exact`` is geometrically exact (MODEL.md section 7, :mod:`flexctl.model.exact`): the same
+modes describe the slope angle of an inextensible beam, positions and velocities are exact, and
+the mass matrix ``M(q)`` depends on the deflection. It stays regular for a massless hub,
+reduces to first_order when linearised and to consistent at second order.
 
 Notes
 -----
@@ -22,7 +27,10 @@ rates in rad/s and m/s. Input ``u = [torque]``, N m. Outputs, in this order::
 
     y = [theta, theta_dot, tip_deflection, root_moment, tip_angle]
 
-(rad, rad/s, m, N m, rad), all linear in the state.
+(rad, rad/s, m, N m, rad), linear in the state except for the exact variant, whose tip
+deflection is the lateral tip position ``p_y(l)`` in the hub frame and whose tip angle is
+``theta + atan2(p_y(l), p_x(l))``. :attr:`Model.output_matrix` is their linearisation at
+``q = 0`` for every variant.
 """
 
 from __future__ import annotations
@@ -32,12 +40,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
+from .exact import exact_geometry
 from .matrices import ModalMatrices, assemble
 from .parameters import HubBeam
 
 __all__ = ["Model", "build_model", "VARIANTS", "SingularMassMatrixError"]
 
-VARIANTS = ("first_order", "zero_order", "consistent")
+VARIANTS = ("first_order", "zero_order", "consistent", "exact")
 OUTPUT_NAMES = ("theta", "theta_dot", "tip_deflection", "root_moment", "tip_angle")
 
 
@@ -61,7 +70,7 @@ class Model:
     system : HubBeam
     n_modes : int
     variant : str
-        ``"first_order"``, ``"zero_order"`` or ``"consistent"``.
+        ``"first_order"``, ``"zero_order"``, ``"consistent"`` or ``"exact"``.
     matrices : ModalMatrices
     state_names, input_names, output_names : tuple of str
     """
@@ -129,19 +138,46 @@ class Model:
     def effective_hub_inertia(self, x) -> np.ndarray:
         """Schur complement ``J(q) - m_tf^T M_ff^-1 m_tf`` of the mass matrix, kg m^2.
 
-        The mass matrix is singular where it reaches 0. Constant except for the consistent
-        variant, where ``J(q) = J_0 + q^T D q``. Accepts shape (n,) or (n, P).
+        The mass matrix is singular where it reaches 0. Constant for first_order and
+        zero_order; ``J(q) = J_0 + q^T D q`` for consistent; for exact, the Schur complement
+        ``M_tt - M_tq M_qq^-1 M_qt`` of ``M(q)``, positive for any deflection. Accepts shape
+        (n,) or (n, P).
         """
         x = self._check_state(x)
         j = self._c["j_rigid_eff"]
+        if self.variant == "exact":
+            mass = self._exact_mass(x)
+            schur = [m[0, 0] - m[0, 1:] @ np.linalg.solve(m[1:, 1:], m[1:, 0]) for m in mass]
+            return np.array(schur) if x.ndim > 1 else np.float64(schur[0])
         if self.variant != "consistent":
             return np.full(x.shape[1:], j) if x.ndim > 1 else np.float64(j)
         q = x[1:self.n_modes + 1]
         return j + np.einsum("i...,ij,j...->...", q, self.matrices.D, q)
 
+    @property
+    def geometry(self):
+        """The exact variant's CasADi functions (:class:`~flexctl.model.exact.ExactGeometry`),
+        built on first use and cached; ``None`` for the other variants."""
+        if self.variant != "exact":
+            return None
+        if "geometry" not in self._c:
+            self._c["geometry"] = exact_geometry(self.matrices)
+        return self._c["geometry"]
+
+    def _exact_mass(self, x) -> list:
+        q = np.atleast_2d(x[1:self.n_modes + 1].T).T
+        masses = [np.array(self.geometry.mass(q[:, k])) for k in range(q.shape[1])]
+        return [0.5 * (m + m.T) for m in masses]
+
     def mass_matrix(self, x) -> np.ndarray:
-        """Mass matrix ``[[J(q), m_tf^T], [m_tf, M_ff]]`` at state ``x``, shape (N+1, N+1)."""
+        """Mass matrix ``[[J(q), m_tf^T], [m_tf, M_ff]]`` at state ``x``, shape (N+1, N+1).
+
+        For the exact variant, the configuration-dependent ``M(q)`` of
+        :mod:`flexctl.model.exact`.
+        """
         x = self._check_state(x)
+        if self.variant == "exact":
+            return self._exact_mass(x)[0]
         mat = self.matrices
         j = mat.J0
         if self.variant == "consistent":
@@ -175,6 +211,10 @@ class Model:
             If the effective hub inertia is not positive (consistent variant, light hub).
         """
         x = self._check_state(x)
+        if self.variant == "exact":
+            u = np.broadcast_to(np.asarray(torque, dtype=float), x.shape[1:])
+            xdot = self._evaluate(self.geometry.rhs, x.ndim > 1, x, u)
+            return xdot[self.n_modes + 1], xdot[self.n_modes + 2:]
         c = self._c
         f_hub, f_beam = self._forces(x, torque)
         j_eff = self.effective_hub_inertia(x)
@@ -207,11 +247,25 @@ class Model:
         n = self.n_modes
         return np.concatenate((x[n + 1:], np.expand_dims(theta_tt, 0), q_tt), axis=0)
 
+    @staticmethod
+    def _evaluate(function, batch: bool, *args) -> np.ndarray:
+        """A CasADi function at one point (arguments (k,) or scalars) or at P points
+        (``batch``: arguments (k, P) or (P,)), as a float array of shape (m,) or (m, P)."""
+        columns = [np.atleast_2d(np.asarray(a, dtype=float).T).T if function.size1_in(i) > 1
+                   else np.atleast_2d(np.asarray(a, dtype=float).reshape(-1))
+                   for i, a in enumerate(args)]
+        out = np.array(function(*columns))
+        return out if batch else out[:, 0]
+
     def beam_accelerations(self, q, q_dot, theta_dot, theta_tt):
         """Modal accelerations under prescribed hub motion, m/s^2, shape (N,) or (N, P).
 
-        ``M_ff q_tt + C_ff q_t + (K_ff - theta_t^2 D) q = -m_tf theta_tt``.
+        ``M_ff q_tt + C_ff q_t + (K_ff - theta_t^2 D) q = -m_tf theta_tt`` (for the exact
+        variant, the beam rows of ``M(q)`` with its velocity terms).
         """
+        if self.variant == "exact":
+            return self._evaluate(self.geometry.beam, np.ndim(q) > 1, q, q_dot, theta_dot,
+                                  theta_tt)
         mat, c = self.matrices, self._c
         f_beam = -(mat.C_ff @ q_dot) - mat.K_ff @ q + theta_dot ** 2 * (c["stiff_d"] @ q)
         return c["m_inv"] @ (f_beam - np.multiply.outer(mat.m_tf, theta_tt))
@@ -219,6 +273,9 @@ class Model:
     def hub_torque(self, x, theta_tt, q_tt):
         """Torque that produces the given accelerations at state ``x`` (the hub equation), N m."""
         x = self._check_state(x)
+        if self.variant == "exact":
+            out = self._evaluate(self.geometry.torque, x.ndim > 1, x, theta_tt, q_tt)
+            return out[0]
         mat = self.matrices
         _, q, w, qd = self.split(x)
         j = mat.J0
@@ -243,12 +300,39 @@ class Model:
 
     @property
     def output_matrix(self) -> np.ndarray:
-        """``C`` such that ``y = C x`` for the outputs :attr:`output_names`, shape (5, n)."""
+        """``C`` such that ``y = C x`` for the outputs :attr:`output_names`, shape (5, n).
+
+        Exact for every variant but exact, where it is the linearisation at ``q = 0``.
+        """
         return self._c["c_out"]
+
+    def tip_position(self, x) -> np.ndarray:
+        """Tip position ``[p_x(l), p_y(l)]`` in the hub frame, m, shape (2,) or (2, P).
+
+        Exact geometry for the exact variant; ``[b + l, phi(l)^T q]`` (no foreshortening) for
+        the small-deflection variants.
+        """
+        x = self._check_state(x)
+        q = x[1:self.n_modes + 1]
+        if self.variant == "exact":
+            return self._evaluate(self.geometry.tip, x.ndim > 1, q)
+        tip_y = self.matrices.tip @ q
+        return np.stack((np.full_like(tip_y, self.system.hub.radius
+                                      + self.system.beam.length), tip_y))
+
+    def tip_deflection(self, x) -> np.ndarray:
+        """Lateral tip deflection in the hub frame, m, shape () or (P,)."""
+        return self.tip_position(x)[1]
 
     def outputs(self, x) -> np.ndarray:
         """Outputs at state(s) ``x`` (shape (n,) or (n, P)); shape (5,) or (5, P)."""
-        return self.output_matrix @ self._check_state(x)
+        x = self._check_state(x)
+        y = self.output_matrix @ x
+        if self.variant == "exact":
+            tip = self.tip_position(x)
+            y[2] = tip[1]
+            y[4] = x[0] + np.arctan2(tip[1], tip[0])
+        return y
 
     def deflection(self, x, position: float) -> np.ndarray:
         """Beam deflection ``y(position)`` in the hub frame, m, at state(s) ``x``."""
@@ -256,12 +340,17 @@ class Model:
         return self.matrices.deflection_vector(position) @ x[1:self.n_modes + 1]
 
     def energy(self, x) -> np.ndarray:
-        """Mechanical energy of the consistent model, J (MODEL.md section 4).
+        """Mechanical energy, J.
 
+        For the exact variant its own energy ``1/2 v^T M(q) v + 1/2 q^T K_ff q``; for the
+        others that of the consistent model (MODEL.md section 4),
         ``E = 1/2 theta_t^2 (J_0 + q^T D q) + theta_t m_tf^T q_t + 1/2 q_t^T M_ff q_t
-        + 1/2 q^T K_ff q``; conserved by the consistent variant when unforced and undamped.
+        + 1/2 q^T K_ff q``. Each is conserved by its variant when unforced and undamped.
         """
         x = self._check_state(x)
+        if self.variant == "exact":
+            out = self._evaluate(self.geometry.energy, x.ndim > 1, x)
+            return out[0]
         mat = self.matrices
         _, q, w, qd = self.split(x)
         qf = lambda a, m, b: np.einsum("i...,ij,j...->...", a, m, b)  # noqa: E731
@@ -269,8 +358,31 @@ class Model:
                 + 0.5 * qf(qd, mat.M_ff, qd) + 0.5 * qf(q, mat.K_ff, q))
 
     # ------------------------------------------------------------------ linear analysis
+    def angular_momentum(self, x) -> np.ndarray:
+        """Angular momentum about O, ``dT/dtheta_t``, kg m^2/s, shape () or (P,).
+
+        Conserved by each variant when no torque acts and the hub has no friction: the first
+        row of ``M(q)`` times the velocities for exact, ``J(q) theta_t + m_tf^T q_t`` for the
+        others (``J(q) = J_0 + q^T D q`` for consistent, ``J_0`` otherwise).
+        """
+        x = self._check_state(x)
+        n = self.n_modes
+        if self.variant == "exact":
+            mass = self._exact_mass(x)
+            v = np.atleast_2d(x[n + 1:].T).T
+            h = np.array([m[0] @ v[:, k] for k, m in enumerate(mass)])
+            return h if x.ndim > 1 else h[0]
+        mat = self.matrices
+        _, q, w, qd = self.split(x)
+        inertia = mat.J0
+        if self.variant == "consistent":
+            inertia = inertia + np.einsum("i...,ij,j...->...", q, mat.D, q)
+        return w * inertia + mat.m_tf @ qd
+
     def stiffness_matrix(self, spin_rate: float = 0.0) -> np.ndarray:
-        """Beam stiffness at a steady spin, ``K_ff - spin_rate^2 D``, N/m, shape (N, N)."""
+        """Beam stiffness at a steady spin, ``K_ff - spin_rate^2 D``, N/m, shape (N, N).
+
+        The exact variant's linearisation has the stiffness of first_order."""
         spin_rate = _spin(spin_rate)
         return self.matrices.K_ff - spin_rate ** 2 * self._c["stiff_d"]
 
@@ -381,8 +493,8 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order")
     system : HubBeam
     n_modes : int, optional
         Number of cantilever modes ``N`` (1 to 200). Default 4.
-    variant : {"first_order", "zero_order", "consistent"}, optional
-        Default ``"first_order"`` (with dynamic stiffening).
+    variant : {"first_order", "zero_order", "consistent", "exact"}, optional
+        Default ``"first_order"`` (with dynamic stiffening); ``"exact"`` for large deflection.
 
     Returns
     -------

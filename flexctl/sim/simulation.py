@@ -43,6 +43,10 @@ __all__ = ["simulate", "SimulationResult", "Controller", "StiffnessWarning", "Ac
 #: Integration stops as "singular" when the effective hub inertia falls below this fraction
 #: of the rigid inertia J_0 (the exact singularity cannot be integrated up to).
 SINGULAR_FRACTION = 1e-9
+#: The exact variant stops as "diverged" when its modal tip ``phi(l)^T q``, the integral of the
+#: slope angle over the beam, passes this many beam lengths: a mean slope of 2 rad is a beam
+#: curled back on itself, beyond what a few modes describe.
+EXACT_CURL = 2.0
 
 #: Integration methods: "auto" (CVODES when every input has a CasADi form, else DOP853),
 #: "cvodes" (compiled, :mod:`flexctl.sim.compiled`) and the ``scipy.integrate.solve_ivp`` methods.
@@ -382,6 +386,9 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     mat = model.matrices
     length = model.system.beam.length
     tip = mat.tip
+    # the small-deflection variants leave their range when the modal tip passes the length;
+    # the exact beam cannot, and stops only when its mean slope passes EXACT_CURL rad
+    reach = length * (EXACT_CURL if model.variant == "exact" else 1.0)
 
     # Inputs are evaluated inside the current smooth segment: at its closed end the integrator
     # must see the value from the left, not the next piece's.
@@ -433,7 +440,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
 
     def tip_event(t, y):
         q = y[:n] if prescribed else y[1:n + 1]
-        return length - abs(tip @ q)
+        return reach - abs(tip @ q)
     tip_event.terminal = True
 
     events = [tip_event]
@@ -464,7 +471,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     def first_bad_sample(y_seg):
         """Index of the first output sample past a stopping condition, or None."""
         q = y_seg[:n] if prescribed else y_seg[1:n + 1]
-        bad = ~np.all(np.isfinite(y_seg), axis=0) | (np.abs(tip @ q) >= length)
+        bad = ~np.all(np.isfinite(y_seg), axis=0) | (np.abs(tip @ q) >= reach)
         if len(events) > 1:
             bad |= np.asarray(model.effective_hub_inertia(y_seg[:nx])) <= j_floor
         return int(np.argmax(bad)) if bad.any() else None
@@ -588,7 +595,11 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                                    for k, t in enumerate(t_all)])
 
     t_end = float(t_all[-1])
-    if status == "diverged" and message.startswith("reached"):
+    if status == "diverged" and message.startswith("reached") and model.variant == "exact":
+        message = (f"the beam curled back on itself at t = {t_end:.6g} s (mean slope angle "
+                   f"above {EXACT_CURL:g} rad): the load is beyond what a beam of "
+                   f"{model.n_modes} modes can describe")
+    elif status == "diverged" and message.startswith("reached"):
         spin = float(states[n + 1, -1])
         message = (f"tip deflection passed the beam length {length:g} m at t = {t_end:.6g} s: "
                    + _stiffness_reason(model, spin))
@@ -604,7 +615,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         message = f"{message} ({accuracy_note})"
 
     return SimulationResult(model=model, t=t_all, states=states, torque=np.asarray(torque_out,
-                            dtype=float).reshape(-1), tip_deflection=tip @ states[1:n + 1],
+                            dtype=float).reshape(-1),
+                            tip_deflection=np.asarray(model.tip_deflection(states), dtype=float),
                             root_moment=mat.root @ states[1:n + 1], status=status,
                             message=message, wall_time=wall, n_evaluations=int(n_eval),
                             method=method, rtol=float(rtol), controller_states=z_all,

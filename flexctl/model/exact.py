@@ -1,0 +1,304 @@
+"""Geometrically exact kinematics of the hub-beam-mass system (MODEL.md section 7).
+
+The beam is inextensible and described by its slope angle in the hub frame,
+``psi(s, t) = sum_i q_i phi_i'(s)`` on the same cantilever modes as the other variants, so that
+``q`` means the same thing and the variants agree to first order. Positions are exact,
+
+    p(s) = ( b + int_0^s cos psi,  int_0^s sin psi ),
+
+and the equations of motion follow from the principle of virtual work with the exact inertial
+acceleration of every beam point and point mass,
+
+    a = p_tt + theta_tt e_z x p + 2 theta_t e_z x p_t - theta_t^2 p,
+    p_t = J(s) q_t,   p_tt = J(s) q_tt + (-int_0^s cos psi psi_t^2, -int_0^s sin psi psi_t^2),
+
+with ``J(s) = dp/dq`` (2 x N). Bending energy ``EI/2 int psi_s^2 = 1/2 q^T K_ff q`` is exact on
+these modes. The result is ``M(q) [theta_tt; q_tt] = [T_h - c_h theta_t - b_theta;
+-K_ff q - C_ff q_t - b_q]``, with
+
+    M_theta_theta = J_h + int rhoA |p|^2 + sum_k m_k |p_k|^2
+    M_theta_q     = int rhoA (p_x J_y - p_y J_x) + sum_k ...
+    M_qq          = int rhoA (J_x^T J_x + J_y^T J_y) + sum_k ...
+
+``M(q)`` is the kinetic-energy metric of the whole structure, positive definite for any hub
+inertia (``J_h = 0`` included): the beam carries inertia. Expanded to second order in ``q`` the
+equations are those of the consistent variant; linearised about a steady spin they are
+first_order's (the tests pin both).
+
+The inner integrals ``int_0^s`` and the outer ones ``int_0^l`` use Gauss-Legendre panels
+(:class:`PanelRule`): the beam is cut into equal panels of ``PANEL_POINTS`` Gauss points; inside
+a panel the cumulative integral is that of the interpolating polynomial, and whole panels
+before it add their Gauss sums. Every integral then costs ``O(n PANEL_POINTS)`` operations for
+``n`` points instead of the ``O(n^2)`` of one global polynomial, at the same accuracy. The
+number of panels is chosen per model (:func:`choose_panels`): the fewest for which the
+accelerations at a strongly deflected test state agree with those on the next candidate to
+:data:`PANEL_TOLERANCE`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+
+from .modes import mode_shapes
+from .parameters import HubBeam
+
+__all__ = ["ExactGeometry", "PanelRule", "choose_panels", "exact_geometry",
+           "PANEL_TOLERANCE", "PANEL_POINTS"]
+
+#: Gauss points per panel.
+PANEL_POINTS = 8
+#: Relative agreement of the accelerations on two panel counts that fixes the smaller one.
+PANEL_TOLERANCE = 1e-6
+#: Candidate panel counts.
+PANEL_CANDIDATES = (1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64)
+#: Tip deflection of the test state on which the panel count is chosen, relative to the length.
+TEST_DEFLECTION = 0.4
+
+
+@dataclass(frozen=True, eq=False)
+class PanelRule:
+    """Composite Gauss-Legendre rule on ``[0, length]`` that also integrates from the root.
+
+    Attributes
+    ----------
+    nodes : ndarray, shape (n,)
+        Gauss points, ascending, m (``n = n_panels * PANEL_POINTS``).
+    weights : ndarray, shape (n,)
+        Weights of ``int_0^l``, m.
+    local : ndarray, shape (n, n)
+        Block diagonal: ``(local @ f)[j]`` integrates ``f`` from the start of the panel of
+        ``nodes[j]`` to ``nodes[j]``.
+    sums : ndarray, shape (n_panels, n)
+        Gauss sum of each whole panel.
+    before : ndarray, shape (n, n_panels)
+        1 where the panel lies wholly before ``nodes[j]``, so that
+        ``int_0^{nodes[j]} f = local @ f + before @ (sums @ f)``.
+    """
+
+    n_panels: int
+    length: float
+    nodes: np.ndarray
+    weights: np.ndarray
+    local: np.ndarray
+    sums: np.ndarray
+    before: np.ndarray
+
+    @classmethod
+    def build(cls, n_panels: int, length: float) -> "PanelRule":
+        leg = np.polynomial.legendre
+        g, w = leg.leggauss(PANEL_POINTS)
+        coefficients = np.linalg.inv(leg.legvander(g, PANEL_POINTS - 1))
+        local = leg.legvander(g, PANEL_POINTS) @ leg.legint(coefficients, lbnd=-1.0, axis=0)
+        half = 0.5 * length / n_panels
+        nodes = np.concatenate([(2 * p + 1 + g) * half for p in range(n_panels)])
+        eye = np.eye(n_panels)
+        return cls(n_panels=n_panels, length=length, nodes=nodes,
+                   weights=np.tile(half * w, n_panels),
+                   local=np.kron(eye, half * local),
+                   sums=np.kron(eye, half * w[None, :]),
+                   before=np.kron(np.tril(np.ones((n_panels, n_panels)), -1),
+                                  np.ones((PANEL_POINTS, 1))))
+
+    def at(self, positions) -> np.ndarray:
+        """Rows that integrate from the root to each position (m), shape (P, n)."""
+        leg = np.polynomial.legendre
+        g, w = leg.leggauss(PANEL_POINTS)
+        coefficients = np.linalg.inv(leg.legvander(g, PANEL_POINTS - 1))
+        integrated = leg.legint(coefficients, lbnd=-1.0, axis=0)
+        h = self.length / self.n_panels
+        rows = np.zeros((len(positions), self.nodes.size))
+        for k, s in enumerate(positions):
+            p = min(int(s // h), self.n_panels - 1)
+            xi = 2.0 * (s - p * h) / h - 1.0
+            block = slice(p * PANEL_POINTS, (p + 1) * PANEL_POINTS)
+            rows[k, block] = 0.5 * h * leg.legvander(np.array([xi]), PANEL_POINTS) @ integrated
+            rows[k, :p * PANEL_POINTS] = self.weights[:p * PANEL_POINTS]
+        return rows
+
+
+def _sparse(a):
+    import casadi as ca
+    return ca.sparsify(ca.DM(a))
+
+
+@dataclass(frozen=True, eq=False)
+class ExactGeometry:
+    """CasADi functions of the geometrically exact model of one system on ``N`` modes.
+
+    Build with :func:`exact_geometry` (cached). ``x`` is the model state
+    ``[theta, q_1..q_N, theta_dot, q_1_dot..q_N_dot]``; see the module docstring for the
+    equations.
+
+    Attributes
+    ----------
+    system : HubBeam
+    n_modes : int
+    n_panels : int
+        Gauss-Legendre panels of the quadrature (:class:`PanelRule`).
+    rhs : casadi.Function
+        ``(x, u) -> xdot``, torque ``u`` in N m.
+    beam : casadi.Function
+        ``(q, q_dot, rate, acceleration) -> q_tt`` under a prescribed hub motion.
+    torque : casadi.Function
+        ``(x, theta_tt, q_tt) -> T_h``, the hub equation, N m.
+    mass : casadi.Function
+        ``q -> M(q)``, shape (N + 1, N + 1).
+    tip : casadi.Function
+        ``q -> [p_x(l), p_y(l)]``, tip position in the hub frame, m.
+    energy : casadi.Function
+        ``x -> E``, kinetic plus bending energy, J.
+    """
+
+    system: HubBeam
+    n_modes: int
+    n_panels: int
+    rhs: object = field(repr=False)
+    beam: object = field(repr=False)
+    torque: object = field(repr=False)
+    mass: object = field(repr=False)
+    tip: object = field(repr=False)
+    energy: object = field(repr=False)
+
+
+def _terms(system, n_modes, n_panels, q, q_dot, rate):
+    """Mass matrix ``M(q)``, bias ``[b_theta; b_q]`` and tip position, as CasADi expressions."""
+    import casadi as ca
+
+    b, l = system.hub.radius, system.beam.length
+    rule = PanelRule.build(n_panels, l)
+    local, sums, before = _sparse(rule.local), _sparse(rule.sums), _sparse(rule.before)
+    slope_shapes = ca.DM(mode_shapes(n_modes, rule.nodes / l, derivative=1, length=l).T)
+    psi = ca.mtimes(slope_shapes, q)
+    psi_t = ca.mtimes(slope_shapes, q_dot)
+    cos, sin = ca.cos(psi), ca.sin(psi)
+    # integrands of p_x - b, p_y, p_x_t, p_y_t and of the q_t^2 part of p_tt
+    integrands = ca.horzcat(cos, sin, -sin * psi_t, cos * psi_t,
+                            -cos * psi_t ** 2, -sin * psi_t ** 2)
+    beam_weights = ca.DM(rule.weights)
+    tip = ca.vertcat(b + ca.dot(beam_weights, cos), ca.dot(beam_weights, sin))
+    jac_x = -ca.repmat(sin, 1, n_modes) * slope_shapes
+    jac_y = ca.repmat(cos, 1, n_modes) * slope_shapes
+
+
+    def along_beam(f):
+        return ca.mtimes(local, f) + ca.mtimes(before, ca.mtimes(sums, f))
+
+    def at_masses(f):
+        return ca.mtimes(_sparse(rule.at([m.position for m in system.masses])), f)
+
+    # (weights, integral from the root) of the beam's points and of the point masses
+    points = [(system.beam.linear_density * rule.weights, along_beam)]
+    if system.masses:
+        points.append((np.array([m.mass for m in system.masses]), at_masses))
+    m_tt, m_tq, m_qq, b_t, b_q = system.hub.inertia, 0.0, 0.0, 0.0, 0.0
+    for weights, integrate in points:
+        w = ca.DM(weights)
+        p = integrate(integrands)
+        px, py, pxt, pyt, ax, ay = (p[:, k] for k in range(6))
+        px = px + b
+        jx, jy = integrate(jac_x), integrate(jac_y)
+        wjx, wjy = ca.repmat(w, 1, n_modes) * jx, ca.repmat(w, 1, n_modes) * jy
+        m_tt = m_tt + ca.dot(w, px ** 2 + py ** 2)
+        m_tq = m_tq + ca.mtimes(px.T, wjy) - ca.mtimes(py.T, wjx)
+        m_qq = m_qq + ca.mtimes(jx.T, wjx) + ca.mtimes(jy.T, wjy)
+        # velocity terms of the inertial acceleration: p_tt(q_tt = 0), Coriolis, centripetal
+        gx = ax - 2.0 * rate * pyt - rate ** 2 * px
+        gy = ay + 2.0 * rate * pxt - rate ** 2 * py
+        b_t = b_t + ca.dot(w, px * gy - py * gx)
+        b_q = b_q + ca.mtimes(wjx.T, gx) + ca.mtimes(wjy.T, gy)
+    mass = ca.blockcat([[m_tt, m_tq], [m_tq.T, m_qq]])
+    return mass, ca.vertcat(b_t, b_q), tip
+
+
+def _rhs(system: HubBeam, n_modes: int, n_panels: int, matrices):
+    """``(x, u) -> xdot`` and the symbols and terms it was built from."""
+    import casadi as ca
+
+    n = n_modes
+    x = ca.SX.sym("x", 2 * n + 2)
+    u = ca.SX.sym("u")
+    q, rate, q_dot = x[1:n + 1], x[n + 1], x[n + 2:]
+    mass, bias, tip = _terms(system, n, n_panels, q, q_dot, rate)
+    elastic = -ca.mtimes(ca.DM(matrices.K_ff), q) - ca.mtimes(ca.DM(matrices.C_ff), q_dot)
+    generalized = ca.vertcat(u - system.hub.friction * rate, elastic) - bias
+    acc = ca.solve(mass, generalized)
+    rhs = ca.Function(f"flexctl_exact_N{n}", [x, u], [ca.vertcat(rate, q_dot, acc)],
+                      ["x", "u"], ["xdot"])
+    return rhs, x, mass, bias, tip
+
+
+def _build(system: HubBeam, n_modes: int, n_panels: int, matrices) -> ExactGeometry:
+    import casadi as ca
+
+    n = n_modes
+    rhs, x, mass, bias, tip = _rhs(system, n, n_panels, matrices)
+    q, rate = x[1:n + 1], x[n + 1]
+    stiffness, damping = ca.DM(matrices.K_ff), ca.DM(matrices.C_ff)
+    friction = system.hub.friction
+    name = f"exact_N{n}"
+
+    theta_tt = ca.SX.sym("theta_tt")
+    q_tt = ca.SX.sym("q_tt", n)
+    hub_row = ca.mtimes(mass[0, :], ca.vertcat(theta_tt, q_tt)) + bias[0] + friction * rate
+    torque = ca.Function(f"{name}_torque", [x, theta_tt, q_tt], [hub_row],
+                         ["x", "theta_tt", "q_tt"], ["torque"])
+
+    qs, qds = ca.SX.sym("q", n), ca.SX.sym("q_dot", n)
+    w, acc_hub = ca.SX.sym("rate"), ca.SX.sym("acceleration")
+    m_b, bias_b, _ = _terms(system, n, n_panels, qs, qds, w)
+    load = (-ca.mtimes(stiffness, qs) - ca.mtimes(damping, qds) - bias_b[1:]
+            - m_b[1:, 0] * acc_hub)
+    beam = ca.Function(f"{name}_beam", [qs, qds, w, acc_hub], [ca.solve(m_b[1:, 1:], load)],
+                       ["q", "q_dot", "rate", "acceleration"], ["q_tt"])
+
+    mass_fn = ca.Function(f"{name}_mass", [q], [mass], ["q"], ["M"])
+    tip_fn = ca.Function(f"{name}_tip", [q], [tip], ["q"], ["p_tip"])
+    v = x[n + 1:]
+    kinetic = 0.5 * ca.dot(v, ca.mtimes(mass, v))
+    energy = ca.Function(f"{name}_energy", [x],
+                         [kinetic + 0.5 * ca.dot(q, ca.mtimes(stiffness, q))], ["x"], ["E"])
+    return ExactGeometry(system=system, n_modes=n, n_panels=n_panels, rhs=rhs, beam=beam,
+                         torque=torque, mass=mass_fn, tip=tip_fn, energy=energy)
+
+
+def _test_state(system: HubBeam, matrices) -> np.ndarray:
+    """A strongly deflected, fast state: modal amplitudes falling as ``1 / i^4`` (as a static load spreads over the modes) with the first
+    tip deflection ``TEST_DEFLECTION * l``, rates at each mode's own frequency."""
+    n = matrices.n_modes
+    i = np.arange(1, n + 1)
+    q = TEST_DEFLECTION * system.beam.length / np.abs(matrices.tip) / i ** 4
+    omega = matrices.beam_frequencies
+    return np.concatenate(([0.0], q, [omega[0]], omega * q))
+
+
+def choose_panels(system: HubBeam, matrices) -> int:
+    """The fewest Gauss-Legendre panels that resolve the exact model on its modes.
+
+    The accelerations at the test state (:func:`_test_state`) on successive candidate panel
+    counts are compared; the first count that agrees with the next within
+    :data:`PANEL_TOLERANCE` (relative to their largest entry) is taken.
+    """
+    x = _test_state(system, matrices)
+    previous = None
+    for n_panels in PANEL_CANDIDATES:
+        acc = np.array(_rhs(system, matrices.n_modes, n_panels, matrices)[0](x, 1.0))
+        acc = acc.ravel()[matrices.n_modes + 1:]
+        if previous is not None:
+            scale = max(np.max(np.abs(acc)), 1e-300)
+            if np.max(np.abs(acc - previous[1])) <= PANEL_TOLERANCE * scale:
+                return previous[0]
+        previous = (n_panels, acc)
+    return previous[0]
+
+
+@lru_cache(maxsize=32)
+def _cached(system: HubBeam, n_modes: int, matrices) -> ExactGeometry:
+    return _build(system, n_modes, choose_panels(system, matrices), matrices)
+
+
+def exact_geometry(matrices) -> ExactGeometry:
+    """The exact model's CasADi functions for assembled ``matrices`` (built once, cached)."""
+    return _cached(matrices.system, matrices.n_modes, matrices)
