@@ -72,6 +72,40 @@ def _quadrature(system: HubBeam, n_modes: int):
     return np.concatenate(nodes), np.concatenate(weights)
 
 
+def condensed_hub_inertia(system: HubBeam, n_modes: int) -> float:
+    """Effective hub inertia at rest ``J_0 - m_tf^T M_ff^-1 m_tf``, kg m^2, without cancellation.
+
+    The Schur complement is the hub inertia plus the inertia of the part of the rigid rotation
+    ``r = b + x`` that the modes cannot represent: with the mass measure ``mu`` of the beam and
+    its point masses, ``J_0 - m_tf^T M_ff^-1 m_tf = J_h + ||r - P r||_mu^2``, ``P`` the
+    ``mu``-orthogonal projection onto the mode shapes. The residual norm is the last diagonal
+    entry of the QR factor of ``sqrt(mu) [phi^T, r]`` (rows sorted heaviest first, which keeps
+    Householder QR accurate under strong row scaling), so a heavy tip mass (1e8 kg on a 1 kg
+    beam) no longer subtracts two nearly equal numbers of size ``J_0``.
+
+    Parameters
+    ----------
+    system : HubBeam
+    n_modes : int
+
+    Returns
+    -------
+    float
+    """
+    beam, b = system.beam, system.hub.radius
+    l = beam.length
+    x, w = _quadrature(system, n_modes)
+    positions = np.concatenate((x, [m.position for m in system.masses]))
+    weights = np.concatenate((beam.linear_density * w, [m.mass for m in system.masses]))
+    keep = weights > 0.0
+    root_w = np.sqrt(weights[keep])
+    order = np.argsort(-root_w, kind="stable")
+    phi = mode_shapes(n_modes, positions[keep] / l)
+    rows = np.column_stack((phi.T * root_w[:, None], (b + positions[keep]) * root_w))[order]
+    r_factor = np.linalg.qr(rows, mode="r")
+    return float(system.hub.inertia + r_factor[n_modes, n_modes] ** 2)
+
+
 @dataclass(frozen=True, eq=False)
 class ModalMatrices:
     """Assembled modal matrices of a :class:`~flexctl.model.parameters.HubBeam` (read-only arrays).

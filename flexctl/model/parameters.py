@@ -17,7 +17,7 @@ Examples
 >>> Hub(inertia=-1.0, radius=0.0)
 Traceback (most recent call last):
 ...
-ValueError: hub.inertia must be finite and >= 0; got -1.0
+flexctl.model.errors.InputValueError: hub.inertia must be finite and >= 0; got -1.0
 """
 
 from __future__ import annotations
@@ -26,7 +26,17 @@ import math
 from dataclasses import dataclass, field
 from numbers import Real
 
-__all__ = ["Hub", "Beam", "PointMass", "HubBeam", "check_real"]
+from .errors import InputTypeError, InputValueError
+
+__all__ = ["Hub", "Beam", "PointMass", "HubBeam", "check_real", "RATIO_LIMIT",
+           "MASS_RATIO_LIMIT"]
+
+#: Products and ratios of beam parameters (mass per length, bending stiffness, EI / rhoA l^4)
+#: must lie within [1 / RATIO_LIMIT, RATIO_LIMIT]: the modal matrices multiply and square them.
+RATIO_LIMIT = 1e100
+#: Largest ratio of the point masses to the beam mass: the condition number of the modal mass
+#: matrix grows with it (about 3 times the ratio), and so do the rounding errors of the model.
+MASS_RATIO_LIMIT = 1e6
 
 
 def check_real(owner: str, name: str, value, *, minimum: float | None = None,
@@ -38,7 +48,7 @@ def check_real(owner: str, name: str, value, *, minimum: float | None = None,
     """
     label = f"{owner}.{name}"
     if isinstance(value, bool) or not isinstance(value, Real):
-        raise TypeError(f"{label} must be a real number; got {value!r} of type "
+        raise InputTypeError(f"{label} must be a real number; got {value!r} of type "
                         f"{type(value).__name__}")
     value = float(value)
     rule = "finite"
@@ -52,7 +62,7 @@ def check_real(owner: str, name: str, value, *, minimum: float | None = None,
     if ok and maximum is not None:
         ok = value <= maximum
     if not ok:
-        raise ValueError(f"{label} must be {rule}; got {value!r}")
+        raise InputValueError(f"{label} must be {rule}; got {value!r}")
     return value
 
 
@@ -113,8 +123,28 @@ class Beam:
                                                  minimum=0.0, strict=True))
         zeta = check_real("beam", "damping_ratio", self.damping_ratio, minimum=0.0)
         if zeta >= 1.0:
-            raise ValueError(f"beam.damping_ratio must be finite and in [0, 1); got {zeta!r}")
+            raise InputValueError(f"beam.damping_ratio must be finite and in [0, 1); got {zeta!r}")
         object.__setattr__(self, "damping_ratio", zeta)
+        self._check_ratios()
+
+    def _check_ratios(self):
+        """Products and the stiffness-to-mass ratio must stay far from under- and overflow:
+        the modal matrices square them (a density and area of 1e-300 give a mass per length
+        of 0 and frequencies of inf)."""
+        low, high = 1.0 / RATIO_LIMIT, RATIO_LIMIT
+        for label, value in (("beam.density * beam.area (mass per length, kg/m)",
+                              self.density * self.area),
+                             ("beam.youngs_modulus * beam.second_moment (bending stiffness, "
+                              "N m^2)", self.youngs_modulus * self.second_moment)):
+            if not low <= value <= high:
+                raise InputValueError(f"{label} must lie in [{low:g}, {high:g}] to be "
+                                      f"represented in floating point; got {value!r}")
+        ratio = self.bending_stiffness / (self.linear_density * self.length ** 4)
+        if not low <= ratio <= high:
+            raise InputValueError(
+                "the ratio EI / (rho A l^4) of beam.youngs_modulus * beam.second_moment to "
+                "beam.density * beam.area * beam.length^4 (the squared first clamped frequency "
+                f"/ 12.4, 1/s^2) must lie in [{low:g}, {high:g}]; got {ratio!r}")
 
     @property
     def linear_density(self) -> float:
@@ -172,22 +202,28 @@ class HubBeam:
 
     def __post_init__(self):
         if not isinstance(self.hub, Hub):
-            raise TypeError(f"system.hub must be a Hub; got {type(self.hub).__name__}")
+            raise InputTypeError(f"system.hub must be a Hub; got {type(self.hub).__name__}")
         if not isinstance(self.beam, Beam):
-            raise TypeError(f"system.beam must be a Beam; got {type(self.beam).__name__}")
+            raise InputTypeError(f"system.beam must be a Beam; got {type(self.beam).__name__}")
         try:
             masses = tuple(self.masses)
         except TypeError:
-            raise TypeError("system.masses must be an iterable of PointMass; got "
+            raise InputTypeError("system.masses must be an iterable of PointMass; got "
                             f"{type(self.masses).__name__}") from None
         for k, m in enumerate(masses):
             if not isinstance(m, PointMass):
-                raise TypeError(f"system.masses[{k}] must be a PointMass; got "
+                raise InputTypeError(f"system.masses[{k}] must be a PointMass; got "
                                 f"{type(m).__name__}")
             if m.position > self.beam.length:
-                raise ValueError(f"system.masses[{k}].position must lie in [0, beam.length = "
+                raise InputValueError(f"system.masses[{k}].position must lie in [0, beam.length = "
                                  f"{self.beam.length:g}]; got {m.position!r}")
         object.__setattr__(self, "masses", tuple(sorted(masses, key=lambda m: m.position)))
+        ratio = sum(m.mass for m in masses) / self.beam.mass
+        if ratio > MASS_RATIO_LIMIT:
+            raise InputValueError(
+                f"the ratio of the point masses to the beam mass ({self.beam.mass:.4g} kg) must "
+                f"be <= {MASS_RATIO_LIMIT:g}: beyond it the modal mass matrix is too ill "
+                f"conditioned for the model to keep its accuracy; got {ratio:.4g}")
 
     @property
     def total_point_mass(self) -> float:

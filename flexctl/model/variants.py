@@ -41,7 +41,7 @@ import numpy as np
 import scipy.linalg
 
 from .exact import exact_geometry
-from .matrices import ModalMatrices, assemble
+from .matrices import ModalMatrices, assemble, condensed_hub_inertia
 from .parameters import HubBeam
 
 __all__ = ["Model", "build_model", "VARIANTS", "SingularMassMatrixError"]
@@ -95,7 +95,9 @@ class Model:
             "stiff_d": stiff_d,                       # D of the beam stiffness term
             "m_inv": m_inv,                           # M_ff^-1
             "g": g,                                   # M_ff^-1 m_tf
-            "j_rigid_eff": mat.J0 - mat.m_tf @ g,     # Schur complement at q = 0
+            # Schur complement J0 - m_tf^T g at q = 0, without the cancelling subtraction
+            # (a heavy tip mass made it 30 times too large)
+            "j_rigid_eff": condensed_hub_inertia(mat.system, self.n_modes),
             "c_out": self._output_matrix(),
         }
         for a in cache.values():
