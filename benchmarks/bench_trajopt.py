@@ -121,7 +121,7 @@ def main():
         times.append(time.perf_counter() - start)
     t_casadi = float(np.median(times))
     cost_casadi = effort_hold(solution.t, solution.torque)
-    print(f"\nsolve_slew (CasADi Opti + IPOPT, multiple shooting RK4 x{problem.substeps}):")
+    print(f"\nsolve_slew (CasADi Opti + IPOPT, multiple shooting RK4, {problem.substeps or "auto"} substeps):")
     print(f"  wall time {t_casadi:.3f} s (median of {REPEATS}: "
           f"{', '.join(f'{t:.3f}' for t in times)}), IPOPT {solution.ipopt_time_s:.3f} s, "
           f"{solution.iterations} iterations, status {solution.return_status}")

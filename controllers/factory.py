@@ -2,8 +2,9 @@
 
 The scene (:class:`flexctl.Scene`) carries the goal (:class:`flexctl.sim.maneuvers.Slew`:
 angle, duration or free, actuator torque bound), the plant model and the design model size
-(``[model] design_modes``); :func:`from_spec` designs the controller on a first_order model
-with ``design_modes`` modes and returns it ready for :func:`flexctl.simulate`.
+(``[model] design_modes`` and ``design_variant``); :func:`from_spec` designs the controller on
+a model of ``design_modes`` modes of the scene's design variant (exact on an exact plant,
+first_order otherwise) and returns it ready for :func:`flexctl.simulate`.
 
 Settings (all optional) per ``kind``:
 
@@ -158,7 +159,7 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
     if n_design > plant.n_modes:
         raise SceneError(f"model.design_modes must be <= model.modes = {plant.n_modes}; "
                          f"got {n_design}")
-    design = build_model(scene.system, n_modes=n_design, variant="first_order")
+    design = build_model(scene.system, n_modes=n_design, variant=scene.design_variant)
     angle, bound = maneuver.angle, maneuver.torque_bound
     kind = spec.kind
 

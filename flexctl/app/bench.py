@@ -293,7 +293,7 @@ def bench_scene(scene, config: BenchConfig, progress: bool = True) -> SceneBench
 
     _drivable(scene)
     t_final = config.t_final or scene.simulation.t_final
-    variant0 = scene.model.variant
+    variant0 = scene.variant
     choice = choose_modes(scene.system, scene.maneuver, config.tolerance, variant=variant0,
                           t_final=t_final)
     chosen_extra = () if choice.n_modes in config.modes else (choice.n_modes,)

@@ -50,7 +50,7 @@ _RUN_COLUMNS = [  # (heading, cell, right-aligned)
 
 def fastest_within(bench, level: float, variant: str | None = None):
     """Fastest finished run with ``error <= level`` (of ``variant``, default the scene's)."""
-    variant = variant or bench.scene.model.variant
+    variant = variant or bench.scene.variant
     runs = [r for r in bench.front(variant) if r.error <= level]
     return runs[0] if runs else None
 

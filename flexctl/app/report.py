@@ -45,7 +45,10 @@ _UNITS = {"integration_error": "m (estimated largest tip error of the integratio
           "stiffness, value = -growth rate in 1/s)",
           "slew": "settling_time s, overshoot fraction of the angle, final_error rad, "
           "peak_torque N m, peak_tip_deflection m, residual_vibration m (max |tip| after the "
-          "manoeuvre), solve_time_s s"}
+          "manoeuvre), solve_time_s s",
+          "model_validity": "deflection_ratio: peak tip deflection / beam length; "
+          "geometric_error, tolerance: relative tip error against exact geometry (estimated on "
+          "2 modes, flexctl.sim.validity)"}
 
 
 def timeseries_columns(n_modes: int) -> list:
@@ -88,6 +91,9 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         A scene with ``modes = "auto"`` adds ``mode_choice``: the number of modes chosen, the
         estimated relative tip error against the tolerance, the error estimated for each number
         of modes, the stiffening verdict and why (:meth:`flexctl.sim.fidelity.ModeChoice.to_dict`).
+        ``model_validity`` gives the largest tip deflection relative to the beam length and the
+        estimated geometric model error of the run (:class:`flexctl.sim.validity.ModelValidity`);
+        a scene with ``variant = "auto"`` adds ``variant_choice``.
     """
     model = result.model
     summary = {
@@ -118,6 +124,11 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
     choice = scene.mode_choice()
     if choice is not None:
         summary["mode_choice"] = choice.to_dict()
+    if result.validity is not None:
+        summary["model_validity"] = result.validity.to_dict()
+    variant_choice = scene.variant_choice()
+    if variant_choice is not None:
+        summary["variant_choice"] = variant_choice.to_dict()
     summary.update(extra or {})
     summary["units"] = {k: v for k, v in _UNITS.items() if k in summary}
     if choice is not None:
@@ -191,6 +202,11 @@ def format_summary(summary: dict) -> str:
                      f"error {choice['estimated_error']:.2g} of the peak, tolerance "
                      f"{choice['tolerance']:.2g}); stiffening "
                      f"{'matters' if choice['stiffening_matters'] else 'does not matter'}")
+    validity = summary.get("model_validity")
+    if validity:
+        lines.append(f"  model: {validity['message']}")
+    if summary.get("variant_choice"):
+        lines.append(f"  variant chosen automatically: {summary['variant_choice']['explanation']}")
     slew = summary.get("slew")
     if slew:
         settle = slew["settling_time"]

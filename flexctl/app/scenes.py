@@ -22,10 +22,16 @@ Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as sh
     position = 1.62
 
     [model]
-    variant = "first_order"              # first_order | zero_order | consistent
+    variant = "first_order"              # first_order | zero_order | consistent | exact, or
+                                         # "auto": first_order where its geometric error meets
+                                         # the tolerance, else exact (flexctl.sim.validity)
     modes = 4                            # or "auto": as few as the manoeuvre needs, see
-    # tolerance = 1e-2                   # flexctl.sim.fidelity.choose_modes (only with "auto")
+                                         # flexctl.sim.fidelity.choose_modes
+    # tolerance = 1e-2                   # optional: relative tip error for the "auto" choices
+                                         # and for the model-validity warning
     design_modes = 2                     # optional: modes of a controller's design model
+    # design_variant = "exact"           # optional: variant of the design model; default
+                                         # exact on an exact plant, else first_order
 
     [maneuver]
     kind = "sine_torque"                 # peak_torque, duration
@@ -54,6 +60,7 @@ SpinUp(spin_rate=10.0, ramp_time=15.0)
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -69,6 +76,7 @@ from ..sim.metrics import slew_metrics
 from ..model import VARIANTS, Model, build_model
 from ..model.parameters import Beam, Hub, HubBeam, PointMass
 from ..sim.simulation import METHODS, SimulationResult, simulate
+from ..sim.validity import VariantChoice, assess, choose_variant
 
 __all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene",
            "parse_scene",
@@ -91,7 +99,7 @@ _SCHEMA = {
     "hub": {"inertia", "radius", "friction"},
     "beam": {"length", "density", "area", "second_moment", "youngs_modulus", "damping_ratio"},
     "masses": {"mass", "position"},
-    "model": {"variant", "modes", "design_modes", "tolerance"},
+    "model": {"variant", "modes", "design_modes", "design_variant", "tolerance"},
     "maneuver": {"kind", "spin_rate", "ramp_time", "peak_torque", "duration", "angle_deg",
                  "torque_bound"},
     "simulation": {"t_final", "output_step", "rtol", "method"},
@@ -108,15 +116,19 @@ class ModelSpec:
 
     ``modes`` may be ``"auto"``: as few modes as the scene's manoeuvre needs for a relative tip
     error ``tolerance`` in (0, 1) (default 1e-2; :func:`flexctl.sim.fidelity.choose_modes`).
-    ``tolerance`` applies only then and must be left out otherwise.
+    ``variant`` may be ``"auto"``: first_order where its estimated geometric error meets
+    ``tolerance``, exact otherwise (:func:`flexctl.sim.validity.choose_variant`). The same
+    ``tolerance`` decides when a run warns that its model was used out of range.
 
-    ``design_modes`` is the number of modes of the model a controller is designed on
-    (default 2; used by slew scenes).
+    ``design_modes`` and ``design_variant`` describe the model a controller is designed on
+    (default 2 modes; the exact variant on an exact plant, first_order otherwise; used by slew
+    scenes).
     """
 
     variant: str = "first_order"
     modes: int | str = 4
     design_modes: int = 2
+    design_variant: str | None = None
     tolerance: float | None = None
 
     def __post_init__(self):
@@ -124,24 +136,24 @@ class ModelSpec:
                 or not 1 <= self.design_modes <= 200:
             raise SceneError("model.design_modes must be an integer in [1, 200]; got "
                              f"{self.design_modes!r}")
-        if self.variant not in VARIANTS:
-            raise SceneError(f"model.variant must be one of {', '.join(VARIANTS)}; "
+        if self.variant not in VARIANTS + ("auto",):
+            raise SceneError(f"model.variant must be one of {', '.join(VARIANTS)} or auto; "
                              f"got {self.variant!r}")
+        if self.design_variant is not None and self.design_variant not in VARIANTS:
+            raise SceneError(f"model.design_variant must be one of {', '.join(VARIANTS)}; "
+                             f"got {self.design_variant!r}")
+        tolerance = DEFAULT_TOLERANCE if self.tolerance is None else self.tolerance
+        if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) \
+                or not 0.0 < tolerance < 1.0:
+            raise SceneError("model.tolerance must be a relative tip error in (0, 1); "
+                             f"got {tolerance!r}")
+        object.__setattr__(self, "tolerance", float(tolerance))
         if self.modes == "auto":
-            tolerance = DEFAULT_TOLERANCE if self.tolerance is None else self.tolerance
-            if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) \
-                    or not 0.0 < tolerance < 1.0:
-                raise SceneError("model.tolerance must be a relative tip error in (0, 1); "
-                                 f"got {tolerance!r}")
-            object.__setattr__(self, "tolerance", float(tolerance))
             return
         if isinstance(self.modes, bool) or not isinstance(self.modes, int) \
                 or not 1 <= self.modes <= 200:
             raise SceneError("model.modes must be an integer in [1, 200] or \"auto\"; "
                              f"got {self.modes!r}")
-        if self.tolerance is not None:
-            raise SceneError("model.tolerance applies only with model.modes = \"auto\"; got "
-                             f"tolerance = {self.tolerance!r} with modes = {self.modes!r}")
 
     @property
     def auto(self) -> bool:
@@ -200,6 +212,31 @@ class Scene:
     description: str = ""
     data: dict = field(default_factory=dict, repr=False, compare=False)
 
+    def variant_choice(self) -> VariantChoice | None:
+        """Which variant ``variant = "auto"`` takes, and why (None for a named variant).
+
+        Estimated over the scene's horizon (:func:`flexctl.sim.validity.choose_variant`,
+        cached).
+        """
+        if self.model.variant != "auto":
+            return None
+        return choose_variant(self.system, self.maneuver, self.model.tolerance,
+                              t_final=self.simulation.t_final)
+
+    @property
+    def variant(self) -> str:
+        """The plant's variant (the choice when ``"auto"``)."""
+        choice = self.variant_choice()
+        return choice.variant if choice is not None else self.model.variant
+
+    @property
+    def design_variant(self) -> str:
+        """Variant of a controller's design model: ``model.design_variant``, else exact on an
+        exact plant and first_order otherwise."""
+        if self.model.design_variant is not None:
+            return self.model.design_variant
+        return "exact" if self.variant == "exact" else "first_order"
+
     def mode_choice(self) -> ModeChoice | None:
         """How many modes ``modes = "auto"`` takes, and why (None for a fixed number).
 
@@ -209,13 +246,13 @@ class Scene:
         if not self.model.auto:
             return None
         return choose_modes(self.system, self.maneuver, self.model.tolerance,
-                            variant=self.model.variant, t_final=self.simulation.t_final)
+                            variant=self.variant, t_final=self.simulation.t_final)
 
     def build_model(self) -> Model:
-        """The model this scene asks for (its number of modes chosen when ``"auto"``)."""
+        """The model this scene asks for (variant and number of modes chosen when ``"auto"``)."""
         choice = self.mode_choice()
         n_modes = choice.n_modes if choice is not None else self.model.modes
-        return build_model(self.system, n_modes=n_modes, variant=self.model.variant)
+        return build_model(self.system, n_modes=n_modes, variant=self.variant)
 
 
 def builtin_scenes() -> dict:
@@ -409,6 +446,14 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None) -> Simu
         for a slew scene, which is a goal for a controller rather than an input.
     model : Model, optional
         ``scene.build_model()`` when already built.
+
+    Returns
+    -------
+    SimulationResult
+        With ``validity`` (:class:`flexctl.sim.validity.ModelValidity`): the deflection
+        reached and the estimated geometric error of the model; a
+        :class:`~flexctl.sim.validity.ModelValidityWarning` is issued when a small-deflection
+        variant was used where that error is above ``model.tolerance``.
     """
     model = scene.build_model() if model is None else model
     sim = scene.simulation
@@ -421,8 +466,10 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None) -> Simu
         drive = {"hub_motion": scene.maneuver}
     else:
         drive = {"torque": scene.maneuver}
-    return simulate(model, sim.t_final, rtol=sim.rtol, method=sim.method,
-                    output_step=sim.output_step, **drive)
+    result = simulate(model, sim.t_final, rtol=sim.rtol, method=sim.method,
+                      output_step=sim.output_step, **drive)
+    validity = assess(result, tolerance=scene.model.tolerance, **drive)
+    return dataclasses.replace(result, validity=validity)
 
 
 def run_slew(scene: Scene, controller_factory):
@@ -450,5 +497,17 @@ def run_slew(scene: Scene, controller_factory):
                          f"{type(scene.maneuver).__name__}")
     plant = scene.build_model()
     built = controller_factory(scene, plant)
+    _check_slew_fits(scene, built)
     result = run_scene(scene, controller=built.controller, model=plant)
     return result, built, slew_metrics(result, scene.maneuver.angle, built.maneuver_end)
+
+
+def _check_slew_fits(scene: Scene, built) -> None:
+    """A slew that ends after ``t_final`` (e.g. a reference stretched to what a small torque
+    bound allows) would report a hub that never got there as a finished run: refuse it."""
+    t_final, end = scene.simulation.t_final, float(built.maneuver_end)
+    if end > t_final:
+        why = built.info.get("note") if isinstance(getattr(built, "info", None), dict) else None
+        raise SceneError(f"simulation.t_final must be at least the {end:.4g} s the "
+                         f"{getattr(built, 'kind', 'controller')} slew needs"
+                         f"{f' ({why})' if why else ''}; got {t_final:g} s")

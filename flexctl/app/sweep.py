@@ -441,7 +441,7 @@ class PointMassAmplitudes:
                              f"{name!r} has {type(scene.maneuver).__name__}")
         settings = {"system": scene.system, "torque": scene.maneuver,
                     "t_final": scene.simulation.t_final, "n_modes": scene.model.modes,
-                    "variant": scene.model.variant}
+                    "variant": scene.variant}
         settings.update(kwargs)
         return cls(**settings)
 

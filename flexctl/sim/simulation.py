@@ -175,6 +175,10 @@ class SimulationResult:
         Estimated largest integration error of the tip deflection, m: the difference from a
         check run at 10 times the tolerance (conservative). ``None`` where no check ran (SciPy
         methods, stopped runs, ``check_accuracy=False``).
+    validity : ModelValidity or None
+        Deflection reached and estimated geometric model error
+        (:func:`flexctl.sim.validity.assess`); set by scene runs, ``None`` from
+        :func:`simulate` itself.
     """
 
     model: Model
@@ -191,6 +195,12 @@ class SimulationResult:
     rtol: float
     controller_states: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     integration_error: float | None = None
+    validity: object = None
+
+    @property
+    def deflection_ratio(self) -> float:
+        """Largest ``|tip_deflection|`` divided by the beam length."""
+        return self.peak_tip_deflection / self.model.system.beam.length
 
     @property
     def ok(self) -> bool:

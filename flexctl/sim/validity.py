@@ -1,0 +1,228 @@
+"""Is the model valid for this run? Deflection, geometric model error, and the variant to use.
+
+first_order, zero_order and consistent are small-deflection models: their error against a
+geometrically exact beam grows with the tip deflection relative to the length (MODEL.md
+section 7). This module measures that error for a run without paying for the exact model on
+every mode:
+
+* :func:`geometric_error` runs the run's variant and the exact variant, both on
+  :data:`ESTIMATE_MODES` modes, under the run's own inputs (torque, hub motion or controller)
+  and returns their largest tip difference relative to the exact peak. The geometric
+  nonlinearity lives in the low modes that carry the deflection, so the few-mode difference
+  tracks the difference of the full models (``tests/test_validity.py`` checks it on the
+  papers' manoeuvres and a slew, within a factor of 2).
+* :func:`assess` adds the deflection ratio and a warning when the estimate passes a tolerance.
+* :func:`choose_variant` picks the cheapest variant whose estimated geometric error for a
+  manoeuvre meets a tolerance (``[model] variant = "auto"``); slews are judged by their rigid
+  rest-to-rest torque, as for the choice of modes.
+
+Examples
+--------
+>>> from flexctl import load_scene
+>>> from flexctl.sim.validity import choose_variant
+>>> scene = load_scene("hub-beam-mass")
+>>> choose_variant(scene.system, scene.maneuver, 1e-2, t_final=6.0).variant
+'first_order'
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from ..model import build_model
+from .fidelity import DEFAULT_TOLERANCE, _as_input, _check_tolerance, _is_prescribed
+from .simulation import simulate
+
+__all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "assess",
+           "choose_variant", "geometric_error", "ESTIMATE_MODES"]
+
+#: Modes of the two models compared by :func:`geometric_error`.
+ESTIMATE_MODES = 2
+#: Relative tolerance of the estimate's runs (far below any tolerance asked of the estimate).
+ESTIMATE_RTOL = 1e-7
+
+
+class ModelValidityWarning(UserWarning):
+    """A small-deflection model was used where its geometric error exceeds the tolerance."""
+
+
+def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, controller=None,
+                    n_modes: int = ESTIMATE_MODES) -> float:
+    """Estimated relative tip error of ``model``'s variant against exact geometry.
+
+    Parameters
+    ----------
+    model : Model
+        Gives the system and the variant; its own number of modes is not used.
+    t_final : float
+        Horizon, s.
+    torque, hub_motion, controller :
+        The run's inputs, as for :func:`flexctl.simulate`.
+    n_modes : int
+        Modes of the two compared models.
+
+    Returns
+    -------
+    float
+        ``max_t |tip_variant - tip_exact| / max_t |tip_exact|`` on ``n_modes`` modes; 0 for the
+        exact variant; ``inf`` when one of the two runs stops early.
+    """
+    if model.variant == "exact":
+        return 0.0
+    tips = []
+    drive = {"torque": torque, "hub_motion": hub_motion, "controller": controller}
+    for variant in (model.variant, "exact"):
+        small = build_model(model.system, n_modes=min(n_modes, model.n_modes), variant=variant)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            run = simulate(small, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False, **drive)
+        if run.status != "ok":
+            return float("inf")
+        tips.append(run.tip_deflection)
+    peak = float(np.max(np.abs(tips[1])))
+    return float(np.max(np.abs(tips[0] - tips[1])) / peak) if peak > 0 else 0.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class ModelValidity:
+    """How far a run stayed inside its model's range.
+
+    Attributes
+    ----------
+    variant : str
+    deflection_ratio : float
+        Largest ``|tip deflection|`` divided by the beam length.
+    geometric_error : float
+        Estimated relative tip error against exact geometry (:func:`geometric_error`); 0 for
+        the exact variant.
+    tolerance : float
+        Relative tip error accepted.
+    """
+
+    variant: str
+    deflection_ratio: float
+    geometric_error: float
+    tolerance: float
+
+    @property
+    def valid(self) -> bool:
+        """True when the estimated geometric error is within the tolerance."""
+        return self.geometric_error <= self.tolerance
+
+    @property
+    def message(self) -> str:
+        """One sentence for people."""
+        text = (f"peak tip deflection {100 * self.deflection_ratio:.3g} % of the beam length; "
+                f"estimated geometric model error {self.geometric_error:.2g} of the peak")
+        if self.variant == "exact":
+            return (f"peak tip deflection {100 * self.deflection_ratio:.3g} % of the beam "
+                    "length; exact geometry")
+        if self.valid:
+            return f"{text}, within the tolerance {self.tolerance:.2g}"
+        return (f"{text}, above the tolerance {self.tolerance:.2g}: the {self.variant} model is "
+                "used outside its small-deflection range; use variant = \"exact\"")
+
+    def to_dict(self) -> dict:
+        """JSON types only (as written to ``summary.json``)."""
+        error = self.geometric_error
+        return {"variant": self.variant, "deflection_ratio": self.deflection_ratio,
+                "geometric_error": error if np.isfinite(error) else None,
+                "tolerance": self.tolerance, "valid": self.valid, "message": self.message}
+
+
+def assess(result, *, torque=None, hub_motion=None, controller=None,
+           tolerance: float = DEFAULT_TOLERANCE, warn: bool = True) -> ModelValidity:
+    """The :class:`ModelValidity` of a finished run, warning when the model was out of range.
+
+    Parameters
+    ----------
+    result : SimulationResult
+    torque, hub_motion, controller :
+        The inputs the run was made with.
+    tolerance : float
+        Relative tip error accepted, in (0, 1).
+    warn : bool
+        Issue a :class:`ModelValidityWarning` when the estimate is above ``tolerance``.
+    """
+    _check_tolerance(tolerance)
+    model = result.model
+    t_end = float(result.t[-1]) if result.t.size else 0.0
+    error = (geometric_error(model, t_end, torque=torque, hub_motion=hub_motion,
+                             controller=controller) if t_end > 0 else 0.0)
+    validity = ModelValidity(variant=model.variant,
+                             deflection_ratio=result.peak_tip_deflection
+                             / model.system.beam.length,
+                             geometric_error=error, tolerance=float(tolerance))
+    if warn and not validity.valid:
+        warnings.warn(validity.message, ModelValidityWarning, stacklevel=2)
+    return validity
+
+
+@dataclass(frozen=True, kw_only=True)
+class VariantChoice:
+    """The variant a manoeuvre needs, as chosen by :func:`choose_variant`.
+
+    Attributes
+    ----------
+    variant : {"first_order", "exact"}
+    geometric_error : float
+        Estimated relative tip error of first_order against exact geometry.
+    deflection_ratio : float
+        Peak tip deflection of the estimate relative to the beam length.
+    tolerance : float
+    explanation : str
+    """
+
+    variant: str
+    geometric_error: float
+    deflection_ratio: float
+    tolerance: float
+    explanation: str
+
+    def to_dict(self) -> dict:
+        """JSON types only."""
+        error = self.geometric_error
+        return {"variant": self.variant, "deflection_ratio": self.deflection_ratio,
+                "geometric_error": error if np.isfinite(error) else None,
+                "tolerance": self.tolerance, "explanation": self.explanation}
+
+
+def choose_variant(system, maneuver, tolerance: float = DEFAULT_TOLERANCE, *,
+                   t_final: float) -> VariantChoice:
+    """The cheapest variant whose estimated geometric error meets ``tolerance``.
+
+    first_order when :func:`geometric_error` of first_order on the manoeuvre (a slew by its
+    rigid rest-to-rest torque) is within ``tolerance``; exact otherwise.
+    """
+    _check_tolerance(tolerance)
+    return _choose(system, maneuver, float(tolerance), float(t_final))
+
+
+@lru_cache(maxsize=64)
+def _choose(system, maneuver, tolerance, t_final) -> VariantChoice:
+    drive = _as_input(system, maneuver)
+    key = "hub_motion" if _is_prescribed(drive) else "torque"
+    model = build_model(system, n_modes=ESTIMATE_MODES, variant="exact")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = simulate(model, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False,
+                       **{key: drive})
+    ratio = run.peak_tip_deflection / system.beam.length
+    error = geometric_error(build_model(system, n_modes=ESTIMATE_MODES), t_final,
+                            **{key: drive})
+    if error <= tolerance:
+        variant = "first_order"
+        why = (f"first_order: estimated geometric error {error:.2g} of the peak is within the "
+               f"tolerance {tolerance:.2g} (peak tip deflection {100 * ratio:.3g} % of the "
+               "length)")
+    else:
+        variant = "exact"
+        why = (f"exact: first_order's estimated geometric error {error:.2g} of the peak is "
+               f"above the tolerance {tolerance:.2g} (peak tip deflection {100 * ratio:.3g} % "
+               "of the length)")
+    return VariantChoice(variant=variant, geometric_error=error, deflection_ratio=ratio,
+                         tolerance=tolerance, explanation=why)

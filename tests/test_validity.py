@@ -1,0 +1,86 @@
+"""Model validity: the few-mode geometric error estimate tracks the full-model difference,
+runs report it and warn, and ``variant = "auto"`` pays for exact geometry only when needed."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+import flexctl
+from flexctl import SineTorque, SpinUp, build_model, simulate
+from flexctl.sim.validity import (ModelValidityWarning, assess, choose_variant,
+                                  geometric_error)
+
+#: The estimate on 2 modes against the difference of the 6-mode models.
+TRACKING_FACTOR = 2.0
+
+CASES = {
+    "kane-2rad_s": ("kane-spinup", 20.0, {"hub_motion": SpinUp(spin_rate=2.0, ramp_time=15.0)}),
+    "kane-10rad_s": ("kane-spinup", 20.0,
+                     {"hub_motion": SpinUp(spin_rate=10.0, ramp_time=15.0)}),
+    "massless-hub": ("spacecraft-torque", 6.0,
+                     {"torque": SineTorque(peak_torque=50.0, duration=2.0)}),
+    "hub-beam-mass": ("hub-beam-mass", 6.0,
+                      {"torque": SineTorque(peak_torque=2.0, duration=2.0)}),
+    "fast-slew": ("hub-beam-mass", 6.0, {"torque": SineTorque(peak_torque=6.0, duration=1.2)}),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", list(CASES), ids=list(CASES))
+def test_estimate_tracks_the_full_difference(case):
+    name, t_final, drive = CASES[case]
+    system = flexctl.load_scene(name).system
+    tips = {v: simulate(build_model(system, 6, v), t_final, **drive).tip_deflection
+            for v in ("first_order", "exact")}
+    full = np.max(np.abs(tips["first_order"] - tips["exact"])) / np.max(np.abs(tips["exact"]))
+    estimate = geometric_error(build_model(system, 6), t_final, **drive)
+    assert full / TRACKING_FACTOR <= estimate <= full * TRACKING_FACTOR, (estimate, full)
+
+
+def test_exact_has_no_geometric_error_and_first_order_warns():
+    system = flexctl.load_scene("hub-beam-mass").system
+    drive = {"torque": SineTorque(peak_torque=6.0, duration=1.2)}
+    exact = simulate(build_model(system, 2, "exact"), 3.0, **drive)
+    assert assess(exact, **drive).geometric_error == 0.0
+    first = simulate(build_model(system, 2), 3.0, **drive)
+    with pytest.warns(ModelValidityWarning, match="outside its small-deflection range"):
+        validity = assess(first, tolerance=1e-3, **drive)
+    assert not validity.valid
+    assert validity.deflection_ratio == pytest.approx(first.peak_tip_deflection / 1.8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert assess(first, tolerance=0.5, **drive).valid
+
+
+def test_bad_tolerance_is_refused():
+    system = flexctl.load_scene("hub-beam-mass").system
+    result = simulate(build_model(system, 1), 0.5)
+    for bad in (0.0, 1.0, -1e-3, float("nan"), "0.01", True):
+        with pytest.raises(ValueError, match="tolerance"):
+            assess(result, tolerance=bad)
+
+
+def test_auto_variant_picks_exact_only_for_large_deflection():
+    """A gentle torque stays first_order; a fast slew (28 % deflection) needs exact."""
+    system = flexctl.load_scene("hub-beam-mass").system
+    gentle = choose_variant(system, SineTorque(peak_torque=0.2, duration=2.0), 1e-2,
+                            t_final=6.0)
+    assert gentle.variant == "first_order" and gentle.geometric_error <= 1e-2
+    fast = choose_variant(system, SineTorque(peak_torque=6.0, duration=1.2), 1e-2, t_final=6.0)
+    assert fast.variant == "exact" and fast.geometric_error > 1e-2
+    assert "above the tolerance" in fast.explanation
+
+
+def test_scene_reports_validity_and_auto_variant():
+    scene = flexctl.load_scene("hub-beam-mass", overrides={
+        "model.variant": "auto", "maneuver.peak_torque": 6.0, "maneuver.duration": 1.2,
+        "simulation.t_final": 3.0, "model.modes": 2})
+    assert scene.variant == "exact"
+    result = flexctl.run_scene(scene)
+    assert result.model.variant == "exact"
+    assert result.validity.deflection_ratio > 0.2
+    with pytest.raises(flexctl.SceneError, match="model.variant"):
+        flexctl.load_scene("hub-beam-mass", overrides={"model.variant": "exactly"})
+    with pytest.raises(flexctl.SceneError, match="model.design_variant"):
+        flexctl.load_scene("slew-90", overrides={"model.design_variant": "auto"})
