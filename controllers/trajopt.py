@@ -354,9 +354,10 @@ def _resample_guess(guess, model: Model, problem: SlewProblem):
 
 
 # ---------------------------------------------------------------------------- transcription
-#: ``omega_max h`` of one RK4 substep on the fastest design mode (stability needs < 2.83; at 1
-#: the phase error per step is below 1e-2 rad and the slower modes are far more accurate).
-RK4_OMEGA_H = 1.0
+#: ``omega_max h`` of one RK4 substep on the fastest design mode: stability needs < 2.83, and
+#: the plan's own accuracy (the end state reached by the held torques, to 1e-3 of each state's
+#: scale on slew-90) needs about 0.3, where the relative phase error per step is 2e-5.
+RK4_OMEGA_H = 0.3
 #: More substeps per hold than this means design modes far faster than the holds can shape:
 #: fewer design modes or more intervals is the remedy.
 MAX_SUBSTEPS = 100
