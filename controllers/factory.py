@@ -74,6 +74,16 @@ class OpenLoop:
     def torque(self, t, x, z):
         return float(self.torque_function(t))
 
+    @property
+    def has_casadi_form(self) -> bool:
+        """True when the torque function has a CasADi form (``casadi(t)``)."""
+        return callable(getattr(self.torque_function, "casadi", None)) \
+            and bool(getattr(self.torque_function, "has_casadi_form", True))
+
+    def casadi_torque(self, t, x):
+        """The torque function's CasADi expression of the symbol ``t`` (``x`` unused)."""
+        return self.torque_function.casadi(t)
+
     def derivative(self, t, x, z):
         return np.zeros(0)
 

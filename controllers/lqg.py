@@ -32,8 +32,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .lqr import LQRWeights, _lqr_gain, _model, reference_state, static_deflection_gain
-from .reference import _check_reference, _optional_positive, _real, _saturate
+from .lqr import (LQRWeights, _lqr_gain, _model, casadi_reference_state, reference_state,
+                  static_deflection_gain)
+from .reference import (_casadi_saturate, _check_reference, _has_casadi, _optional_positive,
+                        _real, _saturate)
 
 __all__ = ["NoiseLevels", "LQG", "design_lqg", "estimator_gain", "SumOfSines",
            "MEASURED_OUTPUTS"]
@@ -163,6 +165,14 @@ class SumOfSines:
         return np.sum(self.amplitudes * np.sin(self.frequencies * float(t) + self.phases),
                       axis=1)
 
+    def casadi(self, t):
+        """The noise as a CasADi expression of the symbol ``t``, shape (C, 1)."""
+        import casadi as ca
+
+        terms = ca.DM(self.amplitudes) * ca.sin(ca.DM(self.frequencies) * t
+                                                + ca.DM(self.phases))
+        return ca.sum2(terms)
+
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class LQG:
@@ -290,6 +300,44 @@ class LQG:
         u = self.torque(t, x, z)
         innovation = self.measure(t, x) - self.c @ z
         return self.a @ z + self.b[:, 0] * u + self.estimator_gain @ innovation
+
+    @property
+    def has_casadi_form(self) -> bool:
+        """True when the reference and the measurement noise (if any) have CasADi forms."""
+        return _has_casadi(self.reference) and _has_casadi(self.measurement_noise, "casadi")
+
+    def casadi_measure(self, t, x):
+        """:meth:`measure` of the CasADi symbols ``t`` and ``x``, shape (2, 1)."""
+        import casadi as ca
+
+        if x.numel() != self.measurement_matrix.shape[1]:
+            raise ValueError(f"lqg: plant state has shape {x.shape} but the sensors are set "
+                             f"for {self.measurement_matrix.shape[1]} states; use "
+                             "lqg.for_plant(plant_model)")
+        y = ca.mtimes(ca.DM(self.measurement_matrix), x)
+        if self.measurement_noise is not None:
+            y = y + self.measurement_noise.casadi(t)
+        return y
+
+    def casadi_torque(self, t, x, z):
+        """:meth:`torque` as a CasADi expression of the symbols ``t``, ``x`` and ``z``."""
+        import casadi as ca
+
+        x_ref, acc = casadi_reference_state(self.reference, t, self.n_modes,
+                                            self.deflection_gain)
+        u = -ca.dot(ca.DM(self.gain[0]), z - x_ref)
+        if self.feedforward_inertia is not None:
+            u += self.feedforward_inertia * acc
+        return _casadi_saturate(u, self.torque_limit)
+
+    def casadi_derivative(self, t, x, z):
+        """:meth:`derivative` as a CasADi expression, shape (n_d, 1)."""
+        import casadi as ca
+
+        u = self.casadi_torque(t, x, z)
+        innovation = self.casadi_measure(t, x) - ca.mtimes(ca.DM(self.c), z)
+        return (ca.mtimes(ca.DM(self.a), z) + ca.DM(self.b[:, 0]) * u
+                + ca.mtimes(ca.DM(self.estimator_gain), innovation))
 
     def compensator(self):
         """Linear compensator from ``[theta, root_moment]`` to torque (no reference, no

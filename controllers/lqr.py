@@ -41,9 +41,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from flexctl.model import Model
+from flexctl.model.errors import InputValueError
 
-from .reference import (_check_reference, _evaluate, _optional_positive, _real,
-                        _saturate)
+from .reference import (_casadi_evaluate, _casadi_saturate, _check_reference, _evaluate,
+                        _has_casadi, _optional_positive, _real, _saturate)
 
 __all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation_matrix",
            "truncate_state", "reference_state", "closed_loop_poles", "static_deflection_gain"]
@@ -137,6 +138,38 @@ def reference_state(reference, t: float, n_modes: int, deflection_gain=None) -> 
     return x_ref, acc
 
 
+def casadi_truncate_state(x, n_design_modes: int):
+    """:func:`truncate_state` of a CasADi plant state vector (shape (2 N + 2, 1))."""
+    import casadi as ca
+
+    if x.numel() < 2 or x.numel() % 2:
+        raise ValueError("truncate_state.x must be a plant state vector of even length; "
+                         f"got shape {x.shape}")
+    m, n = int(n_design_modes), x.numel() // 2 - 1
+    if m > n:
+        raise ValueError(f"truncate_state.n_design_modes must be <= the plant's {n} modes; "
+                         f"got {m}")
+    return ca.vertcat(x[:m + 1], x[n + 1:n + m + 2])
+
+
+def casadi_reference_state(reference, t, n_modes: int, deflection_gain=None) -> tuple:
+    """:func:`reference_state` on the CasADi symbol ``t``: ``(x_ref (2 M + 2, 1), acc_ref)``."""
+    import casadi as ca
+
+    angle, rate, acc = _casadi_evaluate(reference, t)
+    q_ref = q_dot_ref = ca.DM.zeros(n_modes)
+    if deflection_gain is not None and reference is not None:
+        jerk = (_casadi_evaluate(reference, t + _JERK_STEP)[2]
+                - _casadi_evaluate(reference, t - _JERK_STEP)[2]) / (2.0 * _JERK_STEP)
+        gain = ca.DM(np.asarray(deflection_gain, dtype=float))
+        q_ref, q_dot_ref = -gain * acc, -gain * jerk
+    return ca.vertcat(angle, q_ref, rate, q_dot_ref), acc
+
+
+#: Bryson values of :class:`LQRWeights` must lie within [1 / WEIGHT_RANGE, WEIGHT_RANGE].
+WEIGHT_RANGE = 1e12
+
+
 @dataclass(frozen=True, kw_only=True)
 class LQRWeights:
     """Largest acceptable values (Bryson's rule) that weight the LQR cost.
@@ -172,6 +205,13 @@ class LQRWeights:
         for name in ("hub_rate", "tip_deflection", "modal_energy"):
             object.__setattr__(self, name,
                                _optional_positive("lqr_weights", name, getattr(self, name)))
+        for name in ("hub_angle", "torque", "hub_rate", "tip_deflection", "modal_energy"):
+            value = getattr(self, name)
+            # the cost squares their inverses: 1e-200 overflows, and weights this far apart
+            # leave the Riccati equation nothing but rounding error
+            if value is not None and not 1.0 / WEIGHT_RANGE <= value <= WEIGHT_RANGE:
+                raise InputValueError(f"lqr_weights.{name} must lie in [{1.0 / WEIGHT_RANGE:g}, "
+                                      f"{WEIGHT_RANGE:g}]; got {value!r}")
 
 
 def lqr_weight_matrices(model, weights: LQRWeights) -> tuple:
@@ -278,6 +318,23 @@ class LQR:
         if self.feedforward_inertia is not None:
             u += self.feedforward_inertia * acc
         return _saturate(u, self.torque_limit)
+
+    @property
+    def has_casadi_form(self) -> bool:
+        """True when the reference (if any) has a CasADi form (``casadi_reference``)."""
+        return _has_casadi(self.reference)
+
+    def casadi_torque(self, t, x):
+        """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``."""
+        import casadi as ca
+
+        x_design = casadi_truncate_state(x, self.n_modes)
+        x_ref, acc = casadi_reference_state(self.reference, t, self.n_modes,
+                                            self.deflection_gain)
+        u = -ca.dot(ca.DM(self.gain[0]), x_design - x_ref)
+        if self.feedforward_inertia is not None:
+            u += self.feedforward_inertia * acc
+        return _casadi_saturate(u, self.torque_limit)
 
     def derivative(self, t: float, x, z=None) -> np.ndarray:
         """No internal state: shape (0,)."""

@@ -23,8 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .reference import (_check_reference, _evaluate, _hub_state, _optional_positive, _real,
-                        _saturate)
+from .reference import (_casadi_evaluate, _casadi_hub_state, _casadi_saturate,
+                        _check_reference, _evaluate, _has_casadi, _hub_state, _optional_positive,
+                        _real, _saturate)
 
 __all__ = ["PD", "pd_gains", "design_pd"]
 
@@ -109,6 +110,20 @@ class PD:
         if self.feedforward_inertia is not None:
             u += self.feedforward_inertia * acc_ref
         return _saturate(u, self.torque_limit)
+
+    @property
+    def has_casadi_form(self) -> bool:
+        """True when the reference (if any) has a CasADi form (``casadi_reference``)."""
+        return _has_casadi(self.reference)
+
+    def casadi_torque(self, t, x):
+        """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``."""
+        theta, rate = _casadi_hub_state(x)
+        angle_ref, rate_ref, acc_ref = _casadi_evaluate(self.reference, t)
+        u = self.kp * (angle_ref - theta) + self.kd * (rate_ref - rate)
+        if self.feedforward_inertia is not None:
+            u += self.feedforward_inertia * acc_ref
+        return _casadi_saturate(u, self.torque_limit)
 
     def derivative(self, t: float, x, z=None) -> np.ndarray:
         """No internal state: shape (0,)."""

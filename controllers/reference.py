@@ -109,6 +109,23 @@ class SlewProfile:
         """Largest ``|acceleration|``, rad/s^2."""
         return _PEAK_ACCELERATION[self.shape] * abs(self.slew_angle) / self.duration ** 2
 
+    def casadi_reference(self, t):
+        """Angle, rate and acceleration as CasADi expressions of the symbol ``t`` (the
+        formulas of :meth:`angle`, :meth:`rate`, :meth:`acceleration`)."""
+        import casadi as ca
+
+        tau = ca.fmin(ca.fmax((t - self.start_time) / self.duration, 0.0), 1.0)
+        if self.shape == "poly7":
+            s = tau ** 4 * (35.0 + tau * (-84.0 + tau * (70.0 - 20.0 * tau)))
+            ds = 140.0 * (tau * (1.0 - tau)) ** 3
+            dds = 420.0 * (tau * (1.0 - tau)) ** 2 * (1.0 - 2.0 * tau)
+        else:
+            s = tau - ca.sin(2.0 * np.pi * tau) / (2.0 * np.pi)
+            ds = 1.0 - ca.cos(2.0 * np.pi * tau)
+            dds = 2.0 * np.pi * ca.sin(2.0 * np.pi * tau)
+        return (self.slew_angle * s, self.slew_angle / self.duration * ds,
+                self.slew_angle / self.duration ** 2 * dds)
+
     def _tau(self, t):
         t = np.asarray(t, dtype=float)
         return np.clip((t - self.start_time) / self.duration, 0.0, 1.0)
@@ -209,3 +226,32 @@ def _hub_state(x) -> tuple:
         raise ValueError("plant state must be a vector [theta, q_1..q_N, theta_dot, "
                          f"q_1_dot..q_N_dot] of even length >= 2; got shape {x.shape}")
     return float(x[0]), float(x[x.size // 2])
+
+
+# ---- CasADi forms of the helpers above, for the compiled simulation path ----------------
+def _has_casadi(source, method: str = "casadi_reference") -> bool:
+    """``source`` is absent or offers a CasADi form ``method`` (and does not disown it)."""
+    return source is None or (callable(getattr(source, method, None))
+                              and bool(getattr(source, "has_casadi_form", True)))
+
+
+def _casadi_evaluate(reference, t):
+    """:func:`_evaluate` on the CasADi symbol ``t``."""
+    if reference is None:
+        return 0.0, 0.0, 0.0
+    return reference.casadi_reference(t)
+
+
+def _casadi_saturate(torque, limit: float | None):
+    """:func:`_saturate` of a CasADi expression."""
+    import casadi as ca
+
+    return torque if limit is None else ca.fmin(ca.fmax(torque, -limit), limit)
+
+
+def _casadi_hub_state(x) -> tuple:
+    """:func:`_hub_state` of a CasADi state vector."""
+    if x.numel() < 2 or x.numel() % 2:
+        raise ValueError("plant state must be a vector [theta, q_1..q_N, theta_dot, "
+                         f"q_1_dot..q_N_dot] of even length >= 2; got shape {x.shape}")
+    return x[0], x[x.numel() // 2]

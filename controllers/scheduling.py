@@ -29,9 +29,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .lqr import (LQRWeights, _lqr_gain, _model, reference_state, static_deflection_gain,
+from .lqr import (LQRWeights, _lqr_gain, _model, casadi_reference_state,
+                  casadi_truncate_state, reference_state, static_deflection_gain,
                   truncate_state, truncation_matrix)
-from .reference import _check_reference, _optional_positive, _real, _saturate
+from .reference import (_casadi_saturate, _check_reference, _has_casadi, _optional_positive,
+                        _real, _saturate)
 
 __all__ = ["ScheduledLQR", "design_scheduled_lqr"]
 
@@ -125,6 +127,37 @@ class ScheduledLQR:
         if self.feedforward_inertia is not None:
             u += self.feedforward_inertia * acc
         return _saturate(u, self.torque_limit)
+
+    @property
+    def has_casadi_form(self) -> bool:
+        """True when the reference (if any) has a CasADi form (``casadi_reference``)."""
+        return _has_casadi(self.reference)
+
+    def casadi_gain_at(self, spin_rate):
+        """:meth:`gain_at` of a CasADi hub rate: the gains as a list of 2 M + 2 expressions."""
+        import casadi as ca
+
+        w, rates, gains = ca.fabs(spin_rate), self.spin_rates, self.gains
+        gain = ca.SX(ca.DM(gains[-1]))
+        # from the top down, so that each bracket overrides the ones above it
+        for k in range(rates.size - 2, -1, -1):
+            frac = (w - rates[k]) / (rates[k + 1] - rates[k])
+            gain = ca.if_else(w < rates[k + 1], (1.0 - frac) * ca.DM(gains[k])
+                              + frac * ca.DM(gains[k + 1]), gain)
+        return ca.if_else(w <= rates[0], ca.DM(gains[0]), gain)
+
+    def casadi_torque(self, t, x):
+        """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``."""
+        import casadi as ca
+
+        x_design = casadi_truncate_state(x, self.n_modes)
+        x_ref, acc = casadi_reference_state(self.reference, t, self.n_modes,
+                                            self.deflection_gain)
+        gain = self.casadi_gain_at(x_design[self.n_modes + 1])
+        u = -ca.dot(gain, x_design - x_ref)
+        if self.feedforward_inertia is not None:
+            u += self.feedforward_inertia * acc
+        return _casadi_saturate(u, self.torque_limit)
 
     def derivative(self, t: float, x, z=None) -> np.ndarray:
         """No internal state: shape (0,)."""

@@ -109,6 +109,17 @@ class BangBang:
         """Torque at time(s) ``t``, N m."""
         return self.inertia * self.acceleration(t)
 
+    def casadi(self, t):
+        """The torque as a CasADi expression of the symbol ``t``, N m."""
+        import casadi as ca
+
+        t = t - self.start_time
+        half, a = 0.5 * self.duration, math.copysign(self.peak_torque / self.inertia,
+                                                    self.slew_angle)
+        acc = ca.if_else(ca.logic_and(t >= 0, t < half), a,
+                         ca.if_else(ca.logic_and(t >= half, t < 2 * half), -a, 0.0))
+        return self.inertia * acc
+
     def rate(self, t):
         """Rigid hub rate, rad/s."""
         t = np.clip(np.asarray(t, dtype=float) - self.start_time, 0.0, self.duration)
@@ -247,6 +258,17 @@ class ShapedTorque:
         return sum(a * np.asarray(self.base(t - ti), dtype=float)
                    for ti, a in zip(self.shaper.times, self.shaper.amplitudes))
 
+    @property
+    def has_casadi_form(self) -> bool:
+        """True when ``base`` has a CasADi form (``casadi(t)``)."""
+        return callable(getattr(self.base, "casadi", None)) \
+            and bool(getattr(self.base, "has_casadi_form", True))
+
+    def casadi(self, t):
+        """The torque as a CasADi expression of the symbol ``t``, N m."""
+        return sum(a * self.base.casadi(t - ti)
+                   for ti, a in zip(self.shaper.times, self.shaper.amplitudes))
+
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class ShapedReference:
@@ -281,6 +303,18 @@ class ShapedReference:
     def acceleration(self, t):
         """rad/s^2."""
         return self._sum("acceleration", t)
+
+    @property
+    def has_casadi_form(self) -> bool:
+        """True when ``base`` has a CasADi form (``casadi_reference(t)``)."""
+        return callable(getattr(self.base, "casadi_reference", None)) \
+            and bool(getattr(self.base, "has_casadi_form", True))
+
+    def casadi_reference(self, t):
+        """Angle, rate and acceleration as CasADi expressions of the symbol ``t``."""
+        parts = [self.base.casadi_reference(t - ti) for ti in self.shaper.times]
+        return tuple(sum(a * part[j] for a, part in zip(self.shaper.amplitudes, parts))
+                     for j in range(3))
 
 
 def shape(command, shaper: Shaper):

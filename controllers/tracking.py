@@ -13,7 +13,7 @@ import numpy as np
 
 from flexctl.model import Model
 
-from .lqr import truncate_state
+from .lqr import casadi_truncate_state, truncate_state
 from .trajopt import HoldTorque, SlewSolution, _number
 
 __all__ = ["TrajectoryTracker"]
@@ -115,6 +115,31 @@ class TrajectoryTracker:
         u = self._feedforward(t) - float(self.gain @ error)
         if self.torque_limit is not None:
             u = float(np.clip(u, -self.torque_limit, self.torque_limit))
+        return u
+
+    def casadi_torque(self, t, x):
+        """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``.
+
+        ``K x_opt(t)`` is the Hermite cubic of :meth:`SlewSolution.state_at` with its
+        coefficients projected on the gain beforehand: one scalar per coefficient and hold,
+        selected with the held feedforward by one chain of comparisons on ``t``.
+        """
+        import casadi as ca
+
+        from flexctl.sim.compiled import piecewise_constant
+
+        grid, coef = self.solution.t, self.solution._hermite      # (K+1,), (K, 4, n)
+        table = np.column_stack((grid[:-1], grid[1:], coef @ self.gain,
+                                 self._feedforward.values))
+        row = piecewise_constant(t, grid[1:-1], table)
+        s = ca.fmin(ca.fmax((t - row[0]) / (row[1] - row[0]), 0.0), 1.0)
+        optimal = row[2] + s * (row[3] + s * (row[4] + s * row[5]))     # K x_opt(t)
+        outside = ca.logic_or(t < self._feedforward.t[0], t >= self._feedforward.t[-1])
+        feedforward = ca.if_else(outside, 0.0, row[6])
+        design = casadi_truncate_state(x, self.solution.model.n_modes)
+        u = feedforward - (ca.dot(ca.DM(self.gain), design) - optimal)
+        if self.torque_limit is not None:
+            u = ca.fmin(ca.fmax(u, -self.torque_limit), self.torque_limit)
         return u
 
     def derivative(self, t, x, z=None) -> np.ndarray:  # noqa: D102

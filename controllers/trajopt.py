@@ -226,6 +226,15 @@ class HoldTorque:
         inside = (k >= 0) & (k < self.values.size)
         return np.where(inside, self.values[np.clip(k, 0, self.values.size - 1)], 0.0)
 
+    def casadi(self, t):
+        """The torque as a CasADi expression of the symbol ``t`` (exactly the held values)."""
+        import casadi as ca
+
+        from flexctl.sim.compiled import piecewise_constant
+
+        held = piecewise_constant(t, self.t[1:-1], self.values)
+        return ca.if_else(ca.logic_or(t < self.t[0], t >= self.t[-1]), 0.0, held)
+
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class SlewSolution:

@@ -28,10 +28,11 @@ import numpy as np
 
 from controllers.spec import CONTROLLER_KEYS
 
-from .scenes import load_scene
+from .scenes import load_scene, run_slew
 from .sweep import PointMassAmplitudes, SceneTask, response_amplitudes, sweep
 
 __all__ = ["Section", "kane_spinup", "spacecraft_torque", "hub_beam_mass", "slew_comparison",
+           "large_deflection",
            "PAPER_VALUES", "SWEEP_POINTS"]
 
 #: Published values (MODEL.md section 6), m.
@@ -269,8 +270,9 @@ def slew_comparison(out: Path, executor=None, kinds=None) -> Section:
     return Section(
         title="Controller comparison on slew-90",
         paragraphs=(f"{scene.description}. Every controller kind, designed on a "
-                    f"{scene.model.design_modes}-mode model by controllers.from_spec and run "
-                    f"against the {scene.model.modes}-mode first_order plant. Residual "
+                    f"{scene.model.design_modes}-mode {scene.design_variant} model by "
+                    f"controllers.from_spec and run against the {scene.model.modes}-mode "
+                    f"{scene.variant} plant. Residual "
                     "vibration: largest |tip deflection| after the manoeuvre's nominal end; "
                     "settling: 2 % band of the hub angle. Table: "
                     "[controller-comparison.csv](controller-comparison.csv).",),
@@ -278,3 +280,48 @@ def slew_comparison(out: Path, executor=None, kinds=None) -> Section:
                 "peak torque (N m)", "peak tip (m)", "final error (rad)", "wall time (s)"),
                rows),
         images=(("Controller comparison", image),), files=(csv,))
+
+
+def large_deflection(out: Path, executor=None) -> Section:
+    """What exact geometry changes on ``slew-90``: the optimal slew designed on first_order and
+    on exact (few modes each), each judged on first_order and exact plants."""
+    from controllers import from_spec
+
+    base = load_scene("slew-90")
+    rows, csv_rows = [], ["design_variant,plant_variant,residual_vibration_m,final_error_rad,"
+                          "peak_tip_deflection_m,geometric_error"]
+    for design in ("first_order", "exact"):
+        designed = None                      # one optimisation per design model
+        for plant in ("first_order", "exact"):
+            scene = load_scene("slew-90", overrides={
+                "controller.kind": "trajopt", "model.variant": plant,
+                "model.design_variant": design})
+            designed = designed or from_spec(scene)
+            result, built, metrics = run_slew(scene, lambda *_: designed)
+            error = result.validity.geometric_error
+            rows.append((design, plant, f"{1e3 * metrics.residual_vibration:.3g}",
+                         f"{np.degrees(metrics.final_error):.3g}",
+                         f"{metrics.peak_tip_deflection:.3g}",
+                         "exact" if plant == "exact" else f"{error:.2g}"))
+            csv_rows.append(f"{design},{plant},{metrics.residual_vibration:.6g},"
+                            f"{metrics.final_error:.6g},{metrics.peak_tip_deflection:.6g},"
+                            f"{error:.6g}")
+    csv = out / "large-deflection.csv"
+    csv.write_text("\n".join(csv_rows) + "\n")
+    return Section(
+        title="Large deflection: what exact geometry changes on slew-90",
+        paragraphs=(
+            f"{base.description}. The tip bends by a quarter of the beam length, far outside "
+            "the small-deflection range of first_order. The minimum-effort slew "
+            f"(trajopt, {base.model.design_modes} design modes, "
+            f"{base.maneuver.torque_bound:g} N m bound) is "
+            "optimised on each variant and played open loop on a "
+            f"{base.model.modes}-mode plant of each variant. Designed on first_order, it looks "
+            "nearly vibration-free on first_order but leaves far more on the exact beam, and "
+            "its hub overshoots the target; designed on exact, it suppresses the vibration of "
+            "the exact beam. The last column is the run's estimated geometric model error "
+            "(flexctl.sim.validity), the warning that first_order is out of range here. "
+            "Table: [large-deflection.csv](large-deflection.csv).",),
+        table=(("design model", "plant", "residual vibration (mm)", "final error (deg)",
+                "peak tip (m)", "geometric error of the plant model"), rows),
+        files=(csv,))

@@ -8,27 +8,212 @@ to locate the exact time at which a run stops.
 
 States are scaled by their physical size before integration, so one absolute tolerance serves
 angles, rates and modal coordinates alike.
+
+Controllers join through ``casadi_torque(t, x)`` (static laws) or ``casadi_torque(t, x, z)``
+and ``casadi_derivative(t, x, z)`` (laws with internal states ``z``, integrated with the
+plant): CasADi expressions of the time symbol ``t`` and the plant's state vector ``x``
+(``[theta, q_1..q_N, theta_dot, q_1_dot..q_N_dot]`` of the *plant*, whatever the design model),
+equal to the numpy ``torque`` and ``derivative`` of the same law. Saturation is ``fmin`` /
+``fmax`` (the exact law); jumps in time (holds, reference ends) stay at the ``breakpoints``
+where the integration restarts, and each segment's inputs are evaluated at most at its own
+last time.
+
+Each segment is integrated in its own time ``tau = (t - t_0) / h`` in [0, 1], with ``t_0``,
+``h`` and the last input time as parameters, so one right-hand side and one integrator per
+pattern of output times serve every segment; both are kept (:data:`RHS_CACHE_SIZE`,
+:data:`INTEGRATOR_CACHE_SIZE`) for later runs with the same model and inputs, when those are
+immutable (frozen dataclasses, as the built-in ones are).
 """
 
 from __future__ import annotations
+
+from collections import OrderedDict
 
 import numpy as np
 
 from ..model.exports import _symbolic_beam_dynamics, _symbolic_dynamics
 
-__all__ = ["is_symbolic", "SegmentIntegrator", "integrate_segments"]
+__all__ = ["is_symbolic", "piecewise_constant", "torque_history", "SegmentIntegrator",
+           "integrate_segments"]
+
+
+def _has_form(source, method: str) -> bool:
+    """``source`` offers a callable ``method`` and does not disown it (``has_casadi_form``)."""
+    return callable(getattr(source, method, None)) and bool(getattr(source, "has_casadi_form",
+                                                                    True))
 
 
 def is_symbolic(torque=None, hub_motion=None, controller=None) -> bool:
-    """True when every given input offers a CasADi form (``casadi`` / ``casadi_torque``)."""
-    if torque is not None and not callable(getattr(torque, "casadi", None)):
+    """True when every given input offers a CasADi form.
+
+    A torque needs ``casadi(t)``, a hub motion ``casadi(t) -> (rate, acceleration)``, a
+    controller ``casadi_torque(t, x)`` (static, ``n_states == 0``) or ``casadi_torque(t, x, z)``
+    and ``casadi_derivative(t, x, z)`` (with internal states ``z``). An object whose form
+    depends on what it wraps (a shaped command, a reference) says whether it has one with a
+    ``has_casadi_form`` attribute (default True).
+    """
+    if torque is not None and not _has_form(torque, "casadi"):
         return False
-    if hub_motion is not None and not callable(getattr(hub_motion, "casadi", None)):
+    if hub_motion is not None and not _has_form(hub_motion, "casadi"):
         return False
-    if controller is not None and (getattr(controller, "n_states", 0)
-                                   or not callable(getattr(controller, "casadi_torque", None))):
-        return False
+    if controller is not None:
+        if not _has_form(controller, "casadi_torque"):
+            return False
+        if getattr(controller, "n_states", 0) and not callable(
+                getattr(controller, "casadi_derivative", None)):
+            return False
     return True
+
+
+def piecewise_constant(t, edges, values):
+    """CasADi ``values[k]`` for ``t`` past ``k`` of the ``edges``: the zero-order hold.
+
+    Parameters
+    ----------
+    t : casadi.SX
+        Scalar time, s.
+    edges : array_like, shape (K - 1,)
+        Ascending interior boundaries, s; hold ``k`` is ``edges[k-1] <= t < edges[k]``
+        (``bisect.bisect_right(edges, t)``), the first and last holds extend to infinity.
+    values : array_like, shape (K,) or (K, m)
+
+    Returns
+    -------
+    casadi.SX, shape (m, 1) (or (1, 1))
+        Exactly one of the rows of ``values`` (a chain of ``if_else``, no arithmetic on them).
+    """
+    import casadi as ca
+
+    values = np.asarray(values, dtype=float)
+    rows = values.reshape(values.shape[0], -1)
+    edges = np.asarray(edges, dtype=float).reshape(-1)
+    if edges.size != rows.shape[0] - 1:
+        raise ValueError(f"piecewise_constant needs {rows.shape[0] - 1} edges for "
+                         f"{rows.shape[0]} values; got {edges.size}")
+    passed = [t >= float(e) for e in edges]
+    out = ca.SX(ca.DM(rows[0]))
+    for k in range(1, rows.shape[0]):
+        out = ca.if_else(passed[k - 1], ca.DM(rows[k]), out)
+    return out
+
+
+def _closed_loop_dynamics(model, t, y, torque, controller):
+    """CasADi ``d[x, z]/dt`` of the plant ``x`` under ``torque`` and ``controller``, whose
+    internal states ``z`` (if any) follow ``casadi_derivative``."""
+    import casadi as ca
+
+    nx = model.n_states
+    x, z = y[:nx], y[nx:]
+    u = 0.0
+    if torque is not None:
+        u = u + torque.casadi(t)
+    stateful = controller is not None and getattr(controller, "n_states", 0)
+    if stateful:
+        u = u + controller.casadi_torque(t, x, z)
+    elif controller is not None:
+        u = u + controller.casadi_torque(t, x)
+    dx = _symbolic_dynamics(model, x, ca.vertcat(u))
+    return ca.vertcat(dx, controller.casadi_derivative(t, x, z)) if stateful else dx
+
+
+#: Right-hand sides and integrators kept for reuse, by the identity of the model and inputs
+#: (immutable ones only), least recently used dropped first.
+RHS_CACHE_SIZE = 16
+INTEGRATOR_CACHE_SIZE = 256
+_RHS_CACHE: OrderedDict = OrderedDict()
+_INTEGRATOR_CACHE: OrderedDict = OrderedDict()
+
+
+def _immutable(source) -> bool:
+    """None, or a frozen dataclass (the built-in inputs): its CasADi form cannot change."""
+    params = getattr(source, "__dataclass_params__", None)
+    return source is None or (params is not None and params.frozen)
+
+
+def _input_key(model, inputs, scale):
+    """Cache key of a right-hand side, or None when an input may change after use."""
+    if not all(_immutable(source) for source in inputs):
+        return None
+    return (id(model), *(id(source) for source in inputs), scale.tobytes())
+
+
+def _cached(cache, size, key, keep_alive, build):
+    """``build()``, remembered under ``key`` (None: not remembered). ``keep_alive`` holds the
+    objects whose ``id`` is in the key, so that no other object can take their ids."""
+    if key is None:
+        return build()
+    if key in cache:
+        cache.move_to_end(key)
+        return cache[key][1]
+    value = build()
+    cache[key] = (keep_alive, value)
+    while len(cache) > size:
+        cache.popitem(last=False)
+    return value
+
+
+def _rhs_function(model, scale, torque, hub_motion, controller):
+    """The scaled right-hand side as a CasADi DAE ``Function`` (``casadi.dyn_in`` inputs) in
+    the segment's own time ``tau`` in [0, 1]: ``t = t_0 + tau h`` with the parameters
+    ``p = [t_0, h, t_last]``, ``t_last`` the last time at which the inputs are evaluated.
+
+    One function (and one integrator per output pattern) then serves every segment: the holds
+    of an optimal torque differ only in ``t_0``.
+    """
+    import casadi as ca
+
+    ys, tau, p = ca.SX.sym("ys", scale.size), ca.SX.sym("tau"), ca.SX.sym("p", 3)
+    y = ys * ca.DM(scale)
+    t_in = ca.fmin(p[0] + tau * p[1], p[2])
+    if hub_motion is not None:
+        rate, acceleration = hub_motion.casadi(t_in)
+        dy = _symbolic_beam_dynamics(model, y, rate, acceleration)
+    else:
+        dy = _closed_loop_dynamics(model, t_in, y, torque, controller)
+    empty = ca.SX(0, 1)
+    return ca.Function("flexctl_rhs", [tau, ys, empty, p, empty],
+                       [p[1] * dy / ca.DM(scale), empty, empty, empty], ca.dyn_in(),
+                       ca.dyn_out())
+
+
+def torque_history(model, t, states, controller_states, torque=None, controller=None):
+    """Hub torque of ``torque`` plus ``controller`` along a run, through their CasADi forms.
+
+    Parameters
+    ----------
+    model : Model
+    t : ndarray, shape (P,)
+        s.
+    states : ndarray, shape (n, P)
+        Plant states.
+    controller_states : ndarray, shape (n_z, P)
+    torque, controller :
+        As in :func:`flexctl.simulate`; each must pass :func:`is_symbolic`.
+
+    Returns
+    -------
+    ndarray, shape (P,)
+        N m.
+    """
+    import casadi as ca
+
+    nz = controller_states.shape[0]
+
+    def build():
+        ts, x, z = ca.SX.sym("t"), ca.SX.sym("x", model.n_states), ca.SX.sym("z", nz)
+        u = ca.SX(0.0)
+        if torque is not None:
+            u = u + torque.casadi(ts)
+        if controller is not None:
+            u = u + (controller.casadi_torque(ts, x, z) if nz
+                     else controller.casadi_torque(ts, x))
+        return ca.Function("flexctl_torque", [ts, x, z], [u])
+
+    key = _input_key(model, (torque, None, controller), np.array([nz], dtype=float))
+    law = _cached(_RHS_CACHE, RHS_CACHE_SIZE, None if key is None else ("torque", key),
+                  (model, torque, controller), build)
+    t = np.asarray(t, dtype=float).reshape(1, -1)
+    return np.array(law.map(t.size)(t, states, controller_states)).reshape(-1)
 
 
 class SegmentIntegrator:
@@ -42,8 +227,9 @@ class SegmentIntegrator:
     t_out : ndarray, shape (K,)
         Output times in ``(t_start, t_end]``, ascending, s.
     scale : ndarray, shape (m,)
-        Physical size of each integrated state; ``m = n`` (torque-driven) or ``2 N``
-        (prescribed hub motion: ``[q, q_dot]``).
+        Physical size of each integrated state; ``m = n + n_z`` (torque-driven: the plant
+        state, then the controller's ``n_z`` internal states) or ``2 N`` (prescribed hub
+        motion: ``[q, q_dot]``).
     rtol : float
         Relative tolerance; the absolute tolerance is ``rtol * scale``.
     torque, hub_motion, controller :
@@ -60,35 +246,40 @@ class SegmentIntegrator:
         import casadi as ca
 
         scale = np.asarray(scale, dtype=float)
-        ys = ca.SX.sym("ys", scale.size)
-        t = ca.SX.sym("t")
-        y = ys * ca.DM(scale)
-        if hub_motion is not None:
-            rate, acceleration = hub_motion.casadi(t)
-            dy = _symbolic_beam_dynamics(model, y, rate, acceleration)
-        else:
-            u = 0.0
-            if torque is not None:
-                u = u + torque.casadi(t)
-            if controller is not None:
-                u = u + controller.casadi_torque(t, y)
-            dy = _symbolic_dynamics(model, y, ca.vertcat(u))
+        t_out = np.asarray(t_out, dtype=float)
+        inputs = (torque, hub_motion, controller)
+        rhs_key = _input_key(model, inputs, scale)
+        rhs = _cached(_RHS_CACHE, RHS_CACHE_SIZE, rhs_key, (model, *inputs),
+                      lambda: _rhs_function(model, scale, *inputs))
+        t_start, t_end = float(t_start), float(t_out[-1])
+        length = t_end - t_start
+        # output times as fractions of the segment, rounded so that segments of one pattern
+        # (equal holds on a regular grid) share an integrator; 1e-12 of a segment is far
+        # below any integration error
+        fractions = np.round((t_out - t_start) / length, 12)
+        fractions[-1] = 1.0
         opts = {"reltol": float(rtol), "abstol": float(rtol), "max_num_steps": int(max_steps),
                 "disable_internal_warnings": True}
         if solver == "cvodes":
             # a step this small means a singularity, not accuracy: fail fast and let the
-            # caller locate it
-            opts["min_step_size"] = 1e-12 * max(1.0, float(t_out[-1]))
+            # caller locate it (a power of ten, in fractions of the segment, to share)
+            opts["min_step_size"] = 10.0 ** np.floor(np.log10(1e-12 * max(1.0, t_end)
+                                                              / length))
         if max_order is not None:
             opts["max_multistep_order"] = int(max_order)
+        key = None if rhs_key is None else (rhs_key, fractions.tobytes(),
+                                            tuple(sorted(opts.items())), solver)
         self._scale = scale
-        self._f = ca.integrator(f"flexctl_{solver}", solver,
-                                {"x": ys, "t": t, "ode": dy / ca.DM(scale)},
-                                float(t_start), [float(v) for v in t_out], opts)
+        # the inputs see the segment's own piece at its closed end, as on the SciPy path: a
+        # solver that evaluates past the last output time must not see the next hold
+        self._parameters = [t_start, length, float(np.nextafter(t_end, t_start))]
+        self._f = _cached(_INTEGRATOR_CACHE, INTEGRATOR_CACHE_SIZE, key, (model, *inputs),
+                          lambda: ca.integrator(f"flexctl_{solver}", solver, rhs, 0.0,
+                                                [float(v) for v in fractions], opts))
 
     def __call__(self, y0) -> np.ndarray:
         """States at the output times, shape (m, K); raises ``RuntimeError`` if CVODES fails."""
-        out = self._f(x0=np.asarray(y0, dtype=float) / self._scale)
+        out = self._f(x0=np.asarray(y0, dtype=float) / self._scale, p=self._parameters)
         return np.array(out["xf"]) * self._scale[:, None]
 
     @property

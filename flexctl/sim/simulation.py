@@ -35,7 +35,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .compiled import SegmentIntegrator, is_symbolic, verify_accuracy
+from .compiled import SegmentIntegrator, is_symbolic, torque_history, verify_accuracy
 from ..model import Model, SingularMassMatrixError
 
 __all__ = ["simulate", "SimulationResult", "Controller", "StiffnessWarning", "AccuracyWarning"]
@@ -600,6 +600,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                           else np.asarray(torque(t_all), dtype=float).reshape(-1))
             if torque_out.shape != t_all.shape:
                 torque_out = None
+        if torque_out is None and symbolic:
+            torque_out = torque_history(model, t_all, states, z_all, torque, controller)
         if torque_out is None:
             torque_out = np.array([applied_torque(t, states[:, k], z_all[:, k])
                                    for k, t in enumerate(t_all)])

@@ -1,0 +1,192 @@
+"""Benchmark: closed-loop simulation, compiled (CVODES) against SciPy and a bare CVODES loop.
+
+Case A, the closed loop of issue 9: ``slew-90``'s 6-mode first_order plant under
+``controllers.PD(kp=12, kd=8, torque_limit=6)``, from 90 deg off target (``theta(0) = -pi/2``,
+regulated to 0) to rest, 6 s, on the scene's 0.005 s output grid. Tools:
+
+- ``flexctl.simulate(controller=pd)`` on its default path, now compiled (the PD law has a
+  CasADi form): *cold*, a new controller object per run so that nothing built before is reused
+  (integrator construction, the run, the accuracy check, outputs); *warm*, the same objects
+  again (the integrators built for them are reused); and without the accuracy check;
+- the same call forced onto SciPy's DOP853 (``method="DOP853"``), the path every closed loop
+  took before the controllers had CasADi forms;
+- a bare CasADi CVODES integration of the same closed loop built on ``model.casadi()``
+  (``f(x, u)``, the saturated PD written with ``fmin``/``fmax``), construction included.
+
+Every tool runs at the largest relative tolerance (quarter decades from 1e-4 down) whose tip
+deflection is within 1e-6 of a reference, relative to the peak, as ``bench_speed.py`` does. The
+reference is DOP853 at rtol 1e-12 through ``flexctl.simulate`` (a different integrator from the
+compiled ones timed). The bare run takes ``atol = rtol * 1e-3`` (metres and radians); flexctl
+scales its own.
+
+Case B, the demo's controller comparison (:func:`flexctl.app.demo.slew_comparison`): every
+controller kind on ``slew-90`` through :func:`flexctl.app.sweep.sweep`, run serially here,
+on the default path and with ``simulation.method = "DOP853"``. Wall time per kind (design and
+simulation, as the sweep reports it) and the whole sweep.
+
+Targets (issue 9): A, flexctl within 2x of the bare CVODES loop; B, the comparison at least 5x
+faster than on the SciPy path. Nothing here is asserted: the script prints what it measures.
+
+Run: ``python benchmarks/bench_closed_loop.py`` (a few minutes: the DOP853 runs dominate).
+"""
+
+from __future__ import annotations
+
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import casadi as ca                                   # noqa: E402
+
+from controllers import PD, from_spec                 # noqa: E402
+from controllers.spec import CONTROLLER_KEYS          # noqa: E402
+from flexctl import load_scene, simulate              # noqa: E402
+from flexctl.app.sweep import SceneTask, sweep        # noqa: E402
+
+TARGET = 1e-6                        # relative tip error asked of every tool
+RTOL_GRID = 10.0 ** (-4.0 - 0.25 * np.arange(29))     # 1e-4 .. 1e-11
+REFERENCE_RTOL = 1e-12
+ATOL_SCALE = 1e-3                    # bare run: atol = rtol * 1e-3 (m, rad)
+T_FINAL = 6.0                        # s
+GAINS = {"kp": 12.0, "kd": 8.0, "torque_limit": 6.0}
+REPEATS = 7                          # compiled runs (tens of ms each)
+REPEATS_SLOW = 3                     # DOP853 runs (seconds each)
+
+
+def relative_error(tip, reference):
+    return float(np.max(np.abs(tip - reference)) / np.max(np.abs(reference)))
+
+
+def median_time(run, repeats):
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        run()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def tune(run, reference):
+    """Largest rtol of RTOL_GRID whose tip is within TARGET of the reference: (rtol, error)."""
+    for rtol in RTOL_GRID:
+        error = relative_error(run(rtol), reference)
+        if error <= TARGET:
+            return float(rtol), error
+    raise RuntimeError(f"no rtol down to {RTOL_GRID[-1]:g} reaches {TARGET:g}")
+
+
+# ---------------------------------------------------------------------------- case A
+def flexctl_tip(model, x0, step, fresh=True, method="auto", check_accuracy=True):
+    """``rtol -> tip``; ``fresh``: a new PD per run, so that no cached integrator applies."""
+    kept = PD(**GAINS)
+
+    def run(rtol):
+        pd = PD(**GAINS) if fresh else kept
+        result = simulate(model, T_FINAL, controller=pd, x0=x0, rtol=rtol, output_step=step,
+                          method=method, check_accuracy=check_accuracy)
+        assert result.ok and (method != "auto" or result.method == "cvodes"), result.message
+        return result.tip_deflection
+    return run
+
+
+def bare_cvodes_tip(model, x0, grid):
+    """CVODES on ``model.casadi()`` closed by the saturated PD law, written directly."""
+    n, tip = model.n_modes, model.matrices.tip
+    dynamics = model.casadi()
+
+    def run(rtol):
+        x = ca.SX.sym("x", model.n_states)
+        u = GAINS["kp"] * (0.0 - x[0]) + GAINS["kd"] * (0.0 - x[n + 1])
+        u = ca.fmin(ca.fmax(u, -GAINS["torque_limit"]), GAINS["torque_limit"])
+        integrator = ca.integrator("bare", "cvodes", {"x": x, "ode": dynamics(x, u)}, 0.0,
+                                   list(grid[1:]), {"reltol": rtol, "abstol": rtol * ATOL_SCALE,
+                                                    "max_num_steps": 10 ** 7})
+        xf = np.array(integrator(x0=x0)["xf"])
+        return np.concatenate(([tip @ x0[1:n + 1]], tip @ xf[1:n + 1]))
+    return run
+
+
+def closed_loop_case():
+    scene = load_scene("slew-90")
+    model = scene.build_model()
+    step = scene.simulation.output_step
+    x0 = np.zeros(model.n_states)
+    x0[0] = -np.pi / 2
+    grid = np.arange(0.0, T_FINAL + 0.5 * step, step)
+    grid = grid[grid <= T_FINAL]
+    print(f"\n== A. slew-90 plant ({model.variant}, {model.n_modes} modes) under "
+          f"PD({', '.join(f'{k}={v:g}' for k, v in GAINS.items())}), 90 deg to rest, "
+          f"{T_FINAL:g} s; target relative tip error {TARGET:g}")
+    start = time.perf_counter()
+    reference = flexctl_tip(model, x0, step, method="DOP853")(REFERENCE_RTOL)
+    print(f"   reference: DOP853 at rtol {REFERENCE_RTOL:g} ({time.perf_counter() - start:.1f} s)")
+    tools = {
+        "flexctl.simulate, cold": (flexctl_tip(model, x0, step), REPEATS),
+        "flexctl.simulate, warm": (flexctl_tip(model, x0, step, fresh=False), REPEATS),
+        "flexctl, cold, no check": (flexctl_tip(model, x0, step, check_accuracy=False),
+                                    REPEATS),
+        "flexctl, DOP853 (SciPy)": (flexctl_tip(model, x0, step, method="DOP853"),
+                                    REPEATS_SLOW),
+        "bare casadi CVODES": (bare_cvodes_tip(model, x0, grid), REPEATS),
+    }
+    times = {}
+    print(f"   {'tool':<26} {'rtol':>9} {'error':>9} {'median time':>12}")
+    for label, (run, repeats) in tools.items():
+        rtol, error = tune(run, reference)
+        times[label] = median_time(lambda: run(rtol), repeats)
+        print(f"   {label:<26} {rtol:>9.2g} {error:>9.2g} {times[label]:>10.4f} s")
+    bare = times["bare casadi CVODES"]
+    for label in ("flexctl.simulate, cold", "flexctl.simulate, warm", "flexctl, cold, no check"):
+        ratio = times[label] / bare
+        print(f"   {label} / bare CVODES = {ratio:.2f} (target <= 2: "
+              f"{'met' if ratio <= 2 else 'missed'})")
+    print(f"   DOP853 path / compiled path (cold) = "
+          f"{times['flexctl, DOP853 (SciPy)'] / times['flexctl.simulate, cold']:.1f}")
+    return times
+
+
+# ---------------------------------------------------------------------------- case B
+def comparison(method):
+    """The demo's sweep over every controller kind: (total wall time, rows)."""
+    overrides = {"controller.kind": list(CONTROLLER_KEYS)}
+    if method is not None:
+        overrides["simulation.method"] = [method]
+    start = time.perf_counter()
+    table = sweep(SceneTask(scene="slew-90", controller_factory=from_spec, keep_result=True),
+                  overrides, executor=None, progress=False)
+    return time.perf_counter() - start, list(table)
+
+
+def demo_case():
+    print("\n== B. the demo's controller comparison on slew-90 (every kind, serial)")
+    runs = {"compiled (auto)": comparison(None), "SciPy (DOP853)": comparison("DOP853")}
+    print(f"   {'kind':<13} {'compiled: method, wall (s)':>28} {'DOP853 wall (s)':>16} "
+          f"{'ratio':>6}")
+    fast_rows, slow_rows = (runs[k][1] for k in runs)
+    for fast, slow in zip(fast_rows, slow_rows):
+        print(f"   {fast['controller.kind']:<13} {fast['result'].method:>17} "
+              f"{fast['wall_time_s']:>10.3f} {slow['wall_time_s']:>16.3f} "
+              f"{slow['wall_time_s'] / fast['wall_time_s']:>6.1f}")
+    total_fast, total_slow = runs["compiled (auto)"][0], runs["SciPy (DOP853)"][0]
+    ratio = total_slow / total_fast
+    print(f"   whole comparison: {total_fast:.2f} s compiled, {total_slow:.2f} s on DOP853: "
+          f"{ratio:.1f}x faster (target >= 5: {'met' if ratio >= 5 else 'missed'})")
+    integration = sum(r["result"].wall_time for r in fast_rows)
+    print(f"   of the compiled {total_fast:.2f} s, {integration:.2f} s are integration; the rest "
+          "is design (trajectory optimisation above all) and set-up")
+
+
+def main():
+    print(f"flexctl closed-loop benchmark (casadi {ca.__version__}); times are medians, "
+          "end to end")
+    closed_loop_case()
+    demo_case()
+
+
+if __name__ == "__main__":
+    main()
