@@ -491,6 +491,16 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
     umax, target = problem.torque_bound, problem.target_state(n)
     t_rigid = rigid_minimum_time(problem.angle, model.matrices.J0, umax)
     free_time = problem.objective == "time"
+    if problem.duration is not None and problem.duration < t_rigid:
+        # the structure's angular momentum obeys J_0 d(mean angle)/dt^2 = torque, so no torque
+        # within the bound brings it to rest at the angle sooner than the rigid body: no need
+        # to let IPOPT find out
+        raise TrajectoryOptimizationError(
+            f"the duration {problem.duration:g} s is below the rigid-body minimum time "
+            f"{t_rigid:.4g} s for angle {problem.angle:g} rad and torque_bound {umax:g} N m, so "
+            "no torque within the bound can complete the slew: lengthen maneuver.duration or "
+            "raise maneuver.torque_bound (return status 'Infeasible_Duration', found before "
+            "IPOPT ran)", "Infeasible_Duration", 0)
 
     if initial_guess is not None:
         t_guess, x_guess, u_guess = _resample_guess(initial_guess, model, problem)
