@@ -127,3 +127,16 @@ def test_cli_bench_runs_and_rejects_bad_input(tmp_path, capsys):
     assert main(["bench", "--scene", "slew-90", "--out", str(out)]) == EXIT_BAD_INPUT
     err = capsys.readouterr().err
     assert err.startswith("flexctl: error:") and "slew" in err
+
+
+def test_exact_variant_is_benched_against_its_own_reference(tmp_path):
+    config = BenchConfig(scenes=("kane-spinup",), modes=(1, 2), variants=("first_order", "exact"),
+                         methods=("cvodes",), rtols=(1e-8,), reference_modes=4,
+                         reference_rtol=1e-10, t_final=10.0)
+    bench = run_bench(config, tmp_path, progress=False)[0]
+    assert bench.references["exact"]["status"] == "ok"
+    exact = sorted((r for r in bench.rows if r.variant == "exact"), key=lambda r: r.n_modes)
+    assert [r.status for r in exact] == ["ok", "ok"]
+    assert exact[1].error < exact[0].error            # truncation falls with modes
+    assert pareto_front(exact)
+    assert (tmp_path / "kane-spinup-pareto.png").read_bytes()[:8] == PNG_MAGIC

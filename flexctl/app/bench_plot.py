@@ -13,7 +13,7 @@ __all__ = ["plot_pareto"]
 _METHOD_COLOURS = {"cvodes": "tab:blue", "DOP853": "tab:orange", "LSODA": "tab:green",
                    "RK45": "tab:red", "RK23": "tab:purple", "Radau": "tab:brown",
                    "BDF": "tab:pink", "auto": "tab:gray"}
-_VARIANT_MARKERS = {"first_order": "o", "zero_order": "s", "consistent": "^"}
+_VARIANT_MARKERS = {"first_order": "o", "zero_order": "s", "consistent": "^", "exact": "D"}
 
 
 def plot_pareto(bench: SceneBench):

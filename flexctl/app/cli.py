@@ -173,7 +173,7 @@ def _add_bench_command(commands) -> None:
                    "the options below still apply")
     for flag, kind, text in (
             ("--modes", _list(int), "numbers of modes, e.g. 1-12 or 1,2,4 (default 1-12)"),
-            ("--variants", _list(str), "default first_order,zero_order,consistent"),
+            ("--variants", _list(str), "default first_order,zero_order,consistent,exact"),
             ("--methods", _list(str), "default cvodes,DOP853,LSODA"),
             ("--rtols", _list(float), "default 1e-4,1e-6,1e-8"),
             ("--reference-modes", int, "modes of the reference (default 20)"),

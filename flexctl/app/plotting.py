@@ -41,7 +41,8 @@ _STATUS_COLOURS = {"ok": "tab:green", "diverged": "tab:red", "singular": "tab:pu
 #: their clamped stiffness, so their curves coincide).
 _VARIANT_STYLES = {"first_order": dict(linestyle="-", linewidth=2.2),
                    "zero_order": dict(linestyle="--", linewidth=1.6),
-                   "consistent": dict(linestyle=":", linewidth=2.0)}
+                   "consistent": dict(linestyle=":", linewidth=2.0),
+                   "exact": dict(linestyle="-.", linewidth=2.0)}
 
 
 def plot_response(result, fig=None, title: str | None = None):
@@ -294,7 +295,7 @@ def plot_tip_deflections(results, ax=None, title: str | None = None,
     ----------
     results : dict of {str: SimulationResult} or sequence of SimulationResult
         Runs to overlay, labelled by the dict keys. Line style follows the model variant
-        (first_order solid, zero_order dashed, consistent dotted), colour the run.
+        (first_order solid, zero_order dashed, consistent dotted, exact dash-dotted), colour the run.
     ax : matplotlib.axes.Axes, optional
         Axes to draw into; default a new figure.
     title : str, optional
