@@ -1,6 +1,6 @@
 """Benchmark: closed-loop simulation, compiled (CVODES) against SciPy and a bare CVODES loop.
 
-Case A, the closed loop of issue 9: ``slew-90``'s 6-mode first_order plant under
+Case A, the closed loop of issue 9: ``slew-90``'s 6-mode plant, first_order, under
 ``controllers.PD(kp=12, kd=8, torque_limit=6)``, from 90 deg off target (``theta(0) = -pi/2``,
 regulated to 0) to rest, 6 s, on the scene's 0.005 s output grid. Tools:
 
@@ -22,10 +22,16 @@ scales its own.
 Case B, the demo's controller comparison (:func:`flexctl.app.demo.slew_comparison`): every
 controller kind on ``slew-90`` through :func:`flexctl.app.sweep.sweep`, run serially here,
 on the default path and with ``simulation.method = "DOP853"``. Wall time per kind (design and
-simulation, as the sweep reports it) and the whole sweep.
+simulation, as the sweep reports it) and the whole sweep; on the first_order plant of issue 9's
+measurement, and on the scene's own plant when that is another variant.
+
+Case C, repeated runs (issue 9, item 4): slews of case A whose PD gains are dispersed by
++-30 %, at one tolerance: ``flexctl.simulate`` (the PD numbers are parameters of one compiled
+right-hand side, so its integrators are built once) against the sum of the bare CVODES
+integration times (and construction, which the bare loop repeats per gain pair).
 
 Targets (issue 9): A, flexctl within 2x of the bare CVODES loop; B, the comparison at least 5x
-faster than on the SciPy path. Nothing here is asserted: the script prints what it measures.
+faster than on the SciPy path; C, at most 3x the sum of the bare integration times. Nothing here is asserted: the script prints what it measures.
 
 Run: ``python benchmarks/bench_closed_loop.py`` (a few minutes: the DOP853 runs dominate).
 """
@@ -45,7 +51,7 @@ import casadi as ca                                   # noqa: E402
 
 from controllers import PD, from_spec                 # noqa: E402
 from controllers.spec import CONTROLLER_KEYS          # noqa: E402
-from flexctl import load_scene, simulate              # noqa: E402
+from flexctl import build_model, load_scene, simulate  # noqa: E402
 from flexctl.app.sweep import SceneTask, sweep        # noqa: E402
 
 TARGET = 1e-6                        # relative tip error asked of every tool
@@ -56,6 +62,8 @@ T_FINAL = 6.0                        # s
 GAINS = {"kp": 12.0, "kd": 8.0, "torque_limit": 6.0}
 REPEATS = 7                          # compiled runs (tens of ms each)
 REPEATS_SLOW = 3                     # DOP853 runs (seconds each)
+SWEEP_SLEWS = 200                    # case C (issue 9 asks about 1000: the cost is linear)
+SWEEP_RTOL = 1e-6
 
 
 def relative_error(tip, reference):
@@ -113,7 +121,7 @@ def bare_cvodes_tip(model, x0, grid):
 
 def closed_loop_case():
     scene = load_scene("slew-90")
-    model = scene.build_model()
+    model = build_model(scene.system, n_modes=scene.model.modes, variant="first_order")
     step = scene.simulation.output_step
     x0 = np.zeros(model.n_states)
     x0[0] = -np.pi / 2
@@ -150,21 +158,76 @@ def closed_loop_case():
     return times
 
 
+# ---------------------------------------------------------------------------- case C
+def dispersed_gains(count, seed=9):
+    """``count`` PD gain pairs within +-30 % of the nominal ones."""
+    rng = np.random.default_rng(seed)
+    return GAINS["kp"] * rng.uniform(0.7, 1.3, count), GAINS["kd"] * rng.uniform(0.7, 1.3, count)
+
+
+def gain_sweep_case(count=SWEEP_SLEWS, rtol=SWEEP_RTOL):
+    """Slews with dispersed PD gains: flexctl (integrators shared through the gains as
+    parameters) against the sum of bare CVODES integration times."""
+    scene = load_scene("slew-90")
+    model = build_model(scene.system, n_modes=scene.model.modes, variant="first_order")
+    step = scene.simulation.output_step
+    x0 = np.zeros(model.n_states)
+    x0[0] = -np.pi / 2
+    grid = np.arange(0.0, T_FINAL + 0.5 * step, step)
+    grid = grid[grid <= T_FINAL]
+    kps, kds = dispersed_gains(count)
+    print(f"\n== C. {count} slews of case A with PD gains dispersed by +-30 %, rtol {rtol:g}")
+    totals = {}
+    for label, check in (("flexctl.simulate", True), ("flexctl, no check", False)):
+        start = time.perf_counter()
+        for kp, kd in zip(kps, kds):
+            pd = PD(kp=kp, kd=kd, torque_limit=GAINS["torque_limit"])
+            simulate(model, T_FINAL, controller=pd, x0=x0, rtol=rtol, output_step=step,
+                     check_accuracy=check)
+        totals[label] = time.perf_counter() - start
+    build_total = run_total = 0.0
+    dynamics = model.casadi()
+    for kp, kd in zip(kps, kds):
+        start = time.perf_counter()
+        x = ca.SX.sym("x", model.n_states)
+        u = kp * (0.0 - x[0]) + kd * (0.0 - x[model.n_modes + 1])
+        u = ca.fmin(ca.fmax(u, -GAINS["torque_limit"]), GAINS["torque_limit"])
+        integrator = ca.integrator("bare", "cvodes", {"x": x, "ode": dynamics(x, u)}, 0.0,
+                                   list(grid[1:]), {"reltol": rtol, "abstol": rtol * ATOL_SCALE,
+                                                    "max_num_steps": 10 ** 7})
+        built = time.perf_counter()
+        integrator(x0=x0)
+        build_total += built - start
+        run_total += time.perf_counter() - built
+    print(f"   bare CVODES: integration {run_total:.2f} s, construction {build_total:.2f} s "
+          f"(sums over the {count} slews)")
+    for label, total in totals.items():
+        ratio = total / run_total
+        print(f"   {label:<18} {total:.2f} s = {ratio:.2f} x the bare integration times "
+              f"(target <= 3: {'met' if ratio <= 3 else 'missed'}), "
+              f"{total / (run_total + build_total):.2f} x bare built and run")
+
+
 # ---------------------------------------------------------------------------- case B
-def comparison(method):
+def comparison(method, variant):
     """The demo's sweep over every controller kind: (total wall time, rows)."""
     overrides = {"controller.kind": list(CONTROLLER_KEYS)}
     if method is not None:
         overrides["simulation.method"] = [method]
+    if variant is not None:
+        overrides["model.variant"] = [variant]
     start = time.perf_counter()
     table = sweep(SceneTask(scene="slew-90", controller_factory=from_spec, keep_result=True),
                   overrides, executor=None, progress=False)
     return time.perf_counter() - start, list(table)
 
 
-def demo_case():
-    print("\n== B. the demo's controller comparison on slew-90 (every kind, serial)")
-    runs = {"compiled (auto)": comparison(None), "SciPy (DOP853)": comparison("DOP853")}
+def demo_case(variant=None):
+    plant = load_scene("slew-90").model.variant if variant is None else variant
+    print(f"\n== B. the demo's controller comparison on slew-90 (every kind, serial), "
+          f"{plant} plant{' (the scene as the demo runs it)' if variant is None else ''}")
+    runs = {"compiled (auto)": comparison(None, variant),
+            "SciPy (DOP853)": comparison("DOP853", variant)}
     print(f"   {'kind':<13} {'compiled: method, wall (s)':>28} {'DOP853 wall (s)':>16} "
           f"{'ratio':>6}")
     fast_rows, slow_rows = (runs[k][1] for k in runs)
@@ -185,7 +248,10 @@ def main():
     print(f"flexctl closed-loop benchmark (casadi {ca.__version__}); times are medians, "
           "end to end")
     closed_loop_case()
-    demo_case()
+    gain_sweep_case()
+    demo_case("first_order")            # the plant of issue 9's measurement
+    if load_scene("slew-90").model.variant != "first_order":
+        demo_case()
 
 
 if __name__ == "__main__":

@@ -44,7 +44,7 @@ from flexctl.model import Model
 from flexctl.model.errors import InputValueError
 
 from .reference import (_casadi_evaluate, _casadi_saturate, _check_reference, _evaluate,
-                        _has_casadi, _optional_positive, _real, _saturate)
+                        _has_casadi, _optional_positive, _real, _saturate, _structure_key)
 
 __all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation_matrix",
            "truncate_state", "reference_state", "closed_loop_poles", "static_deflection_gain"]
@@ -161,7 +161,8 @@ def casadi_reference_state(reference, t, n_modes: int, deflection_gain=None) -> 
     if deflection_gain is not None and reference is not None:
         jerk = (_casadi_evaluate(reference, t + _JERK_STEP)[2]
                 - _casadi_evaluate(reference, t - _JERK_STEP)[2]) / (2.0 * _JERK_STEP)
-        gain = ca.DM(np.asarray(deflection_gain, dtype=float))
+        gain = (deflection_gain if isinstance(deflection_gain, ca.SX)
+                else ca.DM(np.asarray(deflection_gain, dtype=float)))
         q_ref, q_dot_ref = -gain * acc, -gain * jerk
     return ca.vertcat(angle, q_ref, rate, q_dot_ref), acc
 
@@ -324,17 +325,38 @@ class LQR:
         """True when the reference (if any) has a CasADi form (``casadi_reference``)."""
         return _has_casadi(self.reference)
 
-    def casadi_torque(self, t, x):
-        """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``."""
+    @property
+    def casadi_parameters(self) -> tuple:
+        """``(structure, values)``: what shapes :meth:`casadi_torque` (design modes,
+        reference, which options are on) and its numbers ``[K, feedforward_inertia,
+        torque_limit, deflection_gain]`` (0 for an option that is off, no deflection gain for a
+        rigid reference). Compiled runs of LQR laws of one structure share their integrators."""
+        structure = (self.n_modes, _structure_key(self.reference),
+                     self.feedforward_inertia is None, self.torque_limit is None,
+                     self.deflection_gain is None)
+        extra = () if self.deflection_gain is None else self.deflection_gain
+        return structure, np.concatenate((self.gain[0], [self.feedforward_inertia or 0.0,
+                                                         self.torque_limit or 0.0], extra))
+
+    def casadi_torque(self, t, x, parameters=None):
+        """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``; the numbers
+        are symbols too when ``parameters`` (the values of :attr:`casadi_parameters`) is given."""
         import casadi as ca
 
+        gain, inertia, limit = ca.DM(self.gain[0]), self.feedforward_inertia, self.torque_limit
+        deflection = self.deflection_gain
+        if parameters is not None:
+            nd = self.gain.shape[1]
+            gain = parameters[:nd]
+            inertia = None if inertia is None else parameters[nd]
+            limit = None if limit is None else parameters[nd + 1]
+            deflection = None if deflection is None else parameters[nd + 2:]
         x_design = casadi_truncate_state(x, self.n_modes)
-        x_ref, acc = casadi_reference_state(self.reference, t, self.n_modes,
-                                            self.deflection_gain)
-        u = -ca.dot(ca.DM(self.gain[0]), x_design - x_ref)
-        if self.feedforward_inertia is not None:
-            u += self.feedforward_inertia * acc
-        return _casadi_saturate(u, self.torque_limit)
+        x_ref, acc = casadi_reference_state(self.reference, t, self.n_modes, deflection)
+        u = -ca.dot(gain, x_design - x_ref)
+        if inertia is not None:
+            u += inertia * acc
+        return _casadi_saturate(u, limit)
 
     def derivative(self, t: float, x, z=None) -> np.ndarray:
         """No internal state: shape (0,)."""

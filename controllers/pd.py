@@ -25,7 +25,7 @@ import numpy as np
 
 from .reference import (_casadi_evaluate, _casadi_hub_state, _casadi_saturate,
                         _check_reference, _evaluate, _has_casadi, _hub_state, _optional_positive,
-                        _real, _saturate)
+                        _real, _saturate, _structure_key)
 
 __all__ = ["PD", "pd_gains", "design_pd"]
 
@@ -116,14 +116,31 @@ class PD:
         """True when the reference (if any) has a CasADi form (``casadi_reference``)."""
         return _has_casadi(self.reference)
 
-    def casadi_torque(self, t, x):
-        """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``."""
+    @property
+    def casadi_parameters(self) -> tuple:
+        """``(structure, values)``: what shapes :meth:`casadi_torque` (the reference, which
+        options are on) and its numbers ``[kp, kd, feedforward_inertia, torque_limit]`` (0 for
+        an option that is off). Compiled runs of PD laws of one structure share their
+        integrators."""
+        structure = (_structure_key(self.reference), self.feedforward_inertia is None,
+                     self.torque_limit is None)
+        return structure, np.array([self.kp, self.kd, self.feedforward_inertia or 0.0,
+                                    self.torque_limit or 0.0])
+
+    def casadi_torque(self, t, x, parameters=None):
+        """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``; the numbers
+        are symbols too when ``parameters`` (the values of :attr:`casadi_parameters`) is given."""
+        kp, kd, inertia, limit = (self.kp, self.kd, self.feedforward_inertia, self.torque_limit)
+        if parameters is not None:
+            kp, kd = parameters[0], parameters[1]
+            inertia = None if inertia is None else parameters[2]
+            limit = None if limit is None else parameters[3]
         theta, rate = _casadi_hub_state(x)
         angle_ref, rate_ref, acc_ref = _casadi_evaluate(self.reference, t)
-        u = self.kp * (angle_ref - theta) + self.kd * (rate_ref - rate)
-        if self.feedforward_inertia is not None:
-            u += self.feedforward_inertia * acc_ref
-        return _casadi_saturate(u, self.torque_limit)
+        u = kp * (angle_ref - theta) + kd * (rate_ref - rate)
+        if inertia is not None:
+            u += inertia * acc_ref
+        return _casadi_saturate(u, limit)
 
     def derivative(self, t: float, x, z=None) -> np.ndarray:
         """No internal state: shape (0,)."""

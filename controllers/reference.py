@@ -235,6 +235,16 @@ def _has_casadi(source, method: str = "casadi_reference") -> bool:
                               and bool(getattr(source, "has_casadi_form", True)))
 
 
+def _structure_key(source):
+    """``source`` itself where it compares by value (a frozen dataclass such as
+    :class:`SlewProfile`), else its identity: part of a compiled law's structure."""
+    try:
+        hash(source)
+    except TypeError:
+        return ("id", id(source))
+    return source
+
+
 def _casadi_evaluate(reference, t):
     """:func:`_evaluate` on the CasADi symbol ``t``."""
     if reference is None:

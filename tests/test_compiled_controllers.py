@@ -16,6 +16,7 @@ from controllers import (LQRWeights, NoiseLevels, OpenLoop, SlewProfile, SumOfSi
                          design_scheduled_lqr, design_shaper, from_spec, shape)
 from controllers.pd import PD
 from flexctl import build_model, load_scene, simulate
+from flexctl.sim import compiled
 from flexctl.sim.compiled import is_symbolic, piecewise_constant
 
 #: Largest difference between a CasADi form and its numpy law, relative to max(1, |value|).
@@ -101,6 +102,12 @@ def _casadi_law(controller, nx):
         f = ca.Function("law", [t, x, z], [controller.casadi_torque(t, x, z),
                                            controller.casadi_derivative(t, x, z)])
         return lambda tv, xv, zv: tuple(np.array(v).reshape(-1) for v in f(tv, xv, zv))
+    if getattr(controller, "casadi_parameters", None) is not None:
+        # the parametric form, its numbers fed in as values
+        values = controller.casadi_parameters[1]
+        c = ca.SX.sym("c", values.size)
+        f = ca.Function("law", [t, x, c], [controller.casadi_torque(t, x, c)])
+        return lambda tv, xv, zv: (np.array(f(tv, xv, values)).reshape(-1), np.zeros(0))
     f = ca.Function("law", [t, x], [controller.casadi_torque(t, x)])
     return lambda tv, xv, zv: (np.array(f(tv, xv)).reshape(-1), np.zeros(0))
 
@@ -155,6 +162,40 @@ def test_compiled_closed_loop_agrees_with_scipy(controllers, plant, name):
         scale = np.max(np.abs(scipy.controller_states))
         assert np.max(np.abs(compiled.controller_states - scipy.controller_states)) \
             <= ANGLE_AGREEMENT * max(1.0, scale)
+
+
+@pytest.mark.parametrize("name", ["pd-regulator", "pd-reference", "lqr-flexible-reference"])
+def test_constant_form_equals_parametric_form(controllers, plant, name):
+    controller = controllers[name]
+    t, x = ca.SX.sym("t"), ca.SX.sym("x", plant.n_states)
+    c = ca.SX.sym("c", controller.casadi_parameters[1].size)
+    f = ca.Function("law", [t, x, c], [controller.casadi_torque(t, x),
+                                       controller.casadi_torque(t, x, c)])
+    rng = np.random.default_rng(3)
+    for tv in rng.uniform(0.0, 3.0, 20):
+        xv = rng.uniform(-0.2, 0.2, plant.n_states)
+        constant, parametric = (float(v) for v in f(tv, xv, controller.casadi_parameters[1]))
+        assert abs(constant - parametric) <= LAW_TOLERANCE * max(1.0, abs(constant))
+
+
+def test_laws_differing_only_in_numbers_share_their_integrators(plant):
+    """A second PD of other gains reuses the integrators built for the first, with its own
+    numbers: the result equals that of a fresh build."""
+    x0 = np.zeros(plant.n_states)
+    x0[0] = -SLEW
+    first, second = PD(kp=12.0, kd=8.0, torque_limit=6.0), PD(kp=20.0, kd=5.0, torque_limit=4.0)
+    compiled._INTEGRATOR_CACHE.clear()
+    compiled._RHS_CACHE.clear()
+    simulate(plant, 2.0, controller=first, x0=x0, rtol=1e-7)
+    built = len(compiled._INTEGRATOR_CACHE), len(compiled._RHS_CACHE)
+    reused = simulate(plant, 2.0, controller=second, x0=x0, rtol=1e-7)
+    assert (len(compiled._INTEGRATOR_CACHE), len(compiled._RHS_CACHE)) == built
+    compiled._INTEGRATOR_CACHE.clear()
+    compiled._RHS_CACHE.clear()
+    fresh = simulate(plant, 2.0, controller=second, x0=x0, rtol=1e-7)
+    np.testing.assert_array_equal(reused.states, fresh.states)
+    np.testing.assert_array_equal(reused.torque, fresh.torque)
+    assert np.max(np.abs(reused.torque)) == pytest.approx(4.0)
 
 
 def test_python_controllers_keep_the_scipy_path(plant, design):

@@ -97,23 +97,47 @@ def piecewise_constant(t, edges, values):
     return out
 
 
-def _closed_loop_dynamics(model, t, y, torque, controller):
+def _parametric(controller) -> bool:
+    """A static controller whose numbers enter its CasADi form as parameters: it offers
+    ``casadi_parameters`` (``(structure, values)``) and ``casadi_torque(t, x, parameters)``."""
+    return (controller is not None and not getattr(controller, "n_states", 0)
+            and getattr(controller, "casadi_parameters", None) is not None)
+
+
+def _parameter_values(controller) -> np.ndarray:
+    """The numbers of a parametric controller (:func:`_parametric`), else none."""
+    if not _parametric(controller):
+        return np.zeros(0)
+    return np.asarray(controller.casadi_parameters[1], dtype=float).reshape(-1)
+
+
+def _applied_torque(t, x, z, torque, controller, parameters):
+    """CasADi hub torque of ``torque`` plus ``controller`` (numbers from ``parameters``, a
+    symbol, for a parametric controller)."""
+    u = 0.0
+    if torque is not None:
+        u = u + torque.casadi(t)
+    if controller is None:
+        return u
+    if getattr(controller, "n_states", 0):
+        return u + controller.casadi_torque(t, x, z)
+    if _parametric(controller):
+        return u + controller.casadi_torque(t, x, parameters)
+    return u + controller.casadi_torque(t, x)
+
+
+def _closed_loop_dynamics(model, t, y, torque, controller, parameters=None):
     """CasADi ``d[x, z]/dt`` of the plant ``x`` under ``torque`` and ``controller``, whose
     internal states ``z`` (if any) follow ``casadi_derivative``."""
     import casadi as ca
 
     nx = model.n_states
     x, z = y[:nx], y[nx:]
-    u = 0.0
-    if torque is not None:
-        u = u + torque.casadi(t)
-    stateful = controller is not None and getattr(controller, "n_states", 0)
-    if stateful:
-        u = u + controller.casadi_torque(t, x, z)
-    elif controller is not None:
-        u = u + controller.casadi_torque(t, x)
+    u = _applied_torque(t, x, z, torque, controller, parameters)
     dx = _symbolic_dynamics(model, x, ca.vertcat(u))
-    return ca.vertcat(dx, controller.casadi_derivative(t, x, z)) if stateful else dx
+    if controller is not None and getattr(controller, "n_states", 0):
+        return ca.vertcat(dx, controller.casadi_derivative(t, x, z))
+    return dx
 
 
 #: Right-hand sides and integrators kept for reuse, by the identity of the model and inputs
@@ -131,10 +155,19 @@ def _immutable(source) -> bool:
 
 
 def _input_key(model, inputs, scale):
-    """Cache key of a right-hand side, or None when an input may change after use."""
+    """Cache key of a right-hand side, or None when an input may change after use.
+
+    Inputs count by identity, except a parametric controller (:func:`_parametric`), which
+    counts by its class and structure: controllers that differ only in numbers share one
+    right-hand side and its integrators.
+    """
     if not all(_immutable(source) for source in inputs):
         return None
-    return (id(model), *(id(source) for source in inputs), scale.tobytes())
+    parts = [id(source) for source in inputs]
+    controller = inputs[-1]
+    if _parametric(controller):
+        parts[-1] = (type(controller), controller.casadi_parameters[0])
+    return (id(model), *parts, scale.tobytes())
 
 
 def _cached(cache, size, key, keep_alive, build):
@@ -155,21 +188,24 @@ def _cached(cache, size, key, keep_alive, build):
 def _rhs_function(model, scale, torque, hub_motion, controller):
     """The scaled right-hand side as a CasADi DAE ``Function`` (``casadi.dyn_in`` inputs) in
     the segment's own time ``tau`` in [0, 1]: ``t = t_0 + tau h`` with the parameters
-    ``p = [t_0, h, t_last]``, ``t_last`` the last time at which the inputs are evaluated.
+    ``p = [t_0, h, t_last, c]``, ``t_last`` the last time at which the inputs are evaluated and
+    ``c`` the numbers of a parametric controller (:func:`_parametric`).
 
     One function (and one integrator per output pattern) then serves every segment: the holds
     of an optimal torque differ only in ``t_0``.
     """
     import casadi as ca
 
-    ys, tau, p = ca.SX.sym("ys", scale.size), ca.SX.sym("tau"), ca.SX.sym("p", 3)
+    n_numbers = _parameter_values(controller).size
+    ys, tau = ca.SX.sym("ys", scale.size), ca.SX.sym("tau")
+    p = ca.SX.sym("p", 3 + n_numbers)
     y = ys * ca.DM(scale)
     t_in = ca.fmin(p[0] + tau * p[1], p[2])
     if hub_motion is not None:
         rate, acceleration = hub_motion.casadi(t_in)
         dy = _symbolic_beam_dynamics(model, y, rate, acceleration)
     else:
-        dy = _closed_loop_dynamics(model, t_in, y, torque, controller)
+        dy = _closed_loop_dynamics(model, t_in, y, torque, controller, p[3:])
     empty = ca.SX(0, 1)
     return ca.Function("flexctl_rhs", [tau, ys, empty, p, empty],
                        [p[1] * dy / ca.DM(scale), empty, empty, empty], ca.dyn_in(),
@@ -199,21 +235,20 @@ def torque_history(model, t, states, controller_states, torque=None, controller=
 
     nz = controller_states.shape[0]
 
+    numbers = _parameter_values(controller)
+
     def build():
         ts, x, z = ca.SX.sym("t"), ca.SX.sym("x", model.n_states), ca.SX.sym("z", nz)
-        u = ca.SX(0.0)
-        if torque is not None:
-            u = u + torque.casadi(ts)
-        if controller is not None:
-            u = u + (controller.casadi_torque(ts, x, z) if nz
-                     else controller.casadi_torque(ts, x))
-        return ca.Function("flexctl_torque", [ts, x, z], [u])
+        c = ca.SX.sym("c", numbers.size)
+        u = ca.SX(_applied_torque(ts, x, z, torque, controller, c))
+        return ca.Function("flexctl_torque", [ts, x, z, c], [u])
 
     key = _input_key(model, (torque, None, controller), np.array([nz], dtype=float))
     law = _cached(_RHS_CACHE, RHS_CACHE_SIZE, None if key is None else ("torque", key),
                   (model, torque, controller), build)
     t = np.asarray(t, dtype=float).reshape(1, -1)
-    return np.array(law.map(t.size)(t, states, controller_states)).reshape(-1)
+    return np.array(law.map(t.size)(t, states, controller_states,
+                                    np.repeat(numbers[:, None], t.size, axis=1))).reshape(-1)
 
 
 class SegmentIntegrator:
@@ -272,7 +307,8 @@ class SegmentIntegrator:
         self._scale = scale
         # the inputs see the segment's own piece at its closed end, as on the SciPy path: a
         # solver that evaluates past the last output time must not see the next hold
-        self._parameters = [t_start, length, float(np.nextafter(t_end, t_start))]
+        self._parameters = [t_start, length, float(np.nextafter(t_end, t_start)),
+                            *_parameter_values(controller)]
         self._f = _cached(_INTEGRATOR_CACHE, INTEGRATOR_CACHE_SIZE, key, (model, *inputs),
                           lambda: ca.integrator(f"flexctl_{solver}", solver, rhs, 0.0,
                                                 [float(v) for v in fractions], opts))
