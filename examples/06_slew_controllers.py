@@ -18,8 +18,10 @@
 #
 # The built-in scene `slew-90` asks for a rest-to-rest slew of the paper-000 hub-beam-mass
 # system by 90 degrees in 2 s with a 6 N m actuator. Each controller is designed on a
-# 2-mode first_order model (`[model] design_modes`) and run against the 6-mode nonlinear
-# plant, so the modes left out of the design are there to be excited (spillover):
+# 2-mode model (`[model] design_modes`) and run against the 6-mode nonlinear plant, so the
+# modes left out of the design are there to be excited (spillover). The tip bends by a quarter
+# of the beam length here, so plant and design model are geometrically exact
+# (`[model] variant = "exact"`; notebook 8 shows what that changes):
 #
 # | kind | what it is |
 # |---|---|
