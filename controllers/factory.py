@@ -240,7 +240,7 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
                     n_intervals=int(_setting(spec, "intervals", 40)), objective=objective,
                     torque_rate_bound=_setting(spec, "torque_rate_bound", None),
                     tip_bound=_setting(spec, "tip_bound", None),
-                    transcription=spec.settings.get("transcription", "multiple_shooting"))
+                    transcription=spec.settings.get("transcription"))
     start = time.perf_counter()
     try:
         solution = solve_slew(design, problem)
