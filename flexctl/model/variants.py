@@ -166,6 +166,32 @@ class Model:
             self._c["geometry"] = exact_geometry(self.matrices)
         return self._c["geometry"]
 
+    def integration_rhs(self):
+        """The dynamics as a CasADi ``Function`` ``(x, u) -> xdot`` for implicit integrators.
+
+        For the exact variant, its own right-hand side with the Jacobian of the first_order
+        model in place of its own: Newton iterations of an implicit method need only an
+        approximate Jacobian (accuracy is that of the right-hand side), and the exact one
+        costs many evaluations of the right-hand side. The same as :meth:`casadi` otherwise.
+        """
+        if self.variant != "exact":
+            return self.casadi()
+        if "integration_rhs" not in self._c:
+            import casadi as ca
+
+            n = self.n_states
+            linear = build_model(self.system, self.n_modes).casadi()
+            x, u, out = ca.SX.sym("x", n), ca.SX.sym("u"), ca.SX.sym("out", n)
+            name = f"flexctl_exact_newton_N{self.n_modes}"
+            jac = ca.Function(f"jac_{name}", [x, u, out],
+                              [ca.jacobian(linear(x, u), x), ca.jacobian(linear(x, u), u)],
+                              ["x", "u", "out_xdot"], ["jac_xdot_x", "jac_xdot_u"])
+            xm, um = ca.MX.sym("x", n), ca.MX.sym("u")
+            self._c["integration_rhs"] = ca.Function(
+                name, [xm, um], [self.geometry.rhs(xm, um)], ["x", "u"], ["xdot"],
+                {"custom_jacobian": jac, "jac_penalty": 0})
+        return self._c["integration_rhs"]
+
     def _exact_mass(self, x) -> list:
         q = np.atleast_2d(x[1:self.n_modes + 1].T).T
         masses = [np.array(self.geometry.mass(q[:, k])) for k in range(q.shape[1])]

@@ -134,7 +134,10 @@ def _closed_loop_dynamics(model, t, y, torque, controller, parameters=None):
     nx = model.n_states
     x, z = y[:nx], y[nx:]
     u = _applied_torque(t, x, z, torque, controller, parameters)
-    dx = _symbolic_dynamics(model, x, ca.vertcat(u))
+    if isinstance(x, ca.MX):
+        dx = model.integration_rhs()(x, u)
+    else:
+        dx = _symbolic_dynamics(model, x, ca.vertcat(u))
     if controller is not None and getattr(controller, "n_states", 0):
         return ca.vertcat(dx, controller.casadi_derivative(t, x, z))
     return dx
@@ -197,8 +200,11 @@ def _rhs_function(model, scale, torque, hub_motion, controller):
     import casadi as ca
 
     n_numbers = _parameter_values(controller).size
-    ys, tau = ca.SX.sym("ys", scale.size), ca.SX.sym("tau")
-    p = ca.SX.sym("p", 3 + n_numbers)
+    # the exact model enters through a call (Model.integration_rhs), which keeps its cheap
+    # Newton Jacobian; the others are inlined into scalar expressions
+    sym = ca.MX if model.variant == "exact" and hub_motion is None else ca.SX
+    ys, tau = sym.sym("ys", scale.size), sym.sym("tau")
+    p = sym.sym("p", 3 + n_numbers)
     y = ys * ca.DM(scale)
     t_in = ca.fmin(p[0] + tau * p[1], p[2])
     if hub_motion is not None:
@@ -206,7 +212,7 @@ def _rhs_function(model, scale, torque, hub_motion, controller):
         dy = _symbolic_beam_dynamics(model, y, rate, acceleration)
     else:
         dy = _closed_loop_dynamics(model, t_in, y, torque, controller, p[3:])
-    empty = ca.SX(0, 1)
+    empty = sym(0, 1)
     return ca.Function("flexctl_rhs", [tau, ys, empty, p, empty],
                        [p[1] * dy / ca.DM(scale), empty, empty, empty], ca.dyn_in(),
                        ca.dyn_out())
