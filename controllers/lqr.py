@@ -161,7 +161,7 @@ def casadi_reference_state(reference, t, n_modes: int, deflection_gain=None) -> 
     if deflection_gain is not None and reference is not None:
         jerk = (_casadi_evaluate(reference, t + _JERK_STEP)[2]
                 - _casadi_evaluate(reference, t - _JERK_STEP)[2]) / (2.0 * _JERK_STEP)
-        gain = (deflection_gain if isinstance(deflection_gain, ca.SX)
+        gain = (deflection_gain if isinstance(deflection_gain, (ca.SX, ca.MX))
                 else ca.DM(np.asarray(deflection_gain, dtype=float)))
         q_ref, q_dot_ref = -gain * acc, -gain * jerk
     return ca.vertcat(angle, q_ref, rate, q_dot_ref), acc

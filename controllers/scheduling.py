@@ -138,7 +138,7 @@ class ScheduledLQR:
         import casadi as ca
 
         w, rates, gains = ca.fabs(spin_rate), self.spin_rates, self.gains
-        gain = ca.SX(ca.DM(gains[-1]))
+        gain = ca.DM(gains[-1])
         # from the top down, so that each bracket overrides the ones above it
         for k in range(rates.size - 2, -1, -1):
             frac = (w - rates[k]) / (rates[k + 1] - rates[k])

@@ -93,19 +93,19 @@ NAMES = ["pd-regulator", "pd-reference", "pd-shaped-reference", "lqr-rigid-refer
          "trajopt", "trajopt+lqr"]
 
 
-def _casadi_law(controller, nx):
+def _casadi_law(controller, nx, symbol=ca.SX):
     """``(t, x, z) -> (torque, dz/dt)`` evaluated through CasADi."""
-    t, x = ca.SX.sym("t"), ca.SX.sym("x", nx)
+    t, x = symbol.sym("t"), symbol.sym("x", nx)
     nz = controller.n_states
     if nz:
-        z = ca.SX.sym("z", nz)
+        z = symbol.sym("z", nz)
         f = ca.Function("law", [t, x, z], [controller.casadi_torque(t, x, z),
                                            controller.casadi_derivative(t, x, z)])
         return lambda tv, xv, zv: tuple(np.array(v).reshape(-1) for v in f(tv, xv, zv))
     if getattr(controller, "casadi_parameters", None) is not None:
         # the parametric form, its numbers fed in as values
         values = controller.casadi_parameters[1]
-        c = ca.SX.sym("c", values.size)
+        c = symbol.sym("c", values.size)
         f = ca.Function("law", [t, x, c], [controller.casadi_torque(t, x, c)])
         return lambda tv, xv, zv: (np.array(f(tv, xv, values)).reshape(-1), np.zeros(0))
     f = ca.Function("law", [t, x], [controller.casadi_torque(t, x)])
@@ -162,6 +162,19 @@ def test_compiled_closed_loop_agrees_with_scipy(controllers, plant, name):
         scale = np.max(np.abs(scipy.controller_states))
         assert np.max(np.abs(compiled.controller_states - scipy.controller_states)) \
             <= ANGLE_AGREEMENT * max(1.0, scale)
+
+
+@pytest.mark.parametrize("name", NAMES, ids=NAMES)
+def test_casadi_law_builds_on_mx_symbols(controllers, plant, name):
+    """The exact variant's right-hand side is an MX graph: every law must build on MX too."""
+    controller = controllers[name]
+    rng = np.random.default_rng(5)
+    law = _casadi_law(controller, plant.n_states, symbol=ca.MX)
+    times, states = _samples(controller, plant.n_states, rng)
+    for t, x in list(zip(times, states))[::10]:
+        z = rng.uniform(-1.0, 1.0, controller.n_states)
+        u_num = controller.torque(t, x, z)
+        assert abs(law(t, x, z)[0][0] - u_num) <= LAW_TOLERANCE * max(1.0, abs(u_num))
 
 
 @pytest.mark.parametrize("name", ["pd-regulator", "pd-reference", "lqr-flexible-reference"])

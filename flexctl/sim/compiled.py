@@ -70,7 +70,7 @@ def piecewise_constant(t, edges, values):
 
     Parameters
     ----------
-    t : casadi.SX
+    t : casadi.SX or casadi.MX
         Scalar time, s.
     edges : array_like, shape (K - 1,)
         Ascending interior boundaries, s; hold ``k`` is ``edges[k-1] <= t < edges[k]``
@@ -79,8 +79,9 @@ def piecewise_constant(t, edges, values):
 
     Returns
     -------
-    casadi.SX, shape (m, 1) (or (1, 1))
-        Exactly one of the rows of ``values`` (a chain of ``if_else``, no arithmetic on them).
+    casadi.SX or casadi.MX (as ``t``), shape (m, 1)
+        Exactly one of the rows of ``values`` (a chain of ``if_else``, no arithmetic on them);
+        a constant ``DM`` when there is one hold only.
     """
     import casadi as ca
 
@@ -91,7 +92,7 @@ def piecewise_constant(t, edges, values):
         raise ValueError(f"piecewise_constant needs {rows.shape[0] - 1} edges for "
                          f"{rows.shape[0]} values; got {edges.size}")
     passed = [t >= float(e) for e in edges]
-    out = ca.SX(ca.DM(rows[0]))
+    out = ca.DM(rows[0])
     for k in range(1, rows.shape[0]):
         out = ca.if_else(passed[k - 1], ca.DM(rows[k]), out)
     return out
