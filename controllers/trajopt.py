@@ -52,7 +52,7 @@ import numpy as np
 from flexctl.model import Model
 
 __all__ = ["SlewProblem", "SlewSolution", "TrajectoryOptimizationError", "HoldTorque",
-           "solve_slew", "rigid_minimum_time"]
+           "solve_slew", "rigid_minimum_time", "rk4_substeps", "transcription_for"]
 
 TRANSCRIPTIONS = ("multiple_shooting", "collocation")
 INTEGRATORS = ("rk4", "cvodes")
