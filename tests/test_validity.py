@@ -84,3 +84,17 @@ def test_scene_reports_validity_and_auto_variant():
         flexctl.load_scene("hub-beam-mass", overrides={"model.variant": "exactly"})
     with pytest.raises(flexctl.SceneError, match="model.design_variant"):
         flexctl.load_scene("slew-90", overrides={"model.design_variant": "auto"})
+
+
+@pytest.mark.parametrize("kind", ["lqg", "pd"])
+def test_closed_loop_slew_on_first_order_reports_and_warns(kind):
+    """The estimate re-runs the controller itself (LQG with its sensors moved to the small
+    model) and flags first_order on slew-90's 25 % deflection."""
+    from controllers import from_spec
+
+    scene = flexctl.load_scene("slew-90", overrides={"controller.kind": kind,
+                                                     "model.variant": "first_order"})
+    with pytest.warns(ModelValidityWarning):
+        result, _, _ = flexctl.run_slew(scene, from_spec)
+    assert result.validity.deflection_ratio > 0.2
+    assert result.validity.geometric_error > scene.model.tolerance

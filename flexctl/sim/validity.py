@@ -73,10 +73,15 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     """
     if model.variant == "exact":
         return 0.0
+    # a controller reads at least the modes it was designed on
+    n_modes = min(max(n_modes, int(getattr(controller, "n_modes", 0) or 0)), model.n_modes)
     tips = []
-    drive = {"torque": torque, "hub_motion": hub_motion, "controller": controller}
     for variant in (model.variant, "exact"):
-        small = build_model(model.system, n_modes=min(n_modes, model.n_modes), variant=variant)
+        small = build_model(model.system, n_modes=n_modes, variant=variant)
+        on_small = controller
+        if callable(getattr(controller, "for_plant", None)):     # sensors set for a plant
+            on_small = controller.for_plant(small)
+        drive = {"torque": torque, "hub_motion": hub_motion, "controller": on_small}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             run = simulate(small, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False, **drive)
