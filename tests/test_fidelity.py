@@ -213,16 +213,22 @@ def test_auto_scene_from_a_file_with_its_tolerance(tmp_path):
 
 
 @pytest.mark.parametrize("overrides, pattern", [
-    ({"model.tolerance": "0.01"}, r"model\.tolerance applies only with model\.modes"),
+    ({"model.tolerance": "-0.01"}, r"model\.tolerance"),
     ({"model.modes": "auto", "model.tolerance": "0"}, r"model\.tolerance"),
     ({"model.modes": "auto", "model.tolerance": "1.5"}, r"model\.tolerance"),
     ({"model.modes": "auto", "model.tolerance": "'tight'"}, r"model\.tolerance"),
     ({"model.modes": "many"}, r"model\.modes.*auto"),
-], ids=["tolerance-without-auto", "tolerance-zero", "tolerance-above-one", "tolerance-string",
+], ids=["tolerance-negative", "tolerance-zero", "tolerance-above-one", "tolerance-string",
         "modes-other-string"])
 def test_auto_settings_are_checked_by_name(overrides, pattern):
     with pytest.raises(SceneError, match=pattern):
         load_scene("kane-spinup", overrides=overrides)
+
+
+def test_tolerance_with_fixed_modes_sets_the_validity_warning():
+    """With fixed modes the tolerance still decides when a run warns of its model's range."""
+    assert load_scene("kane-spinup", overrides={"model.tolerance": "0.05"}).model.tolerance \
+        == 0.05
 
 
 def test_summary_reports_the_mode_choice(tmp_path, capsys):
