@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from flexctl.model.errors import InputValueError
+
 __all__ = ["CONTROLLER_KEYS", "ControllerSpec", "SceneError"]
 
 #: Settings each controller kind accepts in a scene's [controller] table (the factory builds
@@ -31,8 +33,9 @@ CONTROLLER_KEYS = {
 CONTROLLER_KEYS["trajopt+lqr"] = CONTROLLER_KEYS["trajopt"]
 
 
-class SceneError(ValueError):
-    """A scene file or override is malformed; the message names the key."""
+class SceneError(InputValueError):
+    """A scene file or override is malformed; the message names the key (a ``ValueError`` and
+    a :class:`flexctl.model.errors.InputError`)."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -15,7 +15,11 @@ TOML. ``run`` writes ``timeseries.csv``, ``summary.json`` and ``response.png`` i
 
 Exit status: 0 when every run reached its final time (for ``demo``: when every run ended as
 expected), 3 when a run stopped early (diverged or singular; its files are still written), 2 on
-bad input (one line on stderr starting ``flexctl: error:``).
+bad input (one line on stderr starting ``flexctl: error:`` naming the key, the rule and the
+value, and nothing else on stderr), 1 for a bug (with its traceback).
+
+A run's files are written into a temporary directory next to ``DIR`` and moved into ``DIR``
+only once all of them are complete: a run that fails leaves ``DIR`` as it was.
 
 Examples
 --------
@@ -28,28 +32,38 @@ flexctl 0.1.0
 from __future__ import annotations
 
 import argparse
+import ctypes
+import os
+import shutil
 import sys
+import tempfile
 import time
+import traceback
+import warnings
 from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 
 from .. import __version__
+from ..model.errors import InputError, InputValueError
 from .bench import BenchConfig, run_bench, summary_line
 from .report import format_summary, write_demo_report, write_run
 from .scenes import SceneError, builtin_scenes, load_scene, run_scene, run_slew
 
-__all__ = ["main", "parse_overrides", "EXIT_OK", "EXIT_BAD_INPUT", "EXIT_STOPPED"]
+__all__ = ["main", "parse_overrides", "EXIT_OK", "EXIT_BUG", "EXIT_BAD_INPUT", "EXIT_STOPPED"]
 
 EXIT_OK = 0
+EXIT_BUG = 1
 EXIT_BAD_INPUT = 2
 EXIT_STOPPED = 3
 PROG = "flexctl"
 DEFAULT_RUN_DIR = Path("flexctl-out")
 DEFAULT_DEMO_DIR = Path("flexctl-demo")
-#: Errors of loading or running a scene that are the user's input, reported in one line.
-INPUT_ERRORS = (SceneError, ValueError, TypeError, FileNotFoundError)
+#: Errors of loading or running a scene that are the user's input, reported in one line: the
+#: checks of parameters, scenes, controller settings and simulate raise these; any other
+#: exception is a bug and ends with its traceback (exit 1).
+INPUT_ERRORS = (InputError,)
 
 #: Demo runs besides the built-in scenes: (label, scene, overrides, expected status).
 DEMO_COMPARISONS = (
@@ -91,7 +105,7 @@ def parse_overrides(settings) -> dict:
 
     Raises
     ------
-    ValueError
+    flexctl.model.errors.InputValueError
         If a setting has no ``=``.
 
     Examples
@@ -103,8 +117,8 @@ def parse_overrides(settings) -> dict:
     for item in settings or ():
         key, sep, value = item.partition("=")
         if not sep:
-            raise ValueError(f"--set expects key=value, e.g. --set maneuver.spin_rate=10; "
-                             f"got {item!r}")
+            raise InputValueError(f"--set expects key=value, e.g. --set "
+                                  f"maneuver.spin_rate=10; got {item!r}")
         out[key.strip()] = value.strip()
     return out
 
@@ -124,7 +138,7 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                      help="override a scene value by its dotted path, value read as TOML, "
                      "e.g. --set model.variant=zero_order (repeatable)")
-    run.add_argument("--out", metavar="DIR", type=Path,
+    run.add_argument("--out", metavar="DIR", type=_out_dir,
                      help=f"output directory (default {DEFAULT_RUN_DIR}/<scene name>)")
     run.set_defaults(func=_cmd_run)
 
@@ -137,7 +151,7 @@ def _parser() -> argparse.ArgumentParser:
                                "(paper 001 Figs. 4 and 5, paper 000 Figs. 5 to 8 with their "
                                "sweeps) and compare every controller kind on slew-90; write "
                                "each run's files, the figures and report.md.")
-    demo.add_argument("--out", metavar="DIR", type=Path, default=DEFAULT_DEMO_DIR,
+    demo.add_argument("--out", metavar="DIR", type=_out_dir, default=DEFAULT_DEMO_DIR,
                       help=f"output directory (default {DEFAULT_DEMO_DIR})")
     demo.add_argument("--workers", metavar="N", type=_worker_count, default=DEMO_WORKERS,
                       help="processes for the sweeps and the controller comparison "
@@ -182,7 +196,7 @@ def _add_bench_command(commands) -> None:
             ("--tolerance", float, "relative tip error of the mode choice (default 1e-2)"),
             ("--t-final", float, "horizon in s instead of each scene's")):
         p.add_argument(flag, type=kind, help=text)
-    p.add_argument("--out", type=Path, default=Path("flexctl-bench"), metavar="DIR",
+    p.add_argument("--out", type=_out_dir, default=Path("flexctl-bench"), metavar="DIR",
                    help="output directory (default flexctl-bench)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_bench)
@@ -190,6 +204,96 @@ def _add_bench_command(commands) -> None:
 
 class _InputError(Exception):
     """Bad input or an unwritable output directory, reported in one line."""
+
+
+def _out_dir(text: str) -> Path:
+    """argparse type of ``--out``: a non-empty path (``''`` would mean the current directory)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"must name a directory; got {text!r}")
+    return Path(text)
+
+
+def _flush_c_stdio() -> None:
+    """Flush the C library's buffered streams (IPOPT writes through printf)."""
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):  # pragma: no cover - no C library to flush
+        pass
+
+
+class _HeldOutput:
+    """Hold what a run writes to the process's stdout and stderr, and its Python warnings.
+
+    CasADi and IPOPT print from C++, numpy and the simulation warn: a run that ends in bad
+    input must leave only its one error line on stderr, so the output is held at the file
+    descriptors and either dropped (bad input) or replayed (any other end).
+    """
+
+    def __init__(self):
+        self.streams = {}
+        self.caught = []
+        self._saved, self._files, self._catcher = {}, {}, None
+
+    def __enter__(self):
+        for stream in (sys.stdout, sys.stderr):
+            stream.flush()
+        _flush_c_stdio()
+        try:
+            for fd in (1, 2):
+                self._files[fd] = tempfile.TemporaryFile()
+                self._saved[fd] = os.dup(fd)
+                os.dup2(self._files[fd].fileno(), fd)
+        except OSError:     # no such descriptor: nothing to hold there
+            pass
+        self._catcher = warnings.catch_warnings(record=True)
+        self.caught = self._catcher.__enter__()
+        warnings.simplefilter("always")
+        return self
+
+    def __exit__(self, *exc_info):
+        self._catcher.__exit__(*exc_info)
+        for stream in (sys.stdout, sys.stderr):
+            stream.flush()
+        _flush_c_stdio()
+        for fd, saved in self._saved.items():
+            os.dup2(saved, fd)
+            os.close(saved)
+        for fd, file in self._files.items():
+            file.seek(0)
+            self.streams[fd] = file.read().decode("utf-8", "replace")
+            file.close()
+        return False
+
+    def replay(self) -> None:
+        """Write the held output where it was going, and each warning as one line."""
+        for fd, stream in ((1, sys.stdout), (2, sys.stderr)):
+            if self.streams.get(fd):
+                stream.write(self.streams[fd])
+                stream.flush()
+        for w in self.caught:
+            text = " ".join(str(w.message).split())
+            print(f"{PROG}: warning: {w.category.__name__}: {text}", file=sys.stderr)
+
+
+def _write_complete(scene, result, out: Path, overrides: dict, extra: dict) -> dict:
+    """:func:`write_run` into a temporary directory next to ``out``; move the files into ``out``
+    only once every one is written, so a failure leaves ``out`` as it was."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(17, "exists and is not a directory", str(out))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}-", suffix=".partial",
+                                    dir=out.parent))
+    try:
+        summary = write_run(scene, result, staging, overrides=overrides, extra=extra)
+        out.mkdir(exist_ok=True)
+        for path in sorted(staging.iterdir()):
+            os.replace(path, out / path.name)
+        summary["files"] = {kind: str(out / Path(path).name)
+                            for kind, path in summary.get("files", {}).items()}
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return summary
 
 
 def _worker_count(text: str) -> int:
@@ -219,20 +323,27 @@ def _run_controlled(scene):
 def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
     """Load, simulate and write one scene: the shared step of ``run`` and ``demo``.
 
-    Returns the summary of :func:`flexctl.app.report.write_run`; raises :class:`_InputError`.
+    Returns the summary of :func:`flexctl.app.report.write_run`; raises :class:`_InputError`
+    on bad input, with nothing else written to stdout or stderr.
     """
+    held = _HeldOutput()
     try:
-        scene = load_scene(source, overrides=overrides)
-        extra = {}
-        if scene.controller is None:
-            result = run_scene(scene)
-        else:
-            result, extra = _run_controlled(scene)
+        with held:
+            scene = load_scene(source, overrides=overrides)
+            extra = {}
+            if scene.controller is None:
+                result = run_scene(scene)
+            else:
+                result, extra = _run_controlled(scene)
     except INPUT_ERRORS as exc:
         raise _InputError(str(exc)) from None
+    except BaseException:
+        held.replay()
+        raise
+    held.replay()
     out = out_dir if out_dir is not None else DEFAULT_RUN_DIR / scene.name
     try:
-        return write_run(scene, result, out, overrides=overrides, extra=extra)
+        return _write_complete(scene, result, out, overrides, extra)
     except OSError as exc:
         reason = exc.strerror or str(exc)
         where = f" ({exc.filename})" if exc.filename else ""
@@ -244,7 +355,7 @@ def _cmd_run(args) -> int:
     try:
         overrides = parse_overrides(args.set)
         summary = _load_and_run(args.scene, overrides, args.out)
-    except (_InputError, ValueError) as exc:
+    except (_InputError, InputError) as exc:
         return _error(exc)
     print(format_summary(summary))
     return EXIT_OK if summary["status"] == "ok" else EXIT_STOPPED
@@ -310,7 +421,7 @@ def _demo_sections(out: Path, workers: int, surprises: list) -> list:
             begin = time.perf_counter()
             try:
                 sections.append(make(out, pool if pooled else None))
-            except (SweepError, *INPUT_ERRORS) as exc:
+            except (SweepError, ValueError, TypeError) as exc:
                 surprises.append(f"{label} failed: {exc}")
                 continue
             print(f"{label}: {time.perf_counter() - begin:.1f} s", flush=True)
@@ -354,7 +465,10 @@ def _cmd_demo(args) -> int:
 
 
 def main(argv=None) -> int:
-    """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status."""
+    """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status.
+
+    A bug (any exception that is not bad input) prints its traceback and returns 1.
+    """
     parser = _parser()
     try:
         args = parser.parse_args(argv)
@@ -362,7 +476,11 @@ def main(argv=None) -> int:
         if exc.code is None:
             return EXIT_OK
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
-    return args.func(args)
+    try:
+        return args.func(args)
+    except Exception:   # a bug: say where, and do not pass it off as bad input
+        traceback.print_exc()
+        return EXIT_BUG
 
 
 if __name__ == "__main__":  # pragma: no cover
