@@ -30,6 +30,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from .errors import InputTypeError, InputValueError
 from .modes import cantilever_roots, mode_shapes
 from .parameters import HubBeam
 
@@ -135,7 +136,8 @@ class ModalMatrices:
         """``phi_i(x)`` at ``position`` (m), so that ``y(x) = phi(x) @ q``. Shape (N,)."""
         l = self.system.beam.length
         if not 0.0 <= position <= l:
-            raise ValueError(f"position must lie in [0, beam.length = {l:g}]; got {position!r}")
+            raise InputValueError(f"position must lie in [0, beam.length = {l:g}]; "
+                                  f"got {position!r}")
         return mode_shapes(self.n_modes, [position / l])[:, 0]
 
 
@@ -158,9 +160,9 @@ def assemble(system: HubBeam, n_modes: int) -> ModalMatrices:
     ModalMatrices
     """
     if not isinstance(system, HubBeam):
-        raise TypeError(f"system must be a HubBeam; got {type(system).__name__}")
+        raise InputTypeError(f"system must be a HubBeam; got {type(system).__name__}")
     if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) or n_modes < 1:
-        raise ValueError(f"n_modes must be an integer >= 1; got {n_modes!r}")
+        raise InputValueError(f"n_modes must be an integer >= 1; got {n_modes!r}")
     return _assemble(system, int(n_modes))
 
 

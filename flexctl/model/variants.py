@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
+from .errors import InputTypeError, InputValueError
 from .exact import exact_geometry
 from .matrices import ModalMatrices, assemble, condensed_hub_inertia
 from .parameters import HubBeam
@@ -461,7 +462,7 @@ class Model:
             reduced = mat.M_ff - np.outer(mat.m_tf, mat.m_tf) / mat.J0
             lam = scipy.linalg.eigh(stiff, reduced, eigvals_only=True)
         else:
-            raise ValueError(f"hub must be 'clamped' or 'free'; got {hub!r}")
+            raise InputValueError(f"hub must be 'clamped' or 'free'; got {hub!r}")
         return np.sort(np.sign(lam) * np.sqrt(np.abs(lam)))
 
     def linearize(self, spin_rate: float = 0.0):
@@ -509,7 +510,8 @@ def _system_name(text: str) -> str:
 
 def _spin(spin_rate) -> float:
     if isinstance(spin_rate, bool) or not np.isscalar(spin_rate) or not np.isfinite(spin_rate):
-        raise ValueError(f"spin_rate must be a finite number (rad/s); got {spin_rate!r}")
+        raise InputValueError(f"spin_rate must be a finite number (rad/s); "
+                              f"got {spin_rate!r}")
     return float(spin_rate)
 
 
@@ -539,11 +541,12 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order")
     array([ 2.91, 18.24, 51.08])
     """
     if variant not in VARIANTS:
-        raise ValueError(f"variant must be one of {', '.join(VARIANTS)}; got {variant!r}")
+        raise InputValueError(f"variant must be one of {', '.join(VARIANTS)}; "
+                              f"got {variant!r}")
     if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) \
             or not 1 <= n_modes <= 200:
-        raise ValueError(f"n_modes must be an integer in [1, 200]; got {n_modes!r}")
+        raise InputValueError(f"n_modes must be an integer in [1, 200]; got {n_modes!r}")
     if not isinstance(system, HubBeam):
-        raise TypeError(f"system must be a HubBeam; got {type(system).__name__}")
+        raise InputTypeError(f"system must be a HubBeam; got {type(system).__name__}")
     return Model(system=system, n_modes=int(n_modes), variant=variant,
                  matrices=assemble(system, int(n_modes)))

@@ -26,7 +26,6 @@ The arrays of a stopped run end at the stop time; they never hold NaN or overflo
 
 from __future__ import annotations
 
-import inspect
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -36,7 +35,10 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .compiled import SegmentIntegrator, is_symbolic, torque_history, verify_accuracy
+from .inputs import (as_vector, check_method, check_rtol, check_time, input_value,
+                     jacobian_frequency, output_grid, time_function)
 from ..model import Model, SingularMassMatrixError
+from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["simulate", "SimulationResult", "Controller", "StiffnessWarning", "AccuracyWarning"]
 
@@ -64,6 +66,25 @@ EXPLICIT_STABILITY_LIMITS = {"DOP853": 3.0, "RK45": 0.67, "RK23": 0.87}
 #: An explicit method predicted to need more steps than this (about 5 s of DOP853 at ~40 us a
 #: right-hand side) is not used when the compiled implicit path can take the run.
 EXPLICIT_STEP_LIMIT = 10_000
+#: The closed loop counts as made stiff by its controller when its fastest pole is this many
+#: times the plant's fastest mode.
+LOOP_FACTOR = 2.0
+#: An explicit method kept for Python inputs is refused past this many steps (some 15 minutes
+#: of DOP853 at ~40 us a right-hand side).
+EXPLICIT_REFUSE_LIMIT = 2e6
+#: A run may span at most this many periods of the model's slowest mode: any integrator
+#: takes several steps a period, so a longer horizon would run for hours.
+MAX_PERIODS = 1e6
+#: A controller whose gains put the fastest closed-loop pole beyond this many times the
+#: plant's fastest mode is refused: nothing the model describes is that fast, and the run
+#: would crawl (a PD loop of bandwidth 1e6 rad/s on slew-90 took some 25 minutes).
+LOOP_LIMIT = 1e4
+#: CVODES may take at least this many steps between two output times, and
+#: CVODES_STEPS_PER_RADIAN per radian of the fastest mode over the interval; a run that needs
+#: more has blown up (a diverging beam stiffens without bound), and failing fast hands the
+#: interval to the SciPy path, which locates the stop.
+CVODES_MIN_STEPS = 5_000
+CVODES_STEPS_PER_RADIAN = 10.0
 
 
 class AccuracyWarning(RuntimeWarning):
@@ -75,7 +96,7 @@ class StiffnessWarning(RuntimeWarning):
 
 
 def _stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
-                     prescribed: bool):
+                     prescribed: bool, loop_frequency: float = 0.0):
     """``(method to use, reason)``: reason is empty when ``method`` is kept silently.
 
     The step of an explicit method on an undamped mode ``omega`` is bounded by
@@ -87,21 +108,39 @@ def _stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
     resolved by any method, and LSODA measured 1.8 to 2.9 times slower than DOP853 (Kane,
     spacecraft and hub-beam-mass scenes, 12 and 16 modes, rtol 1e-5 and 1e-8, with and
     without beam damping).
+
+    ``loop_frequency`` (rad/s) is the fastest pole of the closed loop (:func:`jacobian_frequency`
+    at the start): a controller's gains can make it far faster than any mode of the plant.
+    When they do, the fast poles are damped ones that an implicit method steps over, so a run
+    with Python inputs moves to LSODA (implicit BDF where the problem is stiff) rather than
+    crawl for minutes.
     """
     limit = EXPLICIT_STABILITY_LIMITS.get(method)
     if limit is None:
         return method, ""
     hub = "clamped" if prescribed else "free"
-    omega_max = float(model.natural_frequencies(0.0, hub=hub)[-1])
+    omega_plant = float(model.natural_frequencies(0.0, hub=hub)[-1])
+    omega_max = max(omega_plant, float(loop_frequency))
     steps = omega_max * float(t_final) / limit
     if steps <= EXPLICIT_STEP_LIMIT:
         return method, ""
-    reason = (f"stiffness: {method} is explicit and the fastest mode of this {model.n_modes}-mode "
-              f"model ({omega_max:.4g} rad/s, hub {'held' if prescribed else 'free'}) bounds its "
-              f"step to about {limit:g}/{omega_max:.4g} s, some {steps:.3g} steps over "
-              f"{float(t_final):g} s (more than {EXPLICIT_STEP_LIMIT})")
+    by_controller = omega_max > LOOP_FACTOR * omega_plant
+    source = (f"the fastest pole of the closed loop ({omega_max:.4g} rad/s, set by the "
+              f"controller's gains; the plant's fastest mode is {omega_plant:.4g} rad/s)"
+              if by_controller else
+              f"the fastest mode of this {model.n_modes}-mode model ({omega_max:.4g} rad/s, hub "
+              f"{'held' if prescribed else 'free'})")
+    reason = (f"stiffness: {method} is explicit and {source} bounds its step to about "
+              f"{limit:g}/{omega_max:.4g} s, some {steps:.3g} steps over {float(t_final):g} s "
+              f"(more than {EXPLICIT_STEP_LIMIT})")
     if symbolic:
         return "cvodes", reason + "; switched to cvodes (implicit BDF, compiled)"
+    if by_controller:
+        return "LSODA", reason + "; switched to LSODA (implicit BDF where the problem is stiff)"
+    if steps > EXPLICIT_REFUSE_LIMIT:
+        raise InputValueError(f"t_final {float(t_final):g} s: {reason}, beyond the "
+                              f"{EXPLICIT_REFUSE_LIMIT:.3g} steps a run may take; shorten "
+                              "t_final, use fewer modes or give the inputs a CasADi form")
     return method, (reason + f"; kept {method} because the inputs have no CasADi form (give "
                     "them one, e.g. the built-in manoeuvres, to run on cvodes)")
 
@@ -239,24 +278,6 @@ class SimulationResult:
                 f"wall_time={self.wall_time:.3g} s)")
 
 
-def _time_function(func, name):
-    """Wrap ``func(t)`` or ``func(t, x)`` as ``g(t, x)``."""
-    if not callable(func):
-        raise TypeError(f"{name} must be callable as {name}(t) or {name}(t, x); "
-                        f"got {type(func).__name__}")
-    try:
-        params = inspect.signature(func).parameters.values()
-        n_required = sum(1 for p in params if p.default is p.empty
-                         and p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD))
-    except (TypeError, ValueError):
-        n_required = 1
-    if n_required >= 2:
-        return lambda t, x: float(func(t, x))
-    if n_required <= 1:
-        return lambda t, x: float(func(t))
-    raise TypeError(f"{name} must take (t) or (t, x)")  # pragma: no cover
-
-
 def _breakpoints(*sources):
     points = set()
     for src in sources:
@@ -348,48 +369,53 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     ('ok', 0.42)
     """
     if not isinstance(model, Model):
-        raise TypeError(f"model must be a flexctl Model; got {type(model).__name__}")
-    if isinstance(t_final, bool) or not np.isscalar(t_final) or not np.isfinite(t_final) \
-            or t_final <= 0:
-        raise ValueError(f"t_final must be a positive finite time (s); got {t_final!r}")
-    if not (np.isscalar(rtol) and np.isfinite(rtol) and 1e-14 <= rtol < 1):
-        raise ValueError(f"rtol must lie in [1e-14, 1); got {rtol!r}")
+        raise InputTypeError(f"model must be a flexctl Model; got {type(model).__name__}")
+    t_final = check_time("t_final", t_final)
+    rtol = check_rtol(rtol)
     if hub_motion is not None and (torque is not None or controller is not None):
-        raise ValueError("hub_motion prescribes the hub: it cannot be combined with torque or "
-                         "controller")
+        raise InputValueError("hub_motion prescribes the hub: it cannot be combined with "
+                              "torque or controller")
     if hub_motion is not None:
         for attr in ("angle", "rate", "acceleration"):
             if not callable(getattr(hub_motion, attr, None)):
-                raise TypeError(f"hub_motion must have a callable {attr}(t); got "
-                                f"{type(hub_motion).__name__}")
-    if output_step is not None and not (np.isscalar(output_step) and np.isfinite(output_step)
-                                        and output_step > 0):
-        raise ValueError(f"output_step must be a positive time (s); got {output_step!r}")
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+                raise InputTypeError(f"hub_motion must have a callable {attr}(t); got "
+                                     f"{type(hub_motion).__name__}")
+    if output_step is not None:
+        output_step = check_time("output_step", output_step)
+    max_step = check_time("max_step", max_step, allow_inf=True)
+    method = check_method(method, METHODS)
     symbolic = is_symbolic(torque, hub_motion, controller)
     if method == "cvodes" and not symbolic:
-        raise ValueError("method 'cvodes' needs inputs with a CasADi form (the built-in "
-                         "manoeuvres, controllers with casadi_torque); got a Python callable")
+        raise InputValueError("method 'cvodes' needs inputs with a CasADi form (the built-in "
+                              "manoeuvres, controllers with casadi_torque); got a Python "
+                              "callable")
     if method == "auto":
         method = "cvodes" if symbolic else "DOP853"
-    method, stiffness_note = _stiffness_guard(model, t_final, method, symbolic,
-                                              hub_motion is not None)
-    if stiffness_note:
-        warnings.warn(stiffness_note, StiffnessWarning, stacklevel=2)
-    fallback = "DOP853" if method == "cvodes" else method
+    step = output_step if output_step is not None else t_final / DEFAULT_OUTPUT_POINTS
+    grid = output_grid(t_final, step)
+    hub = "clamped" if hub_motion is not None else "free"
+    omega_slow = float(model.natural_frequencies(0.0, hub=hub)[0])
+    if t_final * omega_slow / (2.0 * np.pi) > MAX_PERIODS:
+        raise InputValueError(
+            f"t_final {t_final:g} s spans {t_final * omega_slow / (2.0 * np.pi):.3g} periods of "
+            f"the slowest mode ({omega_slow:.4g} rad/s), more than the limit {MAX_PERIODS:g} "
+            "(each takes an integrator several steps); shorten t_final")
 
     n, nx = model.n_modes, model.n_states
-    x_init = np.zeros(nx) if x0 is None else np.array(x0, dtype=float).reshape(-1)
+    x_init = (np.zeros(nx) if x0 is None else
+              as_vector("x0", x0, f"{nx} numbers (states {', '.join(model.state_names)})")
+              .reshape(-1))
     if x_init.shape != (nx,) or not np.all(np.isfinite(x_init)):
-        raise ValueError(f"x0 must be {nx} finite numbers (states {', '.join(model.state_names)})"
-                         f"; got {x0!r}")
+        raise InputValueError(f"x0 must be {nx} finite numbers (states "
+                              f"{', '.join(model.state_names)}); got {x0!r}")
 
-    torque_fn = _time_function(torque, "torque") if torque is not None else None
+    torque_fn = time_function(torque, "torque") if torque is not None else None
     if controller is not None and not isinstance(controller, Controller):
         if not callable(controller):
-            raise TypeError("controller must be callable as controller(t, x) or follow the "
-                            f"flexctl Controller protocol; got {type(controller).__name__}")
+            raise InputTypeError("controller must be callable as controller(t, x) or follow "
+                                 "the flexctl Controller protocol; got "
+                                 f"{type(controller).__name__}")
+        time_function(controller, "controller")     # its signature: (t, x)
         controller = _StaticFeedback(controller)
     nz = controller.n_states if controller is not None else 0
     prescribed = hub_motion is not None
@@ -399,6 +425,10 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     # the small-deflection variants leave their range when the modal tip passes the length;
     # the exact beam cannot, and stops only when its mean slope passes EXACT_CURL rad
     reach = length * (EXACT_CURL if model.variant == "exact" else 1.0)
+    if abs(tip @ x_init[1:n + 1]) >= reach:
+        raise InputValueError(f"x0 puts the modal tip at {tip @ x_init[1:n + 1]:.4g} m, beyond "
+                              f"the {reach:g} m the {model.variant} model covers (beam length "
+                              f"{length:g} m); got x0 = {x0!r}")
 
     # Inputs are evaluated inside the current smooth segment: at its closed end the integrator
     # must see the value from the left, not the next piece's.
@@ -414,8 +444,10 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         def rhs(t, y):
             q, qd = y[:n], y[n:]
             t = inside(t)
-            qdd = model.beam_accelerations(q, qd, float(hub_motion.rate(t)),
-                                           float(hub_motion.acceleration(t)))
+            qdd = model.beam_accelerations(
+                q, qd, input_value("hub_motion.rate", hub_motion.rate(t), t, "rad/s"),
+                input_value("hub_motion.acceleration", hub_motion.acceleration(t), t,
+                            "rad/s^2"))
             return np.concatenate((qd, qdd))
 
         def plant_state(t, y):
@@ -434,7 +466,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         def applied_torque(t, x, z):
             u = torque_fn(t, x) if torque_fn is not None else 0.0
             if controller is not None:
-                u += float(controller.torque(t, x, z))
+                u += input_value("controller", controller.torque(t, x, z), t)
             return u
 
         def rhs(t, y):
@@ -442,7 +474,11 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             u = applied_torque(inside(t), x, z)
             dx = model.dynamics(t, x, u)
             if nz:
-                return np.concatenate((dx, controller.derivative(t, x, z)))
+                dz = np.asarray(controller.derivative(t, x, z), dtype=float).reshape(-1)
+                if dz.shape != (nz,) or not np.all(np.isfinite(dz)):
+                    raise InputValueError(f"controller.derivative must return {nz} finite "
+                                          f"numbers; got {dz!r} at t = {t:.6g} s")
+                return np.concatenate((dx, dz))
             return dx
 
         def plant_state(t, y):
@@ -466,17 +502,46 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         atol_vec = _default_atol(model, rtol, prescribed)
         atol_vec = np.concatenate((atol_vec, np.full(nz, rtol * 1e-3)))
     else:
-        atol_vec = np.broadcast_to(np.asarray(atol, dtype=float), (y_init.size,)).copy()
+        atol_vec = as_vector("atol", atol, "a positive number or one per state")
+        try:
+            atol_vec = np.broadcast_to(atol_vec, (y_init.size,)).copy()
+        except ValueError:
+            raise InputValueError(f"atol must be one number or {y_init.size}; got shape "
+                                  f"{atol_vec.shape}") from None
         if not np.all(np.isfinite(atol_vec)) or np.any(atol_vec <= 0):
-            raise ValueError(f"atol must be positive and finite; got {atol!r}")
+            raise InputValueError(f"atol must be positive and finite; got {atol!r}")
+
+    # the closed loop's fastest pole joins the stiffness guard
+    omega_plant = float(model.natural_frequencies(0.0, hub=hub)[-1])
+    loop_frequency = 0.0
+    if controller is not None:
+        try:
+            loop_frequency = jacobian_frequency(rhs, 0.0, y_init, atol_vec / rtol)
+        except SingularMassMatrixError:     # reported as such by the run itself
+            pass
+        if loop_frequency > LOOP_LIMIT * omega_plant:
+            raise InputValueError(
+                f"controller gains put the fastest closed-loop pole at {loop_frequency:.4g} "
+                f"rad/s, more than {LOOP_LIMIT:g} times the fastest mode of the "
+                f"{model.n_modes}-mode model ({omega_plant:.4g} rad/s): the model describes "
+                "nothing that fast and the run would crawl; lower the gains (e.g. the "
+                "bandwidth)")
+    method, stiffness_note = _stiffness_guard(model, t_final, method, symbolic, prescribed,
+                                              loop_frequency)
+    if stiffness_note:
+        warnings.warn(stiffness_note, StiffnessWarning, stacklevel=2)
+    fallback = "DOP853" if method == "cvodes" else method
+    # every input once at the start: a wrong type or a non-finite value is named here, before
+    # any integrator sees it
+    if prescribed:
+        rhs(0.0, y_init)
+    else:
+        applied_torque(0.0, x_init, y_init[nx:])
+    cvodes_steps = int(min(1e6, max(CVODES_MIN_STEPS, CVODES_STEPS_PER_RADIAN
+                                    * max(omega_plant, loop_frequency) * step)))
 
     cuts = [0.0] + [b for b in _breakpoints(torque, hub_motion, controller)
                     if 0.0 < b < t_final] + [float(t_final)]
-    step = output_step if output_step is not None else t_final / DEFAULT_OUTPUT_POINTS
-    grid = np.arange(0.0, t_final + 0.5 * step, step)
-    grid = grid[grid <= t_final]
-    if grid[-1] < t_final:
-        grid = np.append(grid, t_final)
 
     def first_bad_sample(y_seg):
         """Index of the first output sample past a stopping condition, or None."""
@@ -501,7 +566,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             try:
                 integ = SegmentIntegrator(model, lo, t_eval, atol_vec / rtol, rtol,
                                           torque=torque, hub_motion=hub_motion,
-                                          controller=controller)
+                                          controller=controller, max_steps=cvodes_steps)
                 y_seg = integ(y)
                 n_eval += integ.n_evaluations
                 bad = first_bad_sample(y_seg)
@@ -605,6 +670,19 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         if torque_out is None:
             torque_out = np.array([applied_torque(t, states[:, k], z_all[:, k])
                                    for k, t in enumerate(t_all)])
+    torque_out = np.asarray(torque_out, dtype=float).reshape(-1)
+    finite = np.isfinite(torque_out)
+    if not finite.all():
+        # the torque a prescribed motion needs, or an input's own array form, overflowed:
+        # the arrays end at the last finite sample, as for the state
+        first_bad = int(np.argmin(finite))
+        if first_bad == 0:
+            raise InputValueError(f"the hub torque is {torque_out[0]!r} at t = 0 s; the inputs "
+                                  "must keep it finite")
+        t_all, states, z_all = t_all[:first_bad], states[:, :first_bad], z_all[:, :first_bad]
+        torque_out = torque_out[:first_bad]
+        status = "diverged"
+        message = f"the hub torque became non-finite after t = {t_all[-1]:.6g} s"
 
     t_end = float(t_all[-1])
     if status == "diverged" and message.startswith("reached") and model.variant == "exact":
@@ -626,8 +704,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     if accuracy_note:
         message = f"{message} ({accuracy_note})"
 
-    return SimulationResult(model=model, t=t_all, states=states, torque=np.asarray(torque_out,
-                            dtype=float).reshape(-1),
+    return SimulationResult(model=model, t=t_all, states=states, torque=torque_out,
                             tip_deflection=np.asarray(model.tip_deflection(states), dtype=float),
                             root_moment=mat.root @ states[1:n + 1], status=status,
                             message=message, wall_time=wall, n_evaluations=int(n_eval),
