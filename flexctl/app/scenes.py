@@ -286,6 +286,9 @@ def _set_dotted(data: dict, path: str, value):
                 raise SceneError(f"override key {path!r}: {where} is not an index of a list of "
                                  f"{len(node)}")
             node = node[int(key)]
+        elif not isinstance(node, dict):
+            raise SceneError(f"override key {path!r}: {'.'.join(parts[:depth])} is a "
+                             f"{type(node).__name__} value, not a table")
         else:
             if key not in node:
                 if key not in _SCHEMA or key == "description":
@@ -296,6 +299,9 @@ def _set_dotted(data: dict, path: str, value):
     if isinstance(node, list):
         raise SceneError(f"override key {path!r} must index an item of the list, "
                          f"e.g. masses.0.mass")
+    if not isinstance(node, dict):
+        raise SceneError(f"override key {path!r}: {'.'.join(parts[:-1])} is a "
+                         f"{type(node).__name__} value, not a table")
     node[last] = value
 
 

@@ -26,6 +26,8 @@ import math
 from dataclasses import dataclass, field
 from numbers import Real
 
+import numpy as np
+
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["Hub", "Beam", "PointMass", "HubBeam", "check_real", "RATIO_LIMIT",
@@ -139,7 +141,9 @@ class Beam:
             if not low <= value <= high:
                 raise InputValueError(f"{label} must lie in [{low:g}, {high:g}] to be "
                                       f"represented in floating point; got {value!r}")
-        ratio = self.bending_stiffness / (self.linear_density * self.length ** 4)
+        with np.errstate(all="ignore"):    # an overflow is an out-of-range ratio, said below
+            ratio = float(np.float64(self.bending_stiffness)
+                          / (self.linear_density * np.float64(self.length) ** 4))
         if not low <= ratio <= high:
             raise InputValueError(
                 "the ratio EI / (rho A l^4) of beam.youngs_modulus * beam.second_moment to "

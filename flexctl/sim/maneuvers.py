@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..model.errors import InputValueError
 from ..model.parameters import check_real as _real
 
 __all__ = ["SpinUp", "SineTorque", "Slew"]
@@ -153,3 +154,13 @@ class Slew:
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, _real("maneuver", name, getattr(self, name),
                                                      minimum=0.0, strict=True))
+        if self.duration is not None:
+            # the rigid slew's acceleration 4 angle / duration^2 must be a number: a duration
+            # of 1e-300 s overflows it to inf, 1e300 s underflows it to 0
+            with np.errstate(all="ignore"):
+                acceleration = float(4.0 * abs(angle) / np.float64(self.duration) ** 2)
+            if not 0.0 < acceleration < float("inf"):
+                raise InputValueError(
+                    f"maneuver.duration must make the rigid slew acceleration 4 angle / "
+                    f"duration^2 a positive finite number; got {self.duration!r} s, giving "
+                    f"{acceleration!r} rad/s^2")
