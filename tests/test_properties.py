@@ -35,7 +35,7 @@ from flexctl.model.errors import InputError
 #: Generated inputs per test (five tests: 375 inputs a run).
 MAX_EXAMPLES = {"parameters": 120, "simulate": 120, "overrides": 60, "controllers": 45,
                 "x0": 30}
-PROPERTY_SETTINGS = {"deadline": None, "derandomize": False,
+PROPERTY_SETTINGS = {"deadline": None, "derandomize": True,
                      "suppress_health_check": [HealthCheck.too_slow]}
 OUTPUT_FILES = {"timeseries.csv", "summary.json", "response.png"}
 STATUSES = {"ok", "diverged", "singular"}

@@ -409,6 +409,21 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         raise InputValueError(f"x0 must be {nx} finite numbers (states "
                               f"{', '.join(model.state_names)}); got {x0!r}")
 
+    spin0 = 0.0 if hub_motion is not None else float(x_init[n + 1])
+    if spin0:
+        # a stop on the way must be located by an explicit method, which resolves the fastest
+        # frequency the spin gives the beam
+        try:
+            with np.errstate(all="ignore"):
+                w_spin = float(np.max(np.abs(model.natural_frequencies(spin0, hub="clamped"))))
+        except (OverflowError, np.linalg.LinAlgError, ValueError):  # spin0 ** 2 overflowed
+            w_spin = np.inf
+        if not w_spin * t_final / 3.0 <= EXPLICIT_REFUSE_LIMIT:
+            raise InputValueError(
+                f"x0: the hub rate {spin0:g} rad/s gives the beam frequencies up to "
+                f"{w_spin:.3g} rad/s, some {w_spin * t_final / 3.0:.3g} steps over t_final "
+                f"{t_final:g} s, beyond the {EXPLICIT_REFUSE_LIMIT:.3g} a run may take; got "
+                f"x0 = {x0!r}")
     torque_fn = time_function(torque, "torque") if torque is not None else None
     if controller is not None and not isinstance(controller, Controller):
         if not callable(controller):
