@@ -243,7 +243,7 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
                     transcription=spec.settings.get("transcription"))
     start = time.perf_counter()
     try:
-        solution = solve_slew(design, problem)
+        solution = _wrap(solve_slew, design, problem)
     except RuntimeError as exc:
         raise SceneError(f"controller: trajectory optimisation failed: {exc}") from None
     info = {"solve_time_s": time.perf_counter() - start, "ipopt_status": solution.return_status,

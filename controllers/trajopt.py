@@ -499,6 +499,10 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
         raise ValueError(f"ipopt_options must be a dict of IPOPT options; got "
                          f"{type(ipopt_options).__name__}")
     n, N, K = model.n_states, model.n_modes, problem.n_intervals
+    if K < n:
+        raise ValueError(f"n_intervals must be at least the {n} terminal conditions of a "
+                         f"rest-to-rest slew of a {N}-mode design model (2 N + 2 torque holds); "
+                         f"got {K}")
     umax, target = problem.torque_bound, problem.target_state(n)
     t_rigid = rigid_minimum_time(problem.angle, model.matrices.J0, umax)
     free_time = problem.objective == "time"

@@ -240,3 +240,10 @@ def test_scenes_are_frozen():
     scene = load_scene("hub-beam-mass")
     with pytest.raises(dataclasses.FrozenInstanceError):
         scene.name = "other"
+
+
+def test_scene_file_that_is_not_utf8_is_named(tmp_path):
+    path = tmp_path / "latin1.toml"
+    path.write_bytes('description = "caf\xe9"\n'.encode("latin-1"))
+    with pytest.raises(flexctl.SceneError, match=r"latin1\.toml.*UTF-8"):
+        flexctl.load_scene(path)

@@ -285,3 +285,10 @@ def test_bad_solver_inputs_name_the_parameter(design, problem, solution):
 def test_iteration_limit_is_reported_as_failure(design, problem):
     with pytest.raises(TrajectoryOptimizationError, match="Maximum_Iterations_Exceeded"):
         solve_slew(design, problem, ipopt_options={"max_iter": 2})
+
+
+def test_too_few_holds_for_the_terminal_conditions_are_refused_before_solving(design):
+    problem = SlewProblem(angle=ANGLE, duration=DURATION, torque_bound=TORQUE_BOUND,
+                          n_intervals=2)
+    with pytest.raises(ValueError, match=r"n_intervals must be at least the 6 terminal"):
+        solve_slew(design, problem)

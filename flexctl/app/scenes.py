@@ -424,9 +424,16 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
         if not path.is_file():
             raise SceneError(f"scene file {str(path)!r} does not exist")
         try:
-            data = tomllib.loads(path.read_text())
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
         except tomllib.TOMLDecodeError as exc:
             raise SceneError(f"scene file {str(path)!r} is not valid TOML: {exc}") from None
+        except UnicodeDecodeError as exc:
+            raise SceneError(f"scene file {str(path)!r} must be UTF-8 text (TOML); byte "
+                             f"{exc.object[exc.start]:#04x} at offset {exc.start} is not "
+                             "UTF-8") from None
+        except OSError as exc:
+            raise SceneError(f"scene file {str(path)!r} cannot be read: "
+                             f"{exc.strerror or exc}") from None
         name = path.stem
     else:
         names = builtin_scenes()
