@@ -21,6 +21,7 @@ Like the command line, this module sits on top of both packages: it imports
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,6 +29,7 @@ import numpy as np
 
 from controllers.spec import CONTROLLER_KEYS
 
+from ..sim.validity import ModelValidityWarning
 from .scenes import load_scene, run_slew
 from .sweep import PointMassAmplitudes, SceneTask, response_amplitudes, sweep
 
@@ -297,7 +299,9 @@ def large_deflection(out: Path, executor=None) -> Section:
                 "controller.kind": "trajopt", "model.variant": plant,
                 "model.design_variant": design})
             designed = designed or from_spec(scene)
-            result, built, metrics = run_slew(scene, lambda *_: designed)
+            with warnings.catch_warnings():      # first_order out of range is the point here:
+                warnings.simplefilter("ignore", ModelValidityWarning)   # the table shows it
+                result, built, metrics = run_slew(scene, lambda *_: designed)
             error = result.validity.geometric_error
             rows.append((design, plant, f"{1e3 * metrics.residual_vibration:.3g}",
                          f"{np.degrees(metrics.final_error):.3g}",
