@@ -39,7 +39,6 @@ Run: ``python benchmarks/bench_closed_loop.py`` (a few minutes: the DOP853 runs 
 
 from __future__ import annotations
 
-import statistics
 import sys
 import time
 import warnings
@@ -48,16 +47,16 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import casadi as ca                                   # noqa: E402
+from equal_error import TARGET, median_time, tune  # noqa: E402
 
 from controllers import PD, from_spec                 # noqa: E402
 from controllers.spec import CONTROLLER_KEYS          # noqa: E402
 from flexctl import build_model, load_scene, simulate  # noqa: E402
 from flexctl.app.sweep import SceneTask, SweepError, sweep  # noqa: E402
 
-TARGET = 1e-6                        # relative tip error asked of every tool
-RTOL_GRID = 10.0 ** (-4.0 - 0.25 * np.arange(29))     # 1e-4 .. 1e-11
 REFERENCE_RTOL = 1e-12
 ATOL_SCALE = 1e-3                    # bare run: atol = rtol * 1e-3 (m, rad)
 T_FINAL = 6.0                        # s
@@ -66,28 +65,6 @@ REPEATS = 7                          # compiled runs (tens of ms each)
 REPEATS_SLOW = 3                     # DOP853 runs (seconds each)
 SWEEP_SLEWS = 200                    # case C (issue 9 asks about 1000: the cost is linear)
 SWEEP_RTOL = 1e-6
-
-
-def relative_error(tip, reference):
-    return float(np.max(np.abs(tip - reference)) / np.max(np.abs(reference)))
-
-
-def median_time(run, repeats):
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
-
-
-def tune(run, reference):
-    """Largest rtol of RTOL_GRID whose tip is within TARGET of the reference: (rtol, error)."""
-    for rtol in RTOL_GRID:
-        error = relative_error(run(rtol), reference)
-        if error <= TARGET:
-            return float(rtol), error
-    raise RuntimeError(f"no rtol down to {RTOL_GRID[-1]:g} reaches {TARGET:g}")
 
 
 # ---------------------------------------------------------------------------- case A
@@ -121,7 +98,8 @@ def bare_cvodes_tip(model, x0, grid):
     return run
 
 
-def closed_loop_case():
+def slew_case():
+    """slew-90's plant on first_order, 90 deg off target at rest, its output grid and step."""
     scene = load_scene("slew-90")
     model = build_model(scene.system, n_modes=scene.model.modes, variant="first_order")
     step = scene.simulation.output_step
@@ -129,6 +107,11 @@ def closed_loop_case():
     x0[0] = -np.pi / 2
     grid = np.arange(0.0, T_FINAL + 0.5 * step, step)
     grid = grid[grid <= T_FINAL]
+    return model, x0, grid, step
+
+
+def closed_loop_case():
+    model, x0, grid, step = slew_case()
     print(f"\n== A. slew-90 plant ({model.variant}, {model.n_modes} modes) under "
           f"PD({', '.join(f'{k}={v:g}' for k, v in GAINS.items())}), 90 deg to rest, "
           f"{T_FINAL:g} s; target relative tip error {TARGET:g}")
@@ -170,13 +153,7 @@ def dispersed_gains(count, seed=9):
 def gain_sweep_case(count=SWEEP_SLEWS, rtol=SWEEP_RTOL):
     """Slews with dispersed PD gains: flexctl (integrators shared through the gains as
     parameters) against the sum of bare CVODES integration times."""
-    scene = load_scene("slew-90")
-    model = build_model(scene.system, n_modes=scene.model.modes, variant="first_order")
-    step = scene.simulation.output_step
-    x0 = np.zeros(model.n_states)
-    x0[0] = -np.pi / 2
-    grid = np.arange(0.0, T_FINAL + 0.5 * step, step)
-    grid = grid[grid <= T_FINAL]
+    model, x0, grid, step = slew_case()
     kps, kds = dispersed_gains(count)
     print(f"\n== C. {count} slews of case A with PD gains dispersed by +-30 %, rtol {rtol:g}")
     totals = {}

@@ -31,7 +31,6 @@ Run: ``python benchmarks/bench_speed.py`` (a few minutes; python-control dominat
 
 from __future__ import annotations
 
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -39,14 +38,14 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import casadi as ca                               # noqa: E402
+from equal_error import TARGET, median_time, relative_error, tune  # noqa: E402
 import control                                    # noqa: E402
 
 from flexctl import SpinUp, load_scene, simulate  # noqa: E402
 
-TARGET = 1e-6                    # relative tip error asked of every tool
-RTOL_GRID = 10.0 ** (-4.0 - 0.25 * np.arange(29))     # 1e-4 .. 1e-11
 REFERENCE_RTOL = 1e-13
 ATOL_SCALE = 1e-3                # atol = rtol * 1e-3 (m, rad) for the bare and python-control runs
 OUTPUT_STEP = 0.01               # s
@@ -60,28 +59,6 @@ def output_grid(t_final):
     grid = np.arange(0.0, t_final + 0.5 * OUTPUT_STEP, OUTPUT_STEP)
     grid[-1] = t_final
     return grid
-
-
-def relative_error(tip, reference):
-    return float(np.max(np.abs(tip - reference)) / np.max(np.abs(reference)))
-
-
-def median_time(run, repeats):
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
-
-
-def tune(run, reference):
-    """Largest rtol of RTOL_GRID whose tip is within TARGET of the reference: (rtol, error)."""
-    for rtol in RTOL_GRID:
-        error = relative_error(run(rtol), reference)
-        if error <= TARGET:
-            return float(rtol), error
-    raise RuntimeError(f"no rtol down to {RTOL_GRID[-1]:g} reaches {TARGET:g}")
 
 
 # ---------------------------------------------------------------------------- the tools
