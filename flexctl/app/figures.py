@@ -7,7 +7,7 @@ light.
 
 from __future__ import annotations
 
-__all__ = ["new_figure"]
+__all__ = ["new_figure", "figure_for"]
 
 
 def new_figure(figsize, nrows=1, sharex=False):
@@ -24,3 +24,12 @@ def new_figure(figsize, nrows=1, sharex=False):
     fig = Figure(figsize=figsize, layout="constrained")
     axes = fig.subplots(nrows, 1, sharex=sharex, squeeze=False)[:, 0]
     return fig, list(axes)
+
+
+def figure_for(ax, figsize):
+    """``(figure, ax)``: the figure of the given axes, or a new one-axes figure when ``ax`` is
+    None."""
+    if ax is None:
+        fig, (ax,) = new_figure(figsize)
+        return fig, ax
+    return ax.figure, ax

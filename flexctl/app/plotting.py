@@ -28,7 +28,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from .figures import new_figure
+from .figures import figure_for, new_figure
 # Sweep and Pareto plots live in their own module; they are importable from here too.
 from .plotting_sweeps import plot_pareto, plot_sweep
 
@@ -144,10 +144,7 @@ def plot_mode_shapes(model, n_shapes: int | None = None, n_points: int = 201, ax
         raise ValueError(f"n_shapes must be an integer in [1, {n_modes}]; got {n_shapes!r}")
     if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 2:
         raise ValueError(f"n_points must be an integer >= 2; got {n_points!r}")
-    if ax is None:
-        fig, (ax,) = new_figure((7.0, 4.0))
-    else:
-        fig = ax.figure
+    fig, ax = figure_for(ax, (7.0, 4.0))
     length = model.system.beam.length
     xi = np.linspace(0.0, 1.0, int(n_points))
     shapes = mode_shapes(n_modes, xi)[:n_shapes]
@@ -238,10 +235,7 @@ def plot_frequencies_vs_spin(models, spin_rates, variants=("first_order", "zero_
             or not 1 <= n_frequencies <= n_max:
         raise ValueError(f"n_frequencies must be an integer in [1, {n_max}]; "
                          f"got {n_frequencies!r}")
-    if ax is None:
-        fig, (ax,) = new_figure((7.5, 5.0))
-    else:
-        fig = ax.figure
+    fig, ax = figure_for(ax, (7.5, 5.0))
 
     lowest = 0.0
     colours = [f"C{i}" for i in range(10)]
@@ -312,10 +306,7 @@ def plot_tip_deflections(results, ax=None, title: str | None = None,
         and its legend entry says ``diverged at t = ... s`` (or ``singular``).
     """
     runs = _results_from(results)
-    if ax is None:
-        fig, (ax,) = new_figure((8.0, 4.0))
-    else:
-        fig = ax.figure
+    fig, ax = figure_for(ax, (8.0, 4.0))
     finished = []
     for k, (label, r) in enumerate(runs.items()):
         colour = f"C{k % 10}"

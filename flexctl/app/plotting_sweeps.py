@@ -21,7 +21,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from .figures import new_figure
+from .figures import figure_for
 
 __all__ = ["plot_sweep", "plot_pareto", "table_column"]
 
@@ -111,10 +111,7 @@ def plot_sweep(table, x: str, y, *, by: str | None = None, ax=None, labels=None,
     if by is not None:
         keys = table_column(table, by)
         groups = [(value, keys == value) for value in dict.fromkeys(keys.tolist())]
-    if ax is None:
-        fig, (ax,) = new_figure((7.0, 4.5))
-    else:
-        fig = ax.figure
+    fig, ax = figure_for(ax, (7.0, 4.5))
     labels = dict(labels or {})
     markers = "osD^v<>"
     for i, name in enumerate(names):
@@ -195,10 +192,7 @@ def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | No
     if not usable.any():
         raise ValueError(f"plot_pareto needs at least one point with finite (and, on a log "
                          f"axis, positive) {x!r} and {y!r}; got none")
-    if ax is None:
-        fig, (ax,) = new_figure((7.0, 5.0))
-    else:
-        fig = ax.figure
+    fig, ax = figure_for(ax, (7.0, 5.0))
     groups = [(None, usable)]
     if by is not None:
         keys = table_column(table, by)
