@@ -205,3 +205,9 @@ def test_slew_90_optimised_on_exact_suppresses_vibration_on_the_finite_element_b
     assert beam <= residual_bar, residuals
     assert abs(reported - beam) <= max(0.5 * beam, residual_bar), residuals
     assert residuals["first_order"][1] > 20 * beam, residuals
+
+
+@pytest.mark.parametrize("n_modes", [25, 200])
+def test_exact_refuses_more_modes_than_it_can_build(n_modes):
+    with pytest.raises(ValueError, match=r"n_modes must be at most 24 for the exact variant"):
+        build_model(_system("hub-beam-mass"), n_modes=n_modes, variant="exact")

@@ -48,6 +48,8 @@ from .parameters import HubBeam
 __all__ = ["Model", "build_model", "VARIANTS", "SingularMassMatrixError"]
 
 VARIANTS = ("first_order", "zero_order", "consistent", "exact")
+#: Most modes the exact variant takes (20 modes: a 445k-instruction right-hand side, 4 s to build).
+EXACT_MAX_MODES = 24
 OUTPUT_NAMES = ("theta", "theta_dot", "tip_deflection", "root_moment", "tip_angle")
 
 
@@ -546,6 +548,12 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order")
     if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) \
             or not 1 <= n_modes <= 200:
         raise InputValueError(f"n_modes must be an integer in [1, 200]; got {n_modes!r}")
+    if variant == "exact" and n_modes > EXACT_MAX_MODES:
+        raise InputValueError(
+            f"n_modes must be at most {EXACT_MAX_MODES} for the exact variant (its geometry "
+            "grows as the square of the modes times the quadrature points, and large "
+            "deflection lives in the low modes; converge the higher ones on first_order); "
+            f"got {n_modes!r}")
     if not isinstance(system, HubBeam):
         raise InputTypeError(f"system must be a HubBeam; got {type(system).__name__}")
     return Model(system=system, n_modes=int(n_modes), variant=variant,
