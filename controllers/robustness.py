@@ -191,7 +191,8 @@ class RobustnessTask:
 
     Notes
     -----
-    A call returns a dict: the :class:`~controllers.analysis.LoopMargins` fields,
+    A call returns a dict: the factors :data:`SCALES`, the
+    :class:`~controllers.analysis.LoopMargins` fields,
     ``first_frequency`` (lowest hub-free flexible frequency, rad/s) and, with ``slew_time``,
     ``status`` and the :class:`~flexctl.sim.metrics.SlewMetrics` fields.
     """
@@ -238,7 +239,9 @@ class RobustnessTask:
                           hub_inertia_scale=hub_inertia_scale)
         model = build_model(system, self.n_modes, self.variant)
         loop = loop_transfer(model, self.controller, self.spin_rate, sensor=self.sensor)
-        row = loop_margins(loop).as_dict()
+        row = {"youngs_modulus_scale": float(youngs_modulus_scale),
+               "point_mass_scale": float(point_mass_scale),
+               "hub_inertia_scale": float(hub_inertia_scale), **loop_margins(loop).as_dict()}
         row["first_frequency"] = float(model.natural_frequencies(self.spin_rate, "free")[0])
         if self.slew_time is not None:
             controller = self.controller
