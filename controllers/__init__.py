@@ -13,6 +13,8 @@ module                 contents
 ``tracking``           feedforward plus LQR feedback about an optimal slew
 ``spec``               the kinds and settings a scene's [controller] table may hold
 ``factory``            the controller a slew scene's [controller] table asks for
+``analysis``           loop transfer functions, stability margins, poles against spin
+``robustness``         Monte Carlo dispersion of stiffness, point masses, hub inertia
 =====================  ==========================================================
 
 The package depends on :mod:`flexctl.model` and :mod:`flexctl.sim` (models and the simulation
@@ -31,6 +33,10 @@ from .trajopt import (SlewProblem, SlewSolution, TrajectoryOptimizationError,
                       rigid_minimum_time, solve_slew)
 from .tracking import TrajectoryTracker
 from .factory import BuiltController, OpenLoop, from_spec
+from .analysis import (LoopMargins, PlantChannels, PolesVsSpin, loop_margins, loop_transfer,
+                       plant_channels, poles_vs_spin)
+from .robustness import (Dispersion, RobustnessSummary, RobustnessTask, disperse,
+                         robustness_summary)
 
 __all__ = [
     "SlewProfile", "minimum_slew_duration",
@@ -44,4 +50,7 @@ __all__ = [
     "SlewProblem", "SlewSolution", "TrajectoryOptimizationError", "TrajectoryTracker",
     "rigid_minimum_time", "solve_slew",
     "BuiltController", "OpenLoop", "from_spec",
+    "LoopMargins", "PlantChannels", "PolesVsSpin", "loop_margins", "loop_transfer",
+    "plant_channels", "poles_vs_spin",
+    "Dispersion", "RobustnessSummary", "RobustnessTask", "disperse", "robustness_summary",
 ]
