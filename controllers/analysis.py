@@ -336,9 +336,9 @@ class LoopMargins:
         Largest real part of the closed-loop poles, 1/s.
     closed_loop_stable : bool
         Every closed-loop pole in the open left half-plane (:data:`STABILITY_TOLERANCE`).
-        When False, the two gain margins bound the factors around 1 over which the loop
-        stays unstable (e.g. tip feedback on a lightly damped beam: stable only below its
-        gain-reduction margin).
+        When False, the two gain margins are the nearest factors at which the number of
+        unstable closed-loop poles changes: the loop may regain stability there (tip
+        feedback on a lightly damped beam does below its gain-reduction margin) or not.
     """
 
     gain_margin: float
