@@ -8,6 +8,8 @@ module          contents
 ``maneuvers``   ``SpinUp``, ``SineTorque``, ``Slew``: what drives the hub
 ``simulation``  ``simulate`` (compiled and SciPy paths), ``SimulationResult``, ``Controller``
 ``compiled``    the CasADi/CVODES integration of a symbolic drive
+``fixed_step``  compiled fixed-step RK4 with a step-doubling error estimate (``method="rk4"``)
+``digital``     sampled controllers: ``ZeroOrderHold``, the ``SampledController`` protocol
 ``metrics``     slew metrics and settling time
 ``fidelity``    how many modes a manoeuvre needs (``choose_modes``)
 ==============  =============================================================================
@@ -16,6 +18,7 @@ module          contents
 from .maneuvers import SineTorque, Slew, SpinUp
 from .simulation import (METHODS, AccuracyWarning, Controller, SimulationResult,
                          StiffnessWarning, simulate)
+from .digital import ControllerSession, SampledController, ZeroOrderHold
 from .metrics import SlewMetrics, settling_time, slew_metrics
 from .fidelity import ModeChoice, choose_modes
 
@@ -23,6 +26,7 @@ __all__ = [
     "SineTorque", "Slew", "SpinUp",
     "METHODS", "AccuracyWarning", "Controller", "SimulationResult", "StiffnessWarning",
     "simulate",
+    "ControllerSession", "SampledController", "ZeroOrderHold",
     "SlewMetrics", "settling_time", "slew_metrics",
     "ModeChoice", "choose_modes",
 ]

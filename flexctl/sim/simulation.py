@@ -35,6 +35,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .compiled import SegmentIntegrator, is_symbolic, torque_history, verify_accuracy
+from .digital import is_sampled, run_sampled
+from .fixed_step import MAX_HALVINGS, RK4_OMEGA_H, integrate_fixed_step
 from .inputs import (as_vector, check_method, check_rtol, check_time, input_value,
                      jacobian_frequency, output_grid, time_function)
 from ..model import Model, SingularMassMatrixError
@@ -51,8 +53,14 @@ SINGULAR_FRACTION = 1e-9
 EXACT_CURL = 2.0
 
 #: Integration methods: "auto" (CVODES when every input has a CasADi form, else DOP853),
-#: "cvodes" (compiled, :mod:`flexctl.sim.compiled`) and the ``scipy.integrate.solve_ivp`` methods.
-METHODS = ("auto", "cvodes", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+#: "cvodes" (compiled, :mod:`flexctl.sim.compiled`), "rk4" (compiled fixed step,
+#: :mod:`flexctl.sim.fixed_step`) and the ``scipy.integrate.solve_ivp`` methods.
+METHODS = ("auto", "cvodes", "rk4", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+
+#: Default tolerances: of the error-controlled methods, and of "rk4" (relative to the peak tip
+#: deflection, for "fast, and 1 % is enough").
+DEFAULT_RTOL = 1e-8
+RK4_RTOL = 1e-2
 
 #: Output samples over the run when no ``output_step`` is given.
 DEFAULT_OUTPUT_POINTS = 2000
@@ -218,6 +226,10 @@ class SimulationResult:
         Deflection reached and estimated geometric model error
         (:func:`flexctl.sim.validity.assess`); set by scene runs, ``None`` from
         :func:`simulate` itself.
+    controller_report : dict or None
+        For a sampled controller (:mod:`flexctl.sim.digital`): the session's report (e.g. solve
+        times) with ``samples``, ``sample_time`` (s) and ``controller_time`` (s, wall time in
+        the controller); ``None`` otherwise.
     """
 
     model: Model
@@ -235,6 +247,7 @@ class SimulationResult:
     controller_states: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     integration_error: float | None = None
     validity: object = None
+    controller_report: dict | None = None
 
     @property
     def deflection_ratio(self) -> float:
@@ -312,8 +325,75 @@ def _stiffness_reason(model: Model, spin: float) -> str:
             f"(hub rate {abs(spin):.4g} rad/s, first clamped frequency {w1:.4g} rad/s)")
 
 
+def _simulate_sampled(model, t_final, controller, x_init, torque, rtol, atol, step, reach,
+                      check_accuracy, method) -> SimulationResult:
+    """:func:`simulate` under a sampled controller (:mod:`flexctl.sim.digital`)."""
+    n, nx = model.n_modes, model.n_states
+    tip = model.matrices.tip
+    if atol is None:
+        scale = _default_atol(model, rtol, False) / rtol
+    else:
+        atol_vec = as_vector("atol", atol, "a positive number or one per state")
+        try:
+            atol_vec = np.broadcast_to(atol_vec, (nx,)).astype(float)
+        except ValueError:
+            raise InputValueError(f"atol must be one number or {nx}; got shape "
+                                  f"{atol_vec.shape}") from None
+        if not np.all(np.isfinite(atol_vec)) or np.any(atol_vec <= 0):
+            raise InputValueError(f"atol must be positive and finite; got {atol!r}")
+        scale = atol_vec / rtol
+
+    def bad_sample(y_seg):
+        bad = ~np.all(np.isfinite(y_seg), axis=0) | (np.abs(tip @ y_seg[1:n + 1]) >= reach)
+        return int(np.argmax(bad)) if bad.any() else None
+
+    omega_max = float(model.natural_frequencies(0.0, hub="free")[-1])
+    spin = float(x_init[n + 1])
+    if spin:
+        with np.errstate(all="ignore"):
+            omega_max = max(omega_max, float(np.max(np.abs(model.natural_frequencies(
+                spin, hub="clamped")))))
+    start = time.perf_counter()
+    run = run_sampled(model, t_final, controller, x_init, torque=torque, output_step=step,
+                      scale=scale, rtol=rtol, bad_sample=bad_sample,
+                      check_accuracy=check_accuracy,
+                      integrator="rk4" if method == "rk4" else "cvodes",
+                      h_max=RK4_OMEGA_H / omega_max)
+    wall = time.perf_counter() - start
+    accuracy_note = ""
+    if method == "rk4" and run.integration_error is not None:
+        peak = float(np.max(np.abs(tip @ run.states[1:n + 1])))
+        if run.integration_error > rtol * max(peak, 1e-12):
+            accuracy_note = (f"rk4: the estimated tip error {run.integration_error:.3g} m is "
+                             f"above rtol {rtol:g} of the peak {peak:.3g} m; use method "
+                             "'cvodes' for this accuracy")
+            warnings.warn(accuracy_note, AccuracyWarning, stacklevel=3)
+    status, message = run.status, run.message
+    if status == "diverged" and message == "reached":
+        t_end = float(run.t[-1])
+        if model.variant == "exact":
+            message = (f"the beam curled back on itself at t = {t_end:.6g} s (mean slope angle "
+                       f"above {EXACT_CURL:g} rad): the load is beyond what a beam of "
+                       f"{model.n_modes} modes can describe")
+        else:
+            message = (f"tip deflection passed the beam length {model.system.beam.length:g} m "
+                       f"at t = {t_end:.6g} s: "
+                       + _stiffness_reason(model, float(run.states[n + 1, -1])))
+    if accuracy_note:
+        message = f"{message} ({accuracy_note})"
+    report = dict(run.report, controller_time=run.controller_time)
+    states = run.states
+    return SimulationResult(model=model, t=run.t, states=states, torque=run.torque,
+                            tip_deflection=np.asarray(model.tip_deflection(states), dtype=float),
+                            root_moment=model.matrices.root @ states[1:n + 1], status=status,
+                            message=message, wall_time=wall, n_evaluations=run.n_evaluations,
+                            method="rk4" if method == "rk4" else "cvodes", rtol=float(rtol),
+                            controller_states=np.zeros((0, run.t.size)),
+                            integration_error=run.integration_error, controller_report=report)
+
+
 def simulate(model: Model, t_final: float, torque=None, hub_motion=None, controller=None,
-             x0=None, *, rtol: float = 1e-8, atol=None, method: str = "auto",
+             x0=None, *, rtol: float | None = None, atol=None, method: str = "auto",
              output_step: float | None = None, max_step: float = np.inf,
              check_accuracy: bool = True) -> SimulationResult:
     """Simulate the nonlinear model.
@@ -334,7 +414,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         Initial plant state; default rest at zero. With ``hub_motion`` its hub entries are
         ignored (the motion fixes them).
     rtol : float, optional
-        Relative tolerance of the error-controlled integrator. Default 1e-8.
+        Relative tolerance of the error-controlled integrator. Default 1e-8. For ``"rk4"``:
+        the largest estimated tip-deflection error relative to its peak, default 1e-2.
     atol : float or array_like, optional
         Absolute tolerance; default ``rtol`` times each state's physical scale.
     method : str, optional
@@ -345,6 +426,9 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         (DOP853, RK45, RK23) on a model too stiff for it is replaced by ``"cvodes"`` when the
         inputs allow, with a :class:`StiffnessWarning` and a note in the result's ``message``
         (``method`` of the result is the one used); see :func:`_stiffness_guard`.
+        ``"rk4"``: compiled fixed-step RK4 for loose tolerances, its step set by the fastest
+        mode and halved until a step-doubling error estimate meets ``rtol``
+        (:mod:`flexctl.sim.fixed_step`); needs inputs with a CasADi form.
     output_step : float, optional
         Spacing of the output times, s. Default: ``t_final / 2000``.
     max_step : float, optional
@@ -371,7 +455,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     if not isinstance(model, Model):
         raise InputTypeError(f"model must be a flexctl Model; got {type(model).__name__}")
     t_final = check_time("t_final", t_final)
-    rtol = check_rtol(rtol)
+    method = check_method(method, METHODS)
+    rtol = check_rtol((RK4_RTOL if method == "rk4" else DEFAULT_RTOL) if rtol is None else rtol)
     if hub_motion is not None and (torque is not None or controller is not None):
         raise InputValueError("hub_motion prescribes the hub: it cannot be combined with "
                               "torque or controller")
@@ -383,10 +468,13 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     if output_step is not None:
         output_step = check_time("output_step", output_step)
     max_step = check_time("max_step", max_step, allow_inf=True)
-    method = check_method(method, METHODS)
-    symbolic = is_symbolic(torque, hub_motion, controller)
-    if method == "cvodes" and not symbolic:
-        raise InputValueError("method 'cvodes' needs inputs with a CasADi form (the built-in "
+    symbolic = is_symbolic(torque, hub_motion, None if is_sampled(controller) else controller)
+    if is_sampled(controller) and method not in ("auto", "cvodes", "rk4"):
+        raise InputValueError(f"method {method!r}: a sampled controller (sample_time "
+                              f"{controller.sample_time!r} s) runs on the compiled path; use "
+                              "method 'auto' or 'cvodes'")
+    if method in ("cvodes", "rk4") and not symbolic:
+        raise InputValueError(f"method {method!r} needs inputs with a CasADi form (the built-in "
                               "manoeuvres, controllers with casadi_torque); got a Python "
                               "callable")
     if method == "auto":
@@ -425,14 +513,15 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                 f"{t_final:g} s, beyond the {EXPLICIT_REFUSE_LIMIT:.3g} a run may take; got "
                 f"x0 = {x0!r}")
     torque_fn = time_function(torque, "torque") if torque is not None else None
-    if controller is not None and not isinstance(controller, Controller):
+    if controller is not None and not is_sampled(controller) \
+            and not isinstance(controller, Controller):
         if not callable(controller):
             raise InputTypeError("controller must be callable as controller(t, x) or follow "
                                  "the flexctl Controller protocol; got "
                                  f"{type(controller).__name__}")
         time_function(controller, "controller")     # its signature: (t, x)
         controller = _StaticFeedback(controller)
-    nz = controller.n_states if controller is not None else 0
+    nz = controller.n_states if controller is not None and not is_sampled(controller) else 0
     prescribed = hub_motion is not None
     mat = model.matrices
     length = model.system.beam.length
@@ -444,6 +533,10 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         raise InputValueError(f"x0 puts the modal tip at {tip @ x_init[1:n + 1]:.4g} m, beyond "
                               f"the {reach:g} m the {model.variant} model covers (beam length "
                               f"{length:g} m); got x0 = {x0!r}")
+
+    if is_sampled(controller):
+        return _simulate_sampled(model, t_final, controller, x_init, torque, rtol, atol, step,
+                                 reach, check_accuracy, method)
 
     # Inputs are evaluated inside the current smooth segment: at its closed end the integrator
     # must see the value from the left, not the next piece's.
@@ -572,7 +665,44 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     n_eval = 0
     y = y_init
     start = time.perf_counter()
-    for lo, hi in zip(cuts[:-1], cuts[1:]):
+    integration_error, accuracy_note = None, ""
+    drive_cuts = cuts
+    if method == "rk4":
+        drive_cuts = []         # the whole run is one compiled call
+        tip_map = np.zeros(y_init.size)
+        tip_map[(0 if prescribed else 1):(0 if prescribed else 1) + n] = tip
+        omega_max = max(omega_plant, loop_frequency, w_spin if spin0 else 0.0)
+        if prescribed:
+            rates = np.asarray(hub_motion.rate(grid), dtype=float)
+            spin_max = float(np.max(np.abs(rates))) if rates.size else 0.0
+            if np.isfinite(spin_max) and spin_max > 0.0:
+                omega_max = max(omega_max, float(model.natural_frequencies(
+                    spin_max, hub="clamped")[-1]))
+        try:
+            fixed = integrate_fixed_step(model, np.array(cuts), grid, y_init, tip_map,
+                                         RK4_OMEGA_H / omega_max, rtol,
+                                         torque=torque, hub_motion=hub_motion,
+                                         controller=controller)
+        except ValueError as exc:
+            raise InputValueError(f"method 'rk4': {exc}; use method 'cvodes'") from None
+        n_eval = fixed.evaluations
+        t_fixed, y_fixed = grid, fixed.states
+        bad = first_bad_sample(y_fixed)
+        if bad is not None:
+            t_fixed, y_fixed = t_fixed[:bad + 1], y_fixed[:, :bad + 1]
+            status = "diverged"
+        else:
+            integration_error = fixed.error
+            peak = float(np.max(np.abs(tip_map @ y_fixed))) if y_fixed.size else 0.0
+            if integration_error is not None and integration_error > rtol * max(peak, 1e-12):
+                accuracy_note = (f"rk4: the estimated tip error {integration_error:.3g} m is "
+                                 f"above rtol {rtol:g} of the peak {peak:.3g} m after "
+                                 f"{MAX_HALVINGS} step halvings (step {fixed.h:.3g} s); use "
+                                 "method 'cvodes' for this accuracy")
+                warnings.warn(accuracy_note, AccuracyWarning, stacklevel=2)
+        ts.append(t_fixed)
+        ys.append(y_fixed)
+    for lo, hi in zip(drive_cuts[:-1], drive_cuts[1:]):
         t_eval = grid[(grid > lo) & (grid <= hi)]
         if t_eval.size == 0 or t_eval[-1] < hi:
             t_eval = np.append(t_eval, hi)
@@ -635,7 +765,6 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             break
         y = sol.y[:, -1]
 
-    integration_error, accuracy_note = None, ""
     if check_accuracy and method == "cvodes" and status == "ok" \
             and len(compiled_segments) == len(cuts) - 1:
         tip_map = np.zeros(y_init.size)

@@ -1,0 +1,398 @@
+"""Digital controllers: a law evaluated at a sample rate, its torque held between samples.
+
+A flight computer reads the sensors at ``t_k = k T``, computes a torque and holds it until
+``t_{k+1}`` (a zero-order hold). :func:`flexctl.simulate` runs any object following
+:class:`SampledController` this way: the plant is integrated from sample to sample with the
+held torque as a constant (compiled CVODES, one integrator shared by every sample), and the
+controller is called once per sample, from Python, so that it may keep any memory it likes (a
+warm start, an estimate, statistics).
+
+- :class:`ZeroOrderHold` turns a continuous law (any static :class:`flexctl.Controller`, e.g.
+  PD or LQR, or a callable ``law(t, x)``) into a sampled one: the same law, continuous or
+  sampled, is one switch.
+- A controller with its own solver (e.g. :class:`controllers.nmpc.NMPC`) implements
+  :class:`SampledController` directly: ``start`` gives a session whose ``step`` is called at
+  each sample and whose ``report`` lands in ``SimulationResult.controller_report``.
+
+Examples
+--------
+>>> import flexctl
+>>> from flexctl.sim.digital import ZeroOrderHold
+>>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+>>> pd = lambda t, x: 3.0 * (0.1 - x[0]) - 2.0 * x[3]
+>>> result = flexctl.simulate(model, 4.0, controller=ZeroOrderHold(pd, sample_time=0.01))
+>>> result.status, result.controller_report["samples"]
+('ok', 400)
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from .compiled import CHECK_FACTOR, SegmentIntegrator, is_symbolic
+from .fixed_step import _jit, _step_function
+from .inputs import input_value, output_grid, time_function
+from ..model.errors import InputTypeError, InputValueError
+
+__all__ = ["SampledController", "ControllerSession", "ZeroOrderHold", "is_sampled",
+           "SampledRun", "run_sampled"]
+
+#: Fewest samples a run may have, and most: a sample costs one integrator call (some 50 to
+#: 500 us) and one controller call, so 1e6 samples is minutes at least.
+MAX_SAMPLES = 1_000_000
+
+
+@runtime_checkable
+class ControllerSession(Protocol):
+    """One run of a sampled controller, with whatever memory it keeps between samples."""
+
+    def step(self, t: float, x: np.ndarray) -> float:
+        """Torque (N m) to hold from sample time ``t`` (s) to the next, given the plant state
+        ``x`` measured at ``t``, shape (n,)."""
+
+    def report(self) -> dict:
+        """What the run did (JSON-serialisable): solve times, iterations, failures..."""
+
+
+@runtime_checkable
+class SampledController(Protocol):
+    """A controller evaluated every ``sample_time`` seconds (zero-order hold in between).
+
+    Attributes
+    ----------
+    sample_time : float
+        s (> 0).
+    """
+
+    sample_time: float
+
+    def start(self, model, x0: np.ndarray) -> ControllerSession:
+        """A fresh session for a run of ``model`` from the plant state ``x0``."""
+
+
+def is_sampled(controller) -> bool:
+    """True for an object following :class:`SampledController`."""
+    return (getattr(controller, "sample_time", None) is not None
+            and callable(getattr(controller, "start", None)))
+
+
+def _sample_time(owner: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise InputTypeError(f"{owner} sample_time must be a number of seconds; got "
+                             f"{type(value).__name__} {value!r}")
+    value = float(value)
+    if not (np.isfinite(value) and value > 0.0):
+        raise InputValueError(f"{owner} sample_time must be positive and finite, s; got "
+                              f"{value!r}")
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class _HoldSession:
+    law: object
+
+    def step(self, t, x):
+        return self.law(t, x)
+
+    def report(self):
+        return {}
+
+
+@dataclass(frozen=True, eq=False)
+class ZeroOrderHold:
+    """A continuous law sampled every ``sample_time`` with its torque held in between.
+
+    Parameters
+    ----------
+    law : Controller or callable
+        A static :class:`flexctl.Controller` (``n_states == 0``: PD, LQR, a tracker, an open-loop
+        torque) or a callable ``law(t, x)`` returning N m.
+    sample_time : float
+        s (> 0).
+
+    Notes
+    -----
+    A law with internal states (an estimator, e.g. LQG) integrates them continuously and has
+    no sampled form here: its estimator would have to be discretised with the hold.
+    """
+
+    law: object
+    sample_time: float
+
+    def __post_init__(self):
+        object.__setattr__(self, "sample_time", _sample_time("ZeroOrderHold",
+                                                             self.sample_time))
+        law = self.law
+        if is_sampled(law):
+            raise InputValueError("ZeroOrderHold law is already sampled (it has a sample_time "
+                                  f"of {law.sample_time!r} s); pass the continuous law")
+        if callable(getattr(law, "torque", None)) and hasattr(law, "n_states"):
+            if law.n_states:
+                raise InputValueError(
+                    f"ZeroOrderHold law has {law.n_states} internal states (an estimator); "
+                    "only a static law (n_states = 0) can be sampled here")
+        elif callable(law):
+            time_function(law, "ZeroOrderHold law")       # its signature: (t, x)
+        else:
+            raise InputTypeError("ZeroOrderHold law must be a static flexctl Controller or a "
+                                 f"callable law(t, x); got {type(law).__name__}")
+
+    @property
+    def continuous(self):
+        """The law itself, to run it without the hold."""
+        return self.law
+
+    def start(self, model, x0) -> ControllerSession:
+        """A session evaluating the law at each sample."""
+        law = self.law
+        if callable(getattr(law, "torque", None)) and hasattr(law, "n_states"):
+            z = np.zeros(0)
+            return _HoldSession(lambda t, x: law.torque(t, x, z))
+        return _HoldSession(law)
+
+
+@dataclass(frozen=True)
+class _Held:
+    """The held torque as a parametric static controller: one compiled right-hand side and
+    one integrator serve every sample, the torque entering as a number."""
+
+    value: float
+    n_states = 0
+
+    def torque(self, t, x, z=None):
+        return self.value
+
+    @property
+    def casadi_parameters(self) -> tuple:
+        return ("held",), (self.value,)
+
+    def casadi_torque(self, t, x, parameters=None):
+        return parameters[0]
+
+
+@dataclass(frozen=True, eq=False)
+class SampledRun:
+    """Raw outcome of :func:`run_sampled`, for :func:`flexctl.simulate` to report.
+
+    Attributes
+    ----------
+    t : ndarray, shape (P,)
+        Output times, s: the output grid, and the stop time of a stopped run.
+    states : ndarray, shape (n, P)
+    torque : ndarray, shape (P,)
+        Held torque at each output time (the new sample's value at a sample time), N m.
+    sample_times, sample_torques : ndarray, shape (K,)
+        Each sample and the torque held from it, s and N m.
+    status : {"ok", "diverged"}
+    message : str
+    n_evaluations : int
+    integration_error : float or None
+        Estimated largest tip-deflection error, m: the difference from a replay of the held
+        torques at ``CHECK_FACTOR`` times the tolerance (CVODES), or with twice the step (RK4);
+        conservative, as it is the error of the looser replay.
+    report : dict
+        The session's report plus ``samples`` and ``sample_time``.
+    controller_time : float
+        Wall time spent in the controller, s.
+    """
+
+    t: np.ndarray
+    states: np.ndarray
+    torque: np.ndarray
+    sample_times: np.ndarray
+    sample_torques: np.ndarray
+    status: str
+    message: str
+    n_evaluations: int
+    integration_error: float | None
+    report: dict
+    controller_time: float
+
+
+def _sample_grid(t_final: float, sample_time: float) -> np.ndarray:
+    count = int(np.ceil(t_final / sample_time * (1.0 - 1e-12)))
+    if count > MAX_SAMPLES:
+        raise InputValueError(f"sample_time {sample_time:g} s gives {count} samples over "
+                              f"t_final {t_final:g} s, more than the limit {MAX_SAMPLES}; "
+                              "lengthen sample_time or shorten t_final")
+    edges = np.minimum(np.arange(count + 1) * sample_time, t_final)
+    edges[-1] = t_final
+    return edges
+
+
+class _CvodesHold:
+    """One sample under a held torque by CVODES (one integrator shared by every sample)."""
+
+    #: the looser run's difference is taken as the error (conservative)
+    error_divisor = 1.0
+
+    def __init__(self, model, torque, scale, rtol, max_steps):
+        self.model, self.torque, self.scale = model, torque, scale
+        self.rtol, self.max_steps = rtol, max_steps
+
+    def __call__(self, lo, t_out, y, u, loose=False):
+        integ = SegmentIntegrator(self.model, lo, t_out, self.scale,
+                                  self.rtol * (CHECK_FACTOR if loose else 1.0),
+                                  torque=self.torque, controller=_Held(u),
+                                  max_steps=self.max_steps)
+        return integ(y), integ.n_evaluations
+
+
+class _RK4Hold:
+    """One sample under a held torque by compiled RK4 steps of at most ``h_max`` (twice that
+    when ``loose``, for the step-doubling error estimate)."""
+
+    #: the difference from the run at twice the step is taken as the error (conservative: it
+    #: is the error of the coarser run; Richardson's division by 15 holds only where every
+    #: mode is resolved, and the torque steps of a hold excite the fastest ones)
+    error_divisor = 1.0
+
+    def __init__(self, model, torque, h_max):
+        self.h_max, self.model = float(h_max), model
+        self.step = _step_function(model, torque, None, _Held(0.0), 1)[0]
+        self.chains = {}
+
+    def _final(self, count):
+        """Compiled ``count`` steps: ``([y; t], h, u) -> [y; t]`` at the end."""
+        if count not in self.chains:
+            import casadi as ca
+
+            chain = self.step.mapaccum("flexctl_rk4_hold", count)
+            args = chain.mx_in()
+            ys = chain.call(args)[0]
+            self.chains[count] = _jit(ca.Function("flexctl_rk4_hold_end", args, [ys[:, -1]]),
+                                      self.model)
+        return self.chains[count]
+
+    def __call__(self, lo, t_out, y, u, loose=False):
+        h_max = self.h_max * (2.0 if loose else 1.0)
+        out, evaluations, start = [], 0, lo
+        yt = np.append(y, lo)
+        for end in t_out:
+            count = max(1, int(np.ceil((end - start) / h_max * (1.0 - 1e-12))))
+            yt = np.array(self._final(count)(yt, (end - start) / count, u)).reshape(-1)
+            yt[-1] = end
+            out.append(yt[:-1])
+            evaluations += 4 * count
+            start = end
+        out = np.column_stack(out)
+        if not np.all(np.isfinite(out)):
+            raise RuntimeError("non-finite state")
+        return out, evaluations
+
+
+def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_step: float,
+                scale, rtol: float, bad_sample, check_accuracy: bool = True,
+                max_steps: int = 100_000, integrator: str = "cvodes",
+                h_max: float | None = None) -> SampledRun:
+    """Integrate ``model`` under a sampled controller, sample by sample.
+
+    Parameters
+    ----------
+    model : Model
+    t_final : float
+        s.
+    controller : SampledController
+    x0 : ndarray, shape (n,)
+    torque : object, optional
+        An additional torque with a CasADi form (``casadi(t)``), applied continuously.
+    output_step : float
+        Spacing of the output times, s (:func:`flexctl.sim.inputs.output_grid`).
+    scale : ndarray, shape (n,)
+        Physical size of each state (absolute tolerance ``rtol * scale``).
+    rtol : float
+    bad_sample : callable
+        ``bad_sample(y)`` for states ``y`` of shape (n, K): index of the first output past a
+        stopping condition, or None.
+    check_accuracy : bool
+        Estimate the integration error (see :class:`SampledRun`).
+    integrator : {"cvodes", "rk4"}
+        Error-controlled CVODES from sample to sample, or compiled fixed-step RK4 with steps
+        of at most ``h_max`` (s).
+
+    Returns
+    -------
+    SampledRun
+    """
+    if torque is not None and not is_symbolic(torque=torque):
+        raise InputValueError("a torque added to a sampled controller needs a CasADi form "
+                              "(casadi(t), e.g. the built-in manoeuvres); got a Python "
+                              "callable")
+    T = controller.sample_time
+    edges = _sample_grid(t_final, T)
+    grid = output_grid(t_final, output_step)
+    session = controller.start(model, np.array(x0, dtype=float))
+    if not isinstance(session, ControllerSession):
+        raise InputTypeError("controller.start must return a session with step(t, x) and "
+                             f"report(); got {type(session).__name__}")
+    tip_map = np.zeros(model.n_states)
+    tip_map[1:model.n_modes + 1] = model.matrices.tip
+    if integrator == "rk4":
+        hold = _RK4Hold(model, torque, h_max)
+    else:
+        hold = _CvodesHold(model, torque, scale, rtol, max_steps)
+    ts, ys, us = [np.array([0.0])], [np.asarray(x0, dtype=float)[:, None]], []
+    status, message = "ok", f"reached t_final = {float(t_final):g} s"
+    n_eval, controller_time, error, ends = 0, 0.0, None, []
+    y = np.asarray(x0, dtype=float)
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        started = time.perf_counter()
+        u = input_value("controller", session.step(float(lo), y.copy()), float(lo))
+        controller_time += time.perf_counter() - started
+        us.append(u)
+        t_out = grid[(grid > lo) & (grid < hi)]
+        t_out = np.append(t_out, hi)
+        try:
+            y_seg, evaluations = hold(lo, t_out, y, u)
+            n_eval += evaluations
+        except RuntimeError:
+            status = "diverged"
+            message = (f"the integration failed between samples t = {lo:.6g} s and "
+                       f"{hi:.6g} s under a held torque of {u:.6g} N m")
+            break
+        bad = bad_sample(y_seg)
+        if bad is not None:
+            ts.append(t_out[:bad])
+            ys.append(y_seg[:, :bad])
+            status, message = "diverged", "reached"       # the caller names the reason
+            break
+        ts.append(t_out)
+        ys.append(y_seg)
+        ends.append(y_seg[:, -1])
+        y = y_seg[:, -1]
+    sample_times = edges[:len(us)]
+    if check_accuracy and status == "ok":
+        # the recorded torques replayed by the looser integration (10x the tolerance, or
+        # twice the step): the difference at the samples estimates the run's error
+        try:
+            y_check = np.asarray(x0, dtype=float)
+            error = 0.0
+            for lo, hi, u, y_end in zip(edges[:-1], edges[1:], us, ends):
+                y_check, evaluations = hold(lo, np.array([hi]), y_check, u, loose=True)
+                y_check = y_check[:, -1]
+                n_eval += evaluations
+                error = max(error, float(abs(tip_map @ (y_end - y_check))))
+            error /= hold.error_divisor
+        except RuntimeError:
+            error = None
+    sample_torques = np.array(us, dtype=float)
+    t_all = np.concatenate(ts)
+    states = np.concatenate(ys, axis=1)
+    # outputs on the grid (and the last time), as on the continuous path
+    keep = np.isin(t_all, grid)
+    keep[-1] = True
+    t_all, states = t_all[keep], states[:, keep]
+    index = np.clip(np.searchsorted(sample_times, t_all, side="right") - 1, 0,
+                    max(len(us) - 1, 0))
+    held = sample_torques[index] if us else np.zeros(t_all.size)
+    report = dict(session.report() or {})
+    report.update(samples=len(us), sample_time=T)
+    return SampledRun(t=t_all, states=states, torque=held, sample_times=sample_times,
+                      sample_torques=sample_torques, status=status, message=message,
+                      n_evaluations=n_eval,
+                      integration_error=error,
+                      report=report, controller_time=controller_time)

@@ -1,0 +1,108 @@
+"""Compiled fixed-step RK4 (method="rk4"): accuracy, error estimate, breakpoints, stops."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+import flexctl
+from controllers import PD
+from flexctl.model.errors import InputError
+from flexctl.sim.fixed_step import RK4_OMEGA_H, RK4_STABILITY, hermite, step_times
+from flexctl.sim.maneuvers import SineTorque
+
+
+@pytest.fixture(scope="module")
+def kane():
+    scene = flexctl.load_scene("kane-spinup")
+    reference = flexctl.simulate(flexctl.build_model(scene.system, n_modes=8), 30.0,
+                                 hub_motion=scene.maneuver, rtol=1e-10)
+    return scene, reference
+
+
+def test_step_pair_stays_inside_rk4_stability():
+    # the coarse run of the pair has twice the returned run's omega h
+    assert 2.0 * RK4_OMEGA_H < RK4_STABILITY
+
+
+def test_kane_spinup_within_one_percent_of_converged(kane):
+    scene, reference = kane
+    model = flexctl.build_model(scene.system, n_modes=2)
+    run = flexctl.simulate(model, 30.0, hub_motion=scene.maneuver, method="rk4")
+    assert run.ok and run.method == "rk4"
+    assert np.allclose(run.t, reference.t)
+    error = np.max(np.abs(run.tip_deflection - reference.tip_deflection))
+    assert error < 0.01 * reference.peak_tip_deflection
+    # the estimate bounds the integration error (against the same 2-mode model, converged)
+    tight = flexctl.simulate(model, 30.0, hub_motion=scene.maneuver, rtol=1e-11)
+    actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
+    assert run.integration_error is not None
+    assert actual <= run.integration_error
+    assert run.integration_error <= 1e-2 * run.peak_tip_deflection
+
+
+def test_tolerance_drives_step_halving(kane):
+    scene, _ = kane
+    model = flexctl.build_model(scene.system, n_modes=3)
+    loose = flexctl.simulate(model, 30.0, hub_motion=scene.maneuver, method="rk4", rtol=1e-2)
+    tight = flexctl.simulate(model, 30.0, hub_motion=scene.maneuver, method="rk4", rtol=1e-7)
+    assert tight.n_evaluations > loose.n_evaluations
+    assert tight.integration_error <= 1e-7 * tight.peak_tip_deflection or \
+        "halvings" in tight.message
+
+
+def test_closed_loop_with_saturation_and_reference():
+    system = flexctl.load_scene("slew-90").system
+    model = flexctl.build_model(system, n_modes=4, variant="first_order")
+    x0 = np.zeros(model.n_states)
+    x0[0] = -np.pi / 2
+    pd = PD(kp=12.0, kd=8.0, torque_limit=6.0)
+    reference = flexctl.simulate(model, 6.0, controller=pd, x0=x0, rtol=1e-11)
+    run = flexctl.simulate(model, 6.0, controller=pd, x0=x0, method="rk4", rtol=1e-3)
+    assert run.ok
+    actual = np.max(np.abs(run.tip_deflection - reference.tip_deflection))
+    assert actual <= run.integration_error
+    assert actual < 1e-3 * reference.peak_tip_deflection
+    assert np.allclose(run.torque, reference.torque, atol=1e-3 * 6.0)
+
+
+def test_breakpoints_are_step_boundaries():
+    # a sine pulse that ends at 2 s: the run restarts there, so the torque after it is zero
+    system = flexctl.load_scene("spacecraft-torque").system
+    model = flexctl.build_model(system, n_modes=3)
+    torque = SineTorque(peak_torque=50.0, duration=2.0)
+    run = flexctl.simulate(model, 5.0, torque=torque, method="rk4", rtol=1e-4)
+    reference = flexctl.simulate(model, 5.0, torque=torque, rtol=1e-11)
+    assert run.ok
+    error = np.max(np.abs(run.tip_deflection - reference.tip_deflection))
+    assert error <= max(run.integration_error, 1e-4 * reference.peak_tip_deflection)
+    starts, sizes, ends = step_times([0.0, 2.0, 5.0], 0.3)
+    assert np.isclose(starts[ends[0]] + sizes[ends[0]], 2.0)
+
+
+def test_hermite_reproduces_cubic():
+    t = np.linspace(0.0, 1.0, 5)
+    starts, sizes, _ = step_times(t, 0.25)
+    poly = lambda s: 1.0 + 2.0 * s - 3.0 * s ** 2 + 0.5 * s ** 3
+    dpoly = lambda s: 2.0 - 6.0 * s + 1.5 * s ** 2
+    nodes = np.r_[starts, 1.0]
+    out = np.linspace(0.0, 1.0, 37)
+    dense = hermite(out, starts, sizes, poly(nodes)[None], dpoly(nodes)[None])
+    assert np.allclose(dense[0], poly(out), atol=1e-12)
+
+
+def test_divergence_is_reported_with_reason():
+    # zero_order drops dynamic stiffening: spun above its first clamped frequency it buckles
+    scene = flexctl.load_scene("kane-spinup")
+    model = flexctl.build_model(scene.system, n_modes=2, variant="zero_order")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = flexctl.simulate(model, 30.0, hub_motion=scene.maneuver, method="rk4")
+    assert run.status == "diverged"
+    assert np.all(np.isfinite(run.states))
+
+
+def test_python_inputs_refused():
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    with pytest.raises(InputError, match="rk4"):
+        flexctl.simulate(model, 1.0, torque=lambda t: 0.1, method="rk4")
