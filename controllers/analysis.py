@@ -291,10 +291,11 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
         raise InputTypeError("loop_transfer.controller must be a PD, LQR, ScheduledLQR, "
                              "TrajectoryTracker, LQG or a gain array; got "
                              f"{type(controller).__name__}")
+    compensator = controller.compensator()
     meas = controller.for_plant(model).measurement_matrix
     sensors = control.ss(a, b, meas, np.zeros((2, 1)), states=states, inputs=["torque"],
-                         outputs=list(controller.compensator().input_labels))
-    loop = -control.series(sensors, controller.compensator())
+                         outputs=list(compensator.input_labels))
+    loop = -control.series(sensors, compensator)
     loop.update_names(inputs=["torque"], outputs=["return_torque"], name=name)
     return loop
 
@@ -402,9 +403,11 @@ def _axis_frequencies(loop, tolerance: float) -> tuple:
 
 
 def _off_axis(frequencies, singular, scale, tolerance) -> np.ndarray:
-    """Mask of the crossing frequencies that sit on none of the ``singular`` frequencies."""
+    """Mask of the crossing frequencies that sit on none of the ``singular`` frequencies
+    (within ``tolerance`` of each, relatively) and away from the origin (``tolerance *
+    scale``)."""
     w = np.asarray(frequencies, dtype=float).reshape(-1, 1)
-    near = np.abs(w - singular[None, :]) <= tolerance * np.maximum(singular[None, :], scale)
+    near = np.abs(w - singular[None, :]) <= tolerance * singular[None, :]
     return ~np.any(near, axis=1) & (w[:, 0] > tolerance * scale)
 
 

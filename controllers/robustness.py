@@ -292,11 +292,11 @@ class RobustnessSummary:
 
 
 def _rows(table) -> list:
-    if isinstance(table, (str, bytes)) or not isinstance(table, (Sequence, Mapping)) \
-            and not hasattr(table, "rows"):
+    rows = getattr(table, "rows", table)        # a SweepResult holds its rows
+    if isinstance(rows, (str, bytes)) or not isinstance(rows, Sequence):
         raise InputTypeError("robustness_summary.table must be a SweepResult or a sequence "
                              f"of row dicts; got {type(table).__name__}")
-    rows = list(getattr(table, "rows", table))
+    rows = list(rows)
     needed = ("closed_loop_stable", "gain_margin", "phase_margin", "stability_margin",
               "spectral_abscissa")
     for k, row in enumerate(rows):

@@ -422,9 +422,11 @@ def test_robustness_task_flies_the_slew_on_the_dispersed_plant(system):
     (lambda s, pd: robustness_summary([]), "must hold at least one row"),
     (lambda s, pd: robustness_summary([{"gain_margin": 2.0}]),
      "row 0 must hold the columns closed_loop_stable"),
+    (lambda s, pd: robustness_summary({"gain_margin": [2.0]}),
+     "table must be a SweepResult or a sequence of row dicts; got dict"),
 ], ids=["dispersion-range", "dispersion-normal", "distribution", "dispersion-negative",
         "samples", "scale", "system", "modes", "variant", "slew-reference", "sensor",
-        "controller", "summary-empty", "summary-columns"])
+        "controller", "summary-empty", "summary-columns", "summary-type"])
 def test_robustness_bad_input_is_refused_naming_it(system, make, match):
     with pytest.raises((InputValueError, InputTypeError), match=match):
         make(system, PD(kp=1.0, kd=1.0))
