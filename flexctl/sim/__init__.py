@@ -7,6 +7,8 @@ module          contents
 ==============  =============================================================================
 ``maneuvers``   ``SpinUp``, ``SineTorque``, ``Slew``: what drives the hub
 ``simulation``  ``simulate`` (compiled and SciPy paths), ``SimulationResult``, ``Controller``
+``inputs``      argument checks, ``SampledTorque`` (a torque given as samples)
+``tracing``     Python torque functions traced into CasADi (``trace_torque``)
 ``compiled``    the CasADi/CVODES integration of a symbolic drive
 ``fixed_step``  compiled fixed-step RK4 with a step-doubling error estimate (``method="rk4"``)
 ``digital``     sampled controllers: ``ZeroOrderHold``, the ``SampledController`` protocol
@@ -16,6 +18,7 @@ module          contents
 """
 
 from .maneuvers import SineTorque, Slew, SpinUp
+from .inputs import SampledTorque
 from .simulation import (METHODS, AccuracyWarning, Controller, SimulationResult,
                          StiffnessWarning, simulate)
 from .digital import ControllerSession, SampledController, ZeroOrderHold
@@ -23,7 +26,7 @@ from .metrics import SlewMetrics, settling_time, slew_metrics
 from .fidelity import ModeChoice, choose_modes
 
 __all__ = [
-    "SineTorque", "Slew", "SpinUp",
+    "SineTorque", "Slew", "SpinUp", "SampledTorque",
     "METHODS", "AccuracyWarning", "Controller", "SimulationResult", "StiffnessWarning",
     "simulate",
     "ControllerSession", "SampledController", "ZeroOrderHold",

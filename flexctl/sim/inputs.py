@@ -1,4 +1,5 @@
-"""What :func:`flexctl.simulate` is given: its arguments checked, its inputs' values checked.
+"""What :func:`flexctl.simulate` is given: its arguments checked, its inputs' values checked,
+and a torque given as samples (:class:`SampledTorque`).
 
 Every check raises :class:`~flexctl.model.errors.InputTypeError` (a ``TypeError``) for a wrong
 type and :class:`~flexctl.model.errors.InputValueError` (a ``ValueError``) for a wrong value,
@@ -26,6 +27,9 @@ from __future__ import annotations
 
 import inspect
 import math
+from collections import OrderedDict
+from dataclasses import KW_ONLY, dataclass
+from functools import cached_property
 from numbers import Real
 
 import numpy as np
@@ -33,7 +37,8 @@ import numpy as np
 from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["MAX_OUTPUT_SAMPLES", "check_time", "check_rtol", "check_method", "as_vector",
-           "output_grid", "input_value", "time_function", "jacobian_frequency"]
+           "output_grid", "input_value", "time_function", "jacobian_frequency",
+           "INTERPOLATIONS", "SampledTorque", "sampled_torque"]
 
 #: Most output samples a run may ask for (t_final / output_step + 1): 1e6 samples of a 6-mode
 #: model are 100 MB of states and a 300 MB CSV file; beyond that the grid is a mistake.
@@ -168,3 +173,242 @@ def jacobian_frequency(rhs, t: float, y: np.ndarray, scale: np.ndarray) -> float
     if not np.all(np.isfinite(jac)):
         return math.inf
     return float(np.max(np.abs(np.linalg.eigvals(jac)))) if jac.size else 0.0
+
+
+# ---- a torque given as samples ---------------------------------------------------------
+#: How a :class:`SampledTorque` fills the time between its samples, and the fewest samples
+#: each needs (CasADi's cubic spline is not-a-knot, which takes four).
+INTERPOLATIONS = {"hold": 2, "linear": 2, "spline": 4}
+
+
+@dataclass(frozen=True, eq=False)
+class SampledTorque:
+    """Hub torque given as samples ``(times, values)``, as python-control users pass ``T``
+    and ``U`` to ``input_output_response``.
+
+    :func:`flexctl.simulate` takes the pair itself (``torque=(times, values)``, linear
+    interpolation, python-control's) or this class for another interpolation. The torque has a
+    CasADi form (:meth:`casadi`), so it runs on the compiled path.
+
+    Parameters
+    ----------
+    times : array_like, shape (K,)
+        Sample times, s: finite and strictly increasing.
+    values : array_like, shape (K,) or (1, K)
+        Torque at each sample time, N m: finite.
+    interpolation : {"linear", "hold", "spline"}, keyword-only
+        ``"linear"`` (default): straight lines between samples, as python-control does.
+        ``"hold"``: each value held until the next sample time (a zero-order hold,
+        right-continuous: ``values[k]`` on ``[times[k], times[k+1])``). ``"spline"``: the
+        not-a-knot cubic spline through the samples (``casadi.interpolant("bspline")``, equal
+        to ``scipy.interpolate.CubicSpline(times, values)``); needs 4 samples.
+
+    Notes
+    -----
+    Outside ``[times[0], times[-1]]`` the torque is the first or last value (the time is
+    clamped into the sampled range). :func:`flexctl.simulate` does not rely on this: it refuses
+    samples that do not cover the run, ``times[0] <= 0`` and ``times[-1] >= t_final`` (a
+    shortfall of rounding size, at most ``1e-9 t_final``, is allowed and holds the last value).
+
+    The numpy form (:meth:`__call__`) is exactly the CasADi form, bit for bit: the same lookup
+    and the same arithmetic for ``"hold"`` and ``"linear"``, the CasADi function itself for
+    ``"spline"``. :attr:`breakpoints` lists the times where the torque is not smooth, at which
+    the integration restarts: every sample time for ``"hold"`` (jumps) and ``"linear"``
+    (kinks), only the ends of the sampled range for ``"spline"``.
+
+    Examples
+    --------
+    >>> from flexctl.sim.inputs import SampledTorque
+    >>> push = SampledTorque([0.0, 1.0, 2.0], [0.0, 2.0, 0.0])
+    >>> float(push(0.25)), float(push(5.0))
+    (0.5, 0.0)
+    >>> float(SampledTorque([0.0, 1.0, 2.0], [0.0, 2.0, 0.0], interpolation="hold")(1.5))
+    2.0
+    >>> SampledTorque([0.0, 1.0, 1.0], [0.0, 2.0, 0.0])
+    Traceback (most recent call last):
+    ...
+    flexctl.model.errors.InputValueError: torque samples: times must be strictly increasing (s); got times[2] = 1.0 after times[1] = 1.0
+    """
+
+    times: np.ndarray
+    values: np.ndarray
+    _: KW_ONLY
+    interpolation: str = "linear"
+
+    def __post_init__(self):
+        interpolation = self.interpolation
+        if not isinstance(interpolation, str):
+            raise _type_error("torque samples: interpolation", interpolation,
+                              f"one of {', '.join(map(repr, INTERPOLATIONS))}")
+        if interpolation not in INTERPOLATIONS:
+            raise InputValueError(f"torque samples: interpolation must be one of "
+                                  f"{', '.join(map(repr, INTERPOLATIONS))}; got "
+                                  f"{interpolation!r}")
+        times, values = _checked_samples(self.times, self.values, interpolation)
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "values", values)
+
+    # the CasADi functions are built once, on first use, and not pickled
+    def __getstate__(self):
+        return {"times": self.times, "values": self.values,
+                "interpolation": self.interpolation}
+
+    def __setstate__(self, state):
+        for name, value in state.items():
+            object.__setattr__(self, name, value)
+
+    def __repr__(self):
+        return (f"SampledTorque({self.times.size} samples over [{self.times[0]:g}, "
+                f"{self.times[-1]:g}] s, interpolation={self.interpolation!r})")
+
+    @property
+    def breakpoints(self) -> tuple:
+        """Times (s) where the torque is not smooth: every sample for ``"hold"`` and
+        ``"linear"``, the ends of the sampled range for ``"spline"``."""
+        if self.interpolation == "spline":
+            return (float(self.times[0]), float(self.times[-1]))
+        return tuple(self.times.tolist())
+
+    @cached_property
+    def _function(self):
+        """CasADi ``Function`` ``t -> torque`` (SX, scalar ``t``)."""
+        import casadi as ca
+
+        t = ca.SX.sym("t")
+        inside = ca.fmin(ca.fmax(t, float(self.times[0])), float(self.times[-1]))
+        grid, values = [self.times.tolist()], self.values.tolist()
+        if self.interpolation == "linear":
+            torque = ca.interpolant("torque_linear", "linear", grid, values)(inside)
+        elif self.interpolation == "spline":
+            torque = ca.interpolant("torque_spline", "bspline", grid, values)(inside)
+        else:
+            torque = self._hold_form(inside)
+        return ca.Function("sampled_torque", [t], [torque])
+
+    def _hold_form(self, inside):
+        """``values[k]`` for ``times[k] <= inside < times[k+1]``, exactly, in O(log K).
+
+        The sample index comes from a linear interpolant that is constant between samples (a
+        grid with each sample time ``t_k`` preceded by its float predecessor ``t_k^-``, no
+        float lying between the two), rounded to the integer it equals up to rounding; the
+        value is a linear interpolant of the values over the indices, which returns
+        ``values[k]`` exactly at the integer ``k``.
+        """
+        import casadi as ca
+
+        grid, index = [float(self.times[0])], [0.0]
+        for k, t_k in enumerate(self.times[1:].tolist(), start=1):
+            before = float(np.nextafter(t_k, -np.inf))
+            if before > grid[-1]:
+                grid.append(before)
+                index.append(k - 1.0)
+            grid.append(t_k)
+            index.append(float(k))
+        which = ca.interpolant("torque_hold_index", "linear", [grid], index)(inside)
+        by_index = ca.interpolant("torque_hold_value", "linear",
+                                  [np.arange(self.times.size, dtype=float).tolist()],
+                                  self.values.tolist())
+        return by_index(ca.floor(which + 0.5))
+
+    def casadi(self, t):
+        """The torque as a CasADi expression of the time symbol ``t`` (SX or MX), N m."""
+        return self._function(t)
+
+    def __call__(self, t):
+        """Torque at time(s) ``t``, N m: an array of the shape of ``t``, equal to
+        :meth:`casadi` bit for bit."""
+        t = np.asarray(t, dtype=float)
+        inside = np.clip(t, self.times[0], self.times[-1])
+        if self.interpolation == "hold":
+            k = np.searchsorted(self.times, inside, side="right") - 1
+            return self.values[np.clip(k, 0, self.times.size - 1)]
+        if self.interpolation == "linear":
+            # CasADi's arithmetic: the interval k with times[k] <= t < times[k+1] (the last
+            # one for t = times[-1]), the fraction a along it, (1 - a) v_k + a v_{k+1}
+            k = np.clip(np.searchsorted(self.times, inside, side="right") - 1, 0,
+                        self.times.size - 2)
+            t_k, t_next = self.times[k], self.times[k + 1]
+            a = (inside - t_k) / (t_next - t_k)
+            return (1.0 - a) * self.values[k] + a * self.values[k + 1]
+        if inside.ndim == 0:
+            return np.asarray(float(self._function(float(inside))))
+        flat = inside.reshape(1, -1)
+        return np.array(self._function.map(flat.shape[1])(flat)).reshape(t.shape)
+
+
+def _checked_samples(times, values, interpolation):
+    """``(times, values)`` as read-only float arrays of shape (K,), or an error naming the
+    rule broken."""
+    times = as_vector("torque samples: times", times, "an array of sample times (s)")
+    values = as_vector("torque samples: values", values, "an array of torques (N m)")
+    if times.ndim != 1:
+        raise InputValueError(f"torque samples: times must be one-dimensional, shape (K,); "
+                              f"got shape {times.shape}")
+    if values.shape in ((1, times.size), (times.size, 1)):
+        values = values.reshape(-1)
+    if values.shape != times.shape:
+        raise InputValueError(f"torque samples: values must hold one torque per sample time, "
+                              f"shape ({times.size},) or (1, {times.size}); got shape "
+                              f"{values.shape}")
+    fewest = INTERPOLATIONS[interpolation]
+    if times.size < fewest:
+        raise InputValueError(f"torque samples: interpolation {interpolation!r} needs at "
+                              f"least {fewest} samples; got {times.size}")
+    for name, array, unit in (("times", times, "s"), ("values", values, "N m")):
+        bad = np.flatnonzero(~np.isfinite(array))
+        if bad.size:
+            raise InputValueError(f"torque samples: {name} must be finite ({unit}); got "
+                                  f"{name}[{bad[0]}] = {float(array[bad[0]])!r}")
+    step = np.diff(times)
+    if np.any(step <= 0.0):
+        k = int(np.argmax(step <= 0.0)) + 1
+        raise InputValueError(f"torque samples: times must be strictly increasing (s); got "
+                              f"times[{k}] = {float(times[k])!r} after times[{k - 1}] = "
+                              f"{float(times[k - 1])!r}")
+    times, values = times.copy(), values.copy()
+    times.flags.writeable = values.flags.writeable = False
+    return times, values
+
+
+#: Sampled torques made from pairs, kept by content (up to this many samples each), so that
+#: the same arrays passed again reuse the compiled integrators built for them
+#: (:mod:`flexctl.sim.compiled` keys those by the input's identity).
+SAMPLES_CACHE_SIZE = 16
+SAMPLES_CACHE_LIMIT = 100_000
+_SAMPLED: OrderedDict = OrderedDict()
+
+
+def sampled_torque(torque, t_final: float) -> SampledTorque:
+    """``torque`` given as samples, a pair ``(times, values)`` or a :class:`SampledTorque`, as
+    a :class:`SampledTorque` covering ``[0, t_final]``; else an error naming the rule broken.
+
+    A pair equal, sample for sample, to one seen before gives the same object.
+    """
+    if not isinstance(torque, SampledTorque):
+        if len(torque) != 2:
+            raise InputTypeError(f"torque samples must be a pair (times, values); got a "
+                                 f"{type(torque).__name__} of {len(torque)} items")
+        torque = _remembered(SampledTorque(*torque))
+    first, last = float(torque.times[0]), float(torque.times[-1])
+    if first > 0.0:
+        raise InputValueError(f"torque samples must start at or before t = 0 s; got times[0] "
+                              f"= {first!r}")
+    if last < t_final * (1.0 - 1e-9):
+        raise InputValueError(f"torque samples must cover the run up to t_final = "
+                              f"{t_final:g} s; got times[-1] = {last!r} (add samples or "
+                              "shorten t_final)")
+    return torque
+
+
+def _remembered(torque: SampledTorque) -> SampledTorque:
+    """The sampled torque made before from the same samples, else ``torque``, remembered."""
+    if torque.times.size > SAMPLES_CACHE_LIMIT:
+        return torque
+    key = (torque.interpolation, torque.times.tobytes(), torque.values.tobytes())
+    if key in _SAMPLED:
+        _SAMPLED.move_to_end(key)
+        return _SAMPLED[key]
+    _SAMPLED[key] = torque
+    while len(_SAMPLED) > SAMPLES_CACHE_SIZE:
+        _SAMPLED.popitem(last=False)
+    return torque
