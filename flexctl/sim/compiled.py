@@ -46,7 +46,8 @@ def _has_form(source, method: str) -> bool:
 def is_symbolic(torque=None, hub_motion=None, controller=None) -> bool:
     """True when every given input offers a CasADi form.
 
-    A torque needs ``casadi(t)``, a hub motion ``casadi(t) -> (rate, acceleration)``, a
+    A torque needs ``casadi(t)`` (``casadi(t, x)`` when it declares ``state_dependent =
+    True``, e.g. a traced ``f(t, x)``), a hub motion ``casadi(t) -> (rate, acceleration)``, a
     controller ``casadi_torque(t, x)`` (static, ``n_states == 0``) or ``casadi_torque(t, x, z)``
     and ``casadi_derivative(t, x, z)`` (with internal states ``z``). An object whose form
     depends on what it wraps (a shaped command, a reference) says whether it has one with a
@@ -117,7 +118,8 @@ def _applied_torque(t, x, z, torque, controller, parameters):
     symbol, for a parametric controller)."""
     u = 0.0
     if torque is not None:
-        u = u + torque.casadi(t)
+        u = u + (torque.casadi(t, x) if getattr(torque, "state_dependent", False)
+                 else torque.casadi(t))
     if controller is None:
         return u
     if getattr(controller, "n_states", 0):

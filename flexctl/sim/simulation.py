@@ -2,7 +2,8 @@
 
 Three ways to drive the hub, combined as follows:
 
-- ``torque``: a function of time ``f(t)`` or of time and state ``f(t, x)``, N m;
+- ``torque``: a function of time ``f(t)`` or of time and state ``f(t, x)``, or samples
+  ``(times, values)`` (:class:`~flexctl.sim.inputs.SampledTorque`), N m;
 - ``controller``: feedback, a callable ``(t, x) -> torque`` or an object following
   :class:`Controller` (with internal states, e.g. an estimator); its torque adds to ``torque``;
 - ``hub_motion``: a prescribed ``theta(t)`` with ``rate(t)`` and ``acceleration(t)`` (e.g.
@@ -39,6 +40,7 @@ from .digital import is_sampled, run_sampled
 from .fixed_step import MAX_HALVINGS, RK4_OMEGA_H, integrate_fixed_step
 from .inputs import (as_vector, check_method, check_rtol, check_time, input_value,
                      jacobian_frequency, output_grid, time_function)
+from .tracing import torque_input
 from ..model import Model, SingularMassMatrixError
 from ..model.errors import InputTypeError, InputValueError
 
@@ -403,8 +405,13 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     model : Model
     t_final : float
         End time, s (> 0).
-    torque : callable, optional
-        Hub torque ``torque(t)`` or ``torque(t, x)``, N m. Default 0.
+    torque : callable, (times, values) or SampledTorque, optional
+        Hub torque, N m. Default 0. A function ``torque(t)`` or ``torque(t, x)``: one that
+        CasADi can trace runs compiled, any other on SciPy (:mod:`flexctl.sim.tracing` gives
+        the rule). Samples ``(times, values)`` (arrays of shape (K,), as python-control's
+        ``T`` and ``U``), interpolated linearly, or a
+        :class:`~flexctl.sim.inputs.SampledTorque` for a hold or a spline; they must cover
+        ``[0, t_final]``.
     hub_motion : object, optional
         Prescribed hub motion with methods ``angle(t)``, ``rate(t)``, ``acceleration(t)``
         (rad, rad/s, rad/s^2), e.g. :class:`~flexctl.sim.maneuvers.SpinUp`.
@@ -420,9 +427,10 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         Absolute tolerance; default ``rtol`` times each state's physical scale.
     method : str, optional
         ``"auto"`` (default): ``"cvodes"`` when every input has a CasADi form (the built-in
-        manoeuvres), else ``"DOP853"``. ``"cvodes"``: compiled SUNDIALS integration
-        (:mod:`flexctl.sim.compiled`); or a ``scipy.integrate.solve_ivp`` method (``"DOP853"``,
-        ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``). An explicit method
+        manoeuvres, torque samples, traced torque functions), else ``"DOP853"``.
+        ``"cvodes"``: compiled SUNDIALS integration (:mod:`flexctl.sim.compiled`); or a
+        ``scipy.integrate.solve_ivp`` method (``"DOP853"``, ``"RK45"``, ``"RK23"``,
+        ``"Radau"``, ``"BDF"``, ``"LSODA"``). An explicit method
         (DOP853, RK45, RK23) on a model too stiff for it is replaced by ``"cvodes"`` when the
         inputs allow, with a :class:`StiffnessWarning` and a note in the result's ``message``
         (``method`` of the result is the one used); see :func:`_stiffness_guard`.
@@ -468,6 +476,15 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     if output_step is not None:
         output_step = check_time("output_step", output_step)
     max_step = check_time("max_step", max_step, allow_inf=True)
+    # samples become an interpolant; a Python function is traced into CasADi when the rest
+    # of the run is compiled (flexctl.sim.tracing)
+    compiled_feedback = (controller is None or is_sampled(controller)
+                         or is_symbolic(controller=controller))
+    torque, untraced = torque_input(
+        torque, t_final=t_final, n_states=model.n_states,
+        trace=(method in ("auto", "cvodes", "rk4") and hub_motion is None
+               and compiled_feedback),
+        state_scale=_default_atol(model, 1.0, False))
     symbolic = is_symbolic(torque, hub_motion, None if is_sampled(controller) else controller)
     if is_sampled(controller) and method not in ("auto", "cvodes", "rk4"):
         raise InputValueError(f"method {method!r}: a sampled controller (sample_time "
@@ -475,8 +492,10 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                               "method 'auto' or 'cvodes'")
     if method in ("cvodes", "rk4") and not symbolic:
         raise InputValueError(f"method {method!r} needs inputs with a CasADi form (the built-in "
-                              "manoeuvres, controllers with casadi_torque); got a Python "
-                              "callable")
+                              "manoeuvres, torque samples, controllers with casadi_torque); "
+                              "got a Python callable"
+                              + (f" (the torque function could not be traced: {untraced})"
+                                 if untraced else ""))
     if method == "auto":
         method = "cvodes" if symbolic else "DOP853"
     step = output_step if output_step is not None else t_final / DEFAULT_OUTPUT_POINTS
@@ -802,7 +821,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         torque_out = model.hub_torque(states, acc, qdd)
     else:
         torque_out = None
-        if controller is None and (torque is None or symbolic):
+        if controller is None and (torque is None or symbolic) \
+                and not getattr(torque, "state_dependent", False):
             # no torque, or a manoeuvre with a CasADi form: those evaluate a whole time array
             # at once (checked, since a user's own class may not)
             torque_out = (np.zeros(t_all.size) if torque is None
