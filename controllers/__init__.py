@@ -32,6 +32,7 @@ from .shaping import (BangBang, ShapedReference, ShapedTorque, Shaper, bang_bang
 from .trajopt import (SlewProblem, SlewSolution, TrajectoryOptimizationError,
                       rigid_minimum_time, solve_slew)
 from .tracking import TrajectoryTracker
+from .nmpc import NMPC, NMPCSession
 from .factory import BuiltController, OpenLoop, from_spec
 from .analysis import (LoopMargins, PlantChannels, PolesVsSpin, loop_margins, loop_transfer,
                        plant_channels, poles_vs_spin)
@@ -49,6 +50,7 @@ __all__ = [
     "shape", "zv_shaper", "zvd_shaper",
     "SlewProblem", "SlewSolution", "TrajectoryOptimizationError", "TrajectoryTracker",
     "rigid_minimum_time", "solve_slew",
+    "NMPC", "NMPCSession",
     "BuiltController", "OpenLoop", "from_spec",
     "LoopMargins", "PlantChannels", "PolesVsSpin", "loop_margins", "loop_transfer",
     "plant_channels", "poles_vs_spin",

@@ -24,21 +24,32 @@ trajopt+lqr     trajopt settings; LQR feedback about the optimal trajectory (Bry
                 5 % of the angle, 3 % of the beam length at the tip, the torque bound)
 bang_bang       none: rigid time-optimal at the torque bound, or the torque that fits the duration
 zv, zvd         none: the bang-bang torque shaped at the first hub-free frequency
+nmpc            ``horizon`` (20 samples), ``mode`` ("rti" or "converged"), ``qp_solver`` ("qrqp"),
+                ``terminal`` ("lqr" or "rest"), ``reference`` ("trajopt": track the optimal slew,
+                with the trajopt settings; or "none": regulate to the target),
+                ``torque_rate_bound`` (N m/s), ``tip_bound`` (m); runs at ``sample_time``
+                (0.02 s)
 ==============  ================================================================================
+
+Every kind also takes ``sample_time`` (s): the law runs sampled with a zero-order hold
+(:class:`flexctl.sim.digital.ZeroOrderHold`; not LQG, whose estimator is continuous).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from flexctl.model import Model, build_model
+from flexctl.sim.digital import ZeroOrderHold
 from flexctl.sim.maneuvers import Slew
 
 from .lqg import NoiseLevels, design_lqg
 from .lqr import LQRWeights, design_lqr
+from .nmpc import NMPC
 from .pd import design_pd
 from .reference import SlewProfile, minimum_slew_duration
 from .scheduling import design_scheduled_lqr
@@ -169,7 +180,7 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
     if n_design > plant.n_modes:
         raise SceneError(f"model.design_modes must be <= model.modes = {plant.n_modes}; "
                          f"got {n_design}")
-    design = build_model(scene.system, n_modes=n_design, variant=scene.design_variant)
+    design = build_model(scene.design_system, n_modes=n_design, variant=scene.design_variant)
     angle, bound = maneuver.angle, maneuver.torque_bound
     kind = spec.kind
 
@@ -216,7 +227,7 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
         else:
             rates = spec.settings.get("spin_rates", [0.0, 1.0, 2.0])
             ctrl = _wrap(design_scheduled_lqr, design, _lqr_weights(spec), rates, **common)
-        return BuiltController(ctrl, kind, float(duration), n_design, info)
+        return _sampled(spec, BuiltController(ctrl, kind, float(duration), n_design, info))
 
     if kind in ("bang_bang", "zv", "zvd"):
         limits = {"torque_limit": bound} if duration is None else {"duration": duration}
@@ -230,11 +241,24 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
             shaper = design_shaper(design, kind)
             torque = shape(base, shaper)
             end += float(max(shaper.times))
-        return BuiltController(OpenLoop(torque), kind, float(end), n_design)
+        return _sampled(spec, BuiltController(OpenLoop(torque), kind, float(end), n_design))
 
-    # trajectory optimisation
     if bound is None:
         raise SceneError(f"controller kind {kind!r} needs maneuver.torque_bound")
+    if kind == "nmpc":
+        return _sampled(spec, _nmpc(spec, design, angle, duration, bound, n_design))
+    solution, info = _trajectory(spec, design, angle, duration, bound)
+    if kind == "trajopt":
+        ctrl = OpenLoop(solution.torque_function())
+    else:
+        ctrl = _wrap(TrajectoryTracker, solution=solution, torque_limit=bound)
+    return _sampled(spec, BuiltController(ctrl, kind, float(solution.duration), n_design,
+                                          info))
+
+
+def _trajectory(spec: ControllerSpec, design: Model, angle, duration, bound) -> tuple:
+    """The optimal slew of the ``trajopt`` settings on the design model, and what its solve
+    measured."""
     objective = spec.settings.get("objective", "time" if duration is None else "effort")
     problem = _wrap(SlewProblem, angle=angle, duration=duration, torque_bound=bound,
                     n_intervals=int(_setting(spec, "intervals", 40)), objective=objective,
@@ -249,8 +273,40 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
     info = {"solve_time_s": time.perf_counter() - start, "ipopt_status": solution.return_status,
             "iterations": solution.iterations, "cost": solution.cost,
             "duration": solution.duration}
-    if kind == "trajopt":
-        ctrl = OpenLoop(solution.torque_function())
+    return solution, info
+
+
+def _nmpc(spec: ControllerSpec, design: Model, angle, duration, bound, n_design):
+    """Nonlinear MPC tracking the optimal slew (``reference = "trajopt"``, default) or
+    regulating to the target at rest (``reference = "none"``)."""
+    reference = spec.settings.get("reference", "trajopt")
+    if reference not in ("trajopt", "none"):
+        raise SceneError("controller.reference for kind 'nmpc' must be \"trajopt\" or "
+                         f"\"none\"; got {reference!r}")
+    info, solution = {}, None
+    if reference == "trajopt":
+        solution, info = _trajectory(spec, design, angle, duration, bound)
+        end = float(solution.duration)
     else:
-        ctrl = _wrap(TrajectoryTracker, solution=solution, torque_limit=bound)
-    return BuiltController(ctrl, kind, float(solution.duration), n_design, info)
+        end = float(duration if duration is not None
+                    else minimum_slew_duration(angle, design.matrices.J0, bound))
+    settings = {key: spec.settings[key] for key in ("horizon", "mode", "qp_solver", "terminal")
+                if key in spec.settings}
+    start = time.perf_counter()
+    ctrl = _wrap(NMPC, model=design, target=angle, torque_limit=bound, reference=solution,
+                 sample_time=_setting(spec, "sample_time", 0.02),
+                 torque_rate_limit=_setting(spec, "torque_rate_bound", None),
+                 tip_limit=_setting(spec, "tip_bound", None), **settings)
+    _wrap(ctrl.prepare)
+    info["nmpc_build_time_s"] = time.perf_counter() - start
+    info["substeps"] = ctrl.substeps
+    return BuiltController(ctrl, "nmpc", end, n_design, info)
+
+
+def _sampled(spec: ControllerSpec, built: BuiltController) -> BuiltController:
+    """``built`` run at ``controller.sample_time`` with a zero-order hold, when given."""
+    if "sample_time" not in spec.settings or built.kind == "nmpc":
+        return built
+    held = _wrap(ZeroOrderHold, built.controller, _setting(spec, "sample_time", None))
+    return dataclasses.replace(built, controller=held,
+                               info={**built.info, "sample_time": held.sample_time})

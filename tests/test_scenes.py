@@ -8,7 +8,7 @@ import flexctl
 from flexctl import Beam, Hub, SceneError, builtin_scenes, load_scene, run_scene
 from flexctl.sim.maneuvers import SineTorque, SpinUp
 
-BUILTINS = ("hub-beam-mass", "kane-spinup", "slew-90", "spacecraft-torque")
+BUILTINS = ("hub-beam-mass", "kane-spinup", "slew-90", "slew-90-model-error", "spacecraft-torque")
 
 #: MODEL.md section 6, written out independently of the scene files.
 KANE_BEAM = Beam(length=8.0, youngs_modulus=6.8952e10, area=7.2968e-5,

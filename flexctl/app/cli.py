@@ -317,7 +317,10 @@ def _run_controlled(scene):
     slew = metrics.as_dict()
     slew.update({"controller": built.kind, "design_modes": built.design_modes,
                  "maneuver_end": built.maneuver_end, **built.info})
-    return result, {"slew": slew}
+    extra = {"slew": slew}
+    if result.controller_report is not None:
+        extra["controller_report"] = result.controller_report
+    return result, extra
 
 
 def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:

@@ -48,7 +48,11 @@ _UNITS = {"integration_error": "m (estimated largest tip error of the integratio
           "manoeuvre), solve_time_s s",
           "model_validity": "deflection_ratio: peak tip deflection / beam length; "
           "geometric_error, tolerance: relative tip error against exact geometry (estimated on "
-          "2 modes, flexctl.sim.validity)"}
+          "2 modes, flexctl.sim.validity)",
+          "controller_report": "a sampled controller's run: samples, sample_time s, "
+          "controller_time s (wall time in the controller), solve_time_median_s, "
+          "solve_time_p99_s, solve_time_max_s s per sample (NMPC), iterations (QP or NLP), "
+          "failed_steps"}
 
 
 def timeseries_columns(n_modes: int) -> list:
@@ -216,7 +220,20 @@ def format_summary(summary: dict) -> str:
                      f"{slew['peak_torque']:.3g} N m, residual tip vibration "
                      f"{slew['residual_vibration']:.3g} m after {slew['maneuver_end']:.3g} s")
         if "solve_time_s" in slew:
-            lines[-1] += f", solved in {slew['solve_time_s']:.3g} s ({slew['ipopt_status']})"
+            what = "reference trajectory " if slew["controller"] == "nmpc" else ""
+            lines[-1] += (f", {what}solved in {slew['solve_time_s']:.3g} s "
+                          f"({slew['ipopt_status']})")
+    sampled = summary.get("controller_report")
+    if sampled:
+        line = (f"  sampled every {1e3 * sampled['sample_time']:.3g} ms "
+                f"({sampled['samples']} samples)")
+        if "solve_time_median_s" in sampled:
+            line += (f"; {sampled['mode']} ({sampled['qp_solver']}) per sample: median "
+                     f"{1e3 * sampled['solve_time_median_s']:.3g} ms, 99th percentile "
+                     f"{1e3 * sampled['solve_time_p99_s']:.3g} ms, max "
+                     f"{1e3 * sampled['solve_time_max_s']:.3g} ms, "
+                     f"{sampled['failed_steps']} failed")
+        lines.append(line)
     files = summary.get("files")
     if files:
         folder = Path(files["summary"]).parent

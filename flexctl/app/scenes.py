@@ -99,7 +99,8 @@ _SCHEMA = {
     "hub": {"inertia", "radius", "friction"},
     "beam": {"length", "density", "area", "second_moment", "youngs_modulus", "damping_ratio"},
     "masses": {"mass", "position"},
-    "model": {"variant", "modes", "design_modes", "design_variant", "tolerance"},
+    "model": {"variant", "modes", "design_modes", "design_variant", "tolerance",
+              "design_stiffness_factor", "design_mass_factor"},
     "maneuver": {"kind", "spin_rate", "ramp_time", "peak_torque", "duration", "angle_deg",
                  "torque_bound"},
     "simulation": {"t_final", "output_step", "rtol", "method"},
@@ -122,7 +123,9 @@ class ModelSpec:
 
     ``design_modes`` and ``design_variant`` describe the model a controller is designed on
     (default 2 modes; the exact variant on an exact plant, first_order otherwise; used by slew
-    scenes).
+    scenes). ``design_stiffness_factor`` and ``design_mass_factor`` (default 1, in [0.1, 10])
+    scale the beam's bending stiffness ``EI`` and every point mass of the design model only:
+    a controller designed on a model that is off, run against the true plant.
     """
 
     variant: str = "first_order"
@@ -130,8 +133,16 @@ class ModelSpec:
     design_modes: int = 2
     design_variant: str | None = None
     tolerance: float | None = None
+    design_stiffness_factor: float = 1.0
+    design_mass_factor: float = 1.0
 
     def __post_init__(self):
+        for key in ("design_stiffness_factor", "design_mass_factor"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not 0.1 <= value <= 10.0:
+                raise SceneError(f"model.{key} must be a number in [0.1, 10]; got {value!r}")
+            object.__setattr__(self, key, float(value))
         if isinstance(self.design_modes, bool) or not isinstance(self.design_modes, int) \
                 or not 1 <= self.design_modes <= 200:
             raise SceneError("model.design_modes must be an integer in [1, 200]; got "
@@ -236,6 +247,19 @@ class Scene:
         if self.model.design_variant is not None:
             return self.model.design_variant
         return "exact" if self.variant == "exact" else "first_order"
+
+    @property
+    def design_system(self) -> HubBeam:
+        """The system a controller is designed on: :attr:`system` with the beam's ``EI`` and
+        the point masses scaled by ``model.design_stiffness_factor`` and
+        ``model.design_mass_factor``."""
+        stiffness, mass = self.model.design_stiffness_factor, self.model.design_mass_factor
+        if stiffness == 1.0 and mass == 1.0:
+            return self.system
+        beam = dataclasses.replace(self.system.beam, youngs_modulus=self.system.beam
+                                   .youngs_modulus * stiffness)
+        masses = tuple(dataclasses.replace(m, mass=m.mass * mass) for m in self.system.masses)
+        return dataclasses.replace(self.system, beam=beam, masses=masses)
 
     def mode_choice(self) -> ModeChoice | None:
         """How many modes ``modes = "auto"`` takes, and why (None for a fixed number).

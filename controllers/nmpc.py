@@ -1,0 +1,631 @@
+"""Nonlinear model predictive control of a slew, by real-time iteration or to convergence.
+
+At every sample ``t_k = k T`` the controller solves, on a design model with few modes (any
+variant, the geometrically exact one included),
+
+    min   sum_{j<N} |x_j - r_j|_Q^2 + R (u_j - v_j)^2  +  |x_N - r_N|_P^2
+    s.t.  x_0 = x(t_k),  x_{j+1} = F(x_j, u_j)             (RK4 over the hold, multiple shooting)
+          |u_j| <= u_max,  |u_j - u_{j-1}| <= T du_max,  |tip(x_j)| <= d_max
+          [x_N = r_N]                                        (terminal = "rest")
+
+with ``r_j, v_j`` the reference (a :class:`~controllers.trajopt.SlewSolution` or a rest
+target), ``P`` the discrete LQR Riccati solution of the design model at rest (terminal
+cost), and applies ``u_0`` until the next sample (a :class:`flexctl.sim.digital.SampledController`).
+
+Two solution modes:
+
+- ``"rti"`` (real-time iteration, Diehl et al.): one Gauss-Newton SQP step per sample. The
+  constraint Jacobian and residuals come from one compiled CasADi function, the Hessian is the
+  constant Gauss-Newton ``blockdiag(Q, R, ..., P)``, and one structured QP is solved by a QP
+  solver shipped with CasADi (``qrqp`` by default; ``osqp``, ``qpoases``, ``hpipm`` are
+  accepted where ``casadi.has_conic`` says they are there). The previous solution, shifted by
+  one sample, is the linearisation point (warm start).
+- ``"converged"``: IPOPT on the same NLP to tolerance from the same warm start, for reference.
+
+RK4 substeps per hold are chosen so that ``omega_max h <= OMEGA_H`` for the design model's
+fastest mode, inside RK4's stability interval.
+
+Examples
+--------
+>>> import numpy as np, flexctl
+>>> from controllers.nmpc import NMPC
+>>> model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=2,
+...                             variant="first_order")
+>>> mpc = NMPC(model=model, target=np.pi / 2, torque_limit=6.0, sample_time=0.05, horizon=20)
+>>> result = flexctl.simulate(model, 6.0, controller=mpc)
+>>> result.status, bool(abs(result.theta[-1] - np.pi / 2) < 0.05)
+('ok', True)
+>>> result.controller_report["failed_steps"]
+0
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flexctl.model import Model
+from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.sim.digital import _sample_time
+from flexctl.sim.fixed_step import _jit
+
+from .lqr import truncate_state
+from .trajopt import SlewSolution
+
+__all__ = ["NMPC", "NMPCSession", "OMEGA_H", "QP_SOLVERS"]
+
+#: Largest ``omega_max h`` of the RK4 substeps in the prediction model (RK4 is stable up to
+#: ``2 sqrt 2``; 1 keeps the fastest design mode's phase error per hold small).
+OMEGA_H = 1.0
+#: QP solvers of the real-time iteration, where the installed CasADi has them.
+QP_SOLVERS = ("qrqp", "osqp", "qpoases", "hpipm")
+MODES = ("rti", "converged")
+TERMINALS = ("lqr", "rest")
+#: Most RK4 substeps per hold.
+MAX_SUBSTEPS = 50
+
+
+def _positive(name, value, optional=False):
+    if value is None and optional:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise InputTypeError(f"nmpc {name} must be a number; got {type(value).__name__} "
+                             f"{value!r}")
+    value = float(value)
+    if not (np.isfinite(value) and value > 0.0):
+        raise InputValueError(f"nmpc {name} must be positive and finite; got {value!r}")
+    return value
+
+
+def _hold_function(model: Model, sample_time: float, substeps: int):
+    """CasADi ``F(x, u)``: the state after one hold of torque ``u`` (N m) over ``sample_time``
+    (s), by ``substeps`` RK4 steps of the model's dynamics."""
+    import casadi as ca
+
+    f = model.casadi()
+    x, u = ca.SX.sym("x", model.n_states), ca.SX.sym("u")
+    h = sample_time / substeps
+    y = x
+    for _ in range(substeps):
+        k1 = f(y, u)
+        k2 = f(y + 0.5 * h * k1, u)
+        k3 = f(y + 0.5 * h * k2, u)
+        k4 = f(y + h * k3, u)
+        y = y + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return ca.Function("nmpc_hold", [x, u], [y])
+
+
+#: Default weights (Bryson's rule): largest hub angle error as a fraction of the slew angle,
+#: and largest tip deflection as a fraction of the beam length. Tighter than the tracker's LQR
+#: (5 % and 3 %): measured on slew-90 (exact plant, 6 modes; exact 2-mode design), 1.6 % and
+#: 0.3 % keep the nominal residual vibration of trajopt+lqr (0.14 mm) and halve it when the
+#: design model's stiffness and point mass are 20 % off (29 mm against 53 mm); 0.1 % at the
+#: tip lowers that to 12 mm but leaves the hub 2 degrees short at 6 s.
+ANGLE_FRACTION = 0.05 / np.sqrt(10.0)
+TIP_FRACTION = 0.003
+
+
+def _conic(name: str, solver: str, h_sparsity, a_sparsity):
+    """A quiet CasADi QP solver that reports failure in its stats rather than raising."""
+    import casadi as ca
+
+    opts = {"error_on_fail": False}
+    if solver == "qrqp":
+        opts.update(print_iter=False, print_header=False, print_info=False)
+    elif solver == "osqp":
+        opts.update(osqp={"verbose": False, "polish": False, "eps_abs": 1e-7, "eps_rel": 1e-7,
+                          "max_iter": 4000})
+    elif solver == "qpoases":
+        opts.update(printLevel="none", sparse=False)
+    return ca.conic(name, solver, {"h": h_sparsity, "a": a_sparsity}, opts)
+
+
+def _default_weights(model: Model, angle: float, torque_limit: float):
+    """Bryson's rule: :data:`ANGLE_FRACTION` of the angle (at least 1 mrad),
+    :data:`TIP_FRACTION` of the beam length at the tip, rates from the flexible frequencies,
+    the torque limit."""
+    mat = model.matrices
+    w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
+    theta = max(ANGLE_FRACTION * abs(angle), 1e-3)
+    q = TIP_FRACTION * model.system.beam.length / np.maximum(np.abs(mat.tip), 1e-12)
+    allowed = np.concatenate(([theta], q, [theta * w[0]], q * w))
+    return 1.0 / allowed ** 2, 1.0 / torque_limit ** 2
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class NMPC:
+    """Nonlinear MPC of a slew (a :class:`flexctl.sim.digital.SampledController`).
+
+    Parameters
+    ----------
+    model : Model
+        Design model (few modes; any variant). The plant may have more modes: the design
+        states are its first ones (:func:`~controllers.lqr.truncate_state`).
+    target : float
+        Hub angle to reach and hold at rest, rad. Ignored where ``reference`` is given (its
+        final angle is the target).
+    torque_limit : float
+        ``u_max``, N m (> 0).
+    sample_time : float
+        ``T``, s (> 0). Default 0.02.
+    horizon : int
+        ``N``, samples (>= 2). Default 20.
+    reference : SlewSolution, optional
+        Trajectory to track (states of a model with the same modes as ``model``, torque as
+        feedforward); after its end, rest at its final angle. Default: rest at ``target``.
+    torque_rate_limit : float, optional
+        ``du_max``, N m/s (> 0). Default none.
+    tip_limit : float, optional
+        ``d_max``, m (> 0), on the modal tip deflection of the design model. Default none.
+    terminal : {"lqr", "rest"}
+        Terminal cost ``P`` (default) or terminal equality to the reference.
+    mode : {"rti", "converged"}
+    qp_solver : str
+        QP solver of the real-time iteration (:data:`QP_SOLVERS`). Default ``"qrqp"``.
+    state_weights : array_like, shape (n,), optional
+        Diagonal of ``Q``. Default Bryson's rule (:func:`_default_weights`).
+    torque_weight : float, optional
+        ``R``, 1/(N m)^2. Default ``1 / torque_limit^2``.
+    substeps : int, optional
+        RK4 substeps per hold; default the fewest with ``omega_max h <= OMEGA_H``.
+
+    Attributes
+    ----------
+    n_states : int
+        0: no continuous internal states (the memory lives in the session).
+    """
+
+    model: Model
+    target: float = 0.0
+    torque_limit: float
+    sample_time: float = 0.02
+    horizon: int = 20
+    reference: SlewSolution | None = None
+    torque_rate_limit: float | None = None
+    tip_limit: float | None = None
+    terminal: str = "lqr"
+    mode: str = "rti"
+    qp_solver: str = "qrqp"
+    state_weights: np.ndarray | None = None
+    torque_weight: float | None = None
+    substeps: int | None = None
+    _built: dict = field(init=False, repr=False, default_factory=dict)
+
+    n_states = 0
+
+    def __post_init__(self):
+        import casadi as ca
+
+        if not isinstance(self.model, Model):
+            raise InputTypeError(f"nmpc model must be a flexctl Model; got "
+                                 f"{type(self.model).__name__}")
+        if isinstance(self.target, bool) or not isinstance(self.target, (int, float, np.number)) \
+                or not np.isfinite(self.target):
+            raise InputValueError(f"nmpc target must be a finite angle, rad; got "
+                                  f"{self.target!r}")
+        object.__setattr__(self, "target", float(self.target))
+        object.__setattr__(self, "torque_limit", _positive("torque_limit", self.torque_limit))
+        object.__setattr__(self, "sample_time", _sample_time("nmpc", self.sample_time))
+        if isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, np.integer)) \
+                or not 2 <= self.horizon <= 500:
+            raise InputValueError(f"nmpc horizon must be an integer in [2, 500] samples; got "
+                                  f"{self.horizon!r}")
+        object.__setattr__(self, "horizon", int(self.horizon))
+        if self.reference is not None:
+            if not isinstance(self.reference, SlewSolution):
+                raise InputTypeError("nmpc reference must be a SlewSolution (or None); got "
+                                     f"{type(self.reference).__name__}")
+            if self.reference.model.n_modes != self.model.n_modes:
+                raise InputValueError(
+                    f"nmpc reference has {self.reference.model.n_modes} modes, the design "
+                    f"model {self.model.n_modes}; they must match")
+        for name in ("torque_rate_limit", "tip_limit"):
+            object.__setattr__(self, name, _positive(name, getattr(self, name), optional=True))
+        if self.terminal not in TERMINALS:
+            raise InputValueError(f"nmpc terminal must be one of {', '.join(TERMINALS)}; got "
+                                  f"{self.terminal!r}")
+        if self.mode not in MODES:
+            raise InputValueError(f"nmpc mode must be one of {', '.join(MODES)}; got "
+                                  f"{self.mode!r}")
+        if self.qp_solver not in QP_SOLVERS:
+            raise InputValueError(f"nmpc qp_solver must be one of {', '.join(QP_SOLVERS)}; "
+                                  f"got {self.qp_solver!r}")
+        if not ca.has_conic(self.qp_solver):
+            raise InputValueError(f"nmpc qp_solver {self.qp_solver!r} is not in this CasADi "
+                                  "build (casadi.has_conic); use 'qrqp'")
+        n = self.model.n_states
+        q_default, r_default = _default_weights(self.model, self.final_angle,
+                                                self.torque_limit)
+        q = q_default if self.state_weights is None else np.asarray(self.state_weights,
+                                                                     dtype=float)
+        if q.shape != (n,) or not np.all(np.isfinite(q)) or np.any(q < 0):
+            raise InputValueError(f"nmpc state_weights must be {n} finite numbers >= 0; got "
+                                  f"{self.state_weights!r}")
+        object.__setattr__(self, "state_weights", q)
+        r = r_default if self.torque_weight is None else _positive("torque_weight",
+                                                                   self.torque_weight)
+        object.__setattr__(self, "torque_weight", float(r))
+        omega = float(self.model.natural_frequencies(0.0, hub="free")[-1])
+        auto = max(1, int(np.ceil(omega * self.sample_time / OMEGA_H)))
+        if self.substeps is None:
+            if auto > MAX_SUBSTEPS:
+                raise InputValueError(
+                    f"nmpc sample_time {self.sample_time:g} s needs {auto} RK4 substeps for the "
+                    f"design model's fastest mode ({omega:.4g} rad/s, omega h <= {OMEGA_H:g}), "
+                    f"more than {MAX_SUBSTEPS}; shorten sample_time or use fewer design modes")
+            object.__setattr__(self, "substeps", auto)
+        else:
+            if isinstance(self.substeps, bool) or not isinstance(self.substeps,
+                                                                 (int, np.integer)) \
+                    or not 1 <= self.substeps <= MAX_SUBSTEPS:
+                raise InputValueError(f"nmpc substeps must be an integer in [1, "
+                                      f"{MAX_SUBSTEPS}]; got {self.substeps!r}")
+            if omega * self.sample_time / self.substeps > 2.0 * np.sqrt(2.0):
+                raise InputValueError(
+                    f"nmpc substeps {self.substeps} put the fastest design mode at omega h = "
+                    f"{omega * self.sample_time / self.substeps:.3g}, outside RK4's stability "
+                    f"interval (2.83); use at least {auto}")
+            object.__setattr__(self, "substeps", int(self.substeps))
+
+    # ------------------------------------------------------------------ reference
+    @property
+    def final_angle(self) -> float:
+        """The hub angle held at the end, rad."""
+        if self.reference is not None:
+            return float(self.reference.problem.angle)
+        return self.target
+
+    def reference_at(self, t) -> tuple:
+        """Reference states ``r`` (n, P) at times ``t`` (s) and torques ``v`` (P,): the mean
+        of the reference torque over each hold ``[t, t + sample_time)``, N m (what a hold
+        must apply to follow a reference whose own holds need not line up with the samples).
+        """
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        n = self.model.n_states
+        if self.reference is None:
+            r = np.zeros((n, t.size))
+            r[0] = self.target
+            return r, np.zeros(t.size)
+        states = self.reference.state_at(t)
+        edges, values = self._reference_holds()
+        impulse = np.concatenate(([0.0], np.cumsum(values * np.diff(edges))))
+        before = np.interp(t, edges, impulse)
+        after = np.interp(t + self.sample_time, edges, impulse)
+        return states, (after - before) / self.sample_time
+
+    def _reference_holds(self) -> tuple:
+        """Edges (s) and values (N m) of the reference's hold torque, zero outside."""
+        if "holds" not in self._built:
+            hold = self.reference.torque_function()
+            self._built["holds"] = (np.asarray(hold.t, dtype=float),
+                                    np.asarray(hold.values, dtype=float))
+        return self._built["holds"]
+
+    # ------------------------------------------------------------------ problem
+    def _problem(self) -> dict:
+        """The NLP and its compiled pieces, built once."""
+        if "qp" in self._built:
+            return self._built
+        import casadi as ca
+        import control
+
+        model, big_n, n = self.model, self.horizon, self.model.n_states
+        T = self.sample_time
+        sym = ca.MX if model.variant == "exact" else ca.SX
+        hold = _hold_function(model, T, self.substeps)
+
+        # terminal cost: discrete LQR of the design model at rest
+        a, b = model.linear_matrices(0.0)
+        sys_d = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, 1))), T, "zoh")
+        q_diag, r = self.state_weights, self.torque_weight
+        _, p_mat, _ = control.dlqr(sys_d.A, sys_d.B, np.diag(q_diag), np.array([[r]]))
+        p_mat = 0.5 * (np.asarray(p_mat) + np.asarray(p_mat).T)
+
+        # decision variables: x_0, u_0, x_1, u_1, ..., x_{N-1}, u_{N-1}, x_N
+        w = sym.sym("w", (big_n + 1) * n + big_n)
+        xs = [w[j * (n + 1):j * (n + 1) + n] for j in range(big_n + 1)]
+        us = [w[j * (n + 1) + n] for j in range(big_n)]
+        n_ref = (big_n + 1) * n + big_n
+        par = sym.sym("p", n + 1 + n_ref)       # measured x, previous u, references
+        x_meas, u_prev = par[:n], par[n]
+        refs = par[n + 1:]
+        rx = [refs[j * (n + 1):j * (n + 1) + n] for j in range(big_n + 1)]
+        rv = [refs[j * (n + 1) + n] for j in range(big_n)]
+        residuals, g, lbg, ubg = [], [], [], []
+        sq = np.sqrt(q_diag)
+        for j in range(big_n):
+            residuals.append(ca.DM(sq) * (xs[j] - rx[j]))
+            residuals.append(np.sqrt(r) * (us[j] - rv[j]))
+        chol = np.linalg.cholesky(p_mat + 1e-12 * np.eye(n)).T
+        residuals.append(ca.mtimes(ca.DM(chol), xs[big_n] - rx[big_n]))
+        res = ca.vertcat(*residuals)
+        cost = 0.5 * ca.sumsqr(res)
+        g.append(xs[0] - x_meas)
+        lbg += [0.0] * n
+        ubg += [0.0] * n
+        for j in range(big_n):
+            g.append(hold(xs[j], us[j]) - xs[j + 1])
+            lbg += [0.0] * n
+            ubg += [0.0] * n
+        if self.torque_rate_limit is not None:
+            step = self.torque_rate_limit * T
+            for j in range(big_n):
+                g.append(us[j] - (u_prev if j == 0 else us[j - 1]))
+                lbg.append(-step)
+                ubg.append(step)
+        if self.tip_limit is not None:
+            tip = ca.DM(model.matrices.tip)
+            nm = model.n_modes
+            for j in range(1, big_n + 1):
+                g.append(ca.dot(tip, xs[j][1:nm + 1]))
+                lbg.append(-self.tip_limit)
+                ubg.append(self.tip_limit)
+        if self.terminal == "rest":
+            g.append(xs[big_n] - rx[big_n])
+            lbg += [0.0] * n
+            ubg += [0.0] * n
+        g = ca.vertcat(*g)
+        lbw = np.full(w.numel(), -np.inf)
+        ubw = np.full(w.numel(), np.inf)
+        u_index = np.array([j * (n + 1) + n for j in range(big_n)])
+        lbw[u_index], ubw[u_index] = -self.torque_limit, self.torque_limit
+
+        built = {"n": n, "nw": w.numel(), "u_index": u_index, "lbg": np.array(lbg),
+                 "ubg": np.array(ubg), "lbw": lbw, "ubw": ubw, "hold": _jit(hold, model)}
+        built.update(self._condensed(hold, q_diag, r, p_mat))
+        built["hold"] = built["hold_one"]
+        a_sp, h_sp = built["a_sparsity"], built["h_sparsity"]
+        built["qp"] = _conic("nmpc_qp", self.qp_solver, h_sp, a_sp)
+        # a degenerate active set (torque and rate bounds both active) can stop an active-set
+        # solver; the step is then solved again by the ADMM solver, which does not mind
+        built["qp_fallback"] = (_conic("nmpc_qp_fallback", "osqp", h_sp, a_sp)
+                                if self.qp_solver != "osqp" else None)
+        if self.mode == "converged":
+            built["nlp"] = ca.nlpsol("nmpc_nlp", "ipopt", {"x": w, "p": par, "f": cost, "g": g},
+                                     {"ipopt.print_level": 0, "print_time": False,
+                                      "ipopt.sb": "yes", "ipopt.tol": 1e-8,
+                                      "ipopt.max_iter": 500, "error_on_fail": False})
+        self._built.update(built)
+        return self._built
+
+    def _condensed(self, hold, q_diag, r, p_mat) -> dict:
+        """The pieces of the condensed Gauss-Newton QP of one real-time iteration.
+
+        Linearised about the current guess (states ``x_j``, torques ``u_j``), the shooting gaps
+        ``d_j = F(x_j, u_j) - x_{j+1}`` and the measured start give the state steps as affine
+        functions of the torque steps, ``dx_0 = x(t_k) - x_0``,
+        ``dx_{j+1} = A_j dx_j + B_j du_j + d_j``, i.e. ``dx_j = e_j + G_j du``: the QP has the
+        ``N`` torque steps only (dense ``N x N``, see :meth:`NMPCSession._rti`). One compiled
+        call gives every stage's ``F`` (``forward``), one its ``A, B`` (``linear``, of
+        :attr:`NMPC.linearisation_model`); the condensing is numpy.
+        """
+        import casadi as ca
+
+        n, big_n = self.model.n_states, self.horizon
+        lin_model = self.linearisation_model
+        lin_hold = hold if lin_model is self.model else _hold_function(
+            lin_model, self.sample_time, self.substeps)
+        x, u = ca.SX.sym("x", n), ca.SX.sym("u")
+        f = lin_hold(x, u)
+        stage = ca.Function("nmpc_stage", [x, u], [ca.jacobian(f, x), ca.jacobian(f, u)])
+        rows = 0
+        if self.torque_rate_limit is not None:
+            rows += big_n
+        if self.tip_limit is not None:
+            rows += big_n
+        if self.terminal == "rest":
+            rows += n
+        return {"forward": _jit(hold.map(big_n), self.model),
+                "linear": _jit(stage.map(big_n), lin_model), "hold_one": _jit(hold, self.model),
+                "q": q_diag, "r": r, "p": p_mat, "rows": rows,
+                "h_sparsity": ca.Sparsity.dense(big_n, big_n),
+                "a_sparsity": ca.Sparsity.dense(rows, big_n)}
+
+    @property
+    def linearisation_model(self) -> Model:
+        """The model whose Jacobians the real-time iteration uses: the design model itself, or
+        for the exact variant the first_order model of the same modes.
+
+        The exact model's RK4 Jacobians cost some 250 000 operations a stage (26 ms for 20
+        stages, measured), the first_order one's a few hundred. Its linearisation agrees with
+        the exact one at rest and differs at second order in the deflection; the shooting
+        gaps, cost and constraints stay those of the exact model, so the iterations still aim
+        at the exact model's optimum (an inexact-Jacobian SQP step).
+        """
+        if self.model.variant != "exact":
+            return self.model
+        if "linearisation_model" not in self._built:
+            from flexctl.model import build_model
+
+            self._built["linearisation_model"] = build_model(
+                self.model.system, n_modes=self.model.n_modes, variant="first_order")
+        return self._built["linearisation_model"]
+
+    def prepare(self) -> "NMPC":
+        """Build (and compile, where a C compiler is present) the problem now rather than at
+        the first sample; returns ``self``."""
+        self._problem()
+        return self
+
+    def start(self, model, x0) -> "NMPCSession":
+        """A fresh session for a run of the plant ``model`` from ``x0``."""
+        if not isinstance(model, Model):
+            raise InputTypeError(f"nmpc plant must be a flexctl Model; got "
+                                 f"{type(model).__name__}")
+        if model.n_modes < self.model.n_modes:
+            raise InputValueError(f"nmpc design model has {self.model.n_modes} modes, more "
+                                  f"than the plant's {model.n_modes}")
+        return NMPCSession(self, self._problem(), np.asarray(x0, dtype=float))
+
+
+class NMPCSession:
+    """One closed-loop run of an :class:`NMPC`: warm start, last torque and statistics."""
+
+    def __init__(self, mpc: NMPC, built: dict, x0):
+        self.mpc, self.built = mpc, built
+        n, big_n = built["n"], mpc.horizon
+        self._n = n
+        x_design = truncate_state(x0, mpc.model.n_modes)
+        # initial guess: the reference from now on (or the start state held)
+        refs, torques = mpc.reference_at(mpc.sample_time * np.arange(big_n + 1))
+        w = np.zeros(built["nw"])
+        for j in range(big_n + 1):
+            w[j * (n + 1):j * (n + 1) + n] = refs[:, j] if mpc.reference is not None \
+                else x_design
+        w[built["u_index"]] = np.clip(torques[:big_n], -mpc.torque_limit, mpc.torque_limit)
+        self.w = w
+        self.u_prev = 0.0
+        self.solve_times, self.iterations, self.failures, self.statuses = [], [], 0, {}
+        self.fallbacks = 0
+
+    def _parameters(self, t, x_design):
+        mpc, n, big_n = self.mpc, self._n, self.mpc.horizon
+        times = t + mpc.sample_time * np.arange(big_n + 1)
+        refs, torques = mpc.reference_at(times)
+        block = np.zeros((big_n + 1) * n + big_n)
+        for j in range(big_n + 1):
+            block[j * (n + 1):j * (n + 1) + n] = refs[:, j]
+        block[self.built["u_index"]] = torques[:big_n]
+        return np.concatenate((x_design, [self.u_prev], block))
+
+    def _shift(self):
+        """Warm start: the previous solution moved one sample on, its last hold repeated."""
+        n, w = self._n, self.w
+        width = n + 1
+        shifted = np.empty_like(w)
+        shifted[:-width] = w[width:]
+        last_x = w[-n:]
+        last_u = w[-n - 1]
+        shifted[-width:-n] = last_u
+        shifted[-n:] = np.array(self.built["hold"](last_x, last_u)).reshape(-1)
+        if not np.all(np.isfinite(shifted)):
+            shifted = w
+        return shifted
+
+    def step(self, t, x) -> float:
+        """Torque (N m) to hold from ``t`` (s), given the plant state ``x``."""
+        started = time.perf_counter()
+        mpc, built = self.mpc, self.built
+        x_design = truncate_state(x, mpc.model.n_modes)
+        p = self._parameters(float(t), x_design)
+        guess = self._shift() if self.solve_times else self.w
+        guess[:self._n] = x_design
+        if mpc.mode == "rti":
+            w_new, ok, iterations, status = self._rti(guess, p, x_design)
+        else:
+            sol = built["nlp"](x0=guess, p=p, lbx=built["lbw"], ubx=built["ubw"],
+                               lbg=built["lbg"], ubg=built["ubg"])
+            stats = built["nlp"].stats()
+            ok = bool(stats.get("success", False))
+            iterations = int(stats.get("iter_count", 0) or 0)
+            status = str(stats.get("return_status", ""))
+            w_new = np.array(sol["x"]).reshape(-1)
+        if ok and np.all(np.isfinite(w_new)):
+            self.w = w_new
+        else:
+            # keep the shifted previous plan: its first torque is still feasible
+            self.failures += 1
+            self.w = guess
+        self.statuses[status] = self.statuses.get(status, 0) + 1
+        u = float(np.clip(self.w[built["u_index"][0]], -mpc.torque_limit, mpc.torque_limit))
+        if mpc.torque_rate_limit is not None and self.solve_times:
+            bound = mpc.torque_rate_limit * mpc.sample_time
+            u = float(np.clip(u, self.u_prev - bound, self.u_prev + bound))
+        self.u_prev = u
+        self.iterations.append(iterations)
+        self.solve_times.append(time.perf_counter() - started)
+        return u
+
+    def _rti(self, guess, p, x_design):
+        """One Gauss-Newton SQP step from ``guess``: linearise, condense, solve the QP."""
+        mpc, built, n, big_n = self.mpc, self.built, self._n, self.mpc.horizon
+        width = n + 1
+        xs = np.empty((big_n + 1, n))
+        for j in range(big_n + 1):
+            xs[j] = guess[j * width:j * width + n]
+        us = guess[built["u_index"]]
+        refs = p[n + 1:]
+        rx = np.array([refs[j * width:j * width + n] for j in range(big_n + 1)])
+        rv = refs[built["u_index"]]
+        f = np.array(built["forward"](xs[:-1].T, us[None]))
+        a, b = (np.array(v) for v in built["linear"](xs[:-1].T, us[None]))
+        a = a.reshape(n, big_n, n).transpose(1, 0, 2)        # (N, n, n): A_j
+        gaps = f.T - xs[1:]                                   # (N, n)
+        e = np.empty((big_n + 1, n))
+        g_mat = np.zeros((big_n + 1, n, big_n))
+        e[0] = x_design - xs[0]
+        for j in range(big_n):
+            e[j + 1] = a[j] @ e[j] + gaps[j]
+            g_mat[j + 1] = a[j] @ g_mat[j]
+            g_mat[j + 1][:, j] += b[:, j]
+        base = xs + e - rx                                    # x_j + e_j - r_j
+        q, r, p_mat = built["q"], built["r"], built["p"]
+        stacked = g_mat[:-1].reshape(big_n * n, big_n)      # rows: stage j, state i
+        weighted = stacked.T * np.tile(q, big_n)
+        h = weighted @ stacked + g_mat[-1].T @ p_mat @ g_mat[-1] + r * np.eye(big_n)
+        grad = weighted @ base[:-1].reshape(-1) + g_mat[-1].T @ (p_mat @ base[-1]) \
+            + r * (us - rv)
+        rows, lower, upper = [], [], []
+        if mpc.torque_rate_limit is not None:
+            bound = mpc.torque_rate_limit * mpc.sample_time
+            diff = np.eye(big_n) - np.eye(big_n, k=-1)
+            now = us - np.r_[self.u_prev, us[:-1]]
+            rows.append(diff)
+            lower.append(-bound - now)
+            upper.append(bound - now)
+        if mpc.tip_limit is not None:
+            tip = mpc.model.matrices.tip
+            nm = mpc.model.n_modes
+            tips = np.einsum("m,jmk->jk", tip, g_mat[1:, 1:nm + 1])
+            now = (xs[1:, 1:nm + 1] + e[1:, 1:nm + 1]) @ tip
+            rows.append(tips)
+            lower.append(-mpc.tip_limit - now)
+            upper.append(mpc.tip_limit - now)
+        if mpc.terminal == "rest":
+            rows.append(g_mat[-1])
+            lower.append(-base[-1])
+            upper.append(-base[-1])
+        a_qp = np.vstack(rows) if rows else np.zeros((0, big_n))
+        lba = np.concatenate(lower) if rows else np.zeros(0)
+        uba = np.concatenate(upper) if rows else np.zeros(0)
+        lbx, ubx = -mpc.torque_limit - us, mpc.torque_limit - us
+        h = 0.5 * (h + h.T)
+        data = dict(h=h, g=grad, a=a_qp, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
+        sol = built["qp"](**data)
+        stats = built["qp"].stats()
+        ok = bool(stats.get("success", False))
+        iterations = int(stats.get("iter_count", 0) or 0)
+        status = str(stats.get("return_status", "ok" if ok else "failed"))
+        if not ok and built["qp_fallback"] is not None:
+            self.fallbacks += 1
+            sol = built["qp_fallback"](**data)
+            stats = built["qp_fallback"].stats()
+            ok = bool(stats.get("success", False))
+            iterations += int(stats.get("iter_count", 0) or 0)
+            status = "fallback osqp: " + str(stats.get("return_status", "ok" if ok else
+                                                        "failed"))
+        du = np.array(sol["x"]).reshape(-1)
+        new_x = xs + e + g_mat @ du
+        w_new = np.empty_like(guess)
+        for j in range(big_n + 1):
+            w_new[j * width:j * width + n] = new_x[j]
+        w_new[built["u_index"]] = us + du
+        return w_new, ok, iterations, status
+
+    def report(self) -> dict:
+        """Per-step solve time (s: median, 99th percentile, max), iterations, failed steps
+        (the previous plan shifted was applied) and steps re-solved by the fallback QP solver,
+        with the solvers' statuses and their counts."""
+        times = np.array(self.solve_times) if self.solve_times else np.zeros(1)
+        its = np.array(self.iterations) if self.iterations else np.zeros(1)
+        return {"mode": self.mpc.mode, "qp_solver": self.mpc.qp_solver if self.mpc.mode == "rti"
+                else "ipopt", "horizon": self.mpc.horizon, "design_modes": self.mpc.model.n_modes,
+                "substeps": self.mpc.substeps,
+                "solve_time_median_s": float(np.median(times)),
+                "solve_time_p99_s": float(np.percentile(times, 99)),
+                "solve_time_max_s": float(np.max(times)),
+                "iterations_median": float(np.median(its)), "iterations_max": int(np.max(its)),
+                "failed_steps": int(self.failures), "fallback_steps": int(self.fallbacks),
+                "statuses": dict(self.statuses)}
