@@ -27,8 +27,9 @@ zv, zvd         none: the bang-bang torque shaped at the first hub-free frequenc
 nmpc            ``horizon`` (20 samples), ``mode`` ("rti" or "converged"), ``qp_solver`` ("qrqp"),
                 ``terminal`` ("lqr" or "rest"), ``reference`` ("trajopt": track the optimal slew,
                 with the trajopt settings; or "none": regulate to the target),
-                ``torque_rate_bound`` (N m/s), ``tip_bound`` (m); runs at ``sample_time``
-                (0.02 s)
+                ``torque_rate_bound`` (N m/s), ``tip_bound`` (m), ``estimator`` ("state" or
+                "kalman": extended Kalman filter on hub angle and root moment, with the lqg
+                noise settings); runs at ``sample_time`` (0.02 s)
 ==============  ================================================================================
 
 Every kind also takes ``sample_time`` (s): the law runs sampled with a zero-order hold
@@ -292,6 +293,14 @@ def _nmpc(spec: ControllerSpec, design: Model, angle, duration, bound, n_design)
                     else minimum_slew_duration(angle, design.matrices.J0, bound))
     settings = {key: spec.settings[key] for key in ("horizon", "mode", "qp_solver", "terminal")
                 if key in spec.settings}
+    estimator = spec.settings.get("estimator", "state")
+    if estimator not in ("state", "kalman"):
+        raise SceneError("controller.estimator for kind 'nmpc' must be \"state\" or "
+                         f"\"kalman\"; got {estimator!r}")
+    if estimator == "kalman":
+        settings["noise"] = _wrap(NoiseLevels, angle=_setting(spec, "angle_noise", 1e-3),
+                                  root_moment=_setting(spec, "moment_noise", 0.1),
+                                  torque=_setting(spec, "process_torque", 0.1))
     start = time.perf_counter()
     ctrl = _wrap(NMPC, model=design, target=angle, torque_limit=bound, reference=solution,
                  sample_time=_setting(spec, "sample_time", 0.02),

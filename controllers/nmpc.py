@@ -51,6 +51,7 @@ from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.digital import _sample_time
 from flexctl.sim.fixed_step import _jit
 
+from .lqg import NoiseLevels, _measurement_rows
 from .lqr import truncate_state
 from .trajopt import SlewSolution
 
@@ -168,6 +169,11 @@ class NMPC:
         Diagonal of ``Q``. Default Bryson's rule (:func:`_default_weights`).
     torque_weight : float, optional
         ``R``, 1/(N m)^2. Default ``1 / torque_limit^2``.
+    noise : NoiseLevels, optional
+        Output feedback: the state is estimated by an extended Kalman filter on the design
+        model from the hub angle and the root bending moment of the plant (as LQG measures),
+        designed for these noise levels. Default: full state feedback (the plant state
+        truncated to the design modes).
     substeps : int, optional
         RK4 substeps per hold; default the fewest with ``omega_max h <= OMEGA_H``.
 
@@ -191,6 +197,7 @@ class NMPC:
     state_weights: np.ndarray | None = None
     torque_weight: float | None = None
     substeps: int | None = None
+    noise: NoiseLevels | None = None
     _built: dict = field(init=False, repr=False, default_factory=dict)
 
     n_states = 0
@@ -213,6 +220,9 @@ class NMPC:
             raise InputValueError(f"nmpc horizon must be an integer in [2, 500] samples; got "
                                   f"{self.horizon!r}")
         object.__setattr__(self, "horizon", int(self.horizon))
+        if self.noise is not None and not isinstance(self.noise, NoiseLevels):
+            raise InputTypeError(f"nmpc noise must be NoiseLevels (or None); got "
+                                 f"{type(self.noise).__name__}")
         if self.reference is not None:
             if not isinstance(self.reference, SlewSolution):
                 raise InputTypeError("nmpc reference must be a SlewSolution (or None); got "
@@ -457,7 +467,54 @@ class NMPC:
         if model.n_modes < self.model.n_modes:
             raise InputValueError(f"nmpc design model has {self.model.n_modes} modes, more "
                                   f"than the plant's {model.n_modes}")
-        return NMPCSession(self, self._problem(), np.asarray(x0, dtype=float))
+        session = NMPCSession(self, self._problem(), np.asarray(x0, dtype=float))
+        if self.noise is not None:
+            session.filter = _ExtendedKalman(self, _measurement_rows(model),
+                                             truncate_state(x0, self.model.n_modes))
+        return session
+
+
+class _ExtendedKalman:
+    """Extended Kalman filter on the design model, one prediction and update per sample.
+
+    Prediction through the RK4 hold ``F`` with its Jacobian (of
+    :attr:`NMPC.linearisation_model`); process noise a white hub torque of intensity
+    ``noise.torque^2`` held over the sample (``B_d Q B_d^T / T``); measurement the plant's hub
+    angle and root moment, ``y = C_plant x``, against the design model's ``C``.
+    """
+
+    def __init__(self, mpc: NMPC, plant_rows, x0):
+        import casadi as ca
+
+        model = mpc.model
+        self.mpc = mpc
+        self.plant_rows = plant_rows
+        self.rows = _measurement_rows(model)
+        x, u = ca.SX.sym("x", model.n_states), ca.SX.sym("u")
+        lin = _hold_function(mpc.linearisation_model, mpc.sample_time, mpc.substeps)(x, u)
+        self.hold = _jit(_hold_function(model, mpc.sample_time, mpc.substeps), model)
+        self.jacobians = _jit(ca.Function("nmpc_ekf_jac", [x, u], [ca.jacobian(lin, x),
+                                                                    ca.jacobian(lin, u)]),
+                              mpc.linearisation_model)
+        self.r = mpc.noise.measurement_covariance
+        self.q = float(mpc.noise.process_covariance[0, 0])
+        self.x = np.asarray(x0, dtype=float).copy()
+        self.p = np.eye(model.n_states) * 1e-8
+
+    def update(self, x_plant, u_prev, first: bool) -> np.ndarray:
+        """The estimate at this sample from the plant's measurement and the torque held
+        since the last one."""
+        if not first:
+            a, b = (np.array(v) for v in self.jacobians(self.x, u_prev))
+            self.x = np.array(self.hold(self.x, u_prev)).reshape(-1)
+            self.p = a @ self.p @ a.T + (self.q / self.mpc.sample_time) * (b @ b.T)
+        y = self.plant_rows @ x_plant
+        c = self.rows
+        s = c @ self.p @ c.T + self.r
+        gain = np.linalg.solve(s, c @ self.p).T
+        self.x = self.x + gain @ (y - c @ self.x)
+        self.p = (np.eye(self.x.size) - gain @ c) @ self.p
+        return self.x
 
 
 class NMPCSession:
@@ -479,6 +536,7 @@ class NMPCSession:
         self.u_prev = 0.0
         self.solve_times, self.iterations, self.failures, self.statuses = [], [], 0, {}
         self.fallbacks = 0
+        self.filter = None
 
     def _parameters(self, t, x_design):
         mpc, n, big_n = self.mpc, self._n, self.mpc.horizon
@@ -508,7 +566,11 @@ class NMPCSession:
         """Torque (N m) to hold from ``t`` (s), given the plant state ``x``."""
         started = time.perf_counter()
         mpc, built = self.mpc, self.built
-        x_design = truncate_state(x, mpc.model.n_modes)
+        if self.filter is not None:
+            x_design = self.filter.update(np.asarray(x, dtype=float), self.u_prev,
+                                          not self.solve_times).copy()
+        else:
+            x_design = truncate_state(x, mpc.model.n_modes)
         p = self._parameters(float(t), x_design)
         guess = self._shift() if self.solve_times else self.w
         guess[:self._n] = x_design
@@ -620,7 +682,8 @@ class NMPCSession:
         with the solvers' statuses and their counts."""
         times = np.array(self.solve_times) if self.solve_times else np.zeros(1)
         its = np.array(self.iterations) if self.iterations else np.zeros(1)
-        return {"mode": self.mpc.mode, "qp_solver": self.mpc.qp_solver if self.mpc.mode == "rti"
+        return {"estimator": "ekf" if self.filter is not None else "state",
+                "mode": self.mpc.mode, "qp_solver": self.mpc.qp_solver if self.mpc.mode == "rti"
                 else "ipopt", "horizon": self.mpc.horizon, "design_modes": self.mpc.model.n_modes,
                 "substeps": self.mpc.substeps,
                 "solve_time_median_s": float(np.median(times)),

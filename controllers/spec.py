@@ -34,7 +34,8 @@ CONTROLLER_KEYS["trajopt+lqr"] = CONTROLLER_KEYS["trajopt"]
 #: Nonlinear MPC (controllers.nmpc): its own settings and those of the trajectory it tracks.
 CONTROLLER_KEYS["nmpc"] = {"horizon", "mode", "qp_solver", "terminal", "reference",
                            "torque_rate_bound", "tip_bound", "intervals", "objective",
-                           "transcription"}
+                           "transcription", "estimator", "angle_noise", "moment_noise",
+                           "process_torque"}
 #: Every kind may run sampled with a zero-order hold (NMPC always is; default 0.02 s).
 for _keys in CONTROLLER_KEYS.values():
     _keys.add("sample_time")

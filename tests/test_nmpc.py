@@ -158,3 +158,37 @@ def test_slew_against_trajopt_lqr_nominal_and_with_model_error():
     assert residual["slew-90", "nmpc"] <= 2.0 * residual["slew-90", "trajopt+lqr"]
     assert residual["slew-90-model-error", "nmpc"] < residual["slew-90-model-error",
                                                               "trajopt+lqr"]
+
+
+def test_output_feedback_through_extended_kalman_filter(design, reference):
+    from controllers import NoiseLevels
+
+    plant6 = flexctl.build_model(design.system, n_modes=6, variant="first_order")
+    noise = NoiseLevels(angle=1e-3, root_moment=0.1, torque=0.1)
+    state = flexctl.simulate(plant6, 4.0, controller=_mpc(design, reference, sample_time=0.02))
+    output = flexctl.simulate(plant6, 4.0, controller=_mpc(design, reference, sample_time=0.02,
+                                                           noise=noise))
+    assert output.ok and output.controller_report["estimator"] == "ekf"
+    assert state.controller_report["estimator"] == "state"
+    # measuring only the hub angle and the root moment, it still slews and damps the beam
+    assert abs(output.theta[-1] - np.pi / 2) < 1e-3
+    assert np.max(np.abs(output.tip_deflection[output.t > 2.5])) < 0.01
+    with pytest.raises(InputError, match="noise"):
+        _mpc(design, reference, noise="loud")
+
+
+def test_scene_settings_reach_the_controller():
+    from controllers.factory import from_spec
+
+    scene = flexctl.load_scene("slew-90", overrides={
+        "controller.kind": "nmpc", "model.design_variant": "first_order",
+        "controller.horizon": 12, "controller.sample_time": 0.05,
+        "controller.estimator": "kalman", "controller.reference": "none"})
+    built = from_spec(scene)
+    mpc = built.controller
+    assert (mpc.horizon, mpc.sample_time, mpc.reference) == (12, 0.05, None)
+    assert mpc.noise is not None and mpc.model.variant == "first_order"
+    bad = flexctl.load_scene("slew-90", overrides={"controller.kind": "nmpc",
+                                                   "controller.estimator": "magic"})
+    with pytest.raises(flexctl.SceneError, match="estimator"):
+        from_spec(bad)

@@ -79,7 +79,8 @@ class BenchConfig:
         or a hub motion.
     modes, variants, methods, rtols : tuple
         Numbers of modes (1 to 200; default 1 to 12), model variants (default all three),
-        integrators (:data:`flexctl.sim.simulation.METHODS`; default cvodes, DOP853, LSODA) and
+        integrators (:data:`flexctl.sim.simulation.METHODS`; default cvodes, rk4, DOP853,
+        LSODA; rk4's tolerance is its target tip error relative to the peak) and
         relative tolerances (in (0, 1); default 1e-4, 1e-6, 1e-8).
     reference_modes : int
         Modes of the converged reference, >= every entry of ``modes``. Default 20.
@@ -96,7 +97,7 @@ class BenchConfig:
     scenes: tuple = ()
     modes: tuple = tuple(range(1, 13))
     variants: tuple = VARIANTS
-    methods: tuple = ("cvodes", "DOP853", "LSODA")
+    methods: tuple = ("cvodes", "rk4", "DOP853", "LSODA")
     rtols: tuple = (1e-4, 1e-6, 1e-8)
     reference_modes: int = 20
     reference_rtol: float = 1e-10
@@ -131,9 +132,9 @@ class BenchConfig:
     @classmethod
     def quick(cls, **changes) -> "BenchConfig":
         """A small sweep (about two minutes for the built-in scenes): 1, 2, 4, 8 modes,
-        first_order, cvodes and DOP853 at 1e-5 and 1e-8, a 12-mode reference at 1e-9."""
+        first_order, cvodes, rk4 and DOP853 at 1e-5 and 1e-8, a 12-mode reference at 1e-9."""
         return replace(cls(modes=(1, 2, 4, 8), variants=("first_order",), rtols=(1e-5, 1e-8),
-                           methods=("cvodes", "DOP853"), reference_modes=12,
+                           methods=("cvodes", "rk4", "DOP853"), reference_modes=12,
                            reference_rtol=1e-9, time_limit=10.0), **changes)
 
 
@@ -249,7 +250,7 @@ def _relative_tip_error(result, reference) -> float:
 def _run(model, scene, t_final, method, rtol, time_limit=None):
     """``(result or None, wall time s, note)``; never raises for a failed run."""
     maneuver = scene.maneuver
-    if time_limit is not None and method not in ("cvodes", "auto"):
+    if time_limit is not None and method not in ("cvodes", "rk4", "auto"):
         maneuver = _Deadline(maneuver, time.perf_counter() + time_limit)
     drive = ({"hub_motion": maneuver} if isinstance(scene.maneuver, SpinUp)
              else {"torque": maneuver})

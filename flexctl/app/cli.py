@@ -416,6 +416,7 @@ def _demo_sections(out: Path, workers: int, surprises: list) -> list:
              ("paper 001 Fig. 5", lambda o, pool: demo.spacecraft_torque(o), False),
              ("paper 000 Figs. 5-8", demo.hub_beam_mass, True),
              ("controller comparison", demo.slew_comparison, True),
+             ("design-model error", demo.model_error, True),
              ("large deflection", lambda o, pool: demo.large_deflection(o), False))
     pool = ProcessPoolExecutor(max_workers=workers) if workers > 1 else None
     sections = []
