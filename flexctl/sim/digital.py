@@ -33,8 +33,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from .compiled import CHECK_FACTOR, SegmentIntegrator, is_symbolic
-from .fixed_step import _jit, _step_function
+from .compiled import CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, is_symbolic
+from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
 from .inputs import input_value, output_grid, time_function
 from ..model.errors import InputTypeError, InputValueError
 
@@ -252,21 +252,29 @@ class _RK4Hold:
     error_divisor = 1.0
 
     def __init__(self, model, torque, h_max):
-        self.h_max, self.model = float(h_max), model
-        self.step = _step_function(model, torque, None, _Held(0.0), 1)[0]
+        self.h_max, self.model, self.torque = float(h_max), model, torque
         self.chains = {}
+        # the compiled loops are kept across runs (by model, torque and step count), like the
+        # CVODES integrators: a second run with other gains or another law costs no build
+        self.key = _input_key(model, (torque, None, None), np.array([1.0]))
 
     def _final(self, count):
         """Compiled ``count`` steps: ``([y; t], h, u) -> [y; t]`` at the end."""
         if count not in self.chains:
-            import casadi as ca
-
-            chain = self.step.mapaccum("flexctl_rk4_hold", count)
-            args = chain.mx_in()
-            ys = chain.call(args)[0]
-            self.chains[count] = _jit(ca.Function("flexctl_rk4_hold_end", args, [ys[:, -1]]),
-                                      self.model)
+            self.chains[count] = _cached(
+                _STEP_CACHE, _STEP_CACHE_SIZE,
+                None if self.key is None else ("rk4-hold", self.key, count),
+                (self.model, self.torque), lambda: self._build(count))
         return self.chains[count]
+
+    def _build(self, count):
+        import casadi as ca
+
+        step = _step_function(self.model, self.torque, None, _Held(0.0), 1)[0]
+        chain = step.mapaccum("flexctl_rk4_hold", count)
+        args = chain.mx_in()
+        ys = chain.call(args)[0]
+        return _jit(ca.Function("flexctl_rk4_hold_end", args, [ys[:, -1]]), self.model)
 
     def __call__(self, lo, t_out, y, u, loose=False):
         h_max = self.h_max * (2.0 if loose else 1.0)
