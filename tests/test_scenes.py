@@ -247,3 +247,10 @@ def test_scene_file_that_is_not_utf8_is_named(tmp_path):
     path.write_bytes('description = "caf\xe9"\n'.encode("latin-1"))
     with pytest.raises(flexctl.SceneError, match=r"latin1\.toml.*UTF-8"):
         flexctl.load_scene(path)
+
+
+def test_exact_mode_limit_names_the_scene_key():
+    from flexctl.app.scenes import SceneError, load_scene as load
+
+    with pytest.raises(SceneError, match="model.modes"):
+        load("slew-90", overrides={"model.modes": 30}).build_model()

@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -74,6 +75,7 @@ from ..sim.fidelity import DEFAULT_TOLERANCE, ModeChoice, choose_modes
 from ..sim.maneuvers import SineTorque, Slew, SpinUp
 from ..sim.metrics import slew_metrics
 from ..model import VARIANTS, Model, build_model
+from ..model.variants import EXACT_MAX_MODES
 from ..model.parameters import Beam, Hub, HubBeam, PointMass
 from ..sim.simulation import METHODS, SimulationResult, simulate
 from ..sim.validity import VariantChoice, assess, choose_variant
@@ -276,6 +278,10 @@ class Scene:
         """The model this scene asks for (variant and number of modes chosen when ``"auto"``)."""
         choice = self.mode_choice()
         n_modes = choice.n_modes if choice is not None else self.model.modes
+        if self.variant == "exact" and n_modes > EXACT_MAX_MODES:
+            raise SceneError(f"model.modes must be at most {EXACT_MAX_MODES} for the exact "
+                             "variant (its geometry grows as the square of the modes; converge "
+                             f"the higher ones on first_order); got {n_modes}")
         return build_model(self.system, n_modes=n_modes, variant=self.variant)
 
 
@@ -434,7 +440,8 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
     Parameters
     ----------
     source : str or path-like
-        A path to a ``.toml`` file, or the name of a built-in scene (:func:`builtin_scenes`).
+        A path to a ``.toml`` file, a run's ``summary.json`` (the scene as it was run, from
+        its ``scene_table``), or the name of a built-in scene (:func:`builtin_scenes`).
     overrides : dict, optional
         ``{"dotted.key": value}``; string values are read as TOML values (``"10"`` -> 10,
         ``"zero_order"`` stays a string), e.g. ``{"maneuver.spin_rate": "10"}``.
@@ -444,7 +451,9 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
     Scene
     """
     path = Path(source)
-    if path.suffix == ".toml" or path.is_file():
+    if path.suffix == ".json":
+        data, name = _summary_scene(path)
+    elif path.suffix == ".toml" or path.is_file():
         if not path.is_file():
             raise SceneError(f"scene file {str(path)!r} does not exist")
         try:
@@ -470,6 +479,23 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
     for key, value in (overrides or {}).items():
         _set_dotted(data, key, value)
     return parse_scene(data, name=name)
+
+
+def _summary_scene(path: Path) -> tuple:
+    """The scene table and name recorded in a run's ``summary.json``."""
+    try:
+        summary = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise SceneError(f"summary file {str(path)!r} cannot be read: "
+                         f"{exc.strerror or exc}") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise SceneError(f"summary file {str(path)!r} is not valid JSON: {exc}") from None
+    table = summary.get("scene_table") if isinstance(summary, dict) else None
+    if not isinstance(table, dict):
+        raise SceneError(f"summary file {str(path)!r} has no scene_table (a run's summary.json "
+                         "records the scene it ran under that key)")
+    name = summary.get("scene")
+    return table, name if isinstance(name, str) and name else path.parent.name
 
 
 def run_scene(scene: Scene, controller=None, model: Model | None = None) -> SimulationResult:
