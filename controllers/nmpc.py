@@ -542,10 +542,8 @@ class NMPCSession:
         mpc, n, big_n = self.mpc, self._n, self.mpc.horizon
         times = t + mpc.sample_time * np.arange(big_n + 1)
         refs, torques = mpc.reference_at(times)
-        block = np.zeros((big_n + 1) * n + big_n)
-        for j in range(big_n + 1):
-            block[j * (n + 1):j * (n + 1) + n] = refs[:, j]
-        block[self.built["u_index"]] = torques[:big_n]
+        block = np.concatenate((np.column_stack((refs[:, :-1].T, torques[:big_n])).reshape(-1),
+                                refs[:, -1]))
         return np.concatenate((x_design, [self.u_prev], block))
 
     def _shift(self):
@@ -604,13 +602,13 @@ class NMPCSession:
         """One Gauss-Newton SQP step from ``guess``: linearise, condense, solve the QP."""
         mpc, built, n, big_n = self.mpc, self.built, self._n, self.mpc.horizon
         width = n + 1
-        xs = np.empty((big_n + 1, n))
-        for j in range(big_n + 1):
-            xs[j] = guess[j * width:j * width + n]
-        us = guess[built["u_index"]]
+        stages = guess[:-n].reshape(big_n, width)             # rows [x_j, u_j]
+        xs = np.vstack((stages[:, :n], guess[-n:]))
+        us = stages[:, n]
         refs = p[n + 1:]
-        rx = np.array([refs[j * width:j * width + n] for j in range(big_n + 1)])
-        rv = refs[built["u_index"]]
+        ref_stages = refs[:-n].reshape(big_n, width)
+        rx = np.vstack((ref_stages[:, :n], refs[-n:]))
+        rv = ref_stages[:, n]
         f = np.array(built["forward"](xs[:-1].T, us[None]))
         a, b = (np.array(v) for v in built["linear"](xs[:-1].T, us[None]))
         a = a.reshape(n, big_n, n).transpose(1, 0, 2)        # (N, n, n): A_j
@@ -670,10 +668,7 @@ class NMPCSession:
                                                         "failed"))
         du = np.array(sol["x"]).reshape(-1)
         new_x = xs + e + g_mat @ du
-        w_new = np.empty_like(guess)
-        for j in range(big_n + 1):
-            w_new[j * width:j * width + n] = new_x[j]
-        w_new[built["u_index"]] = us + du
+        w_new = np.concatenate((np.column_stack((new_x[:-1], us + du)).reshape(-1), new_x[-1]))
         return w_new, ok, iterations, status
 
     def report(self) -> dict:
