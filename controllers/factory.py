@@ -6,34 +6,143 @@ angle, duration or free, actuator torque bound), the plant model and the design 
 a model of ``design_modes`` modes of the scene's design variant (exact on an exact plant,
 first_order otherwise) and returns it ready for :func:`flexctl.simulate`.
 
-Settings (all optional) per ``kind``:
+Settings (all optional) per ``kind``, from the registry :data:`controllers.spec.CONTROLLER_KINDS`
+(``tests/test_controller_registry.py`` checks that this table is
+:func:`controllers.spec.settings_table`):
 
-==============  ================================================================================
-kind            settings
-==============  ================================================================================
-pd              ``bandwidth`` (rad/s, default 2), ``damping_ratio`` (0.9), ``feedforward`` (true)
-lqr             ``angle_error`` (rad, 0.05), ``rate_error`` (rad/s, 0.02), ``tip_deflection``
-                (m, 0.01), ``modal_energy`` (J, off), ``torque`` (N m, 1.0), ``spin_rate``
-                (rad/s, 0), ``reference`` ("poly7" or "cycloidal")
-lqg             lqr settings plus ``angle_noise`` (rad, 1e-3), ``moment_noise`` (N m, 0.1),
-                ``process_torque`` (N m, 0.1)
-scheduled       lqr settings plus ``spin_rates`` (rad/s, [0, 1, 2])
-trajopt         ``intervals`` (40), ``objective`` ("effort"; "time" when duration is free),
-                ``transcription``, ``torque_rate_bound`` (N m/s), ``tip_bound`` (m)
-trajopt+lqr     trajopt settings; LQR feedback about the optimal trajectory (Bryson weights:
-                5 % of the angle, 3 % of the beam length at the tip, the torque bound)
-bang_bang       none: rigid time-optimal at the torque bound, or the torque that fits the duration
-zv, zvd         none: the bang-bang torque shaped at the first hub-free frequency
-nmpc            ``horizon`` (20 samples), ``mode`` ("rti" or "converged"), ``qp_solver`` ("qrqp"),
-                ``terminal`` ("lqr" or "rest"), ``reference`` ("trajopt": track the optimal slew,
-                with the trajopt settings; or "none": regulate to the target),
-                ``torque_rate_bound`` (N m/s), ``tip_bound`` (m), ``estimator`` ("state" or
-                "kalman": extended Kalman filter on hub angle and root moment, with the lqg
-                noise settings); runs at ``sample_time`` (0.02 s)
-==============  ================================================================================
+===========  ===============================================================================
+kind         settings
+===========  ===============================================================================
+pd           PD on the hub angle about a smooth reference.
+             ``bandwidth`` (rad/s; default 2; a number > 0): closed-loop bandwidth
+             ``damping_ratio`` (default 0.9; a number > 0): closed-loop damping ratio
+             ``feedforward`` (default true; true or false): add the rigid-body torque of the
+               reference
+             ``reference`` (default "poly7"; one of "poly7", "cycloidal"): shape of the
+               reference slew the loop tracks
+             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
+               at this period (default: continuous)
+lqr          full-state LQR about a smooth reference.
+             ``angle_error`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
+               weight: acceptable hub angle error
+             ``rate_error`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
+               acceptable hub rate error
+             ``tip_deflection`` (m; default 0.01; a number in [1e-12, 1e+12]): LQR weight:
+               acceptable tip deflection
+             ``modal_energy`` (J; a number in [1e-12, 1e+12]): LQR weight: acceptable modal
+               energy (default: off)
+             ``torque`` (N m; default 1; a number in [1e-12, 1e+12]): LQR weight: acceptable
+               torque
+             ``reference`` (default "poly7"; one of "poly7", "cycloidal"): shape of the
+               reference slew the loop tracks
+             ``spin_rate`` (rad/s; default 0; a finite number): hub rate of the
+               linearization the gain is designed at
+             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
+               at this period (default: continuous)
+lqg          LQR on a Kalman-Bucy estimate from hub angle and root moment.
+             ``angle_error`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
+               weight: acceptable hub angle error
+             ``rate_error`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
+               acceptable hub rate error
+             ``tip_deflection`` (m; default 0.01; a number in [1e-12, 1e+12]): LQR weight:
+               acceptable tip deflection
+             ``modal_energy`` (J; a number in [1e-12, 1e+12]): LQR weight: acceptable modal
+               energy (default: off)
+             ``torque`` (N m; default 1; a number in [1e-12, 1e+12]): LQR weight: acceptable
+               torque
+             ``reference`` (default "poly7"; one of "poly7", "cycloidal"): shape of the
+               reference slew the loop tracks
+             ``spin_rate`` (rad/s; default 0; a finite number): hub rate of the
+               linearization the gain is designed at
+             ``angle_noise`` (rad; default 0.001; a number > 0): hub angle measurement noise
+               (estimator)
+             ``moment_noise`` (N m; default 0.1; a number > 0): root bending moment
+               measurement noise (estimator)
+             ``process_torque`` (N m; default 0.1; a number > 0): disturbance torque on the
+               hub (estimator)
+scheduled    LQR gains designed at several spin rates, interpolated at the hub rate.
+             ``angle_error`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
+               weight: acceptable hub angle error
+             ``rate_error`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
+               acceptable hub rate error
+             ``tip_deflection`` (m; default 0.01; a number in [1e-12, 1e+12]): LQR weight:
+               acceptable tip deflection
+             ``modal_energy`` (J; a number in [1e-12, 1e+12]): LQR weight: acceptable modal
+               energy (default: off)
+             ``torque`` (N m; default 1; a number in [1e-12, 1e+12]): LQR weight: acceptable
+               torque
+             ``reference`` (default "poly7"; one of "poly7", "cycloidal"): shape of the
+               reference slew the loop tracks
+             ``spin_rates`` (rad/s; default [0, 1, 2]; an array of numbers >= 0): design
+               spin rates, strictly increasing
+             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
+               at this period (default: continuous)
+trajopt      optimal slew on the design model, played open loop.
+             ``intervals`` (default 40; an integer >= 2): control intervals of the
+               transcription
+             ``objective`` (one of "effort", "time"): default: effort, or time when
+               maneuver.duration is free
+             ``transcription`` (one of "multiple_shooting", "collocation"): default: by the
+               design model (collocation for exact)
+             ``torque_rate_bound`` (N m/s; a number > 0): bound on the torque rate (default:
+               none)
+             ``tip_bound`` (m; a number > 0): bound on the tip deflection (default: none)
+             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
+               at this period (default: continuous)
+trajopt+lqr  optimal slew with LQR feedback about it (Bryson weights: 5 % of the angle, 3 %
+               of the beam length at the tip, the torque bound).
+             ``intervals`` (default 40; an integer >= 2): control intervals of the
+               transcription
+             ``objective`` (one of "effort", "time"): default: effort, or time when
+               maneuver.duration is free
+             ``transcription`` (one of "multiple_shooting", "collocation"): default: by the
+               design model (collocation for exact)
+             ``torque_rate_bound`` (N m/s; a number > 0): bound on the torque rate (default:
+               none)
+             ``tip_bound`` (m; a number > 0): bound on the tip deflection (default: none)
+             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
+               at this period (default: continuous)
+bang_bang    rigid time-optimal at the torque bound, or the torque that fits the duration.
+             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
+               at this period (default: continuous)
+zv           ZV shaper: the bang-bang torque shaped at the first hub-free frequency.
+             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
+               at this period (default: continuous)
+zvd          ZVD shaper: the bang-bang torque shaped at the first hub-free frequency.
+             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
+               at this period (default: continuous)
+nmpc         nonlinear MPC on the design model, run sampled.
+             ``horizon`` (samples; default 20; an integer in [2, 500]): prediction horizon
+             ``mode`` (default "rti"; one of "rti", "converged"): real-time iteration or
+               solved to convergence (IPOPT)
+             ``qp_solver`` (default "qrqp"; one of "qrqp", "osqp", "qpoases", "hpipm"):
+               CasADi QP solver of the real-time iteration
+             ``terminal`` (default "lqr"; one of "lqr", "rest"): terminal cost (LQR) or
+               terminal rest constraint
+             ``reference`` (default "trajopt"; one of "trajopt", "none"): track the optimal
+               slew, or regulate to the target
+             ``intervals`` (default 40; an integer >= 2): control intervals of the
+               transcription
+             ``objective`` (one of "effort", "time"): default: effort, or time when
+               maneuver.duration is free
+             ``transcription`` (one of "multiple_shooting", "collocation"): default: by the
+               design model (collocation for exact)
+             ``torque_rate_bound`` (N m/s; a number > 0): bound on the torque rate (default:
+               none)
+             ``tip_bound`` (m; a number > 0): bound on the tip deflection (default: none)
+             ``estimator`` (default "state"; one of "state", "kalman"): measured state, or
+               an extended Kalman filter on hub angle and root moment
+             ``angle_noise`` (rad; default 0.001; a number > 0): hub angle measurement noise
+               (estimator)
+             ``moment_noise`` (N m; default 0.1; a number > 0): root bending moment
+               measurement noise (estimator)
+             ``process_torque`` (N m; default 0.1; a number > 0): disturbance torque on the
+               hub (estimator)
+             ``sample_time`` (s; default 0.02; a number > 0): sample period
+===========  ===============================================================================
 
-Every kind also takes ``sample_time`` (s): the law runs sampled with a zero-order hold
-(:class:`flexctl.sim.digital.ZeroOrderHold`; not LQG, whose estimator is continuous).
+``sample_time`` runs the law with a zero-order hold (:class:`flexctl.sim.digital.ZeroOrderHold`);
+LQG does not take it, since its estimator integrates continuously.
 """
 
 from __future__ import annotations
@@ -61,10 +170,6 @@ from .tracking import TrajectoryTracker
 from .trajopt import SlewProblem, solve_slew
 
 __all__ = ["BuiltController", "OpenLoop", "from_spec"]
-
-_LQR_DEFAULTS = {"angle_error": 0.05, "rate_error": 0.02, "tip_deflection": 0.01,
-                 "modal_energy": None, "torque": 1.0}
-
 
 @dataclass(frozen=True, eq=False)
 class OpenLoop:
@@ -125,17 +230,6 @@ class BuiltController:
     info: dict = field(default_factory=dict)
 
 
-def _setting(spec: ControllerSpec, key: str, default, kind=float):
-    value = spec.settings.get(key, default)
-    if value is None:
-        return None
-    if kind is float and (isinstance(value, bool) or not isinstance(value, (int, float))):
-        raise SceneError(f"controller.{key} must be a number; got {value!r}")
-    if kind is bool and not isinstance(value, bool):
-        raise SceneError(f"controller.{key} must be true or false; got {value!r}")
-    return value
-
-
 def _wrap(func, *args, **kwargs):
     try:
         return func(*args, **kwargs)
@@ -149,8 +243,12 @@ def _lqr_weights(spec: ControllerSpec) -> LQRWeights:
     names = {"angle_error": "hub_angle", "rate_error": "hub_rate",
              "tip_deflection": "tip_deflection", "modal_energy": "modal_energy",
              "torque": "torque"}
-    kwargs = {names[k]: _setting(spec, k, d) for k, d in _LQR_DEFAULTS.items()}
-    return _wrap(LQRWeights, **kwargs)
+    return _wrap(LQRWeights, **{field: spec.get(key) for key, field in names.items()})
+
+
+def _noise(spec: ControllerSpec) -> NoiseLevels:
+    return _wrap(NoiseLevels, angle=spec.get("angle_noise"),
+                 root_moment=spec.get("moment_noise"), torque=spec.get("process_torque"))
 
 
 def from_spec(scene, plant: Model | None = None) -> BuiltController:
@@ -194,15 +292,12 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
         if bound is None:
             raise SceneError("maneuver.torque_bound is required when maneuver.duration is "
                              "\"free\"")
-        if kind in ("trajopt", "trajopt+lqr"):
-            duration = None
-        elif kind in ("bang_bang", "zv", "zvd"):
-            duration = None
-        else:
+        if kind not in ("trajopt", "trajopt+lqr", "bang_bang", "zv", "zvd"):
+            # trajopt and the shapers take the free duration as a minimum-time problem
             duration = minimum_slew_duration(angle, design.matrices.J0, bound)
 
     if kind in ("pd", "lqr", "lqg", "scheduled"):
-        profile_shape = spec.settings.get("reference", "poly7")
+        profile_shape = spec.get("reference")
         info = {}
         if bound is not None:
             # a smooth reference the actuator cannot follow only winds the loop up: stretch it
@@ -217,21 +312,17 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
         profile = _wrap(SlewProfile, slew_angle=angle, duration=duration, shape=profile_shape)
         common = {"reference": profile, "torque_limit": bound}
         if kind == "pd":
-            ctrl = _wrap(design_pd, design, _setting(spec, "bandwidth", 2.0),
-                         _setting(spec, "damping_ratio", 0.9),
-                         feedforward=_setting(spec, "feedforward", True, bool), **common)
+            ctrl = _wrap(design_pd, design, spec.get("bandwidth"), spec.get("damping_ratio"),
+                         feedforward=spec.get("feedforward"), **common)
         elif kind == "lqr":
-            ctrl = _wrap(design_lqr, design, _lqr_weights(spec),
-                         _setting(spec, "spin_rate", 0.0), **common)
+            ctrl = _wrap(design_lqr, design, _lqr_weights(spec), spec.get("spin_rate"),
+                         **common)
         elif kind == "lqg":
-            noise = _wrap(NoiseLevels, angle=_setting(spec, "angle_noise", 1e-3),
-                          root_moment=_setting(spec, "moment_noise", 0.1),
-                          torque=_setting(spec, "process_torque", 0.1))
-            ctrl = _wrap(design_lqg, design, _lqr_weights(spec), noise,
-                         _setting(spec, "spin_rate", 0.0), plant=plant, **common)
+            ctrl = _wrap(design_lqg, design, _lqr_weights(spec), _noise(spec),
+                         spec.get("spin_rate"), plant=plant, **common)
         else:
-            rates = spec.settings.get("spin_rates", [0.0, 1.0, 2.0])
-            ctrl = _wrap(design_scheduled_lqr, design, _lqr_weights(spec), rates, **common)
+            ctrl = _wrap(design_scheduled_lqr, design, _lqr_weights(spec),
+                         list(spec.get("spin_rates")), **common)
         return _sampled(spec, BuiltController(ctrl, kind, float(duration), n_design, info))
 
     if kind in ("bang_bang", "zv", "zvd"):
@@ -264,12 +355,11 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
 def _trajectory(spec: ControllerSpec, design: Model, angle, duration, bound) -> tuple:
     """The optimal slew of the ``trajopt`` settings on the design model, and what its solve
     measured."""
-    objective = spec.settings.get("objective", "time" if duration is None else "effort")
+    # objective None: SlewProblem takes "time" for a free duration, else "effort"
     problem = _wrap(SlewProblem, angle=angle, duration=duration, torque_bound=bound,
-                    n_intervals=int(_setting(spec, "intervals", 40)), objective=objective,
-                    torque_rate_bound=_setting(spec, "torque_rate_bound", None),
-                    tip_bound=_setting(spec, "tip_bound", None),
-                    transcription=spec.settings.get("transcription"))
+                    n_intervals=spec.get("intervals"), objective=spec.get("objective"),
+                    torque_rate_bound=spec.get("torque_rate_bound"),
+                    tip_bound=spec.get("tip_bound"), transcription=spec.get("transcription"))
     start = time.perf_counter()
     try:
         solution = _wrap(solve_slew, design, problem)
@@ -284,32 +374,21 @@ def _trajectory(spec: ControllerSpec, design: Model, angle, duration, bound) -> 
 def _nmpc(spec: ControllerSpec, design: Model, angle, duration, bound, n_design):
     """Nonlinear MPC tracking the optimal slew (``reference = "trajopt"``, default) or
     regulating to the target at rest (``reference = "none"``)."""
-    reference = spec.settings.get("reference", "trajopt")
-    if reference not in ("trajopt", "none"):
-        raise SceneError("controller.reference for kind 'nmpc' must be \"trajopt\" or "
-                         f"\"none\"; got {reference!r}")
     info, solution = {}, None
-    if reference == "trajopt":
+    if spec.get("reference") == "trajopt":
         solution, info = _trajectory(spec, design, angle, duration, bound)
         end = float(solution.duration)
     else:
         end = float(duration if duration is not None
                     else minimum_slew_duration(angle, design.matrices.J0, bound))
-    settings = {key: spec.settings[key] for key in ("horizon", "mode", "qp_solver", "terminal")
-                if key in spec.settings}
-    estimator = spec.settings.get("estimator", "state")
-    if estimator not in ("state", "kalman"):
-        raise SceneError("controller.estimator for kind 'nmpc' must be \"state\" or "
-                         f"\"kalman\"; got {estimator!r}")
-    if estimator == "kalman":
-        settings["noise"] = _wrap(NoiseLevels, angle=_setting(spec, "angle_noise", 1e-3),
-                                  root_moment=_setting(spec, "moment_noise", 0.1),
-                                  torque=_setting(spec, "process_torque", 0.1))
+    settings = {key: spec.get(key) for key in ("horizon", "mode", "qp_solver", "terminal")}
+    if spec.get("estimator") == "kalman":
+        settings["noise"] = _noise(spec)
     start = time.perf_counter()
     ctrl = _wrap(NMPC, model=design, target=angle, torque_limit=bound, reference=solution,
-                 sample_time=_setting(spec, "sample_time", 0.02),
-                 torque_rate_limit=_setting(spec, "torque_rate_bound", None),
-                 tip_limit=_setting(spec, "tip_bound", None), **settings)
+                 sample_time=spec.get("sample_time"),
+                 torque_rate_limit=spec.get("torque_rate_bound"),
+                 tip_limit=spec.get("tip_bound"), **settings)
     _wrap(ctrl.prepare)
     info["nmpc_build_time_s"] = time.perf_counter() - start
     info["substeps"] = ctrl.substeps
@@ -318,8 +397,9 @@ def _nmpc(spec: ControllerSpec, design: Model, angle, duration, bound, n_design)
 
 def _sampled(spec: ControllerSpec, built: BuiltController) -> BuiltController:
     """``built`` run at ``controller.sample_time`` with a zero-order hold, when given."""
-    if "sample_time" not in spec.settings or built.kind == "nmpc":
+    # nmpc samples itself; lqg takes no sample_time (its estimator is continuous)
+    if built.kind in ("nmpc", "lqg") or spec.get("sample_time") is None:
         return built
-    held = _wrap(ZeroOrderHold, built.controller, _setting(spec, "sample_time", None))
+    held = _wrap(ZeroOrderHold, built.controller, spec.get("sample_time"))
     return dataclasses.replace(built, controller=held,
                                info={**built.info, "sample_time": held.sample_time})

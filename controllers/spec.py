@@ -1,44 +1,48 @@
 """What a scene's ``[controller]`` table may hold: the controller kinds and their settings.
 
+Each kind declares its settings once, in :data:`CONTROLLER_KINDS` (name, type, default, rule,
+unit, one-line doc). :class:`ControllerSpec` validates a table against it, the factory
+(:func:`controllers.from_spec`) reads its defaults from it, the command line lists it
+(``flexctl run --help``) and :func:`settings_table` renders the table in
+:mod:`controllers.factory`'s docstring (a test keeps the two equal).
+
 The controllers package owns the kinds it builds; :mod:`flexctl.app.scenes` reads them from
 here and re-exports :class:`ControllerSpec` and :class:`SceneError`, so the dependency runs
 from the application layer to the controllers and never back. :class:`SceneError` lives here
-because the factory (:func:`controllers.from_spec`) is the lowest place that raises it, for a
-bad ``[controller]`` setting.
+because the factory is the lowest place that raises it, for a bad ``[controller]`` setting.
+
+Examples
+--------
+>>> CONTROLLER_KINDS["pd"].setting("bandwidth").default
+2.0
+>>> ControllerSpec(kind="pd", settings={"bandwidth": -1.0})
+Traceback (most recent call last):
+...
+controllers.spec.SceneError: controller.bandwidth (kind 'pd') must be a number > 0; got -1.0
 """
 
 from __future__ import annotations
 
+import math
+import textwrap
 from dataclasses import dataclass, field
+from numbers import Integral, Real
 
 from flexctl.model.errors import InputValueError
 
-__all__ = ["CONTROLLER_KEYS", "ControllerSpec", "SceneError"]
+# Choices owned by the controller modules, spelled out here because flexctl's package import
+# reaches this module while those modules are still loading; tests/test_controller_registry.py
+# pins them to the modules' constants.
+WEIGHT_RANGE = 1e12                                     # controllers.lqr.WEIGHT_RANGE
+SHAPES = ("poly7", "cycloidal")                         # controllers.reference.SHAPES
+OBJECTIVES = ("effort", "time")                         # controllers.trajopt.OBJECTIVES
+TRANSCRIPTIONS = ("multiple_shooting", "collocation")   # controllers.trajopt.TRANSCRIPTIONS
+MODES = ("rti", "converged")                            # controllers.nmpc.MODES
+QP_SOLVERS = ("qrqp", "osqp", "qpoases", "hpipm")       # controllers.nmpc.QP_SOLVERS
+TERMINALS = ("lqr", "rest")                             # controllers.nmpc.TERMINALS
 
-#: Settings each controller kind accepts in a scene's [controller] table (the factory builds
-#: the controller and checks the values).
-_LQR_KEYS = {"spin_rate", "angle_error", "rate_error", "tip_deflection",
-             "modal_energy", "torque", "reference"}
-CONTROLLER_KEYS = {
-    "pd": {"bandwidth", "damping_ratio", "feedforward", "reference"},
-    "lqr": _LQR_KEYS,
-    "lqg": _LQR_KEYS | {"angle_noise", "moment_noise", "process_torque"},
-    "scheduled": _LQR_KEYS | {"spin_rates"},
-    "trajopt": {"intervals", "objective", "transcription",
-                "torque_rate_bound", "tip_bound"},
-    "bang_bang": set(),
-    "zv": set(),
-    "zvd": set(),
-}
-CONTROLLER_KEYS["trajopt+lqr"] = CONTROLLER_KEYS["trajopt"]
-#: Nonlinear MPC (controllers.nmpc): its own settings and those of the trajectory it tracks.
-CONTROLLER_KEYS["nmpc"] = {"horizon", "mode", "qp_solver", "terminal", "reference",
-                           "torque_rate_bound", "tip_bound", "intervals", "objective",
-                           "transcription", "estimator", "angle_noise", "moment_noise",
-                           "process_torque"}
-#: Every kind may run sampled with a zero-order hold (NMPC always is; default 0.02 s).
-for _keys in CONTROLLER_KEYS.values():
-    _keys.add("sample_time")
+__all__ = ["CONTROLLER_KEYS", "CONTROLLER_KINDS", "ControllerKind", "ControllerSpec",
+           "SceneError", "Setting", "settings_table"]
 
 
 class SceneError(InputValueError):
@@ -46,22 +50,260 @@ class SceneError(InputValueError):
     a :class:`flexctl.model.errors.InputError`)."""
 
 
+_TYPE_NAMES = {float: "a number", int: "an integer", bool: "true or false", str: "a string",
+               tuple: "an array of numbers"}
+
+
+@dataclass(frozen=True, kw_only=True)
+class Setting:
+    """One setting of a controller kind.
+
+    Attributes
+    ----------
+    name : str
+        Key in the ``[controller]`` table.
+    type : {float, int, bool, str, tuple}
+        ``tuple``: an array of numbers.
+    default : object
+        Used when the table does not give the setting; ``None``: off, or chosen by the design
+        as ``doc`` says.
+    doc : str
+        One line.
+    unit : str
+        SI unit of a number ("" for none).
+    choices : tuple of str
+        Allowed strings (``type`` str).
+    minimum, maximum : float, optional
+        Bounds of a number (inclusive unless ``strict``, which makes ``minimum`` exclusive).
+    """
+
+    name: str
+    type: type
+    default: object
+    doc: str
+    unit: str = ""
+    choices: tuple = ()
+    minimum: float | None = None
+    maximum: float | None = None
+    strict: bool = False
+
+    @property
+    def rule(self) -> str:
+        """The rule a value must meet, in words (used in error messages and help)."""
+        if self.choices:
+            return "one of " + ", ".join(f'"{c}"' for c in self.choices)
+        text = _TYPE_NAMES[self.type]
+        if self.type is tuple:
+            text += " >= 0" if self.minimum == 0 else ""
+        elif self.minimum is not None and self.maximum is not None:
+            text += f" in {'(' if self.strict else '['}{self.minimum:g}, {self.maximum:g}]"
+        elif self.minimum is not None:
+            text += f" {'>' if self.strict else '>='} {self.minimum:g}"
+        elif self.type is float:
+            text = "a finite number"
+        return text
+
+    @property
+    def default_text(self) -> str | None:
+        """:attr:`default` as written in TOML (None when there is no default value)."""
+        value = self.default
+        if isinstance(value, bool):
+            return str(value).lower()
+        if isinstance(value, str):
+            return f'"{value}"'
+        if isinstance(value, tuple):
+            return "[" + ", ".join(f"{v:g}" for v in value) + "]"
+        return None if value is None else f"{value:g}"
+
+    def check(self, kind: str, value):
+        """``value`` when it meets :attr:`rule`; raise :class:`SceneError` naming the key."""
+        if not self._accepts(value):
+            raise SceneError(f"controller.{self.name} (kind {kind!r}) must be {self.rule}; "
+                             f"got {value!r}")
+        return value
+
+    def _accepts(self, value) -> bool:
+        if self.type is bool or self.type is str:
+            return isinstance(value, self.type) and (not self.choices or value in self.choices)
+        if self.type is tuple:
+            return isinstance(value, (list, tuple)) and len(value) > 0 \
+                and all(self._number_ok(v, Real) for v in value)
+        return self._number_ok(value, Integral if self.type is int else Real)
+
+    def _number_ok(self, value, number_type) -> bool:
+        if isinstance(value, bool) or not isinstance(value, number_type) \
+                or not math.isfinite(value):
+            return False
+        low_ok = self.minimum is None or (value > self.minimum if self.strict
+                                          else value >= self.minimum)
+        return low_ok and (self.maximum is None or value <= self.maximum)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ControllerKind:
+    """A controller kind: its name, one line on what it does, and its settings."""
+
+    name: str
+    doc: str
+    settings: tuple
+
+    def setting(self, name: str) -> Setting:
+        """The setting called ``name``."""
+        for item in self.settings:
+            if item.name == name:
+                return item
+        raise KeyError(f"controller kind {self.name!r} has no setting {name!r}")
+
+    @property
+    def names(self) -> frozenset:
+        """Names of the settings."""
+        return frozenset(item.name for item in self.settings)
+
+
+def _weight(name, default, unit, doc):
+    return Setting(name=name, type=float, default=default, unit=unit, doc=doc,
+                   minimum=1.0 / WEIGHT_RANGE, maximum=WEIGHT_RANGE)
+
+
+def _positive(name, default, unit, doc):
+    return Setting(name=name, type=float, default=default, unit=unit, doc=doc, minimum=0.0,
+                   strict=True)
+
+
+_SAMPLE_TIME = _positive("sample_time", None, "s", "run the law sampled with a zero-order "
+                         "hold at this period (default: continuous)")
+_REFERENCE = Setting(name="reference", type=str, default="poly7", choices=SHAPES,
+                     doc="shape of the reference slew the loop tracks")
+_WEIGHTS = (
+    _weight("angle_error", 0.05, "rad", "LQR (Bryson) weight: acceptable hub angle error"),
+    _weight("rate_error", 0.02, "rad/s", "LQR weight: acceptable hub rate error"),
+    _weight("tip_deflection", 0.01, "m", "LQR weight: acceptable tip deflection"),
+    _weight("modal_energy", None, "J", "LQR weight: acceptable modal energy (default: off)"),
+    _weight("torque", 1.0, "N m", "LQR weight: acceptable torque"),
+    _REFERENCE,
+)
+_SPIN_RATE = Setting(name="spin_rate", type=float, default=0.0, unit="rad/s",
+                     doc="hub rate of the linearization the gain is designed at")
+_NOISE = (
+    _positive("angle_noise", 1e-3, "rad", "hub angle measurement noise (estimator)"),
+    _positive("moment_noise", 0.1, "N m", "root bending moment measurement noise (estimator)"),
+    _positive("process_torque", 0.1, "N m", "disturbance torque on the hub (estimator)"),
+)
+_TRAJOPT = (
+    Setting(name="intervals", type=int, default=40, minimum=2,
+            doc="control intervals of the transcription"),
+    Setting(name="objective", type=str, default=None, choices=OBJECTIVES,
+            doc="default: effort, or time when maneuver.duration is free"),
+    Setting(name="transcription", type=str, default=None, choices=TRANSCRIPTIONS,
+            doc="default: by the design model (collocation for exact)"),
+    _positive("torque_rate_bound", None, "N m/s", "bound on the torque rate (default: none)"),
+    _positive("tip_bound", None, "m", "bound on the tip deflection (default: none)"),
+)
+_SHAPED = "the bang-bang torque shaped at the first hub-free frequency"
+
+_KINDS = (
+    ControllerKind(name="pd", doc="PD on the hub angle about a smooth reference", settings=(
+        _positive("bandwidth", 2.0, "rad/s", "closed-loop bandwidth"),
+        _positive("damping_ratio", 0.9, "", "closed-loop damping ratio"),
+        Setting(name="feedforward", type=bool, default=True,
+                doc="add the rigid-body torque of the reference"),
+        _REFERENCE, _SAMPLE_TIME)),
+    ControllerKind(name="lqr", doc="full-state LQR about a smooth reference",
+                   settings=(*_WEIGHTS, _SPIN_RATE, _SAMPLE_TIME)),
+    # no sample_time: the estimator integrates continuously (ZeroOrderHold refuses it)
+    ControllerKind(name="lqg", doc="LQR on a Kalman-Bucy estimate from hub angle and root "
+                   "moment", settings=(*_WEIGHTS, _SPIN_RATE, *_NOISE)),
+    ControllerKind(name="scheduled", doc="LQR gains designed at several spin rates, "
+                   "interpolated at the hub rate", settings=(
+                       *_WEIGHTS,
+                       Setting(name="spin_rates", type=tuple, default=(0.0, 1.0, 2.0),
+                               minimum=0.0, unit="rad/s",
+                               doc="design spin rates, strictly increasing"),
+                       _SAMPLE_TIME)),
+    ControllerKind(name="trajopt", doc="optimal slew on the design model, played open loop",
+                   settings=(*_TRAJOPT, _SAMPLE_TIME)),
+    ControllerKind(name="trajopt+lqr", doc="optimal slew with LQR feedback about it (Bryson "
+                   "weights: 5 % of the angle, 3 % of the beam length at the tip, the torque "
+                   "bound)", settings=(*_TRAJOPT, _SAMPLE_TIME)),
+    ControllerKind(name="bang_bang", doc="rigid time-optimal at the torque bound, or the "
+                   "torque that fits the duration", settings=(_SAMPLE_TIME,)),
+    ControllerKind(name="zv", doc=f"ZV shaper: {_SHAPED}", settings=(_SAMPLE_TIME,)),
+    ControllerKind(name="zvd", doc=f"ZVD shaper: {_SHAPED}", settings=(_SAMPLE_TIME,)),
+    ControllerKind(name="nmpc", doc="nonlinear MPC on the design model, run sampled",
+                   settings=(
+                       Setting(name="horizon", type=int, default=20, minimum=2, maximum=500,
+                               unit="samples", doc="prediction horizon"),
+                       Setting(name="mode", type=str, default="rti", choices=MODES,
+                               doc="real-time iteration or solved to convergence (IPOPT)"),
+                       Setting(name="qp_solver", type=str, default="qrqp", choices=QP_SOLVERS,
+                               doc="CasADi QP solver of the real-time iteration"),
+                       Setting(name="terminal", type=str, default="lqr", choices=TERMINALS,
+                               doc="terminal cost (LQR) or terminal rest constraint"),
+                       Setting(name="reference", type=str, default="trajopt",
+                               choices=("trajopt", "none"),
+                               doc="track the optimal slew, or regulate to the target"),
+                       *_TRAJOPT,
+                       Setting(name="estimator", type=str, default="state",
+                               choices=("state", "kalman"),
+                               doc="measured state, or an extended Kalman filter on hub angle "
+                               "and root moment"),
+                       *_NOISE,
+                       _positive("sample_time", 0.02, "s", "sample period"),
+                   )),
+)
+
+#: The controller kinds, by name: what a scene's ``[controller]`` table may hold.
+CONTROLLER_KINDS = {kind.name: kind for kind in _KINDS}
+#: Names of the settings of each kind (derived from :data:`CONTROLLER_KINDS`).
+CONTROLLER_KEYS = {name: kind.names for name, kind in CONTROLLER_KINDS.items()}
+
+
 @dataclass(frozen=True, kw_only=True)
 class ControllerSpec:
     """A scene's ``[controller]`` table: the controller ``kind`` and its ``settings``.
 
-    The :mod:`controllers` package turns it into a controller (``controllers.from_spec``).
+    Names and values are checked against :data:`CONTROLLER_KINDS`; :meth:`get` gives a
+    setting or its default. The :mod:`controllers` package turns it into a controller
+    (``controllers.from_spec``).
     """
 
     kind: str
     settings: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        if self.kind not in CONTROLLER_KEYS:
-            raise SceneError(f"controller.kind must be one of {', '.join(CONTROLLER_KEYS)}; "
+        if self.kind not in CONTROLLER_KINDS:
+            raise SceneError(f"controller.kind must be one of {', '.join(CONTROLLER_KINDS)}; "
                              f"got {self.kind!r}")
-        for key in self.settings:
-            if key not in CONTROLLER_KEYS[self.kind]:
+        kind = CONTROLLER_KINDS[self.kind]
+        for key, value in self.settings.items():
+            if key not in kind.names:
                 raise SceneError(f"unknown scene key 'controller.{key}' for kind "
                                  f"{self.kind!r}; expected one of "
-                                 f"{', '.join(sorted(CONTROLLER_KEYS[self.kind]))}")
+                                 f"{', '.join(sorted(kind.names))}")
+            kind.setting(key).check(self.kind, value)
+
+    def get(self, name: str):
+        """The value of setting ``name``: the table's, else the registry's default."""
+        return self.settings.get(name, CONTROLLER_KINDS[self.kind].setting(name).default)
+
+
+def _describe(item: Setting) -> str:
+    default = item.default_text
+    parts = [item.unit, "" if default is None else f"default {default}", item.rule]
+    return f"``{item.name}`` ({'; '.join(p for p in parts if p)}): {item.doc}"
+
+
+def settings_table(width: int = 92) -> str:
+    """The kinds and their settings as a reStructuredText simple table, ``width`` wide."""
+    left = max(len(name) for name in CONTROLLER_KINDS) + 2
+    rule = "=" * (left - 2) + "  " + "=" * (width - left)
+    lines = [rule, f"{'kind':<{left}}settings", rule]
+    for kind in _KINDS:
+        cells = [kind.doc + "."] + [_describe(item) for item in kind.settings]
+        first = True
+        for cell in cells:
+            for part in textwrap.wrap(cell, width - left, subsequent_indent="  "):
+                lines.append(f"{kind.name if first else '':<{left}}{part}".rstrip())
+                first = False
+    lines.append(rule)
+    return "\n".join(lines)

@@ -37,6 +37,7 @@ import os
 import shutil
 import sys
 import tempfile
+import textwrap
 import time
 import traceback
 import warnings
@@ -44,6 +45,8 @@ from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
+
+from controllers.spec import CONTROLLER_KINDS
 
 from .. import __version__
 from ..model.errors import InputError, InputValueError
@@ -129,12 +132,14 @@ def _parser() -> argparse.ArgumentParser:
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     run = commands.add_parser("run", help="simulate one scene and write its files",
-                              description="Simulate a scene; write timeseries.csv, "
-                              "summary.json and response.png. Exit 0 when the run reached "
-                              "its final time, 3 when it stopped (diverged or singular), "
-                              "2 on bad input.")
-    run.add_argument("scene", metavar="SCENE", help="TOML file or built-in scene name "
-                     "(see 'flexctl scenes')")
+                              description=textwrap.fill(
+                                  "Simulate a scene; write timeseries.csv, summary.json and "
+                                  "response.png. Exit 0 when the run reached its final time, "
+                                  "3 when it stopped (diverged or singular), 2 on bad input.",
+                                  width=80), epilog=controller_help(),
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+    run.add_argument("scene", metavar="SCENE", help="TOML file, a run's summary.json (runs "
+                     "that scene again) or built-in scene name (see 'flexctl scenes')")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                      help="override a scene value by its dotted path, value read as TOML, "
                      "e.g. --set model.variant=zero_order (repeatable)")
@@ -160,6 +165,20 @@ def _parser() -> argparse.ArgumentParser:
 
     _add_bench_command(commands)
     return parser
+
+
+def controller_help() -> str:
+    """The controller kinds and their settings with defaults, from the registry
+    (:data:`controllers.spec.CONTROLLER_KINDS`), for ``flexctl run --help``."""
+    lines = textwrap.wrap("controller kinds of a slew scene's [controller] table, and their "
+                          "settings (default; -: off or chosen by the design; rules and units "
+                          "in controllers.factory):", width=92)
+    for kind in CONTROLLER_KINDS.values():
+        items = ", ".join(f"{item.name}={item.default_text or '-'}"
+                          for item in kind.settings)
+        lines.append(textwrap.fill(f"{kind.name}: {items}", width=92, initial_indent="  ",
+                                   subsequent_indent="      "))
+    return "\n".join(lines)
 
 
 def _list(kind):

@@ -6,7 +6,9 @@ A run directory holds
 ``timeseries.csv``  columns ``t,theta,theta_dot,torque,tip_deflection,q1,...,qN`` (s, rad,
                     rad/s, N m, m, m); one row per output time, up to the stop time
 ``summary.json``    scene, variant, modes, status, message, peak tip deflection, clamped
-                    natural frequencies, overrides, wall time (see :func:`summarize`)
+                    natural frequencies, overrides, wall time, and ``scene_table``: the
+                    scene as run (see :func:`summarize`; ``flexctl run summary.json``
+                    runs it again)
 ``response.png``    :func:`flexctl.app.plotting.plot_response`
 ==================  ===================================================================
 
@@ -97,7 +99,9 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         of modes, the stiffening verdict and why (:meth:`flexctl.sim.fidelity.ModeChoice.to_dict`).
         ``model_validity`` gives the largest tip deflection relative to the beam length and the
         estimated geometric model error of the run (:class:`flexctl.sim.validity.ModelValidity`);
-        a scene with ``variant = "auto"`` adds ``variant_choice``.
+        a scene with ``variant = "auto"`` adds ``variant_choice``. ``scene_table`` holds the
+        scene's tables after overrides (:attr:`flexctl.Scene.data`), from which
+        :func:`flexctl.load_scene` rebuilds the scene.
     """
     model = result.model
     summary = {
@@ -118,6 +122,8 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         "method": str(result.method),
         "rtol": float(result.rtol),
         "overrides": dict(overrides or {}),
+        # the scene's tables after overrides: load_scene(summary.json) rebuilds the scene
+        "scene_table": scene.data,
         "clamped_frequencies": _floats(model.natural_frequencies(0.0, hub="clamped")),
     }
     if isinstance(scene.maneuver, SpinUp):
