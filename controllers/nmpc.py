@@ -435,7 +435,7 @@ class NMPC:
         ``dx_{j+1} = A_j dx_j + B_j du_j + d_j``, i.e. ``dx_j = e_j + G_j du``: the QP has the
         ``N`` torque steps only (dense ``N x N``, see :meth:`NMPCSession._rti`). One compiled
         call gives every stage's ``F`` (``forward``), one its ``A, B`` (``linear``, of
-        :attr:`NMPC.linearisation_model`); the condensing is numpy.
+        :attr:`NMPC.linearisation_model`); the condensing is :meth:`_condensing`.
         """
         import casadi as ca
 
