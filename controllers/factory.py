@@ -23,10 +23,10 @@ pd           PD on the hub angle about a smooth reference.
              ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
                at this period (default: continuous)
 lqr          full-state LQR about a smooth reference.
-             ``angle_error`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
-               weight: acceptable hub angle error
-             ``rate_error`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
-               acceptable hub rate error
+             ``hub_angle`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
+               weight: acceptable hub angle error (was ``angle_error``, deprecated)
+             ``hub_rate`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
+               acceptable hub rate error (was ``rate_error``, deprecated)
              ``tip_deflection`` (m; default 0.01; a number in [1e-12, 1e+12]): LQR weight:
                acceptable tip deflection
              ``modal_energy`` (J; a number in [1e-12, 1e+12]): LQR weight: acceptable modal
@@ -40,10 +40,10 @@ lqr          full-state LQR about a smooth reference.
              ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
                at this period (default: continuous)
 lqg          LQR on a Kalman-Bucy estimate from hub angle and root moment.
-             ``angle_error`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
-               weight: acceptable hub angle error
-             ``rate_error`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
-               acceptable hub rate error
+             ``hub_angle`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
+               weight: acceptable hub angle error (was ``angle_error``, deprecated)
+             ``hub_rate`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
+               acceptable hub rate error (was ``rate_error``, deprecated)
              ``tip_deflection`` (m; default 0.01; a number in [1e-12, 1e+12]): LQR weight:
                acceptable tip deflection
              ``modal_energy`` (J; a number in [1e-12, 1e+12]): LQR weight: acceptable modal
@@ -61,10 +61,10 @@ lqg          LQR on a Kalman-Bucy estimate from hub angle and root moment.
              ``process_torque`` (N m; default 0.1; a number > 0): disturbance torque on the
                hub (estimator)
 scheduled    LQR gains designed at several spin rates, interpolated at the hub rate.
-             ``angle_error`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
-               weight: acceptable hub angle error
-             ``rate_error`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
-               acceptable hub rate error
+             ``hub_angle`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
+               weight: acceptable hub angle error (was ``angle_error``, deprecated)
+             ``hub_rate`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
+               acceptable hub rate error (was ``rate_error``, deprecated)
              ``tip_deflection`` (m; default 0.01; a number in [1e-12, 1e+12]): LQR weight:
                acceptable tip deflection
              ``modal_energy`` (J; a number in [1e-12, 1e+12]): LQR weight: acceptable modal
@@ -78,8 +78,8 @@ scheduled    LQR gains designed at several spin rates, interpolated at the hub r
              ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
                at this period (default: continuous)
 trajopt      optimal slew on the design model, played open loop.
-             ``intervals`` (default 40; an integer >= 2): control intervals of the
-               transcription
+             ``n_intervals`` (default 40; an integer >= 2): control intervals of the
+               transcription (was ``intervals``, deprecated)
              ``objective`` (one of "effort", "time"): default: effort, or time when
                maneuver.duration is free
              ``transcription`` (one of "multiple_shooting", "collocation"): default: by the
@@ -91,8 +91,8 @@ trajopt      optimal slew on the design model, played open loop.
                at this period (default: continuous)
 trajopt+lqr  optimal slew with LQR feedback about it (Bryson weights: 5 % of the angle, 3 %
                of the beam length at the tip, the torque bound).
-             ``intervals`` (default 40; an integer >= 2): control intervals of the
-               transcription
+             ``n_intervals`` (default 40; an integer >= 2): control intervals of the
+               transcription (was ``intervals``, deprecated)
              ``objective`` (one of "effort", "time"): default: effort, or time when
                maneuver.duration is free
              ``transcription`` (one of "multiple_shooting", "collocation"): default: by the
@@ -121,8 +121,8 @@ nmpc         nonlinear MPC on the design model, run sampled.
                terminal rest constraint
              ``reference`` (default "trajopt"; one of "trajopt", "none"): track the optimal
                slew, or regulate to the target
-             ``intervals`` (default 40; an integer >= 2): control intervals of the
-               transcription
+             ``n_intervals`` (default 40; an integer >= 2): control intervals of the
+               transcription (was ``intervals``, deprecated)
              ``objective`` (one of "effort", "time"): default: effort, or time when
                maneuver.duration is free
              ``transcription`` (one of "multiple_shooting", "collocation"): default: by the
@@ -239,16 +239,20 @@ def _wrap(func, *args, **kwargs):
         raise SceneError(f"controller: {exc}") from None
 
 
+#: LQRWeights fields, set by the settings of the same names.
+_WEIGHT_SETTINGS = ("hub_angle", "hub_rate", "tip_deflection", "modal_energy", "torque")
+#: NoiseLevels fields and the settings that set them: the [controller] table is flat, so the
+#: noise settings carry "noise" (and "process") to tell them from the LQR weights.
+NOISE_SETTINGS = {"angle": "angle_noise", "root_moment": "moment_noise",
+                  "torque": "process_torque"}
+
+
 def _lqr_weights(spec: ControllerSpec) -> LQRWeights:
-    names = {"angle_error": "hub_angle", "rate_error": "hub_rate",
-             "tip_deflection": "tip_deflection", "modal_energy": "modal_energy",
-             "torque": "torque"}
-    return _wrap(LQRWeights, **{field: spec.get(key) for key, field in names.items()})
+    return _wrap(LQRWeights, **{name: spec.get(name) for name in _WEIGHT_SETTINGS})
 
 
 def _noise(spec: ControllerSpec) -> NoiseLevels:
-    return _wrap(NoiseLevels, angle=spec.get("angle_noise"),
-                 root_moment=spec.get("moment_noise"), torque=spec.get("process_torque"))
+    return _wrap(NoiseLevels, **{field: spec.get(key) for field, key in NOISE_SETTINGS.items()})
 
 
 def from_spec(scene, plant: Model | None = None) -> BuiltController:
@@ -357,7 +361,7 @@ def _trajectory(spec: ControllerSpec, design: Model, angle, duration, bound) -> 
     measured."""
     # objective None: SlewProblem takes "time" for a free duration, else "effort"
     problem = _wrap(SlewProblem, angle=angle, duration=duration, torque_bound=bound,
-                    n_intervals=spec.get("intervals"), objective=spec.get("objective"),
+                    n_intervals=spec.get("n_intervals"), objective=spec.get("objective"),
                     torque_rate_bound=spec.get("torque_rate_bound"),
                     tip_bound=spec.get("tip_bound"), transcription=spec.get("transcription"))
     start = time.perf_counter()

@@ -6,6 +6,12 @@ unit, one-line doc). :class:`ControllerSpec` validates a table against it, the f
 (``flexctl run --help``) and :func:`settings_table` renders the table in
 :mod:`controllers.factory`'s docstring (a test keeps the two equal).
 
+A setting takes the name of the argument it sets (``hub_angle`` sets
+``LQRWeights.hub_angle``, ``n_intervals`` sets ``SlewProblem.n_intervals``; the exceptions and
+their reasons are in ``tests/test_scene_keys.py``). A renamed setting keeps its former name in
+``Setting.former_names`` for one release: :func:`current_names` turns it into the new one with
+a ``FutureWarning`` (shown by default, since scene authors, not programmers, read it).
+
 The controllers package owns the kinds it builds; :mod:`flexctl.app.scenes` reads them from
 here and re-exports :class:`ControllerSpec` and :class:`SceneError`, so the dependency runs
 from the application layer to the controllers and never back. :class:`SceneError` lives here
@@ -25,6 +31,7 @@ from __future__ import annotations
 
 import math
 import textwrap
+import warnings
 from dataclasses import dataclass, field
 from numbers import Integral, Real
 
@@ -42,7 +49,8 @@ QP_SOLVERS = ("qrqp", "osqp", "qpoases", "hpipm")       # controllers.nmpc.QP_SO
 TERMINALS = ("lqr", "rest")                             # controllers.nmpc.TERMINALS
 
 __all__ = ["CONTROLLER_KEYS", "CONTROLLER_KINDS", "ControllerKind", "ControllerSpec",
-           "SceneError", "Setting", "settings_table"]
+           "FORMER_NAMES", "SceneError", "Setting", "current_name", "current_names",
+           "settings_table"]
 
 
 class SceneError(InputValueError):
@@ -75,6 +83,9 @@ class Setting:
         Allowed strings (``type`` str).
     minimum, maximum : float, optional
         Bounds of a number (inclusive unless ``strict``, which makes ``minimum`` exclusive).
+    former_names : tuple of str
+        Names the setting had before it took the name of the constructor argument it sets;
+        still accepted for one release, with a ``FutureWarning`` (:func:`current_names`).
     """
 
     name: str
@@ -86,6 +97,7 @@ class Setting:
     minimum: float | None = None
     maximum: float | None = None
     strict: bool = False
+    former_names: tuple = ()
 
     @property
     def rule(self) -> str:
@@ -160,9 +172,9 @@ class ControllerKind:
         return frozenset(item.name for item in self.settings)
 
 
-def _weight(name, default, unit, doc):
+def _weight(name, default, unit, doc, former_names=()):
     return Setting(name=name, type=float, default=default, unit=unit, doc=doc,
-                   minimum=1.0 / WEIGHT_RANGE, maximum=WEIGHT_RANGE)
+                   minimum=1.0 / WEIGHT_RANGE, maximum=WEIGHT_RANGE, former_names=former_names)
 
 
 def _positive(name, default, unit, doc):
@@ -175,8 +187,10 @@ _SAMPLE_TIME = _positive("sample_time", None, "s", "run the law sampled with a z
 _REFERENCE = Setting(name="reference", type=str, default="poly7", choices=SHAPES,
                      doc="shape of the reference slew the loop tracks")
 _WEIGHTS = (
-    _weight("angle_error", 0.05, "rad", "LQR (Bryson) weight: acceptable hub angle error"),
-    _weight("rate_error", 0.02, "rad/s", "LQR weight: acceptable hub rate error"),
+    _weight("hub_angle", 0.05, "rad", "LQR (Bryson) weight: acceptable hub angle error",
+            former_names=("angle_error",)),
+    _weight("hub_rate", 0.02, "rad/s", "LQR weight: acceptable hub rate error",
+            former_names=("rate_error",)),
     _weight("tip_deflection", 0.01, "m", "LQR weight: acceptable tip deflection"),
     _weight("modal_energy", None, "J", "LQR weight: acceptable modal energy (default: off)"),
     _weight("torque", 1.0, "N m", "LQR weight: acceptable torque"),
@@ -190,8 +204,8 @@ _NOISE = (
     _positive("process_torque", 0.1, "N m", "disturbance torque on the hub (estimator)"),
 )
 _TRAJOPT = (
-    Setting(name="intervals", type=int, default=40, minimum=2,
-            doc="control intervals of the transcription"),
+    Setting(name="n_intervals", type=int, default=40, minimum=2,
+            doc="control intervals of the transcription", former_names=("intervals",)),
     Setting(name="objective", type=str, default=None, choices=OBJECTIVES,
             doc="default: effort, or time when maneuver.duration is free"),
     Setting(name="transcription", type=str, default=None, choices=TRANSCRIPTIONS,
@@ -256,6 +270,48 @@ _KINDS = (
 CONTROLLER_KINDS = {kind.name: kind for kind in _KINDS}
 #: Names of the settings of each kind (derived from :data:`CONTROLLER_KINDS`).
 CONTROLLER_KEYS = {name: kind.names for name, kind in CONTROLLER_KINDS.items()}
+#: Former setting names still accepted, with the name each now has:
+#: ``{"angle_error": "hub_angle", ...}`` (derived from :data:`CONTROLLER_KINDS`).
+FORMER_NAMES = {old: item.name for kind in _KINDS for item in kind.settings
+                for old in item.former_names}
+
+
+def current_name(key: str) -> str:
+    """The current name of setting ``key``: ``key`` itself, or for a former name
+    (:data:`FORMER_NAMES`) the name it now has, with a ``FutureWarning`` that names both.
+
+    A ``FutureWarning`` rather than a ``DeprecationWarning``, because the people who write
+    scene files and ``--set`` overrides see it: Python shows it by default.
+    """
+    new = FORMER_NAMES.get(key)
+    if new is None:
+        return key
+    warnings.warn(f"controller.{key} is deprecated and will be removed in the next release: "
+                  f"write controller.{new} instead (same meaning)", FutureWarning, stacklevel=3)
+    return new
+
+
+def current_names(table: dict) -> dict:
+    """``table`` (a ``[controller]`` table) with each former setting name replaced by its
+    current one (:func:`current_name`, in the same place); a table that gives a setting
+    under both names is refused.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("ignore")
+    ...     current_names({"kind": "lqr", "angle_error": 0.1})
+    {'kind': 'lqr', 'hub_angle': 0.1}
+    """
+    out = {}
+    for key, value in table.items():
+        if key in FORMER_NAMES and FORMER_NAMES[key] in table:
+            raise SceneError(f"controller.{key} is the former name of "
+                             f"controller.{FORMER_NAMES[key]}; give only "
+                             f"controller.{FORMER_NAMES[key]}")
+        out[current_name(key)] = value
+    return out
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -271,6 +327,7 @@ class ControllerSpec:
     settings: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        object.__setattr__(self, "settings", current_names(self.settings))
         if self.kind not in CONTROLLER_KINDS:
             raise SceneError(f"controller.kind must be one of {', '.join(CONTROLLER_KINDS)}; "
                              f"got {self.kind!r}")
@@ -290,7 +347,8 @@ class ControllerSpec:
 def _describe(item: Setting) -> str:
     default = item.default_text
     parts = [item.unit, "" if default is None else f"default {default}", item.rule]
-    return f"``{item.name}`` ({'; '.join(p for p in parts if p)}): {item.doc}"
+    former = "".join(f" (was ``{name}``, deprecated)" for name in item.former_names)
+    return f"``{item.name}`` ({'; '.join(p for p in parts if p)}): {item.doc}{former}"
 
 
 def settings_table(width: int = 92) -> str:

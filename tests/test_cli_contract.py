@@ -24,8 +24,8 @@ def _assert_one_error_line(code, captured, *named):
 @pytest.mark.parametrize(("argv", "named"), [
     pytest.param(["run", "hub-beam-mass", "--out", ""], ("--out", "''"), id="empty-out"),
     pytest.param(["run", "slew-90", "--set", "controller.kind=lqr",
-                  "--set", "controller.angle_error=1e-200"],
-                 ("controller.angle_error", "1e-200"),
+                  "--set", "controller.hub_angle=1e-200"],
+                 ("controller.hub_angle", "1e-200"),
                  id="overflowing-lqr-weight"),
     pytest.param(["run", "slew-90", "--set", "controller.kind=pd",
                   "--set", "maneuver.torque_bound=1e-3"], ("simulation.t_final", "194 s", "6 s"),

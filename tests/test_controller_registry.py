@@ -33,7 +33,7 @@ def test_nmpc_defaults_agree_with_the_controller_class():
 
 def test_trajopt_intervals_default_agrees_with_slew_problem():
     default = trajopt.SlewProblem.__dataclass_fields__["n_intervals"].default
-    assert CONTROLLER_KINDS["trajopt"].setting("intervals").default == default
+    assert CONTROLLER_KINDS["trajopt"].setting("n_intervals").default == default
 
 
 def test_controller_keys_derive_from_the_registry():
@@ -59,10 +59,10 @@ def test_defaults_meet_their_own_rules():
     ("pd", "bandwidth", -1.0, "a number > 0"),
     ("pd", "bandwidth", "fast", "a number > 0"),
     ("pd", "feedforward", 1, "true or false"),
-    ("lqr", "angle_error", 1e20, r"a number in \[1e-12, 1e\+12\]"),
+    ("lqr", "hub_angle", 1e20, r"a number in \[1e-12, 1e\+12\]"),
     ("lqr", "reference", "sine", 'one of "poly7", "cycloidal"'),
-    ("trajopt", "intervals", 1, "an integer >= 2"),
-    ("trajopt", "intervals", 40.5, "an integer >= 2"),
+    ("trajopt", "n_intervals", 1, "an integer >= 2"),
+    ("trajopt", "n_intervals", 40.5, "an integer >= 2"),
     ("nmpc", "horizon", 1000, r"an integer in \[2, 500\]"),
     ("nmpc", "estimator", "ukf", 'one of "state", "kalman"'),
     ("scheduled", "spin_rates", [-1.0, 1.0], "an array of numbers >= 0"),
@@ -88,8 +88,8 @@ def test_get_falls_back_to_the_registry_default():
 
 
 def test_scene_override_is_checked_against_the_registry():
-    with pytest.raises(SceneError, match=r"controller\.intervals \(kind 'trajopt\+lqr'\)"):
-        load_scene("slew-90", overrides={"controller.intervals": "-3"})
+    with pytest.raises(SceneError, match=r"controller\.n_intervals \(kind 'trajopt\+lqr'\)"):
+        load_scene("slew-90", overrides={"controller.n_intervals": "-3"})
 
 
 def test_cli_help_lists_every_kind_and_setting(capsys):

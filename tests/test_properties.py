@@ -260,7 +260,7 @@ def test_overrides_exit_0_2_or_3_with_files_complete_or_absent(overrides):
 
 CONTROLLER_SETTINGS = {
     "pd": ["bandwidth", "damping_ratio", "feedforward", "reference"],
-    "lqr": ["angle_error", "rate_error", "tip_deflection", "modal_energy", "torque",
+    "lqr": ["hub_angle", "hub_rate", "tip_deflection", "modal_energy", "torque",
             "spin_rate", "reference"],
     "bang_bang": [], "zv": [], "zvd": []}
 SETTING_VALUES = st.one_of(EXTREME_FLOATS.map(repr), _plausible(0.01, 100.0).map(repr),

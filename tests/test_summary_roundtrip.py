@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from flexctl import SceneError, load_scene
+from flexctl.app.scenes import parse_scene
 from flexctl.app.cli import main
 
 #: Two runs of one scene with one model and integrator agree to rounding of the integrator.
@@ -47,6 +48,9 @@ def test_summary_gives_back_the_scene_and_the_run(tmp_path, case):
     assert again == scene
     assert again.data == scene.data
     assert again.name == scene.name
+    # the maneuver table is written under the scene's own keys and units (a slew's angle_deg)
+    maneuver = {k: v for k, v in first["maneuver"].items() if v is not None}
+    assert parse_scene({**scene.data, "maneuver": maneuver}, name=scene.name) == scene
     second = _run(tmp_path, tmp_path / "first" / "summary.json", {}, "second")
     assert second["scene_table"] == first["scene_table"]
     assert second["status"] == first["status"]

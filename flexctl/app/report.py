@@ -24,6 +24,7 @@ Examples
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -64,8 +65,14 @@ def timeseries_columns(n_modes: int) -> list:
 
 
 def _maneuver_table(maneuver) -> dict:
+    """The manoeuvre under the keys and units of a scene's ``[maneuver]`` table (a slew's
+    angle in degrees, ``angle_deg``; a free duration as ``"free"``); a slew without a torque
+    bound gives ``torque_bound`` null."""
     kind = {SpinUp: "spin_up", Slew: "slew"}.get(type(maneuver), "sine_torque")
     fields = {k: (None if v is None else float(v)) for k, v in vars(maneuver).items()}
+    if kind == "slew":
+        fields = {"angle_deg": math.degrees(fields.pop("angle")), **fields}
+        fields["duration"] = "free" if fields["duration"] is None else fields["duration"]
     return {"kind": kind, **fields}
 
 
@@ -87,7 +94,8 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
     Returns
     -------
     dict
-        Keys ``scene``, ``description``, ``variant``, ``n_modes``, ``maneuver``, ``status``
+        Keys ``scene``, ``description``, ``variant``, ``n_modes``, ``maneuver`` (under the
+        keys and units of the scene's ``[maneuver]`` table: a slew's ``angle_deg``), ``status``
         (``ok``, ``diverged`` or ``singular``), ``message``, ``peak_tip_deflection`` (m),
         ``t_end`` and ``t_final`` (s), ``n_points``, ``wall_time_s`` (integration wall time,
         s), ``method`` and ``rtol`` of the integrator, ``overrides``, ``clamped_frequencies``

@@ -69,7 +69,8 @@ from importlib import resources
 from pathlib import Path
 
 # the controller kinds and their settings belong to the controllers package
-from controllers.spec import CONTROLLER_KEYS, ControllerSpec, SceneError
+from controllers.spec import (CONTROLLER_KEYS, ControllerSpec, SceneError, current_name,
+                              current_names)
 
 from ..sim.fidelity import DEFAULT_TOLERANCE, ModeChoice, choose_modes
 from ..sim.maneuvers import SineTorque, Slew, SpinUp
@@ -308,6 +309,8 @@ def _set_dotted(data: dict, path: str, value):
         except tomllib.TOMLDecodeError:
             pass
     parts = path.split(".")
+    if len(parts) == 2 and parts[0] == "controller":
+        parts[1] = current_name(parts[1])       # a former name warns and takes the new one
     node = data
     for depth, key in enumerate(parts[:-1]):
         where = ".".join(parts[:depth + 1])
@@ -423,7 +426,9 @@ def parse_scene(data: dict, name: str = "scene") -> Scene:
         raise SceneError(f"description must be a string; got {description!r}")
     controller = None
     if "controller" in data:
-        table = dict(_table(data, "controller"))
+        # the table as written to summary.json's scene_table carries the current names
+        table = current_names(_table(data, "controller"))
+        data["controller"] = dict(table)
         controller = ControllerSpec(kind=table.pop("kind", None), settings=table)
     if isinstance(maneuver, Slew) and controller is None:
         raise SceneError("maneuver.kind 'slew' needs a [controller] table")
@@ -476,6 +481,9 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
         name = str(source)
         data = tomllib.loads(
             resources.files("flexctl.app.builtin_scenes").joinpath(f"{name}.toml").read_text())
+    if isinstance(data.get("controller"), dict):
+        # former names first, so that an override under either name replaces the file's value
+        data["controller"] = current_names(data["controller"])
     for key, value in (overrides or {}).items():
         _set_dotted(data, key, value)
     return parse_scene(data, name=name)
