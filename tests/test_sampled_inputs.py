@@ -114,13 +114,22 @@ def test_numpy_form_is_the_casadi_form_bit_for_bit(rng, interpolation, sym):
     assert torque(t.reshape(2, -1)).shape == (2, t.size // 2)
 
 
-@pytest.mark.parametrize("interpolation, expected", [
-    ("hold", "all"), ("linear", "all"), ("spline", "ends")])
-def test_breakpoints_are_where_the_torque_is_not_smooth(rng, interpolation, expected):
-    times, values = random_samples(rng, 6)
+@pytest.mark.parametrize("interpolation", INTERPOLATIONS)
+def test_a_near_uniform_grid_bounds_the_step_by_its_shortest_interval(rng, interpolation):
+    times, values = random_samples(rng, 9)          # intervals within a factor 5 of each other
     torque = SampledTorque(times, values, interpolation=interpolation)
-    want = times if expected == "all" else times[[0, -1]]
-    assert torque.breakpoints == tuple(want)
+    assert torque.max_step == np.min(np.diff(times))
+    assert torque.breakpoints == (times[0], times[-1])
+
+
+@pytest.mark.parametrize("interpolation, restarts", [
+    ("hold", True), ("linear", True), ("spline", False)])
+def test_an_uneven_grid_restarts_at_every_sample_where_the_torque_is_not_smooth(
+        rng, interpolation, restarts):
+    times = np.array([0.0, 1e-3, 1.0, 2.0, 3.0])    # one interval 1/750 of the mean
+    torque = SampledTorque(times, rng.normal(size=5), interpolation=interpolation)
+    assert torque.max_step is None
+    assert torque.breakpoints == (tuple(times) if restarts else (times[0], times[-1]))
 
 
 def test_a_pickled_torque_is_the_same_torque(rng):
@@ -160,6 +169,15 @@ def test_a_pair_is_linear_interpolation(model, rng):
                                atol=ROUNDING * np.max(np.abs(values)))
 
 
+@pytest.mark.parametrize("method", ["cvodes", "DOP853", "rk4"])
+def test_max_step_bounds_every_path(model, method):
+    free = simulate(model, 1.0, torque=TRACEABLE["sine"], method=method, rtol=1e-3,
+                    check_accuracy=False)
+    bounded = simulate(model, 1.0, torque=TRACEABLE["sine"], method=method, rtol=1e-3,
+                       check_accuracy=False, max_step=1e-3)
+    assert free.n_evaluations < 1000 <= bounded.n_evaluations
+
+
 def piecewise_constant_reference(model, times, values, t_out):
     """The model integrated hold by hold with the torque a constant, at rtol 1e-12."""
     x = np.zeros(model.n_states)
@@ -191,14 +209,21 @@ def test_hold_matches_a_piecewise_constant_integration(model, rng):
 
 
 @pytest.mark.parametrize("interpolation", ["hold", "linear"])
-def test_a_short_pulse_after_a_quiet_start_is_not_stepped_over(model, interpolation):
+@pytest.mark.parametrize("grid", ["uniform", "uneven"])
+@pytest.mark.parametrize("method", ["cvodes", "DOP853"])
+def test_a_short_pulse_after_a_quiet_start_is_not_stepped_over(model, interpolation, grid,
+                                                               method):
     """At rest the integrator's steps grow long; a one-sample pulse between two samples is
-    seen only because the integration restarts at every sample time (its breakpoints)."""
+    seen only because no step may be longer than a sample interval (uniform grid) or the
+    integration restarts at every sample time (uneven grid)."""
     times = np.linspace(0.0, T_FINAL, 301)
+    if grid == "uneven":
+        times = np.insert(times, 1, 1e-5)
     values = np.zeros(times.size)
-    values[200] = 1.0                               # 2.00 s to 2.01 s
+    values[np.searchsorted(times, 2.0)] = 1.0       # 2.00 s to 2.01 s
     torque = SampledTorque(times, values, interpolation=interpolation)
-    result = simulate(model, T_FINAL, torque=torque, rtol=1e-8)
+    assert (torque.max_step is None) == (grid == "uneven")
+    result = simulate(model, T_FINAL, torque=torque, rtol=1e-8, method=method)
     # the angular momentum about the hub axis is the torque's impulse, 0.01 N m s for the
     # 0.01 s hold and for the triangle of the linear interpolation, 0.02 s wide
     assert model.angular_momentum(result.states[:, 0]) == 0.0

@@ -283,10 +283,14 @@ class SegmentIntegrator:
     max_order : int, optional
         Highest BDF order (honoured by IDAS). Order 2 is A-stable: it never amplifies an
         undamped oscillation, where orders 3 to 5 can for steps near the oscillation period.
+    max_step : float, optional
+        Longest step, s (e.g. a sampled torque's sample interval, so that no sample is
+        stepped over). Default: unbounded.
     """
 
     def __init__(self, model, t_start, t_out, scale, rtol, torque=None, hub_motion=None,
-                 controller=None, max_steps=1_000_000, solver="cvodes", max_order=None):
+                 controller=None, max_steps=1_000_000, solver="cvodes", max_order=None,
+                 max_step=None):
         import casadi as ca
 
         scale = np.asarray(scale, dtype=float)
@@ -311,6 +315,8 @@ class SegmentIntegrator:
                                                               / length))
         if max_order is not None:
             opts["max_multistep_order"] = int(max_order)
+        if max_step is not None and max_step < length:
+            opts["max_step_size"] = float(max_step) / length
         key = None if rhs_key is None else (rhs_key, fractions.tobytes(),
                                             tuple(sorted(opts.items())), solver)
         self._scale = scale
@@ -347,7 +353,7 @@ def integrate_segments(model, segments, y0, scale, rtol, **options):
         State at the first segment's start.
     scale, rtol, **options :
         As for :class:`SegmentIntegrator` (``torque``, ``hub_motion``, ``controller``,
-        ``solver``, ``max_order``).
+        ``solver``, ``max_order``, ``max_step``).
 
     Returns
     -------

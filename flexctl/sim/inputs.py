@@ -38,7 +38,7 @@ from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["MAX_OUTPUT_SAMPLES", "check_time", "check_rtol", "check_method", "as_vector",
            "output_grid", "input_value", "time_function", "jacobian_frequency",
-           "INTERPOLATIONS", "SampledTorque", "sampled_torque"]
+           "INTERPOLATIONS", "UNIFORM_RATIO", "SampledTorque", "sampled_torque"]
 
 #: Most output samples a run may ask for (t_final / output_step + 1): 1e6 samples of a 6-mode
 #: model are 100 MB of states and a 300 MB CSV file; beyond that the grid is a mistake.
@@ -179,6 +179,10 @@ def jacobian_frequency(rhs, t: float, y: np.ndarray, scale: np.ndarray) -> float
 #: How a :class:`SampledTorque` fills the time between its samples, and the fewest samples
 #: each needs (CasADi's cubic spline is not-a-knot, which takes four).
 INTERPOLATIONS = {"hold": 2, "linear": 2, "spline": 4}
+#: A sample grid counts as near-uniform, and bounds the integration step by its shortest
+#: interval, when that interval is at least the mean one divided by this: then the bound
+#: costs at most this many steps per sample.
+UNIFORM_RATIO = 4.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -212,9 +216,17 @@ class SampledTorque:
 
     The numpy form (:meth:`__call__`) is exactly the CasADi form, bit for bit: the same lookup
     and the same arithmetic for ``"hold"`` and ``"linear"``, the CasADi function itself for
-    ``"spline"``. :attr:`breakpoints` lists the times where the torque is not smooth, at which
-    the integration restarts: every sample time for ``"hold"`` (jumps) and ``"linear"``
-    (kinks), only the ends of the sampled range for ``"spline"``.
+    ``"spline"``.
+
+    No integrator may step over a sample: a pulse one sample long after a quiet start would
+    go unseen by steps grown long at rest. On a near-uniform grid (the shortest interval at
+    least ``1 / UNIFORM_RATIO`` of the mean one) the torque bounds every step by its
+    shortest interval (:attr:`max_step`) and the integration goes straight through the jumps
+    of a hold and the kinks of a line, resolving them by error control; otherwise it restarts
+    at every sample (:attr:`breakpoints`). On the 2001 samples of ``hub-beam-mass``'s 20 s
+    push, restarting at every sample cost CVODES 10 to 50 times as long for the same error as
+    the bounded step did (``benchmarks/bench_inputs.py``): each restart begins again at order
+    1 with a tiny step.
 
     Examples
     --------
@@ -262,10 +274,19 @@ class SampledTorque:
                 f"{self.times[-1]:g}] s, interpolation={self.interpolation!r})")
 
     @property
+    def max_step(self) -> float | None:
+        """Longest step an integrator may take, s: the shortest sample interval, on a
+        near-uniform grid; None (restart at every sample instead) otherwise."""
+        shortest = float(np.min(np.diff(self.times)))
+        span = float(self.times[-1] - self.times[0])
+        return shortest if span <= UNIFORM_RATIO * (self.times.size - 1) * shortest else None
+
+    @property
     def breakpoints(self) -> tuple:
-        """Times (s) where the torque is not smooth: every sample for ``"hold"`` and
-        ``"linear"``, the ends of the sampled range for ``"spline"``."""
-        if self.interpolation == "spline":
+        """Times (s) at which the integration restarts: the ends of the sampled range (where
+        the clamping starts) and, on a grid too uneven for :attr:`max_step`, every sample of a
+        hold (jumps) or a line (kinks)."""
+        if self.interpolation == "spline" or self.max_step is not None:
             return (float(self.times[0]), float(self.times[-1]))
         return tuple(self.times.tolist())
 

@@ -11,7 +11,9 @@ Three ways to drive the hub, combined as follows:
   carries the torque the motion needs. Excludes the other two.
 
 Inputs are evaluated at the integrator's own times (never sampled and interpolated), and the
-integration restarts at every ``breakpoints`` time an input declares (where it is not smooth).
+integration restarts at every ``breakpoints`` time an input declares (where it is not smooth);
+no step is longer than the ``max_step`` an input declares (a sampled torque: its sample
+interval, so that no sample is stepped over) or the one given.
 
 A run stops early, and says so in ``status`` and ``message``, when
 
@@ -30,6 +32,7 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass, field
+from numbers import Real
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -293,6 +296,13 @@ class SimulationResult:
                 f"wall_time={self.wall_time:.3g} s)")
 
 
+def _step_bound(max_step: float, *sources) -> float:
+    """The shortest of ``max_step`` and the positive ``max_step`` the inputs declare, s."""
+    bounds = [getattr(src, "max_step", None) for src in sources]
+    return min([max_step] + [float(b) for b in bounds
+                             if isinstance(b, Real) and not isinstance(b, bool) and b > 0])
+
+
 def _breakpoints(*sources):
     points = set()
     for src in sources:
@@ -311,9 +321,13 @@ def _default_atol(model: Model, rtol: float, prescribed: bool) -> np.ndarray:
 
 
 def _stiffness_reason(model: Model, spin: float) -> str:
-    stiff = model.stiffness_matrix(spin)
-    lowest = np.linalg.eigvalsh(stiff)[0]
     w1 = model.first_clamped_frequency
+    try:
+        lowest = np.linalg.eigvalsh(model.stiffness_matrix(spin))[0]
+    except (OverflowError, ValueError, np.linalg.LinAlgError):
+        # a runaway (e.g. a torque of 1e12 N m) spun the hub so fast its square overflows
+        return (f"the hub rate reached {abs(spin):.4g} rad/s, whose square overflows the beam "
+                f"stiffness (first clamped frequency {w1:.4g} rad/s)")
     if lowest < 0.0:
         if model.variant == "zero_order":
             term = "M_ff"
@@ -440,7 +454,9 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     output_step : float, optional
         Spacing of the output times, s. Default: ``t_final / 2000``.
     max_step : float, optional
-        Largest integration step, s.
+        Largest integration step, s, on every path (for ``"rk4"``, of the coarser run of its
+        step-doubling pair). An input's own ``max_step`` (a sampled torque's sample
+        interval) bounds it too.
     check_accuracy : bool, optional
         For the compiled (``"cvodes"``) path: repeat the run at 10 times the tolerance to
         estimate the integration error (``result.integration_error``), and redo it with
@@ -485,6 +501,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         trace=(method in ("auto", "cvodes", "rk4") and hub_motion is None
                and compiled_feedback),
         state_scale=_default_atol(model, 1.0, False))
+    max_step = _step_bound(max_step, torque)
+    cvodes_step = max_step if np.isfinite(max_step) else None
     symbolic = is_symbolic(torque, hub_motion, None if is_sampled(controller) else controller)
     if is_sampled(controller) and method not in ("auto", "cvodes", "rk4"):
         raise InputValueError(f"method {method!r}: a sampled controller (sample_time "
@@ -699,7 +717,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                     spin_max, hub="clamped")[-1]))
         try:
             fixed = integrate_fixed_step(model, np.array(cuts), grid, y_init, tip_map,
-                                         RK4_OMEGA_H / omega_max, rtol,
+                                         min(RK4_OMEGA_H / omega_max, 0.5 * max_step), rtol,
                                          torque=torque, hub_motion=hub_motion,
                                          controller=controller)
         except ValueError as exc:
@@ -730,7 +748,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             try:
                 integ = SegmentIntegrator(model, lo, t_eval, atol_vec / rtol, rtol,
                                           torque=torque, hub_motion=hub_motion,
-                                          controller=controller, max_steps=cvodes_steps)
+                                          controller=controller, max_steps=cvodes_steps,
+                                          max_step=cvodes_step)
                 y_seg = integ(y)
                 n_eval += integ.n_evaluations
                 bad = first_bad_sample(y_seg)
@@ -792,7 +811,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         y_checked, integration_error, accuracy_note, n_check = verify_accuracy(
             model, compiled_segments, y_init, atol_vec / rtol, rtol,
             np.concatenate(ys[1:], axis=1), tip_map, n_eval, torque=torque,
-            hub_motion=hub_motion, controller=controller)
+            hub_motion=hub_motion, controller=controller, max_step=cvodes_step)
         n_eval += n_check
         ys = [ys[0], y_checked]
         if accuracy_note:
