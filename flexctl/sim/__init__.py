@@ -20,7 +20,7 @@ module          contents
 from .maneuvers import SineTorque, Slew, SpinUp
 from .inputs import SampledTorque
 from .simulation import (METHODS, AccuracyWarning, Controller, SimulationResult,
-                         StiffnessWarning, simulate)
+                         StiffnessWarning, StopReason, simulate)
 from .digital import ControllerSession, SampledController, ZeroOrderHold
 from .metrics import SlewMetrics, settling_time, slew_metrics
 from .fidelity import ModeChoice, choose_modes
@@ -28,7 +28,7 @@ from .fidelity import ModeChoice, choose_modes
 __all__ = [
     "SineTorque", "Slew", "SpinUp", "SampledTorque",
     "METHODS", "AccuracyWarning", "Controller", "SimulationResult", "StiffnessWarning",
-    "simulate",
+    "simulate", "StopReason",
     "ControllerSession", "SampledController", "ZeroOrderHold",
     "SlewMetrics", "settling_time", "slew_metrics",
     "ModeChoice", "choose_modes",

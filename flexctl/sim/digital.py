@@ -187,8 +187,12 @@ class SampledRun:
         Held torque at each output time (the new sample's value at a sample time), N m.
     sample_times, sample_torques : ndarray, shape (K,)
         Each sample and the torque held from it, s and N m.
-    status : {"ok", "diverged"}
-    message : str
+    stop : {None, "integrator", "bad_sample"}
+        None for a run that reached ``t_final``; ``"integrator"`` when the integration of a
+        sample failed (``message`` says where); ``"bad_sample"`` when an output passed a
+        stopping condition (``stop_state``, the plant state there, for the caller to name).
+    message : str or None
+    stop_state : ndarray or None
     n_evaluations : int
     integration_error : float or None
         Estimated largest tip-deflection error, m: the difference from a replay of the held
@@ -205,8 +209,9 @@ class SampledRun:
     torque: np.ndarray
     sample_times: np.ndarray
     sample_torques: np.ndarray
-    status: str
-    message: str
+    stop: str | None
+    message: str | None
+    stop_state: np.ndarray | None
     n_evaluations: int
     integration_error: float | None
     report: dict
@@ -344,7 +349,7 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
     else:
         hold = _CvodesHold(model, torque, scale, rtol, max_steps)
     ts, ys, us = [np.array([0.0])], [np.asarray(x0, dtype=float)[:, None]], []
-    status, message = "ok", f"reached t_final = {float(t_final):g} s"
+    stop, message, stop_state = None, f"reached t_final = {float(t_final):g} s", None
     n_eval, controller_time, error, ends = 0, 0.0, None, []
     y = np.asarray(x0, dtype=float)
     for lo, hi in zip(edges[:-1], edges[1:]):
@@ -358,7 +363,7 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
             y_seg, evaluations = hold(lo, t_out, y, u)
             n_eval += evaluations
         except RuntimeError:
-            status = "diverged"
+            stop = "integrator"
             message = (f"the integration failed between samples t = {lo:.6g} s and "
                        f"{hi:.6g} s under a held torque of {u:.6g} N m")
             break
@@ -366,14 +371,14 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
         if bad is not None:
             ts.append(t_out[:bad])
             ys.append(y_seg[:, :bad])
-            status, message = "diverged", "reached"       # the caller names the reason
+            stop, message, stop_state = "bad_sample", None, y_seg[:, bad]
             break
         ts.append(t_out)
         ys.append(y_seg)
         ends.append(y_seg[:, -1])
         y = y_seg[:, -1]
     sample_times = edges[:len(us)]
-    if check_accuracy and status == "ok":
+    if check_accuracy and stop is None:
         # the recorded torques replayed by the looser integration (10x the tolerance, or
         # twice the step): the difference at the samples estimates the run's error
         try:
@@ -400,7 +405,8 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
     report = dict(session.report() or {})
     report.update(samples=len(us), sample_time=T)
     return SampledRun(t=t_all, states=states, torque=held, sample_times=sample_times,
-                      sample_torques=sample_torques, status=status, message=message,
+                      sample_torques=sample_torques, stop=stop, message=message,
+                      stop_state=stop_state,
                       n_evaluations=n_eval,
                       integration_error=error,
                       report=report, controller_time=controller_time)

@@ -32,6 +32,7 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass, field
+from enum import Enum
 from numbers import Real
 from typing import Protocol, runtime_checkable
 
@@ -47,7 +48,8 @@ from .tracing import torque_input
 from ..model import Model, SingularMassMatrixError
 from ..model.errors import InputTypeError, InputValueError
 
-__all__ = ["simulate", "SimulationResult", "Controller", "StiffnessWarning", "AccuracyWarning"]
+__all__ = ["simulate", "SimulationResult", "Controller", "StopReason", "StiffnessWarning",
+           "AccuracyWarning"]
 
 #: Integration stops as "singular" when the effective hub inertia falls below this fraction
 #: of the rigid inertia J_0 (the exact singularity cannot be integrated up to).
@@ -106,6 +108,51 @@ class AccuracyWarning(RuntimeWarning):
 
 class StiffnessWarning(RuntimeWarning):
     """An explicit method was asked for on a model whose fastest mode makes it crawl."""
+
+
+class StopReason(Enum):
+    """Why a run ended; :attr:`status` is the ``SimulationResult.status`` it gives."""
+
+    REACHED_END = "reached t_final"
+    TIP_PAST_LENGTH = "the modal tip passed the beam length (small-deflection variants)"
+    BEAM_CURLED = "the exact beam curled back on itself"
+    SINGULAR_MASS = "the mass matrix turned singular"
+    STATE_OVERFLOW = "the state overflowed"
+    INTEGRATOR_FAILED = "the integrator failed"
+    NON_FINITE_STATE = "the state became non-finite"
+    NON_FINITE_TORQUE = "the hub torque became non-finite"
+
+    @property
+    def status(self) -> str:
+        """``"ok"``, ``"singular"`` or ``"diverged"``."""
+        if self is StopReason.REACHED_END:
+            return "ok"
+        return "singular" if self is StopReason.SINGULAR_MASS else "diverged"
+
+
+def _geometric_stop(model: Model) -> StopReason:
+    """The stop of a run whose tip left the range of ``model``."""
+    return StopReason.BEAM_CURLED if model.variant == "exact" else StopReason.TIP_PAST_LENGTH
+
+
+def _stop_message(model: Model, reason: StopReason, t_end: float, state) -> str:
+    """The physical reason of a stop found by an event or a bad sample, at ``t_end`` (s) in
+    the plant state ``state``."""
+    n = model.n_modes
+    if reason is StopReason.BEAM_CURLED:
+        return (f"the beam curled back on itself at t = {t_end:.6g} s (mean slope angle above "
+                f"{EXACT_CURL:g} rad): the load is beyond what a beam of {n} modes can "
+                "describe")
+    if reason is StopReason.TIP_PAST_LENGTH:
+        return (f"tip deflection passed the beam length {model.system.beam.length:g} m at "
+                f"t = {t_end:.6g} s: " + _stiffness_reason(model, float(state[n + 1])))
+    if reason is StopReason.SINGULAR_MASS:
+        j_eff = float(model.effective_hub_inertia(state))
+        return (f"mass matrix singular at t = {t_end:.6g} s: the effective hub inertia "
+                f"J_0 + q^T D q - m_tf^T M_ff^-1 m_tf fell to {j_eff:.3g} kg m^2 "
+                f"(J_0 = {model.matrices.J0:.4g} kg m^2); in the consistent model the "
+                "deflection lowers the hub inertia, and a light hub loses all of it")
+    return reason.value + f" at t = {t_end:.6g} s"
 
 
 def _stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
@@ -231,6 +278,8 @@ class SimulationResult:
         Deflection reached and estimated geometric model error
         (:func:`flexctl.sim.validity.assess`); set by scene runs, ``None`` from
         :func:`simulate` itself.
+    stop_reason : StopReason
+        Why the run ended (``status`` is ``stop_reason.status``).
     controller_report : dict or None
         For a sampled controller (:mod:`flexctl.sim.digital`): the session's report (e.g. solve
         times) with ``samples``, ``sample_time`` (s) and ``controller_time`` (s, wall time in
@@ -253,6 +302,7 @@ class SimulationResult:
     integration_error: float | None = None
     validity: object = None
     controller_report: dict | None = None
+    stop_reason: StopReason | None = None
 
     @property
     def deflection_ratio(self) -> float:
@@ -341,6 +391,17 @@ def _stiffness_reason(model: Model, spin: float) -> str:
             f"(hub rate {abs(spin):.4g} rad/s, first clamped frequency {w1:.4g} rad/s)")
 
 
+def _bad_sample_reason(model: Model, y, prescribed: bool, j_floor: float,
+                       singular_possible: bool) -> StopReason:
+    """Which stopping condition the first bad output sample ``y`` of a run met."""
+    if not np.all(np.isfinite(y)):
+        return StopReason.NON_FINITE_STATE
+    if singular_possible and not prescribed \
+            and float(model.effective_hub_inertia(y[:model.n_states])) <= j_floor:
+        return StopReason.SINGULAR_MASS
+    return _geometric_stop(model)
+
+
 def _simulate_sampled(model, t_final, controller, x_init, torque, rtol, atol, step, reach,
                       check_accuracy, method) -> SimulationResult:
     """:func:`simulate` under a sampled controller (:mod:`flexctl.sim.digital`)."""
@@ -384,17 +445,15 @@ def _simulate_sampled(model, t_final, controller, x_init, torque, rtol, atol, st
                              f"above rtol {rtol:g} of the peak {peak:.3g} m; use method "
                              "'cvodes' for this accuracy")
             warnings.warn(accuracy_note, AccuracyWarning, stacklevel=3)
-    status, message = run.status, run.message
-    if status == "diverged" and message == "reached":
-        t_end = float(run.t[-1])
-        if model.variant == "exact":
-            message = (f"the beam curled back on itself at t = {t_end:.6g} s (mean slope angle "
-                       f"above {EXACT_CURL:g} rad): the load is beyond what a beam of "
-                       f"{model.n_modes} modes can describe")
-        else:
-            message = (f"tip deflection passed the beam length {model.system.beam.length:g} m "
-                       f"at t = {t_end:.6g} s: "
-                       + _stiffness_reason(model, float(run.states[n + 1, -1])))
+    message = run.message
+    if run.stop is None:
+        reason = StopReason.REACHED_END
+    elif run.stop == "integrator":
+        reason = StopReason.INTEGRATOR_FAILED
+    else:
+        reason = _bad_sample_reason(model, run.stop_state, False, 0.0, False)
+        message = _stop_message(model, reason, float(run.t[-1]), run.states[:, -1])
+    status = reason.status
     if accuracy_note:
         message = f"{message} ({accuracy_note})"
     report = dict(run.report, controller_time=run.controller_time)
@@ -405,7 +464,8 @@ def _simulate_sampled(model, t_final, controller, x_init, torque, rtol, atol, st
                             message=message, wall_time=wall, n_evaluations=run.n_evaluations,
                             method="rk4" if method == "rk4" else "cvodes", rtol=float(rtol),
                             controller_states=np.zeros((0, run.t.size)),
-                            integration_error=run.integration_error, controller_report=report)
+                            integration_error=run.integration_error, controller_report=report,
+                            stop_reason=reason)
 
 
 def simulate(model: Model, t_final: float, torque=None, hub_motion=None, controller=None,
@@ -696,7 +756,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             bad |= np.asarray(model.effective_hub_inertia(y_seg[:nx])) <= j_floor
         return int(np.argmax(bad)) if bad.any() else None
 
-    status, message = "ok", f"reached t_final = {float(t_final):g} s"
+    reason, message = StopReason.REACHED_END, f"reached t_final = {float(t_final):g} s"
+    found = False           # True once an event or a bad sample stopped the run (message due)
     ts, ys = [np.array([0.0])], [y_init[:, None]]
     compiled_segments = []
     n_eval = 0
@@ -727,7 +788,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         bad = first_bad_sample(y_fixed)
         if bad is not None:
             t_fixed, y_fixed = t_fixed[:bad + 1], y_fixed[:, :bad + 1]
-            status = "diverged"
+            reason, found = _bad_sample_reason(model, y_fixed[:, -1], prescribed, j_floor,
+                                               len(events) > 1), True
         else:
             integration_error = fixed.error
             peak = float(np.max(np.abs(tip_map @ y_fixed))) if y_fixed.size else 0.0
@@ -773,10 +835,11 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                 sol = solve_ivp(rhs, (lo, hi), y, method=fallback, t_eval=t_eval, rtol=rtol,
                                 atol=atol_vec, events=events, max_step=max_step)
         except SingularMassMatrixError as exc:
-            status, message = "singular", str(exc)
+            reason, message = StopReason.SINGULAR_MASS, str(exc)
+            found = "effective" in message      # named again from the state, with J_eff
             break
         except FloatingPointError as exc:
-            status = "diverged"
+            reason = StopReason.STATE_OVERFLOW
             message = f"the state overflowed between t = {lo:.6g} s and {hi:.6g} s ({exc})"
             break
         n_eval += sol.nfev
@@ -791,19 +854,20 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             before = t_seg < stop_time
             t_seg = np.append(t_seg[before], stop_time)
             y_seg = np.column_stack((y_seg[:, before], y_stop))
-            status = "diverged" if kind == 0 else "singular"
+            reason = _geometric_stop(model) if kind == 0 else StopReason.SINGULAR_MASS
+            found = True
         if t_seg.size:
             ts.append(t_seg)
             ys.append(y_seg)
         if stop_time is not None:
             break
         if sol.status != 0:
-            status = "diverged"
+            reason = StopReason.INTEGRATOR_FAILED
             message = f"integration failed at t = {sol.t[-1]:.6g} s: {sol.message}"
             break
         y = sol.y[:, -1]
 
-    if check_accuracy and method == "cvodes" and status == "ok" \
+    if check_accuracy and method == "cvodes" and reason is StopReason.REACHED_END \
             and len(compiled_segments) == len(cuts) - 1:
         tip_map = np.zeros(y_init.size)
         first_q = 0 if prescribed else 1
@@ -829,7 +893,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     if not finite.all():
         first_bad = int(np.argmin(finite))
         t_all, y_all = t_all[:first_bad], y_all[:, :first_bad]
-        status = "diverged"
+        reason, found = StopReason.NON_FINITE_STATE, False
         message = f"the state became non-finite after t = {t_all[-1]:.6g} s"
     states = np.asarray(plant_state(t_all, y_all))
     z_all = y_all[nx:] if not prescribed else np.zeros((0, t_all.size))
@@ -864,24 +928,11 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                                   "must keep it finite")
         t_all, states, z_all = t_all[:first_bad], states[:, :first_bad], z_all[:, :first_bad]
         torque_out = torque_out[:first_bad]
-        status = "diverged"
+        reason, found = StopReason.NON_FINITE_TORQUE, False
         message = f"the hub torque became non-finite after t = {t_all[-1]:.6g} s"
 
-    t_end = float(t_all[-1])
-    if status == "diverged" and message.startswith("reached") and model.variant == "exact":
-        message = (f"the beam curled back on itself at t = {t_end:.6g} s (mean slope angle "
-                   f"above {EXACT_CURL:g} rad): the load is beyond what a beam of "
-                   f"{model.n_modes} modes can describe")
-    elif status == "diverged" and message.startswith("reached"):
-        spin = float(states[n + 1, -1])
-        message = (f"tip deflection passed the beam length {length:g} m at t = {t_end:.6g} s: "
-                   + _stiffness_reason(model, spin))
-    elif status == "singular" and (message.startswith("reached") or "effective" in message):
-        j_eff = float(model.effective_hub_inertia(states[:, -1]))
-        message = (f"mass matrix singular at t = {t_end:.6g} s: the effective hub inertia "
-                   f"J_0 + q^T D q - m_tf^T M_ff^-1 m_tf fell to {j_eff:.3g} kg m^2 "
-                   f"(J_0 = {mat.J0:.4g} kg m^2); in the consistent model the deflection "
-                   "lowers the hub inertia, and a light hub loses all of it")
+    if found:
+        message = _stop_message(model, reason, float(t_all[-1]), states[:, -1])
     if stiffness_note:
         message = f"{message} ({stiffness_note})"
     if accuracy_note:
@@ -889,7 +940,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
 
     return SimulationResult(model=model, t=t_all, states=states, torque=torque_out,
                             tip_deflection=np.asarray(model.tip_deflection(states), dtype=float),
-                            root_moment=mat.root @ states[1:n + 1], status=status,
+                            root_moment=mat.root @ states[1:n + 1], status=reason.status,
                             message=message, wall_time=wall, n_evaluations=int(n_eval),
                             method=method, rtol=float(rtol), controller_states=z_all,
-                            integration_error=integration_error)
+                            integration_error=integration_error, stop_reason=reason)

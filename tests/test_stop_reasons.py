@@ -1,0 +1,44 @@
+"""Every run says why it ended, as a StopReason whose status is the result's."""
+
+import warnings
+
+import numpy as np
+
+import flexctl
+from flexctl.sim import StopReason
+from flexctl.sim.digital import ZeroOrderHold
+
+
+def test_reached_end():
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    result = flexctl.simulate(model, 1.0, torque=flexctl.SineTorque(peak_torque=1.0,
+                                                                     duration=0.5))
+    assert result.stop_reason is StopReason.REACHED_END and result.status == "ok"
+
+
+def test_zero_order_spinning_past_its_first_frequency_passes_the_length():
+    scene = flexctl.load_scene("kane-spinup")
+    model = flexctl.build_model(scene.system, n_modes=2, variant="zero_order")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for method in ("auto", "rk4"):
+            result = flexctl.simulate(model, 30.0, hub_motion=scene.maneuver, method=method)
+            assert result.stop_reason is StopReason.TIP_PAST_LENGTH, method
+            assert result.status == "diverged"
+            assert "passed the beam length" in result.message
+
+
+def test_sampled_runaway_passes_the_length():
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    law = ZeroOrderHold(lambda t, x: 1e4, sample_time=0.01)
+    result = flexctl.simulate(model, 5.0, controller=law)
+    assert result.stop_reason is StopReason.TIP_PAST_LENGTH
+    assert np.all(np.isfinite(result.states))
+
+
+def test_every_reason_maps_to_a_status():
+    statuses = {reason: reason.status for reason in StopReason}
+    assert statuses[StopReason.REACHED_END] == "ok"
+    assert statuses[StopReason.SINGULAR_MASS] == "singular"
+    assert {s for r, s in statuses.items()
+            if r not in (StopReason.REACHED_END, StopReason.SINGULAR_MASS)} == {"diverged"}
