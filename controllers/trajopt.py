@@ -10,11 +10,13 @@ Notes
 -----
 Symbols: ``N`` design modes, ``n = 2 N + 2`` states in the order of
 :attr:`flexctl.Model.state_names`, ``K`` intervals (``problem.n_intervals``) of length
-``h = T / K``, ``d = 3`` collocation points per interval (collocation only), ``x_f`` the target
-``[angle, 0 .. 0]``. The decision variables, in this order::
+``h = T / K``, ``m`` collocation elements per hold (collocation only; ``m = 1`` otherwise),
+``d = 3`` collocation points per element, ``x_f`` the target ``[angle, 0 .. 0]``. The decision
+variables, in this order::
 
-    X   (n, K + 1)   states at the grid times t_k = k h, k = 0 .. K
-    Xc  (n, d K)     states at the collocation points, interval k in columns k d .. k d + d - 1
+    X   (n, m K + 1) states at the element boundaries t_j = j h / m, j = 0 .. m K; the hold
+                     boundaries t_k = k h are its columns k m (multiple shooting: m = 1)
+    Xc  (n, d m K)   states at the collocation points, element j in columns j d .. j d + d - 1
                      (collocation only)
     U   (1, K)       torque held on [t_k, t_k+1), N m
     T   scalar       duration, s (minimum time only)
@@ -24,19 +26,25 @@ The constraints, in this order (the order of ``opti.g`` and of
 
     X[:, 0] = 0                                         n
     dynamics: multiple shooting  X[:, k+1] = F(X[:, k], U[k], h)          n K
-              collocation        Z_k C = h f(Xc_k, U[k]), Z_k = [X_k, Xc_k]     n d K
-                                 X[:, k+1] = Z_k D                        n K
-    X[:, K] = x_f                                       n
+              collocation        Z_j C = (h/m) f(Xc_j, U[j // m]), Z_j = [X_j, Xc_j]   n d m K
+                                 X[:, j+1] = Z_j D                        n m K
+    X[:, m K] = x_f                                     n
     -u_max <= U[k] <= u_max                             K
     -r h <= U[k] - U[k-1] <= r h, k = 0 .. K, U[-1] = U[K] = 0   (K + 1, rate bound only)
-    -y_max <= tip @ q <= y_max at X[:, 1:K] (and Xc)    K - 1 (+ d K)  (tip bound only)
+    -y_max <= tip @ q <= y_max at X[:, 1:m K] (and Xc)  m K - 1 (+ d m K)  (tip bound only)
     T_min <= T <= T_max                                 2  (minimum time only)
 
 ``F`` is ``substeps`` RK4 steps or a CVODES integrator; ``C`` and ``D`` come from
-``casadi.collocation_coeff`` on Legendre or Radau points. The states are scaled for IPOPT
+``casadi.collocation_coeff`` on Legendre or Radau points. ``substeps`` and ``m`` follow from
+the design model's fastest mode (:func:`slew_discretisation`). The states are scaled for IPOPT
 (``opti.set_linear_scale``) by their physical sizes; values and multipliers stay in SI units.
 The rate bound treats the torque as zero before and after the slew, so the first and last
 holds are limited to ``r h``.
+
+Before anything is built, :func:`solve_slew` refuses a slew whose holds cannot reach its
+true optimum (:mod:`controllers.hold_grid`): fewer holds than terminal conditions, or holds
+that alias a design mode so that stopping it costs more than
+:data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` above the converged effort.
 """
 
 from __future__ import annotations
@@ -51,16 +59,18 @@ import numpy as np
 
 from flexctl.model import Model
 
+from .hold_grid import check_holds
+from .slew_nlp import (Discretisation, Transcribed, discretisation, refuse_costly_exact,
+                       rk4_substeps, transcribe, transcription_for)
+
 __all__ = ["SlewProblem", "SlewSolution", "TrajectoryOptimizationError", "HoldTorque",
-           "solve_slew", "rigid_minimum_time", "rk4_substeps", "transcription_for"]
+           "Discretisation", "solve_slew", "rigid_minimum_time", "rk4_substeps",
+           "slew_discretisation", "transcription_for"]
 
 TRANSCRIPTIONS = ("multiple_shooting", "collocation")
 INTEGRATORS = ("rk4", "cvodes")
 COLLOCATION_SCHEMES = ("radau", "legendre")
 OBJECTIVES = ("effort", "time")
-#: Lower bound on the free final time, as a fraction of the rigid-body minimum time (kept
-#: below 1 so that the physical bound is found by the optimiser, not imposed on it).
-MIN_TIME_FLOOR = 0.5
 #: Default upper bound on the free final time, in rigid-body minimum times.
 MAX_TIME_FACTOR = 10.0
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
@@ -135,10 +145,13 @@ class SlewProblem:
         Multiple shooting only: ``substeps`` fixed RK4 steps per hold, or CasADi's CVODES.
     substeps : int, optional
         RK4 steps per hold (>= 1). Default: chosen by :func:`rk4_substeps` from the design
-        model's fastest mode, so that ``omega_max h`` stays at :data:`RK4_OMEGA_H`, well inside
-        RK4's stability interval (2.83) and accurate for every design mode.
+        model's fastest mode, which they integrate over the slew within
+        :data:`~controllers.hold_grid.PHASE_TOLERANCE` of its amplitude (and inside RK4's
+        stability interval).
     collocation_scheme : {"radau", "legendre"}, optional
-        Collocation only: the points (degree :attr:`degree`, 3). Default ``"radau"``.
+        Collocation only: the points (degree :attr:`degree`, 3) of each of the ``m`` elements
+        per hold, ``m`` chosen from the design model's fastest mode
+        (:func:`slew_discretisation`). Default ``"radau"``.
     max_duration : float, optional
         Upper bound on the free duration, s; default ``MAX_TIME_FACTOR`` times the rigid-body
         minimum time. Minimum time only.
@@ -268,6 +281,8 @@ class SlewSolution:
         IPOPT's return status.
     multipliers : ndarray
         Constraint multipliers in the order of the module Notes (for warm starts).
+    discretisation : Discretisation
+        How the holds were integrated.
     """
 
     problem: SlewProblem
@@ -282,6 +297,7 @@ class SlewSolution:
     iterations: int
     return_status: str
     multipliers: np.ndarray = field(repr=False)
+    discretisation: Discretisation | None = None
     _hermite: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -365,94 +381,156 @@ def _resample_guess(guess, model: Model, problem: SlewProblem):
     return float(t[-1]), x, u
 
 
-# ---------------------------------------------------------------------------- transcription
-#: ``omega_max h`` of one RK4 substep on the fastest design mode: stability needs < 2.83, and
-#: the plan's own accuracy (the end state reached by the held torques, to 1e-3 of each state's
-#: scale on slew-90) needs about 0.3, where the relative phase error per step is 2e-5.
-RK4_OMEGA_H = 0.3
-#: More substeps per hold than this means design modes far faster than the holds can shape:
-#: fewer design modes or more intervals is the remedy.
-MAX_SUBSTEPS = 100
+# ---------------------------------------------------------------------------- discretisation
+def slew_discretisation(problem: SlewProblem, model: Model,
+                        duration: float | None = None) -> Discretisation:
+    """The discretisation :func:`solve_slew` uses for ``problem`` on ``model``.
 
+    RK4 substeps and collocation elements are chosen from the design model's fastest mode
+    (:func:`controllers.hold_grid.steps_per_hold`): every scheme integrates it over the slew
+    within :data:`~controllers.hold_grid.PHASE_TOLERANCE` of its amplitude. ``duration`` (s)
+    overrides the duration a free-time problem is sized for.
 
-def transcription_for(problem: SlewProblem, model: Model) -> str:
-    """The problem's transcription, or the design model's default when it names none."""
-    if problem.transcription is not None:
-        return problem.transcription
-    return "collocation" if model.variant == "exact" else "multiple_shooting"
-
-
-def rk4_substeps(model: Model, hold: float) -> int:
-    """RK4 substeps per hold of ``hold`` seconds for the fastest mode of ``model``.
-
-    Raises
-    ------
-    ValueError
-        If more than :data:`MAX_SUBSTEPS` would be needed, naming the settings to change.
+    Examples
+    --------
+    >>> import flexctl
+    >>> model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=4)
+    >>> problem = SlewProblem(angle=1.57, duration=2.0, torque_bound=6.0, n_intervals=60)
+    >>> slew_discretisation(problem, model)          # omega_max h = 134.6 * 2 / 60 = 4.5
+    Discretisation(transcription='multiple_shooting', method='rk4', steps_per_hold=12, \
+sized_for=2.0)
     """
-    omega_max = float(np.max(np.abs(model.natural_frequencies(0.0, hub="free"))))
-    substeps = max(1, math.ceil(omega_max * hold / RK4_OMEGA_H))
-    if substeps > MAX_SUBSTEPS:
-        raise ValueError(
-            f"the fastest of the {model.n_modes} design modes ({omega_max:.4g} rad/s) needs "
-            f"{substeps} RK4 substeps per {hold:.4g} s hold (more than {MAX_SUBSTEPS}): use "
-            "fewer design modes or more intervals")
-    return substeps
+    return discretisation(problem, model, *_time_bounds(model, problem), duration)
 
 
-def _rk4_step(f, n: int, substeps: int, symbol=None):
-    import casadi as ca
+# ---------------------------------------------------------------------------- refusals
+def _refuse_before_solving(model: Model, problem: SlewProblem) -> None:
+    """Raise on a slew that cannot be solved to its optimum, before anything is built.
 
-    symbol = symbol or ca.SX
-    x, u, h = symbol.sym("x", n), symbol.sym("u"), symbol.sym("h")
-    xk, dt = x, h / substeps
-    for _ in range(substeps):
-        k1 = f(xk, u)
-        k2 = f(xk + 0.5 * dt * k1, u)
-        k3 = f(xk + 0.5 * dt * k2, u)
-        k4 = f(xk + dt * k3, u)
-        xk = xk + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return ca.Function("rk4_hold", [x, u, h], [xk], ["x", "u", "h"], ["xf"])
-
-
-def _cvodes_step(f, n: int):
-    import casadi as ca
-
-    x, p = ca.SX.sym("x", n), ca.SX.sym("p", 2)          # p = [u, h]; time scaled to [0, 1]
-    dae = {"x": x, "p": p, "ode": p[1] * f(x, p[0])}
-    F = ca.integrator("cvodes_hold", "cvodes", dae, 0.0, 1.0,
-                      {"abstol": 1e-10, "reltol": 1e-10})
-    xs, us, hs = ca.MX.sym("x", n), ca.MX.sym("u"), ca.MX.sym("h")
-    xf = F(x0=xs, p=ca.vertcat(us, hs))["xf"]
-    return ca.Function("cvodes_hold", [xs, us, hs], [xf], ["x", "u", "h"], ["xf"])
-
-
-def _collocation_interval(f, n: int, scheme: str, degree: int):
-    """``g(x_k, Xc_k (n, d), u, h) -> (defects (n, d), x_k+1)`` for one hold."""
-    import casadi as ca
-
-    tau = ca.collocation_points(degree, scheme)
-    C, D, _ = ca.collocation_coeff(tau)
-    x, xc = ca.SX.sym("x", n), ca.SX.sym("xc", n, degree)
-    u, h = ca.SX.sym("u"), ca.SX.sym("h")
-    z = ca.horzcat(x, xc)
-    fc = ca.horzcat(*[f(xc[:, j], u) for j in range(degree)])
-    return ca.Function("collocation_hold", [x, xc, u, h], [ca.mtimes(z, C) - h * fc,
-                       ca.mtimes(z, D)], ["x", "xc", "u", "h"], ["defect", "xf"])
+    Too few holds for the terminal conditions, a duration below the rigid-body minimum time,
+    and holds whose least effort exceeds the converged one by more than
+    :data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` (fixed duration only).
+    """
+    n, N, K = model.n_states, model.n_modes, problem.n_intervals
+    if K < n:
+        raise ValueError(f"n_intervals must be at least the {n} terminal conditions of a "
+                         f"rest-to-rest slew of a {N}-mode design model (2 N + 2 torque holds); "
+                         f"got {K}")
+    umax = problem.torque_bound
+    t_rigid = rigid_minimum_time(problem.angle, model.matrices.J0, umax)
+    if problem.duration is not None and problem.duration < t_rigid:
+        # the structure's angular momentum obeys J_0 d(mean angle)/dt^2 = torque, so no torque
+        # within the bound brings it to rest at the angle sooner than the rigid body
+        raise TrajectoryOptimizationError(
+            f"the duration {problem.duration:g} s is below the rigid-body minimum time "
+            f"{t_rigid:.4g} s for angle {problem.angle:g} rad and torque_bound {umax:g} N m, so "
+            "no torque within the bound can complete the slew: lengthen maneuver.duration or "
+            "raise maneuver.torque_bound (found before the optimiser ran)",
+            "Infeasible_Duration", 0)
+    if problem.duration is not None:
+        check_holds(model, problem.duration, problem.n_intervals, problem.angle)
 
 
-def _state_scale(model: Model, problem: SlewProblem, duration: float) -> np.ndarray:
-    """Physical size of each state: angle, mean rate, quasi-static modal deflections."""
-    mat, n = model.matrices, model.n_modes
-    w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
-    q = np.abs(mat.m_tf) * problem.torque_bound / mat.J0 / np.diag(mat.K_ff)
-    q = np.maximum(q, 1e-6 * model.system.beam.length)
-    return np.concatenate(([abs(problem.angle)], q, [abs(problem.angle) / duration], q * w))
+_FEASIBILITY = ("lengthen maneuver.duration, raise maneuver.torque_bound, or loosen tip_bound "
+                "or torque_rate_bound")
+_CONVERGENCE = "start from initial_guess (a nearby solution) or raise the limit"
+#: What an IPOPT ending without a solution means for a slew, and what to change.
+_ENDINGS = {
+    "Infeasible_Problem_Detected": ("found no torque within the bounds that meets the "
+                                    "terminal conditions", _FEASIBILITY),
+    "Restoration_Failed": ("could not find a torque that meets the terminal conditions",
+                           _FEASIBILITY),
+    "Maximum_Iterations_Exceeded": ("reached its iteration limit (ipopt_options max_iter)",
+                                    _CONVERGENCE),
+    "Maximum_CpuTime_Exceeded": ("reached its time limit (ipopt_options max_cpu_time)",
+                                 _CONVERGENCE),
+    "Maximum_WallTime_Exceeded": ("reached its time limit (ipopt_options max_wall_time)",
+                                  _CONVERGENCE),
+    "Invalid_Number_Detected": ("met a non-finite value of the dynamics", _FEASIBILITY),
+}
+_NUMERICAL_TROUBLE = ("stopped without converging (numerical trouble)",
+                      "start from initial_guess, or " + _FEASIBILITY)
+
+
+def _failure(status: str, iterations: int, problem: SlewProblem) -> TrajectoryOptimizationError:
+    """The error for an optimiser that ended without a solution: what happened, what to do.
+
+    IPOPT's own status stays in :attr:`TrajectoryOptimizationError.return_status`."""
+    what, remedy = _ENDINGS.get(status, _NUMERICAL_TROUBLE)
+    duration = (f"{problem.duration:g} s" if problem.duration is not None
+                else "a free duration")
+    return TrajectoryOptimizationError(
+        f"the trajectory optimiser {what} after {iterations} iterations "
+        f"({problem.n_intervals} holds over {duration}): {remedy}", status, iterations)
+
+
+def _time_bounds(model: Model, problem: SlewProblem) -> tuple:
+    """``(rigid-body minimum time, longest free duration)``, s."""
+    t_rigid = rigid_minimum_time(problem.angle, model.matrices.J0, problem.torque_bound)
+    return t_rigid, problem.max_duration or MAX_TIME_FACTOR * t_rigid
+
+
+def _guess(model: Model, problem: SlewProblem, initial_guess) -> tuple:
+    """``(duration, states (n, K+1), torque (K,))`` to start from."""
+    if initial_guess is not None:
+        return _resample_guess(initial_guess, model, problem)
+    t_rigid = rigid_minimum_time(problem.angle, model.matrices.J0, problem.torque_bound)
+    duration = problem.duration or math.sqrt(1.5) * t_rigid   # quintic peak torque = u_max
+    return (duration, *_smooth_guess(model, problem, duration))
+
+
+def _solve(nlp: Transcribed, problem: SlewProblem, disc: Discretisation, initial_guess,
+           ipopt_options: dict | None):
+    """Run IPOPT; ``(stats, wall time s)``, or raise the failure."""
+    opti = nlp.opti
+    # mumps_pivtol: IPOPT's default (1e-6) lets MUMPS pick pivots that misjudge the inertia
+    # of the KKT matrix of fine collocation grids: IPOPT then regularises a convex problem and
+    # crawls, or stops in "Error_In_Step_Computation" (slew-90 on 4 modes with 6 elements per
+    # hold, say). acceptable_*: an "acceptable" ending must still meet the constraints (in
+    # state-scale units) and complementarity, not only IPOPT's default 1e-2 of them
+    ipopt = {"print_level": 0, "sb": "yes", "tol": 1e-9, "max_iter": 1000,
+             "mumps_pivtol": 1e-4, "acceptable_constr_viol_tol": 1e-8,
+             "acceptable_compl_inf_tol": 1e-6}
+    if isinstance(initial_guess, SlewSolution) \
+            and initial_guess.problem.n_intervals == problem.n_intervals \
+            and initial_guess.multipliers.size == opti.ng \
+            and initial_guess.discretisation == disc:
+        opti.set_initial(opti.lam_g, initial_guess.multipliers)
+        ipopt.update(warm_start_init_point="yes", mu_init=1e-6,
+                     warm_start_bound_push=1e-8, warm_start_mult_bound_push=1e-8)
+    ipopt.update(ipopt_options or {})
+    # expand=False: the mapped SX interval functions are faster to differentiate than the
+    # expanded NLP (0.1 s against 0.8 s for 40 RK4 holds), and CVODES cannot be expanded.
+    opti.solver("ipopt", {"expand": False, "print_time": False, "record_time": True}, ipopt)
+    start = time.perf_counter()
+    try:
+        opti.solve_limited()
+        failed = False
+    except RuntimeError:             # CasADi raises on any status that is not a success
+        failed = True
+    wall = time.perf_counter() - start
+    try:
+        stats = opti.stats()
+    except RuntimeError:             # pragma: no cover - no stats when the solver never ran
+        stats = {"return_status": "CasADi_Error"}
+    status, iterations = str(stats.get("return_status")), int(stats.get("iter_count", 0))
+    if failed or status not in _SUCCESS:
+        raise _failure(status, iterations, problem)
+    return stats, wall
 
 
 def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
                ipopt_options: dict | None = None) -> SlewSolution:
     """Optimise a rest-to-rest slew of ``model`` with CasADi Opti and IPOPT.
+
+    Before anything is built, a slew that cannot be solved to its optimum is refused
+    (``ValueError`` naming the setting and a value that works): fewer holds than terminal
+    conditions; holds too coarse for the design modes, whose least effort exceeds the
+    converged (continuous-torque) effort by more than
+    :data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` (:mod:`controllers.hold_grid`); or
+    an exact design model whose derivatives would take minutes
+    (:data:`~controllers.slew_nlp.MAX_EXACT_WORK`). Each hold is integrated with the steps the
+    fastest design mode needs (:func:`slew_discretisation`).
 
     Parameters
     ----------
@@ -474,9 +552,11 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
 
     Raises
     ------
+    ValueError
+        A slew refused before solving, naming the setting to change and a value that works.
     TrajectoryOptimizationError
-        IPOPT did not converge (e.g. an infeasible problem); the message and the
-        ``return_status`` attribute carry IPOPT's status. No partial result is returned.
+        No solution (e.g. an infeasible problem): the message says what happened and what
+        to change; ``return_status`` holds IPOPT's status. No partial result is returned.
 
     Examples
     --------
@@ -489,8 +569,6 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
     >>> bool(abs(solution.states[0, -1] - np.pi / 4) < 1e-8)
     True
     """
-    import casadi as ca
-
     if not isinstance(model, Model):
         raise TypeError(f"model must be a flexctl Model; got {type(model).__name__}")
     if not isinstance(problem, SlewProblem):
@@ -498,133 +576,37 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
     if ipopt_options is not None and not isinstance(ipopt_options, dict):
         raise ValueError(f"ipopt_options must be a dict of IPOPT options; got "
                          f"{type(ipopt_options).__name__}")
-    n, N, K = model.n_states, model.n_modes, problem.n_intervals
-    if K < n:
-        raise ValueError(f"n_intervals must be at least the {n} terminal conditions of a "
-                         f"rest-to-rest slew of a {N}-mode design model (2 N + 2 torque holds); "
-                         f"got {K}")
-    umax, target = problem.torque_bound, problem.target_state(n)
-    t_rigid = rigid_minimum_time(problem.angle, model.matrices.J0, umax)
-    free_time = problem.objective == "time"
-    if problem.duration is not None and problem.duration < t_rigid:
-        # the structure's angular momentum obeys J_0 d(mean angle)/dt^2 = torque, so no torque
-        # within the bound brings it to rest at the angle sooner than the rigid body: no need
-        # to let IPOPT find out
-        raise TrajectoryOptimizationError(
-            f"the duration {problem.duration:g} s is below the rigid-body minimum time "
-            f"{t_rigid:.4g} s for angle {problem.angle:g} rad and torque_bound {umax:g} N m, so "
-            "no torque within the bound can complete the slew: lengthen maneuver.duration or "
-            "raise maneuver.torque_bound (return status 'Infeasible_Duration', found before "
-            "IPOPT ran)", "Infeasible_Duration", 0)
-
-    if initial_guess is not None:
-        t_guess, x_guess, u_guess = _resample_guess(initial_guess, model, problem)
-    else:
-        t_guess = problem.duration or math.sqrt(1.5) * t_rigid   # quintic peak torque = u_max
-        x_guess, u_guess = _smooth_guess(model, problem, t_guess)
-    duration_guess = problem.duration or t_guess
-    scale = _state_scale(model, problem, duration_guess)
-    f = model.casadi()
-
-    opti = ca.Opti()
-    X = opti.variable(n, K + 1)
-    transcription = transcription_for(problem, model)
-    Xc = opti.variable(n, problem.degree * K) if transcription == "collocation" else None
-    U = opti.variable(1, K)
-    T = opti.variable() if free_time else problem.duration
-    h = T / K
-    opti.set_linear_scale(X, ca.repmat(ca.DM(scale), 1, K + 1))
-    if Xc is not None:
-        opti.set_linear_scale(Xc, ca.repmat(ca.DM(scale), 1, problem.degree * K))
-    opti.set_linear_scale(U, umax)
-    scale_k = ca.repmat(ca.DM(scale), 1, K)
-
-    opti.subject_to(X[:, 0] == 0)
-    if Xc is None:
-        if problem.integrator == "rk4":
-            longest = problem.duration or problem.max_duration or MAX_TIME_FACTOR * t_rigid
-            substeps = problem.substeps or rk4_substeps(model, longest / K)
-            # the exact dynamics are large: calling them (MX) rather than inlining them (SX)
-            # lets CasADi differentiate them once instead of once per substep
-            step = _rk4_step(f, n, substeps, ca.MX if model.variant == "exact" else ca.SX)
-        else:
-            step = _cvodes_step(f, n)
-        x_next = step.map(K)(X[:, :-1], U, h)
-        opti.subject_to(X[:, 1:] == x_next, scale_k)
-    else:
-        d = problem.degree
-        g = _collocation_interval(f, n, problem.collocation_scheme, d).map(K)
-        defect, x_end = g(X[:, :-1], Xc, U, h)
-        opti.subject_to(defect == 0, ca.repmat(ca.DM(scale), 1, d * K))
-        opti.subject_to(X[:, 1:] == x_end, scale_k)
-    opti.subject_to(X[:, K] == target)
-    opti.subject_to(opti.bounded(-umax, U, umax))
-    if problem.torque_rate_bound is not None:
-        jumps = ca.diff(ca.horzcat(0, U, 0), 1, 1)
-        lim = problem.torque_rate_bound * h
-        opti.subject_to(opti.bounded(-lim, jumps, lim), umax)
-    if problem.tip_bound is not None:
-        tip = ca.DM(model.matrices.tip).T
-        ymax = problem.tip_bound
-        opti.subject_to(opti.bounded(-ymax, ca.mtimes(tip, X[1:N + 1, 1:K]), ymax), ymax)
-        if Xc is not None:
-            opti.subject_to(opti.bounded(-ymax, ca.mtimes(tip, Xc[1:N + 1, :]), ymax), ymax)
-    if free_time:
-        t_max = problem.max_duration or MAX_TIME_FACTOR * t_rigid
-        opti.subject_to(opti.bounded(MIN_TIME_FLOOR * t_rigid, T, t_max))
-        opti.set_initial(T, min(max(t_guess, MIN_TIME_FLOOR * t_rigid), t_max))
-        opti.minimize(T)
-    else:
-        opti.minimize(h * ca.sumsqr(U) / (umax ** 2 * problem.duration))
-
-    opti.set_initial(X, x_guess)
-    opti.set_initial(U, u_guess.reshape(1, K))
-    if Xc is not None:
-        tau = np.asarray(ca.collocation_points(problem.degree, problem.collocation_scheme))
-        sc = ((np.arange(K)[:, None] + tau[None, :]) / K).ravel()
-        opti.set_initial(Xc, np.vstack([np.interp(sc, np.linspace(0, 1, K + 1), row)
-                                        for row in x_guess]))
-    ipopt = {"print_level": 0, "sb": "yes", "tol": 1e-9, "max_iter": 1000}
-    if isinstance(initial_guess, SlewSolution) and initial_guess.problem.n_intervals == K \
-            and initial_guess.multipliers.size == opti.ng \
-            and transcription_for(initial_guess.problem, initial_guess.model) == transcription:
-        opti.set_initial(opti.lam_g, initial_guess.multipliers)
-        ipopt.update(warm_start_init_point="yes", mu_init=1e-6,
-                     warm_start_bound_push=1e-8, warm_start_mult_bound_push=1e-8)
-    ipopt.update(ipopt_options or {})
-    # expand=False: the mapped SX interval functions are faster to differentiate than the
-    # expanded NLP (0.1 s against 0.8 s for 40 RK4 holds), and CVODES cannot be expanded.
-    opti.solver("ipopt", {"expand": False, "print_time": False, "record_time": True}, ipopt)
-
+    _refuse_before_solving(model, problem)
+    disc = slew_discretisation(problem, model)
+    refuse_costly_exact(model, problem, disc)
+    guess = _guess(model, problem, initial_guess)
     start = time.perf_counter()
-    try:
-        opti.solve_limited()
-        failure = None
-    except RuntimeError as exc:      # CasADi raises on any status that is not a success
-        failure = exc
-    wall = time.perf_counter() - start
-    try:
-        stats = opti.stats()
-    except RuntimeError:             # pragma: no cover - no stats when the solver never ran
-        stats = {"return_status": f"CasADi error: {failure}"}
-    status, iterations = str(stats.get("return_status")), int(stats.get("iter_count", 0))
-    if failure is not None or status not in _SUCCESS:
-        hint = ""
-        if problem.duration is not None and problem.duration < t_rigid:
-            hint = (f"; the duration {problem.duration:g} s is below the rigid-body minimum "
-                    f"time {t_rigid:.4g} s for angle {problem.angle:g} rad and torque_bound "
-                    f"{umax:g} N m, so no torque within the bound can complete the slew")
-        raise TrajectoryOptimizationError(
-            f"IPOPT did not solve the slew problem: return status {status!r} after "
-            f"{iterations} iterations{hint}", status, iterations)
+    nlp = transcribe(model, problem, disc, guess, *_time_bounds(model, problem))
+    stats, _ = _solve(nlp, problem, disc, initial_guess, ipopt_options)
+    duration = float(nlp.opti.value(nlp.T)) if problem.objective == "time" else problem.duration
+    if duration > disc.sized_for * (1 + 1e-9):
+        # a free duration longer than the collocation elements were chosen for: again, with
+        # the elements of the duration found, from the solution found
+        first = _solution(nlp, model, problem, disc, stats, start)
+        disc = slew_discretisation(problem, model, duration * 1.05)
+        nlp = transcribe(model, problem, disc, _resample_guess(first, model, problem),
+                         *_time_bounds(model, problem))
+        stats, _ = _solve(nlp, problem, disc, None, ipopt_options)
+    return _solution(nlp, model, problem, disc, stats, start)
 
-    duration = float(opti.value(T)) if free_time else problem.duration
-    torque = np.asarray(opti.value(U), dtype=float).reshape(K)
-    cost = duration if free_time else float(duration / K * np.sum(torque ** 2))
+
+def _solution(nlp: Transcribed, model: Model, problem: SlewProblem, disc: Discretisation,
+              stats: dict, start: float) -> SlewSolution:
+    opti, K, n = nlp.opti, problem.n_intervals, model.n_states
+    duration = float(opti.value(nlp.T)) if problem.objective == "time" else problem.duration
+    torque = np.asarray(opti.value(nlp.U), dtype=float).reshape(K)
+    cost = duration if problem.objective == "time" \
+        else float(duration / K * np.sum(torque ** 2))
     return SlewSolution(
         problem=problem, model=model, t=np.linspace(0.0, duration, K + 1),
-        states=np.asarray(opti.value(X), dtype=float).reshape(n, K + 1), torque=torque,
-        duration=duration, cost=cost, solve_time_s=wall,
-        ipopt_time_s=float(stats.get("t_wall_total", np.nan)), iterations=iterations,
-        return_status=status,
-        multipliers=np.asarray(opti.value(opti.lam_g), dtype=float).reshape(-1))
+        states=np.asarray(opti.value(nlp.X), dtype=float).reshape(n, K + 1), torque=torque,
+        duration=duration, cost=cost, solve_time_s=time.perf_counter() - start,
+        ipopt_time_s=float(stats.get("t_wall_total", np.nan)),
+        iterations=int(stats.get("iter_count", 0)), return_status=str(stats["return_status"]),
+        multipliers=np.asarray(opti.value(opti.lam_g), dtype=float).reshape(-1),
+        discretisation=disc)

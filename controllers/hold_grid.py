@@ -1,0 +1,370 @@
+"""What a grid of torque holds can do for a slew: resolution and effort of each design mode.
+
+:func:`controllers.solve_slew` holds the torque constant on ``K`` intervals of length
+``h = T / K`` and brings every design mode to rest at ``T``. Two facts about that grid decide,
+before IPOPT runs, whether a slew can be solved to its true optimum:
+
+- **Resolution.** Each hold is integrated by ``s`` RK4 substeps or ``m`` collocation elements.
+  :func:`steps_per_hold` picks the smallest count that integrates the fastest design mode
+  over the whole slew within :data:`PHASE_TOLERANCE` of its amplitude: ``omega T / (omega dt)``
+  steps, each off by ``|R(i omega dt) - exp(i omega dt)|`` (``R`` the scheme's stability
+  function; exact for a linear oscillator). Slower modes are integrated more accurately.
+- **Aliasing.** Seen through holds of length ``h``, a mode of frequency ``omega`` above the
+  hold Nyquist frequency ``pi / h`` behaves like one at its alias ``|omega - 2 pi j / h|``,
+  and stopping a mode aliased near zero fights the slew's own torque (with ``omega h`` a
+  multiple of ``pi``, the holds move the mode along a single direction only).
+  :func:`hold_effort_excess` measures the effect on the linearisation at rest: the least
+  effort of ``K`` holds that reach the target, against the least effort of a continuous
+  torque (the converged value).
+
+Notes
+-----
+The excess is computed in the modal coordinates of the linearisation ``(A, B)`` at rest,
+``z = [omega_j eta_j, eta_dot_j]`` per mode (``omega_0 = 1`` for the rigid-body mode), where
+``A`` is nearly skew and both the hold map and the controllability Gramian are well conditioned:
+
+- ``K`` holds: ``x(T) = G u``, ``G[:, k] = Phi^(K-1-k) Gamma`` with ``Phi = exp(A h)`` and
+  ``Gamma = int_0^h exp(A s) B ds``; least effort ``h min |u|^2 = h z_f^T (G G^T)^-1 z_f``.
+- continuous: ``z_f^T W^-1 z_f`` with ``W = int_0^T exp(A s) B B^T exp(A^T s) ds`` (Van Loan).
+
+Honouring only the rigid-body mode and the first ``j`` flexible modes keeps their rows; the
+first ``j`` whose excess passes the tolerance names the mode that the holds cannot stop
+cheaply.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+__all__ = ["PHASE_TOLERANCE", "MAX_SUBSTEPS", "HOLD_EFFORT_TOLERANCE", "step_error",
+           "steps_per_hold", "fastest_frequency", "HoldEffort", "hold_effort_excess",
+           "check_holds"]
+
+#: Error that integrating the fastest design mode over the whole slew may leave, relative to
+#: that mode's amplitude. Measured on slew-90 (``benchmarks/bench_trajopt.py``): a mode
+#: integrated with errors near 1 is a different mode, and stopping it can cost over 1 % more
+#: effort; 0.2 leaves the effort within 0.05 % of the converged discretisation; 0.05 also
+#: keeps the end state the torques reach within 1e-3 of the motion of each kind of state
+#: when the fastest mode moves as much as 1/50 of the slowest (2 modes of hub-beam-mass).
+PHASE_TOLERANCE = 0.05
+#: More RK4 substeps per hold than this means design modes far faster than the holds can shape:
+#: fewer design modes or more intervals is the remedy.
+MAX_SUBSTEPS = 100
+#: Largest relative excess of the least effort of the holds over the converged (continuous
+#: torque) effort that a slew accepts; above it the holds are refused, naming the interval
+#: counts and design-mode counts that stay within it.
+HOLD_EFFORT_TOLERANCE = 0.01
+#: Largest ``omega_max dt`` per step: RK4 is stable up to 2.83 on the imaginary axis; a
+#: collocation element spans at most half a period of the fastest mode.
+LARGEST_STEP = {"rk4": 2.5, "radau": math.pi, "legendre": math.pi}
+SCHEMES = ("rk4", "radau", "legendre")
+
+
+@functools.lru_cache(maxsize=None)
+def _butcher(scheme: str, degree: int):
+    """Butcher ``A`` (d, d) and ``b`` (d,) of the collocation method on CasADi's points."""
+    import casadi as ca
+    from numpy.polynomial import polynomial as P
+
+    tau = np.asarray(ca.collocation_points(degree, scheme), dtype=float)
+    a, b = np.zeros((degree, degree)), np.zeros(degree)
+    for j in range(degree):
+        basis = np.array([1.0])
+        for k in range(degree):
+            if k != j:
+                basis = P.polymul(basis, np.array([-tau[k], 1.0]) / (tau[j] - tau[k]))
+        integral = P.polyint(basis)
+        a[:, j] = P.polyval(tau, integral)
+        b[j] = P.polyval(1.0, integral)
+    return a, b
+
+
+def step_error(scheme: str, omega_dt: float, degree: int = 3) -> float:
+    """``|R(i omega dt) - exp(i omega dt)|``: one step's error on an undamped oscillator.
+
+    ``R`` is the scheme's stability function: RK4's Taylor polynomial, or
+    ``1 + z b^T (I - z A)^-1 1`` of the collocation method (``scheme`` "radau" or
+    "legendre", ``degree`` points). The error is relative to the mode's amplitude.
+
+    Examples
+    --------
+    >>> round(step_error("rk4", 0.3), 7)              # (0.3)^5 / 120
+    2.02e-05
+    >>> step_error("legendre", 1.0) < step_error("radau", 1.0) < step_error("rk4", 1.0)
+    True
+    """
+    z = 1j * omega_dt
+    if scheme == "rk4":
+        r = 1 + z + z ** 2 / 2 + z ** 3 / 6 + z ** 4 / 24
+    else:
+        a, b = _butcher(scheme, degree)
+        r = 1 + z * b @ np.linalg.solve(np.eye(degree) - z * a, np.ones(degree))
+    return float(abs(r - np.exp(z)))
+
+
+def steps_per_hold(scheme: str, omega_max: float, hold: float, duration: float,
+                   degree: int = 3) -> int:
+    """Smallest number of steps per hold that integrates ``omega_max`` over ``duration``
+    within :data:`PHASE_TOLERANCE` of its amplitude.
+
+    Parameters
+    ----------
+    scheme : {"rk4", "radau", "legendre"}
+        RK4 substeps or collocation elements (``degree`` points each).
+    omega_max : float
+        Fastest design frequency, rad/s.
+    hold : float
+        Hold length ``h``, s.
+    duration : float
+        Time over which the errors add up (the slew), s.
+
+    Examples
+    --------
+    >>> steps_per_hold("rk4", 100.0, 0.05, 2.0)      # omega h = 5, omega T = 200
+    13
+    >>> steps_per_hold("radau", 100.0, 0.05, 2.0), steps_per_hold("legendre", 100.0, 0.05, 2.0)
+    (5, 3)
+    """
+    if scheme not in SCHEMES:
+        raise ValueError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}; "
+                         f"got {scheme!r}")
+    angle = omega_max * hold                       # rad of the fastest mode per hold
+    if angle <= 0.0:
+        return 1
+    per_radian = PHASE_TOLERANCE / (omega_max * max(duration, hold))
+    return max(1, math.ceil(angle / _largest_step(scheme, degree, per_radian)))
+
+
+def _largest_step(scheme: str, degree: int, per_radian: float) -> float:
+    """Largest ``omega dt`` whose error per radian is within ``per_radian`` (bisection: the
+    error per radian grows with the step)."""
+    low, high = 0.0, LARGEST_STEP[scheme]
+    if step_error(scheme, high, degree) / high <= per_radian:
+        return high
+    for _ in range(50):
+        mid = 0.5 * (low + high)
+        if step_error(scheme, mid, degree) / mid <= per_radian:
+            low = mid
+        else:
+            high = mid
+    return max(low, 1e-6)
+
+
+def fastest_frequency(model) -> float:
+    """Highest hub-free natural frequency of ``model`` at rest, rad/s."""
+    return float(np.max(np.abs(model.natural_frequencies(0.0, hub="free"))))
+
+
+@dataclass(frozen=True)
+class HoldEffort:
+    """Least effort of ``n_intervals`` holds against a continuous torque, per honoured mode.
+
+    Attributes
+    ----------
+    n_intervals : int
+    excess : ndarray, shape (N + 1,)
+        ``excess[j]``: relative excess of the holds' least effort over the continuous one
+        when the rigid-body mode and the first ``j`` flexible modes must end at rest
+        (``inf`` when the holds cannot stop them).
+    frequencies : ndarray, shape (N,)
+        Hub-free natural frequencies, rad/s, ascending.
+    """
+
+    n_intervals: int
+    excess: np.ndarray
+    frequencies: np.ndarray
+
+    @property
+    def worst(self) -> float:
+        """Excess with every design mode honoured."""
+        return float(self.excess[-1])
+
+    def culprit(self, tolerance: float) -> int:
+        """The first design mode (1-based) whose honouring takes the excess above
+        ``tolerance`` (0: the rigid-body slew alone; N + 1: none)."""
+        above = np.flatnonzero(self.excess > tolerance)
+        return int(above[0]) if above.size else self.excess.size
+
+    def modes_within(self, tolerance: float) -> int:
+        """Most design modes, counted from the slowest, whose excess is within ``tolerance``."""
+        return max(self.culprit(tolerance) - 1, 0)
+
+
+def _modal_form(a: np.ndarray, b: np.ndarray):
+    """``(A_z, B_z, T_z, omega)``: the linearisation in scaled modal coordinates ``z = T_z x``."""
+    n_dof = a.shape[0] // 2
+    stiffness = -a[n_dof:, :n_dof]                 # M^-1 K, similar to a symmetric matrix
+    lam, vec = np.linalg.eig(stiffness)
+    order = np.argsort(lam.real)
+    lam, vec = lam.real[order], vec.real[:, order]
+    omega = np.sqrt(np.clip(lam, 0.0, None))
+    omega[0] = 1.0                                 # the rigid-body mode: no stiffness
+    inv = np.linalg.inv(vec)
+    t_z = np.zeros_like(a)
+    t_z[:n_dof, :n_dof] = omega[:, None] * inv
+    t_z[n_dof:, n_dof:] = inv
+    a_z = t_z @ a @ np.linalg.inv(t_z)
+    return a_z, t_z @ b, t_z, omega
+
+
+def _hold_map(a_z: np.ndarray, b_z: np.ndarray, duration: float, n_intervals: int):
+    """``G`` (n, K): the end state reached from rest by unit torque on each hold."""
+    n, h = a_z.shape[0], duration / n_intervals
+    block = np.zeros((n + 1, n + 1))
+    block[:n, :n], block[:n, n] = a_z * h, b_z[:, 0] * h
+    e = scipy.linalg.expm(block)
+    cols, power = e[:n, n:], e[:n, :n]              # Phi^k Gamma for k = 0, by doubling
+    while cols.shape[1] < n_intervals:
+        cols = np.hstack((cols, power @ cols))
+        power = power @ power
+    return cols[:, :n_intervals][:, ::-1]
+
+
+def _gramian(a_z: np.ndarray, b_z: np.ndarray, duration: float) -> np.ndarray:
+    n = a_z.shape[0]
+    block = np.zeros((2 * n, 2 * n))
+    block[:n, :n], block[:n, n:], block[n:, n:] = -a_z, b_z @ b_z.T, a_z.T
+    e = scipy.linalg.expm(block * duration)
+    return e[n:, n:].T @ e[:n, n:]
+
+
+class _Slew:
+    """A rest-to-rest slew of a model's linearisation at rest, in scaled modal coordinates,
+    with its continuous least effort per honoured-mode count (computed once)."""
+
+    def __init__(self, model, duration: float, angle: float):
+        a, b = model.linear_matrices(0.0)
+        self.a_z, self.b_z, t_z, omega = _modal_form(a, b)
+        self.frequencies, self.duration = omega[1:], duration
+        self.n_dof = a.shape[0] // 2
+        self.target = t_z @ (np.eye(a.shape[0])[0] * angle)
+        gramian = _gramian(self.a_z, self.b_z, duration)
+        self.rows = [self._rows(j) for j in range(self.n_dof)]
+        self.continuous = np.array([self.target[r] @ np.linalg.solve(
+            gramian[np.ix_(r, r)], self.target[r]) for r in self.rows])
+
+    def _rows(self, honoured: int) -> np.ndarray:
+        """Modal states of the rigid-body mode and the first ``honoured`` modes."""
+        keep = np.arange(honoured + 1)
+        return np.concatenate((keep, self.n_dof + keep))
+
+    def excess(self, n_intervals: int, honoured: int | None = None) -> np.ndarray:
+        """Excess of the holds' least effort for 0 .. N honoured modes (or for ``honoured``
+        modes only, shape (1,))."""
+        g = _hold_map(self.a_z, self.b_z, self.duration, n_intervals)
+        h = self.duration / n_intervals
+        counts = range(self.n_dof) if honoured is None else [honoured]
+        excess = np.empty(len(counts))
+        for i, count in enumerate(counts):
+            rows = self.rows[count]
+            z, gj = self.target[rows], g[rows]
+            u, *_ = np.linalg.lstsq(gj, z, rcond=None)
+            miss = np.linalg.norm(gj @ u - z) / np.linalg.norm(z)
+            excess[i] = np.inf if miss > 1e-6 else h * (u @ u) / self.continuous[count] - 1.0
+        return excess
+
+
+def hold_effort_excess(model, duration: float, n_intervals: int,
+                       angle: float = 1.0) -> HoldEffort:
+    """Excess effort of ``n_intervals`` torque holds over a continuous torque, per mode.
+
+    The least-effort rest-to-rest slew of ``model``'s linearisation at rest, without the
+    torque bound; a few milliseconds for 8 modes and 200 holds.
+
+    Examples
+    --------
+    >>> import flexctl
+    >>> model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=4)
+    >>> effort = hold_effort_excess(model, 2.0, 40)      # mode 4: 134.6 rad/s, h = 0.05 s
+    >>> effort.culprit(HOLD_EFFORT_TOLERANCE), bool(effort.worst > 0.04)
+    (4, True)
+    >>> bool(hold_effort_excess(model, 2.0, 60).worst < HOLD_EFFORT_TOLERANCE)
+    True
+    """
+    slew = _Slew(model, duration, angle)
+    return HoldEffort(n_intervals, slew.excess(n_intervals), slew.frequencies)
+
+
+def _linearisation_model(model):
+    """A model with ``model``'s linearisation at rest that is cheap to build: the exact
+    variant's equals first_order's there, and building its geometry takes seconds."""
+    if model.variant != "exact":
+        return model
+    from flexctl.model import build_model
+
+    return build_model(model.system, n_modes=model.n_modes, variant="first_order")
+
+
+def check_holds(model, duration: float, n_intervals: int, angle: float = 1.0) -> None:
+    """Refuse holds too coarse for the design modes of ``model``.
+
+    Raises
+    ------
+    ValueError
+        If the least effort of ``n_intervals`` holds over ``duration`` s exceeds the converged
+        effort by more than :data:`HOLD_EFFORT_TOLERANCE`, or the holds cannot stop a mode:
+        names the mode, its alias, the next interval count that passes and the most design
+        modes that pass at this count.
+
+    Examples
+    --------
+    >>> import flexctl
+    >>> model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=4)
+    >>> check_holds(model, 2.0, 40, 1.57)
+    Traceback (most recent call last):
+    ...
+    ValueError: n_intervals = 40 is too coarse for 4 design modes: holds of 0.05 s see design \
+mode 4 (134.6 rad/s) at its alias 8.92 rad/s, and stopping it costs 5.15 % more effort than \
+the converged slew (limit 1 %); use n_intervals = 45 or at most 3 design modes \
+(model.design_modes)
+    """
+    slew = _Slew(_linearisation_model(model), duration, angle)
+    tol = HOLD_EFFORT_TOLERANCE
+    effort = HoldEffort(n_intervals, slew.excess(n_intervals), slew.frequencies)
+    if effort.worst <= tol:
+        return
+    if effort.excess[0] > tol:
+        why = (f"{n_intervals} holds shape even the rigid-body slew with "
+               f"{100 * effort.excess[0]:.3g} % more effort than a continuous torque")
+    else:
+        why = _aliasing_reason(effort, effort.culprit(tol), duration / n_intervals)
+    remedies = []
+    better = _next_interval_count(slew, n_intervals)
+    if better is not None:
+        remedies.append(f"n_intervals = {better}")
+    if effort.modes_within(tol) >= 1:
+        remedies.append(f"at most {effort.modes_within(tol)} design modes "
+                        "(model.design_modes)")
+    modes = f"{model.n_modes} design mode{'s' if model.n_modes > 1 else ''}"
+    raise ValueError(f"n_intervals = {n_intervals} is too coarse for {modes}: {why}; use "
+                     f"{' or '.join(remedies) or 'more n_intervals'}")
+
+
+def _aliasing_reason(effort: HoldEffort, culprit: int, h: float) -> str:
+    omega = effort.frequencies[culprit - 1]
+    if math.isinf(effort.excess[culprit]):
+        return f"holds of {h:.3g} s cannot stop design mode {culprit} ({omega:.4g} rad/s)"
+    alias = abs(omega - 2 * math.pi / h * round(omega * h / (2 * math.pi)))
+    total = "" if culprit == effort.excess.size - 1 else \
+        f", and stopping all {effort.excess.size - 1} modes {100 * effort.worst:.3g} %"
+    return (f"holds of {h:.3g} s see design mode {culprit} ({omega:.4g} rad/s) at its alias "
+            f"{alias:.3g} rad/s, and stopping it costs {100 * effort.excess[culprit]:.3g} % "
+            f"more effort than the converged slew{total} (limit "
+            f"{100 * HOLD_EFFORT_TOLERANCE:g} %)")
+
+
+def _next_interval_count(slew: _Slew, n_intervals: int):
+    """The smallest count above ``n_intervals`` whose holds pass, searched up to twice the
+    count that puts every design mode below the hold Nyquist frequency ``pi / h``, or twice
+    the count asked for when that is more."""
+    nyquist = math.ceil(slew.frequencies[-1] * slew.duration / math.pi)
+    everything = slew.n_dof - 1
+    for count in range(n_intervals + 1, 2 * max(nyquist, n_intervals, 10) + 1):
+        if slew.excess(count, everything)[-1] <= HOLD_EFFORT_TOLERANCE:
+            return count
+    return None

@@ -1,0 +1,290 @@
+"""The discretisation and NLP of a slew for CasADi Opti (see :mod:`controllers.trajopt`).
+
+:func:`discretisation` chooses how each torque hold is integrated (RK4 substeps, CVODES, or
+collocation elements) from the design model's fastest mode; :func:`transcribe` builds the
+problem that :func:`controllers.solve_slew` hands to IPOPT, in the variable and constraint
+order of the :mod:`controllers.trajopt` Notes, from a
+:class:`~controllers.trajopt.SlewProblem`, a :class:`Discretisation` and a guess. The
+dynamics enter as CasADi ``Function`` objects mapped over the holds or collocation points.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .hold_grid import MAX_SUBSTEPS, fastest_frequency, steps_per_hold
+
+__all__ = ["Discretisation", "discretisation", "transcription_for", "rk4_substeps",
+           "refuse_costly_exact", "Transcribed", "transcribe", "set_initial", "state_scale"]
+
+#: Lower bound on the free final time, as a fraction of the rigid-body minimum time (kept
+#: below 1 so that the physical bound is found by the optimiser, not imposed on it).
+MIN_TIME_FLOOR = 0.5
+
+
+#: Largest work per IPOPT iteration for the exact variant's dynamics, in dynamics evaluations
+#: (collocation points or RK4 stages) times the cube of the state count, which the cost of
+#: their derivatives follows: 3.5e6 is about two minutes of solving on the 2-core machine of
+#: ``benchmarks/bench_trajopt.py`` (slew-90 on 4 exact modes and 60 holds: 9e5, 33 s).
+MAX_EXACT_WORK = 3.5e6
+#: A free duration is discretised for this many rigid-body minimum times first (minimum-time
+#: slews of flexible bodies end a little above 1); a longer optimum is solved again with the
+#: steps of its own duration.
+TIME_SIZING = 1.5
+
+
+def transcription_for(problem, model) -> str:
+    """The problem's transcription, or the design model's default when it names none."""
+    if problem.transcription is not None:
+        return problem.transcription
+    return "collocation" if model.variant == "exact" else "multiple_shooting"
+
+
+def rk4_substeps(model, hold: float, duration: float | None = None) -> int:
+    """RK4 substeps per hold of ``hold`` seconds for the fastest mode of ``model``.
+
+    As many as integrate that mode over ``duration`` (s; default one hold) within
+    :data:`~controllers.hold_grid.PHASE_TOLERANCE` of its amplitude
+    (:func:`controllers.hold_grid.steps_per_hold`).
+
+    Raises
+    ------
+    ValueError
+        If more than :data:`MAX_SUBSTEPS` would be needed, naming the settings to change.
+    """
+    omega_max = fastest_frequency(model)
+    substeps = steps_per_hold("rk4", omega_max, hold, duration or hold)
+    if substeps > MAX_SUBSTEPS:
+        raise ValueError(
+            f"the fastest of the {model.n_modes} design modes ({omega_max:.4g} rad/s) needs "
+            f"{substeps} RK4 substeps per {hold:.4g} s hold (more than {MAX_SUBSTEPS}): use "
+            f"at least {math.ceil(substeps / MAX_SUBSTEPS)} times as many n_intervals, "
+            "fewer design modes, or transcription 'collocation'")
+    return substeps
+
+
+@dataclass(frozen=True)
+class Discretisation:
+    """How each hold of a slew is integrated (see :func:`slew_discretisation`).
+
+    Attributes
+    ----------
+    transcription : {"multiple_shooting", "collocation"}
+    method : {"rk4", "cvodes", "radau", "legendre"}
+        Integrator (multiple shooting) or collocation points.
+    steps_per_hold : int
+        RK4 substeps or collocation elements per hold (1 for CVODES, which chooses its own).
+    sized_for : float
+        Duration, s, the steps were chosen for: the fixed duration, or for a free one the
+        longest it may take (RK4, which must stay stable) or the expected one (collocation).
+    """
+
+    transcription: str
+    method: str
+    steps_per_hold: int
+    sized_for: float
+
+
+def discretisation(problem, model, t_rigid: float, longest: float,
+                   duration: float | None = None) -> Discretisation:
+    """:func:`controllers.trajopt.slew_discretisation`, given the rigid-body minimum time and
+    the longest free duration (s)."""
+    transcription = transcription_for(problem, model)
+    if transcription == "collocation":
+        sized = problem.duration or duration or min(TIME_SIZING * t_rigid, longest)
+        method = problem.collocation_scheme
+    else:
+        sized = problem.duration or longest
+        method = problem.integrator
+    if method == "cvodes":
+        return Discretisation(transcription, "cvodes", 1, sized)
+    if method == "rk4" and problem.substeps is not None:
+        return Discretisation(transcription, "rk4", problem.substeps, sized)
+    if method == "rk4":
+        steps = rk4_substeps(model, sized / problem.n_intervals, sized)
+    else:
+        steps = steps_per_hold(method, fastest_frequency(model), sized / problem.n_intervals,
+                               sized, problem.degree)
+    return Discretisation(transcription, method, steps, sized)
+
+
+def _exact_work(problem, method: str, steps: int, n_states: int) -> float:
+    """Dynamics evaluations per iteration times ``n_states ** 3`` (see MAX_EXACT_WORK)."""
+    per_step = 4 if method == "rk4" else problem.degree
+    return per_step * steps * problem.n_intervals * n_states ** 3
+
+
+def refuse_costly_exact(model, problem, disc: Discretisation) -> None:
+    """Refuse an exact design model whose derivatives would take more than
+    :data:`MAX_EXACT_WORK` per iteration, naming the design-mode count that fits."""
+    if model.variant != "exact" or disc.method == "cvodes":
+        return
+    work = _exact_work(problem, disc.method, disc.steps_per_hold, model.n_states)
+    if work <= MAX_EXACT_WORK:
+        return
+    omega, hold = model.natural_frequencies(0.0, hub="free"), disc.sized_for / problem.n_intervals
+    fewer = [n for n in range(1, model.n_modes) if _exact_work(
+        problem, disc.method, steps_per_hold(disc.method, omega[n - 1], hold, disc.sized_for,
+                                             problem.degree), 2 * n + 2) <= MAX_EXACT_WORK]
+    per_hold = (4 if disc.method == "rk4" else problem.degree) * disc.steps_per_hold
+    remedy = f"at most {fewer[-1]} design modes (model.design_modes) or " if fewer else ""
+    raise ValueError(
+        f"the exact design model's {model.n_modes} modes need {per_hold} dynamics evaluations "
+        f"per {hold:.3g} s hold ({disc.method}, to integrate mode {model.n_modes} at "
+        f"{omega[-1]:.4g} rad/s over {disc.sized_for:.3g} s), {per_hold * problem.n_intervals}"
+        f" in all: their derivatives would take {work / MAX_EXACT_WORK:.2g} times the work "
+        f"allowed per iteration (MAX_EXACT_WORK, minutes of solving); use {remedy}"
+        "model.design_variant 'first_order' (small deflection, solved in seconds)")
+
+
+def _rk4_step(f, n: int, substeps: int, symbol=None):
+    import casadi as ca
+
+    symbol = symbol or ca.SX
+    x, u, h = symbol.sym("x", n), symbol.sym("u"), symbol.sym("h")
+    xk, dt = x, h / substeps
+    for _ in range(substeps):
+        k1 = f(xk, u)
+        k2 = f(xk + 0.5 * dt * k1, u)
+        k3 = f(xk + 0.5 * dt * k2, u)
+        k4 = f(xk + dt * k3, u)
+        xk = xk + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return ca.Function("rk4_hold", [x, u, h], [xk], ["x", "u", "h"], ["xf"])
+
+
+def _cvodes_step(f, n: int):
+    import casadi as ca
+
+    x, p = ca.SX.sym("x", n), ca.SX.sym("p", 2)          # p = [u, h]; time scaled to [0, 1]
+    dae = {"x": x, "p": p, "ode": p[1] * f(x, p[0])}
+    F = ca.integrator("cvodes_hold", "cvodes", dae, 0.0, 1.0,
+                      {"abstol": 1e-10, "reltol": 1e-10})
+    xs, us, hs = ca.MX.sym("x", n), ca.MX.sym("u"), ca.MX.sym("h")
+    xf = F(x0=xs, p=ca.vertcat(us, hs))["xf"]
+    return ca.Function("cvodes_hold", [xs, us, hs], [xf], ["x", "u", "h"], ["xf"])
+
+
+def _collocation_constraints(f, grid, Xc, held, h_element, scheme: str, degree: int):
+    """Defects ``(n, d M)`` and element end states ``(n, M)`` of ``M`` collocation elements.
+
+    ``Z_j C - h f(Xc_j)`` and ``Z_j D`` for every element at once: the linear parts as sparse
+    matrix products, the dynamics as one map over the ``d M`` points, so that CasADi
+    differentiates ``f`` point by point (``n + 1`` inputs) rather than whole elements.
+    """
+    import casadi as ca
+    import scipy.sparse
+
+    C, D, _ = (np.asarray(ca.DM(c)) for c in ca.collocation_coeff(
+        ca.collocation_points(degree, scheme)))
+    elements = held.shape[1]
+
+    def blocks(matrix):                     # the same (rows, cols) block for every element
+        return ca.DM(scipy.sparse.kron(scipy.sparse.eye(elements), matrix, format="csc"))
+
+    left = grid[:, :-1]
+    points = ca.repmat(held, degree, 1)     # (d, M): each element's torque at its d points
+    dynamics = f.map(degree * elements)(Xc, ca.reshape(points, 1, degree * elements))
+    defect = (ca.mtimes(left, blocks(C[:1, :])) + ca.mtimes(Xc, blocks(C[1:, :]))
+              - h_element * dynamics)
+    end = ca.mtimes(left, blocks(D[:1, :])) + ca.mtimes(Xc, blocks(D[1:, :]))
+    return defect, end
+
+
+def state_scale(model, problem, duration: float) -> np.ndarray:
+    """Physical size of each state: angle, mean rate, quasi-static modal deflections."""
+    mat = model.matrices
+    w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
+    q = np.abs(mat.m_tf) * problem.torque_bound / mat.J0 / np.diag(mat.K_ff)
+    q = np.maximum(q, 1e-6 * model.system.beam.length)
+    return np.concatenate(([abs(problem.angle)], q, [abs(problem.angle) / duration], q * w))
+
+
+@dataclass(frozen=True)
+class Transcribed:
+    """The Opti problem of a slew and the expressions of its results."""
+
+    opti: object
+    X: object             # states at the hold boundaries (n, K+1)
+    U: object             # holds (1, K)
+    T: object             # duration: a variable (free time) or the fixed number
+
+
+def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float) -> Transcribed:
+    """Variables, constraints and objective in the order of the module Notes."""
+    import casadi as ca
+
+    (t_guess, x_guess, u_guess) = guess
+    n, N, K = model.n_states, model.n_modes, problem.n_intervals
+    umax, target = problem.torque_bound, problem.target_state(n)
+    free_time = problem.objective == "time"
+    scale = ca.DM(state_scale(model, problem, problem.duration or t_guess))
+    collocation = disc.transcription == "collocation"
+    m, d = (disc.steps_per_hold, problem.degree) if collocation else (1, 0)
+    f = model.casadi()
+
+    opti = ca.Opti()
+    grid = opti.variable(n, m * K + 1)                 # X, or the element boundaries
+    Xc = opti.variable(n, d * m * K) if collocation else None
+    U = opti.variable(1, K)
+    T = opti.variable() if free_time else problem.duration
+    X = grid[:, ::m] if m > 1 else grid
+    h = T / K
+    opti.set_linear_scale(grid, ca.repmat(scale, 1, m * K + 1))
+    opti.set_linear_scale(U, umax)
+
+    opti.subject_to(grid[:, 0] == 0, scale)
+    if not collocation:
+        if disc.method == "rk4":
+            # the exact dynamics are large: calling them (MX) rather than inlining them (SX)
+            # lets CasADi differentiate them once instead of once per substep
+            step = _rk4_step(f, n, disc.steps_per_hold,
+                             ca.MX if model.variant == "exact" else ca.SX)
+        else:
+            step = _cvodes_step(f, n)
+        opti.subject_to(X[:, 1:] == step.map(K)(X[:, :-1], U, h), ca.repmat(scale, 1, K))
+    else:
+        opti.set_linear_scale(Xc, ca.repmat(scale, 1, d * m * K))
+        held = ca.reshape(ca.repmat(U, m, 1), 1, m * K)     # each hold on its m elements
+        defect, x_end = _collocation_constraints(f, grid, Xc, held, h / m,
+                                                 problem.collocation_scheme, d)
+        opti.subject_to(defect == 0, ca.repmat(scale, 1, d * m * K))
+        opti.subject_to(grid[:, 1:] == x_end, ca.repmat(scale, 1, m * K))
+    opti.subject_to(X[:, K] == target, scale)
+    opti.subject_to(opti.bounded(-umax, U, umax))
+    if problem.torque_rate_bound is not None:
+        jumps = ca.diff(ca.horzcat(0, U, 0), 1, 1)
+        lim = problem.torque_rate_bound * h
+        opti.subject_to(opti.bounded(-lim, jumps, lim), umax)
+    if problem.tip_bound is not None:
+        tip, ymax = ca.DM(model.matrices.tip).T, problem.tip_bound
+        opti.subject_to(opti.bounded(-ymax, ca.mtimes(tip, grid[1:N + 1, 1:m * K]), ymax),
+                        ymax)
+        if collocation:
+            opti.subject_to(opti.bounded(-ymax, ca.mtimes(tip, Xc[1:N + 1, :]), ymax), ymax)
+    if free_time:
+        opti.subject_to(opti.bounded(MIN_TIME_FLOOR * t_rigid, T, t_max))
+        opti.set_initial(T, min(max(t_guess, MIN_TIME_FLOOR * t_rigid), t_max))
+        opti.minimize(T)
+    else:
+        opti.minimize(h * ca.sumsqr(U) / (umax ** 2 * problem.duration))
+
+    set_initial(opti, grid, Xc, problem, m, x_guess)
+    opti.set_initial(U, u_guess.reshape(1, K))
+    return Transcribed(opti, X, U, T)
+
+
+def set_initial(opti, grid, Xc, problem, m: int, x_guess: np.ndarray):
+    """The guess, given at the hold boundaries, interpolated to the elements and points."""
+    import casadi as ca
+
+    K = problem.n_intervals
+    s_guess = np.linspace(0.0, 1.0, K + 1)
+    s_grid = np.linspace(0.0, 1.0, m * K + 1)
+    opti.set_initial(grid, np.vstack([np.interp(s_grid, s_guess, row) for row in x_guess]))
+    if Xc is not None:
+        tau = np.asarray(ca.collocation_points(problem.degree, problem.collocation_scheme))
+        sc = ((np.arange(m * K)[:, None] + tau[None, :]) / (m * K)).ravel()
+        opti.set_initial(Xc, np.vstack([np.interp(sc, s_guess, row) for row in x_guess]))
