@@ -92,7 +92,8 @@ def as_vector(name: str, value, what: str) -> np.ndarray:
 def output_grid(t_final: float, step: float) -> np.ndarray:
     """Output times ``0, step, 2 step, ... , t_final``, s; refused before allocating when
     there would be more than :data:`MAX_OUTPUT_SAMPLES`."""
-    n_samples = t_final / step + 1.0
+    with np.errstate(divide="ignore", over="ignore"):
+        n_samples = np.float64(t_final) / np.float64(step) + 1.0 if step > 0.0 else np.inf
     if not n_samples <= MAX_OUTPUT_SAMPLES:     # inf for a subnormal step
         raise InputValueError(
             f"output_step {step:g} s over t_final {t_final:g} s asks for {n_samples:.3g} "

@@ -577,6 +577,9 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     if method == "auto":
         method = "cvodes" if symbolic else "DOP853"
     step = output_step if output_step is not None else t_final / DEFAULT_OUTPUT_POINTS
+    if not step > 0.0:      # a subnormal t_final: its two-thousandth part is zero
+        raise InputValueError(f"t_final {t_final!r} s is too short to sample; give at least "
+                              "1e-300 s")
     grid = output_grid(t_final, step)
     hub = "clamped" if hub_motion is not None else "free"
     omega_slow = float(model.natural_frequencies(0.0, hub=hub)[0])
