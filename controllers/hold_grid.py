@@ -42,8 +42,8 @@ import numpy as np
 import scipy.linalg
 
 __all__ = ["PHASE_TOLERANCE", "MAX_SUBSTEPS", "HOLD_EFFORT_TOLERANCE", "step_error",
-           "steps_per_hold", "fastest_frequency", "HoldEffort", "hold_effort_excess",
-           "check_holds"]
+           "steps_per_hold", "largest_step", "fastest_frequency", "HoldEffort", "HoldGrid",
+           "hold_effort_excess"]
 
 #: Error that integrating the fastest design mode over the whole slew may leave, relative to
 #: that mode's amplitude. Measured on slew-90 (``benchmarks/bench_trajopt.py``): a mode
@@ -130,16 +130,30 @@ def steps_per_hold(scheme: str, omega_max: float, hold: float, duration: float,
     >>> steps_per_hold("radau", 100.0, 0.05, 2.0), steps_per_hold("legendre", 100.0, 0.05, 2.0)
     (5, 3)
     """
-    if scheme not in SCHEMES:
-        raise ValueError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}; "
-                         f"got {scheme!r}")
     angle = omega_max * hold                       # rad of the fastest mode per hold
     if angle <= 0.0:
         return 1
-    per_radian = PHASE_TOLERANCE / (omega_max * max(duration, hold))
-    return max(1, math.ceil(angle / _largest_step(scheme, degree, per_radian)))
+    return max(1, math.ceil(angle / largest_step(scheme, omega_max, max(duration, hold),
+                                                 degree)))
 
 
+def largest_step(scheme: str, omega_max: float, duration: float, degree: int = 3) -> float:
+    """Largest ``omega_max dt`` of one step that integrates ``omega_max`` over ``duration``
+    within :data:`PHASE_TOLERANCE`; ``omega_max duration`` divided by it is the fewest steps a
+    slew can take.
+
+    Examples
+    --------
+    >>> round(largest_step("rk4", 100.0, 2.0), 3)       # (omega dt)^4 / 120 = 0.05 / 200
+    0.416
+    """
+    if scheme not in SCHEMES:
+        raise ValueError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}; "
+                         f"got {scheme!r}")
+    return _largest_step(scheme, degree, PHASE_TOLERANCE / (omega_max * duration))
+
+
+@functools.lru_cache(maxsize=1024)
 def _largest_step(scheme: str, degree: int, per_radian: float) -> float:
     """Largest ``omega dt`` whose error per radian is within ``per_radian`` (bisection: the
     error per radian grows with the step)."""
@@ -233,12 +247,25 @@ def _gramian(a_z: np.ndarray, b_z: np.ndarray, duration: float) -> np.ndarray:
     return e[n:, n:].T @ e[:n, n:]
 
 
-class _Slew:
-    """A rest-to-rest slew of a model's linearisation at rest, in scaled modal coordinates,
-    with its continuous least effort per honoured-mode count (computed once)."""
+class HoldGrid:
+    """Torque holds over one rest-to-rest slew of a model's linearisation at rest.
 
-    def __init__(self, model, duration: float, angle: float):
-        a, b = model.linear_matrices(0.0)
+    Built once per model, duration and angle (the modal form and the continuous least
+    efforts, about 10 ms); :meth:`effort` and :meth:`reason` then cost a few milliseconds per
+    interval count. The exact variant is analysed on its first_order twin, which has the same
+    linearisation at rest and builds in milliseconds.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+    duration : float
+        Slew duration ``T``, s.
+    angle : float, optional
+        Slew angle, rad (the excess does not depend on it).
+    """
+
+    def __init__(self, model, duration: float, angle: float = 1.0):
+        a, b = _linearisation_model(model).linear_matrices(0.0)
         self.a_z, self.b_z, t_z, omega = _modal_form(a, b)
         self.frequencies, self.duration = omega[1:], duration
         self.n_dof = a.shape[0] // 2
@@ -268,13 +295,43 @@ class _Slew:
             excess[i] = np.inf if miss > 1e-6 else h * (u @ u) / self.continuous[count] - 1.0
         return excess
 
+    def effort(self, n_intervals: int) -> HoldEffort:
+        """The excess of ``n_intervals`` holds for every honoured-mode count."""
+        return HoldEffort(n_intervals, self.excess(n_intervals), self.frequencies)
+
+    def passes(self, n_intervals: int) -> bool:
+        """Whether ``n_intervals`` holds keep the excess within :data:`HOLD_EFFORT_TOLERANCE`."""
+        return bool(self.excess(n_intervals, self.n_dof - 1)[0] <= HOLD_EFFORT_TOLERANCE)
+
+    def reason(self, n_intervals: int) -> str | None:
+        """Why ``n_intervals`` holds are too coarse for the design modes, or None.
+
+        Examples
+        --------
+        >>> import flexctl
+        >>> model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=4)
+        >>> print(HoldGrid(model, 2.0).reason(40))
+        holds of 0.05 s see design mode 4 (134.6 rad/s) at its alias 8.92 rad/s, and stopping \
+it costs 5.15 % more effort than the converged slew (limit 1 %)
+        >>> HoldGrid(model, 2.0).reason(60) is None
+        True
+        """
+        effort = self.effort(n_intervals)
+        if effort.worst <= HOLD_EFFORT_TOLERANCE:
+            return None
+        if effort.excess[0] > HOLD_EFFORT_TOLERANCE:
+            return (f"{n_intervals} holds shape even the rigid-body slew with "
+                    f"{100 * effort.excess[0]:.3g} % more effort than a continuous torque")
+        return _aliasing_reason(effort, effort.culprit(HOLD_EFFORT_TOLERANCE),
+                                self.duration / n_intervals)
+
 
 def hold_effort_excess(model, duration: float, n_intervals: int,
                        angle: float = 1.0) -> HoldEffort:
     """Excess effort of ``n_intervals`` torque holds over a continuous torque, per mode.
 
     The least-effort rest-to-rest slew of ``model``'s linearisation at rest, without the
-    torque bound; a few milliseconds for 8 modes and 200 holds.
+    torque bound (:class:`HoldGrid`).
 
     Examples
     --------
@@ -286,8 +343,7 @@ def hold_effort_excess(model, duration: float, n_intervals: int,
     >>> bool(hold_effort_excess(model, 2.0, 60).worst < HOLD_EFFORT_TOLERANCE)
     True
     """
-    slew = _Slew(model, duration, angle)
-    return HoldEffort(n_intervals, slew.excess(n_intervals), slew.frequencies)
+    return HoldGrid(model, duration, angle).effort(n_intervals)
 
 
 def _linearisation_model(model):
@@ -298,51 +354,6 @@ def _linearisation_model(model):
     from flexctl.model import build_model
 
     return build_model(model.system, n_modes=model.n_modes, variant="first_order")
-
-
-def check_holds(model, duration: float, n_intervals: int, angle: float = 1.0) -> None:
-    """Refuse holds too coarse for the design modes of ``model``.
-
-    Raises
-    ------
-    ValueError
-        If the least effort of ``n_intervals`` holds over ``duration`` s exceeds the converged
-        effort by more than :data:`HOLD_EFFORT_TOLERANCE`, or the holds cannot stop a mode:
-        names the mode, its alias, the next interval count that passes and the most design
-        modes that pass at this count.
-
-    Examples
-    --------
-    >>> import flexctl
-    >>> model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=4)
-    >>> check_holds(model, 2.0, 40, 1.57)
-    Traceback (most recent call last):
-    ...
-    ValueError: n_intervals = 40 is too coarse for 4 design modes: holds of 0.05 s see design \
-mode 4 (134.6 rad/s) at its alias 8.92 rad/s, and stopping it costs 5.15 % more effort than \
-the converged slew (limit 1 %); use n_intervals = 45 or at most 3 design modes \
-(model.design_modes)
-    """
-    slew = _Slew(_linearisation_model(model), duration, angle)
-    tol = HOLD_EFFORT_TOLERANCE
-    effort = HoldEffort(n_intervals, slew.excess(n_intervals), slew.frequencies)
-    if effort.worst <= tol:
-        return
-    if effort.excess[0] > tol:
-        why = (f"{n_intervals} holds shape even the rigid-body slew with "
-               f"{100 * effort.excess[0]:.3g} % more effort than a continuous torque")
-    else:
-        why = _aliasing_reason(effort, effort.culprit(tol), duration / n_intervals)
-    remedies = []
-    better = _next_interval_count(slew, n_intervals)
-    if better is not None:
-        remedies.append(f"n_intervals = {better}")
-    if effort.modes_within(tol) >= 1:
-        remedies.append(f"at most {effort.modes_within(tol)} design modes "
-                        "(model.design_modes)")
-    modes = f"{model.n_modes} design mode{'s' if model.n_modes > 1 else ''}"
-    raise ValueError(f"n_intervals = {n_intervals} is too coarse for {modes}: {why}; use "
-                     f"{' or '.join(remedies) or 'more n_intervals'}")
 
 
 def _aliasing_reason(effort: HoldEffort, culprit: int, h: float) -> str:
@@ -356,15 +367,3 @@ def _aliasing_reason(effort: HoldEffort, culprit: int, h: float) -> str:
             f"{alias:.3g} rad/s, and stopping it costs {100 * effort.excess[culprit]:.3g} % "
             f"more effort than the converged slew{total} (limit "
             f"{100 * HOLD_EFFORT_TOLERANCE:g} %)")
-
-
-def _next_interval_count(slew: _Slew, n_intervals: int):
-    """The smallest count above ``n_intervals`` whose holds pass, searched up to twice the
-    count that puts every design mode below the hold Nyquist frequency ``pi / h``, or twice
-    the count asked for when that is more."""
-    nyquist = math.ceil(slew.frequencies[-1] * slew.duration / math.pi)
-    everything = slew.n_dof - 1
-    for count in range(n_intervals + 1, 2 * max(nyquist, n_intervals, 10) + 1):
-        if slew.excess(count, everything)[-1] <= HOLD_EFFORT_TOLERANCE:
-            return count
-    return None

@@ -18,18 +18,13 @@ import numpy as np
 from .hold_grid import MAX_SUBSTEPS, fastest_frequency, steps_per_hold
 
 __all__ = ["Discretisation", "discretisation", "transcription_for", "rk4_substeps",
-           "refuse_costly_exact", "Transcribed", "transcribe", "set_initial", "state_scale"]
+           "Transcribed", "transcribe", "set_initial", "state_scale"]
 
 #: Lower bound on the free final time, as a fraction of the rigid-body minimum time (kept
 #: below 1 so that the physical bound is found by the optimiser, not imposed on it).
 MIN_TIME_FLOOR = 0.5
 
 
-#: Largest work per IPOPT iteration for the exact variant's dynamics, in dynamics evaluations
-#: (collocation points or RK4 stages) times the cube of the state count, which the cost of
-#: their derivatives follows: 3.5e6 is about two minutes of solving on the 2-core machine of
-#: ``benchmarks/bench_trajopt.py`` (slew-90 on 4 exact modes and 60 holds: 9e5, 33 s).
-MAX_EXACT_WORK = 3.5e6
 #: A free duration is discretised for this many rigid-body minimum times first (minimum-time
 #: slews of flexible bodies end a little above 1); a longer optimum is solved again with the
 #: steps of its own duration.
@@ -109,35 +104,6 @@ def discretisation(problem, model, t_rigid: float, longest: float,
         steps = steps_per_hold(method, fastest_frequency(model), sized / problem.n_intervals,
                                sized, problem.degree)
     return Discretisation(transcription, method, steps, sized)
-
-
-def _exact_work(problem, method: str, steps: int, n_states: int) -> float:
-    """Dynamics evaluations per iteration times ``n_states ** 3`` (see MAX_EXACT_WORK)."""
-    per_step = 4 if method == "rk4" else problem.degree
-    return per_step * steps * problem.n_intervals * n_states ** 3
-
-
-def refuse_costly_exact(model, problem, disc: Discretisation) -> None:
-    """Refuse an exact design model whose derivatives would take more than
-    :data:`MAX_EXACT_WORK` per iteration, naming the design-mode count that fits."""
-    if model.variant != "exact" or disc.method == "cvodes":
-        return
-    work = _exact_work(problem, disc.method, disc.steps_per_hold, model.n_states)
-    if work <= MAX_EXACT_WORK:
-        return
-    omega, hold = model.natural_frequencies(0.0, hub="free"), disc.sized_for / problem.n_intervals
-    fewer = [n for n in range(1, model.n_modes) if _exact_work(
-        problem, disc.method, steps_per_hold(disc.method, omega[n - 1], hold, disc.sized_for,
-                                             problem.degree), 2 * n + 2) <= MAX_EXACT_WORK]
-    per_hold = (4 if disc.method == "rk4" else problem.degree) * disc.steps_per_hold
-    remedy = f"at most {fewer[-1]} design modes (model.design_modes) or " if fewer else ""
-    raise ValueError(
-        f"the exact design model's {model.n_modes} modes need {per_hold} dynamics evaluations "
-        f"per {hold:.3g} s hold ({disc.method}, to integrate mode {model.n_modes} at "
-        f"{omega[-1]:.4g} rad/s over {disc.sized_for:.3g} s), {per_hold * problem.n_intervals}"
-        f" in all: their derivatives would take {work / MAX_EXACT_WORK:.2g} times the work "
-        f"allowed per iteration (MAX_EXACT_WORK, minutes of solving); use {remedy}"
-        "model.design_variant 'first_order' (small deflection, solved in seconds)")
 
 
 def _rk4_step(f, n: int, substeps: int, symbol=None):

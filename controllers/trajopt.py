@@ -59,9 +59,9 @@ import numpy as np
 
 from flexctl.model import Model
 
-from .hold_grid import check_holds
-from .slew_nlp import (Discretisation, Transcribed, discretisation, refuse_costly_exact,
-                       rk4_substeps, transcribe, transcription_for)
+from .slew_checks import refuse_unsolvable
+from .slew_nlp import (Discretisation, Transcribed, discretisation, rk4_substeps, transcribe,
+                       transcription_for)
 
 __all__ = ["SlewProblem", "SlewSolution", "TrajectoryOptimizationError", "HoldTorque",
            "Discretisation", "solve_slew", "rigid_minimum_time", "rk4_substeps",
@@ -427,8 +427,7 @@ def _refuse_before_solving(model: Model, problem: SlewProblem) -> None:
             "no torque within the bound can complete the slew: lengthen maneuver.duration or "
             "raise maneuver.torque_bound (found before the optimiser ran)",
             "Infeasible_Duration", 0)
-    if problem.duration is not None:
-        check_holds(model, problem.duration, problem.n_intervals, problem.angle)
+    refuse_unsolvable(model, problem, *_time_bounds(model, problem))
 
 
 _FEASIBILITY = ("lengthen maneuver.duration, raise maneuver.torque_bound, or loosen tip_bound "
@@ -529,7 +528,7 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
     converged (continuous-torque) effort by more than
     :data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` (:mod:`controllers.hold_grid`); or
     an exact design model whose derivatives would take minutes
-    (:data:`~controllers.slew_nlp.MAX_EXACT_WORK`). Each hold is integrated with the steps the
+    (:data:`~controllers.slew_checks.MAX_EXACT_WORK`). Each hold is integrated with the steps the
     fastest design mode needs (:func:`slew_discretisation`).
 
     Parameters
@@ -578,7 +577,6 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
                          f"{type(ipopt_options).__name__}")
     _refuse_before_solving(model, problem)
     disc = slew_discretisation(problem, model)
-    refuse_costly_exact(model, problem, disc)
     guess = _guess(model, problem, initial_guess)
     start = time.perf_counter()
     nlp = transcribe(model, problem, disc, guess, *_time_bounds(model, problem))

@@ -1,0 +1,171 @@
+"""What :func:`controllers.solve_slew` refuses before IPOPT runs, and the settings that pass.
+
+A slew whose holds cannot reach its true optimum, or whose solve would take minutes, is refused
+in well under a second with a ``ValueError`` that gives the reason and the settings that would
+pass *every* check: the next interval count (``n_intervals``), the most design modes
+(``model.design_modes``), and for the exact variant the first_order design variant.
+
+- **Aliasing** (fixed duration): holds whose least effort exceeds the converged one by more
+  than :data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` (:class:`~.hold_grid.HoldGrid`).
+- **Work** (exact variant): the exact dynamics' derivatives cost about ``n_states ** 3`` per
+  evaluation; more than :data:`MAX_EXACT_WORK` per IPOPT iteration is minutes of solving.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+
+from .hold_grid import HoldGrid, largest_step
+from .slew_nlp import Discretisation, discretisation
+
+__all__ = ["MAX_EXACT_WORK", "exact_work", "refuse_unsolvable"]
+
+#: Largest work per IPOPT iteration for the exact variant's dynamics, in dynamics evaluations
+#: (collocation points or RK4 stages) times the cube of the state count, which the cost of
+#: their derivatives follows: 3.5e6 is about two minutes of solving on the 2-core machine of
+#: ``benchmarks/bench_trajopt.py`` (slew-90 on 4 exact modes and 60 holds: 9e5, 33 s).
+MAX_EXACT_WORK = 3.5e6
+
+
+def exact_work(problem, disc: Discretisation, n_states: int) -> float:
+    """Dynamics evaluations per IPOPT iteration times ``n_states ** 3`` (0 for CVODES)."""
+    if disc.method == "cvodes":
+        return 0.0
+    per_step = 4 if disc.method == "rk4" else problem.degree
+    return per_step * disc.steps_per_hold * problem.n_intervals * n_states ** 3
+
+
+class _Checks:
+    """The checks of one design model over one slew duration, for any interval count."""
+
+    def __init__(self, model, problem, t_rigid: float, longest: float):
+        self.model, self.problem, self.bounds = model, problem, (t_rigid, longest)
+
+    @functools.cached_property
+    def holds(self) -> HoldGrid | None:
+        if self.problem.duration is None:
+            return None
+        return HoldGrid(self.model, self.problem.duration, self.problem.angle)
+
+    @functools.cached_property
+    def omega_max(self) -> float:
+        return float(self.model.natural_frequencies(0.0, hub="free")[-1])
+
+    def least_work(self) -> float:
+        """The work of the fewest steps any interval count can take (0 but for exact)."""
+        if self.model.variant != "exact":
+            return 0.0
+        try:
+            disc = discretisation(self.problem, self.model, *self.bounds)
+        except ValueError:                   # more RK4 substeps than MAX_SUBSTEPS
+            return math.inf
+        if disc.method == "cvodes":
+            return 0.0
+        per_step = 4 if disc.method == "rk4" else self.problem.degree
+        steps = self.omega_max * disc.sized_for / largest_step(
+            disc.method, self.omega_max, disc.sized_for, self.problem.degree)
+        return per_step * steps * self.model.n_states ** 3
+
+    def work_reason(self, n_intervals: int) -> str | None:
+        if self.model.variant != "exact":
+            return None
+        problem = dataclasses.replace(self.problem, n_intervals=n_intervals)
+        try:
+            disc = discretisation(problem, self.model, *self.bounds)
+        except ValueError as exc:            # more RK4 substeps than MAX_SUBSTEPS
+            return str(exc)
+        work = exact_work(problem, disc, self.model.n_states)
+        if work <= MAX_EXACT_WORK:
+            return None
+        evaluations = round(work / self.model.n_states ** 3)
+        return (f"the exact design model's {self.model.n_modes} modes need {evaluations} "
+                f"dynamics evaluations ({disc.steps_per_hold} {disc.method} steps per "
+                f"{disc.sized_for / n_intervals:.3g} s hold to integrate mode "
+                f"{self.model.n_modes} at {self.omega_max:.4g} rad/s over "
+                f"{disc.sized_for:.3g} s), whose derivatives take "
+                f"{work / MAX_EXACT_WORK:.2g} times the work allowed per iteration "
+                "(MAX_EXACT_WORK: minutes of solving)")
+
+    def reason(self, n_intervals: int) -> str | None:
+        """Why ``n_intervals`` holds are refused, or None."""
+        aliasing = self.holds.reason(n_intervals) if self.holds else None
+        if aliasing is None:
+            return self.work_reason(n_intervals)
+        n_modes = self.model.n_modes
+        return (f"n_intervals = {n_intervals} is too coarse for {n_modes} design "
+                f"mode{'s' if n_modes > 1 else ''}: {aliasing}")
+
+    def passes(self, n_intervals: int) -> bool:
+        if self.work_reason(n_intervals) is not None:
+            return False
+        return self.holds is None or self.holds.passes(n_intervals)
+
+
+def _more_intervals(checks: _Checks, n_intervals: int) -> int | None:
+    """The smallest count above ``n_intervals`` that passes, searched up to twice the count
+    that puts every design mode below the hold Nyquist frequency (or twice the count asked)."""
+    if checks.holds is None or checks.least_work() > MAX_EXACT_WORK:
+        return None
+    nyquist = math.ceil(checks.holds.frequencies[-1] * checks.problem.duration / math.pi)
+    for count in range(n_intervals + 1, 2 * max(nyquist, n_intervals, 10) + 1):
+        if checks.passes(count):
+            return count
+    return None
+
+
+def _fewer_modes(checks: _Checks, n_intervals: int) -> int | None:
+    """The most design modes below the model's that pass at ``n_intervals``."""
+    from flexctl.model import build_model
+
+    model = checks.model
+    for n_modes in range(model.n_modes - 1, 0, -1):
+        fewer = _Checks(build_model(model.system, n_modes=n_modes, variant=model.variant),
+                        checks.problem, *checks.bounds)
+        if fewer.least_work() <= MAX_EXACT_WORK and fewer.passes(n_intervals):
+            return n_modes
+    return None
+
+
+def refuse_unsolvable(model, problem, t_rigid: float, longest: float) -> None:
+    """Raise ``ValueError`` if ``problem`` on ``model`` fails a check, with the reason and the
+    settings that pass every check.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+    problem : SlewProblem
+    t_rigid, longest : float
+        Rigid-body minimum time and longest free duration, s.
+
+    Examples
+    --------
+    >>> import flexctl
+    >>> from controllers.trajopt import SlewProblem
+    >>> model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=4)
+    >>> problem = SlewProblem(angle=1.57, duration=2.0, torque_bound=6.0, n_intervals=40)
+    >>> refuse_unsolvable(model, problem, 1.0, 10.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: n_intervals = 40 is too coarse for 4 design modes: holds of 0.05 s see design \
+mode 4 (134.6 rad/s) at its alias 8.92 rad/s, and stopping it costs 5.15 % more effort than \
+the converged slew (limit 1 %); use n_intervals = 45 or at most 3 design modes \
+(model.design_modes)
+    """
+    checks = _Checks(model, problem, t_rigid, longest)
+    K = problem.n_intervals
+    reason = checks.reason(K)
+    if reason is None:
+        return
+    remedies = []
+    more = _more_intervals(checks, K)
+    if more is not None:
+        remedies.append(f"n_intervals = {more}")
+    fewer = _fewer_modes(checks, K)
+    if fewer is not None:
+        remedies.append(f"at most {fewer} design modes (model.design_modes)")
+    if model.variant == "exact" and checks.work_reason(K) is not None:
+        remedies.append("model.design_variant 'first_order' (small deflection, solved in "
+                        "seconds)")
+    raise ValueError(f"{reason}; use {' or '.join(remedies) or 'more n_intervals'}")
