@@ -5,10 +5,10 @@
 before IPOPT runs, whether a slew can be solved to its true optimum:
 
 - **Resolution.** Each hold is integrated by ``s`` RK4 substeps or ``m`` collocation elements.
-  :func:`steps_per_hold` picks the smallest count that integrates the fastest design mode
-  over the whole slew within :data:`PHASE_TOLERANCE` of its amplitude: ``omega T / (omega dt)``
-  steps, each off by ``|R(i omega dt) - exp(i omega dt)|`` (``R`` the scheme's stability
-  function; exact for a linear oscillator). Slower modes are integrated more accurately.
+  :func:`steps_per_hold` picks the smallest count that integrates every design mode over the
+  whole slew within its tolerance (:func:`mode_tolerances`): ``omega T / (omega dt)`` steps,
+  each off by ``|R(i omega dt) - exp(i omega dt)|`` (``R`` the scheme's stability function;
+  exact for a linear oscillator).
 - **Aliasing.** Seen through holds of length ``h``, a mode of frequency ``omega`` above the
   hold Nyquist frequency ``pi / h`` behaves like one at its alias ``|omega - 2 pi j / h|``,
   and stopping a mode aliased near zero fights the slew's own torque (with ``omega h`` a
@@ -36,22 +36,26 @@ from __future__ import annotations
 
 import functools
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 
-__all__ = ["PHASE_TOLERANCE", "MAX_SUBSTEPS", "HOLD_EFFORT_TOLERANCE", "step_error",
-           "steps_per_hold", "largest_step", "fastest_frequency", "HoldEffort", "HoldGrid",
-           "hold_effort_excess"]
+__all__ = ["PHASE_TOLERANCE", "END_STATE_TOLERANCE", "MAX_SUBSTEPS", "HOLD_EFFORT_TOLERANCE",
+           "step_error", "steps_per_hold", "largest_step", "mode_tolerances", "HoldEffort",
+           "HoldGrid", "hold_effort_excess"]
 
-#: Error that integrating the fastest design mode over the whole slew may leave, relative to
-#: that mode's amplitude. Measured on slew-90 (``benchmarks/bench_trajopt.py``): a mode
+#: Error that integrating a design mode over the whole slew may leave, relative to that
+#: mode's own amplitude. Measured on slew-90 (``benchmarks/bench_trajopt.py``): a mode
 #: integrated with errors near 1 is a different mode, and stopping it can cost over 1 % more
-#: effort; 0.2 leaves the effort within 0.05 % of the converged discretisation; 0.05 also
-#: keeps the end state the torques reach within 1e-3 of the motion of each kind of state
-#: when the fastest mode moves as much as 1/50 of the slowest (2 modes of hub-beam-mass).
+#: effort; 0.2 leaves the effort within 0.05 % of the converged discretisation.
 PHASE_TOLERANCE = 0.05
+#: Error the integration may leave in the end state, relative to the largest motion of its
+#: kind (modal deflection or modal rate): a mode that carries a share ``w`` of that motion is
+#: held to ``END_STATE_TOLERANCE / w`` of its own amplitude (at most PHASE_TOLERANCE), so the
+#: slowest mode is integrated finely and a fast one that hardly moves only to PHASE_TOLERANCE.
+END_STATE_TOLERANCE = 1e-3
 #: More RK4 substeps per hold than this means design modes far faster than the holds can shape:
 #: fewer design modes or more intervals is the remedy.
 MAX_SUBSTEPS = 100
@@ -107,21 +111,24 @@ def step_error(scheme: str, omega_dt: float, degree: int = 3) -> float:
     return float(abs(r - np.exp(z)))
 
 
-def steps_per_hold(scheme: str, omega_max: float, hold: float, duration: float,
-                   degree: int = 3) -> int:
-    """Smallest number of steps per hold that integrates ``omega_max`` over ``duration``
-    within :data:`PHASE_TOLERANCE` of its amplitude.
+def steps_per_hold(scheme: str, omega, hold: float, duration: float, degree: int = 3,
+                   tolerance=PHASE_TOLERANCE) -> int:
+    """Fewest steps per hold that integrate each frequency in ``omega`` over ``duration``
+    within its ``tolerance`` of its amplitude.
 
     Parameters
     ----------
     scheme : {"rk4", "radau", "legendre"}
         RK4 substeps or collocation elements (``degree`` points each).
-    omega_max : float
-        Fastest design frequency, rad/s.
+    omega : float or array_like, shape (N,)
+        Design frequencies, rad/s.
     hold : float
         Hold length ``h``, s.
     duration : float
         Time over which the errors add up (the slew), s.
+    tolerance : float or array_like, shape (N,)
+        Error allowed for each frequency over ``duration``, relative to its amplitude
+        (:func:`mode_tolerances`).
 
     Examples
     --------
@@ -129,17 +136,23 @@ def steps_per_hold(scheme: str, omega_max: float, hold: float, duration: float,
     13
     >>> steps_per_hold("radau", 100.0, 0.05, 2.0), steps_per_hold("legendre", 100.0, 0.05, 2.0)
     (5, 3)
+    >>> steps_per_hold("rk4", [5.0, 100.0], 0.05, 2.0, tolerance=[1e-3, 0.05])
+    13
     """
-    angle = omega_max * hold                       # rad of the fastest mode per hold
-    if angle <= 0.0:
-        return 1
-    return max(1, math.ceil(angle / largest_step(scheme, omega_max, max(duration, hold),
-                                                 degree)))
+    omega, tolerance = np.broadcast_arrays(np.atleast_1d(np.asarray(omega, dtype=float)),
+                                           np.asarray(tolerance, dtype=float))
+    steps = 1
+    for w, tol in zip(np.abs(omega), tolerance):
+        if w * hold > 0.0:
+            largest = largest_step(scheme, w, max(duration, hold), degree, tol)
+            steps = max(steps, math.ceil(w * hold / largest))
+    return steps
 
 
-def largest_step(scheme: str, omega_max: float, duration: float, degree: int = 3) -> float:
-    """Largest ``omega_max dt`` of one step that integrates ``omega_max`` over ``duration``
-    within :data:`PHASE_TOLERANCE`; ``omega_max duration`` divided by it is the fewest steps a
+def largest_step(scheme: str, omega: float, duration: float, degree: int = 3,
+                 tolerance: float = PHASE_TOLERANCE) -> float:
+    """Largest ``omega dt`` of one step that integrates ``omega`` over ``duration`` within
+    ``tolerance`` of its amplitude; ``omega duration`` divided by it is the fewest steps a
     slew can take.
 
     Examples
@@ -150,10 +163,10 @@ def largest_step(scheme: str, omega_max: float, duration: float, degree: int = 3
     if scheme not in SCHEMES:
         raise ValueError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}; "
                          f"got {scheme!r}")
-    return _largest_step(scheme, degree, PHASE_TOLERANCE / (omega_max * duration))
+    return _largest_step(scheme, degree, float(tolerance) / (omega * duration))
 
 
-@functools.lru_cache(maxsize=1024)
+@functools.lru_cache(maxsize=4096)
 def _largest_step(scheme: str, degree: int, per_radian: float) -> float:
     """Largest ``omega dt`` whose error per radian is within ``per_radian`` (bisection: the
     error per radian grows with the step)."""
@@ -169,9 +182,50 @@ def _largest_step(scheme: str, degree: int, per_radian: float) -> float:
     return max(low, 1e-6)
 
 
-def fastest_frequency(model) -> float:
-    """Highest hub-free natural frequency of ``model`` at rest, rad/s."""
-    return float(np.max(np.abs(model.natural_frequencies(0.0, hub="free"))))
+def mode_tolerances(model):
+    """Hub-free frequencies (rad/s) and the error each mode may keep over a slew.
+
+    Mode ``i`` of the linearisation at rest, driven quasi-statically by the torque, moves the
+    beam's modal coordinates by ``d_i = max|V[1:, i]| |beta_i| / omega_i^2`` (per unit torque;
+    ``V`` the modes, ``beta`` their modal input) and their rates by ``omega_i d_i``. Its share
+    of the larger motion of either kind, ``w_i``, sets its tolerance
+    ``min(PHASE_TOLERANCE, END_STATE_TOLERANCE / w_i)``.
+
+    Returns
+    -------
+    omega, tolerance : ndarray, shape (N,)
+
+    Examples
+    --------
+    >>> import flexctl
+    >>> model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=3)
+    >>> omega, tolerance = mode_tolerances(model)
+    >>> omega.round(1).tolist(), tolerance.round(4).tolist()
+    ([5.5, 24.3, 68.5], [0.001, 0.0253, 0.05])
+    """
+    if model not in _TOLERANCES:
+        _TOLERANCES[model] = _mode_tolerances(model)
+    return _TOLERANCES[model]
+
+
+_TOLERANCES = weakref.WeakKeyDictionary()       # per model: computed once, read-only
+
+
+def _mode_tolerances(model):
+    a, b = _linearisation_model(model).linear_matrices(0.0)
+    n_dof = a.shape[0] // 2
+    lam, vec = np.linalg.eig(-a[n_dof:, :n_dof])           # M^-1 K
+    order = np.argsort(lam.real)[1:]                       # the rigid-body mode left out
+    omega = np.sqrt(np.abs(lam.real[order]))
+    vec = vec.real[:, order]
+    beta = np.linalg.lstsq(vec, b[n_dof:, 0], rcond=None)[0]
+    deflection = np.max(np.abs(vec[1:]), axis=0) * np.abs(beta) / omega ** 2
+    share = np.maximum(deflection / deflection.max(),
+                       omega * deflection / (omega * deflection).max())
+    tolerance = np.minimum(PHASE_TOLERANCE, END_STATE_TOLERANCE / share)
+    omega.setflags(write=False)
+    tolerance.setflags(write=False)
+    return omega, tolerance
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ import dataclasses
 import functools
 import math
 
-from .hold_grid import HoldGrid, largest_step
+from .hold_grid import HoldGrid, largest_step, mode_tolerances
 from .slew_nlp import Discretisation, discretisation
 
 __all__ = ["MAX_EXACT_WORK", "exact_work", "refuse_unsolvable"]
@@ -50,8 +50,9 @@ class _Checks:
         return HoldGrid(self.model, self.problem.duration, self.problem.angle)
 
     @functools.cached_property
-    def omega_max(self) -> float:
-        return float(self.model.natural_frequencies(0.0, hub="free")[-1])
+    def modes(self):
+        """Hub-free frequencies (rad/s) and tolerances of the design modes."""
+        return mode_tolerances(self.model)
 
     def least_work(self) -> float:
         """The work of the fewest steps any interval count can take (0 but for exact)."""
@@ -64,8 +65,9 @@ class _Checks:
         if disc.method == "cvodes":
             return 0.0
         per_step = 4 if disc.method == "rk4" else self.problem.degree
-        steps = self.omega_max * disc.sized_for / largest_step(
-            disc.method, self.omega_max, disc.sized_for, self.problem.degree)
+        steps = max(w * disc.sized_for / largest_step(disc.method, w, disc.sized_for,
+                                                      self.problem.degree, tol)
+                    for w, tol in zip(*self.modes))
         return per_step * steps * self.model.n_states ** 3
 
     def work_reason(self, n_intervals: int) -> str | None:
@@ -83,7 +85,7 @@ class _Checks:
         return (f"the exact design model's {self.model.n_modes} modes need {evaluations} "
                 f"dynamics evaluations ({disc.steps_per_hold} {disc.method} steps per "
                 f"{disc.sized_for / n_intervals:.3g} s hold to integrate mode "
-                f"{self.model.n_modes} at {self.omega_max:.4g} rad/s over "
+                f"{self.model.n_modes} at {self.modes[0][-1]:.4g} rad/s over "
                 f"{disc.sized_for:.3g} s), whose derivatives take "
                 f"{work / MAX_EXACT_WORK:.2g} times the work allowed per iteration "
                 "(MAX_EXACT_WORK: minutes of solving)")

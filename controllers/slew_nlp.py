@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .hold_grid import MAX_SUBSTEPS, fastest_frequency, steps_per_hold
+from .hold_grid import MAX_SUBSTEPS, mode_tolerances, steps_per_hold
 
 __all__ = ["Discretisation", "discretisation", "transcription_for", "rk4_substeps",
            "Transcribed", "transcribe", "set_initial", "state_scale"]
@@ -39,19 +39,20 @@ def transcription_for(problem, model) -> str:
 
 
 def rk4_substeps(model, hold: float, duration: float | None = None) -> int:
-    """RK4 substeps per hold of ``hold`` seconds for the fastest mode of ``model``.
+    """RK4 substeps per hold of ``hold`` seconds for the design modes of ``model``.
 
-    As many as integrate that mode over ``duration`` (s; default one hold) within
-    :data:`~controllers.hold_grid.PHASE_TOLERANCE` of its amplitude
-    (:func:`controllers.hold_grid.steps_per_hold`).
+    As many as integrate each mode over ``duration`` (s; default one hold) within its
+    tolerance (:func:`controllers.hold_grid.mode_tolerances`,
+    :func:`controllers.hold_grid.steps_per_hold`).
 
     Raises
     ------
     ValueError
         If more than :data:`MAX_SUBSTEPS` would be needed, naming the settings to change.
     """
-    omega_max = fastest_frequency(model)
-    substeps = steps_per_hold("rk4", omega_max, hold, duration or hold)
+    omega, tolerance = mode_tolerances(model)
+    omega_max = float(omega[-1])
+    substeps = steps_per_hold("rk4", omega, hold, duration or hold, tolerance=tolerance)
     if substeps > MAX_SUBSTEPS:
         raise ValueError(
             f"the fastest of the {model.n_modes} design modes ({omega_max:.4g} rad/s) needs "
@@ -101,8 +102,9 @@ def discretisation(problem, model, t_rigid: float, longest: float,
     if method == "rk4":
         steps = rk4_substeps(model, sized / problem.n_intervals, sized)
     else:
-        steps = steps_per_hold(method, fastest_frequency(model), sized / problem.n_intervals,
-                               sized, problem.degree)
+        omega, tolerance = mode_tolerances(model)
+        steps = steps_per_hold(method, omega, sized / problem.n_intervals, sized,
+                               problem.degree, tolerance)
     return Discretisation(transcription, method, steps, sized)
 
 
