@@ -1,6 +1,16 @@
-"""Benchmark ``slew-90``: :func:`controllers.trajopt.solve_slew` against python-control.
+"""Benchmarks of :func:`controllers.trajopt.solve_slew` on ``slew-90``.
 
-Case: the hub-beam-mass system on 2 modes (first_order), a 90 degree rest-to-rest slew in
+1. ``--grid``: robustness to fast modes. Every design-mode count 1 to 8 and interval count
+   (20, 30, 40, 60, 80, 120, 200) of the slew-90 system, on the first_order and exact design
+   variants: each cell either solves, with its cost compared to the converged value (the same
+   design model solved on :data:`REFERENCE_INTERVALS` holds, where holds no longer cost
+   effort), or is refused before IPOPT runs. Prints, per variant, a table of cost, error
+   against the converged value, wall and CPU time and status, then the refusals in full.
+   ``python benchmarks/bench_trajopt.py --grid`` (an hour or so; ``--variants``, ``--modes``
+   and ``--intervals`` narrow it).
+2. Default: against python-control on one case.
+
+Case of 2: the hub-beam-mass system on 2 modes (first_order), a 90 degree rest-to-rest slew in
 2 s, ``|torque| <= 6 N m``, minimum effort (integral of torque^2), the same horizon and the
 same 40 intervals for both solvers:
 
@@ -20,6 +30,7 @@ Run: ``python benchmarks/bench_trajopt.py`` (about a minute; python-control domi
 
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 import time
@@ -33,7 +44,9 @@ import control                                    # noqa: E402
 import control.optimal as opt                     # noqa: E402
 
 import flexctl                                    # noqa: E402
-from controllers.trajopt import HoldTorque, SlewProblem, solve_slew   # noqa: E402
+from flexctl import build_model                   # noqa: E402
+from controllers.trajopt import (HoldTorque, SlewProblem, TrajectoryOptimizationError,  # noqa: E402
+                                 solve_slew)
 
 ANGLE = math.radians(90.0)       # rad
 DURATION = 2.0                   # s
@@ -121,7 +134,9 @@ def main():
         times.append(time.perf_counter() - start)
     t_casadi = float(np.median(times))
     cost_casadi = effort_hold(solution.t, solution.torque)
-    print(f"\nsolve_slew (CasADi Opti + IPOPT, multiple shooting RK4, {problem.substeps or "auto"} substeps):")
+    disc = solution.discretisation
+    print(f"\nsolve_slew (CasADi Opti + IPOPT, {disc.transcription} {disc.method}, "
+          f"{disc.steps_per_hold} steps per hold):")
     print(f"  wall time {t_casadi:.3f} s (median of {REPEATS}: "
           f"{', '.join(f'{t:.3f}' for t in times)}), IPOPT {solution.ipopt_time_s:.3f} s, "
           f"{solution.iterations} iterations, status {solution.return_status}")
@@ -165,5 +180,142 @@ def main():
           design, plant, target)
 
 
+# ---------------------------------------------------------------------------- the grid
+GRID_MODES = tuple(range(1, 9))
+GRID_INTERVALS = (20, 30, 40, 60, 80, 120, 200)
+GRID_VARIANTS = ("first_order", "exact")
+#: Holds of the converged reference, the first that is not refused: their least effort is
+#: within 0.006 % (400) or 0.02 % (240, for 5 exact modes, whose 400 holds would take
+#: minutes) of a continuous torque's (``controllers.hold_grid.hold_effort_excess``).
+REFERENCE_INTERVALS = (400, 240)
+COST_TOLERANCE = 0.01            # relative error of a solved cell against the converged value
+END_STATE_TOL = 1e-3             # end state of the re-simulated torque / motion of its kind
+REFUSAL_BUDGET = 1.0             # s: a refusal must come sooner
+TIME_LIMIT = 900.0               # s of IPOPT per cell (max_wall_time)
+
+
+def slew_problem(n_intervals):
+    slew = flexctl.load_scene("slew-90").maneuver
+    return SlewProblem(angle=slew.angle, duration=slew.duration,
+                       torque_bound=slew.torque_bound, n_intervals=n_intervals)
+
+
+def run_cell(model, n_intervals):
+    """Solve one cell: a dict with status, cost, wall and CPU time and the message."""
+    start, cpu = time.perf_counter(), time.process_time()
+    try:
+        solution = solve_slew(model, slew_problem(n_intervals),
+                              ipopt_options={"max_wall_time": TIME_LIMIT})
+    except (ValueError, TrajectoryOptimizationError) as exc:
+        kind = "refused" if isinstance(exc, ValueError) or exc.iterations == 0 else "failed"
+        return {"status": kind, "message": str(exc), "wall": time.perf_counter() - start,
+                "cpu": time.process_time() - cpu}
+    return {"status": solution.return_status, "cost": solution.cost,
+            "wall": time.perf_counter() - start, "cpu": time.process_time() - cpu,
+            "iterations": solution.iterations,
+            "steps": solution.discretisation.steps_per_hold,
+            "method": solution.discretisation.method, "end_error": end_state_error(solution)}
+
+
+def end_state_error(solution):
+    """Largest error of the state the torque reaches, played into the design model by
+    flexctl's error-controlled integrator, relative to the largest motion of its kind
+    (angle, modal deflection, hub rate, modal rate) along the optimum."""
+    model, n = solution.model, solution.model.n_modes
+    reached = flexctl.simulate(model, solution.duration, torque=solution.torque_function(),
+                               rtol=1e-10).states[:, -1]
+    peak = np.max(np.abs(solution.states), axis=1)
+    kinds = [slice(0, 1), slice(1, n + 1), slice(n + 1, n + 2), slice(n + 2, 2 * n + 2)]
+    scale = np.concatenate([np.full(k.stop - k.start, peak[k].max()) for k in kinds])
+    target = solution.problem.target_state(model.n_states)
+    return float(np.max(np.abs(reached - target) / scale))
+
+
+def converged_cost(model):
+    """``(cost, cell)`` on the first of REFERENCE_INTERVALS that is not refused (cost None
+    when all are)."""
+    for count in REFERENCE_INTERVALS:
+        cell = run_cell(model, count)
+        if cell["status"] != "refused":
+            break
+    return cell.get("cost"), cell
+
+
+def cell_verdict(cell, reference):
+    """'ok' (within COST_TOLERANCE of the converged value, or refused within
+    REFUSAL_BUDGET), or what is wrong."""
+    if cell["status"] == "refused":
+        return "ok" if cell["wall"] < REFUSAL_BUDGET else "SLOW REFUSAL"
+    if "cost" not in cell:
+        return "FAILED"
+    if cell["end_error"] > END_STATE_TOL:
+        return "END STATE OFF"
+    if reference is None:
+        return "no reference"
+    return "ok" if abs(cell["cost"] / reference - 1) <= COST_TOLERANCE else "OFF OPTIMUM"
+
+
+def format_cell(cell, reference):
+    if cell["status"] == "refused":
+        return f"refused {cell['wall']:.2f}s"
+    if "cost" not in cell:
+        return f"FAILED {cell['wall']:.0f}s"
+    error = "" if reference is None else f" {100 * (cell['cost'] / reference - 1):+.2f}%"
+    acceptable = "*" if cell["status"] == "Solved_To_Acceptable_Level" else ""
+    return f"{cell['cost']:.3f}{acceptable}{error} {cell['wall']:.1f}s/{cell['cpu']:.1f}"
+
+
+def grid(variants, modes, intervals):
+    system = flexctl.load_scene("slew-90").system
+    problems = []
+    for variant in variants:
+        references = " or ".join(map(str, REFERENCE_INTERVALS))
+        print(f"\nslew-90 on {variant} design models: cost (N^2 m^2 s), error against the "
+              f"converged value ({references} holds), wall/CPU time (s); 'refused' = refused "
+              "before IPOPT ran", flush=True)
+        print(f"{'modes':>5} {'converged':>14} " + " ".join(f"{k:>25}" for k in intervals))
+        refusals, end_errors = [], []
+        for n_modes in modes:
+            model = build_model(system, n_modes=n_modes, variant=variant)
+            reference, ref_cell = converged_cost(model)
+            cells = {k: run_cell(model, k) for k in intervals}
+            ref_text = f"{reference:.4f}" if reference is not None else ref_cell["status"]
+            print(f"{n_modes:>5} {ref_text:>14} " + " ".join(
+                f"{format_cell(cells[k], reference):>25}" for k in intervals), flush=True)
+            for k in intervals:
+                verdict = cell_verdict(cells[k], reference)
+                if "end_error" in cells[k]:
+                    end_errors.append((cells[k]["end_error"], n_modes, k))
+                if cells[k]["status"] == "refused":
+                    refusals.append(f"  {n_modes} modes, {k} holds: {cells[k]['message']}")
+                if verdict != "ok":
+                    problems.append(f"  {variant}, {n_modes} modes, {k} holds: {verdict} "
+                                    f"{cells[k]}")
+        if end_errors:
+            worst = max(end_errors)
+            print(f"largest end-state error of the re-simulated torques: {worst[0]:.2e} of the "
+                  f"motion of its kind ({worst[1]} modes, {worst[2]} holds); * = IPOPT "
+                  "ended 'acceptable'")
+        print("refusals:")
+        print("\n".join(refusals) or "  none")
+    print("\ncells neither within "
+          f"{100 * COST_TOLERANCE:g} % of the converged value nor refused within "
+          f"{REFUSAL_BUDGET:g} s:")
+    print("\n".join(problems) or "  none")
+
+
+def parse(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--grid", action="store_true", help="robustness grid (see above)")
+    parser.add_argument("--variants", nargs="+", default=list(GRID_VARIANTS))
+    parser.add_argument("--modes", nargs="+", type=int, default=list(GRID_MODES))
+    parser.add_argument("--intervals", nargs="+", type=int, default=list(GRID_INTERVALS))
+    return parser.parse_args(argv)
+
+
 if __name__ == "__main__":
-    main()
+    args = parse()
+    if args.grid:
+        grid(args.variants, args.modes, args.intervals)
+    else:
+        main()
