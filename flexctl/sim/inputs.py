@@ -225,9 +225,9 @@ class SampledTorque:
     shortest interval (:attr:`max_step`) and the integration goes straight through the jumps
     of a hold and the kinks of a line, resolving them by error control; otherwise it restarts
     at every sample (:attr:`breakpoints`). On the 2001 samples of ``hub-beam-mass``'s 20 s
-    push, restarting at every sample cost CVODES 10 to 50 times as long for the same error as
-    the bounded step did (``benchmarks/bench_inputs.py``): each restart begins again at order
-    1 with a tiny step.
+    push, restarting at every sample made a run 20 to 40 times as long for the same error as
+    the bounded step did (2 and 4 modes, ``benchmarks/bench_inputs.py``): each restart begins
+    again at order 1 with a tiny step.
 
     Examples
     --------

@@ -1,0 +1,218 @@
+"""Benchmark: sampled torques and traced Python torque functions against python-control.
+
+Issue 9, item 2: a torque given as samples, or as a Python function CasADi can trace, runs on
+the compiled CVODES path; the goal is ``flexctl.simulate`` at least 30 times faster than
+python-control's ``control.input_output_response`` on ``model.nonlinear()`` at equal error.
+
+Scene ``hub-beam-mass`` (20 s; the scene's push, one period of a 2 N m sine over 2 s), on
+first_order models of 2 and 4 modes. Two inputs:
+
+A. **Samples** ``(T, U)``: the push sampled every 0.01 s (2001 samples), the arrays a
+   python-control user hands to ``input_output_response(sys, T, U)``. Both tools integrate the
+   same piecewise-linear torque (python-control interpolates ``U`` linearly, and so does
+   ``simulate(torque=(T, U))``). Also timed: the design not taken, restarting the integration
+   at every sample instead of bounding the step by the sample interval.
+B. **A Python function** ``torque(t) = where(t <= 2, 2 sin(pi t), 0)``. flexctl traces it;
+   python-control needs samples, fine enough (every 2e-4 s, as in ``bench_speed.py``) that their
+   interpolation error (~1e-7 of the peak) stays below the accuracy asked for. flexctl's
+   SciPy path (``method="DOP853"``, the function called at every step: the path Python
+   functions took before tracing) is timed too.
+
+Every tool runs at the largest relative tolerance of ``equal_error.RTOL_GRID`` whose tip
+deflection, on the 0.01 s output grid, is within 1e-6 of the peak of a reference: flexctl's
+DOP853 at rtol 1e-13 on the same input (restarted at every sample for A). Absolute
+tolerances: flexctl scales its own per state; python-control takes ``rtol * 1e-3``.
+python-control runs with SciPy's RK45 (its default), DOP853 and LSODA; the fastest counts.
+
+Times are medians, end to end: for flexctl the ``simulate`` call from the user's arrays or
+function (sampled torque built, function traced, integrator built, run, accuracy check,
+outputs); "reused" passes one ``SampledTorque`` object, whose compiled integrators flexctl keeps
+between runs (equal arrays give the same object, so the pair hits the same caches); "no
+accuracy check" skips the run at 10x the tolerance that gives ``integration_error``, which
+python-control does not make. For python-control the ``input_output_response`` call.
+
+Run: ``python benchmarks/bench_inputs.py`` (some 10 to 30 minutes, python-control dominates;
+``--modes 2`` for one model, ``--methods RK45`` for python-control's default only).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import casadi as ca                                   # noqa: E402
+import control                                        # noqa: E402
+from equal_error import TARGET, median_time, tune  # noqa: E402
+
+from flexctl import build_model, load_scene, simulate  # noqa: E402
+from flexctl.sim.inputs import SampledTorque          # noqa: E402
+
+SCENE = "hub-beam-mass"
+REFERENCE_RTOL = 1e-13
+ATOL_SCALE = 1e-3                # python-control: atol = rtol * 1e-3 (m, rad)
+OUTPUT_STEP = 0.01               # s, output grid and the samples of case A
+FINE_INPUT_STEP = 2e-4           # s, samples of the function handed to python-control (B)
+REPEATS = 5                      # flexctl runs (tens to hundreds of ms)
+REPEATS_SLOW = 3                 # python-control runs (seconds each)
+PYTHON_CONTROL_METHODS = ("RK45", "DOP853", "LSODA")
+GOAL = 30.0
+
+
+def time_grid(t_final, step):
+    grid = np.arange(0.0, t_final + 0.5 * step, step)
+    grid[-1] = t_final
+    return grid
+
+
+def push(t):
+    """The scene's push as a Python function (traceable: numpy only, no branch on t)."""
+    return np.where(t <= 2.0, 2.0 * np.sin(np.pi * t), 0.0)
+
+
+# ---------------------------------------------------------------------------- the tools
+def flexctl_tip(model, t_final, torque, method="auto", check_accuracy=True):
+    """``rtol -> tip`` of ``simulate``; ``torque`` is a zero-argument factory, so each run
+    starts from the user's arrays or function."""
+    def run(rtol):
+        result = simulate(model, t_final, torque=torque(), rtol=rtol, output_step=OUTPUT_STEP,
+                          method=method, check_accuracy=check_accuracy)
+        assert result.ok and result.method in (method, "cvodes"), result.message
+        return result.tip_deflection
+    return run
+
+
+def python_control_tip(model, t_final, t_in, u, method):
+    system = model.nonlinear()
+    grid = time_grid(t_final, OUTPUT_STEP)
+    tip_row = list(model.output_names).index("tip_deflection")
+
+    def run(rtol):
+        response = control.input_output_response(
+            system, t_in, u, np.zeros(model.n_states), evaluation_times=grid,
+            solve_ivp_method=method, solve_ivp_kwargs={"rtol": rtol,
+                                                       "atol": rtol * ATOL_SCALE})
+        return np.asarray(response.outputs)[tip_row]
+    return run
+
+
+# ---------------------------------------------------------------------------- cases
+def measure(tools, reference):
+    """Tune and time each tool: ``{label: seconds}``, with a table row per tool."""
+    times = {}
+    print(f"   {'tool':<40} {'rtol':>9} {'error':>9} {'median time':>12}")
+    for label, (run, repeats) in tools.items():
+        rtol, error = tune(run, reference)
+        times[label] = median_time(lambda: run(rtol), repeats)
+        print(f"   {label:<40} {rtol:>9.2g} {error:>9.2g} {times[label]:>10.4f} s", flush=True)
+    return times
+
+
+def python_control_tools(model, t_final, t_in, u, methods):
+    return {f"python-control {m}": (python_control_tip(model, t_final, t_in, u, m),
+                                    REPEATS_SLOW) for m in methods}
+
+
+def report(times, flexctl_labels, baselines=()):
+    """Print and return fastest python-control / each flexctl tool; the goal is judged for
+    the compiled tools, not for ``baselines`` (the paths they replace)."""
+    pc = {k: v for k, v in times.items() if k.startswith("python-control")}
+    fastest = min(pc, key=pc.get)
+    ratios = {}
+    for label in (*flexctl_labels, *baselines):
+        ratios[label] = pc[fastest] / times[label]
+        default = (f"; against its default RK45: {pc['python-control RK45'] / times[label]:.0f}"
+                   if "python-control RK45" in pc else "")
+        verdict = ("baseline" if label in baselines else
+                   f"goal >= {GOAL:g}: {'met' if ratios[label] >= GOAL else 'missed'}")
+        print(f"   fastest python-control ({fastest.split()[-1]}) / {label} = "
+              f"{ratios[label]:.1f} ({verdict}){default}")
+    return ratios
+
+
+class RestartingTorque(SampledTorque):
+    """The alternative not taken: restart the integration at every sample, no step bound."""
+
+    max_step = None
+
+    @property
+    def breakpoints(self):
+        return tuple(self.times.tolist())
+
+
+def case_samples(model, t_final, methods):
+    grid = time_grid(t_final, OUTPUT_STEP)
+    t_in, u = grid, np.asarray(push(grid), dtype=float)
+    sampled = SampledTorque(t_in, u)
+    start = time.perf_counter()
+    reference = flexctl_tip(model, t_final, lambda: sampled, "DOP853")(REFERENCE_RTOL)
+    print(f"   A. samples (T, U), {t_in.size} of them, linear: reference DOP853 at "
+          f"{REFERENCE_RTOL:g} ({time.perf_counter() - start:.1f} s)")
+    restarting = RestartingTorque(t_in, u)
+    tools = {"flexctl.simulate(torque=(T, U))": (
+                 flexctl_tip(model, t_final, lambda: (t_in, u)), REPEATS),
+             "flexctl, one SampledTorque reused": (
+                 flexctl_tip(model, t_final, lambda: sampled), REPEATS),
+             "flexctl, (T, U), no accuracy check": (
+                 flexctl_tip(model, t_final, lambda: (t_in, u), check_accuracy=False), REPEATS),
+             "flexctl, restart at every sample": (
+                 flexctl_tip(model, t_final, lambda: restarting), REPEATS_SLOW)}
+    tools.update(python_control_tools(model, t_final, t_in, u, methods))
+    times = measure(tools, reference)
+    print(f"   restarting at every sample / bounding the step: "
+          f"{times[list(tools)[3]] / times[list(tools)[1]]:.1f}x the time")
+    return report(times, list(tools)[:3], baselines=list(tools)[3:4])
+
+
+def case_function(model, t_final, methods):
+    start = time.perf_counter()
+    reference = flexctl_tip(model, t_final, lambda: push, "DOP853")(REFERENCE_RTOL)
+    print(f"   B. Python function: reference DOP853 at {REFERENCE_RTOL:g} "
+          f"({time.perf_counter() - start:.1f} s)")
+    t_in = time_grid(t_final, FINE_INPUT_STEP)
+    tools = {"flexctl.simulate(torque=push), traced": (
+                 flexctl_tip(model, t_final, lambda: push), REPEATS),
+             "flexctl, traced, no accuracy check": (
+                 flexctl_tip(model, t_final, lambda: push, check_accuracy=False), REPEATS),
+             "flexctl, push on SciPy DOP853 (untraced)": (
+                 flexctl_tip(model, t_final, lambda: push, "DOP853"), REPEATS_SLOW)}
+    tools.update(python_control_tools(model, t_final, t_in, np.asarray(push(t_in), float),
+                                      methods))
+    times = measure(tools, reference)
+    print(f"   tracing / SciPy path for the same function: "
+          f"{times[list(tools)[2]] / times[list(tools)[0]]:.1f}x faster")
+    return report(times, list(tools)[:2], baselines=list(tools)[2:3])
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--modes", type=int, nargs="+", default=[2, 4])
+    parser.add_argument("--methods", nargs="+", default=list(PYTHON_CONTROL_METHODS),
+                        choices=PYTHON_CONTROL_METHODS)
+    args = parser.parse_args(argv)
+    scene = load_scene(SCENE)
+    t_final = scene.simulation.t_final
+    print(f"flexctl sampled and traced inputs against python-control (casadi {ca.__version__}, "
+          f"python-control {control.__version__}); {SCENE}, {t_final:g} s, target relative "
+          f"tip error {TARGET:g}; times are medians, end to end")
+    ratios = {}
+    for n_modes in args.modes:
+        model = build_model(scene.system, n_modes=n_modes)
+        print(f"\n== {n_modes} modes ({model.variant})")
+        for label, ratio in {**case_samples(model, t_final, args.methods),
+                             **case_function(model, t_final, args.methods)}.items():
+            ratios[(n_modes, label)] = ratio
+    print("\nsummary: fastest python-control / flexctl")
+    for (n_modes, label), ratio in ratios.items():
+        print(f"   {n_modes} modes  {label:<40} {ratio:>7.1f}")
+    return ratios
+
+
+if __name__ == "__main__":
+    main()
