@@ -157,6 +157,7 @@ from flexctl.model import Model, build_model
 from flexctl.model.variants import EXACT_MAX_MODES
 from flexctl.sim.digital import ZeroOrderHold
 from flexctl.sim.maneuvers import Slew
+from flexctl.sim.simulation import StaticLaw
 
 from .lqg import NoiseLevels, design_lqg
 from .lqr import LQRWeights, design_lqr
@@ -171,39 +172,32 @@ from .trajopt import SlewProblem, solve_slew
 
 __all__ = ["BuiltController", "OpenLoop", "from_spec"]
 
-@dataclass(frozen=True, eq=False)
-class OpenLoop:
+class OpenLoop(StaticLaw):
     """A torque function of time played open loop, as a static controller.
 
-    Keeps the function's ``breakpoints`` so that :func:`flexctl.simulate` restarts there.
+    ``OpenLoop(f)`` gives ``torque(t, x) = f(t)``; ``f``'s ``breakpoints`` are kept so that
+    :func:`flexctl.simulate` restarts there, and its ``casadi(t)`` form, if any, runs it
+    compiled.
     """
 
-    torque_function: object
-    n_states: int = 0
-
     @property
-    def breakpoints(self) -> tuple:
-        """Times (s) where the torque is not smooth."""
-        return tuple(getattr(self.torque_function, "breakpoints", ()) or ())
+    def torque_function(self):
+        """The played function of time."""
+        return self.law
 
-    def initial_state(self, x0):
-        return np.zeros(0)
-
-    def torque(self, t, x, z):
-        return float(self.torque_function(t))
+    def torque(self, t, x, z=None) -> float:
+        """``f(t)``, N m."""
+        return float(self.law(t))
 
     @property
     def has_casadi_form(self) -> bool:
         """True when the torque function has a CasADi form (``casadi(t)``)."""
-        return callable(getattr(self.torque_function, "casadi", None)) \
-            and bool(getattr(self.torque_function, "has_casadi_form", True))
+        return callable(getattr(self.law, "casadi", None)) \
+            and bool(getattr(self.law, "has_casadi_form", True))
 
     def casadi_torque(self, t, x):
         """The torque function's CasADi expression of the symbol ``t`` (``x`` unused)."""
-        return self.torque_function.casadi(t)
-
-    def derivative(self, t, x, z):
-        return np.zeros(0)
+        return self.law.casadi(t)
 
 
 @dataclass(frozen=True, eq=False)

@@ -19,7 +19,7 @@ module          contents
 
 from .maneuvers import SineTorque, Slew, SpinUp
 from .inputs import SampledTorque
-from .simulation import (METHODS, AccuracyWarning, Controller, SimulationResult,
+from .simulation import (METHODS, AccuracyWarning, Controller, SimulationResult, StaticLaw,
                          StiffnessWarning, StopReason, simulate)
 from .digital import ControllerSession, SampledController, ZeroOrderHold
 from .metrics import SlewMetrics, settling_time, slew_metrics
@@ -28,7 +28,7 @@ from .fidelity import ModeChoice, choose_modes
 __all__ = [
     "SineTorque", "Slew", "SpinUp", "SampledTorque",
     "METHODS", "AccuracyWarning", "Controller", "SimulationResult", "StiffnessWarning",
-    "simulate", "StopReason",
+    "simulate", "StopReason", "StaticLaw",
     "ControllerSession", "SampledController", "ZeroOrderHold",
     "SlewMetrics", "settling_time", "slew_metrics",
     "ModeChoice", "choose_modes",

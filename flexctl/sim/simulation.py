@@ -48,8 +48,8 @@ from .tracing import torque_input
 from ..model import Model, SingularMassMatrixError
 from ..model.errors import InputTypeError, InputValueError
 
-__all__ = ["simulate", "SimulationResult", "Controller", "StopReason", "StiffnessWarning",
-           "AccuracyWarning"]
+__all__ = ["simulate", "SimulationResult", "Controller", "StaticLaw", "StopReason",
+           "StiffnessWarning", "AccuracyWarning"]
 
 #: Integration stops as "singular" when the effective hub inertia falls below this fraction
 #: of the rigid inertia J_0 (the exact singularity cannot be integrated up to).
@@ -230,23 +230,39 @@ class Controller(Protocol):
         """``dz/dt``, shape (n_states,)."""
 
 
-@dataclass(frozen=True)
-class _StaticFeedback:
+@dataclass(frozen=True, eq=False)
+class StaticLaw:
+    """A static feedback law ``torque = law(t, x)`` as a :class:`Controller` (no states).
+
+    :func:`simulate` wraps a callable ``controller`` in this; :class:`controllers.OpenLoop`
+    is the open-loop case ``torque = f(t)``.
+
+    Parameters
+    ----------
+    law : callable
+        ``law(t, x)``: hub torque, N m, at time ``t`` (s) for plant state ``x`` (shape (n,)).
+        Its ``breakpoints`` attribute (times, s, where it is not smooth), if any, is kept so
+        that :func:`simulate` restarts the integrator there.
+    """
+
     law: object
-    n_states: int = 0
+    n_states = 0
 
     @property
     def breakpoints(self) -> tuple:
         """The wrapped law's times of non-smoothness, s."""
         return tuple(getattr(self.law, "breakpoints", ()) or ())
 
-    def initial_state(self, x0):
+    def initial_state(self, x0) -> np.ndarray:
+        """No internal state: shape (0,)."""
         return np.zeros(0)
 
-    def torque(self, t, x, z):
+    def torque(self, t, x, z=None) -> float:
+        """Hub torque, N m."""
         return self.law(t, x)
 
-    def derivative(self, t, x, z):
+    def derivative(self, t, x, z=None) -> np.ndarray:
+        """No internal state: shape (0,)."""
         return np.zeros(0)
 
 
@@ -624,7 +640,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                                  "the flexctl Controller protocol; got "
                                  f"{type(controller).__name__}")
         time_function(controller, "controller")     # its signature: (t, x)
-        controller = _StaticFeedback(controller)
+        controller = StaticLaw(controller)
     nz = controller.n_states if controller is not None and not is_sampled(controller) else 0
     prescribed = hub_motion is not None
     mat = model.matrices
