@@ -32,10 +32,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .feedback import ReferenceFeedback
 from .lqr import (LQRWeights, _lqr_gain, _model, casadi_reference_state, reference_state,
                   static_deflection_gain)
-from .reference import (_casadi_saturate, _check_reference, _has_casadi, _optional_positive,
-                        _real, _saturate)
+from .reference import _has_casadi, _real
 
 __all__ = ["NoiseLevels", "LQG", "design_lqg", "estimator_gain", "SumOfSines",
            "MEASURED_OUTPUTS"]
@@ -175,7 +175,7 @@ class SumOfSines:
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
-class LQG:
+class LQG(ReferenceFeedback):
     """Output feedback: Kalman filter plus LQR (a :class:`flexctl.Controller`).
 
     Build with :func:`design_lqg`; see the module Notes for the equations and orders.
@@ -207,11 +207,10 @@ class LQG:
     c: np.ndarray
     measurement_matrix: np.ndarray
     measurement_noise: object = None
-    reference: object = None
-    feedforward_inertia: float | None = None
-    torque_limit: float | None = None
     initial_estimate: np.ndarray = field(default=None, repr=False)
     deflection_gain: np.ndarray | None = field(default=None, repr=False)
+
+    owner = "lqg"
 
     def __post_init__(self):
         nd = np.asarray(self.a).shape[0]
@@ -233,11 +232,7 @@ class LQG:
         if self.measurement_noise is not None and not callable(self.measurement_noise):
             raise TypeError("lqg.measurement_noise must be callable as v(t) -> shape (2,); got "
                             f"{type(self.measurement_noise).__name__}")
-        object.__setattr__(self, "reference", _check_reference("lqg", self.reference))
-        object.__setattr__(self, "feedforward_inertia", _optional_positive(
-            "lqg", "feedforward_inertia", self.feedforward_inertia))
-        object.__setattr__(self, "torque_limit",
-                           _optional_positive("lqg", "torque_limit", self.torque_limit))
+        super().__post_init__()
         if self.initial_estimate is not None:
             z0 = np.array(self.initial_estimate, dtype=float).reshape(-1)
             if z0.shape != (nd,) or not np.all(np.isfinite(z0)):
@@ -254,11 +249,6 @@ class LQG:
     def n_modes(self) -> int:
         """Design modes ``M``."""
         return self.n_states // 2 - 1
-
-    @property
-    def breakpoints(self) -> tuple:
-        """Times (s) where the reference is not smooth."""
-        return tuple(getattr(self.reference, "breakpoints", ()) or ())
 
     def for_plant(self, model) -> "LQG":
         """The same controller reading the sensors of ``model`` (``N >= M`` modes)."""
@@ -289,10 +279,7 @@ class LQG:
     def torque(self, t: float, x, z) -> float:
         """Hub torque, N m, from the estimate ``z`` (the plant state ``x`` is not read)."""
         x_ref, acc = reference_state(self.reference, t, self.n_modes, self.deflection_gain)
-        u = -float(self.gain[0] @ (np.asarray(z, dtype=float) - x_ref))
-        if self.feedforward_inertia is not None:
-            u += self.feedforward_inertia * acc
-        return _saturate(u, self.torque_limit)
+        return self._apply(-float(self.gain[0] @ (np.asarray(z, dtype=float) - x_ref)), acc)
 
     def derivative(self, t: float, x, z) -> np.ndarray:
         """``dz/dt = A z + B u + L (y - C z)``, shape (n_d,)."""
@@ -325,10 +312,7 @@ class LQG:
 
         x_ref, acc = casadi_reference_state(self.reference, t, self.n_modes,
                                             self.deflection_gain)
-        u = -ca.dot(ca.DM(self.gain[0]), z - x_ref)
-        if self.feedforward_inertia is not None:
-            u += self.feedforward_inertia * acc
-        return _casadi_saturate(u, self.torque_limit)
+        return self._casadi_apply(-ca.dot(ca.DM(self.gain[0]), z - x_ref), acc)
 
     def casadi_derivative(self, t, x, z):
         """:meth:`derivative` as a CasADi expression, shape (n_d, 1)."""

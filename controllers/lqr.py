@@ -43,8 +43,8 @@ import numpy as np
 from flexctl.model import Model
 from flexctl.model.errors import InputValueError
 
-from .reference import (_casadi_evaluate, _casadi_saturate, _check_reference, _evaluate,
-                        _has_casadi, _optional_positive, _real, _saturate, _structure_key)
+from .feedback import ReferenceFeedback
+from .reference import _casadi_evaluate, _evaluate, _optional_positive, _real, _structure_key
 
 __all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation_matrix",
            "truncate_state", "reference_state", "closed_loop_poles", "static_deflection_gain"]
@@ -241,7 +241,7 @@ def lqr_weight_matrices(model, weights: LQRWeights) -> tuple:
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
-class LQR:
+class LQR(ReferenceFeedback):
     """State feedback ``u = -K (x_d - x_ref) + J acc_ref`` (a :class:`flexctl.Controller`).
 
     Build with :func:`design_lqr`. See the module Notes for the state orders.
@@ -267,14 +267,11 @@ class LQR:
     """
 
     gain: np.ndarray
-    reference: object = None
-    feedforward_inertia: float | None = None
-    torque_limit: float | None = None
     spin_rate: float = 0.0
     poles: np.ndarray = field(default=None, repr=False)
     deflection_gain: np.ndarray | None = field(default=None, repr=False)
 
-    n_states = 0
+    owner = "lqr"
 
     def __post_init__(self):
         gain = np.array(self.gain, dtype=float)
@@ -286,44 +283,23 @@ class LQR:
                              f"shape {gain.shape}")
         gain.setflags(write=False)
         object.__setattr__(self, "gain", gain)
-        object.__setattr__(self, "reference", _check_reference("lqr", self.reference))
-        object.__setattr__(self, "feedforward_inertia", _optional_positive(
-            "lqr", "feedforward_inertia", self.feedforward_inertia))
-        object.__setattr__(self, "torque_limit",
-                           _optional_positive("lqr", "torque_limit", self.torque_limit))
         object.__setattr__(self, "spin_rate", _real("lqr", "spin_rate", self.spin_rate))
+        super().__post_init__()
 
     @property
     def n_modes(self) -> int:
         """Number of design modes ``M``."""
         return self.gain.shape[1] // 2 - 1
 
-    @property
-    def breakpoints(self) -> tuple:
-        """Times (s) where the reference is not smooth."""
-        return tuple(getattr(self.reference, "breakpoints", ()) or ())
-
     def state_gain(self, n_modes: int) -> np.ndarray:
         """``K P``: the gain on a plant state with ``n_modes >= M`` modes, shape (1, 2N+2)."""
         return self.gain @ truncation_matrix(n_modes, self.n_modes)
-
-    def initial_state(self, x0) -> np.ndarray:
-        """No internal state: shape (0,)."""
-        return np.zeros(0)
 
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, at time ``t`` (s) for plant state ``x`` (shape (2 N + 2,))."""
         x_design = truncate_state(x, self.n_modes)
         x_ref, acc = reference_state(self.reference, t, self.n_modes, self.deflection_gain)
-        u = -float(self.gain[0] @ (x_design - x_ref))
-        if self.feedforward_inertia is not None:
-            u += self.feedforward_inertia * acc
-        return _saturate(u, self.torque_limit)
-
-    @property
-    def has_casadi_form(self) -> bool:
-        """True when the reference (if any) has a CasADi form (``casadi_reference``)."""
-        return _has_casadi(self.reference)
+        return self._apply(-float(self.gain[0] @ (x_design - x_ref)), acc)
 
     @property
     def casadi_parameters(self) -> tuple:
@@ -343,24 +319,15 @@ class LQR:
         are symbols too when ``parameters`` (the values of :attr:`casadi_parameters`) is given."""
         import casadi as ca
 
-        gain, inertia, limit = ca.DM(self.gain[0]), self.feedforward_inertia, self.torque_limit
+        gain, inertia, limit = ca.DM(self.gain[0]), None, None
         deflection = self.deflection_gain
         if parameters is not None:
             nd = self.gain.shape[1]
-            gain = parameters[:nd]
-            inertia = None if inertia is None else parameters[nd]
-            limit = None if limit is None else parameters[nd + 1]
+            gain, inertia, limit = parameters[:nd], parameters[nd], parameters[nd + 1]
             deflection = None if deflection is None else parameters[nd + 2:]
         x_design = casadi_truncate_state(x, self.n_modes)
         x_ref, acc = casadi_reference_state(self.reference, t, self.n_modes, deflection)
-        u = -ca.dot(gain, x_design - x_ref)
-        if inertia is not None:
-            u += inertia * acc
-        return _casadi_saturate(u, limit)
-
-    def derivative(self, t: float, x, z=None) -> np.ndarray:
-        """No internal state: shape (0,)."""
-        return np.zeros(0)
+        return self._casadi_apply(-ca.dot(gain, x_design - x_ref), acc, inertia, limit)
 
 
 def _lqr_gain(model, weights, spin_rate):

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .reference import (_casadi_evaluate, _casadi_hub_state, _casadi_saturate,
-                        _check_reference, _evaluate, _has_casadi, _hub_state, _optional_positive,
-                        _real, _saturate, _structure_key)
+from .feedback import ReferenceFeedback
+from .reference import _casadi_evaluate, _casadi_hub_state, _evaluate, _hub_state, _real, \
+    _structure_key
 
 __all__ = ["PD", "pd_gains", "design_pd"]
 
@@ -39,7 +39,7 @@ def _rigid_inertia(owner: str, model_or_inertia) -> float:
 
 
 @dataclass(frozen=True, kw_only=True)
-class PD:
+class PD(ReferenceFeedback):
     """Collocated PD law on hub angle and rate (a :class:`flexctl.Controller`, no states).
 
     ``torque = kp (theta_ref - theta) + kd (rate_ref - theta_dot) + J acc_ref``, clipped to
@@ -68,25 +68,13 @@ class PD:
 
     kp: float
     kd: float
-    reference: object = None
-    feedforward_inertia: float | None = None
-    torque_limit: float | None = None
 
-    n_states = 0
+    owner = "pd"
 
     def __post_init__(self):
         object.__setattr__(self, "kp", _real("pd", "kp", self.kp, minimum=0.0, strict=True))
         object.__setattr__(self, "kd", _real("pd", "kd", self.kd, minimum=0.0, strict=True))
-        object.__setattr__(self, "reference", _check_reference("pd", self.reference))
-        object.__setattr__(self, "feedforward_inertia", _optional_positive(
-            "pd", "feedforward_inertia", self.feedforward_inertia))
-        object.__setattr__(self, "torque_limit",
-                           _optional_positive("pd", "torque_limit", self.torque_limit))
-
-    @property
-    def breakpoints(self) -> tuple:
-        """Times (s) where the reference is not smooth."""
-        return tuple(getattr(self.reference, "breakpoints", ()) or ())
+        super().__post_init__()
 
     def state_gain(self, n_modes: int) -> np.ndarray:
         """``K`` with ``torque = -K x`` for a plant with ``n_modes`` modes (no reference, no
@@ -98,23 +86,11 @@ class PD:
         gain[0, 0], gain[0, n_modes + 1] = self.kp, self.kd
         return gain
 
-    def initial_state(self, x0) -> np.ndarray:
-        """No internal state: shape (0,)."""
-        return np.zeros(0)
-
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, at time ``t`` (s) for plant state ``x``."""
         theta, rate = _hub_state(x)
         angle_ref, rate_ref, acc_ref = _evaluate(self.reference, t)
-        u = self.kp * (angle_ref - theta) + self.kd * (rate_ref - rate)
-        if self.feedforward_inertia is not None:
-            u += self.feedforward_inertia * acc_ref
-        return _saturate(u, self.torque_limit)
-
-    @property
-    def has_casadi_form(self) -> bool:
-        """True when the reference (if any) has a CasADi form (``casadi_reference``)."""
-        return _has_casadi(self.reference)
+        return self._apply(self.kp * (angle_ref - theta) + self.kd * (rate_ref - rate), acc_ref)
 
     @property
     def casadi_parameters(self) -> tuple:
@@ -130,21 +106,13 @@ class PD:
     def casadi_torque(self, t, x, parameters=None):
         """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``; the numbers
         are symbols too when ``parameters`` (the values of :attr:`casadi_parameters`) is given."""
-        kp, kd, inertia, limit = (self.kp, self.kd, self.feedforward_inertia, self.torque_limit)
+        kp, kd, inertia, limit = self.kp, self.kd, None, None
         if parameters is not None:
-            kp, kd = parameters[0], parameters[1]
-            inertia = None if inertia is None else parameters[2]
-            limit = None if limit is None else parameters[3]
+            kp, kd, inertia, limit = parameters[0], parameters[1], parameters[2], parameters[3]
         theta, rate = _casadi_hub_state(x)
         angle_ref, rate_ref, acc_ref = _casadi_evaluate(self.reference, t)
-        u = kp * (angle_ref - theta) + kd * (rate_ref - rate)
-        if inertia is not None:
-            u += inertia * acc_ref
-        return _casadi_saturate(u, limit)
-
-    def derivative(self, t: float, x, z=None) -> np.ndarray:
-        """No internal state: shape (0,)."""
-        return np.zeros(0)
+        return self._casadi_apply(kp * (angle_ref - theta) + kd * (rate_ref - rate), acc_ref,
+                                  inertia, limit)
 
 
 def pd_gains(model_or_inertia, bandwidth: float, damping_ratio: float = 0.7) -> tuple:

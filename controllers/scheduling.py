@@ -29,11 +29,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .feedback import ReferenceFeedback
 from .lqr import (LQRWeights, _lqr_gain, _model, casadi_reference_state,
                   casadi_truncate_state, reference_state, static_deflection_gain,
                   truncate_state, truncation_matrix)
-from .reference import (_casadi_saturate, _check_reference, _has_casadi, _optional_positive,
-                        _real, _saturate)
+from .reference import _real
 
 __all__ = ["ScheduledLQR", "design_scheduled_lqr"]
 
@@ -48,7 +48,7 @@ def _spin_rates(owner: str, spin_rates) -> np.ndarray:
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
-class ScheduledLQR:
+class ScheduledLQR(ReferenceFeedback):
     """LQR whose gain is interpolated in ``|theta_dot|`` (a :class:`flexctl.Controller`).
 
     Build with :func:`design_scheduled_lqr`.
@@ -65,12 +65,9 @@ class ScheduledLQR:
 
     spin_rates: np.ndarray
     gains: np.ndarray
-    reference: object = None
-    feedforward_inertia: float | None = None
-    torque_limit: float | None = None
     deflection_gain: np.ndarray | None = None
 
-    n_states = 0
+    owner = "scheduled_lqr"
 
     def __post_init__(self):
         rates = _spin_rates("scheduled_lqr", self.spin_rates)
@@ -82,21 +79,12 @@ class ScheduledLQR:
         for name, value in (("spin_rates", rates), ("gains", gains)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
-        object.__setattr__(self, "reference", _check_reference("scheduled_lqr", self.reference))
-        object.__setattr__(self, "feedforward_inertia", _optional_positive(
-            "scheduled_lqr", "feedforward_inertia", self.feedforward_inertia))
-        object.__setattr__(self, "torque_limit", _optional_positive(
-            "scheduled_lqr", "torque_limit", self.torque_limit))
+        super().__post_init__()
 
     @property
     def n_modes(self) -> int:
         """Design modes ``M``."""
         return self.gains.shape[1] // 2 - 1
-
-    @property
-    def breakpoints(self) -> tuple:
-        """Times (s) where the reference is not smooth."""
-        return tuple(getattr(self.reference, "breakpoints", ()) or ())
 
     def gain_at(self, spin_rate: float) -> np.ndarray:
         """Interpolated gain at hub rate ``spin_rate`` (rad/s, either sign), shape (1, 2M+2)."""
@@ -114,24 +102,12 @@ class ScheduledLQR:
         """Gain at ``spin_rate`` on a plant state with ``n_modes`` modes, shape (1, 2N+2)."""
         return self.gain_at(spin_rate) @ truncation_matrix(n_modes, self.n_modes)
 
-    def initial_state(self, x0) -> np.ndarray:
-        """No internal state: shape (0,)."""
-        return np.zeros(0)
-
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, with the gain at the measured ``|theta_dot|``."""
         x_design = truncate_state(x, self.n_modes)
         x_ref, acc = reference_state(self.reference, t, self.n_modes, self.deflection_gain)
         gain = self.gain_at(x_design[self.n_modes + 1])
-        u = -float(gain[0] @ (x_design - x_ref))
-        if self.feedforward_inertia is not None:
-            u += self.feedforward_inertia * acc
-        return _saturate(u, self.torque_limit)
-
-    @property
-    def has_casadi_form(self) -> bool:
-        """True when the reference (if any) has a CasADi form (``casadi_reference``)."""
-        return _has_casadi(self.reference)
+        return self._apply(-float(gain[0] @ (x_design - x_ref)), acc)
 
     def casadi_gain_at(self, spin_rate):
         """:meth:`gain_at` of a CasADi hub rate: the gains as a list of 2 M + 2 expressions."""
@@ -154,14 +130,7 @@ class ScheduledLQR:
         x_ref, acc = casadi_reference_state(self.reference, t, self.n_modes,
                                             self.deflection_gain)
         gain = self.casadi_gain_at(x_design[self.n_modes + 1])
-        u = -ca.dot(gain, x_design - x_ref)
-        if self.feedforward_inertia is not None:
-            u += self.feedforward_inertia * acc
-        return _casadi_saturate(u, self.torque_limit)
-
-    def derivative(self, t: float, x, z=None) -> np.ndarray:
-        """No internal state: shape (0,)."""
-        return np.zeros(0)
+        return self._casadi_apply(-ca.dot(gain, x_design - x_ref), acc)
 
 
 def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=None,

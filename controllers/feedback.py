@@ -1,0 +1,95 @@
+"""The common part of the feedback laws that track a hub reference.
+
+PD (:mod:`controllers.pd`), LQR (:mod:`controllers.lqr`), gain-scheduled LQR
+(:mod:`controllers.scheduling`) and LQG (:mod:`controllers.lqg`) all apply
+
+``torque = feedback(t, x) + J acc_ref(t)``, clipped to ``[-torque_limit, torque_limit]``,
+
+where ``feedback`` is the law's own (a PD on the hub, a gain on the design state's deviation
+from the reference state), ``acc_ref`` the reference's hub acceleration and ``J`` the
+feedforward inertia (normally the rigid inertia ``J0``). :class:`ReferenceFeedback` owns the
+three settings this shares (``reference``, ``feedforward_inertia``, ``torque_limit``): their
+validation, the breakpoints they give the integrator, and the feedforward and saturation in
+numpy and CasADi.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from .reference import _casadi_saturate, _check_reference, _has_casadi, _optional_positive, \
+    _saturate
+
+__all__ = ["ReferenceFeedback"]
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class ReferenceFeedback:
+    """Base of the laws that track a hub reference with feedforward and saturation.
+
+    A static law (``n_states = 0``) unless a subclass overrides :attr:`n_states`,
+    :meth:`initial_state` and :meth:`derivative`.
+
+    Parameters
+    ----------
+    reference : object, optional
+        Hub reference with ``angle(t)``, ``rate(t)``, ``acceleration(t)`` (rad, rad/s,
+        rad/s^2), e.g. :class:`~controllers.reference.SlewProfile`. Default: regulate to 0.
+    feedforward_inertia : float, optional
+        ``J`` of the feedforward term ``J acc_ref``, kg m^2 (> 0). Default: no feedforward.
+    torque_limit : float, optional
+        Saturation of the total torque, N m (> 0). Default: none.
+    """
+
+    reference: object = None
+    feedforward_inertia: float | None = None
+    torque_limit: float | None = None
+
+    #: The law's name in error messages (``"pd"``, ``"lqr"``, ...).
+    owner: ClassVar[str] = "controller"
+    n_states = 0
+
+    def __post_init__(self):
+        object.__setattr__(self, "reference", _check_reference(self.owner, self.reference))
+        object.__setattr__(self, "feedforward_inertia", _optional_positive(
+            self.owner, "feedforward_inertia", self.feedforward_inertia))
+        object.__setattr__(self, "torque_limit", _optional_positive(
+            self.owner, "torque_limit", self.torque_limit))
+
+    @property
+    def breakpoints(self) -> tuple:
+        """Times (s) where the reference is not smooth."""
+        return tuple(getattr(self.reference, "breakpoints", ()) or ())
+
+    @property
+    def has_casadi_form(self) -> bool:
+        """True when the reference (if any) has a CasADi form (``casadi_reference``)."""
+        return _has_casadi(self.reference)
+
+    def initial_state(self, x0) -> np.ndarray:
+        """No internal state: shape (0,)."""
+        return np.zeros(0)
+
+    def derivative(self, t: float, x, z=None) -> np.ndarray:
+        """No internal state: shape (0,)."""
+        return np.zeros(0)
+
+    def _apply(self, feedback: float, acceleration: float) -> float:
+        """``feedback + J acc_ref``, saturated, N m."""
+        if self.feedforward_inertia is not None:
+            feedback += self.feedforward_inertia * acceleration
+        return _saturate(feedback, self.torque_limit)
+
+    def _casadi_apply(self, feedback, acceleration, inertia=None, limit=None):
+        """:meth:`_apply` on CasADi expressions; ``inertia`` and ``limit`` replace the
+        settings' numbers (e.g. by parameter symbols) where given, and are ignored where the
+        setting is off."""
+        if self.feedforward_inertia is not None:
+            feedback += (self.feedforward_inertia if inertia is None else inertia) \
+                * acceleration
+        if self.torque_limit is None:
+            return feedback
+        return _casadi_saturate(feedback, self.torque_limit if limit is None else limit)
