@@ -151,8 +151,6 @@ import dataclasses
 import time
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from flexctl.model import Model, build_model
 from flexctl.model.variants import EXACT_MAX_MODES
 from flexctl.sim.digital import ZeroOrderHold
@@ -329,7 +327,7 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
         if bound is not None and duration is not None and base.peak_torque > bound:
             raise SceneError(f"maneuver.duration {duration:g} s is shorter than the rigid "
                              f"minimum time at torque_bound {bound:g} N m")
-        end = 2.0 * np.sqrt(abs(angle) * design.matrices.J0 / base.peak_torque)
+        end = base.duration
         torque = base
         if kind != "bang_bang":
             shaper = design_shaper(design, kind)

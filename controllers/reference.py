@@ -31,19 +31,17 @@ Examples
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from flexctl.model.parameters import check_real as _real
+from flexctl.sim.maneuvers import RIGID_PEAK_ACCELERATION, rigid_slew_duration
 
 __all__ = ["SlewProfile", "minimum_slew_duration", "SHAPES"]
 
 SHAPES = ("poly7", "cycloidal")
 
-#: Peak |acceleration| of each unit profile (angle 1 rad, duration 1 s), rad/s^2.
-_PEAK_ACCELERATION = {"poly7": 84.0 * math.sqrt(5.0) / 25.0, "cycloidal": 2.0 * math.pi}
 #: Peak rate of each unit profile, rad/s.
 _PEAK_RATE = {"poly7": 35.0 / 16.0, "cycloidal": 2.0}
 
@@ -107,7 +105,7 @@ class SlewProfile:
     @property
     def peak_acceleration(self) -> float:
         """Largest ``|acceleration|``, rad/s^2."""
-        return _PEAK_ACCELERATION[self.shape] * abs(self.slew_angle) / self.duration ** 2
+        return RIGID_PEAK_ACCELERATION[self.shape] * abs(self.slew_angle) / self.duration ** 2
 
     def casadi_reference(self, t):
         """Angle, rate and acceleration as CasADi expressions of the symbol ``t`` (the
@@ -192,7 +190,7 @@ def minimum_slew_duration(slew_angle: float, inertia: float, torque_limit: float
     if shape not in SHAPES:
         raise ValueError(f"minimum_slew_duration.shape must be one of {', '.join(SHAPES)}; "
                          f"got {shape!r}")
-    return math.sqrt(_PEAK_ACCELERATION[shape] * abs(angle) * inertia / limit)
+    return rigid_slew_duration(angle, inertia, limit, shape)
 
 
 def _check_reference(owner: str, reference):

@@ -40,6 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexctl.sim.maneuvers import rigid_slew_duration
+
 from .pd import _rigid_inertia
 from .reference import _real
 
@@ -89,7 +91,7 @@ class BangBang:
     @property
     def duration(self) -> float:
         """Slew time, s."""
-        return 2.0 * math.sqrt(abs(self.slew_angle) * self.inertia / self.peak_torque)
+        return rigid_slew_duration(self.slew_angle, self.inertia, self.peak_torque)
 
     @property
     def breakpoints(self) -> tuple:

@@ -47,7 +47,7 @@ from functools import lru_cache
 import numpy as np
 import scipy.linalg
 
-from .maneuvers import SineTorque, Slew
+from .maneuvers import SineTorque, Slew, rigid_slew_duration
 from ..model import VARIANTS, build_model
 from ..model.parameters import HubBeam
 
@@ -172,7 +172,7 @@ def rigid_slew_torque(system: HubBeam, slew: Slew) -> SineTorque:
         if slew.torque_bound is None:
             raise ValueError("a slew needs a duration or a torque_bound to set its time scale; "
                              "got neither")
-        duration = math.sqrt(2.0 * math.pi * j0 * abs(angle) / slew.torque_bound)
+        duration = rigid_slew_duration(angle, j0, slew.torque_bound, "cycloidal")
     return SineTorque(peak_torque=2.0 * math.pi * j0 * angle / duration ** 2, duration=duration)
 
 

@@ -16,6 +16,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +24,44 @@ import numpy as np
 from ..model.errors import InputValueError
 from ..model.parameters import check_real as _real
 
-__all__ = ["SpinUp", "SineTorque", "Slew"]
+__all__ = ["SpinUp", "SineTorque", "Slew", "RIGID_PEAK_ACCELERATION", "rigid_slew_duration"]
+
+#: Peak |acceleration| of each unit rest-to-rest profile (angle 1 rad, duration 1 s), rad/s^2:
+#: bang-bang ``4``, cycloidal (one period of sine torque) ``2 pi``, 7th-order polynomial
+#: ``84 sqrt(5) / 25`` (about 7.51).
+RIGID_PEAK_ACCELERATION = {"bang_bang": 4.0, "cycloidal": 2.0 * math.pi,
+                           "poly7": 84.0 * math.sqrt(5.0) / 25.0}
+
+
+def rigid_slew_duration(angle: float, inertia: float, torque_bound: float,
+                        shape: str = "bang_bang") -> float:
+    """Shortest rest-to-rest slew of a rigid body whose torque stays within a bound.
+
+    A profile of duration ``T`` peaks at ``c |angle| / T^2`` (``c`` from
+    :data:`RIGID_PEAK_ACCELERATION`), so ``T = sqrt(c |angle| inertia / torque_bound)``; for
+    ``"bang_bang"`` this is the minimum time ``2 sqrt(|angle| inertia / torque_bound)``.
+
+    Parameters
+    ----------
+    angle : float
+        Slew angle, rad.
+    inertia : float
+        Rigid inertia, kg m^2 (> 0).
+    torque_bound : float
+        N m (> 0).
+    shape : {"bang_bang", "cycloidal", "poly7"}
+
+    Returns
+    -------
+    float
+        s.
+
+    Examples
+    --------
+    >>> rigid_slew_duration(1.0, 1.0, 1.0)
+    2.0
+    """
+    return math.sqrt(RIGID_PEAK_ACCELERATION[shape] * abs(angle) * inertia / torque_bound)
 
 
 @dataclass(frozen=True, kw_only=True)
