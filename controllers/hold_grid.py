@@ -63,6 +63,9 @@ MAX_SUBSTEPS = 100
 #: torque) effort that a slew accepts; above it the holds are refused, naming the interval
 #: counts and design-mode counts that stay within it.
 HOLD_EFFORT_TOLERANCE = 0.01
+#: A design mode that turns less than this over the slew (``omega T``, rad) hardly moves: the
+#: hub torque cannot stop it apart from the rigid body, and the hold analysis is singular.
+SLOW_MODE_PHASE = 1e-2
 #: Largest ``omega_max dt`` per step: RK4 is stable up to 2.83 on the imaginary axis; a
 #: collocation element spans at most half a period of the fastest mode.
 LARGEST_STEP = {"rk4": 2.5, "radau": math.pi, "legendre": math.pi}
@@ -320,14 +323,41 @@ class HoldGrid:
 
     def __init__(self, model, duration: float, angle: float = 1.0):
         a, b = _linearisation_model(model).linear_matrices(0.0)
-        self.a_z, self.b_z, t_z, omega = _modal_form(a, b)
-        self.frequencies, self.duration = omega[1:], duration
         self.n_dof = a.shape[0] // 2
-        self.target = t_z @ (np.eye(a.shape[0])[0] * angle)
-        gramian = _gramian(self.a_z, self.b_z, duration)
+        self.frequencies, self.duration = np.sqrt(np.abs(np.sort(
+            np.linalg.eigvals(-a[self.n_dof:, :self.n_dof]).real)[1:])), duration
         self.rows = [self._rows(j) for j in range(self.n_dof)]
-        self.continuous = np.array([self.target[r] @ np.linalg.solve(
-            gramian[np.ix_(r, r)], self.target[r]) for r in self.rows])
+        # The excess is a ratio of efforts, which both scale as |B|^-2: a unit input keeps a
+        # tiny rigid inertia J0 (B ~ 1 / J0) from overflowing the Van Loan exponential
+        with np.errstate(all="ignore"):
+            try:
+                self.a_z, b_z, t_z, omega = _modal_form(a, b)
+                self.b_z = b_z / np.linalg.norm(b_z)
+                self.frequencies = omega[1:]
+                self.target = t_z @ (np.eye(a.shape[0])[0] * angle)
+                gramian = _gramian(self.a_z, self.b_z, duration)
+                self.continuous = np.array([self.target[r] @ np.linalg.solve(
+                    gramian[np.ix_(r, r)], self.target[r]) for r in self.rows])
+            except np.linalg.LinAlgError:
+                self.continuous = np.full(self.n_dof, np.nan)
+        if not (np.all(np.isfinite(self.continuous)) and np.all(self.continuous > 0.0)):
+            raise ValueError(self._unresolved())
+
+    def _unresolved(self) -> str:
+        """Why the holds of this slew cannot be analysed: the physical scales involved."""
+        w, T = self.frequencies, self.duration
+        what = (f"the design model's linearisation at rest cannot be analysed over the "
+                f"{T:.4g} s slew in floating point: its {w.size} design mode"
+                f"{'s span' if w.size > 1 else ' is at'} {w[0]:.4g}"
+                f"{f' to {w[-1]:.4g}' if w.size > 1 else ''} rad/s (omega T = {w[0] * T:.3g}"
+                f"{f' to {w[-1] * T:.3g}' if w.size > 1 else ''} rad)")
+        if w[0] * T < SLOW_MODE_PHASE:
+            return (f"{what}; design mode 1 hardly moves during the slew, so the hub torque "
+                    f"cannot bring the beam to rest with it: lengthen the duration towards its "
+                    f"period {2 * math.pi / w[0]:.3g} s or stiffen the beam "
+                    "(beam.youngs_modulus)")
+        return (f"{what}; use fewer design modes (model.design_modes), a duration nearer the "
+                "rigid-body minimum time, or check the beam and hub parameters")
 
     def _rows(self, honoured: int) -> np.ndarray:
         """Modal states of the rigid-body mode and the first ``honoured`` modes."""
@@ -337,16 +367,25 @@ class HoldGrid:
     def excess(self, n_intervals: int, honoured: int | None = None) -> np.ndarray:
         """Excess of the holds' least effort for 0 .. N honoured modes (or for ``honoured``
         modes only, shape (1,))."""
-        g = _hold_map(self.a_z, self.b_z, self.duration, n_intervals)
         h = self.duration / n_intervals
         counts = range(self.n_dof) if honoured is None else [honoured]
-        excess = np.empty(len(counts))
-        for i, count in enumerate(counts):
-            rows = self.rows[count]
-            z, gj = self.target[rows], g[rows]
-            u, *_ = np.linalg.lstsq(gj, z, rcond=None)
-            miss = np.linalg.norm(gj @ u - z) / np.linalg.norm(z)
-            excess[i] = np.inf if miss > 1e-6 else h * (u @ u) / self.continuous[count] - 1.0
+        excess = np.full(len(counts), np.nan)
+        with np.errstate(all="ignore"):
+            g = _hold_map(self.a_z, self.b_z, self.duration, n_intervals)
+            for i, count in enumerate(counts):
+                rows = self.rows[count]
+                z, gj = self.target[rows], g[rows]
+                if not np.all(np.isfinite(gj)):
+                    break
+                try:
+                    u, *_ = np.linalg.lstsq(gj, z, rcond=None)
+                except np.linalg.LinAlgError:
+                    break
+                miss = np.linalg.norm(gj @ u - z) / np.linalg.norm(z)
+                excess[i] = np.inf if miss > 1e-6 \
+                    else h * (u @ u) / self.continuous[count] - 1.0
+        if np.any(np.isnan(excess)):
+            raise ValueError(self._unresolved())
         return excess
 
     def effort(self, n_intervals: int) -> HoldEffort:

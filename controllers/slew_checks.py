@@ -18,7 +18,7 @@ import functools
 import math
 
 from .hold_grid import HoldGrid, largest_step, mode_tolerances
-from .slew_nlp import Discretisation, discretisation
+from .slew_nlp import Discretisation, discretisation, refuse_fast_modes
 
 __all__ = ["MAX_EXACT_WORK", "exact_work", "refuse_unsolvable"]
 
@@ -155,6 +155,11 @@ mode 4 (134.6 rad/s) at its alias 8.92 rad/s, and stopping it costs 5.15 % more 
 the converged slew (limit 1 %); use n_intervals = 45 or at most 3 design modes \
 (model.design_modes)
     """
+    # modes too fast for any grid of holds first: the hold analysis of such a slew is
+    # inaccurate in floating point (or overflows), and no other setting helps
+    refuse_fast_modes(model, problem.duration or longest, t_rigid)
+    if model.variant != "exact":         # the exact variant's steps are part of its work check
+        discretisation(problem, model, t_rigid, longest)
     checks = _Checks(model, problem, t_rigid, longest)
     K = problem.n_intervals
     reason = checks.reason(K)

@@ -15,10 +15,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .hold_grid import MAX_SUBSTEPS, mode_tolerances, steps_per_hold
+from .hold_grid import LARGEST_STEP, MAX_SUBSTEPS, mode_tolerances, steps_per_hold
 
-__all__ = ["Discretisation", "discretisation", "transcription_for", "rk4_substeps",
-           "Transcribed", "transcribe", "set_initial", "state_scale"]
+__all__ = ["MAX_INTERVALS", "MAX_ELEMENTS", "MAX_MODE_PHASE", "Discretisation", "discretisation",
+           "transcription_for", "rk4_substeps", "refuse_fast_modes", "Transcribed", "transcribe",
+           "set_initial", "state_scale"]
+
+#: Most torque holds: the NLP grows with them (IPOPT's work about linearly, the refusal checks
+#: too), and 400 already converge the slew-90 cost (``benchmarks/bench_trajopt.py --grid``).
+MAX_INTERVALS = 5000
+#: Most collocation elements over a slew (``m K``): each adds ``n (d + 1)`` variables.
+MAX_ELEMENTS = 20000
+#: Most radians a design mode may turn over a slew: what MAX_INTERVALS holds of MAX_SUBSTEPS
+#: RK4 steps of the largest stable step integrate. Beyond it no discretisation within the
+#: limits follows the mode, and the hold analysis loses its accuracy in floating point.
+MAX_MODE_PHASE = MAX_INTERVALS * MAX_SUBSTEPS * LARGEST_STEP["rk4"]
 
 #: Lower bound on the free final time, as a fraction of the rigid-body minimum time (kept
 #: below 1 so that the physical bound is found by the optimiser, not imposed on it).
@@ -48,18 +59,63 @@ def rk4_substeps(model, hold: float, duration: float | None = None) -> int:
     Raises
     ------
     ValueError
-        If more than :data:`MAX_SUBSTEPS` would be needed, naming the settings to change.
+        If more than :data:`MAX_SUBSTEPS` would be needed, naming the settings that pass.
     """
     omega, tolerance = mode_tolerances(model)
-    omega_max = float(omega[-1])
-    substeps = steps_per_hold("rk4", omega, hold, duration or hold, tolerance=tolerance)
+    duration = duration or hold
+    substeps = steps_per_hold("rk4", omega, hold, duration, tolerance=tolerance)
     if substeps > MAX_SUBSTEPS:
+        n_intervals = round(duration / hold)
         raise ValueError(
-            f"the fastest of the {model.n_modes} design modes ({omega_max:.4g} rad/s) needs "
-            f"{substeps} RK4 substeps per {hold:.4g} s hold (more than {MAX_SUBSTEPS}): use "
-            f"at least {math.ceil(substeps / MAX_SUBSTEPS)} times as many n_intervals, "
-            "fewer design modes, or transcription 'collocation'")
+            f"the fastest of the {model.n_modes} design modes ({float(omega[-1]):.4g} rad/s) "
+            f"needs {substeps} RK4 substeps per {hold:.4g} s hold (more than {MAX_SUBSTEPS}): "
+            f"use {_resolution_remedies(model, omega, tolerance, hold, duration, n_intervals)}")
     return substeps
+
+
+def _resolution_remedies(model, omega, tolerance, hold, duration, n_intervals) -> str:
+    """Settings that integrate the design modes within the step limits, as a phrase."""
+    remedies = []
+    more = math.ceil(n_intervals * steps_per_hold("rk4", omega, hold, duration,
+                                                  tolerance=tolerance) / MAX_SUBSTEPS)
+    if more <= MAX_INTERVALS:
+        remedies.append(f"at least n_intervals = {more}")
+    fits = [j for j in range(1, omega.size) if steps_per_hold(
+        "rk4", omega[:j], hold, duration, tolerance=tolerance[:j]) <= MAX_SUBSTEPS]
+    if fits:
+        remedies.append("fewer design modes (model.design_modes)")
+    if n_intervals * steps_per_hold("radau", omega, hold, duration, 3, tolerance) \
+            <= MAX_ELEMENTS:
+        remedies.append("transcription 'collocation'")
+    if not remedies:
+        return ("a design model whose modes are slower against the slew (its fastest mode "
+                f"turns {float(omega[-1]) * duration:.3g} rad; see beam and hub parameters)")
+    return " or ".join(remedies)
+
+
+def refuse_fast_modes(model, sized: float, t_rigid: float) -> None:
+    """Raise if the fastest design mode turns more than :data:`MAX_MODE_PHASE` over ``sized``
+    seconds: no grid of holds within the limits integrates it."""
+    omega, _ = mode_tolerances(model)
+    phase = float(omega[-1]) * sized
+    if phase <= MAX_MODE_PHASE:
+        return
+    remedies = []
+    slow = int(np.count_nonzero(omega * sized <= MAX_MODE_PHASE))
+    if slow:
+        remedies.append(f"at most {slow} design mode{'s' if slow > 1 else ''} "
+                        "(model.design_modes)")
+    shorter = MAX_MODE_PHASE / float(omega[-1])
+    if shorter >= t_rigid:
+        remedies.append(f"a duration of at most {shorter:.3g} s (the rigid-body minimum "
+                        f"time is {t_rigid:.3g} s)")
+    remedy = " or ".join(remedies) or (
+        f"a higher torque_bound (no duration above the rigid-body minimum time {t_rigid:.3g} s "
+        "keeps even design mode 1 within reach), or check the beam and hub parameters")
+    raise ValueError(
+        f"design mode {model.n_modes} ({float(omega[-1]):.4g} rad/s) turns {phase:.3g} rad over "
+        f"the {sized:.4g} s slew, more than the {MAX_MODE_PHASE:.3g} rad that {MAX_INTERVALS} "
+        f"holds of {MAX_SUBSTEPS} RK4 substeps can integrate (MAX_MODE_PHASE): use {remedy}")
 
 
 @dataclass(frozen=True)
@@ -95,6 +151,7 @@ def discretisation(problem, model, t_rigid: float, longest: float,
     else:
         sized = problem.duration or longest
         method = problem.integrator
+    refuse_fast_modes(model, sized, t_rigid)
     if method == "cvodes":
         return Discretisation(transcription, "cvodes", 1, sized)
     if method == "rk4" and problem.substeps is not None:
@@ -105,6 +162,13 @@ def discretisation(problem, model, t_rigid: float, longest: float,
         omega, tolerance = mode_tolerances(model)
         steps = steps_per_hold(method, omega, sized / problem.n_intervals, sized,
                                problem.degree, tolerance)
+        if steps * problem.n_intervals > MAX_ELEMENTS:
+            raise ValueError(
+                f"the fastest of the {model.n_modes} design modes ({float(omega[-1]):.4g} "
+                f"rad/s) needs {steps} {method} collocation elements per "
+                f"{sized / problem.n_intervals:.4g} s hold, {steps * problem.n_intervals} over "
+                f"the slew (more than MAX_ELEMENTS = {MAX_ELEMENTS}): use fewer design modes "
+                "(model.design_modes) or transcription 'multiple_shooting'")
     return Discretisation(transcription, method, steps, sized)
 
 
@@ -237,7 +301,8 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
         opti.set_initial(T, min(max(t_guess, MIN_TIME_FLOOR * t_rigid), t_max))
         opti.minimize(T)
     else:
-        opti.minimize(h * ca.sumsqr(U) / (umax ** 2 * problem.duration))
+        # U / umax first: umax ** 2 overflows for a torque bound above 1e154 N m
+        opti.minimize(h * ca.sumsqr(U / umax) / problem.duration)
 
     set_initial(opti, grid, Xc, problem, m, x_guess)
     opti.set_initial(U, u_guess.reshape(1, K))

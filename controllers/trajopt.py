@@ -58,10 +58,12 @@ from numbers import Integral, Real
 import numpy as np
 
 from flexctl.model import Model
+from flexctl.model.errors import InputTypeError, InputValueError
 
+from .hold_grid import MAX_SUBSTEPS
 from .slew_checks import refuse_unsolvable
-from .slew_nlp import (Discretisation, Transcribed, discretisation, rk4_substeps, transcribe,
-                       transcription_for)
+from .slew_nlp import (MAX_INTERVALS, Discretisation, Transcribed, discretisation, rk4_substeps,
+                       transcribe, transcription_for)
 
 __all__ = ["SlewProblem", "SlewSolution", "TrajectoryOptimizationError", "HoldTorque",
            "Discretisation", "solve_slew", "rigid_minimum_time", "rk4_substeps",
@@ -88,21 +90,32 @@ class TrajectoryOptimizationError(RuntimeError):
 def _number(name, value, *, positive=True, optional=False):
     if value is None and optional:
         return None
-    if isinstance(value, bool) or not isinstance(value, Real) or not math.isfinite(value) \
-            or (positive and value <= 0):
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise InputTypeError(f"{name} must be a real number; got {value!r} of type "
+                             f"{type(value).__name__}")
+    value = float(value)
+    if not math.isfinite(value) or (positive and value <= 0):
         rule = "a positive finite number" if positive else "a finite number"
-        raise ValueError(f"{name} must be {rule}; got {value!r}")
-    return float(value)
+        raise InputValueError(f"{name} must be {rule}; got {value!r}")
+    return value
 
 
 def _choice(name, value, choices):
+    if not isinstance(value, str):
+        raise InputTypeError(f"{name} must be one of {', '.join(map(repr, choices))}; got "
+                             f"{value!r} of type {type(value).__name__}")
     if value not in choices:
-        raise ValueError(f"{name} must be one of {', '.join(map(repr, choices))}; got {value!r}")
+        raise InputValueError(f"{name} must be one of {', '.join(map(repr, choices))}; "
+                              f"got {value!r}")
 
 
-def _integer(name, value, minimum):
-    if isinstance(value, bool) or not isinstance(value, Integral) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
+def _integer(name, value, minimum, maximum):
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise InputTypeError(f"{name} must be an integer; got {value!r} of type "
+                             f"{type(value).__name__}")
+    if not isinstance(value, Integral) or not minimum <= value <= maximum:
+        raise InputValueError(f"{name} must be an integer in [{minimum}, {maximum}]; "
+                              f"got {value!r}")
     return int(value)
 
 
@@ -185,32 +198,33 @@ class SlewProblem:
     def __post_init__(self):
         angle = _number("angle", self.angle, positive=False)
         if angle == 0.0:
-            raise ValueError("angle must be non-zero (rad); got 0.0")
+            raise InputValueError("angle must be non-zero (rad); got 0.0")
         set_ = lambda name, v: object.__setattr__(self, name, v)  # noqa: E731
         set_("angle", angle)
         set_("duration", _number("duration", self.duration, optional=True))
         set_("torque_bound", _number("torque_bound", self.torque_bound))
-        set_("n_intervals", _integer("n_intervals", self.n_intervals, 2))
+        set_("n_intervals", _integer("n_intervals", self.n_intervals, 2, MAX_INTERVALS))
         for name in ("torque_rate_bound", "tip_bound", "max_duration"):
             set_(name, _number(name, getattr(self, name), optional=True))
-        objective = self.objective or ("time" if self.duration is None else "effort")
+        objective = ("time" if self.duration is None else "effort") if self.objective is None \
+            else self.objective
         _choice("objective", objective, OBJECTIVES)
         set_("objective", objective)
         if objective == "time" and self.duration is not None:
-            raise ValueError(f"duration must be None for objective 'time' (the duration is "
-                             f"optimised); got {self.duration!r}")
+            raise InputValueError(f"duration must be None for objective 'time' (the duration "
+                                  f"is optimised); got {self.duration!r}")
         if objective == "effort" and self.duration is None:
-            raise ValueError("duration must be a positive time (s) for objective 'effort'; "
-                             "got None")
+            raise InputValueError("duration must be a positive time (s) for objective "
+                                  "'effort'; got None")
         if self.max_duration is not None and objective != "time":
-            raise ValueError(f"max_duration applies to objective 'time' only; got "
-                             f"{self.max_duration!r}")
+            raise InputValueError(f"max_duration applies to objective 'time' only; got "
+                                  f"{self.max_duration!r}")
         for name, choices in (("transcription", TRANSCRIPTIONS), ("integrator", INTEGRATORS),
                               ("collocation_scheme", COLLOCATION_SCHEMES)):
             if name != "transcription" or self.transcription is not None:
                 _choice(name, getattr(self, name), choices)
         if self.substeps is not None:
-            set_("substeps", _integer("substeps", self.substeps, 1))
+            set_("substeps", _integer("substeps", self.substeps, 1, MAX_SUBSTEPS))
 
     def target_state(self, n_states: int) -> np.ndarray:
         """Final state ``x_f = [angle, 0 .. 0]``, shape (n_states,)."""
@@ -364,15 +378,16 @@ def _resample_guess(guess, model: Model, problem: SlewProblem):
         try:
             t, states, torque = (np.asarray(a, dtype=float) for a in guess)
         except (TypeError, ValueError):
-            raise ValueError("initial_guess must be a SlewSolution or a tuple (t, states, "
-                             f"torque); got {type(guess).__name__}") from None
+            raise InputTypeError("initial_guess must be a SlewSolution or a tuple (t, states, "
+                                 f"torque) of arrays; got {type(guess).__name__}") from None
     m = t.size - 1
-    if t.ndim != 1 or m < 1 or np.any(np.diff(t) <= 0) or t[0] != 0.0 \
+    if t.ndim != 1 or m < 1 or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0) \
+            or t[0] != 0.0 \
             or states.shape != (model.n_states, m + 1) or torque.shape != (m,) \
             or not (np.all(np.isfinite(states)) and np.all(np.isfinite(torque))):
-        raise ValueError(f"initial_guess must hold t (M+1,) increasing from 0, states "
-                         f"({model.n_states}, M+1) and torque (M,), finite; got shapes "
-                         f"{t.shape}, {states.shape}, {torque.shape}")
+        raise InputValueError(f"initial_guess must hold t (M+1,) increasing from 0, states "
+                              f"({model.n_states}, M+1) and torque (M,), finite; got shapes "
+                              f"{t.shape}, {states.shape}, {torque.shape}")
     s_new = np.linspace(0.0, 1.0, problem.n_intervals + 1)
     s_old = t / t[-1]
     x = np.vstack([np.interp(s_new, s_old, row) for row in states])
@@ -413,9 +428,9 @@ def _refuse_before_solving(model: Model, problem: SlewProblem) -> None:
     """
     n, N, K = model.n_states, model.n_modes, problem.n_intervals
     if K < n:
-        raise ValueError(f"n_intervals must be at least the {n} terminal conditions of a "
-                         f"rest-to-rest slew of a {N}-mode design model (2 N + 2 torque holds); "
-                         f"got {K}")
+        raise InputValueError(f"n_intervals must be at least the {n} terminal conditions of a "
+                              f"rest-to-rest slew of a {N}-mode design model (2 N + 2 torque "
+                              f"holds); got {K}")
     umax = problem.torque_bound
     t_rigid = rigid_minimum_time(problem.angle, model.matrices.J0, umax)
     if problem.duration is not None and problem.duration < t_rigid:
@@ -427,6 +442,11 @@ def _refuse_before_solving(model: Model, problem: SlewProblem) -> None:
             "no torque within the bound can complete the slew: lengthen maneuver.duration or "
             "raise maneuver.torque_bound (found before the optimiser ran)",
             "Infeasible_Duration", 0)
+    if problem.max_duration is not None and problem.max_duration < t_rigid:
+        raise InputValueError(
+            f"max_duration must be at least the rigid-body minimum time {t_rigid:.4g} s for "
+            f"angle {problem.angle:g} rad and torque_bound {umax:g} N m (no torque within the "
+            f"bound completes the slew sooner); got {problem.max_duration!r}")
     refuse_unsolvable(model, problem, *_time_bounds(model, problem))
 
 
