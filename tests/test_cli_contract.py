@@ -3,7 +3,7 @@
 
 import pytest
 
-import flexctl.app.cli as cli
+import flexctl.app.runner as runner
 from flexctl.app.cli import EXIT_BAD_INPUT, EXIT_BUG, EXIT_OK, main
 
 #: A run that takes well under a second: one mode, one second.
@@ -53,7 +53,7 @@ def test_bad_input_leaves_one_line_on_stderr_and_no_files(argv, named, tmp_path,
 def test_a_bug_exits_1_with_its_traceback(tmp_path, monkeypatch, capsys):
     def broken(scene):
         raise ValueError("an internal inconsistency")
-    monkeypatch.setattr(cli, "run_scene", broken)
+    monkeypatch.setattr(runner, "run_scene", broken)
     code = main(["run", "hub-beam-mass", "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
     assert code == EXIT_BUG
@@ -75,17 +75,17 @@ def test_failed_run_leaves_the_output_directory_as_it_was(failure, tmp_path, mon
     out = tmp_path / "out"
     _previous_run(out)
     if failure == "write":
-        real = cli.write_run
+        real = runner.write_run
 
         def write_then_fail(scene, result, where, **kwargs):
             real(scene, result, where, **kwargs)
             raise OSError(28, "No space left on device")
-        monkeypatch.setattr(cli, "write_run", write_then_fail)
+        monkeypatch.setattr(runner, "write_run", write_then_fail)
         expected = EXIT_BAD_INPUT
     else:
         def broken(scene):
             raise RuntimeError("boom")
-        monkeypatch.setattr(cli, "run_scene", broken)
+        monkeypatch.setattr(runner, "run_scene", broken)
         expected = EXIT_BUG
     assert main(["run", "hub-beam-mass", *QUICK, "--out", str(out)]) == expected
     assert {p.name: p.read_text() for p in out.iterdir()} == {

@@ -12,11 +12,13 @@ module               contents
 ``bench_plot``       the bench's speed-against-error figure
 ``bench_report``     the bench's CSV, Markdown pages and report.md
 ``report``           a run's summary, time series and figures written to disk
+``runner``           one scene end to end: controller design, run, files moved in complete
 ``markdown``         the one Markdown-table renderer of the reports
 ``figures``          the bare matplotlib figure the plots start from
 ``plotting``         figures of responses, modes, frequencies, controller comparisons
 ``plotting_sweeps``  sweep curves and Pareto plots
-``cli``              the ``flexctl`` command
-``demo``             the papers' figures and the controller comparison
+``plotting_loops``   loop-shaping figures: Bode, Nyquist, margins
+``cli``              the ``flexctl`` command: arguments, exit codes, held output
+``demo``             ``flexctl demo``: built-in scenes, the papers' figures, comparisons
 ===================  ========================================================================
 """

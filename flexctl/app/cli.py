@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import ctypes
 import os
-import shutil
 import sys
 import tempfile
 import textwrap
@@ -44,15 +43,15 @@ import warnings
 from dataclasses import fields
 from pathlib import Path
 
-import numpy as np
-
 from controllers.spec import CONTROLLER_KINDS
 
 from .. import __version__
 from ..model.errors import InputError, InputValueError
 from .bench import BenchConfig, run_bench, summary_line
-from .report import format_summary, write_demo_report, write_run
-from .scenes import SceneError, builtin_scenes, load_scene, run_scene, run_slew
+from .demo import DEMO_WORKERS, run_demo
+from .report import format_summary
+from .runner import execute, write_complete
+from .scenes import SceneError, builtin_scenes, load_scene
 
 __all__ = ["main", "parse_overrides", "EXIT_OK", "EXIT_BUG", "EXIT_BAD_INPUT", "EXIT_STOPPED"]
 
@@ -67,28 +66,6 @@ DEFAULT_DEMO_DIR = Path("flexctl-demo")
 #: checks of parameters, scenes, controller settings and simulate raise these; any other
 #: exception is a bug and ends with its traceback (exit 1).
 INPUT_ERRORS = (InputError,)
-
-#: Demo runs besides the built-in scenes: (label, scene, overrides, expected status).
-DEMO_COMPARISONS = (
-    ("kane-spinup-zero_order", "kane-spinup", {"model.variant": "zero_order"}, "diverged"),
-)
-DEMO_INTRO = (
-    "Every built-in scene run with its default settings, and the Kane spin-up once more with "
-    "the zero_order model. zero_order leaves out dynamic stiffening (the centrifugal tension "
-    "of the beam), so once the hub rate passes the first clamped frequency of the beam its "
-    "stiffness K_ff - Omega^2 M_ff is no longer positive and the deflection grows without "
-    "bound: that run is expected to diverge. After the frequency plot: the papers' figures "
-    "(paper 001 Figs. 4 and 5, paper 000 Figs. 5 to 8) against their published numbers, and "
-    "every controller kind on slew-90.")
-#: Processes of the demo's pool (sweeps and controller comparison).
-DEMO_WORKERS = 2
-DEMO_FREQUENCY_NOTE = (
-    "Kane beam, hub clamped at a steady spin rate. first_order and consistent share the beam "
-    "stiffness K_ff - Omega^2 (M_ff - K_g), so their curves lie on each other and rise with "
-    "the spin (dynamic stiffening); zero_order softens and its first frequency reaches zero "
-    "where the spin equals the first clamped frequency. Values below zero are modes without "
-    "stiffness, drawn as minus their growth rate (1/s).")
-
 
 class _Parser(argparse.ArgumentParser):
     """argparse with errors in one line, like the rest of the command line."""
@@ -294,27 +271,6 @@ class _HeldOutput:
             print(f"{PROG}: warning: {w.category.__name__}: {text}", file=sys.stderr)
 
 
-def _write_complete(scene, result, out: Path, overrides: dict, extra: dict) -> dict:
-    """:func:`write_run` into a temporary directory next to ``out``; move the files into ``out``
-    only once every one is written, so a failure leaves ``out`` as it was."""
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise FileExistsError(17, "exists and is not a directory", str(out))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}-", suffix=".partial",
-                                    dir=out.parent))
-    try:
-        summary = write_run(scene, result, staging, overrides=overrides, extra=extra)
-        out.mkdir(exist_ok=True)
-        for path in sorted(staging.iterdir()):
-            os.replace(path, out / path.name)
-        summary["files"] = {kind: str(out / Path(path).name)
-                            for kind, path in summary.get("files", {}).items()}
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-    return summary
-
-
 def _worker_count(text: str) -> int:
     """argparse type of ``demo --workers``: an integer >= 1."""
     try:
@@ -324,22 +280,6 @@ def _worker_count(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be an integer >= 1; got {text!r}")
     return value
-
-
-def _run_controlled(scene):
-    """Design the controller of a slew scene, run it, and measure the slew."""
-    # The command line sits on top of both packages: controllers are built from the scene
-    # here, never inside flexctl's physics or simulation.
-    from controllers.factory import from_spec
-
-    result, built, metrics = run_slew(scene, from_spec)
-    slew = metrics.as_dict()
-    slew.update({"controller": built.kind, "design_modes": built.design_modes,
-                 "maneuver_end": built.maneuver_end, **built.info})
-    extra = {"slew": slew}
-    if result.controller_report is not None:
-        extra["controller_report"] = result.controller_report
-    return result, extra
 
 
 def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
@@ -352,11 +292,7 @@ def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
     try:
         with held:
             scene = load_scene(source, overrides=overrides)
-            extra = {}
-            if scene.controller is None:
-                result = run_scene(scene)
-            else:
-                result, extra = _run_controlled(scene)
+            result, extra = execute(scene)
     except INPUT_ERRORS as exc:
         raise _InputError(str(exc)) from None
     except BaseException:
@@ -365,7 +301,7 @@ def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
     held.replay()
     out = out_dir if out_dir is not None else DEFAULT_RUN_DIR / scene.name
     try:
-        return _write_complete(scene, result, out, overrides, extra)
+        return write_complete(scene, result, out, overrides, extra)
     except OSError as exc:
         reason = exc.strerror or str(exc)
         where = f" ({exc.filename})" if exc.filename else ""
@@ -410,77 +346,15 @@ def _cmd_bench(args) -> int:
     return EXIT_OK
 
 
-def _demo_frequency_plot(out: Path, source: str = "kane-spinup") -> Path:
-    from ..model import VARIANTS
-    from .plotting import plot_frequencies_vs_spin
-
-    scene = load_scene(source)
-    top = 1.5 * max(abs(getattr(scene.maneuver, "spin_rate", 0.0)), 1.0)
-    fig = plot_frequencies_vs_spin(scene.system, np.linspace(0.0, top, 151), variants=VARIANTS,
-                                   n_modes=scene.model.modes, n_frequencies=2)
-    fig.axes[0].set_title(f"{source}: clamped natural frequencies against spin rate")
-    path = out / "frequencies-vs-spin.png"
-    fig.savefig(path, dpi=100)
-    return path
-
-
-def _demo_sections(out: Path, workers: int, surprises: list) -> list:
-    """The papers' figures and the controller comparison (:mod:`flexctl.app.demo`), on a pool."""
-    from concurrent.futures import ProcessPoolExecutor
-
-    from . import demo
-    from .sweep import SweepError
-
-    cases = (("paper 001 Fig. 4", demo.kane_spinup, True),
-             ("paper 001 Fig. 5", lambda o, pool: demo.spacecraft_torque(o), False),
-             ("paper 000 Figs. 5-8", demo.hub_beam_mass, True),
-             ("controller comparison", demo.slew_comparison, True),
-             ("design-model error", demo.model_error, True),
-             ("large deflection", lambda o, pool: demo.large_deflection(o), False))
-    pool = ProcessPoolExecutor(max_workers=workers) if workers > 1 else None
-    sections = []
-    try:
-        for label, make, pooled in cases:
-            begin = time.perf_counter()
-            try:
-                sections.append(make(out, pool if pooled else None))
-            except (SweepError, InputError) as exc:     # a genuine bug keeps its traceback
-                surprises.append(f"{label} failed: {exc}")
-                continue
-            print(f"{label}: {time.perf_counter() - begin:.1f} s", flush=True)
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    return sections
-
-
 def _cmd_demo(args) -> int:
-    out = args.out
-    plan = [(name, name, {}, "ok") for name in builtin_scenes()]
-    for extra in DEMO_COMPARISONS:
-        after = next((k for k, p in enumerate(plan) if p[1] == extra[1]), len(plan) - 1)
-        plan.insert(after + 1, extra)
-    runs, surprises = [], []
     start = time.perf_counter()
     try:
-        for label, source, overrides, expected in plan:
-            summary = _load_and_run(source, overrides, out / label)
-            runs.append((label, summary))
-            note = "" if summary["status"] == expected else f" (expected {expected})"
-            print(f"{label}: {summary['status']}{note}, peak tip deflection "
-                  f"{summary['peak_tip_deflection']:.4g} m, t = {summary['t_end']:.4g} s, "
-                  f"{summary['wall_time_s']:.2f} s", flush=True)
-            if note:
-                surprises.append(f"{label} ended {summary['status']}{note}: "
-                                 f"{summary['message']}")
-        freq_plot = _demo_frequency_plot(out)
-        sections = _demo_sections(out, args.workers, surprises)
-        report = write_demo_report(out, runs, freq_plot, intro=DEMO_INTRO,
-                                   frequency_note=DEMO_FREQUENCY_NOTE, sections=sections)
+        report, surprises = run_demo(args.out, _load_and_run, workers=args.workers,
+                                     progress=lambda line: print(line, flush=True))
     except _InputError as exc:
         return _error(exc)
     except OSError as exc:
-        return _error(f"cannot write the demo report to {out}: {exc.strerror or exc}")
+        return _error(f"cannot write the demo report to {args.out}: {exc.strerror or exc}")
     print(f"report: {report} ({time.perf_counter() - start:.1f} s)")
     for text in surprises:
         print(f"{PROG}: unexpected: {text}", file=sys.stderr)

@@ -1,6 +1,8 @@
-"""The papers' figures and the controller comparison of ``flexctl demo``, as report sections.
+"""``flexctl demo``: every built-in scene, the papers' figures and the controller comparisons.
 
-Each function runs one case, saves its figures (PNG) and tables (CSV) into the demo directory,
+:func:`run_demo` is the whole demo: it runs every built-in scene (and the comparisons of
+:data:`DEMO_COMPARISONS`), draws the frequency plot, makes every section below and writes
+``report.md``. Each section function runs one case, saves its figures (PNG) and tables (CSV) into the demo directory,
 and returns a :class:`Section` that :func:`flexctl.app.report.write_demo_report` turns into
 Markdown. The sweeps go through :func:`flexctl.app.sweep.sweep` on the executor given (the demo
 passes a process pool). Sizes are chosen to finish in well under a minute on two cores.
@@ -23,6 +25,7 @@ Like the command line, this module sits on top of both packages: it imports
 from __future__ import annotations
 
 import dataclasses
+import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,13 +34,16 @@ import numpy as np
 
 from controllers.spec import CONTROLLER_KEYS
 
+from ..model.errors import InputError
 from ..sim.validity import ModelValidityWarning
-from .scenes import load_scene, run_slew
+from .report import write_demo_report
+from .scenes import builtin_scenes, load_scene, run_slew
 from .sweep import PointMassAmplitudes, SceneTask, response_amplitudes, sweep
 
 __all__ = ["Section", "kane_spinup", "spacecraft_torque", "hub_beam_mass", "slew_comparison",
-           "model_error", "large_deflection",
-           "PAPER_VALUES", "SWEEP_POINTS"]
+           "model_error", "large_deflection", "frequency_plot", "sections", "run_demo",
+           "PAPER_VALUES", "SWEEP_POINTS", "DEMO_COMPARISONS", "DEMO_INTRO", "DEMO_WORKERS",
+           "DEMO_FREQUENCY_NOTE"]
 
 #: Published values (MODEL.md section 6), m.
 PAPER_VALUES = {
@@ -422,3 +428,115 @@ def large_deflection(out: Path, executor=None) -> Section:
         table=(("design model", "plant", "residual vibration (mm)", "final error (deg)",
                 "peak tip (m)", "geometric error of the plant model"), rows),
         files=(csv,))
+
+
+#: Demo runs besides the built-in scenes: (label, scene, overrides, expected status).
+DEMO_COMPARISONS = (
+    ("kane-spinup-zero_order", "kane-spinup", {"model.variant": "zero_order"}, "diverged"),
+)
+DEMO_INTRO = (
+    "Every built-in scene run with its default settings, and the Kane spin-up once more with "
+    "the zero_order model. zero_order leaves out dynamic stiffening (the centrifugal tension "
+    "of the beam), so once the hub rate passes the first clamped frequency of the beam its "
+    "stiffness K_ff - Omega^2 M_ff is no longer positive and the deflection grows without "
+    "bound: that run is expected to diverge. After the frequency plot: the papers' figures "
+    "(paper 001 Figs. 4 and 5, paper 000 Figs. 5 to 8) against their published numbers, and "
+    "every controller kind on slew-90.")
+#: Processes of the demo's pool (sweeps and controller comparison).
+DEMO_WORKERS = 2
+DEMO_FREQUENCY_NOTE = (
+    "Kane beam, hub clamped at a steady spin rate. first_order and consistent share the beam "
+    "stiffness K_ff - Omega^2 (M_ff - K_g), so their curves lie on each other and rise with "
+    "the spin (dynamic stiffening); zero_order softens and its first frequency reaches zero "
+    "where the spin equals the first clamped frequency. Values below zero are modes without "
+    "stiffness, drawn as minus their growth rate (1/s).")
+
+
+def frequency_plot(out: Path, source: str = "kane-spinup") -> Path:
+    """Clamped natural frequencies of a scene's beam against the spin rate, every variant;
+    written to ``out / "frequencies-vs-spin.png"``."""
+    from ..model import VARIANTS
+    from .plotting import plot_frequencies_vs_spin
+
+    scene = load_scene(source)
+    top = 1.5 * max(abs(getattr(scene.maneuver, "spin_rate", 0.0)), 1.0)
+    fig = plot_frequencies_vs_spin(scene.system, np.linspace(0.0, top, 151), variants=VARIANTS,
+                                   n_modes=scene.build_model().n_modes, n_frequencies=2)
+    fig.axes[0].set_title(f"{source}: clamped natural frequencies against spin rate")
+    path = out / "frequencies-vs-spin.png"
+    fig.savefig(path, dpi=100)
+    return path
+
+
+def sections(out: Path, workers: int, surprises: list, progress=print) -> list:
+    """Every section of this module, the sweeps and comparisons on a pool of ``workers``
+    processes; a section that fails on bad input or in a sweep is listed in ``surprises``
+    (a genuine bug keeps its traceback)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from .sweep import SweepError
+
+    cases = (("paper 001 Fig. 4", kane_spinup, True),
+             ("paper 001 Fig. 5", lambda o, pool: spacecraft_torque(o), False),
+             ("paper 000 Figs. 5-8", hub_beam_mass, True),
+             ("controller comparison", slew_comparison, True),
+             ("design-model error", model_error, True),
+             ("large deflection", lambda o, pool: large_deflection(o), False))
+    pool = ProcessPoolExecutor(max_workers=workers) if workers > 1 else None
+    made = []
+    try:
+        for label, make, pooled in cases:
+            begin = time.perf_counter()
+            try:
+                made.append(make(out, pool if pooled else None))
+            except (SweepError, InputError) as exc:
+                surprises.append(f"{label} failed: {exc}")
+                continue
+            progress(f"{label}: {time.perf_counter() - begin:.1f} s")
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    return made
+
+
+def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print) -> tuple:
+    """The whole demo: every built-in scene and :data:`DEMO_COMPARISONS`, the frequency plot,
+    every section, and ``report.md``.
+
+    Parameters
+    ----------
+    out : Path
+        Output directory; each run writes into ``out / label``.
+    run_one : callable
+        ``run_one(source, overrides, out_dir) -> summary``: loads, runs and writes one scene
+        (the command line's, which holds the run's output and maps its errors).
+    workers : int
+        Processes for the sweeps and comparisons.
+    progress : callable
+        Called with one line per finished run or section.
+
+    Returns
+    -------
+    report : Path
+    surprises : list of str
+        Runs that did not end as expected and sections that failed.
+    """
+    plan = [(name, name, {}, "ok") for name in builtin_scenes()]
+    for extra in DEMO_COMPARISONS:
+        after = next((k for k, p in enumerate(plan) if p[1] == extra[1]), len(plan) - 1)
+        plan.insert(after + 1, extra)
+    runs, surprises = [], []
+    for label, source, overrides, expected in plan:
+        summary = run_one(source, overrides, out / label)
+        runs.append((label, summary))
+        note = "" if summary["status"] == expected else f" (expected {expected})"
+        progress(f"{label}: {summary['status']}{note}, peak tip deflection "
+                 f"{summary['peak_tip_deflection']:.4g} m, t = {summary['t_end']:.4g} s, "
+                 f"{summary['wall_time_s']:.2f} s")
+        if note:
+            surprises.append(f"{label} ended {summary['status']}{note}: {summary['message']}")
+    freq_plot = frequency_plot(out)
+    made = sections(out, workers, surprises, progress)
+    report = write_demo_report(out, runs, freq_plot, intro=DEMO_INTRO,
+                               frequency_note=DEMO_FREQUENCY_NOTE, sections=made)
+    return report, surprises

@@ -1,0 +1,84 @@
+"""One scene, end to end: design its controller (if any), simulate, and write its files.
+
+:func:`execute` runs a loaded scene: a scene without a ``[controller]`` table through
+:func:`~flexctl.app.scenes.run_scene`, a slew with a controller through
+:func:`~flexctl.app.scenes.run_slew` with :func:`controllers.from_spec`, whose design facts
+and slew metrics go into the run's summary. :func:`write_complete` writes the run's files
+(:func:`~flexctl.app.report.write_run`) into a temporary directory and moves them into place
+only once every one is written. ``flexctl run`` and ``flexctl demo`` are these two steps.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+from .report import write_run
+from .scenes import run_scene, run_slew
+
+__all__ = ["execute", "write_complete"]
+
+
+def _run_controlled(scene):
+    """Design the controller of a slew scene, run it, and measure the slew."""
+    from controllers.factory import from_spec
+
+    result, built, metrics = run_slew(scene, from_spec)
+    slew = metrics.as_dict()
+    slew.update({"controller": built.kind, "design_modes": built.design_modes,
+                 "maneuver_end": built.maneuver_end, **built.info})
+    extra = {"slew": slew}
+    if result.controller_report is not None:
+        extra["controller_report"] = result.controller_report
+    return result, extra
+
+
+def execute(scene) -> tuple:
+    """Run a loaded scene.
+
+    Returns
+    -------
+    result : SimulationResult
+    extra : dict
+        Entries for the run's ``summary.json`` beside the scene and the result: ``slew`` (the
+        controller kind, design modes and slew metrics) and ``controller_report`` for a
+        controlled slew; empty otherwise.
+    """
+    if scene.controller is None:
+        return run_scene(scene), {}
+    return _run_controlled(scene)
+
+
+def write_complete(scene, result, out, overrides: dict, extra: dict) -> dict:
+    """:func:`~flexctl.app.report.write_run` into a temporary directory next to ``out``; the
+    files are moved into ``out`` only once every one is written, so a failure leaves ``out``
+    as it was.
+
+    Returns
+    -------
+    dict
+        The run's summary, with ``files`` naming the files in ``out``.
+
+    Raises
+    ------
+    OSError
+        If ``out`` cannot be created or written (``out`` is then unchanged).
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(17, "exists and is not a directory", str(out))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}-", suffix=".partial",
+                                    dir=out.parent))
+    try:
+        summary = write_run(scene, result, staging, overrides=overrides, extra=extra)
+        out.mkdir(exist_ok=True)
+        for path in sorted(staging.iterdir()):
+            os.replace(path, out / path.name)
+        summary["files"] = {kind: str(out / Path(path).name)
+                            for kind, path in summary.get("files", {}).items()}
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return summary
