@@ -49,7 +49,8 @@ from ..model import Model, SingularMassMatrixError
 from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["simulate", "SimulationResult", "Controller", "StaticLaw", "StopReason",
-           "StiffnessWarning", "AccuracyWarning"]
+           "StiffnessWarning", "AccuracyWarning", "ModelValidityWarning", "EnergyBalance",
+           "energy_balance"]
 
 #: Integration stops as "singular" when the effective hub inertia falls below this fraction
 #: of the rigid inertia J_0 (the exact singularity cannot be integrated up to).
@@ -63,6 +64,15 @@ EXACT_CURL = 2.0
 #: "cvodes" (compiled, :mod:`flexctl.sim.compiled`), "rk4" (compiled fixed step,
 #: :mod:`flexctl.sim.fixed_step`) and the ``scipy.integrate.solve_ivp`` methods.
 METHODS = ("auto", "cvodes", "rk4", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+
+#: A small-deflection run whose energy departs from the work done on it by more than this
+#: fraction of the energy that passed through it (:class:`EnergyBalance`) is outside its
+#: model's range. first_order is not energy-consistent, but on the built-in scenes it stays
+#: within 1e-3 (hub-beam-mass 7e-4, spacecraft-torque 7e-4, kane-spinup 3e-5; zero_order
+#: 1.1e-3 on hub-beam-mass); with a point mass of 30 / 300 / 3000 kg at the tip of the
+#: hub-beam-mass beam it reaches 0.26 / 1.9 / 60, and the run's hub rate is 15 times the
+#: exact model's at 3000 kg.
+ENERGY_TOLERANCE = 0.1
 
 #: Default tolerances: of the error-controlled methods, and of "rk4" (relative to the peak tip
 #: deflection, for "fast, and 1 % is enough").
@@ -113,6 +123,12 @@ class StiffnessWarning(RuntimeWarning):
     """An explicit method was asked for on a model whose fastest mode makes it crawl."""
 
 
+class ModelValidityWarning(UserWarning):
+    """A small-deflection model was used outside its range: its geometric error exceeds the
+    tolerance (:func:`flexctl.sim.validity.assess`) or its energy balance is broken
+    (:class:`EnergyBalance`)."""
+
+
 class StopReason(Enum):
     """Why a run ended; :attr:`status` is the ``SimulationResult.status`` it gives."""
 
@@ -150,12 +166,199 @@ def _stop_message(model: Model, reason: StopReason, t_end: float, state) -> str:
         return (f"tip deflection passed the beam length {model.system.beam.length:g} m at "
                 f"t = {t_end:.6g} s: " + _stiffness_reason(model, float(state[n + 1])))
     if reason is StopReason.SINGULAR_MASS:
-        j_eff = float(model.effective_hub_inertia(state))
-        return (f"mass matrix singular at t = {t_end:.6g} s: the effective hub inertia "
-                f"J_0 + q^T D q - m_tf^T M_ff^-1 m_tf fell to {j_eff:.3g} kg m^2 "
-                f"(J_0 = {model.matrices.J0:.4g} kg m^2); in the consistent model the "
-                "deflection lowers the hub inertia, and a light hub loses all of it")
+        return _singular_message(model, t_end, state)
     return reason.value + f" at t = {t_end:.6g} s"
+
+
+@dataclass(frozen=True, kw_only=True)
+class EnergyBalance:
+    """Mechanical energy of a small-deflection run against the work done on it.
+
+    The residual ``r(t) = E(t) - E(0) - W(t) + L(t)``, with ``E`` :meth:`Model.energy` (the
+    consistent model's energy, MODEL.md section 4), ``W`` the work of the hub torque
+    ``int T theta_t dt`` and ``L`` the energy taken by hub friction and beam damping, all from
+    the output samples (trapezoidal rule). consistent conserves ``E``, so its ``r`` is
+    integration error; first_order and zero_order leave the second-order inertia ``q^T D q``
+    out of the hub equation, and ``dE/dt = T theta_t + theta_t d(theta_t q^T D q)/dt - dL/dt``
+    (first_order): their ``r`` measures what they neglect, which matters once ``q^T D q`` is
+    not small against the effective hub inertia ``J_0 - m_tf^T M_ff^-1 m_tf``.
+
+    Attributes
+    ----------
+    variant : str
+    energy_start : float
+        ``E(0)``, J.
+    imbalance : float
+        ``r`` where ``|r|`` is largest, J (positive: energy created).
+    time : float
+        Where, s.
+    energy, work, lost : float
+        ``E``, ``W`` and ``L`` at that time, J.
+    throughput : float
+        ``E(0) + int |T theta_t| dt`` over the run, J: the energy that passed through.
+    hub_inertia : float
+        Effective hub inertia at rest ``J_0 - m_tf^T M_ff^-1 m_tf``, kg m^2.
+    inertia_change : float
+        ``q^T D q`` where ``|q^T D q|`` is largest, kg m^2.
+    mass_ratio : float
+        Point masses over the beam's mass.
+    """
+
+    variant: str
+    energy_start: float
+    imbalance: float
+    time: float
+    energy: float
+    work: float
+    lost: float
+    throughput: float
+    hub_inertia: float
+    inertia_change: float
+    mass_ratio: float
+
+    @property
+    def relative_imbalance(self) -> float:
+        """``|imbalance| / throughput``."""
+        if self.imbalance == 0.0:
+            return 0.0
+        return abs(self.imbalance) / self.throughput if self.throughput > 0 else np.inf
+
+    @property
+    def violated(self) -> bool:
+        """True when the relative imbalance is above :data:`ENERGY_TOLERANCE`."""
+        return self.relative_imbalance > ENERGY_TOLERANCE
+
+    @property
+    def message(self) -> str:
+        """The balance in one sentence, with its physical reading when violated."""
+        went = "rose" if self.energy >= self.energy_start else "fell"
+        text = (f"the {self.variant} model's energy {went} from {self.energy_start:.3g} to "
+                f"{self.energy:.3g} J by t = {self.time:.4g} s while the hub torque did "
+                f"{self.work:.3g} J of work ({self.lost:.3g} J dissipated): it "
+                f"{'created' if self.imbalance > 0 else 'destroyed'} {abs(self.imbalance):.3g} J, "
+                f"{self.relative_imbalance:.3g} times the {self.throughput:.3g} J that passed "
+                "through the system")
+        if not self.violated:
+            return text
+        if self.variant == "consistent":
+            return (text + "; the consistent model conserves this energy, so the integration "
+                    "lost its accuracy (tighten rtol)")
+        masses = (f" (point masses {self.mass_ratio:.3g} times the beam mass)"
+                  if self.mass_ratio > 0 else "")
+        stiffening = (" and its beam equation the dynamic stiffening K_g"
+                      if self.variant == "zero_order" else "")
+        return (text + f"; its hub equation leaves out the second-order inertia q^T D q, which "
+                f"reached {self.inertia_change:.3g} kg m^2 against the effective hub inertia "
+                f"{self.hub_inertia:.3g} kg m^2{masses}{stiffening}: its first-order terms are "
+                "outside their validity here; the exact variant conserves energy")
+
+
+def _running_integral(t: np.ndarray, rate: np.ndarray) -> np.ndarray:
+    """Trapezoidal ``int_0^t rate``, shape (P,)."""
+    return np.concatenate(([0.0], np.cumsum(0.5 * np.diff(t) * (rate[1:] + rate[:-1]))))
+
+
+def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
+    """The :class:`EnergyBalance` of a run of a small-deflection model from its outputs.
+
+    Parameters
+    ----------
+    model : Model
+    t : array_like, shape (P,)
+        Output times, s.
+    states : array_like, shape (n, P)
+        Plant states.
+    torque : array_like, shape (P,)
+        Hub torque, N m.
+
+    Returns
+    -------
+    EnergyBalance or None
+        ``None`` for the exact variant, which conserves its own energy by construction.
+    """
+    if model.variant == "exact":
+        return None
+    t, x = np.asarray(t, dtype=float), np.asarray(states, dtype=float)
+    n, mat = model.n_modes, model.matrices
+    q, w, qd = x[1:n + 1], x[n + 1], x[n + 2:]
+    energy = np.asarray(model.energy(x), dtype=float).reshape(-1)
+    power = np.asarray(torque, dtype=float) * w
+    work = _running_integral(t, power)
+    lost = _running_integral(t, model.system.hub.friction * w ** 2
+                             + np.einsum("ip,ij,jp->p", qd, mat.C_ff, qd))
+    residual = energy - energy[0] - work + lost
+    k = int(np.argmax(np.abs(residual)))
+    inertia = np.einsum("ip,ij,jp->p", q, mat.D, q)
+    system = model.system
+    return EnergyBalance(
+        variant=model.variant, energy_start=float(energy[0]), imbalance=float(residual[k]),
+        time=float(t[k]), energy=float(energy[k]), work=float(work[k]), lost=float(lost[k]),
+        throughput=float(max(energy[0], 0.0) + _running_integral(t, np.abs(power))[-1]),
+        hub_inertia=float(model.effective_hub_inertia(np.zeros(model.n_states))),
+        inertia_change=float(inertia[int(np.argmax(np.abs(inertia)))]),
+        mass_ratio=sum(m.mass for m in system.masses) / (system.beam.linear_density
+                                                          * system.beam.length))
+
+
+def _singular_message(model: Model, t_end: float, state) -> str:
+    """Why the consistent model's mass matrix turned singular at ``t_end`` (s) in ``state``.
+
+    Its Schur complement is the effective hub inertia at rest (computed without cancellation,
+    :func:`flexctl.model.matrices.condensed_hub_inertia`) plus ``q^T D q``: a real
+    singularity of the model, reached when the second-order inertia cancels the first.
+    """
+    system, n = model.system, model.n_modes
+    j_eff = float(model.effective_hub_inertia(state))
+    j_rest = float(model.effective_hub_inertia(np.zeros(model.n_states)))
+    tip = float(model.matrices.tip @ np.asarray(state)[1:n + 1])
+    point_mass = sum(m.mass for m in system.masses)
+    beam_mass = system.beam.linear_density * system.beam.length
+    cause = (f"the point masses ({point_mass:.4g} kg, {point_mass / beam_mass:.3g} times the "
+             "beam mass) make it large against the hub's own inertia"
+             if point_mass > beam_mass else
+             f"a light hub (J_h = {system.hub.inertia:.4g} kg m^2) loses all of it")
+    return (f"mass matrix singular at t = {t_end:.6g} s: the effective hub inertia "
+            f"J_0 + q^T D q - m_tf^T M_ff^-1 m_tf fell to {j_eff:.3g} kg m^2 from "
+            f"{j_rest:.4g} kg m^2 at rest (J_0 = {model.matrices.J0:.4g} kg m^2) as the "
+            f"second-order inertia q^T D q reached {j_eff - j_rest:.4g} kg m^2 at a tip "
+            f"deflection of {100 * abs(tip) / system.beam.length:.3g} % of the length; in the "
+            f"consistent model the deflection lowers the hub inertia, and {cause}; the exact "
+            "variant's mass matrix stays positive definite (MODEL.md section 7)")
+
+
+def _audit_energy(model: Model, result_arrays, reason: StopReason, message: str,
+                  stacklevel: int):
+    """``(EnergyBalance or None, message)`` of a run, the message naming a broken balance.
+
+    ``result_arrays`` is ``(t, states, torque)``. A run that reached its end with a broken
+    balance warns (:class:`ModelValidityWarning`); a stopped one gets the balance as its
+    physical reason, and zero_order or first_order the loss of beam stiffness when the hub
+    rate has passed it. A singular stop has its own reason (:func:`_singular_message`).
+    """
+    if reason is StopReason.SINGULAR_MASS:
+        # the hub rate outruns the output samples near the singularity: a balance would
+        # measure their quadrature, not the model (which conserves energy)
+        return None, message
+    balance = energy_balance(model, *result_arrays)
+    if balance is None:
+        return balance, message
+    message = message.rstrip(".")
+    state = result_arrays[1][:, -1]
+    if reason is not StopReason.REACHED_END and reason is not StopReason.TIP_PAST_LENGTH \
+            and model.variant != "consistent" and balance.violated:
+        spin = float(state[model.n_modes + 1])
+        with np.errstate(all="ignore"):
+            softened = np.linalg.eigvalsh(model.stiffness_matrix(spin))[0] < 0.0 \
+                if np.isfinite(spin ** 2) else True
+        if softened:
+            message = f"{message}: {_stiffness_reason(model, spin)}"
+    if not balance.violated:
+        return balance, message
+    if reason is StopReason.REACHED_END:
+        warnings.warn(f"energy balance violated: {balance.message}", ModelValidityWarning,
+                      stacklevel=stacklevel)
+        return balance, f"{message}; energy balance violated: {balance.message}"
+    return balance, f"{message}; {balance.message}"
 
 
 def _stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
@@ -299,6 +502,10 @@ class SimulationResult:
         :func:`simulate` itself.
     stop_reason : StopReason
         Why the run ended (``status`` is ``stop_reason.status``).
+    energy_balance : EnergyBalance or None
+        Energy against the work done, from the outputs (:func:`energy_balance`); ``None`` for
+        the exact variant and a singular stop (whose hub rate outruns the samples). When it is violated the message says so, and a run that reached
+        ``t_final`` warns (:class:`ModelValidityWarning`).
     controller_report : dict or None
         For a sampled controller (:mod:`flexctl.sim.digital`): the session's report (e.g. solve
         times) with ``samples``, ``sample_time`` (s) and ``controller_time`` (s, wall time in
@@ -322,6 +529,7 @@ class SimulationResult:
     validity: object = None
     controller_report: dict | None = None
     stop_reason: StopReason | None = None
+    energy_balance: EnergyBalance | None = None
 
     @property
     def deflection_ratio(self) -> float:
@@ -473,10 +681,11 @@ def _simulate_sampled(model, t_final, controller, x_init, torque, rtol, atol, st
         reason = _bad_sample_reason(model, run.stop_state, False, 0.0, False)
         message = _stop_message(model, reason, float(run.t[-1]), run.states[:, -1])
     status = reason.status
+    states = run.states
+    balance, message = _audit_energy(model, (run.t, states, run.torque), reason, message, 4)
     if accuracy_note:
         message = f"{message} ({accuracy_note})"
     report = dict(run.report, controller_time=run.controller_time)
-    states = run.states
     return SimulationResult(model=model, t=run.t, states=states, torque=run.torque,
                             tip_deflection=np.asarray(model.tip_deflection(states), dtype=float),
                             root_moment=model.matrices.root @ states[1:n + 1], status=status,
@@ -484,7 +693,7 @@ def _simulate_sampled(model, t_final, controller, x_init, torque, rtol, atol, st
                             method="rk4" if method == "rk4" else "cvodes", rtol=float(rtol),
                             controller_states=np.zeros((0, run.t.size)),
                             integration_error=run.integration_error, controller_report=report,
-                            stop_reason=reason)
+                            stop_reason=reason, energy_balance=balance)
 
 
 def simulate(model: Model, t_final: float, torque=None, hub_motion=None, controller=None,
@@ -956,6 +1165,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
 
     if found:
         message = _stop_message(model, reason, float(t_all[-1]), states[:, -1])
+    balance, message = _audit_energy(model, (t_all, states, torque_out), reason, message, 3)
     if stiffness_note:
         message = f"{message} ({stiffness_note})"
     if accuracy_note:
@@ -966,4 +1176,5 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                             root_moment=mat.root @ states[1:n + 1], status=reason.status,
                             message=message, wall_time=wall, n_evaluations=int(n_eval),
                             method=method, rtol=float(rtol), controller_states=z_all,
-                            integration_error=integration_error, stop_reason=reason)
+                            integration_error=integration_error, stop_reason=reason,
+                            energy_balance=balance)

@@ -11,7 +11,9 @@ every mode:
   nonlinearity lives in the low modes that carry the deflection, so the few-mode difference
   tracks the difference of the full models (``tests/test_validity.py`` checks it on the
   papers' manoeuvres and a slew, within a factor of 2).
-* :func:`assess` adds the deflection ratio and a warning when the estimate passes a tolerance.
+* :func:`assess` adds the deflection ratio, the run's own energy balance
+  (:class:`~flexctl.sim.simulation.EnergyBalance`, measured by :func:`flexctl.simulate` from
+  its outputs) and a warning when the estimate passes a tolerance or the balance is broken.
 * :func:`choose_variant` picks the cheapest variant whose estimated geometric error for a
   manoeuvre meets a tolerance (``[model] variant = "auto"``); slews are judged by their rigid
   rest-to-rest torque, as for the choice of modes.
@@ -35,7 +37,7 @@ import numpy as np
 
 from ..model import build_model
 from .fidelity import DEFAULT_TOLERANCE, _as_input, _check_tolerance, _is_prescribed
-from .simulation import simulate
+from .simulation import ENERGY_TOLERANCE, ModelValidityWarning, simulate
 
 __all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "assess",
            "choose_variant", "geometric_error", "ESTIMATE_MODES"]
@@ -44,10 +46,6 @@ __all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "assess",
 ESTIMATE_MODES = 2
 #: Relative tolerance of the estimate's runs (far below any tolerance asked of the estimate).
 ESTIMATE_RTOL = 1e-7
-
-
-class ModelValidityWarning(UserWarning):
-    """A small-deflection model was used where its geometric error exceeds the tolerance."""
 
 
 def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, controller=None,
@@ -106,17 +104,29 @@ class ModelValidity:
         the exact variant.
     tolerance : float
         Relative tip error accepted.
+    energy_balance : EnergyBalance or None
+        The run's energy against the work done on it (``result.energy_balance``); ``None``
+        for the exact variant.
     """
 
     variant: str
     deflection_ratio: float
     geometric_error: float
     tolerance: float
+    energy_balance: object = None
+
+    @property
+    def energy_error(self) -> float | None:
+        """Energy created or destroyed relative to the energy that passed through the run."""
+        balance = self.energy_balance
+        return None if balance is None else balance.relative_imbalance
 
     @property
     def valid(self) -> bool:
-        """True when the estimated geometric error is within the tolerance."""
-        return self.geometric_error <= self.tolerance
+        """True when the estimated geometric error is within the tolerance and the energy
+        balance within :data:`~flexctl.sim.simulation.ENERGY_TOLERANCE`."""
+        energy_ok = self.energy_balance is None or not self.energy_balance.violated
+        return self.geometric_error <= self.tolerance and energy_ok
 
     @property
     def message(self) -> str:
@@ -128,15 +138,25 @@ class ModelValidity:
                     "length; exact geometry")
         if self.valid:
             return f"{text}, within the tolerance {self.tolerance:.2g}"
-        return (f"{text}, above the tolerance {self.tolerance:.2g}: the {self.variant} model is "
-                "used outside its small-deflection range; use variant = \"exact\"")
+        if self.geometric_error > self.tolerance:
+            text = (f"{text}, above the tolerance {self.tolerance:.2g}: the {self.variant} model "
+                    "is used outside its small-deflection range")
+        if self.energy_balance is not None and self.energy_balance.violated:
+            text = (f"{text}; energy balance violated (more than {ENERGY_TOLERANCE:g} of the "
+                    f"energy that passed through): {self.energy_balance.message}")
+        return f"{text}; use variant = \"exact\""
 
     def to_dict(self) -> dict:
         """JSON types only (as written to ``summary.json``)."""
         error = self.geometric_error
         return {"variant": self.variant, "deflection_ratio": self.deflection_ratio,
                 "geometric_error": error if np.isfinite(error) else None,
-                "tolerance": self.tolerance, "valid": self.valid, "message": self.message}
+                "tolerance": self.tolerance, "valid": self.valid,
+                "energy_error": _finite_or_none(self.energy_error), "message": self.message}
+
+
+def _finite_or_none(value):
+    return float(value) if value is not None and np.isfinite(value) else None
 
 
 def assess(result, *, torque=None, hub_motion=None, controller=None,
@@ -151,7 +171,8 @@ def assess(result, *, torque=None, hub_motion=None, controller=None,
     tolerance : float
         Relative tip error accepted, in (0, 1).
     warn : bool
-        Issue a :class:`ModelValidityWarning` when the estimate is above ``tolerance``.
+        Issue a :class:`ModelValidityWarning` when the estimate is above ``tolerance`` or the
+        run's energy balance is violated.
     """
     _check_tolerance(tolerance)
     model = result.model
@@ -161,7 +182,8 @@ def assess(result, *, torque=None, hub_motion=None, controller=None,
     validity = ModelValidity(variant=model.variant,
                              deflection_ratio=result.peak_tip_deflection
                              / model.system.beam.length,
-                             geometric_error=error, tolerance=float(tolerance))
+                             geometric_error=error, tolerance=float(tolerance),
+                             energy_balance=getattr(result, "energy_balance", None))
     if warn and not validity.valid:
         warnings.warn(validity.message, ModelValidityWarning, stacklevel=2)
     return validity
