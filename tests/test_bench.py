@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from flexctl import load_scene
-from flexctl.app.bench import (CSV_COLUMNS, BenchConfig, BenchRow, bench_scene, pareto_front,
+from flexctl.app.bench import (CSV_COLUMNS, BenchConfig, BenchRow, bench_scene, runs_on_front,
                                run_bench)
 from flexctl.app.cli import EXIT_BAD_INPUT, EXIT_OK, main
 
@@ -81,7 +81,7 @@ def test_diverging_variant_and_slow_runs_are_recorded_not_raised():
     assert by_method["DOP853", 1].status == "timeout"
     assert by_method["DOP853", 2].status == "skipped"
     assert bench.references["zero_order"]["status"] == "diverged"
-    assert pareto_front(bench.rows) == []
+    assert runs_on_front(bench.rows) == []
 
 
 def _row(time_s, error, n=1, status="ok", method="cvodes"):
@@ -89,10 +89,10 @@ def _row(time_s, error, n=1, status="ok", method="cvodes"):
                     error, error, 0.0)
 
 
-def test_pareto_front_keeps_only_undominated_finished_runs():
+def test_runs_on_front_keeps_only_undominated_finished_runs():
     rows = [_row(1.0, 1e-2, 1), _row(2.0, 1e-3, 2), _row(3.0, 5e-3, 3),
             _row(0.5, 1e-6, 4, status="diverged"), _row(4.0, 1e-4, 5)]
-    front = pareto_front(rows)
+    front = runs_on_front(rows)
     assert [r.n_modes for r in front] == [1, 2, 5]
     times = [r.wall_time_s for r in front]
     errors = [r.error for r in front]
@@ -138,5 +138,5 @@ def test_exact_variant_is_benched_against_its_own_reference(tmp_path):
     exact = sorted((r for r in bench.rows if r.variant == "exact"), key=lambda r: r.n_modes)
     assert [r.status for r in exact] == ["ok", "ok"]
     assert exact[1].error < exact[0].error            # truncation falls with modes
-    assert pareto_front(exact)
+    assert runs_on_front(exact)
     assert (tmp_path / "kane-spinup-pareto.png").read_bytes()[:8] == PNG_MAGIC

@@ -40,14 +40,14 @@ from ..sim.fidelity import choose_modes
 from ..sim.maneuvers import SineTorque, SpinUp
 from ..sim.simulation import METHODS, simulate
 # the figure and the files live in their own modules, importable from here too
-from .bench_plot import plot_pareto
+from .bench_plot import plot_speed_error
 from .bench_report import (CSV_COLUMNS, SUMMARY_LEVELS, fastest_within, summary_line,
                            write_index, write_scene)
 from .scenes import builtin_scenes, load_scene
-from .sweep import pareto_front as _dominance
+from .sweep import pareto_front
 
-__all__ = ["BenchConfig", "BenchRow", "SceneBench", "bench_scene", "run_bench", "pareto_front",
-           "plot_pareto", "write_scene", "summary_line", "BENCH_KINDS"]
+__all__ = ["BenchConfig", "BenchRow", "SceneBench", "bench_scene", "run_bench", "finished_runs",
+           "runs_on_front", "plot_speed_error", "write_scene", "summary_line", "BENCH_KINDS"]
 
 #: Manoeuvres the bench can drive a model with (inputs, not goals for a controller).
 BENCH_KINDS = (SpinUp, SineTorque)
@@ -182,26 +182,33 @@ class SceneBench:
         """Truncation error of the chosen number of modes against the reference."""
         return self.truncation.get(self.choice.n_modes, math.nan)
 
+    def finished(self) -> list:
+        """The finished runs (:func:`finished_runs`), fastest first."""
+        return finished_runs(self.rows)
+
     def front(self, variant: str) -> list:
-        """Pareto front of a variant's finished runs (:func:`pareto_front`)."""
-        return pareto_front([r for r in self.rows if r.variant == variant])
+        """Pareto front of a variant's finished runs (:func:`runs_on_front`)."""
+        return runs_on_front([r for r in self.rows if r.variant == variant])
 
 
-def pareto_front(rows) -> list:
-    """Finished runs that no other run beats on both wall time and error, fastest first.
-
-    Runs with the same variant, modes, integrator used and rtol count once (an explicit method
-    moved to cvodes repeats the cvodes run). Dominance as in
-    :func:`flexctl.app.sweep.pareto_front`.
-    """
+def finished_runs(rows) -> list:
+    """Runs that reached their end with a finite error, fastest first; runs with the same
+    variant, modes, integrator used and rtol count once (an explicit method moved to cvodes
+    repeats the cvodes run)."""
     unique = {}
     for r in sorted((r for r in rows if r.status == "ok" and math.isfinite(r.error)),
                     key=lambda r: (r.wall_time_s, r.error)):
         unique.setdefault((r.variant, r.n_modes, r.method_used, r.rtol), r)
-    done = list(unique.values())
+    return list(unique.values())
+
+
+def runs_on_front(rows) -> list:
+    """The :func:`finished_runs` that no other beats on both wall time and error (the
+    dominance of :func:`flexctl.app.sweep.pareto_front`), fastest first."""
+    done = finished_runs(rows)
     if not done:
         return []
-    on_front = _dominance([r.wall_time_s for r in done], [r.error for r in done])
+    on_front = pareto_front([r.wall_time_s for r in done], [r.error for r in done])
     return [r for r, keep in zip(done, on_front) if keep]
 
 

@@ -1,51 +1,51 @@
 """The bench's speed-against-error figure: every run, and each variant's Pareto front.
 
-Draws a :class:`flexctl.app.bench.SceneBench`; computes nothing (the fronts come from
-``SceneBench.front``, i.e. :func:`flexctl.app.bench.pareto_front`).
+Draws a :class:`flexctl.app.bench.SceneBench` with the one Pareto plot of the package,
+:func:`flexctl.app.plotting_sweeps.plot_pareto`: the fronts are computed there, by
+:func:`flexctl.app.sweep.pareto_front`, on the runs of
+:meth:`flexctl.app.bench.SceneBench.finished`.
 """
 
 from __future__ import annotations
 
 from .figures import new_figure
+from .plotting_sweeps import plot_pareto
 
-__all__ = ["plot_pareto"]
+__all__ = ["plot_speed_error"]
 
 _METHOD_COLOURS = {"cvodes": "tab:blue", "DOP853": "tab:orange", "LSODA": "tab:green",
                    "RK45": "tab:red", "RK23": "tab:purple", "Radau": "tab:brown",
-                   "BDF": "tab:pink", "auto": "tab:gray"}
+                   "BDF": "tab:pink", "rk4": "tab:olive", "auto": "tab:gray"}
 _VARIANT_MARKERS = {"first_order": "o", "zero_order": "s", "consistent": "^", "exact": "D"}
 
 
-def plot_pareto(bench: SceneBench):
+def plot_speed_error(bench):
     """Wall time against error of every finished run, with each variant's Pareto front.
+
+    Parameters
+    ----------
+    bench : SceneBench
 
     Returns
     -------
     matplotlib.figure.Figure
         Log-log axes: wall time (s) across, relative tip error up; colour by integrator used,
-        marker by variant; front points labelled with their number of modes.
+        marker by variant, a front per variant with its points labelled by their number of
+        modes; the mode-choice tolerance as a dotted line.
     """
+    rows = [{"wall_time_s": r.wall_time_s, "error": r.error, "method": r.method_used,
+             "variant": r.variant, "modes": f"N{r.n_modes}"}
+            for r in bench.finished() if r.error > 0]
     fig, (ax,) = new_figure((8.0, 5.5))
-    done = [r for r in bench.rows if r.status == "ok" and r.error > 0]
-    for r in done:
-        ax.plot(r.wall_time_s, r.error, _VARIANT_MARKERS.get(r.variant, "o"), alpha=0.55,
-                color=_METHOD_COLOURS.get(r.method_used, "black"))
-    for variant in bench.config.variants:
-        front = [r for r in bench.front(variant) if r.error > 0]
-        if front:
-            ax.step([r.wall_time_s for r in front], [r.error for r in front], where="post",
-                    color="black", linewidth=1.0,
-                    linestyle={"first_order": "-", "zero_order": "--"}.get(variant, ":"))
-            for r in front:
-                ax.annotate(f"N{r.n_modes}", (r.wall_time_s, r.error), fontsize=7,
-                            xytext=(3, 3), textcoords="offset points")
-    used = [m for m in _METHOD_COLOURS if any(r.method_used == m for r in done)]
-    ax.legend(handles=[ax.plot([], [], "o", color=_METHOD_COLOURS[m], label=m)[0] for m in used]
-              + [ax.plot([], [], _VARIANT_MARKERS[v], color="gray", label=v)[0]
-                 for v in bench.config.variants], fontsize=8, loc="upper right")
+    title = (f"{bench.scene.name}: speed against error over {bench.t_final:g} s "
+             f"(reference {bench.config.reference_modes} modes)")
+    if not rows:
+        ax.set(xlabel="wall time (s)", ylabel="relative tip error", title=title)
+        ax.text(0.5, 0.5, "no finished run", ha="center", transform=ax.transAxes)
+        return fig
+    plot_pareto(rows, "wall_time_s", "error", label="modes", by="method", front_by="variant",
+                marker_by="variant", colors=_METHOD_COLOURS, markers=_VARIANT_MARKERS, ax=ax,
+                xlabel="wall time (s)", ylabel="relative tip error", title=title)
     ax.axhline(bench.config.tolerance, color="gray", linewidth=0.8, linestyle=":")
-    ax.set(xscale="log", yscale="log", xlabel="wall time (s)", ylabel="relative tip error")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.set_title(f"{bench.scene.name}: speed against error over {bench.t_final:g} s "
-                 f"(reference {bench.config.reference_modes} modes)")
+    ax.legend(fontsize=7, loc="upper right")
     return fig

@@ -12,7 +12,7 @@ import math
 from dataclasses import asdict
 from pathlib import Path
 
-from .bench_plot import plot_pareto
+from .bench_plot import plot_speed_error
 from .markdown import markdown_table
 
 __all__ = ["CSV_COLUMNS", "SUMMARY_LEVELS", "fastest_within", "summary_line", "write_index",
@@ -73,7 +73,7 @@ def write_scene(bench, out_dir) -> dict:
         for r in bench.rows:
             writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v)
                              for k, v in asdict(r).items()})
-    plot_pareto(bench).savefig(paths["plot"], dpi=100)
+    plot_speed_error(bench).savefig(paths["plot"], dpi=100)
 
     lines = [f"# Bench: {name}", "", bench.scene.description, "",
              f"Horizon {bench.t_final:g} s. Errors are relative tip errors, max |tip - tip_ref| "

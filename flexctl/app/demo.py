@@ -1,10 +1,10 @@
 """``flexctl demo``: every built-in scene, the papers' figures and the controller comparisons.
 
 :func:`run_demo` is the whole demo: it runs every built-in scene (and the comparisons of
-:data:`DEMO_COMPARISONS`), draws the frequency plot, makes every section below and writes
-``report.md``. Each section function runs one case, saves its figures (PNG) and tables (CSV) into the demo directory,
-and returns a :class:`Section` that :func:`flexctl.app.report.write_demo_report` turns into
-Markdown. The sweeps go through :func:`flexctl.app.sweep.sweep` on the executor given (the demo
+:data:`DEMO_COMPARISONS`), draws the frequency plot, makes every section below and
+writes ``report.md``. Each section function runs one case, saves its figures (PNG) and
+tables (CSV) into the demo directory, and returns a :class:`Section` that
+:func:`flexctl.app.report.write_demo_report` turns into Markdown. The sweeps go through :func:`flexctl.app.sweep.sweep` on the executor given (the demo
 passes a process pool). Sizes are chosen to finish in well under a minute on two cores.
 
 ==========================  =================================================================

@@ -151,8 +151,9 @@ def plot_sweep(table, x: str, y, *, by: str | None = None, ax=None, labels=None,
 
 
 def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | None = None,
-                ax=None, logx: bool = True, logy: bool = True, xlabel: str | None = None,
-                ylabel: str | None = None, title: str | None = None):
+                front_by: str | None = None, marker_by: str | None = None, colors=None,
+                markers=None, ax=None, logx: bool = True, logy: bool = True,
+                xlabel: str | None = None, ylabel: str | None = None, title: str | None = None):
     """Trade-off of two costs (both minimised), with the Pareto front drawn through.
 
     Parameters
@@ -165,6 +166,15 @@ def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | No
         numbers are written with ``:g``).
     by : str, optional
         Column whose distinct values get their own colour (e.g. the integrator).
+    front_by : str, optional
+        Column whose distinct values get a Pareto front each (e.g. the model variant), drawn
+        with its own line style and labelled ``Pareto front, <value>``; default one front
+        through every point.
+    marker_by : str, optional
+        Column whose distinct values get their own marker (e.g. the model variant).
+    colors, markers : dict, optional
+        Colour of each ``by`` value and marker of each ``marker_by`` value, where the default
+        cycle will not do.
     ax : matplotlib.axes.Axes, optional
         Axes to draw into; default a new figure.
     logx, logy : bool, optional
@@ -193,25 +203,42 @@ def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | No
         raise ValueError(f"plot_pareto needs at least one point with finite (and, on a log "
                          f"axis, positive) {x!r} and {y!r}; got none")
     fig, ax = figure_for(ax, (7.0, 5.0))
-    groups = [(None, usable)]
-    if by is not None:
-        keys = table_column(table, by)
-        groups = [(value, usable & (keys == value)) for value in dict.fromkeys(keys.tolist())]
-    for j, (value, rows) in enumerate(groups):
-        ax.scatter(xs[rows], ys[rows], color=f"C{j % 10}", s=25, alpha=0.8,
-                   label=None if value is None else f"{by} = {value}")
-    front = np.zeros(xs.size, dtype=bool)
-    front[usable] = pareto_front(xs[usable], ys[usable])
-    order = np.argsort(xs[front])
-    fx, fy = xs[front][order], ys[front][order]
-    ax.step(fx, fy, where="post", color="black", linewidth=1.2, label="Pareto front")
-    ax.scatter(fx, fy, s=90, facecolors="none", edgecolors="black", linewidths=1.2)
-    if label is not None:
-        texts = table_column(table, label)[front][order]
-        for px, py, text in zip(fx, fy, texts):
-            text = f"{text:g}" if isinstance(text, (int, float, np.number)) else str(text)
-            ax.annotate(text, xy=(px, py), xytext=(5, 4), textcoords="offset points",
-                        fontsize="x-small")
+
+    def groups(column):
+        if column is None:
+            return [(None, usable)]
+        keys = table_column(table, column)
+        return [(value, usable & (keys == value))
+                for value in dict.fromkeys(keys[usable].tolist())]
+
+    colors, markers = dict(colors or {}), dict(markers or {})
+    shapes = groups(marker_by)
+    for j, (value, rows) in enumerate(groups(by)):
+        color = colors.get(value, f"C{j % 10}")
+        for k, (shape, cell) in enumerate(shapes):
+            named = value is not None and (marker_by is None or k == 0)
+            ax.scatter(xs[rows & cell], ys[rows & cell], color=color, s=25, alpha=0.8,
+                       marker=markers.get(shape, "osD^v<>p*h"[k % 10]),
+                       label=f"{by} = {value}" if named else None)
+    if marker_by is not None:
+        for k, (shape, _) in enumerate(shapes):
+            ax.scatter([], [], color="gray", s=25, label=f"{marker_by} = {shape}",
+                       marker=markers.get(shape, "osD^v<>p*h"[k % 10]))
+    texts = None if label is None else table_column(table, label)
+    for k, (value, rows) in enumerate(groups(front_by)):
+        front = np.zeros(xs.size, dtype=bool)
+        front[rows] = pareto_front(xs[rows], ys[rows])
+        order = np.argsort(xs[front])
+        fx, fy = xs[front][order], ys[front][order]
+        ax.step(fx, fy, where="post", color="black", linewidth=1.2,
+                linestyle=("-", "--", ":", "-.")[k % 4],
+                label="Pareto front" if value is None else f"Pareto front, {value}")
+        ax.scatter(fx, fy, s=90, facecolors="none", edgecolors="black", linewidths=1.2)
+        if texts is not None:
+            for px, py, text in zip(fx, fy, texts[front][order]):
+                text = f"{text:g}" if isinstance(text, (int, float, np.number)) else str(text)
+                ax.annotate(text, xy=(px, py), xytext=(5, 4), textcoords="offset points",
+                            fontsize="x-small")
     if logx:
         ax.set_xscale("log")
     if logy:
