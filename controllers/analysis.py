@@ -55,10 +55,10 @@ import numpy as np
 
 from flexctl.model import Model
 from flexctl.model.errors import InputTypeError, InputValueError
-from flexctl.model.parameters import check_real
+from flexctl.model.checks import check_real
 
 from .lqg import LQG
-from .lqr import LQR, truncation_matrix
+from .lqr import LQR, _model, truncation_matrix
 from .pd import PD
 from .scheduling import ScheduledLQR
 from .tracking import TrajectoryTracker
@@ -75,13 +75,6 @@ AXIS_TOLERANCE = 1e-6
 #: A closed loop is stable when its largest pole real part is below ``-STABILITY_TOLERANCE``
 #: times its largest pole magnitude (eigenvalue rounding of an undamped mode is ~1e-13 of it).
 STABILITY_TOLERANCE = 1e-10
-
-
-def _model(owner: str, model) -> Model:
-    if not isinstance(model, Model):
-        raise InputTypeError(f"{owner}.model must be a flexctl Model; got "
-                             f"{type(model).__name__}")
-    return model
 
 
 def _readonly(array) -> np.ndarray:

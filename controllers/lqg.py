@@ -32,6 +32,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from flexctl.model.checks import check_array
+from flexctl.model.errors import InputTypeError, InputValueError
+
 from .feedback import ReferenceFeedback
 from .lqr import (LQRWeights, _lqr_gain, _model, casadi_reference_state, reference_state,
                   static_deflection_gain)
@@ -96,7 +99,8 @@ def estimator_gain(model, noise: NoiseLevels, spin_rate: float = 0.0) -> tuple:
 
     model = _model("estimator_gain", model)
     if not isinstance(noise, NoiseLevels):
-        raise TypeError(f"estimator_gain.noise must be NoiseLevels; got {type(noise).__name__}")
+        raise InputTypeError(f"estimator_gain.noise must be NoiseLevels; got "
+                             f"{type(noise).__name__}")
     a, b = model.linear_matrices(_real("estimator_gain", "spin_rate", spin_rate))
     gain, _, poles = control.lqe(a, b, _measurement_rows(model), noise.process_covariance,
                                  noise.measurement_covariance)
@@ -124,12 +128,12 @@ class SumOfSines:
     phases: np.ndarray
 
     def __post_init__(self):
-        arrays = [np.array(getattr(self, n), dtype=float, ndmin=2)
+        arrays = [np.array(check_array("sum_of_sines", n, getattr(self, n), finite=False), ndmin=2)
                   for n in ("amplitudes", "frequencies", "phases")]
         if len({a.shape for a in arrays}) != 1 or not all(np.all(np.isfinite(a))
                                                           for a in arrays):
-            raise ValueError("sum_of_sines.amplitudes, frequencies and phases must be finite "
-                             f"with one shape (C, K); got {[a.shape for a in arrays]}")
+            raise InputValueError("sum_of_sines.amplitudes, frequencies and phases must be finite "
+                                  f"with one shape (C, K); got {[a.shape for a in arrays]}")
         for name, a in zip(("amplitudes", "frequencies", "phases"), arrays):
             a.setflags(write=False)
             object.__setattr__(self, name, a)
@@ -149,9 +153,9 @@ class SumOfSines:
         seed : int, optional
             Seed of the frequencies and phases. Default 0.
         """
-        std = np.atleast_1d(np.asarray(std, dtype=float))
+        std = np.atleast_1d(check_array("sum_of_sines", "std", std, finite=False))
         if std.ndim != 1 or not np.all(np.isfinite(std)) or np.any(std < 0):
-            raise ValueError(f"sum_of_sines.std must be finite values >= 0; got {std!r}")
+            raise InputValueError(f"sum_of_sines.std must be finite values >= 0; got {std!r}")
         bandwidth = _real("sum_of_sines", "bandwidth", bandwidth, minimum=0.0, strict=True)
         rng = np.random.default_rng(seed)
         shape = (std.size, int(n_sines))
@@ -213,31 +217,33 @@ class LQG(ReferenceFeedback):
     owner = "lqg"
 
     def __post_init__(self):
-        nd = np.asarray(self.a).shape[0]
+        nd = check_array("lqg", "a", self.a, finite=False, shape=(None, None)).shape[0]
         shapes = {"gain": (1, nd), "estimator_gain": (nd, 2), "a": (nd, nd), "b": (nd, 1),
                   "c": (2, nd)}
         for name, shape in shapes.items():
-            value = np.array(getattr(self, name), dtype=float)
+            value = check_array("lqg", name, getattr(self, name), finite=False).copy()
             if value.shape != shape or not np.all(np.isfinite(value)):
-                raise ValueError(f"lqg.{name} must be finite with shape {shape}; got "
-                                 f"shape {value.shape}")
+                raise InputValueError(f"lqg.{name} must be finite with shape {shape}; got "
+                                      f"shape {value.shape}")
             value.setflags(write=False)
             object.__setattr__(self, name, value)
-        meas = np.array(self.measurement_matrix, dtype=float)
+        meas = check_array("lqg", "measurement_matrix", self.measurement_matrix,
+                           finite=False).copy()
         if meas.ndim != 2 or meas.shape[0] != 2 or meas.shape[1] < nd or meas.shape[1] % 2:
-            raise ValueError(f"lqg.measurement_matrix must have shape (2, 2 N + 2) with N >= "
-                             f"{nd // 2 - 1} modes; got shape {meas.shape}")
+            raise InputValueError(f"lqg.measurement_matrix must have shape (2, 2 N + 2) with N >= "
+                                  f"{nd // 2 - 1} modes; got shape {meas.shape}")
         meas.setflags(write=False)
         object.__setattr__(self, "measurement_matrix", meas)
         if self.measurement_noise is not None and not callable(self.measurement_noise):
-            raise TypeError("lqg.measurement_noise must be callable as v(t) -> shape (2,); got "
-                            f"{type(self.measurement_noise).__name__}")
+            raise InputTypeError("lqg.measurement_noise must be callable as v(t) -> shape (2,); "
+                                 f"got {type(self.measurement_noise).__name__}")
         super().__post_init__()
         if self.initial_estimate is not None:
-            z0 = np.array(self.initial_estimate, dtype=float).reshape(-1)
+            z0 = check_array("lqg", "initial_estimate", self.initial_estimate,
+                             finite=False).reshape(-1)
             if z0.shape != (nd,) or not np.all(np.isfinite(z0)):
-                raise ValueError(f"lqg.initial_estimate must be {nd} finite numbers; got "
-                                 f"shape {z0.shape}")
+                raise InputValueError(f"lqg.initial_estimate must be {nd} finite numbers; got "
+                                      f"shape {z0.shape}")
             object.__setattr__(self, "initial_estimate", z0)
 
     @property
@@ -254,17 +260,17 @@ class LQG(ReferenceFeedback):
         """The same controller reading the sensors of ``model`` (``N >= M`` modes)."""
         model = _model("lqg.for_plant", model)
         if model.n_modes < self.n_modes:
-            raise ValueError(f"lqg.for_plant plant must have at least the design's "
-                             f"{self.n_modes} modes; got n_modes = {model.n_modes}")
+            raise InputValueError(f"lqg.for_plant plant must have at least the design's "
+                                  f"{self.n_modes} modes; got n_modes = {model.n_modes}")
         return replace(self, measurement_matrix=_measurement_rows(model))
 
     def measure(self, t: float, x) -> np.ndarray:
         """Sensor readings ``[theta, root_moment]`` (rad, N m) of plant state ``x``."""
         x = np.asarray(x, dtype=float)
         if x.shape != (self.measurement_matrix.shape[1],):
-            raise ValueError(f"lqg: plant state has shape {x.shape} but the sensors are set "
-                             f"for {self.measurement_matrix.shape[1]} states; use "
-                             "lqg.for_plant(plant_model)")
+            raise InputValueError(f"lqg: plant state has shape {x.shape} but the sensors are set "
+                                  f"for {self.measurement_matrix.shape[1]} states; use "
+                                  "lqg.for_plant(plant_model)")
         y = self.measurement_matrix @ x
         if self.measurement_noise is not None:
             y = y + np.asarray(self.measurement_noise(t), dtype=float).reshape(2)
@@ -298,9 +304,9 @@ class LQG(ReferenceFeedback):
         import casadi as ca
 
         if x.numel() != self.measurement_matrix.shape[1]:
-            raise ValueError(f"lqg: plant state has shape {x.shape} but the sensors are set "
-                             f"for {self.measurement_matrix.shape[1]} states; use "
-                             "lqg.for_plant(plant_model)")
+            raise InputValueError(f"lqg: plant state has shape {x.shape} but the sensors are set "
+                                  f"for {self.measurement_matrix.shape[1]} states; use "
+                                  "lqg.for_plant(plant_model)")
         y = ca.mtimes(ca.DM(self.measurement_matrix), x)
         if self.measurement_noise is not None:
             y = y + self.measurement_noise.casadi(t)
@@ -385,7 +391,8 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
     model = _model("design_lqg", model)
     spin_rate = _real("design_lqg", "spin_rate", spin_rate)
     if not isinstance(weights, LQRWeights):
-        raise TypeError(f"design_lqg.weights must be LQRWeights; got {type(weights).__name__}")
+        raise InputTypeError(f"design_lqg.weights must be LQRWeights; got "
+                             f"{type(weights).__name__}")
     gain, _ = _lqr_gain(model, weights, spin_rate)
     est_gain, _ = estimator_gain(model, noise, spin_rate)
     a, b = model.linear_matrices(spin_rate)

@@ -41,7 +41,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from flexctl.model import Model
-from flexctl.model.errors import InputValueError
+from flexctl.model.checks import check_array, check_instance, check_integer
+from flexctl.model.errors import InputTypeError, InputValueError
 
 from .feedback import ReferenceFeedback
 from .reference import _casadi_evaluate, _evaluate, _optional_positive, _real, _structure_key
@@ -50,16 +51,13 @@ __all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation
            "truncate_state", "reference_state", "closed_loop_poles", "static_deflection_gain"]
 
 
-def _model(owner: str, model):
-    if not isinstance(model, Model):
-        raise TypeError(f"{owner}.model must be a flexctl Model; got {type(model).__name__}")
-    return model
+def _model(owner: str, model) -> Model:
+    """``model`` itself when it is a flexctl :class:`~flexctl.Model`."""
+    return check_instance(owner, "model", model, Model, "flexctl Model")
 
 
 def _n_modes(owner: str, name: str, value, minimum: int = 0) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{owner}.{name} must be an integer >= {minimum}; got {value!r}")
-    return int(value)
+    return check_integer(owner, name, value, minimum=minimum)
 
 
 def truncation_matrix(n_plant_modes: int, n_design_modes: int) -> np.ndarray:
@@ -73,8 +71,8 @@ def truncation_matrix(n_plant_modes: int, n_design_modes: int) -> np.ndarray:
     n = _n_modes("truncation_matrix", "n_plant_modes", n_plant_modes)
     m = _n_modes("truncation_matrix", "n_design_modes", n_design_modes)
     if m > n:
-        raise ValueError(f"truncation_matrix.n_design_modes must be <= n_plant_modes = {n} "
-                         f"(the plant must have at least the design's modes); got {m}")
+        raise InputValueError(f"truncation_matrix.n_design_modes must be <= n_plant_modes = {n} "
+                              f"(the plant must have at least the design's modes); got {m}")
     rows = np.r_[0:m + 1, n + 1:n + m + 2]
     return np.eye(2 * n + 2)[rows]
 
@@ -93,15 +91,15 @@ def truncate_state(x, n_design_modes: int) -> np.ndarray:
     -------
     ndarray, shape (2 M + 2,)
     """
-    x = np.asarray(x, dtype=float)
+    x = check_array("truncate_state", "x", x, finite=False)
     m = _n_modes("truncate_state", "n_design_modes", n_design_modes)
     if x.ndim != 1 or x.size < 2 or x.size % 2:
-        raise ValueError("truncate_state.x must be a plant state vector of even length; "
-                         f"got shape {x.shape}")
+        raise InputValueError("truncate_state.x must be a plant state vector of even length; "
+                              f"got shape {x.shape}")
     n = x.size // 2 - 1
     if m > n:
-        raise ValueError(f"truncate_state.n_design_modes must be <= the plant's {n} modes; "
-                         f"got {m}")
+        raise InputValueError(f"truncate_state.n_design_modes must be <= the plant's {n} modes; "
+                              f"got {m}")
     return np.concatenate((x[:m + 1], x[n + 1:n + m + 2]))
 
 
@@ -143,12 +141,12 @@ def casadi_truncate_state(x, n_design_modes: int):
     import casadi as ca
 
     if x.numel() < 2 or x.numel() % 2:
-        raise ValueError("truncate_state.x must be a plant state vector of even length; "
-                         f"got shape {x.shape}")
+        raise InputValueError("truncate_state.x must be a plant state vector of even length; "
+                              f"got shape {x.shape}")
     m, n = int(n_design_modes), x.numel() // 2 - 1
     if m > n:
-        raise ValueError(f"truncate_state.n_design_modes must be <= the plant's {n} modes; "
-                         f"got {m}")
+        raise InputValueError(f"truncate_state.n_design_modes must be <= the plant's {n} modes; "
+                              f"got {m}")
     return ca.vertcat(x[:m + 1], x[n + 1:n + m + 2])
 
 
@@ -223,8 +221,8 @@ def lqr_weight_matrices(model, weights: LQRWeights) -> tuple:
     """
     model = _model("lqr_weight_matrices", model)
     if not isinstance(weights, LQRWeights):
-        raise TypeError(f"lqr_weight_matrices.weights must be LQRWeights; got "
-                        f"{type(weights).__name__}")
+        raise InputTypeError(f"lqr_weight_matrices.weights must be LQRWeights; got "
+                             f"{type(weights).__name__}")
     n, nx = model.n_modes, model.n_states
     q_mat = np.zeros((nx, nx))
     q_mat[0, 0] = weights.hub_angle ** -2
@@ -274,13 +272,13 @@ class LQR(ReferenceFeedback):
     owner = "lqr"
 
     def __post_init__(self):
-        gain = np.array(self.gain, dtype=float)
+        gain = check_array("lqr", "gain", self.gain, finite=False).copy()
         if gain.ndim == 1:
             gain = gain[None, :]
         if gain.ndim != 2 or gain.shape[0] != 1 or gain.shape[1] < 2 or gain.shape[1] % 2 \
                 or not np.all(np.isfinite(gain)):
-            raise ValueError("lqr.gain must be finite with shape (1, 2 M + 2); got "
-                             f"shape {gain.shape}")
+            raise InputValueError("lqr.gain must be finite with shape (1, 2 M + 2); got "
+                                  f"shape {gain.shape}")
         gain.setflags(write=False)
         object.__setattr__(self, "gain", gain)
         object.__setattr__(self, "spin_rate", _real("lqr", "spin_rate", self.spin_rate))
@@ -395,8 +393,8 @@ def closed_loop_poles(model, gain, spin_rate: float = 0.0) -> np.ndarray:
     """
     model = _model("closed_loop_poles", model)
     a, b = model.linear_matrices(spin_rate)
-    gain = np.asarray(gain, dtype=float).reshape(1, -1)
+    gain = check_array("closed_loop_poles", "gain", gain).reshape(1, -1)
     if gain.shape[1] != model.n_states:
-        raise ValueError(f"closed_loop_poles.gain must have shape (1, {model.n_states}) for "
-                         f"{model.n_modes} plant modes; got {gain.shape}")
+        raise InputValueError(f"closed_loop_poles.gain must have shape (1, {model.n_states}) for "
+                              f"{model.n_modes} plant modes; got {gain.shape}")
     return np.linalg.eigvals(a - b @ gain)

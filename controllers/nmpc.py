@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from flexctl.model import Model
+from flexctl.model.checks import check_array, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.digital import _sample_time
 from flexctl.sim.fixed_step import _jit
@@ -75,15 +76,7 @@ _PROBLEMS: OrderedDict = OrderedDict()
 
 
 def _positive(name, value, optional=False):
-    if value is None and optional:
-        return None
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise InputTypeError(f"nmpc {name} must be a number; got {type(value).__name__} "
-                             f"{value!r}")
-    value = float(value)
-    if not (np.isfinite(value) and value > 0.0):
-        raise InputValueError(f"nmpc {name} must be positive and finite; got {value!r}")
-    return value
+    return check_real("nmpc", name, value, minimum=0.0, strict=True, optional=optional)
 
 
 def _hold_function(model: Model, sample_time: float, substeps: int):
@@ -212,26 +205,26 @@ class NMPC:
         import casadi as ca
 
         if not isinstance(self.model, Model):
-            raise InputTypeError(f"nmpc model must be a flexctl Model; got "
+            raise InputTypeError(f"nmpc.model must be a flexctl Model; got "
                                  f"{type(self.model).__name__}")
         if isinstance(self.target, bool) or not isinstance(self.target, (int, float, np.number)) \
                 or not np.isfinite(self.target):
-            raise InputValueError(f"nmpc target must be a finite angle, rad; got "
+            raise InputValueError(f"nmpc.target must be a finite angle, rad; got "
                                   f"{self.target!r}")
         object.__setattr__(self, "target", float(self.target))
         object.__setattr__(self, "torque_limit", _positive("torque_limit", self.torque_limit))
         object.__setattr__(self, "sample_time", _sample_time("nmpc", self.sample_time))
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, np.integer)) \
                 or not 2 <= self.horizon <= 500:
-            raise InputValueError(f"nmpc horizon must be an integer in [2, 500] samples; got "
+            raise InputValueError(f"nmpc.horizon must be an integer in [2, 500] samples; got "
                                   f"{self.horizon!r}")
         object.__setattr__(self, "horizon", int(self.horizon))
         if self.noise is not None and not isinstance(self.noise, NoiseLevels):
-            raise InputTypeError(f"nmpc noise must be NoiseLevels (or None); got "
+            raise InputTypeError(f"nmpc.noise must be NoiseLevels (or None); got "
                                  f"{type(self.noise).__name__}")
         if self.reference is not None:
             if not isinstance(self.reference, SlewSolution):
-                raise InputTypeError("nmpc reference must be a SlewSolution (or None); got "
+                raise InputTypeError("nmpc.reference must be a SlewSolution (or None); got "
                                      f"{type(self.reference).__name__}")
             if self.reference.model.n_modes != self.model.n_modes:
                 raise InputValueError(
@@ -240,13 +233,13 @@ class NMPC:
         for name in ("torque_rate_limit", "tip_limit"):
             object.__setattr__(self, name, _positive(name, getattr(self, name), optional=True))
         if self.terminal not in TERMINALS:
-            raise InputValueError(f"nmpc terminal must be one of {', '.join(TERMINALS)}; got "
+            raise InputValueError(f"nmpc.terminal must be one of {', '.join(TERMINALS)}; got "
                                   f"{self.terminal!r}")
         if self.mode not in MODES:
-            raise InputValueError(f"nmpc mode must be one of {', '.join(MODES)}; got "
+            raise InputValueError(f"nmpc.mode must be one of {', '.join(MODES)}; got "
                                   f"{self.mode!r}")
         if self.qp_solver not in QP_SOLVERS:
-            raise InputValueError(f"nmpc qp_solver must be one of {', '.join(QP_SOLVERS)}; "
+            raise InputValueError(f"nmpc.qp_solver must be one of {', '.join(QP_SOLVERS)}; "
                                   f"got {self.qp_solver!r}")
         if not ca.has_conic(self.qp_solver):
             raise InputValueError(f"nmpc qp_solver {self.qp_solver!r} is not in this CasADi "
@@ -254,10 +247,10 @@ class NMPC:
         n = self.model.n_states
         q_default, r_default = _default_weights(self.model, self.final_angle,
                                                 self.torque_limit)
-        q = q_default if self.state_weights is None else np.asarray(self.state_weights,
-                                                                     dtype=float)
+        q = q_default if self.state_weights is None else check_array(
+            "nmpc", "state_weights", self.state_weights, finite=False)
         if q.shape != (n,) or not np.all(np.isfinite(q)) or np.any(q < 0):
-            raise InputValueError(f"nmpc state_weights must be {n} finite numbers >= 0; got "
+            raise InputValueError(f"nmpc.state_weights must be {n} finite numbers >= 0; got "
                                   f"{self.state_weights!r}")
         object.__setattr__(self, "state_weights", q)
         r = r_default if self.torque_weight is None else _positive("torque_weight",
@@ -276,7 +269,7 @@ class NMPC:
             if isinstance(self.substeps, bool) or not isinstance(self.substeps,
                                                                  (int, np.integer)) \
                     or not 1 <= self.substeps <= MAX_SUBSTEPS:
-                raise InputValueError(f"nmpc substeps must be an integer in [1, "
+                raise InputValueError(f"nmpc.substeps must be an integer in [1, "
                                       f"{MAX_SUBSTEPS}]; got {self.substeps!r}")
             if omega * self.sample_time / self.substeps > 2.0 * np.sqrt(2.0):
                 raise InputValueError(
@@ -576,7 +569,7 @@ class NMPC:
     def start(self, model, x0) -> "NMPCSession":
         """A fresh session for a run of the plant ``model`` from ``x0``."""
         if not isinstance(model, Model):
-            raise InputTypeError(f"nmpc plant must be a flexctl Model; got "
+            raise InputTypeError(f"nmpc.plant must be a flexctl Model; got "
                                  f"{type(model).__name__}")
         if model.n_modes < self.model.n_modes:
             raise InputValueError(f"nmpc design model has {self.model.n_modes} modes, more "

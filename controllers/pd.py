@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexctl.model.checks import check_integer
+
 from .feedback import ReferenceFeedback
 from .reference import _casadi_evaluate, _casadi_hub_state, _evaluate, _hub_state, _real, \
     _structure_key
@@ -79,9 +81,7 @@ class PD(ReferenceFeedback):
     def state_gain(self, n_modes: int) -> np.ndarray:
         """``K`` with ``torque = -K x`` for a plant with ``n_modes`` modes (no reference, no
         saturation), shape (1, 2 n_modes + 2)."""
-        if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) \
-                or n_modes < 0:
-            raise ValueError(f"pd.state_gain n_modes must be an integer >= 0; got {n_modes!r}")
+        n_modes = check_integer("pd.state_gain", "n_modes", n_modes, minimum=0)
         gain = np.zeros((1, 2 * n_modes + 2))
         gain[0, 0], gain[0, n_modes + 1] = self.kp, self.kd
         return gain

@@ -35,7 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexctl.model.parameters import check_real as _real
+from flexctl.model.errors import InputTypeError, InputValueError
+
+from flexctl.model.checks import check_real as _real
 from flexctl.sim.maneuvers import RIGID_PEAK_ACCELERATION, rigid_slew_duration
 
 __all__ = ["SlewProfile", "minimum_slew_duration", "SHAPES"]
@@ -48,7 +50,7 @@ _PEAK_RATE = {"poly7": 35.0 / 16.0, "cycloidal": 2.0}
 
 def _optional_positive(owner: str, name: str, value) -> float | None:
     """``None`` or a finite number > 0."""
-    return None if value is None else _real(owner, name, value, minimum=0.0, strict=True)
+    return _real(owner, name, value, minimum=0.0, strict=True, optional=True)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -84,8 +86,8 @@ class SlewProfile:
         object.__setattr__(self, "start_time", _real("slew", "start_time", self.start_time,
                                                      minimum=0.0))
         if self.shape not in SHAPES:
-            raise ValueError(f"slew.shape must be one of {', '.join(SHAPES)}; "
-                             f"got {self.shape!r}")
+            raise InputValueError(f"slew.shape must be one of {', '.join(SHAPES)}; "
+                                  f"got {self.shape!r}")
 
     @property
     def end_time(self) -> float:
@@ -183,13 +185,13 @@ def minimum_slew_duration(slew_angle: float, inertia: float, torque_limit: float
     """
     angle = _real("minimum_slew_duration", "slew_angle", slew_angle)
     if angle == 0.0:
-        raise ValueError("minimum_slew_duration.slew_angle must be nonzero; got 0.0")
+        raise InputValueError("minimum_slew_duration.slew_angle must be nonzero; got 0.0")
     inertia = _real("minimum_slew_duration", "inertia", inertia, minimum=0.0, strict=True)
     limit = _real("minimum_slew_duration", "torque_limit", torque_limit, minimum=0.0,
                   strict=True)
     if shape not in SHAPES:
-        raise ValueError(f"minimum_slew_duration.shape must be one of {', '.join(SHAPES)}; "
-                         f"got {shape!r}")
+        raise InputValueError(f"minimum_slew_duration.shape must be one of {', '.join(SHAPES)}; "
+                              f"got {shape!r}")
     return rigid_slew_duration(angle, inertia, limit, shape)
 
 
@@ -199,8 +201,8 @@ def _check_reference(owner: str, reference):
         return None
     for attr in ("angle", "rate", "acceleration"):
         if not callable(getattr(reference, attr, None)):
-            raise TypeError(f"{owner}.reference must have a callable {attr}(t) (e.g. a "
-                            f"SlewProfile); got {type(reference).__name__}")
+            raise InputTypeError(f"{owner}.reference must have a callable {attr}(t) (e.g. a "
+                                 f"SlewProfile); got {type(reference).__name__}")
     return reference
 
 
@@ -221,8 +223,8 @@ def _hub_state(x) -> tuple:
     """Hub angle and rate from a plant state ``[theta, q, theta_dot, q_dot]`` of any size."""
     x = np.asarray(x, dtype=float)
     if x.ndim != 1 or x.size < 2 or x.size % 2:
-        raise ValueError("plant state must be a vector [theta, q_1..q_N, theta_dot, "
-                         f"q_1_dot..q_N_dot] of even length >= 2; got shape {x.shape}")
+        raise InputValueError("plant state must be a vector [theta, q_1..q_N, theta_dot, "
+                              f"q_1_dot..q_N_dot] of even length >= 2; got shape {x.shape}")
     return float(x[0]), float(x[x.size // 2])
 
 
@@ -260,6 +262,6 @@ def _casadi_saturate(torque, limit: float | None):
 def _casadi_hub_state(x) -> tuple:
     """:func:`_hub_state` of a CasADi state vector."""
     if x.numel() < 2 or x.numel() % 2:
-        raise ValueError("plant state must be a vector [theta, q_1..q_N, theta_dot, "
-                         f"q_1_dot..q_N_dot] of even length >= 2; got shape {x.shape}")
+        raise InputValueError("plant state must be a vector [theta, q_1..q_N, theta_dot, "
+                              f"q_1_dot..q_N_dot] of even length >= 2; got shape {x.shape}")
     return x[0], x[x.numel() // 2]

@@ -36,7 +36,7 @@ import numpy as np
 
 from flexctl.model import VARIANTS, HubBeam, build_model
 from flexctl.model.errors import InputTypeError, InputValueError
-from flexctl.model.parameters import check_real
+from flexctl.model.checks import check_real
 from flexctl.sim.metrics import slew_metrics
 from flexctl.sim.simulation import simulate
 

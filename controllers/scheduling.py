@@ -29,6 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexctl.model.checks import check_array
+from flexctl.model.errors import InputValueError
+
 from .feedback import ReferenceFeedback
 from .lqr import (LQRWeights, _lqr_gain, _model, casadi_reference_state,
                   casadi_truncate_state, reference_state, static_deflection_gain,
@@ -39,11 +42,11 @@ __all__ = ["ScheduledLQR", "design_scheduled_lqr"]
 
 
 def _spin_rates(owner: str, spin_rates) -> np.ndarray:
-    rates = np.array(spin_rates, dtype=float).reshape(-1)
+    rates = check_array(owner, "spin_rates", spin_rates, finite=False).reshape(-1).copy()
     if rates.size < 1 or not np.all(np.isfinite(rates)) or np.any(rates < 0) \
             or np.any(np.diff(rates) <= 0):
-        raise ValueError(f"{owner}.spin_rates must be finite, >= 0 and strictly increasing "
-                         f"(rad/s); got {spin_rates!r}")
+        raise InputValueError(f"{owner}.spin_rates must be finite, >= 0 and strictly increasing "
+                              f"(rad/s); got {spin_rates!r}")
     return rates
 
 
@@ -71,11 +74,11 @@ class ScheduledLQR(ReferenceFeedback):
 
     def __post_init__(self):
         rates = _spin_rates("scheduled_lqr", self.spin_rates)
-        gains = np.array(self.gains, dtype=float)
+        gains = check_array("scheduled_lqr", "gains", self.gains, finite=False).copy()
         if gains.ndim != 2 or gains.shape[0] != rates.size or gains.shape[1] < 2 \
                 or gains.shape[1] % 2 or not np.all(np.isfinite(gains)):
-            raise ValueError(f"scheduled_lqr.gains must be finite with shape ({rates.size}, "
-                             f"2 M + 2); got shape {gains.shape}")
+            raise InputValueError(f"scheduled_lqr.gains must be finite with shape ({rates.size}, "
+                                  f"2 M + 2); got shape {gains.shape}")
         for name, value in (("spin_rates", rates), ("gains", gains)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)

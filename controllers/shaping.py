@@ -40,6 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexctl.model.errors import InputTypeError, InputValueError
+
 from flexctl.sim.maneuvers import rigid_slew_duration
 
 from .pd import _rigid_inertia
@@ -80,7 +82,7 @@ class BangBang:
     def __post_init__(self):
         angle = _real("bang_bang", "slew_angle", self.slew_angle)
         if angle == 0.0:
-            raise ValueError("bang_bang.slew_angle must be nonzero; got 0.0")
+            raise InputValueError("bang_bang.slew_angle must be nonzero; got 0.0")
         object.__setattr__(self, "slew_angle", angle)
         for name in ("inertia", "peak_torque"):
             object.__setattr__(self, name, _real("bang_bang", name, getattr(self, name),
@@ -157,8 +159,8 @@ def bang_bang(model_or_inertia, slew_angle: float, *, torque_limit: float | None
     """
     inertia = _rigid_inertia("bang_bang", model_or_inertia)
     if (torque_limit is None) == (duration is None):
-        raise ValueError("bang_bang needs exactly one of torque_limit and duration; got "
-                         f"torque_limit={torque_limit!r}, duration={duration!r}")
+        raise InputValueError("bang_bang needs exactly one of torque_limit and duration; got "
+                              f"torque_limit={torque_limit!r}, duration={duration!r}")
     if duration is not None:
         duration = _real("bang_bang", "duration", duration, minimum=0.0, strict=True)
         angle = _real("bang_bang", "slew_angle", slew_angle)
@@ -188,11 +190,11 @@ class Shaper:
                      for a in self.amplitudes)
         if len(times) != len(amps) or not times or times[0] != 0.0 \
                 or any(b <= a for a, b in zip(times, times[1:])):
-            raise ValueError("shaper.times must start at 0, increase strictly and match "
-                             f"amplitudes in length; got times={self.times!r}, "
-                             f"amplitudes={self.amplitudes!r}")
+            raise InputValueError("shaper.times must start at 0, increase strictly and match "
+                                  f"amplitudes in length; got times={self.times!r}, "
+                                  f"amplitudes={self.amplitudes!r}")
         if abs(sum(amps) - 1.0) > 1e-12:
-            raise ValueError(f"shaper.amplitudes must sum to 1; got sum {sum(amps)!r}")
+            raise InputValueError(f"shaper.amplitudes must sum to 1; got sum {sum(amps)!r}")
         object.__setattr__(self, "times", times)
         object.__setattr__(self, "amplitudes", amps)
 
@@ -206,7 +208,8 @@ def _shaper_terms(owner, frequency, damping_ratio):
     w = _real(owner, "frequency", frequency, minimum=0.0, strict=True)
     zeta = _real(owner, "damping_ratio", damping_ratio, minimum=0.0, maximum=1.0)
     if zeta >= 1.0:
-        raise ValueError(f"{owner}.damping_ratio must be < 1 (an oscillating mode); got {zeta}")
+        raise InputValueError(f"{owner}.damping_ratio must be < 1 (an oscillating mode); "
+                              f"got {zeta}")
     root = math.sqrt(1.0 - zeta ** 2)
     return math.exp(-zeta * math.pi / root), math.pi / (w * root)
 
@@ -232,7 +235,7 @@ def design_shaper(model, kind: str = "zv", spin_rate: float = 0.0) -> Shaper:
     """
     makers = {"zv": zv_shaper, "zvd": zvd_shaper}
     if kind not in makers:
-        raise ValueError(f"design_shaper.kind must be 'zv' or 'zvd'; got {kind!r}")
+        raise InputValueError(f"design_shaper.kind must be 'zv' or 'zvd'; got {kind!r}")
     frequency = float(model.natural_frequencies(spin_rate, hub="free")[0])
     return makers[kind](frequency, model.system.beam.damping_ratio)
 
@@ -335,10 +338,10 @@ def shape(command, shaper: Shaper):
     ShapedTorque or ShapedReference
     """
     if not isinstance(shaper, Shaper):
-        raise TypeError(f"shape.shaper must be a Shaper; got {type(shaper).__name__}")
+        raise InputTypeError(f"shape.shaper must be a Shaper; got {type(shaper).__name__}")
     if callable(command):
         return ShapedTorque(base=command, shaper=shaper)
     if all(callable(getattr(command, n, None)) for n in ("angle", "rate", "acceleration")):
         return ShapedReference(base=command, shaper=shaper)
-    raise TypeError("shape.command must be a torque function of time or a reference with "
-                    f"angle, rate and acceleration; got {type(command).__name__}")
+    raise InputTypeError("shape.command must be a torque function of time or a reference with "
+                         f"angle, rate and acceleration; got {type(command).__name__}")

@@ -11,6 +11,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from flexctl.model.checks import check_array
+from flexctl.model.errors import InputTypeError, InputValueError
+
 from flexctl.model import Model
 
 from .lqr import casadi_truncate_state, truncate_state
@@ -82,14 +85,15 @@ class TrajectoryTracker:
         import control
 
         if not isinstance(self.solution, SlewSolution):
-            raise TypeError(f"solution must be a SlewSolution; got "
-                            f"{type(self.solution).__name__}")
+            raise InputTypeError(f"solution must be a SlewSolution; got "
+                                 f"{type(self.solution).__name__}")
         model, problem = self.solution.model, self.solution.problem
         q_default, r_default = _default_weights(model, problem.angle, problem.torque_bound)
-        q = q_default if self.state_weights is None else np.asarray(self.state_weights, float)
+        q = q_default if self.state_weights is None else check_array(
+            "trajectory_tracker", "state_weights", self.state_weights, finite=False)
         if q.shape != (model.n_states,) or not np.all(np.isfinite(q)) or np.any(q < 0):
-            raise ValueError(f"state_weights must be {model.n_states} finite numbers >= 0; "
-                             f"got {self.state_weights!r}")
+            raise InputValueError(f"state_weights must be {model.n_states} finite numbers >= 0; "
+                                  f"got {self.state_weights!r}")
         r = r_default if self.torque_weight is None else _number("torque_weight",
                                                                  self.torque_weight)
         _number("torque_limit", self.torque_limit, optional=True)

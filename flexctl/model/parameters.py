@@ -22,12 +22,11 @@ flexctl.model.errors.InputValueError: hub.inertia must be finite and >= 0; got -
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
-from numbers import Real
 
 import numpy as np
 
+from .checks import check_real
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["Hub", "Beam", "PointMass", "HubBeam", "check_real", "RATIO_LIMIT",
@@ -39,33 +38,6 @@ RATIO_LIMIT = 1e100
 #: Largest ratio of the point masses to the beam mass: the condition number of the modal mass
 #: matrix grows with it (about 3 times the ratio), and so do the rounding errors of the model.
 MASS_RATIO_LIMIT = 1e6
-
-
-def check_real(owner: str, name: str, value, *, minimum: float | None = None,
-               strict: bool = False, maximum: float | None = None) -> float:
-    """Check that ``value`` is a finite real number within bounds and return it as float.
-
-    Raises ``TypeError`` for a non-number (bool included) and ``ValueError`` naming
-    ``owner.name``, the rule and the value for NaN, infinity or a value out of bounds.
-    """
-    label = f"{owner}.{name}"
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise InputTypeError(f"{label} must be a real number; got {value!r} of type "
-                        f"{type(value).__name__}")
-    value = float(value)
-    rule = "finite"
-    if minimum is not None:
-        rule += f" and {'>' if strict else '>='} {minimum:g}"
-    if maximum is not None:
-        rule += f" and <= {maximum:g}"
-    ok = math.isfinite(value)
-    if ok and minimum is not None:
-        ok = value > minimum if strict else value >= minimum
-    if ok and maximum is not None:
-        ok = value <= maximum
-    if not ok:
-        raise InputValueError(f"{label} must be {rule}; got {value!r}")
-    return value
 
 
 @dataclass(frozen=True, kw_only=True)

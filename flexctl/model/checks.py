@@ -1,0 +1,134 @@
+"""The one vocabulary of argument checks, for flexctl and controllers alike.
+
+Every check names the input as ``owner.name`` (e.g. ``lqr.gain``, ``nmpc.horizon``; the
+scene's field path where the input comes from a scene), states the rule and shows the value,
+and raises :class:`~flexctl.model.errors.InputTypeError` (a ``TypeError``) for an input of the
+wrong type and :class:`~flexctl.model.errors.InputValueError` (a ``ValueError``) for a wrong
+value. A NaN or an infinity is a wrong value unless a check says otherwise.
+
+Examples
+--------
+>>> from flexctl.model.checks import check_integer, check_real
+>>> check_real("pd", "kp", 2)
+2.0
+>>> check_integer("nmpc", "horizon", 2.5, minimum=1)
+Traceback (most recent call last):
+...
+flexctl.model.errors.InputTypeError: nmpc.horizon must be an integer >= 1; got 2.5 of type float
+"""
+
+from __future__ import annotations
+
+import math
+from numbers import Integral, Real
+
+import numpy as np
+
+from .errors import InputTypeError, InputValueError
+
+__all__ = ["label", "check_real", "check_integer", "check_choice", "check_instance",
+           "check_array"]
+
+
+def label(owner: str, name: str) -> str:
+    """``owner.name``, or ``name`` alone for an empty owner."""
+    return f"{owner}.{name}" if owner else name
+
+
+def check_real(owner: str, name: str, value, *, minimum: float | None = None,
+               strict: bool = False, maximum: float | None = None,
+               optional: bool = False) -> float | None:
+    """A finite real number within bounds, as float (``None`` passes when ``optional``).
+
+    Raises ``TypeError`` for a non-number (bool included) and ``ValueError`` naming
+    ``owner.name``, the rule and the value for NaN, infinity or a value out of bounds
+    (``minimum`` exclusive when ``strict``).
+    """
+    if value is None and optional:
+        return None
+    where = label(owner, name)
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise InputTypeError(f"{where} must be a real number; got {value!r} of type "
+                             f"{type(value).__name__}")
+    value = float(value)
+    rule = "finite"
+    if minimum is not None:
+        rule += f" and {'>' if strict else '>='} {minimum:g}"
+    if maximum is not None:
+        rule += f" and <= {maximum:g}"
+    ok = math.isfinite(value)
+    if ok and minimum is not None:
+        ok = value > minimum if strict else value >= minimum
+    if ok and maximum is not None:
+        ok = value <= maximum
+    if not ok:
+        raise InputValueError(f"{where} must be {rule}; got {value!r}")
+    return value
+
+
+def check_integer(owner: str, name: str, value, *, minimum: int | None = None,
+                  maximum: int | None = None) -> int:
+    """An integer (not a bool, not a float) within ``[minimum, maximum]``, as int."""
+    where = label(owner, name)
+    rule = "an integer"
+    if minimum is not None and maximum is not None:
+        rule += f" in [{minimum}, {maximum}]"
+    elif minimum is not None:
+        rule += f" >= {minimum}"
+    elif maximum is not None:
+        rule += f" <= {maximum}"
+    if isinstance(value, bool) or not isinstance(value, Integral):
+        raise InputTypeError(f"{where} must be {rule}; got {value!r} of type "
+                             f"{type(value).__name__}")
+    value = int(value)
+    if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
+        raise InputValueError(f"{where} must be {rule}; got {value!r}")
+    return value
+
+
+def check_choice(owner: str, name: str, value, choices) -> str:
+    """One of the strings ``choices``."""
+    where, listed = label(owner, name), ", ".join(map(repr, choices))
+    if not isinstance(value, str):
+        raise InputTypeError(f"{where} must be one of {listed}; got {value!r} of type "
+                             f"{type(value).__name__}")
+    if value not in choices:
+        raise InputValueError(f"{where} must be one of {listed}; got {value!r}")
+    return value
+
+
+def check_instance(owner: str, name: str, value, kind, what: str | None = None):
+    """``value`` itself when it is an instance of ``kind`` (a type or tuple of types)."""
+    if not isinstance(value, kind):
+        what = what or (kind.__name__ if isinstance(kind, type)
+                        else " or ".join(k.__name__ for k in kind))
+        raise InputTypeError(f"{label(owner, name)} must be a {what}; got "
+                             f"{type(value).__name__}")
+    return value
+
+
+def check_array(owner: str, name: str, value, *, shape: tuple | None = None,
+                finite: bool = True, minimum: float | None = None) -> np.ndarray:
+    """A read-only float array of the given ``shape`` (``None`` entries match any size).
+
+    Raises ``TypeError`` when ``value`` is not numbers (strings, objects, ragged lists) and
+    ``ValueError`` for a wrong shape, a NaN or infinity (when ``finite``) or an entry below
+    ``minimum``.
+    """
+    where = label(owner, name)
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputTypeError(f"{where} must be an array of real numbers; got "
+                             f"{type(value).__name__} {value!r:.80}") from None
+    if shape is not None and (array.ndim != len(shape) or any(
+            want is not None and want != got for want, got in zip(shape, array.shape))):
+        wanted = "(" + ", ".join("any" if s is None else str(s) for s in shape) + \
+            ("," if len(shape) == 1 else "") + ")"
+        raise InputValueError(f"{where} must have shape {wanted}; got shape {array.shape}")
+    if finite and not np.all(np.isfinite(array)):
+        raise InputValueError(f"{where} must be finite; got {array!r:.120}")
+    if minimum is not None and np.any(array < minimum):
+        raise InputValueError(f"{where} must be >= {minimum:g}; got {array!r:.120}")
+    array.setflags(write=False)
+    return array
