@@ -18,7 +18,7 @@ import pytest
 
 import flexctl
 from flexctl import build_model, simulate
-from flexctl.sim.simulation import ENERGY_TOLERANCE, ModelValidityWarning, energy_balance
+from flexctl.sim.energy import ENERGY_TOLERANCE, ModelValidityWarning, energy_balance
 from flexctl.sim.validity import assess
 
 T_FINAL = 3.0

@@ -12,6 +12,8 @@ module          contents
 ``compiled``    the CasADi/CVODES integration of a symbolic drive
 ``fixed_step``  compiled fixed-step RK4 with a step-doubling error estimate (``method="rk4"``)
 ``digital``     sampled controllers: ``ZeroOrderHold``, the ``SampledController`` protocol
+``energy``      energy balance of small-deflection runs (``energy_balance``)
+``validity``    geometric model error of a run, the variant a manoeuvre needs
 ``metrics``     slew metrics and settling time
 ``fidelity``    how many modes a manoeuvre needs (``choose_modes``)
 ==============  =============================================================================

@@ -41,6 +41,7 @@ from scipy.integrate import solve_ivp
 
 from .compiled import SegmentIntegrator, is_symbolic, torque_history, verify_accuracy
 from .digital import is_sampled, run_sampled
+from .energy import EnergyBalance, ModelValidityWarning, energy_balance
 from .fixed_step import MAX_HALVINGS, RK4_OMEGA_H, integrate_fixed_step
 from .inputs import (as_vector, check_method, check_rtol, check_time, input_value,
                      jacobian_frequency, output_grid, time_function)
@@ -64,15 +65,6 @@ EXACT_CURL = 2.0
 #: "cvodes" (compiled, :mod:`flexctl.sim.compiled`), "rk4" (compiled fixed step,
 #: :mod:`flexctl.sim.fixed_step`) and the ``scipy.integrate.solve_ivp`` methods.
 METHODS = ("auto", "cvodes", "rk4", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
-
-#: A small-deflection run whose energy departs from the work done on it by more than this
-#: fraction of the energy that passed through it (:class:`EnergyBalance`) is outside its
-#: model's range. first_order is not energy-consistent, but on the built-in scenes it stays
-#: within 1e-3 (hub-beam-mass 7e-4, spacecraft-torque 7e-4, kane-spinup 3e-5; zero_order
-#: 1.1e-3 on hub-beam-mass); with a point mass of 30 / 300 / 3000 kg at the tip of the
-#: hub-beam-mass beam it reaches 0.26 / 1.9 / 60, and the run's hub rate is 15 times the
-#: exact model's at 3000 kg.
-ENERGY_TOLERANCE = 0.1
 
 #: Default tolerances: of the error-controlled methods, and of "rk4" (relative to the peak tip
 #: deflection, for "fast, and 1 % is enough").
@@ -123,12 +115,6 @@ class StiffnessWarning(RuntimeWarning):
     """An explicit method was asked for on a model whose fastest mode makes it crawl."""
 
 
-class ModelValidityWarning(UserWarning):
-    """A small-deflection model was used outside its range: its geometric error exceeds the
-    tolerance (:func:`flexctl.sim.validity.assess`) or its energy balance is broken
-    (:class:`EnergyBalance`)."""
-
-
 class StopReason(Enum):
     """Why a run ended; :attr:`status` is the ``SimulationResult.status`` it gives."""
 
@@ -168,160 +154,6 @@ def _stop_message(model: Model, reason: StopReason, t_end: float, state) -> str:
     if reason is StopReason.SINGULAR_MASS:
         return _singular_message(model, t_end, state)
     return reason.value + f" at t = {t_end:.6g} s"
-
-
-@dataclass(frozen=True, kw_only=True)
-class EnergyBalance:
-    """Mechanical energy of a small-deflection run against the work done on it.
-
-    The residual ``r(t) = E(t) - E(0) - W(t) + L(t)``, with ``E`` :meth:`Model.energy` (the
-    consistent model's energy, MODEL.md section 4), ``W`` the work of the hub torque
-    ``int T theta_t dt`` and ``L`` the energy taken by hub friction and beam damping, all from
-    the output samples (trapezoidal rule). consistent conserves ``E``; first_order and
-    zero_order leave the second-order inertia ``s = q^T D q`` out of the hub equation, so that
-    ``dE/dt = T theta_t - dL/dt + theta_t d(theta_t s)/dt`` (first_order; zero_order adds
-    ``theta_t^2 d(q^T K_g q / 2)/dt`` for the stiffening it drops). The last terms, integrated
-    along the samples, are the energy the model's neglected terms create (``neglected``): it
-    matters once ``s`` is not small against the effective hub inertia
-    ``J_0 - m_tf^T M_ff^-1 m_tf``. The balance is violated when both ``r`` and ``neglected``
-    pass :data:`ENERGY_TOLERANCE` of the energy that passed through: a residual that the
-    neglected terms do not produce is the output samples' quadrature (e.g. a loop faster than
-    the output step), not the model.
-
-    Attributes
-    ----------
-    variant : str
-    energy_start : float
-        ``E(0)``, J.
-    imbalance : float
-        ``r`` where ``|r|`` is largest, J (positive: energy created).
-    time : float
-        Where, s.
-    energy, work, lost : float
-        ``E``, ``W`` and ``L`` at that time, J.
-    throughput : float
-        ``E(0) + int |T theta_t| dt`` over the run, J: the energy that passed through.
-    hub_inertia : float
-        Effective hub inertia at rest ``J_0 - m_tf^T M_ff^-1 m_tf``, kg m^2.
-    inertia_change : float
-        ``q^T D q`` where ``|q^T D q|`` is largest, kg m^2.
-    neglected : float
-        Energy created by the terms the variant leaves out where it is largest in magnitude,
-        J (0 for consistent).
-    mass_ratio : float
-        Point masses over the beam's mass.
-    """
-
-    variant: str
-    energy_start: float
-    imbalance: float
-    time: float
-    energy: float
-    work: float
-    lost: float
-    throughput: float
-    hub_inertia: float
-    inertia_change: float
-    neglected: float
-    mass_ratio: float
-
-    @property
-    def relative_imbalance(self) -> float:
-        """``|imbalance| / throughput``."""
-        if self.imbalance == 0.0:
-            return 0.0
-        return abs(self.imbalance) / self.throughput if self.throughput > 0 else np.inf
-
-    @property
-    def violated(self) -> bool:
-        """True when the relative imbalance and the energy of the neglected terms are both
-        above :data:`ENERGY_TOLERANCE` of the energy that passed through."""
-        scale = ENERGY_TOLERANCE * self.throughput
-        return self.relative_imbalance > ENERGY_TOLERANCE and abs(self.neglected) > scale
-
-    @property
-    def message(self) -> str:
-        """The balance in one sentence, with its physical reading when violated."""
-        went = "rose" if self.energy >= self.energy_start else "fell"
-        text = (f"the {self.variant} model's energy {went} from {self.energy_start:.3g} to "
-                f"{self.energy:.3g} J by t = {self.time:.4g} s while the hub torque did "
-                f"{self.work:.3g} J of work ({self.lost:.3g} J dissipated): it "
-                f"{'created' if self.imbalance > 0 else 'destroyed'} {abs(self.imbalance):.3g} J, "
-                f"{self.relative_imbalance:.3g} times the {self.throughput:.3g} J that passed "
-                "through the system")
-        if not self.violated:
-            return text
-        masses = (f" (point masses {self.mass_ratio:.3g} times the beam mass)"
-                  if self.mass_ratio > 0 else "")
-        stiffening = (" and its beam equation the dynamic stiffening K_g"
-                      if self.variant == "zero_order" else "")
-        return (text + f"; its hub equation leaves out the second-order inertia q^T D q, which "
-                f"reached {self.inertia_change:.3g} kg m^2 against the effective hub inertia "
-                f"{self.hub_inertia:.3g} kg m^2{masses}{stiffening}, terms that create "
-                f"{self.neglected:.3g} J along the run: its first-order terms are outside their "
-                "validity here; the exact variant conserves energy")
-
-
-def _running_integral(t: np.ndarray, rate: np.ndarray) -> np.ndarray:
-    """Trapezoidal ``int_0^t rate``, shape (P,)."""
-    return np.concatenate(([0.0], np.cumsum(0.5 * np.diff(t) * (rate[1:] + rate[:-1]))))
-
-
-def _neglected_energy(model: Model, rate, q, inertia) -> np.ndarray:
-    """Energy created by the terms a small-deflection variant leaves out, J, shape (P,):
-    ``int theta_t d(theta_t q^T D q)`` (and ``int theta_t^2 d(q^T K_g q / 2)`` for zero_order)
-    as sums over the output samples."""
-    if model.variant == "consistent":
-        return np.zeros(rate.size)
-    steps = 0.5 * (rate[1:] + rate[:-1]) * np.diff(rate * inertia)
-    if model.variant == "zero_order":
-        stiffening = 0.5 * np.einsum("ip,ij,jp->p", q, model.matrices.K_g, q)
-        steps = steps + 0.5 * (rate[1:] ** 2 + rate[:-1] ** 2) * np.diff(stiffening)
-    return np.concatenate(([0.0], np.cumsum(steps)))
-
-
-def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
-    """The :class:`EnergyBalance` of a run of a small-deflection model from its outputs.
-
-    Parameters
-    ----------
-    model : Model
-    t : array_like, shape (P,)
-        Output times, s.
-    states : array_like, shape (n, P)
-        Plant states.
-    torque : array_like, shape (P,)
-        Hub torque, N m.
-
-    Returns
-    -------
-    EnergyBalance or None
-        ``None`` for the exact variant, which conserves its own energy by construction.
-    """
-    if model.variant == "exact":
-        return None
-    t, x = np.asarray(t, dtype=float), np.asarray(states, dtype=float)
-    n, mat = model.n_modes, model.matrices
-    q, w, qd = x[1:n + 1], x[n + 1], x[n + 2:]
-    energy = np.asarray(model.energy(x), dtype=float).reshape(-1)
-    power = np.asarray(torque, dtype=float) * w
-    work = _running_integral(t, power)
-    lost = _running_integral(t, model.system.hub.friction * w ** 2
-                             + np.einsum("ip,ij,jp->p", qd, mat.C_ff, qd))
-    residual = energy - energy[0] - work + lost
-    k = int(np.argmax(np.abs(residual)))
-    inertia = np.einsum("ip,ij,jp->p", q, mat.D, q)
-    neglected = _neglected_energy(model, w, q, inertia)
-    system = model.system
-    return EnergyBalance(
-        variant=model.variant, energy_start=float(energy[0]), imbalance=float(residual[k]),
-        time=float(t[k]), energy=float(energy[k]), work=float(work[k]), lost=float(lost[k]),
-        throughput=float(max(energy[0], 0.0) + _running_integral(t, np.abs(power))[-1]),
-        hub_inertia=float(model.effective_hub_inertia(np.zeros(model.n_states))),
-        inertia_change=float(inertia[int(np.argmax(np.abs(inertia)))]),
-        neglected=float(neglected[int(np.argmax(np.abs(neglected)))]),
-        mass_ratio=sum(m.mass for m in system.masses) / (system.beam.linear_density
-                                                          * system.beam.length))
 
 
 def _singular_message(model: Model, t_end: float, state) -> str:

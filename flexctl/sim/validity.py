@@ -12,7 +12,7 @@ every mode:
   tracks the difference of the full models (``tests/test_validity.py`` checks it on the
   papers' manoeuvres and a slew, within a factor of 2).
 * :func:`assess` adds the deflection ratio, the run's own energy balance
-  (:class:`~flexctl.sim.simulation.EnergyBalance`, measured by :func:`flexctl.simulate` from
+  (:class:`~flexctl.sim.energy.EnergyBalance`, measured by :func:`flexctl.simulate` from
   its outputs) and a warning when the estimate passes a tolerance or the balance is broken.
 * :func:`choose_variant` picks the cheapest variant whose estimated geometric error for a
   manoeuvre meets a tolerance (``[model] variant = "auto"``); slews are judged by their rigid
@@ -37,7 +37,8 @@ import numpy as np
 
 from ..model import build_model
 from .fidelity import DEFAULT_TOLERANCE, _as_input, _check_tolerance, _is_prescribed
-from .simulation import ENERGY_TOLERANCE, ModelValidityWarning, simulate
+from .energy import ENERGY_TOLERANCE, ModelValidityWarning
+from .simulation import simulate
 
 __all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "assess",
            "choose_variant", "geometric_error", "ESTIMATE_MODES"]
@@ -124,7 +125,7 @@ class ModelValidity:
     @property
     def valid(self) -> bool:
         """True when the estimated geometric error is within the tolerance and the energy
-        balance within :data:`~flexctl.sim.simulation.ENERGY_TOLERANCE`."""
+        balance within :data:`~flexctl.sim.energy.ENERGY_TOLERANCE`."""
         energy_ok = self.energy_balance is None or not self.energy_balance.violated
         return self.geometric_error <= self.tolerance and energy_ok
 
