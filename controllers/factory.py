@@ -33,27 +33,14 @@ lqr          full-state LQR about a smooth reference.
                energy (default: off)
              ``torque`` (N m; default 1; a number in [1e-12, 1e+12]): LQR weight: acceptable
                torque
-             ``reference`` (default "poly7"; one of "poly7", "cycloidal"): shape of the
-               reference slew the loop tracks
+             ``reference``, ``sample_time``: as for pd
              ``spin_rate`` (rad/s; default 0; a finite number): hub rate of the
                linearization the gain is designed at
-             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
-               at this period (default: continuous)
 lqg          LQR on a Kalman-Bucy estimate from hub angle and root moment.
-             ``hub_angle`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
-               weight: acceptable hub angle error (was ``angle_error``, deprecated)
-             ``hub_rate`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
-               acceptable hub rate error (was ``rate_error``, deprecated)
-             ``tip_deflection`` (m; default 0.01; a number in [1e-12, 1e+12]): LQR weight:
-               acceptable tip deflection
-             ``modal_energy`` (J; a number in [1e-12, 1e+12]): LQR weight: acceptable modal
-               energy (default: off)
-             ``torque`` (N m; default 1; a number in [1e-12, 1e+12]): LQR weight: acceptable
-               torque
-             ``reference`` (default "poly7"; one of "poly7", "cycloidal"): shape of the
-               reference slew the loop tracks
-             ``spin_rate`` (rad/s; default 0; a finite number): hub rate of the
-               linearization the gain is designed at
+             ``hub_angle``, ``hub_rate``, ``tip_deflection``, ``modal_energy``, ``torque``:
+               as for lqr
+             ``reference``: as for pd
+             ``spin_rate``: as for lqr
              ``angle_noise`` (rad; default 0.001; a number > 0): hub angle measurement noise
                (estimator)
              ``moment_noise`` (N m; default 0.1; a number > 0): root bending moment
@@ -61,22 +48,11 @@ lqg          LQR on a Kalman-Bucy estimate from hub angle and root moment.
              ``process_torque`` (N m; default 0.1; a number > 0): disturbance torque on the
                hub (estimator)
 scheduled    LQR gains designed at several spin rates, interpolated at the hub rate.
-             ``hub_angle`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
-               weight: acceptable hub angle error (was ``angle_error``, deprecated)
-             ``hub_rate`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
-               acceptable hub rate error (was ``rate_error``, deprecated)
-             ``tip_deflection`` (m; default 0.01; a number in [1e-12, 1e+12]): LQR weight:
-               acceptable tip deflection
-             ``modal_energy`` (J; a number in [1e-12, 1e+12]): LQR weight: acceptable modal
-               energy (default: off)
-             ``torque`` (N m; default 1; a number in [1e-12, 1e+12]): LQR weight: acceptable
-               torque
-             ``reference`` (default "poly7"; one of "poly7", "cycloidal"): shape of the
-               reference slew the loop tracks
+             ``hub_angle``, ``hub_rate``, ``tip_deflection``, ``modal_energy``, ``torque``:
+               as for lqr
+             ``reference``, ``sample_time``: as for pd
              ``spin_rates`` (rad/s; default [0, 1, 2]; an array of numbers >= 0): design
                spin rates, strictly increasing
-             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
-               at this period (default: continuous)
 trajopt      optimal slew on the design model, played open loop.
              ``n_intervals`` (default 40; an integer >= 2): control intervals of the
                transcription (was ``intervals``, deprecated)
@@ -87,30 +63,18 @@ trajopt      optimal slew on the design model, played open loop.
              ``torque_rate_bound`` (N m/s; a number > 0): bound on the torque rate (default:
                none)
              ``tip_bound`` (m; a number > 0): bound on the tip deflection (default: none)
-             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
-               at this period (default: continuous)
+             ``sample_time``: as for pd
 trajopt+lqr  optimal slew with LQR feedback about it (Bryson weights: 5 % of the angle, 3 %
                of the beam length at the tip, the torque bound).
-             ``n_intervals`` (default 40; an integer >= 2): control intervals of the
-               transcription (was ``intervals``, deprecated)
-             ``objective`` (one of "effort", "time"): default: effort, or time when
-               maneuver.duration is free
-             ``transcription`` (one of "multiple_shooting", "collocation"): default: by the
-               design model (collocation for exact)
-             ``torque_rate_bound`` (N m/s; a number > 0): bound on the torque rate (default:
-               none)
-             ``tip_bound`` (m; a number > 0): bound on the tip deflection (default: none)
-             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
-               at this period (default: continuous)
+             ``n_intervals``, ``objective``, ``transcription``, ``torque_rate_bound``,
+               ``tip_bound``: as for trajopt
+             ``sample_time``: as for pd
 bang_bang    rigid time-optimal at the torque bound, or the torque that fits the duration.
-             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
-               at this period (default: continuous)
+             ``sample_time``: as for pd
 zv           ZV shaper: the bang-bang torque shaped at the first hub-free frequency.
-             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
-               at this period (default: continuous)
+             ``sample_time``: as for pd
 zvd          ZVD shaper: the bang-bang torque shaped at the first hub-free frequency.
-             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
-               at this period (default: continuous)
+             ``sample_time``: as for pd
 nmpc         nonlinear MPC on the design model, run sampled.
              ``horizon`` (samples; default 20; an integer in [2, 500]): prediction horizon
              ``mode`` (default "rti"; one of "rti", "converged"): real-time iteration or
@@ -121,23 +85,11 @@ nmpc         nonlinear MPC on the design model, run sampled.
                terminal rest constraint
              ``reference`` (default "trajopt"; one of "trajopt", "none"): track the optimal
                slew, or regulate to the target
-             ``n_intervals`` (default 40; an integer >= 2): control intervals of the
-               transcription (was ``intervals``, deprecated)
-             ``objective`` (one of "effort", "time"): default: effort, or time when
-               maneuver.duration is free
-             ``transcription`` (one of "multiple_shooting", "collocation"): default: by the
-               design model (collocation for exact)
-             ``torque_rate_bound`` (N m/s; a number > 0): bound on the torque rate (default:
-               none)
-             ``tip_bound`` (m; a number > 0): bound on the tip deflection (default: none)
+             ``n_intervals``, ``objective``, ``transcription``, ``torque_rate_bound``,
+               ``tip_bound``: as for trajopt
              ``estimator`` (default "state"; one of "state", "kalman"): measured state, or
                an extended Kalman filter on hub angle and root moment
-             ``angle_noise`` (rad; default 0.001; a number > 0): hub angle measurement noise
-               (estimator)
-             ``moment_noise`` (N m; default 0.1; a number > 0): root bending moment
-               measurement noise (estimator)
-             ``process_torque`` (N m; default 0.1; a number > 0): disturbance torque on the
-               hub (estimator)
+             ``angle_noise``, ``moment_noise``, ``process_torque``: as for lqg
              ``sample_time`` (s; default 0.02; a number > 0): sample period
 ===========  ===============================================================================
 

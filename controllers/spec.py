@@ -356,8 +356,21 @@ def settings_table(width: int = 92) -> str:
     left = max(len(name) for name in CONTROLLER_KINDS) + 2
     rule = "=" * (left - 2) + "  " + "=" * (width - left)
     lines = [rule, f"{'kind':<{left}}settings", rule]
+    described = {}          # a setting shared by several kinds is described once
     for kind in _KINDS:
-        cells = [kind.doc + "."] + [_describe(item) for item in kind.settings]
+        cells, shared = [kind.doc + "."], []
+        for item in kind.settings:
+            owner = described.setdefault(id(item), kind.name)
+            if owner != kind.name and shared and shared[-1][0] == owner:
+                shared[-1][1].append(item.name)
+            elif owner != kind.name:
+                shared.append((owner, [item.name]))
+                cells.append(shared[-1])
+            else:
+                cells.append(_describe(item))
+        cells = [cell if isinstance(cell, str) else
+                 ", ".join(f"``{name}``" for name in cell[1]) + f": as for {cell[0]}"
+                 for cell in cells]
         first = True
         for cell in cells:
             for part in textwrap.wrap(cell, width - left, subsequent_indent="  "):
