@@ -118,7 +118,7 @@ class ModelValidity:
 
     @property
     def energy_error(self) -> float | None:
-        """Energy created or destroyed relative to the energy that passed through the run."""
+        """Energy created or destroyed relative to the run's energy scale."""
         balance = self.energy_balance
         return None if balance is None else balance.relative_imbalance
 
@@ -144,7 +144,7 @@ class ModelValidity:
                     "is used outside its small-deflection range")
         if self.energy_balance is not None and self.energy_balance.violated:
             text = (f"{text}; energy balance violated (more than {ENERGY_TOLERANCE:g} of the "
-                    f"energy that passed through): {self.energy_balance.message}")
+                    f"energy scale): {self.energy_balance.message}")
         return f"{text}; use variant = \"exact\""
 
     def to_dict(self) -> dict:
