@@ -19,7 +19,7 @@ from .hold_grid import LARGEST_STEP, MAX_SUBSTEPS, mode_tolerances, steps_per_ho
 
 __all__ = ["MAX_INTERVALS", "MAX_ELEMENTS", "MAX_MODE_PHASE", "Discretisation", "discretisation",
            "transcription_for", "rk4_substeps", "refuse_fast_modes", "Transcribed", "transcribe",
-           "set_initial", "state_scale"]
+           "set_initial", "state_scale", "torque_scale"]
 
 #: Most torque holds: the NLP grows with them (IPOPT's work about linearly, the refusal checks
 #: too), and 400 already converge the slew-90 cost (``benchmarks/bench_trajopt.py --grid``).
@@ -225,11 +225,19 @@ def _collocation_constraints(f, grid, Xc, held, h_element, scheme: str, degree: 
     return defect, end
 
 
+def torque_scale(model, problem, duration: float) -> float:
+    """Size of the torque, N m: the bound, unless it is over 1000 times the rigid
+    bang-bang torque ``4 J0 |angle| / T^2`` of the slew (a bound of 1e300 N m would scale
+    the torque and the modal deflections far out of IPOPT's reach)."""
+    needed = 4.0 * model.matrices.J0 * abs(problem.angle) / duration ** 2
+    return min(problem.torque_bound, 1e3 * needed) if needed > 0.0 else problem.torque_bound
+
+
 def state_scale(model, problem, duration: float) -> np.ndarray:
     """Physical size of each state: angle, mean rate, quasi-static modal deflections."""
     mat = model.matrices
     w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
-    q = np.abs(mat.m_tf) * problem.torque_bound / mat.J0 / np.diag(mat.K_ff)
+    q = np.abs(mat.m_tf) * torque_scale(model, problem, duration) / mat.J0 / np.diag(mat.K_ff)
     q = np.maximum(q, 1e-6 * model.system.beam.length)
     return np.concatenate(([abs(problem.angle)], q, [abs(problem.angle) / duration], q * w))
 
@@ -265,7 +273,8 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
     X = grid[:, ::m] if m > 1 else grid
     h = T / K
     opti.set_linear_scale(grid, ca.repmat(scale, 1, m * K + 1))
-    opti.set_linear_scale(U, umax)
+    u_scale = torque_scale(model, problem, problem.duration or t_guess)
+    opti.set_linear_scale(U, u_scale)
 
     opti.subject_to(grid[:, 0] == 0, scale)
     if not collocation:
@@ -289,7 +298,7 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
     if problem.torque_rate_bound is not None:
         jumps = ca.diff(ca.horzcat(0, U, 0), 1, 1)
         lim = problem.torque_rate_bound * h
-        opti.subject_to(opti.bounded(-lim, jumps, lim), umax)
+        opti.subject_to(opti.bounded(-lim, jumps, lim), u_scale)
     if problem.tip_bound is not None:
         tip, ymax = ca.DM(model.matrices.tip).T, problem.tip_bound
         opti.subject_to(opti.bounded(-ymax, ca.mtimes(tip, grid[1:N + 1, 1:m * K]), ymax),
@@ -301,8 +310,8 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
         opti.set_initial(T, min(max(t_guess, MIN_TIME_FLOOR * t_rigid), t_max))
         opti.minimize(T)
     else:
-        # U / umax first: umax ** 2 overflows for a torque bound above 1e154 N m
-        opti.minimize(h * ca.sumsqr(U / umax) / problem.duration)
+        # U / u_scale first: its square overflows for a torque bound above 1e154 N m
+        opti.minimize(h * ca.sumsqr(U / u_scale) / problem.duration)
 
     set_initial(opti, grid, Xc, problem, m, x_guess)
     opti.set_initial(U, u_guess.reshape(1, K))

@@ -476,6 +476,8 @@ def _failure(status: str, iterations: int, problem: SlewProblem) -> TrajectoryOp
 
     IPOPT's own status stays in :attr:`TrajectoryOptimizationError.return_status`."""
     what, remedy = _ENDINGS.get(status, _NUMERICAL_TROUBLE)
+    if problem.objective == "time" and remedy != _CONVERGENCE:
+        remedy += ", or raise max_duration (the free duration's upper bound)"
     duration = (f"{problem.duration:g} s" if problem.duration is not None
                 else "a free duration")
     return TrajectoryOptimizationError(
