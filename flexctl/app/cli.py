@@ -50,6 +50,7 @@ from ..model.errors import InputError, InputValueError
 from .bench import BenchConfig, run_bench, summary_line
 from .demo import DEMO_WORKERS, run_demo
 from .report import format_summary
+from ..sim.progress import progress_printer
 from .runner import execute, write_complete
 from .scenes import SceneError, builtin_scenes, load_scene
 
@@ -260,6 +261,14 @@ class _HeldOutput:
             file.close()
         return False
 
+    def write_through(self, line: str) -> None:
+        """Write ``line`` to the real stderr now, past the hold (progress of a long run)."""
+        saved = self._saved.get(2)
+        if saved is None:
+            print(line, file=sys.stderr, flush=True)
+            return
+        os.write(saved, (line + "\n").encode("utf-8", "replace"))
+
     def replay(self) -> None:
         """Write the held output where it was going, and each warning as one line."""
         for fd, stream in ((1, sys.stdout), (2, sys.stderr)):
@@ -292,7 +301,8 @@ def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
     try:
         with held:
             scene = load_scene(source, overrides=overrides)
-            result, extra = execute(scene)
+            progress = progress_printer(lambda line: held.write_through(f"{PROG}: {line}"))
+            result, extra = execute(scene, progress=progress)
     except INPUT_ERRORS as exc:
         raise _InputError(str(exc)) from None
     except BaseException:

@@ -21,11 +21,11 @@ from .scenes import run_scene, run_slew
 __all__ = ["execute", "write_complete"]
 
 
-def _run_controlled(scene):
+def _run_controlled(scene, progress=None):
     """Design the controller of a slew scene, run it, and measure the slew."""
     from controllers.factory import from_spec
 
-    result, built, metrics = run_slew(scene, from_spec)
+    result, built, metrics = run_slew(scene, from_spec, progress=progress)
     slew = metrics.as_dict()
     slew.update({"controller": built.kind, "design_modes": built.design_modes,
                  "maneuver_end": built.maneuver_end, **built.info})
@@ -35,8 +35,14 @@ def _run_controlled(scene):
     return result, extra
 
 
-def execute(scene) -> tuple:
+def execute(scene, progress=None) -> tuple:
     """Run a loaded scene.
+
+    Parameters
+    ----------
+    scene : Scene
+    progress : bool or callable, optional
+        As for :func:`flexctl.simulate`.
 
     Returns
     -------
@@ -47,8 +53,8 @@ def execute(scene) -> tuple:
         controlled slew; empty otherwise.
     """
     if scene.controller is None:
-        return run_scene(scene), {}
-    return _run_controlled(scene)
+        return run_scene(scene, progress=progress), {}
+    return _run_controlled(scene, progress)
 
 
 def write_complete(scene, result, out, overrides: dict, extra: dict) -> dict:

@@ -506,7 +506,8 @@ def _summary_scene(path: Path) -> tuple:
     return table, name if isinstance(name, str) and name else path.parent.name
 
 
-def run_scene(scene: Scene, controller=None, model: Model | None = None) -> SimulationResult:
+def run_scene(scene: Scene, controller=None, model: Model | None = None, *,
+              progress=None) -> SimulationResult:
     """Simulate a scene with the model and settings it names.
 
     Parameters
@@ -517,6 +518,8 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None) -> Simu
         for a slew scene, which is a goal for a controller rather than an input.
     model : Model, optional
         ``scene.build_model()`` when already built.
+    progress : bool or callable, optional
+        As for :func:`flexctl.simulate`.
 
     Returns
     -------
@@ -538,12 +541,12 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None) -> Simu
     else:
         drive = {"torque": scene.maneuver}
     result = simulate(model, sim.t_final, rtol=sim.rtol, method=sim.method,
-                      output_step=sim.output_step, **drive)
+                      output_step=sim.output_step, progress=progress, **drive)
     validity = assess(result, tolerance=scene.model.tolerance, **drive)
     return dataclasses.replace(result, validity=validity)
 
 
-def run_slew(scene: Scene, controller_factory):
+def run_slew(scene: Scene, controller_factory, *, progress=None):
     """Design a slew scene's controller, run it against the scene's plant, measure the slew.
 
     Parameters
@@ -554,6 +557,8 @@ def run_slew(scene: Scene, controller_factory):
         ``factory(scene, plant)`` returning an object with ``controller`` and
         ``maneuver_end`` (``controllers.from_spec``), passed in so that a caller can
         give another factory.
+    progress : bool or callable, optional
+        As for :func:`flexctl.simulate` (the closed-loop run).
 
     Returns
     -------
@@ -569,7 +574,7 @@ def run_slew(scene: Scene, controller_factory):
     plant = scene.build_model()
     built = controller_factory(scene, plant)
     _check_slew_fits(scene, built)
-    result = run_scene(scene, controller=built.controller, model=plant)
+    result = run_scene(scene, controller=built.controller, model=plant, progress=progress)
     return result, built, slew_metrics(result, scene.maneuver.angle, built.maneuver_end)
 
 

@@ -42,6 +42,7 @@ from scipy.integrate import solve_ivp
 from .compiled import SegmentIntegrator, is_symbolic, torque_history, verify_accuracy
 from .digital import is_sampled, run_sampled
 from .energy import EnergyBalance, ModelValidityWarning, energy_balance
+from .progress import Progress, check_progress, progress_cuts
 from .fixed_step import MAX_HALVINGS, RK4_OMEGA_H, integrate_fixed_step
 from .inputs import (as_vector, check_method, check_rtol, check_time, input_value,
                      jacobian_frequency, output_grid, time_function)
@@ -555,7 +556,7 @@ def _simulate_sampled(model, t_final, controller, x_init, torque, rtol, atol, st
 def simulate(model: Model, t_final: float, torque=None, hub_motion=None, controller=None,
              x0=None, *, rtol: float | None = None, atol=None, method: str = "auto",
              output_step: float | None = None, max_step: float = np.inf,
-             check_accuracy: bool = True) -> SimulationResult:
+             check_accuracy: bool = True, progress=None) -> SimulationResult:
     """Simulate the nonlinear model.
 
     Parameters
@@ -606,6 +607,12 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         estimate the integration error (``result.integration_error``), and redo it with
         A-stable BDF2 if the two disagree grossly (:func:`flexctl.sim.compiled.verify_accuracy`).
         Default True.
+    progress : bool or callable, optional
+        Report the progress of a long run: ``True`` prints a line with the simulated time
+        reached and an estimate of the time to go to stderr every 5 s once the run has taken
+        5 s; a callable is called with a :class:`~flexctl.sim.progress.Progress` after every
+        :data:`~flexctl.sim.progress.PROGRESS_CHUNKS`-th of the run (which is then integrated
+        in that many pieces). Default: no reports.
 
     Returns
     -------
@@ -628,6 +635,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         # on such a scale: a subnormal t_final divided by zero, 1e-300 s hung LSODA
         raise InputValueError(f"t_final must be at least {MIN_T_FINAL:g} s; got {t_final!r}")
     method = check_method(method, METHODS)
+    report = check_progress(progress)
     rtol = check_rtol((RK4_RTOL if method == "rk4" else DEFAULT_RTOL) if rtol is None else rtol)
     if hub_motion is not None and (torque is not None or controller is not None):
         raise InputValueError("hub_motion prescribes the hub: it cannot be combined with "
@@ -852,7 +860,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     y = y_init
     start = time.perf_counter()
     integration_error, accuracy_note = None, ""
-    drive_cuts = cuts
+    drive_cuts = cuts if report is None else progress_cuts(cuts, float(t_final))
     if method == "rk4":
         drive_cuts = []         # the whole run is one compiled call
         tip_map = np.zeros(y_init.size)
@@ -910,6 +918,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                 ys.append(y_seg)
                 compiled_segments.append((lo, t_eval))
                 y = y_seg[:, -1]
+                if report is not None:
+                    report(Progress(hi, float(t_final), time.perf_counter() - start))
                 continue
             # Something stops the run in this segment: find where, exactly, with SciPy
             # from the last good sample.
@@ -954,9 +964,14 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             message = f"integration failed at t = {sol.t[-1]:.6g} s: {sol.message}"
             break
         y = sol.y[:, -1]
+        if report is not None:
+            report(Progress(hi, float(t_final), time.perf_counter() - start))
 
     if check_accuracy and method == "cvodes" and reason is StopReason.REACHED_END \
-            and len(compiled_segments) == len(cuts) - 1:
+            and len(compiled_segments) == len(drive_cuts) - 1:
+        if report is not None:
+            report(Progress(float(t_final), float(t_final), time.perf_counter() - start,
+                            "checking accuracy"))
         tip_map = np.zeros(y_init.size)
         first_q = 0 if prescribed else 1
         tip_map[first_q:first_q + n] = tip
