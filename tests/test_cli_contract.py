@@ -51,7 +51,7 @@ def test_bad_input_leaves_one_line_on_stderr_and_no_files(argv, named, tmp_path,
 
 
 def test_a_bug_exits_1_with_its_traceback(tmp_path, monkeypatch, capsys):
-    def broken(scene):
+    def broken(scene, **options):
         raise ValueError("an internal inconsistency")
     monkeypatch.setattr(runner, "run_scene", broken)
     code = main(["run", "hub-beam-mass", "--out", str(tmp_path / "out")])
@@ -83,7 +83,7 @@ def test_failed_run_leaves_the_output_directory_as_it_was(failure, tmp_path, mon
         monkeypatch.setattr(runner, "write_run", write_then_fail)
         expected = EXIT_BAD_INPUT
     else:
-        def broken(scene):
+        def broken(scene, **options):
             raise RuntimeError("boom")
         monkeypatch.setattr(runner, "run_scene", broken)
         expected = EXIT_BUG
