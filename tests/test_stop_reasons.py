@@ -42,3 +42,18 @@ def test_every_reason_maps_to_a_status():
     assert statuses[StopReason.SINGULAR_MASS] == "singular"
     assert {s for r, s in statuses.items()
             if r not in (StopReason.REACHED_END, StopReason.SINGULAR_MASS)} == {"diverged"}
+
+
+def test_compiled_fallback_locates_the_stop_where_the_python_path_does():
+    """Where a compiled segment fails, SciPy locates the stop on the compiled right-hand
+    side: the same stop, to the integrator's tolerance, as the Python model gives."""
+    scene = flexctl.load_scene("hub-beam-mass")
+    model = scene.build_model()
+    push = flexctl.SineTorque(peak_torque=1e5, duration=2.0)
+    stops = {method: flexctl.simulate(model, 20.0, torque=push, method=method)
+             for method in ("cvodes", "DOP853")}
+    for result in stops.values():
+        assert result.stop_reason is StopReason.TIP_PAST_LENGTH
+    assert abs(stops["cvodes"].t[-1] - stops["DOP853"].t[-1]) < 1e-6 * stops["DOP853"].t[-1]
+    assert np.allclose(stops["cvodes"].states[:, -1], stops["DOP853"].states[:, -1],
+                       rtol=1e-4, atol=1e-6)

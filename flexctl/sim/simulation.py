@@ -39,7 +39,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .compiled import SegmentIntegrator, is_symbolic, torque_history, verify_accuracy
+from .compiled import (SegmentIntegrator, is_symbolic, numeric_rhs, torque_history,
+                       verify_accuracy)
 from .digital import is_sampled, run_sampled
 from .energy import EnergyBalance, ModelValidityWarning, energy_balance
 from .progress import Progress, check_progress, progress_cuts
@@ -841,6 +842,22 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     cvodes_steps = int(min(1e6, max(CVODES_MIN_STEPS, CVODES_STEPS_PER_RADIAN
                                     * max(omega_plant, loop_frequency) * step)))
 
+    fallback_rhs = None             # SciPy's right-hand side where a compiled segment fails
+    if method == "cvodes" and model.variant != "consistent":
+        # where a compiled segment fails (a run blowing up), SciPy locates the stop on the
+        # compiled right-hand side; consistent keeps the Python one, which names a singular
+        # mass matrix
+        compiled_rhs = []           # built on first use: most runs never need it
+
+        def compiled_fallback(t, y):
+            if not compiled_rhs:
+                compiled_rhs.append(numeric_rhs(model, torque, hub_motion, controller))
+            dy = compiled_rhs[0](t, y, segment_end[0])
+            if not np.all(np.isfinite(dy)):
+                raise FloatingPointError("the state derivative is not finite")
+            return dy
+        fallback_rhs = compiled_fallback
+
     cuts = [0.0] + [b for b in _breakpoints(torque, hub_motion, controller)
                     if 0.0 < b < t_final] + [float(t_final)]
 
@@ -930,8 +947,9 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             t_eval = t_eval[bad:]
         try:
             with np.errstate(over="raise", invalid="raise"):
-                sol = solve_ivp(rhs, (lo, hi), y, method=fallback, t_eval=t_eval, rtol=rtol,
-                                atol=atol_vec, events=events, max_step=max_step)
+                sol = solve_ivp(fallback_rhs or rhs, (lo, hi), y, method=fallback,
+                                t_eval=t_eval, rtol=rtol, atol=atol_vec, events=events,
+                                max_step=max_step)
         except SingularMassMatrixError as exc:
             reason, message = StopReason.SINGULAR_MASS, str(exc)
             found = "effective" in message      # named again from the state, with J_eff
