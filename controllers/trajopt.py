@@ -178,7 +178,7 @@ class SlewProblem:
     >>> SlewProblem(angle=1.0, duration=2.0, torque_bound=-5.0)
     Traceback (most recent call last):
     ...
-    ValueError: torque_bound must be a positive finite number; got -5.0
+    flexctl.model.errors.InputValueError: torque_bound must be a positive finite number; got -5.0
     """
 
     angle: float
