@@ -18,7 +18,8 @@ import functools
 import math
 
 from .hold_grid import HoldGrid, largest_step, mode_tolerances
-from .slew_nlp import Discretisation, discretisation, refuse_fast_modes
+from .slew_nlp import (MAX_INTERVALS, Discretisation, discretisation, refuse_fast_modes,
+                       resolution_reason)
 
 __all__ = ["MAX_EXACT_WORK", "exact_work", "refuse_unsolvable"]
 
@@ -70,14 +71,17 @@ class _Checks:
                     for w, tol in zip(*self.modes))
         return per_step * steps * self.model.n_states ** 3
 
+    def resolution_reason(self, n_intervals: int) -> str | None:
+        """Why ``n_intervals`` holds need more steps than the limits allow, or None."""
+        problem = dataclasses.replace(self.problem, n_intervals=n_intervals)
+        return resolution_reason(problem, self.model, discretisation(
+            problem, self.model, *self.bounds, check=False))
+
     def work_reason(self, n_intervals: int) -> str | None:
         if self.model.variant != "exact":
             return None
         problem = dataclasses.replace(self.problem, n_intervals=n_intervals)
-        try:
-            disc = discretisation(problem, self.model, *self.bounds)
-        except ValueError as exc:            # more RK4 substeps than MAX_SUBSTEPS
-            return str(exc)
+        disc = discretisation(problem, self.model, *self.bounds, check=False)
         work = exact_work(problem, disc, self.model.n_states)
         if work <= MAX_EXACT_WORK:
             return None
@@ -92,6 +96,9 @@ class _Checks:
 
     def reason(self, n_intervals: int) -> str | None:
         """Why ``n_intervals`` holds are refused, or None."""
+        resolution = self.resolution_reason(n_intervals)
+        if resolution is not None:           # before the hold analysis, which it would upset
+            return resolution
         aliasing = self.holds.reason(n_intervals) if self.holds else None
         if aliasing is None:
             return self.work_reason(n_intervals)
@@ -100,7 +107,8 @@ class _Checks:
                 f"mode{'s' if n_modes > 1 else ''}: {aliasing}")
 
     def passes(self, n_intervals: int) -> bool:
-        if self.work_reason(n_intervals) is not None:
+        if self.resolution_reason(n_intervals) is not None \
+                or self.work_reason(n_intervals) is not None:
             return False
         return self.holds is None or self.holds.passes(n_intervals)
 
@@ -111,7 +119,8 @@ def _more_intervals(checks: _Checks, n_intervals: int) -> int | None:
     if checks.holds is None or checks.least_work() > MAX_EXACT_WORK:
         return None
     nyquist = math.ceil(checks.holds.frequencies[-1] * checks.problem.duration / math.pi)
-    for count in range(n_intervals + 1, 2 * max(nyquist, n_intervals, 10) + 1):
+    for count in range(n_intervals + 1, min(2 * max(nyquist, n_intervals, 10),
+                                            MAX_INTERVALS) + 1):
         if checks.passes(count):
             return count
     return None
@@ -158,8 +167,6 @@ the converged slew (limit 1 %); use n_intervals = 45 or at most 3 design modes \
     # modes too fast for any grid of holds first: the hold analysis of such a slew is
     # inaccurate in floating point (or overflows), and no other setting helps
     refuse_fast_modes(model, problem.duration or longest, t_rigid)
-    if model.variant != "exact":         # the exact variant's steps are part of its work check
-        discretisation(problem, model, t_rigid, longest)
     checks = _Checks(model, problem, t_rigid, longest)
     K = problem.n_intervals
     reason = checks.reason(K)

@@ -18,7 +18,7 @@ import numpy as np
 from .hold_grid import LARGEST_STEP, MAX_SUBSTEPS, mode_tolerances, steps_per_hold
 
 __all__ = ["MAX_INTERVALS", "MAX_ELEMENTS", "MAX_MODE_PHASE", "Discretisation", "discretisation",
-           "transcription_for", "rk4_substeps", "refuse_fast_modes", "Transcribed", "transcribe",
+           "transcription_for", "rk4_substeps", "refuse_fast_modes", "resolution_reason", "Transcribed", "transcribe",
            "set_initial", "state_scale", "torque_scale"]
 
 #: Most torque holds: the NLP grows with them (IPOPT's work about linearly, the refusal checks
@@ -143,9 +143,10 @@ class Discretisation:
 
 
 def discretisation(problem, model, t_rigid: float, longest: float,
-                   duration: float | None = None) -> Discretisation:
+                   duration: float | None = None, check: bool = True) -> Discretisation:
     """:func:`controllers.trajopt.slew_discretisation`, given the rigid-body minimum time and
-    the longest free duration (s)."""
+    the longest free duration (s). ``check=False`` returns the steps even beyond the limits
+    (:func:`resolution_reason` says why they are refused)."""
     transcription = transcription_for(problem, model)
     if transcription == "collocation":
         sized = problem.duration or duration or min(TIME_SIZING * t_rigid, longest)
@@ -153,25 +154,39 @@ def discretisation(problem, model, t_rigid: float, longest: float,
     else:
         sized = problem.duration or longest
         method = problem.integrator
-    refuse_fast_modes(model, sized, t_rigid)
+    if check:
+        refuse_fast_modes(model, sized, t_rigid)
     if method == "cvodes":
         return Discretisation(transcription, "cvodes", 1, sized)
     if method == "rk4" and problem.substeps is not None:
         return Discretisation(transcription, "rk4", problem.substeps, sized)
-    if method == "rk4":
+    if method == "rk4" and check:
         steps = rk4_substeps(model, sized / problem.n_intervals, sized)
     else:
         omega, tolerance = mode_tolerances(model)
         steps = steps_per_hold(method, omega, sized / problem.n_intervals, sized,
-                               problem.degree, tolerance)
-        if steps * problem.n_intervals > MAX_ELEMENTS:
-            raise ValueError(
-                f"the fastest of the {model.n_modes} design modes ({float(omega[-1]):.4g} "
-                f"rad/s) needs {steps} {method} collocation elements per "
-                f"{sized / problem.n_intervals:.4g} s hold, {steps * problem.n_intervals} over "
-                f"the slew (more than MAX_ELEMENTS = {MAX_ELEMENTS}): use fewer design modes "
-                "(model.design_modes) or transcription 'multiple_shooting'")
-    return Discretisation(transcription, method, steps, sized)
+                               problem.degree if method != "rk4" else 3, tolerance)
+    disc = Discretisation(transcription, method, steps, sized)
+    if check and resolution_reason(problem, model, disc):
+        raise ValueError(f"{resolution_reason(problem, model, disc)}: use fewer design modes "
+                         "(model.design_modes) or transcription 'multiple_shooting'")
+    return disc
+
+
+def resolution_reason(problem, model, disc: Discretisation) -> str | None:
+    """Why ``disc`` takes more steps than the limits allow, or None."""
+    K, omega_max = problem.n_intervals, float(mode_tolerances(model)[0][-1])
+    hold = disc.sized_for / K
+    if disc.method == "rk4" and problem.substeps is None and disc.steps_per_hold > MAX_SUBSTEPS:
+        return (f"the fastest of the {model.n_modes} design modes ({omega_max:.4g} rad/s) "
+                f"needs {disc.steps_per_hold} RK4 substeps per {hold:.4g} s hold (more than "
+                f"{MAX_SUBSTEPS})")
+    if disc.transcription == "collocation" and disc.steps_per_hold * K > MAX_ELEMENTS:
+        return (f"the fastest of the {model.n_modes} design modes ({omega_max:.4g} rad/s) "
+                f"needs {disc.steps_per_hold} {disc.method} collocation elements per "
+                f"{hold:.4g} s hold, {disc.steps_per_hold * K} over the slew (more than "
+                f"MAX_ELEMENTS = {MAX_ELEMENTS})")
+    return None
 
 
 def _rk4_step(f, n: int, substeps: int, symbol=None):
