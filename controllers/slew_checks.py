@@ -19,7 +19,7 @@ import math
 
 from .hold_grid import HoldGrid, largest_step, mode_tolerances
 from .slew_nlp import (MAX_INTERVALS, Discretisation, discretisation, refuse_fast_modes,
-                       resolution_reason)
+                       resolution_reason, transcription_for)
 
 __all__ = ["MAX_EXACT_WORK", "exact_work", "refuse_unsolvable"]
 
@@ -182,4 +182,15 @@ the converged slew (limit 1 %); use n_intervals = 45 or at most 3 design modes \
     if model.variant == "exact" and checks.work_reason(K) is not None:
         remedies.append("model.design_variant 'first_order' (small deflection, solved in "
                         "seconds)")
+    if not remedies and checks.holds is not None:
+        # the search went up to MAX_INTERVALS: no interval count helps
+        omega = checks.modes[0]
+        remedies.append(f"a design model whose modes turn fewer radians over the slew (design "
+                        f"mode {model.n_modes} at {omega[-1]:.4g} rad/s turns "
+                        f"{omega[-1] * problem.duration:.3g} rad, and no n_intervals up to "
+                        f"{MAX_INTERVALS} passes): check the beam and hub parameters")
+    if not remedies and transcription_for(problem, model) == "collocation":
+        # elements over the slew hardly change with the interval count
+        remedies.append("fewer design modes (model.design_modes) or transcription "
+                        "'multiple_shooting'")
     raise ValueError(f"{reason}; use {' or '.join(remedies) or 'more n_intervals'}")

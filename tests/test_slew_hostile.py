@@ -91,6 +91,24 @@ def test_beam_too_stiff_for_the_holds_is_refused(youngs_modulus):
     assert elapsed < FAST_REFUSAL_S
 
 
+def test_substeps_no_interval_count_can_cut_are_refused_without_a_false_remedy():
+    """It suggested "6670 times as many n_intervals", far above the interval limit."""
+    model = flexctl.build_model(system(hub_inertia=0.0, density=1e-3, masses=()), 2)
+    message, elapsed = refused(model, problem(), match="RK4 substeps per")
+    assert f"no n_intervals up to {MAX_INTERVALS} passes" in message
+    assert elapsed < FAST_REFUSAL_S
+
+
+def test_collocation_elements_beyond_the_limit_are_refused_fast():
+    """A free-time collocation slew of 4720 elements took minutes to build."""
+    model = flexctl.build_model(system(hub_inertia=1000.0, masses=(
+        dataclasses.replace(BASE.masses[0], mass=10.0),)), 3)
+    slew = problem(angle=2.8, duration=None, torque_bound=12.5, n_intervals=80,
+                   transcription="collocation")
+    message, elapsed = refused(model, slew, match="MAX_ELEMENTS")
+    assert "model.design_modes" in message and elapsed < FAST_REFUSAL_S
+
+
 def test_the_fast_mode_refusal_names_a_duration_that_passes_the_phase_check():
     model = flexctl.build_model(system(hub_inertia=0.0, density=1e-6, masses=()), 2)
     message, _ = refused(model, problem())
