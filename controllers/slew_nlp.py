@@ -255,8 +255,12 @@ def state_scale(model, problem, duration: float) -> np.ndarray:
     mat = model.matrices
     w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
     q = np.abs(mat.m_tf) * torque_scale(model, problem, duration) / mat.J0 / np.diag(mat.K_ff)
+    # a mode too slow to follow the hub lags it by no more than the slew angle: without this
+    # cap a very soft beam's scale (1e15 for E = 1e-6) let IPOPT accept broken dynamics
+    q = np.minimum(q, np.abs(mat.m_tf) / np.diag(mat.M_ff) * abs(problem.angle))
     q = np.maximum(q, 1e-6 * model.system.beam.length)
-    return np.concatenate(([abs(problem.angle)], q, [abs(problem.angle) / duration], q * w))
+    return np.concatenate(([abs(problem.angle)], q, [abs(problem.angle) / duration],
+                           q * np.maximum(w, 1.0 / duration)))
 
 
 @dataclass(frozen=True)
