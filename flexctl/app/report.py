@@ -33,6 +33,7 @@ from ..sim.maneuvers import Slew, SpinUp
 from .markdown import markdown_table
 
 __all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "timeseries_columns", "summarize",
+           "json_safe",
            "write_run", "format_summary", "write_demo_report"]
 
 TIMESERIES = "timeseries.csv"
@@ -74,6 +75,30 @@ def _maneuver_table(maneuver) -> dict:
         fields = {"angle_deg": math.degrees(fields.pop("angle")), **fields}
         fields["duration"] = "free" if fields["duration"] is None else fields["duration"]
     return {"kind": kind, **fields}
+
+
+def json_safe(value):
+    """``value`` with JSON types only: a NaN or infinite number becomes null (strict JSON has
+    neither), numpy scalars and arrays become numbers and lists, anything else its text.
+
+    Examples
+    --------
+    >>> json_safe({"a": float("inf"), "b": (1, np.float64(2.5)), "c": np.arange(2)})
+    {'a': None, 'b': [1, 2.5], 'c': [0, 1]}
+    """
+    if isinstance(value, dict):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_safe(value.tolist())
+    if isinstance(value, np.generic):
+        return json_safe(value.item())
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if value is None or isinstance(value, (str, bool, int)):
+        return value
+    return str(value)
 
 
 def _floats(values) -> list:
@@ -187,7 +212,8 @@ def write_run(scene, result, out_dir, overrides: dict | None = None,
                              result.tip_deflection, result.q.T))
     np.savetxt(out / TIMESERIES, table, delimiter=",", fmt=f"%.{CSV_DIGITS}g",
                header=",".join(timeseries_columns(result.model.n_modes)), comments="")
-    (out / SUMMARY).write_text(json.dumps(summary, indent=2) + "\n")
+    (out / SUMMARY).write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False)
+                               + "\n")
 
     from .plotting import plot_response
     fig = plot_response(result, title=f"{scene.name}: {result.model.variant}, "

@@ -63,6 +63,8 @@ import copy
 import dataclasses
 import json
 import math
+import os
+import re
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -77,8 +79,9 @@ from ..sim.maneuvers import SineTorque, Slew, SpinUp
 from ..sim.metrics import slew_metrics
 from ..model import VARIANTS, Model, build_model
 from ..model.variants import EXACT_MAX_MODES
+from ..model.errors import InputTypeError
 from ..model.parameters import Beam, Hub, HubBeam, PointMass
-from ..sim.simulation import METHODS, SimulationResult, simulate
+from ..sim.simulation import METHODS, MIN_T_FINAL, SimulationResult, simulate
 from ..sim.validity import VariantChoice, assess, choose_variant
 
 __all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene",
@@ -193,8 +196,11 @@ class SimulationSpec:
                     or value != value or value == float("inf"):
                 raise SceneError(f"simulation.{key} must be a positive finite number; "
                                  f"got {value!r}")
-        if not self.rtol < 1:
-            raise SceneError(f"simulation.rtol must be < 1; got {self.rtol!r}")
+        if not 1e-14 <= self.rtol < 1:
+            raise SceneError(f"simulation.rtol must lie in [1e-14, 1); got {self.rtol!r}")
+        if self.t_final < MIN_T_FINAL:
+            raise SceneError(f"simulation.t_final must be at least {MIN_T_FINAL:g} s; "
+                             f"got {self.t_final!r}")
         if self.method not in METHODS:
             raise SceneError(f"simulation.method must be one of {', '.join(METHODS)}; "
                              f"got {self.method!r}")
@@ -296,11 +302,17 @@ def builtin_scenes() -> dict:
     return out
 
 
+#: A list item written ``name[k]`` in an override key.
+_INDEX = re.compile(r"\[([^\[\]]*)\]")
+
+
 def _set_dotted(data: dict, path: str, value):
     """Set ``data[a][b]... = value`` for the dotted ``path``; list items by index.
 
     A string ``value`` is read as a TOML value when it is one (``"10"`` -> 10).
     """
+    if isinstance(path, str):
+        path = _INDEX.sub(r".\1", path)      # masses[0].mass is masses.0.mass
     if not isinstance(path, str) or not path or any(not p for p in path.split(".")):
         raise SceneError(f"override key {path!r} is not a dotted path like maneuver.spin_rate")
     if isinstance(value, str):
@@ -406,7 +418,7 @@ def parse_scene(data: dict, name: str = "scene") -> Scene:
 
     maneuver_table = dict(_table(data, "maneuver"))
     kind = maneuver_table.pop("kind", None)
-    if kind not in _MANEUVERS:
+    if not isinstance(kind, str) or kind not in _MANEUVERS:
         raise SceneError(f"maneuver.kind must be one of {', '.join(_MANEUVERS)}; got {kind!r}")
     for key in maneuver_table:
         if key not in _MANEUVER_KEYS[kind]:
@@ -455,10 +467,24 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
     -------
     Scene
     """
+    if not isinstance(source, (str, os.PathLike)) or isinstance(source, bytes):
+        raise InputTypeError(f"scene must be a path or a built-in scene name; got "
+                             f"{type(source).__name__}")
+    if overrides is not None and not isinstance(overrides, dict):
+        raise InputTypeError("overrides must be a dict {\"dotted.key\": value}; got "
+                             f"{type(overrides).__name__}")
     path = Path(source)
+    if not str(source).strip() or "\0" in str(source):
+        raise SceneError(f"scene must name a TOML file, a summary.json or a built-in scene; "
+                         f"got {str(source)!r}")
+    try:
+        is_file = path.is_file()
+    except OSError as exc:      # a name too long for the file system
+        raise SceneError(f"scene {str(source)[:80]!r} cannot be read: "
+                         f"{exc.strerror or exc}") from None
     if path.suffix == ".json":
         data, name = _summary_scene(path)
-    elif path.suffix == ".toml" or path.is_file():
+    elif path.suffix == ".toml" or is_file:
         if not path.is_file():
             raise SceneError(f"scene file {str(path)!r} does not exist")
         try:
@@ -476,8 +502,9 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
     else:
         names = builtin_scenes()
         if str(source) not in names:
-            raise SceneError(f"scene {str(source)!r} is neither a file nor a built-in scene "
-                             f"({', '.join(names)})")
+            what = "a directory, not a scene file" if path.is_dir() else \
+                "neither a file nor a built-in scene"
+            raise SceneError(f"scene {str(source)[:200]!r} is {what} ({', '.join(names)})")
         name = str(source)
         data = tomllib.loads(
             resources.files("flexctl.app.builtin_scenes").joinpath(f"{name}.toml").read_text())

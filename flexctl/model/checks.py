@@ -50,12 +50,17 @@ def check_real(owner: str, name: str, value, *, minimum: float | None = None,
     if isinstance(value, bool) or not isinstance(value, Real):
         raise InputTypeError(f"{where} must be a real number; got {value!r} of type "
                              f"{type(value).__name__}")
-    value = float(value)
     rule = "finite"
     if minimum is not None:
         rule += f" and {'>' if strict else '>='} {minimum:g}"
     if maximum is not None:
         rule += f" and <= {maximum:g}"
+    try:
+        value = float(value)
+    except OverflowError:       # an int beyond the float range, e.g. 10**400
+        exponent = int(abs(int(value)).bit_length() * math.log10(2.0))
+        raise InputValueError(f"{where} must be {rule}; got a number of about "
+                              f"1e{exponent}, beyond the float range") from None
     ok = math.isfinite(value)
     if ok and minimum is not None:
         ok = value > minimum if strict else value >= minimum

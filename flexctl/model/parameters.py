@@ -30,7 +30,7 @@ from .checks import check_real
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["Hub", "Beam", "PointMass", "HubBeam", "check_real", "RATIO_LIMIT",
-           "MASS_RATIO_LIMIT"]
+           "MASS_RATIO_LIMIT", "RADIUS_RATIO_LIMIT"]
 
 #: Products and ratios of beam parameters (mass per length, bending stiffness, EI / rhoA l^4)
 #: must lie within [1 / RATIO_LIMIT, RATIO_LIMIT]: the modal matrices multiply and square them.
@@ -38,6 +38,11 @@ RATIO_LIMIT = 1e100
 #: Largest ratio of the point masses to the beam mass: the condition number of the modal mass
 #: matrix grows with it (about 3 times the ratio), and so do the rounding errors of the model.
 MASS_RATIO_LIMIT = 1e6
+#: Largest ratio of the hub radius to the beam length: the free-hub mass matrix holds
+#: ``J_0 ~ rhoA l b^2`` beside modal masses ``~ rhoA l``, and its condition number grows as
+#: ``(b / l)^2``; past 1e6 the free-hub frequencies lose digits (at 1e16 they were 10 % off,
+#: at 1e17 the mass matrix was no longer positive definite, at 1e250 J_0 overflowed).
+RADIUS_RATIO_LIMIT = 1e6
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -194,6 +199,11 @@ class HubBeam:
                 raise InputValueError(f"system.masses[{k}].position must lie in [0, beam.length = "
                                  f"{self.beam.length:g}]; got {m.position!r}")
         object.__setattr__(self, "masses", tuple(sorted(masses, key=lambda m: m.position)))
+        if self.hub.radius > RADIUS_RATIO_LIMIT * self.beam.length:
+            raise InputValueError(
+                f"hub.radius must be at most {RADIUS_RATIO_LIMIT:g} times beam.length = "
+                f"{self.beam.length:g} m: beyond it the free-hub mass matrix is too ill "
+                f"conditioned for the model to keep its accuracy; got {self.hub.radius!r}")
         ratio = sum(m.mass for m in masses) / self.beam.mass
         if ratio > MASS_RATIO_LIMIT:
             raise InputValueError(
@@ -210,5 +220,6 @@ class HubBeam:
     def rigid_inertia(self) -> float:
         """Inertia ``J_0`` of the undeformed system about O, kg m^2 (MODEL.md section 2)."""
         b, l = self.hub.radius, self.beam.length
-        return (self.hub.inertia + self.beam.linear_density * ((b + l) ** 3 - b ** 3) / 3.0
+        # ((b + l)^3 - b^3) / 3 without the cancellation that lost digits for b >> l
+        return (self.hub.inertia + self.beam.linear_density * l * (b * b + b * l + l * l / 3.0)
                 + sum(m.mass * (b + m.position) ** 2 for m in self.masses))

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
+from .checks import check_choice, check_real
 from .errors import InputTypeError, InputValueError
 from .exact import exact_geometry
 from .matrices import ModalMatrices, assemble, condensed_hub_inertia
@@ -50,6 +51,9 @@ __all__ = ["Model", "build_model", "VARIANTS", "SingularMassMatrixError"]
 VARIANTS = ("first_order", "zero_order", "consistent", "exact")
 #: Most modes the exact variant takes (20 modes: a 445k-instruction right-hand side, 4 s to build).
 EXACT_MAX_MODES = 24
+#: Largest steady spin rate the linear analysis takes, rad/s: its square multiplies the modal
+#: matrices, and must stay far from overflow.
+MAX_SPIN_RATE = 1e100
 OUTPUT_NAMES = ("theta", "theta_dot", "tip_deflection", "root_moment", "tip_angle")
 
 
@@ -511,10 +515,12 @@ def _system_name(text: str) -> str:
 
 
 def _spin(spin_rate) -> float:
-    if isinstance(spin_rate, bool) or not np.isscalar(spin_rate) or not np.isfinite(spin_rate):
-        raise InputValueError(f"spin_rate must be a finite number (rad/s); "
-                              f"got {spin_rate!r}")
-    return float(spin_rate)
+    spin_rate = check_real("", "spin_rate", spin_rate)
+    if abs(spin_rate) > MAX_SPIN_RATE:
+        # spin_rate^2 times the modal matrices overflowed (OverflowError at 1e300 rad/s)
+        raise InputValueError(f"spin_rate must be finite and at most {MAX_SPIN_RATE:g} rad/s in "
+                              f"magnitude (its square scales the stiffness); got {spin_rate!r}")
+    return spin_rate
 
 
 def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order") -> Model:
@@ -542,12 +548,12 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order")
     >>> model.natural_frequencies().round(2)
     array([ 2.91, 18.24, 51.08])
     """
-    if variant not in VARIANTS:
-        raise InputValueError(f"variant must be one of {', '.join(VARIANTS)}; "
-                              f"got {variant!r}")
+    variant = check_choice("", "variant", variant, VARIANTS)
     if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) \
             or not 1 <= n_modes <= 200:
-        raise InputValueError(f"n_modes must be an integer in [1, 200]; got {n_modes!r}")
+        # a ValueError for a float or a bool too, as tests/test_model.py has it
+        raise InputValueError(f"n_modes must be an integer in [1, 200]; got {n_modes!r} of "
+                              f"type {type(n_modes).__name__}")
     if variant == "exact" and n_modes > EXACT_MAX_MODES:
         raise InputValueError(
             f"n_modes must be at most {EXACT_MAX_MODES} for the exact variant (its geometry "

@@ -34,7 +34,7 @@ from numbers import Real
 
 import numpy as np
 
-from ..model.errors import InputTypeError, InputValueError
+from ..model.errors import InputError, InputTypeError, InputValueError
 
 __all__ = ["MAX_OUTPUT_SAMPLES", "check_time", "check_rtol", "check_method", "as_vector",
            "output_grid", "input_value", "time_function", "jacobian_frequency",
@@ -84,8 +84,14 @@ def as_vector(name: str, value, what: str) -> np.ndarray:
     if isinstance(value, (str, bytes)):
         raise _type_error(name, value, what)
     try:
-        return np.array(value, dtype=float)
-    except (TypeError, ValueError):
+        raw = np.asarray(value)
+    except (TypeError, ValueError):      # ragged nesting
+        raise _type_error(name, value, what) from None
+    if raw.dtype.kind == "c":            # float() would drop the imaginary part, and warn
+        raise _type_error(name, value, what + " (real, not complex)")
+    try:
+        return np.array(raw, dtype=float)
+    except (TypeError, ValueError, OverflowError):
         raise _type_error(name, value, what) from None
 
 
@@ -147,14 +153,39 @@ def time_function(func, name: str):
         raise InputTypeError(f"{name} must be callable as {name}(t) or {name}(t, x); "
                              f"got {type(func).__name__}")
     n_required = _required_positional(func)
-    if n_required is not None and not 0 <= n_required <= 2:
-        what = ("a required keyword-only argument" if n_required < 0
+    if n_required is not None and not 0 <= n_required <= 2 or _takes_no_time(func):
+        what = ("a required keyword-only argument" if n_required is not None and n_required < 0
+                else "no argument" if n_required == 0
                 else f"{n_required} required arguments")
         raise InputTypeError(f"{name} must be callable as {name}(t) or {name}(t, x); "
                              f"got {getattr(func, '__name__', type(func).__name__)} with {what}")
     if n_required == 2:
-        return lambda t, x: input_value(name, func(t, x), t)
-    return lambda t, x: input_value(name, func(t), t)
+        return lambda t, x: input_value(name, _call(func, name, t, t, x), t)
+    return lambda t, x: input_value(name, _call(func, name, t, t), t)
+
+
+def _takes_no_time(func) -> bool:
+    """True when ``func`` can take no positional argument at all (``lambda: 1.0``)."""
+    try:
+        params = inspect.signature(func).parameters.values()
+    except (TypeError, ValueError):
+        return False
+    return not any(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD, p.VAR_POSITIONAL)
+                   for p in params)
+
+
+def _call(func, name: str, t: float, *args):
+    """``func(*args)``, its exceptions reported as the input's (naming it and the time) and
+    numpy's floating-point warnings silenced: a value they would warn about is NaN or
+    infinite, which :func:`input_value` names."""
+    try:
+        with np.errstate(all="ignore"):
+            return func(*args)
+    except InputError:
+        raise
+    except Exception as exc:        # whatever the user's function raised
+        raise InputValueError(f"{name} raised {type(exc).__name__} at t = {t:.6g} s: "
+                              f"{exc}") from exc
 
 
 def jacobian_frequency(rhs, t: float, y: np.ndarray, scale: np.ndarray) -> float:

@@ -21,8 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.errors import InputValueError
+from ..model.errors import InputTypeError, InputValueError
 from ..model.parameters import check_real as _real
+from ..model.variants import MAX_SPIN_RATE
 
 __all__ = ["SpinUp", "SineTorque", "Slew", "RIGID_PEAK_ACCELERATION", "rigid_slew_duration"]
 
@@ -61,7 +62,20 @@ def rigid_slew_duration(angle: float, inertia: float, torque_bound: float,
     >>> rigid_slew_duration(1.0, 1.0, 1.0)
     2.0
     """
-    return math.sqrt(RIGID_PEAK_ACCELERATION[shape] * abs(angle) * inertia / torque_bound)
+    if not isinstance(shape, str) or shape not in RIGID_PEAK_ACCELERATION:
+        raise (InputValueError if isinstance(shape, str) else InputTypeError)(
+            f"shape must be one of {', '.join(map(repr, RIGID_PEAK_ACCELERATION))}; got "
+            f"{shape!r}")
+    angle = _real("", "angle", angle)
+    inertia = _real("", "inertia", inertia, minimum=0.0, strict=True)
+    torque_bound = _real("", "torque_bound", torque_bound, minimum=0.0, strict=True)
+    with np.errstate(all="ignore"):
+        duration = float(np.sqrt(RIGID_PEAK_ACCELERATION[shape] * abs(np.float64(angle))
+                                 * inertia / torque_bound))
+    if not math.isfinite(duration):
+        raise InputValueError(f"angle * inertia / torque_bound must be finite; got {angle!r} "
+                              f"rad * {inertia!r} kg m^2 / {torque_bound!r} N m")
+    return duration
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -84,8 +98,27 @@ class SpinUp:
 
     def __post_init__(self):
         object.__setattr__(self, "spin_rate", _real("maneuver", "spin_rate", self.spin_rate))
+        if abs(self.spin_rate) > MAX_SPIN_RATE:
+            raise InputValueError(f"maneuver.spin_rate must be at most {MAX_SPIN_RATE:g} rad/s "
+                                  "in magnitude (its square scales the beam stiffness); got "
+                                  f"{self.spin_rate!r}")
         object.__setattr__(self, "ramp_time", _real("maneuver", "ramp_time", self.ramp_time,
                                                     minimum=0.0, strict=True))
+        # the ramp divides by (2 pi / ramp_time)^2 and multiplies spin_rate / ramp_time: a
+        # ramp_time of 1e-300 s overflowed them (OverflowError), 1e300 s underflowed the
+        # square to 0 (NaN angles)
+        with np.errstate(all="ignore"):
+            k_squared = float((2.0 * np.pi / np.float64(self.ramp_time)) ** 2)
+            acceleration = float(2.0 * abs(np.float64(self.spin_rate)) / self.ramp_time)
+        if not np.finfo(float).tiny <= k_squared < math.inf:
+            raise InputValueError(
+                "maneuver.ramp_time must make (2 pi / ramp_time)^2 a positive finite number "
+                f"(ramp times between about 1e-150 and 1e150 s); got {self.ramp_time!r} s")
+        if not math.isfinite(acceleration):
+            raise InputValueError(
+                "maneuver.spin_rate and maneuver.ramp_time must make the peak hub acceleration "
+                "2 spin_rate / ramp_time a finite number; got spin_rate = "
+                f"{self.spin_rate!r} rad/s over ramp_time = {self.ramp_time!r} s")
 
     @property
     def breakpoints(self) -> tuple:
@@ -186,7 +219,7 @@ class Slew:
     def __post_init__(self):
         angle = _real("maneuver", "angle", self.angle)
         if angle == 0.0:
-            raise ValueError("maneuver.angle must be non-zero; got 0.0")
+            raise InputValueError("maneuver.angle must be non-zero; got 0.0")
         object.__setattr__(self, "angle", angle)
         for name in ("duration", "torque_bound"):
             if getattr(self, name) is not None:

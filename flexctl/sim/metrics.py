@@ -11,9 +11,13 @@ Examples
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+
+from ..model.checks import check_array, check_real
+from ..model.errors import InputValueError
 
 __all__ = ["SlewMetrics", "slew_metrics", "settling_time"]
 
@@ -23,7 +27,12 @@ def settling_time(t, signal, target: float, band: float = 0.02) -> float:
 
     Returns ``inf`` when the signal is outside the band at the last sample.
     """
-    t, signal = np.asarray(t, dtype=float), np.asarray(signal, dtype=float)
+    t = check_array("settling_time", "t", t, shape=(None,))
+    signal = check_array("settling_time", "signal", signal, shape=(t.size,))
+    if t.size == 0:
+        raise InputValueError("settling_time.t must hold at least one sample; got none")
+    target = check_real("settling_time", "target", target)
+    band = check_real("settling_time", "band", band, minimum=0.0)
     tol = band * abs(target) if target != 0 else band
     outside = np.abs(signal - target) > tol
     if outside[-1]:
@@ -82,8 +91,12 @@ def slew_metrics(result, angle: float, duration: float, band: float = 0.02) -> S
     band : float
         Settling band as a fraction of ``angle``.
     """
+    angle = check_real("slew_metrics", "angle", angle)
     if not angle:
-        raise ValueError(f"angle must be non-zero; got {angle!r}")
+        raise InputValueError(f"slew_metrics.angle must be non-zero; got {angle!r}")
+    if not (duration == math.inf or duration == -math.inf):   # an end never reached
+        duration = check_real("slew_metrics", "duration", duration)
+    band = check_real("slew_metrics", "band", band, minimum=0.0)
     t, theta = result.t, result.theta
     past = (theta - angle) * np.sign(angle)
     after = t >= duration
