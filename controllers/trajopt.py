@@ -58,7 +58,9 @@ from numbers import Integral, Real
 import numpy as np
 
 from flexctl.model import Model
+from flexctl.model.checks import check_choice, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.sim.maneuvers import rigid_slew_duration
 
 from .hold_grid import MAX_SUBSTEPS
 from .slew_checks import refuse_unsolvable
@@ -88,25 +90,12 @@ class TrajectoryOptimizationError(RuntimeError):
 
 
 def _number(name, value, *, positive=True, optional=False):
-    if value is None and optional:
-        return None
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise InputTypeError(f"{name} must be a real number; got {value!r} of type "
-                             f"{type(value).__name__}")
-    value = float(value)
-    if not math.isfinite(value) or (positive and value <= 0):
-        rule = "a positive finite number" if positive else "a finite number"
-        raise InputValueError(f"{name} must be {rule}; got {value!r}")
-    return value
+    return check_real("", name, value, minimum=0.0 if positive else None, strict=positive,
+                      optional=optional)
 
 
 def _choice(name, value, choices):
-    if not isinstance(value, str):
-        raise InputTypeError(f"{name} must be one of {', '.join(map(repr, choices))}; got "
-                             f"{value!r} of type {type(value).__name__}")
-    if value not in choices:
-        raise InputValueError(f"{name} must be one of {', '.join(map(repr, choices))}; "
-                              f"got {value!r}")
+    return check_choice("", name, value, choices)
 
 
 def _integer(name, value, minimum, maximum):
@@ -125,7 +114,7 @@ def rigid_minimum_time(angle: float, inertia: float, torque_bound: float) -> flo
     A lower bound for any rest-to-rest slew of the flexible first_order model too: its total
     angular momentum obeys ``d/dt (J_0 theta_dot + m_tf^T q_dot) = torque``.
     """
-    return 2.0 * math.sqrt(abs(angle) * inertia / torque_bound)
+    return rigid_slew_duration(angle, inertia, torque_bound)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -178,7 +167,7 @@ class SlewProblem:
     >>> SlewProblem(angle=1.0, duration=2.0, torque_bound=-5.0)
     Traceback (most recent call last):
     ...
-    flexctl.model.errors.InputValueError: torque_bound must be a positive finite number; got -5.0
+    flexctl.model.errors.InputValueError: torque_bound must be finite and > 0; got -5.0
     """
 
     angle: float
