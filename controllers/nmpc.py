@@ -55,6 +55,7 @@ from flexctl.sim.fixed_step import _jit
 
 from .lqg import NoiseLevels, _measurement_rows
 from .lqr import truncate_state
+from .slew_nlp import _rk4_step
 from .trajopt import SlewSolution
 
 __all__ = ["NMPC", "NMPCSession", "OMEGA_H", "QP_SOLVERS"]
@@ -84,17 +85,9 @@ def _hold_function(model: Model, sample_time: float, substeps: int):
     (s), by ``substeps`` RK4 steps of the model's dynamics."""
     import casadi as ca
 
-    f = model.casadi()
+    step = _rk4_step(model.casadi(), model.n_states, substeps)     # (x, u, h) -> x(h)
     x, u = ca.SX.sym("x", model.n_states), ca.SX.sym("u")
-    h = sample_time / substeps
-    y = x
-    for _ in range(substeps):
-        k1 = f(y, u)
-        k2 = f(y + 0.5 * h * k1, u)
-        k3 = f(y + 0.5 * h * k2, u)
-        k4 = f(y + h * k3, u)
-        y = y + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return ca.Function("nmpc_hold", [x, u], [y])
+    return ca.Function("nmpc_hold", [x, u], [step(x, u, sample_time)])
 
 
 #: Default weights (Bryson's rule): largest hub angle error as a fraction of the slew angle,
