@@ -50,7 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import casadi as ca                                   # noqa: E402
-from equal_error import TARGET, median_time, tune  # noqa: E402
+from equal_error import TARGET, measure  # noqa: E402
 
 from controllers import PD, from_spec                 # noqa: E402
 from controllers.spec import CONTROLLER_KEYS          # noqa: E402
@@ -127,12 +127,7 @@ def closed_loop_case():
                                     REPEATS_SLOW),
         "bare casadi CVODES": (bare_cvodes_tip(model, x0, grid), REPEATS),
     }
-    times = {}
-    print(f"   {'tool':<26} {'rtol':>9} {'error':>9} {'median time':>12}")
-    for label, (run, repeats) in tools.items():
-        rtol, error = tune(run, reference)
-        times[label] = median_time(lambda: run(rtol), repeats)
-        print(f"   {label:<26} {rtol:>9.2g} {error:>9.2g} {times[label]:>10.4f} s")
+    times = measure(tools, reference, width=26)
     bare = times["bare casadi CVODES"]
     for label in ("flexctl.simulate, cold", "flexctl.simulate, warm", "flexctl, cold, no check"):
         ratio = times[label] / bare

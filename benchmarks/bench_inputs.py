@@ -49,14 +49,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import casadi as ca                                   # noqa: E402
 import control                                        # noqa: E402
-from equal_error import TARGET, median_time, tune  # noqa: E402
+from equal_error import TARGET, measure, python_control_tip  # noqa: E402
 
 from flexctl import build_model, load_scene, simulate  # noqa: E402
 from flexctl.sim.inputs import SampledTorque          # noqa: E402
 
 SCENE = "hub-beam-mass"
 REFERENCE_RTOL = 1e-13
-ATOL_SCALE = 1e-3                # python-control: atol = rtol * 1e-3 (m, rad)
 OUTPUT_STEP = 0.01               # s, output grid and the samples of case A
 FINE_INPUT_STEP = 2e-4           # s, samples of the function handed to python-control (B)
 REPEATS = 5                      # flexctl runs (tens to hundreds of ms)
@@ -88,35 +87,11 @@ def flexctl_tip(model, t_final, torque, method="auto", check_accuracy=True):
     return run
 
 
-def python_control_tip(model, t_final, t_in, u, method):
-    system = model.nonlinear()
-    grid = time_grid(t_final, OUTPUT_STEP)
-    tip_row = list(model.output_names).index("tip_deflection")
-
-    def run(rtol):
-        response = control.input_output_response(
-            system, t_in, u, np.zeros(model.n_states), evaluation_times=grid,
-            solve_ivp_method=method, solve_ivp_kwargs={"rtol": rtol,
-                                                       "atol": rtol * ATOL_SCALE})
-        return np.asarray(response.outputs)[tip_row]
-    return run
-
-
 # ---------------------------------------------------------------------------- cases
-def measure(tools, reference):
-    """Tune and time each tool: ``{label: seconds}``, with a table row per tool."""
-    times = {}
-    print(f"   {'tool':<40} {'rtol':>9} {'error':>9} {'median time':>12}")
-    for label, (run, repeats) in tools.items():
-        rtol, error = tune(run, reference)
-        times[label] = median_time(lambda: run(rtol), repeats)
-        print(f"   {label:<40} {rtol:>9.2g} {error:>9.2g} {times[label]:>10.4f} s", flush=True)
-    return times
-
-
 def python_control_tools(model, t_final, t_in, u, methods):
-    return {f"python-control {m}": (python_control_tip(model, t_final, t_in, u, m),
-                                    REPEATS_SLOW) for m in methods}
+    grid = time_grid(t_final, OUTPUT_STEP)
+    return {f"python-control {m}": (python_control_tip(model, t_in, u, grid, m), REPEATS_SLOW)
+            for m in methods}
 
 
 def report(times, flexctl_labels, baselines=()):

@@ -41,13 +41,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import casadi as ca                               # noqa: E402
-from equal_error import TARGET, median_time, relative_error, tune  # noqa: E402
+from equal_error import (ATOL_SCALE, TARGET, measure, python_control_tip,  # noqa: E402
+                         relative_error)
 import control                                    # noqa: E402
 
 from flexctl import SpinUp, load_scene, simulate  # noqa: E402
 
 REFERENCE_RTOL = 1e-13
-ATOL_SCALE = 1e-3                # atol = rtol * 1e-3 (m, rad) for the bare and python-control runs
 OUTPUT_STEP = 0.01               # s
 INPUT_STEP = 2e-4                # s, torque samples handed to python-control
 REPEATS = 7                      # CVODES runs (tens of ms each)
@@ -108,21 +108,10 @@ def bare_cvodes_tip(model, scene, t_final):
     return run
 
 
-def python_control_tip(model, scene, t_final, method):
-    system = model.nonlinear()
+def python_control_run(model, scene, t_final, method):
     t_in = np.arange(0.0, t_final + 0.5 * INPUT_STEP, INPUT_STEP)
     t_in[-1] = t_final
-    u = scene.maneuver(t_in)
-    grid = output_grid(t_final)
-    tip_row = list(model.output_names).index("tip_deflection")
-
-    def run(rtol):
-        response = control.input_output_response(
-            system, t_in, u, np.zeros(model.n_states), evaluation_times=grid,
-            solve_ivp_method=method, solve_ivp_kwargs={"rtol": rtol,
-                                                       "atol": rtol * ATOL_SCALE})
-        return np.asarray(response.outputs)[tip_row]
-    return run
+    return python_control_tip(model, t_in, scene.maneuver(t_in), output_grid(t_final), method)
 
 
 # ---------------------------------------------------------------------------- cases
@@ -146,13 +135,8 @@ def compare(name, with_python_control):
     if with_python_control:
         for method in PYTHON_CONTROL_METHODS:
             tools[f"python-control {method}"] = (
-                python_control_tip(model, scene, t_final, method), REPEATS_SLOW)
-    times = {}
-    print(f"   {'tool':<28} {'rtol':>9} {'error':>9} {'median time':>12}")
-    for label, (run, repeats) in tools.items():
-        rtol, error = tune(run, reference)
-        times[label] = median_time(lambda: run(rtol), repeats)
-        print(f"   {label:<28} {rtol:>9.2g} {error:>9.2g} {times[label]:>10.4f} s")
+                python_control_run(model, scene, t_final, method), REPEATS_SLOW)
+    times = measure(tools, reference, width=28)
     flex_time = times["flexctl.simulate (cvodes)"]
     ratio = flex_time / times["bare casadi CVODES"]
     print(f"   flexctl / bare CVODES = {ratio:.2f} (target <= 2: "

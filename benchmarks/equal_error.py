@@ -32,3 +32,37 @@ def tune(run, reference):
         if error <= TARGET:
             return float(rtol), error
     raise RuntimeError(f"no rtol down to {RTOL_GRID[-1]:g} reaches {TARGET:g}")
+
+
+#: python-control's runs: atol = rtol * ATOL_SCALE (m, rad).
+ATOL_SCALE = 1e-3
+
+
+def python_control_tip(model, t_in, u, grid, method):
+    """A run ``rtol -> tip deflection on grid`` of python-control's ``input_output_response``
+    on ``model.nonlinear()`` with the torque samples ``(t_in, u)``, by SciPy's ``method``."""
+    import control
+
+    system = model.nonlinear()
+    tip_row = list(model.output_names).index("tip_deflection")
+
+    def run(rtol):
+        response = control.input_output_response(
+            system, t_in, u, np.zeros(model.n_states), evaluation_times=grid,
+            solve_ivp_method=method, solve_ivp_kwargs={"rtol": rtol,
+                                                       "atol": rtol * ATOL_SCALE})
+        return np.asarray(response.outputs)[tip_row]
+    return run
+
+
+def measure(tools, reference, width=40):
+    """Tune and time each tool of ``{label: (run, repeats)}``: ``{label: seconds}``, printing
+    a table row per tool."""
+    times = {}
+    print(f"   {'tool':<{width}} {'rtol':>9} {'error':>9} {'median time':>12}")
+    for label, (run, repeats) in tools.items():
+        rtol, error = tune(run, reference)
+        times[label] = median_time(lambda: run(rtol), repeats)
+        print(f"   {label:<{width}} {rtol:>9.2g} {error:>9.2g} {times[label]:>10.4f} s",
+              flush=True)
+    return times
