@@ -231,8 +231,9 @@ def test_explicit_method_with_python_input_warns_and_keeps_the_method(spacecraft
 
     model = build_model(spacecraft_system, n_modes=12)
     with pytest.warns(StiffnessWarning, match=r"kept DOP853.*CasADi"):
-        with pytest.raises(_Stop):
+        with pytest.raises(ValueError, match="torque raised _Stop") as raised:
             simulate(model, 20.0, torque=torque, method="DOP853")
+    assert isinstance(raised.value.__cause__, _Stop)      # the user's error, chained
 
 
 # ================================================================== long unforced run
