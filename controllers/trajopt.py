@@ -53,12 +53,11 @@ import bisect
 import math
 import time
 from dataclasses import dataclass, field
-from numbers import Integral, Real
 
 import numpy as np
 
 from flexctl.model import Model
-from flexctl.model.checks import check_choice, check_real
+from flexctl.model.checks import check_choice, check_integer, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.maneuvers import rigid_slew_duration
 
@@ -99,13 +98,7 @@ def _choice(name, value, choices):
 
 
 def _integer(name, value, minimum, maximum):
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise InputTypeError(f"{name} must be an integer; got {value!r} of type "
-                             f"{type(value).__name__}")
-    if not isinstance(value, Integral) or not minimum <= value <= maximum:
-        raise InputValueError(f"{name} must be an integer in [{minimum}, {maximum}]; "
-                              f"got {value!r}")
-    return int(value)
+    return check_integer("", name, value, minimum=minimum, maximum=maximum)
 
 
 def rigid_minimum_time(angle: float, inertia: float, torque_bound: float) -> float:

@@ -352,8 +352,8 @@ def test_hub_torque_inverts_the_dynamics(lossy_hub_beam_mass_system, rng):
     ({"variant": "second_order"}, ValueError, "variant"),
     ({"n_modes": 0}, ValueError, "n_modes"),
     ({"n_modes": 201}, ValueError, "n_modes"),
-    ({"n_modes": 2.0}, ValueError, "n_modes"),
-    ({"n_modes": True}, ValueError, "n_modes"),
+    ({"n_modes": 2.0}, TypeError, "n_modes"),      # a count is an int: a float is the
+    ({"n_modes": True}, TypeError, "n_modes"),     # wrong type, as for range(2.0)
 ], ids=["unknown-variant", "zero-modes", "too-many-modes", "float-modes", "bool-modes"])
 def test_build_model_rejects_bad_input(hub_beam_mass_system, kwargs, exc, pattern):
     with pytest.raises(exc, match=pattern):

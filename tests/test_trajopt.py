@@ -253,7 +253,7 @@ def test_tracker_on_the_design_model_reproduces_the_optimum(design, solution):
 
 @pytest.mark.parametrize("field, value", [
     ("angle", 0.0), ("angle", float("nan")), ("duration", -1.0), ("torque_bound", 0.0),
-    ("n_intervals", 1), ("n_intervals", 2.5), ("torque_rate_bound", -1.0),
+    ("n_intervals", 1), ("n_intervals", 0), ("torque_rate_bound", -1.0),
     ("tip_bound", 0.0), ("objective", "fast"), ("transcription", "shooting"),
     ("integrator", "euler"), ("substeps", 0), ("collocation_scheme", "gauss"),
     ("max_duration", 5.0),

@@ -30,6 +30,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from .checks import check_integer
 from .errors import InputTypeError, InputValueError
 from .modes import cantilever_roots, mode_shapes
 from .parameters import HubBeam
@@ -161,9 +162,7 @@ def assemble(system: HubBeam, n_modes: int) -> ModalMatrices:
     """
     if not isinstance(system, HubBeam):
         raise InputTypeError(f"system must be a HubBeam; got {type(system).__name__}")
-    if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) or n_modes < 1:
-        raise InputValueError(f"n_modes must be an integer >= 1; got {n_modes!r}")
-    return _assemble(system, int(n_modes))
+    return _assemble(system, check_integer("", "n_modes", n_modes, minimum=1))
 
 
 @lru_cache(maxsize=64)

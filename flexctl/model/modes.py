@@ -28,6 +28,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from .checks import check_integer
+
 __all__ = ["cantilever_roots", "mode_shapes"]
 
 
@@ -61,9 +63,7 @@ def cantilever_roots(n_modes: int) -> np.ndarray:
     -------
     ndarray, shape (n_modes,)
     """
-    if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) or n_modes < 1:
-        raise ValueError(f"n_modes must be an integer >= 1; got {n_modes!r}")
-    return np.array(_roots(int(n_modes)))
+    return np.array(_roots(check_integer("cantilever_roots", "n_modes", n_modes, minimum=1)))
 
 
 def _one_minus_s_scaled(z: np.ndarray) -> np.ndarray:

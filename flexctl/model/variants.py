@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from .checks import check_choice, check_real
+from .checks import check_choice, check_integer, check_real
 from .errors import InputTypeError, InputValueError
 from .exact import exact_geometry
 from .matrices import ModalMatrices, assemble, condensed_hub_inertia
@@ -549,11 +549,7 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order")
     array([ 2.91, 18.24, 51.08])
     """
     variant = check_choice("", "variant", variant, VARIANTS)
-    if isinstance(n_modes, bool) or not isinstance(n_modes, (int, np.integer)) \
-            or not 1 <= n_modes <= 200:
-        # a ValueError for a float or a bool too, as tests/test_model.py has it
-        raise InputValueError(f"n_modes must be an integer in [1, 200]; got {n_modes!r} of "
-                              f"type {type(n_modes).__name__}")
+    n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=200)
     if variant == "exact" and n_modes > EXACT_MAX_MODES:
         raise InputValueError(
             f"n_modes must be at most {EXACT_MAX_MODES} for the exact variant (its geometry "
