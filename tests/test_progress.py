@@ -64,3 +64,10 @@ def test_cuts_keep_the_breakpoints_and_bound_the_pieces():
     cuts = progress_cuts([0.0, 2.0, 100.0], 100.0, chunks=10)
     assert 2.0 in cuts and cuts[0] == 0.0 and cuts[-1] == 100.0
     assert np.max(np.diff(cuts)) <= 10.0 + 1e-12 and np.all(np.diff(cuts) > 0)
+
+
+def test_a_progress_callable_that_raises_is_named(scene):
+    model = flexctl.build_model(scene.system, n_modes=1)
+    with pytest.raises(ValueError, match="progress raised ZeroDivisionError") as raised:
+        flexctl.simulate(model, 1.0, progress=lambda p: 1 / 0)
+    assert isinstance(raised.value.__cause__, ZeroDivisionError)

@@ -1,11 +1,13 @@
 """Every run says why it ended, as a StopReason whose status is the result's."""
 
+import dataclasses
 import warnings
 
 import numpy as np
 
 import flexctl
 from flexctl.sim import StopReason
+from flexctl.sim.simulation import FALLBACK_EVALUATIONS
 from flexctl.sim.digital import ZeroOrderHold
 
 
@@ -57,3 +59,19 @@ def test_compiled_fallback_locates_the_stop_where_the_python_path_does():
     assert abs(stops["cvodes"].t[-1] - stops["DOP853"].t[-1]) < 1e-6 * stops["DOP853"].t[-1]
     assert np.allclose(stops["cvodes"].states[:, -1], stops["DOP853"].states[:, -1],
                        rtol=1e-4, atol=1e-6)
+
+
+def test_a_state_too_stiff_to_follow_ends_with_its_stiffness_named():
+    """A massless hub under a 6e5 kg tip mass (exact, 2 modes): the compiled integrator
+    cannot pass t = 0 and the fallback would crawl for minutes; its evaluations are bounded
+    and the run ends as an integrator failure naming the stiffness it met."""
+    base = flexctl.load_scene("hub-beam-mass").system
+    system = dataclasses.replace(base, hub=dataclasses.replace(base.hub, inertia=0.0),
+                                 masses=(flexctl.PointMass(mass=6e5, position=1.8),))
+    model = flexctl.build_model(system, n_modes=2, variant="exact")
+    result = flexctl.simulate(model, 1.0, torque=flexctl.SineTorque(peak_torque=1.0,
+                                                                     duration=0.5))
+    assert result.stop_reason is StopReason.INTEGRATOR_FAILED
+    assert f"{FALLBACK_EVALUATIONS:.3g} evaluations of DOP853" in result.message
+    assert "stiff (fastest rate" in result.message
+    assert np.all(np.isfinite(result.states))

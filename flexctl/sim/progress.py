@@ -19,7 +19,7 @@ import sys
 import time
 from dataclasses import dataclass
 
-from ..model.errors import InputTypeError
+from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["Progress", "progress_printer", "check_progress", "progress_cuts",
            "PROGRESS_CHUNKS", "REPORT_INTERVAL"]
@@ -119,7 +119,14 @@ def check_progress(progress):
     if not callable(progress):
         raise InputTypeError("progress must be True, False, None or a callable "
                              f"progress(Progress); got {type(progress).__name__}")
-    return progress
+
+    def report(state: Progress) -> None:
+        try:
+            progress(state)
+        except Exception as exc:            # the user's callable: named, with the time
+            raise InputValueError(f"progress raised {type(exc).__name__} at t = "
+                                  f"{state.t:.6g} s: {exc}") from exc
+    return report
 
 
 def progress_cuts(cuts, t_final: float, chunks: int = PROGRESS_CHUNKS) -> list:

@@ -29,6 +29,8 @@ The arrays of a stopped run end at the stop time; they never hold NaN or overflo
 
 from __future__ import annotations
 
+import inspect
+import math
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -95,8 +97,10 @@ LOOP_FACTOR = 2.0
 #: of DOP853 at ~40 us a right-hand side).
 EXPLICIT_REFUSE_LIMIT = 2e6
 #: A run may span at most this many periods of the model's slowest mode: any integrator
-#: takes several steps a period, so a longer horizon would run for hours.
-MAX_PERIODS = 1e6
+#: takes several steps a period. hub-beam-mass on 4 modes took 19 s for 8.7e3 periods
+#: (1e4 s, with its accuracy check), so the limit is some 4 minutes there; 1e6 periods ran
+#: for over half an hour inside CVODES, where no interrupt reaches.
+MAX_PERIODS = 1e5
 #: A controller whose gains put the fastest closed-loop pole beyond this many times the
 #: plant's fastest mode is refused: nothing the model describes is that fast, and the run
 #: would crawl (a PD loop of bandwidth 1e6 rad/s on slew-90 took some 25 minutes).
@@ -115,6 +119,34 @@ class AccuracyWarning(RuntimeWarning):
 
 class StiffnessWarning(RuntimeWarning):
     """An explicit method was asked for on a model whose fastest mode makes it crawl."""
+
+
+#: Where a compiled segment fails, SciPy locates the stop with at most this many evaluations
+#: of the right-hand side (1 to 5 s of DOP853 steps); a state so stiff that they do not
+#: reach it ends the run as an integrator failure, with its stiffness named. The 3e4 kg
+#: tip-mass divergence of first_order took 7.5e4.
+FALLBACK_EVALUATIONS = 200_000
+
+
+class _BudgetSpent(Exception):
+    """The fallback integrator spent its evaluations at time ``t`` in state ``y``."""
+
+    def __init__(self, t, y):
+        super().__init__(f"evaluation budget spent at t = {t:.6g} s")
+        self.t, self.y = float(t), np.array(y, dtype=float)
+
+
+class _Budgeted:
+    """A right-hand side that raises :class:`_BudgetSpent` past ``budget`` evaluations."""
+
+    def __init__(self, rhs, budget: int):
+        self.rhs, self.left = rhs, int(budget)
+
+    def __call__(self, t, y):
+        self.left -= 1
+        if self.left < 0:
+            raise _BudgetSpent(t, y)
+        return self.rhs(t, y)
 
 
 class StopReason(Enum):
@@ -713,8 +745,18 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
             raise InputTypeError("controller must be callable as controller(t, x) or follow "
                                  "the flexctl Controller protocol; got "
                                  f"{type(controller).__name__}")
-        time_function(controller, "controller")     # its signature: (t, x)
-        controller = StaticLaw(controller)
+        law = time_function(controller, "controller")    # its errors named, with the time
+        try:
+            inspect.signature(controller).bind(0.0, x_init)
+        except TypeError:
+            raise InputTypeError(
+                "controller must be callable as controller(t, x); got "
+                f"{getattr(controller, '__name__', type(controller).__name__)}, which cannot "
+                "take the state (a torque of time alone is passed as torque=)") from None
+        except ValueError:          # no signature to read (a builtin): its calls will tell
+            pass
+        law.breakpoints = tuple(getattr(controller, "breakpoints", ()) or ())
+        controller = StaticLaw(law)
     nz = controller.n_states if controller is not None and not is_sampled(controller) else 0
     prescribed = hub_motion is not None
     mat = model.matrices
@@ -945,11 +987,27 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                 ys.append(y_seg[:, :bad])
                 lo, y = float(t_eval[bad - 1]), y_seg[:, bad - 1]
             t_eval = t_eval[bad:]
+        locate = fallback_rhs or rhs
+        if method == "cvodes":
+            locate = _Budgeted(locate, FALLBACK_EVALUATIONS)
         try:
             with np.errstate(over="raise", invalid="raise"):
-                sol = solve_ivp(fallback_rhs or rhs, (lo, hi), y, method=fallback,
-                                t_eval=t_eval, rtol=rtol, atol=atol_vec, events=events,
-                                max_step=max_step)
+                sol = solve_ivp(locate, (lo, hi), y, method=fallback, t_eval=t_eval,
+                                rtol=rtol, atol=atol_vec, events=events, max_step=max_step)
+        except _BudgetSpent as spent:
+            reason = StopReason.INTEGRATOR_FAILED
+            try:                    # a diagnosis only: any failure of it leaves it unknown
+                with np.errstate(all="ignore"):
+                    w = jacobian_frequency(fallback_rhs or rhs, spent.t, spent.y,
+                                           atol_vec / rtol)
+            except (ArithmeticError, ValueError, SingularMassMatrixError):
+                w = math.inf
+            message = (f"integration failed at t = {lo:.6g} s: the compiled integrator could "
+                       f"not pass it and {FALLBACK_EVALUATIONS:.3g} evaluations of {fallback} "
+                       f"from there reached only t = {spent.t:.6g} s; the state had become "
+                       f"stiff (fastest rate {w:.3g} 1/s against the fastest mode at rest, "
+                       f"{omega_plant:.3g} rad/s)")
+            break
         except SingularMassMatrixError as exc:
             reason, message = StopReason.SINGULAR_MASS, str(exc)
             found = "effective" in message      # named again from the state, with J_eff
