@@ -339,8 +339,9 @@ class SegmentIntegrator:
         # below any integration error
         fractions = np.round((t_out - t_start) / length, 12)
         fractions[-1] = 1.0
+        # a blown-up state (inf in the right-hand side) is the caller's to report, by name
         opts = {"reltol": float(rtol), "abstol": float(rtol), "max_num_steps": int(max_steps),
-                "disable_internal_warnings": True}
+                "disable_internal_warnings": True, "show_eval_warnings": False}
         if solver == "cvodes":
             # a step this small means a singularity, not accuracy: fail fast and let the
             # caller locate it (a power of ten, in fractions of the segment, to share)

@@ -47,6 +47,10 @@ __all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "assess",
 ESTIMATE_MODES = 2
 #: Relative tolerance of the estimate's runs (far below any tolerance asked of the estimate).
 ESTIMATE_RTOL = 1e-7
+#: The estimate's errors are relative to the peak deflection, or to this fraction of the beam
+#: length if the peak is smaller: the geometric nonlinearity goes as the square of the
+#: deflection, 1e-18 of it there.
+DEFLECTION_FLOOR = 1e-9
 
 
 def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, controller=None,
@@ -87,8 +91,10 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         if run.status != "ok":
             return float("inf")
         tips.append(run.tip_deflection)
-    peak = float(np.max(np.abs(tips[1])))
-    return float(np.max(np.abs(tips[0] - tips[1])) / peak) if peak > 0 else 0.0
+    # relative to the peak, but not below DEFLECTION_FLOOR of the length: a deflection of
+    # 1e-38 m has no geometric error, only the integrators' rounding
+    peak = max(float(np.max(np.abs(tips[1]))), DEFLECTION_FLOOR * model.system.beam.length)
+    return float(np.max(np.abs(tips[0] - tips[1])) / peak)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -108,6 +114,8 @@ class ModelValidity:
     energy_balance : EnergyBalance or None
         The run's energy against the work done on it (``result.energy_balance``); ``None``
         for the exact variant.
+    t_end : float or None
+        Where the run ended, s; a run that stopped at ``t = 0`` has nothing to assess.
     """
 
     variant: str
@@ -115,6 +123,7 @@ class ModelValidity:
     geometric_error: float
     tolerance: float
     energy_balance: object = None
+    t_end: float | None = None
 
     @property
     def energy_error(self) -> float | None:
@@ -137,6 +146,8 @@ class ModelValidity:
         if self.variant == "exact":
             return (f"peak tip deflection {100 * self.deflection_ratio:.3g} % of the beam "
                     "length; exact geometry")
+        if self.t_end is not None and self.t_end <= 0.0:
+            return "not assessed: the run stopped at t = 0"
         if self.valid:
             return f"{text}, within the tolerance {self.tolerance:.2g}"
         if self.geometric_error > self.tolerance:
@@ -184,7 +195,8 @@ def assess(result, *, torque=None, hub_motion=None, controller=None,
                              deflection_ratio=result.peak_tip_deflection
                              / model.system.beam.length,
                              geometric_error=error, tolerance=float(tolerance),
-                             energy_balance=getattr(result, "energy_balance", None))
+                             energy_balance=getattr(result, "energy_balance", None),
+                             t_end=t_end)
     if warn and not validity.valid:
         warnings.warn(validity.message, ModelValidityWarning, stacklevel=2)
     return validity
