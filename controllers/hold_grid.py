@@ -42,6 +42,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from flexctl.model.errors import InputValueError
+
 __all__ = ["PHASE_TOLERANCE", "END_STATE_TOLERANCE", "MAX_SUBSTEPS", "HOLD_EFFORT_TOLERANCE",
            "step_error", "steps_per_hold", "largest_step", "mode_tolerances", "HoldEffort",
            "HoldGrid", "hold_effort_excess"]
@@ -164,7 +166,7 @@ def largest_step(scheme: str, omega: float, duration: float, degree: int = 3,
     0.416
     """
     if scheme not in SCHEMES:
-        raise ValueError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}; "
+        raise InputValueError(f"scheme must be one of {', '.join(map(repr, SCHEMES))}; "
                          f"got {scheme!r}")
     return _largest_step(scheme, degree, float(tolerance) / (omega * duration))
 
@@ -341,7 +343,7 @@ class HoldGrid:
             except np.linalg.LinAlgError:
                 self.continuous = np.full(self.n_dof, np.nan)
         if not (np.all(np.isfinite(self.continuous)) and np.all(self.continuous > 0.0)):
-            raise ValueError(self._unresolved())
+            raise InputValueError(self._unresolved())
 
     def _unresolved(self) -> str:
         """Why the holds of this slew cannot be analysed: the physical scales involved."""
@@ -385,7 +387,7 @@ class HoldGrid:
                 excess[i] = np.inf if miss > 1e-6 \
                     else h * (u @ u) / self.continuous[count] - 1.0
         if np.any(np.isnan(excess)):
-            raise ValueError(self._unresolved())
+            raise InputValueError(self._unresolved())
         return excess
 
     def effort(self, n_intervals: int) -> HoldEffort:

@@ -17,6 +17,8 @@ import dataclasses
 import functools
 import math
 
+from flexctl.model.errors import InputValueError
+
 from .hold_grid import HoldGrid, largest_step, mode_tolerances
 from .slew_nlp import (MAX_INTERVALS, Discretisation, discretisation, refuse_fast_modes,
                        resolution_reason, transcription_for)
@@ -159,7 +161,7 @@ def refuse_unsolvable(model, problem, t_rigid: float, longest: float) -> None:
     >>> refuse_unsolvable(model, problem, 1.0, 10.0)
     Traceback (most recent call last):
     ...
-    ValueError: n_intervals = 40 is too coarse for 4 design modes: holds of 0.05 s see design \
+    flexctl.model.errors.InputValueError: n_intervals = 40 is too coarse for 4 design modes: holds of 0.05 s see design \
 mode 4 (134.6 rad/s) at its alias 8.92 rad/s, and stopping it costs 5.15 % more effort than \
 the converged slew (limit 1 %); use n_intervals = 45 or at most 3 design modes \
 (model.design_modes)
@@ -193,4 +195,4 @@ the converged slew (limit 1 %); use n_intervals = 45 or at most 3 design modes \
         # elements over the slew hardly change with the interval count
         remedies.append("fewer design modes (model.design_modes) or transcription "
                         "'multiple_shooting'")
-    raise ValueError(f"{reason}; use {' or '.join(remedies) or 'more n_intervals'}")
+    raise InputValueError(f"{reason}; use {' or '.join(remedies) or 'more n_intervals'}")

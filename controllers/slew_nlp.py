@@ -15,11 +15,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexctl.model.errors import InputValueError
+
 from .hold_grid import LARGEST_STEP, MAX_SUBSTEPS, mode_tolerances, steps_per_hold
 
 __all__ = ["MAX_INTERVALS", "MAX_ELEMENTS", "MAX_MODE_PHASE", "Discretisation", "discretisation",
-           "transcription_for", "rk4_substeps", "refuse_fast_modes", "resolution_reason", "Transcribed", "transcribe",
-           "set_initial", "state_scale", "torque_scale"]
+           "transcription_for", "rk4_substeps", "refuse_fast_modes", "resolution_reason",
+           "Transcribed", "transcribe", "set_initial", "state_scale", "torque_scale"]
 
 #: Most torque holds: the NLP grows with them (IPOPT's work about linearly, the refusal checks
 #: too), and 400 already converge the slew-90 cost (``benchmarks/bench_trajopt.py --grid``).
@@ -68,7 +70,7 @@ def rk4_substeps(model, hold: float, duration: float | None = None) -> int:
     substeps = steps_per_hold("rk4", omega, hold, duration, tolerance=tolerance)
     if substeps > MAX_SUBSTEPS:
         n_intervals = round(duration / hold)
-        raise ValueError(
+        raise InputValueError(
             f"the fastest of the {model.n_modes} design modes ({float(omega[-1]):.4g} rad/s) "
             f"needs {substeps} RK4 substeps per {hold:.4g} s hold (more than {MAX_SUBSTEPS}): "
             f"use {_resolution_remedies(model, omega, tolerance, hold, duration, n_intervals)}")
@@ -114,7 +116,7 @@ def refuse_fast_modes(model, sized: float, t_rigid: float) -> None:
     remedy = " or ".join(remedies) or (
         f"a higher torque_bound (no duration above the rigid-body minimum time {t_rigid:.3g} s "
         "keeps even design mode 1 within reach), or check the beam and hub parameters")
-    raise ValueError(
+    raise InputValueError(
         f"design mode {model.n_modes} ({float(omega[-1]):.4g} rad/s) turns {phase:.3g} rad over "
         f"the {sized:.4g} s slew, more than the {MAX_MODE_PHASE:.3g} rad that {MAX_INTERVALS} "
         f"holds of {MAX_SUBSTEPS} RK4 substeps can integrate (MAX_MODE_PHASE): use {remedy}")
@@ -168,7 +170,7 @@ def discretisation(problem, model, t_rigid: float, longest: float,
                                problem.degree if method != "rk4" else 3, tolerance)
     disc = Discretisation(transcription, method, steps, sized)
     if check and resolution_reason(problem, model, disc):
-        raise ValueError(f"{resolution_reason(problem, model, disc)}: use fewer design modes "
+        raise InputValueError(f"{resolution_reason(problem, model, disc)}: use fewer design modes "
                          "(model.design_modes) or transcription 'multiple_shooting'")
     return disc
 

@@ -21,6 +21,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import flexctl
+from flexctl.model.errors import InputError
 from controllers import SlewProblem, TrajectoryOptimizationError, solve_slew
 from controllers.slew_nlp import MAX_INTERVALS
 
@@ -224,14 +225,16 @@ def test_solve_slew_gives_a_clear_error_or_a_finite_solution(hub_beam, settings_
         warnings.simplefilter("error")
         try:
             model = flexctl.build_model(system(**hub_beam), n_modes)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError) as exc:
             event("model refused")
+            assert isinstance(exc, InputError), f"{type(exc).__name__} escaped: {exc}"
             return
         try:
             solution = solve_slew(model, SlewProblem(**settings_),
                                   ipopt_options={"max_iter": 60})
         except (TypeError, ValueError) as exc:
             event(f"refused: {type(exc).__name__}")
+            assert isinstance(exc, InputError), f"{type(exc).__name__} escaped: {exc}"
             assert any(name in str(exc) for name in NAMES), str(exc)
             return
         except TrajectoryOptimizationError as exc:
