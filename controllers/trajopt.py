@@ -573,12 +573,12 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
     True
     """
     if not isinstance(model, Model):
-        raise TypeError(f"model must be a flexctl Model; got {type(model).__name__}")
+        raise InputTypeError(f"model must be a flexctl Model; got {type(model).__name__}")
     if not isinstance(problem, SlewProblem):
-        raise TypeError(f"problem must be a SlewProblem; got {type(problem).__name__}")
+        raise InputTypeError(f"problem must be a SlewProblem; got {type(problem).__name__}")
     if ipopt_options is not None and not isinstance(ipopt_options, dict):
-        raise ValueError(f"ipopt_options must be a dict of IPOPT options; got "
-                         f"{type(ipopt_options).__name__}")
+        raise InputValueError(f"ipopt_options must be a dict of IPOPT options; got "
+                              f"{type(ipopt_options).__name__}")
     _refuse_before_solving(model, problem)
     disc = slew_discretisation(problem, model)
     guess = _guess(model, problem, initial_guess)

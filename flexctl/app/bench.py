@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model import VARIANTS, build_model
+from ..model.errors import InputValueError
 from ..sim.fidelity import choose_modes
 from ..sim.maneuvers import SineTorque, SpinUp
 from ..sim.simulation import METHODS, simulate
@@ -57,14 +58,14 @@ def _ints(name, values, low, high):
     values = tuple(values)
     if not values or any(isinstance(v, bool) or not isinstance(v, (int, np.integer))
                          or not low <= v <= high for v in values):
-        raise ValueError(f"{name} must be integers in [{low}, {high}]; got {values!r}")
+        raise InputValueError(f"{name} must be integers in [{low}, {high}]; got {values!r}")
     return tuple(sorted(set(int(v) for v in values)))
 
 
 def _positive(name, value, below=math.inf):
     if isinstance(value, bool) or not isinstance(value, (int, float)) \
             or not 0.0 < value < below:
-        raise ValueError(f"{name} must be a number in (0, {below:g}); got {value!r}")
+        raise InputValueError(f"{name} must be a number in (0, {below:g}); got {value!r}")
     return float(value)
 
 
@@ -113,13 +114,13 @@ class BenchConfig:
             values = tuple(dict.fromkeys(getattr(self, name)))
             bad = [v for v in values if v not in allowed]
             if not values or bad:
-                raise ValueError(f"{name} must be taken from {', '.join(allowed)}; got "
-                                 f"{values!r}")
+                raise InputValueError(f"{name} must be taken from {', '.join(allowed)}; got "
+                                      f"{values!r}")
             set_(name, values)
         set_("rtols", tuple(sorted({_positive("rtols", r, 1.0) for r in self.rtols},
                                    reverse=True)))
         if not self.rtols:
-            raise ValueError("rtols must hold at least one tolerance; got ()")
+            raise InputValueError("rtols must hold at least one tolerance; got ()")
         set_("reference_modes", _ints("reference_modes", (self.reference_modes,),
                                       max(self.modes), 200)[0])
         set_("reference_rtol", _positive("reference_rtol", self.reference_rtol,
@@ -276,9 +277,9 @@ def _run(model, scene, t_final, method, rtol, time_limit=None):
 
 def _drivable(scene):
     if not isinstance(scene.maneuver, BENCH_KINDS):
-        raise ValueError(f"scene {scene.name!r} has a {type(scene.maneuver).__name__} "
-                         "manoeuvre, a goal for a controller: the bench drives models with a "
-                         "torque or a hub motion (spin_up or sine_torque scenes)")
+        raise InputValueError(f"scene {scene.name!r} has a {type(scene.maneuver).__name__} "
+                              "manoeuvre, a goal for a controller: the bench drives models with a "
+                              "torque or a hub motion (spin_up or sine_torque scenes)")
     return scene
 
 

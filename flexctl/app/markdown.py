@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from ..model.errors import InputValueError
+
 __all__ = ["markdown_table"]
 
 
@@ -36,8 +38,8 @@ def markdown_table(header: Sequence, rows, right: Sequence | None = None) -> lis
     header = [str(h) for h in header]
     right = [False] * len(header) if right is None else list(right)
     if len(right) != len(header):
-        raise ValueError(f"right must give one flag per column ({len(header)}); "
-                         f"got {len(right)}")
+        raise InputValueError(f"right must give one flag per column ({len(header)}); "
+                              f"got {len(right)}")
     lines = ["| " + " | ".join(header) + " |",
              "|" + "|".join("---:" if flag else "---" for flag in right) + "|"]
     lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]

@@ -79,7 +79,7 @@ from ..sim.maneuvers import SineTorque, Slew, SpinUp
 from ..sim.metrics import slew_metrics
 from ..model import VARIANTS, Model, build_model
 from ..model.variants import EXACT_MAX_MODES
-from ..model.errors import InputTypeError
+from ..model.errors import InputTypeError, InputValueError
 from ..model.parameters import Beam, Hub, HubBeam, PointMass
 from ..sim.simulation import METHODS, MIN_T_FINAL, SimulationResult, simulate
 from ..sim.validity import VariantChoice, assess, choose_variant
@@ -91,11 +91,11 @@ __all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec
 def _slew(angle_deg, duration="free", torque_bound=None):
     if isinstance(duration, str):
         if duration != "free":
-            raise ValueError(f"maneuver.duration must be a positive time (s) or \"free\"; "
-                             f"got {duration!r}")
+            raise InputValueError(f"maneuver.duration must be a positive time (s) or \"free\"; "
+                                  f"got {duration!r}")
         duration = None
     if isinstance(angle_deg, bool) or not isinstance(angle_deg, (int, float)):
-        raise ValueError(f"maneuver.angle_deg must be a number (degrees); got {angle_deg!r}")
+        raise InputValueError(f"maneuver.angle_deg must be a number (degrees); got {angle_deg!r}")
     return Slew(angle=math.radians(angle_deg), duration=duration, torque_bound=torque_bound)
 
 

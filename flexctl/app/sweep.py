@@ -47,6 +47,7 @@ import numpy as np
 
 from ..sim.maneuvers import SineTorque
 from ..model.parameters import HubBeam, PointMass
+from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["sweep", "parameter_grid", "SweepResult", "SweepError", "pareto_front",
            "response_amplitudes", "PointMassAmplitudes", "SceneTask"]
@@ -79,15 +80,16 @@ def parameter_grid(**axes) -> list:
      {'variant': 'zero_order', 'spin_rate': 0.5}, {'variant': 'zero_order', 'spin_rate': 2.0}]
     """
     if not axes:
-        raise ValueError("parameter_grid needs at least one axis, e.g. mass_ratio=[0, 0.5, 1]")
+        raise InputValueError("parameter_grid needs at least one axis, e.g. "
+                              "mass_ratio=[0, 0.5, 1]")
     names, columns = [], []
     for name, values in axes.items():
         if isinstance(values, (str, bytes)) or not isinstance(values, (Sequence, np.ndarray)):
-            raise TypeError(f"parameter_grid axis {name!r} must be a sequence of values; got "
-                            f"{type(values).__name__}")
+            raise InputTypeError(f"parameter_grid axis {name!r} must be a sequence of values; got "
+                                 f"{type(values).__name__}")
         if len(values) == 0:
-            raise ValueError(f"parameter_grid axis {name!r} must hold at least one value; "
-                             "got none")
+            raise InputValueError(f"parameter_grid axis {name!r} must hold at least one value; "
+                                  "got none")
         names.append(name)
         columns.append([_plain(v) for v in values])
     return [dict(zip(names, combo)) for combo in itertools.product(*columns)]
@@ -102,16 +104,16 @@ def _points(grid) -> list:
     if isinstance(grid, Mapping):
         return parameter_grid(**grid)
     if isinstance(grid, (str, bytes)) or not isinstance(grid, Sequence):
-        raise TypeError("parameter_grid must be a dict {name: values} or a sequence of dicts "
-                        f"{{name: value}}; got {type(grid).__name__}")
+        raise InputTypeError("parameter_grid must be a dict {name: values} or a sequence of dicts "
+                             f"{{name: value}}; got {type(grid).__name__}")
     points = []
     for k, point in enumerate(grid):
         if not isinstance(point, Mapping):
-            raise TypeError(f"parameter_grid[{k}] must be a dict {{name: value}}; got "
-                            f"{type(point).__name__}")
+            raise InputTypeError(f"parameter_grid[{k}] must be a dict {{name: value}}; got "
+                                 f"{type(point).__name__}")
         points.append({str(key): _plain(v) for key, v in point.items()})
     if not points:
-        raise ValueError("parameter_grid must hold at least one point; got none")
+        raise InputValueError("parameter_grid must hold at least one point; got none")
     return points
 
 
@@ -237,7 +239,7 @@ def pareto_front(*objectives) -> np.ndarray:
     [True, True, True, False]
     """
     if len(objectives) < 2:
-        raise ValueError(f"pareto_front needs at least two objectives; got {len(objectives)}")
+        raise InputValueError(f"pareto_front needs at least two objectives; got {len(objectives)}")
     costs = np.column_stack([np.asarray(o, dtype=float).reshape(-1) for o in objectives])
     finite = np.all(np.isfinite(costs), axis=1)
     front = finite.copy()
@@ -296,11 +298,11 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
         is its ``__cause__``, and the points not yet started are cancelled.
     """
     if not callable(task):
-        raise TypeError(f"task must be callable as task(**point); got {type(task).__name__}")
+        raise InputTypeError(f"task must be callable as task(**point); got {type(task).__name__}")
     if executor is not None and not _is_executor(executor):
-        raise TypeError("executor must have a submit(fn, *args) method (a "
-                        "concurrent.futures executor or a Dask Client.get_executor()); "
-                        f"got {type(executor).__name__}")
+        raise InputTypeError("executor must have a submit(fn, *args) method (a "
+                             "concurrent.futures executor or a Dask Client.get_executor()); "
+                             f"got {type(executor).__name__}")
     points = _points(parameter_grid)
     from tqdm import tqdm
 
@@ -418,14 +420,14 @@ class PointMassAmplitudes:
 
     def __post_init__(self):
         if not isinstance(self.system, HubBeam):
-            raise TypeError(f"PointMassAmplitudes.system must be a HubBeam; got "
-                            f"{type(self.system).__name__}")
+            raise InputTypeError(f"PointMassAmplitudes.system must be a HubBeam; got "
+                                 f"{type(self.system).__name__}")
         if not isinstance(self.torque, SineTorque):
-            raise TypeError(f"PointMassAmplitudes.torque must be a SineTorque; got "
-                            f"{type(self.torque).__name__}")
+            raise InputTypeError(f"PointMassAmplitudes.torque must be a SineTorque; got "
+                                 f"{type(self.torque).__name__}")
         if not (isinstance(self.t_final, (int, float)) and self.t_final > self.torque.duration):
-            raise ValueError("PointMassAmplitudes.t_final must exceed the torque duration "
-                             f"{self.torque.duration:g} s; got {self.t_final!r}")
+            raise InputValueError("PointMassAmplitudes.t_final must exceed the torque duration "
+                                  f"{self.torque.duration:g} s; got {self.t_final!r}")
 
     @classmethod
     def from_scene(cls, name: str = "hub-beam-mass", **kwargs) -> "PointMassAmplitudes":
@@ -437,8 +439,8 @@ class PointMassAmplitudes:
 
         scene = load_scene(name)
         if not isinstance(scene.maneuver, SineTorque):
-            raise ValueError(f"PointMassAmplitudes.from_scene needs a sine_torque scene; "
-                             f"{name!r} has {type(scene.maneuver).__name__}")
+            raise InputValueError(f"PointMassAmplitudes.from_scene needs a sine_torque scene; "
+                                  f"{name!r} has {type(scene.maneuver).__name__}")
         settings = {"system": scene.system, "torque": scene.maneuver,
                     "t_final": scene.simulation.t_final, "n_modes": scene.model.modes,
                     "variant": scene.variant}
@@ -466,7 +468,7 @@ class PointMassAmplitudes:
         for name, value in (("mass_position_ratio", position), ("mass_ratio", ratio)):
             if isinstance(value, bool) or not isinstance(value, (int, float)) \
                     or not 0.0 <= value <= 1.0:
-                raise ValueError(f"{name} must be a number in [0, 1]; got {value!r}")
+                raise InputValueError(f"{name} must be a number in [0, 1]; got {value!r}")
         beam = self.system.beam
         mass = PointMass(mass=ratio * beam.density * beam.area * beam.length,
                          position=position * beam.length)

@@ -29,6 +29,7 @@ from functools import lru_cache
 import numpy as np
 
 from .checks import check_integer
+from .errors import InputValueError
 
 __all__ = ["cantilever_roots", "mode_shapes"]
 
@@ -93,11 +94,11 @@ def mode_shapes(n_modes: int, xi, derivative: int = 0, length: float = 1.0) -> n
         ``d^k phi_i / dx^k`` at each position, in m^-k.
     """
     if derivative not in (0, 1, 2, 3):
-        raise ValueError(f"derivative must be 0, 1, 2 or 3; got {derivative!r}")
+        raise InputValueError(f"derivative must be 0, 1, 2 or 3; got {derivative!r}")
     z = cantilever_roots(n_modes)[:, None]
     xi = np.atleast_1d(np.asarray(xi, dtype=float))[None, :]
     if np.any(xi < -1e-12) or np.any(xi > 1 + 1e-12):
-        raise ValueError("xi must lie in [0, 1]")
+        raise InputValueError("xi must lie in [0, 1]")
     a = z * xi
     s = (np.cosh(z) + np.cos(z)) / (np.sinh(z) + np.sin(z))
     grow = 0.5 * _one_minus_s_scaled(z) * np.exp(a - z)   # (1 - s) e^a / 2

@@ -139,8 +139,8 @@ class Model:
     def _check_state(self, x) -> np.ndarray:
         x = np.asarray(x, dtype=float)
         if x.shape[:1] != (self.n_states,):
-            raise ValueError(f"state must have shape ({self.n_states},) for {self.n_modes} "
-                             f"modes; got {x.shape}")
+            raise InputValueError(f"state must have shape ({self.n_states},) for {self.n_modes} "
+                                  f"modes; got {x.shape}")
         return x
 
     # ------------------------------------------------------------------ dynamics

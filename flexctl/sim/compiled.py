@@ -32,6 +32,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..model.exports import _symbolic_beam_dynamics, _symbolic_dynamics
+from ..model.errors import InputValueError
 
 __all__ = ["is_symbolic", "piecewise_constant", "torque_history", "SegmentIntegrator",
            "integrate_segments", "numeric_rhs"]
@@ -90,8 +91,8 @@ def piecewise_constant(t, edges, values):
     rows = values.reshape(values.shape[0], -1)
     edges = np.asarray(edges, dtype=float).reshape(-1)
     if edges.size != rows.shape[0] - 1:
-        raise ValueError(f"piecewise_constant needs {rows.shape[0] - 1} edges for "
-                         f"{rows.shape[0]} values; got {edges.size}")
+        raise InputValueError(f"piecewise_constant needs {rows.shape[0] - 1} edges for "
+                              f"{rows.shape[0]} values; got {edges.size}")
     passed = [t >= float(e) for e in edges]
     out = ca.DM(rows[0])
     for k in range(1, rows.shape[0]):

@@ -49,6 +49,7 @@ import scipy.linalg
 
 from .maneuvers import SineTorque, Slew, rigid_slew_duration
 from ..model import VARIANTS, build_model
+from ..model.errors import InputTypeError, InputValueError
 from ..model.parameters import HubBeam
 
 __all__ = ["ModeChoice", "choose_modes", "linear_tip_responses", "largest_spin_rate",
@@ -116,16 +117,16 @@ class ModeChoice:
     def __post_init__(self):
         if isinstance(self.n_modes, bool) or not isinstance(self.n_modes, (int, np.integer)) \
                 or not 1 <= self.n_modes <= len(self.error_by_modes):
-            raise ValueError(f"n_modes must be an integer in [1, {len(self.error_by_modes)}]; "
-                             f"got {self.n_modes!r}")
+            raise InputValueError(f"n_modes must be an integer in "
+                                  f"[1, {len(self.error_by_modes)}]; got {self.n_modes!r}")
         object.__setattr__(self, "n_modes", int(self.n_modes))
         _check_tolerance(self.tolerance)
         if self.variant not in VARIANTS:
-            raise ValueError(f"variant must be one of {', '.join(VARIANTS)}; "
-                             f"got {self.variant!r}")
+            raise InputValueError(f"variant must be one of {', '.join(VARIANTS)}; "
+                                  f"got {self.variant!r}")
         errors = tuple(float(e) for e in self.error_by_modes)
         if any(not e >= 0.0 for e in errors):
-            raise ValueError(f"error_by_modes must be >= 0 (inf allowed); got {errors!r}")
+            raise InputValueError(f"error_by_modes must be >= 0 (inf allowed); got {errors!r}")
         object.__setattr__(self, "error_by_modes", errors)
         object.__setattr__(self, "estimated_error", float(self.estimated_error))
         object.__setattr__(self, "stiffening_matters", bool(self.stiffening_matters))
@@ -152,7 +153,7 @@ class ModeChoice:
 def _check_tolerance(tolerance):
     if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float, np.floating)) \
             or not 0.0 < tolerance < 1.0:
-        raise ValueError(f"tolerance must be a relative error in (0, 1); got {tolerance!r}")
+        raise InputValueError(f"tolerance must be a relative error in (0, 1); got {tolerance!r}")
 
 
 def rigid_slew_torque(system: HubBeam, slew: Slew) -> SineTorque:
@@ -170,8 +171,8 @@ def rigid_slew_torque(system: HubBeam, slew: Slew) -> SineTorque:
     duration = slew.duration
     if duration is None:
         if slew.torque_bound is None:
-            raise ValueError("a slew needs a duration or a torque_bound to set its time scale; "
-                             "got neither")
+            raise InputValueError("a slew needs a duration or a torque_bound to set its time "
+                                  "scale; got neither")
         duration = rigid_slew_duration(angle, j0, slew.torque_bound, "cycloidal")
     return SineTorque(peak_torque=2.0 * math.pi * j0 * angle / duration ** 2, duration=duration)
 
@@ -185,8 +186,8 @@ def _is_prescribed(maneuver) -> bool:
         return True
     if callable(maneuver):
         return False
-    raise TypeError("maneuver must be a prescribed hub motion (angle, rate, acceleration) or a "
-                    f"torque callable torque(t); got {type(maneuver).__name__}")
+    raise InputTypeError("maneuver must be a prescribed hub motion (angle, rate, acceleration) "
+                         f"or a torque callable torque(t); got {type(maneuver).__name__}")
 
 
 def _time_grid(maneuver, t_final: float) -> np.ndarray:
@@ -352,16 +353,16 @@ def choose_modes(system: HubBeam, maneuver, tolerance: float = DEFAULT_TOLERANCE
     """
     _check_tolerance(tolerance)
     if variant not in VARIANTS:
-        raise ValueError(f"variant must be one of {', '.join(VARIANTS)}; got {variant!r}")
+        raise InputValueError(f"variant must be one of {', '.join(VARIANTS)}; got {variant!r}")
     if isinstance(max_modes, bool) or not isinstance(max_modes, (int, np.integer)) \
             or not 1 <= max_modes <= 100:
-        raise ValueError(f"max_modes must be an integer in [1, 100]; got {max_modes!r}")
+        raise InputValueError(f"max_modes must be an integer in [1, 100]; got {max_modes!r}")
     if reference_modes is None:
         reference_modes = max(2 * int(max_modes), int(max_modes) + 8)
     if isinstance(reference_modes, bool) or not isinstance(reference_modes, (int, np.integer)) \
             or not max_modes < reference_modes <= 200:
-        raise ValueError(f"reference_modes must be an integer in (max_modes = {max_modes}, 200]"
-                         f"; got {reference_modes!r}")
+        raise InputValueError(f"reference_modes must be an integer in (max_modes = "
+                              f"{max_modes}, 200]; got {reference_modes!r}")
     prescribed = _is_prescribed(_as_input(system, maneuver))
     if t_final is None:
         scale = max((float(b) for b in getattr(_as_input(system, maneuver), "breakpoints", ())
@@ -370,7 +371,7 @@ def choose_modes(system: HubBeam, maneuver, tolerance: float = DEFAULT_TOLERANCE
         t_final = HORIZON_FACTOR[key] * scale if scale > 0 else 10.0
     if isinstance(t_final, bool) or not isinstance(t_final, (int, float, np.floating)) \
             or not 0.0 < t_final < math.inf:
-        raise ValueError(f"t_final must be a positive finite time (s); got {t_final!r}")
+        raise InputValueError(f"t_final must be a positive finite time (s); got {t_final!r}")
     args = (system, maneuver, float(tolerance), variant, int(max_modes), int(reference_modes),
             float(t_final))
     try:

@@ -803,8 +803,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         z_init = (np.asarray(controller.initial_state(x_init), dtype=float).reshape(-1)
                   if controller is not None else np.zeros(0))
         if z_init.shape != (nz,):
-            raise ValueError(f"controller.initial_state must return {nz} values; got "
-                             f"shape {z_init.shape}")
+            raise InputValueError(f"controller.initial_state must return {nz} values; got "
+                                  f"shape {z_init.shape}")
         y_init = np.concatenate((x_init, z_init))
 
         def applied_torque(t, x, z):
