@@ -28,6 +28,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from ..model.errors import InputTypeError, InputValueError
 from .figures import figure_for, new_figure
 # Sweep and Pareto plots live in their own module; they are importable from here too.
 from .plotting_sweeps import plot_pareto, plot_sweep
@@ -141,9 +142,9 @@ def plot_mode_shapes(model, n_shapes: int | None = None, n_points: int = 201, ax
         n_shapes = n_modes
     if isinstance(n_shapes, bool) or not isinstance(n_shapes, (int, np.integer)) \
             or not 1 <= n_shapes <= n_modes:
-        raise ValueError(f"n_shapes must be an integer in [1, {n_modes}]; got {n_shapes!r}")
+        raise InputValueError(f"n_shapes must be an integer in [1, {n_modes}]; got {n_shapes!r}")
     if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 2:
-        raise ValueError(f"n_points must be an integer >= 2; got {n_points!r}")
+        raise InputValueError(f"n_points must be an integer >= 2; got {n_points!r}")
     fig, ax = figure_for(ax, (7.0, 4.0))
     length = model.system.beam.length
     xi = np.linspace(0.0, 1.0, int(n_points))
@@ -180,18 +181,18 @@ def _models_from(models, variants, n_modes):
     elif isinstance(models, Sequence) and not isinstance(models, str):
         pairs = [(m.variant if isinstance(m, Model) else None, m) for m in models]
     else:
-        raise TypeError("models must be a HubBeam, a Model, a sequence of Models or a dict "
-                        f"{{label: Model}}; got {type(models).__name__}")
+        raise InputTypeError("models must be a HubBeam, a Model, a sequence of Models or a dict "
+                             f"{{label: Model}}; got {type(models).__name__}")
     out = {}
     for label, m in pairs:
         if not isinstance(m, Model):
-            raise TypeError(f"models must hold flexctl Models; got {type(m).__name__}")
+            raise InputTypeError(f"models must hold flexctl Models; got {type(m).__name__}")
         label = str(label)
         while label in out:
             label += "'"
         out[label] = m
     if not out:
-        raise ValueError("models must hold at least one Model; got none")
+        raise InputValueError("models must hold at least one Model; got none")
     return out
 
 
@@ -227,14 +228,14 @@ def plot_frequencies_vs_spin(models, spin_rates, variants=("first_order", "zero_
     """
     spin = np.asarray(spin_rates, dtype=float).reshape(-1)
     if spin.size < 2 or not np.all(np.isfinite(spin)):
-        raise ValueError(f"spin_rates must hold at least two finite rates (rad/s); "
-                         f"got {spin_rates!r}")
+        raise InputValueError(f"spin_rates must hold at least two finite rates (rad/s); "
+                              f"got {spin_rates!r}")
     labelled = _models_from(models, variants, n_modes)
     n_max = min(m.n_modes for m in labelled.values())
     if isinstance(n_frequencies, bool) or not isinstance(n_frequencies, (int, np.integer)) \
             or not 1 <= n_frequencies <= n_max:
-        raise ValueError(f"n_frequencies must be an integer in [1, {n_max}]; "
-                         f"got {n_frequencies!r}")
+        raise InputValueError(f"n_frequencies must be an integer in [1, {n_max}]; "
+                              f"got {n_frequencies!r}")
     fig, ax = figure_for(ax, (7.5, 5.0))
 
     lowest = 0.0
@@ -270,14 +271,14 @@ def _results_from(results, name: str = "results") -> dict:
     elif isinstance(results, Sequence) and not isinstance(results, str):
         pairs = [(f"run {k}", v) for k, v in enumerate(results)]
     else:
-        raise TypeError(f"{name} must be a dict {{label: SimulationResult}} or a sequence of "
-                        f"results; got {type(results).__name__}")
+        raise InputTypeError(f"{name} must be a dict {{label: SimulationResult}} or a sequence of "
+                             f"results; got {type(results).__name__}")
     for label, r in pairs:
         if not all(hasattr(r, a) for a in ("t", "tip_deflection", "status", "model")):
-            raise TypeError(f"{name}[{label!r}] must be a flexctl SimulationResult; got "
-                            f"{type(r).__name__}")
+            raise InputTypeError(f"{name}[{label!r}] must be a flexctl SimulationResult; got "
+                                 f"{type(r).__name__}")
     if not pairs:
-        raise ValueError(f"{name} must hold at least one result; got none")
+        raise InputValueError(f"{name} must hold at least one result; got none")
     return dict(pairs)
 
 
@@ -376,11 +377,11 @@ def plot_controller_comparison(results, metrics=None, target_angle: float | None
     runs = _results_from(results)
     if metrics is not None:
         if not isinstance(metrics, Mapping):
-            raise TypeError(f"metrics must be a dict {{label: SlewMetrics}}; got "
-                            f"{type(metrics).__name__}")
+            raise InputTypeError(f"metrics must be a dict {{label: SlewMetrics}}; got "
+                                 f"{type(metrics).__name__}")
         missing = [label for label in runs if label not in metrics]
         if missing:
-            raise ValueError(f"metrics must hold every label of results; missing {missing}")
+            raise InputValueError(f"metrics must hold every label of results; missing {missing}")
     if fig is None:
         from matplotlib.figure import Figure
 

@@ -24,6 +24,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..model.errors import InputTypeError, InputValueError
 from .figures import figure_for, new_figure
 
 __all__ = ["plot_bode", "plot_pole_zero", "plot_poles_vs_spin", "plot_frequencies_vs_spin",
@@ -41,8 +42,8 @@ def _systems(systems) -> dict:
     if isinstance(systems, Mapping) and systems \
             and all(isinstance(s, control.LTI) for s in systems.values()):
         return {str(label): s for label, s in systems.items()}
-    raise TypeError("systems must be a python-control LTI system or a non-empty dict "
-                    f"{{label: LTI system}}; got {type(systems).__name__}")
+    raise InputTypeError("systems must be a python-control LTI system or a non-empty dict "
+                         f"{{label: LTI system}}; got {type(systems).__name__}")
 
 
 def _frequencies(natural_frequencies) -> np.ndarray:
@@ -50,7 +51,7 @@ def _frequencies(natural_frequencies) -> np.ndarray:
         return np.zeros(0)
     values = np.asarray(natural_frequencies, dtype=float).reshape(-1)
     if not np.all(np.isfinite(values)):
-        raise ValueError(f"natural_frequencies must be finite (rad/s); got {values!r}")
+        raise InputValueError(f"natural_frequencies must be finite (rad/s); got {values!r}")
     return values[values > 0.0]
 
 
@@ -70,7 +71,7 @@ def mark_modes(ax, natural_frequencies, *, axis: str = "x", label: bool = True) 
     """
     frequencies = _frequencies(natural_frequencies)
     if axis not in ("x", "y"):
-        raise ValueError(f"axis must be 'x' or 'y'; got {axis!r}")
+        raise InputValueError(f"axis must be 'x' or 'y'; got {axis!r}")
     for i, w in enumerate(frequencies, start=1):
         if axis == "x":
             ax.axvline(w, **_MODE_STYLE)
@@ -115,7 +116,7 @@ def plot_bode(systems, *, natural_frequencies=None, omega_limits=None, omega_num
     else:
         axes = list(axes)
         if len(axes) != 2:
-            raise ValueError(f"axes must be two Axes (magnitude, phase); got {len(axes)}")
+            raise InputValueError(f"axes must be two Axes (magnitude, phase); got {len(axes)}")
         fig = axes[0].figure
     responses = [control.frequency_response(sys, omega_limits=omega_limits,
                                             omega_num=omega_num) for sys in named.values()]
@@ -178,10 +179,10 @@ def plot_poles_vs_spin(table, *, which: str = "closed_loop", ax=None, cmap: str 
     matplotlib.figure.Figure
     """
     if which not in ("closed_loop", "plant"):
-        raise ValueError(f"which must be 'closed_loop' or 'plant'; got {which!r}")
+        raise InputValueError(f"which must be 'closed_loop' or 'plant'; got {which!r}")
     if which == "closed_loop" and table.closed_loop_poles is None:
-        raise ValueError("which='closed_loop' needs a table built with a controller "
-                         "(poles_vs_spin(model, spin_rates, controller))")
+        raise InputValueError("which='closed_loop' needs a table built with a controller "
+                              "(poles_vs_spin(model, spin_rates, controller))")
     fig, ax = figure_for(ax, (6.0, 5.0))
     rates = np.asarray(table.spin_rates, dtype=float)
     layers = ([(table.closed_loop_poles, "x", "closed-loop poles")] if which == "closed_loop"

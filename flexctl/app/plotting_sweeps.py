@@ -21,6 +21,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from ..model.errors import InputTypeError, InputValueError
 from .figures import figure_for
 
 __all__ = ["plot_sweep", "plot_pareto", "table_column"]
@@ -54,8 +55,8 @@ def table_column(table, name: str) -> np.ndarray:
             raise KeyError(f"column must be one of {', '.join(map(str, names))}; got {name!r}")
         values = [row.get(name, np.nan) for row in table]
     else:
-        raise TypeError("table must be a SweepResult, a dict of columns or a sequence of row "
-                        f"dicts; got {type(table).__name__}")
+        raise InputTypeError("table must be a SweepResult, a dict of columns or a sequence of row "
+                             f"dicts; got {type(table).__name__}")
     try:
         return np.array([np.nan if v is None else v for v in values], dtype=float)
     except (TypeError, ValueError):
@@ -67,7 +68,7 @@ def _names(y) -> list:
         return [y]
     if isinstance(y, Sequence) and y and all(isinstance(v, str) for v in y):
         return list(y)
-    raise TypeError(f"y must be a column name or a non-empty list of names; got {y!r}")
+    raise InputTypeError(f"y must be a column name or a non-empty list of names; got {y!r}")
 
 
 def plot_sweep(table, x: str, y, *, by: str | None = None, ax=None, labels=None,
@@ -106,7 +107,7 @@ def plot_sweep(table, x: str, y, *, by: str | None = None, ax=None, labels=None,
     names = _names(y)
     xs = table_column(table, x)
     if xs.dtype == object:
-        raise TypeError(f"x column {x!r} must hold numbers; got {xs[:3].tolist()}...")
+        raise InputTypeError(f"x column {x!r} must hold numbers; got {xs[:3].tolist()}...")
     groups = [(None, np.ones(xs.size, dtype=bool))]
     if by is not None:
         keys = table_column(table, by)
@@ -117,7 +118,7 @@ def plot_sweep(table, x: str, y, *, by: str | None = None, ax=None, labels=None,
     for i, name in enumerate(names):
         ys = table_column(table, name)
         if ys.dtype == object:
-            raise TypeError(f"y column {name!r} must hold numbers; got {ys[:3].tolist()}...")
+            raise InputTypeError(f"y column {name!r} must hold numbers; got {ys[:3].tolist()}...")
         for j, (value, rows) in enumerate(groups):
             order = np.argsort(xs[rows], kind="stable")
             text = labels.get(name, name)
@@ -131,8 +132,8 @@ def plot_sweep(table, x: str, y, *, by: str | None = None, ax=None, labels=None,
         if points.shape == (2,):
             points = points[None]
         if points.ndim != 2 or points.shape[1] != 2:
-            raise ValueError(f"reference[{label!r}] must be a point (x, y) or a list of "
-                             f"points; got shape {points.shape}")
+            raise InputValueError(f"reference[{label!r}] must be a point (x, y) or a list of "
+                                  f"points; got shape {points.shape}")
         ax.plot(points[:, 0], points[:, 1], marker="*", markersize=13, color="black",
                 linestyle="none", label=label)
     if logx:
@@ -193,15 +194,16 @@ def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | No
     xs, ys = table_column(table, x), table_column(table, y)
     for name, values in ((x, xs), (y, ys)):
         if values.dtype == object:
-            raise TypeError(f"column {name!r} must hold numbers; got {values[:3].tolist()}...")
+            raise InputTypeError(f"column {name!r} must hold numbers; got "
+                                 f"{values[:3].tolist()}...")
     usable = np.isfinite(xs) & np.isfinite(ys)
     if logx:
         usable &= xs > 0
     if logy:
         usable &= ys > 0
     if not usable.any():
-        raise ValueError(f"plot_pareto needs at least one point with finite (and, on a log "
-                         f"axis, positive) {x!r} and {y!r}; got none")
+        raise InputValueError(f"plot_pareto needs at least one point with finite (and, on a log "
+                              f"axis, positive) {x!r} and {y!r}; got none")
     fig, ax = figure_for(ax, (7.0, 5.0))
 
     def groups(column):
