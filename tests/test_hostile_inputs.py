@@ -21,10 +21,11 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from flexctl import (Beam, Hub, HubBeam, PointMass, SceneError, SineTorque, SpinUp, build_model,
+from flexctl import (Beam, Hub, HubBeam, PointMass, SceneError, SpinUp, build_model,
                      load_scene, simulate)
 from flexctl.app.report import json_safe
-from flexctl.model.errors import InputError, InputTypeError, InputValueError
+from clear_errors import assert_clear_error
+from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.parameters import RADIUS_RATIO_LIMIT
 from flexctl.sim.maneuvers import Slew, rigid_slew_duration
 from flexctl.sim.metrics import settling_time
@@ -252,9 +253,6 @@ NOT_NUMBERS = st.sampled_from([None, "1.0", True, [1.0], np.array([1.0]), {"a": 
                                complex(1, 1)])
 
 
-def _names_the_input(message: str, *names: str) -> bool:
-    return any(name in message for name in names)
-
 
 @settings(max_examples=MAX_EXAMPLES["system"], **PROPERTY_SETTINGS)
 @given(radius=st.one_of(st.floats(0.0, 1.0), EXTREME_FLOATS, NOT_NUMBERS),
@@ -270,10 +268,8 @@ def test_systems_and_spin_rates_give_a_clear_error_or_finite_frequencies(
         frequencies = model.natural_frequencies(spin_rate, hub="clamped")
         plant = model.linearize(spin_rate)
     except (TypeError, ValueError) as exc:
-        assert isinstance(exc, InputError), f"{type(exc).__name__} escaped: {exc}"
-        assert _names_the_input(str(exc), "hub.radius", "mass.", "masses[0]", "spin_rate",
-                                "ratio"), str(exc)
-        event(f"clear error: {type(exc).__name__}")
+        assert_clear_error(exc, "hub.radius", "mass.", "masses[0]", "spin_rate",
+                                "ratio")
         return
     event("finite model")
     assert np.all(np.isfinite(frequencies))
@@ -292,10 +288,7 @@ def test_spin_ups_give_a_clear_error_or_a_finite_run(tiny_model, spin_rate, ramp
                                     message=".*(energy|accuracy|model validity|stiff)")
             result = simulate(tiny_model, 0.5, hub_motion=motion, check_accuracy=False)
     except (TypeError, ValueError) as exc:
-        assert isinstance(exc, InputError), f"{type(exc).__name__} escaped: {exc}"
-        assert _names_the_input(str(exc), "maneuver.spin_rate", "maneuver.ramp_time",
-                                "t_final"), str(exc)
-        event("clear error")
+        assert_clear_error(exc, "maneuver.spin_rate", "maneuver.ramp_time", "t_final")
         return
     event(f"ran: {result.status}")
     _assert_finite_run(result, 0.5)
@@ -333,11 +326,9 @@ def test_overrides_give_a_clear_error_naming_the_key_or_a_scene(overrides, scene
         if loaded.model.modes != "auto" and loaded.model.modes <= 24:
             loaded.build_model()
     except (TypeError, ValueError) as exc:
-        assert isinstance(exc, InputError), f"{type(exc).__name__} escaped: {exc}"
         keys = [k.split(".")[0].split("[")[0] for k in overrides]
-        assert _names_the_input(str(exc), "override key", "scene key", "scene is missing",
-                                *(k for k in keys if k), "n_modes", "system."), str(exc)
-        event("clear error")
+        assert_clear_error(exc, "override key", "scene key", "scene is missing",
+                           *(k for k in keys if k), "n_modes", "system.")
         return
     event("loaded")
     assert loaded.simulation.t_final > 0.0 and math.isfinite(loaded.simulation.t_final)
@@ -364,9 +355,7 @@ def test_torque_samples_give_a_clear_error_or_a_finite_run(tiny_model, times, va
             warnings.simplefilter("error", np.exceptions.ComplexWarning)
             result = simulate(tiny_model, 1.0, torque=(times, values), check_accuracy=False)
     except (TypeError, ValueError) as exc:
-        assert isinstance(exc, InputError), f"{type(exc).__name__} escaped: {exc}"
-        assert "torque" in str(exc), str(exc)
-        event("clear error")
+        assert_clear_error(exc, "torque")
         return
     event(f"ran: {result.status}")
     _assert_finite_run(result, 1.0)
@@ -400,9 +389,7 @@ def test_torque_functions_give_a_clear_error_or_a_finite_run(tiny_model, torque,
             result = simulate(tiny_model, 0.5, torque=torque, method=method,
                               check_accuracy=False)
     except (TypeError, ValueError) as exc:
-        assert isinstance(exc, InputError), f"{type(exc).__name__} escaped: {exc}"
-        assert "torque" in str(exc), str(exc)
-        event("clear error")
+        assert_clear_error(exc, "torque")
         return
     event(f"ran: {result.status}")
     _assert_finite_run(result, 0.5)

@@ -30,6 +30,7 @@ from hypothesis import strategies as st
 
 from flexctl import Beam, Hub, HubBeam, PointMass, build_model, load_scene, simulate
 from flexctl.app.cli import EXIT_BAD_INPUT, EXIT_OK, EXIT_STOPPED, main
+from clear_errors import assert_clear_error
 from flexctl.model.errors import InputError
 
 #: Generated inputs per test (five tests: 375 inputs a run).
@@ -68,9 +69,6 @@ def _field(low, high):
     return _mostly(_plausible(low, high), EXTREME_FLOATS, NOT_NUMBERS, weight=6)
 
 
-def _names_the_input(message: str, *names: str) -> bool:
-    return any(name in message for name in names)
-
 
 # ------------------------------------------------------------------ parameters
 PARAMETER_RANGES = {
@@ -108,11 +106,8 @@ def test_parameters_give_a_clear_error_or_a_finite_model(values, n_modes, varian
         system = _system(values)
         model = build_model(system, n_modes=n_modes, variant=variant)
     except (TypeError, ValueError) as exc:
-        assert isinstance(exc, InputError) or "n_modes" in str(exc) or "variant" in str(exc), \
-            f"{type(exc).__name__} is not an input error: {exc}"
-        assert _names_the_input(str(exc), "hub.", "beam.", "mass.", "system.", "ratio",
-                                "n_modes", "variant"), str(exc)
-        event(f"clear error: {type(exc).__name__}")
+        assert_clear_error(exc, "hub.", "beam.", "mass.", "system.", "ratio", "n_modes",
+                           "variant")
         return
     event("built a model")
     frequencies = model.natural_frequencies(0.0, hub="free")
@@ -168,10 +163,8 @@ def test_simulate_gives_a_clear_error_or_a_finite_honest_result(tiny_model, argu
         result = simulate(tiny_model, t_final, torque=torque, rtol=rtol,
                           output_step=output_step, method=method, check_accuracy=False)
     except (TypeError, ValueError) as exc:
-        assert isinstance(exc, InputError), f"{type(exc).__name__} escaped: {exc}"
-        assert _names_the_input(str(exc), "torque", "t_final", "rtol", "output_step",
-                                "method"), str(exc)
-        event(f"clear error: {type(exc).__name__}")
+        assert_clear_error(exc, "torque", "t_final", "rtol", "output_step",
+                                "method")
         return
     event(f"ran: {result.status}")
     assert result.status in STATUSES
