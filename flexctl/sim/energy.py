@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.integrate import cumulative_trapezoid, trapezoid
 
 from ..model import Model
 
@@ -131,11 +132,6 @@ class EnergyBalance:
                 "validity here; the exact variant conserves energy")
 
 
-def _running_integral(t: np.ndarray, rate: np.ndarray) -> np.ndarray:
-    """Trapezoidal ``int_0^t rate``, shape (P,)."""
-    return np.concatenate(([0.0], np.cumsum(0.5 * np.diff(t) * (rate[1:] + rate[:-1]))))
-
-
 def _neglected_energy(model: Model, rate, q, inertia) -> np.ndarray:
     """Energy created by the terms a small-deflection variant leaves out, J, shape (P,):
     ``int theta_t d(theta_t q^T D q)`` (and ``int theta_t^2 d(q^T K_g q / 2)`` for zero_order)
@@ -174,9 +170,9 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     q, w, qd = x[1:n + 1], x[n + 1], x[n + 2:]
     energy = np.asarray(model.energy(x), dtype=float).reshape(-1)
     power = np.asarray(torque, dtype=float) * w
-    work = _running_integral(t, power)
-    lost = _running_integral(t, model.system.hub.friction * w ** 2
-                             + np.einsum("ip,ij,jp->p", qd, mat.C_ff, qd))
+    work = cumulative_trapezoid(power, t, initial=0.0)
+    lost = cumulative_trapezoid(model.system.hub.friction * w ** 2
+                                + np.einsum("ip,ij,jp->p", qd, mat.C_ff, qd), t, initial=0.0)
     residual = energy - energy[0] - work + lost
     k = int(np.argmax(np.abs(residual)))
     inertia = np.einsum("ip,ij,jp->p", q, mat.D, q)
@@ -185,10 +181,9 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     return EnergyBalance(
         variant=model.variant, energy_start=float(energy[0]), imbalance=float(residual[k]),
         time=float(t[k]), energy=float(energy[k]), work=float(work[k]), lost=float(lost[k]),
-        throughput=float(max(max(energy[0], 0.0) + _running_integral(t, np.abs(power))[-1],
+        throughput=float(max(max(energy[0], 0.0) + trapezoid(np.abs(power), t),
                              np.max(np.abs(energy)))),
         hub_inertia=float(model.effective_hub_inertia(np.zeros(model.n_states))),
         inertia_change=float(inertia[int(np.argmax(np.abs(inertia)))]),
         neglected=float(neglected[int(np.argmax(np.abs(neglected)))]),
-        mass_ratio=sum(m.mass for m in system.masses) / (system.beam.linear_density
-                                                          * system.beam.length))
+        mass_ratio=system.total_point_mass / system.beam.mass)

@@ -201,8 +201,7 @@ def _singular_message(model: Model, t_end: float, state) -> str:
     j_eff = float(model.effective_hub_inertia(state))
     j_rest = float(model.effective_hub_inertia(np.zeros(model.n_states)))
     tip = float(model.matrices.tip @ np.asarray(state)[1:n + 1])
-    point_mass = sum(m.mass for m in system.masses)
-    beam_mass = system.beam.linear_density * system.beam.length
+    point_mass, beam_mass = system.total_point_mass, system.beam.mass
     cause = (f"the point masses ({point_mass:.4g} kg, {point_mass / beam_mass:.3g} times the "
              "beam mass) make it large against the hub's own inertia"
              if point_mass > beam_mass else
