@@ -25,8 +25,11 @@ from flexctl import (Beam, Hub, HubBeam, PointMass, SceneError, SpinUp, build_mo
                      load_scene, simulate)
 from flexctl.app.report import json_safe
 from clear_errors import assert_clear_error
+from controllers import OpenLoop
+from flexctl.model.checks import check_integer
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.parameters import RADIUS_RATIO_LIMIT
+from flexctl.sim import StaticLaw
 from flexctl.sim.maneuvers import Slew, rigid_slew_duration
 from flexctl.sim.metrics import settling_time
 
@@ -393,3 +396,15 @@ def test_torque_functions_give_a_clear_error_or_a_finite_run(tiny_model, torque,
         return
     event(f"ran: {result.status}")
     _assert_finite_run(result, 0.5)
+
+
+@pytest.mark.parametrize("adapter", [StaticLaw, OpenLoop], ids=["StaticLaw", "OpenLoop"])
+def test_a_static_law_must_be_callable(adapter):
+    with pytest.raises(InputTypeError, match=r"\.law must be callable"):
+        adapter("not a law")
+
+
+def test_an_absurd_count_is_named_without_its_digits():
+    with pytest.raises(InputValueError, match="an integer of 401 digits") as raised:
+        check_integer("nmpc", "horizon", 10 ** 400, minimum=2, maximum=500)
+    assert len(str(raised.value)) < 120

@@ -87,7 +87,9 @@ def check_integer(owner: str, name: str, value, *, minimum: int | None = None,
                              f"{type(value).__name__}")
     value = int(value)
     if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
-        raise InputValueError(f"{where} must be {rule}; got {value!r}")
+        shown = repr(value) if len(repr(value)) <= 30 else \
+            f"an integer of {len(str(abs(value)))} digits"
+        raise InputValueError(f"{where} must be {rule}; got {shown}")
     return value
 
 

@@ -340,6 +340,11 @@ class StaticLaw:
     law: object
     n_states = 0
 
+    def __post_init__(self):
+        if not callable(self.law):
+            raise InputTypeError(f"{type(self).__name__}.law must be callable; got "
+                                 f"{type(self.law).__name__}")
+
     @property
     def breakpoints(self) -> tuple:
         """The wrapped law's times of non-smoothness, s."""
