@@ -98,8 +98,8 @@ LOOP_FACTOR = 2.0
 EXPLICIT_REFUSE_LIMIT = 2e6
 #: A run may span at most this many periods of the model's slowest mode: any integrator
 #: takes several steps a period. hub-beam-mass on 4 modes took 19 s for 8.7e3 periods
-#: (1e4 s, with its accuracy check), so the limit is some 4 minutes there; 1e6 periods ran
-#: for over half an hour inside CVODES, where no interrupt reaches.
+#: (1e4 s, with its accuracy check), so the limit is some 4 minutes there, growing linearly;
+#: inside one CVODES call no interrupt reaches the run.
 MAX_PERIODS = 1e5
 #: A controller whose gains put the fastest closed-loop pole beyond this many times the
 #: plant's fastest mode is refused: nothing the model describes is that fast, and the run
