@@ -42,6 +42,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from .layout import StateLayout
 from .modes import mode_shapes
 from .parameters import HubBeam
 
@@ -217,15 +218,15 @@ def _rhs(system: HubBeam, n_modes: int, n_panels: int, matrices):
     """``(x, u) -> xdot`` and the symbols and terms it was built from."""
     import casadi as ca
 
-    n = n_modes
-    x = ca.SX.sym("x", 2 * n + 2)
+    n, layout = n_modes, StateLayout.single(n_modes)
+    x = ca.SX.sym("x", layout.n_states)
     u = ca.SX.sym("u")
-    q, rate, q_dot = x[1:n + 1], x[n + 1], x[n + 2:]
+    _, q, rate, q_dot = layout.split(x)
     mass, bias, tip = _terms(system, n, n_panels, q, q_dot, rate)
     elastic = -ca.mtimes(ca.DM(matrices.K_ff), q) - ca.mtimes(ca.DM(matrices.C_ff), q_dot)
     generalized = ca.vertcat(u - system.hub.friction * rate, elastic) - bias
     acc = ca.solve(mass, generalized)
-    rhs = ca.Function(f"flexctl_exact_N{n}", [x, u], [ca.vertcat(rate, q_dot, acc)],
+    rhs = ca.Function(f"flexctl_exact_N{n}", [x, u], [ca.vertcat(x[layout.velocities], acc)],
                       ["x", "u"], ["xdot"])
     return rhs, x, mass, bias, tip
 
@@ -233,9 +234,9 @@ def _rhs(system: HubBeam, n_modes: int, n_panels: int, matrices):
 def _build(system: HubBeam, n_modes: int, n_panels: int, matrices) -> ExactGeometry:
     import casadi as ca
 
-    n = n_modes
+    n, layout = n_modes, StateLayout.single(n_modes)
     rhs, x, mass, bias, tip = _rhs(system, n, n_panels, matrices)
-    q, rate = x[1:n + 1], x[n + 1]
+    q, rate = layout.modal(x), layout.hub_rate(x)
     stiffness, damping = ca.DM(matrices.K_ff), ca.DM(matrices.C_ff)
     friction = system.hub.friction
     name = f"exact_N{n}"
@@ -256,7 +257,7 @@ def _build(system: HubBeam, n_modes: int, n_panels: int, matrices) -> ExactGeome
 
     mass_fn = ca.Function(f"{name}_mass", [q], [mass], ["q"], ["M"])
     tip_fn = ca.Function(f"{name}_tip", [q], [tip], ["q"], ["p_tip"])
-    v = x[n + 1:]
+    v = x[layout.velocities]
     kinetic = 0.5 * ca.dot(v, ca.mtimes(mass, v))
     energy = ca.Function(f"{name}_energy", [x],
                          [kinetic + 0.5 * ca.dot(q, ca.mtimes(stiffness, q))], ["x"], ["E"])
@@ -271,7 +272,7 @@ def _test_state(system: HubBeam, matrices) -> np.ndarray:
     i = np.arange(1, n + 1)
     q = TEST_DEFLECTION * system.beam.length / np.abs(matrices.tip) / i ** 4
     omega = matrices.beam_frequencies
-    return np.concatenate(([0.0], q, [omega[0]], omega * q))
+    return StateLayout.single(n).join(q=q, theta_dot=omega[0], q_dot=omega * q)
 
 
 def choose_panels(system: HubBeam, matrices) -> int:
@@ -285,7 +286,7 @@ def choose_panels(system: HubBeam, matrices) -> int:
     previous = None
     for n_panels in PANEL_CANDIDATES:
         acc = np.array(_rhs(system, matrices.n_modes, n_panels, matrices)[0](x, 1.0))
-        acc = acc.ravel()[matrices.n_modes + 1:]
+        acc = acc.ravel()[StateLayout.single(matrices.n_modes).velocities]
         if previous is not None:
             scale = max(np.max(np.abs(acc)), 1e-300)
             if np.max(np.abs(acc - previous[1])) <= PANEL_TOLERANCE * scale:

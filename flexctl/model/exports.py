@@ -44,9 +44,8 @@ def _symbolic_dynamics(model, x, u):
 
     if model.variant == "exact":
         return model.geometry.rhs(x, u)
-    mat, n = model.matrices, model.n_modes
-    c = model._c
-    q, w, qd = x[1:n + 1], x[n + 1], x[n + 2:]
+    mat, c = model.matrices, model._c
+    _, q, w, qd = model.layout.split(x)
     dm = ca.DM
     f_beam = (-ca.mtimes(dm(mat.C_ff), qd) - ca.mtimes(dm(mat.K_ff), q)
               + w ** 2 * ca.mtimes(dm(c["stiff_d"]), q))
@@ -59,15 +58,15 @@ def _symbolic_dynamics(model, x, u):
     g = dm(c["g"])
     theta_tt = (f_hub - ca.dot(g, f_beam)) / j_eff
     q_tt = ca.mtimes(dm(c["m_inv"]), f_beam) - g * theta_tt
-    return ca.vertcat(w, qd, theta_tt, q_tt)
+    return model.layout.join(theta=w, q=qd, theta_dot=theta_tt, q_dot=q_tt)
 
 
 def _symbolic_beam_dynamics(model, y, rate, acceleration):
     """CasADi ``d[q, q_dot]/dt`` under prescribed hub ``rate`` and ``acceleration``."""
     import casadi as ca
 
-    mat, n = model.matrices, model.n_modes
-    q, qd = y[:n], y[n:]
+    mat, beam = model.matrices, model.layout.without_rotation()
+    q, qd = beam.modal(y), beam.modal_rates(y)
     if model.variant == "exact":
         return ca.vertcat(qd, model.geometry.beam(q, qd, rate, acceleration))
     dm = ca.DM
@@ -119,6 +118,6 @@ def to_casadi_outputs(model, sx: bool = True):
     x = sym("x", model.n_states)
     y = ca.mtimes(ca.DM(model.output_matrix), x)
     if model.variant == "exact":
-        tip = model.geometry.tip(x[1:model.n_modes + 1])
-        y = ca.vertcat(y[:2], tip[1], y[3], x[0] + ca.atan2(tip[1], tip[0]))
+        tip = model.geometry.tip(model.layout.modal(x))
+        y = ca.vertcat(y[:2], tip[1], y[3], model.layout.hub_angle(x) + ca.atan2(tip[1], tip[0]))
     return ca.Function(f"flexctl_outputs_N{model.n_modes}", [x], [y], ["x"], ["y"])

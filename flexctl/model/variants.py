@@ -43,6 +43,7 @@ import scipy.linalg
 from .checks import check_choice, check_integer, check_real
 from .errors import InputTypeError, InputValueError
 from .exact import exact_geometry
+from .layout import StateLayout
 from .matrices import ModalMatrices, assemble, condensed_hub_inertia
 from .parameters import HubBeam
 
@@ -61,11 +62,6 @@ class SingularMassMatrixError(ArithmeticError):
     """The mass matrix of the model is singular at the given state."""
 
 
-def _state_names(n_modes: int) -> tuple:
-    q = [f"q{i}" for i in range(1, n_modes + 1)]
-    return ("theta", *q, "theta_dot", *(f"{name}_dot" for name in q))
-
-
 @dataclass(frozen=True, eq=False)
 class Model:
     """A hub-beam-mass model of one variant on ``n_modes`` cantilever modes.
@@ -79,6 +75,8 @@ class Model:
     variant : str
         ``"first_order"``, ``"zero_order"``, ``"consistent"`` or ``"exact"``.
     matrices : ModalMatrices
+    layout : StateLayout
+        Names and slices of the state's blocks (:mod:`flexctl.model.layout`).
     state_names, input_names, output_names : tuple of str
     """
 
@@ -86,13 +84,16 @@ class Model:
     n_modes: int
     variant: str
     matrices: ModalMatrices = field(repr=False)
+    layout: StateLayout = field(init=False, repr=False)
     state_names: tuple = field(init=False, repr=False)
     input_names: tuple = field(init=False, repr=False, default=("torque",))
     output_names: tuple = field(init=False, repr=False, default=OUTPUT_NAMES)
 
     def __post_init__(self):
         mat = self.matrices
-        object.__setattr__(self, "state_names", _state_names(self.n_modes))
+        layout = StateLayout.single(self.n_modes)
+        object.__setattr__(self, "layout", layout)
+        object.__setattr__(self, "state_names", layout.names)
         stiff_d = mat.M_ff if self.variant == "zero_order" else mat.D
         cho = scipy.linalg.cho_factor(mat.M_ff)
         m_inv = scipy.linalg.cho_solve(cho, np.eye(self.n_modes))
@@ -116,7 +117,7 @@ class Model:
     @property
     def n_states(self) -> int:
         """Number of states ``2 N + 2``."""
-        return 2 * self.n_modes + 2
+        return self.layout.n_states
 
     def __repr__(self):
         return (f"Model(variant={self.variant!r}, n_modes={self.n_modes}, "
@@ -132,9 +133,7 @@ class Model:
 
     def split(self, x):
         """Split a state (shape (n,) or (n, P)) into ``theta, q, theta_dot, q_dot``."""
-        x = np.asarray(x, dtype=float)
-        n = self.n_modes
-        return x[0], x[1:n + 1], x[n + 1], x[n + 2:]
+        return self.layout.split(np.asarray(x, dtype=float))
 
     def _check_state(self, x) -> np.ndarray:
         x = np.asarray(x, dtype=float)
@@ -160,7 +159,7 @@ class Model:
             return np.array(schur) if x.ndim > 1 else np.float64(schur[0])
         if self.variant != "consistent":
             return np.full(x.shape[1:], j) if x.ndim > 1 else np.float64(j)
-        q = x[1:self.n_modes + 1]
+        q = self.layout.modal(x)
         return j + np.einsum("i...,ij,j...->...", q, self.matrices.D, q)
 
     @property
@@ -200,7 +199,7 @@ class Model:
         return self._c["integration_rhs"]
 
     def _exact_mass(self, x) -> list:
-        q = np.atleast_2d(x[1:self.n_modes + 1].T).T
+        q = np.atleast_2d(self.layout.modal(x).T).T
         masses = [np.array(self.geometry.mass(q[:, k])) for k in range(q.shape[1])]
         return [0.5 * (m + m.T) for m in masses]
 
@@ -216,7 +215,7 @@ class Model:
         mat = self.matrices
         j = mat.J0
         if self.variant == "consistent":
-            q = x[1:self.n_modes + 1]
+            q = self.layout.modal(x)
             j = j + q @ mat.D @ q
         top = np.concatenate(([j], mat.m_tf))
         return np.vstack((top, np.column_stack((mat.m_tf, mat.M_ff))))
@@ -249,7 +248,7 @@ class Model:
         if self.variant == "exact":
             u = np.broadcast_to(np.asarray(torque, dtype=float), x.shape[1:])
             xdot = self._evaluate(self.geometry.rhs, x.ndim > 1, x, u)
-            return xdot[self.n_modes + 1], xdot[self.n_modes + 2:]
+            return self.layout.hub_rate(xdot), self.layout.modal_rates(xdot)
         c = self._c
         f_hub, f_beam = self._forces(x, torque)
         j_eff = self.effective_hub_inertia(x)
@@ -279,8 +278,8 @@ class Model:
         u = np.asarray(u, dtype=float)
         torque = u.reshape(()) if u.size == 1 and x.ndim == 1 else u
         theta_tt, q_tt = self.accelerations(x, torque)
-        n = self.n_modes
-        return np.concatenate((x[n + 1:], np.expand_dims(theta_tt, 0), q_tt), axis=0)
+        layout = self.layout
+        return np.concatenate((x[layout.velocities], np.expand_dims(theta_tt, 0), q_tt), axis=0)
 
     @staticmethod
     def _evaluate(function, batch: bool, *args) -> np.ndarray:
@@ -323,15 +322,11 @@ class Model:
 
     # ------------------------------------------------------------------ outputs and energy
     def _output_matrix(self) -> np.ndarray:
-        mat, n = self.matrices, self.n_modes
-        c_out = np.zeros((len(OUTPUT_NAMES), 2 * n + 2))
-        c_out[0, 0] = 1.0
-        c_out[1, n + 1] = 1.0
-        c_out[2, 1:n + 1] = mat.tip
-        c_out[3, 1:n + 1] = mat.root
-        c_out[4, 0] = 1.0
-        c_out[4, 1:n + 1] = mat.tip / (self.system.hub.radius + self.system.beam.length)
-        return c_out
+        mat, layout = self.matrices, self.layout
+        reach = self.system.hub.radius + self.system.beam.length
+        return np.vstack((layout.embed(1.0, "theta"), layout.embed(1.0, "theta_dot"),
+                          layout.embed(mat.tip), layout.embed(mat.root),
+                          layout.embed(1.0, "theta") + layout.embed(mat.tip / reach)))
 
     @property
     def output_matrix(self) -> np.ndarray:
@@ -348,7 +343,7 @@ class Model:
         the small-deflection variants.
         """
         x = self._check_state(x)
-        q = x[1:self.n_modes + 1]
+        q = self.layout.modal(x)
         if self.variant == "exact":
             return self._evaluate(self.geometry.tip, x.ndim > 1, q)
         tip_y = self.matrices.tip @ q
@@ -366,13 +361,13 @@ class Model:
         if self.variant == "exact":
             tip = self.tip_position(x)
             y[2] = tip[1]
-            y[4] = x[0] + np.arctan2(tip[1], tip[0])
+            y[4] = self.layout.hub_angle(x) + np.arctan2(tip[1], tip[0])
         return y
 
     def deflection(self, x, position: float) -> np.ndarray:
         """Beam deflection ``y(position)`` in the hub frame, m, at state(s) ``x``."""
         x = self._check_state(x)
-        return self.matrices.deflection_vector(position) @ x[1:self.n_modes + 1]
+        return self.matrices.deflection_vector(position) @ self.layout.modal(x)
 
     def energy(self, x) -> np.ndarray:
         """Mechanical energy, J.
@@ -401,10 +396,9 @@ class Model:
         others (``J(q) = J_0 + q^T D q`` for consistent, ``J_0`` otherwise).
         """
         x = self._check_state(x)
-        n = self.n_modes
         if self.variant == "exact":
             mass = self._exact_mass(x)
-            v = np.atleast_2d(x[n + 1:].T).T
+            v = np.atleast_2d(x[self.layout.velocities].T).T
             h = np.array([m[0] @ v[:, k] for k, m in enumerate(mass)])
             return h if x.ndim > 1 else h[0]
         mat = self.matrices
@@ -424,20 +418,24 @@ class Model:
     def linear_matrices(self, spin_rate: float = 0.0):
         """``A`` (n, n) and ``B`` (n, 1) of the linearisation about a steady spin (``q = 0``)."""
         spin_rate = _spin(spin_rate)
-        mat, n = self.matrices, self.n_modes
-        mass = self.mass_matrix(np.zeros(self.n_states))
-        stiff = np.zeros((n + 1, n + 1))
-        stiff[1:, 1:] = self.stiffness_matrix(spin_rate)
-        damp = np.zeros((n + 1, n + 1))
-        damp[0, 0] = self.system.hub.friction
-        damp[1:, 1:] = mat.C_ff
-        m_inv_k = np.linalg.solve(mass, np.hstack((stiff, damp, np.eye(n + 1)[:, :1])))
+        mat, layout = self.matrices, self.layout
+        # second-order form in the generalized coordinates, whose order the state's
+        # coordinate block keeps: layout.q indexes both
+        n_c, q, hub = layout.n_coordinates, layout.q, layout.theta
+        mass = self.mass_matrix(layout.zeros())
+        stiff, damp, load = np.zeros((n_c, n_c)), np.zeros((n_c, n_c)), np.zeros((n_c, 1))
+        stiff[q, q] = self.stiffness_matrix(spin_rate)
+        damp[hub, hub] = self.system.hub.friction
+        damp[q, q] = mat.C_ff
+        load[hub, 0] = 1.0
+        m_inv_k, m_inv_c, m_inv_b = np.split(np.linalg.solve(mass, np.hstack((stiff, damp, load))),
+                                             [n_c, 2 * n_c], axis=1)
         a = np.zeros((self.n_states, self.n_states))
-        a[:n + 1, n + 1:] = np.eye(n + 1)
-        a[n + 1:, :n + 1] = -m_inv_k[:, :n + 1]
-        a[n + 1:, n + 1:] = -m_inv_k[:, n + 1:2 * n + 2]
+        a[layout.coordinates, layout.velocities] = np.eye(n_c)
+        a[layout.velocities, layout.coordinates] = -m_inv_k
+        a[layout.velocities, layout.velocities] = -m_inv_c
         b = np.zeros((self.n_states, 1))
-        b[n + 1:, 0] = m_inv_k[:, -1]
+        b[layout.velocities] = m_inv_b
         return a, b
 
     def natural_frequencies(self, spin_rate: float = 0.0, hub: str = "clamped") -> np.ndarray:

@@ -1,0 +1,395 @@
+"""The state layout: the one owner of the names and slices of a state vector.
+
+Every module that reads or builds a state asks a :class:`StateLayout` where its blocks are
+(hub angle and rate, each appendage's modal coordinates and rates, hub translation, further
+first-order blocks such as actuator or controller states) instead of slicing by index
+arithmetic.
+
+Notes
+-----
+A layout describes the state of a mechanical system with generalized coordinates and their
+rates, followed by first-order blocks, in this order::
+
+    x = [theta, hub_x, hub_y, q_(a,1) .. q_(a,N_a), q_(b,1) .. q_(b,N_b), ...,     coordinates
+         theta_dot, hub_x_dot, hub_y_dot, q_(a,1)_dot .. q_(b,N_b)_dot, ...,       their rates
+         <extra block 1>, <extra block 2>, ...]                                    first order
+
+``hub_x, hub_y`` (m) are present for a free-floating hub only. The modal coordinates of all
+appendages form one contiguous block (:attr:`StateLayout.q`), appendage after appendage in
+the order given; a single appendage whose name is ``""`` has unprefixed names (``q1``), any
+other appendage's names carry its name (``wing_a.q1``). ``theta`` may be absent
+(:meth:`StateLayout.without_rotation`: the beam states integrated under a prescribed hub
+rotation). Every accessor works on numpy arrays of shape ``(n,)`` or ``(n, P)`` (the first
+axis is the state) and on CasADi column vectors.
+
+Examples
+--------
+>>> layout = StateLayout.single(2)
+>>> layout.names
+('theta', 'q1', 'q2', 'theta_dot', 'q1_dot', 'q2_dot')
+>>> layout.q, layout.theta_dot
+(slice(1, 3, None), 3)
+>>> two = StateLayout(appendages=(("wing_a", 2), ("wing_b", 1)), free_hub=True)
+>>> two.names[:6]
+('theta', 'hub_x', 'hub_y', 'wing_a.q1', 'wing_a.q2', 'wing_b.q1')
+>>> two.modal_slice("wing_b"), two.n_states
+(slice(5, 6, None), 12)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .checks import check_integer
+from .errors import InputTypeError, InputValueError
+
+__all__ = ["StateLayout"]
+
+
+def _is_symbolic(x) -> bool:
+    return type(x).__module__.startswith("casadi")
+
+
+def _block_array(value, size: int) -> np.ndarray:
+    """A block's value as shape ``(size,)`` or ``(size, P)``: a block of one state may be a
+    number or one value per column, shape ``(P,)``."""
+    v = np.asarray(value, dtype=float)
+    if size == 1 and v.ndim <= 1:
+        return v.reshape(1) if v.size == 1 and v.ndim == 0 else v.reshape(1, -1) \
+            if v.size > 1 else v.reshape(1)
+    if v.shape[:1] != (size,) or v.ndim > 2:
+        raise InputValueError(f"a state block of {size} entries must have shape ({size},) or "
+                              f"({size}, P); got {v.shape}")
+    return v
+
+
+@dataclass(frozen=True)
+class StateLayout:
+    """Names and slices of every block of a state vector (see the module Notes for the order).
+
+    Parameters
+    ----------
+    appendages : tuple of (str, int)
+        Each appendage's name and its number of modes, in state order. A single appendage
+        named ``""`` gives unprefixed names.
+    free_hub : bool
+        The hub translates in the plane: coordinates ``hub_x, hub_y`` (m) follow ``theta``.
+    rotation : bool
+        ``theta`` and ``theta_dot`` are states (False: the hub rotation is prescribed).
+    extra : tuple of (str, tuple of str)
+        First-order blocks after the mechanical states: each block's name and its state names.
+    """
+
+    appendages: tuple = (("", 4),)
+    free_hub: bool = False
+    rotation: bool = True
+    extra: tuple = ()
+    _index: dict = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        apps = tuple(self.appendages)
+        if not apps:
+            raise InputValueError("StateLayout.appendages must name at least one appendage; "
+                                  "got ()")
+        checked, seen = [], set()
+        for entry in apps:
+            if not isinstance(entry, tuple) or len(entry) != 2 or not isinstance(entry[0], str):
+                raise InputTypeError("StateLayout.appendages must hold (name, n_modes) pairs; "
+                                     f"got {entry!r}")
+            name, modes = entry
+            if name in seen or (name == "" and len(apps) > 1):
+                raise InputValueError("StateLayout.appendages names must be unique (and "
+                                      f"non-empty when there are several); got {name!r}")
+            seen.add(name)
+            checked.append((name, check_integer("StateLayout", "n_modes", modes, minimum=1)))
+        object.__setattr__(self, "appendages", tuple(checked))
+        extra = tuple((str(name), tuple(str(s) for s in names)) for name, names in self.extra)
+        object.__setattr__(self, "extra", extra)
+        object.__setattr__(self, "_index", self._blocks())
+
+    @classmethod
+    def single(cls, n_modes: int) -> "StateLayout":
+        """The layout of one unnamed appendage of ``n_modes`` modes on a pinned hub."""
+        return cls(appendages=(("", n_modes),))
+
+    # ------------------------------------------------------------------ construction
+    def _blocks(self) -> dict:
+        """``{block name: slice}`` for every block, and the state names."""
+        coords = (["theta"] if self.rotation else []) + (["hub_x", "hub_y"] if self.free_hub
+                                                         else [])
+        modal = {}
+        for name, modes in self.appendages:
+            prefix = f"{name}." if name else ""
+            modal[name] = (len(coords), len(coords) + modes)
+            coords += [f"{prefix}q{i}" for i in range(1, modes + 1)]
+        n_c = len(coords)
+        names = coords + [f"{c}_dot" for c in coords]
+        index = {"names": tuple(names), "n_coordinates": n_c, "modal": modal}
+        start = len(names)
+        for name, labels in self.extra:
+            index.setdefault("extra", {})[name] = slice(start, start + len(labels))
+            start += len(labels)
+            names += list(labels)
+        index["names"] = tuple(names)
+        return index
+
+    def with_block(self, name: str, labels) -> "StateLayout":
+        """This layout with a first-order block ``name`` of states ``labels`` appended."""
+        if name in dict(self.extra):
+            raise InputValueError(f"StateLayout block {name!r} exists already")
+        return StateLayout(appendages=self.appendages, free_hub=self.free_hub,
+                           rotation=self.rotation,
+                           extra=self.extra + ((name, tuple(labels)),))
+
+    def without_rotation(self) -> "StateLayout":
+        """The mechanical states left when the hub rotation is prescribed (no extra blocks)."""
+        return StateLayout(appendages=self.appendages, free_hub=self.free_hub, rotation=False)
+
+    def with_modes(self, n_modes) -> "StateLayout":
+        """The same blocks on other mode counts: one number for every appendage, or one per
+        appendage in order (a design model on fewer modes)."""
+        counts = (n_modes,) * len(self.appendages) if np.ndim(n_modes) == 0 else tuple(n_modes)
+        if len(counts) != len(self.appendages):
+            raise InputValueError(f"n_modes must be one count or {len(self.appendages)}; got "
+                                  f"{n_modes!r}")
+        return StateLayout(appendages=tuple((name, m) for (name, _), m
+                                            in zip(self.appendages, counts)),
+                           free_hub=self.free_hub, rotation=self.rotation, extra=self.extra)
+
+    # ------------------------------------------------------------------ sizes and names
+    @property
+    def names(self) -> tuple:
+        """State names in order."""
+        return self._index["names"]
+
+    @property
+    def n_states(self) -> int:
+        """Length of the state vector."""
+        return len(self.names)
+
+    @property
+    def n_coordinates(self) -> int:
+        """Number of generalized coordinates (hub angle, translation, modal coordinates)."""
+        return self._index["n_coordinates"]
+
+    @property
+    def n_mechanical(self) -> int:
+        """Coordinates and their rates: ``2 n_coordinates``."""
+        return 2 * self.n_coordinates
+
+    @property
+    def n_modes(self) -> int:
+        """Modal coordinates of all appendages together."""
+        return sum(modes for _, modes in self.appendages)
+
+    @property
+    def appendage_names(self) -> tuple:
+        """Appendage names in state order."""
+        return tuple(name for name, _ in self.appendages)
+
+    # ------------------------------------------------------------------ indices and slices
+    def _require_rotation(self):
+        if not self.rotation:
+            raise InputValueError("this state layout has no hub rotation (prescribed hub)")
+
+    @property
+    def theta(self) -> int:
+        """Index of the hub angle, rad."""
+        self._require_rotation()
+        return 0
+
+    @property
+    def theta_dot(self) -> int:
+        """Index of the hub rate, rad/s."""
+        self._require_rotation()
+        return self.n_coordinates
+
+    @property
+    def coordinates(self) -> slice:
+        """The generalized coordinates."""
+        return slice(0, self.n_coordinates)
+
+    @property
+    def velocities(self) -> slice:
+        """The rates of the generalized coordinates."""
+        return slice(self.n_coordinates, self.n_mechanical)
+
+    @property
+    def mechanical(self) -> slice:
+        """Coordinates and rates: the states of the structure."""
+        return slice(0, self.n_mechanical)
+
+    @property
+    def hub_position(self) -> slice | None:
+        """``hub_x, hub_y`` (m) for a free hub; ``None`` for a pinned one."""
+        if not self.free_hub:
+            return None
+        start = 1 if self.rotation else 0
+        return slice(start, start + 2)
+
+    @property
+    def hub_velocity(self) -> slice | None:
+        """``hub_x_dot, hub_y_dot`` (m/s) for a free hub; ``None`` for a pinned one."""
+        pos = self.hub_position
+        return None if pos is None else slice(pos.start + self.n_coordinates,
+                                              pos.stop + self.n_coordinates)
+
+    @property
+    def q(self) -> slice:
+        """Modal coordinates of every appendage, m."""
+        lo = self._index["modal"][self.appendages[0][0]][0]
+        return slice(lo, lo + self.n_modes)
+
+    @property
+    def q_dot(self) -> slice:
+        """Modal rates of every appendage, m/s."""
+        q = self.q
+        return slice(q.start + self.n_coordinates, q.stop + self.n_coordinates)
+
+    def modal_slice(self, appendage: str = "") -> slice:
+        """Modal coordinates of one appendage (by name; ``""`` for a single unnamed one)."""
+        if appendage not in self._index["modal"]:
+            raise InputValueError(f"appendage must be one of {list(self.appendage_names)}; "
+                                  f"got {appendage!r}")
+        return slice(*self._index["modal"][appendage])
+
+    def modal_rate_slice(self, appendage: str = "") -> slice:
+        """Modal rates of one appendage."""
+        s = self.modal_slice(appendage)
+        return slice(s.start + self.n_coordinates, s.stop + self.n_coordinates)
+
+    def block(self, name: str) -> slice:
+        """A first-order block appended by :meth:`with_block`."""
+        blocks = self._index.get("extra", {})
+        if name not in blocks:
+            raise InputValueError(f"state block must be one of {list(blocks)}; got {name!r}")
+        return blocks[name]
+
+    @property
+    def beam(self) -> np.ndarray:
+        """Indices of the states integrated under a prescribed hub rotation (every state but
+        ``theta`` and ``theta_dot``), in :meth:`without_rotation` order."""
+        keep = np.ones(self.n_mechanical, dtype=bool)
+        if self.rotation:
+            keep[[self.theta, self.theta_dot]] = False
+        return np.flatnonzero(keep)
+
+    def projection(self, other: "StateLayout") -> np.ndarray:
+        """Indices of this layout's states that form the state of ``other`` (a layout of the
+        same blocks on fewer modes, e.g. a design model): each appendage's first modes."""
+        if other.appendage_names != self.appendage_names or other.free_hub != self.free_hub \
+                or other.rotation != self.rotation:
+            raise InputValueError("the layouts must have the same appendages and hub")
+        rows = []
+        for part in ("coordinates", "velocities"):
+            offset = 0 if part == "coordinates" else self.n_coordinates
+            if self.rotation:
+                rows.append(offset)
+            if self.free_hub:
+                rows += [offset + k for k in range(self.hub_position.start,
+                                                   self.hub_position.stop)]
+            for name, modes in other.appendages:
+                start = self.modal_slice(name).start
+                if modes > dict(self.appendages)[name]:
+                    raise InputValueError(f"appendage {name!r} has {dict(self.appendages)[name]}"
+                                          f" modes here; cannot give {modes}")
+                rows += [offset + start + k for k in range(modes)]
+        return np.array(rows, dtype=int)
+
+    # ------------------------------------------------------------------ accessors
+    def hub_angle(self, x):
+        """Hub angle(s), rad."""
+        return x[self.theta]
+
+    def hub_rate(self, x):
+        """Hub rate(s), rad/s."""
+        return x[self.theta_dot]
+
+    def modal(self, x, appendage: str | None = None):
+        """Modal coordinates (of every appendage, or of one), m."""
+        return x[self.q if appendage is None else self.modal_slice(appendage)]
+
+    def modal_rates(self, x, appendage: str | None = None):
+        """Modal rates (of every appendage, or of one), m/s."""
+        return x[self.q_dot if appendage is None else self.modal_rate_slice(appendage)]
+
+    def split(self, x):
+        """``theta, q, theta_dot, q_dot`` of a state (pinned hub, rotation included)."""
+        return x[self.theta], x[self.q], x[self.theta_dot], x[self.q_dot]
+
+    def embed(self, row, block: str = "q", size: int | None = None) -> np.ndarray:
+        """A row vector of length ``size`` (default :attr:`n_states`) that reads ``row``
+        against one block (``"q"``, ``"q_dot"``, ``"theta"``, ``"theta_dot"``, or an
+        appendage's ``"<name>.q"``): e.g. the tip deflection ``phi(l)^T q`` as a map of the
+        whole state."""
+        out = np.zeros(self.n_states if size is None else int(size))
+        out[self._named_slice(block)] = row
+        return out
+
+    def _named_slice(self, block: str):
+        if block in ("q", "q_dot", "theta", "theta_dot", "coordinates", "velocities"):
+            return getattr(self, block)
+        if block.endswith(".q_dot"):
+            return self.modal_rate_slice(block[:-6])
+        if block.endswith(".q"):
+            return self.modal_slice(block[:-2])
+        return self.block(block)
+
+    def join(self, *, theta=None, q=None, theta_dot=None, q_dot=None, hub_position=None,
+             hub_velocity=None, **blocks):
+        """A state from its blocks (missing mechanical blocks are zero).
+
+        Each block is a number or an array whose first axis has the block's size; with arrays
+        of shape ``(k, P)`` the result has shape ``(n, P)``. CasADi symbols give a CasADi
+        column (``vertcat``).
+        """
+        parts = {"theta": theta, "hub_position": hub_position, "q": q,
+                 "theta_dot": theta_dot, "hub_velocity": hub_velocity, "q_dot": q_dot}
+        order = (["theta"] if self.rotation else []) + (["hub_position"] if self.free_hub
+                                                        else []) + ["q"]
+        order += [{"theta": "theta_dot", "hub_position": "hub_velocity",
+                   "q": "q_dot"}[k] for k in order]
+        sizes = {"theta": 1, "theta_dot": 1, "hub_position": 2, "hub_velocity": 2,
+                 "q": self.n_modes, "q_dot": self.n_modes}
+        unknown = set(blocks) - set(dict(self.extra))
+        if unknown:
+            raise InputValueError(f"state blocks must be among {list(dict(self.extra))}; got "
+                                  f"{sorted(unknown)}")
+        values = [(parts[k], sizes[k]) for k in order]
+        values += [(blocks.get(name), len(labels)) for name, labels in self.extra]
+        if any(_is_symbolic(v) for v, _ in values if v is not None):
+            import casadi as ca
+            return ca.vertcat(*[ca.DM.zeros(size) if v is None else v for v, size in values])
+        arrays = [(None if v is None else _block_array(v, size), size) for v, size in values]
+        widths = {a.shape[1] for a, _ in arrays if a is not None and a.ndim == 2}
+        if len(widths) > 1:
+            raise InputValueError(f"state blocks must share one number of columns; got "
+                                  f"{sorted(widths)}")
+        tail = tuple(widths)
+        return np.concatenate([np.zeros((size,) + tail) if a is None
+                               else np.broadcast_to(a if a.ndim == 2 or not tail
+                                                    else a[:, None], (size,) + tail)
+                               for a, size in arrays], axis=0)
+
+    def from_beam(self, beam_states, theta=0.0, theta_dot=0.0):
+        """The full state from the states of :meth:`without_rotation` (shape (m,) or (m, P))
+        and a prescribed hub angle and rate (numbers or arrays of shape (P,))."""
+        beam_states = np.asarray(beam_states, dtype=float)
+        width = beam_states.shape[1:]
+        out = np.zeros((self.n_mechanical,) + width)
+        out[self.beam] = beam_states
+        out[self.theta] = theta
+        out[self.theta_dot] = theta_dot
+        return out
+
+    def zeros(self) -> np.ndarray:
+        """The state at rest, shape (n,)."""
+        return np.zeros(self.n_states)
+
+    def __repr__(self):
+        apps = ", ".join(f"{name or 'beam'}: {modes} modes" for name, modes in self.appendages)
+        hub = "free hub" if self.free_hub else "pinned hub"
+        extra = "".join(f", {name} ({len(labels)})" for name, labels in self.extra)
+        return f"StateLayout({hub}, {apps}{extra}; {self.n_states} states)"
