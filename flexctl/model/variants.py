@@ -415,21 +415,34 @@ class Model:
         spin_rate = _spin(spin_rate)
         return self.matrices.K_ff - spin_rate ** 2 * self._c["stiff_d"]
 
-    def linear_matrices(self, spin_rate: float = 0.0):
-        """``A`` (n, n) and ``B`` (n, 1) of the linearisation about a steady spin (``q = 0``)."""
+    def second_order_form(self, spin_rate: float = 0.0):
+        """``M``, ``K``, ``C`` and the torque's load vector ``f`` of the linearisation about a
+        steady spin, ``M c_tt + C c_t + K c = f T_h`` in the generalized coordinates ``c``
+        (the state's coordinate block, :attr:`StateLayout.coordinates`).
+
+        Returns
+        -------
+        mass, stiffness, damping : ndarray, shape (n_c, n_c)
+        load : ndarray, shape (n_c,)
+        """
         spin_rate = _spin(spin_rate)
-        mat, layout = self.matrices, self.layout
-        # second-order form in the generalized coordinates, whose order the state's
-        # coordinate block keeps: layout.q indexes both
+        layout = self.layout
+        # the coordinate block keeps the state's order: layout.q and layout.theta index both
         n_c, q, hub = layout.n_coordinates, layout.q, layout.theta
-        mass = self.mass_matrix(layout.zeros())
-        stiff, damp, load = np.zeros((n_c, n_c)), np.zeros((n_c, n_c)), np.zeros((n_c, 1))
+        stiff, damp, load = np.zeros((n_c, n_c)), np.zeros((n_c, n_c)), np.zeros(n_c)
         stiff[q, q] = self.stiffness_matrix(spin_rate)
         damp[hub, hub] = self.system.hub.friction
-        damp[q, q] = mat.C_ff
-        load[hub, 0] = 1.0
-        m_inv_k, m_inv_c, m_inv_b = np.split(np.linalg.solve(mass, np.hstack((stiff, damp, load))),
-                                             [n_c, 2 * n_c], axis=1)
+        damp[q, q] = self.matrices.C_ff
+        load[hub] = 1.0
+        return self.mass_matrix(layout.zeros()), stiff, damp, load
+
+    def linear_matrices(self, spin_rate: float = 0.0):
+        """``A`` (n, n) and ``B`` (n, 1) of the linearisation about a steady spin (``q = 0``)."""
+        layout = self.layout
+        mass, stiff, damp, load = self.second_order_form(spin_rate)
+        n_c = layout.n_coordinates
+        m_inv_k, m_inv_c, m_inv_b = np.split(np.linalg.solve(
+            mass, np.column_stack((stiff, damp, load))), [n_c, 2 * n_c], axis=1)
         a = np.zeros((self.n_states, self.n_states))
         a[layout.coordinates, layout.velocities] = np.eye(n_c)
         a[layout.velocities, layout.coordinates] = -m_inv_k

@@ -130,13 +130,21 @@ def _applied_torque(t, x, z, torque, controller, parameters):
     return u + controller.casadi_torque(t, x)
 
 
+def drive_size(model, hub_motion=None, controller=None) -> int:
+    """Length of the state a run integrates: the beam's alone under a prescribed hub motion,
+    else the plant's and the controller's."""
+    if hub_motion is not None:
+        return model.layout.without_rotation().n_states
+    return model.n_states + int(getattr(controller, "n_states", 0) or 0)
+
+
 def _closed_loop_dynamics(model, t, y, torque, controller, parameters=None):
     """CasADi ``d[x, z]/dt`` of the plant ``x`` under ``torque`` and ``controller``, whose
     internal states ``z`` (if any) follow ``casadi_derivative``."""
     import casadi as ca
 
-    nx = model.n_states
-    x, z = y[:nx], y[nx:]
+    plant = model.layout.mechanical
+    x, z = y[plant], y[plant.stop:]
     u = _applied_torque(t, x, z, torque, controller, parameters)
     if isinstance(x, ca.MX):
         dx = model.integration_rhs()(x, u)
@@ -231,8 +239,7 @@ def numeric_rhs(model, torque=None, hub_motion=None, controller=None):
     it where a compiled segment failed: a few microseconds a call, against a few hundred for
     the Python model.
     """
-    n_y = model.n_modes * 2 if hub_motion is not None else \
-        model.n_states + (getattr(controller, "n_states", 0) or 0)
+    n_y = drive_size(model, hub_motion, controller)
     scale = np.ones(n_y)
     inputs = (torque, hub_motion, controller)
     rhs_key = _input_key(model, inputs, scale)

@@ -28,7 +28,7 @@ Examples
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -335,78 +335,108 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
         raise InputValueError("a torque added to a sampled controller needs a CasADi form "
                               "(casadi(t), e.g. the built-in manoeuvres); got a Python "
                               "callable")
-    T = controller.sample_time
-    edges = _sample_grid(t_final, T)
+    edges = _sample_grid(t_final, controller.sample_time)
     grid = output_grid(t_final, output_step)
     session = controller.start(model, np.array(x0, dtype=float))
     if not isinstance(session, ControllerSession):
         raise InputTypeError("controller.start must return a session with step(t, x) and "
                              f"report(); got {type(session).__name__}")
-    tip_map = np.zeros(model.n_states)
-    tip_map[1:model.n_modes + 1] = model.matrices.tip
-    if integrator == "rk4":
-        hold = _RK4Hold(model, torque, h_max)
-    else:
-        hold = _CvodesHold(model, torque, scale, rtol, max_steps)
-    ts, ys, us = [np.array([0.0])], [np.asarray(x0, dtype=float)[:, None]], []
-    stop, message, stop_state = None, f"reached t_final = {float(t_final):g} s", None
-    n_eval, controller_time, error, ends = 0, 0.0, None, []
-    y = np.asarray(x0, dtype=float)
+    hold = (_RK4Hold(model, torque, h_max) if integrator == "rk4"
+            else _CvodesHold(model, torque, scale, rtol, max_steps))
+    log = _SampleLog(x0=np.asarray(x0, dtype=float), t_final=float(t_final))
+    _sample_loop(log, session, hold, edges, grid, bad_sample)
+    if check_accuracy and log.stop is None:
+        tip_map = model.layout.embed(model.matrices.tip)
+        log.error = _replay_error(log, hold, edges, tip_map)
+    return _sampled_outputs(log, session, edges, grid, controller.sample_time)
+
+
+@dataclass
+class _SampleLog:
+    """What the sample loop has integrated so far."""
+
+    x0: np.ndarray
+    t_final: float
+    ts: list = field(default_factory=list)
+    ys: list = field(default_factory=list)
+    us: list = field(default_factory=list)
+    ends: list = field(default_factory=list)
+    stop: str | None = None
+    message: str | None = None
+    stop_state: np.ndarray | None = None
+    n_eval: int = 0
+    controller_time: float = 0.0
+    error: float | None = None
+
+    def __post_init__(self):
+        self.ts.append(np.array([0.0]))
+        self.ys.append(self.x0[:, None])
+        self.message = f"reached t_final = {self.t_final:g} s"
+
+
+def _sample_loop(log, session, hold, edges, grid, bad_sample):
+    """From sample to sample: the session's torque at each sample, held over the interval,
+    until the end, an integrator failure or a bad output sample."""
+    y = log.x0
     for lo, hi in zip(edges[:-1], edges[1:]):
         started = time.perf_counter()
         u = input_value("controller", session.step(float(lo), y.copy()), float(lo))
-        controller_time += time.perf_counter() - started
-        us.append(u)
-        t_out = grid[(grid > lo) & (grid < hi)]
-        t_out = np.append(t_out, hi)
+        log.controller_time += time.perf_counter() - started
+        log.us.append(u)
+        t_out = np.append(grid[(grid > lo) & (grid < hi)], hi)
         try:
             y_seg, evaluations = hold(lo, t_out, y, u)
-            n_eval += evaluations
+            log.n_eval += evaluations
         except RuntimeError:
-            stop = "integrator"
-            message = (f"the integration failed between samples t = {lo:.6g} s and "
-                       f"{hi:.6g} s under a held torque of {u:.6g} N m")
-            break
+            log.stop = "integrator"
+            log.message = (f"the integration failed between samples t = {lo:.6g} s and "
+                           f"{hi:.6g} s under a held torque of {u:.6g} N m")
+            return
         bad = bad_sample(y_seg)
         if bad is not None:
-            ts.append(t_out[:bad])
-            ys.append(y_seg[:, :bad])
-            stop, message, stop_state = "bad_sample", None, y_seg[:, bad]
-            break
-        ts.append(t_out)
-        ys.append(y_seg)
-        ends.append(y_seg[:, -1])
+            log.ts.append(t_out[:bad])
+            log.ys.append(y_seg[:, :bad])
+            log.stop, log.message, log.stop_state = "bad_sample", None, y_seg[:, bad]
+            return
+        log.ts.append(t_out)
+        log.ys.append(y_seg)
+        log.ends.append(y_seg[:, -1])
         y = y_seg[:, -1]
-    sample_times = edges[:len(us)]
-    if check_accuracy and stop is None:
-        # the recorded torques replayed by the looser integration (10x the tolerance, or
-        # twice the step): the difference at the samples estimates the run's error
-        try:
-            y_check = np.asarray(x0, dtype=float)
-            error = 0.0
-            for lo, hi, u, y_end in zip(edges[:-1], edges[1:], us, ends):
-                y_check, evaluations = hold(lo, np.array([hi]), y_check, u, loose=True)
-                y_check = y_check[:, -1]
-                n_eval += evaluations
-                error = max(error, float(abs(tip_map @ (y_end - y_check))))
-            error /= hold.error_divisor
-        except RuntimeError:
-            error = None
-    sample_torques = np.array(us, dtype=float)
-    t_all = np.concatenate(ts)
-    states = np.concatenate(ys, axis=1)
+
+
+def _replay_error(log, hold, edges, tip_map) -> float | None:
+    """The recorded torques replayed by the looser integration (10x the tolerance, or twice
+    the step): the largest tip difference at the samples estimates the run's error, m."""
+    try:
+        y_check = log.x0
+        error = 0.0
+        for lo, hi, u, y_end in zip(edges[:-1], edges[1:], log.us, log.ends):
+            y_check, evaluations = hold(lo, np.array([hi]), y_check, u, loose=True)
+            y_check = y_check[:, -1]
+            log.n_eval += evaluations
+            error = max(error, float(abs(tip_map @ (y_end - y_check))))
+        return error / hold.error_divisor
+    except RuntimeError:
+        return None
+
+
+def _sampled_outputs(log, session, edges, grid, sample_time) -> SampledRun:
+    """The run on the output grid (and its last time), with the held torque."""
+    sample_times = edges[:len(log.us)]
+    sample_torques = np.array(log.us, dtype=float)
+    t_all = np.concatenate(log.ts)
+    states = np.concatenate(log.ys, axis=1)
     # outputs on the grid (and the last time), as on the continuous path
     keep = np.isin(t_all, grid)
     keep[-1] = True
     t_all, states = t_all[keep], states[:, keep]
     index = np.clip(np.searchsorted(sample_times, t_all, side="right") - 1, 0,
-                    max(len(us) - 1, 0))
-    held = sample_torques[index] if us else np.zeros(t_all.size)
+                    max(len(log.us) - 1, 0))
+    held = sample_torques[index] if log.us else np.zeros(t_all.size)
     report = dict(session.report() or {})
-    report.update(samples=len(us), sample_time=T)
+    report.update(samples=len(log.us), sample_time=sample_time)
     return SampledRun(t=t_all, states=states, torque=held, sample_times=sample_times,
-                      sample_torques=sample_torques, stop=stop, message=message,
-                      stop_state=stop_state,
-                      n_evaluations=n_eval,
-                      integration_error=error,
-                      report=report, controller_time=controller_time)
+                      sample_torques=sample_torques, stop=log.stop, message=log.message,
+                      stop_state=log.stop_state, n_evaluations=log.n_eval,
+                      integration_error=log.error, report=report,
+                      controller_time=log.controller_time)

@@ -166,8 +166,8 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     if model.variant == "exact":
         return None
     t, x = np.asarray(t, dtype=float), np.asarray(states, dtype=float)
-    n, mat = model.n_modes, model.matrices
-    q, w, qd = x[1:n + 1], x[n + 1], x[n + 2:]
+    mat = model.matrices
+    _, q, w, qd = model.layout.split(x)
     energy = np.asarray(model.energy(x), dtype=float).reshape(-1)
     power = np.asarray(torque, dtype=float) * w
     work = cumulative_trapezoid(power, t, initial=0.0)

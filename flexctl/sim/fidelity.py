@@ -219,20 +219,13 @@ def largest_spin_rate(system: HubBeam, maneuver, t) -> float:
 
 def _modal_form(model, spin_rate: float, prescribed: bool):
     """Squared frequencies (1/s^2), modal damping (1/s) and tip gain of each flexible mode."""
-    mat, n = model.matrices, model.n_modes
-    beam_stiffness = model.stiffness_matrix(spin_rate)
+    mat = model.matrices
     if prescribed:
-        mass, stiff, damp = mat.M_ff, beam_stiffness, mat.C_ff
+        mass, stiff, damp = mat.M_ff, model.stiffness_matrix(spin_rate), mat.C_ff
         load, tip = -mat.m_tf, mat.tip
     else:
-        mass = model.mass_matrix(np.zeros(model.n_states))
-        stiff = np.zeros((n + 1, n + 1))
-        stiff[1:, 1:] = beam_stiffness
-        damp = np.zeros((n + 1, n + 1))
-        damp[0, 0] = model.system.hub.friction
-        damp[1:, 1:] = mat.C_ff
-        load = np.eye(n + 1)[0]
-        tip = np.concatenate(([0.0], mat.tip))
+        mass, stiff, damp, load = model.second_order_form(spin_rate)
+        tip = model.layout.embed(mat.tip, size=model.layout.n_coordinates)
     w2, vecs = scipy.linalg.eigh(stiff, mass)
     if not prescribed:
         # the rigid-body mode (w = 0) moves the hub only: no tip deflection

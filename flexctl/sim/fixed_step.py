@@ -24,7 +24,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from .compiled import (_cached, _closed_loop_dynamics, _input_key,
+from .compiled import (_cached, _closed_loop_dynamics, _input_key, drive_size,
                        _parameter_values)
 from ..model.exports import _symbolic_beam_dynamics
 
@@ -63,10 +63,7 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int):
     import casadi as ca
 
     sym = ca.MX if model.variant == "exact" else ca.SX
-    if hub_motion is not None:
-        ny = 2 * model.n_modes
-    else:
-        ny = model.n_states + int(getattr(controller, "n_states", 0) or 0)
+    ny = drive_size(model, hub_motion, controller)
     yt, h, c = sym.sym("yt", ny + 1), sym.sym("h"), sym.sym("c", n_numbers)
     y, t = yt[:ny], yt[ny]
 
@@ -221,70 +218,16 @@ def integrate_fixed_step(model, edges, t_out, y0, tip_map, h_max: float, rtol: f
         The finest run made, at ``t_out``; its ``error`` may exceed ``rtol`` times the peak
         after ``MAX_HALVINGS`` halvings (the caller warns).
     """
-    numbers = _parameter_values(controller)
-    inputs = (torque, hub_motion, controller)
-    base_key = _input_key(model, inputs, np.array([numbers.size], dtype=float))
-    step, rate = _cached(_STEP_CACHE, _STEP_CACHE_SIZE,
-                         None if base_key is None else ("rk4", base_key), (model, *inputs),
-                         lambda: _step_function(model, torque, hub_motion, controller,
-                                                numbers.size))
-    tip_map = np.asarray(tip_map, dtype=float)
-    t_out = np.asarray(t_out, dtype=float)
-    edges = np.asarray(edges, dtype=float)
-    widths = np.diff(edges)
-    base = np.maximum(1, np.ceil(widths / (2.0 * h_max) * (1.0 - 1e-12))).astype(int)
-    if 2 ** MAX_HALVINGS * 2 * int(base.sum()) > MAX_STEPS:
-        raise ValueError(f"the fixed-step run may need {2 ** (MAX_HALVINGS + 1) * base.sum()} "
-                         f"RK4 steps, more than the limit {MAX_STEPS}")
-
-    def runs(count):
-        key = None if base_key is None else ("rk4-runs", base_key, count, tip_map.tobytes())
-        return _cached(_STEP_CACHE, _STEP_CACHE_SIZE, key, (model, *inputs),
-                       lambda: _segment_runs(step, count, tip_map, model))
-
-    def run(refine, full):
-        """Tip at the step ends (coarse) or the states for dense output (full)."""
-        yt = np.append(np.asarray(y0, dtype=float), edges[0])
-        tips, blocks, derivatives, starts, sizes = [], [], [], [], []
-        with np.errstate(invalid="ignore", over="ignore"):
-            for lo, width, count in zip(edges[:-1], widths, base * refine):
-                h = width / count
-                if full:
-                    ys, fs = (np.array(v) for v in runs(int(count))[0](yt, h, numbers))
-                    blocks.append(ys)
-                    derivatives.append(fs)
-                    starts.append(lo + h * np.arange(count))
-                    sizes.append(np.full(count, h))
-                    yt = ys[:, -1]
-                else:
-                    tip, yt = (np.array(v) for v in runs(int(count))[1](yt, h, numbers))
-                    tips.append(tip.reshape(-1))
-                    yt = yt.reshape(-1)
-                yt[-1] = lo + width          # time exactly at the segment's end
-        if not full:
-            return np.concatenate(tips)
-        ny = y0.size
-        y_all = np.column_stack([np.asarray(y0, dtype=float)] + [b[:ny] for b in blocks])
-        return y_all, np.concatenate(derivatives, axis=1), np.concatenate(starts), \
-            np.concatenate(sizes)
-
-    def dense(found):
-        y_all, fs, starts, sizes = found
-        with np.errstate(invalid="ignore", over="ignore"):
-            f_end = np.array(rate(y_all[:, -1], edges[-1] * (1.0 - 1e-15), numbers))
-            return hermite(t_out, starts, sizes, y_all, np.column_stack((fs, f_end)))
-
-    y0 = np.asarray(y0, dtype=float)
-    coarse = run(1, full=False)
-    steps = int(base.sum())
-    evaluations = 4 * steps
+    runner = _RK4Runner(model, edges, y0, tip_map, h_max, (torque, hub_motion, controller))
+    coarse = runner.step_end_tips(1)
+    evaluations = 4 * int(runner.base.sum())
     refine = 1
     while True:
         refine *= 2
-        found = run(refine, full=True)
-        steps = int(base.sum()) * refine
+        found = runner.states(refine)
+        steps = int(runner.base.sum()) * refine
         evaluations += 4 * steps
-        fine = tip_map @ found[0]
+        fine = runner.tip_map @ found[0]
         finite = bool(np.all(np.isfinite(found[0])))
         error = None
         if finite:
@@ -292,6 +235,82 @@ def integrate_fixed_step(model, edges, t_out, y0, tip_map, h_max: float, rtol: f
             error = float(np.max(np.abs(fine[2::2] - coarse)))
             peak = float(np.max(np.abs(fine)))
         if not finite or error <= rtol * max(peak, 1e-12) or refine >= 2 ** MAX_HALVINGS:
-            return FixedStepRun(dense(found), error, steps, evaluations,
-                                float(np.max(widths / (base * refine))))
+            return FixedStepRun(runner.dense(found, t_out), error, steps, evaluations,
+                                float(np.max(runner.widths / (runner.base * refine))))
         coarse = fine[1:]
+
+
+class _RK4Runner:
+    """RK4 runs of one drive over fixed step boundaries at a given refinement: the compiled
+    loops (cached per step count), the tip at the step ends, the states for dense output."""
+
+    def __init__(self, model, edges, y0, tip_map, h_max, inputs):
+        self.model, self.inputs = model, inputs
+        self.numbers = _parameter_values(inputs[-1])
+        self.base_key = _input_key(model, inputs, np.array([self.numbers.size], dtype=float))
+        self.step, self.rate = _cached(
+            _STEP_CACHE, _STEP_CACHE_SIZE,
+            None if self.base_key is None else ("rk4", self.base_key), (model, *inputs),
+            lambda: _step_function(model, *inputs, self.numbers.size))
+        self.tip_map = np.asarray(tip_map, dtype=float)
+        self.y0 = np.asarray(y0, dtype=float)
+        self.edges = np.asarray(edges, dtype=float)
+        self.widths = np.diff(self.edges)
+        self.base = np.maximum(1, np.ceil(self.widths / (2.0 * h_max)
+                                          * (1.0 - 1e-12))).astype(int)
+        if 2 ** MAX_HALVINGS * 2 * int(self.base.sum()) > MAX_STEPS:
+            raise ValueError(f"the fixed-step run may need "
+                             f"{2 ** (MAX_HALVINGS + 1) * self.base.sum()} RK4 steps, more "
+                             f"than the limit {MAX_STEPS}")
+
+    def runs(self, count):
+        """The compiled loops of ``count`` steps: (states and derivatives, tip and end)."""
+        key = (None if self.base_key is None
+               else ("rk4-runs", self.base_key, count, self.tip_map.tobytes()))
+        return _cached(_STEP_CACHE, _STEP_CACHE_SIZE, key, (self.model, *self.inputs),
+                       lambda: _segment_runs(self.step, count, self.tip_map, self.model))
+
+    def _segments(self, refine):
+        """``(start, width, count, loops)`` of each segment at refinement ``refine``."""
+        for lo, width, count in zip(self.edges[:-1], self.widths, self.base * refine):
+            yield lo, width, int(count), self.runs(int(count))
+
+    def step_end_tips(self, refine) -> np.ndarray:
+        """The tip at every step end, m."""
+        yt = np.append(self.y0, self.edges[0])
+        tips = []
+        with np.errstate(invalid="ignore", over="ignore"):
+            for lo, width, count, loops in self._segments(refine):
+                tip, yt = (np.array(v) for v in loops[1](yt, width / count, self.numbers))
+                tips.append(tip.reshape(-1))
+                yt = yt.reshape(-1)
+                yt[-1] = lo + width          # time exactly at the segment's end
+        return np.concatenate(tips)
+
+    def states(self, refine):
+        """States at the step ends, derivatives, step starts and sizes, for dense output."""
+        yt = np.append(self.y0, self.edges[0])
+        blocks, derivatives, starts, sizes = [], [], [], []
+        with np.errstate(invalid="ignore", over="ignore"):
+            for lo, width, count, loops in self._segments(refine):
+                h = width / count
+                ys, fs = (np.array(v) for v in loops[0](yt, h, self.numbers))
+                blocks.append(ys)
+                derivatives.append(fs)
+                starts.append(lo + h * np.arange(count))
+                sizes.append(np.full(count, h))
+                yt = ys[:, -1]
+                yt[-1] = lo + width          # time exactly at the segment's end
+        ny = self.y0.size
+        y_all = np.column_stack([self.y0] + [b[:ny] for b in blocks])
+        return y_all, np.concatenate(derivatives, axis=1), np.concatenate(starts), \
+            np.concatenate(sizes)
+
+    def dense(self, found, t_out) -> np.ndarray:
+        """Cubic Hermite interpolation of a run of :meth:`states` at ``t_out``."""
+        y_all, fs, starts, sizes = found
+        with np.errstate(invalid="ignore", over="ignore"):
+            f_end = np.array(self.rate(y_all[:, -1], self.edges[-1] * (1.0 - 1e-15),
+                                       self.numbers))
+            return hermite(np.asarray(t_out, dtype=float), starts, sizes, y_all,
+                           np.column_stack((fs, f_end)))

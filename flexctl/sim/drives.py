@@ -1,0 +1,249 @@
+"""What drives a run: a prescribed hub motion, or a torque with a continuous controller.
+
+A drive owns the state the integrator carries (its :class:`~flexctl.model.layout.StateLayout`),
+its right-hand side for SciPy, the plant state and the hub torque it reports. The compiled
+paths build their own right-hand sides from the same inputs (:mod:`flexctl.sim.compiled`); a
+sampled controller has its own loop (:mod:`flexctl.sim.digital`).
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from .compiled import torque_history
+from .inputs import input_value, time_function
+from ..model import Model
+from ..model.errors import InputTypeError, InputValueError
+
+__all__ = ["Controller", "StaticLaw", "PrescribedDrive", "TorqueDrive", "as_controller"]
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """Feedback law with optional internal states ``z`` (e.g. an estimator).
+
+    Attributes
+    ----------
+    n_states : int
+        Number of internal states (0 for a static law).
+    """
+
+    n_states: int
+
+    def initial_state(self, x0: np.ndarray) -> np.ndarray:
+        """Internal state at ``t = 0`` given the plant's initial state, shape (n_states,)."""
+
+    def torque(self, t: float, x: np.ndarray, z: np.ndarray) -> float:
+        """Hub torque (N m) at time ``t`` for plant state ``x`` and internal state ``z``."""
+
+    def derivative(self, t: float, x: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """``dz/dt``, shape (n_states,)."""
+
+
+@dataclass(frozen=True, eq=False)
+class StaticLaw:
+    """A static feedback law ``torque = law(t, x)`` as a :class:`Controller` (no states).
+
+    :func:`simulate` wraps a callable ``controller`` in this; :class:`controllers.OpenLoop`
+    is the open-loop case ``torque = f(t)``.
+
+    Parameters
+    ----------
+    law : callable
+        ``law(t, x)``: hub torque, N m, at time ``t`` (s) for plant state ``x`` (shape (n,)).
+        Its ``breakpoints`` attribute (times, s, where it is not smooth), if any, is kept so
+        that :func:`simulate` restarts the integrator there.
+    """
+
+    law: object
+    n_states = 0
+
+    def __post_init__(self):
+        if not callable(self.law):
+            raise InputTypeError(f"{type(self).__name__}.law must be callable; got "
+                                 f"{type(self.law).__name__}")
+
+    @property
+    def breakpoints(self) -> tuple:
+        """The wrapped law's times of non-smoothness, s."""
+        return tuple(getattr(self.law, "breakpoints", ()) or ())
+
+    def initial_state(self, x0) -> np.ndarray:
+        """No internal state: shape (0,)."""
+        return np.zeros(0)
+
+    def torque(self, t, x, z=None) -> float:
+        """Hub torque, N m."""
+        return self.law(t, x)
+
+    def derivative(self, t, x, z=None) -> np.ndarray:
+        """No internal state: shape (0,)."""
+        return np.zeros(0)
+
+
+def as_controller(controller, x_init):
+    """``controller`` as a :class:`Controller`: a callable ``(t, x)`` becomes a
+    :class:`StaticLaw` whose errors name it with the time; anything else is refused by name."""
+    if controller is None or isinstance(controller, Controller):
+        return controller
+    if not callable(controller):
+        raise InputTypeError("controller must be callable as controller(t, x) or follow "
+                             f"the flexctl Controller protocol; got {type(controller).__name__}")
+    law = time_function(controller, "controller")    # its errors named, with the time
+    try:
+        inspect.signature(controller).bind(0.0, x_init)
+    except TypeError:
+        raise InputTypeError(
+            "controller must be callable as controller(t, x); got "
+            f"{getattr(controller, '__name__', type(controller).__name__)}, which cannot "
+            "take the state (a torque of time alone is passed as torque=)") from None
+    except ValueError:          # no signature to read (a builtin): its calls will tell
+        pass
+    law.breakpoints = tuple(getattr(controller, "breakpoints", ()) or ())
+    return StaticLaw(law)
+
+
+class _Drive:
+    """Shared part of the drives: the model, the segment end the inputs are held to.
+
+    Inputs are evaluated inside the current smooth segment: at its closed end the integrator
+    must see the value from the left, not the next piece's (:attr:`segment_end`).
+    """
+
+    prescribed = False
+    hub_motion = None
+    controller = None
+    torque = None
+
+    def __init__(self, model: Model):
+        self.model = model
+        self.segment_end = np.inf
+
+    def inside(self, t):
+        """``t`` held to the end of the current segment."""
+        return min(t, self.segment_end)
+
+    @property
+    def sources(self) -> tuple:
+        """The inputs, for breakpoints and step bounds."""
+        return (self.torque, self.hub_motion, self.controller)
+
+    def controller_states(self, y_all) -> np.ndarray:
+        """The controller's states over the run, shape (n_z, P)."""
+        return np.zeros((0, np.shape(y_all)[1]))
+
+
+class PrescribedDrive(_Drive):
+    """The hub follows ``hub_motion``; only the beam is integrated
+    (state :meth:`~flexctl.model.layout.StateLayout.without_rotation`)."""
+
+    prescribed = True
+
+    def __init__(self, model: Model, hub_motion, x_init):
+        super().__init__(model)
+        self.hub_motion = hub_motion
+        self.layout = model.layout.without_rotation()
+        self.y_init = x_init[model.layout.beam]
+
+    def rhs(self, t, y):
+        """``d[q, q_dot]/dt`` under the prescribed rate and acceleration."""
+        beam, motion = self.layout, self.hub_motion
+        t = self.inside(t)
+        qdd = self.model.beam_accelerations(
+            beam.modal(y), beam.modal_rates(y),
+            input_value("hub_motion.rate", motion.rate(t), t, "rad/s"),
+            input_value("hub_motion.acceleration", motion.acceleration(t), t, "rad/s^2"))
+        return np.concatenate((y[beam.velocities], qdd))
+
+    def check_inputs(self):
+        """Every input once at the start: a wrong type or a non-finite value is named."""
+        self.rhs(0.0, self.y_init)
+
+    def plant_state(self, t, y):
+        """The plant states at times ``t`` (shape (P,)) from the integrated ``y`` (m, P)."""
+        t = np.asarray(t)
+        return self.model.layout.from_beam(y, self.hub_motion.angle(t), self.hub_motion.rate(t))
+
+    def torque_output(self, t_all, states, z_all, symbolic):
+        """The torque the motion needs, N m, shape (P,)."""
+        model = self.model
+        acc = self.hub_motion.acceleration(t_all)
+        _, q, rate, q_dot = model.layout.split(states)
+        qdd = model.beam_accelerations(q, q_dot, rate, acc)
+        return model.hub_torque(states, acc, qdd)
+
+
+class TorqueDrive(_Drive):
+    """A hub torque (a function of time or of time and state) plus a continuous controller
+    with internal states ``z``; integrated state ``[x, z]``."""
+
+    def __init__(self, model: Model, torque, controller, x_init):
+        super().__init__(model)
+        self.torque, self.controller = torque, controller
+        self.torque_fn = time_function(torque, "torque") if torque is not None else None
+        self.nz = controller.n_states if controller is not None else 0
+        z_init = (np.asarray(controller.initial_state(x_init), dtype=float).reshape(-1)
+                  if controller is not None else np.zeros(0))
+        if z_init.shape != (self.nz,):
+            raise InputValueError(f"controller.initial_state must return {self.nz} values; "
+                                  f"got shape {z_init.shape}")
+        self.layout = (model.layout.with_block("controller", [f"z{k}" for k in range(self.nz)])
+                       if self.nz else model.layout)
+        self.plant = model.layout.mechanical
+        self.y_init = np.concatenate((x_init, z_init))
+
+    def _z(self, y):
+        return y[self.layout.block("controller")] if self.nz else y[:0]
+
+    def applied_torque(self, t, x, z):
+        """The hub torque, N m: the torque input plus the controller's."""
+        u = self.torque_fn(t, x) if self.torque_fn is not None else 0.0
+        if self.controller is not None:
+            u += input_value("controller", self.controller.torque(t, x, z), t)
+        return u
+
+    def rhs(self, t, y):
+        """``d[x, z]/dt``."""
+        x, z = y[self.plant], self._z(y)
+        dx = self.model.dynamics(t, x, self.applied_torque(self.inside(t), x, z))
+        if not self.nz:
+            return dx
+        dz = np.asarray(self.controller.derivative(t, x, z), dtype=float).reshape(-1)
+        if dz.shape != (self.nz,) or not np.all(np.isfinite(dz)):
+            raise InputValueError(f"controller.derivative must return {self.nz} finite "
+                                  f"numbers; got {dz!r} at t = {t:.6g} s")
+        return np.concatenate((dx, dz))
+
+    def check_inputs(self):
+        """Every input once at the start: a wrong type or a non-finite value is named."""
+        self.applied_torque(0.0, self.y_init[self.plant], self._z(self.y_init))
+
+    def plant_state(self, t, y):
+        """The plant states from the integrated ``y``."""
+        return y[self.plant]
+
+    def controller_states(self, y_all) -> np.ndarray:
+        return self._z(y_all)
+
+    def torque_output(self, t_all, states, z_all, symbolic):
+        """The hub torque over the run, N m, shape (P,)."""
+        torque, controller = self.torque, self.controller
+        out = None
+        if controller is None and (torque is None or symbolic) \
+                and not getattr(torque, "state_dependent", False):
+            # no torque, or a manoeuvre with a CasADi form: those evaluate a whole time array
+            # at once (checked, since a user's own class may not)
+            out = (np.zeros(t_all.size) if torque is None
+                   else np.asarray(torque(t_all), dtype=float).reshape(-1))
+            if out.shape != t_all.shape:
+                out = None
+        if out is None and symbolic:
+            out = torque_history(self.model, t_all, states, z_all, torque, controller)
+        if out is None:
+            out = np.array([self.applied_torque(t, states[:, k], z_all[:, k])
+                            for k, t in enumerate(t_all)])
+        return out

@@ -1,0 +1,452 @@
+"""A validated run request, and the integration plan drawn from it.
+
+:func:`run_request` checks every argument of :func:`flexctl.simulate` and turns the inputs into
+the forms the integrators take (samples into interpolants, Python functions traced into
+CasADi where the run is compiled, a callable controller into a
+:class:`~flexctl.sim.drives.StaticLaw`). :func:`plan_integration` then fixes what the
+integration of a given drive needs: tolerances per state, the method the stiffness of the
+model and the closed loop allow, the segments between the inputs' breakpoints.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from numbers import Real
+
+import numpy as np
+
+from .compiled import is_symbolic
+from .digital import is_sampled
+from .drives import as_controller
+from .inputs import (as_vector, check_method, check_rtol, check_time, jacobian_frequency,
+                     output_grid, time_function)
+from .progress import check_progress, progress_cuts
+from .tracing import torque_input
+from ..model import Model, SingularMassMatrixError
+from ..model.errors import InputTypeError, InputValueError
+
+__all__ = ["RunRequest", "IntegrationPlan", "run_request", "plan_integration", "state_scale",
+           "StiffnessWarning", "METHODS"]
+
+#: Integration methods: "auto" (CVODES when every input has a CasADi form, else DOP853),
+#: "cvodes" (compiled, :mod:`flexctl.sim.compiled`), "rk4" (compiled fixed step,
+#: :mod:`flexctl.sim.fixed_step`) and the ``scipy.integrate.solve_ivp`` methods.
+METHODS = ("auto", "cvodes", "rk4", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+#: Default tolerances: of the error-controlled methods, and of "rk4" (relative to the peak tip
+#: deflection, for "fast, and 1 % is enough").
+DEFAULT_RTOL = 1e-8
+RK4_RTOL = 1e-2
+#: Shortest run, s.
+MIN_T_FINAL = 1e-9
+#: Output samples over the run when no ``output_step`` is given.
+DEFAULT_OUTPUT_POINTS = 2000
+
+# ---- stiffness guard -------------------------------------------------------------------
+#: Largest ``omega h`` at which each explicit method stays stable on an undamped mode of
+#: frequency ``omega``: half the extent of its stability region along the imaginary axis
+#: (where ``|R(iy)| <= 1 + 1e-3``: DOP853 5.96, RK45 1.34, RK23 1.73), the margin that error
+#: control keeps in practice.
+EXPLICIT_STABILITY_LIMITS = {"DOP853": 3.0, "RK45": 0.67, "RK23": 0.87}
+#: An explicit method predicted to need more steps than this (about 5 s of DOP853 at ~40 us a
+#: right-hand side) is not used when the compiled implicit path can take the run.
+EXPLICIT_STEP_LIMIT = 10_000
+#: The closed loop counts as made stiff by its controller when its fastest pole is this many
+#: times the plant's fastest mode.
+LOOP_FACTOR = 2.0
+#: An explicit method kept for Python inputs is refused past this many steps (some 15 minutes
+#: of DOP853 at ~40 us a right-hand side).
+EXPLICIT_REFUSE_LIMIT = 2e6
+#: A run may span at most this many periods of the model's slowest mode: any integrator
+#: takes several steps a period. hub-beam-mass on 4 modes took 19 s for 8.7e3 periods
+#: (1e4 s, with its accuracy check), so the limit is some 4 minutes there, growing linearly;
+#: inside one CVODES call no interrupt reaches the run.
+MAX_PERIODS = 1e5
+#: A controller whose gains put the fastest closed-loop pole beyond this many times the
+#: plant's fastest mode is refused: nothing the model describes is that fast, and the run
+#: would crawl (a PD loop of bandwidth 1e6 rad/s on slew-90 took some 25 minutes).
+LOOP_LIMIT = 1e4
+#: CVODES may take at least this many steps between two output times, and
+#: CVODES_STEPS_PER_RADIAN per radian of the fastest mode over the interval; a run that needs
+#: more has blown up (a diverging beam stiffens without bound), and failing fast hands the
+#: interval to the SciPy path, which locates the stop.
+CVODES_MIN_STEPS = 5_000
+CVODES_STEPS_PER_RADIAN = 10.0
+
+
+class StiffnessWarning(RuntimeWarning):
+    """An explicit method was asked for on a model whose fastest mode makes it crawl."""
+
+
+@dataclass(frozen=True, eq=False)
+class RunRequest:
+    """The checked arguments of one :func:`flexctl.simulate` call.
+
+    Attributes
+    ----------
+    model : Model
+    t_final : float
+        s.
+    method : str
+        The method asked for, ``"auto"`` resolved (the stiffness guard may still change it).
+    rtol : float
+    atol : object
+        As given (``None``: each state's physical scale times ``rtol``).
+    grid : ndarray, shape (P,)
+        Output times, s; ``step`` their spacing.
+    max_step : float
+        Largest step, s (``inf``: none), the inputs' own bounds included.
+    torque, hub_motion, controller : object
+        The inputs in the form the integrators take (``controller`` a
+        :class:`~flexctl.sim.drives.Controller` or a sampled controller).
+    torque_fn : callable or None
+        ``torque`` as a checked ``g(t, x)``.
+    x_init : ndarray, shape (n,)
+        Initial plant state.
+    symbolic : bool
+        Every input has a CasADi form.
+    spin_frequency : float
+        Fastest beam frequency at the initial hub rate, rad/s (0 at rest).
+    report : callable or None
+        Progress reporter.
+    """
+
+    model: Model
+    t_final: float
+    method: str
+    rtol: float
+    atol: object
+    grid: np.ndarray
+    step: float
+    max_step: float
+    check_accuracy: bool
+    torque: object
+    hub_motion: object
+    controller: object
+    torque_fn: object
+    x_init: np.ndarray
+    symbolic: bool
+    spin_frequency: float
+    report: object
+
+    @property
+    def prescribed(self) -> bool:
+        """The hub follows a prescribed motion."""
+        return self.hub_motion is not None
+
+    @property
+    def sampled(self) -> bool:
+        """The controller runs sampled (:mod:`flexctl.sim.digital`)."""
+        return is_sampled(self.controller)
+
+
+def state_scale(model: Model, layout) -> np.ndarray:
+    """Each state's physical size in ``layout`` (the model's, with a controller block, or
+    without the hub rotation): 1e-3 rad, 1e-3 of the length, rates at the first clamped
+    frequency, 1e-3 for a controller's state. Times ``rtol``, the default ``atol``."""
+    rate = max(model.first_clamped_frequency, 1.0)
+    length = 1e-3 * model.system.beam.length
+    scale = np.full(layout.n_states, 1e-3)
+    scale[layout.coordinates] = length
+    scale[layout.velocities] = length * rate
+    if layout.rotation:
+        scale[layout.theta], scale[layout.theta_dot] = 1e-3, 1e-3 * rate
+    return scale
+
+
+def _check_arguments(model, t_final, hub_motion, torque, controller, method, rtol,
+                     output_step, max_step, progress):
+    """The plain arguments, checked: ``(t_final, method, rtol, output_step, max_step,
+    report)``."""
+    if not isinstance(model, Model):
+        raise InputTypeError(f"model must be a flexctl Model; got {type(model).__name__}")
+    t_final = check_time("t_final", t_final)
+    if t_final < MIN_T_FINAL:
+        # no integrator can step where t + h rounds to t, and nothing in these models moves
+        # on such a scale: a subnormal t_final divided by zero, 1e-300 s hung LSODA
+        raise InputValueError(f"t_final must be at least {MIN_T_FINAL:g} s; got {t_final!r}")
+    method = check_method(method, METHODS)
+    report = check_progress(progress)
+    rtol = check_rtol((RK4_RTOL if method == "rk4" else DEFAULT_RTOL) if rtol is None else rtol)
+    if hub_motion is not None and (torque is not None or controller is not None):
+        raise InputValueError("hub_motion prescribes the hub: it cannot be combined with "
+                              "torque or controller")
+    if hub_motion is not None:
+        for attr in ("angle", "rate", "acceleration"):
+            if not callable(getattr(hub_motion, attr, None)):
+                raise InputTypeError(f"hub_motion must have a callable {attr}(t); got "
+                                     f"{type(hub_motion).__name__}")
+    if output_step is not None:
+        output_step = check_time("output_step", output_step)
+    max_step = check_time("max_step", max_step, allow_inf=True)
+    return t_final, method, rtol, output_step, max_step, report
+
+
+def _step_bound(max_step: float, *sources) -> float:
+    """The shortest of ``max_step`` and the positive ``max_step`` the inputs declare, s."""
+    bounds = [getattr(src, "max_step", None) for src in sources]
+    return min([max_step] + [float(b) for b in bounds
+                             if isinstance(b, Real) and not isinstance(b, bool) and b > 0])
+
+
+def _resolve_method(method, symbolic, controller, untraced) -> str:
+    """The method the inputs allow: ``"auto"`` resolved, a compiled one refused for Python
+    inputs."""
+    if is_sampled(controller) and method not in ("auto", "cvodes", "rk4"):
+        raise InputValueError(f"method {method!r}: a sampled controller (sample_time "
+                              f"{controller.sample_time!r} s) runs on the compiled path; use "
+                              "method 'auto' or 'cvodes'")
+    if method in ("cvodes", "rk4") and not symbolic:
+        raise InputValueError(f"method {method!r} needs inputs with a CasADi form (the built-in "
+                              "manoeuvres, torque samples, controllers with casadi_torque); "
+                              "got a Python callable"
+                              + (f" (the torque function could not be traced: {untraced})"
+                                 if untraced else ""))
+    if method == "auto":
+        return "cvodes" if symbolic else "DOP853"
+    return method
+
+
+def _check_duration(model, t_final, prescribed):
+    """Refuse a run of more than :data:`MAX_PERIODS` periods of the slowest mode."""
+    hub = "clamped" if prescribed else "free"
+    omega_slow = float(model.natural_frequencies(0.0, hub=hub)[0])
+    periods = t_final * omega_slow / (2.0 * np.pi)
+    if periods > MAX_PERIODS:
+        raise InputValueError(
+            f"t_final {t_final:g} s spans {periods:.3g} periods of the slowest mode "
+            f"({omega_slow:.4g} rad/s), more than the limit {MAX_PERIODS:g} (each takes an "
+            "integrator several steps); shorten t_final")
+
+
+def _initial_state(model, x0) -> np.ndarray:
+    """``x0`` checked (default rest), shape (n,)."""
+    nx, names = model.n_states, ", ".join(model.state_names)
+    x_init = (model.layout.zeros() if x0 is None else
+              as_vector("x0", x0, f"{nx} numbers (states {names})").reshape(-1))
+    if x_init.shape != (nx,) or not np.all(np.isfinite(x_init)):
+        raise InputValueError(f"x0 must be {nx} finite numbers (states {names}); got {x0!r}")
+    return x_init
+
+
+def _spin_frequency(model, x_init, x0, t_final, prescribed) -> float:
+    """Fastest beam frequency at the initial hub rate, rad/s; a rate that would take an
+    explicit method beyond :data:`EXPLICIT_REFUSE_LIMIT` steps is refused."""
+    spin0 = 0.0 if prescribed else float(model.layout.hub_rate(x_init))
+    if not spin0:
+        return 0.0
+    # a stop on the way must be located by an explicit method, which resolves the fastest
+    # frequency the spin gives the beam
+    try:
+        with np.errstate(all="ignore"):
+            w_spin = float(np.max(np.abs(model.natural_frequencies(spin0, hub="clamped"))))
+    except (OverflowError, np.linalg.LinAlgError, ValueError):  # spin0 ** 2 overflowed
+        w_spin = np.inf
+    if not w_spin * t_final / 3.0 <= EXPLICIT_REFUSE_LIMIT:
+        raise InputValueError(
+            f"x0: the hub rate {spin0:g} rad/s gives the beam frequencies up to "
+            f"{w_spin:.3g} rad/s, some {w_spin * t_final / 3.0:.3g} steps over t_final "
+            f"{t_final:g} s, beyond the {EXPLICIT_REFUSE_LIMIT:.3g} a run may take; got "
+            f"x0 = {x0!r}")
+    return w_spin
+
+
+def _check_reach(model, x_init, x0):
+    """Refuse an initial state whose modal tip is already beyond the model's range."""
+    from .stops import EXACT_CURL
+    length = model.system.beam.length
+    reach = length * (EXACT_CURL if model.variant == "exact" else 1.0)
+    tip = float(model.matrices.tip @ model.layout.modal(x_init))
+    if abs(tip) >= reach:
+        raise InputValueError(f"x0 puts the modal tip at {tip:.4g} m, beyond the {reach:g} m "
+                              f"the {model.variant} model covers (beam length {length:g} m); "
+                              f"got x0 = {x0!r}")
+
+
+def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x0=None, *,
+                rtol=None, atol=None, method="auto", output_step=None, max_step=np.inf,
+                check_accuracy=True, progress=None) -> RunRequest:
+    """Check the arguments of :func:`flexctl.simulate` (the same signature) and give the run
+    they ask for."""
+    t_final, method, rtol, output_step, max_step, report = _check_arguments(
+        model, t_final, hub_motion, torque, controller, method, rtol, output_step, max_step,
+        progress)
+    # samples become an interpolant; a Python function is traced into CasADi when the rest
+    # of the run is compiled (flexctl.sim.tracing)
+    compiled_feedback = (controller is None or is_sampled(controller)
+                         or is_symbolic(controller=controller))
+    torque, untraced = torque_input(
+        torque, t_final=t_final, n_states=model.n_states,
+        trace=(method in ("auto", "cvodes", "rk4") and hub_motion is None
+               and compiled_feedback),
+        state_scale=state_scale(model, model.layout))
+    max_step = _step_bound(max_step, torque)
+    symbolic = is_symbolic(torque, hub_motion, None if is_sampled(controller) else controller)
+    method = _resolve_method(method, symbolic, controller, untraced)
+    step = output_step if output_step is not None else t_final / DEFAULT_OUTPUT_POINTS
+    grid = output_grid(t_final, step)
+    _check_duration(model, t_final, hub_motion is not None)
+    x_init = _initial_state(model, x0)
+    w_spin = _spin_frequency(model, x_init, x0, t_final, hub_motion is not None)
+    torque_fn = time_function(torque, "torque") if torque is not None else None
+    if not is_sampled(controller):
+        controller = as_controller(controller, x_init)
+    _check_reach(model, x_init, x0)
+    return RunRequest(model=model, t_final=float(t_final), method=method, rtol=float(rtol),
+                      atol=atol, grid=grid, step=float(step), max_step=max_step,
+                      check_accuracy=bool(check_accuracy), torque=torque,
+                      hub_motion=hub_motion, controller=controller, torque_fn=torque_fn,
+                      x_init=x_init, symbolic=symbolic, spin_frequency=w_spin, report=report)
+
+
+def check_atol(atol, size: int) -> np.ndarray:
+    """A user's ``atol``: one positive finite number or one per state, as shape (size,)."""
+    atol_vec = as_vector("atol", atol, "a positive number or one per state")
+    try:
+        atol_vec = np.broadcast_to(atol_vec, (size,)).astype(float)
+    except ValueError:
+        raise InputValueError(f"atol must be one number or {size}; got shape "
+                              f"{atol_vec.shape}") from None
+    if not np.all(np.isfinite(atol_vec)) or np.any(atol_vec <= 0):
+        raise InputValueError(f"atol must be positive and finite; got {atol!r}")
+    return atol_vec
+
+
+@dataclass(frozen=True, eq=False)
+class IntegrationPlan:
+    """How a drive is integrated: the method, tolerances per state and the segments.
+
+    Attributes
+    ----------
+    method : str
+        The method used (after the stiffness guard); ``fallback`` the SciPy method that
+        locates a stop.
+    atol : ndarray
+        Absolute tolerance per integrated state; ``scale = atol / rtol``.
+    cuts : list of float
+        Segment boundaries (the inputs' breakpoints), s; ``drive_cuts`` the ones the segment
+        loop steps through (more where progress is reported).
+    omega_plant, loop_frequency : float
+        Fastest mode of the plant at rest and fastest pole of the closed loop, rad/s.
+    cvodes_steps : int
+        CVODES's step budget between two output times.
+    cvodes_step : float or None
+        CVODES's largest step, s.
+    stiffness_note : str
+        What the stiffness guard did ("" when nothing).
+    """
+
+    method: str
+    fallback: str
+    atol: np.ndarray
+    scale: np.ndarray
+    cuts: list
+    drive_cuts: list
+    omega_plant: float
+    loop_frequency: float
+    cvodes_steps: int
+    cvodes_step: float | None
+    stiffness_note: str
+
+
+def _loop_frequency(request, drive, scale, omega_plant) -> float:
+    """Fastest pole of the closed loop at the start, rad/s (0 without a controller); gains
+    beyond :data:`LOOP_LIMIT` times the plant's fastest mode are refused."""
+    if request.controller is None:
+        return 0.0
+    try:
+        frequency = jacobian_frequency(drive.rhs, 0.0, drive.y_init, scale)
+    except SingularMassMatrixError:     # reported as such by the run itself
+        return 0.0
+    if frequency > LOOP_LIMIT * omega_plant:
+        raise InputValueError(
+            f"controller gains put the fastest closed-loop pole at {frequency:.4g} rad/s, "
+            f"more than {LOOP_LIMIT:g} times the fastest mode of the "
+            f"{request.model.n_modes}-mode model ({omega_plant:.4g} rad/s): the model "
+            "describes nothing that fast and the run would crawl; lower the gains (e.g. the "
+            "bandwidth)")
+    return frequency
+
+
+def stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
+                    prescribed: bool, loop_frequency: float = 0.0):
+    """``(method to use, reason)``: reason is empty when ``method`` is kept silently.
+
+    The step of an explicit method on an undamped mode ``omega`` is bounded by
+    ``limit / omega`` whatever the tolerance, so a run needs at least
+    ``omega_max t_final / limit`` steps, ``omega_max`` the highest natural frequency (hub held
+    for a prescribed motion, free otherwise). Past :data:`EXPLICIT_STEP_LIMIT` the run moves to
+    CVODES (BDF, compiled) when the inputs have a CasADi form. Python inputs keep the explicit
+    method with a warning: on these undamped models the fast modes are excited and must be
+    resolved by any method, and LSODA measured 1.8 to 2.9 times slower than DOP853 (Kane,
+    spacecraft and hub-beam-mass scenes, 12 and 16 modes, rtol 1e-5 and 1e-8, with and
+    without beam damping).
+
+    ``loop_frequency`` (rad/s) is the fastest pole of the closed loop (:func:`jacobian_frequency`
+    at the start): a controller's gains can make it far faster than any mode of the plant.
+    When they do, the fast poles are damped ones that an implicit method steps over, so a run
+    with Python inputs moves to LSODA (implicit BDF where the problem is stiff) rather than
+    crawl for minutes.
+    """
+    limit = EXPLICIT_STABILITY_LIMITS.get(method)
+    if limit is None:
+        return method, ""
+    omega_plant = float(model.natural_frequencies(
+        0.0, hub="clamped" if prescribed else "free")[-1])
+    omega_max = max(omega_plant, float(loop_frequency))
+    steps = omega_max * float(t_final) / limit
+    if steps <= EXPLICIT_STEP_LIMIT:
+        return method, ""
+    by_controller = omega_max > LOOP_FACTOR * omega_plant
+    source = (f"the fastest pole of the closed loop ({omega_max:.4g} rad/s, set by the "
+              f"controller's gains; the plant's fastest mode is {omega_plant:.4g} rad/s)"
+              if by_controller else
+              f"the fastest mode of this {model.n_modes}-mode model ({omega_max:.4g} rad/s, hub "
+              f"{'held' if prescribed else 'free'})")
+    reason = (f"stiffness: {method} is explicit and {source} bounds its step to about "
+              f"{limit:g}/{omega_max:.4g} s, some {steps:.3g} steps over {float(t_final):g} s "
+              f"(more than {EXPLICIT_STEP_LIMIT})")
+    if symbolic:
+        return "cvodes", reason + "; switched to cvodes (implicit BDF, compiled)"
+    if by_controller:
+        return "LSODA", reason + "; switched to LSODA (implicit BDF where the problem is stiff)"
+    if steps > EXPLICIT_REFUSE_LIMIT:
+        raise InputValueError(f"t_final {float(t_final):g} s: {reason}, beyond the "
+                              f"{EXPLICIT_REFUSE_LIMIT:.3g} steps a run may take; shorten "
+                              "t_final, use fewer modes or give the inputs a CasADi form")
+    return method, (reason + f"; kept {method} because the inputs have no CasADi form (give "
+                    "them one, e.g. the built-in manoeuvres, to run on cvodes)")
+
+
+def _breakpoints(*sources) -> list:
+    points = set()
+    for src in sources:
+        points.update(float(b) for b in getattr(src, "breakpoints", ()) or ())
+    return sorted(points)
+
+
+def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> IntegrationPlan:
+    """The integration of ``drive`` under ``request``; warns (:class:`StiffnessWarning`) when
+    the stiffness guard changes or keeps an explicit method on a stiff run."""
+    model, rtol, t_final = request.model, request.rtol, request.t_final
+    if request.atol is None:
+        atol = rtol * state_scale(model, drive.layout)
+    else:
+        atol = check_atol(request.atol, drive.layout.n_states)
+    omega_plant = float(model.natural_frequencies(
+        0.0, hub="clamped" if request.prescribed else "free")[-1])
+    loop = _loop_frequency(request, drive, atol / rtol, omega_plant)
+    method, note = stiffness_guard(model, t_final, request.method, request.symbolic,
+                                   request.prescribed, loop)
+    if note:
+        warnings.warn(note, StiffnessWarning, stacklevel=stacklevel)
+    cuts = [0.0] + [b for b in _breakpoints(*drive.sources) if 0.0 < b < t_final] + [t_final]
+    steps = int(min(1e6, max(CVODES_MIN_STEPS, CVODES_STEPS_PER_RADIAN
+                             * max(omega_plant, loop) * request.step)))
+    return IntegrationPlan(
+        method=method, fallback="DOP853" if method == "cvodes" else method, atol=atol,
+        scale=atol / rtol, cuts=cuts,
+        drive_cuts=cuts if request.report is None else progress_cuts(cuts, t_final),
+        omega_plant=omega_plant, loop_frequency=loop, cvodes_steps=steps,
+        cvodes_step=request.max_step if np.isfinite(request.max_step) else None,
+        stiffness_note=note)

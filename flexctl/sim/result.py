@@ -1,0 +1,221 @@
+"""The result of a run, and its assembly from what the integration handed back.
+
+Only the output grid and the last time (``t_final`` or the stop) are reported; the arrays of a
+stopped run end at the stop time and never hold NaN or overflowed values. A small-deflection
+run's energy is balanced against the work of the hub torque (:mod:`flexctl.sim.energy`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .energy import EnergyBalance, ModelValidityWarning, energy_balance
+from .stops import StopReason, softened, stiffness_reason
+from ..model import Model
+from ..model.errors import InputValueError
+
+__all__ = ["SimulationResult", "assemble_result", "audit_energy"]
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """Outcome of :func:`simulate`.
+
+    Attributes
+    ----------
+    model : Model
+    t : ndarray, shape (P,)
+        Output times, s.
+    states : ndarray, shape (n, P)
+        Plant states in the order of :attr:`Model.state_names` (:attr:`Model.layout`).
+    torque : ndarray, shape (P,)
+        Hub torque, N m (the torque the prescribed motion needs, for ``hub_motion`` runs).
+    tip_deflection, root_moment : ndarray, shape (P,)
+        m and N m.
+    status : {"ok", "diverged", "singular"}
+    message : str
+        Why the run stopped, with the time and the physical reason.
+    wall_time : float
+        Integration wall time, s.
+    n_evaluations : int
+        Number of right-hand-side evaluations.
+    controller_states : ndarray, shape (n_z, P)
+    integration_error : float or None
+        Estimated largest integration error of the tip deflection, m: the difference from a
+        check run at 10 times the tolerance (conservative). ``None`` where no check ran (SciPy
+        methods, stopped runs, ``check_accuracy=False``).
+    validity : ModelValidity or None
+        Deflection reached and estimated geometric model error
+        (:func:`flexctl.sim.validity.assess`); set by scene runs, ``None`` from
+        :func:`simulate` itself.
+    stop_reason : StopReason
+        Why the run ended (``status`` is ``stop_reason.status``).
+    energy_balance : EnergyBalance or None
+        Energy against the work done, from the outputs (:func:`energy_balance`); ``None`` for
+        the exact variant and a singular stop (whose hub rate outruns the samples). When it is
+        violated the message says so, and a run that reached ``t_final`` warns
+        (:class:`ModelValidityWarning`).
+    controller_report : dict or None
+        For a sampled controller (:mod:`flexctl.sim.digital`): the session's report (e.g. solve
+        times) with ``samples``, ``sample_time`` (s) and ``controller_time`` (s, wall time in
+        the controller); ``None`` otherwise.
+    """
+
+    model: Model
+    t: np.ndarray
+    states: np.ndarray
+    torque: np.ndarray
+    tip_deflection: np.ndarray
+    root_moment: np.ndarray
+    status: str
+    message: str
+    wall_time: float
+    n_evaluations: int
+    method: str
+    rtol: float
+    controller_states: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    integration_error: float | None = None
+    validity: object = None
+    controller_report: dict | None = None
+    stop_reason: StopReason | None = None
+    energy_balance: EnergyBalance | None = None
+
+    @classmethod
+    def from_states(cls, model: Model, t, states, torque, **fields) -> "SimulationResult":
+        """A result whose tip deflection and root moment are computed from ``states``."""
+        return cls(model=model, t=t, states=states, torque=torque,
+                   tip_deflection=np.asarray(model.tip_deflection(states), dtype=float),
+                   root_moment=model.matrices.root @ model.layout.modal(states), **fields)
+
+    @property
+    def deflection_ratio(self) -> float:
+        """Largest ``|tip_deflection|`` divided by the beam length."""
+        return self.peak_tip_deflection / self.model.system.beam.length
+
+    @property
+    def ok(self) -> bool:
+        """True when the run reached ``t_final``."""
+        return self.status == "ok"
+
+    @property
+    def theta(self) -> np.ndarray:
+        """Hub angle, rad, shape (P,)."""
+        return self.model.layout.hub_angle(self.states)
+
+    @property
+    def theta_dot(self) -> np.ndarray:
+        """Hub rate, rad/s, shape (P,)."""
+        return self.model.layout.hub_rate(self.states)
+
+    @property
+    def q(self) -> np.ndarray:
+        """Modal coordinates, m, shape (N, P)."""
+        return self.model.layout.modal(self.states)
+
+    @property
+    def outputs(self) -> dict:
+        """Every model output by name (:attr:`Model.output_names`), each shape (P,)."""
+        y = self.model.outputs(self.states)
+        return dict(zip(self.model.output_names, y))
+
+    @property
+    def peak_tip_deflection(self) -> float:
+        """Largest ``|tip_deflection|``, m."""
+        return float(np.max(np.abs(self.tip_deflection))) if self.t.size else 0.0
+
+    def __repr__(self):
+        return (f"SimulationResult(status={self.status!r}, t_end={self.t[-1]:.6g} s, "
+                f"points={self.t.size}, peak_tip_deflection={self.peak_tip_deflection:.6g} m, "
+                f"wall_time={self.wall_time:.3g} s)")
+
+
+def audit_energy(model: Model, result_arrays, reason: StopReason, message: str,
+                 stacklevel: int):
+    """``(EnergyBalance or None, message)`` of a run, the message naming a broken balance.
+
+    ``result_arrays`` is ``(t, states, torque)``. A run that reached its end with a broken
+    balance warns (:class:`ModelValidityWarning`); a stopped one gets the balance as its
+    physical reason, and zero_order or first_order the loss of beam stiffness when the hub
+    rate has passed it. A singular stop has its own reason.
+    """
+    if reason is StopReason.SINGULAR_MASS:
+        # the hub rate outruns the output samples near the singularity: a balance would
+        # measure their quadrature, not the model (which conserves energy)
+        return None, message
+    balance = energy_balance(model, *result_arrays)
+    if balance is None:
+        return balance, message
+    message = message.rstrip(".")
+    if reason is not StopReason.REACHED_END and reason is not StopReason.TIP_PAST_LENGTH \
+            and model.variant != "consistent" and balance.violated:
+        spin = float(model.layout.hub_rate(result_arrays[1][:, -1]))
+        if softened(model, spin):
+            message = f"{message}: {stiffness_reason(model, spin)}"
+    if not balance.violated:
+        return balance, message
+    if reason is StopReason.REACHED_END:
+        warnings.warn(f"energy balance violated: {balance.message}", ModelValidityWarning,
+                      stacklevel=stacklevel)
+        return balance, f"{message}; energy balance violated: {balance.message}"
+    return balance, f"{message}; {balance.message}"
+
+
+def _output_samples(grid, traj):
+    """The trajectory's samples on the output grid and at its last time, cut before the first
+    non-finite one: ``(t, y)``."""
+    t_all = np.concatenate(traj.ts)
+    y_all = np.concatenate(traj.ys, axis=1)
+    # segment ends at breakpoints off the grid were integration restarts, not outputs
+    keep = np.concatenate(([True], np.diff(t_all) > 0)) & np.isin(t_all, grid)
+    keep[-1] = True
+    t_all, y_all = t_all[keep], y_all[:, keep]
+    finite = np.all(np.isfinite(y_all), axis=0)
+    if not finite.all():
+        first_bad = int(np.argmin(finite))
+        t_all, y_all = t_all[:first_bad], y_all[:, :first_bad]
+        traj.stop(StopReason.NON_FINITE_STATE,
+                  f"the state became non-finite after t = {t_all[-1]:.6g} s")
+    return t_all, y_all
+
+
+def _finite_torque(t_all, states, z_all, torque, traj):
+    """The arrays cut before the first non-finite torque (the torque a prescribed motion
+    needs, or an input's own array form, overflowed)."""
+    finite = np.isfinite(torque)
+    if finite.all():
+        return t_all, states, z_all, torque
+    first_bad = int(np.argmin(finite))
+    if first_bad == 0:
+        raise InputValueError(f"the hub torque is {torque[0]!r} at t = 0 s; the inputs must "
+                              "keep it finite")
+    traj.stop(StopReason.NON_FINITE_TORQUE,
+              f"the hub torque became non-finite after t = {t_all[first_bad - 1]:.6g} s")
+    return (t_all[:first_bad], states[:, :first_bad], z_all[:, :first_bad],
+            torque[:first_bad])
+
+
+def assemble_result(request, plan, drive, stops, traj, wall: float) -> SimulationResult:
+    """The :class:`SimulationResult` of an integrated run: outputs, torque, stop message,
+    energy audit and the notes of the stiffness guard and the accuracy check."""
+    model = request.model
+    t_all, y_all = _output_samples(request.grid, traj)
+    states = np.asarray(drive.plant_state(t_all, y_all))
+    z_all = drive.controller_states(y_all)
+    torque = np.asarray(drive.torque_output(t_all, states, z_all, request.symbolic),
+                        dtype=float).reshape(-1)
+    t_all, states, z_all, torque = _finite_torque(t_all, states, z_all, torque, traj)
+    message = traj.message or f"reached t_final = {request.t_final:g} s"
+    if traj.found:
+        message = stops.message(traj.reason, float(t_all[-1]), states[:, -1])
+    balance, message = audit_energy(model, (t_all, states, torque), traj.reason, message, 4)
+    for note in (plan.stiffness_note, traj.accuracy_note):
+        if note:
+            message = f"{message} ({note})"
+    return SimulationResult.from_states(
+        model, t_all, states, torque, status=traj.reason.status, message=message,
+        wall_time=wall, n_evaluations=int(traj.n_eval), method=plan.method, rtol=request.rtol,
+        controller_states=z_all, integration_error=traj.integration_error,
+        stop_reason=traj.reason, energy_balance=balance)

@@ -1,0 +1,321 @@
+"""Integration strategies: one per method family, each a small object with one ``run``.
+
+- :class:`CvodesSegments`: the compiled right-hand side integrated by CVODES segment by
+  segment (between the inputs' breakpoints); where a segment fails or passes a stopping
+  condition, SciPy locates the stop from the last good sample on a bounded budget.
+- :class:`FixedStepRK4`: the compiled fixed-step loop of :mod:`flexctl.sim.fixed_step`, one
+  call for the whole run, its step halved until a step-doubling estimate meets ``rtol``.
+- :class:`ScipyIVP`: ``scipy.integrate.solve_ivp`` segment by segment, with the stopping
+  conditions as terminal events.
+
+Each hands back a :class:`Trajectory`: the samples it integrated and why it stopped. The
+accuracy check of a compiled run (:func:`check_run_accuracy`) is its own step.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .compiled import SegmentIntegrator, numeric_rhs, verify_accuracy
+from .fixed_step import MAX_HALVINGS, RK4_OMEGA_H, integrate_fixed_step
+from .inputs import jacobian_frequency
+from .progress import Progress
+from .stops import StopReason
+from ..model import SingularMassMatrixError
+from ..model.errors import InputValueError
+
+__all__ = ["Trajectory", "CvodesSegments", "FixedStepRK4", "ScipyIVP", "strategy_for",
+           "check_run_accuracy", "AccuracyWarning", "FALLBACK_EVALUATIONS"]
+
+#: Where a compiled segment fails, SciPy locates the stop with at most this many evaluations
+#: of the right-hand side (1 to 5 s of DOP853 steps); a state so stiff that they do not
+#: reach it ends the run as an integrator failure, with its stiffness named. The 3e4 kg
+#: tip-mass divergence of first_order took 7.5e4.
+FALLBACK_EVALUATIONS = 200_000
+
+
+class AccuracyWarning(RuntimeWarning):
+    """The accuracy check of a compiled run found it wrong and what was done about it."""
+
+
+@dataclass
+class Trajectory:
+    """What an integration hands back: samples, effort, and why it stopped.
+
+    ``found`` is True when a stopping condition ended the run and its physical reason is
+    still to be named from the last state (:meth:`StopConditions.message`).
+    """
+
+    ts: list
+    ys: list
+    reason: StopReason = StopReason.REACHED_END
+    message: str = ""
+    found: bool = False
+    n_eval: int = 0
+    compiled_segments: list = field(default_factory=list)
+    integration_error: float | None = None
+    accuracy_note: str = ""
+
+    def add(self, t, y):
+        """Append samples ``t`` (K,) and ``y`` (m, K)."""
+        self.ts.append(t)
+        self.ys.append(y)
+
+    def stop(self, reason: StopReason, message: str = "", found: bool = False):
+        """End the run for ``reason``."""
+        self.reason, self.message, self.found = reason, message, found
+
+
+class _BudgetSpent(Exception):
+    """The fallback integrator spent its evaluations at time ``t`` in state ``y``."""
+
+    def __init__(self, t, y):
+        super().__init__(f"evaluation budget spent at t = {t:.6g} s")
+        self.t, self.y = float(t), np.array(y, dtype=float)
+
+
+class _Budgeted:
+    """A right-hand side that raises :class:`_BudgetSpent` past ``budget`` evaluations."""
+
+    def __init__(self, rhs, budget: int):
+        self.rhs, self.left = rhs, int(budget)
+
+    def __call__(self, t, y):
+        self.left -= 1
+        if self.left < 0:
+            raise _BudgetSpent(t, y)
+        return self.rhs(t, y)
+
+
+class _Segments:
+    """The segment loop shared by the error-controlled strategies: each segment between two
+    cuts is integrated onto the output times inside it, restarting at every cut."""
+
+    def __init__(self, request, plan, drive, stops):
+        self.request, self.plan, self.drive, self.stops = request, plan, drive, stops
+        self.start = time.perf_counter()
+
+    def run(self) -> Trajectory:
+        """Integrate every segment until the end or a stop."""
+        drive, grid = self.drive, self.request.grid
+        traj = Trajectory(ts=[np.array([0.0])], ys=[drive.y_init[:, None]])
+        y = drive.y_init
+        cuts = self.plan.drive_cuts
+        for lo, hi in zip(cuts[:-1], cuts[1:]):
+            t_eval = grid[(grid > lo) & (grid <= hi)]
+            if t_eval.size == 0 or t_eval[-1] < hi:
+                t_eval = np.append(t_eval, hi)
+            drive.segment_end = np.nextafter(hi, lo)
+            y = self.segment(traj, lo, hi, t_eval, y)
+            if y is None:
+                break
+            self.report(hi)
+        return traj
+
+    def report(self, t_reached, note: str = ""):
+        """Progress to the reporter, if any."""
+        if self.request.report is not None:
+            self.request.report(Progress(t_reached, self.request.t_final,
+                                         time.perf_counter() - self.start, *((note,) if note
+                                                                            else ())))
+
+    def segment(self, traj, lo, hi, t_eval, y):
+        """Integrate ``[lo, hi]`` from ``y``: the state at ``hi``, or None after a stop."""
+        return self.solve_ivp(traj, lo, hi, t_eval, y, self.drive.rhs)
+
+    def solve_ivp(self, traj, lo, hi, t_eval, y, rhs):
+        """``solve_ivp`` over ``[lo, hi]`` with the stops as terminal events."""
+        plan, request = self.plan, self.request
+        try:
+            with np.errstate(over="raise", invalid="raise"):
+                sol = solve_ivp(rhs, (lo, hi), y, method=plan.fallback, t_eval=t_eval,
+                                rtol=request.rtol, atol=plan.atol, events=self.stops.events(),
+                                max_step=request.max_step)
+        except _BudgetSpent as spent:
+            traj.stop(StopReason.INTEGRATOR_FAILED, self._budget_message(lo, spent))
+            return None
+        except SingularMassMatrixError as exc:
+            # named again from the state, with J_eff
+            traj.stop(StopReason.SINGULAR_MASS, str(exc), found="effective" in str(exc))
+            return None
+        except FloatingPointError as exc:
+            traj.stop(StopReason.STATE_OVERFLOW,
+                      f"the state overflowed between t = {lo:.6g} s and {hi:.6g} s ({exc})")
+            return None
+        traj.n_eval += sol.nfev
+        return self._take(traj, sol, y.size)
+
+    def _take(self, traj, sol, size):
+        """Keep ``sol``'s samples up to its first event; the last state, or None."""
+        # (solve_ivp hands back lists when an event fires before the first output time)
+        t_seg = np.asarray(sol.t, dtype=float)
+        y_seg = np.asarray(sol.y, dtype=float).reshape(size, t_seg.size)
+        hits = [(float(te[0]), k, ye[0]) for k, (te, ye) in
+                enumerate(zip(sol.t_events, sol.y_events)) if te.size]
+        if hits:
+            stop_time, kind, y_stop = min(hits, key=lambda h: h[0])
+            before = t_seg < stop_time
+            traj.add(np.append(t_seg[before], stop_time),
+                     np.column_stack((y_seg[:, before], y_stop)))
+            traj.stop(self.stops.reason_of_event(kind), found=True)
+            return None
+        if t_seg.size:
+            traj.add(t_seg, y_seg)
+        if sol.status != 0:
+            traj.stop(StopReason.INTEGRATOR_FAILED,
+                      f"integration failed at t = {sol.t[-1]:.6g} s: {sol.message}")
+            return None
+        return sol.y[:, -1]
+
+    def _budget_message(self, lo, spent) -> str:
+        """The integrator failure of a stop search that spent its budget, with the stiffness
+        of the state it reached."""
+        try:                    # a diagnosis only: any failure of it leaves it unknown
+            with np.errstate(all="ignore"):
+                w = jacobian_frequency(self.fallback_rhs or self.drive.rhs, spent.t, spent.y,
+                                       self.plan.scale)
+        except (ArithmeticError, ValueError, SingularMassMatrixError):
+            w = math.inf
+        return (f"integration failed at t = {lo:.6g} s: the compiled integrator could not pass "
+                f"it and {FALLBACK_EVALUATIONS:.3g} evaluations of {self.plan.fallback} from "
+                f"there reached only t = {spent.t:.6g} s; the state had become stiff (fastest "
+                f"rate {w:.3g} 1/s against the fastest mode at rest, "
+                f"{self.plan.omega_plant:.3g} rad/s)")
+
+    fallback_rhs = None
+
+
+class ScipyIVP(_Segments):
+    """``scipy.integrate.solve_ivp`` on the drive's Python right-hand side."""
+
+
+class CvodesSegments(_Segments):
+    """CVODES on the compiled right-hand side; SciPy locates a stop within a segment."""
+
+    def __init__(self, request, plan, drive, stops):
+        super().__init__(request, plan, drive, stops)
+        self._compiled_rhs = None
+        # consistent keeps the Python right-hand side to locate a stop, which names a
+        # singular mass matrix
+        if request.model.variant != "consistent":
+            self.fallback_rhs = self._compiled_fallback
+
+    def _compiled_fallback(self, t, y):
+        """The compiled right-hand side for SciPy, built on first use (most runs never need
+        it)."""
+        if self._compiled_rhs is None:
+            r = self.request
+            self._compiled_rhs = numeric_rhs(r.model, r.torque, r.hub_motion, r.controller)
+        dy = self._compiled_rhs(t, y, self.drive.segment_end)
+        if not np.all(np.isfinite(dy)):
+            raise FloatingPointError("the state derivative is not finite")
+        return dy
+
+    def segment(self, traj, lo, hi, t_eval, y):
+        request, plan = self.request, self.plan
+        try:
+            integ = SegmentIntegrator(request.model, lo, t_eval, plan.scale, request.rtol,
+                                      torque=request.torque, hub_motion=request.hub_motion,
+                                      controller=request.controller,
+                                      max_steps=plan.cvodes_steps, max_step=plan.cvodes_step)
+            y_seg = integ(y)
+            traj.n_eval += integ.n_evaluations
+            bad = self.stops.first_bad(y_seg)
+        except RuntimeError:
+            y_seg, bad = None, 0
+        if bad is None:
+            traj.add(t_eval, y_seg)
+            traj.compiled_segments.append((lo, t_eval))
+            return y_seg[:, -1]
+        # Something stops the run in this segment: find where, exactly, with SciPy from the
+        # last good sample.
+        if bad > 0:
+            traj.add(t_eval[:bad], y_seg[:, :bad])
+            lo, y = float(t_eval[bad - 1]), y_seg[:, bad - 1]
+        locate = _Budgeted(self.fallback_rhs or self.drive.rhs, FALLBACK_EVALUATIONS)
+        return self.solve_ivp(traj, lo, hi, t_eval[bad:], y, locate)
+
+
+class FixedStepRK4:
+    """Compiled fixed-step RK4 over the whole run in one call (:mod:`flexctl.sim.fixed_step`)."""
+
+    def __init__(self, request, plan, drive, stops):
+        self.request, self.plan, self.drive, self.stops = request, plan, drive, stops
+
+    def _step_bound(self) -> float:
+        """The coarse step: :data:`RK4_OMEGA_H` over the fastest frequency the run meets
+        (the plant's, the loop's, the initial spin's, a prescribed spin's)."""
+        request, plan = self.request, self.plan
+        omega_max = max(plan.omega_plant, plan.loop_frequency, request.spin_frequency)
+        if request.prescribed:
+            rates = np.asarray(request.hub_motion.rate(request.grid), dtype=float)
+            spin_max = float(np.max(np.abs(rates))) if rates.size else 0.0
+            if np.isfinite(spin_max) and spin_max > 0.0:
+                omega_max = max(omega_max, float(request.model.natural_frequencies(
+                    spin_max, hub="clamped")[-1]))
+        return min(RK4_OMEGA_H / omega_max, 0.5 * request.max_step)
+
+    def run(self) -> Trajectory:
+        request, drive, stops = self.request, self.drive, self.stops
+        tip_map = drive.layout.embed(request.model.matrices.tip)
+        try:
+            fixed = integrate_fixed_step(request.model, np.array(self.plan.cuts), request.grid,
+                                         drive.y_init, tip_map, self._step_bound(),
+                                         request.rtol, torque=request.torque,
+                                         hub_motion=request.hub_motion,
+                                         controller=request.controller)
+        except ValueError as exc:
+            raise InputValueError(f"method 'rk4': {exc}; use method 'cvodes'") from None
+        traj = Trajectory(ts=[np.array([0.0])], ys=[drive.y_init[:, None]],
+                          n_eval=fixed.evaluations)
+        t_fixed, y_fixed = request.grid, fixed.states
+        bad = stops.first_bad(y_fixed)
+        if bad is not None:
+            t_fixed, y_fixed = t_fixed[:bad + 1], y_fixed[:, :bad + 1]
+            traj.stop(stops.reason_of_sample(y_fixed[:, -1]), found=True)
+        else:
+            traj.integration_error = fixed.error
+            self._judge(traj, tip_map @ y_fixed, fixed)
+        traj.add(t_fixed, y_fixed)
+        return traj
+
+    def _judge(self, traj, tip, fixed):
+        """Warn when the step-doubling estimate stays above ``rtol`` of the peak."""
+        rtol = self.request.rtol
+        peak = float(np.max(np.abs(tip))) if tip.size else 0.0
+        error = traj.integration_error
+        if error is not None and error > rtol * max(peak, 1e-12):
+            traj.accuracy_note = (f"rk4: the estimated tip error {error:.3g} m is above rtol "
+                                  f"{rtol:g} of the peak {peak:.3g} m after {MAX_HALVINGS} step "
+                                  f"halvings (step {fixed.h:.3g} s); use method 'cvodes' for "
+                                  "this accuracy")
+            warnings.warn(traj.accuracy_note, AccuracyWarning, stacklevel=4)
+
+
+def strategy_for(method: str):
+    """The strategy class of an integration method."""
+    return {"cvodes": CvodesSegments, "rk4": FixedStepRK4}.get(method, ScipyIVP)
+
+
+def check_run_accuracy(request, plan, drive, traj: Trajectory, reporter=None):
+    """Repeat a compiled run that reached its end at 10 times the tolerance
+    (:func:`flexctl.sim.compiled.verify_accuracy`): ``traj.integration_error``, and the run
+    redone with BDF2 where the two disagree grossly (with an :class:`AccuracyWarning`)."""
+    if reporter is not None:
+        reporter.report(request.t_final, "checking accuracy")
+    tip_map = drive.layout.embed(request.model.matrices.tip)
+    y_checked, traj.integration_error, traj.accuracy_note, n_check = verify_accuracy(
+        request.model, traj.compiled_segments, drive.y_init, plan.scale, request.rtol,
+        np.concatenate(traj.ys[1:], axis=1), tip_map, traj.n_eval, torque=request.torque,
+        hub_motion=request.hub_motion, controller=request.controller,
+        max_step=plan.cvodes_step)
+    traj.n_eval += n_check
+    traj.ys = [traj.ys[0], y_checked]
+    if traj.accuracy_note:
+        warnings.warn(traj.accuracy_note, AccuracyWarning, stacklevel=3)
