@@ -302,8 +302,7 @@ def bench_scene(scene, config: BenchConfig, progress: bool = True) -> SceneBench
 
     _drivable(scene)
     t_final = config.t_final or scene.simulation.t_final
-    variant0 = scene.variant
-    choice = choose_modes(scene.system, scene.maneuver, config.tolerance, variant=variant0,
+    choice = choose_modes(scene.system, scene.maneuver, config.tolerance, variant=scene.variant,
                           t_final=t_final)
     chosen_extra = () if choice.n_modes in config.modes else (choice.n_modes,)
     n_runs = len(config.variants) * (1 + len(config.modes) * (
@@ -315,22 +314,65 @@ def bench_scene(scene, config: BenchConfig, progress: bool = True) -> SceneBench
         return _run(build_model(scene.system, n, variant), scene, t_final, "auto",
                     config.reference_rtol)
 
+    references, tight_runs = _tight_runs(tight, scene.name, config)
+    truncation = _truncation_errors(tight, references, tight_runs, scene.variant, config.modes,
+                                    chosen_extra)
+    rows = _sweep_rows(scene, config, t_final, references, tight_runs, bar)
+    bar.close()
+    return SceneBench(scene=scene, config=config, t_final=float(t_final), rows=tuple(rows),
+                      references=_reference_summary(references), choice=choice,
+                      truncation=truncation)
+
+
+def _tight_runs(tight, scene_name: str, config: BenchConfig) -> tuple:
+    """The references and the runs at the reference tolerance.
+
+    ``tight(variant, n)`` runs ``n`` modes of ``variant`` at the reference tolerance and
+    returns :func:`_run`'s triple.
+
+    Returns
+    -------
+    references : dict
+        ``{variant: SimulationResult}`` on ``config.reference_modes`` modes.
+    tight_runs : dict
+        ``{(variant, n): SimulationResult or None}`` for every ``n`` of ``config.modes``.
+
+    Raises
+    ------
+    RuntimeError
+        If a reference run fails.
+    """
     references, tight_runs = {}, {}
     for variant in config.variants:
         ref, wall, note = tight(variant, config.reference_modes)
         if ref is None:
-            raise RuntimeError(f"the {variant} reference of {scene.name} failed: {note}")
+            raise RuntimeError(f"the {variant} reference of {scene_name} failed: {note}")
         references[variant] = ref
         for n in config.modes:
             tight_runs[variant, n] = tight(variant, n)[0]
-    truncation = {n: _relative_tip_error(tight_runs[variant0, n], references[variant0])
-                  for n in config.modes if (variant0, n) in tight_runs
-                  and tight_runs[variant0, n] is not None}
-    for n in chosen_extra:
-        run = tight(variant0, n)[0] if variant0 in references else None
-        if run is not None:
-            truncation[n] = _relative_tip_error(run, references[variant0])
+    return references, tight_runs
 
+
+def _truncation_errors(tight, references, tight_runs, variant: str, modes, chosen_extra) -> dict:
+    """``{N: relative tip error against the reference}`` of ``variant`` at the reference
+    tolerance, for the ``modes`` swept and the mode choice's ``chosen_extra`` (run here)."""
+    truncation = {n: _relative_tip_error(tight_runs[variant, n], references[variant])
+                  for n in modes if (variant, n) in tight_runs
+                  and tight_runs[variant, n] is not None}
+    for n in chosen_extra:
+        run = tight(variant, n)[0] if variant in references else None
+        if run is not None:
+            truncation[n] = _relative_tip_error(run, references[variant])
+    return truncation
+
+
+def _sweep_rows(scene, config: BenchConfig, t_final: float, references, tight_runs,
+                bar) -> list:
+    """A :class:`BenchRow` for every variant, mode count, integrator and tolerance.
+
+    A method that failed or timed out on fewer modes is skipped on more (it would cost
+    more); ``bar`` advances once a row.
+    """
     rows, given_up, nan = [], {}, math.nan
     for variant, n, method, rtol in itertools.product(config.variants, config.modes,
                                                       config.methods, config.rtols):
@@ -355,15 +397,18 @@ def bench_scene(scene, config: BenchConfig, progress: bool = True) -> SceneBench
             result.n_evaluations, _relative_tip_error(result, references[variant]), trunc,
             _relative_tip_error(result, base) if base is not None else nan,
             "" if result.ok and result.method == method else result.message))
-    bar.close()
+    return rows
 
+
+def _reference_summary(references) -> dict:
+    """Per variant the reference's ``status``, ``t_end`` (s), ``wall_time_s``, ``message`` and
+    ``difference_from_first_order`` (relative tip difference; NaN without a first_order
+    reference)."""
     first = references.get("first_order")
-    ref_info = {v: {"status": r.status, "t_end": float(r.t[-1]), "wall_time_s": r.wall_time,
-                    "message": r.message, "difference_from_first_order":
-                    _relative_tip_error(r, first) if first is not None else math.nan}
-                for v, r in references.items()}
-    return SceneBench(scene=scene, config=config, t_final=float(t_final), rows=tuple(rows),
-                      references=ref_info, choice=choice, truncation=truncation)
+    return {v: {"status": r.status, "t_end": float(r.t[-1]), "wall_time_s": r.wall_time,
+                "message": r.message, "difference_from_first_order":
+                _relative_tip_error(r, first) if first is not None else math.nan}
+            for v, r in references.items()}
 
 
 def run_bench(config: BenchConfig, out_dir, progress: bool = True) -> list:

@@ -174,10 +174,6 @@ def spacecraft_torque(out: Path) -> Section:
 
 def hub_beam_mass(out: Path, executor=None, points: int = SWEEP_POINTS) -> Section:
     """Paper 000 Figs. 5 to 8: the point mass, and sweeps of its position and mass ratios."""
-    from matplotlib.figure import Figure
-
-    from .plotting import plot_sweep, plot_tip_deflections
-
     task = PointMassAmplitudes.from_scene("hub-beam-mass")
     ratios = np.round(np.linspace(0.0, 1.0, points), 4)
     by_position = sweep(task, {"mass_position_ratio": ratios}, executor=executor,
@@ -188,34 +184,77 @@ def hub_beam_mass(out: Path, executor=None, points: int = SWEEP_POINTS) -> Secti
     by_mass.to_csv(out / "paper000-fig8.csv")
 
     # Figs. 5 and 7: time histories (four short runs, here).
+    fig5, fig7 = _point_mass_histories(task)
+    at_02, at_08, loaded, bare = (_amplitudes(r, task.torque.duration)
+                                  for r in (*fig5.values(), *fig7.values()))
+    fig = _draw_figs_5_to_8(task, fig5, fig7, by_position, by_mass)
+    image = _save(fig, out / "paper000-figs5-8.png")
+
+    m_t, d_ratio = _point_mass_labels(task.system)
+    torque = task.torque
+    return Section(
+        title="Paper 000 Figs. 5 to 8: a point mass softens the beam",
+        paragraphs=(f"Hub-beam-mass system ({m_t} at {d_ratio}), {torque.peak_torque:g} N m "
+                    f"sine torque for {torque.duration:g} s. Peak: largest |tip deflection| "
+                    "while the torque acts; residual: largest after it.",
+                    _point_mass_sweep_text(by_position, by_mass, bare, points)),
+        table=(("quantity", "flexctl", "paper 000", "difference"),
+               _point_mass_table(at_02, at_08, loaded, bare)),
+        images=(("Paper 000 Figs. 5 to 8", image),),
+        files=(out / "paper000-fig6.csv", out / "paper000-fig8.csv"))
+
+
+def _point_mass_labels(system) -> tuple:
+    """Legend text of the point mass: ``("m_t = ... kg", "d = ... l")``."""
+    mass, length = system.masses[0], system.beam.length
+    return f"m_t = {mass.mass:g} kg", f"d = {mass.position / length:.3g} l"
+
+
+def _point_mass_histories(task) -> tuple:
+    """The time histories of Figs. 5 and 7.
+
+    Returns
+    -------
+    fig5, fig7 : dict of {str: SimulationResult}
+        The mass at 0.2 l and 0.8 l; the system with and without its mass.
+    """
     from ..model import build_model
+    from ..model.parameters import PointMass
     from ..sim.simulation import simulate
 
-    system, torque = task.system, task.torque
+    system = task.system
 
     def history(masses):
         model = build_model(dataclasses.replace(system, masses=masses), n_modes=task.n_modes)
-        return simulate(model, task.t_final, torque=torque, output_step=task.output_step)
+        return simulate(model, task.t_final, torque=task.torque, output_step=task.output_step)
 
     def mass_at(ratio):
-        from ..model.parameters import PointMass
-
         return (PointMass(mass=system.masses[0].mass, position=ratio * system.beam.length),)
 
-    mass, length = system.masses[0], system.beam.length
-    m_t, d_ratio = f"m_t = {mass.mass:g} kg", f"d = {mass.position / length:.3g} l"
+    m_t, _ = _point_mass_labels(system)
     fig5 = {"d = 0.2 l": history(mass_at(0.2)), "d = 0.8 l": history(mass_at(0.8))}
     fig7 = {m_t: history(system.masses), "m_t = 0": history(())}
-    at_02, at_08, loaded, bare = (
-        dict(zip(("peak_amplitude", "residual_amplitude"),
-                 response_amplitudes(r, torque.duration)))
-        for r in (*fig5.values(), *fig7.values()))
+    return fig5, fig7
+
+
+def _amplitudes(result, torque_end: float) -> dict:
+    """``{"peak_amplitude": m, "residual_amplitude": m}`` of a torque response."""
+    return dict(zip(("peak_amplitude", "residual_amplitude"),
+                    response_amplitudes(result, torque_end)))
+
+
+def _draw_figs_5_to_8(task, fig5, fig7, by_position, by_mass):
+    """Figs. 5 and 7 (time histories) over Figs. 6 and 8 (sweeps, with the paper's values)."""
+    from matplotlib.figure import Figure
+
+    from .plotting import plot_sweep, plot_tip_deflections
+
+    m_t, d_ratio = _point_mass_labels(task.system)
     fig = Figure(figsize=(11.0, 8.0), layout="constrained")
     (ax5, ax7), (ax6, ax8) = fig.subplots(2, 2)
     plot_tip_deflections(fig5, ax=ax5, title=f"Fig. 5: {m_t} at 0.2 l and 0.8 l")
     plot_tip_deflections(fig7, ax=ax7, title=f"Fig. 7: with and without the mass ({d_ratio})")
-    paper_with, paper_without = PAPER_VALUES["hub_beam_mass"]["with"], \
-        PAPER_VALUES["hub_beam_mass"]["without"]
+    paper_with = PAPER_VALUES["hub_beam_mass"]["with"]
     labels = {"peak_amplitude": "peak", "residual_amplitude": "residual"}
     plot_sweep(by_position, "mass_position_ratio", list(labels), ax=ax6, labels=labels,
                xlabel="R_d = d/l", ylabel="tip amplitude (m)", title="Fig. 6: position ratio",
@@ -225,8 +264,14 @@ def hub_beam_mass(out: Path, executor=None, points: int = SWEEP_POINTS) -> Secti
                title=f"Fig. 8: mass ratio ({d_ratio})",
                reference={"paper 000": [(task.default_ratios[1], paper_with[0]),
                                         (task.default_ratios[1], paper_with[1])]})
-    image = _save(fig, out / "paper000-figs5-8.png")
+    return fig
 
+
+def _point_mass_table(at_02, at_08, loaded, bare) -> list:
+    """Rows of the section's table: Fig. 7's amplitudes against the paper's, and Fig. 5's
+    comparison of the two mass positions (amplitudes as :func:`_amplitudes`)."""
+    paper_with, paper_without = PAPER_VALUES["hub_beam_mass"]["with"], \
+        PAPER_VALUES["hub_beam_mass"]["without"]
     rows = [("Fig. 7, with mass: peak (m)", loaded["peak_amplitude"], paper_with[0]),
             ("Fig. 7, with mass: residual (m)", loaded["residual_amplitude"], paper_with[1]),
             ("Fig. 7, without mass: peak (m)", bare["peak_amplitude"], paper_without[0]),
@@ -239,33 +284,29 @@ def hub_beam_mass(out: Path, executor=None, points: int = SWEEP_POINTS) -> Secti
                    ("Fig. 5, d = 0.2 l / 0.8 l: residual (m)",
                     f"{at_02['residual_amplitude']:.4f} / {at_08['residual_amplitude']:.4f}",
                     "larger at 0.8 l", "")]
+    return table_rows
+
+
+def _point_mass_sweep_text(by_position, by_mass, bare, points: int) -> str:
+    """The paragraph on the sweeps of Figs. 6 and 8, against the beam without mass
+    (``bare``, amplitudes as :func:`_amplitudes`)."""
     position = by_position.column("mass_position_ratio")
     low = position <= 0.3 + 1e-9
     change = max(np.max(np.abs(by_position.column(c)[low] / bare[c] - 1))
                  for c in ("peak_amplitude", "residual_amplitude"))
-    sweep_text = ("Sweeps on %d points each, run through flexctl.app.sweep on the demo's process "
-                  "pool (%.2g s and %.2g s). Fig. 6: for d/l <= 0.3 the amplitudes stay within "
-                  "%.2g %% of the beam without mass (the paper: negligible); at d/l = 1 the "
-                  "peak is %+.0f %% and the residual %+.0f %%. Fig. 8: from R_M = 0 to 1 the "
-                  "peak grows from %.3f m to %.3f m and the residual from %.3f m to %.3f m, "
-                  "ever more slowly. Tables: [paper000-fig6.csv](paper000-fig6.csv), "
-                  "[paper000-fig8.csv](paper000-fig8.csv)." % (
-                      points, by_position.wall_time, by_mass.wall_time, 100 * change,
-                      100 * (by_position.column("peak_amplitude")[-1] / bare["peak_amplitude"]
-                             - 1),
-                      100 * (by_position.column("residual_amplitude")[-1]
-                             / bare["residual_amplitude"] - 1),
-                      *by_mass.column("peak_amplitude")[[0, -1]],
-                      *by_mass.column("residual_amplitude")[[0, -1]]))
-    return Section(
-        title="Paper 000 Figs. 5 to 8: a point mass softens the beam",
-        paragraphs=(f"Hub-beam-mass system ({m_t} at {d_ratio}), {torque.peak_torque:g} N m "
-                    f"sine torque for {torque.duration:g} s. Peak: largest |tip deflection| "
-                    "while the torque acts; residual: largest after it.",
-                    sweep_text),
-        table=(("quantity", "flexctl", "paper 000", "difference"), table_rows),
-        images=(("Paper 000 Figs. 5 to 8", image),),
-        files=(out / "paper000-fig6.csv", out / "paper000-fig8.csv"))
+    return ("Sweeps on %d points each, run through flexctl.app.sweep on the demo's process "
+            "pool (%.2g s and %.2g s). Fig. 6: for d/l <= 0.3 the amplitudes stay within "
+            "%.2g %% of the beam without mass (the paper: negligible); at d/l = 1 the "
+            "peak is %+.0f %% and the residual %+.0f %%. Fig. 8: from R_M = 0 to 1 the "
+            "peak grows from %.3f m to %.3f m and the residual from %.3f m to %.3f m, "
+            "ever more slowly. Tables: [paper000-fig6.csv](paper000-fig6.csv), "
+            "[paper000-fig8.csv](paper000-fig8.csv)." % (
+                points, by_position.wall_time, by_mass.wall_time, 100 * change,
+                100 * (by_position.column("peak_amplitude")[-1] / bare["peak_amplitude"] - 1),
+                100 * (by_position.column("residual_amplitude")[-1]
+                       / bare["residual_amplitude"] - 1),
+                *by_mass.column("peak_amplitude")[[0, -1]],
+                *by_mass.column("residual_amplitude")[[0, -1]]))
 
 
 def slew_comparison(out: Path, executor=None, kinds=None) -> Section:

@@ -375,23 +375,45 @@ def plot_controller_comparison(results, metrics=None, target_angle: float | None
         time axis, in this order in ``fig.axes``; then the metric bars, if any.
     """
     runs = _results_from(results)
-    if metrics is not None:
-        if not isinstance(metrics, Mapping):
-            raise InputTypeError(f"metrics must be a dict {{label: SlewMetrics}}; got "
-                                 f"{type(metrics).__name__}")
-        missing = [label for label in runs if label not in metrics]
-        if missing:
-            raise InputValueError(f"metrics must hold every label of results; missing {missing}")
+    _check_comparison_metrics(metrics, runs)
     if fig is None:
         from matplotlib.figure import Figure
 
         fig = Figure(figsize=(13.0 if metrics else 8.0, 8.0), layout="constrained")
     grid = fig.add_gridspec(3, 2 if metrics else 1,
                             width_ratios=[1.6, 1.0] if metrics else None)
+    colours = {label: f"C{k % 10}" for k, label in enumerate(runs)}
+    _draw_comparison_histories(fig, grid, runs, colours, target_angle, maneuver_end,
+                               torque_bound)
+    if metrics:
+        t_end = max(float(r.t[-1]) for r in runs.values())
+        for row, (key, axis_label, log) in enumerate(_COMPARISON_BARS):
+            _draw_metric_bars(fig.add_subplot(grid[row, 1]), metrics, key, axis_label, log,
+                              colours, t_end)
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def _check_comparison_metrics(metrics, runs) -> None:
+    """Raise unless ``metrics`` is None or a dict holding every label of ``runs``."""
+    if metrics is None:
+        return
+    if not isinstance(metrics, Mapping):
+        raise InputTypeError(f"metrics must be a dict {{label: SlewMetrics}}; got "
+                             f"{type(metrics).__name__}")
+    missing = [label for label in runs if label not in metrics]
+    if missing:
+        raise InputValueError(f"metrics must hold every label of results; missing {missing}")
+
+
+def _draw_comparison_histories(fig, grid, runs, colours, target_angle, maneuver_end,
+                               torque_bound) -> None:
+    """Hub angle, torque and tip deflection of every run against time, in the first column of
+    ``grid``, with the target angle, the torque bound and the end of the manoeuvre."""
     ax_angle = fig.add_subplot(grid[0, 0])
     ax_torque = fig.add_subplot(grid[1, 0], sharex=ax_angle)
     ax_tip = fig.add_subplot(grid[2, 0], sharex=ax_angle)
-    colours = {label: f"C{k % 10}" for k, label in enumerate(runs)}
     for label, r in runs.items():
         c = colours[label]
         ax_angle.plot(r.t, r.theta, color=c, label=label)
@@ -413,26 +435,24 @@ def plot_controller_comparison(results, metrics=None, target_angle: float | None
     ax_tip.set_xlabel("time (s)")
     ax_angle.legend(loc="lower right", fontsize="small", ncol=2)
 
-    if metrics:
-        labels = list(runs)
-        positions = np.arange(len(labels))
-        t_end = max(float(r.t[-1]) for r in runs.values())
-        for row, (key, axis_label, log) in enumerate(_COMPARISON_BARS):
-            ax = fig.add_subplot(grid[row, 1])
-            values = np.array([_metric(metrics[label], key) for label in labels])
-            unsettled = ~np.isfinite(values)
-            shown = np.where(unsettled, t_end, values) if key == "settling_time" else values
-            bars = ax.barh(positions, shown, color=[colours[label] for label in labels])
-            for bar, hatch in zip(bars, unsettled):
-                if hatch and key == "settling_time":
-                    bar.set_hatch("//")
-                    bar.set_alpha(0.5)
-            if log and np.all(shown[np.isfinite(shown)] > 0):
-                ax.set_xscale("log")
-            ax.set_yticks(positions, labels, fontsize="small")
-            ax.invert_yaxis()
-            ax.set_xlabel(axis_label)
-            ax.grid(True, axis="x", alpha=0.3)
-    if title:
-        fig.suptitle(title)
-    return fig
+
+def _draw_metric_bars(ax, metrics, key: str, axis_label: str, log: bool, colours,
+                      t_end: float) -> None:
+    """One metric of every run as horizontal bars, in the order of ``colours``; a run that
+    never settled gets a hatched settling-time bar up to ``t_end`` (s)."""
+    labels = list(colours)
+    positions = np.arange(len(labels))
+    values = np.array([_metric(metrics[label], key) for label in labels])
+    unsettled = ~np.isfinite(values)
+    shown = np.where(unsettled, t_end, values) if key == "settling_time" else values
+    bars = ax.barh(positions, shown, color=[colours[label] for label in labels])
+    for bar, hatch in zip(bars, unsettled):
+        if hatch and key == "settling_time":
+            bar.set_hatch("//")
+            bar.set_alpha(0.5)
+    if log and np.all(shown[np.isfinite(shown)] > 0):
+        ax.set_xscale("log")
+    ax.set_yticks(positions, labels, fontsize="small")
+    ax.invert_yaxis()
+    ax.set_xlabel(axis_label)
+    ax.grid(True, axis="x", alpha=0.3)

@@ -189,8 +189,39 @@ def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | No
         Every point as a dot; the non-dominated ones (:func:`flexctl.app.sweep.pareto_front`) ringed
         and joined by a staircase line labelled ``Pareto front``.
     """
-    from .sweep import pareto_front
+    xs, ys, usable = _usable_costs(table, x, y, logx, logy)
+    fig, ax = figure_for(ax, (7.0, 5.0))
+    _draw_cost_points(ax, xs, ys, _column_groups(table, by, usable), by,
+                      _column_groups(table, marker_by, usable), marker_by, dict(colors or {}),
+                      dict(markers or {}))
+    texts = None if label is None else table_column(table, label)
+    for k, (value, rows) in enumerate(_column_groups(table, front_by, usable)):
+        _draw_front(ax, xs, ys, rows, texts, linestyle=("-", "--", ":", "-.")[k % 4],
+                    text="Pareto front" if value is None else f"Pareto front, {value}")
+    if logx:
+        ax.set_xscale("log")
+    if logy:
+        ax.set_yscale("log")
+    ax.set_xlabel(xlabel or x)
+    ax.set_ylabel(ylabel or y)
+    if title:
+        ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    return fig
 
+
+def _usable_costs(table, x: str, y: str, logx: bool, logy: bool) -> tuple:
+    """The cost columns ``xs, ys`` and the mask of the rows that can be drawn: both finite
+    and, on a logarithmic axis, positive.
+
+    Raises
+    ------
+    TypeError
+        If a cost column holds anything but numbers.
+    ValueError
+        If no row can be drawn.
+    """
     xs, ys = table_column(table, x), table_column(table, y)
     for name, values in ((x, xs), (y, ys)):
         if values.dtype == object:
@@ -204,18 +235,23 @@ def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | No
     if not usable.any():
         raise InputValueError(f"plot_pareto needs at least one point with finite (and, on a log "
                               f"axis, positive) {x!r} and {y!r}; got none")
-    fig, ax = figure_for(ax, (7.0, 5.0))
+    return xs, ys, usable
 
-    def groups(column):
-        if column is None:
-            return [(None, usable)]
-        keys = table_column(table, column)
-        return [(value, usable & (keys == value))
-                for value in dict.fromkeys(keys[usable].tolist())]
 
-    colors, markers = dict(colors or {}), dict(markers or {})
-    shapes = groups(marker_by)
-    for j, (value, rows) in enumerate(groups(by)):
+def _column_groups(table, column: str | None, usable) -> list:
+    """``[(value, mask)]``: the usable rows of each distinct value of ``column`` in order of
+    appearance, or ``[(None, usable)]`` without a column."""
+    if column is None:
+        return [(None, usable)]
+    keys = table_column(table, column)
+    return [(value, usable & (keys == value)) for value in dict.fromkeys(keys[usable].tolist())]
+
+
+def _draw_cost_points(ax, xs, ys, colour_groups, by, shapes, marker_by, colors,
+                      markers) -> None:
+    """Every usable point, coloured by its ``by`` group and shaped by its ``marker_by`` group,
+    with one legend entry per colour and per marker."""
+    for j, (value, rows) in enumerate(colour_groups):
         color = colors.get(value, f"C{j % 10}")
         for k, (shape, cell) in enumerate(shapes):
             named = value is not None and (marker_by is None or k == 0)
@@ -226,29 +262,22 @@ def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | No
         for k, (shape, _) in enumerate(shapes):
             ax.scatter([], [], color="gray", s=25, label=f"{marker_by} = {shape}",
                        marker=markers.get(shape, "osD^v<>p*h"[k % 10]))
-    texts = None if label is None else table_column(table, label)
-    for k, (value, rows) in enumerate(groups(front_by)):
-        front = np.zeros(xs.size, dtype=bool)
-        front[rows] = pareto_front(xs[rows], ys[rows])
-        order = np.argsort(xs[front])
-        fx, fy = xs[front][order], ys[front][order]
-        ax.step(fx, fy, where="post", color="black", linewidth=1.2,
-                linestyle=("-", "--", ":", "-.")[k % 4],
-                label="Pareto front" if value is None else f"Pareto front, {value}")
-        ax.scatter(fx, fy, s=90, facecolors="none", edgecolors="black", linewidths=1.2)
-        if texts is not None:
-            for px, py, text in zip(fx, fy, texts[front][order]):
-                text = f"{text:g}" if isinstance(text, (int, float, np.number)) else str(text)
-                ax.annotate(text, xy=(px, py), xytext=(5, 4), textcoords="offset points",
-                            fontsize="x-small")
-    if logx:
-        ax.set_xscale("log")
-    if logy:
-        ax.set_yscale("log")
-    ax.set_xlabel(xlabel or x)
-    ax.set_ylabel(ylabel or y)
-    if title:
-        ax.set_title(title)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(loc="best", fontsize="small")
-    return fig
+
+
+def _draw_front(ax, xs, ys, rows, texts, *, linestyle: str, text: str) -> None:
+    """The Pareto front of the points ``rows`` (a mask): a staircase labelled ``text`` through
+    the ringed non-dominated points, each annotated with its entry of ``texts`` if given."""
+    from .sweep import pareto_front
+
+    front = np.zeros(xs.size, dtype=bool)
+    front[rows] = pareto_front(xs[rows], ys[rows])
+    order = np.argsort(xs[front])
+    fx, fy = xs[front][order], ys[front][order]
+    ax.step(fx, fy, where="post", color="black", linewidth=1.2, linestyle=linestyle,
+            label=text)
+    ax.scatter(fx, fy, s=90, facecolors="none", edgecolors="black", linewidths=1.2)
+    if texts is not None:
+        for px, py, note in zip(fx, fy, texts[front][order]):
+            note = f"{note:g}" if isinstance(note, (int, float, np.number)) else str(note)
+            ax.annotate(note, xy=(px, py), xytext=(5, 4), textcoords="offset points",
+                        fontsize="x-small")

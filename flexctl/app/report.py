@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..model.layout import StateLayout
 from ..sim.maneuvers import Slew, SpinUp
 from .markdown import markdown_table
 
@@ -61,8 +62,15 @@ _UNITS = {"integration_error": "m (estimated largest tip error of the integratio
 
 def timeseries_columns(n_modes: int) -> list:
     """Column names of ``timeseries.csv`` for ``n_modes`` modal coordinates."""
-    return ["t", "theta", "theta_dot", "torque", "tip_deflection",
-            *(f"q{i}" for i in range(1, n_modes + 1))]
+    return _columns(StateLayout.single(n_modes))
+
+
+def _columns(layout) -> list:
+    """Column names of ``timeseries.csv`` for a model's state layout (its hub angle and rate,
+    then its modal coordinates, named as the layout names them)."""
+    names = layout.names
+    return ["t", names[layout.theta], names[layout.theta_dot], "torque", "tip_deflection",
+            *names[layout.q]]
 
 
 def _maneuver_table(maneuver) -> dict:
@@ -211,7 +219,7 @@ def write_run(scene, result, out_dir, overrides: dict | None = None,
     table = np.column_stack((result.t, result.theta, result.theta_dot, result.torque,
                              result.tip_deflection, result.q.T))
     np.savetxt(out / TIMESERIES, table, delimiter=",", fmt=f"%.{CSV_DIGITS}g",
-               header=",".join(timeseries_columns(result.model.n_modes)), comments="")
+               header=",".join(_columns(result.model.layout)), comments="")
     (out / SUMMARY).write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False)
                                + "\n")
 

@@ -297,54 +297,82 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
         When the task raises at a point; the message names the point, the original exception
         is its ``__cause__``, and the points not yet started are cancelled.
     """
+    _check_task(task, executor)
+    points = _points(parameter_grid)
+    from tqdm import tqdm
+
+    name = description or getattr(task, "__name__", type(task).__name__)
+    bar = tqdm(total=len(points), desc=name, disable=not progress, unit="point")
+    start = time.perf_counter()
+    try:
+        if executor is None:
+            outputs = _outputs_here(task, points, name, bar)
+        else:
+            outputs = _outputs_on(executor, task, points, name, bar)
+    finally:
+        bar.close()
+    return _sweep_table(points, outputs, start)
+
+
+def _check_task(task, executor) -> None:
+    """Raise unless ``task`` is callable and ``executor`` is None or has ``submit``."""
     if not callable(task):
         raise InputTypeError(f"task must be callable as task(**point); got {type(task).__name__}")
     if executor is not None and not _is_executor(executor):
         raise InputTypeError("executor must have a submit(fn, *args) method (a "
                              "concurrent.futures executor or a Dask Client.get_executor()); "
                              f"got {type(executor).__name__}")
-    points = _points(parameter_grid)
-    from tqdm import tqdm
 
-    name = description or getattr(task, "__name__", type(task).__name__)
-    bar = tqdm(total=len(points), desc=name, disable=not progress, unit="point")
+
+def _point_failed(name: str, k: int, point: dict, exc: Exception) -> SweepError:
+    """The error of task ``name`` raising ``exc`` at point ``k``, naming the point."""
+    return SweepError(f"sweep task {name} failed at point {k} {point}: "
+                      f"{type(exc).__name__}: {exc}")
+
+
+def _outputs_here(task, points: list, name: str, bar) -> list:
+    """The task's outputs at every point, run in this process in order."""
+    outputs = []
+    for k, point in enumerate(points):
+        try:
+            outputs.append(_evaluate(task, point))
+        except Exception as exc:
+            raise _point_failed(name, k, point, exc) from exc
+        bar.update()
+    return outputs
+
+
+def _outputs_on(executor, task, points: list, name: str, bar) -> list:
+    """The task's outputs at every point, in grid order, run on ``executor``.
+
+    ``concurrent.futures`` futures are collected as they finish, other future types in order;
+    on a failure (or an interrupt) the futures not yet started are cancelled.
+    """
     outputs = [None] * len(points)
-    start = time.perf_counter()
-
-    def fail(k, exc):
-        raise SweepError(f"sweep task {name} failed at point {k} {points[k]}: "
-                         f"{type(exc).__name__}: {exc}") from exc
-
+    futures = [executor.submit(_evaluate, task, point) for point in points]
+    index = {id(f): k for k, f in enumerate(futures)}
     try:
-        if executor is None:
-            for k, point in enumerate(points):
-                try:
-                    outputs[k] = _evaluate(task, point)
-                except Exception as exc:
-                    fail(k, exc)
-                bar.update()
+        if all(isinstance(f, concurrent.futures.Future) for f in futures):
+            finished = concurrent.futures.as_completed(futures)
         else:
-            futures = [executor.submit(_evaluate, task, point) for point in points]
-            index = {id(f): k for k, f in enumerate(futures)}
+            finished = iter(futures)    # other future types: in order
+        for future in finished:
+            k = index[id(future)]
             try:
-                if all(isinstance(f, concurrent.futures.Future) for f in futures):
-                    finished = concurrent.futures.as_completed(futures)
-                else:
-                    finished = iter(futures)    # other future types: in order
-                for future in finished:
-                    k = index[id(future)]
-                    try:
-                        outputs[k] = future.result()
-                    except Exception as exc:
-                        fail(k, exc)
-                    bar.update()
-            except BaseException:
-                for future in futures:
-                    future.cancel()
-                raise
-    finally:
-        bar.close()
+                outputs[k] = future.result()
+            except Exception as exc:
+                raise _point_failed(name, k, points[k], exc) from exc
+            bar.update()
+    except BaseException:
+        for future in futures:
+            future.cancel()
+        raise
+    return outputs
 
+
+def _sweep_table(points: list, outputs: list, start: float) -> SweepResult:
+    """The table of a sweep: one row per point, its parameters then the task's other
+    outputs; the wall time (s) runs from ``start`` (:func:`time.perf_counter`) to now."""
     parameters = tuple(dict.fromkeys(k for p in points for k in p))
     names = tuple(dict.fromkeys(k for out in outputs for k in out))
     rows = tuple({**point, **{k: v for k, v in out.items() if k not in point}}
