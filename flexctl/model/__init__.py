@@ -6,6 +6,7 @@ Imports nothing from :mod:`flexctl.sim`, :mod:`flexctl.app` or :mod:`controllers
 module         contents
 =============  ==============================================================================
 ``parameters`` ``Hub``, ``Beam``, ``PointMass``, ``HubBeam``: validated physical parameters
+``layout``     ``StateLayout``: names and slices of every block of the state vector
 ``modes``      cantilever roots and mode shapes at quadrature points
 ``matrices``   the modal matrices, assembled once and cached
 ``variants``   ``Model`` and ``build_model``: the variants built on one assembly
@@ -14,12 +15,13 @@ module         contents
 """
 
 from .parameters import Beam, Hub, HubBeam, PointMass, check_real
+from .layout import StateLayout
 from .modes import cantilever_roots, mode_shapes
 from .matrices import ModalMatrices, assemble, tension
 from .variants import VARIANTS, Model, SingularMassMatrixError, build_model
 
 __all__ = [
-    "Beam", "Hub", "HubBeam", "PointMass", "check_real",
+    "Beam", "Hub", "HubBeam", "PointMass", "check_real", "StateLayout",
     "cantilever_roots", "mode_shapes",
     "ModalMatrices", "assemble", "tension",
     "VARIANTS", "Model", "SingularMassMatrixError", "build_model",

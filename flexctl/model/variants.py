@@ -469,18 +469,26 @@ class Model:
             A mode that has lost its stiffness (zero_order above its first clamped frequency)
             is returned as a negative number whose magnitude is its exponential growth rate, 1/s.
         """
+        spin_rate = _spin(spin_rate)
+        if not isinstance(hub, str) or hub not in ("clamped", "free"):
+            raise InputValueError(f"hub must be 'clamped' or 'free'; got {hub!r}")
+        key = ("frequencies", hub)
+        if spin_rate == 0.0 and key in self._c:
+            # at rest (asked by every run for its stiffness and duration checks): computed once
+            return self._c[key].copy()
         stiff = self.stiffness_matrix(spin_rate)
         if hub == "clamped":
             lam = scipy.linalg.eigh(stiff, self.matrices.M_ff, eigvals_only=True)
-        elif hub == "free":
+        else:
             # The hub carries no stiffness: condensing its coordinate out of the mass matrix
             # leaves the flexible modes exactly, without the rigid-body zero to remove.
             mat = self.matrices
             reduced = mat.M_ff - np.outer(mat.m_tf, mat.m_tf) / mat.J0
             lam = scipy.linalg.eigh(stiff, reduced, eigvals_only=True)
-        else:
-            raise InputValueError(f"hub must be 'clamped' or 'free'; got {hub!r}")
-        return np.sort(np.sign(lam) * np.sqrt(np.abs(lam)))
+        frequencies = np.sort(np.sign(lam) * np.sqrt(np.abs(lam)))
+        if spin_rate == 0.0:
+            self._c[key] = frequencies.copy()
+        return frequencies
 
     def linearize(self, spin_rate: float = 0.0):
         """Linear plant about a steady spin, as a python-control ``StateSpace``.

@@ -6,7 +6,12 @@ Imports :mod:`flexctl.model` only.
 module          contents
 ==============  =============================================================================
 ``maneuvers``   ``SpinUp``, ``SineTorque``, ``Slew``: what drives the hub
-``simulation``  ``simulate`` (compiled and SciPy paths), ``SimulationResult``, ``Controller``
+``simulation``  ``simulate``: a thin driver over the parts below
+``request``     the validated run request and its integration plan (tolerances, stiffness guard)
+``drives``      what drives a run: prescribed hub, torque and continuous ``Controller``
+``strategies``  one integration strategy per method family (CVODES, rk4, ``solve_ivp``)
+``stops``       stopping conditions and their physical reasons (``StopReason``)
+``result``      ``SimulationResult`` and its assembly
 ``inputs``      argument checks, ``SampledTorque`` (a torque given as samples)
 ``tracing``     Python torque functions traced into CasADi (``trace_torque``)
 ``compiled``    the CasADi/CVODES integration of a symbolic drive
