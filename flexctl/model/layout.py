@@ -38,6 +38,7 @@ Examples
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,6 +51,53 @@ __all__ = ["StateLayout"]
 
 def _is_symbolic(x) -> bool:
     return type(x).__module__.startswith("casadi")
+
+
+#: Most modes one appendage may carry (as :func:`flexctl.build_model`).
+MAX_MODES = 200
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+
+
+def _checked_appendages(appendages) -> tuple:
+    """``(name, n_modes)`` pairs: names unique identifiers (or one unnamed ``""``), counts
+    from 1 to :data:`MAX_MODES`."""
+    if not isinstance(appendages, (tuple, list)) or not appendages:
+        raise InputValueError("StateLayout.appendages must name at least one appendage as "
+                              f"(name, n_modes) pairs; got {appendages!r}")
+    checked = []
+    for entry in appendages:
+        if not isinstance(entry, (tuple, list)) or len(entry) != 2 \
+                or not isinstance(entry[0], str):
+            raise InputTypeError("StateLayout.appendages must hold (name, n_modes) pairs; "
+                                 f"got {entry!r}")
+        name, modes = entry
+        if not (name == "" and len(appendages) == 1) and not _NAME.match(name):
+            raise InputValueError("StateLayout.appendages names must be identifiers (letters, "
+                                  "digits, underscores; '' only for a single appendage); got "
+                                  f"{name!r}")
+        if name in dict(checked):
+            raise InputValueError(f"StateLayout.appendages names must be unique; got {name!r} "
+                                  "twice")
+        checked.append((name, check_integer("StateLayout", "n_modes", modes, minimum=1,
+                                            maximum=MAX_MODES)))
+    return tuple(checked)
+
+
+def _checked_extra(extra) -> tuple:
+    """``(name, labels)`` pairs of the first-order blocks, names unique."""
+    if not isinstance(extra, (tuple, list)):
+        raise InputTypeError(f"StateLayout.extra must be (name, labels) pairs; got {extra!r}")
+    checked = []
+    for entry in extra:
+        if not isinstance(entry, (tuple, list)) or len(entry) != 2 \
+                or not isinstance(entry[0], str) or not isinstance(entry[1], (tuple, list)) \
+                or not all(isinstance(label, str) for label in entry[1]):
+            raise InputTypeError("StateLayout.extra must hold (name, labels) pairs of strings; "
+                                 f"got {entry!r}")
+        if entry[0] in dict(checked):
+            raise InputValueError(f"StateLayout block {entry[0]!r} exists already")
+        checked.append((entry[0], tuple(entry[1])))
+    return tuple(checked)
 
 
 def _block_array(value, size: int) -> np.ndarray:
@@ -89,25 +137,16 @@ class StateLayout:
     _index: dict = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
-        apps = tuple(self.appendages)
-        if not apps:
-            raise InputValueError("StateLayout.appendages must name at least one appendage; "
-                                  "got ()")
-        checked, seen = [], set()
-        for entry in apps:
-            if not isinstance(entry, tuple) or len(entry) != 2 or not isinstance(entry[0], str):
-                raise InputTypeError("StateLayout.appendages must hold (name, n_modes) pairs; "
-                                     f"got {entry!r}")
-            name, modes = entry
-            if name in seen or (name == "" and len(apps) > 1):
-                raise InputValueError("StateLayout.appendages names must be unique (and "
-                                      f"non-empty when there are several); got {name!r}")
-            seen.add(name)
-            checked.append((name, check_integer("StateLayout", "n_modes", modes, minimum=1)))
-        object.__setattr__(self, "appendages", tuple(checked))
-        extra = tuple((str(name), tuple(str(s) for s in names)) for name, names in self.extra)
-        object.__setattr__(self, "extra", extra)
+        object.__setattr__(self, "appendages", _checked_appendages(self.appendages))
+        for name in ("free_hub", "rotation"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise InputTypeError(f"StateLayout.{name} must be True or False; got "
+                                     f"{getattr(self, name)!r}")
+            object.__setattr__(self, name, bool(getattr(self, name)))
+        object.__setattr__(self, "extra", _checked_extra(self.extra))
         object.__setattr__(self, "_index", self._blocks())
+        if len(set(self.names)) != len(self.names):
+            raise InputValueError(f"StateLayout state names must be unique; got {self.names}")
 
     @classmethod
     def single(cls, n_modes: int) -> "StateLayout":
@@ -137,8 +176,6 @@ class StateLayout:
 
     def with_block(self, name: str, labels) -> "StateLayout":
         """This layout with a first-order block ``name`` of states ``labels`` appended."""
-        if name in dict(self.extra):
-            raise InputValueError(f"StateLayout block {name!r} exists already")
         return StateLayout(appendages=self.appendages, free_hub=self.free_hub,
                            rotation=self.rotation,
                            extra=self.extra + ((name, tuple(labels)),))
@@ -250,7 +287,7 @@ class StateLayout:
 
     def modal_slice(self, appendage: str = "") -> slice:
         """Modal coordinates of one appendage (by name; ``""`` for a single unnamed one)."""
-        if appendage not in self._index["modal"]:
+        if not isinstance(appendage, str) or appendage not in self._index["modal"]:
             raise InputValueError(f"appendage must be one of {list(self.appendage_names)}; "
                                   f"got {appendage!r}")
         return slice(*self._index["modal"][appendage])
@@ -263,7 +300,7 @@ class StateLayout:
     def block(self, name: str) -> slice:
         """A first-order block appended by :meth:`with_block`."""
         blocks = self._index.get("extra", {})
-        if name not in blocks:
+        if not isinstance(name, str) or name not in blocks:
             raise InputValueError(f"state block must be one of {list(blocks)}; got {name!r}")
         return blocks[name]
 
