@@ -25,6 +25,24 @@ A run stops early, and says so in ``status`` and ``message``, when
 - the integrator fails (``"diverged"``, with the integrator's message).
 
 The arrays of a stopped run end at the stop time; they never hold NaN or overflowed values.
+
+Methods
+-------
+``"cvodes"`` is compiled SUNDIALS integration (:mod:`flexctl.sim.compiled`); every such run
+is repeated at 10 times the tolerance to estimate its integration error, and redone with
+A-stable BDF2 if the two disagree grossly. An explicit SciPy method (DOP853, RK45, RK23) on a
+model too stiff for it is replaced by ``"cvodes"`` when the inputs allow, with a
+:class:`StiffnessWarning` and a note in the result's ``message`` (the result's ``method`` is
+the one used; :func:`flexctl.sim.request.stiffness_guard`). ``"rk4"`` is compiled fixed-step
+RK4 for loose tolerances, its step set by the fastest mode and halved until a step-doubling
+error estimate meets ``rtol`` (:mod:`flexctl.sim.fixed_step`); it needs inputs with a CasADi
+form. A ``progress`` callable makes the run integrate in
+:data:`~flexctl.sim.progress.PROGRESS_CHUNKS` pieces.
+
+The parts, each in its own module: the validated request and integration plan
+(:mod:`~flexctl.sim.request`), the drive (:mod:`~flexctl.sim.drives`), one integration strategy
+per method family (:mod:`~flexctl.sim.strategies`), the stopping conditions
+(:mod:`~flexctl.sim.stops`) and the result's assembly (:mod:`~flexctl.sim.result`).
 """
 
 from __future__ import annotations
@@ -63,12 +81,10 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     t_final : float
         End time, s (> 0).
     torque : callable, (times, values) or SampledTorque, optional
-        Hub torque, N m. Default 0. A function ``torque(t)`` or ``torque(t, x)``: one that
-        CasADi can trace runs compiled, any other on SciPy (:mod:`flexctl.sim.tracing` gives
-        the rule). Samples ``(times, values)`` (arrays of shape (K,), as python-control's
-        ``T`` and ``U``), interpolated linearly, or a
-        :class:`~flexctl.sim.inputs.SampledTorque` for a hold or a spline; they must cover
-        ``[0, t_final]``.
+        Hub torque, N m. Default 0. A function ``torque(t)`` or ``torque(t, x)`` (compiled
+        where CasADi can trace it, :mod:`flexctl.sim.tracing`), or samples covering
+        ``[0, t_final]``: ``(times, values)`` (shape (K,) each, as python-control's ``T`` and
+        ``U``) interpolated linearly, or a :class:`~flexctl.sim.inputs.SampledTorque`.
     hub_motion : object, optional
         Prescribed hub motion with methods ``angle(t)``, ``rate(t)``, ``acceleration(t)``
         (rad, rad/s, rad/s^2), e.g. :class:`~flexctl.sim.maneuvers.SpinUp`.
@@ -83,17 +99,10 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     atol : float or array_like, optional
         Absolute tolerance; default ``rtol`` times each state's physical scale.
     method : str, optional
-        ``"auto"`` (default): ``"cvodes"`` when every input has a CasADi form (the built-in
-        manoeuvres, torque samples, traced torque functions), else ``"DOP853"``.
-        ``"cvodes"``: compiled SUNDIALS integration (:mod:`flexctl.sim.compiled`); or a
-        ``scipy.integrate.solve_ivp`` method (``"DOP853"``, ``"RK45"``, ``"RK23"``,
-        ``"Radau"``, ``"BDF"``, ``"LSODA"``). An explicit method
-        (DOP853, RK45, RK23) on a model too stiff for it is replaced by ``"cvodes"`` when the
-        inputs allow, with a :class:`StiffnessWarning` and a note in the result's ``message``
-        (``method`` of the result is the one used); see :func:`flexctl.sim.request.stiffness_guard`.
-        ``"rk4"``: compiled fixed-step RK4 for loose tolerances, its step set by the fastest
-        mode and halved until a step-doubling error estimate meets ``rtol``
-        (:mod:`flexctl.sim.fixed_step`); needs inputs with a CasADi form.
+        ``"auto"`` (default: ``"cvodes"`` when every input has a CasADi form, else
+        ``"DOP853"``), ``"cvodes"``, ``"rk4"`` or a ``scipy.integrate.solve_ivp`` method
+        (``"DOP853"``, ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``); see
+        the module's Methods.
     output_step : float, optional
         Spacing of the output times, s. Default: ``t_final / 2000``.
     max_step : float, optional
@@ -101,16 +110,14 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         step-doubling pair). An input's own ``max_step`` (a sampled torque's sample
         interval) bounds it too.
     check_accuracy : bool, optional
-        For the compiled (``"cvodes"``) path: repeat the run at 10 times the tolerance to
-        estimate the integration error (``result.integration_error``), and redo it with
-        A-stable BDF2 if the two disagree grossly (:func:`flexctl.sim.compiled.verify_accuracy`).
+        On ``"cvodes"``: repeat the run at 10 times the tolerance for
+        ``result.integration_error`` (:func:`flexctl.sim.compiled.verify_accuracy`).
         Default True.
     progress : bool or callable, optional
-        Report the progress of a long run: ``True`` prints a line with the simulated time
-        reached and an estimate of the time to go to stderr every 5 s once the run has taken
-        5 s; a callable is called with a :class:`~flexctl.sim.progress.Progress` after every
-        :data:`~flexctl.sim.progress.PROGRESS_CHUNKS`-th of the run (which is then integrated
-        in that many pieces). Default: no reports.
+        ``True`` prints the simulated time reached and the time to go to stderr every 5 s
+        once the run has taken 5 s; a callable gets a :class:`~flexctl.sim.progress.Progress`
+        after every :data:`~flexctl.sim.progress.PROGRESS_CHUNKS`-th of the run. Default
+        none.
 
     Returns
     -------
@@ -132,16 +139,14 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         return _simulate_sampled(request)
     drive = (PrescribedDrive(model, hub_motion, request.x_init) if request.prescribed
              else TorqueDrive(model, request.torque, request.controller, request.x_init))
-    stops = StopConditions(model, drive.layout, singular=(model.variant == "consistent"
-                                                          and not request.prescribed))
-    plan = plan_integration(request, drive)
+    singular = model.variant == "consistent" and not request.prescribed
+    stops, plan = StopConditions(model, drive.layout, singular), plan_integration(request, drive)
     drive.check_inputs()
     strategy = strategy_for(plan.method)(request, plan, drive, stops)
     start = time.perf_counter()
     traj = strategy.run()
-    if request.check_accuracy and plan.method == "cvodes" \
-            and traj.reason is StopReason.REACHED_END \
-            and len(traj.compiled_segments) == len(plan.drive_cuts) - 1:
+    if request.check_accuracy and plan.method == "cvodes" and traj.reason is \
+            StopReason.REACHED_END and len(traj.compiled_segments) == len(plan.drive_cuts) - 1:
         check_run_accuracy(request, plan, drive, traj, reporter=strategy)
     return assemble_result(request, plan, drive, stops, traj, time.perf_counter() - start)
 
