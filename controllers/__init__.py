@@ -6,6 +6,7 @@ module                 contents
 ``reference``          smooth rest-to-rest slew profiles (poly7, cycloidal)
 ``pd``                 collocated PD on hub angle and rate
 ``lqr``                LQR with Bryson-style physical weights, state truncation
+``plant_state``        the plant's state layout, design state and hub state a law reads
 ``lqg``                Kalman filter on hub angle and root moment plus LQR
 ``scheduling``         LQR gains scheduled on the spin rate
 ``shaping``            rigid bang-bang torque and ZV / ZVD input shaping

@@ -56,9 +56,11 @@ import numpy as np
 from flexctl.model import Model
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.checks import check_real
+from flexctl.model.layout import StateLayout
 
 from .lqg import LQG
 from .lqr import LQR, _model, truncation_matrix
+from .plant_state import resized
 from .pd import PD
 from .scheduling import ScheduledLQR
 from .tracking import TrajectoryTracker
@@ -191,19 +193,25 @@ def _sensor_gain(model: Model, a: np.ndarray, pd: PD, sensor: str) -> np.ndarray
     return (pd.kp * row + pd.kd * (row @ a))[None, :]
 
 
-def _design_gain(owner: str, gain, n_modes: int) -> np.ndarray:
-    """A gain on a design state (``M <= N`` modes) lifted to the plant state, shape (1, n)."""
+def _design_gain(owner: str, gain, plant: StateLayout,
+                 design: StateLayout | None = None) -> np.ndarray:
+    """A gain on a design state (layout ``design``, ``M <= N`` modes; by default the plant's
+    blocks on the gain's mode count) lifted to the plant state (layout ``plant``), shape
+    (1, n)."""
     gain = np.asarray(gain, dtype=float).reshape(1, -1)
     size = gain.shape[1]
-    if size < 2 or size % 2 or size > 2 * n_modes + 2 or not np.all(np.isfinite(gain)):
+    if design is None:
+        design = resized(plant, size)
+    if design is None or design.n_states != size or design.n_modes > plant.n_modes \
+            or not np.all(np.isfinite(gain)):
         raise InputValueError(f"{owner}.controller gain must be finite with shape (1, 2 M + 2),"
-                              f" M <= the plant's {n_modes} modes; got shape {gain.shape}")
-    return gain @ truncation_matrix(n_modes, size // 2 - 1)
+                              f" M <= the plant's {plant.n_modes} modes; got shape {gain.shape}")
+    return gain @ truncation_matrix(plant, design)
 
 
 def _state_gain(model: Model, a: np.ndarray, controller, spin_rate: float, sensor):
     """``K`` (1, n) of a static law on the plant state, or None for a dynamic law."""
-    n = model.n_modes
+    plant = model.layout
     if isinstance(controller, PD):
         return _sensor_gain(model, a, controller, "theta" if sensor is None else sensor)
     if sensor is not None:
@@ -211,13 +219,14 @@ def _state_gain(model: Model, a: np.ndarray, controller, spin_rate: float, senso
                               f"tracker reads what it was designed for); got {sensor!r} with "
                               f"a {type(controller).__name__}")
     if isinstance(controller, LQR):
-        return controller.state_gain(n)
+        return controller.state_gain(plant)
     if isinstance(controller, ScheduledLQR):
-        return controller.state_gain(n, spin_rate)
+        return controller.state_gain(plant, spin_rate)
     if isinstance(controller, TrajectoryTracker):
-        return _design_gain("loop_transfer", controller.gain, n)
+        return _design_gain("loop_transfer", controller.gain, plant,
+                            controller.solution.model.layout)
     if isinstance(controller, np.ndarray):
-        return _design_gain("loop_transfer", controller, n)
+        return _design_gain("loop_transfer", controller, plant)
     return None
 
 

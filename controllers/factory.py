@@ -199,6 +199,14 @@ def _noise(spec: ControllerSpec) -> NoiseLevels:
     return _wrap(NoiseLevels, **{field: spec.get(key) for field, key in NOISE_SETTINGS.items()})
 
 
+#: Kinds that track a smooth reference slew with feedback (:func:`_feedback`).
+_FEEDBACK_KINDS = ("pd", "lqr", "lqg", "scheduled")
+#: Kinds that play the rigid bang-bang torque, shaped or not (:func:`_open_loop`).
+_OPEN_LOOP_KINDS = ("bang_bang", "zv", "zvd")
+#: Kinds that take a free duration as a minimum-time problem of their own.
+_OWN_DURATION_KINDS = ("trajopt", "trajopt+lqr") + _OPEN_LOOP_KINDS
+
+
 def from_spec(scene, plant: Model | None = None) -> BuiltController:
     """Design the controller of a slew scene.
 
@@ -224,6 +232,23 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
     if not isinstance(maneuver, Slew) or spec is None:
         raise SceneError(f"scene {scene.name!r} is not a slew with a [controller] table")
     plant = scene.build_model() if plant is None else plant
+    design = _design_model(scene, plant)
+    angle, bound, kind = maneuver.angle, maneuver.torque_bound, spec.kind
+    duration = _slew_duration(maneuver, kind, design)
+    if kind in _FEEDBACK_KINDS:
+        return _sampled(spec, _feedback(spec, design, plant, angle, duration, bound))
+    if kind in _OPEN_LOOP_KINDS:
+        return _sampled(spec, _open_loop(spec, design, angle, duration, bound))
+    if bound is None:
+        raise SceneError(f"controller kind {kind!r} needs maneuver.torque_bound")
+    if kind == "nmpc":
+        return _sampled(spec, _nmpc(spec, design, angle, duration, bound, design.n_modes))
+    return _sampled(spec, _optimal(spec, design, angle, duration, bound))
+
+
+def _design_model(scene, plant: Model) -> Model:
+    """The model the controller is designed on: ``design_modes`` modes (at most the plant's)
+    of the scene's design variant."""
     n_design = scene.model.design_modes
     if n_design > plant.n_modes:
         raise SceneError(f"model.design_modes must be <= model.modes = {plant.n_modes}; "
@@ -231,73 +256,90 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
     if scene.design_variant == "exact" and n_design > EXACT_MAX_MODES:
         raise SceneError(f"model.design_modes must be at most {EXACT_MAX_MODES} for the exact "
                          f"design variant; got {n_design}")
-    design = build_model(scene.design_system, n_modes=n_design, variant=scene.design_variant)
-    angle, bound = maneuver.angle, maneuver.torque_bound
-    kind = spec.kind
+    return build_model(scene.design_system, n_modes=n_design, variant=scene.design_variant)
 
+
+def _slew_duration(maneuver: Slew, kind: str, design: Model):
+    """The slew's duration, s: the manoeuvre's; for a free one, None for the kinds that find
+    their own (:data:`_OWN_DURATION_KINDS`), else the rigid minimum time at the torque bound."""
     duration = maneuver.duration
     if duration is None:
-        if bound is None:
+        if maneuver.torque_bound is None:
             raise SceneError("maneuver.torque_bound is required when maneuver.duration is "
                              "\"free\"")
-        if kind not in ("trajopt", "trajopt+lqr", "bang_bang", "zv", "zvd"):
-            # trajopt and the shapers take the free duration as a minimum-time problem
-            duration = minimum_slew_duration(angle, design.matrices.J0, bound)
+        if kind not in _OWN_DURATION_KINDS:
+            duration = minimum_slew_duration(maneuver.angle, design.matrices.J0,
+                                             maneuver.torque_bound)
+    return duration
 
-    if kind in ("pd", "lqr", "lqg", "scheduled"):
-        profile_shape = spec.get("reference")
-        info = {}
-        if bound is not None:
-            # a smooth reference the actuator cannot follow only winds the loop up: stretch it
-            # to the shortest one the torque bound allows (5 % margin for the feedback)
-            feasible = 1.05 * _wrap(minimum_slew_duration, angle, design.matrices.J0, bound,
-                                    shape=profile_shape)
-            if feasible > duration:
-                info["reference_duration"] = feasible
-                info["note"] = (f"the {profile_shape} reference needs {feasible:.3g} s at "
-                                f"{bound:g} N m; stretched from {duration:.3g} s")
-                duration = feasible
-        profile = _wrap(SlewProfile, slew_angle=angle, duration=duration, shape=profile_shape)
-        common = {"reference": profile, "torque_limit": bound}
-        if kind == "pd":
-            ctrl = _wrap(design_pd, design, spec.get("bandwidth"), spec.get("damping_ratio"),
-                         feedforward=spec.get("feedforward"), **common)
-        elif kind == "lqr":
-            ctrl = _wrap(design_lqr, design, _lqr_weights(spec), spec.get("spin_rate"),
-                         **common)
-        elif kind == "lqg":
-            ctrl = _wrap(design_lqg, design, _lqr_weights(spec), _noise(spec),
-                         spec.get("spin_rate"), plant=plant, **common)
-        else:
-            ctrl = _wrap(design_scheduled_lqr, design, _lqr_weights(spec),
-                         list(spec.get("spin_rates")), **common)
-        return _sampled(spec, BuiltController(ctrl, kind, float(duration), n_design, info))
 
-    if kind in ("bang_bang", "zv", "zvd"):
-        limits = {"torque_limit": bound} if duration is None else {"duration": duration}
-        base = _wrap(bang_bang, design, angle, **limits)
-        if bound is not None and duration is not None and base.peak_torque > bound:
-            raise SceneError(f"maneuver.duration {duration:g} s is shorter than the rigid "
-                             f"minimum time at torque_bound {bound:g} N m")
-        end = base.duration
-        torque = base
-        if kind != "bang_bang":
-            shaper = design_shaper(design, kind)
-            torque = shape(base, shaper)
-            end += float(max(shaper.times))
-        return _sampled(spec, BuiltController(OpenLoop(torque), kind, float(end), n_design))
+def _reference(spec: ControllerSpec, design: Model, angle, duration, bound) -> tuple:
+    """``(profile, duration, info)``: the smooth reference slew of the ``reference`` setting,
+    stretched to the shortest one the torque bound allows (``info`` says so)."""
+    profile_shape = spec.get("reference")
+    info = {}
+    if bound is not None:
+        # a smooth reference the actuator cannot follow only winds the loop up: stretch it
+        # to the shortest one the torque bound allows (5 % margin for the feedback)
+        feasible = 1.05 * _wrap(minimum_slew_duration, angle, design.matrices.J0, bound,
+                                shape=profile_shape)
+        if feasible > duration:
+            info["reference_duration"] = feasible
+            info["note"] = (f"the {profile_shape} reference needs {feasible:.3g} s at "
+                            f"{bound:g} N m; stretched from {duration:.3g} s")
+            duration = feasible
+    profile = _wrap(SlewProfile, slew_angle=angle, duration=duration, shape=profile_shape)
+    return profile, duration, info
 
-    if bound is None:
-        raise SceneError(f"controller kind {kind!r} needs maneuver.torque_bound")
-    if kind == "nmpc":
-        return _sampled(spec, _nmpc(spec, design, angle, duration, bound, n_design))
+
+def _feedback(spec: ControllerSpec, design: Model, plant: Model, angle, duration,
+              bound) -> BuiltController:
+    """PD, LQR, LQG or scheduled LQR on the design model about the reference slew
+    (:func:`_reference`)."""
+    kind = spec.kind
+    profile, duration, info = _reference(spec, design, angle, duration, bound)
+    common = {"reference": profile, "torque_limit": bound}
+    if kind == "pd":
+        ctrl = _wrap(design_pd, design, spec.get("bandwidth"), spec.get("damping_ratio"),
+                     feedforward=spec.get("feedforward"), **common)
+    elif kind == "lqr":
+        ctrl = _wrap(design_lqr, design, _lqr_weights(spec), spec.get("spin_rate"), **common)
+    elif kind == "lqg":
+        ctrl = _wrap(design_lqg, design, _lqr_weights(spec), _noise(spec),
+                     spec.get("spin_rate"), plant=plant, **common)
+    else:
+        ctrl = _wrap(design_scheduled_lqr, design, _lqr_weights(spec),
+                     list(spec.get("spin_rates")), **common)
+    return BuiltController(ctrl, kind, float(duration), design.n_modes, info)
+
+
+def _open_loop(spec: ControllerSpec, design: Model, angle, duration,
+               bound) -> BuiltController:
+    """The rigid bang-bang torque (at the bound for a free duration), shaped at the first
+    hub-free frequency for ``zv`` and ``zvd``, played open loop."""
+    limits = {"torque_limit": bound} if duration is None else {"duration": duration}
+    base = _wrap(bang_bang, design, angle, **limits)
+    if bound is not None and duration is not None and base.peak_torque > bound:
+        raise SceneError(f"maneuver.duration {duration:g} s is shorter than the rigid "
+                         f"minimum time at torque_bound {bound:g} N m")
+    end = base.duration
+    torque = base
+    if spec.kind != "bang_bang":
+        shaper = design_shaper(design, spec.kind)
+        torque = shape(base, shaper)
+        end += float(max(shaper.times))
+    return BuiltController(OpenLoop(torque), spec.kind, float(end), design.n_modes)
+
+
+def _optimal(spec: ControllerSpec, design: Model, angle, duration, bound) -> BuiltController:
+    """The optimal slew played open loop (``trajopt``) or tracked with LQR feedback
+    (``trajopt+lqr``)."""
     solution, info = _trajectory(spec, design, angle, duration, bound)
-    if kind == "trajopt":
+    if spec.kind == "trajopt":
         ctrl = OpenLoop(solution.torque_function())
     else:
         ctrl = _wrap(TrajectoryTracker, solution=solution, torque_limit=bound)
-    return _sampled(spec, BuiltController(ctrl, kind, float(solution.duration), n_design,
-                                          info))
+    return BuiltController(ctrl, spec.kind, float(solution.duration), design.n_modes, info)
 
 
 def _trajectory(spec: ControllerSpec, design: Model, angle, duration, bound) -> tuple:

@@ -191,8 +191,9 @@ def mode_tolerances(model):
     """Hub-free frequencies (rad/s) and the error each mode may keep over a slew.
 
     Mode ``i`` of the linearisation at rest, driven quasi-statically by the torque, moves the
-    beam's modal coordinates by ``d_i = max|V[1:, i]| |beta_i| / omega_i^2`` (per unit torque;
-    ``V`` the modes, ``beta`` their modal input) and their rates by ``omega_i d_i``. Its share
+    beam's modal coordinates by ``d_i = max|V[q, i]| |beta_i| / omega_i^2`` (per unit torque;
+    ``V`` the mode shapes, ``q`` their modal rows, ``beta`` their modal input) and their rates
+    by ``omega_i d_i``. Its share
     of the larger motion of either kind, ``w_i``, sets its tolerance
     ``min(PHASE_TOLERANCE, END_STATE_TOLERANCE / w_i)``.
 
@@ -217,14 +218,15 @@ _TOLERANCES = weakref.WeakKeyDictionary()       # per model: computed once, read
 
 
 def _mode_tolerances(model):
-    a, b = _linearisation_model(model).linear_matrices(0.0)
-    n_dof = a.shape[0] // 2
-    lam, vec = np.linalg.eig(-a[n_dof:, :n_dof])           # M^-1 K
+    linear = _linearisation_model(model)
+    a, b = linear.linear_matrices(0.0)
+    layout = linear.layout
+    lam, vec = np.linalg.eig(-a[layout.velocities, layout.coordinates])     # M^-1 K
     order = np.argsort(lam.real)[1:]                       # the rigid-body mode left out
     omega = np.sqrt(np.abs(lam.real[order]))
-    vec = vec.real[:, order]
-    beta = np.linalg.lstsq(vec, b[n_dof:, 0], rcond=None)[0]
-    deflection = np.max(np.abs(vec[1:]), axis=0) * np.abs(beta) / omega ** 2
+    vec = vec.real[:, order]                               # mode shapes in the coordinates
+    beta = np.linalg.lstsq(vec, b[layout.velocities, 0], rcond=None)[0]
+    deflection = np.max(np.abs(vec[layout.q]), axis=0) * np.abs(beta) / omega ** 2
     share = np.maximum(deflection / deflection.max(),
                        omega * deflection / (omega * deflection).max())
     tolerance = np.minimum(PHASE_TOLERANCE, END_STATE_TOLERANCE / share)
@@ -268,10 +270,11 @@ class HoldEffort:
         return max(self.culprit(tolerance) - 1, 0)
 
 
-def _modal_form(a: np.ndarray, b: np.ndarray):
-    """``(A_z, B_z, T_z, omega)``: the linearisation in scaled modal coordinates ``z = T_z x``."""
-    n_dof = a.shape[0] // 2
-    stiffness = -a[n_dof:, :n_dof]                 # M^-1 K, similar to a symmetric matrix
+def _modal_form(a: np.ndarray, b: np.ndarray, layout):
+    """``(A_z, B_z, T_z, omega)``: the linearisation (states of ``layout``) in scaled modal
+    coordinates ``z = T_z x``, ``z = [omega_j eta_j, eta_dot_j]``."""
+    coordinates, velocities = layout.coordinates, layout.velocities
+    stiffness = -a[velocities, coordinates]        # M^-1 K, similar to a symmetric matrix
     lam, vec = np.linalg.eig(stiffness)
     order = np.argsort(lam.real)
     lam, vec = lam.real[order], vec.real[:, order]
@@ -279,8 +282,8 @@ def _modal_form(a: np.ndarray, b: np.ndarray):
     omega[0] = 1.0                                 # the rigid-body mode: no stiffness
     inv = np.linalg.inv(vec)
     t_z = np.zeros_like(a)
-    t_z[:n_dof, :n_dof] = omega[:, None] * inv
-    t_z[n_dof:, n_dof:] = inv
+    t_z[coordinates, coordinates] = omega[:, None] * inv
+    t_z[velocities, velocities] = inv
     a_z = t_z @ a @ np.linalg.inv(t_z)
     return a_z, t_z @ b, t_z, omega
 
@@ -324,19 +327,21 @@ class HoldGrid:
     """
 
     def __init__(self, model, duration: float, angle: float = 1.0):
-        a, b = _linearisation_model(model).linear_matrices(0.0)
-        self.n_dof = a.shape[0] // 2
+        linear = _linearisation_model(model)
+        a, b = linear.linear_matrices(0.0)
+        layout = linear.layout
+        self.n_dof = layout.n_coordinates
         self.frequencies, self.duration = np.sqrt(np.abs(np.sort(
-            np.linalg.eigvals(-a[self.n_dof:, :self.n_dof]).real)[1:])), duration
+            np.linalg.eigvals(-a[layout.velocities, layout.coordinates]).real)[1:])), duration
         self.rows = [self._rows(j) for j in range(self.n_dof)]
         # The excess is a ratio of efforts, which both scale as |B|^-2: a unit input keeps a
         # tiny rigid inertia J0 (B ~ 1 / J0) from overflowing the Van Loan exponential
         with np.errstate(all="ignore"):
             try:
-                self.a_z, b_z, t_z, omega = _modal_form(a, b)
+                self.a_z, b_z, t_z, omega = _modal_form(a, b, layout)
                 self.b_z = b_z / np.linalg.norm(b_z)
                 self.frequencies = omega[1:]
-                self.target = t_z @ (np.eye(a.shape[0])[0] * angle)
+                self.target = t_z @ layout.join(theta=angle)
                 gramian = _gramian(self.a_z, self.b_z, duration)
                 self.continuous = np.array([self.target[r] @ np.linalg.solve(
                     gramian[np.ix_(r, r)], self.target[r]) for r in self.rows])

@@ -34,10 +34,12 @@ import numpy as np
 
 from flexctl.model.checks import check_array
 from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.model.layout import StateLayout
 
 from .feedback import ReferenceFeedback
-from .lqr import (LQRWeights, _lqr_gain, _model, casadi_reference_state, reference_state,
-                  static_deflection_gain)
+from .lqr import (LQRWeights, _gain_layout, _lqr_gain, _model, casadi_reference_state,
+                  reference_state, static_deflection_gain)
+from .plant_state import mode_count
 from .reference import _has_casadi, _real
 
 __all__ = ["NoiseLevels", "LQG", "design_lqg", "estimator_gain", "SumOfSines",
@@ -202,6 +204,8 @@ class LQG(ReferenceFeedback):
         ``z(0)``; default zeros (the filter knows nothing of the initial state).
     deflection_gain : ndarray, shape (M,), optional
         As in :class:`~controllers.lqr.LQR`.
+    layout : StateLayout, optional
+        The design state's (and estimate's) layout, as in :class:`~controllers.lqr.LQR`.
     """
 
     gain: np.ndarray
@@ -213,6 +217,7 @@ class LQG(ReferenceFeedback):
     measurement_noise: object = None
     initial_estimate: np.ndarray = field(default=None, repr=False)
     deflection_gain: np.ndarray | None = field(default=None, repr=False)
+    layout: StateLayout | None = field(default=None, repr=False)
 
     owner = "lqg"
 
@@ -227,11 +232,14 @@ class LQG(ReferenceFeedback):
                                       f"shape {value.shape}")
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        layout = _gain_layout("lqg", self.layout, nd)
+        object.__setattr__(self, "layout", layout)
         meas = check_array("lqg", "measurement_matrix", self.measurement_matrix,
                            finite=False).copy()
-        if meas.ndim != 2 or meas.shape[0] != 2 or meas.shape[1] < nd or meas.shape[1] % 2:
+        plant_modes = mode_count(layout, meas.shape[1]) if meas.ndim == 2 else None
+        if plant_modes is None or meas.shape[0] != 2 or plant_modes < layout.n_modes:
             raise InputValueError(f"lqg.measurement_matrix must have shape (2, 2 N + 2) with N >= "
-                                  f"{nd // 2 - 1} modes; got shape {meas.shape}")
+                                  f"{layout.n_modes} modes; got shape {meas.shape}")
         meas.setflags(write=False)
         object.__setattr__(self, "measurement_matrix", meas)
         if self.measurement_noise is not None and not callable(self.measurement_noise):
@@ -254,7 +262,7 @@ class LQG(ReferenceFeedback):
     @property
     def n_modes(self) -> int:
         """Design modes ``M``."""
-        return self.n_states // 2 - 1
+        return self.layout.n_modes
 
     def for_plant(self, model) -> "LQG":
         """The same controller reading the sensors of ``model`` (``N >= M`` modes)."""
@@ -284,7 +292,7 @@ class LQG(ReferenceFeedback):
 
     def torque(self, t: float, x, z) -> float:
         """Hub torque, N m, from the estimate ``z`` (the plant state ``x`` is not read)."""
-        x_ref, acc = reference_state(self.reference, t, self.n_modes, self.deflection_gain)
+        x_ref, acc = reference_state(self.reference, t, self.layout, self.deflection_gain)
         return self._apply(-float(self.gain[0] @ (np.asarray(z, dtype=float) - x_ref)), acc)
 
     def derivative(self, t: float, x, z) -> np.ndarray:
@@ -316,7 +324,7 @@ class LQG(ReferenceFeedback):
         """:meth:`torque` as a CasADi expression of the symbols ``t``, ``x`` and ``z``."""
         import casadi as ca
 
-        x_ref, acc = casadi_reference_state(self.reference, t, self.n_modes,
+        x_ref, acc = casadi_reference_state(self.reference, t, self.layout,
                                             self.deflection_gain)
         return self._casadi_apply(-ca.dot(ca.DM(self.gain[0]), z - x_ref), acc)
 
@@ -402,5 +410,5 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
                      feedforward_inertia=float(model.matrices.J0) if feedforward else None,
                      torque_limit=torque_limit,
                      deflection_gain=(static_deflection_gain(model) if flexible_reference
-                                      else None))
+                                      else None), layout=model.layout)
     return controller if plant is None else controller.for_plant(plant)

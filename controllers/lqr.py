@@ -12,7 +12,10 @@ Notes
 With ``N`` plant modes and ``M <= N`` design modes, the plant state is
 ``x = [theta, q_1..q_N, theta_dot, q_1_dot..q_N_dot]`` (``2 N + 2``) and the design state is
 ``x_d = [theta, q_1..q_M, theta_dot, q_1_dot..q_M_dot]`` (``2 M + 2``), ``x_d = P x`` with
-``P = truncation_matrix(N, M)``. A reference slew sets
+``P = truncation_matrix(N, M)``. Both orders are the design model's
+:class:`~flexctl.model.layout.StateLayout` (``model.layout``) on ``M`` and ``N`` modes: the
+design state is the plant's ``plant_layout.projection(design_layout)``
+(:mod:`controllers.plant_state`). A reference slew sets
 ``x_ref = [theta_ref, 0..0, rate_ref, 0..0]`` and the torque is
 ``u = -K (x_d - x_ref) + J0 acc_ref`` (the feedforward optional), clipped to the torque limit.
 
@@ -43,8 +46,10 @@ import numpy as np
 from flexctl.model import Model
 from flexctl.model.checks import check_array, check_instance, check_integer
 from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.model.layout import StateLayout
 
 from .feedback import ReferenceFeedback
+from .plant_state import DEFAULT_LAYOUT, design_rows, resized
 from .reference import _casadi_evaluate, _evaluate, _optional_positive, _real, _structure_key
 
 __all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation_matrix",
@@ -56,51 +61,80 @@ def _model(owner: str, model) -> Model:
     return check_instance(owner, "model", model, Model, "flexctl Model")
 
 
-def _n_modes(owner: str, name: str, value, minimum: int = 0) -> int:
+def _n_modes(owner: str, name: str, value, minimum: int = 1) -> int:
     return check_integer(owner, name, value, minimum=minimum)
 
 
-def truncation_matrix(n_plant_modes: int, n_design_modes: int) -> np.ndarray:
+def _layout(owner: str, design) -> StateLayout:
+    """The design state's layout: ``design`` itself, or one appendage of ``design`` modes on a
+    pinned hub."""
+    if isinstance(design, StateLayout):
+        return design
+    return StateLayout.single(_n_modes(owner, "n_design_modes", design))
+
+
+def _gain_layout(owner: str, layout, n_states: int) -> StateLayout:
+    """The layout of a design state of ``n_states`` entries (a gain's width): ``layout``
+    checked against it, or one appendage on a pinned hub (a gain given without a model)."""
+    if layout is None:
+        layout = resized(DEFAULT_LAYOUT, n_states)
+        if layout is None:
+            raise InputValueError(f"{owner}.gain must be finite with shape (1, 2 M + 2), M >= 1;"
+                                  f" got {n_states} columns")
+    if not isinstance(layout, StateLayout):
+        raise InputTypeError(f"{owner}.layout must be a StateLayout (the design model's "
+                             f"model.layout); got {type(layout).__name__}")
+    if layout.n_states != n_states:
+        raise InputValueError(f"{owner}.layout has {layout.n_states} states but the gain "
+                              f"{n_states} columns")
+    return layout
+
+
+def truncation_matrix(n_plant_modes, n_design_modes) -> np.ndarray:
     """``P`` with ``x_design = P x_plant`` (module Notes), shape (2 M + 2, 2 N + 2).
+
+    Parameters
+    ----------
+    n_plant_modes : int or StateLayout
+        ``N``, or the plant state's layout.
+    n_design_modes : int or StateLayout
+        ``M``, or the design state's layout (``model.layout`` of the design model).
 
     Raises
     ------
     ValueError
         If ``n_design_modes > n_plant_modes``.
     """
-    n = _n_modes("truncation_matrix", "n_plant_modes", n_plant_modes)
-    m = _n_modes("truncation_matrix", "n_design_modes", n_design_modes)
-    if m > n:
-        raise InputValueError(f"truncation_matrix.n_design_modes must be <= n_plant_modes = {n} "
-                              f"(the plant must have at least the design's modes); got {m}")
-    rows = np.r_[0:m + 1, n + 1:n + m + 2]
-    return np.eye(2 * n + 2)[rows]
+    design = _layout("truncation_matrix", n_design_modes)
+    plant = n_plant_modes if isinstance(n_plant_modes, StateLayout) else design.with_modes(
+        _n_modes("truncation_matrix", "n_plant_modes", n_plant_modes))
+    if design.n_modes > plant.n_modes:
+        raise InputValueError(f"truncation_matrix.n_design_modes must be <= n_plant_modes = "
+                              f"{plant.n_modes} (the plant must have at least the design's "
+                              f"modes); got {design.n_modes}")
+    return np.eye(plant.n_states)[plant.projection(design)]
 
 
-def truncate_state(x, n_design_modes: int) -> np.ndarray:
+def truncate_state(x, n_design_modes) -> np.ndarray:
     """Design-model state ``[theta, q_1..q_M, theta_dot, q_1_dot..q_M_dot]`` of a plant state.
 
     Parameters
     ----------
     x : array_like, shape (2 N + 2,)
         Plant state with ``N >= M`` modes.
-    n_design_modes : int
-        ``M``.
+    n_design_modes : int or StateLayout
+        ``M``, or the design state's layout (``model.layout`` of the design model).
 
     Returns
     -------
     ndarray, shape (2 M + 2,)
     """
     x = check_array("truncate_state", "x", x, finite=False)
-    m = _n_modes("truncate_state", "n_design_modes", n_design_modes)
-    if x.ndim != 1 or x.size < 2 or x.size % 2:
+    design = _layout("truncate_state", n_design_modes)
+    if x.ndim != 1:
         raise InputValueError("truncate_state.x must be a plant state vector of even length; "
                               f"got shape {x.shape}")
-    n = x.size // 2 - 1
-    if m > n:
-        raise InputValueError(f"truncate_state.n_design_modes must be <= the plant's {n} modes; "
-                              f"got {m}")
-    return np.concatenate((x[:m + 1], x[n + 1:n + m + 2]))
+    return x[design_rows(design, x.size)]
 
 
 #: Time step of the central difference that gives the reference jerk, s.
@@ -117,52 +151,47 @@ def static_deflection_gain(model) -> np.ndarray:
     return np.linalg.solve(mat.K_ff, mat.m_tf)
 
 
-def reference_state(reference, t: float, n_modes: int, deflection_gain=None) -> tuple:
+def reference_state(reference, t: float, n_modes, deflection_gain=None) -> tuple:
     """Reference design state (shape (2 M + 2,)) and hub acceleration ``acc_ref`` at ``t``.
 
     ``x_ref = [theta_ref, q_ref, rate_ref, q_dot_ref]`` with ``q_ref = 0`` (rigid reference,
     ``deflection_gain=None``) or the quasi-static deflection ``q_ref = -g acc_ref`` and
     ``q_dot_ref = -g jerk_ref`` (``g`` from :func:`static_deflection_gain`): a beam that bends
     as much as the commanded acceleration needs, instead of one held straight against it.
+    ``n_modes`` is ``M`` or the design state's layout.
     """
+    layout = _layout("reference_state", n_modes)
     angle, rate, acc = _evaluate(reference, t)
-    x_ref = np.zeros(2 * n_modes + 2)
-    x_ref[0], x_ref[n_modes + 1] = angle, rate
+    x_ref = layout.zeros()
+    x_ref[layout.theta], x_ref[layout.theta_dot] = angle, rate
     if deflection_gain is not None and reference is not None:
         jerk = (_evaluate(reference, t + _JERK_STEP)[2]
                 - _evaluate(reference, t - _JERK_STEP)[2]) / (2.0 * _JERK_STEP)
-        x_ref[1:n_modes + 1] = -deflection_gain * acc
-        x_ref[n_modes + 2:] = -deflection_gain * jerk
+        x_ref[layout.q] = -deflection_gain * acc
+        x_ref[layout.q_dot] = -deflection_gain * jerk
     return x_ref, acc
 
 
-def casadi_truncate_state(x, n_design_modes: int):
+def casadi_truncate_state(x, n_design_modes):
     """:func:`truncate_state` of a CasADi plant state vector (shape (2 N + 2, 1))."""
-    import casadi as ca
-
-    if x.numel() < 2 or x.numel() % 2:
-        raise InputValueError("truncate_state.x must be a plant state vector of even length; "
-                              f"got shape {x.shape}")
-    m, n = int(n_design_modes), x.numel() // 2 - 1
-    if m > n:
-        raise InputValueError(f"truncate_state.n_design_modes must be <= the plant's {n} modes; "
-                              f"got {m}")
-    return ca.vertcat(x[:m + 1], x[n + 1:n + m + 2])
+    design = _layout("truncate_state", n_design_modes)
+    return x[design_rows(design, x.numel()).tolist()]
 
 
-def casadi_reference_state(reference, t, n_modes: int, deflection_gain=None) -> tuple:
+def casadi_reference_state(reference, t, n_modes, deflection_gain=None) -> tuple:
     """:func:`reference_state` on the CasADi symbol ``t``: ``(x_ref (2 M + 2, 1), acc_ref)``."""
     import casadi as ca
 
+    layout = _layout("reference_state", n_modes)
     angle, rate, acc = _casadi_evaluate(reference, t)
-    q_ref = q_dot_ref = ca.DM.zeros(n_modes)
+    q_ref = q_dot_ref = ca.DM.zeros(layout.n_modes)
     if deflection_gain is not None and reference is not None:
         jerk = (_casadi_evaluate(reference, t + _JERK_STEP)[2]
                 - _casadi_evaluate(reference, t - _JERK_STEP)[2]) / (2.0 * _JERK_STEP)
         gain = (deflection_gain if isinstance(deflection_gain, (ca.SX, ca.MX))
                 else ca.DM(np.asarray(deflection_gain, dtype=float)))
         q_ref, q_dot_ref = -gain * acc, -gain * jerk
-    return ca.vertcat(angle, q_ref, rate, q_dot_ref), acc
+    return layout.join(theta=angle, q=q_ref, theta_dot=rate, q_dot=q_dot_ref), acc
 
 
 #: Bryson values of :class:`LQRWeights` must lie within [1 / WEIGHT_RANGE, WEIGHT_RANGE].
@@ -223,18 +252,18 @@ def lqr_weight_matrices(model, weights: LQRWeights) -> tuple:
     if not isinstance(weights, LQRWeights):
         raise InputTypeError(f"lqr_weight_matrices.weights must be LQRWeights; got "
                              f"{type(weights).__name__}")
-    n, nx = model.n_modes, model.n_states
-    q_mat = np.zeros((nx, nx))
-    q_mat[0, 0] = weights.hub_angle ** -2
+    layout = model.layout
+    q_mat = np.zeros((layout.n_states, layout.n_states))
+    q_mat[layout.theta, layout.theta] = weights.hub_angle ** -2
     if weights.hub_rate is not None:
-        q_mat[n + 1, n + 1] += weights.hub_rate ** -2
+        q_mat[layout.theta_dot, layout.theta_dot] += weights.hub_rate ** -2
     if weights.tip_deflection is not None:
         row = model.output_matrix[model.output_names.index("tip_deflection")]
         q_mat += np.outer(row, row) / weights.tip_deflection ** 2
     if weights.modal_energy is not None:
         mat = model.matrices
-        q_mat[1:n + 1, 1:n + 1] += mat.K_ff / (2.0 * weights.modal_energy)
-        q_mat[n + 2:, n + 2:] += mat.M_ff / (2.0 * weights.modal_energy)
+        q_mat[layout.q, layout.q] += mat.K_ff / (2.0 * weights.modal_energy)
+        q_mat[layout.q_dot, layout.q_dot] += mat.M_ff / (2.0 * weights.modal_energy)
     return 0.5 * (q_mat + q_mat.T), np.array([[weights.torque ** -2]])
 
 
@@ -262,12 +291,16 @@ class LQR(ReferenceFeedback):
     deflection_gain : ndarray, shape (M,), optional
         Track the quasi-static beam deflection of the reference (:func:`reference_state`);
         default a rigid reference.
+    layout : StateLayout, optional
+        The design state's layout (the design model's ``model.layout``); default one
+        appendage of ``M`` modes on a pinned hub.
     """
 
     gain: np.ndarray
     spin_rate: float = 0.0
     poles: np.ndarray = field(default=None, repr=False)
     deflection_gain: np.ndarray | None = field(default=None, repr=False)
+    layout: StateLayout | None = field(default=None, repr=False)
 
     owner = "lqr"
 
@@ -281,31 +314,33 @@ class LQR(ReferenceFeedback):
                                   f"shape {gain.shape}")
         gain.setflags(write=False)
         object.__setattr__(self, "gain", gain)
+        object.__setattr__(self, "layout", _gain_layout("lqr", self.layout, gain.shape[1]))
         object.__setattr__(self, "spin_rate", _real("lqr", "spin_rate", self.spin_rate))
         super().__post_init__()
 
     @property
     def n_modes(self) -> int:
         """Number of design modes ``M``."""
-        return self.gain.shape[1] // 2 - 1
+        return self.layout.n_modes
 
-    def state_gain(self, n_modes: int) -> np.ndarray:
-        """``K P``: the gain on a plant state with ``n_modes >= M`` modes, shape (1, 2N+2)."""
-        return self.gain @ truncation_matrix(n_modes, self.n_modes)
+    def state_gain(self, n_modes) -> np.ndarray:
+        """``K P``: the gain on a plant state with ``n_modes >= M`` modes (or of that
+        layout), shape (1, 2N+2)."""
+        return self.gain @ truncation_matrix(n_modes, self.layout)
 
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, at time ``t`` (s) for plant state ``x`` (shape (2 N + 2,))."""
-        x_design = truncate_state(x, self.n_modes)
-        x_ref, acc = reference_state(self.reference, t, self.n_modes, self.deflection_gain)
+        x_design = truncate_state(x, self.layout)
+        x_ref, acc = reference_state(self.reference, t, self.layout, self.deflection_gain)
         return self._apply(-float(self.gain[0] @ (x_design - x_ref)), acc)
 
     @property
     def casadi_parameters(self) -> tuple:
-        """``(structure, values)``: what shapes :meth:`casadi_torque` (design modes,
-        reference, which options are on) and its numbers ``[K, feedforward_inertia,
+        """``(structure, values)``: what shapes :meth:`casadi_torque` (design state
+        layout, reference, which options are on) and its numbers ``[K, feedforward_inertia,
         torque_limit, deflection_gain]`` (0 for an option that is off, no deflection gain for a
         rigid reference). Compiled runs of LQR laws of one structure share their integrators."""
-        structure = (self.n_modes, _structure_key(self.reference),
+        structure = (self.layout, _structure_key(self.reference),
                      self.feedforward_inertia is None, self.torque_limit is None,
                      self.deflection_gain is None)
         extra = () if self.deflection_gain is None else self.deflection_gain
@@ -320,11 +355,13 @@ class LQR(ReferenceFeedback):
         gain, inertia, limit = ca.DM(self.gain[0]), None, None
         deflection = self.deflection_gain
         if parameters is not None:
-            nd = self.gain.shape[1]
-            gain, inertia, limit = parameters[:nd], parameters[nd], parameters[nd + 1]
-            deflection = None if deflection is None else parameters[nd + 2:]
-        x_design = casadi_truncate_state(x, self.n_modes)
-        x_ref, acc = casadi_reference_state(self.reference, t, self.n_modes, deflection)
+            # the numbers in casadi_parameters' order: gain row, inertia, limit, deflection
+            gain, inertia, limit, rest = ca.vertsplit(
+                parameters, [0, self.gain.shape[1], self.gain.shape[1] + 1,
+                             self.gain.shape[1] + 2, parameters.numel()])
+            deflection = None if deflection is None else rest
+        x_design = casadi_truncate_state(x, self.layout)
+        x_ref, acc = casadi_reference_state(self.reference, t, self.layout, deflection)
         return self._casadi_apply(-ca.dot(gain, x_design - x_ref), acc, inertia, limit)
 
 
@@ -370,7 +407,8 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
     return LQR(gain=gain, reference=reference,
                feedforward_inertia=float(model.matrices.J0) if feedforward else None,
                torque_limit=torque_limit, spin_rate=spin_rate, poles=poles,
-               deflection_gain=static_deflection_gain(model) if flexible_reference else None)
+               deflection_gain=static_deflection_gain(model) if flexible_reference else None,
+               layout=model.layout)
 
 
 def closed_loop_poles(model, gain, spin_rate: float = 0.0) -> np.ndarray:

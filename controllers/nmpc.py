@@ -54,7 +54,7 @@ from flexctl.sim.digital import _sample_time
 from flexctl.sim.fixed_step import _jit
 
 from .lqg import NoiseLevels, _measurement_rows
-from .lqr import truncate_state
+from .plant_state import design_rows
 from .slew_nlp import _rk4_step
 from .trajopt import SlewSolution
 
@@ -123,8 +123,86 @@ def _default_weights(model: Model, angle: float, torque_limit: float):
     w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
     theta = max(ANGLE_FRACTION * abs(angle), 1e-3)
     q = TIP_FRACTION * model.system.beam.length / np.maximum(np.abs(mat.tip), 1e-12)
-    allowed = np.concatenate(([theta], q, [theta * w[0]], q * w))
+    allowed = model.layout.join(theta=theta, q=q, theta_dot=theta * w[0], q_dot=q * w)
     return 1.0 / allowed ** 2, 1.0 / torque_limit ** 2
+
+
+def _state_slice(n: int, j: int) -> slice:
+    """``x_j`` in a vector of stages ``[x_0, u_0, x_1, u_1, ..., x_N]`` (``n`` states each):
+    the decision variables, and the references ``[r_0, v_0, ..., r_N]``."""
+    return slice(j * (n + 1), j * (n + 1) + n)
+
+
+def _input_index(n: int, j: int) -> int:
+    """``u_j`` in a vector of stages (see :func:`_state_slice`)."""
+    return j * (n + 1) + n
+
+
+def _parameters(par, n: int) -> tuple:
+    """The measured state, the previous torque and the references of the NMPC's parameter
+    vector ``[x_meas (n), u_prev, r_0, v_0, ..., r_N]``."""
+    import casadi as ca
+
+    x_meas, u_prev, refs = ca.vertsplit(par, (0, n, n + 1, par.numel()))
+    return x_meas, u_prev, refs
+
+
+def _stages(v, n: int, big_n: int) -> tuple:
+    """The ``N + 1`` states and ``N`` torques of a vector of stages (:func:`_state_slice`)."""
+    return ([v[_state_slice(n, j)] for j in range(big_n + 1)],
+            [v[_input_index(n, j)] for j in range(big_n)])
+
+
+def _state_steps(pieces: dict, xs, us, x_meas) -> tuple:
+    """``e_j, G_j`` (``j = 0..N``) of the state steps ``dx_j = e_j + G_j du`` about the guess
+    ``xs, us``, from every stage's ``F`` and ``A, B`` (:meth:`NMPC._condensed`)."""
+    import casadi as ca
+
+    n, big_n = xs[0].numel(), us.numel()
+    states = ca.horzcat(*xs[:-1])
+    f = pieces["forward"](states, us.T)
+    a_all, b_all = pieces["linear"](states, us.T)
+    e = [x_meas - xs[0]]
+    g_mats = [ca.MX.zeros(n, big_n)]
+    for j in range(big_n):
+        a_j = a_all[:, j * n:(j + 1) * n]
+        unit = ca.DM.zeros(1, big_n)
+        unit[j] = 1.0
+        e.append(ca.mtimes(a_j, e[j]) + f[:, j] - xs[j + 1])
+        g_mats.append(ca.mtimes(a_j, g_mats[j]) + ca.mtimes(b_all[:, j], unit))
+    return e, g_mats
+
+
+def _condensed_cost(pieces: dict, g_mats, base, us, rv) -> tuple:
+    """Hessian ``H`` and gradient ``g`` of the Gauss-Newton cost in the torque steps, from
+    ``G_j`` and the residuals ``x_j + e_j - r_j`` (``base``) at ``du = 0``."""
+    import casadi as ca
+
+    big_n = us.numel()
+    q, p_mat, r = ca.DM(pieces["q"]), ca.DM(pieces["p"]), float(pieces["r"])
+    stacked = ca.vertcat(*g_mats[:-1])                     # (N n, N)
+    weighted = stacked * ca.repmat(ca.repmat(q, big_n, 1), 1, big_n)     # diag(Q) G
+    hessian = ca.mtimes(stacked.T, weighted) \
+        + ca.mtimes(g_mats[-1].T, ca.mtimes(p_mat, g_mats[-1])) + r * ca.DM.eye(big_n)
+    gradient = ca.mtimes(weighted.T, ca.vertcat(*base[:-1])) \
+        + ca.mtimes(g_mats[-1].T, ca.mtimes(p_mat, base[-1])) + r * (us - rv)
+    return hessian, gradient
+
+
+def _expansion(w, n: int, big_n: int):
+    """``expand(w, e, G, du) -> w + dw``: the step ``x_j + e_j + G_j du`` and
+    ``u_j + du_j``, in the order of ``w``."""
+    import casadi as ca
+
+    du = ca.MX.sym("du", big_n)
+    e_in = ca.MX.sym("e", (big_n + 1) * n)
+    g_in = ca.MX.sym("G", (big_n + 1) * n, big_n)
+    dx = e_in + ca.mtimes(g_in, du)
+    parts = []
+    for j in range(big_n):
+        parts += [dx[j * n:(j + 1) * n], du[j]]
+    parts.append(dx[big_n * n:])
+    return ca.Function("nmpc_expand", [w, e_in, g_in, du], [w + ca.vertcat(*parts)])
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -135,7 +213,7 @@ class NMPC:
     ----------
     model : Model
         Design model (few modes; any variant). The plant may have more modes: the design
-        states are its first ones (:func:`~controllers.lqr.truncate_state`).
+        states are its first ones (``plant.layout.projection(model.layout)``).
     target : float
         Hub angle to reach and hold at rest, rad. Ignored where ``reference`` is given (its
         final angle is the target).
@@ -285,10 +363,10 @@ class NMPC:
         must apply to follow a reference whose own holds need not line up with the samples).
         """
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        n = self.model.n_states
+        layout = self.model.layout
         if self.reference is None:
-            r = np.zeros((n, t.size))
-            r[0] = self.target
+            r = np.zeros((layout.n_states, t.size))
+            r[layout.theta] = self.target
             return r, np.zeros(t.size)
         states = self.reference.state_at(t)
         edges, values = self._reference_holds()
@@ -331,73 +409,30 @@ class NMPC:
         return self._built
 
     def _build_problem(self) -> None:
+        """The NLP of the module docstring, its bounds and the compiled pieces of a step."""
         import casadi as ca
-        import control
 
         model, big_n, n = self.model, self.horizon, self.model.n_states
-        T = self.sample_time
         sym = ca.MX if model.variant == "exact" else ca.SX
-        hold = _hold_function(model, T, self.substeps)
-
-        # terminal cost: discrete LQR of the design model at rest
-        a, b = model.linear_matrices(0.0)
-        sys_d = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, 1))), T, "zoh")
-        q_diag, r = self.state_weights, self.torque_weight
-        _, p_mat, _ = control.dlqr(sys_d.A, sys_d.B, np.diag(q_diag), np.array([[r]]))
-        p_mat = 0.5 * (np.asarray(p_mat) + np.asarray(p_mat).T)
-
-        # decision variables: x_0, u_0, x_1, u_1, ..., x_{N-1}, u_{N-1}, x_N
+        hold = _hold_function(model, self.sample_time, self.substeps)
+        p_mat = self._terminal_weight()
+        # decision variables [x_0, u_0, ..., x_{N-1}, u_{N-1}, x_N]; parameters: measured x,
+        # previous u, then the references [r_0, v_0, ..., r_N] in the same stage order
         w = sym.sym("w", (big_n + 1) * n + big_n)
-        xs = [w[j * (n + 1):j * (n + 1) + n] for j in range(big_n + 1)]
-        us = [w[j * (n + 1) + n] for j in range(big_n)]
-        n_ref = (big_n + 1) * n + big_n
-        par = sym.sym("p", n + 1 + n_ref)       # measured x, previous u, references
-        x_meas, u_prev = par[:n], par[n]
-        refs = par[n + 1:]
-        rx = [refs[j * (n + 1):j * (n + 1) + n] for j in range(big_n + 1)]
-        rv = [refs[j * (n + 1) + n] for j in range(big_n)]
-        residuals, g, lbg, ubg = [], [], [], []
-        sq = np.sqrt(q_diag)
-        for j in range(big_n):
-            residuals.append(ca.DM(sq) * (xs[j] - rx[j]))
-            residuals.append(np.sqrt(r) * (us[j] - rv[j]))
-        chol = np.linalg.cholesky(p_mat + 1e-12 * np.eye(n)).T
-        residuals.append(ca.mtimes(ca.DM(chol), xs[big_n] - rx[big_n]))
-        res = ca.vertcat(*residuals)
-        cost = 0.5 * ca.sumsqr(res)
-        g.append(xs[0] - x_meas)
-        lbg += [0.0] * n
-        ubg += [0.0] * n
-        for j in range(big_n):
-            g.append(hold(xs[j], us[j]) - xs[j + 1])
-            lbg += [0.0] * n
-            ubg += [0.0] * n
-        if self.torque_rate_limit is not None:
-            step = self.torque_rate_limit * T
-            for j in range(big_n):
-                g.append(us[j] - (u_prev if j == 0 else us[j - 1]))
-                lbg.append(-step)
-                ubg.append(step)
-        if self.tip_limit is not None:
-            tip = ca.DM(model.matrices.tip)
-            nm = model.n_modes
-            for j in range(1, big_n + 1):
-                g.append(ca.dot(tip, xs[j][1:nm + 1]))
-                lbg.append(-self.tip_limit)
-                ubg.append(self.tip_limit)
-        if self.terminal == "rest":
-            g.append(xs[big_n] - rx[big_n])
-            lbg += [0.0] * n
-            ubg += [0.0] * n
-        g = ca.vertcat(*g)
+        par = sym.sym("p", n + 1 + (big_n + 1) * n + big_n)
+        xs, us = _stages(w, n, big_n)
+        x_meas, u_prev, refs = _parameters(par, n)
+        rx, rv = _stages(refs, n, big_n)
+        cost = self._nlp_cost(xs, us, rx, rv, p_mat)
+        g, lbg, ubg = self._nlp_constraints(hold, xs, us, x_meas, u_prev, rx)
         lbw = np.full(w.numel(), -np.inf)
         ubw = np.full(w.numel(), np.inf)
-        u_index = np.array([j * (n + 1) + n for j in range(big_n)])
+        u_index = np.array([_input_index(n, j) for j in range(big_n)])
         lbw[u_index], ubw[u_index] = -self.torque_limit, self.torque_limit
 
-        built = {"n": n, "nw": w.numel(), "u_index": u_index, "lbg": np.array(lbg),
-                 "ubg": np.array(ubg), "lbw": lbw, "ubw": ubw, "hold": _jit(hold, model)}
-        built.update(self._condensed(hold, q_diag, r, p_mat))
+        built = {"n": n, "nw": w.numel(), "u_index": u_index, "lbg": lbg, "ubg": ubg,
+                 "lbw": lbw, "ubw": ubw}
+        built.update(self._condensed(hold, self.state_weights, self.torque_weight, p_mat))
         built["hold"] = built["hold_one"]
         a_sp, h_sp = built["a_sparsity"], built["h_sparsity"]
         built["qp"] = _conic("nmpc_qp", self.qp_solver, h_sp, a_sp)
@@ -411,6 +446,63 @@ class NMPC:
                                       "ipopt.sb": "yes", "ipopt.tol": 1e-8,
                                       "ipopt.max_iter": 500, "error_on_fail": False})
         self._built.update(built)
+
+    def _terminal_weight(self) -> np.ndarray:
+        """``P``: the discrete LQR Riccati solution of the design model at rest, held over
+        ``sample_time`` with weights ``Q`` and ``R``, shape (n, n)."""
+        import control
+
+        n = self.model.n_states
+        a, b = self.model.linear_matrices(0.0)
+        sys_d = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, 1))), self.sample_time,
+                            "zoh")
+        _, p_mat, _ = control.dlqr(sys_d.A, sys_d.B, np.diag(self.state_weights),
+                                   np.array([[self.torque_weight]]))
+        return 0.5 * (np.asarray(p_mat) + np.asarray(p_mat).T)
+
+    def _nlp_cost(self, xs, us, rx, rv, p_mat):
+        """``1/2 |res|^2``: each stage's residuals weighted by ``sqrt(Q)`` and ``sqrt(R)``, the
+        last state's by the Cholesky factor of ``P``."""
+        import casadi as ca
+
+        big_n, r = self.horizon, self.torque_weight
+        residuals = []
+        sq = np.sqrt(self.state_weights)
+        for j in range(big_n):
+            residuals.append(ca.DM(sq) * (xs[j] - rx[j]))
+            residuals.append(np.sqrt(r) * (us[j] - rv[j]))
+        chol = np.linalg.cholesky(p_mat + 1e-12 * np.eye(self.model.n_states)).T
+        residuals.append(ca.mtimes(ca.DM(chol), xs[big_n] - rx[big_n]))
+        return 0.5 * ca.sumsqr(ca.vertcat(*residuals))
+
+    def _nlp_constraints(self, hold, xs, us, x_meas, u_prev, rx) -> tuple:
+        """``(g, lbg, ubg)``: the start at the measured state, the shooting gaps, then the
+        torque-rate, tip and terminal-rest constraints that are set, in that order."""
+        import casadi as ca
+
+        big_n, n, layout = self.horizon, self.model.n_states, self.model.layout
+        g, lbg, ubg = [xs[0] - x_meas], [0.0] * n, [0.0] * n
+        for j in range(big_n):
+            g.append(hold(xs[j], us[j]) - xs[j + 1])
+            lbg += [0.0] * n
+            ubg += [0.0] * n
+        if self.torque_rate_limit is not None:
+            step = self.torque_rate_limit * self.sample_time
+            for j in range(big_n):
+                g.append(us[j] - (u_prev if j == 0 else us[j - 1]))
+                lbg.append(-step)
+                ubg.append(step)
+        if self.tip_limit is not None:
+            tip = ca.DM(self.model.matrices.tip)
+            for j in range(1, big_n + 1):
+                g.append(ca.dot(tip, layout.modal(xs[j])))
+                lbg.append(-self.tip_limit)
+                ubg.append(self.tip_limit)
+        if self.terminal == "rest":
+            g.append(xs[big_n] - rx[big_n])
+            lbg += [0.0] * n
+            ubg += [0.0] * n
+        return ca.vertcat(*g), np.array(lbg), np.array(ubg)
 
     def _condensed(self, hold, q_diag, r, p_mat) -> dict:
         """The pieces of the condensed Gauss-Newton QP of one real-time iteration.
@@ -448,44 +540,40 @@ class NMPC:
         return pieces
 
     def _condensing(self, pieces) -> dict:
-        """``condense(w, p) -> (H, g, A, lba, uba, lbx, ubx)`` and ``expand(w, p, du) -> w + dw``
-        as CasADi matrix expressions (MX: one operation per block, not per scalar), so that a
-        step hands CasADi matrices from the linearisation to the QP solver and back without
-        converting them to numpy."""
+        """``condense(w, p) -> (H, g, A, lba, uba, lbx, ubx, e, G)`` and
+        ``expand(w, e, G, du) -> w + dw`` as CasADi matrix expressions (MX: one operation per
+        block, not per scalar), so that a step hands CasADi matrices from the linearisation to
+        the QP solver and back without converting them to numpy."""
         import casadi as ca
 
         n, big_n = self.model.n_states, self.horizon
-        width = n + 1
         w = ca.MX.sym("w", (big_n + 1) * n + big_n)
         par = ca.MX.sym("p", n + 1 + (big_n + 1) * n + big_n)
-        du = ca.MX.sym("du", big_n)
-        xs = [w[j * width:j * width + n] for j in range(big_n + 1)]
-        us = ca.vertcat(*[w[j * width + n] for j in range(big_n)])
-        x_meas, u_prev, refs = par[:n], par[n], par[n + 1:]
-        rx = [refs[j * width:j * width + n] for j in range(big_n + 1)]
-        rv = ca.vertcat(*[refs[j * width + n] for j in range(big_n)])
-        states = ca.horzcat(*xs[:-1])
-        f = pieces["forward"](states, us.T)
-        a_all, b_all = pieces["linear"](states, us.T)
-        q = ca.DM(pieces["q"])
-        p_mat = ca.DM(pieces["p"])
-        r = float(pieces["r"])
-        e = [x_meas - xs[0]]
-        g_mats = [ca.MX.zeros(n, big_n)]
-        for j in range(big_n):
-            a_j = a_all[:, j * n:(j + 1) * n]
-            unit = ca.DM.zeros(1, big_n)
-            unit[j] = 1.0
-            e.append(ca.mtimes(a_j, e[j]) + f[:, j] - xs[j + 1])
-            g_mats.append(ca.mtimes(a_j, g_mats[j]) + ca.mtimes(b_all[:, j], unit))
+        xs, us = _stages(w, n, big_n)
+        us = ca.vertcat(*us)
+        x_meas, u_prev, refs = _parameters(par, n)
+        rx, rv = _stages(refs, n, big_n)
+        e, g_mats = _state_steps(pieces, xs, us, x_meas)
         base = [xs[j] + e[j] - rx[j] for j in range(big_n + 1)]
-        stacked = ca.vertcat(*g_mats[:-1])                     # (N n, N)
-        weights = ca.repmat(q, big_n, 1)
-        weighted = stacked * ca.repmat(weights, 1, big_n)     # diag(Q) G
-        hessian = ca.mtimes(stacked.T, weighted) \
-            + ca.mtimes(g_mats[-1].T, ca.mtimes(p_mat, g_mats[-1])) + r * ca.DM.eye(big_n)
-        gradient = ca.mtimes(weighted.T, ca.vertcat(*base[:-1])) \
-            + ca.mtimes(g_mats[-1].T, ca.mtimes(p_mat, base[-1])) + r * (us - rv)
+        hessian, gradient = _condensed_cost(pieces, g_mats, base, us, ca.vertcat(*rv))
+        a_qp, lba, uba = self._condensed_constraints(g_mats, e, xs, us, u_prev, base)
+        condense = ca.Function(
+            "nmpc_condense", [w, par],
+            [ca.densify(0.5 * (hessian + hessian.T)), gradient, ca.densify(a_qp), lba, uba,
+             -self.torque_limit - us, self.torque_limit - us, ca.vertcat(*e),
+             ca.densify(ca.vertcat(*g_mats))])
+        # compiling the condensing costs 5 to 7 s of gcc and pays from about 30 steps
+        # (measured at 40: 1.2 against 1.55 ms a step; at 20 no difference)
+        if big_n >= JIT_CONDENSE_FROM:
+            condense = _jit(condense, self.model)
+        return {"condense": condense, "expand": _expansion(w, n, big_n)}
+
+    def _condensed_constraints(self, g_mats, e, xs, us, u_prev, base) -> tuple:
+        """``(A, lba, uba)`` of the QP's ``lba <= A du <= uba``: the torque-rate, tip and
+        terminal-rest rows that are set, in that order (none: no rows)."""
+        import casadi as ca
+
+        big_n = self.horizon
         rows, lower, upper = [], [], []
         if self.torque_rate_limit is not None:
             bound = self.torque_rate_limit * self.sample_time
@@ -495,11 +583,10 @@ class NMPC:
             lower.append(-bound - now)
             upper.append(bound - now)
         if self.tip_limit is not None:
-            tip = ca.DM(self.model.matrices.tip).T
-            nm = self.model.n_modes
-            tips = ca.vertcat(*[ca.mtimes(tip, g_mats[j][1:nm + 1, :])
+            tip, layout = ca.DM(self.model.matrices.tip).T, self.model.layout
+            tips = ca.vertcat(*[ca.mtimes(tip, g_mats[j][layout.q, :])
                                 for j in range(1, big_n + 1)])
-            now = ca.vertcat(*[ca.mtimes(tip, xs[j][1:nm + 1] + e[j][1:nm + 1])
+            now = ca.vertcat(*[ca.mtimes(tip, layout.modal(xs[j]) + layout.modal(e[j]))
                                for j in range(1, big_n + 1)])
             rows.append(tips)
             lower.append(-self.tip_limit - now)
@@ -509,29 +596,8 @@ class NMPC:
             lower.append(-base[-1])
             upper.append(-base[-1])
         if rows:
-            a_qp, lba, uba = ca.vertcat(*rows), ca.vertcat(*lower), ca.vertcat(*upper)
-        else:
-            a_qp, lba, uba = ca.MX(0, big_n), ca.MX(0, 1), ca.MX(0, 1)
-        affine = ca.vertcat(*e)                                # (N + 1) n: e_j
-        gains = ca.vertcat(*g_mats)                            # ((N + 1) n, N): G_j
-        condense = ca.Function(
-            "nmpc_condense", [w, par],
-            [ca.densify(0.5 * (hessian + hessian.T)), gradient, ca.densify(a_qp), lba, uba,
-             -self.torque_limit - us, self.torque_limit - us, affine, ca.densify(gains)])
-        # the step: x_j + e_j + G_j du and u_j + du_j, in the order of w
-        e_in = ca.MX.sym("e", (big_n + 1) * n)
-        g_in = ca.MX.sym("G", (big_n + 1) * n, big_n)
-        dx = e_in + ca.mtimes(g_in, du)
-        parts = []
-        for j in range(big_n):
-            parts += [dx[j * n:(j + 1) * n], du[j]]
-        parts.append(dx[big_n * n:])
-        expand = ca.Function("nmpc_expand", [w, e_in, g_in, du], [w + ca.vertcat(*parts)])
-        # compiling the condensing costs 5 to 7 s of gcc and pays from about 30 steps
-        # (measured at 40: 1.2 against 1.55 ms a step; at 20 no difference)
-        if big_n >= JIT_CONDENSE_FROM:
-            condense = _jit(condense, self.model)
-        return {"condense": condense, "expand": expand}
+            return ca.vertcat(*rows), ca.vertcat(*lower), ca.vertcat(*upper)
+        return ca.MX(0, big_n), ca.MX(0, 1), ca.MX(0, 1)
 
     @property
     def linearisation_model(self) -> Model:
@@ -567,10 +633,11 @@ class NMPC:
         if model.n_modes < self.model.n_modes:
             raise InputValueError(f"nmpc design model has {self.model.n_modes} modes, more "
                                   f"than the plant's {model.n_modes}")
-        session = NMPCSession(self, self._problem(), np.asarray(x0, dtype=float))
+        rows = model.layout.projection(self.model.layout)
+        session = NMPCSession(self, self._problem(), np.asarray(x0, dtype=float), rows)
         if self.noise is not None:
             session.filter = _ExtendedKalman(self, _measurement_rows(model),
-                                             truncate_state(x0, self.model.n_modes))
+                                             np.asarray(x0, dtype=float)[rows])
         return session
 
 
@@ -618,19 +685,26 @@ class _ExtendedKalman:
 
 
 class NMPCSession:
-    """One closed-loop run of an :class:`NMPC`: warm start, last torque and statistics."""
+    """One closed-loop run of an :class:`NMPC`: warm start, last torque and statistics.
 
-    def __init__(self, mpc: NMPC, built: dict, x0):
+    ``rows`` are the indices of the design state in the plant state
+    (``plant.layout.projection(mpc.model.layout)``); by default those of a plant of the design
+    model's blocks with ``x0``'s length (:func:`controllers.plant_state.design_rows`).
+    """
+
+    def __init__(self, mpc: NMPC, built: dict, x0, rows=None):
         self.mpc, self.built = mpc, built
         n, big_n = built["n"], mpc.horizon
         self._n = n
-        x_design = truncate_state(x0, mpc.model.n_modes)
+        x0 = np.asarray(x0, dtype=float)
+        self._rows = design_rows(mpc.model.layout, x0.size) if rows is None \
+            else np.asarray(rows)
+        x_design = x0[self._rows]
         # initial guess: the reference from now on (or the start state held)
         refs, torques = mpc.reference_at(mpc.sample_time * np.arange(big_n + 1))
         w = np.zeros(built["nw"])
         for j in range(big_n + 1):
-            w[j * (n + 1):j * (n + 1) + n] = refs[:, j] if mpc.reference is not None \
-                else x_design
+            w[_state_slice(n, j)] = refs[:, j] if mpc.reference is not None else x_design
         w[built["u_index"]] = np.clip(torques[:big_n], -mpc.torque_limit, mpc.torque_limit)
         self.w = w
         self.u_prev = 0.0
@@ -668,7 +742,7 @@ class NMPCSession:
             x_design = self.filter.update(np.asarray(x, dtype=float), self.u_prev,
                                           not self.solve_times).copy()
         else:
-            x_design = truncate_state(x, mpc.model.n_modes)
+            x_design = np.asarray(x, dtype=float)[self._rows]
         p = self._parameters(float(t), x_design)
         guess = self._shift() if self.solve_times else self.w
         guess[:self._n] = x_design

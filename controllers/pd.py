@@ -24,10 +24,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexctl.model.checks import check_integer
+from flexctl.model.layout import StateLayout
 
 from .feedback import ReferenceFeedback
-from .reference import _casadi_evaluate, _casadi_hub_state, _evaluate, _hub_state, _real, \
-    _structure_key
+from .plant_state import casadi_hub_state, hub_state
+from .reference import _casadi_evaluate, _evaluate, _real, _structure_key
 
 __all__ = ["PD", "pd_gains", "design_pd"]
 
@@ -65,7 +66,7 @@ class PD(ReferenceFeedback):
     Notes
     -----
     The plant state is ``x = [theta, q_1..q_N, theta_dot, q_1_dot..q_N_dot]`` for any ``N``;
-    only ``x[0]`` and ``x[N + 1]`` are read.
+    only ``theta`` and ``theta_dot`` are read (:func:`controllers.plant_state.hub_state`).
     """
 
     kp: float
@@ -78,17 +79,19 @@ class PD(ReferenceFeedback):
         object.__setattr__(self, "kd", _real("pd", "kd", self.kd, minimum=0.0, strict=True))
         super().__post_init__()
 
-    def state_gain(self, n_modes: int) -> np.ndarray:
-        """``K`` with ``torque = -K x`` for a plant with ``n_modes`` modes (no reference, no
-        saturation), shape (1, 2 n_modes + 2)."""
-        n_modes = check_integer("pd.state_gain", "n_modes", n_modes, minimum=0)
-        gain = np.zeros((1, 2 * n_modes + 2))
-        gain[0, 0], gain[0, n_modes + 1] = self.kp, self.kd
+    def state_gain(self, n_modes) -> np.ndarray:
+        """``K`` with ``torque = -K x`` for a plant with ``n_modes`` modes, or of that
+        :class:`~flexctl.model.layout.StateLayout` (no reference, no saturation), shape
+        (1, 2 n_modes + 2)."""
+        layout = n_modes if isinstance(n_modes, StateLayout) else StateLayout.single(
+            check_integer("pd.state_gain", "n_modes", n_modes, minimum=1))
+        gain = np.zeros((1, layout.n_states))
+        gain[0, layout.theta], gain[0, layout.theta_dot] = self.kp, self.kd
         return gain
 
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, at time ``t`` (s) for plant state ``x``."""
-        theta, rate = _hub_state(x)
+        theta, rate = hub_state(x)
         angle_ref, rate_ref, acc_ref = _evaluate(self.reference, t)
         return self._apply(self.kp * (angle_ref - theta) + self.kd * (rate_ref - rate), acc_ref)
 
@@ -109,7 +112,7 @@ class PD(ReferenceFeedback):
         kp, kd, inertia, limit = self.kp, self.kd, None, None
         if parameters is not None:
             kp, kd, inertia, limit = parameters[0], parameters[1], parameters[2], parameters[3]
-        theta, rate = _casadi_hub_state(x)
+        theta, rate = casadi_hub_state(x)
         angle_ref, rate_ref, acc_ref = _casadi_evaluate(self.reference, t)
         return self._casadi_apply(kp * (angle_ref - theta) + kd * (rate_ref - rate), acc_ref,
                                   inertia, limit)

@@ -219,15 +219,6 @@ def _saturate(torque: float, limit: float | None) -> float:
     return torque if limit is None else min(max(torque, -limit), limit)
 
 
-def _hub_state(x) -> tuple:
-    """Hub angle and rate from a plant state ``[theta, q, theta_dot, q_dot]`` of any size."""
-    x = np.asarray(x, dtype=float)
-    if x.ndim != 1 or x.size < 2 or x.size % 2:
-        raise InputValueError("plant state must be a vector [theta, q_1..q_N, theta_dot, "
-                              f"q_1_dot..q_N_dot] of even length >= 2; got shape {x.shape}")
-    return float(x[0]), float(x[x.size // 2])
-
-
 # ---- CasADi forms of the helpers above, for the compiled simulation path ----------------
 def _has_casadi(source, method: str = "casadi_reference") -> bool:
     """``source`` is absent or offers a CasADi form ``method`` (and does not disown it)."""
@@ -257,11 +248,3 @@ def _casadi_saturate(torque, limit: float | None):
     import casadi as ca
 
     return torque if limit is None else ca.fmin(ca.fmax(torque, -limit), limit)
-
-
-def _casadi_hub_state(x) -> tuple:
-    """:func:`_hub_state` of a CasADi state vector."""
-    if x.numel() < 2 or x.numel() % 2:
-        raise InputValueError("plant state must be a vector [theta, q_1..q_N, theta_dot, "
-                              f"q_1_dot..q_N_dot] of even length >= 2; got shape {x.shape}")
-    return x[0], x[x.numel() // 2]

@@ -25,15 +25,16 @@ Examples
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from flexctl.model.checks import check_array
 from flexctl.model.errors import InputValueError
+from flexctl.model.layout import StateLayout
 
 from .feedback import ReferenceFeedback
-from .lqr import (LQRWeights, _lqr_gain, _model, casadi_reference_state,
+from .lqr import (LQRWeights, _gain_layout, _lqr_gain, _model, casadi_reference_state,
                   casadi_truncate_state, reference_state, static_deflection_gain,
                   truncate_state, truncation_matrix)
 from .reference import _real
@@ -62,13 +63,14 @@ class ScheduledLQR(ReferenceFeedback):
         Design spin rates, rad/s, ``>= 0`` and strictly increasing.
     gains : array_like, shape (S, 2 M + 2)
         LQR gain at each design spin rate.
-    reference, feedforward_inertia, torque_limit, deflection_gain
+    reference, feedforward_inertia, torque_limit, deflection_gain, layout
         As in :class:`~controllers.lqr.LQR`.
     """
 
     spin_rates: np.ndarray
     gains: np.ndarray
     deflection_gain: np.ndarray | None = None
+    layout: StateLayout | None = field(default=None, repr=False)
 
     owner = "scheduled_lqr"
 
@@ -82,12 +84,14 @@ class ScheduledLQR(ReferenceFeedback):
         for name, value in (("spin_rates", rates), ("gains", gains)):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        object.__setattr__(self, "layout",
+                           _gain_layout("scheduled_lqr", self.layout, gains.shape[1]))
         super().__post_init__()
 
     @property
     def n_modes(self) -> int:
         """Design modes ``M``."""
-        return self.gains.shape[1] // 2 - 1
+        return self.layout.n_modes
 
     def gain_at(self, spin_rate: float) -> np.ndarray:
         """Interpolated gain at hub rate ``spin_rate`` (rad/s, either sign), shape (1, 2M+2)."""
@@ -101,15 +105,16 @@ class ScheduledLQR(ReferenceFeedback):
         frac = (w - rates[k]) / (rates[k + 1] - rates[k])
         return ((1.0 - frac) * self.gains[k] + frac * self.gains[k + 1])[None, :]
 
-    def state_gain(self, n_modes: int, spin_rate: float = 0.0) -> np.ndarray:
-        """Gain at ``spin_rate`` on a plant state with ``n_modes`` modes, shape (1, 2N+2)."""
-        return self.gain_at(spin_rate) @ truncation_matrix(n_modes, self.n_modes)
+    def state_gain(self, n_modes, spin_rate: float = 0.0) -> np.ndarray:
+        """Gain at ``spin_rate`` on a plant state with ``n_modes`` modes (or of that layout),
+        shape (1, 2N+2)."""
+        return self.gain_at(spin_rate) @ truncation_matrix(n_modes, self.layout)
 
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, with the gain at the measured ``|theta_dot|``."""
-        x_design = truncate_state(x, self.n_modes)
-        x_ref, acc = reference_state(self.reference, t, self.n_modes, self.deflection_gain)
-        gain = self.gain_at(x_design[self.n_modes + 1])
+        x_design = truncate_state(x, self.layout)
+        x_ref, acc = reference_state(self.reference, t, self.layout, self.deflection_gain)
+        gain = self.gain_at(self.layout.hub_rate(x_design))
         return self._apply(-float(gain[0] @ (x_design - x_ref)), acc)
 
     def casadi_gain_at(self, spin_rate):
@@ -129,10 +134,10 @@ class ScheduledLQR(ReferenceFeedback):
         """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``."""
         import casadi as ca
 
-        x_design = casadi_truncate_state(x, self.n_modes)
-        x_ref, acc = casadi_reference_state(self.reference, t, self.n_modes,
+        x_design = casadi_truncate_state(x, self.layout)
+        x_ref, acc = casadi_reference_state(self.reference, t, self.layout,
                                             self.deflection_gain)
-        gain = self.casadi_gain_at(x_design[self.n_modes + 1])
+        gain = self.casadi_gain_at(self.layout.hub_rate(x_design))
         return self._casadi_apply(-ca.dot(gain, x_design - x_ref), acc)
 
 
@@ -164,4 +169,5 @@ def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=No
                         feedforward_inertia=float(model.matrices.J0) if feedforward else None,
                         torque_limit=torque_limit,
                         deflection_gain=(static_deflection_gain(model) if flexible_reference
-                                         else None))
+                                         else None),
+                        layout=model.layout)

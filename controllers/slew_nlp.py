@@ -261,8 +261,9 @@ def state_scale(model, problem, duration: float) -> np.ndarray:
     # cap a very soft beam's scale (1e15 for E = 1e-6) let IPOPT accept broken dynamics
     q = np.minimum(q, np.abs(mat.m_tf) / np.diag(mat.M_ff) * abs(problem.angle))
     q = np.maximum(q, 1e-6 * model.system.beam.length)
-    return np.concatenate(([abs(problem.angle)], q, [abs(problem.angle) / duration],
-                           q * np.maximum(w, 1.0 / duration)))
+    return model.layout.join(theta=abs(problem.angle), q=q,
+                             theta_dot=abs(problem.angle) / duration,
+                             q_dot=q * np.maximum(w, 1.0 / duration))
 
 
 @dataclass(frozen=True)
@@ -280,8 +281,8 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
     import casadi as ca
 
     (t_guess, x_guess, u_guess) = guess
-    n, N, K = model.n_states, model.n_modes, problem.n_intervals
-    umax, target = problem.torque_bound, problem.target_state(n)
+    n, K, layout = model.n_states, problem.n_intervals, model.layout
+    umax, target = problem.torque_bound, problem.target_state(layout)
     free_time = problem.objective == "time"
     scale = ca.DM(state_scale(model, problem, problem.duration or t_guess))
     collocation = disc.transcription == "collocation"
@@ -324,10 +325,10 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
         opti.subject_to(opti.bounded(-lim, jumps, lim), u_scale)
     if problem.tip_bound is not None:
         tip, ymax = ca.DM(model.matrices.tip).T, problem.tip_bound
-        opti.subject_to(opti.bounded(-ymax, ca.mtimes(tip, grid[1:N + 1, 1:m * K]), ymax),
+        opti.subject_to(opti.bounded(-ymax, ca.mtimes(tip, grid[layout.q, 1:m * K]), ymax),
                         ymax)
         if collocation:
-            opti.subject_to(opti.bounded(-ymax, ca.mtimes(tip, Xc[1:N + 1, :]), ymax), ymax)
+            opti.subject_to(opti.bounded(-ymax, ca.mtimes(tip, Xc[layout.q, :]), ymax), ymax)
     if free_time:
         opti.subject_to(opti.bounded(MIN_TIME_FLOOR * t_rigid, T, t_max))
         opti.set_initial(T, min(max(t_guess, MIN_TIME_FLOOR * t_rigid), t_max))

@@ -28,7 +28,7 @@ def _default_weights(model: Model, angle: float, torque_bound: float):
     w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
     theta = 0.05 * abs(angle)
     q = 0.03 * model.system.beam.length / np.abs(mat.tip)
-    allowed = np.concatenate(([theta], q, [theta * w[0]], q * w))
+    allowed = model.layout.join(theta=theta, q=q, theta_dot=theta * w[0], q_dot=q * w)
     return 1.0 / allowed ** 2, 1.0 / torque_bound ** 2
 
 
@@ -107,7 +107,7 @@ class TrajectoryTracker:
 
     def design_state(self, x) -> np.ndarray:
         """The design model's states picked out of a plant state ``x`` (shape (2 M + 2,))."""
-        return truncate_state(x, self.solution.model.n_modes)
+        return truncate_state(x, self.solution.model.layout)
 
     def initial_state(self, x0) -> np.ndarray:
         """No internal states: an empty array (also :meth:`derivative`)."""
@@ -140,7 +140,7 @@ class TrajectoryTracker:
         optimal = row[2] + s * (row[3] + s * (row[4] + s * row[5]))     # K x_opt(t)
         outside = ca.logic_or(t < self._feedforward.t[0], t >= self._feedforward.t[-1])
         feedforward = ca.if_else(outside, 0.0, row[6])
-        design = casadi_truncate_state(x, self.solution.model.n_modes)
+        design = casadi_truncate_state(x, self.solution.model.layout)
         u = feedforward - (ca.dot(ca.DM(self.gain), design) - optimal)
         if self.torque_limit is not None:
             u = ca.fmin(ca.fmax(u, -self.torque_limit), self.torque_limit)

@@ -59,9 +59,11 @@ import numpy as np
 from flexctl.model import Model
 from flexctl.model.checks import check_choice, check_integer, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.model.layout import StateLayout
 from flexctl.sim.maneuvers import rigid_slew_duration
 
 from .hold_grid import MAX_SUBSTEPS
+from .plant_state import DEFAULT_LAYOUT, resized
 from .slew_checks import refuse_unsolvable
 from .slew_nlp import (MAX_INTERVALS, Discretisation, Transcribed, discretisation, rk4_substeps,
                        transcribe, transcription_for)
@@ -208,9 +210,17 @@ class SlewProblem:
         if self.substeps is not None:
             set_("substeps", _integer("substeps", self.substeps, 1, MAX_SUBSTEPS))
 
-    def target_state(self, n_states: int) -> np.ndarray:
-        """Final state ``x_f = [angle, 0 .. 0]``, shape (n_states,)."""
-        return np.eye(n_states)[0] * self.angle
+    def target_state(self, layout) -> np.ndarray:
+        """Final state ``x_f = [angle, 0 .. 0]``, shape (n_states,), of ``layout``: the design
+        model's :class:`~flexctl.model.layout.StateLayout`, or a number of states (one
+        appendage on a pinned hub)."""
+        if not isinstance(layout, StateLayout):
+            n_states = check_integer("target_state", "n_states", layout, minimum=1)
+            layout = resized(DEFAULT_LAYOUT, n_states)
+            if layout is None:
+                raise InputValueError("target_state.n_states must be 2 N + 2 for N >= 1 modes; "
+                                      f"got {n_states}")
+        return layout.join(theta=self.angle)
 
 
 @dataclass(frozen=True, eq=False)
@@ -307,7 +317,7 @@ class SlewSolution:
     @property
     def tip_deflection(self) -> np.ndarray:
         """Tip deflection at the grid times, m, shape (K+1,)."""
-        return self.model.matrices.tip @ self.states[1:self.model.n_modes + 1]
+        return self.model.matrices.tip @ self.model.layout.modal(self.states)
 
     def torque_function(self) -> HoldTorque:
         """The torque as a callable ``torque(t)`` (N m) with ``breakpoints`` at the holds."""
@@ -341,11 +351,11 @@ class SlewSolution:
 # ---------------------------------------------------------------------------- guesses
 def _smooth_guess(model: Model, problem: SlewProblem, duration: float):
     """Rigid-body quintic rest-to-rest profile: grid states (n, K+1) and holds (K,)."""
-    n, K = model.n_modes, problem.n_intervals
+    layout, K = model.layout, problem.n_intervals
     s = np.linspace(0.0, 1.0, K + 1)
-    states = np.zeros((model.n_states, K + 1))
-    states[0] = problem.angle * (10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5)
-    states[n + 1] = problem.angle * 30 * (s ** 2 - 2 * s ** 3 + s ** 4) / duration
+    states = np.zeros((layout.n_states, K + 1))
+    states[layout.theta] = problem.angle * (10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5)
+    states[layout.theta_dot] = problem.angle * 30 * (s ** 2 - 2 * s ** 3 + s ** 4) / duration
     mid = 0.5 * (s[1:] + s[:-1])
     acc = problem.angle * 60 * (mid - 3 * mid ** 2 + 2 * mid ** 3) / duration ** 2
     torque = np.clip(model.matrices.J0 * acc, -problem.torque_bound, problem.torque_bound)

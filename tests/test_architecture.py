@@ -166,3 +166,27 @@ def test_checks_catch_an_upward_import_and_a_cycle():
     assert upward_imports(graph) == [("flexctl.model.variants", "flexctl.sim.simulation")]
     assert import_cycles(graph) == [["flexctl.app.bench", "flexctl.app.cli"],
                                     ["flexctl.model.variants", "flexctl.sim.simulation"]]
+
+
+#: Longest function (``def`` to its last line, docstring included) in flexctl/ and controllers/.
+MAX_FUNCTION_LINES = 80
+
+
+def long_functions(path: Path) -> list:
+    """``(name, lines)`` of every function in ``path`` longer than :data:`MAX_FUNCTION_LINES`."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    return [(node.name, node.end_lineno - node.lineno + 1) for node in ast.walk(tree)
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+            and node.end_lineno - node.lineno + 1 > MAX_FUNCTION_LINES]
+
+
+@pytest.mark.parametrize("module", sorted(module_files()), ids=sorted(module_files()))
+def test_functions_fit_on_a_screen(module):
+    long = long_functions(module_files()[module])
+    assert not long, f"{module}: functions over {MAX_FUNCTION_LINES} lines: {long}"
+
+
+def test_long_function_check_catches_one(tmp_path):
+    source = tmp_path / "mod.py"
+    source.write_text("def f():\n" + "    x = 1\n" * MAX_FUNCTION_LINES)
+    assert long_functions(source) == [("f", MAX_FUNCTION_LINES + 1)]

@@ -1,0 +1,104 @@
+"""How a controller reads the plant state it is handed: the plant's layout, the design state
+and the hub angle and rate.
+
+A controller receives the plant state ``x`` alone (the :class:`flexctl.Controller` protocol),
+and the plant may carry more modes than the design model the controller was built on. The
+plant's :class:`~flexctl.model.layout.StateLayout` is then the design layout's blocks on the
+mode count that gives ``x`` its length (:func:`resized`); the design state is the plant's
+hub states and the first modes of each block (:func:`design_rows`, from
+:meth:`StateLayout.projection`). A state or gain handed over without any layout is read with
+:data:`DEFAULT_LAYOUT`'s blocks (one appendage on a pinned hub).
+
+Examples
+--------
+>>> layout = resized(DEFAULT_LAYOUT, 8)
+>>> layout.n_modes, layout.theta_dot
+(3, 4)
+>>> design_rows(layout.with_modes(1), 8).tolist()
+[0, 1, 4, 5]
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from flexctl.model.errors import InputValueError
+from flexctl.model.layout import StateLayout
+
+__all__ = ["DEFAULT_LAYOUT", "mode_count", "resized", "design_rows", "hub_state",
+           "casadi_hub_state"]
+
+#: The blocks of a state or gain handed over without a layout: one appendage, pinned hub.
+DEFAULT_LAYOUT = StateLayout.single(1)
+
+_HUB_STATE_RULE = ("plant state must be a vector [theta, q_1..q_N, theta_dot, "
+                   "q_1_dot..q_N_dot] with N >= 1")
+
+
+def mode_count(template: StateLayout, n_states: int) -> int | None:
+    """Modes of ``template``'s single appendage that give a state of ``n_states`` entries
+    (possibly below 1), or None when no count does.
+
+    Raises
+    ------
+    ValueError
+        If ``template`` has several appendages (their mode counts are not told apart by the
+        length of a state alone).
+    """
+    if len(template.appendages) != 1:
+        raise InputValueError("a state of several appendages must come with its StateLayout; "
+                              f"got a bare state of {n_states} entries for {template!r}")
+    # each mode adds one coordinate and its rate
+    more, odd = divmod(int(n_states) - template.n_states, 2)
+    return None if odd else template.n_modes + more
+
+
+@functools.lru_cache(maxsize=256)
+def resized(template: StateLayout, n_states: int) -> StateLayout | None:
+    """``template``'s blocks on the mode count that gives ``n_states`` states (see
+    :func:`mode_count`), or None when no count of at least 1 does."""
+    modes = mode_count(template, n_states)
+    return None if modes is None or modes < 1 else template.with_modes(modes)
+
+
+@functools.lru_cache(maxsize=256)
+def design_rows(design: StateLayout, n_plant_states: int,
+                owner: str = "truncate_state") -> np.ndarray:
+    """Indices of the design state (layout ``design``) in a plant state of
+    ``n_plant_states`` entries, read-only, shape (design.n_states,).
+
+    Raises
+    ------
+    ValueError
+        If no plant of ``design``'s blocks has ``n_plant_states`` states, or fewer modes than
+        the design.
+    """
+    modes = mode_count(design, n_plant_states)
+    if modes is None or n_plant_states < 2:
+        raise InputValueError(f"{owner}.x must be a plant state vector of even length; got "
+                              f"shape ({n_plant_states},)")
+    if modes < design.n_modes:
+        raise InputValueError(f"{owner}.n_design_modes must be <= the plant's {modes} modes; "
+                              f"got {design.n_modes}")
+    rows = design.with_modes(modes).projection(design)
+    rows.setflags(write=False)
+    return rows
+
+
+def hub_state(x) -> tuple:
+    """Hub angle (rad) and rate (rad/s) of a plant state of any mode count."""
+    x = np.asarray(x, dtype=float)
+    layout = resized(DEFAULT_LAYOUT, x.size) if x.ndim == 1 else None
+    if layout is None:
+        raise InputValueError(f"{_HUB_STATE_RULE}; got shape {x.shape}")
+    return float(layout.hub_angle(x)), float(layout.hub_rate(x))
+
+
+def casadi_hub_state(x) -> tuple:
+    """:func:`hub_state` of a CasADi state vector."""
+    layout = resized(DEFAULT_LAYOUT, x.numel())
+    if layout is None:
+        raise InputValueError(f"{_HUB_STATE_RULE}; got shape {x.shape}")
+    return layout.hub_angle(x), layout.hub_rate(x)
