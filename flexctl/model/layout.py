@@ -104,9 +104,8 @@ def _block_array(value, size: int) -> np.ndarray:
     """A block's value as shape ``(size,)`` or ``(size, P)``: a block of one state may be a
     number or one value per column, shape ``(P,)``."""
     v = np.asarray(value, dtype=float)
-    if size == 1 and v.ndim <= 1:
-        return v.reshape(1) if v.size == 1 and v.ndim == 0 else v.reshape(1, -1) \
-            if v.size > 1 else v.reshape(1)
+    if size == 1 and v.ndim <= 1 and v.size:
+        return v.reshape(1) if v.size == 1 else v.reshape(1, -1)
     if v.shape[:1] != (size,) or v.ndim > 2:
         raise InputValueError(f"a state block of {size} entries must have shape ({size},) or "
                               f"({size}, P); got {v.shape}")

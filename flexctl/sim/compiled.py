@@ -143,7 +143,7 @@ def _closed_loop_dynamics(model, t, y, torque, controller, parameters=None):
     internal states ``z`` (if any) follow ``casadi_derivative``."""
     import casadi as ca
 
-    plant = model.layout.mechanical
+    plant = slice(0, model.n_states)
     x, z = y[plant], y[plant.stop:]
     u = _applied_torque(t, x, z, torque, controller, parameters)
     if isinstance(x, ca.MX):

@@ -193,7 +193,7 @@ class TorqueDrive(_Drive):
                                   f"got shape {z_init.shape}")
         self.layout = (model.layout.with_block("controller", [f"z{k}" for k in range(self.nz)])
                        if self.nz else model.layout)
-        self.plant = model.layout.mechanical
+        self.plant = slice(0, model.n_states)      # the model's own blocks, actuators included
         self.y_init = np.concatenate((x_init, z_init))
 
     def _z(self, y):

@@ -22,6 +22,7 @@ from .drives import as_controller
 from .inputs import (as_vector, check_method, check_rtol, check_time, jacobian_frequency,
                      output_grid, time_function)
 from .progress import check_progress, progress_cuts
+from .stops import model_reach
 from .tracing import torque_input
 from ..model import Model, SingularMassMatrixError
 from ..model.errors import InputTypeError, InputValueError
@@ -253,9 +254,7 @@ def _spin_frequency(model, x_init, x0, t_final, prescribed) -> float:
 
 def _check_reach(model, x_init, x0):
     """Refuse an initial state whose modal tip is already beyond the model's range."""
-    from .stops import EXACT_CURL
-    length = model.system.beam.length
-    reach = length * (EXACT_CURL if model.variant == "exact" else 1.0)
+    length, reach = model.system.beam.length, model_reach(model)
     tip = float(model.matrices.tip @ model.layout.modal(x_init))
     if abs(tip) >= reach:
         raise InputValueError(f"x0 puts the modal tip at {tip:.4g} m, beyond the {reach:g} m "
@@ -337,9 +336,8 @@ class IntegrationPlan:
     """
 
     method: str
-    fallback: str
     atol: np.ndarray
-    scale: np.ndarray
+    rtol: float
     cuts: list
     drive_cuts: list
     omega_plant: float
@@ -347,6 +345,16 @@ class IntegrationPlan:
     cvodes_steps: int
     cvodes_step: float | None
     stiffness_note: str
+
+    @property
+    def fallback(self) -> str:
+        """The SciPy method that locates a stop: DOP853 behind CVODES, else the method."""
+        return "DOP853" if self.method == "cvodes" else self.method
+
+    @property
+    def scale(self) -> np.ndarray:
+        """Each integrated state's physical size, ``atol / rtol``."""
+        return self.atol / self.rtol
 
 
 def _loop_frequency(request, drive, scale, omega_plant) -> float:
@@ -444,8 +452,7 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
     steps = int(min(1e6, max(CVODES_MIN_STEPS, CVODES_STEPS_PER_RADIAN
                              * max(omega_plant, loop) * request.step)))
     return IntegrationPlan(
-        method=method, fallback="DOP853" if method == "cvodes" else method, atol=atol,
-        scale=atol / rtol, cuts=cuts,
+        method=method, atol=atol, rtol=rtol, cuts=cuts,
         drive_cuts=cuts if request.report is None else progress_cuts(cuts, t_final),
         omega_plant=omega_plant, loop_frequency=loop, cvodes_steps=steps,
         cvodes_step=request.max_step if np.isfinite(request.max_step) else None,

@@ -48,7 +48,6 @@ per method family (:mod:`~flexctl.sim.strategies`), the stopping conditions
 from __future__ import annotations
 
 import time
-import warnings
 
 import numpy as np
 
@@ -61,7 +60,7 @@ from .request import (LOOP_LIMIT, METHODS, MIN_T_FINAL, StiffnessWarning, check_
 from .result import SimulationResult, assemble_result, audit_energy
 from .stops import StopConditions, StopReason
 from .strategies import (FALLBACK_EVALUATIONS, AccuracyWarning, check_run_accuracy,
-                         strategy_for)
+                         rk4_accuracy_note, strategy_for)
 from ..model import Model
 
 __all__ = ["simulate", "SimulationResult", "Controller", "StaticLaw", "StopReason",
@@ -151,32 +150,6 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     return assemble_result(request, plan, drive, stops, traj, time.perf_counter() - start)
 
 
-def _sampled_accuracy_note(request, run, tip) -> str:
-    """The note (and :class:`AccuracyWarning`) of a sampled rk4 run whose step-doubling
-    estimate stays above ``rtol`` of the peak; "" otherwise."""
-    if request.method != "rk4" or run.integration_error is None:
-        return ""
-    peak = float(np.max(np.abs(tip))) if tip.size else 0.0
-    if run.integration_error <= request.rtol * max(peak, 1e-12):
-        return ""
-    note = (f"rk4: the estimated tip error {run.integration_error:.3g} m is above rtol "
-            f"{request.rtol:g} of the peak {peak:.3g} m; use method 'cvodes' for this accuracy")
-    warnings.warn(note, AccuracyWarning, stacklevel=4)
-    return note
-
-
-def _sampled_h_max(model, x_init) -> float:
-    """The coarse rk4 step of a sampled run: :data:`RK4_OMEGA_H` over the fastest mode, at
-    the initial spin too."""
-    omega_max = float(model.natural_frequencies(0.0, hub="free")[-1])
-    spin = float(model.layout.hub_rate(x_init))
-    if spin:
-        with np.errstate(all="ignore"):
-            omega_max = max(omega_max, float(np.max(np.abs(model.natural_frequencies(
-                spin, hub="clamped")))))
-    return RK4_OMEGA_H / omega_max
-
-
 def _simulate_sampled(request) -> SimulationResult:
     """:func:`simulate` under a sampled controller (:mod:`flexctl.sim.digital`)."""
     model, rtol = request.model, request.rtol
@@ -185,13 +158,16 @@ def _simulate_sampled(request) -> SimulationResult:
     stops = StopConditions(model, model.layout, singular=False)
     integrator = "rk4" if request.method == "rk4" else "cvodes"
     start = time.perf_counter()
+    # the coarse rk4 step: RK4_OMEGA_H over the fastest mode, at the initial spin too
+    omega_max = max(float(model.natural_frequencies(0.0, hub="free")[-1]),
+                    request.spin_frequency)
     run = run_sampled(model, request.t_final, request.controller, request.x_init,
                       torque=request.torque, output_step=request.step, scale=scale, rtol=rtol,
                       bad_sample=stops.first_bad, check_accuracy=request.check_accuracy,
-                      integrator=integrator, h_max=_sampled_h_max(model, request.x_init))
+                      integrator=integrator, h_max=RK4_OMEGA_H / omega_max)
     wall = time.perf_counter() - start
-    note = _sampled_accuracy_note(request, run, model.matrices.tip @ model.layout.modal(
-        run.states))
+    note = "" if integrator != "rk4" else rk4_accuracy_note(
+        run.integration_error, stops.modal_tip(run.states), rtol, stacklevel=3)
     message = run.message
     if run.stop is None:
         reason = StopReason.REACHED_END

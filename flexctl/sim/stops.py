@@ -16,8 +16,8 @@ import numpy as np
 
 from ..model import Model
 
-__all__ = ["StopReason", "StopConditions", "stiffness_reason", "SINGULAR_FRACTION",
-           "EXACT_CURL"]
+__all__ = ["StopReason", "StopConditions", "stiffness_reason", "model_reach",
+           "SINGULAR_FRACTION", "EXACT_CURL"]
 
 #: Integration stops as "singular" when the effective hub inertia falls below this fraction
 #: of its value at rest (the exact singularity cannot be integrated up to).
@@ -26,6 +26,13 @@ SINGULAR_FRACTION = 1e-9
 #: slope angle over the beam, passes this many beam lengths: a mean slope of 2 rad is a beam
 #: curled back on itself, beyond what a few modes describe.
 EXACT_CURL = 2.0
+
+
+def model_reach(model: Model) -> float:
+    """Largest ``|phi(l)^T q|`` the model covers, m: the beam length for the small-deflection
+    variants, which leave their range there; :data:`EXACT_CURL` lengths for the exact beam,
+    which cannot, and stops only when its mean slope passes ``EXACT_CURL`` rad."""
+    return model.system.beam.length * (EXACT_CURL if model.variant == "exact" else 1.0)
 
 
 class StopReason(Enum):
@@ -127,17 +134,14 @@ class StopConditions:
 
     def __init__(self, model: Model, layout, singular: bool):
         self.model, self.layout = model, layout
-        length = model.system.beam.length
-        # the small-deflection variants leave their range when the modal tip passes the
-        # length; the exact beam cannot, and stops only when its mean slope passes EXACT_CURL
-        self.reach = length * (EXACT_CURL if model.variant == "exact" else 1.0)
+        self.reach = model_reach(model)
         self.singular = bool(singular)
         # relative to the effective hub inertia at rest (computed without cancellation), not
         # to J_0, which heavy point masses dominate: with 3e4 kg at the tip a J_0-based floor
         # stopped runs at 1e-4 kg m^2 of a true 1.16
         self.j_floor = (SINGULAR_FRACTION * float(model.effective_hub_inertia(
             model.layout.zeros())) if model.variant == "consistent" else 0.0)
-        self._plant = model.layout.mechanical
+        self._plant = slice(0, model.n_states)
 
     def modal_tip(self, y):
         """``phi(l)^T q`` of integrated state(s) ``y``, m."""

@@ -31,7 +31,8 @@ from ..model import SingularMassMatrixError
 from ..model.errors import InputValueError
 
 __all__ = ["Trajectory", "CvodesSegments", "FixedStepRK4", "ScipyIVP", "strategy_for",
-           "check_run_accuracy", "AccuracyWarning", "FALLBACK_EVALUATIONS"]
+           "check_run_accuracy", "rk4_accuracy_note", "AccuracyWarning",
+           "FALLBACK_EVALUATIONS"]
 
 #: Where a compiled segment fails, SciPy locates the stop with at most this many evaluations
 #: of the right-hand side (1 to 5 s of DOP853 steps); a state so stiff that they do not
@@ -281,21 +282,23 @@ class FixedStepRK4:
             traj.stop(stops.reason_of_sample(y_fixed[:, -1]), found=True)
         else:
             traj.integration_error = fixed.error
-            self._judge(traj, tip_map @ y_fixed, fixed)
+            traj.accuracy_note = rk4_accuracy_note(
+                fixed.error, tip_map @ y_fixed, request.rtol,
+                f" after {MAX_HALVINGS} step halvings (step {fixed.h:.3g} s)", stacklevel=3)
         traj.add(t_fixed, y_fixed)
         return traj
 
-    def _judge(self, traj, tip, fixed):
-        """Warn when the step-doubling estimate stays above ``rtol`` of the peak."""
-        rtol = self.request.rtol
-        peak = float(np.max(np.abs(tip))) if tip.size else 0.0
-        error = traj.integration_error
-        if error is not None and error > rtol * max(peak, 1e-12):
-            traj.accuracy_note = (f"rk4: the estimated tip error {error:.3g} m is above rtol "
-                                  f"{rtol:g} of the peak {peak:.3g} m after {MAX_HALVINGS} step "
-                                  f"halvings (step {fixed.h:.3g} s); use method 'cvodes' for "
-                                  "this accuracy")
-            warnings.warn(traj.accuracy_note, AccuracyWarning, stacklevel=4)
+
+def rk4_accuracy_note(error, tip, rtol: float, detail: str = "", stacklevel: int = 2) -> str:
+    """The note, and an :class:`AccuracyWarning`, of an rk4 run whose step-doubling estimate
+    ``error`` (m) stays above ``rtol`` of the peak of ``tip`` (m); "" otherwise."""
+    peak = float(np.max(np.abs(tip))) if np.size(tip) else 0.0
+    if error is None or error <= rtol * max(peak, 1e-12):
+        return ""
+    note = (f"rk4: the estimated tip error {error:.3g} m is above rtol {rtol:g} of the peak "
+            f"{peak:.3g} m{detail}; use method 'cvodes' for this accuracy")
+    warnings.warn(note, AccuracyWarning, stacklevel=stacklevel + 1)
+    return note
 
 
 def strategy_for(method: str):
