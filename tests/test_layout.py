@@ -130,3 +130,16 @@ def test_hostile_layouts_get_a_clear_error(kwargs):
     from flexctl.model.errors import InputError
     with pytest.raises(InputError, match="StateLayout"):
         StateLayout(**kwargs)
+
+
+@pytest.mark.parametrize("call", [
+    lambda layout: layout.embed(np.ones(5)),
+    lambda layout: layout.from_beam(np.ones(3)),
+    lambda layout: layout.projection("design"),
+    lambda layout: layout.join(q=np.ones(5)),
+    lambda layout: layout.modal_slice(["wing"]),
+], ids=["embed-size", "from-beam-size", "projection-type", "join-size", "unhashable-name"])
+def test_layout_accessors_refuse_misuse_by_name(call):
+    from flexctl.model.errors import InputError
+    with pytest.raises(InputError):
+        call(StateLayout.single(2))

@@ -315,6 +315,8 @@ class StateLayout:
     def projection(self, other: "StateLayout") -> np.ndarray:
         """Indices of this layout's states that form the state of ``other`` (a layout of the
         same blocks on fewer modes, e.g. a design model): each appendage's first modes."""
+        if not isinstance(other, StateLayout):
+            raise InputTypeError(f"other must be a StateLayout; got {type(other).__name__}")
         if other.appendage_names != self.appendage_names or other.free_hub != self.free_hub \
                 or other.rotation != self.rotation:
             raise InputValueError("the layouts must have the same appendages and hub")
@@ -361,7 +363,12 @@ class StateLayout:
         appendage's ``"<name>.q"``): e.g. the tip deflection ``phi(l)^T q`` as a map of the
         whole state."""
         out = np.zeros(self.n_states if size is None else int(size))
-        out[self._named_slice(block)] = row
+        target = self._named_slice(block)
+        row = np.asarray(row, dtype=float)
+        if row.size != 1 and row.shape != out[target].shape:
+            raise InputValueError(f"a row for state block {block!r} must have shape "
+                                  f"{out[target].shape}; got {row.shape}")
+        out[target] = row
         return out
 
     def _named_slice(self, block: str):
@@ -413,6 +420,9 @@ class StateLayout:
         """The full state from the states of :meth:`without_rotation` (shape (m,) or (m, P))
         and a prescribed hub angle and rate (numbers or arrays of shape (P,))."""
         beam_states = np.asarray(beam_states, dtype=float)
+        if beam_states.shape[:1] != (self.beam.size,) or beam_states.ndim > 2:
+            raise InputValueError(f"beam states must have shape ({self.beam.size},) or "
+                                  f"({self.beam.size}, P); got {beam_states.shape}")
         width = beam_states.shape[1:]
         out = np.zeros((self.n_mechanical,) + width)
         out[self.beam] = beam_states
