@@ -6,6 +6,7 @@ Imports nothing from :mod:`flexctl.sim`, :mod:`flexctl.app` or :mod:`controllers
 module         contents
 =============  ==============================================================================
 ``parameters`` ``Hub``, ``Beam``, ``PointMass``, ``HubBeam``: validated physical parameters
+``structure``  ``Appendage``, ``Structure``: several appendages on a pinned or free hub
 ``layout``     ``StateLayout``: names and slices of every block of the state vector
 ``modes``      cantilever roots and mode shapes at quadrature points
 ``matrices``   the modal matrices, assembled once and cached
@@ -15,13 +16,15 @@ module         contents
 """
 
 from .parameters import Beam, Hub, HubBeam, PointMass, check_real
+from .structure import Appendage, Structure, as_structure
 from .layout import StateLayout
 from .modes import cantilever_roots, mode_shapes
 from .matrices import ModalMatrices, assemble, tension
 from .variants import VARIANTS, Model, SingularMassMatrixError, build_model
 
 __all__ = [
-    "Beam", "Hub", "HubBeam", "PointMass", "check_real", "StateLayout",
+    "Beam", "Hub", "HubBeam", "PointMass", "check_real", "StateLayout", "Appendage",
+    "Structure", "as_structure",
     "cantilever_roots", "mode_shapes",
     "ModalMatrices", "assemble", "tension",
     "VARIANTS", "Model", "SingularMassMatrixError", "build_model",

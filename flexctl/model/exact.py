@@ -46,7 +46,7 @@ from .layout import StateLayout
 from .modes import mode_shapes
 from .parameters import HubBeam
 
-__all__ = ["ExactGeometry", "PanelRule", "choose_panels", "exact_geometry",
+__all__ = ["ExactGeometry", "PanelRule", "choose_panels", "exact_geometry", "appendage_terms",
            "PANEL_TOLERANCE", "PANEL_POINTS"]
 
 #: Gauss points per panel.
@@ -164,8 +164,16 @@ class ExactGeometry:
     energy: object = field(repr=False)
 
 
-def _terms(system, n_modes, n_panels, q, q_dot, rate):
-    """Mass matrix ``M(q)``, bias ``[b_theta; b_q]`` and tip position, as CasADi expressions."""
+def appendage_terms(system, n_modes, n_panels, q, q_dot, rate) -> dict:
+    """One beam's share of the exact equations in its own frame, as CasADi expressions.
+
+    ``system`` is a :class:`~flexctl.model.parameters.HubBeam` (its hub's inertia is left
+    out: the caller adds it). The frame is the beam's: its root at ``(b, 0)``, its axis along
+    ``x``. Keys: ``m_tt`` (scalar), ``m_tq`` (1, N), ``m_qq`` (N, N), ``b_t``, ``b_q`` (N,):
+    the mass-matrix blocks and velocity terms of the pinned-hub equations; ``first`` (2,):
+    the first moment ``int p dm``; ``first_q`` (2, N): its Jacobian ``int J dm``;
+    ``first_acc`` (2,): ``int (p_tt at q_tt = 0) dm``; ``tip`` (2,): the tip position.
+    """
     import casadi as ca
 
     b, l = system.hub.radius, system.beam.length
@@ -183,7 +191,6 @@ def _terms(system, n_modes, n_panels, q, q_dot, rate):
     jac_x = -ca.repmat(sin, 1, n_modes) * slope_shapes
     jac_y = ca.repmat(cos, 1, n_modes) * slope_shapes
 
-
     def along_beam(f):
         return ca.mtimes(local, f) + ca.mtimes(before, ca.mtimes(sums, f))
 
@@ -194,7 +201,9 @@ def _terms(system, n_modes, n_panels, q, q_dot, rate):
     points = [(system.beam.linear_density * rule.weights, along_beam)]
     if system.masses:
         points.append((np.array([m.mass for m in system.masses]), at_masses))
-    m_tt, m_tq, m_qq, b_t, b_q = system.hub.inertia, 0.0, 0.0, 0.0, 0.0
+    out = dict.fromkeys(("m_tt", "m_tq", "m_qq", "b_t", "b_q"), 0.0)
+    out.update(first=ca.DM.zeros(2), first_q=ca.DM.zeros(2, n_modes), first_acc=ca.DM.zeros(2),
+               tip=tip)
     for weights, integrate in points:
         w = ca.DM(weights)
         p = integrate(integrands)
@@ -202,16 +211,27 @@ def _terms(system, n_modes, n_panels, q, q_dot, rate):
         px = px + b
         jx, jy = integrate(jac_x), integrate(jac_y)
         wjx, wjy = ca.repmat(w, 1, n_modes) * jx, ca.repmat(w, 1, n_modes) * jy
-        m_tt = m_tt + ca.dot(w, px ** 2 + py ** 2)
-        m_tq = m_tq + ca.mtimes(px.T, wjy) - ca.mtimes(py.T, wjx)
-        m_qq = m_qq + ca.mtimes(jx.T, wjx) + ca.mtimes(jy.T, wjy)
+        out["m_tt"] = out["m_tt"] + ca.dot(w, px ** 2 + py ** 2)
+        out["m_tq"] = out["m_tq"] + ca.mtimes(px.T, wjy) - ca.mtimes(py.T, wjx)
+        out["m_qq"] = out["m_qq"] + ca.mtimes(jx.T, wjx) + ca.mtimes(jy.T, wjy)
         # velocity terms of the inertial acceleration: p_tt(q_tt = 0), Coriolis, centripetal
         gx = ax - 2.0 * rate * pyt - rate ** 2 * px
         gy = ay + 2.0 * rate * pxt - rate ** 2 * py
-        b_t = b_t + ca.dot(w, px * gy - py * gx)
-        b_q = b_q + ca.mtimes(wjx.T, gx) + ca.mtimes(wjy.T, gy)
-    mass = ca.blockcat([[m_tt, m_tq], [m_tq.T, m_qq]])
-    return mass, ca.vertcat(b_t, b_q), tip
+        out["b_t"] = out["b_t"] + ca.dot(w, px * gy - py * gx)
+        out["b_q"] = out["b_q"] + ca.mtimes(wjx.T, gx) + ca.mtimes(wjy.T, gy)
+        out["first"] = out["first"] + ca.vertcat(ca.dot(w, px), ca.dot(w, py))
+        out["first_q"] = out["first_q"] + ca.vertcat(ca.sum1(wjx), ca.sum1(wjy))
+        out["first_acc"] = out["first_acc"] + ca.vertcat(ca.dot(w, ax), ca.dot(w, ay))
+    return out
+
+
+def _terms(system, n_modes, n_panels, q, q_dot, rate):
+    """Mass matrix ``M(q)``, bias ``[b_theta; b_q]`` and tip position, as CasADi expressions."""
+    import casadi as ca
+
+    t = appendage_terms(system, n_modes, n_panels, q, q_dot, rate)
+    mass = ca.blockcat([[system.hub.inertia + t["m_tt"], t["m_tq"]], [t["m_tq"].T, t["m_qq"]]])
+    return mass, ca.vertcat(t["b_t"], t["b_q"]), t["tip"]
 
 
 def _rhs(system: HubBeam, n_modes: int, n_panels: int, matrices):

@@ -42,7 +42,7 @@ def _symbolic_dynamics(model, x, u):
     """CasADi expression of ``dx/dt`` in the symbols ``x`` (n,) and ``u`` (1,)."""
     import casadi as ca
 
-    if model.variant == "exact":
+    if model.variant == "exact" or hasattr(model, "functions"):
         return model.geometry.rhs(x, u)
     mat, c = model.matrices, model._c
     _, q, w, qd = model.layout.split(x)
@@ -67,6 +67,10 @@ def _symbolic_beam_dynamics(model, y, rate, acceleration):
 
     mat, beam = model.matrices, model.layout.without_rotation()
     q, qd = beam.modal(y), beam.modal_rates(y)
+    if hasattr(model, "functions"):
+        if model.system.free:
+            model._pinned_only("a prescribed hub motion")
+        return ca.vertcat(qd, model.functions.beam(q, qd, rate, acceleration))
     if model.variant == "exact":
         return ca.vertcat(qd, model.geometry.beam(q, qd, rate, acceleration))
     dm = ca.DM
@@ -116,6 +120,9 @@ def to_casadi_outputs(model, sx: bool = True):
 
     sym = ca.SX.sym if sx else ca.MX.sym
     x = sym("x", model.n_states)
+    if hasattr(model, "functions"):
+        return ca.Function(f"flexctl_outputs_{model.variant}", [x], [model.functions.outputs(x)],
+                           ["x"], ["y"])
     y = ca.mtimes(ca.DM(model.output_matrix), x)
     if model.variant == "exact":
         tip = model.geometry.tip(model.layout.modal(x))

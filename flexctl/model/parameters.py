@@ -30,7 +30,8 @@ from .checks import check_real
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["Hub", "Beam", "PointMass", "HubBeam", "check_real", "RATIO_LIMIT",
-           "MASS_RATIO_LIMIT", "RADIUS_RATIO_LIMIT"]
+           "MASS_RATIO_LIMIT", "RADIUS_RATIO_LIMIT", "SUPPORTS",
+           "carried_masses"]
 
 #: Products and ratios of beam parameters (mass per length, bending stiffness, EI / rhoA l^4)
 #: must lie within [1 / RATIO_LIMIT, RATIO_LIMIT]: the modal matrices multiply and square them.
@@ -43,11 +44,13 @@ MASS_RATIO_LIMIT = 1e6
 #: ``(b / l)^2``; past 1e6 the free-hub frequencies lose digits (at 1e16 they were 10 % off,
 #: at 1e17 the mass matrix was no longer positive definite, at 1e250 J_0 overflowed).
 RADIUS_RATIO_LIMIT = 1e6
+#: How a hub is held: its centre pinned, or floating free in the plane.
+SUPPORTS = ("pinned", "free")
 
 
 @dataclass(frozen=True, kw_only=True)
 class Hub:
-    """Rigid hub rotating about the fixed axis O.
+    """Rigid hub rotating about its centre O, which is pinned or floats free in the plane.
 
     Parameters
     ----------
@@ -57,16 +60,32 @@ class Hub:
         Radius ``b`` at which the beam is clamped, m. May be 0.
     friction : float, optional
         Viscous friction coefficient ``c_h`` of the hub bearing, N m s/rad. Default 0.
+    mass : float, optional
+        Mass ``m_h`` of the hub alone, kg (>= 0). Default 0; it matters only when the hub
+        floats free.
+    support : {"pinned", "free"}, optional
+        ``"pinned"`` (default, the papers' case): the centre O is fixed and the hub rotates
+        about it. ``"free"``: the hub also translates in the plane (a spacecraft in orbit).
     """
 
     inertia: float
     radius: float
     friction: float = 0.0
+    mass: float = 0.0
+    support: str = "pinned"
 
     def __post_init__(self):
-        for name in ("inertia", "radius", "friction"):
+        for name in ("inertia", "radius", "friction", "mass"):
             object.__setattr__(self, name,
                                check_real("hub", name, getattr(self, name), minimum=0.0))
+        if not isinstance(self.support, str) or self.support not in SUPPORTS:
+            raise (InputValueError if isinstance(self.support, str) else InputTypeError)(
+                f"hub.support must be one of {', '.join(SUPPORTS)}; got {self.support!r}")
+
+    @property
+    def free(self) -> bool:
+        """True when the hub floats free (translates as well as rotates)."""
+        return self.support == "free"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -164,6 +183,54 @@ class PointMass:
                            check_real("mass", "position", self.position, minimum=0.0))
 
 
+def carried_masses(owner: str, beam, masses, radius: float) -> tuple:
+    """Check a beam, its point masses and its root radius; the masses sorted by position.
+
+    Parameters
+    ----------
+    owner : str
+        Name of the holder in messages (``system``, ``appendages[1]``).
+    beam : Beam
+    masses : iterable of PointMass
+    radius : float
+        Radius of the beam's root from the hub centre, m.
+
+    Returns
+    -------
+    tuple of PointMass
+    """
+    if not isinstance(beam, Beam):
+        raise InputTypeError(f"{owner}.beam must be a Beam; got {type(beam).__name__}")
+    if isinstance(masses, (str, bytes, dict)):
+        raise InputTypeError(f"{owner}.masses must be an iterable of PointMass; got "
+                             f"{type(masses).__name__}")
+    try:
+        masses = tuple(masses)
+    except TypeError:
+        raise InputTypeError(f"{owner}.masses must be an iterable of PointMass; got "
+                             f"{type(masses).__name__}") from None
+    for k, m in enumerate(masses):
+        if not isinstance(m, PointMass):
+            raise InputTypeError(f"{owner}.masses[{k}] must be a PointMass; got "
+                                 f"{type(m).__name__}")
+        if m.position > beam.length:
+            raise InputValueError(f"{owner}.masses[{k}].position must lie in [0, beam.length = "
+                                  f"{beam.length:g}]; got {m.position!r}")
+    if radius > RADIUS_RATIO_LIMIT * beam.length:
+        raise InputValueError(
+            f"{'hub.radius' if owner == 'system' else owner + '.radius'} must be at most "
+            f"{RADIUS_RATIO_LIMIT:g} times beam.length = {beam.length:g} m: beyond it the "
+            "free-hub mass matrix is too ill conditioned for the model to keep its accuracy; "
+            f"got {radius!r}")
+    ratio = sum(m.mass for m in masses) / beam.mass
+    if ratio > MASS_RATIO_LIMIT:
+        raise InputValueError(
+            f"the ratio of the point masses to the beam mass ({beam.mass:.4g} kg) of {owner} "
+            f"must be <= {MASS_RATIO_LIMIT:g}: beyond it the modal mass matrix is too ill "
+            f"conditioned for the model to keep its accuracy; got {ratio:.4g}")
+    return tuple(sorted(masses, key=lambda m: m.position))
+
+
 @dataclass(frozen=True, kw_only=True)
 class HubBeam:
     """A hub carrying a cantilever beam with any number of point masses.
@@ -184,32 +251,8 @@ class HubBeam:
     def __post_init__(self):
         if not isinstance(self.hub, Hub):
             raise InputTypeError(f"system.hub must be a Hub; got {type(self.hub).__name__}")
-        if not isinstance(self.beam, Beam):
-            raise InputTypeError(f"system.beam must be a Beam; got {type(self.beam).__name__}")
-        try:
-            masses = tuple(self.masses)
-        except TypeError:
-            raise InputTypeError("system.masses must be an iterable of PointMass; got "
-                            f"{type(self.masses).__name__}") from None
-        for k, m in enumerate(masses):
-            if not isinstance(m, PointMass):
-                raise InputTypeError(f"system.masses[{k}] must be a PointMass; got "
-                                f"{type(m).__name__}")
-            if m.position > self.beam.length:
-                raise InputValueError(f"system.masses[{k}].position must lie in [0, beam.length = "
-                                 f"{self.beam.length:g}]; got {m.position!r}")
-        object.__setattr__(self, "masses", tuple(sorted(masses, key=lambda m: m.position)))
-        if self.hub.radius > RADIUS_RATIO_LIMIT * self.beam.length:
-            raise InputValueError(
-                f"hub.radius must be at most {RADIUS_RATIO_LIMIT:g} times beam.length = "
-                f"{self.beam.length:g} m: beyond it the free-hub mass matrix is too ill "
-                f"conditioned for the model to keep its accuracy; got {self.hub.radius!r}")
-        ratio = sum(m.mass for m in masses) / self.beam.mass
-        if ratio > MASS_RATIO_LIMIT:
-            raise InputValueError(
-                f"the ratio of the point masses to the beam mass ({self.beam.mass:.4g} kg) must "
-                f"be <= {MASS_RATIO_LIMIT:g}: beyond it the modal mass matrix is too ill "
-                f"conditioned for the model to keep its accuracy; got {ratio:.4g}")
+        object.__setattr__(self, "masses",
+                           carried_masses("system", self.beam, self.masses, self.hub.radius))
 
     @property
     def total_point_mass(self) -> float:

@@ -115,6 +115,45 @@ class Model:
 
     # ------------------------------------------------------------------ basics
     @property
+    def modes(self) -> tuple:
+        """Modes of each appendage: ``(n_modes,)`` for one beam."""
+        return (self.n_modes,)
+
+    @property
+    def structure(self):
+        """The system as a :class:`~flexctl.model.structure.Structure` (one unnamed
+        appendage for a ``HubBeam``)."""
+        from .structure import as_structure
+        return as_structure(self.system)
+
+    @property
+    def tip_matrix(self) -> np.ndarray:
+        """Linear tip deflection of each appendage per modal coordinate, ``phi_k(l_k)``,
+        shape (K, N) (one row for one beam)."""
+        return self.matrices.tip[None, :]
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """Beam length of each appendage, m, shape (K,)."""
+        return np.array([a.beam.length for a in self.structure.appendages])
+
+    def tip_deflections(self, x) -> np.ndarray:
+        """Each appendage's tip deflection, m, shape (1,) or (1, P) for one beam."""
+        return np.asarray(self.tip_deflection(x))[None]
+
+    def center_of_mass(self, x) -> np.ndarray:
+        """Centre of mass in inertial axes (the pinned hub's centre at the origin), m,
+        shape (2,) or (2, P); small-deflection first moments for every variant."""
+        from .structure_matrices import assemble_structure
+
+        x = self._check_state(x)
+        first = assemble_structure(self.structure, self.modes)
+        s = (np.multiply.outer(first.first, np.ones(x.shape[1:]))
+             + first.first_q @ self.layout.modal(x))
+        c, si = np.cos(self.layout.hub_angle(x)), np.sin(self.layout.hub_angle(x))
+        return np.stack((c * s[0] - si * s[1], si * s[0] + c * s[1])) / first.mass
+
+    @property
     def n_states(self) -> int:
         """Number of states ``2 N + 2``."""
         return self.layout.n_states
@@ -506,7 +545,7 @@ class Model:
         import control
 
         a, b = self.linear_matrices(spin_rate)
-        return control.ss(a, b, self.output_matrix, np.zeros((len(OUTPUT_NAMES), 1)),
+        return control.ss(a, b, self.output_matrix, np.zeros((len(self.output_names), 1)),
                           states=list(self.state_names), inputs=list(self.input_names),
                           outputs=list(self.output_names),
                           name=_system_name(f"{self.variant}_N{self.n_modes}_spin{spin_rate:g}"))
@@ -547,9 +586,13 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order")
 
     Parameters
     ----------
-    system : HubBeam
-    n_modes : int, optional
-        Number of cantilever modes ``N`` (1 to 200). Default 4.
+    system : HubBeam or Structure
+        One beam on a pinned hub, or any number of appendages on a pinned or free hub (a
+        :class:`~flexctl.model.structure_model.StructureModel` is returned for a
+        ``Structure`` and for a ``HubBeam`` on a free hub).
+    n_modes : int, dict or sequence of int, optional
+        Number of cantilever modes ``N`` (1 to 200) of each appendage: one int for all, or
+        ``{name: int}``, or one per appendage in order. Default 4.
     variant : {"first_order", "zero_order", "consistent", "exact"}, optional
         Default ``"first_order"`` (with dynamic stiffening); ``"exact"`` for large deflection.
 
@@ -568,6 +611,9 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order")
     array([ 2.91, 18.24, 51.08])
     """
     variant = check_choice("", "variant", variant, VARIANTS)
+    from .structure import Structure
+    if isinstance(system, Structure) or (isinstance(system, HubBeam) and system.hub.free):
+        return _build_structure_model(system, n_modes, variant)
     n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=200)
     if variant == "exact" and n_modes > EXACT_MAX_MODES:
         raise InputValueError(
@@ -576,6 +622,21 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order")
             "deflection lives in the low modes; converge the higher ones on first_order); "
             f"got {n_modes!r}")
     if not isinstance(system, HubBeam):
-        raise InputTypeError(f"system must be a HubBeam; got {type(system).__name__}")
+        raise InputTypeError(f"system must be a HubBeam or a Structure; got "
+                             f"{type(system).__name__}")
     return Model(system=system, n_modes=int(n_modes), variant=variant,
                  matrices=assemble(system, int(n_modes)))
+
+
+def _build_structure_model(system, n_modes, variant: str) -> Model:
+    """A :class:`~flexctl.model.structure_model.StructureModel` of a Structure, or of a
+    HubBeam on a free hub (its one appendage unnamed)."""
+    from .structure import as_structure
+    from .structure_matrices import assemble_structure, modes_per_appendage
+    from .structure_model import StructureModel
+
+    structure = as_structure(system)
+    modes = modes_per_appendage(structure, n_modes, variant)
+    matrices = assemble_structure(structure, modes)
+    return StructureModel(system=structure, n_modes=matrices.n_modes, variant=variant,
+                          matrices=matrices)

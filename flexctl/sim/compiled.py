@@ -460,8 +460,8 @@ def verify_accuracy(model, segments, y0, scale, rtol, y_main, tip_map, n_main, *
         As for :func:`integrate_segments`.
     y_main : ndarray, shape (m, K)
         The run to check, at the segments' output times.
-    tip_map : ndarray, shape (m,)
-        ``tip = tip_map @ y``.
+    tip_map : ndarray, shape (K, m)
+        ``tips = tip_map @ y``, one row per appendage.
     n_main : int
         Right-hand-side evaluations of the run to check.
 
@@ -482,8 +482,8 @@ def verify_accuracy(model, segments, y0, scale, rtol, y_main, tip_map, n_main, *
                                              CHECK_FACTOR * rtol, **options)
     except RuntimeError:
         return y_main, None, "accuracy check could not run (the check integration failed)", 0
-    error = float(np.max(np.abs(tip_main[picks] - tip_map @ y_check)))
-    peak = max(float(np.max(np.abs(tip_main))), float(abs(tip_map) @ scale) * 1e-3)
+    error = float(np.max(np.abs(tip_main[:, picks] - tip_map @ y_check)))
+    peak = max(float(np.max(np.abs(tip_main))), float(np.max(abs(tip_map) @ scale)) * 1e-3)
     if error <= ALARM_FACTOR * rtol * peak or n_main <= EFFORT_FACTOR * max(n_eval, 1):
         return y_main, error, "", n_eval
     found = (f"accuracy check: CVODES and a check run at {CHECK_FACTOR:g}x the tolerance "

@@ -33,6 +33,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from .stops import tip_rows
 from .compiled import CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, is_symbolic
 from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
 from .inputs import input_value, output_grid, time_function
@@ -346,7 +347,7 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
     log = _SampleLog(x0=np.asarray(x0, dtype=float), t_final=float(t_final))
     _sample_loop(log, session, hold, edges, grid, bad_sample)
     if check_accuracy and log.stop is None:
-        tip_map = model.layout.embed(model.matrices.tip)
+        tip_map = tip_rows(model, model.layout)
         log.error = _replay_error(log, hold, edges, tip_map)
     return _sampled_outputs(log, session, edges, grid, controller.sample_time)
 
@@ -414,7 +415,7 @@ def _replay_error(log, hold, edges, tip_map) -> float | None:
             y_check, evaluations = hold(lo, np.array([hi]), y_check, u, loose=True)
             y_check = y_check[:, -1]
             log.n_eval += evaluations
-            error = max(error, float(abs(tip_map @ (y_end - y_check))))
+            error = max(error, float(np.max(np.abs(tip_map @ (y_end - y_check)))))
         return error / hold.error_divisor
     except RuntimeError:
         return None

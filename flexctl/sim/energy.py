@@ -177,7 +177,7 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     k = int(np.argmax(np.abs(residual)))
     inertia = np.einsum("ip,ij,jp->p", q, mat.D, q)
     neglected = _neglected_energy(model, w, q, inertia)
-    system = model.system
+    apps = model.structure.appendages
     return EnergyBalance(
         variant=model.variant, energy_start=float(energy[0]), imbalance=float(residual[k]),
         time=float(t[k]), energy=float(energy[k]), work=float(work[k]), lost=float(lost[k]),
@@ -186,4 +186,4 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
         hub_inertia=float(model.effective_hub_inertia(np.zeros(model.n_states))),
         inertia_change=float(inertia[int(np.argmax(np.abs(inertia)))]),
         neglected=float(neglected[int(np.argmax(np.abs(neglected)))]),
-        mass_ratio=system.total_point_mass / system.beam.mass)
+        mass_ratio=sum(m.mass for a in apps for m in a.masses) / sum(a.beam.mass for a in apps))

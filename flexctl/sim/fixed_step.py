@@ -92,8 +92,8 @@ def _segment_runs(step, count: int, tip_map, model):
     chain = step.mapaccum("flexctl_rk4_run", count)
     args = chain.mx_in()
     ys, fs = chain.call(args)
-    ny = tip_map.size
-    tips = ca.mtimes(ca.DM(tip_map).T, ys[:ny, :])
+    ny = tip_map.shape[-1]
+    tips = ca.mtimes(ca.DM(tip_map), ys[:ny, :])
     return (_jit(ca.Function("flexctl_rk4_full", args, [ys, fs]), model),
             _jit(ca.Function("flexctl_rk4_tips", args, [tips, ys[:, -1]]), model))
 
@@ -202,8 +202,8 @@ def integrate_fixed_step(model, edges, t_out, y0, tip_map, h_max: float, rtol: f
     t_out : array_like, shape (P,)
         Output times within ``[edges[0], edges[-1]]``, s (cubic Hermite dense output).
     y0 : ndarray, shape (m,)
-    tip_map : ndarray, shape (m,)
-        ``tip = tip_map @ y``.
+    tip_map : ndarray, shape (K, m)
+        ``tips = tip_map @ y``, one row per appendage.
     h_max : float
         Largest step of the returned run before any halving, s (the first, coarser run of
         the pair takes twice as long steps).
@@ -232,12 +232,12 @@ def integrate_fixed_step(model, edges, t_out, y0, tip_map, h_max: float, rtol: f
         error = None
         if finite:
             # the coarse run's step ends are every other one of the fine run's
-            error = float(np.max(np.abs(fine[2::2] - coarse)))
+            error = float(np.max(np.abs(fine[:, 2::2] - coarse)))
             peak = float(np.max(np.abs(fine)))
         if not finite or error <= rtol * max(peak, 1e-12) or refine >= 2 ** MAX_HALVINGS:
             return FixedStepRun(runner.dense(found, t_out), error, steps, evaluations,
                                 float(np.max(runner.widths / (runner.base * refine))))
-        coarse = fine[1:]
+        coarse = fine[:, 1:]
 
 
 class _RK4Runner:
@@ -252,7 +252,7 @@ class _RK4Runner:
             _STEP_CACHE, _STEP_CACHE_SIZE,
             None if self.base_key is None else ("rk4", self.base_key), (model, *inputs),
             lambda: _step_function(model, *inputs, self.numbers.size))
-        self.tip_map = np.asarray(tip_map, dtype=float)
+        self.tip_map = np.atleast_2d(np.asarray(tip_map, dtype=float))
         self.y0 = np.asarray(y0, dtype=float)
         self.edges = np.asarray(edges, dtype=float)
         self.widths = np.diff(self.edges)
@@ -276,16 +276,16 @@ class _RK4Runner:
             yield lo, width, int(count), self.runs(int(count))
 
     def step_end_tips(self, refine) -> np.ndarray:
-        """The tip at every step end, m."""
+        """Each appendage's tip at every step end, m, shape (K, steps)."""
         yt = np.append(self.y0, self.edges[0])
         tips = []
         with np.errstate(invalid="ignore", over="ignore"):
             for lo, width, count, loops in self._segments(refine):
                 tip, yt = (np.array(v) for v in loops[1](yt, width / count, self.numbers))
-                tips.append(tip.reshape(-1))
+                tips.append(tip.reshape(self.tip_map.shape[0], -1))
                 yt = yt.reshape(-1)
                 yt[-1] = lo + width          # time exactly at the segment's end
-        return np.concatenate(tips)
+        return np.concatenate(tips, axis=1)
 
     def states(self, refine):
         """States at the step ends, derivatives, step starts and sizes, for dense output."""

@@ -1,4 +1,5 @@
-"""Reference manoeuvres of MODEL.md section 5: spin-up and one-period sine torque.
+"""Reference manoeuvres of MODEL.md section 5 (spin-up, one-period sine torque), a slew goal and
+a torque history given as samples.
 
 Each manoeuvre is a frozen dataclass that evaluates exactly at any time (no sampling) and lists
 its ``breakpoints``: the times where it is not smooth, at which the integrator restarts.
@@ -12,20 +13,27 @@ Examples
 >>> push = SineTorque(peak_torque=50.0, duration=2.0)
 >>> float(push(0.5)), float(push(3.0))
 (50.0, 0.0)
+>>> from flexctl.sim.maneuvers import TorqueSamples
+>>> steps = TorqueSamples(times=[1.0, 2.0], values=[3.0, -1.0])
+>>> [float(v) for v in steps([0.5, 1.0, 1.5, 2.0, 9.0])]
+[0.0, 3.0, 3.0, -1.0, -1.0]
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from ..model.errors import InputTypeError, InputValueError
 from ..model.parameters import check_real as _real
 from ..model.variants import MAX_SPIN_RATE
+from .inputs import SampledTorque, as_vector
 
-__all__ = ["SpinUp", "SineTorque", "Slew", "RIGID_PEAK_ACCELERATION", "rigid_slew_duration"]
+__all__ = ["SpinUp", "SineTorque", "Slew", "TorqueSamples", "TORQUE_SAMPLE_INTERPOLATIONS",
+           "MAX_TORQUE_SAMPLES", "RIGID_PEAK_ACCELERATION", "rigid_slew_duration"]
 
 #: Peak |acceleration| of each unit rest-to-rest profile (angle 1 rad, duration 1 s), rad/s^2:
 #: bang-bang ``4``, cycloidal (one period of sine torque) ``2 pi``, 7th-order polynomial
@@ -229,3 +237,164 @@ class Slew:
                     f"maneuver.duration must make the rigid slew acceleration 4 angle / "
                     f"duration^2 a positive finite number; got {self.duration!r} s, giving "
                     f"{acceleration!r} rad/s^2")
+
+
+#: How :class:`TorqueSamples` fills the time between samples, and the fewest samples each needs.
+TORQUE_SAMPLE_INTERPOLATIONS = {"hold": 1, "linear": 2}
+#: Most samples a :class:`TorqueSamples` holds (a 16 MB pair of arrays; beyond that the
+#: history is better given as a function).
+MAX_TORQUE_SAMPLES = 1_000_000
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class TorqueSamples:
+    """Hub torque given as a recorded history: samples ``(times, values)``.
+
+    The torque is 0 before ``times[0]``. ``"hold"``: ``values[k]`` on ``[times[k],
+    times[k+1])``, the last value to the end; ``"linear"``: straight lines between samples,
+    the last value held after ``times[-1]``.
+
+    Parameters
+    ----------
+    times : array_like, shape (K,)
+        Sample times, s: finite, ``>= 0``, strictly increasing; ``1 <= K <=``
+        :data:`MAX_TORQUE_SAMPLES` (``K >= 2`` for ``"linear"``).
+    values : array_like, shape (K,)
+        Torque at each sample time, N m: finite.
+    interpolation : {"hold", "linear"}, optional
+        Default ``"hold"``.
+
+    Notes
+    -----
+    ``times`` and ``values`` are stored as read-only float arrays; two manoeuvres are equal
+    (and hash alike) when their interpolation and samples are. Every sample time is a
+    breakpoint: the integration restarts at each jump (hold) or kink (line).
+
+    :meth:`casadi` is :meth:`__call__` exactly, bit for bit: inside the sampled range both are
+    :class:`flexctl.sim.inputs.SampledTorque`'s lookup (``O(log K)`` in CasADi, one
+    interpolant, so 10^5 samples cost no deeper an expression than 2), outside it 0 or the
+    last value.
+
+    Examples
+    --------
+    >>> ramp = TorqueSamples(times=[0.0, 2.0], values=[0.0, 4.0], interpolation="linear")
+    >>> float(ramp(0.5)), float(ramp(10.0)), ramp.breakpoints
+    (1.0, 4.0, (0.0, 2.0))
+    """
+
+    times: np.ndarray
+    values: np.ndarray
+    interpolation: str = "hold"
+
+    def __post_init__(self):
+        interpolation = self.interpolation
+        if not isinstance(interpolation, str) or interpolation not in \
+                TORQUE_SAMPLE_INTERPOLATIONS:
+            raise (InputValueError if isinstance(interpolation, str) else InputTypeError)(
+                "maneuver.interpolation must be one of "
+                f"{', '.join(map(repr, TORQUE_SAMPLE_INTERPOLATIONS))}; got {interpolation!r}")
+        times = _sample_vector("times", self.times, "sample times (s)")
+        values = _sample_vector("values", self.values, "torques (N m)")
+        _check_samples(times, values, interpolation)
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "values", values)
+
+    # the CasADi lookup is built once, on first use, and not pickled
+    def __getstate__(self):
+        return {"times": self.times, "values": self.values,
+                "interpolation": self.interpolation}
+
+    def __setstate__(self, state):
+        for name in ("times", "values"):
+            array = np.array(state[name], dtype=float)
+            array.flags.writeable = False
+            object.__setattr__(self, name, array)
+        object.__setattr__(self, "interpolation", state["interpolation"])
+
+    def __eq__(self, other):
+        if not isinstance(other, TorqueSamples):
+            return NotImplemented
+        return (self.interpolation == other.interpolation
+                and np.array_equal(self.times, other.times)
+                and np.array_equal(self.values, other.values))
+
+    def __hash__(self):
+        return self._hash
+
+    @cached_property
+    def _hash(self) -> int:
+        return hash((self.interpolation, self.times.tobytes(), self.values.tobytes()))
+
+    def __repr__(self):
+        return (f"TorqueSamples({self.times.size} samples over [{self.times[0]:g}, "
+                f"{self.times[-1]:g}] s, interpolation={self.interpolation!r})")
+
+    @property
+    def breakpoints(self) -> tuple:
+        """Times (s) where the torque is not smooth: every sample time."""
+        return tuple(self.times.tolist())
+
+    @cached_property
+    def _sampled(self) -> SampledTorque | None:
+        """The lookup inside ``[times[0], times[-1]]`` (None for a single sample)."""
+        if self.times.size == 1:
+            return None
+        return SampledTorque(self.times, self.values, interpolation=self.interpolation)
+
+    def __call__(self, t):
+        """Torque at time(s) ``t``, N m: an array of the shape of ``t``."""
+        t = np.asarray(t, dtype=float)
+        inside = (np.full(t.shape, self.values[0]) if self._sampled is None
+                  else np.asarray(self._sampled(t), dtype=float))
+        return np.where(t < self.times[0], 0.0, inside)
+
+    def casadi(self, t):
+        """The torque as a CasADi expression of the time symbol ``t`` (SX or MX), N m."""
+        import casadi as ca
+
+        inside = float(self.values[0]) if self._sampled is None else self._sampled.casadi(t)
+        return ca.if_else(t < float(self.times[0]), 0.0, inside)
+
+
+def _sample_vector(name: str, value, what: str) -> np.ndarray:
+    """``value`` as a float vector, or an error naming ``maneuver.<name>``."""
+    where = f"maneuver.{name}"
+    if isinstance(value, np.ndarray) and value.dtype.kind == "b" or \
+            isinstance(value, (list, tuple)) and any(isinstance(v, (bool, np.bool_))
+                                                     for v in value):
+        raise InputTypeError(f"{where} must be an array of {what}, numbers not booleans; "
+                             f"got {value!r:.80}")
+    array = as_vector(where, value, f"an array of {what}")
+    if array.ndim != 1:
+        raise InputValueError(f"{where} must be one-dimensional, one number per sample; got "
+                              f"shape {array.shape}")
+    if array.size > MAX_TORQUE_SAMPLES:
+        raise InputValueError(f"{where} must hold at most {MAX_TORQUE_SAMPLES} samples; got "
+                              f"{array.size}")
+    bad = np.flatnonzero(~np.isfinite(array))
+    if bad.size:
+        raise InputValueError(f"{where} must be finite; got {name}[{bad[0]}] = "
+                              f"{float(array[bad[0]])!r}")
+    array.flags.writeable = False
+    return array
+
+
+def _check_samples(times: np.ndarray, values: np.ndarray, interpolation: str) -> None:
+    """The rules tying the samples together: sizes, start and order of the times."""
+    fewest = TORQUE_SAMPLE_INTERPOLATIONS[interpolation]
+    if times.size < fewest:
+        raise InputValueError(f"maneuver.times must hold at least {fewest} "
+                              f"sample{'s' if fewest > 1 else ''} for interpolation "
+                              f"{interpolation!r}; got {times.size}")
+    if values.size != times.size:
+        raise InputValueError(f"maneuver.values must hold one torque per sample time "
+                              f"({times.size}); got {values.size}")
+    if times[0] < 0.0:
+        raise InputValueError(f"maneuver.times must be >= 0 s (a run starts at t = 0); got "
+                              f"times[0] = {float(times[0])!r}")
+    step = np.diff(times)
+    if np.any(step <= 0.0):
+        k = int(np.argmax(step <= 0.0)) + 1
+        raise InputValueError(f"maneuver.times must be strictly increasing (s); got "
+                              f"times[{k}] = {float(times[k])!r} after times[{k - 1}] = "
+                              f"{float(times[k - 1])!r}")

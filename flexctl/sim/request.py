@@ -146,7 +146,7 @@ def state_scale(model: Model, layout) -> np.ndarray:
     without the hub rotation): 1e-3 rad, 1e-3 of the length, rates at the first clamped
     frequency, 1e-3 for a controller's state. Times ``rtol``, the default ``atol``."""
     rate = max(model.first_clamped_frequency, 1.0)
-    length = 1e-3 * model.system.beam.length
+    length = 1e-3 * float(np.min(model.lengths))
     scale = np.full(layout.n_states, 1e-3)
     scale[layout.coordinates] = length
     scale[layout.velocities] = length * rate
@@ -254,12 +254,14 @@ def _spin_frequency(model, x_init, x0, t_final, prescribed) -> float:
 
 def _check_reach(model, x_init, x0):
     """Refuse an initial state whose modal tip is already beyond the model's range."""
-    length, reach = model.system.beam.length, model_reach(model)
-    tip = float(model.matrices.tip @ model.layout.modal(x_init))
-    if abs(tip) >= reach:
-        raise InputValueError(f"x0 puts the modal tip at {tip:.4g} m, beyond the {reach:g} m "
-                              f"the {model.variant} model covers (beam length {length:g} m); "
-                              f"got x0 = {x0!r}")
+    reach = model_reach(model)
+    tips = model.tip_matrix @ model.layout.modal(x_init)
+    k = int(np.argmax(np.abs(tips) / reach))
+    if abs(tips[k]) >= reach[k]:
+        where = f" of appendage {model.structure.names[k]!r}" if model.structure.names[k] else ""
+        raise InputValueError(f"x0 puts the modal tip{where} at {tips[k]:.4g} m, beyond the "
+                              f"{reach[k]:g} m the {model.variant} model covers (beam length "
+                              f"{model.lengths[k]:g} m); got x0 = {x0!r}")
 
 
 def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x0=None, *,

@@ -34,7 +34,8 @@ class SimulationResult:
     torque : ndarray, shape (P,)
         Hub torque, N m (the torque the prescribed motion needs, for ``hub_motion`` runs).
     tip_deflection, root_moment : ndarray, shape (P,)
-        m and N m.
+        m and N m; with several appendages, the largest in magnitude over them at each time
+        (each appendage's own in :attr:`outputs` and :attr:`tip_deflections`).
     status : {"ok", "diverged", "singular"}
     message : str
         Why the run stopped, with the time and the physical reason.
@@ -86,14 +87,26 @@ class SimulationResult:
     @classmethod
     def from_states(cls, model: Model, t, states, torque, **fields) -> "SimulationResult":
         """A result whose tip deflection and root moment are computed from ``states``."""
+        roots = np.atleast_2d(model.matrices.root) @ model.layout.modal(states)
+        pick = np.argmax(np.abs(roots), axis=0)
         return cls(model=model, t=t, states=states, torque=torque,
                    tip_deflection=np.asarray(model.tip_deflection(states), dtype=float),
-                   root_moment=model.matrices.root @ model.layout.modal(states), **fields)
+                   root_moment=np.take_along_axis(roots, pick[None], 0)[0], **fields)
+
+    @property
+    def tip_deflections(self) -> dict:
+        """Each appendage's tip deflection in its own frame, m, ``{name: (P,)}`` (the name
+        ``""`` for one beam)."""
+        tips = np.atleast_2d(self.model.tip_deflections(self.states))
+        return dict(zip(self.model.structure.names, tips))
 
     @property
     def deflection_ratio(self) -> float:
-        """Largest ``|tip_deflection|`` divided by the beam length."""
-        return self.peak_tip_deflection / self.model.system.beam.length
+        """Largest ``|tip deflection|`` of an appendage divided by its beam length."""
+        if not self.t.size:
+            return 0.0
+        tips = np.atleast_2d(self.model.tip_deflections(self.states))
+        return float(np.max(np.max(np.abs(tips), axis=1) / self.model.lengths))
 
     @property
     def ok(self) -> bool:

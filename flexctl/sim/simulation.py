@@ -58,7 +58,7 @@ from .fixed_step import RK4_OMEGA_H
 from .request import (LOOP_LIMIT, METHODS, MIN_T_FINAL, StiffnessWarning, check_atol,
                       plan_integration, run_request, state_scale)
 from .result import SimulationResult, assemble_result, audit_energy
-from .stops import StopConditions, StopReason
+from .stops import StopConditions, StopReason, tip_rows
 from .strategies import (FALLBACK_EVALUATIONS, AccuracyWarning, check_run_accuracy,
                          rk4_accuracy_note, strategy_for)
 from ..model import Model
@@ -167,7 +167,7 @@ def _simulate_sampled(request) -> SimulationResult:
                       integrator=integrator, h_max=RK4_OMEGA_H / omega_max)
     wall = time.perf_counter() - start
     note = "" if integrator != "rk4" else rk4_accuracy_note(
-        run.integration_error, stops.modal_tip(run.states), rtol, stacklevel=3)
+        run.integration_error, tip_rows(model, model.layout) @ run.states, rtol, stacklevel=3)
     message = run.message
     if run.stop is None:
         reason = StopReason.REACHED_END

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..model import Model
 
-__all__ = ["StopReason", "StopConditions", "stiffness_reason", "model_reach",
+__all__ = ["tip_rows", "reach_ratio", "StopReason", "StopConditions", "stiffness_reason", "model_reach",
            "SINGULAR_FRACTION", "EXACT_CURL"]
 
 #: Integration stops as "singular" when the effective hub inertia falls below this fraction
@@ -28,11 +28,35 @@ SINGULAR_FRACTION = 1e-9
 EXACT_CURL = 2.0
 
 
-def model_reach(model: Model) -> float:
-    """Largest ``|phi(l)^T q|`` the model covers, m: the beam length for the small-deflection
-    variants, which leave their range there; :data:`EXACT_CURL` lengths for the exact beam,
-    which cannot, and stops only when its mean slope passes ``EXACT_CURL`` rad."""
-    return model.system.beam.length * (EXACT_CURL if model.variant == "exact" else 1.0)
+def model_reach(model: Model) -> np.ndarray:
+    """Largest ``|phi_k(l_k)^T q_k|`` the model covers for each appendage, m, shape (K,): the
+    beam length for the small-deflection variants, which leave their range there;
+    :data:`EXACT_CURL` lengths for the exact beam, which cannot, and stops only when its mean
+    slope passes ``EXACT_CURL`` rad."""
+    return model.lengths * (EXACT_CURL if model.variant == "exact" else 1.0)
+
+
+def reach_ratio(model: Model, q) -> np.ndarray:
+    """Largest ``|phi_k(l_k)^T q_k| / reach_k`` over the appendages for modal coordinates
+    ``q`` (N,) or (N, P): 1 where the model leaves its range."""
+    tips = model.tip_matrix @ q
+    reach = model_reach(model).reshape((-1,) + (1,) * (np.ndim(tips) - 1))
+    return np.max(np.abs(tips) / reach, axis=0)
+
+
+def tip_rows(model: Model, layout) -> np.ndarray:
+    """The linear tip deflection of each appendage as rows over the states of ``layout``,
+    shape (K, n): ``tips = tip_rows @ y``."""
+    return np.vstack([layout.embed(row) for row in model.tip_matrix])
+
+
+def _worst_appendage(model: Model, q) -> str:
+    """``" of appendage 'name'"`` for the appendage nearest its reach (empty for one beam)."""
+    names = model.structure.names
+    if len(names) == 1 and not names[0]:
+        return ""
+    k = int(np.argmax(np.abs(model.tip_matrix @ q) / model_reach(model)))
+    return f" of appendage {names[k]!r}"
 
 
 class StopReason(Enum):
@@ -93,11 +117,14 @@ def singular_message(model: Model, t_end: float, state) -> str:
     :func:`flexctl.model.matrices.condensed_hub_inertia`) plus ``q^T D q``: a real
     singularity of the model, reached when the second-order inertia cancels the first.
     """
-    system, layout = model.system, model.layout
+    structure, layout = model.structure, model.layout
     j_eff = float(model.effective_hub_inertia(state))
     j_rest = float(model.effective_hub_inertia(layout.zeros()))
-    tip = float(model.matrices.tip @ layout.modal(np.asarray(state)))
-    point_mass, beam_mass = system.total_point_mass, system.beam.mass
+    q = layout.modal(np.asarray(state))
+    ratio = float(np.max(np.abs(model.tip_matrix @ q) / model.lengths))
+    point_mass = sum(m.mass for a in structure.appendages for m in a.masses)
+    beam_mass = sum(a.beam.mass for a in structure.appendages)
+    system = structure
     cause = (f"the point masses ({point_mass:.4g} kg, {point_mass / beam_mass:.3g} times the "
              "beam mass) make it large against the hub's own inertia"
              if point_mass > beam_mass else
@@ -106,7 +133,7 @@ def singular_message(model: Model, t_end: float, state) -> str:
             f"J_0 + q^T D q - m_tf^T M_ff^-1 m_tf fell to {j_eff:.3g} kg m^2 from "
             f"{j_rest:.4g} kg m^2 at rest (J_0 = {model.matrices.J0:.4g} kg m^2) as the "
             f"second-order inertia q^T D q reached {j_eff - j_rest:.4g} kg m^2 at a tip "
-            f"deflection of {100 * abs(tip) / system.beam.length:.3g} % of the length; in the "
+            f"deflection of {100 * ratio:.3g} % of the length{_worst_appendage(model, q)}; in the "
             f"consistent model the deflection lowers the hub inertia, and {cause}; the exact "
             "variant's mass matrix stays positive definite (MODEL.md section 7)")
 
@@ -125,9 +152,9 @@ class StopConditions:
 
     Attributes
     ----------
-    reach : float
-        Largest ``|phi(l)^T q|``, m: the beam length (small-deflection variants) or
-        :data:`EXACT_CURL` lengths (exact).
+    reach : ndarray, shape (K,)
+        Largest ``|phi_k(l_k)^T q_k|`` of each appendage, m: its beam length
+        (small-deflection variants) or :data:`EXACT_CURL` lengths (exact).
     j_floor : float
         Effective hub inertia at which the run stops as singular, kg m^2 (0 when not watched).
     """
@@ -143,15 +170,15 @@ class StopConditions:
             model.layout.zeros())) if model.variant == "consistent" else 0.0)
         self._plant = slice(0, model.n_states)
 
-    def modal_tip(self, y):
-        """``phi(l)^T q`` of integrated state(s) ``y``, m."""
-        return self.model.matrices.tip @ self.layout.modal(y)
+    def reach_ratio(self, y):
+        """Largest ``|phi_k(l_k)^T q_k| / reach_k`` of integrated state(s) ``y``."""
+        return reach_ratio(self.model, self.layout.modal(y))
 
     def events(self) -> list:
         """Terminal events for ``solve_ivp``: the tip first, then the singular mass."""
 
         def tip_event(t, y):
-            return self.reach - abs(self.modal_tip(y))
+            return 1.0 - float(self.reach_ratio(y))
         tip_event.terminal = True
         events = [tip_event]
         if self.singular:
@@ -173,7 +200,7 @@ class StopConditions:
 
     def first_bad(self, y_seg) -> int | None:
         """Index of the first output sample (columns of ``y_seg``) past a condition, or None."""
-        bad = ~np.all(np.isfinite(y_seg), axis=0) | (np.abs(self.modal_tip(y_seg)) >= self.reach)
+        bad = ~np.all(np.isfinite(y_seg), axis=0) | (self.reach_ratio(y_seg) >= 1.0)
         if self.singular:
             bad |= np.asarray(self.model.effective_hub_inertia(y_seg[self._plant])) \
                 <= self.j_floor
@@ -192,12 +219,15 @@ class StopConditions:
         """The physical reason of a stop at ``t_end`` (s) in plant state ``state``."""
         model = self.model
         if reason is StopReason.BEAM_CURLED:
-            return (f"the beam curled back on itself at t = {t_end:.6g} s (mean slope angle "
+            where = _worst_appendage(model, model.layout.modal(np.asarray(state)))
+            return (f"the beam{where} curled back on itself at t = {t_end:.6g} s (mean slope angle "
                     f"above {EXACT_CURL:g} rad): the load is beyond what a beam of "
                     f"{model.n_modes} modes can describe")
         if reason is StopReason.TIP_PAST_LENGTH:
-            return (f"tip deflection passed the beam length {model.system.beam.length:g} m at "
-                    f"t = {t_end:.6g} s: "
+            q = model.layout.modal(np.asarray(state))
+            k = int(np.argmax(np.abs(model.tip_matrix @ q) / model.lengths))
+            return (f"tip deflection{_worst_appendage(model, q)} passed the beam length "
+                    f"{model.lengths[k]:g} m at t = {t_end:.6g} s: "
                     + stiffness_reason(model, float(model.layout.hub_rate(state))))
         if reason is StopReason.SINGULAR_MASS:
             return singular_message(model, t_end, state)

@@ -26,7 +26,7 @@ from .compiled import SegmentIntegrator, numeric_rhs, verify_accuracy
 from .fixed_step import MAX_HALVINGS, RK4_OMEGA_H, integrate_fixed_step
 from .inputs import jacobian_frequency
 from .progress import Progress
-from .stops import StopReason
+from .stops import StopReason, tip_rows
 from ..model import SingularMassMatrixError
 from ..model.errors import InputValueError
 
@@ -264,7 +264,7 @@ class FixedStepRK4:
 
     def run(self) -> Trajectory:
         request, drive, stops = self.request, self.drive, self.stops
-        tip_map = drive.layout.embed(request.model.matrices.tip)
+        tip_map = tip_rows(request.model, drive.layout)
         try:
             fixed = integrate_fixed_step(request.model, np.array(self.plan.cuts), request.grid,
                                          drive.y_init, tip_map, self._step_bound(),
@@ -312,7 +312,7 @@ def check_run_accuracy(request, plan, drive, traj: Trajectory, reporter=None):
     redone with BDF2 where the two disagree grossly (with an :class:`AccuracyWarning`)."""
     if reporter is not None:
         reporter.report(request.t_final, "checking accuracy")
-    tip_map = drive.layout.embed(request.model.matrices.tip)
+    tip_map = tip_rows(request.model, drive.layout)
     y_checked, traj.integration_error, traj.accuracy_note, n_check = verify_accuracy(
         request.model, traj.compiled_segments, drive.y_init, plan.scale, request.rtol,
         np.concatenate(traj.ys[1:], axis=1), tip_map, traj.n_eval, torque=request.torque,
