@@ -10,7 +10,10 @@ module         contents
 ``layout``     ``StateLayout``: names and slices of every block of the state vector
 ``modes``      cantilever roots and mode shapes at quadrature points
 ``matrices``   the modal matrices, assembled once and cached
-``variants``   ``Model`` and ``build_model``: the variants built on one assembly
+``variants``   ``Model``: the variants of one beam on a pinned hub, built on one assembly
+``structure_matrices``, ``structure_dynamics``, ``structure_model``
+               ``StructureModel``: several appendages on a pinned or free hub
+``build``      ``build_model``: the model of a system
 ``exports``    the model as a python-control system or a CasADi function
 =============  ==============================================================================
 """
@@ -20,12 +23,14 @@ from .structure import Appendage, Structure, as_structure
 from .layout import StateLayout
 from .modes import cantilever_roots, mode_shapes
 from .matrices import ModalMatrices, assemble, tension
-from .variants import VARIANTS, Model, SingularMassMatrixError, build_model
+from .variants import VARIANTS, Model, SingularMassMatrixError
+from .structure_model import StructureModel
+from .build import build_model
 
 __all__ = [
     "Beam", "Hub", "HubBeam", "PointMass", "check_real", "StateLayout", "Appendage",
     "Structure", "as_structure",
     "cantilever_roots", "mode_shapes",
     "ModalMatrices", "assemble", "tension",
-    "VARIANTS", "Model", "SingularMassMatrixError", "build_model",
+    "VARIANTS", "Model", "StructureModel", "SingularMassMatrixError", "build_model",
 ]

@@ -35,10 +35,10 @@ import scipy.linalg
 
 from .checks import check_integer
 from .errors import InputTypeError, InputValueError
+from .exact import EXACT_MAX_MODES
 from .matrices import ModalMatrices, _quadrature, assemble, condensed_hub_inertia
 from .modes import mode_shapes
 from .structure import Structure
-from .variants import EXACT_MAX_MODES
 
 __all__ = ["StructureMatrices", "assemble_structure", "modes_per_appendage"]
 

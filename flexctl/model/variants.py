@@ -42,16 +42,14 @@ import scipy.linalg
 
 from .checks import check_choice, check_integer, check_real
 from .errors import InputTypeError, InputValueError
-from .exact import exact_geometry
+from .exact import EXACT_MAX_MODES, exact_geometry
 from .layout import StateLayout
 from .matrices import ModalMatrices, assemble, condensed_hub_inertia
 from .parameters import HubBeam
 
-__all__ = ["Model", "build_model", "VARIANTS", "SingularMassMatrixError"]
+__all__ = ["Model", "VARIANTS", "SingularMassMatrixError", "EXACT_MAX_MODES"]
 
 VARIANTS = ("first_order", "zero_order", "consistent", "exact")
-#: Most modes the exact variant takes (20 modes: a 445k-instruction right-hand side, 4 s to build).
-EXACT_MAX_MODES = 24
 #: Largest steady spin rate the linear analysis takes, rad/s: its square multiplies the modal
 #: matrices, and must stay far from overflow.
 MAX_SPIN_RATE = 1e100
@@ -225,7 +223,8 @@ class Model:
             import casadi as ca
 
             n = self.n_states
-            linear = build_model(self.system, self.n_modes).casadi()
+            linear = Model(system=self.system, n_modes=self.n_modes, variant="first_order",
+                           matrices=self.matrices).casadi()
             x, u, out = ca.SX.sym("x", n), ca.SX.sym("u"), ca.SX.sym("out", n)
             name = f"flexctl_exact_newton_N{self.n_modes}"
             jac = ca.Function(f"jac_{name}", [x, u, out],
@@ -579,64 +578,3 @@ def _spin(spin_rate) -> float:
         raise InputValueError(f"spin_rate must be finite and at most {MAX_SPIN_RATE:g} rad/s in "
                               f"magnitude (its square scales the stiffness); got {spin_rate!r}")
     return spin_rate
-
-
-def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order") -> Model:
-    """Build a hub-beam-mass model.
-
-    Parameters
-    ----------
-    system : HubBeam or Structure
-        One beam on a pinned hub, or any number of appendages on a pinned or free hub (a
-        :class:`~flexctl.model.structure_model.StructureModel` is returned for a
-        ``Structure`` and for a ``HubBeam`` on a free hub).
-    n_modes : int, dict or sequence of int, optional
-        Number of cantilever modes ``N`` (1 to 200) of each appendage: one int for all, or
-        ``{name: int}``, or one per appendage in order. Default 4.
-    variant : {"first_order", "zero_order", "consistent", "exact"}, optional
-        Default ``"first_order"`` (with dynamic stiffening); ``"exact"`` for large deflection.
-
-    Returns
-    -------
-    Model
-
-    Examples
-    --------
-    >>> from flexctl import Hub, Beam, HubBeam, build_model
-    >>> kane = HubBeam(hub=Hub(inertia=300.0, radius=0.5),
-    ...                beam=Beam(length=8.0, density=2766.67, area=7.2968e-5,
-    ...                          second_moment=8.2189e-9, youngs_modulus=6.8952e10))
-    >>> model = build_model(kane, n_modes=3)
-    >>> model.natural_frequencies().round(2)
-    array([ 2.91, 18.24, 51.08])
-    """
-    variant = check_choice("", "variant", variant, VARIANTS)
-    from .structure import Structure
-    if isinstance(system, Structure) or (isinstance(system, HubBeam) and system.hub.free):
-        return _build_structure_model(system, n_modes, variant)
-    n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=200)
-    if variant == "exact" and n_modes > EXACT_MAX_MODES:
-        raise InputValueError(
-            f"n_modes must be at most {EXACT_MAX_MODES} for the exact variant (its geometry "
-            "grows as the square of the modes times the quadrature points, and large "
-            "deflection lives in the low modes; converge the higher ones on first_order); "
-            f"got {n_modes!r}")
-    if not isinstance(system, HubBeam):
-        raise InputTypeError(f"system must be a HubBeam or a Structure; got "
-                             f"{type(system).__name__}")
-    return Model(system=system, n_modes=int(n_modes), variant=variant,
-                 matrices=assemble(system, int(n_modes)))
-
-
-def _build_structure_model(system, n_modes, variant: str) -> Model:
-    """A :class:`~flexctl.model.structure_model.StructureModel` of a Structure, or of a
-    HubBeam on a free hub (its one appendage unnamed)."""
-    from .structure import as_structure
-    from .structure_matrices import assemble_structure, modes_per_appendage
-    from .structure_model import StructureModel
-
-    structure = as_structure(system)
-    modes = modes_per_appendage(structure, n_modes, variant)
-    matrices = assemble_structure(structure, modes)
-    return StructureModel(system=structure, n_modes=matrices.n_modes, variant=variant,
-                          matrices=matrices)

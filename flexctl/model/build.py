@@ -1,0 +1,76 @@
+"""``build_model``: the model of a system, of one variant, on its cantilever modes.
+
+A :class:`~flexctl.model.parameters.HubBeam` (one beam on a pinned hub) gives a
+:class:`~flexctl.model.variants.Model`; a :class:`~flexctl.model.structure.Structure` (or a
+``HubBeam`` on a free hub) a :class:`~flexctl.model.structure_model.StructureModel`.
+"""
+
+from __future__ import annotations
+
+from .checks import check_choice, check_integer
+from .errors import InputTypeError, InputValueError
+from .exact import EXACT_MAX_MODES
+from .matrices import assemble
+from .parameters import HubBeam
+from .structure import Structure, as_structure
+from .structure_matrices import assemble_structure, modes_per_appendage
+from .structure_model import StructureModel
+from .variants import VARIANTS, Model
+
+__all__ = ["build_model"]
+
+
+def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order") -> Model:
+    """Build a hub-beam-mass model.
+
+    Parameters
+    ----------
+    system : HubBeam or Structure
+        One beam on a pinned hub, or any number of appendages on a pinned or free hub (a
+        :class:`~flexctl.model.structure_model.StructureModel` is returned for a
+        ``Structure`` and for a ``HubBeam`` on a free hub).
+    n_modes : int, dict or sequence of int, optional
+        Number of cantilever modes ``N`` (1 to 200) of each appendage: one int for all, or
+        ``{name: int}``, or one per appendage in order. Default 4.
+    variant : {"first_order", "zero_order", "consistent", "exact"}, optional
+        Default ``"first_order"`` (with dynamic stiffening); ``"exact"`` for large deflection.
+
+    Returns
+    -------
+    Model
+
+    Examples
+    --------
+    >>> from flexctl import Hub, Beam, HubBeam, build_model
+    >>> kane = HubBeam(hub=Hub(inertia=300.0, radius=0.5),
+    ...                beam=Beam(length=8.0, density=2766.67, area=7.2968e-5,
+    ...                          second_moment=8.2189e-9, youngs_modulus=6.8952e10))
+    >>> model = build_model(kane, n_modes=3)
+    >>> model.natural_frequencies().round(2)
+    array([ 2.91, 18.24, 51.08])
+    """
+    variant = check_choice("", "variant", variant, VARIANTS)
+    if isinstance(system, Structure) or (isinstance(system, HubBeam) and system.hub.free):
+        return _build_structure_model(system, n_modes, variant)
+    n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=200)
+    if variant == "exact" and n_modes > EXACT_MAX_MODES:
+        raise InputValueError(
+            f"n_modes must be at most {EXACT_MAX_MODES} for the exact variant (its geometry "
+            "grows as the square of the modes times the quadrature points, and large "
+            "deflection lives in the low modes; converge the higher ones on first_order); "
+            f"got {n_modes!r}")
+    if not isinstance(system, HubBeam):
+        raise InputTypeError(f"system must be a HubBeam or a Structure; got "
+                             f"{type(system).__name__}")
+    return Model(system=system, n_modes=int(n_modes), variant=variant,
+                 matrices=assemble(system, int(n_modes)))
+
+
+def _build_structure_model(system, n_modes, variant: str) -> Model:
+    """A :class:`~flexctl.model.structure_model.StructureModel` of a Structure, or of a
+    HubBeam on a free hub (its one appendage unnamed)."""
+    structure = as_structure(system)
+    modes = modes_per_appendage(structure, n_modes, variant)
+    matrices = assemble_structure(structure, modes)
+    return StructureModel(system=structure, n_modes=matrices.n_modes, variant=variant,
+                          matrices=matrices)
