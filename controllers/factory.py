@@ -268,7 +268,7 @@ def _slew_duration(maneuver: Slew, kind: str, design: Model):
             raise SceneError("maneuver.torque_bound is required when maneuver.duration is "
                              "\"free\"")
         if kind not in _OWN_DURATION_KINDS:
-            duration = minimum_slew_duration(maneuver.angle, design.matrices.J0,
+            duration = minimum_slew_duration(maneuver.angle, design.rigid_inertia,
                                              maneuver.torque_bound)
     return duration
 
@@ -281,7 +281,7 @@ def _reference(spec: ControllerSpec, design: Model, angle, duration, bound) -> t
     if bound is not None:
         # a smooth reference the actuator cannot follow only winds the loop up: stretch it
         # to the shortest one the torque bound allows (5 % margin for the feedback)
-        feasible = 1.05 * _wrap(minimum_slew_duration, angle, design.matrices.J0, bound,
+        feasible = 1.05 * _wrap(minimum_slew_duration, angle, design.rigid_inertia, bound,
                                 shape=profile_shape)
         if feasible > duration:
             info["reference_duration"] = feasible
@@ -370,7 +370,7 @@ def _nmpc(spec: ControllerSpec, design: Model, angle, duration, bound, n_design)
         end = float(solution.duration)
     else:
         end = float(duration if duration is not None
-                    else minimum_slew_duration(angle, design.matrices.J0, bound))
+                    else minimum_slew_duration(angle, design.rigid_inertia, bound))
     settings = {key: spec.get(key) for key in ("horizon", "mode", "qp_solver", "terminal")}
     if spec.get("estimator") == "kalman":
         settings["noise"] = _noise(spec)

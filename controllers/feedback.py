@@ -47,6 +47,9 @@ class ReferenceFeedback:
     reference: object = None
     feedforward_inertia: float | None = None
     torque_limit: float | None = None
+    #: The plant state's layout, set by :meth:`for_plant` (``flexctl.simulate`` binds every
+    #: law to its plant); ``None``: a bare state read with the design's blocks.
+    plant_layout: object = None
 
     #: The law's name in error messages (``"pd"``, ``"lqr"``, ...).
     owner: ClassVar[str] = "controller"
@@ -58,6 +61,32 @@ class ReferenceFeedback:
             self.owner, "feedforward_inertia", self.feedforward_inertia))
         object.__setattr__(self, "torque_limit", _optional_positive(
             self.owner, "torque_limit", self.torque_limit))
+
+    def for_plant(self, model):
+        """The same law reading the states of plant ``model`` (its ``model.layout``): needed
+        for a plant of several appendages, whose mode counts a bare state does not tell."""
+        from dataclasses import replace
+        return replace(self, plant_layout=model.layout)
+
+    def _plant_rows(self, design, x_size: int):
+        """Indices of the ``design`` layout's state in a plant state of ``x_size`` entries
+        (through :attr:`plant_layout` when bound), or None to read it as a bare state."""
+        plant = self.plant_layout
+        if plant is None or plant.n_states != x_size:
+            return None
+        return plant.projection(design)
+
+    def _design_state(self, x):
+        """The design state (layout ``self.layout``) of numpy plant state ``x``."""
+        from .lqr import truncate_state
+        rows = self._plant_rows(self.layout, np.size(x))
+        return truncate_state(x, self.layout) if rows is None else np.asarray(x, float)[rows]
+
+    def _casadi_design_state(self, x):
+        """The design state of a CasADi plant state."""
+        from .lqr import casadi_truncate_state
+        rows = self._plant_rows(self.layout, x.numel())
+        return casadi_truncate_state(x, self.layout) if rows is None else x[rows.tolist()]
 
     @property
     def breakpoints(self) -> tuple:

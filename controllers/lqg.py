@@ -37,20 +37,32 @@ from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.layout import StateLayout
 
 from .feedback import ReferenceFeedback
+from .controllable import lqe_on_part
 from .lqr import (LQRWeights, _gain_layout, _lqr_gain, _model, casadi_reference_state,
                   reference_state, static_deflection_gain)
 from .plant_state import mode_count
 from .reference import _has_casadi, _real
 
 __all__ = ["NoiseLevels", "LQG", "design_lqg", "estimator_gain", "SumOfSines",
-           "MEASURED_OUTPUTS"]
+           "MEASURED_OUTPUTS", "measured_outputs"]
 
 MEASURED_OUTPUTS = ("theta", "root_moment")
 
 
+def measured_outputs(model) -> tuple:
+    """The outputs the filter reads: ``theta`` and each appendage's root moment."""
+    return ("theta",) + tuple(n for n in model.output_names if n.endswith("root_moment"))
+
+
 def _measurement_rows(model) -> np.ndarray:
-    rows = [model.output_names.index(name) for name in MEASURED_OUTPUTS]
+    rows = [model.output_names.index(name) for name in measured_outputs(model)]
     return np.array(model.output_matrix[rows], dtype=float)
+
+
+def _measurement_covariance(noise, model) -> np.ndarray:
+    """``RN``: ``angle^2`` for theta, ``root_moment^2`` for each appendage's root moment."""
+    roots = len(measured_outputs(model)) - 1
+    return np.diag([noise.angle ** 2] + [noise.root_moment ** 2] * roots)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -97,16 +109,13 @@ def estimator_gain(model, noise: NoiseLevels, spin_rate: float = 0.0) -> tuple:
     poles : ndarray, shape (2 M + 2,)
         Estimator poles ``eig(A - L C_meas)``, 1/s.
     """
-    import control
-
     model = _model("estimator_gain", model)
     if not isinstance(noise, NoiseLevels):
         raise InputTypeError(f"estimator_gain.noise must be NoiseLevels; got "
                              f"{type(noise).__name__}")
-    a, b = model.linear_matrices(_real("estimator_gain", "spin_rate", spin_rate))
-    gain, _, poles = control.lqe(a, b, _measurement_rows(model), noise.process_covariance,
-                                 noise.measurement_covariance)
-    return np.asarray(gain, dtype=float), np.asarray(poles)
+    spin_rate = _real("estimator_gain", "spin_rate", spin_rate)
+    return lqe_on_part(model, spin_rate, _measurement_rows(model), noise.process_covariance,
+                       _measurement_covariance(noise, model))
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -223,8 +232,11 @@ class LQG(ReferenceFeedback):
 
     def __post_init__(self):
         nd = check_array("lqg", "a", self.a, finite=False, shape=(None, None)).shape[0]
-        shapes = {"gain": (1, nd), "estimator_gain": (nd, 2), "a": (nd, nd), "b": (nd, 1),
-                  "c": (2, nd)}
+        layout = _gain_layout("lqg", self.layout, nd)
+        # theta and each appendage's root moment
+        nm = 1 + len(layout.appendages)
+        shapes = {"gain": (1, nd), "estimator_gain": (nd, nm), "a": (nd, nd), "b": (nd, 1),
+                  "c": (nm, nd)}
         for name, shape in shapes.items():
             value = check_array("lqg", name, getattr(self, name), finite=False).copy()
             if value.shape != shape or not np.all(np.isfinite(value)):
@@ -232,13 +244,17 @@ class LQG(ReferenceFeedback):
                                       f"shape {value.shape}")
             value.setflags(write=False)
             object.__setattr__(self, name, value)
-        layout = _gain_layout("lqg", self.layout, nd)
         object.__setattr__(self, "layout", layout)
         meas = check_array("lqg", "measurement_matrix", self.measurement_matrix,
                            finite=False).copy()
-        plant_modes = mode_count(layout, meas.shape[1]) if meas.ndim == 2 else None
-        if plant_modes is None or meas.shape[0] != 2 or plant_modes < layout.n_modes:
-            raise InputValueError(f"lqg.measurement_matrix must have shape (2, 2 N + 2) with N >= "
+        if nm > 2:      # several appendages: the plant's layout tells its modes (for_plant)
+            plant_modes = (layout.n_modes if meas.ndim == 2 and meas.shape[1] >= nd
+                           else None)
+        else:
+            plant_modes = mode_count(layout, meas.shape[1]) if meas.ndim == 2 else None
+        if plant_modes is None or meas.shape[0] != nm or plant_modes < layout.n_modes:
+            raise InputValueError(f"lqg.measurement_matrix must have shape ({nm}, n) for a plant "
+                                  f"of at least the design's modes (2 N + 2 states, N >= "
                                   f"{layout.n_modes} modes; got shape {meas.shape}")
         meas.setflags(write=False)
         object.__setattr__(self, "measurement_matrix", meas)
@@ -270,7 +286,8 @@ class LQG(ReferenceFeedback):
         if model.n_modes < self.n_modes:
             raise InputValueError(f"lqg.for_plant plant must have at least the design's "
                                   f"{self.n_modes} modes; got n_modes = {model.n_modes}")
-        return replace(self, measurement_matrix=_measurement_rows(model))
+        return replace(self, measurement_matrix=_measurement_rows(model),
+                       plant_layout=model.layout)
 
     def measure(self, t: float, x) -> np.ndarray:
         """Sensor readings ``[theta, root_moment]`` (rad, N m) of plant state ``x``."""
@@ -281,7 +298,8 @@ class LQG(ReferenceFeedback):
                                   "lqg.for_plant(plant_model)")
         y = self.measurement_matrix @ x
         if self.measurement_noise is not None:
-            y = y + np.asarray(self.measurement_noise(t), dtype=float).reshape(2)
+            y = y + np.asarray(self.measurement_noise(t), dtype=float).reshape(
+                self.measurement_matrix.shape[0])
         return y
 
     def initial_state(self, x0) -> np.ndarray:
@@ -343,8 +361,11 @@ class LQG(ReferenceFeedback):
         import control
 
         a = self.a - self.b @ self.gain - self.estimator_gain @ self.c
-        return control.ss(a, self.estimator_gain, -self.gain, np.zeros((1, 2)),
-                          inputs=list(MEASURED_OUTPUTS), outputs=["torque"], name="lqg")
+        measured = self.c.shape[0]
+        inputs = (list(MEASURED_OUTPUTS) if measured == 2
+                  else ["theta"] + [f"root_moment_{k}" for k in range(1, measured)])
+        return control.ss(a, self.estimator_gain, -self.gain, np.zeros((1, measured)),
+                          inputs=inputs, outputs=["torque"], name="lqg")
 
     def closed_loop_poles(self, model, spin_rate: float = 0.0) -> np.ndarray:
         """Poles of ``model.linearize(spin_rate)`` (``N >= M`` modes) under this compensator,
@@ -407,7 +428,7 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
     controller = LQG(gain=gain, estimator_gain=est_gain, a=a, b=b, c=_measurement_rows(model),
                      measurement_matrix=_measurement_rows(model),
                      measurement_noise=measurement_noise, reference=reference,
-                     feedforward_inertia=float(model.matrices.J0) if feedforward else None,
+                     feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
                      torque_limit=torque_limit,
                      deflection_gain=(static_deflection_gain(model) if flexible_reference
                                       else None), layout=model.layout)

@@ -48,6 +48,7 @@ from flexctl.model.checks import check_array, check_instance, check_integer
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.layout import StateLayout
 
+from .controllable import lqr_on_part
 from .feedback import ReferenceFeedback
 from .plant_state import DEFAULT_LAYOUT, design_rows, resized
 from .reference import _casadi_evaluate, _evaluate, _optional_positive, _real, _structure_key
@@ -147,8 +148,7 @@ def static_deflection_gain(model) -> np.ndarray:
     Under a slow hub acceleration ``theta_tt`` the beam equation ``M_ff q_tt + K_ff q =
     -m_tf theta_tt`` leaves ``q = -K_ff^-1 m_tf theta_tt``, m per rad/s^2, shape (M,).
     """
-    mat = _model("static_deflection_gain", model).matrices
-    return np.linalg.solve(mat.K_ff, mat.m_tf)
+    return _model("static_deflection_gain", model).quasi_static_gain()
 
 
 def reference_state(reference, t: float, n_modes, deflection_gain=None) -> tuple:
@@ -258,8 +258,10 @@ def lqr_weight_matrices(model, weights: LQRWeights) -> tuple:
     if weights.hub_rate is not None:
         q_mat[layout.theta_dot, layout.theta_dot] += weights.hub_rate ** -2
     if weights.tip_deflection is not None:
-        row = model.output_matrix[model.output_names.index("tip_deflection")]
-        q_mat += np.outer(row, row) / weights.tip_deflection ** 2
+        for k, name in enumerate(model.output_names):
+            if name.endswith("tip_deflection"):        # every appendage's tip
+                row = model.output_matrix[k]
+                q_mat += np.outer(row, row) / weights.tip_deflection ** 2
     if weights.modal_energy is not None:
         mat = model.matrices
         q_mat[layout.q, layout.q] += mat.K_ff / (2.0 * weights.modal_energy)
@@ -330,9 +332,10 @@ class LQR(ReferenceFeedback):
 
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, at time ``t`` (s) for plant state ``x`` (shape (2 N + 2,))."""
-        x_design = truncate_state(x, self.layout)
+        x_design = self._design_state(x)
         x_ref, acc = reference_state(self.reference, t, self.layout, self.deflection_gain)
         return self._apply(-float(self.gain[0] @ (x_design - x_ref)), acc)
+
 
     @property
     def casadi_parameters(self) -> tuple:
@@ -360,18 +363,17 @@ class LQR(ReferenceFeedback):
                 parameters, [0, self.gain.shape[1], self.gain.shape[1] + 1,
                              self.gain.shape[1] + 2, parameters.numel()])
             deflection = None if deflection is None else rest
-        x_design = casadi_truncate_state(x, self.layout)
+        x_design = self._casadi_design_state(x)
         x_ref, acc = casadi_reference_state(self.reference, t, self.layout, deflection)
         return self._casadi_apply(-ca.dot(gain, x_design - x_ref), acc, inertia, limit)
 
 
 def _lqr_gain(model, weights, spin_rate):
-    import control
-
-    plant = model.linearize(spin_rate)
+    """Gain and closed-loop poles on the modes the torque moves (:mod:`controllers.controllable`:
+    all of them for one beam, where this is ``control.lqr`` of the linearisation)."""
     q_mat, r_mat = lqr_weight_matrices(model, weights)
-    gain, _, poles = control.lqr(plant, q_mat, r_mat)
-    return np.asarray(gain, dtype=float), np.asarray(poles)
+    gain, poles, _ = lqr_on_part(model, spin_rate, q_mat, r_mat)
+    return gain, poles
 
 
 def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=None,
@@ -399,13 +401,16 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
     Returns
     -------
     LQR
-        ``gain`` equals ``control.lqr(model.linearize(spin_rate), Q, R)[0]``.
+        ``gain`` equals ``control.lqr(model.linearize(spin_rate), Q, R)[0]`` when the torque
+        moves every mode; otherwise the LQR gain of the modes it moves, zero on the others
+        (symmetric appendages bending against each other, a free hub's translation;
+        :mod:`controllers.controllable`).
     """
     model = _model("design_lqr", model)
     spin_rate = _real("design_lqr", "spin_rate", spin_rate)
     gain, poles = _lqr_gain(model, weights, spin_rate)
     return LQR(gain=gain, reference=reference,
-               feedforward_inertia=float(model.matrices.J0) if feedforward else None,
+               feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
                torque_limit=torque_limit, spin_rate=spin_rate, poles=poles,
                deflection_gain=static_deflection_gain(model) if flexible_reference else None,
                layout=model.layout)

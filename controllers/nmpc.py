@@ -450,15 +450,10 @@ class NMPC:
     def _terminal_weight(self) -> np.ndarray:
         """``P``: the discrete LQR Riccati solution of the design model at rest, held over
         ``sample_time`` with weights ``Q`` and ``R``, shape (n, n)."""
-        import control
+        from .controllable import dlqr_on_part
 
-        n = self.model.n_states
-        a, b = self.model.linear_matrices(0.0)
-        sys_d = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, 1))), self.sample_time,
-                            "zoh")
-        _, p_mat, _ = control.dlqr(sys_d.A, sys_d.B, np.diag(self.state_weights),
-                                   np.array([[self.torque_weight]]))
-        return 0.5 * (np.asarray(p_mat) + np.asarray(p_mat).T)
+        return dlqr_on_part(self.model, self.sample_time, np.diag(self.state_weights),
+                            np.array([[self.torque_weight]]))
 
     def _nlp_cost(self, xs, us, rx, rv, p_mat):
         """``1/2 |res|^2``: each stage's residuals weighted by ``sqrt(Q)`` and ``sqrt(R)``, the

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexctl.model import Model
 from flexctl.model.checks import check_integer
 from flexctl.model.layout import StateLayout
 
@@ -34,10 +35,10 @@ __all__ = ["PD", "pd_gains", "design_pd"]
 
 
 def _rigid_inertia(owner: str, model_or_inertia) -> float:
-    """``model.matrices.J0`` of a flexctl Model, or a given inertia (kg m^2, > 0)."""
-    matrices = getattr(model_or_inertia, "matrices", None)
-    if matrices is not None:
-        return float(matrices.J0)
+    """``model.rigid_inertia`` of a flexctl Model (``J_0``, about the centre of mass for a
+    free hub), or a given inertia (kg m^2, > 0)."""
+    if isinstance(model_or_inertia, Model):
+        return float(model_or_inertia.rigid_inertia)
     return _real(owner, "inertia", model_or_inertia, minimum=0.0, strict=True)
 
 
@@ -128,7 +129,7 @@ def pd_gains(model_or_inertia, bandwidth: float, damping_ratio: float = 0.7) -> 
     Parameters
     ----------
     model_or_inertia : flexctl.Model or float
-        A model (its rigid inertia ``model.matrices.J0`` is used) or the inertia, kg m^2.
+        A model (its rigid inertia ``model.rigid_inertia`` is used) or the inertia, kg m^2.
     bandwidth : float
         Rigid-body natural frequency ``w``, rad/s (> 0).
     damping_ratio : float, optional
@@ -160,7 +161,7 @@ def design_pd(model, bandwidth: float, damping_ratio: float = 0.7, *, reference=
     Parameters
     ----------
     model : flexctl.Model
-        Any variant and mode count; only ``model.matrices.J0`` is used.
+        Any variant and mode count; only ``model.rigid_inertia`` is used.
     bandwidth, damping_ratio : float
         See :func:`pd_gains`.
     reference : object, optional
@@ -175,6 +176,6 @@ def design_pd(model, bandwidth: float, damping_ratio: float = 0.7, *, reference=
     PD
     """
     kp, kd = pd_gains(model, bandwidth, damping_ratio)
-    inertia = float(model.matrices.J0) if feedforward else None
+    inertia = float(model.rigid_inertia) if feedforward else None
     return PD(kp=kp, kd=kd, reference=reference, feedforward_inertia=inertia,
               torque_limit=torque_limit)

@@ -112,7 +112,7 @@ class ScheduledLQR(ReferenceFeedback):
 
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, with the gain at the measured ``|theta_dot|``."""
-        x_design = truncate_state(x, self.layout)
+        x_design = self._design_state(x)
         x_ref, acc = reference_state(self.reference, t, self.layout, self.deflection_gain)
         gain = self.gain_at(self.layout.hub_rate(x_design))
         return self._apply(-float(gain[0] @ (x_design - x_ref)), acc)
@@ -134,7 +134,7 @@ class ScheduledLQR(ReferenceFeedback):
         """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``."""
         import casadi as ca
 
-        x_design = casadi_truncate_state(x, self.layout)
+        x_design = self._casadi_design_state(x)
         x_ref, acc = casadi_reference_state(self.reference, t, self.layout,
                                             self.deflection_gain)
         gain = self.casadi_gain_at(self.layout.hub_rate(x_design))
@@ -166,7 +166,7 @@ def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=No
     rates = _spin_rates("design_scheduled_lqr", spin_rates)
     gains = np.vstack([_lqr_gain(model, weights, float(w))[0] for w in rates])
     return ScheduledLQR(spin_rates=rates, gains=gains, reference=reference,
-                        feedforward_inertia=float(model.matrices.J0) if feedforward else None,
+                        feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
                         torque_limit=torque_limit,
                         deflection_gain=(static_deflection_gain(model) if flexible_reference
                                          else None),

@@ -48,6 +48,7 @@ from .pd import _rigid_inertia
 from .reference import _real
 
 __all__ = ["BangBang", "bang_bang", "Shaper", "zv_shaper", "zvd_shaper", "design_shaper",
+           "convolve", "shaper_frequencies",
            "ShapedTorque", "ShapedReference", "shape"]
 
 
@@ -147,7 +148,7 @@ def bang_bang(model_or_inertia, slew_angle: float, *, torque_limit: float | None
     Parameters
     ----------
     model_or_inertia : flexctl.Model or float
-        Model (its ``matrices.J0`` is used) or rigid inertia, kg m^2.
+        Model (its ``rigid_inertia`` is used) or rigid inertia, kg m^2.
     slew_angle : float
         rad.
     torque_limit : float, optional
@@ -227,17 +228,63 @@ def zvd_shaper(frequency: float, damping_ratio: float = 0.0) -> Shaper:
     return Shaper(times=(0.0, half, 2.0 * half), amplitudes=(1.0 / s, 2.0 * k / s, k * k / s))
 
 
-def design_shaper(model, kind: str = "zv", spin_rate: float = 0.0) -> Shaper:
-    """ZV or ZVD shaper at the first hub-free flexible frequency of ``model``.
+def convolve(first: Shaper, second: Shaper) -> Shaper:
+    """The shaper whose impulse train is ``first`` convolved with ``second``: it cancels the
+    vibration each of them cancels (times that coincide merge)."""
+    impulses = {}
+    for t1, a1 in zip(first.times, first.amplitudes):
+        for t2, a2 in zip(second.times, second.amplitudes):
+            key = round(t1 + t2, 15)
+            impulses[key] = impulses.get(key, 0.0) + a1 * a2
+    times = sorted(impulses)
+    amplitudes = [impulses[t] for t in times]
+    total = sum(amplitudes)
+    return Shaper(times=tuple(times), amplitudes=tuple(a / total for a in amplitudes))
 
-    Uses ``model.natural_frequencies(spin_rate, hub="free")[0]`` and the beam's modal damping
-    ratio ``model.system.beam.damping_ratio``.
+
+def shaper_frequencies(model, spin_rate: float = 0.0) -> tuple:
+    """``(frequency, damping ratio)`` of the modes a shaper of ``model`` cancels: the first
+    hub-free flexible mode for one beam; for several appendages the lowest mode the torque
+    moves in which each appendage bends most (its fundamental in the coupled structure),
+    each once."""
+    apps = model.structure.appendages
+    if len(apps) == 1:
+        return ((float(model.natural_frequencies(spin_rate, hub="free")[0]),
+                 apps[0].beam.damping_ratio),)
+    report = model.modal_visibility(spin_rate)
+    moved = [j for j in range(report.frequencies.size)
+             if report.frequencies[j] > 0.0 and j not in report.uncontrollable("torque")]
+    layout, picks = model.layout, []
+    for k, app in enumerate(apps):
+        block = layout.modal_slice(app.name)
+        share = [np.linalg.norm(report.shapes[block, j]) / np.linalg.norm(report.shapes[:, j])
+                 for j in moved]
+        own = [j for j, f in zip(moved, share) if f >= max(share) * 0.5]
+        if own:
+            picks.append((float(report.frequencies[own[0]]), app.beam.damping_ratio))
+    unique = []
+    for w, zeta in sorted(picks):
+        if not unique or abs(w - unique[-1][0]) > 1e-6 * w:
+            unique.append((w, zeta))
+    return tuple(unique)
+
+
+def design_shaper(model, kind: str = "zv", spin_rate: float = 0.0) -> Shaper:
+    """ZV or ZVD shaper at the fundamental flexible frequencies of ``model``.
+
+    One beam: ``model.natural_frequencies(spin_rate, hub="free")[0]`` with the beam's modal
+    damping ratio. Several appendages: one ZV or ZVD shaper per frequency of
+    :func:`shaper_frequencies` (each appendage's fundamental among the modes the torque moves),
+    convolved: the multi-mode shaper of unequal appendages.
     """
     makers = {"zv": zv_shaper, "zvd": zvd_shaper}
     if kind not in makers:
         raise InputValueError(f"design_shaper.kind must be 'zv' or 'zvd'; got {kind!r}")
-    frequency = float(model.natural_frequencies(spin_rate, hub="free")[0])
-    return makers[kind](frequency, model.system.beam.damping_ratio)
+    shapers = [makers[kind](w, zeta) for w, zeta in shaper_frequencies(model, spin_rate)]
+    out = shapers[0]
+    for extra in shapers[1:]:
+        out = convolve(out, extra)
+    return out
 
 
 def _shifted_breakpoints(base, shaper):

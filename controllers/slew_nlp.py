@@ -248,7 +248,7 @@ def torque_scale(model, problem, duration: float) -> float:
     """Size of the torque, N m: the bound, unless it is over 1000 times the rigid
     bang-bang torque ``4 J0 |angle| / T^2`` of the slew (a bound of 1e300 N m would scale
     the torque and the modal deflections far out of IPOPT's reach)."""
-    needed = 4.0 * model.matrices.J0 * abs(problem.angle) / duration ** 2
+    needed = 4.0 * model.rigid_inertia * abs(problem.angle) / duration ** 2
     return min(problem.torque_bound, 1e3 * needed) if needed > 0.0 else problem.torque_bound
 
 

@@ -358,7 +358,7 @@ def _smooth_guess(model: Model, problem: SlewProblem, duration: float):
     states[layout.theta_dot] = problem.angle * 30 * (s ** 2 - 2 * s ** 3 + s ** 4) / duration
     mid = 0.5 * (s[1:] + s[:-1])
     acc = problem.angle * 60 * (mid - 3 * mid ** 2 + 2 * mid ** 3) / duration ** 2
-    torque = np.clip(model.matrices.J0 * acc, -problem.torque_bound, problem.torque_bound)
+    torque = np.clip(model.rigid_inertia * acc, -problem.torque_bound, problem.torque_bound)
     return states, torque
 
 
@@ -424,7 +424,7 @@ def _refuse_before_solving(model: Model, problem: SlewProblem) -> None:
                               f"rest-to-rest slew of a {N}-mode design model (2 N + 2 torque "
                               f"holds); got {K}")
     umax = problem.torque_bound
-    t_rigid = rigid_minimum_time(problem.angle, model.matrices.J0, umax)
+    t_rigid = rigid_minimum_time(problem.angle, model.rigid_inertia, umax)
     if problem.duration is not None and problem.duration < t_rigid:
         # the structure's angular momentum obeys J_0 d(mean angle)/dt^2 = torque, so no torque
         # within the bound brings it to rest at the angle sooner than the rigid body
@@ -479,7 +479,7 @@ def _failure(status: str, iterations: int, problem: SlewProblem) -> TrajectoryOp
 
 def _time_bounds(model: Model, problem: SlewProblem) -> tuple:
     """``(rigid-body minimum time, longest free duration)``, s."""
-    t_rigid = rigid_minimum_time(problem.angle, model.matrices.J0, problem.torque_bound)
+    t_rigid = rigid_minimum_time(problem.angle, model.rigid_inertia, problem.torque_bound)
     return t_rigid, problem.max_duration or MAX_TIME_FACTOR * t_rigid
 
 
@@ -487,7 +487,7 @@ def _guess(model: Model, problem: SlewProblem, initial_guess) -> tuple:
     """``(duration, states (n, K+1), torque (K,))`` to start from."""
     if initial_guess is not None:
         return _resample_guess(initial_guess, model, problem)
-    t_rigid = rigid_minimum_time(problem.angle, model.matrices.J0, problem.torque_bound)
+    t_rigid = rigid_minimum_time(problem.angle, model.rigid_inertia, problem.torque_bound)
     duration = problem.duration or math.sqrt(1.5) * t_rigid   # quintic peak torque = u_max
     return (duration, *_smooth_guess(model, problem, duration))
 

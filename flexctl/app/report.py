@@ -4,7 +4,10 @@ A run directory holds
 
 ==================  ===================================================================
 ``timeseries.csv``  columns ``t,theta,theta_dot,torque,tip_deflection,q1,...,qN`` (s, rad,
-                    rad/s, N m, m, m); one row per output time, up to the stop time
+                    rad/s, N m, m, m); one row per output time, up to the stop time. For a
+                    :class:`~flexctl.model.Structure`: ``t,theta,theta_dot,torque``, then
+                    ``hub_x,hub_y`` (m) for a free hub, then ``<name>.tip_deflection`` (m)
+                    of each appendage (:func:`structure_columns`)
 ``summary.json``    scene, variant, modes, status, message, peak tip deflection, clamped
                     natural frequencies, overrides, wall time, and ``scene_table``: the
                     scene as run (see :func:`summarize`; ``flexctl run summary.json``
@@ -30,10 +33,12 @@ from pathlib import Path
 import numpy as np
 
 from ..model.layout import StateLayout
-from ..sim.maneuvers import Slew, SpinUp
+from ..model.structure import Structure
+from ..sim.maneuvers import Slew, SpinUp, TorqueSamples
 from .markdown import markdown_table
 
-__all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "timeseries_columns", "summarize",
+__all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "timeseries_columns", "structure_columns",
+           "summarize",
            "json_safe",
            "write_run", "format_summary", "write_demo_report"]
 
@@ -73,10 +78,49 @@ def _columns(layout) -> list:
             *names[layout.q]]
 
 
+def structure_columns(structure: Structure) -> list:
+    """Column names of ``timeseries.csv`` for a :class:`~flexctl.model.Structure`: the hub's
+    angle, rate and torque, its position for a free hub, each appendage's tip deflection
+    (named as the model's outputs are: ``<name>.tip_deflection``, ``tip_deflection`` for an
+    unnamed one).
+
+    Examples
+    --------
+    >>> from flexctl import load_scene
+    >>> structure_columns(load_scene("two-array-free").system)
+    ['t', 'theta', 'theta_dot', 'torque', 'hub_x', 'hub_y', 'wing_a.tip_deflection', 'wing_b.tip_deflection']
+    """
+    hub = ["hub_x", "hub_y"] if structure.free else []
+    tips = [f"{name}.tip_deflection" if name else "tip_deflection" for name in structure.names]
+    return ["t", "theta", "theta_dot", "torque", *hub, *tips]
+
+
+def _timeseries(result) -> tuple:
+    """``(columns, table)`` of ``timeseries.csv``: a HubBeam's states, a Structure's named
+    outputs."""
+    system = result.model.system
+    if not isinstance(system, Structure):
+        return _columns(result.model.layout), np.column_stack(
+            (result.t, result.theta, result.theta_dot, result.torque, result.tip_deflection,
+             result.q.T))
+    columns = structure_columns(system)
+    outputs = result.outputs
+    missing = [name for name in columns if name not in ("t", "torque") and name not in outputs]
+    if missing:
+        raise LookupError(f"the model has no output {missing[0]!r} for timeseries.csv; its "
+                       f"outputs are {', '.join(result.model.output_names)}")
+    series = {"t": result.t, "torque": result.torque, **outputs}
+    return columns, np.column_stack([np.asarray(series[name], dtype=float).reshape(-1)
+                                     for name in columns])
+
+
 def _maneuver_table(maneuver) -> dict:
     """The manoeuvre under the keys and units of a scene's ``[maneuver]`` table (a slew's
-    angle in degrees, ``angle_deg``; a free duration as ``"free"``); a slew without a torque
-    bound gives ``torque_bound`` null."""
+    angle in degrees, ``angle_deg``; a free duration as ``"free"``; torque samples as lists);
+    a slew without a torque bound gives ``torque_bound`` null."""
+    if isinstance(maneuver, TorqueSamples):
+        return {"kind": "torque_samples", "times": maneuver.times.tolist(),
+                "values": maneuver.values.tolist(), "interpolation": maneuver.interpolation}
     kind = {SpinUp: "spin_up", Slew: "slew"}.get(type(maneuver), "sine_torque")
     fields = {k: (None if v is None else float(v)) for k, v in vars(maneuver).items()}
     if kind == "slew":
@@ -107,6 +151,11 @@ def json_safe(value):
     if value is None or isinstance(value, (str, bool, int)):
         return value
     return str(value)
+
+
+def _n_modes(n_modes):
+    """A model's number of modes as JSON: an int, or one per appendage as given."""
+    return int(n_modes) if isinstance(n_modes, (int, np.integer)) else json_safe(n_modes)
 
 
 def _floats(values) -> list:
@@ -149,7 +198,7 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         "scene": scene.name,
         "description": scene.description,
         "variant": model.variant,
-        "n_modes": int(model.n_modes),
+        "n_modes": _n_modes(model.n_modes),
         "maneuver": _maneuver_table(scene.maneuver),
         "status": result.status,
         "message": result.message,
@@ -216,10 +265,9 @@ def write_run(scene, result, out_dir, overrides: dict | None = None,
     out.mkdir(parents=True, exist_ok=True)
     summary = summarize(scene, result, overrides, extra)
 
-    table = np.column_stack((result.t, result.theta, result.theta_dot, result.torque,
-                             result.tip_deflection, result.q.T))
+    columns, table = _timeseries(result)
     np.savetxt(out / TIMESERIES, table, delimiter=",", fmt=f"%.{CSV_DIGITS}g",
-               header=",".join(_columns(result.model.layout)), comments="")
+               header=",".join(columns), comments="")
     (out / SUMMARY).write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False)
                                + "\n")
 

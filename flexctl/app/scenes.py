@@ -8,6 +8,8 @@ Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as sh
     inertia = 1.16
     radius = 0.06
     friction = 0.0                       # optional
+    # support = "free"                   # optional: "pinned" (default) or "free" (the hub
+    # mass = 3.0                         # also translates); mass, kg, required when free
 
     [beam]                               # Beam fields
     length = 1.8
@@ -21,12 +23,25 @@ Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as sh
     mass = 0.085
     position = 1.62
 
+    # or, for any number of beams on one hub, [[appendages]] instead of [beam] and [[masses]]:
+    # [[appendages]]
+    # name = "wing_a"                    # an identifier, unique: it names the states and
+    #                                    # outputs (wing_a.tip_deflection)
+    # angle_deg = 0.0                    # optional: mounting angle in the hub frame, degrees
+    # radius = 0.06                      # optional: root radius, m (default hub.radius)
+    # length = 1.8                       # and the other [beam] fields
+    # [[appendages.masses]]              # any number, optional; position from the root, m
+    # mass = 0.085
+    # position = 1.62
+
     [model]
     variant = "first_order"              # first_order | zero_order | consistent | exact, or
                                          # "auto": first_order where its geometric error meets
                                          # the tolerance, else exact (flexctl.sim.validity)
     modes = 4                            # or "auto": as few as the manoeuvre needs, see
-                                         # flexctl.sim.fidelity.choose_modes
+                                         # flexctl.sim.fidelity.choose_modes; with
+                                         # [[appendages]] per appendage, or a table
+                                         # {wing_a = 4, wing_b = 2} naming each of them
     # tolerance = 1e-2                   # optional: relative tip error for the "auto" choices
                                          # and for the model-validity warning
     design_modes = 2                     # optional: modes of a controller's design model
@@ -37,6 +52,10 @@ Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as sh
     kind = "sine_torque"                 # peak_torque, duration
     # kind = "spin_up"                   # spin_rate, ramp_time
     # kind = "slew"                      # angle_deg, duration (s or "free"), torque_bound
+    # kind = "torque_samples"            # times (s), values (N m), interpolation ("hold" or
+                                         # "linear"); or file = "torque.csv" (columns
+                                         # t, torque after a header line; relative to the
+                                         # scene file's directory) instead of times, values
 
     [controller]                         # slew scenes only: kind and its settings
     kind = "trajopt+lqr"                 # see controllers.factory for kinds and settings
@@ -47,7 +66,9 @@ Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as sh
     rtol = 1e-8                          # optional
     method = "auto"                      # optional: auto | cvodes | a solve_ivp method
 
-Unknown keys and bad values raise :class:`SceneError` naming the key.
+Unknown keys and bad values raise :class:`SceneError` naming the key. The one-beam form
+(``[beam]``, ``[[masses]]``) gives :attr:`Scene.system` a :class:`~flexctl.model.HubBeam` on a
+pinned hub; ``[[appendages]]``, or a free hub, a :class:`~flexctl.model.Structure`.
 
 Examples
 --------
@@ -61,6 +82,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import json
 import math
 import os
@@ -75,12 +97,14 @@ from controllers.spec import (CONTROLLER_KEYS, ControllerSpec, SceneError, curre
                               current_names)
 
 from ..sim.fidelity import DEFAULT_TOLERANCE, ModeChoice, choose_modes
-from ..sim.maneuvers import SineTorque, Slew, SpinUp
+from ..sim.maneuvers import MAX_TORQUE_SAMPLES, SineTorque, Slew, SpinUp, TorqueSamples
 from ..sim.metrics import slew_metrics
 from ..model import VARIANTS, Model, build_model
 from ..model.variants import EXACT_MAX_MODES
 from ..model.errors import InputTypeError, InputValueError
+from ..model.checks import check_real
 from ..model.parameters import Beam, Hub, HubBeam, PointMass
+from ..model.structure import MAX_ANGLE, MAX_APPENDAGES, Appendage, Structure
 from ..sim.simulation import METHODS, MIN_T_FINAL, SimulationResult, simulate
 from ..sim.validity import VariantChoice, assess, choose_variant
 
@@ -99,28 +123,119 @@ def _slew(angle_deg, duration="free", torque_bound=None):
     return Slew(angle=math.radians(angle_deg), duration=duration, torque_bound=torque_bound)
 
 
-_MANEUVERS = {"spin_up": SpinUp, "sine_torque": SineTorque, "slew": _slew}
+def _torque_samples(times=None, values=None, interpolation="hold", file=None, *,
+                    base_dir=None):
+    """A ``torque_samples`` manoeuvre: its samples given inline, or read from the CSV ``file``
+    (a relative path from ``base_dir``, the scene file's directory)."""
+    if file is not None:
+        given = [key for key, value in (("times", times), ("values", values)) if value is not None]
+        if given:
+            raise SceneError(f"maneuver.file and maneuver.{given[0]} exclude each other: give "
+                             "the samples inline (times, values) or in a file; got both")
+        times, values = _read_torque_file(file, base_dir)
+    for key, value in (("times", times), ("values", values)):
+        if value is None:
+            raise SceneError(f"maneuver.{key} is required for kind 'torque_samples' (or "
+                             "maneuver.file, a CSV file of columns t, torque)")
+    return TorqueSamples(times=times, values=values, interpolation=interpolation)
+
+
+#: Largest torque file read, bytes: 10^6 samples of two 20-digit numbers fit.
+MAX_TORQUE_FILE_BYTES = 64 * 2 ** 20
+#: The header line of a torque file.
+TORQUE_FILE_COLUMNS = ("t", "torque")
+
+
+def _read_torque_file(file, base_dir) -> tuple:
+    """``(times, values)`` of a torque file: a header line ``t, torque``, then one line
+    ``t, torque`` per sample (s, N m), times strictly increasing from 0 or later."""
+    if not isinstance(file, str) or not file.strip() or "\0" in file:
+        raise SceneError("maneuver.file must be the path of a CSV file (columns t, torque); "
+                         f"got {file!r}")
+    path = Path(file) if Path(file).is_absolute() else Path(base_dir or ".") / file
+    where = f"maneuver.file {file!r}"
+    try:
+        if not path.is_file():
+            raise SceneError(f"{where} does not exist (a relative path is read from the scene "
+                             f"file's directory: {str(path)!r})")
+        if path.stat().st_size > MAX_TORQUE_FILE_BYTES:
+            raise SceneError(f"{where} must be at most {MAX_TORQUE_FILE_BYTES} bytes; got "
+                             f"{path.stat().st_size}")
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
+    except OSError as exc:
+        raise SceneError(f"{where} cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{where} must be UTF-8 text (CSV); byte {exc.object[exc.start]:#04x} "
+                         f"at offset {exc.start} is not UTF-8") from None
+    header = tuple(cell.strip().lower() for cell in lines[0].split(",")) if lines else ()
+    if header != TORQUE_FILE_COLUMNS:
+        raise SceneError(f"{where} must start with the header line 't, torque'; got "
+                         f"{(lines[0] if lines else '')[:80]!r}")
+    times, values = [], []
+    for number, line in enumerate(lines[1:], start=2):
+        if line.strip():
+            _read_sample(f"{where} line {number}", line, times, values)
+    if not times:
+        raise SceneError(f"{where} holds no samples: after the header, one line t, torque per "
+                         "sample")
+    return times, values
+
+
+def _read_sample(where: str, line: str, times: list, values: list) -> None:
+    """Append the sample of one line of a torque file to ``times`` and ``values``."""
+    cells = line.split(",")
+    try:
+        t, torque = (float(cell) for cell in cells) if len(cells) == 2 else (None, None)
+    except ValueError:
+        t = torque = None
+    if t is None:
+        raise SceneError(f"{where} must hold two numbers t, torque; got {line[:80]!r}")
+    if not (math.isfinite(t) and math.isfinite(torque)):
+        raise SceneError(f"{where}: t and torque must be finite; got {line[:80]!r}")
+    if t < 0.0 if not times else t <= times[-1]:
+        rule = "t must be >= 0 s" if not times else \
+            f"t must increase strictly (after {times[-1]!r} s)"
+        raise SceneError(f"{where}: {rule}; got {t!r}")
+    if len(times) == MAX_TORQUE_SAMPLES:
+        raise SceneError(f"{where}: a torque file holds at most {MAX_TORQUE_SAMPLES} samples")
+    times.append(t)
+    values.append(torque)
+
+
+_MANEUVERS = {"spin_up": SpinUp, "sine_torque": SineTorque, "slew": _slew,
+              "torque_samples": _torque_samples}
 _SCHEMA = {
     "description": None,
-    "hub": {"inertia", "radius", "friction"},
+    "hub": {"inertia", "radius", "friction", "mass", "support"},
     "beam": {"length", "density", "area", "second_moment", "youngs_modulus", "damping_ratio"},
     "masses": {"mass", "position"},
     "model": {"variant", "modes", "design_modes", "design_variant", "tolerance",
               "design_stiffness_factor", "design_mass_factor"},
     "maneuver": {"kind", "spin_rate", "ramp_time", "peak_torque", "duration", "angle_deg",
-                 "torque_bound"},
+                 "torque_bound", "times", "values", "interpolation", "file"},
     "simulation": {"t_final", "output_step", "rtol", "method"},
     "controller": None,
 }
+#: Keys of one [[appendages]] table: its name, mounting, beam fields and [[appendages.masses]]
+#: (whose keys are those of [[masses]]); beside _SCHEMA, whose tables are the one-beam form's.
+_APPENDAGE_KEYS = {"name", "angle_deg", "radius", "masses"} | _SCHEMA["beam"]
+#: Top-level keys, and those that hold an array of tables.
+_TOP_LEVEL = set(_SCHEMA) | {"appendages"}
+_ARRAYS = ("masses", "appendages")
 _MANEUVER_KEYS = {"spin_up": {"spin_rate", "ramp_time"},
                   "sine_torque": {"peak_torque", "duration"},
-                  "slew": {"angle_deg", "duration", "torque_bound"}}
-_MANEUVER_OPTIONAL = {"slew": {"duration", "torque_bound"}}
+                  "slew": {"angle_deg", "duration", "torque_bound"},
+                  "torque_samples": {"times", "values", "interpolation", "file"}}
+_MANEUVER_OPTIONAL = {"slew": {"duration", "torque_bound"},
+                      # times and values, or a file: _torque_samples says which is missing
+                      "torque_samples": {"times", "values", "interpolation", "file"}}
 
 @dataclass(frozen=True, kw_only=True)
 class ModelSpec:
     """Which model a scene uses: ``variant`` and number of modes ``modes``.
 
+    ``modes`` is per appendage; a dict ``{name: modes}`` gives each appendage of a
+    ``[[appendages]]`` scene its own (every one named, :func:`parse_scene` checks the names).
     ``modes`` may be ``"auto"``: as few modes as the scene's manoeuvre needs for a relative tip
     error ``tolerance`` in (0, 1) (default 1e-2; :func:`flexctl.sim.fidelity.choose_modes`).
     ``variant`` may be ``"auto"``: first_order where its estimated geometric error meets
@@ -165,17 +280,42 @@ class ModelSpec:
             raise SceneError("model.tolerance must be a relative tip error in (0, 1); "
                              f"got {tolerance!r}")
         object.__setattr__(self, "tolerance", float(tolerance))
-        if self.modes == "auto":
+        if isinstance(self.modes, dict):
+            object.__setattr__(self, "modes", _modes_table(self.modes))
+            return
+        if isinstance(self.modes, str) and self.modes == "auto":
             return
         if isinstance(self.modes, bool) or not isinstance(self.modes, int) \
                 or not 1 <= self.modes <= 200:
-            raise SceneError("model.modes must be an integer in [1, 200] or \"auto\"; "
-                             f"got {self.modes!r}")
+            raise SceneError("model.modes must be an integer in [1, 200], \"auto\" or a table "
+                             f"{{appendage name = modes}}; got {self.modes!r}")
 
     @property
     def auto(self) -> bool:
         """True when the number of modes is chosen from the manoeuvre."""
-        return self.modes == "auto"
+        return isinstance(self.modes, str) and self.modes == "auto"
+
+
+def _modes_table(table: dict) -> dict:
+    """``model.modes`` given per appendage, ``{name: modes}``, checked (not yet its names)."""
+    if not table:
+        raise SceneError("model.modes must give the modes of every appendage, {name = modes}; "
+                         "got an empty table")
+    for name, n_modes in table.items():
+        if isinstance(n_modes, bool) or not isinstance(n_modes, int) or not 1 <= n_modes <= 200:
+            raise SceneError(f"model.modes.{name} must be an integer in [1, 200]; got "
+                             f"{n_modes!r}")
+    return dict(table)
+
+
+def _check_exact_modes(n_modes) -> None:
+    """The exact variant's limit on the modes of each appendage (an int or ``{name: int}``)."""
+    for name, count in (n_modes.items() if isinstance(n_modes, dict) else [("", n_modes)]):
+        if count > EXACT_MAX_MODES:
+            raise SceneError(f"model.modes{'.' + name if name else ''} must be at most "
+                             f"{EXACT_MAX_MODES} for the exact variant (its geometry grows as "
+                             "the square of the modes; converge the higher ones on "
+                             f"first_order); got {count}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -213,9 +353,11 @@ class Scene:
     Attributes
     ----------
     name : str
-    system : HubBeam
+    system : HubBeam or Structure
+        A :class:`~flexctl.model.HubBeam` for the one-beam form on a pinned hub, a
+        :class:`~flexctl.model.Structure` for ``[[appendages]]`` or a free hub.
     model : ModelSpec
-    maneuver : SpinUp, SineTorque or Slew
+    maneuver : SpinUp, SineTorque, Slew or TorqueSamples
     simulation : SimulationSpec
     controller : ControllerSpec or None
     description : str
@@ -224,7 +366,7 @@ class Scene:
     """
 
     name: str
-    system: HubBeam
+    system: HubBeam | Structure
     model: ModelSpec
     maneuver: object
     simulation: SimulationSpec
@@ -258,17 +400,24 @@ class Scene:
         return "exact" if self.variant == "exact" else "first_order"
 
     @property
-    def design_system(self) -> HubBeam:
-        """The system a controller is designed on: :attr:`system` with the beam's ``EI`` and
-        the point masses scaled by ``model.design_stiffness_factor`` and
+    def design_system(self) -> HubBeam | Structure:
+        """The system a controller is designed on: :attr:`system` with every beam's ``EI``
+        and every point mass scaled by ``model.design_stiffness_factor`` and
         ``model.design_mass_factor``."""
         stiffness, mass = self.model.design_stiffness_factor, self.model.design_mass_factor
         if stiffness == 1.0 and mass == 1.0:
             return self.system
-        beam = dataclasses.replace(self.system.beam, youngs_modulus=self.system.beam
-                                   .youngs_modulus * stiffness)
-        masses = tuple(dataclasses.replace(m, mass=m.mass * mass) for m in self.system.masses)
-        return dataclasses.replace(self.system, beam=beam, masses=masses)
+
+        def scaled(holder):       # a HubBeam or an Appendage: its beam and masses
+            beam = dataclasses.replace(holder.beam, youngs_modulus=holder.beam.youngs_modulus
+                                       * stiffness)
+            return dataclasses.replace(holder, beam=beam, masses=tuple(
+                dataclasses.replace(m, mass=m.mass * mass) for m in holder.masses))
+
+        if isinstance(self.system, Structure):
+            return dataclasses.replace(self.system, appendages=tuple(
+                scaled(a) for a in self.system.appendages))
+        return scaled(self.system)
 
     def mode_choice(self) -> ModeChoice | None:
         """How many modes ``modes = "auto"`` takes, and why (None for a fixed number).
@@ -282,14 +431,26 @@ class Scene:
                             variant=self.variant, t_final=self.simulation.t_final)
 
     def build_model(self) -> Model:
-        """The model this scene asks for (variant and number of modes chosen when ``"auto"``)."""
+        """The model this scene asks for (variant and number of modes chosen when ``"auto"``);
+        a structure with named appendages gets its modes by name, ``{name: modes}``."""
         choice = self.mode_choice()
-        n_modes = choice.n_modes if choice is not None else self.model.modes
-        if self.variant == "exact" and n_modes > EXACT_MAX_MODES:
-            raise SceneError(f"model.modes must be at most {EXACT_MAX_MODES} for the exact "
-                             "variant (its geometry grows as the square of the modes; converge "
-                             f"the higher ones on first_order); got {n_modes}")
+        n_modes = self._per_appendage(choice.n_modes if choice is not None
+                                      else self.model.modes)
+        if self.variant == "exact":
+            _check_exact_modes(n_modes)
         return build_model(self.system, n_modes=n_modes, variant=self.variant)
+
+    def _per_appendage(self, n_modes):
+        """``n_modes`` (an int, ``{name: int}`` or one int per appendage) as ``build_model``
+        gets it: by name for a structure with named appendages, else one int."""
+        names = self.system.names if isinstance(self.system, Structure) else ("",)
+        if not all(names):
+            return n_modes
+        if isinstance(n_modes, dict):
+            return dict(n_modes)
+        if isinstance(n_modes, (tuple, list)):
+            return dict(zip(names, (int(n) for n in n_modes)))
+        return dict.fromkeys(names, int(n_modes))
 
 
 def builtin_scenes() -> dict:
@@ -323,6 +484,7 @@ def _set_dotted(data: dict, path: str, value):
     parts = path.split(".")
     if len(parts) == 2 and parts[0] == "controller":
         parts[1] = current_name(parts[1])       # a former name warns and takes the new one
+    _spread_modes(data, parts)
     node = data
     for depth, key in enumerate(parts[:-1]):
         where = ".".join(parts[:depth + 1])
@@ -336,9 +498,9 @@ def _set_dotted(data: dict, path: str, value):
                              f"{type(node).__name__} value, not a table")
         else:
             if key not in node:
-                if key not in _SCHEMA or key == "description":
+                if key not in _TOP_LEVEL or key == "description":
                     raise SceneError(f"override key {path!r}: unknown table {key!r}")
-                node[key] = [] if key == "masses" else {}
+                node[key] = [] if key in _ARRAYS else {}
             node = node[key]
     last = parts[-1]
     if isinstance(node, list):
@@ -348,6 +510,20 @@ def _set_dotted(data: dict, path: str, value):
         raise SceneError(f"override key {path!r}: {'.'.join(parts[:-1])} is a "
                          f"{type(node).__name__} value, not a table")
     node[last] = value
+
+
+def _spread_modes(data: dict, parts: list) -> None:
+    """Before ``model.modes.<name>`` is set on a scene whose modes are one number: that number
+    for every appendage, as the table of which one entry is then set."""
+    if len(parts) != 3 or parts[:2] != ["model", "modes"]:
+        return
+    model, appendages = data.get("model", {}), data.get("appendages")
+    modes = model.get("modes", ModelSpec.modes) if isinstance(model, dict) else None
+    if isinstance(modes, bool) or not isinstance(modes, int) or not isinstance(appendages, list):
+        return
+    names = [a.get("name") if isinstance(a, dict) else None for a in appendages]
+    if names and all(isinstance(n, str) for n in names):
+        data["model"] = {**model, "modes": dict.fromkeys(names, modes)}
 
 
 def _table(data: dict, name: str, required: bool = True) -> dict:
@@ -361,21 +537,41 @@ def _table(data: dict, name: str, required: bool = True) -> dict:
     return table
 
 
-def _construct(cls, key: str, kwargs: dict):
+def _construct(cls, key: str, kwargs: dict, rename: str | None = None):
+    """``cls(**kwargs)``, its error a :class:`SceneError` under the scene key ``key``; with
+    ``rename``, every ``key.`` in the message becomes ``rename.`` (an appendage's beam)."""
+    if dataclasses.is_dataclass(cls):
+        for f in dataclasses.fields(cls):
+            if f.init and f.name not in kwargs and f.default is dataclasses.MISSING \
+                    and f.default_factory is dataclasses.MISSING:
+                raise SceneError(f"{rename or key}.{f.name} is required")
     try:
         return cls(**kwargs)
     except SceneError:
         raise
     except (ValueError, TypeError) as exc:
         msg = str(exc)
+        if rename is not None:
+            msg = msg.replace(f"{key}.", f"{rename}.")
+            raise SceneError(msg if msg.startswith(rename) else f"{rename}: {msg}") from None
         for prefix in ("hub.", "beam.", "mass.", "maneuver."):
             if msg.startswith(prefix):
                 msg = msg[len(prefix):]
         raise SceneError(f"{key}.{msg}") from None
 
 
-def parse_scene(data: dict, name: str = "scene") -> Scene:
+def parse_scene(data: dict, name: str = "scene", base_dir=None) -> Scene:
     """Validate a scene given as nested dictionaries (the TOML tables).
+
+    Parameters
+    ----------
+    data : dict
+        The scene's tables.
+    name : str, optional
+    base_dir : str or path-like, optional
+        Directory a relative ``maneuver.file`` is read from (the scene file's); default the
+        working directory. The samples read replace ``file`` in :attr:`Scene.data`, so that
+        the scene's table runs without the file.
 
     Raises
     ------
@@ -383,52 +579,11 @@ def parse_scene(data: dict, name: str = "scene") -> Scene:
         On an unknown key, a missing table or key, or a bad value; the message names the key.
     """
     data = copy.deepcopy(data)
-    for key in data:
-        if key not in _SCHEMA:
-            raise SceneError(f"unknown scene key {key!r}; expected one of "
-                             f"{', '.join(sorted(_SCHEMA))}")
-    for key, allowed in _SCHEMA.items():
-        if allowed is None or key not in data:
-            continue
-        items = data[key]
-        if key == "masses":
-            if not isinstance(items, list):
-                raise SceneError("scene key 'masses' must be an array of tables [[masses]]")
-            tables = [(f"masses.{k}", t) for k, t in enumerate(items)]
-        else:
-            tables = [(key, _table(data, key))]
-        for where, table in tables:
-            if not isinstance(table, dict):
-                raise SceneError(f"scene key {where!r} must be a table")
-            for sub in table:
-                if sub not in allowed:
-                    raise SceneError(f"unknown scene key '{where}.{sub}'; expected one of "
-                                     f"{', '.join(sorted(allowed))}")
-
-    hub = _construct(Hub, "hub", _table(data, "hub"))
-    beam = _construct(Beam, "beam", _table(data, "beam"))
-    masses = [_construct(PointMass, f"masses.{k}", t) for k, t in
-              enumerate(data.get("masses", []))]
-    for k, m in enumerate(masses):
-        if m.position > beam.length:
-            raise SceneError(f"masses.{k}.position must lie in [0, beam.length = "
-                             f"{beam.length:g}]; got {m.position!r}")
-    system = HubBeam(hub=hub, beam=beam, masses=masses)
+    _check_keys(data)
+    system = _system(data)
     model = _construct(ModelSpec, "model", _table(data, "model", required=False))
-
-    maneuver_table = dict(_table(data, "maneuver"))
-    kind = maneuver_table.pop("kind", None)
-    if not isinstance(kind, str) or kind not in _MANEUVERS:
-        raise SceneError(f"maneuver.kind must be one of {', '.join(_MANEUVERS)}; got {kind!r}")
-    for key in maneuver_table:
-        if key not in _MANEUVER_KEYS[kind]:
-            raise SceneError(f"maneuver.{key} does not apply to kind {kind!r}; expected "
-                             f"{', '.join(sorted(_MANEUVER_KEYS[kind]))}")
-    missing = _MANEUVER_KEYS[kind] - _MANEUVER_OPTIONAL.get(kind, set()) - set(maneuver_table)
-    if missing:
-        raise SceneError(f"maneuver.{sorted(missing)[0]} is required for kind {kind!r}")
-    maneuver = _construct(_MANEUVERS[kind], "maneuver", maneuver_table)
-
+    _check_modes(model, system)
+    maneuver = _maneuver(data, base_dir)
     sim_table = _table(data, "simulation")
     if "t_final" not in sim_table:
         raise SceneError("simulation.t_final is required")
@@ -445,10 +600,179 @@ def parse_scene(data: dict, name: str = "scene") -> Scene:
     if isinstance(maneuver, Slew) and controller is None:
         raise SceneError("maneuver.kind 'slew' needs a [controller] table")
     if controller is not None and not isinstance(maneuver, Slew):
-        raise SceneError(f"a [controller] table needs maneuver.kind 'slew'; got {kind!r}")
+        raise SceneError("a [controller] table needs maneuver.kind 'slew'; got "
+                         f"{data['maneuver'].get('kind')!r}")
     return Scene(name=name, system=system, model=model, maneuver=maneuver,
                  simulation=simulation, controller=controller, description=description,
                  data=data)
+
+
+def _check_keys(data: dict) -> None:
+    """Every key of the scene's tables (but [[appendages]], see :func:`_appendage`) known."""
+    for key in data:
+        if key not in _TOP_LEVEL:
+            raise SceneError(f"unknown scene key {key!r}; expected one of "
+                             f"{', '.join(sorted(_TOP_LEVEL))}")
+    for key, allowed in _SCHEMA.items():
+        if allowed is None or key not in data:
+            continue
+        if key == "masses":
+            tables = _array_of_tables(data["masses"], "masses")
+        else:
+            tables = [(key, _table(data, key))]
+        for where, table in tables:
+            _check_table_keys(where, table, allowed)
+
+
+def _array_of_tables(items, where: str) -> list:
+    """``[(where.k, table)]`` of an array of tables ``[[where]]``."""
+    if not isinstance(items, list):
+        raise SceneError(f"scene key {where!r} must be an array of tables [[{where}]]")
+    return [(f"{where}.{k}", t) for k, t in enumerate(items)]
+
+
+def _check_table_keys(where: str, table, allowed) -> None:
+    if not isinstance(table, dict):
+        raise SceneError(f"scene key {where!r} must be a table")
+    for sub in table:
+        if sub not in allowed:
+            raise SceneError(f"unknown scene key '{where}.{sub}'; expected one of "
+                             f"{', '.join(sorted(allowed))}")
+
+
+def _system(data: dict) -> HubBeam | Structure:
+    """The hub and what it carries: a HubBeam for the one-beam form on a pinned hub, else a
+    Structure."""
+    hub_table = _table(data, "hub")
+    hub = _construct(Hub, "hub", hub_table)
+    if hub.free and "mass" not in hub_table:
+        raise SceneError("hub.mass is required when hub.support = \"free\" (the mass of the hub "
+                         "alone, kg: it moves with the hub)")
+    if "appendages" in data:
+        if "beam" in data or "masses" in data:
+            raise SceneError("a scene gives either [beam] and [[masses]] (one beam) or "
+                             "[[appendages]]; got both (write the beam as one [[appendages]])")
+        return _structure(hub, data["appendages"])
+    if "beam" not in data:
+        raise SceneError("scene is missing the [beam] table (or [[appendages]])")
+    beam = _construct(Beam, "beam", _table(data, "beam"))
+    masses = [_construct(PointMass, f"masses.{k}", t) for k, t in
+              enumerate(data.get("masses", []))]
+    for k, m in enumerate(masses):
+        if m.position > beam.length:
+            raise SceneError(f"masses.{k}.position must lie in [0, beam.length = "
+                             f"{beam.length:g}]; got {m.position!r}")
+    try:
+        system = HubBeam(hub=hub, beam=beam, masses=masses)
+    except (ValueError, TypeError) as exc:
+        raise SceneError(str(exc)) from None
+    return Structure.from_hub_beam(system) if hub.free else system
+
+
+def _structure(hub: Hub, items) -> Structure:
+    """The [[appendages]] on ``hub``."""
+    tables = _array_of_tables(items, "appendages")
+    if not 1 <= len(tables) <= MAX_APPENDAGES:
+        raise SceneError(f"appendages must hold 1 to {MAX_APPENDAGES} [[appendages]] tables; "
+                         f"got {len(tables)}")
+    appendages, seen = [], {}
+    for where, table in tables:
+        appendage = _appendage(where, table)
+        if appendage.name in seen:
+            raise SceneError(f"{where}.name must be unique; {appendage.name!r} is already the "
+                             f"name of appendages.{seen[appendage.name]}")
+        seen[appendage.name] = where.rpartition(".")[2]
+        appendages.append(appendage)
+    try:
+        return Structure(hub=hub, appendages=appendages)
+    except (ValueError, TypeError) as exc:
+        msg = str(exc)
+        for k, a in enumerate(appendages):
+            if a.radius is None:        # its root is at the hub radius
+                msg = msg.replace(f"appendage {a.name!r}.radius", "hub.radius")
+            msg = msg.replace(f"appendage {a.name!r}", f"appendages.{k}")
+        raise SceneError(msg) from None
+
+
+def _appendage(where: str, table) -> Appendage:
+    """One [[appendages]] table: name, mounting angle (degrees) and radius, beam, masses."""
+    _check_table_keys(where, table, _APPENDAGE_KEYS)
+    if "name" not in table:
+        raise SceneError(f"{where}.name is required: an identifier that names the appendage's "
+                         "states and outputs")
+    name = table["name"]
+    if isinstance(name, str) and not name:
+        raise SceneError(f"{where}.name must be an identifier (letters, digits and "
+                         "underscores, not starting with a digit); got ''")
+    try:
+        angle = check_real(where, "angle_deg", table.get("angle_deg", 0.0))
+    except (ValueError, TypeError) as exc:
+        raise SceneError(f"{exc} (degrees)") from None
+    if not abs(math.radians(angle)) <= MAX_ANGLE:
+        raise SceneError(f"{where}.angle_deg must be at most {math.degrees(MAX_ANGLE):g} "
+                         f"degrees in magnitude; got {angle!r}")
+    beam = _construct(Beam, "beam", {k: v for k, v in table.items() if k in _SCHEMA["beam"]},
+                      rename=where)
+    masses = []
+    for key, mass_table in _array_of_tables(table.get("masses", []), f"{where}.masses"):
+        _check_table_keys(key, mass_table, _SCHEMA["masses"])
+        masses.append(_construct(PointMass, key, mass_table))
+    for k, m in enumerate(masses):
+        if m.position > beam.length:
+            raise SceneError(f"{where}.masses.{k}.position must lie in [0, {where}.length = "
+                             f"{beam.length:g}]; got {m.position!r}")
+    try:
+        return Appendage(name=name, beam=beam, masses=masses, angle=math.radians(angle),
+                         radius=table.get("radius"))
+    except (ValueError, TypeError) as exc:
+        msg = str(exc).replace("appendage.name", f"{where}.name")
+        raise SceneError(msg.replace(f"appendage {name!r}", where)) from None
+
+
+def _check_modes(model: ModelSpec, system) -> None:
+    """A table of modes names exactly the appendages; the exact variant's limit."""
+    if isinstance(model.modes, dict):
+        names = system.names if isinstance(system, Structure) else ("",)
+        if not all(names):
+            raise SceneError("model.modes may be a table {appendage name = modes} only with "
+                             f"[[appendages]]; got {model.modes!r}")
+        for key in model.modes:
+            if key not in names:
+                raise SceneError(f"model.modes.{key} names no appendage; expected "
+                                 f"{', '.join(names)}")
+        for key in names:
+            if key not in model.modes:
+                raise SceneError(f"model.modes.{key} is missing: a table of modes gives every "
+                                 f"appendage ({', '.join(names)}); got "
+                                 f"{', '.join(model.modes)}")
+    if model.variant == "exact" and not model.auto:
+        _check_exact_modes(model.modes)
+
+
+def _maneuver(data: dict, base_dir):
+    """The [maneuver] table's manoeuvre; a torque file's samples replace ``file`` in
+    ``data``."""
+    table = dict(_table(data, "maneuver"))
+    kind = table.pop("kind", None)
+    if not isinstance(kind, str) or kind not in _MANEUVERS:
+        raise SceneError(f"maneuver.kind must be one of {', '.join(_MANEUVERS)}; got {kind!r}")
+    for key in table:
+        if key not in _MANEUVER_KEYS[kind]:
+            raise SceneError(f"maneuver.{key} does not apply to kind {kind!r}; expected "
+                             f"{', '.join(sorted(_MANEUVER_KEYS[kind]))}")
+    missing = _MANEUVER_KEYS[kind] - _MANEUVER_OPTIONAL.get(kind, set()) - set(table)
+    if missing:
+        raise SceneError(f"maneuver.{sorted(missing)[0]} is required for kind {kind!r}")
+    make = _MANEUVERS[kind]
+    if make is _torque_samples:
+        make = functools.partial(make, base_dir=base_dir)
+    maneuver = _construct(make, "maneuver", table)
+    if isinstance(maneuver, TorqueSamples) and "file" in table:
+        # the samples read stand in for the file: summary.json's scene_table runs without it
+        data["maneuver"] = {"kind": kind, "times": maneuver.times.tolist(),
+                            "values": maneuver.values.tolist(),
+                            "interpolation": maneuver.interpolation}
+    return maneuver
 
 
 def load_scene(source, overrides: dict | None = None) -> Scene:
@@ -482,8 +806,10 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
     except OSError as exc:      # a name too long for the file system
         raise SceneError(f"scene {str(source)[:80]!r} cannot be read: "
                          f"{exc.strerror or exc}") from None
+    base_dir = None
     if path.suffix == ".json":
         data, name = _summary_scene(path)
+        base_dir = path.parent
     elif path.suffix == ".toml" or is_file:
         if not path.is_file():
             raise SceneError(f"scene file {str(path)!r} does not exist")
@@ -498,7 +824,7 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
         except OSError as exc:
             raise SceneError(f"scene file {str(path)!r} cannot be read: "
                              f"{exc.strerror or exc}") from None
-        name = path.stem
+        name, base_dir = path.stem, path.parent
     else:
         names = builtin_scenes()
         if str(source) not in names:
@@ -513,7 +839,7 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
         data["controller"] = current_names(data["controller"])
     for key, value in (overrides or {}).items():
         _set_dotted(data, key, value)
-    return parse_scene(data, name=name)
+    return parse_scene(data, name=name, base_dir=base_dir)
 
 
 def _summary_scene(path: Path) -> tuple:

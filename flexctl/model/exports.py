@@ -8,14 +8,33 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["to_nonlinear_iosystem", "to_casadi", "to_casadi_outputs"]
+__all__ = ["to_nonlinear_iosystem", "to_casadi", "to_casadi_outputs", "signal_names"]
+
+
+def signal_names(names) -> list:
+    """Names as python-control signals: python-control keeps the dot for ``system.signal``,
+    so an appendage's ``wing_a.q1`` becomes ``wing_a_q1`` (one-beam names are unchanged).
+
+    Raises
+    ------
+    InputValueError
+        If two names become one.
+    """
+    from .errors import InputValueError
+
+    out = [name.replace(".", "_") for name in names]
+    if len(set(out)) != len(out):
+        twice = next(n for n in out if out.count(n) > 1)
+        raise InputValueError(f"the signal names {list(names)} give {twice!r} twice once the "
+                              "dots become underscores for python-control; rename an appendage")
+    return out
 
 
 def to_nonlinear_iosystem(model):
     """The model as a python-control ``NonlinearIOSystem``.
 
     States :attr:`Model.state_names`, input ``torque`` (N m), outputs
-    :attr:`Model.output_names`. A state at which the mass matrix is singular raises
+    :attr:`Model.output_names` (an appendage's dot as an underscore, :func:`signal_names`). A state at which the mass matrix is singular raises
     :class:`~flexctl.model.SingularMassMatrixError`.
 
     Examples
@@ -33,8 +52,8 @@ def to_nonlinear_iosystem(model):
     def outfcn(t, x, u, params):
         return model.outputs(np.asarray(x, dtype=float))
 
-    return control.nlsys(updfcn, outfcn, states=list(model.state_names),
-                         inputs=list(model.input_names), outputs=list(model.output_names),
+    return control.nlsys(updfcn, outfcn, states=signal_names(model.state_names),
+                         inputs=list(model.input_names), outputs=signal_names(model.output_names),
                          name=f"{model.variant}_N{model.n_modes}")
 
 

@@ -32,6 +32,7 @@ import numpy as np
 import scipy.linalg
 
 from .errors import InputValueError
+from .exports import signal_names
 from .layout import StateLayout
 from .structure_dynamics import structure_functions
 from .variants import Model, SingularMassMatrixError, _spin, _system_name
@@ -199,6 +200,25 @@ class StructureModel(Model):
         """Linear tip deflection of each appendage per modal coordinate, shape (K, N)."""
         return self.matrices.tip
 
+    @property
+    def rigid_inertia(self) -> float:
+        """Inertia of the undeformed structure about the axis it turns on, kg m^2 (``J_0``
+        pinned, ``J_0 - |S_0|^2 / m`` free)."""
+        mat = self.matrices
+        if not self.system.free:
+            return float(mat.J0)
+        return float(mat.J0 - mat.first @ mat.first / mat.mass)
+
+    def quasi_static_gain(self) -> np.ndarray:
+        """``q = -g theta_tt`` at rest under a slow hub acceleration, m per rad/s^2, (N,)."""
+        mass = self.rest_mass_matrix()
+        n_h = mass.shape[0] - self.matrices.n_modes
+        coupling = mass[n_h:, 0]
+        if self.system.free:
+            coupling = coupling - mass[n_h:, 1:n_h] @ np.linalg.solve(mass[1:n_h, 1:n_h],
+                                                                      mass[1:n_h, 0])
+        return np.linalg.solve(self.matrices.K_ff, coupling)
+
     def tip_deflections(self, x) -> np.ndarray:
         """Each appendage's tip deflection in its own frame, m, shape (K,) or (K, P)."""
         y = self.outputs(x)
@@ -279,12 +299,20 @@ class StructureModel(Model):
 
     def linearize(self, spin_rate: float = 0.0):
         """Linear plant about rest (free hub) or a steady spin (pinned hub), a python-control
-        ``StateSpace`` with the model's named states, input and outputs."""
+        ``StateSpace`` with the model's named states, input and outputs (dots as underscores,
+        :func:`~flexctl.model.exports.signal_names`); its attribute
+        ``modal_visibility`` (:class:`~flexctl.model.visibility.ModalVisibility`) says which
+        modes the torque cannot move (symmetric appendages bending against each other) and
+        which outputs cannot see them."""
         import control
 
         spin_rate = self._spin_for(spin_rate, "linearisation")
         a, b = self.linear_matrices(spin_rate)
-        return control.ss(a, b, self.output_matrix, np.zeros((len(self.output_names), 1)),
-                          states=list(self.state_names), inputs=list(self.input_names),
-                          outputs=list(self.output_names),
+        plant = control.ss(a, b, self.output_matrix, np.zeros((len(self.output_names), 1)),
+                          states=signal_names(self.state_names), inputs=list(self.input_names),
+                          outputs=signal_names(self.output_names),
                           name=_system_name(f"{self.variant}_structure_spin{spin_rate:g}"))
+
+        # which modes the torque moves and each output sees, beside the plant
+        plant.modal_visibility = self.modal_visibility(spin_rate)
+        return plant

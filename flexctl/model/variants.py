@@ -43,6 +43,7 @@ import scipy.linalg
 from .checks import check_choice, check_integer, check_real
 from .errors import InputTypeError, InputValueError
 from .exact import EXACT_MAX_MODES, exact_geometry
+from .exports import signal_names
 from .layout import StateLayout
 from .matrices import ModalMatrices, assemble, condensed_hub_inertia
 from .parameters import HubBeam
@@ -129,6 +130,18 @@ class Model:
         """Linear tip deflection of each appendage per modal coordinate, ``phi_k(l_k)``,
         shape (K, N) (one row for one beam)."""
         return self.matrices.tip[None, :]
+
+    @property
+    def rigid_inertia(self) -> float:
+        """Inertia of the undeformed structure about the axis it turns on, kg m^2: ``J_0``
+        about the pinned hub's centre; ``J_0 - |S_0|^2 / m`` about the centre of mass for a
+        free hub."""
+        return float(self.matrices.J0)
+
+    def quasi_static_gain(self) -> np.ndarray:
+        """``q = -g theta_tt``: the modal deflection that a slow hub acceleration holds at
+        rest (a free hub's centre moving as the acceleration needs), m per rad/s^2, (N,)."""
+        return np.linalg.solve(self.matrices.K_ff, self.matrices.m_tf)
 
     @property
     def lengths(self) -> np.ndarray:
@@ -539,15 +552,26 @@ class Model:
         Returns
         -------
         control.StateSpace
-            States :attr:`state_names`, input ``torque``, outputs :attr:`output_names`.
+            States :attr:`state_names`, input ``torque``, outputs :attr:`output_names`. Its
+            attribute ``modal_visibility`` (:class:`~flexctl.model.visibility.ModalVisibility`)
+            says which modes the torque cannot move and which outputs cannot see them.
         """
         import control
 
         a, b = self.linear_matrices(spin_rate)
-        return control.ss(a, b, self.output_matrix, np.zeros((len(self.output_names), 1)),
-                          states=list(self.state_names), inputs=list(self.input_names),
-                          outputs=list(self.output_names),
+        plant = control.ss(a, b, self.output_matrix, np.zeros((len(self.output_names), 1)),
+                          states=signal_names(self.state_names), inputs=list(self.input_names),
+                          outputs=signal_names(self.output_names),
                           name=_system_name(f"{self.variant}_N{self.n_modes}_spin{spin_rate:g}"))
+        # which modes the torque moves and each output sees, beside the plant
+        plant.modal_visibility = self.modal_visibility(spin_rate)
+        return plant
+
+    def modal_visibility(self, spin_rate: float = 0.0):
+        """Which modes of the linearisation at ``spin_rate`` the torque can move and each
+        output can see (:func:`flexctl.model.visibility.modal_visibility`)."""
+        from .visibility import modal_visibility
+        return modal_visibility(self, spin_rate)
 
     # ------------------------------------------------------------------ exports
     def nonlinear(self):

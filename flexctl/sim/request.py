@@ -292,6 +292,10 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
     torque_fn = time_function(torque, "torque") if torque is not None else None
     if not is_sampled(controller):
         controller = as_controller(controller, x_init)
+        if hasattr(controller, "for_plant") and getattr(controller, "plant_layout", 0) is None:
+            # a law that reads the plant state by its layout learns the plant's (several
+            # appendages: a bare state does not tell their mode counts)
+            controller = controller.for_plant(model)
     _check_reach(model, x_init, x0)
     return RunRequest(model=model, t_final=float(t_final), method=method, rtol=float(rtol),
                       atol=atol, grid=grid, step=float(step), max_step=max_step,
