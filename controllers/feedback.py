@@ -20,6 +20,9 @@ from typing import ClassVar
 
 import numpy as np
 
+from flexctl.model.errors import InputValueError
+
+from .plant_state import design_rows
 from .reference import _casadi_saturate, _check_reference, _has_casadi, _optional_positive, \
     _saturate
 
@@ -78,15 +81,19 @@ class ReferenceFeedback:
 
     def _design_state(self, x):
         """The design state (layout ``self.layout``) of numpy plant state ``x``."""
-        from .lqr import truncate_state
-        rows = self._plant_rows(self.layout, np.size(x))
-        return truncate_state(x, self.layout) if rows is None else np.asarray(x, float)[rows]
+        x = np.asarray(x, dtype=float)
+        rows = self._plant_rows(self.layout, x.size)
+        if rows is None:
+            if x.ndim != 1:
+                raise InputValueError(f"{self.owner}: the plant state must be a vector; got "
+                                      f"shape {x.shape}")
+            rows = design_rows(self.layout, x.size)
+        return x[rows]
 
     def _casadi_design_state(self, x):
         """The design state of a CasADi plant state."""
-        from .lqr import casadi_truncate_state
         rows = self._plant_rows(self.layout, x.numel())
-        return casadi_truncate_state(x, self.layout) if rows is None else x[rows.tolist()]
+        return x[(design_rows(self.layout, x.numel()) if rows is None else rows).tolist()]
 
     @property
     def breakpoints(self) -> tuple:

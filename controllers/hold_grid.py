@@ -43,6 +43,7 @@ import numpy as np
 import scipy.linalg
 
 from flexctl.model.errors import InputValueError
+from flexctl.model.layout import StateLayout
 
 __all__ = ["PHASE_TOLERANCE", "END_STATE_TOLERANCE", "MAX_SUBSTEPS", "HOLD_EFFORT_TOLERANCE",
            "step_error", "steps_per_hold", "largest_step", "mode_tolerances", "HoldEffort",
@@ -217,10 +218,28 @@ def mode_tolerances(model):
 _TOLERANCES = weakref.WeakKeyDictionary()       # per model: computed once, read-only
 
 
-def _mode_tolerances(model):
+def _linear_form(model):
+    """``(A, B, layout, P)``: the linearisation at rest on the modes the torque moves.
+
+    For one beam every mode: the model's own ``A``, ``B`` and layout, ``P`` None. With modes
+    the torque cannot move (symmetric appendages, a free hub's translation), the
+    :class:`~controllers.controllable.ControllablePart` in its modal coordinates ``z = P x``,
+    ordered as a one-beam layout's (the rigid rotation first)."""
+    from .controllable import controllable_part
+
     linear = _linearisation_model(model)
     a, b = linear.linear_matrices(0.0)
-    layout = linear.layout
+    if len(linear.modes) == 1 and linear.layout.hub_position is None:
+        return a, b, linear.layout, None
+    part = controllable_part(linear)
+    if not part.dropped:
+        return a, b, linear.layout, None
+    a_r, b_r = part.reduce(a, b)
+    return a_r, b_r, StateLayout.single(a_r.shape[0] // 2 - 1), part.projector
+
+
+def _mode_tolerances(model):
+    a, b, layout, _ = _linear_form(model)
     lam, vec = np.linalg.eig(-a[layout.velocities, layout.coordinates])     # M^-1 K
     order = np.argsort(lam.real)[1:]                       # the rigid-body mode left out
     omega = np.sqrt(np.abs(lam.real[order]))
@@ -327,9 +346,7 @@ class HoldGrid:
     """
 
     def __init__(self, model, duration: float, angle: float = 1.0):
-        linear = _linearisation_model(model)
-        a, b = linear.linear_matrices(0.0)
-        layout = linear.layout
+        a, b, layout, projector = _linear_form(model)
         self.n_dof = layout.n_coordinates
         self.frequencies, self.duration = np.sqrt(np.abs(np.sort(
             np.linalg.eigvals(-a[layout.velocities, layout.coordinates]).real)[1:])), duration
@@ -341,7 +358,9 @@ class HoldGrid:
                 self.a_z, b_z, t_z, omega = _modal_form(a, b, layout)
                 self.b_z = b_z / np.linalg.norm(b_z)
                 self.frequencies = omega[1:]
-                self.target = t_z @ layout.join(theta=angle)
+                target = (layout.join(theta=angle) if projector is None
+                          else projector @ model.layout.join(theta=angle))
+                self.target = t_z @ target
                 gramian = _gramian(self.a_z, self.b_z, duration)
                 self.continuous = np.array([self.target[r] @ np.linalg.solve(
                     gramian[np.ix_(r, r)], self.target[r]) for r in self.rows])
@@ -453,7 +472,7 @@ def _linearisation_model(model):
         return model
     from flexctl.model import build_model
 
-    return build_model(model.system, n_modes=model.n_modes, variant="first_order")
+    return build_model(model.system, n_modes=model.mode_spec, variant="first_order")
 
 
 def _aliasing_reason(effort: HoldEffort, culprit: int, h: float) -> str:

@@ -122,8 +122,11 @@ def _default_weights(model: Model, angle: float, torque_limit: float):
     mat = model.matrices
     w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
     theta = max(ANGLE_FRACTION * abs(angle), 1e-3)
-    q = TIP_FRACTION * model.system.beam.length / np.maximum(np.abs(mat.tip), 1e-12)
-    allowed = model.layout.join(theta=theta, q=q, theta_dot=theta * w[0], q_dot=q * w)
+    q = TIP_FRACTION * model.mode_lengths / np.maximum(np.abs(model.mode_tips), 1e-12)
+    # a free hub's position is not regulated (weight 0)
+    hub = ({} if model.layout.hub_position is None
+           else dict(hub_position=np.full(2, np.inf), hub_velocity=np.full(2, np.inf)))
+    allowed = model.layout.join(theta=theta, q=q, theta_dot=theta * w[0], q_dot=q * w, **hub)
     return 1.0 / allowed ** 2, 1.0 / torque_limit ** 2
 
 
@@ -365,8 +368,7 @@ class NMPC:
         t = np.atleast_1d(np.asarray(t, dtype=float))
         layout = self.model.layout
         if self.reference is None:
-            r = np.zeros((layout.n_states, t.size))
-            r[layout.theta] = self.target
+            r = np.repeat(self.model.rest_state(self.target)[:, None], t.size, axis=1)
             return r, np.zeros(t.size)
         states = self.reference.state_at(t)
         edges, values = self._reference_holds()
@@ -488,11 +490,11 @@ class NMPC:
                 lbg.append(-step)
                 ubg.append(step)
         if self.tip_limit is not None:
-            tip = ca.DM(self.model.matrices.tip)
+            tip = ca.DM(self.model.tip_matrix)       # one row per appendage
             for j in range(1, big_n + 1):
-                g.append(ca.dot(tip, layout.modal(xs[j])))
-                lbg.append(-self.tip_limit)
-                ubg.append(self.tip_limit)
+                g.append(ca.mtimes(tip, layout.modal(xs[j])))
+                lbg += [-self.tip_limit] * tip.size1()
+                ubg += [self.tip_limit] * tip.size1()
         if self.terminal == "rest":
             g.append(xs[big_n] - rx[big_n])
             lbg += [0.0] * n
@@ -578,7 +580,7 @@ class NMPC:
             lower.append(-bound - now)
             upper.append(bound - now)
         if self.tip_limit is not None:
-            tip, layout = ca.DM(self.model.matrices.tip).T, self.model.layout
+            tip, layout = ca.DM(self.model.tip_matrix), self.model.layout
             tips = ca.vertcat(*[ca.mtimes(tip, g_mats[j][layout.q, :])
                                 for j in range(1, big_n + 1)])
             now = ca.vertcat(*[ca.mtimes(tip, layout.modal(xs[j]) + layout.modal(e[j]))
@@ -611,7 +613,7 @@ class NMPC:
             from flexctl.model import build_model
 
             self._built["linearisation_model"] = build_model(
-                self.model.system, n_modes=self.model.n_modes, variant="first_order")
+                self.model.system, n_modes=self.model.mode_spec, variant="first_order")
         return self._built["linearisation_model"]
 
     def prepare(self) -> "NMPC":

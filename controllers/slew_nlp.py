@@ -256,14 +256,21 @@ def state_scale(model, problem, duration: float) -> np.ndarray:
     """Physical size of each state: angle, mean rate, quasi-static modal deflections."""
     mat = model.matrices
     w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
-    q = np.abs(mat.m_tf) * torque_scale(model, problem, duration) / mat.J0 / np.diag(mat.K_ff)
+    q = (np.abs(model.quasi_static_gain()) * torque_scale(model, problem, duration)
+         / model.rigid_inertia)
     # a mode too slow to follow the hub lags it by no more than the slew angle: without this
     # cap a very soft beam's scale (1e15 for E = 1e-6) let IPOPT accept broken dynamics
     q = np.minimum(q, np.abs(mat.m_tf) / np.diag(mat.M_ff) * abs(problem.angle))
-    q = np.maximum(q, 1e-6 * model.system.beam.length)
+    q = np.maximum(q, 1e-6 * model.mode_lengths)
+    hub = {}
+    if model.layout.hub_position is not None:
+        # a free hub's centre moves about as far as the centre of mass sits from it
+        reach = max(float(np.min(model.lengths)) * 1e-3,
+                    float(np.linalg.norm(mat.first)) / mat.mass * abs(problem.angle))
+        hub = dict(hub_position=np.full(2, reach), hub_velocity=np.full(2, reach / duration))
     return model.layout.join(theta=abs(problem.angle), q=q,
                              theta_dot=abs(problem.angle) / duration,
-                             q_dot=q * np.maximum(w, 1.0 / duration))
+                             q_dot=q * np.maximum(w, 1.0 / duration), **hub)
 
 
 @dataclass(frozen=True)
@@ -282,7 +289,7 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
 
     (t_guess, x_guess, u_guess) = guess
     n, K, layout = model.n_states, problem.n_intervals, model.layout
-    umax, target = problem.torque_bound, problem.target_state(layout)
+    umax, target = problem.torque_bound, problem.target_state(model)
     free_time = problem.objective == "time"
     scale = ca.DM(state_scale(model, problem, problem.duration or t_guess))
     collocation = disc.transcription == "collocation"
@@ -324,7 +331,7 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
         lim = problem.torque_rate_bound * h
         opti.subject_to(opti.bounded(-lim, jumps, lim), u_scale)
     if problem.tip_bound is not None:
-        tip, ymax = ca.DM(model.matrices.tip).T, problem.tip_bound
+        tip, ymax = ca.DM(model.tip_matrix), problem.tip_bound
         opti.subject_to(opti.bounded(-ymax, ca.mtimes(tip, grid[layout.q, 1:m * K]), ymax),
                         ymax)
         if collocation:

@@ -7,6 +7,7 @@ feedforward plus LQR feedback on the deviation from the optimal state trajectory
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -16,6 +17,7 @@ from flexctl.model.errors import InputTypeError, InputValueError
 
 from flexctl.model import Model
 
+from .controllable import lqr_on_part
 from .lqr import casadi_truncate_state, truncate_state
 from .trajopt import HoldTorque, SlewSolution, _number
 
@@ -27,8 +29,11 @@ def _default_weights(model: Model, angle: float, torque_bound: float):
     mat = model.matrices
     w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
     theta = 0.05 * abs(angle)
-    q = 0.03 * model.system.beam.length / np.abs(mat.tip)
-    allowed = model.layout.join(theta=theta, q=q, theta_dot=theta * w[0], q_dot=q * w)
+    q = 0.03 * model.mode_lengths / np.abs(model.mode_tips)
+    # a free hub's position is not regulated (weight 0)
+    hub = ({} if model.layout.hub_position is None
+           else dict(hub_position=np.full(2, np.inf), hub_velocity=np.full(2, np.inf)))
+    allowed = model.layout.join(theta=theta, q=q, theta_dot=theta * w[0], q_dot=q * w, **hub)
     return 1.0 / allowed ** 2, 1.0 / torque_bound ** 2
 
 
@@ -76,6 +81,8 @@ class TrajectoryTracker:
     state_weights: np.ndarray | None = None
     torque_weight: float | None = None
     torque_limit: float | None = None
+    #: The plant state's layout (:meth:`for_plant`; ``flexctl.simulate`` binds it).
+    plant_layout: object = None
     gain: np.ndarray = field(init=False, repr=False)
     breakpoints: tuple = field(init=False, repr=False)
     n_states: int = field(init=False, default=0)
@@ -97,17 +104,30 @@ class TrajectoryTracker:
         r = r_default if self.torque_weight is None else _number("torque_weight",
                                                                  self.torque_weight)
         _number("torque_limit", self.torque_limit, optional=True)
-        a, b = model.linear_matrices(0.0)
-        gain, _, _ = control.lqr(a, b, np.diag(q), np.array([[r]]))
+        # on the modes the torque moves (symmetric appendages, a free hub's translation left)
+        gain, _, _ = lqr_on_part(model, 0.0, np.diag(q), np.array([[r]]))
         gain = np.asarray(gain, dtype=float).reshape(-1)
         gain.setflags(write=False)
         object.__setattr__(self, "gain", gain)
         object.__setattr__(self, "breakpoints", self.solution.torque_function().breakpoints)
         object.__setattr__(self, "_feedforward", self.solution.torque_function())
 
+    def for_plant(self, model) -> "TrajectoryTracker":
+        """The same law reading the states of plant ``model`` (its layout)."""
+        return dataclasses.replace(self, plant_layout=model.layout)
+
+    def _rows(self, size: int):
+        design, plant = self.solution.model.layout, self.plant_layout
+        if plant is None or plant.n_states != size:
+            return None
+        return plant.projection(design)
+
     def design_state(self, x) -> np.ndarray:
         """The design model's states picked out of a plant state ``x`` (shape (2 M + 2,))."""
-        return truncate_state(x, self.solution.model.layout)
+        rows = self._rows(np.size(x))
+        if rows is None:
+            return truncate_state(x, self.solution.model.layout)
+        return np.asarray(x, dtype=float)[rows]
 
     def initial_state(self, x0) -> np.ndarray:
         """No internal states: an empty array (also :meth:`derivative`)."""
@@ -140,7 +160,9 @@ class TrajectoryTracker:
         optimal = row[2] + s * (row[3] + s * (row[4] + s * row[5]))     # K x_opt(t)
         outside = ca.logic_or(t < self._feedforward.t[0], t >= self._feedforward.t[-1])
         feedforward = ca.if_else(outside, 0.0, row[6])
-        design = casadi_truncate_state(x, self.solution.model.layout)
+        rows = self._rows(x.numel())
+        design = (casadi_truncate_state(x, self.solution.model.layout) if rows is None
+                  else x[rows.tolist()])
         u = feedforward - (ca.dot(ca.DM(self.gain), design) - optimal)
         if self.torque_limit is not None:
             u = ca.fmin(ca.fmax(u, -self.torque_limit), self.torque_limit)

@@ -213,7 +213,10 @@ class SlewProblem:
     def target_state(self, layout) -> np.ndarray:
         """Final state ``x_f = [angle, 0 .. 0]``, shape (n_states,), of ``layout``: the design
         model's :class:`~flexctl.model.layout.StateLayout`, or a number of states (one
-        appendage on a pinned hub)."""
+        appendage on a pinned hub); for a design model, its rest state at the angle (a free
+        hub's centre where the turn about the centre of mass puts it)."""
+        if isinstance(layout, Model):
+            return layout.rest_state(self.angle)
         if not isinstance(layout, StateLayout):
             n_states = check_integer("target_state", "n_states", layout, minimum=1)
             layout = resized(DEFAULT_LAYOUT, n_states)
@@ -316,8 +319,11 @@ class SlewSolution:
 
     @property
     def tip_deflection(self) -> np.ndarray:
-        """Tip deflection at the grid times, m, shape (K+1,)."""
-        return self.model.matrices.tip @ self.model.layout.modal(self.states)
+        """Tip deflection at the grid times, m, shape (K+1,) (several appendages: the largest
+        in magnitude over them at each time)."""
+        tips = self.model.tip_matrix @ self.model.layout.modal(self.states)
+        pick = np.argmax(np.abs(tips), axis=0)
+        return np.take_along_axis(tips, pick[None], 0)[0]
 
     def torque_function(self) -> HoldTorque:
         """The torque as a callable ``torque(t)`` (N m) with ``breakpoints`` at the holds."""

@@ -8,7 +8,8 @@ import flexctl
 from flexctl import Beam, Hub, SceneError, builtin_scenes, load_scene, run_scene
 from flexctl.sim.maneuvers import SineTorque, SpinUp
 
-BUILTINS = ("hub-beam-mass", "kane-spinup", "slew-90", "slew-90-model-error", "spacecraft-torque")
+BUILTINS = ("hub-beam-mass", "kane-spinup", "slew-90", "slew-90-model-error", "spacecraft-torque",
+            "two-array-free", "single-wing-free", "two-array-slew")
 
 #: MODEL.md section 6, written out independently of the scene files.
 KANE_BEAM = Beam(length=8.0, youngs_modulus=6.8952e10, area=7.2968e-5,
@@ -71,10 +72,10 @@ def test_builtin_scenes_load(name):
     scene = load_scene(name)
     assert isinstance(scene, flexctl.Scene)
     assert scene.name == name
-    assert isinstance(scene.system, flexctl.HubBeam)
+    assert isinstance(scene.system, (flexctl.HubBeam, flexctl.Structure))
     assert scene.model.variant in flexctl.VARIANTS
     model = scene.build_model()
-    assert model.n_modes == scene.model.modes and model.variant == scene.model.variant
+    assert set(model.modes) == {scene.model.modes} and model.variant == scene.model.variant
 
 
 def test_kane_scene_is_the_kane_case():

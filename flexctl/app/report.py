@@ -87,8 +87,9 @@ def structure_columns(structure: Structure) -> list:
     Examples
     --------
     >>> from flexctl import load_scene
-    >>> structure_columns(load_scene("two-array-free").system)
-    ['t', 'theta', 'theta_dot', 'torque', 'hub_x', 'hub_y', 'wing_a.tip_deflection', 'wing_b.tip_deflection']
+    >>> structure_columns(load_scene("two-array-free").system)  # doctest: +NORMALIZE_WHITESPACE
+    ['t', 'theta', 'theta_dot', 'torque', 'hub_x', 'hub_y', 'wing_a.tip_deflection',
+     'wing_b.tip_deflection']
     """
     hub = ["hub_x", "hub_y"] if structure.free else []
     tips = [f"{name}.tip_deflection" if name else "tip_deflection" for name in structure.names]

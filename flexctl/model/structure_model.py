@@ -74,6 +74,11 @@ class StructureModel(Model):
         return self.matrices.modes
 
     @property
+    def mode_spec(self) -> tuple:
+        """The ``n_modes`` of :func:`flexctl.build_model` for these modes: :attr:`modes`."""
+        return self.modes
+
+    @property
     def structure(self):
         """The :class:`~flexctl.model.structure.Structure` (the same as :attr:`system`)."""
         return self.system
@@ -129,6 +134,19 @@ class StructureModel(Model):
         """Mass matrix in the accelerations ``(theta_tt, [a], q_tt)`` at state ``x`` (n,)."""
         x = self._check_state(x)
         return np.array(self.functions.mass(x))
+
+    def rest_state(self, theta: float = 0.0) -> np.ndarray:
+        """The undeformed structure at rest at hub angle ``theta`` (rad), shape (n,): a free
+        hub's centre at ``(S_0 - R(theta) S_0) / m``, so that the centre of mass stays where
+        it is at ``theta = 0`` with the hub centre at the origin."""
+        theta = float(theta)
+        if not self.system.free:
+            return self.layout.join(theta=theta)
+        mat = self.matrices
+        c, s = np.cos(theta), np.sin(theta)
+        turned = np.array([c * mat.first[0] - s * mat.first[1],
+                           s * mat.first[0] + c * mat.first[1]])
+        return self.layout.join(theta=theta, hub_position=(mat.first - turned) / mat.mass)
 
     def rest_mass_matrix(self) -> np.ndarray:
         """Mass matrix at rest from the modal matrices (every variant linearises to it),

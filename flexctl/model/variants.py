@@ -119,6 +119,12 @@ class Model:
         return (self.n_modes,)
 
     @property
+    def mode_spec(self):
+        """The ``n_modes`` that :func:`flexctl.build_model` takes to rebuild this model's
+        modes: an int for one beam, the tuple of each appendage's modes for a structure."""
+        return self.n_modes
+
+    @property
     def structure(self):
         """The system as a :class:`~flexctl.model.structure.Structure` (one unnamed
         appendage for a ``HubBeam``)."""
@@ -130,6 +136,22 @@ class Model:
         """Linear tip deflection of each appendage per modal coordinate, ``phi_k(l_k)``,
         shape (K, N) (one row for one beam)."""
         return self.matrices.tip[None, :]
+
+    def rest_state(self, theta: float = 0.0) -> np.ndarray:
+        """The undeformed structure at rest at hub angle ``theta`` (rad), shape (n,): a free
+        hub's centre placed so that the centre of mass is where it is at ``theta = 0`` with
+        the hub centre at the origin (a rigid turn about the centre of mass)."""
+        return self.layout.join(theta=float(theta))
+
+    @property
+    def mode_lengths(self) -> np.ndarray:
+        """Beam length of the appendage each modal coordinate belongs to, m, shape (N,)."""
+        return np.concatenate([np.full(n, length) for n, length in zip(self.modes, self.lengths)])
+
+    @property
+    def mode_tips(self) -> np.ndarray:
+        """Tip deflection of its own appendage per unit of each modal coordinate, shape (N,)."""
+        return np.sum(self.tip_matrix, axis=0)
 
     @property
     def rigid_inertia(self) -> float:

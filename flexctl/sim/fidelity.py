@@ -40,6 +40,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -50,7 +51,8 @@ import scipy.linalg
 from .maneuvers import SineTorque, Slew, rigid_slew_duration
 from ..model import VARIANTS, build_model
 from ..model.errors import InputTypeError, InputValueError
-from ..model.parameters import HubBeam
+from ..model.parameters import Hub, HubBeam
+from ..model.structure import Structure
 
 __all__ = ["ModeChoice", "choose_modes", "linear_tip_responses", "largest_spin_rate",
            "rigid_slew_torque",
@@ -308,6 +310,29 @@ def linear_tip_responses(system: HubBeam, maneuver, mode_counts, *, t_final: flo
     return t, tips, bool(np.all(w2 > 0.0))
 
 
+def _appendage_stand_in(structure, k: int) -> HubBeam:
+    """Appendage ``k`` alone on a pinned hub that carries the rest of the structure's
+    inertia: the one-beam system whose mode count stands in for the appendage's."""
+    app = structure.appendages[k]
+    alone = structure.appendage_system(k)
+    hub = Hub(inertia=structure.rigid_inertia - alone.rigid_inertia,
+              radius=structure.root_radius(app), friction=structure.hub.friction)
+    return HubBeam(hub=hub, beam=app.beam, masses=app.masses)
+
+
+def _choose_structure_modes(structure, maneuver, *args, **kwargs) -> "ModeChoice":
+    """:func:`choose_modes` of each appendage on its stand-in hub; the modes as a tuple."""
+    choices = [choose_modes(_appendage_stand_in(structure, k), maneuver, *args, **kwargs)
+               for k in range(len(structure.appendages))]
+    worst = max(choices, key=lambda c: c.estimated_error)
+    modes = tuple(c.n_modes for c in choices)
+    why = "; ".join(f"{app.name}: {c.n_modes} modes" for app, c in
+                    zip(structure.appendages, choices))
+    return dataclasses.replace(worst, n_modes=modes, explanation=(
+        f"each appendage on a hub carrying the rest of the structure ({why}); "
+        + worst.explanation))
+
+
 def choose_modes(system: HubBeam, maneuver, tolerance: float = DEFAULT_TOLERANCE,
                  variant: str = "first_order", max_modes: int = DEFAULT_MAX_MODES, *,
                  reference_modes: int | None = None, t_final: float | None = None) -> ModeChoice:
@@ -317,7 +342,9 @@ def choose_modes(system: HubBeam, maneuver, tolerance: float = DEFAULT_TOLERANCE
 
     Parameters
     ----------
-    system : HubBeam
+    system : HubBeam or Structure
+        For a Structure each appendage is judged alone on a pinned hub that carries the rest
+        of the structure's inertia, and ``n_modes`` is the tuple of their counts.
     maneuver : SpinUp, SineTorque, Slew or similar
         A prescribed hub motion, a torque ``f(t)`` (N m), or a slew (judged by
         :func:`rigid_slew_torque`).
@@ -344,6 +371,9 @@ def choose_modes(system: HubBeam, maneuver, tolerance: float = DEFAULT_TOLERANCE
     TypeError
         If ``maneuver`` is neither a hub motion nor a torque callable.
     """
+    if isinstance(system, Structure):
+        return _choose_structure_modes(system, maneuver, tolerance, variant, max_modes,
+                                       reference_modes=reference_modes, t_final=t_final)
     _check_tolerance(tolerance)
     if variant not in VARIANTS:
         raise InputValueError(f"variant must be one of {', '.join(VARIANTS)}; got {variant!r}")

@@ -77,7 +77,7 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     if model.variant == "exact":
         return 0.0
     # a controller reads at least the modes it was designed on
-    n_modes = min(max(n_modes, int(getattr(controller, "n_modes", 0) or 0)), model.n_modes)
+    n_modes = min(max(n_modes, int(getattr(controller, "n_modes", 0) or 0)), min(model.modes))
     tips = []
     for variant in (model.variant, "exact"):
         small = build_model(model.system, n_modes=n_modes, variant=variant)
@@ -90,11 +90,11 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
             run = simulate(small, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False, **drive)
         if run.status != "ok":
             return float("inf")
-        tips.append(run.tip_deflection)
-    # relative to the peak, but not below DEFLECTION_FLOOR of the length: a deflection of
-    # 1e-38 m has no geometric error, only the integrators' rounding
-    peak = max(float(np.max(np.abs(tips[1]))), DEFLECTION_FLOOR * model.system.beam.length)
-    return float(np.max(np.abs(tips[0] - tips[1])) / peak)
+        tips.append(np.atleast_2d(small.tip_deflections(run.states)))
+    # each appendage relative to its peak, but not below DEFLECTION_FLOOR of its length: a
+    # deflection of 1e-38 m has no geometric error, only the integrators' rounding
+    peak = np.maximum(np.max(np.abs(tips[1]), axis=1), DEFLECTION_FLOOR * model.lengths)
+    return float(np.max(np.max(np.abs(tips[0] - tips[1]), axis=1) / peak))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -192,8 +192,7 @@ def assess(result, *, torque=None, hub_motion=None, controller=None,
     error = (geometric_error(model, t_end, torque=torque, hub_motion=hub_motion,
                              controller=controller) if t_end > 0 else 0.0)
     validity = ModelValidity(variant=model.variant,
-                             deflection_ratio=result.peak_tip_deflection
-                             / model.system.beam.length,
+                             deflection_ratio=result.deflection_ratio,
                              geometric_error=error, tolerance=float(tolerance),
                              energy_balance=getattr(result, "energy_balance", None),
                              t_end=t_end)
@@ -251,7 +250,7 @@ def _choose(system, maneuver, tolerance, t_final) -> VariantChoice:
         warnings.simplefilter("ignore")
         run = simulate(model, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False,
                        **{key: drive})
-    ratio = run.peak_tip_deflection / system.beam.length
+    ratio = run.deflection_ratio
     error = geometric_error(build_model(system, n_modes=ESTIMATE_MODES), t_final,
                             **{key: drive})
     if error <= tolerance:
