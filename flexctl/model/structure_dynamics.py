@@ -136,14 +136,31 @@ def _assemble(blocks, mat, free, q_dot, rate):
     return mass, ca.vertcat(blocks["b_t"], b_a, blocks["b_q"])
 
 
+def _constant_inverse(mass):
+    """The inverse of a constant CasADi matrix, symmetrised, as a ``DM``."""
+    import casadi as ca
+
+    inverse = np.linalg.inv(np.array(ca.DM(ca.evalf(mass))))
+    return ca.DM(0.5 * (inverse + inverse.T))
+
+
 def _solve(mass, rhs, variables):
-    """``mass^-1 rhs``, through a numeric inverse where ``mass`` is constant."""
+    """``mass^-1 rhs``: through a numeric inverse where ``mass`` is constant, through the
+    Schur complement of the hub rotation where only its row and column vary (the
+    small-deflection variants: ``J(q)`` and ``e_z x S(q)``), else a symbolic solve."""
     import casadi as ca
 
     if not ca.depends_on(mass, variables):
-        inverse = np.linalg.inv(np.array(ca.DM(ca.evalf(mass))))
-        return ca.mtimes(ca.DM(0.5 * (inverse + inverse.T)), rhs)
-    return ca.solve(mass, rhs)
+        return ca.mtimes(_constant_inverse(mass), rhs)
+    n = mass.size1()
+    rest = mass[1:, 1:]
+    if n == 1 or ca.depends_on(rest, variables):
+        return ca.solve(mass, rhs)
+    inverse = _constant_inverse(rest)
+    column = mass[1:, 0]
+    g = ca.mtimes(inverse, column)
+    hub = (rhs[0] - ca.dot(g, rhs[1:])) / (mass[0, 0] - ca.dot(column, g))
+    return ca.vertcat(hub, ca.mtimes(inverse, rhs[1:]) - g * hub)
 
 
 def structure_functions(model) -> StructureFunctions:
