@@ -459,7 +459,7 @@ class NMPC:
 
     def _nlp_cost(self, xs, us, rx, rv, p_mat):
         """``1/2 |res|^2``: each stage's residuals weighted by ``sqrt(Q)`` and ``sqrt(R)``, the
-        last state's by the Cholesky factor of ``P``."""
+        last state's by a square-root factor of ``P``."""
         import casadi as ca
 
         big_n, r = self.horizon, self.torque_weight
@@ -468,8 +468,11 @@ class NMPC:
         for j in range(big_n):
             residuals.append(ca.DM(sq) * (xs[j] - rx[j]))
             residuals.append(np.sqrt(r) * (us[j] - rv[j]))
-        chol = np.linalg.cholesky(p_mat + 1e-12 * np.eye(self.model.n_states)).T
-        residuals.append(ca.mtimes(ca.DM(chol), xs[big_n] - rx[big_n]))
+        # P = F^T F; P is only semidefinite when the torque cannot move some modes
+        # (controllers.controllable), so F comes from its eigenvalues, not Cholesky
+        lam, vec = np.linalg.eigh(0.5 * (p_mat + p_mat.T))
+        factor = np.sqrt(np.clip(lam, 0.0, None))[:, None] * vec.T
+        residuals.append(ca.mtimes(ca.DM(factor), xs[big_n] - rx[big_n]))
         return 0.5 * ca.sumsqr(ca.vertcat(*residuals))
 
     def _nlp_constraints(self, hold, xs, us, x_meas, u_prev, rx) -> tuple:

@@ -13,7 +13,8 @@ section                     content
 :func:`kane_spinup`         paper 001 Fig. 4: spin-up to 0.5, 2, 4 rad/s, first vs zero_order
 :func:`spacecraft_torque`   paper 001 Fig. 5: 50 N m on a massless hub
 :func:`hub_beam_mass`       paper 000 Figs. 5 to 8: the point mass, sweeps of d/l and R_M
-:func:`slew_comparison`     every controller kind on ``slew-90``, on the nonlinear plant
+:func:`slew_comparison`     every controller kind on ``slew-90`` and on ``two-array-slew``
+:func:`structures`          one beam against two arrays, pinned and free hub (its own module)
 :func:`model_error`         trajopt+lqr against NMPC when the design model is 20 % off
 :func:`large_deflection`    the optimal slew designed on first_order and on exact geometry
 ==========================  =================================================================
@@ -37,6 +38,7 @@ from controllers.spec import CONTROLLER_KEYS
 from ..model.errors import InputError
 from ..sim.validity import ModelValidityWarning
 from .report import write_demo_report
+from .demo_structures import structures
 from .scenes import builtin_scenes, load_scene, run_slew
 from .sweep import PointMassAmplitudes, SceneTask, response_amplitudes, sweep
 
@@ -53,6 +55,10 @@ PAPER_VALUES = {
 }
 #: Points of each paper-000 sweep (d/l and R_M in [0, 1]).
 SWEEP_POINTS = 8
+#: Controller kinds compared on the free-hub slew: all but the spin-scheduled LQR, whose
+#: linearisations at a steady spin a free hub does not have (its centre circles the centre
+#: of mass).
+FREE_HUB_KINDS = tuple(k for k in CONTROLLER_KEYS if k != "scheduled")
 #: Kane spin-up final rates of paper 001 Fig. 4, rad/s.
 KANE_SPIN_RATES = (0.5, 2.0, 4.0)
 
@@ -309,27 +315,30 @@ def _point_mass_sweep_text(by_position, by_mass, bare, points: int) -> str:
                 *by_mass.column("residual_amplitude")[[0, -1]]))
 
 
-def slew_comparison(out: Path, executor=None, kinds=None) -> Section:
-    """Every controller kind on ``slew-90``, in closed loop on the nonlinear plant."""
+def slew_comparison(out: Path, executor=None, kinds=None,
+                    scene_name: str = "slew-90") -> Section:
+    """Every controller kind on a slew scene (``slew-90``, or ``two-array-slew``), in closed
+    loop on the nonlinear plant."""
     from controllers import from_spec
 
     from .plotting import plot_controller_comparison
 
     kinds = list(CONTROLLER_KEYS) if kinds is None else list(kinds)
-    scene = load_scene("slew-90")
+    scene = load_scene(scene_name)
     slew = scene.maneuver
-    table = sweep(SceneTask(scene="slew-90", controller_factory=from_spec, keep_result=True),
+    table = sweep(SceneTask(scene=scene_name, controller_factory=from_spec, keep_result=True),
                   {"controller.kind": kinds}, executor=executor, progress=False)
-    csv = out / "controller-comparison.csv"
+    stem = "controller-comparison" + ("" if scene_name == "slew-90" else f"-{scene_name}")
+    csv = out / f"{stem}.csv"
     table.to_csv(csv)
     rows_by_kind = {r["controller.kind"]: r for r in table}
     n_plant = next(iter(rows_by_kind.values()))["result"].model.n_modes
     fig = plot_controller_comparison(
         {k: r["result"] for k, r in rows_by_kind.items()}, rows_by_kind,
         target_angle=slew.angle, maneuver_end=slew.duration, torque_bound=slew.torque_bound,
-        title=f"slew-90: {np.degrees(slew.angle):g} deg in {slew.duration:g} s, "
+        title=f"{scene_name}: {np.degrees(slew.angle):g} deg in {slew.duration:g} s, "
               f"{slew.torque_bound:g} N m bound, {n_plant}-mode nonlinear plant")
-    image = _save(fig, out / "controller-comparison.png")
+    image = _save(fig, out / f"{stem}.png")
     rows = []
     for kind, r in rows_by_kind.items():
         settle = r["settling_time"]
@@ -338,18 +347,28 @@ def slew_comparison(out: Path, executor=None, kinds=None) -> Section:
                      f"{r['peak_torque']:.3g}", f"{r['peak_tip_deflection']:.3g}",
                      f"{r['final_error']:.2e}", f"{r['wall_time_s']:.2g}"))
     return Section(
-        title="Controller comparison on slew-90",
-        paragraphs=(f"{scene.description}. Every controller kind, designed on a "
+        title=f"Controller comparison on {scene_name}",
+        paragraphs=(f"{scene.description}. {_which_kinds(kinds)}, designed on a "
                     f"{scene.model.design_modes}-mode {scene.design_variant} model by "
                     f"controllers.from_spec and run against the {n_plant}-mode "
                     f"{scene.variant} plant. Residual "
                     "vibration: largest |tip deflection| after the manoeuvre's nominal end; "
                     "settling: 2 % band of the hub angle. Table: "
-                    "[controller-comparison.csv](controller-comparison.csv).",),
+                    f"[{stem}.csv]({stem}.csv).",),
         table=(("controller", "status", "residual vibration (m)", "settling time (s)",
                 "peak torque (N m)", "peak tip (m)", "final error (rad)", "wall time (s)"),
                rows),
         images=(("Controller comparison", image),), files=(csv,))
+
+
+def _which_kinds(kinds) -> str:
+    """"Every controller kind", or "Every controller kind but ..." for a subset."""
+    left = sorted(set(CONTROLLER_KEYS) - set(kinds))
+    if not left:
+        return "Every controller kind"
+    why = (" (a free hub has no linearisation at a steady spin to schedule on)"
+           if left == ["scheduled"] else "")
+    return f"Every controller kind but {', '.join(left)}{why}"
 
 
 def model_error(out: Path, executor=None, kinds=("trajopt+lqr", "nmpc")) -> Section:
@@ -509,6 +528,10 @@ def sections(out: Path, workers: int, surprises: list, progress=print) -> list:
              ("paper 001 Fig. 5", lambda o, pool: spacecraft_torque(o), False),
              ("paper 000 Figs. 5-8", hub_beam_mass, True),
              ("controller comparison", slew_comparison, True),
+             ("structures", lambda o, pool: structures(o), False),
+             ("controller comparison, two arrays",
+              lambda o, pool: slew_comparison(o, pool, kinds=FREE_HUB_KINDS,
+                                              scene_name="two-array-slew"), True),
              ("design-model error", model_error, True),
              ("large deflection", lambda o, pool: large_deflection(o), False))
     pool = ProcessPoolExecutor(max_workers=workers) if workers > 1 else None

@@ -62,7 +62,9 @@ def plot_response(result, fig=None, title: str | None = None):
     -------
     matplotlib.figure.Figure
         Three axes sharing the time axis (s): hub angle (rad, left) with hub rate (rad/s,
-        right, a twin axis, the fourth of ``fig.axes``), hub torque (N m) and tip deflection (m).
+        right, a twin axis, the fourth of ``fig.axes``), hub torque (N m; for a free hub
+        with the hub centre's travel, mm, on a fifth, twin axis) and tip deflection (m, one
+        trace per appendage).
         A run that stopped early (status ``"diverged"`` or ``"singular"``) has its stop time
         marked on every axis and its status written on the deflection plot.
     """
@@ -88,7 +90,18 @@ def plot_response(result, fig=None, title: str | None = None):
     ax_torque.plot(t, result.torque, color="tab:gray")
     ax_torque.set_ylabel("torque (N m)")
 
-    ax_tip.plot(t, result.tip_deflection, color="tab:blue")
+    tips = result.tip_deflections
+    for name, tip in tips.items():        # one trace per appendage
+        ax_tip.plot(t, tip, label=name or None)
+    if len(tips) > 1:
+        ax_tip.legend(loc="best", fontsize="small")
+    if model.layout.hub_position is not None:
+        outputs = result.outputs
+        ax_hub = ax_torque.twinx()
+        ax_hub.plot(t, np.hypot(outputs["hub_x"], outputs["hub_y"]) * 1e3,
+                    color="tab:green", linestyle="--")
+        ax_hub.set_ylabel("hub centre travel (mm)", color="tab:green")
+        ax_hub.tick_params(axis="y", labelcolor="tab:green")
     ax_tip.set_ylabel("tip deflection (m)")
     ax_tip.set_xlabel("time (s)")
 
@@ -110,7 +123,9 @@ def plot_response(result, fig=None, title: str | None = None):
                         bbox=dict(boxstyle="round", facecolor="white", edgecolor=colour))
     if title is None:
         end = f"t = {float(t[-1]):.4g} s" if t.size else "no output"
-        title = f"{model.variant}, {model.n_modes} modes: {status} ({end})"
+        modes = (f"{model.n_modes} modes" if len(model.modes) == 1
+                 else f"modes {'+'.join(map(str, model.modes))}")
+        title = f"{model.variant}, {modes}: {status} ({end})"
     fig.suptitle(title, color="black" if status == "ok" else colour)
     return fig
 
