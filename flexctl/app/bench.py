@@ -26,6 +26,8 @@ is ``flexctl bench``.
 
 from __future__ import annotations
 
+import dataclasses
+
 import itertools
 import math
 import time
@@ -304,6 +306,9 @@ def bench_scene(scene, config: BenchConfig, progress: bool = True) -> SceneBench
     t_final = config.t_final or scene.simulation.t_final
     choice = choose_modes(scene.system, scene.maneuver, config.tolerance, variant=scene.variant,
                           t_final=t_final)
+    if not isinstance(choice.n_modes, int):
+        # several appendages: the bench sweeps one mode count for every appendage
+        choice = dataclasses.replace(choice, n_modes=max(choice.n_modes))
     chosen_extra = () if choice.n_modes in config.modes else (choice.n_modes,)
     n_runs = len(config.variants) * (1 + len(config.modes) * (
         1 + len(config.methods) * len(config.rtols))) + len(chosen_extra)

@@ -49,7 +49,9 @@ RESPONSE_PLOT = "response.png"
 CSV_DIGITS = 12
 
 _UNITS = {"integration_error": "m (estimated largest tip error of the integration; null where "
-          "no check ran)", "t_end": "s", "t_final": "s", "peak_tip_deflection": "m", "wall_time_s": "s",
+          "no check ran)", "t_end": "s", "t_final": "s", "peak_tip_deflection": "m",
+          "appendages": "peak_tip_deflection m (in the appendage's own frame)",
+          "peak_hub_travel": "m", "center_of_mass_drift": "m", "wall_time_s": "s",
           "spin_rate": "rad/s", "clamped_frequencies": "rad/s (negative: lost stiffness, "
           "value = -growth rate in 1/s)", "clamped_frequencies_at_spin": "rad/s (negative: lost "
           "stiffness, value = -growth rate in 1/s)",
@@ -222,6 +224,7 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         summary["spin_rate"] = spin
         summary["clamped_frequencies_at_spin"] = _floats(
             model.natural_frequencies(spin, hub="clamped"))
+    summary.update(_structure_summary(model, result))
     choice = scene.mode_choice()
     if choice is not None:
         summary["mode_choice"] = choice.to_dict()
@@ -238,6 +241,27 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
             "difference from a converged model / largest tip deflection); max_spin_rate: rad/s; "
             "stiffening_effect: relative shift of the first clamped frequency; t_final: s")
     return summary
+
+
+def _structure_summary(model, result) -> dict:
+    """For several appendages or a free hub: ``appendages`` (each one's modes and peak tip
+    deflection in its own frame, m), ``hub_support`` and a free hub's ``peak_hub_travel`` (m)
+    and centre-of-mass drift (m); empty for one beam on a pinned hub."""
+    names = model.structure.names
+    if names == ("",) and model.layout.hub_position is None:
+        return {}
+    tips = result.tip_deflections
+    out = {"hub_support": model.structure.hub.support,
+           "appendages": {name: {"modes": int(n),
+                                 "peak_tip_deflection": float(np.max(np.abs(tips[name])))
+                                 if result.t.size else 0.0}
+                          for name, n in zip(names, model.modes)}}
+    if model.layout.hub_position is not None and result.t.size:
+        hub = result.states[model.layout.hub_position]
+        center = model.center_of_mass(result.states)
+        out["peak_hub_travel"] = float(np.max(np.hypot(hub[0], hub[1])))
+        out["center_of_mass_drift"] = float(np.max(np.hypot(*(center - center[:, :1]))))
+    return out
 
 
 def write_run(scene, result, out_dir, overrides: dict | None = None,

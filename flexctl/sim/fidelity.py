@@ -76,9 +76,9 @@ class ModeChoice:
 
     Attributes
     ----------
-    n_modes : int
+    n_modes : int or tuple of int
         Smallest number of modes whose estimated error is within ``tolerance`` (``max_modes``
-        when none is).
+        when none is); for a Structure, one per appendage.
     estimated_error : float
         Estimated relative tip error of ``n_modes`` modes: largest tip deflection difference from
         a converged model over the horizon, divided by the largest tip deflection.
@@ -117,11 +117,14 @@ class ModeChoice:
     explanation: str = field(default="", compare=False)
 
     def __post_init__(self):
-        if isinstance(self.n_modes, bool) or not isinstance(self.n_modes, (int, np.integer)) \
-                or not 1 <= self.n_modes <= len(self.error_by_modes):
+        counts = self.n_modes if isinstance(self.n_modes, tuple) else (self.n_modes,)
+        if not counts or any(isinstance(n, bool) or not isinstance(n, (int, np.integer))
+                             or not 1 <= n <= len(self.error_by_modes) for n in counts):
             raise InputValueError(f"n_modes must be an integer in "
-                                  f"[1, {len(self.error_by_modes)}]; got {self.n_modes!r}")
-        object.__setattr__(self, "n_modes", int(self.n_modes))
+                                  f"[1, {len(self.error_by_modes)}] (a tuple of them per "
+                                  f"appendage); got {self.n_modes!r}")
+        object.__setattr__(self, "n_modes", tuple(int(n) for n in counts)
+                           if isinstance(self.n_modes, tuple) else int(self.n_modes))
         _check_tolerance(self.tolerance)
         if self.variant not in VARIANTS:
             raise InputValueError(f"variant must be one of {', '.join(VARIANTS)}; "
