@@ -85,3 +85,23 @@ def test_report_renders_sections_as_markdown(tmp_path):
     assert "## A case\n\nFirst.\n\nSecond.\n\n| a | b |\n|---|---|\n| 1 | 2 |\n| 3 | 4 |" in text
     assert re.search(r"!\[the figure\]\(figure\.png\)", text)
     assert text.index("## A case") < text.index("## Responses")
+
+
+def test_structures_section_shows_what_a_second_array_and_a_free_hub_change(tmp_path):
+    from flexctl.app.demo_structures import structures
+
+    section = structures(tmp_path)
+    _assert_files(section)
+    rows = {cells[0]: dict(zip(section.table[0], cells)) for cells in section.table[1]}
+    one, pinned = rows["one beam, pinned hub"], rows["two arrays, pinned hub"]
+    free, wing = rows["two arrays, free hub"], rows["single wing, free hub"]
+    peak = lambda row: [float(v) for v in row["peak tips (m)"].split(", ")]  # noqa: E731
+    # a second array: more inertia to turn, each tip bends less, the two tips alike
+    assert float(pinned["rigid inertia (kg m^2)"]) > float(one["rigid inertia (kg m^2)"])
+    assert max(peak(pinned)) < 0.6 * peak(one)[0] and len(set(peak(pinned))) == 1
+    # identical arrays hide modes from the torque; one beam has none
+    assert one["modes the torque cannot move (rad/s)"] == "none"
+    assert pinned["modes the torque cannot move (rad/s)"] != "none"
+    # a single wing turns a free hub about the centre of mass (less inertia) and drags it
+    assert float(wing["rigid inertia (kg m^2)"]) < float(one["rigid inertia (kg m^2)"])
+    assert float(wing["hub travel (mm)"]) > 1.0 and float(free["hub travel (mm)"]) < 1e-6

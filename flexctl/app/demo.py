@@ -28,7 +28,6 @@ from __future__ import annotations
 import dataclasses
 import time
 import warnings
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +38,7 @@ from ..model.errors import InputError
 from ..sim.validity import ModelValidityWarning
 from .report import write_demo_report
 from .demo_structures import structures
+from .section import Section, save_figure as _save
 from .scenes import builtin_scenes, load_scene, run_slew
 from .sweep import PointMassAmplitudes, SceneTask, response_amplitudes, sweep
 
@@ -61,35 +61,6 @@ SWEEP_POINTS = 8
 FREE_HUB_KINDS = tuple(k for k in CONTROLLER_KEYS if k != "scheduled")
 #: Kane spin-up final rates of paper 001 Fig. 4, rad/s.
 KANE_SPIN_RATES = (0.5, 2.0, 4.0)
-
-
-@dataclass(frozen=True)
-class Section:
-    """A part of the demo report.
-
-    Attributes
-    ----------
-    title : str
-    paragraphs : tuple of str
-        Markdown text, one paragraph each.
-    table : tuple
-        ``(header, rows)``: column names and rows of cells (already formatted), or ``()``.
-    images : tuple of (str, Path)
-        ``(caption, path)`` of each figure.
-    files : tuple of Path
-        Data written (CSV), linked from the report.
-    """
-
-    title: str
-    paragraphs: tuple = ()
-    table: tuple = ()
-    images: tuple = ()
-    files: tuple = field(default=())
-
-
-def _save(fig, path: Path) -> Path:
-    fig.savefig(path, dpi=90)
-    return path
 
 
 def _percent(value: float, reference: float) -> str:

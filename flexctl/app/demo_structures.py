@@ -18,6 +18,7 @@ import numpy as np
 from ..model import Appendage, HubBeam, Structure, build_model
 from ..sim.simulation import simulate
 from .scenes import load_scene
+from .section import Section, save_figure
 
 __all__ = ["structures", "structure_cases"]
 
@@ -56,8 +57,7 @@ def _row(label, model, result, push):
 
 
 def structures(out: Path, scene_name: str = "two-array-free"):
-    """The section (:class:`flexctl.app.demo.Section`) comparing the four structures."""
-    from .demo import Section, _save
+    """The :class:`~flexctl.app.section.Section` comparing the four structures."""
     from .plotting import new_figure
 
     scene = load_scene(scene_name)
@@ -79,7 +79,7 @@ def structures(out: Path, scene_name: str = "two-array-free"):
     axes[-1].set_xlabel("time (s)")
     fig.suptitle(f"{push.peak_torque:g} N m sine torque for {push.duration:g} s, "
                  f"{scene.variant} variant, {modes} modes per appendage")
-    image = _save(fig, out / "structures.png")
+    image = save_figure(fig, out / "structures.png")
     return Section(
         title="Several appendages and a free hub",
         paragraphs=(

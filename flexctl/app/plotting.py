@@ -90,18 +90,7 @@ def plot_response(result, fig=None, title: str | None = None):
     ax_torque.plot(t, result.torque, color="tab:gray")
     ax_torque.set_ylabel("torque (N m)")
 
-    tips = result.tip_deflections
-    for name, tip in tips.items():        # one trace per appendage
-        ax_tip.plot(t, tip, label=name or None)
-    if len(tips) > 1:
-        ax_tip.legend(loc="best", fontsize="small")
-    if model.layout.hub_position is not None:
-        outputs = result.outputs
-        ax_hub = ax_torque.twinx()
-        ax_hub.plot(t, np.hypot(outputs["hub_x"], outputs["hub_y"]) * 1e3,
-                    color="tab:green", linestyle="--")
-        ax_hub.set_ylabel("hub centre travel (mm)", color="tab:green")
-        ax_hub.tick_params(axis="y", labelcolor="tab:green")
+    _draw_structure(result, ax_torque, ax_tip)
     ax_tip.set_ylabel("tip deflection (m)")
     ax_tip.set_xlabel("time (s)")
 
@@ -128,6 +117,23 @@ def plot_response(result, fig=None, title: str | None = None):
         title = f"{model.variant}, {modes}: {status} ({end})"
     fig.suptitle(title, color="black" if status == "ok" else colour)
     return fig
+
+
+def _draw_structure(result, ax_torque, ax_tip) -> None:
+    """One tip trace per appendage; a free hub's centre travel (mm) on a twin of the torque
+    axis."""
+    tips = result.tip_deflections
+    for name, tip in tips.items():
+        ax_tip.plot(result.t, tip, label=name or None)
+    if len(tips) > 1:
+        ax_tip.legend(loc="best", fontsize="small")
+    if result.model.layout.hub_position is not None:
+        outputs = result.outputs
+        ax_hub = ax_torque.twinx()
+        ax_hub.plot(result.t, np.hypot(outputs["hub_x"], outputs["hub_y"]) * 1e3,
+                    color="tab:green", linestyle="--")
+        ax_hub.set_ylabel("hub centre travel (mm)", color="tab:green")
+        ax_hub.tick_params(axis="y", labelcolor="tab:green")
 
 
 def plot_mode_shapes(model, n_shapes: int | None = None, n_points: int = 201, ax=None):
