@@ -13,27 +13,17 @@ best of ``REPEATS`` runs, each model built and compiled before timing).
 from __future__ import annotations
 
 import math
-import time
 import warnings
 
+from bench_exact import REPEATS, best_of
 from flexctl import (Appendage, Beam, Hub, HubBeam, PointMass, SineTorque, Structure,
                      build_model, simulate)
 
-REPEATS = 3
 RTOL = 1e-8
 T_FINAL = 6.0
 PANEL = Beam(length=1.8, density=2766.0, area=2.5e-4, second_moment=1.3021e-10,
              youngs_modulus=6.9e10)
 TIP = (PointMass(mass=0.085, position=1.62),)
-
-
-def best_of(func, repeats=REPEATS):
-    times, value = [], None
-    for _ in range(repeats):
-        start = time.perf_counter()
-        value = func()
-        times.append(time.perf_counter() - start)
-    return min(times), value
 
 
 def structure(support: str) -> Structure:

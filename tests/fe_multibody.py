@@ -1,6 +1,7 @@
 """Independent finite-element references for a planar hub carrying several beams.
 
-This module deliberately does not import ``flexctl`` (nor ``fe_reference``): it is a second,
+This module deliberately does not import ``flexctl`` (only the mesh and sine torque of
+``fe_reference``, which does not either): it is a second,
 independent model of the structures of ``docs/theory/free_hub.md`` against which the toolbox is
 checked. A hub, pinned at its centre C or floating free in the plane, carries any number of
 uniform Euler-Bernoulli beams, each clamped radially at radius ``b_k`` and mounting angle
@@ -85,6 +86,9 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+
+# the one-beam reference's mesh and sine torque (it, too, imports nothing from flexctl)
+from fe_reference import _mesh, sine_torque  # noqa: F401  (sine_torque re-exported)
 from scipy.linalg import eigh
 
 __all__ = ["BeamSpec", "MultiSystem", "linear_frequencies", "simulate_multibody",
@@ -173,13 +177,6 @@ class MultiSystem:
 # --------------------------------------------------------------------------------------------
 # torques
 
-def sine_torque(amplitude: float, period: float):
-    """One-period sine ``T = amplitude sin(2 pi t / period)`` for ``t <= period``, else 0."""
-    def torque(t):
-        return amplitude * np.sin(2.0 * np.pi * t / period) if t <= period else 0.0
-    return torque
-
-
 def bang_bang_torque(amplitude: float, duration: float):
     """``+amplitude`` on ``[0, duration/2)``, ``-amplitude`` on ``[duration/2, duration)``, 0 after.
 
@@ -197,22 +194,6 @@ def bang_bang_torque(amplitude: float, duration: float):
 
 # --------------------------------------------------------------------------------------------
 # meshing
-
-def _mesh(beam: BeamSpec, n_elements: int) -> np.ndarray:
-    """Nodes ``x_0 = 0 .. x_n = l`` with every point mass on a node, about uniform spacing."""
-    l = float(beam.length)
-    cuts = sorted({0.0, l} | {float(d) for _, d in beam.masses if 0.0 < d < l})
-    pieces = np.diff(cuts)
-    if n_elements < len(pieces):
-        raise ValueError("n_elements must be at least the number of pieces between masses")
-    counts = np.maximum(1, np.round(n_elements * pieces / l).astype(int))
-    while counts.sum() > n_elements:
-        counts[np.argmax(pieces / counts * (counts > 1))] -= 1
-    while counts.sum() < n_elements:
-        counts[np.argmax(pieces / counts)] += 1
-    nodes = [np.linspace(a, b, c + 1)[:-1] for a, b, c in zip(cuts[:-1], cuts[1:], counts)]
-    return np.concatenate(nodes + [[l]])
-
 
 # --------------------------------------------------------------------------------------------
 # linear Hermite finite elements
