@@ -11,13 +11,13 @@ Three layers, each a subpackage, and the flow is one way:
 A lower layer never imports a higher one (``tests/test_architecture.py``).
 """
 
-from .model import (VARIANTS, Appendage, Beam, Hub, HubBeam, Model, PointMass,
-                    SingularMassMatrixError, Structure, build_model)
+from .model import (VARIANTS, Appendage, Beam, DCMotor, Hub, HubBeam, Model, PointMass,
+                    ReactionWheel, SingularMassMatrixError, Structure, build_model)
 from .sim import Controller, SimulationResult, SineTorque, SpinUp, simulate
 from .app.scenes import Scene, SceneError, builtin_scenes, load_scene, run_scene, run_slew
 
 __all__ = [
-    "Beam", "Hub", "HubBeam", "PointMass", "Appendage", "Structure", "VARIANTS", "Model", "SingularMassMatrixError",
+    "Beam", "Hub", "HubBeam", "PointMass", "Appendage", "Structure", "ReactionWheel", "DCMotor", "VARIANTS", "Model", "SingularMassMatrixError",
     "build_model", "SineTorque", "SpinUp", "Controller", "SimulationResult", "simulate",
     "Scene", "SceneError", "builtin_scenes", "load_scene", "run_scene", "run_slew",
 ]

@@ -13,6 +13,8 @@ module         contents
 ``variants``   ``Model``: the variants of one beam on a pinned hub, built on one assembly
 ``structure_matrices``, ``structure_dynamics``, ``structure_model``
                ``StructureModel``: several appendages on a pinned or free hub
+``actuators``   ``ReactionWheel``, ``DCMotor``: what turns the hub
+``actuated``   ``ActuatedModel``: a structure driven through an actuator
 ``build``      ``build_model``: the model of a system
 ``exports``    the model as a python-control system or a CasADi function
 =============  ==============================================================================
@@ -25,6 +27,8 @@ from .modes import cantilever_roots, mode_shapes
 from .matrices import ModalMatrices, assemble, tension
 from .variants import VARIANTS, Model, SingularMassMatrixError
 from .structure_model import StructureModel
+from .actuators import DCMotor, ReactionWheel
+from .actuated import ActuatedModel
 from .build import build_model
 
 __all__ = [
@@ -33,4 +37,5 @@ __all__ = [
     "cantilever_roots", "mode_shapes",
     "ModalMatrices", "assemble", "tension",
     "VARIANTS", "Model", "StructureModel", "SingularMassMatrixError", "build_model",
+    "ReactionWheel", "DCMotor", "ActuatedModel",
 ]

@@ -7,6 +7,8 @@ A :class:`~flexctl.model.parameters.HubBeam` (one beam on a pinned hub) gives a
 
 from __future__ import annotations
 
+from .actuated import actuated_model
+from .actuators import as_actuator
 from .checks import check_choice, check_integer
 from .errors import InputTypeError, InputValueError
 from .exact import EXACT_MAX_MODES
@@ -20,7 +22,8 @@ from .variants import VARIANTS, Model
 __all__ = ["build_model"]
 
 
-def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order") -> Model:
+def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order", *,
+                actuator=None) -> Model:
     """Build a hub-beam-mass model.
 
     Parameters
@@ -34,6 +37,10 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order")
         ``{name: int}``, or one per appendage in order. Default 4.
     variant : {"first_order", "zero_order", "consistent", "exact"}, optional
         Default ``"first_order"`` (with dynamic stiffening); ``"exact"`` for large deflection.
+    actuator : ReactionWheel or DCMotor, optional
+        What turns the hub (:mod:`flexctl.model.actuators`): the model's input is then its
+        command and its states follow the structure's (an
+        :class:`~flexctl.model.actuated.ActuatedModel`). Default: an ideal hub torque.
 
     Returns
     -------
@@ -50,6 +57,12 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order")
     array([ 2.91, 18.24, 51.08])
     """
     variant = check_choice("", "variant", variant, VARIANTS)
+    actuator = as_actuator(actuator)
+    if actuator is not None:
+        if not isinstance(system, (HubBeam, Structure)):
+            raise InputTypeError(f"system must be a HubBeam or a Structure; got "
+                                 f"{type(system).__name__}")
+        return actuated_model(system, n_modes, variant, actuator)
     if isinstance(system, Structure) or (isinstance(system, HubBeam) and system.hub.free):
         return _build_structure_model(system, n_modes, variant)
     n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=200)

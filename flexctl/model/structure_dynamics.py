@@ -53,6 +53,9 @@ class StructureFunctions:
     torque : ``(x, theta_tt, q_tt) -> T_h`` (pinned hub)
     panels : tuple of int
         Gauss-Legendre panels of each appendage (exact variant), else ().
+    hub_torque, signals : ``(x, u) -> T_hub``, ``(x, u) -> s``
+        With an actuator (:mod:`flexctl.model.actuated`): the torque it puts on the structure
+        and its signals; ``None`` otherwise.
     """
 
     rhs: object = field(repr=False)
@@ -64,6 +67,8 @@ class StructureFunctions:
     beam: object = field(repr=False)
     torque: object = field(repr=False)
     panels: tuple = ()
+    hub_torque: object = field(default=None, repr=False)
+    signals: object = field(default=None, repr=False)
 
 
 def _rotation(angle):

@@ -152,6 +152,9 @@ def state_scale(model: Model, layout) -> np.ndarray:
     scale[layout.velocities] = length * rate
     if layout.rotation:
         scale[layout.theta], scale[layout.theta_dot] = 1e-3, 1e-3 * rate
+    actuator = getattr(model, "actuator", None)
+    if actuator is not None and actuator.state_names:
+        scale[layout.block("actuator")] = actuator.state_scale()
     return scale
 
 

@@ -32,7 +32,8 @@ class SimulationResult:
     states : ndarray, shape (n, P)
         Plant states in the order of :attr:`Model.state_names` (:attr:`Model.layout`).
     torque : ndarray, shape (P,)
-        Hub torque, N m (the torque the prescribed motion needs, for ``hub_motion`` runs).
+        Hub torque, N m (the torque the prescribed motion needs, for ``hub_motion`` runs;
+        the torque the actuator puts on the structure, for a model with an actuator).
     tip_deflection, root_moment : ndarray, shape (P,)
         m and N m; with several appendages, the largest in magnitude over them at each time
         (each appendage's own in :attr:`outputs` and :attr:`tip_deflections`).
@@ -63,6 +64,13 @@ class SimulationResult:
         For a sampled controller (:mod:`flexctl.sim.digital`): the session's report (e.g. solve
         times) with ``samples``, ``sample_time`` (s) and ``controller_time`` (s, wall time in
         the controller); ``None`` otherwise.
+    command : ndarray, shape (P,), or None
+        For a model with an actuator (:class:`~flexctl.model.actuated.ActuatedModel`): the
+        command it was given (N m of torque asked of a reaction wheel, V across a DC motor);
+        ``None`` otherwise.
+    measurements : dict or None
+        For a run with sensors (:mod:`flexctl.sim.sensors`): what the controller saw, each
+        reading by name with its sample times under ``"t"``; ``None`` otherwise.
     """
 
     model: Model
@@ -83,10 +91,17 @@ class SimulationResult:
     controller_report: dict | None = None
     stop_reason: StopReason | None = None
     energy_balance: EnergyBalance | None = None
+    command: np.ndarray | None = None
+    measurements: dict | None = None
 
     @classmethod
     def from_states(cls, model: Model, t, states, torque, **fields) -> "SimulationResult":
-        """A result whose tip deflection and root moment are computed from ``states``."""
+        """A result whose tip deflection and root moment are computed from ``states``; for a
+        model with an actuator ``torque`` is the plant's input, kept as :attr:`command`, and
+        the torque on the hub is computed from it."""
+        if getattr(model, "actuator", None) is not None and "command" not in fields:
+            fields["command"] = np.asarray(torque, dtype=float)
+            torque = np.asarray(model.applied_torque(states, torque), dtype=float).reshape(-1)
         roots = np.atleast_2d(model.matrices.root) @ model.layout.modal(states)
         pick = np.argmax(np.abs(roots), axis=0)
         return cls(model=model, t=t, states=states, torque=torque,
@@ -135,6 +150,15 @@ class SimulationResult:
         return dict(zip(self.model.output_names, y))
 
     @property
+    def actuator_signals(self) -> dict:
+        """The actuator's signals by name, each shape (P,) (``wheel_speed``, ``wheel_torque``;
+        ``motor_voltage``, ``motor_current``); empty without an actuator."""
+        if self.command is None:
+            return {}
+        return {name: np.asarray(v, dtype=float).reshape(-1) for name, v in
+                self.model.actuator_signals(self.states, self.command).items()}
+
+    @property
     def peak_tip_deflection(self) -> float:
         """Largest ``|tip_deflection|``, m."""
         return float(np.max(np.abs(self.tip_deflection))) if self.t.size else 0.0
@@ -158,7 +182,7 @@ def audit_energy(model: Model, result_arrays, reason: StopReason, message: str,
         # the hub rate outruns the output samples near the singularity: a balance would
         # measure their quadrature, not the model (which conserves energy)
         return None, message
-    balance = energy_balance(model, *result_arrays)
+    balance = energy_balance(*mechanical_arrays(model, *result_arrays))
     if balance is None:
         return balance, message
     message = message.rstrip(".")
@@ -174,6 +198,16 @@ def audit_energy(model: Model, result_arrays, reason: StopReason, message: str,
                       stacklevel=stacklevel)
         return balance, f"{message}; energy balance violated: {balance.message}"
     return balance, f"{message}; {balance.message}"
+
+
+def mechanical_arrays(model, t, states, inputs):
+    """``(model, t, states, torque)`` of the structure alone: for a model with an actuator,
+    its mechanical model and states and the torque the actuator puts on the hub (whose work
+    the structure's energy balances); the arguments as they are otherwise."""
+    if getattr(model, "actuator", None) is None:
+        return model, t, states, inputs
+    torque = np.asarray(model.applied_torque(states, inputs), dtype=float).reshape(-1)
+    return model.mechanical, t, model.mechanical_states(states), torque
 
 
 def _output_samples(grid, traj):
