@@ -201,7 +201,10 @@ class DCMotor:
     gear_ratio : float
         ``N``, motor turns per hub turn (> 0; 1 for a direct drive).
     gear_efficiency : float
-        ``eta`` in (0, 1]. Default 1.
+        ``eta_g`` in (0, 1]. Default 1.
+    motor_efficiency : float
+        ``eta_m`` in (0, 1] (a datasheet's motor efficiency, applied to the torque as
+        Quanser's SRV02 model does). Default 1.
     rotor_inertia : float
         ``J_m`` at the motor shaft, kg m^2 (>= 0). Default 0.
     viscous_friction : float
@@ -216,6 +219,7 @@ class DCMotor:
     gear_ratio: float
     voltage_limit: float
     gear_efficiency: float = 1.0
+    motor_efficiency: float = 1.0
     rotor_inertia: float = 0.0
     viscous_friction: float = 0.0
 
@@ -234,9 +238,9 @@ class DCMotor:
         for name in ("rotor_inertia", "viscous_friction"):
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
                                                       minimum=0.0))
-        object.__setattr__(self, "gear_efficiency", check_real(
-            owner, "gear_efficiency", self.gear_efficiency, minimum=0.0, strict=True,
-            maximum=1.0))
+        for name in ("gear_efficiency", "motor_efficiency"):
+            object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
+                                                      minimum=0.0, strict=True, maximum=1.0))
         for name in ("resistance", "torque_constant", "back_emf_constant", "gear_ratio"):
             if not 1e-9 <= getattr(self, name) <= 1e9:
                 raise InputValueError(f"actuator.{name} must be within 1e-9 and 1e9; got "
@@ -253,9 +257,14 @@ class DCMotor:
         return self.gear_ratio ** 2 * self.rotor_inertia
 
     @property
+    def efficiency(self) -> float:
+        """``eta = eta_g eta_m``."""
+        return self.gear_efficiency * self.motor_efficiency
+
+    @property
     def torque_gain(self) -> float:
         """Hub torque per volt at standstill, ``eta N k_t / R``, N m / V."""
-        return self.gear_efficiency * self.gear_ratio * self.torque_constant / self.resistance
+        return self.efficiency * self.gear_ratio * self.torque_constant / self.resistance
 
     @property
     def damping(self) -> float:
@@ -296,7 +305,7 @@ class DCMotor:
 
     def hub_torque(self, states, rate, u):
         """Torque on the hub, N m."""
-        return (self.gear_efficiency * self.gear_ratio * self.torque_constant
+        return (self.efficiency * self.gear_ratio * self.torque_constant
                 * self.current(u, rate) - self.viscous_friction * rate)
 
     def derivative(self, states, rate, theta_tt, u, hub_torque):

@@ -287,8 +287,9 @@ class StructureModel(Model):
         return spin_rate
 
     def stiffness_matrix(self, spin_rate: float = 0.0) -> np.ndarray:
-        """Beam stiffness at a steady spin, ``K_ff - spin_rate^2 D``, N/m, shape (N, N)."""
-        spin_rate = self._spin_for(spin_rate, "stiffness")
+        """Beam stiffness at a steady spin, ``K_ff - spin_rate^2 D``, N/m, shape (N, N)
+        (for a free hub: its beams' stiffness while the hub is held spinning)."""
+        spin_rate = _spin(spin_rate)
         return self.matrices.K_ff - spin_rate ** 2 * self._c["stiff_d"]
 
     def second_order_form(self, spin_rate: float = 0.0):
@@ -299,12 +300,15 @@ class StructureModel(Model):
     def natural_frequencies(self, spin_rate: float = 0.0, hub: str = "clamped") -> np.ndarray:
         """Undamped natural frequencies, rad/s, ascending, shape (N,).
 
-        ``hub="clamped"``: the hub held (rotation and translation); ``"free"``: the hub free
-        to rotate, and to translate when it floats free; its rigid-body modes are left out.
+        ``hub="clamped"``: the hub held (rotation and translation), at any spin; ``"free"``:
+        the hub free to rotate, and to translate when it floats free (then at spin 0 only);
+        its rigid-body modes are left out.
         """
-        spin_rate = self._spin_for(spin_rate, "natural frequencies")
         if not isinstance(hub, str) or hub not in ("clamped", "free"):
             raise InputValueError(f"hub must be 'clamped' or 'free'; got {hub!r}")
+        # a free hub held spinning has clamped beams; turning freely it has no steady spin
+        spin_rate = self._spin_for(spin_rate, "natural frequencies") if hub == "free" \
+            else _spin(spin_rate)
         stiff = self.stiffness_matrix(spin_rate)
         mass = self.rest_mass_matrix()
         n_h = mass.shape[0] - self.matrices.n_modes
