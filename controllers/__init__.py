@@ -16,6 +16,8 @@ module                 contents
 ``factory``            the controller a slew scene's [controller] table asks for
 ``analysis``           loop transfer functions, stability margins, poles against spin
 ``robustness``         Monte Carlo dispersion of stiffness, point masses, hub inertia
+``actuated``           laws through an actuator: wheel-lag LQR, DC-motor voltage, limits
+``observer``           a sampled discrete Kalman filter of noisy sensor readings
 =====================  ==========================================================
 
 The package depends on :mod:`flexctl.model` and :mod:`flexctl.sim` (models and the simulation
@@ -37,6 +39,9 @@ from .nmpc import NMPC, NMPCSession
 from .factory import BuiltController, OpenLoop, from_spec
 from .analysis import (LoopMargins, PlantChannels, PolesVsSpin, loop_margins, loop_transfer,
                        plant_channels, poles_vs_spin)
+from .actuated import (LaggedLQR, MotorVoltage, check_reference_fits, design_wheel_lqr,
+                       through_actuator)
+from .observer import Observed, kalman_step
 from .robustness import (Dispersion, RobustnessSummary, RobustnessTask, disperse,
                          robustness_summary)
 
@@ -55,5 +60,7 @@ __all__ = [
     "BuiltController", "OpenLoop", "from_spec",
     "LoopMargins", "PlantChannels", "PolesVsSpin", "loop_margins", "loop_transfer",
     "plant_channels", "poles_vs_spin",
+    "LaggedLQR", "MotorVoltage", "check_reference_fits", "design_wheel_lqr",
+    "through_actuator", "Observed", "kalman_step",
     "Dispersion", "RobustnessSummary", "RobustnessTask", "disperse", "robustness_summary",
 ]

@@ -109,9 +109,12 @@ from flexctl.sim.digital import ZeroOrderHold
 from flexctl.sim.maneuvers import Slew
 from flexctl.sim.simulation import StaticLaw
 
+from .actuated import (actuator_torque_bound, check_reference_fits, design_wheel_lqr,
+                       through_actuator)
 from .lqg import NoiseLevels, design_lqg
 from .lqr import LQRWeights, design_lqr
 from .nmpc import NMPC
+from .observer import Observed
 from .pd import design_pd
 from .reference import SlewProfile, minimum_slew_duration
 from .scheduling import design_scheduled_lqr
@@ -199,6 +202,9 @@ def _noise(spec: ControllerSpec) -> NoiseLevels:
     return _wrap(NoiseLevels, **{field: spec.get(key) for field, key in NOISE_SETTINGS.items()})
 
 
+#: Sample time of a loop that reads sensors when neither they nor the controller give one, s
+#: (100 Hz, a common attitude-control and lab-servo rate).
+DEFAULT_SENSOR_SAMPLE_TIME = 0.01
 #: Kinds that track a smooth reference slew with feedback (:func:`_feedback`).
 _FEEDBACK_KINDS = ("pd", "lqr", "lqg", "scheduled")
 #: Kinds that play the rigid bang-bang torque, shaped or not (:func:`_open_loop`).
@@ -233,22 +239,47 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
         raise SceneError(f"scene {scene.name!r} is not a slew with a [controller] table")
     plant = scene.build_model() if plant is None else plant
     design = _design_model(scene, plant)
-    angle, bound, kind = maneuver.angle, maneuver.torque_bound, spec.kind
-    duration = _slew_duration(maneuver, kind, design)
+    actuator = getattr(plant, "actuator", None)
+    angle, kind = maneuver.angle, spec.kind
+    bound = actuator_torque_bound(actuator, maneuver.torque_bound)
+    duration = _slew_duration(dataclasses.replace(maneuver, torque_bound=bound), kind, design)
     if kind in _FEEDBACK_KINDS:
-        return _sampled(spec, _feedback(spec, design, plant, angle, duration, bound))
-    if kind in _OPEN_LOOP_KINDS:
-        return _sampled(spec, _open_loop(spec, design, angle, duration, bound))
-    if bound is None:
+        # with sensors, LQG's estimator is the sampled Kalman filter of their readings
+        # (_hardware): the law behind it is LQR
+        law = "lqr" if kind == "lqg" and scene.sensors is not None else kind
+        built = _feedback(spec, design, plant, angle, duration, bound, law,
+                          _loop_sample_time(scene, spec))
+    elif kind in _OPEN_LOOP_KINDS:
+        built = _open_loop(spec, design, angle, duration, bound, actuator)
+    elif bound is None:
         raise SceneError(f"controller kind {kind!r} needs maneuver.torque_bound")
-    if kind == "nmpc":
-        return _sampled(spec, _nmpc(spec, design, angle, duration, bound, design.n_modes))
-    return _sampled(spec, _optimal(spec, design, angle, duration, bound))
+    elif kind == "nmpc":
+        built = _nmpc(spec, design, angle, duration, bound, design.n_modes, actuator)
+    else:
+        built = _optimal(spec, design, angle, duration, bound, actuator)
+    return _hardware(scene, plant, spec, built)
+
+
+def _hardware(scene, plant: Model, spec: ControllerSpec, built) -> BuiltController:
+    """``built`` as the scene's hardware runs it: its hub torque turned into the actuator's
+    command, and, with ``[sensors]``, sampled behind a Kalman filter of the readings (on the
+    plant augmented with the actuator); else sampled when ``sample_time`` is given."""
+    controller = through_actuator(built.controller, plant)
+    built = dataclasses.replace(built, controller=controller)
+    if scene.sensors is None:
+        return _sampled(spec, built)
+    period = scene.sensors.sample_time or spec.get("sample_time") \
+        or getattr(controller, "sample_time", None) or DEFAULT_SENSOR_SAMPLE_TIME
+    observed = _wrap(Observed, law=controller, sensors=scene.sensors, sample_time=period)
+    return dataclasses.replace(built, controller=observed,
+                               info={**built.info, "sample_time": period,
+                                     "estimator": "kalman (sensors)"})
 
 
 def _design_model(scene, plant: Model) -> Model:
     """The model the controller is designed on: ``design_modes`` modes (at most the plant's)
-    of the scene's design variant."""
+    of the scene's design variant, its input the hub torque (a DC motor's rotor inertia on
+    the hub, as on the plant)."""
     n_design = scene.model.design_modes
     if n_design > plant.n_modes:
         raise SceneError(f"model.design_modes must be <= model.modes = {plant.n_modes}; "
@@ -292,14 +323,27 @@ def _reference(spec: ControllerSpec, design: Model, angle, duration, bound) -> t
     return profile, duration, info
 
 
+def _loop_sample_time(scene, spec: ControllerSpec) -> float | None:
+    """The sample time the loop will run at (s): the sensors', else the controller's, else
+    :data:`DEFAULT_SENSOR_SAMPLE_TIME` with sensors; None for a continuous loop."""
+    if scene.sensors is None:
+        return spec.get("sample_time")
+    return scene.sensors.sample_time or spec.get("sample_time") or DEFAULT_SENSOR_SAMPLE_TIME
+
+
 def _feedback(spec: ControllerSpec, design: Model, plant: Model, angle, duration,
-              bound) -> BuiltController:
+              bound, kind: str, sample_time: float | None = None) -> BuiltController:
     """PD, LQR, LQG or scheduled LQR on the design model about the reference slew
-    (:func:`_reference`)."""
-    kind = spec.kind
+    (:func:`_reference`); ``kind`` the law designed."""
     profile, duration, info = _reference(spec, design, angle, duration, bound)
+    actuator = getattr(plant, "actuator", None)
+    info.update(_wrap(check_reference_fits, actuator, design.rigid_inertia, profile))
     common = {"reference": profile, "torque_limit": bound}
-    if kind == "pd":
+    if kind == "lqr" and actuator is not None and actuator.kind == "reaction_wheel":
+        ctrl = _wrap(design_wheel_lqr, design, actuator, _lqr_weights(spec),
+                     sample_time=sample_time, **common)
+        info["design"] = "LQR on the structure augmented with the wheel's motor lag"
+    elif kind == "pd":
         ctrl = _wrap(design_pd, design, spec.get("bandwidth"), spec.get("damping_ratio"),
                      feedforward=spec.get("feedforward"), **common)
     elif kind == "lqr":
@@ -310,11 +354,11 @@ def _feedback(spec: ControllerSpec, design: Model, plant: Model, angle, duration
     else:
         ctrl = _wrap(design_scheduled_lqr, design, _lqr_weights(spec),
                      list(spec.get("spin_rates")), **common)
-    return BuiltController(ctrl, kind, float(duration), design.n_modes, info)
+    return BuiltController(ctrl, spec.kind, float(duration), design.n_modes, info)
 
 
 def _open_loop(spec: ControllerSpec, design: Model, angle, duration,
-               bound) -> BuiltController:
+               bound, actuator=None) -> BuiltController:
     """The rigid bang-bang torque (at the bound for a free duration), shaped at the first
     hub-free frequency for ``zv`` and ``zvd``, played open loop."""
     limits = {"torque_limit": bound} if duration is None else {"duration": duration}
@@ -323,18 +367,20 @@ def _open_loop(spec: ControllerSpec, design: Model, angle, duration,
         raise SceneError(f"maneuver.duration {duration:g} s is shorter than the rigid "
                          f"minimum time at torque_bound {bound:g} N m")
     end = base.duration
+    info = _wrap(check_reference_fits, actuator, design.rigid_inertia, base)
     torque = base
     if spec.kind != "bang_bang":
         shaper = design_shaper(design, spec.kind)
         torque = shape(base, shaper)
         end += float(max(shaper.times))
-    return BuiltController(OpenLoop(torque), spec.kind, float(end), design.n_modes)
+    return BuiltController(OpenLoop(torque), spec.kind, float(end), design.n_modes, info)
 
 
-def _optimal(spec: ControllerSpec, design: Model, angle, duration, bound) -> BuiltController:
+def _optimal(spec: ControllerSpec, design: Model, angle, duration, bound,
+             actuator=None) -> BuiltController:
     """The optimal slew played open loop (``trajopt``) or tracked with LQR feedback
     (``trajopt+lqr``)."""
-    solution, info = _trajectory(spec, design, angle, duration, bound)
+    solution, info = _trajectory(spec, design, angle, duration, bound, actuator)
     if spec.kind == "trajopt":
         ctrl = OpenLoop(solution.torque_function())
     else:
@@ -342,14 +388,16 @@ def _optimal(spec: ControllerSpec, design: Model, angle, duration, bound) -> Bui
     return BuiltController(ctrl, spec.kind, float(solution.duration), design.n_modes, info)
 
 
-def _trajectory(spec: ControllerSpec, design: Model, angle, duration, bound) -> tuple:
+def _trajectory(spec: ControllerSpec, design: Model, angle, duration, bound,
+                actuator=None) -> tuple:
     """The optimal slew of the ``trajopt`` settings on the design model, and what its solve
     measured."""
     # objective None: SlewProblem takes "time" for a free duration, else "effort"
     problem = _wrap(SlewProblem, angle=angle, duration=duration, torque_bound=bound,
                     n_intervals=spec.get("n_intervals"), objective=spec.get("objective"),
                     torque_rate_bound=spec.get("torque_rate_bound"),
-                    tip_bound=spec.get("tip_bound"), transcription=spec.get("transcription"))
+                    tip_bound=spec.get("tip_bound"), transcription=spec.get("transcription"),
+                    actuator=actuator)
     start = time.perf_counter()
     try:
         solution = _wrap(solve_slew, design, problem)
@@ -361,12 +409,13 @@ def _trajectory(spec: ControllerSpec, design: Model, angle, duration, bound) -> 
     return solution, info
 
 
-def _nmpc(spec: ControllerSpec, design: Model, angle, duration, bound, n_design):
+def _nmpc(spec: ControllerSpec, design: Model, angle, duration, bound, n_design,
+          actuator=None):
     """Nonlinear MPC tracking the optimal slew (``reference = "trajopt"``, default) or
     regulating to the target at rest (``reference = "none"``)."""
     info, solution = {}, None
     if spec.get("reference") == "trajopt":
-        solution, info = _trajectory(spec, design, angle, duration, bound)
+        solution, info = _trajectory(spec, design, angle, duration, bound, actuator)
         end = float(solution.duration)
     else:
         end = float(duration if duration is not None
@@ -378,7 +427,7 @@ def _nmpc(spec: ControllerSpec, design: Model, angle, duration, bound, n_design)
     ctrl = _wrap(NMPC, model=design, target=angle, torque_limit=bound, reference=solution,
                  sample_time=spec.get("sample_time"),
                  torque_rate_limit=spec.get("torque_rate_bound"),
-                 tip_limit=spec.get("tip_bound"), **settings)
+                 tip_limit=spec.get("tip_bound"), actuator=actuator, **settings)
     _wrap(ctrl.prepare)
     info["nmpc_build_time_s"] = time.perf_counter() - start
     info["substeps"] = ctrl.substeps

@@ -6,11 +6,18 @@ variant, the geometrically exact one included),
     min   sum_{j<N} |x_j - r_j|_Q^2 + R (u_j - v_j)^2  +  |x_N - r_N|_P^2
     s.t.  x_0 = x(t_k),  x_{j+1} = F(x_j, u_j)             (RK4 over the hold, multiple shooting)
           |u_j| <= u_max,  |u_j - u_{j-1}| <= T du_max,  |tip(x_j)| <= d_max
+          |Omega(x_j)| <= w_max  (j >= 1)                  (actuator: a reaction wheel)
+          |V(u_j, rate_j)| <= V_max, |V(u_j, rate_j+1)| <= V_max    (actuator: a DC motor)
           [x_N = r_N]                                        (terminal = "rest")
 
 with ``r_j, v_j`` the reference (a :class:`~controllers.trajopt.SlewSolution` or a rest
 target), ``P`` the discrete LQR Riccati solution of the design model at rest (terminal
 cost), and applies ``u_0`` until the next sample (a :class:`flexctl.sim.digital.SampledController`).
+With an ``actuator`` the hub torque stays within what it can give
+(:mod:`controllers.actuator_limits`): ``u_max`` is also a reaction wheel's torque limit,
+``Omega(x)`` the wheel's speed relative to the hub for zero total momentum, ``w_max`` its speed
+limit less :data:`~controllers.actuator_limits.SPEED_MARGIN`; ``V(u, rate)`` the voltage a DC
+motor needs for the hub torque ``u`` at the hub rate. The output is still the hub torque.
 
 Two solution modes:
 
@@ -47,12 +54,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexctl.model import Model
+from flexctl.model import DCMotor, Model, ReactionWheel
 from flexctl.model.checks import check_array, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.digital import _sample_time
 from flexctl.sim.fixed_step import _jit
 
+from .actuator_limits import (check_design_model, horizon_constraints, horizon_rows,
+                              hub_torque_bound, linearised_horizon_constraints)
 from .lqg import NoiseLevels, _measurement_rows
 from .plant_state import design_rows
 from .slew_nlp import _rk4_step
@@ -249,6 +258,13 @@ class NMPC:
         truncated to the design modes).
     substeps : int, optional
         RK4 substeps per hold; default the fewest with ``omega_max h <= OMEGA_H``.
+    actuator : ReactionWheel or DCMotor, optional
+        What gives the hub torque (:mod:`controllers.actuator_limits`): the torque also within
+        a wheel's torque limit (:attr:`hub_torque_limit`) and the predicted wheel speed within
+        its speed limit (less the margin; hub, beams and wheel at zero total momentum); or the
+        voltage for each planned torque at the predicted hub rates within a motor's voltage
+        limit. ``model`` is the structure's (for a motor, with the rotor's reflected inertia).
+        Default none.
 
     Attributes
     ----------
@@ -271,6 +287,7 @@ class NMPC:
     torque_weight: float | None = None
     substeps: int | None = None
     noise: NoiseLevels | None = None
+    actuator: ReactionWheel | DCMotor | None = None
     _built: dict = field(init=False, repr=False, default_factory=dict)
 
     n_states = 0
@@ -318,9 +335,10 @@ class NMPC:
         if not ca.has_conic(self.qp_solver):
             raise InputValueError(f"nmpc qp_solver {self.qp_solver!r} is not in this CasADi "
                                   "build (casadi.has_conic); use 'qrqp'")
+        object.__setattr__(self, "actuator", check_design_model(self.model, self.actuator))
         n = self.model.n_states
         q_default, r_default = _default_weights(self.model, self.final_angle,
-                                                self.torque_limit)
+                                                self.hub_torque_limit)
         q = q_default if self.state_weights is None else check_array(
             "nmpc", "state_weights", self.state_weights, finite=False)
         if q.shape != (n,) or not np.all(np.isfinite(q)) or np.any(q < 0):
@@ -351,6 +369,11 @@ class NMPC:
                     f"{omega * self.sample_time / self.substeps:.3g}, outside RK4's stability "
                     f"interval (2.83); use at least {auto}")
             object.__setattr__(self, "substeps", int(self.substeps))
+
+    @property
+    def hub_torque_limit(self) -> float:
+        """The bound on the hub torque, N m: :attr:`torque_limit`, and a reaction wheel's."""
+        return hub_torque_bound(self.torque_limit, self.actuator)
 
     # ------------------------------------------------------------------ reference
     @property
@@ -392,7 +415,7 @@ class NMPC:
         return (id(self.model), self.horizon, self.sample_time, self.substeps,
                 self.state_weights.tobytes(), self.torque_weight, self.torque_limit,
                 numbers(self.torque_rate_limit), numbers(self.tip_limit), self.terminal,
-                self.mode, self.qp_solver)
+                self.mode, self.qp_solver, self.actuator)
 
     def _problem(self) -> dict:
         """The NLP and its compiled pieces, built once per structure (cached)."""
@@ -430,7 +453,7 @@ class NMPC:
         lbw = np.full(w.numel(), -np.inf)
         ubw = np.full(w.numel(), np.inf)
         u_index = np.array([_input_index(n, j) for j in range(big_n)])
-        lbw[u_index], ubw[u_index] = -self.torque_limit, self.torque_limit
+        lbw[u_index], ubw[u_index] = -self.hub_torque_limit, self.hub_torque_limit
 
         built = {"n": n, "nw": w.numel(), "u_index": u_index, "lbg": lbg, "ubg": ubg,
                  "lbw": lbw, "ubw": ubw}
@@ -477,7 +500,7 @@ class NMPC:
 
     def _nlp_constraints(self, hold, xs, us, x_meas, u_prev, rx) -> tuple:
         """``(g, lbg, ubg)``: the start at the measured state, the shooting gaps, then the
-        torque-rate, tip and terminal-rest constraints that are set, in that order."""
+        torque-rate, tip, actuator and terminal-rest constraints that are set, in that order."""
         import casadi as ca
 
         big_n, n, layout = self.horizon, self.model.n_states, self.model.layout
@@ -498,6 +521,11 @@ class NMPC:
                 g.append(ca.mtimes(tip, layout.modal(xs[j])))
                 lbg += [-self.tip_limit] * tip.size1()
                 ubg += [self.tip_limit] * tip.size1()
+        if self.actuator is not None:
+            limits, lower, upper = horizon_constraints(self.model, self.actuator, xs, us)
+            g.append(limits)
+            lbg += list(lower)
+            ubg += list(upper)
         if self.terminal == "rest":
             g.append(xs[big_n] - rx[big_n])
             lbg += [0.0] * n
@@ -529,6 +557,7 @@ class NMPC:
             rows += big_n
         if self.tip_limit is not None:
             rows += big_n
+        rows += horizon_rows(self.actuator, big_n)
         if self.terminal == "rest":
             rows += n
         pieces = {"forward": _jit(hold.map(big_n), self.model),
@@ -560,7 +589,7 @@ class NMPC:
         condense = ca.Function(
             "nmpc_condense", [w, par],
             [ca.densify(0.5 * (hessian + hessian.T)), gradient, ca.densify(a_qp), lba, uba,
-             -self.torque_limit - us, self.torque_limit - us, ca.vertcat(*e),
+             -self.hub_torque_limit - us, self.hub_torque_limit - us, ca.vertcat(*e),
              ca.densify(ca.vertcat(*g_mats))])
         # compiling the condensing costs 5 to 7 s of gcc and pays from about 30 steps
         # (measured at 40: 1.2 against 1.55 ms a step; at 20 no difference)
@@ -569,8 +598,8 @@ class NMPC:
         return {"condense": condense, "expand": _expansion(w, n, big_n)}
 
     def _condensed_constraints(self, g_mats, e, xs, us, u_prev, base) -> tuple:
-        """``(A, lba, uba)`` of the QP's ``lba <= A du <= uba``: the torque-rate, tip and
-        terminal-rest rows that are set, in that order (none: no rows)."""
+        """``(A, lba, uba)`` of the QP's ``lba <= A du <= uba``: the torque-rate, tip,
+        actuator and terminal-rest rows that are set, in that order (none: no rows)."""
         import casadi as ca
 
         big_n = self.horizon
@@ -591,6 +620,10 @@ class NMPC:
             rows.append(tips)
             lower.append(-self.tip_limit - now)
             upper.append(self.tip_limit - now)
+        if self.actuator is not None:
+            for part, piece in zip((rows, lower, upper), linearised_horizon_constraints(
+                    self.model, self.actuator, xs, us, e, g_mats)):
+                part.append(piece)
         if self.terminal == "rest":
             rows.append(g_mats[-1])
             lower.append(-base[-1])
@@ -705,7 +738,8 @@ class NMPCSession:
         w = np.zeros(built["nw"])
         for j in range(big_n + 1):
             w[_state_slice(n, j)] = refs[:, j] if mpc.reference is not None else x_design
-        w[built["u_index"]] = np.clip(torques[:big_n], -mpc.torque_limit, mpc.torque_limit)
+        bound = mpc.hub_torque_limit
+        w[built["u_index"]] = np.clip(torques[:big_n], -bound, bound)
         self.w = w
         self.u_prev = 0.0
         self.solve_times, self.iterations, self.failures, self.statuses = [], [], 0, {}
@@ -763,7 +797,8 @@ class NMPCSession:
             self.failures += 1
             self.w = guess
         self.statuses[status] = self.statuses.get(status, 0) + 1
-        u = float(np.clip(self.w[built["u_index"][0]], -mpc.torque_limit, mpc.torque_limit))
+        u = float(np.clip(self.w[built["u_index"][0]], -mpc.hub_torque_limit,
+                          mpc.hub_torque_limit))
         if mpc.torque_rate_limit is not None and self.solve_times:
             bound = mpc.torque_rate_limit * mpc.sample_time
             u = float(np.clip(u, self.u_prev - bound, self.u_prev + bound))

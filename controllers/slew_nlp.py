@@ -15,8 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexctl.model import DCMotor, ReactionWheel
 from flexctl.model.errors import InputValueError
 
+from .actuator_limits import hold_voltages, speed_bound, wheel_speed_function
 from .hold_grid import LARGEST_STEP, MAX_SUBSTEPS, mode_tolerances, steps_per_hold
 
 __all__ = ["MAX_INTERVALS", "MAX_ELEMENTS", "MAX_MODE_PHASE", "Discretisation", "discretisation",
@@ -245,11 +247,12 @@ def _collocation_constraints(f, grid, Xc, held, h_element, scheme: str, degree: 
 
 
 def torque_scale(model, problem, duration: float) -> float:
-    """Size of the torque, N m: the bound, unless it is over 1000 times the rigid
-    bang-bang torque ``4 J0 |angle| / T^2`` of the slew (a bound of 1e300 N m would scale
-    the torque and the modal deflections far out of IPOPT's reach)."""
+    """Size of the torque, N m: the bound (:attr:`SlewProblem.hub_torque_bound`), unless it
+    is over 1000 times the rigid bang-bang torque ``4 J0 |angle| / T^2`` of the slew (a bound
+    of 1e300 N m would scale the torque and the modal deflections far out of IPOPT's reach)."""
+    bound = problem.hub_torque_bound
     needed = 4.0 * model.rigid_inertia * abs(problem.angle) / duration ** 2
-    return min(problem.torque_bound, 1e3 * needed) if needed > 0.0 else problem.torque_bound
+    return min(bound, 1e3 * needed) if needed > 0.0 else bound
 
 
 def state_scale(model, problem, duration: float) -> np.ndarray:
@@ -289,7 +292,7 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
 
     (t_guess, x_guess, u_guess) = guess
     n, K, layout = model.n_states, problem.n_intervals, model.layout
-    umax, target = problem.torque_bound, problem.target_state(model)
+    umax, target = problem.hub_torque_bound, problem.target_state(model)
     free_time = problem.objective == "time"
     scale = ca.DM(state_scale(model, problem, problem.duration or t_guess))
     collocation = disc.transcription == "collocation"
@@ -336,6 +339,7 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
                         ymax)
         if collocation:
             opti.subject_to(opti.bounded(-ymax, ca.mtimes(tip, Xc[layout.q, :]), ymax), ymax)
+    _actuator_constraints(opti, model, problem.actuator, grid, Xc, ca.repmat(U, m, 1))
     if free_time:
         opti.subject_to(opti.bounded(MIN_TIME_FLOOR * t_rigid, T, t_max))
         opti.set_initial(T, min(max(t_guess, MIN_TIME_FLOOR * t_rigid), t_max))
@@ -347,6 +351,25 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
     set_initial(opti, grid, Xc, problem, m, x_guess)
     opti.set_initial(U, u_guess.reshape(1, K))
     return Transcribed(opti, X, U, T)
+
+
+def _actuator_constraints(opti, model, actuator, grid, Xc, held) -> None:
+    """The wheel speed at the element boundaries after the start (and the collocation
+    points), or the motor voltage at both ends of every element, within the actuator's limit
+    (:mod:`controllers.actuator_limits`); ``held`` (m, K) is each element's torque."""
+    import casadi as ca
+
+    if isinstance(actuator, ReactionWheel):
+        speed, bound = wheel_speed_function(model, actuator), speed_bound(actuator)
+        for states in (grid[:, 1:], Xc):
+            if states is not None:
+                omega = speed.map(states.size2())(states)
+                opti.subject_to(opti.bounded(-bound, omega, bound), bound)
+    elif isinstance(actuator, DCMotor):
+        rates, limit = grid[model.layout.theta_dot, :], actuator.voltage_limit
+        torque = ca.reshape(held, 1, held.numel())           # element by element
+        volts = ca.horzcat(*hold_voltages(actuator, torque, rates[:-1], rates[1:]))
+        opti.subject_to(opti.bounded(-limit, volts, limit), limit)
 
 
 def set_initial(opti, grid, Xc, problem, m: int, x_guess: np.ndarray):

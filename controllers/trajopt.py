@@ -32,6 +32,8 @@ The constraints, in this order (the order of ``opti.g`` and of
     -u_max <= U[k] <= u_max                             K
     -r h <= U[k] - U[k-1] <= r h, k = 0 .. K, U[-1] = U[K] = 0   (K + 1, rate bound only)
     -y_max <= tip @ q <= y_max at X[:, 1:m K] (and Xc)  m K - 1 (+ d m K)  (tip bound only)
+    -w_max <= Omega(X[:, j]) <= w_max, j = 1 .. m K (and Xc)   m K (+ d m K)  (reaction wheel)
+    -V_max <= V(U, rate at each element's start), then at its end <= V_max    2 m K  (DC motor)
     T_min <= T <= T_max                                 2  (minimum time only)
 
 ``F`` is ``substeps`` RK4 steps or a CVODES integrator; ``C`` and ``D`` come from
@@ -39,12 +41,17 @@ The constraints, in this order (the order of ``opti.g`` and of
 the design model's fastest mode (:func:`slew_discretisation`). The states are scaled for IPOPT
 (``opti.set_linear_scale``) by their physical sizes; values and multipliers stay in SI units.
 The rate bound treats the torque as zero before and after the slew, so the first and last
-holds are limited to ``r h``.
+holds are limited to ``r h``. With an ``actuator`` (:mod:`controllers.actuator_limits`), ``u_max``
+is the torque bound and a reaction wheel's torque limit; ``Omega(x)`` is the wheel's speed
+relative to the hub, ``w_max`` its speed limit less
+:data:`~controllers.actuator_limits.SPEED_MARGIN`; ``V(u, rate)`` the voltage a DC motor needs
+for the hub torque ``u`` at the hub rate.
 
 Before anything is built, :func:`solve_slew` refuses a slew whose holds cannot reach its
 true optimum (:mod:`controllers.hold_grid`): fewer holds than terminal conditions, or holds
 that alias a design mode so that stopping it costs more than
-:data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` above the converged effort.
+:data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` above the converged effort; and a slew
+the actuator cannot give (:func:`controllers.actuator_limits.refuse_infeasible`).
 """
 
 from __future__ import annotations
@@ -56,12 +63,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexctl.model import Model
+from flexctl.model import DCMotor, Model, ReactionWheel
+from flexctl.model.actuators import as_actuator
 from flexctl.model.checks import check_choice, check_integer, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.layout import StateLayout
 from flexctl.sim.maneuvers import rigid_slew_duration
 
+from .actuator_limits import (check_design_model, demand, hub_torque_bound, minimum_duration,
+                              refuse_infeasible, speed_bound)
 from .hold_grid import MAX_SUBSTEPS
 from .plant_state import DEFAULT_LAYOUT, resized
 from .slew_checks import refuse_unsolvable
@@ -78,6 +88,8 @@ COLLOCATION_SCHEMES = ("radau", "legendre")
 OBJECTIVES = ("effort", "time")
 #: Default upper bound on the free final time, in rigid-body minimum times.
 MAX_TIME_FACTOR = 10.0
+#: Factor by which a free-time guess is slowed until the actuator can give it.
+GUESS_STRETCH = 1.1
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
 
@@ -152,6 +164,15 @@ class SlewProblem:
     max_duration : float, optional
         Upper bound on the free duration, s; default ``MAX_TIME_FACTOR`` times the rigid-body
         minimum time. Minimum time only.
+    actuator : ReactionWheel or DCMotor, optional
+        What gives the hub torque, whose limits the slew keeps
+        (:mod:`controllers.actuator_limits`): a reaction wheel's torque limit (the hub torque
+        within :attr:`hub_torque_bound`) and speed limit (less
+        :data:`~controllers.actuator_limits.SPEED_MARGIN`, at every state of the grid, for a
+        slew from rest with zero total momentum); a DC motor's voltage limit (the voltage for
+        each hold's torque at the hub rate at both its ends, the motor's torque-speed line).
+        The design model is the structure's (for a motor, with the rotor's reflected inertia:
+        ``ActuatedModel.mechanical``). Default none: an ideal hub torque.
 
     Examples
     --------
@@ -177,6 +198,7 @@ class SlewProblem:
     substeps: int | None = None
     collocation_scheme: str = "radau"
     max_duration: float | None = None
+    actuator: ReactionWheel | DCMotor | None = None
     degree: int = field(default=3, init=False)
 
     def __post_init__(self):
@@ -209,6 +231,13 @@ class SlewProblem:
                 _choice(name, getattr(self, name), choices)
         if self.substeps is not None:
             set_("substeps", _integer("substeps", self.substeps, 1, MAX_SUBSTEPS))
+        as_actuator(self.actuator)
+
+    @property
+    def hub_torque_bound(self) -> float:
+        """The bound on ``|torque|`` the slew keeps, N m: :attr:`torque_bound`, and a reaction
+        wheel's torque limit."""
+        return hub_torque_bound(self.torque_bound, self.actuator)
 
     def target_state(self, layout) -> np.ndarray:
         """Final state ``x_f = [angle, 0 .. 0]``, shape (n_states,), of ``layout``: the design
@@ -325,6 +354,21 @@ class SlewSolution:
         pick = np.argmax(np.abs(tips), axis=0)
         return np.take_along_axis(tips, pick[None], 0)[0]
 
+    @property
+    def actuator_demand(self) -> np.ndarray | None:
+        """What the plan asks of ``problem.actuator``: the wheel speed relative to the hub at
+        the grid times, rad/s, shape (K+1,); or the motor voltage at the start (row 0) and end
+        (row 1) of each hold, V, shape (2, K); ``None`` without an actuator.
+        (:func:`controllers.actuator_limits.demand`, from :attr:`states` and :attr:`torque`.)"""
+        return demand(self.model, self.problem.actuator, self.states, self.torque)
+
+    @property
+    def actuator_peak(self) -> float | None:
+        """The largest ``|wheel speed|`` (rad/s) or ``|voltage|`` (V) of
+        :attr:`actuator_demand`; ``None`` without an actuator."""
+        needed = self.actuator_demand
+        return None if needed is None else float(np.max(np.abs(needed)))
+
     def torque_function(self) -> HoldTorque:
         """The torque as a callable ``torque(t)`` (N m) with ``breakpoints`` at the holds."""
         return HoldTorque(self.t, self.torque)
@@ -364,7 +408,8 @@ def _smooth_guess(model: Model, problem: SlewProblem, duration: float):
     states[layout.theta_dot] = problem.angle * 30 * (s ** 2 - 2 * s ** 3 + s ** 4) / duration
     mid = 0.5 * (s[1:] + s[:-1])
     acc = problem.angle * 60 * (mid - 3 * mid ** 2 + 2 * mid ** 3) / duration ** 2
-    torque = np.clip(model.rigid_inertia * acc, -problem.torque_bound, problem.torque_bound)
+    bound = problem.hub_torque_bound
+    torque = np.clip(model.rigid_inertia * acc, -bound, bound)
     return states, torque
 
 
@@ -420,15 +465,16 @@ sized_for=2.0)
 def _refuse_before_solving(model: Model, problem: SlewProblem) -> None:
     """Raise on a slew that cannot be solved to its optimum, before anything is built.
 
-    Too few holds for the terminal conditions, a duration below the rigid-body minimum time,
-    and holds whose least effort exceeds the converged one by more than
-    :data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` (fixed duration only).
+    Too few holds for the terminal conditions, a slew the actuator cannot give, a duration
+    below the rigid-body minimum time, and holds whose least effort exceeds the converged one
+    by more than :data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` (fixed duration only).
     """
     n, N, K = model.n_states, model.n_modes, problem.n_intervals
     if K < n:
         raise InputValueError(f"n_intervals must be at least the {n} terminal conditions of a "
                               f"rest-to-rest slew of a {N}-mode design model (2 N + 2 torque "
                               f"holds); got {K}")
+    _refuse_for_actuator(model, problem)
     umax = problem.torque_bound
     t_rigid = rigid_minimum_time(problem.angle, model.rigid_inertia, umax)
     if problem.duration is not None and problem.duration < t_rigid:
@@ -446,6 +492,24 @@ def _refuse_before_solving(model: Model, problem: SlewProblem) -> None:
             f"angle {problem.angle:g} rad and torque_bound {umax:g} N m (no torque within the "
             f"bound completes the slew sooner); got {problem.max_duration!r}")
     refuse_unsolvable(model, problem, *_time_bounds(model, problem))
+
+
+def _refuse_for_actuator(model: Model, problem: SlewProblem) -> None:
+    """Raise on a design model the actuator cannot drive, or a slew it cannot give
+    (:func:`controllers.actuator_limits.refuse_infeasible`)."""
+    actuator = check_design_model(model, problem.actuator)
+    if actuator is None:
+        return
+    if problem.duration is not None:
+        refuse_infeasible(model, actuator, problem.angle, problem.duration,
+                          problem.torque_bound)
+        return
+    shortest = minimum_duration(model, actuator, problem.angle, problem.torque_bound)
+    if problem.max_duration is not None and problem.max_duration < shortest:
+        raise InputValueError(
+            f"max_duration must be at least {shortest:.4g} s, the least a rigid body needs "
+            f"for angle {problem.angle:g} rad within torque_bound {problem.torque_bound:g} N m "
+            f"and the limits of the {actuator.kind} (actuator); got {problem.max_duration!r}")
 
 
 _FEASIBILITY = ("lengthen maneuver.duration, raise maneuver.torque_bound, or loosen tip_bound "
@@ -476,6 +540,10 @@ def _failure(status: str, iterations: int, problem: SlewProblem) -> TrajectoryOp
     what, remedy = _ENDINGS.get(status, _NUMERICAL_TROUBLE)
     if problem.objective == "time" and remedy != _CONVERGENCE:
         remedy += ", or raise max_duration (the free duration's upper bound)"
+    if problem.actuator is not None and remedy != _CONVERGENCE:
+        remedy += f", or relax the {problem.actuator.kind}'s " + (
+            "actuator.voltage_limit" if isinstance(problem.actuator, DCMotor)
+            else "actuator.speed_limit or actuator.torque_limit")
     duration = (f"{problem.duration:g} s" if problem.duration is not None
                 else "a free duration")
     return TrajectoryOptimizationError(
@@ -484,8 +552,12 @@ def _failure(status: str, iterations: int, problem: SlewProblem) -> TrajectoryOp
 
 
 def _time_bounds(model: Model, problem: SlewProblem) -> tuple:
-    """``(rigid-body minimum time, longest free duration)``, s."""
+    """``(rigid-body minimum time, longest free duration)``, s: within the actuator's limits
+    too (:func:`controllers.actuator_limits.minimum_duration`)."""
     t_rigid = rigid_minimum_time(problem.angle, model.rigid_inertia, problem.torque_bound)
+    if problem.actuator is not None:
+        t_rigid = max(t_rigid, minimum_duration(model, problem.actuator, problem.angle,
+                                                problem.torque_bound))
     return t_rigid, problem.max_duration or MAX_TIME_FACTOR * t_rigid
 
 
@@ -493,9 +565,26 @@ def _guess(model: Model, problem: SlewProblem, initial_guess) -> tuple:
     """``(duration, states (n, K+1), torque (K,))`` to start from."""
     if initial_guess is not None:
         return _resample_guess(initial_guess, model, problem)
-    t_rigid = rigid_minimum_time(problem.angle, model.rigid_inertia, problem.torque_bound)
-    duration = problem.duration or math.sqrt(1.5) * t_rigid   # quintic peak torque = u_max
-    return (duration, *_smooth_guess(model, problem, duration))
+    t_rigid, longest = _time_bounds(model, problem)
+    if problem.duration is not None:
+        return (problem.duration, *_smooth_guess(model, problem, problem.duration))
+    duration = math.sqrt(1.5) * t_rigid               # quintic peak torque = u_max
+    states, torque = _smooth_guess(model, problem, duration)
+    while duration < longest and not _within_actuator(model, problem, states, torque):
+        # slower, until the actuator can give it (the rigid bound ignores the quintic's shape)
+        duration = min(GUESS_STRETCH * duration, longest)
+        states, torque = _smooth_guess(model, problem, duration)
+    return duration, states, torque
+
+
+def _within_actuator(model: Model, problem: SlewProblem, states, torque) -> bool:
+    """Whether a plan keeps the actuator's speed or voltage limit (none: True)."""
+    needed = demand(model, problem.actuator, states, torque)
+    if needed is None:
+        return True
+    limit = (problem.actuator.voltage_limit if isinstance(problem.actuator, DCMotor)
+             else speed_bound(problem.actuator))
+    return bool(np.max(np.abs(needed)) <= limit)
 
 
 def _solve(nlp: Transcribed, problem: SlewProblem, disc: Discretisation, initial_guess,

@@ -9,7 +9,8 @@ from flexctl import Beam, Hub, SceneError, builtin_scenes, load_scene, run_scene
 from flexctl.sim.maneuvers import SineTorque, SpinUp
 
 BUILTINS = ("hub-beam-mass", "kane-spinup", "slew-90", "slew-90-model-error", "spacecraft-torque",
-            "two-array-free", "single-wing-free", "two-array-slew")
+            "two-array-free", "single-wing-free", "two-array-slew", "wheel-slew",
+            "flexible-link")
 
 #: MODEL.md section 6, written out independently of the scene files.
 KANE_BEAM = Beam(length=8.0, youngs_modulus=6.8952e10, area=7.2968e-5,

@@ -7,7 +7,10 @@ A run directory holds
                     rad/s, N m, m, m); one row per output time, up to the stop time. For a
                     :class:`~flexctl.model.Structure`: ``t,theta,theta_dot,torque``, then
                     ``hub_x,hub_y`` (m) for a free hub, then ``<name>.tip_deflection`` (m)
-                    of each appendage (:func:`structure_columns`)
+                    of each appendage (:func:`structure_columns`). With an actuator, then
+                    ``wheel_speed,wheel_torque`` (rad/s, N m) for a reaction wheel or
+                    ``motor_voltage,motor_current`` (V, A) for a DC motor, and ``torque``
+                    is the torque the actuator puts on the hub
 ``summary.json``    scene, variant, modes, status, message, peak tip deflection, clamped
                     natural frequencies, overrides, wall time, and ``scene_table``: the
                     scene as run (see :func:`summarize`; ``flexctl run summary.json``
@@ -64,7 +67,12 @@ _UNITS = {"integration_error": "m (estimated largest tip error of the integratio
           "controller_report": "a sampled controller's run: samples, sample_time s, "
           "controller_time s (wall time in the controller), solve_time_median_s, "
           "solve_time_p99_s, solve_time_max_s s per sample (NMPC), iterations (QP or NLP), "
-          "failed_steps"}
+          "failed_steps",
+          "actuator": "peak_command N m (wheel) or V (motor); peak_wheel_speed, "
+          "final_wheel_speed rad/s; peak_wheel_torque N m; peak_motor_voltage V; "
+          "peak_motor_current A",
+          "sensors": "largest_error: largest |reading - true value| of each sensor (rad, "
+          "rad/s, N m, m/s^2)"}
 
 
 def timeseries_columns(n_modes: int) -> list:
@@ -100,7 +108,15 @@ def structure_columns(structure: Structure) -> list:
 
 def _timeseries(result) -> tuple:
     """``(columns, table)`` of ``timeseries.csv``: a HubBeam's states, a Structure's named
-    outputs."""
+    outputs, the actuator's signals."""
+    columns, table = _mechanical_timeseries(result)
+    signals = result.actuator_signals
+    if not signals:
+        return columns, table
+    return columns + list(signals), np.column_stack([table] + list(signals.values()))
+
+
+def _mechanical_timeseries(result) -> tuple:
     system = result.model.system
     if not isinstance(system, Structure):
         return _columns(result.model.layout), np.column_stack(
@@ -115,6 +131,32 @@ def _timeseries(result) -> tuple:
     series = {"t": result.t, "torque": result.torque, **outputs}
     return columns, np.column_stack([np.asarray(series[name], dtype=float).reshape(-1)
                                      for name in columns])
+
+
+def _hardware_summary(scene, result) -> dict:
+    """``actuator`` and ``sensors`` entries of the summary (none without them): the
+    actuator's kind, its command's peak and each signal's peak magnitude (``wheel_speed``
+    rad/s, ``wheel_torque`` N m; ``motor_voltage`` V, ``motor_current`` A) and a wheel's
+    ``final_wheel_speed``; the sensors' readings count and the largest reading error of each
+    (reading minus the true value)."""
+    out = {}
+    signals = result.actuator_signals
+    if signals:
+        entry = {"kind": scene.actuator.kind if scene.actuator is not None
+                 else result.model.actuator.kind,
+                 "peak_command": float(np.max(np.abs(result.command))) if result.t.size
+                 else 0.0}
+        entry.update({f"peak_{name}": float(np.max(np.abs(v))) if v.size else 0.0
+                      for name, v in signals.items()})
+        if "wheel_speed" in signals and signals["wheel_speed"].size:
+            entry["final_wheel_speed"] = float(signals["wheel_speed"][-1])
+        out["actuator"] = entry
+    if result.measurements is not None:
+        readings = result.measurements
+        out["sensors"] = {"samples": int(readings["t"].size), "largest_error": {
+            name: float(np.max(np.abs(readings[name] - truth))) if truth.size else 0.0
+            for name, truth in readings["true"].items()}}
+    return out
 
 
 def _maneuver_table(maneuver) -> dict:
@@ -194,7 +236,8 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         estimated geometric model error of the run (:class:`flexctl.sim.validity.ModelValidity`);
         a scene with ``variant = "auto"`` adds ``variant_choice``. ``scene_table`` holds the
         scene's tables after overrides (:attr:`flexctl.Scene.data`), from which
-        :func:`flexctl.load_scene` rebuilds the scene.
+        :func:`flexctl.load_scene` rebuilds the scene. ``actuator`` and ``sensors``: see
+        :func:`_hardware_summary`.
     """
     model = result.model
     summary = {
@@ -225,6 +268,7 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         summary["clamped_frequencies_at_spin"] = _floats(
             model.natural_frequencies(spin, hub="clamped"))
     summary.update(_structure_summary(model, result))
+    summary.update(_hardware_summary(scene, result))
     choice = scene.mode_choice()
     if choice is not None:
         summary["mode_choice"] = choice.to_dict()

@@ -93,6 +93,8 @@ from importlib import resources
 from pathlib import Path
 
 # the controller kinds and their settings belong to the controllers package
+from controllers.actuated import through_actuator
+from controllers.factory import OpenLoop
 from controllers.spec import (CONTROLLER_KEYS, ControllerSpec, SceneError, current_name,
                               current_names)
 
@@ -107,6 +109,7 @@ from ..model.parameters import Beam, Hub, HubBeam, PointMass
 from ..model.structure import MAX_ANGLE, MAX_APPENDAGES, Appendage, Structure
 from ..sim.simulation import METHODS, MIN_T_FINAL, SimulationResult, simulate
 from ..sim.validity import VariantChoice, assess, choose_variant
+from .scene_hardware import parse_actuator, parse_sensors
 
 __all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene",
            "parse_scene",
@@ -215,6 +218,9 @@ _SCHEMA = {
                  "torque_bound", "times", "values", "interpolation", "file"},
     "simulation": {"t_final", "output_step", "rtol", "method"},
     "controller": None,
+    # checked by their own parsers (flexctl.app.scene_hardware): the keys depend on the kind
+    "actuator": None,
+    "sensors": None,
 }
 #: Keys of one [[appendages]] table: its name, mounting, beam fields and [[appendages.masses]]
 #: (whose keys are those of [[masses]]); beside _SCHEMA, whose tables are the one-beam form's.
@@ -360,6 +366,10 @@ class Scene:
     maneuver : SpinUp, SineTorque, Slew or TorqueSamples
     simulation : SimulationSpec
     controller : ControllerSpec or None
+    actuator : ReactionWheel, DCMotor or None
+        What turns the hub (``[actuator]``); ``None``: an ideal hub torque.
+    sensors : Sensors or None
+        What the controller reads (``[sensors]``); ``None``: the exact state.
     description : str
     data : dict
         The scene's table form (after overrides), as it would be written to TOML.
@@ -371,6 +381,8 @@ class Scene:
     maneuver: object
     simulation: SimulationSpec
     controller: ControllerSpec | None = None
+    actuator: object = None
+    sensors: object = None
     description: str = ""
     data: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -406,7 +418,7 @@ class Scene:
         ``model.design_mass_factor``."""
         stiffness, mass = self.model.design_stiffness_factor, self.model.design_mass_factor
         if stiffness == 1.0 and mass == 1.0:
-            return self.system
+            return self._with_actuator_hub(self.system)
 
         def scaled(holder):       # a HubBeam or an Appendage: its beam and masses
             beam = dataclasses.replace(holder.beam, youngs_modulus=holder.beam.youngs_modulus
@@ -415,9 +427,19 @@ class Scene:
                 dataclasses.replace(m, mass=m.mass * mass) for m in holder.masses))
 
         if isinstance(self.system, Structure):
-            return dataclasses.replace(self.system, appendages=tuple(
+            system = dataclasses.replace(self.system, appendages=tuple(
                 scaled(a) for a in self.system.appendages))
-        return scaled(self.system)
+        else:
+            system = scaled(self.system)
+        return self._with_actuator_hub(system)
+
+    def _with_actuator_hub(self, system):
+        """``system`` with the hub the actuator gives it (a DC motor's reflected rotor
+        inertia), as the plant's equations carry it."""
+        if self.actuator is None:
+            return system
+        hub = self.actuator.mechanical_hub(system.hub)
+        return system if hub is system.hub else dataclasses.replace(system, hub=hub)
 
     def mode_choice(self) -> ModeChoice | None:
         """How many modes ``modes = "auto"`` takes, and why (None for a fixed number).
@@ -438,7 +460,8 @@ class Scene:
                                       else self.model.modes)
         if self.variant == "exact":
             _check_exact_modes(n_modes)
-        return build_model(self.system, n_modes=n_modes, variant=self.variant)
+        return build_model(self.system, n_modes=n_modes, variant=self.variant,
+                           actuator=self.actuator)
 
     def _per_appendage(self, n_modes):
         """``n_modes`` (an int, ``{name: int}`` or one int per appendage) as ``build_model``
@@ -591,6 +614,7 @@ def parse_scene(data: dict, name: str = "scene", base_dir=None) -> Scene:
     description = data.get("description", "")
     if not isinstance(description, str):
         raise SceneError(f"description must be a string; got {description!r}")
+    actuator, sensors = _hardware(data, system, maneuver)
     controller = None
     if "controller" in data:
         # the table as written to summary.json's scene_table carries the current names
@@ -602,9 +626,28 @@ def parse_scene(data: dict, name: str = "scene", base_dir=None) -> Scene:
     if controller is not None and not isinstance(maneuver, Slew):
         raise SceneError("a [controller] table needs maneuver.kind 'slew'; got "
                          f"{data['maneuver'].get('kind')!r}")
+    if sensors is not None and controller is None:
+        raise SceneError("[sensors] are read by a controller: they need maneuver.kind 'slew' "
+                         "with a [controller] table")
     return Scene(name=name, system=system, model=model, maneuver=maneuver,
-                 simulation=simulation, controller=controller, description=description,
-                 data=data)
+                 simulation=simulation, controller=controller, actuator=actuator,
+                 sensors=sensors, description=description, data=data)
+
+
+def _hardware(data: dict, system, maneuver) -> tuple:
+    """``(actuator, sensors)`` of the scene's ``[actuator]`` and ``[sensors]`` tables."""
+    actuator = parse_actuator(data["actuator"]) if "actuator" in data else None
+    sensors = parse_sensors(data["sensors"]) if "sensors" in data else None
+    if actuator is not None:
+        if isinstance(maneuver, SpinUp):
+            raise SceneError("maneuver.kind 'spin_up' prescribes the hub's motion, which no "
+                             "actuator drives; remove [actuator] or drive the hub by a torque")
+        free = system.free if isinstance(system, Structure) else system.hub.free
+        if actuator.kind == "dc_motor" and free:
+            raise SceneError("actuator.kind 'dc_motor' turns the hub against the ground and "
+                             "needs hub.support = \"pinned\"; a free hub is turned by a "
+                             "reaction_wheel")
+    return actuator, sensors
 
 
 def _check_keys(data: dict) -> None:
@@ -889,8 +932,13 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None, *,
             raise SceneError(f"scene {scene.name!r} is a slew: pass the controller built from "
                              "its [controller] table (controllers.from_spec)")
         drive = {"controller": controller}
+        if getattr(controller, "measures", False):
+            drive["sensors"] = scene.sensors
     elif isinstance(scene.maneuver, SpinUp):
         drive = {"hub_motion": scene.maneuver}
+    elif getattr(model, "actuator", None) is not None and model.actuator.kind == "dc_motor":
+        # the manoeuvre's hub torque, asked of the motor as the voltage that gives it
+        drive = {"controller": through_actuator(OpenLoop(scene.maneuver), model)}
     else:
         drive = {"torque": scene.maneuver}
     result = simulate(model, sim.t_final, rtol=sim.rtol, method=sim.method,

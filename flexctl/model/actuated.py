@@ -45,6 +45,8 @@ class ActuatedModel(StructureModel):
     """
 
     actuator: object = field(default=None, kw_only=True)
+    #: The structure as given, before the actuator changed its hub (``system``: after).
+    source: object = field(default=None, kw_only=True, repr=False)
 
     def __post_init__(self):
         super().__post_init__()
@@ -173,7 +175,7 @@ def actuated_model(system, n_modes, variant, actuator) -> ActuatedModel:
     from .structure import as_structure
     from .structure_matrices import assemble_structure, modes_per_appendage
 
-    structure = as_structure(system)
+    structure = source = as_structure(system)
     if actuator.kind == "dc_motor" and structure.free:
         raise InputValueError("actuator: a dc_motor turns the hub against the ground and "
                               "needs a pinned hub; a free-floating hub is turned by a "
@@ -184,4 +186,4 @@ def actuated_model(system, n_modes, variant, actuator) -> ActuatedModel:
     modes = modes_per_appendage(structure, n_modes, variant)
     matrices = assemble_structure(structure, modes)
     return ActuatedModel(system=structure, n_modes=matrices.n_modes, variant=variant,
-                         matrices=matrices, actuator=actuator)
+                         matrices=matrices, actuator=actuator, source=source)

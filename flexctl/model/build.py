@@ -19,7 +19,7 @@ from .structure_matrices import assemble_structure, modes_per_appendage
 from .structure_model import StructureModel
 from .variants import VARIANTS, Model
 
-__all__ = ["build_model"]
+__all__ = ["build_model", "rebuild"]
 
 
 def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order", *,
@@ -77,6 +77,17 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order",
                              f"{type(system).__name__}")
     return Model(system=system, n_modes=int(n_modes), variant=variant,
                  matrices=assemble(system, int(n_modes)))
+
+
+def rebuild(model: Model, n_modes=None, variant: str | None = None) -> Model:
+    """The same plant as ``model`` (its actuator included) on other modes or another variant
+    (default: the model's own)."""
+    n_modes = model.mode_spec if n_modes is None else n_modes
+    variant = model.variant if variant is None else variant
+    actuator = getattr(model, "actuator", None)
+    if actuator is not None:
+        return actuated_model(model.source, n_modes, variant, actuator)
+    return build_model(model.system, n_modes=n_modes, variant=variant)
 
 
 def _build_structure_model(system, n_modes, variant: str) -> Model:

@@ -17,6 +17,7 @@ module          contents
 ``compiled``    the CasADi/CVODES integration of a symbolic drive
 ``fixed_step``  compiled fixed-step RK4 with a step-doubling error estimate (``method="rk4"``)
 ``digital``     sampled controllers: ``ZeroOrderHold``, the ``SampledController`` protocol
+``sensors``     noisy, quantised, late sensor readings (``Sensors``)
 ``energy``      energy balance of small-deflection runs (``energy_balance``)
 ``validity``    geometric model error of a run, the variant a manoeuvre needs
 ``metrics``     slew metrics and settling time
@@ -29,6 +30,7 @@ from .inputs import SampledTorque
 from .simulation import (METHODS, AccuracyWarning, Controller, SimulationResult, StaticLaw,
                          StiffnessWarning, StopReason, simulate)
 from .digital import ControllerSession, SampledController, ZeroOrderHold
+from .sensors import Sensors
 from .metrics import SlewMetrics, settling_time, slew_metrics
 from .fidelity import ModeChoice, choose_modes
 
@@ -36,7 +38,7 @@ __all__ = [
     "SineTorque", "Slew", "SpinUp", "SampledTorque",
     "METHODS", "AccuracyWarning", "Controller", "SimulationResult", "StiffnessWarning",
     "simulate", "StopReason", "StaticLaw",
-    "ControllerSession", "SampledController", "ZeroOrderHold",
+    "ControllerSession", "SampledController", "ZeroOrderHold", "Sensors",
     "SlewMetrics", "settling_time", "slew_metrics",
     "ModeChoice", "choose_modes",
 ]

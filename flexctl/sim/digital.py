@@ -27,6 +27,7 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
@@ -37,6 +38,7 @@ from .stops import tip_rows
 from .compiled import CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, is_symbolic
 from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
 from .inputs import input_value, output_grid, time_function
+from .sensors import sensor_names
 from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["SampledController", "ControllerSession", "ZeroOrderHold", "is_sampled",
@@ -217,6 +219,51 @@ class SampledRun:
     integration_error: float | None
     report: dict
     controller_time: float
+    measurements: dict | None = None
+
+
+class _SensorFeed:
+    """The sensors' reading at each sample: of the state ``delay`` seconds before it (the
+    initial state before ``t = 0``, with no command applied), through their noise
+    (:mod:`flexctl.sim.sensors`)."""
+
+    def __init__(self, model, sensors, edges, x0, sample_time):
+        self.model, self.x0 = model, np.asarray(x0, dtype=float)
+        self.session = sensors.start(model, sample_time)
+        self.names = sensor_names(model, sensors)
+        self.rates = sensors.tip_acceleration_noise is not None
+        self.times = edges[:-1] - sensors.delay     # when each sample's state is read
+        self.seen = {}                              # sample -> (state, command held then)
+        self.readings, self.truth = [], []
+
+    def times_in(self, lo: float, hi: float) -> np.ndarray:
+        """The read times that fall in ``(lo, hi]``."""
+        return self.times[(self.times > lo) & (self.times <= hi)]
+
+    def store(self, lo, t_out, y_seg, u):
+        """Keep the states of the interval ``(lo, t_out[-1]]`` at the read times it covers."""
+        for t_read in self.times_in(lo, t_out[-1]):
+            k = int(np.flatnonzero(self.times == t_read)[0])
+            self.seen[k] = (y_seg[:, int(np.flatnonzero(t_out == t_read)[0])], u)
+
+    def read(self, k: int) -> np.ndarray:
+        """Sample ``k``'s reading, shape (m,)."""
+        x, u = self.seen.pop(k, (self.x0, 0.0))
+        xdot = self.model.dynamics(0.0, x, u) if self.rates else None
+        reading = np.asarray(self.session.read(x, xdot), dtype=float)
+        self.readings.append(reading)
+        self.truth.append(np.asarray(self.session.true_values(x, xdot), dtype=float))
+        return reading
+
+    def record(self, sample_times) -> dict:
+        """``{"t": (K,), name: (K,) reading..., "true": {name: (K,)}}``."""
+        k = len(self.readings)
+        out = {"t": np.asarray(sample_times[:k], dtype=float)}
+        values = np.array(self.readings).reshape(k, len(self.names))
+        truth = np.array(self.truth).reshape(k, len(self.names))
+        out.update({name: values[:, j] for j, name in enumerate(self.names)})
+        out["true"] = {name: truth[:, j] for j, name in enumerate(self.names)}
+        return out
 
 
 def _sample_grid(t_final: float, sample_time: float) -> np.ndarray:
@@ -302,7 +349,7 @@ class _RK4Hold:
 def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_step: float,
                 scale, rtol: float, bad_sample, check_accuracy: bool = True,
                 max_steps: int = 100_000, integrator: str = "cvodes",
-                h_max: float | None = None) -> SampledRun:
+                h_max: float | None = None, sensors=None) -> SampledRun:
     """Integrate ``model`` under a sampled controller, sample by sample.
 
     Parameters
@@ -327,6 +374,9 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
     integrator : {"cvodes", "rk4"}
         Error-controlled CVODES from sample to sample, or compiled fixed-step RK4 with steps
         of at most ``h_max`` (s).
+    sensors : Sensors, optional
+        The controller's session gets their readings (:mod:`flexctl.sim.sensors`) instead of
+        the state; they are recorded in ``measurements``.
 
     Returns
     -------
@@ -345,11 +395,16 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
     hold = (_RK4Hold(model, torque, h_max) if integrator == "rk4"
             else _CvodesHold(model, torque, scale, rtol, max_steps))
     log = _SampleLog(x0=np.asarray(x0, dtype=float), t_final=float(t_final))
-    _sample_loop(log, session, hold, edges, grid, bad_sample)
+    feed = None if sensors is None else _SensorFeed(model, sensors, edges, x0,
+                                                    controller.sample_time)
+    _sample_loop(log, session, hold, edges, grid, bad_sample, feed)
     if check_accuracy and log.stop is None:
         tip_map = tip_rows(model, model.layout)
         log.error = _replay_error(log, hold, edges, tip_map)
-    return _sampled_outputs(log, session, edges, grid, controller.sample_time)
+    run = _sampled_outputs(log, session, edges, grid, controller.sample_time)
+    if feed is not None:
+        run = dataclasses.replace(run, measurements=feed.record(edges))
+    return run
 
 
 @dataclass
@@ -375,16 +430,20 @@ class _SampleLog:
         self.message = f"reached t_final = {self.t_final:g} s"
 
 
-def _sample_loop(log, session, hold, edges, grid, bad_sample):
-    """From sample to sample: the session's torque at each sample, held over the interval,
-    until the end, an integrator failure or a bad output sample."""
+def _sample_loop(log, session, hold, edges, grid, bad_sample, feed=None):
+    """From sample to sample: the session's torque at each sample (from the state, or from
+    the sensors' ``feed``), held over the interval, until the end, an integrator failure or a
+    bad output sample."""
     y = log.x0
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for k, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
         started = time.perf_counter()
-        u = input_value("controller", session.step(float(lo), y.copy()), float(lo))
+        seen = y.copy() if feed is None else feed.read(k)
+        u = input_value("controller", session.step(float(lo), seen), float(lo))
         log.controller_time += time.perf_counter() - started
         log.us.append(u)
         t_out = np.append(grid[(grid > lo) & (grid < hi)], hi)
+        if feed is not None:
+            t_out = np.union1d(t_out, feed.times_in(lo, hi))
         try:
             y_seg, evaluations = hold(lo, t_out, y, u)
             log.n_eval += evaluations
@@ -399,6 +458,8 @@ def _sample_loop(log, session, hold, edges, grid, bad_sample):
             log.ys.append(y_seg[:, :bad])
             log.stop, log.message, log.stop_state = "bad_sample", None, y_seg[:, bad]
             return
+        if feed is not None:
+            feed.store(lo, t_out, y_seg, u)
         log.ts.append(t_out)
         log.ys.append(y_seg)
         log.ends.append(y_seg[:, -1])

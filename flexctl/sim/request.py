@@ -22,6 +22,7 @@ from .drives import as_controller
 from .inputs import (as_vector, check_method, check_rtol, check_time, jacobian_frequency,
                      output_grid, time_function)
 from .progress import check_progress, progress_cuts
+from .sensors import Sensors
 from .stops import model_reach
 from .tracing import torque_input
 from ..model import Model, SingularMassMatrixError
@@ -129,6 +130,7 @@ class RunRequest:
     symbolic: bool
     spin_frequency: float
     report: object
+    sensors: object = None
 
     @property
     def prescribed(self) -> bool:
@@ -175,6 +177,9 @@ def _check_arguments(model, t_final, hub_motion, torque, controller, method, rto
     if hub_motion is not None and (torque is not None or controller is not None):
         raise InputValueError("hub_motion prescribes the hub: it cannot be combined with "
                               "torque or controller")
+    if hub_motion is not None and getattr(model, "actuator", None) is not None:
+        raise InputValueError("hub_motion prescribes the hub, which then needs no actuator: "
+                              "simulate the structure's own model (model.mechanical)")
     if hub_motion is not None:
         for attr in ("angle", "rate", "acceleration"):
             if not callable(getattr(hub_motion, attr, None)):
@@ -267,9 +272,33 @@ def _check_reach(model, x_init, x0):
                               f"{model.lengths[k]:g} m); got x0 = {x0!r}")
 
 
+def _check_sensors(sensors, controller):
+    """Sensors are read by a sampled controller that takes readings, and only by one."""
+    reads = bool(getattr(controller, "measures", False))
+    if sensors is None:
+        if reads:
+            raise InputValueError("the controller reads sensors (it measures): pass "
+                                  "sensors=flexctl.sim.sensors.Sensors(...)")
+        return None
+    if not isinstance(sensors, Sensors):
+        raise InputTypeError("sensors must be a flexctl.sim.sensors.Sensors; got "
+                             f"{type(sensors).__name__}")
+    if not is_sampled(controller) or not reads:
+        raise InputValueError(
+            "sensors are read by a sampled controller that takes readings (e.g. "
+            "controllers.Observed, which estimates the state from them); the controller given "
+            f"({type(controller).__name__}) reads the plant's exact state")
+    if sensors.sample_time is not None and not np.isclose(sensors.sample_time,
+                                                          controller.sample_time, rtol=1e-9):
+        raise InputValueError(f"sensors.sample_time {sensors.sample_time:g} s must be the "
+                              f"controller's sample_time {controller.sample_time:g} s (the "
+                              "controller reads them at its own samples)")
+    return sensors
+
+
 def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x0=None, *,
                 rtol=None, atol=None, method="auto", output_step=None, max_step=np.inf,
-                check_accuracy=True, progress=None) -> RunRequest:
+                check_accuracy=True, progress=None, sensors=None) -> RunRequest:
     """Check the arguments of :func:`flexctl.simulate` (the same signature) and give the run
     they ask for."""
     t_final, method, rtol, output_step, max_step, report = _check_arguments(
@@ -300,11 +329,13 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
             # appendages: a bare state does not tell their mode counts)
             controller = controller.for_plant(model)
     _check_reach(model, x_init, x0)
+    sensors = _check_sensors(sensors, controller)
     return RunRequest(model=model, t_final=float(t_final), method=method, rtol=float(rtol),
                       atol=atol, grid=grid, step=float(step), max_step=max_step,
                       check_accuracy=bool(check_accuracy), torque=torque,
                       hub_motion=hub_motion, controller=controller, torque_fn=torque_fn,
-                      x_init=x_init, symbolic=symbolic, spin_frequency=w_spin, report=report)
+                      x_init=x_init, symbolic=symbolic, spin_frequency=w_spin, report=report,
+                      sensors=sensors)
 
 
 def check_atol(atol, size: int) -> np.ndarray:

@@ -71,7 +71,7 @@ __all__ = ["simulate", "SimulationResult", "Controller", "StaticLaw", "StopReaso
 def simulate(model: Model, t_final: float, torque=None, hub_motion=None, controller=None,
              x0=None, *, rtol: float | None = None, atol=None, method: str = "auto",
              output_step: float | None = None, max_step: float = np.inf,
-             check_accuracy: bool = True, progress=None) -> SimulationResult:
+             check_accuracy: bool = True, progress=None, sensors=None) -> SimulationResult:
     """Simulate the nonlinear model.
 
     Parameters
@@ -80,7 +80,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     t_final : float
         End time, s (> 0).
     torque : callable, (times, values) or SampledTorque, optional
-        Hub torque, N m. Default 0. A function ``torque(t)`` or ``torque(t, x)`` (compiled
+        Hub torque, N m (with an actuator: its command, N m or V, as the ``controller``'s
+        output). Default 0. A function ``torque(t)`` or ``torque(t, x)`` (compiled
         where CasADi can trace it, :mod:`flexctl.sim.tracing`), or samples covering
         ``[0, t_final]``: ``(times, values)`` (shape (K,) each, as python-control's ``T`` and
         ``U``) interpolated linearly, or a :class:`~flexctl.sim.inputs.SampledTorque`.
@@ -117,6 +118,9 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         once the run has taken 5 s; a callable gets a :class:`~flexctl.sim.progress.Progress`
         after every :data:`~flexctl.sim.progress.PROGRESS_CHUNKS`-th of the run. Default
         none.
+    sensors : Sensors, optional
+        Read by a sampled controller with ``measures = True`` (:class:`controllers.Observed`)
+        at its samples (:mod:`flexctl.sim.sensors`); kept in ``result.measurements``.
 
     Returns
     -------
@@ -133,9 +137,14 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     """
     request = run_request(model, t_final, torque, hub_motion, controller, x0, rtol=rtol,
                           atol=atol, method=method, output_step=output_step,
-                          max_step=max_step, check_accuracy=check_accuracy, progress=progress)
-    if request.sampled:
-        return _simulate_sampled(request)
+                          max_step=max_step, check_accuracy=check_accuracy, progress=progress,
+                          sensors=sensors)
+    return _simulate_sampled(request) if request.sampled else _simulate_continuous(request)
+
+
+def _simulate_continuous(request) -> SimulationResult:
+    """:func:`simulate` with a continuous drive: its strategy, stops and accuracy check."""
+    model, hub_motion = request.model, request.hub_motion
     drive = (PrescribedDrive(model, hub_motion, request.x_init) if request.prescribed
              else TorqueDrive(model, request.torque, request.controller, request.x_init))
     singular = model.variant == "consistent" and not request.prescribed
@@ -164,7 +173,8 @@ def _simulate_sampled(request) -> SimulationResult:
     run = run_sampled(model, request.t_final, request.controller, request.x_init,
                       torque=request.torque, output_step=request.step, scale=scale, rtol=rtol,
                       bad_sample=stops.first_bad, check_accuracy=request.check_accuracy,
-                      integrator=integrator, h_max=RK4_OMEGA_H / omega_max)
+                      integrator=integrator, h_max=RK4_OMEGA_H / omega_max,
+                      sensors=request.sensors)
     wall = time.perf_counter() - start
     note = "" if integrator != "rk4" else rk4_accuracy_note(
         run.integration_error, tip_rows(model, model.layout) @ run.states, rtol, stacklevel=3)
@@ -185,4 +195,4 @@ def _simulate_sampled(request) -> SimulationResult:
         controller_states=np.zeros((0, run.t.size)),
         integration_error=run.integration_error,
         controller_report=dict(run.report, controller_time=run.controller_time),
-        stop_reason=reason, energy_balance=balance)
+        stop_reason=reason, energy_balance=balance, measurements=run.measurements)

@@ -36,6 +36,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..model import build_model
+from ..model.build import rebuild
 from .fidelity import DEFAULT_TOLERANCE, _as_input, _check_tolerance, _is_prescribed
 from .energy import ENERGY_TOLERANCE, ModelValidityWarning
 from .simulation import simulate
@@ -54,7 +55,7 @@ DEFLECTION_FLOOR = 1e-9
 
 
 def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, controller=None,
-                    n_modes: int = ESTIMATE_MODES) -> float:
+                    n_modes: int = ESTIMATE_MODES, sensors=None) -> float:
     """Estimated relative tip error of ``model``'s variant against exact geometry.
 
     Parameters
@@ -63,7 +64,7 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         Gives the system and the variant; its own number of modes is not used.
     t_final : float
         Horizon, s.
-    torque, hub_motion, controller :
+    torque, hub_motion, controller, sensors :
         The run's inputs, as for :func:`flexctl.simulate`.
     n_modes : int
         Modes of the two compared models.
@@ -80,11 +81,14 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     n_modes = min(max(n_modes, int(getattr(controller, "n_modes", 0) or 0)), min(model.modes))
     tips = []
     for variant in (model.variant, "exact"):
-        small = build_model(model.system, n_modes=n_modes, variant=variant)
+        small = rebuild(model, n_modes=n_modes, variant=variant)
         on_small = controller
         if callable(getattr(controller, "for_plant", None)):     # sensors set for a plant
             on_small = controller.for_plant(small)
-        drive = {"torque": torque, "hub_motion": hub_motion, "controller": on_small}
+        # with noiseless readings: a quantised, noisy loop's vibration is not repeatable from
+        # one model to the other, while the model error is the manoeuvre's
+        drive = {"torque": torque, "hub_motion": hub_motion, "controller": on_small,
+                 "sensors": None if sensors is None else sensors.noiseless()}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             run = simulate(small, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False, **drive)
@@ -171,14 +175,14 @@ def _finite_or_none(value):
     return float(value) if value is not None and np.isfinite(value) else None
 
 
-def assess(result, *, torque=None, hub_motion=None, controller=None,
+def assess(result, *, torque=None, hub_motion=None, controller=None, sensors=None,
            tolerance: float = DEFAULT_TOLERANCE, warn: bool = True) -> ModelValidity:
     """The :class:`ModelValidity` of a finished run, warning when the model was out of range.
 
     Parameters
     ----------
     result : SimulationResult
-    torque, hub_motion, controller :
+    torque, hub_motion, controller, sensors :
         The inputs the run was made with.
     tolerance : float
         Relative tip error accepted, in (0, 1).
@@ -190,7 +194,7 @@ def assess(result, *, torque=None, hub_motion=None, controller=None,
     model = result.model
     t_end = float(result.t[-1]) if result.t.size else 0.0
     error = (geometric_error(model, t_end, torque=torque, hub_motion=hub_motion,
-                             controller=controller) if t_end > 0 else 0.0)
+                             controller=controller, sensors=sensors) if t_end > 0 else 0.0)
     validity = ModelValidity(variant=model.variant,
                              deflection_ratio=result.deflection_ratio,
                              geometric_error=error, tolerance=float(tolerance),

@@ -1,0 +1,400 @@
+"""Observed: a sampled output-feedback controller, a state law on a discrete Kalman estimate.
+
+The flight computer never sees the state: it reads noisy, quantised, late sensors
+(:class:`flexctl.sim.sensors.Sensors`) once per sample. :class:`Observed` runs a discrete
+Kalman filter on the model's linearisation at rest, discretised with the zero-order hold of
+the command, and hands the estimate to a static state law (PD, LQR, a tracker or a callable
+``law(t, x)``). It estimates the gyro bias too when the gyro has one. Its class attribute
+``measures = True`` tells the simulation to hand :meth:`ObservedSession.step` the sensor
+readings instead of the state. :func:`kalman_step` is the filter as a pure function.
+
+Notes
+-----
+``n`` plant states (``model.layout``), ``m`` readings (:func:`~flexctl.sim.sensors.sensor_names`),
+filter state ``z`` of ``n_f = n`` entries, or ``n + 1`` when the gyro has a bias::
+
+    z = [x (model.layout order), b (gyro bias, rad/s)]
+    z(t + h) = Phi(h) z(t) + Gamma(h) (u + w),   w ~ N(0, process_noise^2) held over h
+    y_k = C z(t_k - d) + D u(t_k - d) + v_k,     v_k ~ N(0, R)
+
+``Phi``, ``Gamma`` are the zero-order hold of ``model.linear_matrices(0.0)`` (and
+``exp(-h / tau)`` for the bias, whose process noise keeps its stationary variance); ``C``,
+``D``, ``R`` come from :func:`~flexctl.sim.sensors.measurement_matrix` and
+:func:`~flexctl.sim.sensors.noise_covariance` (the gyro's white part alone when the bias is a
+state). ``Q(h) = Gamma Gamma^T process_noise^2`` on the plant block.
+
+The transport delay ``d = sensors.delay``: the filter estimates the state at the reading
+epochs ``t_k - d``. At each sample it predicts from the previous epoch to ``t_k - d``,
+updates with ``y_k``, extrapolates the estimate to ``t_k`` with the commands held over
+``[t_k - d, t_k)`` (exact for the linear model), applies the law there, and keeps the
+command. Every propagation walks the recorded commands piece by piece (each piece's hold is
+cached by its length), so any delay up to :data:`flexctl.sim.sensors.MAX_DELAY` is handled;
+the process noise of a piece is taken independent of its neighbours'. Before the first sample
+the plant is taken as held at ``x0`` (a reading of an earlier time is of ``x0``), and a reading
+at a command switch sees the command held before it (the sensors read before the new command
+is applied).
+
+The command is clipped to ``model.actuator.command_limit`` when the model has an actuator
+with a finite limit: the filter predicts with what the plant receives (the estimator's
+anti-windup), and the clipped command is returned.
+
+Examples
+--------
+>>> import numpy as np
+>>> import flexctl
+>>> from controllers.observer import Observed
+>>> from flexctl.sim.sensors import Sensors
+>>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+>>> law = lambda t, x: -3.0 * x[0] - 4.0 * x[3]
+>>> observed = Observed(law, Sensors(gyro_noise=1e-4, gyro_bias_instability=1e-3),
+...                     sample_time=0.01)
+>>> session = observed.start(model, np.zeros(model.n_states))
+>>> sensors = observed.sensors.start(model, 0.01)
+>>> u = session.step(0.0, sensors.read(np.zeros(model.n_states)))
+>>> session.report()["samples"], session.estimates.shape
+(1, (1, 6))
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from flexctl.model.checks import check_array, check_instance, check_real
+from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.sim.digital import is_sampled
+from flexctl.sim.inputs import input_value, time_function
+from flexctl.sim.sensors import (VARIANCE_FLOOR, Sensors, measurement_matrix,
+                                 noise_covariance, sensor_names)
+
+__all__ = ["Observed", "ObservedSession", "FilterMatrices", "kalman_update", "kalman_predict",
+           "kalman_step"]
+
+
+# ---------------------------------------------------------------------- pure functions
+def kalman_update(x_pred, p_pred, y, C, R, offset=0.0) -> tuple:
+    """Measurement update of a Kalman filter (Joseph form, so ``P`` stays symmetric).
+
+    Returns ``x_plus`` (n_f,), ``p_plus`` (n_f, n_f), the innovation ``y - C x_pred - offset``
+    (m,) and its covariance ``S = C P C^T + R`` (m, m). ``offset`` is the input's part of the
+    readings, ``D u``.
+    """
+    innovation = y - C @ x_pred - offset
+    s = C @ p_pred @ C.T + R
+    gain = scipy.linalg.solve(s, C @ p_pred, assume_a="pos").T
+    keep = np.eye(p_pred.shape[0]) - gain @ C
+    p_plus = keep @ p_pred @ keep.T + gain @ R @ gain.T
+    return x_pred + gain @ innovation, 0.5 * (p_plus + p_plus.T), innovation, s
+
+
+def kalman_predict(x, p, u, Ad, Bd, Q) -> tuple:
+    """Time update over one hold: ``Ad x + Bd u`` and ``Ad P Ad^T + Q``."""
+    p_pred = Ad @ p @ Ad.T + Q
+    return Ad @ x + Bd[:, 0] * u, 0.5 * (p_pred + p_pred.T)
+
+
+def kalman_step(x_hat, p, y, u, Ad, Bd, C, D, Q, R, *, u_held=None) -> tuple:
+    """One sample of a discrete Kalman filter: update with ``y``, then predict with ``u``.
+
+    ``x_hat`` (n_f,) and ``p`` (n_f, n_f) are the prediction at the reading and its
+    covariance, ``y`` (m,) the readings, ``u`` the command held from this sample to the next
+    (N m) and ``u_held`` the one held when ``y`` was read (the ``D`` term; default ``u``).
+    ``Ad`` (n_f, n_f), ``Bd`` (n_f, 1), ``Q`` (n_f, n_f): the hold over one sample and its
+    process noise; ``C`` (m, n_f), ``D`` (m, 1), ``R`` (m, m): ``y = C x + D u_held + v``.
+
+    Returns
+    -------
+    x_hat_plus, p_plus : ndarray, shapes (n_f,), (n_f, n_f)
+        The estimate after the update, and its covariance.
+    x_pred, p_pred : ndarray
+        The prediction for the next sample.
+    """
+    x_hat = check_array("kalman_step", "x_hat", x_hat, shape=(None,))
+    n, m = x_hat.size, np.size(y)
+    args = {"p": (p, (n, n)), "y": (y, (m,)), "Ad": (Ad, (n, n)), "Bd": (Bd, (n, 1)),
+            "C": (C, (m, n)), "D": (D, (m, 1)), "Q": (Q, (n, n)), "R": (R, (m, m))}
+    p, y, Ad, Bd, C, D, Q, R = (check_array("kalman_step", name, value, shape=shape)
+                                for name, (value, shape) in args.items())
+    u = check_real("kalman_step", "u", u)
+    u_held = u if u_held is None else check_real("kalman_step", "u_held", u_held)
+    x_plus, p_plus, _, _ = kalman_update(x_hat, p, y, C, R, D[:, 0] * u_held)
+    x_pred, p_pred = kalman_predict(x_plus, p_plus, u, Ad, Bd, Q)
+    return x_plus, p_plus, x_pred, p_pred
+
+
+@dataclass(frozen=True, eq=False)
+class FilterMatrices:
+    """The filter's model over one sample interval (module Notes): ``Ad`` (n_f, n_f), ``Bd``
+    (n_f, 1), ``C`` (m, n_f), ``D`` (m, 1), ``Q`` (n_f, n_f), ``R`` (m, m)."""
+
+    Ad: np.ndarray
+    Bd: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+
+
+class _Holds:
+    """``Phi(h)``, ``Gamma(h)``, ``Q(h)`` of the filter state over a hold of ``h`` s, cached
+    by ``h`` to a billionth of the sample interval."""
+
+    def __init__(self, a, b, sample_time, process_noise, bias_std, bias_time):
+        self.a, self.b, self.sample_time, self.process_noise = a, b, sample_time, process_noise
+        self.bias_std, self.bias_time, self.cache = bias_std, bias_time, {}
+
+    def __call__(self, h: float) -> tuple:
+        key = round(h / self.sample_time, 9)
+        if key not in self.cache:
+            self.cache[key] = self._hold(key * self.sample_time)
+        return self.cache[key]
+
+    def _hold(self, h):
+        n = self.a.shape[0]
+        block = np.zeros((n + 1, n + 1))
+        block[:n, :n], block[:n, n:] = self.a, self.b
+        hold = scipy.linalg.expm(block * h)
+        phi, gam = hold[:n, :n], hold[:n, n:]
+        q = gam @ gam.T * self.process_noise ** 2
+        if not self.bias_std:
+            return phi, gam, q
+        spread = self.bias_std ** 2 * -math.expm1(-2.0 * h / self.bias_time)
+        return (scipy.linalg.block_diag(phi, math.exp(-h / self.bias_time)),
+                np.vstack((gam, 0.0)), scipy.linalg.block_diag(q, spread))
+
+
+# ---------------------------------------------------------------------- the controller
+@dataclass(frozen=True, eq=False)
+class Observed:
+    """A static state law on the discrete Kalman estimate of the sensors' readings.
+
+    Parameters
+    ----------
+    law : Controller, SampledController or callable
+        A static :class:`flexctl.Controller` (``n_states == 0``) or ``law(t, x)`` (N m) of
+        the plant state, or a sampled controller at ``sample_time`` (e.g.
+        :class:`controllers.NMPC`), whose session steps on the estimate.
+    sensors : Sensors
+        What is read; ``sensors.sample_time`` must be ``None`` or equal ``sample_time``.
+    sample_time : float
+        s (> 0).
+    process_noise : float
+        Standard deviation of a white disturbance torque held over each sample, entering
+        like the command, N m (>= 0). Default 0.01.
+    """
+
+    law: object
+    sensors: Sensors
+    sample_time: float
+    process_noise: float = 1e-2
+
+    #: Tells the simulation to hand :meth:`ObservedSession.step` the sensors' readings.
+    measures = True
+
+    def __post_init__(self):
+        check_instance("observed", "sensors", self.sensors, Sensors)
+        object.__setattr__(self, "sample_time", check_real(
+            "observed", "sample_time", self.sample_time, minimum=0.0, strict=True))
+        object.__setattr__(self, "process_noise", check_real(
+            "observed", "process_noise", self.process_noise, minimum=0.0))
+        own = self.sensors.sample_time
+        if own is not None and not math.isclose(own, self.sample_time, rel_tol=1e-12):
+            raise InputValueError(
+                f"observed.sample_time must equal sensors.sample_time (one rate for readings "
+                f"and commands); got {self.sample_time!r} s and {own!r} s")
+        law = self.law
+        if is_sampled(law):
+            # a law with its own solver and memory (NMPC): its session gets the estimate
+            if not math.isclose(law.sample_time, self.sample_time, rel_tol=1e-12):
+                raise InputValueError(
+                    f"observed.law samples every {law.sample_time!r} s; it must sample at "
+                    f"the readings' sample_time {self.sample_time!r} s")
+            if getattr(law, "measures", False):
+                raise InputValueError("observed.law reads sensors itself; pass a law that "
+                                      "reads the state")
+        elif callable(getattr(law, "torque", None)) and hasattr(law, "n_states"):
+            if law.n_states:
+                raise InputValueError(f"observed.law must be static (n_states = 0): the filter "
+                                      f"is the estimator; got {law.n_states} internal states")
+        elif callable(law):
+            time_function(law, "observed.law")
+        else:
+            raise InputTypeError("observed.law must be a static flexctl Controller or a "
+                                 f"callable law(t, x); got {type(law).__name__}")
+
+    def start(self, model, x0) -> "ObservedSession":
+        """A fresh session for a run of ``model`` from the plant state ``x0`` (n,)."""
+        return ObservedSession(self, model, x0)
+
+    def __repr__(self):
+        law = getattr(self.law, "__name__", type(self.law).__name__)
+        return (f"Observed(law={law}, sample_time={self.sample_time:g} s, "
+                f"process_noise={self.process_noise:g} N m, {self.sensors!r})")
+
+
+def _bound_law(law, model, x0):
+    """``law`` as ``f(t, x) -> float`` reading ``model``'s plant state (a sampled law's
+    session, started at ``x0``), and that session (None for a static law)."""
+    if is_sampled(law):
+        session = law.start(model, x0)
+        return (lambda t, x: input_value("observed.law", session.step(t, x), t)), session
+    if callable(getattr(law, "for_plant", None)) and getattr(law, "plant_layout", 0) is None:
+        law = law.for_plant(model)
+    if callable(getattr(law, "torque", None)) and hasattr(law, "n_states"):
+        none = np.zeros(0)
+        return (lambda t, x: input_value("observed.law", law.torque(t, x, none), t)), None
+    return time_function(law, "observed.law"), None
+
+
+def _command_limit(model) -> float | None:
+    """The actuator's finite ``command_limit`` (N m), or None."""
+    limit = getattr(getattr(model, "actuator", None), "command_limit", None)
+    if limit is None or not math.isfinite(float(limit)):
+        return None
+    return abs(float(limit))
+
+
+class ObservedSession:
+    """One run of :class:`Observed` (module Notes).
+
+    Attributes
+    ----------
+    matrices : FilterMatrices
+        The filter's model over one sample interval.
+    names : tuple of str
+        The readings :meth:`step` takes, in order.
+    """
+
+    def __init__(self, controller: Observed, model, x0):
+        sensors, n = controller.sensors, model.layout.n_states
+        x0 = check_array("observed.start", "x0", x0, shape=(n,))
+        self.controller, self.model, self.names = controller, model, sensor_names(model, sensors)
+        self._law, self._inner = _bound_law(controller.law, model, x0)
+        self._limit = _command_limit(model)
+        bias = sensors.gyro_bias_instability > 0.0
+        a, b = model.linear_matrices(0.0)
+        self._holds = _Holds(np.asarray(a, dtype=float), np.asarray(b, dtype=float),
+                             controller.sample_time, controller.process_noise,
+                             sensors.gyro_bias_instability if bias else 0.0,
+                             sensors.gyro_bias_time)
+        c, d = measurement_matrix(model, sensors)
+        if bias:
+            c = np.column_stack((c, np.zeros(c.shape[0])))
+            c[self.names.index("theta_dot"), n] = 1.0
+        r = noise_covariance(model, sensors, controller.sample_time, with_bias=bias)
+        self.matrices = FilterMatrices(*self._holds(controller.sample_time)[:2], c, d,
+                                       self._holds(controller.sample_time)[2], r)
+        self._n, self._bias = n, bias
+        self._z = np.concatenate((x0, [0.0] if bias else []))
+        # the start is known up to one sample of disturbance; the bias to its stationary spread
+        p0 = self.matrices.Q + VARIANCE_FLOOR * np.eye(self._z.size)
+        if bias:
+            p0[n, n] = sensors.gyro_bias_instability ** 2
+        self._p, self._epoch, self._start = p0, None, None
+        self._times, self._commands = [], []
+        self._estimates, self._filtered, self._worst, self._clipped = [], [], 0.0, 0
+
+    # ------------------------------------------------------------------ commands held
+    def _pieces(self, t_from: float, t_to: float) -> list:
+        """``(duration, command)`` of each hold within ``[t_from, t_to]``, the time before
+        the first sample left out (the plant held at ``x0``)."""
+        tol = 1e-9 * self.controller.sample_time
+        t_from, pieces = max(t_from, self._start), []
+        while t_from < t_to - tol:
+            j = bisect.bisect_right(self._times, t_from + tol) - 1
+            end = self._times[j + 1] if j + 1 < len(self._times) else t_to
+            end = min(end, t_to)
+            pieces.append((end - t_from, self._commands[j]))
+            t_from = end
+        return pieces
+
+    def _held_at(self, t: float) -> float:
+        """The command held just before ``t`` (0 before the first one)."""
+        j = bisect.bisect_left(self._times, t - 1e-9 * self.controller.sample_time) - 1
+        return self._commands[j] if j >= 0 else 0.0
+
+    def _propagate(self, z, p, t_from, t_to):
+        """Filter state and covariance (``p`` None: state alone) from ``t_from`` to ``t_to``."""
+        for h, u in self._pieces(t_from, t_to):
+            phi, gam, q = self._holds(h)
+            if p is None:
+                z = phi[:z.size, :z.size] @ z + gam[:z.size, 0] * u
+            else:
+                z, p = kalman_predict(z, p, u, phi, gam, q)
+        return z, p
+
+    # ------------------------------------------------------------------ the sample
+    def step(self, t: float, y) -> float:
+        """Command (N m) to hold from sample time ``t`` (s), given the readings ``y`` (m,) of
+        :attr:`names` taken at ``t`` (of the plant ``sensors.delay`` s earlier)."""
+        t = check_real("observed.step", "t", t)
+        y = check_array("observed.step", "y", y, shape=(len(self.names),))
+        epoch = t - self.controller.sensors.delay
+        if self._start is None:
+            self._start = t
+        else:
+            self._z, self._p = self._propagate(self._z, self._p, self._epoch, epoch)
+        mats = self.matrices
+        self._z, self._p, innovation, s = kalman_update(
+            self._z, self._p, y, mats.C, mats.R, mats.D[:, 0] * self._held_at(epoch))
+        self._epoch = epoch
+        self._worst = max(self._worst, float(np.max(np.abs(innovation)
+                                                    / np.sqrt(np.diag(s)))))
+        x_now, _ = self._propagate(self._z[:self._n], None, epoch, t)
+        command = self._law(t, x_now)
+        applied = command if self._limit is None else float(np.clip(command, -self._limit,
+                                                                    self._limit))
+        self._clipped += applied != command
+        self._record(t, applied, x_now)
+        return applied
+
+    def _record(self, t, command, x_now):
+        self._times.append(t)
+        self._commands.append(command)
+        # the commands still needed: the one held at the epoch, and the later ones
+        keep = bisect.bisect_right(self._times, self._epoch) - 1
+        if keep > 0:
+            del self._times[:keep], self._commands[:keep]
+        self._estimates.append(x_now)
+        self._filtered.append(self._z.copy())
+
+    # ------------------------------------------------------------------ what it did
+    @property
+    def estimates(self) -> np.ndarray:
+        """The plant state the law read at each sample (the estimate extrapolated to the
+        sample time), shape (K, n)."""
+        return np.array(self._estimates).reshape(-1, self._n)
+
+    @property
+    def filtered(self) -> np.ndarray:
+        """The filter state after each update, at the reading epochs, shape (K, n_f)."""
+        return np.array(self._filtered).reshape(-1, self._z.size)
+
+    @property
+    def bias_estimates(self) -> np.ndarray | None:
+        """The estimated gyro bias after each update, rad/s, shape (K,); None without one."""
+        return self.filtered[:, self._n] if self._bias else None
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """The filter's current covariance, shape (n_f, n_f)."""
+        return self._p.copy()
+
+    def report(self) -> dict:
+        """Samples, the final estimated gyro bias (rad/s, None without one), the largest
+        innovation over its standard deviation, and the samples whose command was clipped."""
+        bias = self.bias_estimates
+        inner = {} if self._inner is None else dict(self._inner.report() or {})
+        return {**inner, "samples": len(self._filtered),
+                "gyro_bias": None if bias is None or not bias.size else float(bias[-1]),
+                "largest_normalised_innovation": self._worst,
+                "clipped_samples": int(self._clipped),
+                "delay": self.controller.sensors.delay}
+
+    def __repr__(self):
+        return (f"ObservedSession({len(self._filtered)} samples, {self._z.size} filter "
+                f"states, {len(self.names)} readings)")
