@@ -119,7 +119,7 @@ from .pd import design_pd
 from .reference import SlewProfile, minimum_slew_duration
 from .scheduling import design_scheduled_lqr
 from .shaping import bang_bang, design_shaper, shape
-from .spec import ControllerSpec, SceneError
+from .spec import CONTROLLER_KINDS, ControllerSpec, SceneError
 from .tracking import TrajectoryTracker
 from .trajopt import SlewProblem, solve_slew
 
@@ -268,8 +268,7 @@ def _hardware(scene, plant: Model, spec: ControllerSpec, built) -> BuiltControll
     built = dataclasses.replace(built, controller=controller)
     if scene.sensors is None:
         return _sampled(spec, built)
-    period = scene.sensors.sample_time or spec.get("sample_time") \
-        or getattr(controller, "sample_time", None) or DEFAULT_SENSOR_SAMPLE_TIME
+    period = _loop_sample_time(scene, spec)
     observed = _wrap(Observed, law=controller, sensors=scene.sensors, sample_time=period)
     return dataclasses.replace(built, controller=observed,
                                info={**built.info, "sample_time": period,
@@ -326,9 +325,15 @@ def _reference(spec: ControllerSpec, design: Model, angle, duration, bound) -> t
 def _loop_sample_time(scene, spec: ControllerSpec) -> float | None:
     """The sample time the loop will run at (s): the sensors', else the controller's, else
     :data:`DEFAULT_SENSOR_SAMPLE_TIME` with sensors; None for a continuous loop."""
+    own = spec.get("sample_time") if "sample_time" in _kind_settings(spec) else None
     if scene.sensors is None:
-        return spec.get("sample_time")
-    return scene.sensors.sample_time or spec.get("sample_time") or DEFAULT_SENSOR_SAMPLE_TIME
+        return own
+    return scene.sensors.sample_time or own or DEFAULT_SENSOR_SAMPLE_TIME
+
+
+def _kind_settings(spec: ControllerSpec) -> set:
+    """The names of the settings ``spec``'s kind takes."""
+    return {item.name for item in CONTROLLER_KINDS[spec.kind].settings}
 
 
 def _feedback(spec: ControllerSpec, design: Model, plant: Model, angle, duration,

@@ -93,7 +93,8 @@ def test_table_keys_are_dataclass_fields(table):
 
 
 def test_every_table_of_the_schema_is_checked():
-    assert set(scenes._SCHEMA) == {*TABLE_CLASSES, "maneuver", "controller", "description"}
+    assert set(scenes._SCHEMA) == {*TABLE_CLASSES, "maneuver", "controller", "description",
+                                   "actuator", "sensors"}
     assert "description" in _parameters(scenes.Scene)
 
 

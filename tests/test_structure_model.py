@@ -121,10 +121,15 @@ def test_shaper_of_unequal_appendages_cancels_each_fundamental():
 
 def test_free_hub_refuses_a_steady_spin_and_a_prescribed_rotation():
     model = build_model(twins("free"), 2)
-    for call in (lambda: model.linearize(1.0), lambda: model.natural_frequencies(2.0),
+    for call in (lambda: model.linearize(1.0),
+                 lambda: model.natural_frequencies(2.0, hub="free"),
                  lambda: model.beam_accelerations(np.zeros(4), np.zeros(4), 0.0, 0.0)):
         with pytest.raises(InputValueError, match="free hub"):
             call()
+    # held spinning, its beams are clamped ones, stiffened as on a pinned hub
+    pinned = build_model(twins("pinned"), 2)
+    assert np.allclose(model.natural_frequencies(2.0), pinned.natural_frequencies(2.0),
+                       rtol=1e-12)
 
 
 def test_single_wing_pushes_the_free_hub_and_momenta_balance():

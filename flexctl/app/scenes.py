@@ -460,8 +460,8 @@ class Scene:
                                       else self.model.modes)
         if self.variant == "exact":
             _check_exact_modes(n_modes)
-        return build_model(self.system, n_modes=n_modes, variant=self.variant,
-                           actuator=self.actuator)
+        hardware = {} if self.actuator is None else {"actuator": self.actuator}
+        return build_model(self.system, n_modes=n_modes, variant=self.variant, **hardware)
 
     def _per_appendage(self, n_modes):
         """``n_modes`` (an int, ``{name: int}`` or one int per appendage) as ``build_model``
