@@ -35,7 +35,7 @@ import numpy as np
 from flexctl.model.errors import InputTypeError, InputValueError
 
 from .actuator_limits import SPEED_MARGIN, hub_torque_bound, speed_bound
-from .controllable import controllable_part
+from .controllable import controllable_part, state_gain
 from .lqr import LQR, LQRWeights, casadi_reference_state, design_lqr, lqr_weight_matrices, \
     reference_state
 from .reference import _casadi_saturate, _saturate
@@ -267,8 +267,6 @@ def design_wheel_lqr(design, wheel, weights: LQRWeights, *, reference=None,
     -------
     LaggedLQR
     """
-    import control
-
     if getattr(wheel, "kind", None) != "reaction_wheel":
         raise InputTypeError(f"wheel must be a ReactionWheel; got {type(wheel).__name__}")
     limit = wheel.torque_limit if torque_limit is None else min(torque_limit, wheel.torque_limit)
@@ -288,13 +286,7 @@ def design_wheel_lqr(design, wheel, weights: LQRWeights, *, reference=None,
     q[:n, :n] = q_m
     q_r = basis.T @ q @ basis
     a_r, b_r, q_r = projector @ a @ basis, projector @ b, 0.5 * (q_r + q_r.T)
-    if sample_time is None:
-        gain_r = control.lqr(a_r, b_r, q_r, r)[0]
-    else:
-        held = control.c2d(control.ss(a_r, b_r, np.eye(a_r.shape[0]),
-                                      np.zeros((a_r.shape[0], 1))), float(sample_time), "zoh")
-        gain_r = control.dlqr(held.A, held.B, q_r * sample_time, r * sample_time)[0]
-    gain = np.asarray(gain_r, dtype=float) @ projector
+    gain = state_gain(a_r, b_r, q_r, r, sample_time) @ projector
     lqr = replace(base, gain=gain[:, :n], poles=np.linalg.eigvals(a - b @ gain))
     return LaggedLQR(lqr=lqr, actuator_gain=float(gain[0, n]), torque_limit=limit)
 

@@ -83,20 +83,33 @@ def controllable_part(model, spin_rate: float = 0.0) -> ControllablePart:
     return ControllablePart(basis=basis, projector=projector, dropped=dropped, note=note)
 
 
-def lqr_on_part(model, spin_rate, q_mat, r_mat):
-    """LQR gain (1, n) and closed-loop poles (n,) designed on the controllable part."""
-    import control
-
+def lqr_on_part(model, spin_rate, q_mat, r_mat, sample_time=None):
+    """LQR gain (1, n) and closed-loop poles (n,) designed on the controllable part; with a
+    ``sample_time`` (s), the discrete LQR of the plant held over it (weights ``Q T``,
+    ``R T``: the continuous cost's rectangle rule), for a law run with a zero-order hold."""
     a, b = model.linear_matrices(spin_rate)
     part = controllable_part(model, spin_rate)
     if not part.dropped:
-        gain, _, poles = control.lqr(a, b, q_mat, r_mat)
-        return np.asarray(gain, dtype=float), np.asarray(poles), part
+        gain = state_gain(a, b, q_mat, r_mat, sample_time)
+        return gain, np.linalg.eigvals(a - b @ gain), part
     a_r, b_r = part.reduce(a, b)
     q_r = part.basis.T @ q_mat @ part.basis
-    gain_r, _, _ = control.lqr(a_r, b_r, 0.5 * (q_r + q_r.T), r_mat)
-    gain = np.asarray(gain_r, dtype=float) @ part.projector
+    gain = state_gain(a_r, b_r, 0.5 * (q_r + q_r.T), r_mat, sample_time) @ part.projector
     return gain, np.linalg.eigvals(a - b @ gain), part
+
+
+def state_gain(a, b, q_mat, r_mat, sample_time=None) -> np.ndarray:
+    """The LQR gain of ``(A, B)``, shape (1, n): continuous, or discrete for the plant held
+    over ``sample_time`` (s) with the weights ``Q T`` and ``R T``."""
+    import control
+
+    if sample_time is None:
+        return np.asarray(control.lqr(a, b, q_mat, r_mat)[0], dtype=float)
+    n = a.shape[0]
+    held = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, b.shape[1]))),
+                       float(sample_time), "zoh")
+    return np.asarray(control.dlqr(held.A, held.B, q_mat * sample_time,
+                                   np.atleast_2d(r_mat) * sample_time)[0], dtype=float)
 
 
 def lqe_on_part(model, spin_rate, c_meas, process, measurement):

@@ -352,7 +352,8 @@ def _feedback(spec: ControllerSpec, design: Model, plant: Model, angle, duration
         ctrl = _wrap(design_pd, design, spec.get("bandwidth"), spec.get("damping_ratio"),
                      feedforward=spec.get("feedforward"), **common)
     elif kind == "lqr":
-        ctrl = _wrap(design_lqr, design, _lqr_weights(spec), spec.get("spin_rate"), **common)
+        ctrl = _wrap(design_lqr, design, _lqr_weights(spec), spec.get("spin_rate"),
+                     sample_time=sample_time, **common)
     elif kind == "lqg":
         ctrl = _wrap(design_lqg, design, _lqr_weights(spec), _noise(spec),
                      spec.get("spin_rate"), plant=plant, **common)

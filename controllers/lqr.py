@@ -368,17 +368,17 @@ class LQR(ReferenceFeedback):
         return self._casadi_apply(-ca.dot(gain, x_design - x_ref), acc, inertia, limit)
 
 
-def _lqr_gain(model, weights, spin_rate):
+def _lqr_gain(model, weights, spin_rate, sample_time=None):
     """Gain and closed-loop poles on the modes the torque moves (:mod:`controllers.controllable`:
     all of them for one beam, where this is ``control.lqr`` of the linearisation)."""
     q_mat, r_mat = lqr_weight_matrices(model, weights)
-    gain, poles, _ = lqr_on_part(model, spin_rate, q_mat, r_mat)
+    gain, poles, _ = lqr_on_part(model, spin_rate, q_mat, r_mat, sample_time)
     return gain, poles
 
 
 def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=None,
                feedforward: bool = True, torque_limit: float | None = None,
-               flexible_reference: bool = True) -> LQR:
+               flexible_reference: bool = True, sample_time: float | None = None) -> LQR:
     """LQR on ``model.linearize(spin_rate)`` with the weights of :func:`lqr_weight_matrices`.
 
     Parameters
@@ -397,6 +397,10 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
     flexible_reference : bool, optional
         Track the quasi-static deflection the reference acceleration needs
         (:func:`reference_state`) rather than a straight beam. Default True.
+    sample_time : float, optional
+        For a law run with a zero-order hold (s): the discrete LQR of the plant held over
+        it (:func:`controllers.controllable.state_gain`), stable where the continuous gain
+        held that long is not. Default: the continuous LQR.
 
     Returns
     -------
@@ -408,7 +412,9 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
     """
     model = _model("design_lqr", model)
     spin_rate = _real("design_lqr", "spin_rate", spin_rate)
-    gain, poles = _lqr_gain(model, weights, spin_rate)
+    if sample_time is not None:
+        sample_time = _real("design_lqr", "sample_time", sample_time, minimum=0.0, strict=True)
+    gain, poles = _lqr_gain(model, weights, spin_rate, sample_time)
     return LQR(gain=gain, reference=reference,
                feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
                torque_limit=torque_limit, spin_rate=spin_rate, poles=poles,

@@ -213,3 +213,24 @@ def test_a_reference_the_wheel_cannot_follow_is_refused_naming_the_limit():
     link = load_scene("flexible-link", {"maneuver.duration": 0.1})
     with pytest.raises(SceneError, match="actuator.voltage_limit 10 V"):
         from_spec(link)
+
+
+@pytest.mark.parametrize("table", [
+    {"kind": "pd", "bandwidth": 0.3}, {"kind": "lqr"}, {"kind": "lqr", "sample_time": 0.1},
+    {"kind": "lqg"}, {"kind": "zv"},
+], ids=["pd", "lqr", "lqr-sampled", "lqg", "zv"])
+def test_laws_read_the_plant_through_its_actuator_states(table):
+    """A frictionless wheel far from its limits, with a short lag: every law slews the
+    actuated plant as it slews the ideal one (it reads the hub and the modes by the plant's
+    layout, whose wheel states come last). With friction an open-loop slew drifts: the wheel
+    drags the hub."""
+    frictionless = {"actuator.coulomb_friction": 0.0, "actuator.viscous_friction": 0.0}
+    scene = dataclasses.replace(load_scene("wheel-slew", {**SHORT_WHEEL, **frictionless,
+                                                          "controller": table}), sensors=None)
+    ideal = dataclasses.replace(scene, actuator=None)
+    finals = []
+    for case in (ideal, scene):
+        result, _, metrics = run_slew(case, from_spec)
+        assert result.ok
+        finals.append(result.theta[-1])
+    assert abs(finals[1] - finals[0]) <= 2e-3 * scene.maneuver.angle

@@ -150,8 +150,11 @@ class ZeroOrderHold:
         return self.law
 
     def start(self, model, x0) -> ControllerSession:
-        """A session evaluating the law at each sample."""
+        """A session evaluating the law at each sample (a law that reads the plant by its
+        layout bound to ``model``'s, as :func:`flexctl.simulate` binds continuous ones)."""
         law = self.law
+        if callable(getattr(law, "for_plant", None)) and getattr(law, "plant_layout", 0) is None:
+            law = law.for_plant(model)
         if callable(getattr(law, "torque", None)) and hasattr(law, "n_states"):
             z = np.zeros(0)
             return _HoldSession(lambda t, x: law.torque(t, x, z))
