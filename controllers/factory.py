@@ -107,6 +107,7 @@ from flexctl.model import Model, build_model
 from flexctl.model.variants import EXACT_MAX_MODES
 from flexctl.sim.digital import ZeroOrderHold
 from flexctl.sim.maneuvers import Slew
+from flexctl.sim.sensors import DEFAULT_SAMPLE_TIME as DEFAULT_SENSOR_SAMPLE_TIME
 from flexctl.sim.simulation import StaticLaw
 
 from .actuated import (actuator_torque_bound, check_reference_fits, design_wheel_lqr,
@@ -202,9 +203,6 @@ def _noise(spec: ControllerSpec) -> NoiseLevels:
     return _wrap(NoiseLevels, **{field: spec.get(key) for field, key in NOISE_SETTINGS.items()})
 
 
-#: Sample time of a loop that reads sensors when neither they nor the controller give one, s
-#: (100 Hz, a common attitude-control and lab-servo rate).
-DEFAULT_SENSOR_SAMPLE_TIME = 0.01
 #: Kinds that track a smooth reference slew with feedback (:func:`_feedback`).
 _FEEDBACK_KINDS = ("pd", "lqr", "lqg", "scheduled")
 #: Kinds that play the rigid bang-bang torque, shaped or not (:func:`_open_loop`).

@@ -17,6 +17,8 @@ section                     content
 :func:`structures`          one beam against two arrays, pinned and free hub (its own module)
 :func:`model_error`         trajopt+lqr against NMPC when the design model is 20 % off
 :func:`large_deflection`    the optimal slew designed on first_order and on exact geometry
+:func:`hardware`            a reaction wheel and a DC motor, exact state and noisy sensors
+                            (its own module)
 ==========================  =================================================================
 
 Like the command line, this module sits on top of both packages: it imports
@@ -37,6 +39,7 @@ from controllers.spec import CONTROLLER_KEYS
 from ..model.errors import InputError
 from ..sim.validity import ModelValidityWarning
 from .report import write_demo_report
+from .demo_hardware import hardware
 from .demo_structures import structures
 from .section import Section, save_figure as _save
 from .scenes import builtin_scenes, load_scene, run_slew
@@ -504,7 +507,8 @@ def sections(out: Path, workers: int, surprises: list, progress=print) -> list:
               lambda o, pool: slew_comparison(o, pool, kinds=FREE_HUB_KINDS,
                                               scene_name="two-array-slew"), True),
              ("design-model error", model_error, True),
-             ("large deflection", lambda o, pool: large_deflection(o), False))
+             ("large deflection", lambda o, pool: large_deflection(o), False),
+             ("actuators and sensors", hardware, True))
     pool = ProcessPoolExecutor(max_workers=workers) if workers > 1 else None
     made = []
     try:

@@ -26,21 +26,20 @@ The keys are the fields of :class:`~flexctl.model.actuators.ReactionWheel`,
 :class:`~flexctl.model.actuators.DCMotor` and :class:`~flexctl.sim.sensors.Sensors` (one name
 for each quantity in Python and TOML). A scene with ``[sensors]`` runs its controller sampled,
 at ``sensors.sample_time`` or the controller's ``sample_time``, else every
-:data:`DEFAULT_SENSOR_SAMPLE_TIME` seconds.
+:data:`~flexctl.sim.sensors.DEFAULT_SAMPLE_TIME` seconds.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-from controllers.factory import DEFAULT_SENSOR_SAMPLE_TIME
 from controllers.spec import SceneError
 
 from ..model.actuators import ACTUATOR_KINDS
-from ..sim.sensors import Sensors
+from ..sim.sensors import DEFAULT_SAMPLE_TIME, Sensors
 
 __all__ = ["parse_actuator", "parse_sensors", "ACTUATOR_KEYS", "SENSOR_KEYS",
-           "DEFAULT_SENSOR_SAMPLE_TIME"]
+           "DEFAULT_SAMPLE_TIME"]
 
 #: The keys of each actuator kind's table (besides ``kind``).
 ACTUATOR_KEYS = {kind: tuple(f.name for f in dataclasses.fields(cls))

@@ -93,8 +93,6 @@ from importlib import resources
 from pathlib import Path
 
 # the controller kinds and their settings belong to the controllers package
-from controllers.actuated import through_actuator
-from controllers.factory import OpenLoop
 from controllers.spec import (CONTROLLER_KEYS, ControllerSpec, SceneError, current_name,
                               current_names)
 
@@ -938,6 +936,8 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None, *,
         drive = {"hub_motion": scene.maneuver}
     elif getattr(model, "actuator", None) is not None and model.actuator.kind == "dc_motor":
         # the manoeuvre's hub torque, asked of the motor as the voltage that gives it
+        from controllers.actuated import through_actuator
+        from controllers.factory import OpenLoop
         drive = {"controller": through_actuator(OpenLoop(scene.maneuver), model)}
     else:
         drive = {"torque": scene.maneuver}

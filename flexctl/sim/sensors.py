@@ -67,8 +67,11 @@ from ..model.checks import check_array, check_instance, check_integer, check_rea
 from ..model.errors import InputValueError
 
 __all__ = ["Sensors", "SensorSession", "sensor_names", "measurement_matrix",
-           "noise_covariance", "MAX_DELAY", "VARIANCE_FLOOR"]
+           "noise_covariance", "MAX_DELAY", "DEFAULT_SAMPLE_TIME", "VARIANCE_FLOOR"]
 
+#: Sample time of a loop that reads sensors when neither they nor the controller give one, s
+#: (100 Hz, a common attitude-control and lab-servo rate).
+DEFAULT_SAMPLE_TIME = 0.01
 #: Longest transport delay, s: a longer one is a typing slip (ms written as s).
 MAX_DELAY = 10.0
 #: Smallest variance :func:`noise_covariance` gives a reading, in its SI unit squared (rad^2,
