@@ -252,7 +252,8 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
     elif bound is None:
         raise SceneError(f"controller kind {kind!r} needs maneuver.torque_bound")
     elif kind == "nmpc":
-        built = _nmpc(spec, design, angle, duration, bound, design.n_modes, actuator)
+        built = _nmpc(spec, design, angle, duration, bound, design.n_modes, actuator,
+                      scene.sensors is not None)
     else:
         built = _optimal(spec, design, angle, duration, bound, actuator)
     return _hardware(scene, plant, spec, built)
@@ -414,7 +415,7 @@ def _trajectory(spec: ControllerSpec, design: Model, angle, duration, bound,
 
 
 def _nmpc(spec: ControllerSpec, design: Model, angle, duration, bound, n_design,
-          actuator=None):
+          actuator=None, sensed: bool = False):
     """Nonlinear MPC tracking the optimal slew (``reference = "trajopt"``, default) or
     regulating to the target at rest (``reference = "none"``)."""
     info, solution = {}, None
@@ -425,7 +426,8 @@ def _nmpc(spec: ControllerSpec, design: Model, angle, duration, bound, n_design,
         end = float(duration if duration is not None
                     else minimum_slew_duration(angle, design.rigid_inertia, bound))
     settings = {key: spec.get(key) for key in ("horizon", "mode", "qp_solver", "terminal")}
-    if spec.get("estimator") == "kalman":
+    if spec.get("estimator") == "kalman" and not sensed:
+        # with sensors the Kalman filter of their readings (_hardware) estimates the state
         settings["noise"] = _noise(spec)
     start = time.perf_counter()
     ctrl = _wrap(NMPC, model=design, target=angle, torque_limit=bound, reference=solution,

@@ -88,6 +88,32 @@ class NoiseLevels:
             object.__setattr__(self, name, _real("noise", name, getattr(self, name),
                                                  minimum=0.0, strict=True))
 
+    @classmethod
+    def from_sensors(cls, sensors, sample_time: float, torque: float = 0.1) -> "NoiseLevels":
+        """The continuous-time intensities equivalent to ``sensors`` read every
+        ``sample_time`` s: a reading of variance ``sigma^2`` per sample is white noise of
+        intensity ``sigma^2 T`` (the encoder's ``sigma^2 = step^2 / 12``). A noiseless reading
+        takes the floor of :data:`flexctl.sim.sensors.VARIANCE_FLOOR`.
+
+        Examples
+        --------
+        >>> from flexctl.sim.sensors import Sensors
+        >>> noise = NoiseLevels.from_sensors(Sensors(encoder_resolution=1.2e-3,
+        ...                                          root_moment_noise=0.1), 0.01)
+        >>> round(noise.angle, 6), round(noise.root_moment, 4)
+        (3.5e-05, 0.01)
+        """
+        from flexctl.sim.sensors import VARIANCE_FLOOR, Sensors
+
+        if not isinstance(sensors, Sensors):
+            raise InputTypeError("noise.sensors must be a flexctl.sim.sensors.Sensors; got "
+                                 f"{type(sensors).__name__}")
+        period = _real("noise", "sample_time", sample_time, minimum=0.0, strict=True)
+        angle = max(sensors.encoder_resolution ** 2 / 12.0, VARIANCE_FLOOR)
+        moment = max(sensors.root_moment_noise ** 2, VARIANCE_FLOOR)
+        return cls(angle=float(np.sqrt(angle * period)),
+                   root_moment=float(np.sqrt(moment * period)), torque=torque)
+
     @property
     def measurement_covariance(self) -> np.ndarray:
         """``RN = diag(angle^2, root_moment^2)``, shape (2, 2)."""

@@ -60,6 +60,8 @@ __all__ = ["ReactionWheel", "DCMotor", "ACTUATOR_KINDS", "SPEED_LIMIT_BAND", "as
 SPEED_LIMIT_BAND = 0.01
 #: Default speed over which Coulomb friction is smoothed, rad/s (about 10 rpm).
 FRICTION_SMOOTHING = 1.0
+#: Smallest motor lag (s) and friction smoothing speed (rad/s) a wheel takes.
+MIN_SCALE = 1e-6
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -101,10 +103,14 @@ class ReactionWheel:
 
     def __post_init__(self):
         owner = "actuator"
-        for name in ("inertia", "torque_limit", "speed_limit", "time_constant",
-                     "friction_smoothing"):
+        for name in ("inertia", "torque_limit", "speed_limit"):
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
                                                       minimum=0.0, strict=True))
+        # a lag or a friction knee far below anything the structure does only makes the
+        # equations stiff (time constant, s; smoothing speed, rad/s)
+        for name in ("time_constant", "friction_smoothing"):
+            object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
+                                                      minimum=MIN_SCALE, maximum=1e6))
         for name in ("viscous_friction", "coulomb_friction"):
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
                                                       minimum=0.0))
