@@ -179,6 +179,8 @@ def test_results_without_an_actuator_have_no_command():
     (dict(time_constant=0.0), "actuator.time_constant"),
     (dict(coulomb_friction=0.5), "actuator.coulomb_friction must be below"),
     (dict(viscous_friction=-1e-3), "actuator.viscous_friction"),
+    (dict(speed_limit=1e9), "actuator.speed_limit must be finite and > 0 and <= 100000"),
+    (dict(time_constant=1e-9), "actuator.time_constant must be finite and >= 1e-06"),
 ])
 def test_bad_wheels_are_refused(changes, match):
     with pytest.raises(InputValueError, match=match):
@@ -189,7 +191,8 @@ def test_bad_wheels_are_refused(changes, match):
     (dict(resistance=0.0), "actuator.resistance"),
     (dict(gear_efficiency=1.5), "actuator.gear_efficiency"),
     (dict(voltage_limit=float("inf")), "actuator.voltage_limit"),
-    (dict(gear_ratio=1e12), "actuator.gear_ratio must be within"),
+    (dict(gear_ratio=1e12), "actuator.gear_ratio must be finite and > 0 and <= 1e"),
+    (dict(torque_constant=1e-12), "actuator.torque_constant must be within"),
 ])
 def test_bad_motors_are_refused(changes, match):
     with pytest.raises(InputValueError, match=match):

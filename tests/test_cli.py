@@ -243,6 +243,24 @@ def test_scenes_lists_builtins_with_descriptions(capsys):
         assert description in printed
 
 
+def _assert_hardware_rows(report: str):
+    """The demo's actuator-and-sensor table: the limits hold, a wheel far from its limits
+    leaves the LQR slew as it was, noisy readings do not."""
+    from flexctl.app.demo_hardware import SETUPS
+
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in report.splitlines()
+             if line.startswith("| wheel-slew: ") or line.startswith("| flexible-link: ")]
+    table = {(c[0], c[1]): c for c in cells}
+    assert len(table) == 12 and all(c[2] == "ok" for c in cells)
+    ideal, wheel, sensed = (table[("wheel-slew: lqr", setup)] for setup in SETUPS)
+    assert float(wheel[-1].split()[0]) <= load_scene("wheel-slew").actuator.speed_limit
+    assert float(wheel[3]) <= 2 * float(ideal[3]) and float(sensed[3]) > 2 * float(ideal[3])
+    limit = load_scene("flexible-link").actuator.voltage_limit
+    for (case, setup), c in table.items():
+        if case.startswith("flexible-link") and setup != SETUPS[0]:
+            assert float(c[-1].split()[0]) <= limit
+
+
 @pytest.mark.slow
 def test_demo_writes_report_and_plots(tmp_path, capsys):
     out = tmp_path / "demo"
@@ -263,6 +281,7 @@ def test_demo_writes_report_and_plots(tmp_path, capsys):
     for name in BUILTINS:
         assert rows[name][4] == "ok"
         assert json.loads((out / name / "summary.json").read_text())["status"] == "ok"
+    _assert_hardware_rows(report)
     zero = [cells for cells in rows.values() if cells[2] == "zero_order"]
     assert len(zero) == 1 and zero[0][1] == "kane-spinup" and zero[0][4] == "diverged"
     zero_summary = json.loads((out / zero[0][0] / "summary.json").read_text())

@@ -106,24 +106,3 @@ def test_structures_section_shows_what_a_second_array_and_a_free_hub_change(tmp_
     assert float(wing["rigid inertia (kg m^2)"]) < float(one["rigid inertia (kg m^2)"])
     assert float(wing["hub travel (mm)"]) > 1.0 and float(free["hub travel (mm)"]) < 1e-6
 
-
-@pytest.mark.slow
-def test_hardware_section_shows_what_the_actuator_and_the_sensors_change(tmp_path):
-    from flexctl.app.demo_hardware import SETUPS, hardware
-    from flexctl.app.scenes import load_scene
-
-    section = hardware(tmp_path)
-    _assert_files(section)
-    header, rows = section.table
-    cell = {(r[0], r[1], r[2]): dict(zip(header, r)) for r in rows}
-    assert all(r["status"] == "ok" for r in cell.values())
-    ideal, wheel, sensed = (cell[("wheel-slew", "lqr", setup)] for setup in SETUPS)
-    speed_limit = load_scene("wheel-slew").actuator.speed_limit
-    assert float(wheel["peak demand"].split()[0]) <= speed_limit
-    # the wheel, far from its limits, leaves the LQR slew as it was; noisy readings do not
-    assert float(wheel["residual vibration (m)"]) <= 2 * float(ideal["residual vibration (m)"])
-    assert float(sensed["residual vibration (m)"]) > 2 * float(ideal["residual vibration (m)"])
-    for kind in ("lqr", "trajopt+lqr"):
-        for setup in SETUPS[1:]:
-            volts = cell[("flexible-link", kind, setup)]["peak demand"]
-            assert float(volts.split()[0]) <= load_scene("flexible-link").actuator.voltage_limit

@@ -15,6 +15,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import flexctl
 from controllers import LQRWeights, Observed, design_lqr, from_spec
@@ -234,3 +236,46 @@ def test_laws_read_the_plant_through_its_actuator_states(table):
         assert result.ok
         finals.append(result.theta[-1])
     assert abs(finals[1] - finals[0]) <= 2e-3 * scene.maneuver.angle
+
+
+_VALUES = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10, 10 ** 6),
+                    st.text(max_size=3), st.booleans(), st.none())
+
+
+@settings(max_examples=60, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(kind=st.sampled_from(["reaction_wheel", "dc_motor"]), data=st.data())
+def test_any_actuator_table_gives_a_clear_error_or_a_finite_plant(kind, data):
+    base = dict(WHEEL_TABLE if kind == "reaction_wheel" else MOTOR_TABLE)
+    key = data.draw(st.sampled_from(sorted(k for k in base if k != "kind")))
+    base[key] = data.draw(_VALUES)
+    try:
+        scene = parse_scene(_one_beam_table(actuator=base))
+    except SceneError as exc:
+        assert f"actuator.{key}" in str(exc) or "actuator" in str(exc)
+        return
+    model = scene.build_model()
+    for command in (0.0, 1e3, -1e3):
+        assert np.all(np.isfinite(model.dynamics(0.0, model.rest_state(), command)))
+
+
+@settings(max_examples=60, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_any_sensors_table_gives_a_clear_error_or_honest_readings(data):
+    table = dict(SENSOR_TABLE)
+    key = data.draw(st.sampled_from(sorted(table) + ["tip_acceleration_noise",
+                                                     "sample_time", "gyro_bias_time"]))
+    table[key] = data.draw(_VALUES)
+    slew = copy.deepcopy(load_scene("slew-90").data)
+    try:
+        scene = parse_scene({**slew, "sensors": table})
+    except SceneError as exc:
+        assert f"sensors.{key}" in str(exc)
+        return
+    model = build_model(load_scene("hub-beam-mass").system, 2)
+    session = scene.sensors.start(model, 0.01)
+    x = model.layout.zeros()
+    xdot = model.dynamics(0.0, x, 0.0)
+    readings = [session.read(x, xdot) for _ in range(3)]
+    assert all(np.all(np.isfinite(r)) for r in readings)

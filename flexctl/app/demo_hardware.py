@@ -64,7 +64,8 @@ def _cells(run: dict) -> tuple:
     demand = "-" if run["demand"] is None else (
         f"{run['demand']:.4g} rad/s" if run["demand_name"] == "wheel_speed"
         else f"{run['demand']:.3g} V")
-    return (run["scene"], run["kind"], run["setup"], run["status"], f"{run['residual']:.3g}",
+    return (f"{run['scene']}: {run['kind']}", run["setup"], run["status"],
+            f"{run['residual']:.3g}",
             "not settled" if not np.isfinite(settle) else f"{settle:.3g}",
             f"{run['final_error']:.2e}", f"{run['peak_torque']:.3g}", demand)
 
@@ -101,7 +102,7 @@ def hardware(out: Path, executor=None) -> Section:
             f"sensors read every {link.sensors.sample_time:g} s. Residual vibration: largest "
             "|tip deflection| after the manoeuvre's nominal end; settling: 2 % band of the "
             "hub angle; demand: the wheel's peak speed or the motor's peak voltage.",),
-        table=(("scene", "controller", "setup", "status", "residual vibration (m)",
+        table=(("scene: controller", "setup", "status", "residual vibration (m)",
                 "settling time (s)", "final error (rad)", "peak hub torque (N m)",
                 "peak demand"), [_cells(run) for run in runs]),
         images=(("Tip deflection of the first controller of each scene, per setup", image),))

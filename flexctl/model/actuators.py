@@ -103,9 +103,10 @@ class ReactionWheel:
 
     def __post_init__(self):
         owner = "actuator"
-        for name in ("inertia", "torque_limit", "speed_limit"):
+        for name, most in (("inertia", 1e6), ("torque_limit", 1e9), ("speed_limit", 1e5)):
+            # beyond any wheel built (1e5 rad/s is a million rpm): the tolerances scale on them
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
-                                                      minimum=0.0, strict=True))
+                                                      minimum=0.0, strict=True, maximum=most))
         # a lag or a friction knee far below anything the structure does only makes the
         # equations stiff (time constant, s; smoothing speed, rad/s)
         for name in ("time_constant", "friction_smoothing"):
@@ -113,7 +114,7 @@ class ReactionWheel:
                                                       minimum=MIN_SCALE, maximum=1e6))
         for name in ("viscous_friction", "coulomb_friction"):
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
-                                                      minimum=0.0))
+                                                      minimum=0.0, maximum=1e9))
         if self.coulomb_friction >= self.torque_limit:
             raise InputValueError(
                 f"actuator.coulomb_friction must be below the torque_limit "
@@ -240,10 +241,10 @@ class DCMotor:
         for name in ("resistance", "torque_constant", "back_emf_constant", "gear_ratio",
                      "voltage_limit"):
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
-                                                      minimum=0.0, strict=True))
+                                                      minimum=0.0, strict=True, maximum=1e9))
         for name in ("rotor_inertia", "viscous_friction"):
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
-                                                      minimum=0.0))
+                                                      minimum=0.0, maximum=1e9))
         for name in ("gear_efficiency", "motor_efficiency"):
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
                                                       minimum=0.0, strict=True, maximum=1.0))
