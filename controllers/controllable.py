@@ -120,12 +120,22 @@ def lqe_on_part(model, spin_rate, c_meas, process, measurement):
     a, b = model.linear_matrices(spin_rate)
     part = controllable_part(model, spin_rate)
     if not part.dropped:
-        gain, _, poles = control.lqe(a, b, c_meas, process, measurement)
+        gain, _, poles = control.lqe(a, np.eye(a.shape[0]), c_meas,
+                                     _noise_input(b, process), measurement)
         return np.asarray(gain, dtype=float), np.asarray(poles)
     a_r, b_r = part.reduce(a, b)
-    gain_r, _, _ = control.lqe(a_r, b_r, c_meas @ part.basis, process, measurement)
+    gain_r, _, _ = control.lqe(a_r, np.eye(a_r.shape[0]), c_meas @ part.basis,
+                               _noise_input(b_r, process), measurement)
     gain = part.basis @ np.asarray(gain_r, dtype=float)
     return gain, np.linalg.eigvals(a - gain @ c_meas)
+
+
+def _noise_input(b, process) -> np.ndarray:
+    """``B QN B^T``, exactly symmetric: python-control checks the symmetry of the ``G QN G^T``
+    it forms to machine epsilon in absolute terms, which the rounding of a light hub's large
+    ``B`` breaks (a 6.7e-3 kg m^2 rig: asymmetry 5e-14)."""
+    q = np.asarray(b, dtype=float) @ np.atleast_2d(process) @ np.asarray(b, dtype=float).T
+    return 0.5 * (q + q.T)
 
 
 def dlqr_on_part(model, sample_time, q_mat, r_mat) -> np.ndarray:

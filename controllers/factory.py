@@ -356,6 +356,8 @@ def _feedback(spec: ControllerSpec, design: Model, plant: Model, angle, duration
     elif kind == "lqg":
         ctrl = _wrap(design_lqg, design, _lqr_weights(spec), _noise(spec),
                      spec.get("spin_rate"), plant=plant, **common)
+        if actuator is not None and actuator.kind == "dc_motor":
+            ctrl = dataclasses.replace(ctrl, motor=actuator)
     else:
         ctrl = _wrap(design_scheduled_lqr, design, _lqr_weights(spec),
                      list(spec.get("spin_rates")), **common)

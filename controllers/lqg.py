@@ -241,6 +241,11 @@ class LQG(ReferenceFeedback):
         As in :class:`~controllers.lqr.LQR`.
     layout : StateLayout, optional
         The design state's (and estimate's) layout, as in :class:`~controllers.lqr.LQR`.
+    motor : DCMotor, optional
+        The DC motor that turns the hub (its command a voltage,
+        :class:`~controllers.actuated.MotorVoltage`): the torque is kept on the motor's
+        voltage line at the estimated hub rate, ``|T + d w_hat| <= g V_max``, so that the
+        filter integrates the torque the motor can give (anti-windup), not the one asked.
     """
 
     gain: np.ndarray
@@ -253,6 +258,7 @@ class LQG(ReferenceFeedback):
     initial_estimate: np.ndarray = field(default=None, repr=False)
     deflection_gain: np.ndarray | None = field(default=None, repr=False)
     layout: StateLayout | None = field(default=None, repr=False)
+    motor: object = field(default=None, repr=False)
 
     owner = "lqg"
 
@@ -337,7 +343,17 @@ class LQG(ReferenceFeedback):
     def torque(self, t: float, x, z) -> float:
         """Hub torque, N m, from the estimate ``z`` (the plant state ``x`` is not read)."""
         x_ref, acc = reference_state(self.reference, t, self.layout, self.deflection_gain)
-        return self._apply(-float(self.gain[0] @ (np.asarray(z, dtype=float) - x_ref)), acc)
+        z = np.asarray(z, dtype=float)
+        u = self._apply(-float(self.gain[0] @ (z - x_ref)), acc)
+        if self.motor is None:
+            return u
+        rate, reach = float(z[self.layout.theta_dot]), self._motor_reach()
+        drag = self.motor.damping * rate
+        return float(np.clip(u, -reach - drag, reach - drag))
+
+    def _motor_reach(self) -> float:
+        """``g V_max``: the torque the motor's voltage limit gives at standstill, N m."""
+        return self.motor.torque_gain * self.motor.voltage_limit
 
     def derivative(self, t: float, x, z) -> np.ndarray:
         """``dz/dt = A z + B u + L (y - C z)``, shape (n_d,)."""
@@ -370,7 +386,11 @@ class LQG(ReferenceFeedback):
 
         x_ref, acc = casadi_reference_state(self.reference, t, self.layout,
                                             self.deflection_gain)
-        return self._casadi_apply(-ca.dot(ca.DM(self.gain[0]), z - x_ref), acc)
+        u = self._casadi_apply(-ca.dot(ca.DM(self.gain[0]), z - x_ref), acc)
+        if self.motor is None:
+            return u
+        reach, drag = self._motor_reach(), self.motor.damping * z[self.layout.theta_dot]
+        return ca.fmin(ca.fmax(u, -reach - drag), reach - drag)
 
     def casadi_derivative(self, t, x, z):
         """:meth:`derivative` as a CasADi expression, shape (n_d, 1)."""
