@@ -399,12 +399,32 @@ def format_summary(summary: dict) -> str:
                      f"{1e3 * sampled['solve_time_max_s']:.3g} ms, "
                      f"{sampled['failed_steps']} failed")
         lines.append(line)
+    lines += _hardware_lines(summary)
     files = summary.get("files")
     if files:
         folder = Path(files["summary"]).parent
         names = ", ".join(Path(p).name for p in files.values())
         lines.append(f"  wrote {names} in {folder}")
     return "\n".join(lines)
+
+
+def _hardware_lines(summary: dict) -> list:
+    """The console lines of the actuator's peaks and the sensors' errors."""
+    lines = []
+    actuator = summary.get("actuator")
+    if actuator and actuator["kind"] == "reaction_wheel":
+        lines.append(f"  reaction wheel: peak speed {actuator['peak_wheel_speed']:.4g} rad/s, "
+                     f"final {actuator['final_wheel_speed']:.3g} rad/s, peak motor torque "
+                     f"{actuator['peak_wheel_torque']:.3g} N m")
+    elif actuator:
+        lines.append(f"  DC motor: peak voltage {actuator['peak_motor_voltage']:.3g} V, peak "
+                     f"current {actuator['peak_motor_current']:.3g} A")
+    sensors = summary.get("sensors")
+    if sensors:
+        worst = ", ".join(f"{name} {err:.2g}" for name, err in
+                          sensors["largest_error"].items())
+        lines.append(f"  sensors: {sensors['samples']} readings, largest errors {worst}")
+    return lines
 
 
 def _relative(path, base: Path) -> str:
