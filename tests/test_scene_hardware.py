@@ -307,3 +307,18 @@ def test_lqg_on_a_motor_integrates_the_torque_the_motor_gives():
                                      np.max(error[design.layout.theta_dot]))
     assert errors[True][0] <= 0.2 * errors[False][0]
     assert errors[True][1] <= 0.2 * errors[False][1]
+
+
+def test_the_response_plot_shows_the_actuator_demand_against_its_limit():
+    from flexctl.app.plotting import plot_response
+
+    model = build_model(load_scene("hub-beam-mass").system, 2,
+                        actuator=ReactionWheel(**{k: v for k, v in WHEEL_TABLE.items()
+                                                  if k != "kind"}))
+    result = simulate(model, 2.0, torque=lambda t: 0.1)
+    fig = plot_response(result)
+    rows = [ax for ax in fig.axes if ax.get_ylabel().startswith("wheel speed")]
+    assert len(rows) == 1
+    lines = rows[0].get_lines()
+    assert np.allclose(lines[0].get_ydata(), result.actuator_signals["wheel_speed"])
+    assert {-600.0, 600.0} <= {float(line.get_ydata()[0]) for line in lines[1:]}

@@ -64,16 +64,18 @@ def plot_response(result, fig=None, title: str | None = None):
         Three axes sharing the time axis (s): hub angle (rad, left) with hub rate (rad/s,
         right, a twin axis, the fourth of ``fig.axes``), hub torque (N m; for a free hub
         with the hub centre's travel, mm, on a fifth, twin axis) and tip deflection (m, one
-        trace per appendage).
+        trace per appendage); with an actuator, a fourth row of its demand (the wheel's
+        speed, rad/s, or the motor's voltage, V) after the others.
         A run that stopped early (status ``"diverged"`` or ``"singular"``) has its stop time
         marked on every axis and its status written on the deflection plot.
     """
     model = result.model
+    rows = 4 if result.actuator_signals else 3
     if fig is None:
-        fig, axes = new_figure((8.0, 7.5), nrows=3, sharex=True)
+        fig, axes = new_figure((8.0, 2.5 * rows), nrows=rows, sharex=True)
     else:
-        axes = list(fig.subplots(3, 1, sharex=True))
-    ax_angle, ax_torque, ax_tip = axes
+        axes = list(fig.subplots(rows, 1, sharex=True))
+    ax_angle, ax_torque, ax_tip = axes[:3]
     t = result.t
 
     ax_angle.plot(t, result.theta, color="tab:blue", label="hub angle")
@@ -92,7 +94,8 @@ def plot_response(result, fig=None, title: str | None = None):
 
     _draw_structure(result, ax_torque, ax_tip)
     ax_tip.set_ylabel("tip deflection (m)")
-    ax_tip.set_xlabel("time (s)")
+    _draw_actuator(result, axes[3:])
+    axes[-1].set_xlabel("time (s)")
 
     for ax in axes:
         ax.grid(True, alpha=0.3)
@@ -117,6 +120,20 @@ def plot_response(result, fig=None, title: str | None = None):
         title = f"{model.variant}, {modes}: {status} ({end})"
     fig.suptitle(title, color="black" if status == "ok" else colour)
     return fig
+
+
+def _draw_actuator(result, axes) -> None:
+    """The actuator's demand against its limit, on the fourth row (if any)."""
+    if not axes:
+        return
+    signals, actuator = result.actuator_signals, result.model.actuator
+    name, limit, unit = (("wheel_speed", actuator.speed_limit, "rad/s")
+                         if "wheel_speed" in signals else
+                         ("motor_voltage", actuator.voltage_limit, "V"))
+    axes[0].plot(result.t, signals[name], color="tab:green")
+    for bound in (-limit, limit):
+        axes[0].axhline(bound, color="tab:red", linestyle=":", linewidth=1.0)
+    axes[0].set_ylabel(f"{name.replace('_', ' ')} ({unit})")
 
 
 def _draw_structure(result, ax_torque, ax_tip) -> None:
