@@ -256,3 +256,25 @@ def test_exact_mode_limit_names_the_scene_key():
 
     with pytest.raises(SceneError, match="model.modes"):
         load("slew-90", overrides={"model.modes": 30}).build_model()
+
+
+def test_an_override_under_both_names_of_a_setting_is_refused():
+    with pytest.raises(SceneError, match="set the same setting controller.hub_angle"):
+        load_scene("slew-90", {"controller.kind": "lqr", "controller.hub_angle": 0.05,
+                               "controller.angle_error": 0.01})
+
+
+def test_run_slew_designs_the_scene_controller_by_default():
+    from flexctl import run_slew
+
+    result, built, metrics = run_slew(load_scene("slew-90", {"controller.kind": "pd",
+                                                             "model.variant": "first_order",
+                                                             "model.modes": 2}))
+    assert result.ok and built.kind == "pd" and metrics.final_error == pytest.approx(0, abs=1e-2)
+
+
+def test_a_slew_angle_is_reported_in_the_degrees_it_was_written_in():
+    from flexctl.app.report import _maneuver_table
+
+    table = _maneuver_table(load_scene("slew-90", {"maneuver.angle_deg": 60.0}).maneuver)
+    assert table["angle_deg"] == 60.0

@@ -169,7 +169,8 @@ def _maneuver_table(maneuver) -> dict:
     kind = {SpinUp: "spin_up", Slew: "slew"}.get(type(maneuver), "sine_torque")
     fields = {k: (None if v is None else float(v)) for k, v in vars(maneuver).items()}
     if kind == "slew":
-        fields = {"angle_deg": math.degrees(fields.pop("angle")), **fields}
+        # 12 digits: the degrees the scene was written in, not their round trip through rad
+        fields = {"angle_deg": float(f"{math.degrees(fields.pop('angle')):.12g}"), **fields}
         fields["duration"] = "free" if fields["duration"] is None else fields["duration"]
     return {"kind": kind, **fields}
 

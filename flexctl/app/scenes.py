@@ -93,6 +93,7 @@ from importlib import resources
 from pathlib import Path
 
 # the controller kinds and their settings belong to the controllers package
+from controllers.spec import FORMER_NAMES
 from controllers.spec import (CONTROLLER_KEYS, ControllerSpec, SceneError, current_name,
                               current_names)
 
@@ -878,9 +879,25 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
     if isinstance(data.get("controller"), dict):
         # former names first, so that an override under either name replaces the file's value
         data["controller"] = current_names(data["controller"])
+    _check_setting_once(overrides or {})
     for key, value in (overrides or {}).items():
         _set_dotted(data, key, value)
     return parse_scene(data, name=name, base_dir=base_dir)
+
+
+def _check_setting_once(overrides: dict) -> None:
+    """Refuse overrides that set one controller setting under its current and its former
+    name (the later one would win unseen; a scene file giving both is refused too)."""
+    seen = {}
+    for key in overrides:
+        if not isinstance(key, str) or not key.startswith("controller."):
+            continue
+        setting = key[len("controller."):]
+        current = FORMER_NAMES.get(setting, setting)
+        if current in seen and seen[current] != key:
+            raise SceneError(f"override keys {seen[current]!r} and {key!r} set the same setting "
+                             f"controller.{current} (one is its former name); give it once")
+        seen[current] = key
 
 
 def _summary_scene(path: Path) -> tuple:
@@ -947,17 +964,17 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None, *,
     return dataclasses.replace(result, validity=validity)
 
 
-def run_slew(scene: Scene, controller_factory, *, progress=None):
+def run_slew(scene: Scene, controller_factory=None, *, progress=None):
     """Design a slew scene's controller, run it against the scene's plant, measure the slew.
 
     Parameters
     ----------
     scene : Scene
         A slew scene (``maneuver.kind = "slew"`` with a ``[controller]`` table).
-    controller_factory : callable
+    controller_factory : callable, optional
         ``factory(scene, plant)`` returning an object with ``controller`` and
-        ``maneuver_end`` (``controllers.from_spec``), passed in so that a caller can
-        give another factory.
+        ``maneuver_end``; default ``controllers.from_spec`` (the scene's ``[controller]``
+        table).
     progress : bool or callable, optional
         As for :func:`flexctl.simulate` (the closed-loop run).
 
@@ -972,6 +989,8 @@ def run_slew(scene: Scene, controller_factory, *, progress=None):
     if not isinstance(scene.maneuver, Slew):
         raise SceneError(f"scene {scene.name!r} is not a slew; got maneuver "
                          f"{type(scene.maneuver).__name__}")
+    if controller_factory is None:
+        from controllers import from_spec as controller_factory
     plant = scene.build_model()
     built = controller_factory(scene, plant)
     _check_slew_fits(scene, built)
