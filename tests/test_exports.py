@@ -5,7 +5,9 @@ import control
 import numpy as np
 import pytest
 
+import flexctl
 from conftest import random_states
+from flexctl.model.errors import InputValueError
 from flexctl import VARIANTS, build_model
 from flexctl.model.exact import PANEL_TOLERANCE
 from flexctl.model.exports import to_casadi, to_casadi_outputs, to_nonlinear_iosystem
@@ -97,3 +99,61 @@ def test_nonlinear_iosystem_simulates_like_flexctl(hub_beam_mass_system):
     scale = np.max(np.abs(ours.tip_deflection))
     np.testing.assert_allclose(tip, ours.tip_deflection, atol=1e-3 * scale)
     np.testing.assert_allclose(response.states[0], ours.theta, atol=1e-3 * np.max(ours.theta))
+
+
+#: python-control's finite-difference linearisation against the exact Jacobians, relative.
+OPERATING_POINT_TOLERANCE = 1e-5
+
+
+@pytest.mark.parametrize("variant", flexctl.VARIANTS)
+@pytest.mark.parametrize("scene", ["hub-beam-mass", "two-array-free", "wheel-slew"])
+def test_linearisation_about_any_operating_point_is_control_linearize(scene, variant):
+    """A deflected, spinning, accelerating state: the plant is python-control's
+    ``linearize`` of ``model.nonlinear()`` there, and its drift is ``dynamics(x0, u0)``."""
+    import control
+
+    system = flexctl.load_scene(scene)
+    model = system.build_model() if scene == "wheel-slew" else None
+    model = (flexctl.build_model(system.system, 2, variant) if model is None else
+             flexctl.build_model(system.system, 2, variant, actuator=system.actuator))
+    rng = np.random.default_rng(7)
+    x0 = model.rest_state(0.3)
+    x0[model.layout.q] = 0.02 * rng.normal(size=model.n_modes)
+    x0[model.layout.q_dot] = 0.05 * rng.normal(size=model.n_modes)
+    x0[model.layout.theta_dot] = 0.8
+    plant = model.linearize(x0=x0, u0=0.02)
+    reference = control.linearize(model.nonlinear(), x0, [0.02])
+    for name in ("A", "B", "C"):
+        ours, theirs = getattr(plant, name), getattr(reference, name)
+        assert np.max(np.abs(ours - theirs)) <= OPERATING_POINT_TOLERANCE * max(
+            1.0, np.max(np.abs(ours))), name
+    assert np.allclose(plant.drift, model.dynamics(0.0, x0, 0.02), rtol=1e-12, atol=1e-12)
+    assert plant.state_labels == model.nonlinear().state_labels
+
+
+def test_operating_point_refusals():
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, 2)
+    with pytest.raises(InputValueError, match="spin_rate or an operating point"):
+        model.linearize(1.0, x0=model.rest_state())
+    with pytest.raises(InputValueError, match="linearize.x0"):
+        model.linearize(x0=np.zeros(3))
+    with pytest.raises(InputValueError, match="linearize.u0"):
+        model.linearize(u0=float("nan"))
+
+
+@pytest.mark.parametrize("scene", ["hub-beam-mass", "two-array-free", "wheel-slew"])
+def test_casadi_outputs_and_time_response_carry_the_named_signals(scene):
+    loaded = flexctl.load_scene(scene)
+    model = loaded.build_model() if scene == "wheel-slew" else build_model(loaded.system, 2)
+    h = model.casadi_outputs()
+    assert h.name_in() == ["x", "u"] and h.name_out() == ["y"]
+    x = model.rest_state(0.2)
+    x[model.layout.q] = 0.01
+    assert np.allclose(np.array(h(x, 0.3)).ravel(), model.outputs(x), rtol=1e-12, atol=1e-15)
+    result = flexctl.simulate(model, 0.5, torque=lambda t: 0.01, output_step=0.05)
+    response = result.to_time_response()
+    assert response.output_labels == list(model.nonlinear().output_labels)
+    assert response.input_labels == list(model.input_names)
+    assert np.allclose(response.outputs, model.outputs(result.states))
+    assert np.allclose(response.states, result.states) and response.success
+    assert np.allclose(response.inputs, 0.01)

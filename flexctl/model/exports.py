@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["to_nonlinear_iosystem", "to_casadi", "to_casadi_outputs", "signal_names"]
+__all__ = ["to_nonlinear_iosystem", "to_casadi", "to_casadi_outputs", "signal_names",
+           "linearize_at"]
 
 
 def signal_names(names) -> list:
@@ -131,6 +132,45 @@ def to_casadi(model, sx: bool = True):
     u = sym("u", 1)
     return ca.Function(f"flexctl_{model.variant}_N{model.n_modes}", [x, u],
                        [_symbolic_dynamics(model, x, u)], ["x", "u"], ["xdot"])
+
+
+def linearize_at(model, x0, u0=0.0):
+    """The model linearised about any state ``x0`` and input ``u0`` (deflected, spinning,
+    accelerating), a python-control ``StateSpace`` in the deviations from them:
+    ``d(dx)/dt = A dx + B du``, ``dy = C dx``, with ``A, B, C`` the exact Jacobians of the
+    CasADi right-hand side and outputs (:meth:`Model.casadi`). Where ``x0`` is not an
+    equilibrium, the plant's attribute ``drift`` holds ``f(x0, u0)``, shape (n,), and
+    ``operating_point`` holds ``(x0, u0)``.
+
+    Raises
+    ------
+    InputValueError
+        If ``x0`` is not ``n`` finite numbers or ``u0`` one finite number, or the mass matrix
+        is singular there (a non-finite Jacobian).
+    """
+    import casadi as ca
+    import control
+
+    from .checks import check_array, check_real
+    from .errors import InputValueError
+
+    n = model.n_states
+    x0 = check_array("linearize", "x0", x0, shape=(n,))
+    u0 = check_real("linearize", "u0", u0)
+    x, u = ca.SX.sym("x", n), ca.SX.sym("u")
+    xdot, y = model.casadi()(x, u), to_casadi_outputs(model)(x)
+    jac = ca.Function("flexctl_linearize_at", [x, u],
+                      [xdot, ca.jacobian(xdot, x), ca.jacobian(xdot, u), ca.jacobian(y, x)])
+    drift, a, b, c = (np.array(m, dtype=float) for m in jac(x0, u0))
+    if not all(np.all(np.isfinite(m)) for m in (drift, a, b, c)):
+        raise InputValueError("linearize: the Jacobians are not finite at x0 (the mass matrix "
+                              "is singular there)")
+    plant = control.ss(a, b, c, np.zeros((c.shape[0], 1)),
+                       states=signal_names(model.state_names), inputs=list(model.input_names),
+                       outputs=signal_names(model.output_names),
+                       name=f"{model.variant}_at_operating_point")
+    plant.drift, plant.operating_point = drift.reshape(-1), (x0.copy(), u0)
+    return plant
 
 
 def to_casadi_outputs(model, sx: bool = True):

@@ -35,7 +35,7 @@ from .errors import InputValueError
 from .exports import signal_names
 from .layout import StateLayout
 from .structure_dynamics import structure_functions
-from .variants import Model, SingularMassMatrixError, _spin, _system_name
+from .variants import Model, SingularMassMatrixError, _at_operating_point, _spin, _system_name
 
 __all__ = ["StructureModel", "output_names"]
 
@@ -319,15 +319,18 @@ class StructureModel(Model):
         lam = scipy.linalg.eigh(stiff, 0.5 * (reduced + reduced.T), eigvals_only=True)
         return np.sort(np.sign(lam) * np.sqrt(np.abs(lam)))
 
-    def linearize(self, spin_rate: float = 0.0):
+    def linearize(self, spin_rate: float = 0.0, *, x0=None, u0=None):
         """Linear plant about rest (free hub) or a steady spin (pinned hub), a python-control
         ``StateSpace`` with the model's named states, input and outputs (dots as underscores,
         :func:`~flexctl.model.exports.signal_names`); its attribute
         ``modal_visibility`` (:class:`~flexctl.model.visibility.ModalVisibility`) says which
         modes the torque cannot move (symmetric appendages bending against each other) and
-        which outputs cannot see them."""
+        which outputs cannot see them. ``x0`` (and ``u0``) linearise about any operating
+        point instead (:func:`~flexctl.model.exports.linearize_at`)."""
         import control
 
+        if x0 is not None or u0 is not None:
+            return _at_operating_point(self, spin_rate, x0, u0)
         spin_rate = self._spin_for(spin_rate, "linearisation")
         a, b = self.linear_matrices(spin_rate)
         plant = control.ss(a, b, self.output_matrix, np.zeros((len(self.output_names), 1)),

@@ -563,13 +563,16 @@ class Model:
             self._c[key] = frequencies.copy()
         return frequencies
 
-    def linearize(self, spin_rate: float = 0.0):
+    def linearize(self, spin_rate: float = 0.0, *, x0=None, u0=None):
         """Linear plant about a steady spin, as a python-control ``StateSpace``.
 
         Parameters
         ----------
         spin_rate : float
             Steady hub rate ``Omega`` (rad/s) about which the model is linearised, ``q = 0``.
+        x0, u0 : array_like, shape (n,), and float, optional
+            Any operating point instead (a deflected, accelerating state):
+            :func:`~flexctl.model.exports.linearize_at` (``u0`` default 0).
 
         Returns
         -------
@@ -580,6 +583,8 @@ class Model:
         """
         import control
 
+        if x0 is not None or u0 is not None:
+            return _at_operating_point(self, spin_rate, x0, u0)
         a, b = self.linear_matrices(spin_rate)
         plant = control.ss(a, b, self.output_matrix, np.zeros((len(self.output_names), 1)),
                           states=signal_names(self.state_names), inputs=list(self.input_names),
@@ -601,6 +606,21 @@ class Model:
         from .exports import to_nonlinear_iosystem
         return to_nonlinear_iosystem(self)
 
+    def casadi_outputs(self):
+        """The outputs as a CasADi ``Function`` ``(x, u) -> y`` (inputs ``x`` (n x 1) and ``u``
+        (1 x 1), output ``y`` in :attr:`output_names` order; ``u`` is not read: no output feeds
+        through), beside :meth:`casadi`."""
+        import casadi as ca
+
+        from .exports import to_casadi_outputs
+
+        if "casadi_outputs" not in self._c:
+            h = to_casadi_outputs(self)
+            x, u = ca.SX.sym("x", self.n_states), ca.SX.sym("u")
+            self._c["casadi_outputs"] = ca.Function(
+                f"flexctl_{self.variant}_outputs", [x, u], [h(x)], ["x", "u"], ["y"])
+        return self._c["casadi_outputs"]
+
     def casadi(self):
         """Dynamics as a CasADi ``Function`` ``(x, u) -> dx/dt`` (see :mod:`flexctl.model.exports`).
 
@@ -610,6 +630,17 @@ class Model:
             from .exports import to_casadi
             self._c["casadi"] = to_casadi(self)
         return self._c["casadi"]
+
+
+def _at_operating_point(model, spin_rate, x0, u0):
+    """:func:`~flexctl.model.exports.linearize_at`, the operating point given once."""
+    from .exports import linearize_at
+
+    if spin_rate:
+        raise InputValueError(f"linearize takes spin_rate or an operating point x0, not both; "
+                              f"got spin_rate = {spin_rate!r}")
+    return linearize_at(model, model.layout.zeros() if x0 is None else x0,
+                        0.0 if u0 is None else u0)
 
 
 def _system_name(text: str) -> str:

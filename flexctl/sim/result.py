@@ -149,6 +149,24 @@ class SimulationResult:
         y = self.model.outputs(self.states)
         return dict(zip(self.model.output_names, y))
 
+    def to_time_response(self):
+        """The run as a python-control ``TimeResponseData``: time, the model's named outputs,
+        states and input (the actuator's command where there is one, else the hub torque),
+        python-control's signal names (:func:`~flexctl.model.exports.signal_names`), and
+        ``success``/``message`` from the run's status."""
+        import control
+
+        from ..model.exports import signal_names
+
+        model = self.model
+        inputs = self.torque if self.command is None else self.command
+        return control.TimeResponseData(
+            self.t, np.atleast_2d(model.outputs(self.states)), states=self.states,
+            inputs=np.asarray(inputs, dtype=float)[None, :],
+            output_labels=signal_names(model.output_names),
+            state_labels=signal_names(model.state_names), input_labels=list(model.input_names),
+            sysname=f"flexctl_{model.variant}", success=self.ok, message=self.message)
+
     @property
     def actuator_signals(self) -> dict:
         """The actuator's signals by name, each shape (P,) (``wheel_speed``, ``wheel_torque``;
