@@ -327,6 +327,11 @@ def _loop_sample_time(scene, spec: ControllerSpec) -> float | None:
     own = spec.get("sample_time") if "sample_time" in _kind_settings(spec) else None
     if scene.sensors is None:
         return own
+    if own is not None and scene.sensors.sample_time is not None \
+            and abs(own - scene.sensors.sample_time) > 1e-12 * own:
+        raise SceneError(f"controller.sample_time {own:g} s and sensors.sample_time "
+                         f"{scene.sensors.sample_time:g} s must agree: the controller runs "
+                         "at the rate it reads the sensors; give one of them")
     return scene.sensors.sample_time or own or DEFAULT_SENSOR_SAMPLE_TIME
 
 

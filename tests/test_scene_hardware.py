@@ -322,3 +322,9 @@ def test_the_response_plot_shows_the_actuator_demand_against_its_limit():
     lines = rows[0].get_lines()
     assert np.allclose(lines[0].get_ydata(), result.actuator_signals["wheel_speed"])
     assert {-600.0, 600.0} <= {float(line.get_ydata()[0]) for line in lines[1:]}
+
+
+def test_a_controller_rate_other_than_the_sensors_is_refused():
+    scene = load_scene("wheel-slew", {**SHORT_WHEEL, "controller.sample_time": 0.05})
+    with pytest.raises(SceneError, match="controller.sample_time 0.05 s and sensors.sample_time"):
+        from_spec(scene)
