@@ -22,7 +22,7 @@ import numpy as np
 
 from flexctl.model.errors import InputValueError
 
-from .plant_state import design_rows
+from .plant_state import casadi_hub_state, design_rows, hub_state
 from .reference import _casadi_saturate, _check_reference, _has_casadi, _optional_positive, \
     _saturate
 
@@ -89,6 +89,23 @@ class ReferenceFeedback:
                                       f"shape {x.shape}")
             rows = design_rows(self.layout, x.size)
         return x[rows]
+
+    def _hub_state(self, x) -> tuple:
+        """Hub angle (rad) and rate (rad/s) of numpy plant state ``x``: by
+        :attr:`plant_layout` when bound (its actuator's states follow the structure's), else as
+        one beam's state of its size."""
+        plant = self.plant_layout
+        if plant is not None and np.ndim(x) == 1 and plant.n_states == np.size(x):
+            x = np.asarray(x, dtype=float)
+            return float(plant.hub_angle(x)), float(plant.hub_rate(x))
+        return hub_state(x)
+
+    def _casadi_hub_state(self, x) -> tuple:
+        """:meth:`_hub_state` of a CasADi plant state."""
+        plant = self.plant_layout
+        if plant is not None and plant.n_states == x.numel():
+            return plant.hub_angle(x), plant.hub_rate(x)
+        return casadi_hub_state(x)
 
     def _casadi_design_state(self, x):
         """The design state of a CasADi plant state."""

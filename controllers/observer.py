@@ -67,6 +67,7 @@ import scipy.linalg
 from flexctl.model.checks import check_array, check_instance, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.digital import is_sampled
+from flexctl.sim.drives import bound_to_plant
 from flexctl.sim.inputs import input_value, time_function
 from flexctl.sim.sensors import (VARIANCE_FLOOR, Sensors, measurement_matrix,
                                  noise_covariance, sensor_names)
@@ -242,8 +243,7 @@ def _bound_law(law, model, x0):
     if is_sampled(law):
         session = law.start(model, x0)
         return (lambda t, x: input_value("observed.law", session.step(t, x), t)), session
-    if callable(getattr(law, "for_plant", None)) and getattr(law, "plant_layout", 0) is None:
-        law = law.for_plant(model)
+    law = bound_to_plant(law, model)
     if callable(getattr(law, "torque", None)) and hasattr(law, "n_states"):
         none = np.zeros(0)
         return (lambda t, x: input_value("observed.law", law.torque(t, x, none), t)), None

@@ -28,7 +28,6 @@ from flexctl.model.checks import check_integer
 from flexctl.model.layout import StateLayout
 
 from .feedback import ReferenceFeedback
-from .plant_state import casadi_hub_state, hub_state
 from .reference import _casadi_evaluate, _evaluate, _real, _structure_key
 
 __all__ = ["PD", "pd_gains", "design_pd"]
@@ -92,12 +91,7 @@ class PD(ReferenceFeedback):
 
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, at time ``t`` (s) for plant state ``x``."""
-        plant = self.plant_layout
-        if plant is not None and np.ndim(x) == 1 and plant.n_states == np.size(x):
-            x = np.asarray(x, dtype=float)
-            theta, rate = float(plant.hub_angle(x)), float(plant.hub_rate(x))
-        else:           # a bare state, read as one beam's of its size
-            theta, rate = hub_state(x)
+        theta, rate = self._hub_state(x)
         angle_ref, rate_ref, acc_ref = _evaluate(self.reference, t)
         return self._apply(self.kp * (angle_ref - theta) + self.kd * (rate_ref - rate), acc_ref)
 
@@ -118,11 +112,7 @@ class PD(ReferenceFeedback):
         kp, kd, inertia, limit = self.kp, self.kd, None, None
         if parameters is not None:
             kp, kd, inertia, limit = parameters[0], parameters[1], parameters[2], parameters[3]
-        plant = self.plant_layout
-        if plant is not None and plant.n_states == x.numel():
-            theta, rate = plant.hub_angle(x), plant.hub_rate(x)
-        else:
-            theta, rate = casadi_hub_state(x)
+        theta, rate = self._casadi_hub_state(x)
         angle_ref, rate_ref, acc_ref = _casadi_evaluate(self.reference, t)
         return self._casadi_apply(kp * (angle_ref - theta) + kd * (rate_ref - rate), acc_ref,
                                   inertia, limit)

@@ -37,6 +37,7 @@ from controllers.spec import SceneError
 
 from ..model.actuators import ACTUATOR_KINDS
 from ..sim.sensors import DEFAULT_SAMPLE_TIME, Sensors
+from .scene_tables import construct
 
 __all__ = ["parse_actuator", "parse_sensors", "ACTUATOR_KEYS", "SENSOR_KEYS",
            "DEFAULT_SAMPLE_TIME"]
@@ -46,20 +47,6 @@ ACTUATOR_KEYS = {kind: tuple(f.name for f in dataclasses.fields(cls))
                  for kind, cls in ACTUATOR_KINDS.items()}
 #: The keys of ``[sensors]``.
 SENSOR_KEYS = tuple(f.name for f in dataclasses.fields(Sensors))
-
-
-def _build(cls, where: str, table: dict):
-    missing = [f.name for f in dataclasses.fields(cls)
-               if f.init and f.default is dataclasses.MISSING and f.name not in table]
-    if missing:
-        raise SceneError(f"{where}.{missing[0]} is required")
-    try:
-        return cls(**table)
-    except (TypeError, ValueError) as exc:
-        message = str(exc)
-        prefix = where.split(".")[0] + "."
-        raise SceneError(message if message.startswith(prefix)
-                         else f"{where}: {message}") from None
 
 
 def parse_actuator(table) -> object:
@@ -76,7 +63,7 @@ def parse_actuator(table) -> object:
         if key not in allowed:
             raise SceneError(f"unknown key {key!r} in [actuator] of kind {kind!r}; expected "
                              f"one of {', '.join(('kind',) + allowed)}")
-    return _build(ACTUATOR_KINDS[kind], "actuator", table)
+    return construct(ACTUATOR_KINDS[kind], "actuator", table)
 
 
 def parse_sensors(table) -> Sensors:
@@ -87,4 +74,4 @@ def parse_sensors(table) -> Sensors:
         if key not in SENSOR_KEYS:
             raise SceneError(f"unknown key {key!r} in [sensors]; expected one of "
                              f"{', '.join(SENSOR_KEYS)}")
-    return _build(Sensors, "sensors", table)
+    return construct(Sensors, "sensors", table)

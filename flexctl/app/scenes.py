@@ -109,6 +109,7 @@ from ..model.structure import MAX_ANGLE, MAX_APPENDAGES, Appendage, Structure
 from ..sim.simulation import METHODS, MIN_T_FINAL, SimulationResult, simulate
 from ..sim.validity import VariantChoice, assess, choose_variant
 from .scene_hardware import parse_actuator, parse_sensors
+from .scene_tables import construct as _construct
 
 __all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene",
            "parse_scene",
@@ -557,29 +558,6 @@ def _table(data: dict, name: str, required: bool = True) -> dict:
     if not isinstance(table, dict):
         raise SceneError(f"scene key {name!r} must be a table; got {type(table).__name__}")
     return table
-
-
-def _construct(cls, key: str, kwargs: dict, rename: str | None = None):
-    """``cls(**kwargs)``, its error a :class:`SceneError` under the scene key ``key``; with
-    ``rename``, every ``key.`` in the message becomes ``rename.`` (an appendage's beam)."""
-    if dataclasses.is_dataclass(cls):
-        for f in dataclasses.fields(cls):
-            if f.init and f.name not in kwargs and f.default is dataclasses.MISSING \
-                    and f.default_factory is dataclasses.MISSING:
-                raise SceneError(f"{rename or key}.{f.name} is required")
-    try:
-        return cls(**kwargs)
-    except SceneError:
-        raise
-    except (ValueError, TypeError) as exc:
-        msg = str(exc)
-        if rename is not None:
-            msg = msg.replace(f"{key}.", f"{rename}.")
-            raise SceneError(msg if msg.startswith(rename) else f"{rename}: {msg}") from None
-        for prefix in ("hub.", "beam.", "mass.", "maneuver."):
-            if msg.startswith(prefix):
-                msg = msg[len(prefix):]
-        raise SceneError(f"{key}.{msg}") from None
 
 
 def parse_scene(data: dict, name: str = "scene", base_dir=None) -> Scene:

@@ -38,6 +38,7 @@ from .stops import tip_rows
 from .compiled import CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, is_symbolic
 from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
 from .inputs import input_value, output_grid, time_function
+from .drives import bound_to_plant
 from .sensors import sensor_names
 from ..model.errors import InputTypeError, InputValueError
 
@@ -152,9 +153,7 @@ class ZeroOrderHold:
     def start(self, model, x0) -> ControllerSession:
         """A session evaluating the law at each sample (a law that reads the plant by its
         layout bound to ``model``'s, as :func:`flexctl.simulate` binds continuous ones)."""
-        law = self.law
-        if callable(getattr(law, "for_plant", None)) and getattr(law, "plant_layout", 0) is None:
-            law = law.for_plant(model)
+        law = bound_to_plant(self.law, model)
         if callable(getattr(law, "torque", None)) and hasattr(law, "n_states"):
             z = np.zeros(0)
             return _HoldSession(lambda t, x: law.torque(t, x, z))
@@ -239,15 +238,20 @@ class _SensorFeed:
         self.seen = {}                              # sample -> (state, command held then)
         self.readings, self.truth = [], []
 
+    def _reads_in(self, lo: float, hi: float) -> np.ndarray:
+        """The samples whose read time falls in ``(lo, hi]`` (the times ascend)."""
+        return np.arange(np.searchsorted(self.times, lo, side="right"),
+                         np.searchsorted(self.times, hi, side="right"))
+
     def times_in(self, lo: float, hi: float) -> np.ndarray:
         """The read times that fall in ``(lo, hi]``."""
-        return self.times[(self.times > lo) & (self.times <= hi)]
+        return self.times[self._reads_in(lo, hi)]
 
     def store(self, lo, t_out, y_seg, u):
         """Keep the states of the interval ``(lo, t_out[-1]]`` at the read times it covers."""
-        for t_read in self.times_in(lo, t_out[-1]):
-            k = int(np.flatnonzero(self.times == t_read)[0])
-            self.seen[k] = (y_seg[:, int(np.flatnonzero(t_out == t_read)[0])], u)
+        for k in self._reads_in(lo, t_out[-1]):
+            column = int(np.searchsorted(t_out, self.times[k]))
+            self.seen[int(k)] = (y_seg[:, column], u)
 
     def read(self, k: int) -> np.ndarray:
         """Sample ``k``'s reading, shape (m,)."""

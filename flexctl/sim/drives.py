@@ -19,7 +19,8 @@ from .inputs import input_value, time_function
 from ..model import Model
 from ..model.errors import InputTypeError, InputValueError
 
-__all__ = ["Controller", "StaticLaw", "PrescribedDrive", "TorqueDrive", "as_controller"]
+__all__ = ["Controller", "StaticLaw", "PrescribedDrive", "TorqueDrive", "as_controller",
+           "bound_to_plant"]
 
 
 @runtime_checkable
@@ -83,6 +84,15 @@ class StaticLaw:
     def derivative(self, t, x, z=None) -> np.ndarray:
         """No internal state: shape (0,)."""
         return np.zeros(0)
+
+
+def bound_to_plant(law, model):
+    """``law`` reading the states of plant ``model``: a law that reads the plant by its
+    layout (``for_plant``, ``plant_layout`` still None) bound to ``model``'s, since a bare state
+    does not tell its blocks (several appendages, an actuator's states); else ``law``."""
+    if callable(getattr(law, "for_plant", None)) and getattr(law, "plant_layout", 0) is None:
+        return law.for_plant(model)
+    return law
 
 
 def as_controller(controller, x_init):

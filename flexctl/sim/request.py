@@ -18,7 +18,7 @@ import numpy as np
 
 from .compiled import is_symbolic
 from .digital import is_sampled
-from .drives import as_controller
+from .drives import as_controller, bound_to_plant
 from .inputs import (as_vector, check_method, check_rtol, check_time, jacobian_frequency,
                      output_grid, time_function)
 from .progress import check_progress, progress_cuts
@@ -323,11 +323,7 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
     w_spin = _spin_frequency(model, x_init, x0, t_final, hub_motion is not None)
     torque_fn = time_function(torque, "torque") if torque is not None else None
     if not is_sampled(controller):
-        controller = as_controller(controller, x_init)
-        if hasattr(controller, "for_plant") and getattr(controller, "plant_layout", 0) is None:
-            # a law that reads the plant state by its layout learns the plant's (several
-            # appendages: a bare state does not tell their mode counts)
-            controller = controller.for_plant(model)
+        controller = bound_to_plant(as_controller(controller, x_init), model)
     _check_reach(model, x_init, x0)
     sensors = _check_sensors(sensors, controller)
     return RunRequest(model=model, t_final=float(t_final), method=method, rtol=float(rtol),
