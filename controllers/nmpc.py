@@ -532,7 +532,7 @@ class NMPC:
             ubg += [0.0] * n
         return ca.vertcat(*g), np.array(lbg), np.array(ubg)
 
-    def _condensed(self, hold, q_diag, r, p_mat) -> dict:
+    def _condensed(self, hold, q_diag, r, p_mat, compiled: bool = True) -> dict:
         """The pieces of the condensed Gauss-Newton QP of one real-time iteration.
 
         Linearised about the current guess (states ``x_j``, torques ``u_j``), the shooting gaps
@@ -541,7 +541,8 @@ class NMPC:
         ``dx_{j+1} = A_j dx_j + B_j du_j + d_j``, i.e. ``dx_j = e_j + G_j du``: the QP has the
         ``N`` torque steps only (dense ``N x N``, see :meth:`NMPCSession._rti`). One compiled
         call gives every stage's ``F`` (``forward``), one its ``A, B`` (``linear``, of
-        :attr:`NMPC.linearisation_model`); the condensing is :meth:`_condensing`.
+        :attr:`NMPC.linearisation_model`); the condensing is :meth:`_condensing`. With
+        ``compiled`` false they stay CasADi expressions (for C code generation).
         """
         import casadi as ca
 
@@ -560,15 +561,16 @@ class NMPC:
         rows += horizon_rows(self.actuator, big_n)
         if self.terminal == "rest":
             rows += n
-        pieces = {"forward": _jit(hold.map(big_n), self.model),
-                  "linear": _jit(stage.map(big_n), lin_model), "hold_one": _jit(hold, self.model),
+        jit = _jit if compiled else (lambda function, model: function)
+        pieces = {"forward": jit(hold.map(big_n), self.model),
+                  "linear": jit(stage.map(big_n), lin_model), "hold_one": jit(hold, self.model),
                   "q": q_diag, "r": r, "p": p_mat, "rows": rows,
                   "h_sparsity": ca.Sparsity.dense(big_n, big_n),
                   "a_sparsity": ca.Sparsity.dense(rows, big_n)}
-        pieces.update(self._condensing(pieces))
+        pieces.update(self._condensing(pieces, compiled))
         return pieces
 
-    def _condensing(self, pieces) -> dict:
+    def _condensing(self, pieces, compiled: bool = True) -> dict:
         """``condense(w, p) -> (H, g, A, lba, uba, lbx, ubx, e, G)`` and
         ``expand(w, e, G, du) -> w + dw`` as CasADi matrix expressions (MX: one operation per
         block, not per scalar), so that a step hands CasADi matrices from the linearisation to
@@ -593,7 +595,7 @@ class NMPC:
              ca.densify(ca.vertcat(*g_mats))])
         # compiling the condensing costs 5 to 7 s of gcc and pays from about 30 steps
         # (measured at 40: 1.2 against 1.55 ms a step; at 20 no difference)
-        if big_n >= JIT_CONDENSE_FROM:
+        if compiled and big_n >= JIT_CONDENSE_FROM:
             condense = _jit(condense, self.model)
         return {"condense": condense, "expand": _expansion(w, n, big_n)}
 

@@ -1,0 +1,343 @@
+"""The C99 source, header, example ``main`` and Makefile of a :class:`ControllerProgram`.
+
+The source holds CasADi's code for the program's step (and recover) functions and a thin
+wrapper with the flexctl interface (see :data:`INTERFACE` and the header it writes): an opaque
+struct the caller allocates (:c:func:`flexctl_ctrl_size` bytes, aligned for ``double``), which
+holds the law's memory and every work array at a size fixed when the code was written. No
+function allocates memory, nothing at file scope is mutable, and the math library is the only
+dependency.
+"""
+
+from __future__ import annotations
+
+import re
+import textwrap
+
+import numpy as np
+
+from .program import ControllerProgram
+
+__all__ = ["CSources", "c_sources", "RETURN_CODES"]
+
+#: The step's return codes: (macro, value, meaning).
+RETURN_CODES = (
+    ("FLEXCTL_OK", 0, "success: u is the law's command"),
+    ("FLEXCTL_STEP_RECOVERED", 1, "the step's QP failed or gave a non-finite plan: u is the "
+     "previous plan's next command (the plan shifted one sample), which the law keeps"),
+    ("FLEXCTL_ERR_INPUT", 2, "t or an entry of x is not finite: u = 0, the memory unchanged"),
+    ("FLEXCTL_ERR_FAILED", 3, "the law gave a non-finite command: u = 0, the memory unchanged"),
+    ("FLEXCTL_ERR_ARGUMENT", 4, "a NULL pointer, or a struct not initialised by "
+     "flexctl_ctrl_init: nothing is written"),
+)
+
+_MAGIC = 0x666C6578      # "flex"
+
+
+class CSources:
+    """The four files of an export, as text.
+
+    Attributes
+    ----------
+    header, source, main, makefile : str
+    sizes : dict
+        ``memory_doubles``, ``work_doubles``, ``work_ints``, ``arg_pointers``,
+        ``res_pointers``: the arrays of the struct, in entries.
+    """
+
+    def __init__(self, header, source, main, makefile, sizes):
+        self.header, self.source, self.main, self.makefile = header, source, main, makefile
+        self.sizes = sizes
+
+
+def _c_double(value: float) -> str:
+    if not np.isfinite(value):
+        raise ValueError(f"cannot write the non-finite number {value!r} as C")
+    return repr(float(value))
+
+
+def _array(values, per_line: int = 4) -> str:
+    items = [_c_double(v) for v in np.asarray(values, dtype=float).reshape(-1)] or ["0.0"]
+    lines = [", ".join(items[i:i + per_line]) for i in range(0, len(items), per_line)]
+    return "{\n  " + ",\n  ".join(lines) + "\n}"
+
+
+def _generated(program: ControllerProgram, prefix: str) -> tuple:
+    """CasADi's C for the step and recover functions, and the work sizes they need."""
+    import casadi as ca
+
+    cg = ca.CodeGenerator(f"{prefix}_casadi.c", {
+        "with_header": False, "with_export": False, "verbose": False, "casadi_real": "double",
+        "casadi_int": "long long int", "prefix": f"{prefix}_", "avoid_stack": True})
+    functions = [program.step] + ([program.recover] if program.recover is not None else [])
+    renamed = [_renamed(function, f"{prefix}_{role}")
+               for function, role in zip(functions, ("step", "recover"))]
+    for function in renamed:
+        cg.add(function)
+    sizes = np.max([[f.sz_arg(), f.sz_res(), f.sz_iw(), f.sz_w()] for f in renamed], axis=0)
+    return cg.dump(), [f.name() for f in renamed], [int(s) for s in sizes]
+
+
+def _renamed(function, name):
+    """``function`` under ``name`` (a call of it: the functions it calls stay shared)."""
+    import casadi as ca
+
+    args = function.sx_in() if function.is_a("SXFunction") else function.mx_in()
+    return ca.Function(name, args, function.call(args), function.name_in(),
+                       function.name_out())
+
+
+def _fix_generated(code: str) -> str:
+    """CasADi's code made to compile cleanly at ``-Wall -Wextra -Werror``: its
+    ``casadi_int`` entry points and parameters it does not read are marked as such."""
+    code = code.replace("#ifdef __cplusplus\nextern \"C\" {\n#endif", "")
+    code = code.replace("#ifdef __cplusplus\n} /* extern \"C\" */\n#endif", "")
+    return code
+
+
+def c_sources(program: ControllerProgram, prefix: str = "flexctl_ctrl",
+              plant_states: int | None = None) -> CSources:
+    """The C files of ``program`` (module docstring); ``plant_states``: the plant's state
+    count, written as ``FLEXCTL_NX`` when the law reads readings."""
+    if not re.fullmatch(r"[a-z][a-z0-9_]{0,30}", prefix):
+        raise ValueError(f"prefix must be a C identifier of lower-case letters, digits and _; "
+                         f"got {prefix!r}")
+    code, names, (sz_arg, sz_res, sz_iw, sz_w) = _generated(program, "flexctl_law")
+    upper = prefix.upper()
+    n_in, n_mem = program.n_in, program.n_memory
+    measured = program.input_kind == "measurement"
+    nx = plant_states if measured and plant_states else n_in
+    sizes = {"memory_doubles": n_mem, "work_doubles": sz_w, "work_ints": sz_iw,
+             "arg_pointers": sz_arg, "res_pointers": sz_res}
+    header = _header(program, upper, prefix, nx, measured)
+    source = _source(program, prefix, upper, code, names, sizes)
+    return CSources(header, source, _main(program, prefix, upper), _makefile(prefix), sizes)
+
+
+def _names_comment(program) -> str:
+    return "\n".join(f" *   [{i:2d}] {name}" for i, name in enumerate(program.input_names))
+
+
+def _header(program, upper, prefix, nx, measured) -> str:
+    kind = ("the sensor readings y (FLEXCTL_NY entries, below)" if measured else
+            "FLEXCTL_NX plant states, in the plant's state order (below)")
+    codes = "\n".join(f"#define {name} {value}   /* {text} */" for name, value, text in
+                      RETURN_CODES)
+    guard = f"{upper}_H"
+    return f"""\
+/* {prefix}.h: a flexctl feedback law as self-contained C99.
+ *
+ * {program.description}
+ * Input of the step: {kind}:
+{_names_comment(program)}
+ * Output u: the {program.output_name} ({program.output_unit}).
+ *
+ * Usage: provide flexctl_ctrl_size() bytes aligned for double (malloc, or a static array of
+ * double), call flexctl_ctrl_init once, then flexctl_ctrl_step at every sample time t
+ * (t_0, t_0 + FLEXCTL_SAMPLE_TIME, ...), or whenever a command is needed when
+ * FLEXCTL_SAMPLE_TIME is 0. The struct holds the law's memory: one struct per loop, no
+ * global state, no allocation.
+ */
+#ifndef {guard}
+#define {guard}
+
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {{
+#endif
+
+#define FLEXCTL_NX {nx}   /* plant states{'' if measured else ' the law reads, in the plant state order'} */
+#define FLEXCTL_NY {program.n_in if measured else 0}   /* sensor readings an output-feedback law reads (0: it reads the state) */
+#define FLEXCTL_N_INPUT {program.n_in}   /* entries of the step's input (FLEXCTL_NY if nonzero, else FLEXCTL_NX) */
+#define FLEXCTL_NU 1
+#define FLEXCTL_SAMPLE_TIME {_c_double(program.sample_time)}   /* s; 0 for a continuous law evaluated when called */
+#define FLEXCTL_MEMORY_DOUBLES {program.n_memory}   /* the law's memory, inside the struct */
+
+{codes}
+
+typedef struct flexctl_ctrl flexctl_ctrl;   /* opaque */
+
+/* Bytes the caller provides for one controller. */
+size_t flexctl_ctrl_size(void);
+
+/* Sets the law's memory to its start (estimate, warm start, last command); 0 on success,
+ * FLEXCTL_ERR_ARGUMENT for a NULL pointer. Call again to restart the law. */
+int flexctl_ctrl_init(flexctl_ctrl *c);
+
+/* u[0]: the command to hold from time t (s), given x (FLEXCTL_N_INPUT entries: the plant
+ * state, or the readings y of an output-feedback law). Returns one of the codes above. */
+int flexctl_ctrl_step(flexctl_ctrl *c, double t, const double *x, double *u);
+
+/* Names of the step's input entries, in order. */
+extern const char *const flexctl_ctrl_input_names[FLEXCTL_N_INPUT];
+
+#ifdef __cplusplus
+}}
+#endif
+
+#endif
+"""
+
+
+def _source(program, prefix, upper, code, names, sizes) -> str:
+    n_mem = max(program.n_memory, 1)
+    has_recover = program.recover is not None
+    names_list = ",\n  ".join(f'"{name}"' for name in program.input_names)
+    recover_block = ""
+    if has_recover:
+        recover_block = f"""
+  if (!ok) {{
+    /* the step failed: the previous plan, shifted one sample */
+    c->arg[0] = &t;
+    c->arg[1] = x;
+    c->arg[2] = c->m;
+    c->res[0] = &u_new;
+    c->res[1] = c->m_next;
+    flag = {names[1]}(c->arg, c->res, c->iw, c->w, 0);
+    ok = flag == 0 && flexctl_finite(&u_new, 1) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_DOUBLES);
+    status = FLEXCTL_STEP_RECOVERED;
+  }}"""
+    return f"""\
+/* {prefix}.c: {program.description}
+ * Written by flexctl from its CasADi form; C99, no allocation, no mutable file-scope state.
+ */
+#include "{prefix}.h"
+
+#include <math.h>
+#include <string.h>
+
+/* ----------------------------------------------------------------------------------------
+ * CasADi's code of the law's step{' and recover' if has_recover else ''} function{'s' if has_recover else ''}.
+ * CasADi writes every entry point with the same parameter list and some of them leave
+ * parameters unread; only that warning is silenced here, for this part alone.
+ */
+#if defined(__GNUC__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wunused-parameter"
+#endif
+{_fix_generated(code)}
+#if defined(__GNUC__)
+#pragma GCC diagnostic pop
+#endif
+
+/* ---------------------------------------------------------------------------------------- */
+#define FLEXCTL_SZ_ARG {max(sizes['arg_pointers'], 1)}
+#define FLEXCTL_SZ_RES {max(sizes['res_pointers'], 1)}
+#define FLEXCTL_SZ_IW {max(sizes['work_ints'], 1)}
+#define FLEXCTL_SZ_W {max(sizes['work_doubles'], 1)}
+#define FLEXCTL_MAGIC {_MAGIC}
+
+struct flexctl_ctrl {{
+  double m[{n_mem}];        /* the law's memory */
+  double m_next[{n_mem}];   /* the memory after the step being taken */
+  double w[FLEXCTL_SZ_W];
+  long long int iw[FLEXCTL_SZ_IW];
+  const double *arg[FLEXCTL_SZ_ARG];
+  double *res[FLEXCTL_SZ_RES];
+  long magic;
+}};
+
+static const double flexctl_m0[{n_mem}] = {_array(program.memory_init if program.n_memory else [0.0])};
+
+const char *const flexctl_ctrl_input_names[FLEXCTL_N_INPUT] = {{
+  {names_list}
+}};
+
+static int flexctl_finite(const double *v, int n) {{
+  int i;
+  for (i = 0; i < n; ++i) {{
+    if (!isfinite(v[i])) return 0;
+  }}
+  return 1;
+}}
+
+size_t flexctl_ctrl_size(void) {{
+  return sizeof(struct flexctl_ctrl);
+}}
+
+int flexctl_ctrl_init(flexctl_ctrl *c) {{
+  if (!c) return FLEXCTL_ERR_ARGUMENT;
+  memset(c, 0, sizeof(struct flexctl_ctrl));
+  memcpy(c->m, flexctl_m0, sizeof(flexctl_m0));
+  c->magic = FLEXCTL_MAGIC;
+  return FLEXCTL_OK;
+}}
+
+int flexctl_ctrl_step(flexctl_ctrl *c, double t, const double *x, double *u) {{
+  double u_new = 0.0;
+  int flag, ok, status = FLEXCTL_OK;
+  if (!c || !x || !u || c->magic != FLEXCTL_MAGIC) return FLEXCTL_ERR_ARGUMENT;
+  if (!isfinite(t) || !flexctl_finite(x, FLEXCTL_N_INPUT)) {{
+    u[0] = 0.0;
+    return FLEXCTL_ERR_INPUT;
+  }}
+  c->arg[0] = &t;
+  c->arg[1] = x;
+  c->arg[2] = c->m;
+  c->res[0] = &u_new;
+  c->res[1] = c->m_next;
+  flag = {names[0]}(c->arg, c->res, c->iw, c->w, 0);
+  ok = flag == 0 && flexctl_finite(&u_new, 1) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_DOUBLES);{recover_block}
+  if (!ok) {{
+    u[0] = 0.0;
+    return FLEXCTL_ERR_FAILED;
+  }}
+  memcpy(c->m, c->m_next, sizeof(c->m));
+  u[0] = u_new;
+  return status;
+}}
+"""
+
+
+def _main(program, prefix, upper) -> str:
+    return f"""\
+/* main.c: runs the exported law on a state read from the command line (or zeros), and
+ * prints its command for ten samples. Build: make; run: ./{prefix}_demo [x_0 x_1 ...] */
+#include <stdio.h>
+#include <stdlib.h>
+
+#include "{prefix}.h"
+
+int main(int argc, char **argv) {{
+  double x[FLEXCTL_N_INPUT] = {{0.0}};
+  double u = 0.0;
+  int i, k, code;
+  flexctl_ctrl *c = (flexctl_ctrl *)malloc(flexctl_ctrl_size());   /* once, before the loop */
+  if (!c) return 1;
+  for (i = 0; i < FLEXCTL_N_INPUT && i + 1 < argc; ++i) x[i] = atof(argv[i + 1]);
+  if (flexctl_ctrl_init(c) != FLEXCTL_OK) return 1;
+  for (k = 0; k < 10; ++k) {{
+    double t = k * (FLEXCTL_SAMPLE_TIME > 0.0 ? FLEXCTL_SAMPLE_TIME : 0.01);
+    code = flexctl_ctrl_step(c, t, x, &u);
+    printf("t = %.4f s  u = %.12g  (code %d)\\n", t, u, code);
+  }}
+  printf("controller struct: %lu bytes\\n", (unsigned long)flexctl_ctrl_size());
+  free(c);
+  return 0;
+}}
+"""
+
+
+def _makefile(prefix) -> str:
+    return textwrap.dedent(f"""\
+        # Builds the exported law as an object, a static library and the example program.
+        CC ?= cc
+        CFLAGS ?= -std=c99 -O2 -Wall -Wextra -Werror
+        LDLIBS = -lm
+
+        all: lib{prefix}.a {prefix}_demo
+
+        {prefix}.o: {prefix}.c {prefix}.h
+        \t$(CC) $(CFLAGS) -c {prefix}.c -o $@
+
+        lib{prefix}.a: {prefix}.o
+        \t$(AR) rcs $@ $^
+
+        {prefix}_demo: main.c lib{prefix}.a
+        \t$(CC) $(CFLAGS) main.c lib{prefix}.a $(LDLIBS) -o $@
+
+        clean:
+        \trm -f {prefix}.o lib{prefix}.a {prefix}_demo
+
+        .PHONY: all clean
+        """)

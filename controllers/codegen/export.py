@@ -1,0 +1,326 @@
+"""Export a designed law as C files, compile them, and run the compiled law from Python.
+
+:func:`export_c` writes ``flexctl_ctrl.h``, ``flexctl_ctrl.c``, ``main.c`` and a ``Makefile``
+for a law bound to its plant (:func:`~controllers.codegen.program.program_for`).
+:meth:`CExport.compile` builds them with the system C compiler at
+``-std=c99 -Wall -Wextra -Werror`` into a shared library and loads it through :mod:`ctypes`
+(:class:`CompiledLaw`); :meth:`CompiledLaw.controller` is the compiled law as a flexctl
+controller, to close the loop on a plant with it.
+
+Examples
+--------
+>>> import numpy as np, flexctl, tempfile
+>>> from controllers import design_pd
+>>> from controllers.codegen import export_c
+>>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+>>> pd = design_pd(model, bandwidth=3.0, damping_ratio=0.9)
+>>> exported = export_c(pd, model, tempfile.mkdtemp())
+>>> law = exported.compile()                                        # doctest: +SKIP
+>>> law.step(0.0, np.r_[0.1, 0, 0, 0, 0, 0])[0] == pd.torque(0.0, np.r_[0.1, 0, 0, 0, 0, 0])
+... # doctest: +SKIP
+True
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from flexctl.model.errors import InputTypeError, InputValueError
+
+from .c_source import RETURN_CODES, c_sources
+from .program import ControllerProgram, program_for
+
+__all__ = ["export_c", "CExport", "CompiledLaw", "CompiledController", "CompileError",
+           "C_FLAGS", "find_compiler"]
+
+#: Flags every export is checked with.
+C_FLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-Werror")
+PREFIX = "flexctl_ctrl"
+_CODES = {value: name for name, value, _ in RETURN_CODES}
+
+
+class CompileError(RuntimeError):
+    """The C compiler refused an export (its messages attached), or there is none."""
+
+
+def find_compiler(cc: str | None = None) -> str:
+    """The C compiler: ``cc``, else ``$CC``, else ``cc``/``gcc``/``clang`` on the path."""
+    for name in ([cc] if cc else []) + [os.environ.get("CC")] + ["cc", "gcc", "clang"]:
+        if name and shutil.which(name):
+            return shutil.which(name)
+    raise CompileError("no C compiler found (set CC, or install cc, gcc or clang)")
+
+
+@dataclass(frozen=True, eq=False)
+class CExport:
+    """The files of an exported law.
+
+    Attributes
+    ----------
+    directory : pathlib.Path
+    program : ControllerProgram
+    sizes : dict
+        The struct's arrays, in entries (:class:`~controllers.codegen.c_source.CSources`).
+    files : tuple of pathlib.Path
+        Header, source, example main, Makefile.
+    plant_names : tuple of str
+        The plant's state names (what a state law reads).
+    """
+
+    directory: Path
+    program: ControllerProgram
+    sizes: dict
+    files: tuple
+    plant_names: tuple = ()
+
+    @property
+    def source(self) -> Path:
+        """``flexctl_ctrl.c``."""
+        return self.directory / f"{PREFIX}.c"
+
+    @property
+    def header(self) -> Path:
+        """``flexctl_ctrl.h``."""
+        return self.directory / f"{PREFIX}.h"
+
+    def compile(self, cc: str | None = None, flags=C_FLAGS) -> "CompiledLaw":
+        """Compile to a shared library (in :attr:`directory`) and load it.
+
+        Raises
+        ------
+        CompileError
+            No compiler, or it refused the code (its messages in the error).
+        """
+        compiler = find_compiler(cc)
+        library = self.directory / f"lib{PREFIX}_{os.getpid()}_{id(self):x}.so"
+        obj = self.directory / f"{PREFIX}.o"
+        started = time.perf_counter()
+        _run([compiler, *flags, "-fPIC", "-c", str(self.source), "-o", str(obj)])
+        _run([compiler, "-shared", str(obj), "-o", str(library), "-lm"])
+        elapsed = time.perf_counter() - started
+        return CompiledLaw(self, library, compile_time_s=elapsed, code_bytes=_text_size(obj))
+
+    def describe(self) -> dict:
+        """What was written: the law, its input, sample time and the struct's sizes."""
+        program = self.program
+        return {"kind": program.kind, "description": program.description,
+                "input": program.input_kind, "input_names": list(program.input_names),
+                "output": f"{program.output_name} ({program.output_unit})",
+                "sample_time_s": program.sample_time, "memory_doubles": program.n_memory,
+                **{k: int(v) for k, v in self.sizes.items()}, **program.info,
+                "files": [str(f) for f in self.files]}
+
+
+def _run(command):
+    done = subprocess.run(command, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise CompileError(f"{' '.join(command)} failed:\n{done.stderr.strip()[:4000]}")
+
+
+def _text_size(obj: Path) -> int | None:
+    """Bytes of code and constant data in the object (``size``'s text column)."""
+    tool = shutil.which("size")
+    if tool is None:
+        return None
+    done = subprocess.run([tool, str(obj)], capture_output=True, text=True)
+    try:
+        return int(done.stdout.splitlines()[1].split()[0])
+    except (IndexError, ValueError):
+        return None
+
+
+def export_c(controller, plant, directory, *, sample_time: float | None = None,
+             initial_state=None) -> CExport:
+    """Write ``controller`` (bound to ``plant``) as C files in ``directory``.
+
+    Parameters
+    ----------
+    controller : object
+        A designed built-in law (see :func:`~controllers.codegen.program.program_for`), or a
+        :class:`~controllers.codegen.program.ControllerProgram`.
+    plant : flexctl.Model
+        The plant the law runs on (its state order, sensors and actuator).
+    directory : str or pathlib.Path
+        Created if missing; the four files are written there (replacing earlier ones).
+    sample_time : float, optional
+        s: to discretise an LQG's estimator at, or to sample a static law at.
+    initial_state : array_like, optional
+        Plant state where an estimator starts, shape (n,); default zero.
+
+    Returns
+    -------
+    CExport
+    """
+    if isinstance(directory, bool) or not isinstance(directory, (str, os.PathLike)):
+        raise InputTypeError(f"export directory must be a path; got {type(directory).__name__}")
+    program = controller if isinstance(controller, ControllerProgram) else program_for(
+        controller, plant, sample_time=sample_time, initial_state=initial_state)
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise InputValueError(f"export directory {str(directory)!r} is a file")
+    directory.mkdir(parents=True, exist_ok=True)
+    sources = c_sources(program, PREFIX, plant_states=plant.n_states)
+    files = []
+    for name, text in ((f"{PREFIX}.h", sources.header), (f"{PREFIX}.c", sources.source),
+                       ("main.c", sources.main), ("Makefile", sources.makefile)):
+        path = directory / name
+        _write_atomic(path, text)
+        files.append(path)
+    return CExport(directory, program, sources.sizes, tuple(files), tuple(plant.state_names))
+
+
+def _write_atomic(path: Path, text: str):
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    with os.fdopen(handle, "w") as stream:
+        stream.write(text)
+    os.replace(temporary, path)
+
+
+class CompiledLaw:
+    """An exported law compiled and loaded through :mod:`ctypes`.
+
+    Attributes
+    ----------
+    export : CExport
+    struct_bytes : int
+        ``flexctl_ctrl_size()``: the caller's memory for one controller, bytes.
+    code_bytes : int or None
+        Code and constant data of the compiled object, bytes (``size``'s text column).
+    compile_time_s : float
+    """
+
+    def __init__(self, export: CExport, library: Path, compile_time_s: float,
+                 code_bytes: int | None):
+        self.export, self.library = export, library
+        self.compile_time_s, self.code_bytes = compile_time_s, code_bytes
+        lib = ctypes.CDLL(str(library))
+        lib.flexctl_ctrl_size.restype = ctypes.c_size_t
+        lib.flexctl_ctrl_size.argtypes = []
+        lib.flexctl_ctrl_init.restype = ctypes.c_int
+        lib.flexctl_ctrl_init.argtypes = [ctypes.c_void_p]
+        lib.flexctl_ctrl_step.restype = ctypes.c_int
+        lib.flexctl_ctrl_step.argtypes = [ctypes.c_void_p, ctypes.c_double,
+                                          ctypes.POINTER(ctypes.c_double),
+                                          ctypes.POINTER(ctypes.c_double)]
+        self._lib = lib
+        self.struct_bytes = int(lib.flexctl_ctrl_size())
+        # doubles: aligned for every member of the struct
+        self._memory = np.zeros(-(-self.struct_bytes // 8) + 1)
+        self._input = np.zeros(max(export.program.n_in, 1))
+        self._u = ctypes.c_double(0.0)
+        self.init()
+
+    @property
+    def program(self) -> ControllerProgram:
+        """The law's program."""
+        return self.export.program
+
+    def init(self) -> None:
+        """``flexctl_ctrl_init``: the law's memory back to its start."""
+        code = self._lib.flexctl_ctrl_init(self._memory.ctypes.data)
+        if code != 0:
+            raise RuntimeError(f"flexctl_ctrl_init returned {code}")
+
+    def step(self, t: float, v) -> tuple:
+        """``flexctl_ctrl_step``: ``(u, code)`` at time ``t`` (s) for the input ``v``."""
+        v = np.asarray(v, dtype=float).reshape(-1)
+        if v.size != self.program.n_in:
+            raise InputValueError(f"compiled law input must have {self.program.n_in} entries "
+                                  f"({self.program.input_kind}); got {v.size}")
+        self._input[:v.size] = v
+        code = self._lib.flexctl_ctrl_step(
+            self._memory.ctypes.data, ctypes.c_double(float(t)),
+            self._input.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), ctypes.byref(self._u))
+        return float(self._u.value), int(code)
+
+    def controller(self, measure=None) -> "CompiledController":
+        """This compiled law as a flexctl controller for :func:`flexctl.simulate`.
+
+        ``measure(t, x) -> y``: the readings of a measurement law (default
+        ``program.measurement_matrix @ x``)."""
+        return CompiledController(self, measure)
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledController:
+    """A :class:`CompiledLaw` as a flexctl controller: sampled at the law's sample time (a
+    continuous static law, sample time 0, is evaluated whenever the integrator asks)."""
+
+    law: CompiledLaw
+    measure: object = None
+    breakpoints: tuple = field(default=())
+
+    @property
+    def sample_time(self):
+        """s, or None for a continuous law."""
+        return self.law.program.sample_time or None
+
+    n_states = 0
+
+    def initial_state(self, x0):
+        """No states the integrator carries."""
+        return np.zeros(0)
+
+    def derivative(self, t, x, z=None):
+        """No states the integrator carries."""
+        return np.zeros(0)
+
+    def _input(self, t, x):
+        program = self.law.program
+        if program.input_kind == "state":
+            return x
+        if self.measure is not None:
+            return self.measure(t, x)
+        return program.measurement_matrix @ np.asarray(x, dtype=float)
+
+    def torque(self, t, x, z=None) -> float:
+        """The command at ``t`` for plant state ``x`` (a continuous law)."""
+        u, code = self.law.step(t, self._input(t, x))
+        if code not in (0, 1):
+            raise RuntimeError(f"compiled law at t = {t:g} s returned {_CODES.get(code, code)}")
+        return u
+
+    def start(self, model, x0) -> "CompiledSession":
+        """A session: the law's memory reset (``flexctl_ctrl_init``)."""
+        if model.n_states != len(self.law.export.plant_names):
+            raise InputValueError(f"compiled law was exported for a plant of "
+                                  f"{len(self.law.export.plant_names)} states; got "
+                                  f"{model.n_states}")
+        self.law.init()
+        return CompiledSession(self)
+
+
+class CompiledSession:
+    """A closed-loop run of a :class:`CompiledController`: per-step CPU times and codes."""
+
+    def __init__(self, owner: CompiledController):
+        self.owner = owner
+        self.cpu_times, self.codes = [], []
+
+    def step(self, t, x) -> float:
+        """The command to hold from ``t`` (s) for plant state ``x``."""
+        v = self.owner._input(t, x)
+        started = time.process_time()
+        u, code = self.owner.law.step(t, v)
+        self.cpu_times.append(time.process_time() - started)
+        self.codes.append(code)
+        if code not in (0, 1):
+            raise RuntimeError(f"compiled law at t = {t:g} s returned {_CODES.get(code, code)}")
+        return u
+
+    def report(self) -> dict:
+        """Steps, recovered steps and CPU time per step (s: median, 99th percentile)."""
+        times = np.array(self.cpu_times) if self.cpu_times else np.zeros(1)
+        return {"steps": len(self.codes), "recovered_steps": int(sum(c == 1 for c in
+                                                                     self.codes)),
+                "cpu_time_median_s": float(np.median(times)),
+                "cpu_time_p99_s": float(np.percentile(times, 99))}

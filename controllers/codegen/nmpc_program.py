@@ -1,0 +1,242 @@
+"""The NMPC's real-time iteration as one CasADi step function (:mod:`controllers.codegen`).
+
+The step is :meth:`controllers.nmpc.NMPCSession.step` in the ``"rti"`` mode, every operation
+a CasADi expression, so that CasADi writes it as C with its QP solver (``qrqp``, an
+active-set solver whose code CasADi generates):
+
+1. the design state: the plant state's design rows, or the extended Kalman filter's update
+   with the readings (an NMPC with ``noise``);
+2. the reference over the horizon at ``t + j T`` (the rest target, or the optimal slew's
+   Hermite cubics and the mean of its held torque over each sample);
+3. the warm start: the previous plan shifted one sample, its last hold repeated (the first
+   step: the reference, or the state held);
+4. condense (the compiled pieces of :meth:`controllers.nmpc.NMPC._condensed`), solve the QP,
+   expand;
+5. the first torque, clipped to the torque limit and, after the first step, to the torque-rate
+   limit.
+
+The memory is ``[w (the plan), u_prev, started, x_hat (EKF), P (EKF, column-major)]``. The
+``recover`` function is the same step with the QP left out: the shifted previous plan.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from flexctl.model.errors import InputValueError
+
+from .program import ControllerProgram, ExportRefused, _output
+
+__all__ = ["nmpc_program"]
+
+
+def _check(mpc, plant):
+    if mpc.mode != "rti":
+        raise ExportRefused("export: an NMPC solved to convergence runs IPOPT, which CasADi "
+                            "cannot write as C; use mode='rti' (one QP a sample)")
+    if mpc.qp_solver != "qrqp":
+        raise ExportRefused(f"export: the NMPC's QP solver {mpc.qp_solver!r} is a library "
+                            "CasADi calls, not code it writes; use qp_solver='qrqp'")
+    if plant.n_modes < mpc.model.n_modes:
+        raise InputValueError(f"export: the NMPC's design model has {mpc.model.n_modes} modes, "
+                              f"more than the plant's {plant.n_modes}")
+
+
+def _all_finite(v):
+    import casadi as ca
+
+    ok = ca.logic_and(v == v, ca.fabs(v) < ca.inf)
+    return ca.sum1(ok) >= v.numel()
+
+
+def _hermite_rows(t, grid, coef):
+    """``state_at(t)`` of a :class:`~controllers.trajopt.SlewSolution` (its grid, Hermite
+    coefficients (K, 4, n)), shape (n, 1)."""
+    import casadi as ca
+
+    from flexctl.sim.compiled import piecewise_constant
+
+    k_holds, _, n = coef.shape
+    table = np.column_stack((grid[:-1], grid[1:], coef.reshape(k_holds, 4 * n)))
+    row = piecewise_constant(t, grid[1:-1], table)
+    s = ca.fmin(ca.fmax((t - row[0]) / (row[1] - row[0]), 0.0), 1.0)
+    c = [row[2 + j * n:2 + (j + 1) * n] for j in range(4)]
+    return c[0] + s * (c[1] + s * (c[2] + s * c[3]))
+
+
+def _impulse_at(t, edges, impulse):
+    """``np.interp(t, edges, impulse)`` (clamped at both ends)."""
+    import casadi as ca
+
+    from flexctl.sim.compiled import piecewise_constant
+
+    table = np.column_stack((edges[:-1], edges[1:], impulse[:-1], impulse[1:]))
+    row = piecewise_constant(t, edges[1:-1], table)
+    slope = (row[3] - row[2]) / (row[1] - row[0])
+    inside = slope * (t - row[0]) + row[2]
+    return ca.if_else(t <= edges[0], impulse[0], ca.if_else(t >= edges[-1], impulse[-1],
+                                                             inside))
+
+
+def _reference(mpc, t):
+    """``[r_0, v_0, ..., r_{N-1}, v_{N-1}, r_N]`` at ``t + j T`` (MX column): one function
+    of time holding the tables once, mapped over the horizon's times (a loop in C)."""
+    import casadi as ca
+
+    n, big_n, step = mpc.model.n_states, mpc.horizon, mpc.sample_time
+    if mpc.reference is None:
+        rest = ca.DM(mpc.model.rest_state(mpc.target))
+        return ca.vertcat(*([ca.vertcat(rest, 0.0)] * big_n + [rest]))
+    solution = mpc.reference
+    grid, coef = np.asarray(solution.t, dtype=float), np.asarray(solution._hermite)
+    edges, values = mpc._reference_holds()
+    impulse = np.concatenate(([0.0], np.cumsum(values * np.diff(edges))))
+    time = ca.SX.sym("t")
+    held = (_impulse_at(time + step, edges, impulse) - _impulse_at(time, edges, impulse)) / step
+    at = ca.Function("nmpc_reference", [time],
+                     [ca.vertcat(_hermite_rows(time, grid, coef), held)])
+    stages = at.map(big_n + 1)(ca.repmat(t, 1, big_n + 1)
+                               + ca.DM(step * np.arange(big_n + 1)).T)      # (n + 1, N + 1)
+    return ca.vertcat(ca.vec(stages[:, :big_n]), stages[:n, big_n])
+
+
+def _first_guess(mpc, built, x_design):
+    """The plan before the first step (:class:`~controllers.nmpc.NMPCSession`'s start): the
+    reference, or ``x_design`` held."""
+    import casadi as ca
+
+    from controllers.nmpc import _state_slice
+
+    n, big_n = built["n"], mpc.horizon
+    if mpc.reference is not None:
+        refs, torques = mpc.reference_at(mpc.sample_time * np.arange(big_n + 1))
+        w = np.zeros(built["nw"])
+        for j in range(big_n + 1):
+            w[_state_slice(n, j)] = refs[:, j]
+        bound = mpc.hub_torque_limit
+        w[built["u_index"]] = np.clip(torques[:big_n], -bound, bound)
+        return ca.DM(w)
+    parts = [ca.vertcat(x_design, 0.0)] * big_n + [x_design]
+    return ca.vertcat(*parts)
+
+
+def _shifted(w, n, hold):
+    """The plan moved one sample on, its last hold repeated (the plan itself when that is
+    not finite), as :meth:`~controllers.nmpc.NMPCSession._shift`."""
+    import casadi as ca
+
+    width = n + 1
+    last_x, last_u = w[w.numel() - n:], w[w.numel() - n - 1]
+    shifted = ca.vertcat(w[width:], last_u, hold(last_x, last_u))
+    return ca.if_else(_all_finite(shifted), shifted, w)
+
+
+class _Filter:
+    """The extended Kalman filter of :class:`controllers.nmpc._ExtendedKalman` in CasADi."""
+
+    def __init__(self, mpc, plant, x0_design):
+        import casadi as ca
+
+        from controllers.lqg import _measurement_rows
+        from controllers.nmpc import _hold_function
+
+        model = mpc.model
+        n = model.n_states
+        self.n = n
+        self.plant_rows = _measurement_rows(plant)
+        self.rows = _measurement_rows(model)
+        x, u = ca.MX.sym("x", n), ca.MX.sym("u")
+        lin = _hold_function(mpc.linearisation_model, mpc.sample_time, mpc.substeps)(x, u)
+        self.jacobians = ca.Function("nmpc_ekf_jac", [x, u], [ca.jacobian(lin, x),
+                                                               ca.jacobian(lin, u)])
+        self.r = np.asarray(mpc.noise.measurement_covariance, dtype=float)
+        self.q = float(mpc.noise.process_covariance[0, 0]) / mpc.sample_time
+        self.init = np.concatenate((x0_design, (np.eye(n) * 1e-8).reshape(-1, order="F")))
+
+    def update(self, memory, y, u_prev, started, hold):
+        """``(x_hat, P)`` after this sample's prediction (from the second step on) and
+        update, as MX."""
+        import casadi as ca
+
+        n = self.n
+        x_hat = memory[:n]
+        p = ca.reshape(memory[n:n + n * n], n, n)
+        a, b = self.jacobians(x_hat, u_prev)
+        x_pred = ca.if_else(started, hold(x_hat, u_prev), x_hat)
+        p_pred = ca.if_else(started, ca.mtimes([a, p, a.T]) + self.q * ca.mtimes(b, b.T), p)
+        c = ca.DM(self.rows)
+        s = ca.mtimes([c, p_pred, c.T]) + ca.DM(self.r)
+        gain = ca.solve(s, ca.mtimes(c, p_pred), "qr").T
+        x_new = x_pred + ca.mtimes(gain, y - ca.mtimes(c, x_pred))
+        p_new = ca.mtimes(ca.DM.eye(n) - ca.mtimes(gain, c), p_pred)
+        return x_new, p_new
+
+
+def nmpc_program(mpc, plant, x0) -> ControllerProgram:
+    """The :class:`~controllers.codegen.program.ControllerProgram` of ``mpc`` on ``plant``."""
+    import casadi as ca
+
+    from controllers.nmpc import _conic, _input_index
+
+    _check(mpc, plant)
+    mpc._problem()          # validates and sets the sizes
+    model, big_n = mpc.model, mpc.horizon
+    n = model.n_states
+    built = dict(mpc._built)
+    from controllers.nmpc import _hold_function
+
+    hold = _hold_function(model, mpc.sample_time, mpc.substeps)
+    pieces = mpc._condensed(hold, mpc.state_weights, mpc.torque_weight,
+                            mpc._terminal_weight(), compiled=False)
+    qp = _conic("nmpc_qp", "qrqp", pieces["h_sparsity"], pieces["a_sparsity"])
+    nw = built["nw"]
+    rows = plant.layout.projection(model.layout)
+    ekf = None if mpc.noise is None else _Filter(mpc, plant, np.asarray(x0, dtype=float)[rows])
+    n_in = plant.n_states if ekf is None else ekf.plant_rows.shape[0]
+    n_mem = nw + 2 + (0 if ekf is None else n + n * n)
+
+    t, v, m = ca.MX.sym("t"), ca.MX.sym("v", n_in), ca.MX.sym("m", n_mem)
+    w, u_prev, started = m[:nw], m[nw], m[nw + 1]
+    extra = []
+    if ekf is None:
+        x_design = v[rows.tolist()]
+    else:
+        x_hat, p_new = ekf.update(m[nw + 2:], v, u_prev, started, hold)
+        x_design = x_hat
+        extra = [x_hat, ca.reshape(p_new, n * n, 1)]
+    par = ca.vertcat(x_design, u_prev, _reference(mpc, t))
+    # the first plan holds the state read (an EKF's: the state it starts from)
+    start = x_design if ekf is None else ca.DM(ekf.init[:n])
+    guess = ca.if_else(started, _shifted(w, n, hold), _first_guess(mpc, built, start))
+    guess = ca.vertcat(x_design, guess[n:])
+    h, g, a, lba, uba, lbx, ubx, affine, gains = pieces["condense"](guess, par)
+    solution = qp(h=h, g=g, a=a, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
+    planned = pieces["expand"](guess, affine, gains, solution["x"])
+
+    def finish(plan, name):
+        bound = mpc.hub_torque_limit
+        u = ca.fmin(ca.fmax(plan[_input_index(n, 0)], -bound), bound)
+        if mpc.torque_rate_limit is not None:
+            step = mpc.torque_rate_limit * mpc.sample_time
+            u = ca.if_else(started, ca.fmin(ca.fmax(u, u_prev - step), u_prev + step), u)
+        m_next = ca.vertcat(plan, u, 1.0, *extra)
+        return ca.Function(name, [t, v, m], [u, m_next], ["t", "v", "m"], ["u", "m_next"])
+
+    memory = np.concatenate((np.zeros(nw), [0.0, 0.0], [] if ekf is None else ekf.init))
+    if mpc.reference is not None:
+        memory[:nw] = np.array(_first_guess(mpc, built, None)).reshape(-1)
+    if ekf is None:
+        names, kind, matrix = tuple(plant.state_names), "state", None
+    else:
+        from controllers.lqg import measured_outputs
+        names, kind, matrix = tuple(measured_outputs(plant)), "measurement", ekf.plant_rows
+    out_name, unit = _output(plant)
+    return ControllerProgram(
+        kind="nmpc", step=finish(planned, "step"), recover=finish(guess, "recover"),
+        input_names=names, input_kind=kind, output_name=out_name, output_unit=unit,
+        memory_init=memory, sample_time=float(mpc.sample_time), measurement_matrix=matrix,
+        description=(f"NMPC real-time iteration, {model.variant} design model with "
+                     f"{model.n_modes} modes, horizon {big_n} x {mpc.sample_time:g} s, qrqp"
+                     + (", extended Kalman filter" if ekf is not None else "")),
+        info={"design_modes": model.n_modes, "horizon": big_n, "qp_variables": big_n,
+              "qp_constraints": int(pieces["rows"]), "design_variant": model.variant})

@@ -1,0 +1,284 @@
+"""A feedback law as one CasADi step function: what :mod:`controllers.codegen` turns into C.
+
+Every exportable law becomes a :class:`ControllerProgram`: a CasADi function
+
+    step(t, v, m) -> (u, m_next)
+
+of the time ``t`` (s), the law's input ``v`` (the plant state, or the sensor readings of an
+output-feedback law) and its memory ``m`` (estimator states, the NMPC's warm start, the last
+command), giving the command ``u`` and the memory after the sample. A static law has no memory
+and may be evaluated at any time (``sample_time = 0``); a sampled law is called once per
+sample, at ``t = t_0, t_0 + T, ...``. A law whose step can fail (the NMPC's QP) carries a
+``recover`` function of the same signature, which the C code calls when ``step`` reports a
+failure or gives a non-finite number: it applies the previous plan, shifted one sample.
+
+:func:`program_for` builds the program of a designed law bound to its plant, or refuses with
+the reason: a law with no CasADi form (a Python callable), an NMPC that is not a real-time
+iteration with ``qrqp`` (IPOPT and the osqp / qpOASES / HPIPM plugins are libraries CasADi
+calls, not code it writes), a continuous estimator with no sample time to discretise it at.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.sim.digital import ZeroOrderHold, is_sampled
+from flexctl.sim.drives import bound_to_plant
+
+__all__ = ["ControllerProgram", "program_for", "ExportRefused"]
+
+
+class ExportRefused(InputValueError):
+    """A controller that cannot be written as self-contained C, with the reason."""
+
+
+@dataclass(frozen=True, eq=False)
+class ControllerProgram:
+    """A feedback law as CasADi step functions (module docstring).
+
+    Attributes
+    ----------
+    kind : str
+        The law (``"pd"``, ``"lqr"``, ``"scheduled_lqr"``, ``"tracker"``, ``"lqg"``,
+        ``"nmpc"``, ...).
+    step : casadi.Function
+        ``(t (1), v (n_in), m (n_mem)) -> (u (1), m_next (n_mem))``.
+    recover : casadi.Function or None
+        Same signature; what a failed ``step`` is replaced by.
+    input_names : tuple of str
+        Names of ``v``'s entries, in order.
+    input_kind : {"state", "measurement"}
+        ``v`` is the plant state (in the plant's state order) or sensor readings.
+    output_name, output_unit : str
+        ``u``: ``"torque"`` (N m on the hub), ``"torque_command"`` (N m asked of a reaction
+        wheel) or ``"voltage"`` (V on a DC motor).
+    memory_init : ndarray, shape (n_mem,)
+        ``m`` before the first step.
+    sample_time : float
+        s; 0 for a static law evaluated whenever it is called.
+    measurement_matrix : ndarray or None, shape (n_in, n_plant)
+        For a measurement law: the readings ``v = C x`` of the plant state (noise aside).
+    description : str
+        One line naming the law and its settings.
+    info : dict
+        Numbers worth reporting (design modes, horizon, QP size...).
+    """
+
+    kind: str
+    step: object
+    recover: object
+    input_names: tuple
+    input_kind: str
+    output_name: str
+    output_unit: str
+    memory_init: np.ndarray
+    sample_time: float
+    measurement_matrix: np.ndarray | None = None
+    description: str = ""
+    info: dict = field(default_factory=dict)
+
+    @property
+    def n_in(self) -> int:
+        """Entries of the input ``v``."""
+        return len(self.input_names)
+
+    @property
+    def n_memory(self) -> int:
+        """Entries of the memory ``m``."""
+        return int(self.memory_init.size)
+
+    def session(self) -> "ProgramSession":
+        """Steps of this program evaluated by CasADi (the reference the C code is checked
+        against)."""
+        return ProgramSession(self)
+
+
+class ProgramSession:
+    """The program stepped in Python, with the C code's failure handling."""
+
+    def __init__(self, program: ControllerProgram):
+        self.program, self.memory = program, program.memory_init.copy()
+        self.failures = 0
+
+    def step(self, t: float, v) -> float:
+        """Command at time ``t`` (s) for the input ``v`` (n_in,)."""
+        args = (float(t), np.asarray(v, dtype=float).reshape(-1), self.memory)
+        program = self.program
+        try:
+            u, m_next = program.step(*args)
+            ok = True
+        except RuntimeError:        # the QP failed inside the step
+            ok = False
+        if ok:
+            u, m_next = float(u), np.array(m_next, dtype=float).reshape(-1)
+            ok = np.isfinite(u) and bool(np.all(np.isfinite(m_next)))
+        if not ok and program.recover is not None:
+            self.failures += 1
+            u, m_next = program.recover(*args)
+            u, m_next = float(u), np.array(m_next, dtype=float).reshape(-1)
+        self.memory = m_next
+        return u
+
+
+# ------------------------------------------------------------------------ the laws
+def program_for(controller, plant, *, sample_time: float | None = None,
+                initial_state=None) -> ControllerProgram:
+    """The :class:`ControllerProgram` of a designed ``controller`` run on ``plant``.
+
+    Parameters
+    ----------
+    controller : object
+        A flexctl feedback law: PD, LQR, ScheduledLQR, TrajectoryTracker, LQG, NMPC, one of
+        them sampled (:class:`~flexctl.sim.digital.ZeroOrderHold`) or driving an actuator
+        (:class:`~controllers.actuated.MotorVoltage`, :class:`~controllers.actuated.LaggedLQR`).
+    plant : flexctl.Model
+        The plant the law reads (its state order, sensors and actuator).
+    sample_time : float, optional
+        s: the rate a continuous estimator (LQG) is discretised at, or a static law sampled
+        at. A law that samples itself keeps its own and refuses another.
+    initial_state : array_like, optional
+        Plant state at the start, shape (n,): where an estimator's estimate starts (default:
+        at rest, zero).
+
+    Raises
+    ------
+    ExportRefused
+        For a law that cannot be written as C, with the reason.
+    """
+    from flexctl.model import Model
+
+    if not isinstance(plant, Model):
+        raise InputTypeError(f"export plant must be a flexctl Model; got {type(plant).__name__}")
+    if sample_time is not None:
+        from flexctl.sim.digital import _sample_time
+        sample_time = _sample_time("export", sample_time)
+    x0 = np.zeros(plant.n_states) if initial_state is None else np.asarray(
+        initial_state, dtype=float).reshape(-1)
+    if x0.shape != (plant.n_states,) or not np.all(np.isfinite(x0)):
+        raise InputValueError(f"export initial_state must be {plant.n_states} finite numbers "
+                              f"(the plant's states); got shape {x0.shape}")
+    return _dispatch(controller, plant, sample_time, x0)
+
+
+def _dispatch(controller, plant, sample_time, x0):
+    from controllers.actuated import MotorVoltage
+    from controllers.lqg import LQG
+    from controllers.nmpc import NMPC
+    from controllers.observer import Observed
+
+    if isinstance(controller, MotorVoltage):
+        return _voltage_program(controller, plant, sample_time, x0)
+    if isinstance(controller, ZeroOrderHold):
+        own = controller.sample_time
+        if sample_time is not None and abs(sample_time - own) > 1e-12 * own:
+            raise ExportRefused(f"export sample_time {sample_time:g} s differs from the "
+                                f"law's own {own:g} s")
+        return _static_program(controller.law, plant, own)
+    if isinstance(controller, NMPC):
+        _same_rate(controller, sample_time)
+        from .nmpc_program import nmpc_program
+        return nmpc_program(controller, plant, x0)
+    if isinstance(controller, LQG):
+        from .lqg_program import lqg_program
+        return lqg_program(controller, plant, sample_time, x0)
+    if isinstance(controller, Observed):
+        _same_rate(controller, sample_time)
+        from .observed_program import observed_program
+        return observed_program(controller, plant, x0)
+    if is_sampled(controller):
+        raise ExportRefused(f"export: the sampled controller {type(controller).__name__} has "
+                            "no C form (built-in laws only)")
+    return _static_program(controller, plant, sample_time or 0.0)
+
+
+def _same_rate(controller, sample_time):
+    own = controller.sample_time
+    if sample_time is not None and abs(sample_time - own) > 1e-12 * own:
+        raise ExportRefused(f"export sample_time {sample_time:g} s differs from the "
+                            f"{type(controller).__name__}'s own {own:g} s")
+
+
+_STATIC_KINDS = {"PD": "pd", "LQR": "lqr", "ScheduledLQR": "scheduled_lqr",
+                 "TrajectoryTracker": "tracker", "LaggedLQR": "lqr_wheel"}
+
+
+def _output(plant, voltage: bool = False) -> tuple:
+    """(name, unit) of the command a law gives ``plant``."""
+    if voltage:
+        return "voltage", "V"
+    actuator = getattr(plant, "actuator", None)
+    if actuator is not None and actuator.kind == "reaction_wheel":
+        return "torque_command", "N m"
+    return "torque", "N m"
+
+
+def _static_law_expression(controller, plant, owner="export"):
+    """``(t, x, u)``: SX symbols of time and plant state, and the law's command."""
+    import casadi as ca
+
+    kind = _STATIC_KINDS.get(type(controller).__name__)
+    if kind is None or not callable(getattr(controller, "casadi_torque", None)):
+        name = getattr(controller, "__name__", type(controller).__name__)
+        raise ExportRefused(f"{owner}: {name} has no CasADi form to write as C; the built-in "
+                            "laws (PD, LQR, ScheduledLQR, TrajectoryTracker, LQG, NMPC) do")
+    if getattr(controller, "n_states", 0):
+        raise ExportRefused(f"{owner}: {type(controller).__name__} has internal states")
+    if not getattr(controller, "has_casadi_form", True):
+        raise ExportRefused(f"{owner}: {type(controller).__name__}'s reference has no CasADi "
+                            "form (a SlewProfile or a SlewSolution has)")
+    law = bound_to_plant(controller, plant)
+    t, x = ca.SX.sym("t"), ca.SX.sym("x", plant.n_states)
+    return kind, law, t, x, ca.SX(law.casadi_torque(t, x))
+
+
+def _static_program(controller, plant, sample_time) -> ControllerProgram:
+    import casadi as ca
+
+    kind, law, t, x, u = _static_law_expression(controller, plant)
+    m = ca.SX.sym("m", 0)
+    step = ca.Function("step", [t, x, m], [u, m], ["t", "v", "m"], ["u", "m_next"])
+    name, unit = _output(plant)
+    return ControllerProgram(
+        kind=kind, step=step, recover=None, input_names=tuple(plant.state_names),
+        input_kind="state", output_name=name, output_unit=unit, memory_init=np.zeros(0),
+        sample_time=float(sample_time), description=repr(law).splitlines()[0][:200],
+        info={"design_modes": _design_modes(law)})
+
+
+def _design_modes(law) -> int | None:
+    for owner in (law, getattr(law, "lqr", None), getattr(getattr(law, "solution", None),
+                                                          "model", None)):
+        modes = getattr(owner, "n_modes", None)
+        if isinstance(modes, (int, np.integer)):
+            return int(modes)
+    return None
+
+
+def _voltage_program(controller, plant, sample_time, x0) -> ControllerProgram:
+    """A DC motor's voltage for the torque of the inner law's program: ``V(u, hub rate)``."""
+    import casadi as ca
+
+    inner = program_for(controller.law, plant, sample_time=sample_time, initial_state=x0)
+    if inner.input_kind != "state":
+        raise ExportRefused("export: a DC motor's voltage needs the hub rate; the law inside "
+                            f"MotorVoltage ({inner.kind}) reads sensors, not the state")
+    motor, rate_index = controller.motor, plant.layout.theta_dot
+
+    def wrap(function):
+        if function is None:
+            return None
+        t, v, m = (ca.MX.sym(n, function.size_in(i)) for i, n in enumerate(("t", "v", "m")))
+        u, m_next = function(t, v, m)
+        volts = motor.voltage_for(u, v[rate_index])
+        return ca.Function(function.name(), [t, v, m], [volts, m_next], ["t", "v", "m"],
+                           ["u", "m_next"])
+
+    return ControllerProgram(
+        kind=inner.kind, step=wrap(inner.step), recover=wrap(inner.recover),
+        input_names=inner.input_names, input_kind="state", output_name="voltage",
+        output_unit="V", memory_init=inner.memory_init, sample_time=inner.sample_time,
+        description=f"{inner.description} through the DC motor's voltage",
+        info=dict(inner.info))
