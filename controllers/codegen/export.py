@@ -266,6 +266,13 @@ class CompiledController:
 
     n_states = 0
 
+    @property
+    def measures(self) -> bool:
+        """True when the law reads the sensors' readings (handed over by the simulation,
+        ``simulate(..., sensors=)``), as :class:`controllers.observer.Observed` does."""
+        program = self.law.program
+        return program.input_kind == "measurement" and program.measurement_matrix is None
+
     def initial_state(self, x0):
         """No states the integrator carries."""
         return np.zeros(0)
@@ -276,7 +283,7 @@ class CompiledController:
 
     def _input(self, t, x):
         program = self.law.program
-        if program.input_kind == "state":
+        if program.input_kind == "state" or self.measures:
             return x
         if self.measure is not None:
             return self.measure(t, x)
@@ -291,7 +298,7 @@ class CompiledController:
 
     def start(self, model, x0) -> "CompiledSession":
         """A session: the law's memory reset (``flexctl_ctrl_init``)."""
-        if model.n_states != len(self.law.export.plant_names):
+        if not self.measures and model.n_states != len(self.law.export.plant_names):
             raise InputValueError(f"compiled law was exported for a plant of "
                                   f"{len(self.law.export.plant_names)} states; got "
                                   f"{model.n_states}")

@@ -244,8 +244,16 @@ def _static_program(controller, plant, sample_time) -> ControllerProgram:
     return ControllerProgram(
         kind=kind, step=step, recover=None, input_names=tuple(plant.state_names),
         input_kind="state", output_name=name, output_unit=unit, memory_init=np.zeros(0),
-        sample_time=float(sample_time), description=repr(law).splitlines()[0][:200],
+        sample_time=float(sample_time), description=_describe(law, sample_time),
         info={"design_modes": _design_modes(law)})
+
+
+def _describe(law, sample_time) -> str:
+    modes = _design_modes(law)
+    limit = getattr(law, "torque_limit", None)
+    return (f"{type(law).__name__}" + (f" on {modes} design modes" if modes else "")
+            + (f", command limited to {limit:g} N m" if limit else "")
+            + (f", sampled every {sample_time:g} s" if sample_time else ", continuous"))
 
 
 def _design_modes(law) -> int | None:
