@@ -202,7 +202,8 @@ def _same_rate(controller, sample_time):
 
 
 _STATIC_KINDS = {"PD": "pd", "LQR": "lqr", "ScheduledLQR": "scheduled_lqr",
-                 "TrajectoryTracker": "tracker", "LaggedLQR": "lqr_wheel"}
+                 "TrajectoryTracker": "tracker", "LaggedLQR": "lqr_wheel",
+                 "OpenLoop": "open_loop"}
 
 
 def _output(plant, voltage: bool = False) -> tuple:
@@ -288,5 +289,5 @@ def _voltage_program(controller, plant, sample_time, x0) -> ControllerProgram:
         kind=inner.kind, step=wrap(inner.step), recover=wrap(inner.recover),
         input_names=inner.input_names, input_kind="state", output_name="voltage",
         output_unit="V", memory_init=inner.memory_init, sample_time=inner.sample_time,
-        description=f"{inner.description} through the DC motor's voltage",
+        description=f"{inner.description}, through the DC motor's voltage",
         info=dict(inner.info))

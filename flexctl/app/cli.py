@@ -125,6 +125,26 @@ def _parser() -> argparse.ArgumentParser:
                      help=f"output directory (default {DEFAULT_RUN_DIR}/<scene name>)")
     run.set_defaults(func=_cmd_run)
 
+    export = commands.add_parser(
+        "export", help="write a slew scene's controller as C99, compile and check it",
+        description=textwrap.fill(
+            "Design the scene's controller and write it as self-contained C99 "
+            "(flexctl_ctrl.h, flexctl_ctrl.c, an example main.c and a Makefile) in DIR; "
+            "where a C compiler is present, compile it at -std=c99 -Wall -Wextra -Werror and "
+            "check it against the law's CasADi form. Exit 0 on success, 2 on bad input or "
+            "a law that has no C form (the reason is printed).", width=80))
+    export.add_argument("scene", metavar="SCENE", help="TOML file or built-in scene name")
+    export.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a scene value, as for 'flexctl run' (repeatable)")
+    export.add_argument("--out", metavar="DIR", type=_out_dir,
+                        help=f"output directory (default {DEFAULT_RUN_DIR}/<scene name>/c)")
+    export.add_argument("--sample-time", metavar="S", type=_positive_seconds, default=None,
+                        help="s: the rate an LQG's estimator is discretised at (default the "
+                        "sensors', else 0.01), or a continuous law is sampled at")
+    export.add_argument("--no-compile", action="store_true",
+                        help="write the files only")
+    export.set_defaults(func=_cmd_export)
+
     scenes = commands.add_parser("scenes", help="list the built-in scenes")
     scenes.set_defaults(func=_cmd_scenes)
 
@@ -208,6 +228,17 @@ def _out_dir(text: str) -> Path:
     if not text.strip():
         raise argparse.ArgumentTypeError(f"must name a directory; got {text!r}")
     return Path(text)
+
+
+def _positive_seconds(text: str) -> float:
+    """argparse type of ``--sample-time``: a positive, finite number of seconds."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds; got {text!r}") from None
+    if not (value > 0.0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be positive and finite, s; got {text!r}")
+    return value
 
 
 def _flush_c_stdio() -> None:
@@ -327,6 +358,23 @@ def _cmd_run(args) -> int:
         return _error(exc)
     print(format_summary(summary))
     return EXIT_OK if summary["status"] == "ok" else EXIT_STOPPED
+
+
+def _cmd_export(args) -> int:
+    from controllers.codegen import CompileError
+
+    from .export import export_scene, format_export
+    try:
+        scene = load_scene(args.scene, overrides=parse_overrides(args.set))
+        out = args.out if args.out is not None else DEFAULT_RUN_DIR / scene.name / "c"
+        summary = export_scene(scene, out, sample_time=args.sample_time,
+                               compile=not args.no_compile)
+    except (InputError, CompileError) as exc:
+        return _error(exc)
+    except OSError as exc:
+        return _error(f"cannot write the export to {args.out}: {exc.strerror or exc}")
+    print(format_export(summary))
+    return EXIT_OK
 
 
 def _cmd_scenes(args) -> int:

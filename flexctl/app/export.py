@@ -1,0 +1,119 @@
+"""``flexctl export``: a slew scene's designed controller written as C, compiled and checked.
+
+:func:`export_scene` designs the scene's controller (:func:`controllers.from_spec`), writes
+it with :func:`controllers.codegen.export_c`, and, where a C compiler is present, compiles it
+with the checking flags and steps the compiled law against its CasADi program on states (or
+readings) near the scene's start, reporting the largest difference. ``export.json`` in the
+output directory records what was written and measured.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["export_scene", "format_export", "CHECK_STEPS"]
+
+#: Steps of the compiled law checked against its program.
+CHECK_STEPS = 20
+
+
+def _sample_time(scene, given):
+    """The rate an LQG's estimator is discretised at: given, else the scene's sensors' or
+    controller's, else the sensors' default."""
+    if given is not None:
+        return given
+    if scene.controller is not None and scene.controller.kind == "lqg":
+        from flexctl.sim.sensors import DEFAULT_SAMPLE_TIME
+        sensors = getattr(scene, "sensors", None)
+        return (getattr(sensors, "sample_time", None)
+                or scene.controller.settings.get("sample_time") or DEFAULT_SAMPLE_TIME)
+    return None
+
+
+def _check(program, law, plant, seed: int = 0) -> float:
+    """Largest difference, relative to ``max(1, |u|)``, between the compiled law and its
+    program over :data:`CHECK_STEPS` samples of inputs near rest."""
+    rng = np.random.default_rng(seed)
+    reference = program.session()
+    law.init()
+    period = program.sample_time or 0.01
+    worst = 0.0
+    for k in range(CHECK_STEPS):
+        v = 1e-2 * rng.standard_normal(program.n_in)
+        expected = reference.step(k * period, v)
+        got, _ = law.step(k * period, v)
+        worst = max(worst, abs(got - expected) / max(1.0, abs(expected)))
+    law.init()
+    return float(worst)
+
+
+def export_scene(scene, out, *, sample_time: float | None = None, compile: bool = True,
+                 cc: str | None = None) -> dict:
+    """Design ``scene``'s controller, write it as C in ``out``, compile and check it.
+
+    Parameters
+    ----------
+    scene : flexctl.Scene
+        A slew scene with a ``[controller]`` table.
+    out : str or pathlib.Path
+        Directory of the files (created).
+    sample_time : float, optional
+        s: the rate an LQG's estimator is discretised at (default: the sensors', else
+        0.01 s), or a static law is sampled at.
+    compile : bool
+        Compile with :data:`controllers.codegen.C_FLAGS` and check against the program.
+    cc : str, optional
+        The C compiler (default ``$CC``, ``cc``, ``gcc`` or ``clang``).
+
+    Returns
+    -------
+    dict
+        :meth:`~controllers.codegen.CExport.describe`, with ``compiled`` (False when no
+        compiler was found, with the ``note``), ``struct_bytes``, ``code_bytes``,
+        ``compile_time_s`` and ``check_max_difference``.
+    """
+    from controllers import from_spec
+    from controllers.codegen import CompileError, export_c, find_compiler
+
+    plant = scene.build_model()
+    built = from_spec(scene, plant)
+    exported = export_c(built.controller, plant, out,
+                        sample_time=_sample_time(scene, sample_time))
+    summary = {"scene": scene.name, "controller": built.kind, **exported.describe(),
+               "compiled": False}
+    if compile:
+        try:
+            find_compiler(cc)
+        except CompileError as exc:
+            summary["note"] = f"{exc}: the files are written but not compiled"
+        else:
+            law = exported.compile(cc)
+            summary.update(compiled=True, struct_bytes=law.struct_bytes,
+                           code_bytes=law.code_bytes, compile_time_s=law.compile_time_s,
+                           check_steps=CHECK_STEPS,
+                           check_max_difference=_check(exported.program, law, plant))
+            Path(law.library).unlink(missing_ok=True)
+    Path(out, "export.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+    return summary
+
+
+def format_export(summary: dict) -> str:
+    """The console lines of an export."""
+    lines = [f"{summary['scene']}: {summary['description']}",
+             f"  input: {summary['input']} ({len(summary['input_names'])} entries), output: "
+             f"{summary['output']}, sample time: {summary['sample_time_s']:g} s",
+             f"  memory: {summary['memory_doubles']} doubles; work: "
+             f"{summary['work_doubles']} doubles, {summary['work_ints']} integers"]
+    if summary.get("compiled"):
+        lines.append(f"  compiled: struct {summary['struct_bytes']} bytes, code "
+                     f"{summary['code_bytes']} bytes, {summary['compile_time_s']:.2f} s; "
+                     f"{summary['check_steps']} steps against the program: largest "
+                     f"difference {summary['check_max_difference']:.2e}")
+    elif summary.get("note"):
+        lines.append(f"  {summary['note']}")
+    lines.append("  files: " + ", ".join(Path(f).name for f in summary["files"])
+                 + f" in {Path(summary['files'][0]).parent}")
+    return "\n".join(lines)
