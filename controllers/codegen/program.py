@@ -232,7 +232,35 @@ def _static_law_expression(controller, plant, owner="export"):
                             "form (a SlewProfile or a SlewSolution has)")
     law = bound_to_plant(controller, plant)
     t, x = ca.SX.sym("t"), ca.SX.sym("x", plant.n_states)
+    if kind == "tracker":
+        return kind, law, t, x, _tracker_torque(law, t, x)
     return kind, law, t, x, ca.SX(law.casadi_torque(t, x))
+
+
+def _tracker_torque(tracker, t, x):
+    """The tracker's torque in the order of its numpy form, ``ff(t) - K (x - x_opt(t))``:
+    the state error first (its simulation form folds ``K`` into the Hermite coefficients,
+    which rounds differently where the error is small against ``K x``)."""
+    import casadi as ca
+
+    from .nmpc_program import _hermite_rows
+
+    solution, hold = tracker.solution, tracker._feedforward
+    optimal = _hermite_rows(t, np.asarray(solution.t, dtype=float),
+                            np.asarray(solution._hermite))
+    rows = tracker._rows(x.numel())
+    if rows is None:
+        from controllers.lqr import casadi_truncate_state
+        design = casadi_truncate_state(x, solution.model.layout)
+    else:
+        design = x[rows.tolist()]
+    outside = ca.logic_or(t < hold.t[0], t >= hold.t[-1])
+    feedforward = ca.if_else(outside, 0.0, hold.casadi(t))
+    u = feedforward - ca.dot(ca.DM(tracker.gain), design - optimal)
+    if tracker.torque_limit is not None:
+        u = ca.fmin(ca.fmax(u, -tracker.torque_limit), tracker.torque_limit)
+    return u
+
 
 
 def _static_program(controller, plant, sample_time) -> ControllerProgram:
