@@ -18,6 +18,8 @@ module                 contents
 ``robustness``         Monte Carlo dispersion of stiffness, point masses, hub inertia
 ``actuated``           laws through an actuator: wheel-lag LQR, DC-motor voltage, limits
 ``observer``           a sampled discrete Kalman filter of noisy sensor readings
+``lqg_sampled``        LQG with its estimator discretised at a sample time
+``codegen``            a designed law as self-contained C99 (package)
 =====================  ==========================================================
 
 The package depends on :mod:`flexctl.model` and :mod:`flexctl.sim` (models and the simulation

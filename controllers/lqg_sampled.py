@@ -19,7 +19,8 @@ Examples
 >>> from controllers.lqr import LQRWeights
 >>> from controllers.lqg_sampled import SampledLQG
 >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
->>> lqg = design_lqg(model, LQRWeights(), NoiseLevels())
+>>> lqg = design_lqg(model, LQRWeights(hub_angle=0.05, torque=5.0),
+...                  NoiseLevels(angle=1e-4, root_moment=1e-3, torque=0.1))
 >>> sampled = SampledLQG(lqg, sample_time=0.01)
 >>> sampled.phi.shape, sampled.gamma.shape
 ((6, 6), (6, 3))

@@ -21,7 +21,7 @@ SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
 #: Seconds a notebook may run (they take 3 to 20 s alone on 2 cores).
 CELL_TIMEOUT = 240
 #: Notebooks that take more than about 10 s (marked slow; CI still runs them).
-SLOW = {"06_slew_controllers", "07_speed_vs_error", "08_large_deflection"}
+SLOW = {"06_slew_controllers", "07_speed_vs_error", "08_large_deflection", "12_c_export"}
 
 
 def _cells(notebook):

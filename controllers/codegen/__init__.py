@@ -4,6 +4,7 @@
 module                 contents
 =====================  ==========================================================
 ``program``            a law as CasADi step functions ``(t, v, m) -> (u, m_next)``
+``laws``               the program of each built-in law (static laws, a motor's voltage)
 ``nmpc_program``       the NMPC's real-time iteration (EKF and qrqp QP) as a step
 ``lqg_program``        LQG with its estimator discretised at the sample time
 ``observed_program``   a state law on the sensors' discrete Kalman filter
@@ -12,7 +13,8 @@ module                 contents
 =====================  ==========================================================
 """
 
-from .program import ControllerProgram, ExportRefused, program_for
+from .program import ControllerProgram, ExportRefused
+from .laws import program_for
 from .export import (C_FLAGS, CExport, CompileError, CompiledController, CompiledLaw,
                      export_c, find_compiler)
 

@@ -180,9 +180,7 @@ extern const char *const flexctl_ctrl_input_names[FLEXCTL_N_INPUT];
 
 
 def _source(program, prefix, upper, code, names, sizes) -> str:
-    n_mem = max(program.n_memory, 1)
     has_recover = program.recover is not None
-    names_list = ",\n  ".join(f'"{name}"' for name in program.input_names)
     recover_block = ""
     if has_recover:
         recover_block = f"""
@@ -220,6 +218,38 @@ def _source(program, prefix, upper, code, names, sizes) -> str:
 #pragma GCC diagnostic pop
 #endif
 
+{_wrapper(program, sizes)}
+int flexctl_ctrl_step(flexctl_ctrl *c, double t, const double *x, double *u) {{
+  double u_new = 0.0;
+  int flag, ok, status = FLEXCTL_OK;
+  if (!c || !x || !u || c->magic != FLEXCTL_MAGIC) return FLEXCTL_ERR_ARGUMENT;
+  if (!isfinite(t) || !flexctl_finite(x, FLEXCTL_N_INPUT)) {{
+    u[0] = 0.0;
+    return FLEXCTL_ERR_INPUT;
+  }}
+  c->arg[0] = &t;
+  c->arg[1] = x;
+  c->arg[2] = c->m;
+  c->res[0] = &u_new;
+  c->res[1] = c->m_next;
+  flag = {names[0]}(c->arg, c->res, c->iw, c->w, 0);
+  ok = flag == 0 && flexctl_finite(&u_new, 1) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_DOUBLES);{recover_block}
+  if (!ok) {{
+    u[0] = 0.0;
+    return FLEXCTL_ERR_FAILED;
+  }}
+  memcpy(c->m, c->m_next, sizeof(c->m));
+  u[0] = u_new;
+  return status;
+}}
+"""
+
+
+def _wrapper(program, sizes) -> str:
+    """The struct, its initial memory, the input names, ``size`` and ``init``."""
+    n_mem = max(program.n_memory, 1)
+    names_list = ",\n  ".join(f'"{name}"' for name in program.input_names)
+    return f"""\
 /* ---------------------------------------------------------------------------------------- */
 #define FLEXCTL_SZ_ARG {max(sizes['arg_pointers'], 1)}
 #define FLEXCTL_SZ_RES {max(sizes['res_pointers'], 1)}
@@ -263,29 +293,6 @@ int flexctl_ctrl_init(flexctl_ctrl *c) {{
   return FLEXCTL_OK;
 }}
 
-int flexctl_ctrl_step(flexctl_ctrl *c, double t, const double *x, double *u) {{
-  double u_new = 0.0;
-  int flag, ok, status = FLEXCTL_OK;
-  if (!c || !x || !u || c->magic != FLEXCTL_MAGIC) return FLEXCTL_ERR_ARGUMENT;
-  if (!isfinite(t) || !flexctl_finite(x, FLEXCTL_N_INPUT)) {{
-    u[0] = 0.0;
-    return FLEXCTL_ERR_INPUT;
-  }}
-  c->arg[0] = &t;
-  c->arg[1] = x;
-  c->arg[2] = c->m;
-  c->res[0] = &u_new;
-  c->res[1] = c->m_next;
-  flag = {names[0]}(c->arg, c->res, c->iw, c->w, 0);
-  ok = flag == 0 && flexctl_finite(&u_new, 1) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_DOUBLES);{recover_block}
-  if (!ok) {{
-    u[0] = 0.0;
-    return FLEXCTL_ERR_FAILED;
-  }}
-  memcpy(c->m, c->m_next, sizeof(c->m));
-  u[0] = u_new;
-  return status;
-}}
 """
 
 

@@ -1,7 +1,7 @@
 """Export a designed law as C files, compile them, and run the compiled law from Python.
 
 :func:`export_c` writes ``flexctl_ctrl.h``, ``flexctl_ctrl.c``, ``main.c`` and a ``Makefile``
-for a law bound to its plant (:func:`~controllers.codegen.program.program_for`).
+for a law bound to its plant (:func:`~controllers.codegen.laws.program_for`).
 :meth:`CExport.compile` builds them with the system C compiler at
 ``-std=c99 -Wall -Wextra -Werror`` into a shared library and loads it through :mod:`ctypes`
 (:class:`CompiledLaw`); :meth:`CompiledLaw.controller` is the compiled law as a flexctl
@@ -37,7 +37,8 @@ import numpy as np
 from flexctl.model.errors import InputTypeError, InputValueError
 
 from .c_source import RETURN_CODES, c_sources
-from .program import ControllerProgram, program_for
+from .laws import program_for
+from .program import ControllerProgram
 
 __all__ = ["export_c", "CExport", "CompiledLaw", "CompiledController", "CompileError",
            "C_FLAGS", "find_compiler"]
@@ -145,7 +146,7 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     Parameters
     ----------
     controller : object
-        A designed built-in law (see :func:`~controllers.codegen.program.program_for`), or a
+        A designed built-in law (see :func:`~controllers.codegen.laws.program_for`), or a
         :class:`~controllers.codegen.program.ControllerProgram`.
     plant : flexctl.Model
         The plant the law runs on (its state order, sensors and actuator).

@@ -29,15 +29,26 @@ def _pieces(sample_time: float, delay: float) -> tuple:
     return whole, rest
 
 
-def observed_program(observed, plant, x0) -> ControllerProgram:
-    """The program of ``observed`` on ``plant`` started at ``x0``."""
+def _update(z, p, y, mats, offset):
+    """:func:`controllers.observer.kalman_update` (Joseph form) on CasADi expressions."""
+    import casadi as ca
+
+    c_mat, r_mat = ca.DM(mats.C), ca.DM(mats.R)
+    innovation = y - ca.mtimes(c_mat, z) - offset
+    s = ca.mtimes([c_mat, p, c_mat.T]) + r_mat
+    gain = ca.solve(s, ca.mtimes(c_mat, p), "qr").T
+    keep = ca.DM.eye(z.numel()) - ca.mtimes(gain, c_mat)
+    p_plus = ca.mtimes([keep, p, keep.T]) + ca.mtimes([gain, r_mat, gain.T])
+    return z + ca.mtimes(gain, innovation), 0.5 * (p_plus + p_plus.T)
+
+
+def observed_program(observed, plant, x0, inner: ControllerProgram) -> ControllerProgram:
+    """The program of ``observed`` on ``plant`` started at ``x0``, its law's program
+    ``inner`` (reading the state)."""
     import casadi as ca
 
     from controllers.observer import ObservedSession
 
-    from .program import program_for
-
-    inner = program_for(observed.law, plant, initial_state=x0)
     if inner.input_kind != "state":
         raise ExportRefused("export: the law inside Observed must read the state")
     session = ObservedSession(observed, plant, np.asarray(x0, dtype=float))
@@ -71,13 +82,7 @@ def observed_program(observed, plant, x0) -> ControllerProgram:
         z, p = predict(z, p, length, i)
     held, on = command(whole + 1)
     offset = ca.DM(mats.D[:, 0]) * ca.if_else(on, held, 0.0)
-    c_mat, r_mat = ca.DM(mats.C), ca.DM(mats.R)
-    innovation = y - ca.mtimes(c_mat, z) - offset
-    s = ca.mtimes([c_mat, p, c_mat.T]) + r_mat
-    gain = ca.solve(s, ca.mtimes(c_mat, p), "qr").T
-    keep = ca.DM.eye(n_f) - ca.mtimes(gain, c_mat)
-    p_plus = ca.mtimes([keep, p, keep.T]) + ca.mtimes([gain, r_mat, gain.T])
-    z, p = z + ca.mtimes(gain, innovation), 0.5 * (p_plus + p_plus.T)
+    z, p = _update(z, p, y, mats, offset)
     # the estimate extrapolated from the epoch to now, the state alone
     x_now = z[:n]
     extrapolation = ([(rest, whole + 1)] if rest > 0.0 else []) + [

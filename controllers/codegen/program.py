@@ -12,10 +12,7 @@ sample, at ``t = t_0, t_0 + T, ...``. A law whose step can fail (the NMPC's QP) 
 ``recover`` function of the same signature, which the C code calls when ``step`` reports a
 failure or gives a non-finite number: it applies the previous plan, shifted one sample.
 
-:func:`program_for` builds the program of a designed law bound to its plant, or refuses with
-the reason: a law with no CasADi form (a Python callable), an NMPC that is not a real-time
-iteration with ``qrqp`` (IPOPT and the osqp / qpOASES / HPIPM plugins are libraries CasADi
-calls, not code it writes), a continuous estimator with no sample time to discretise it at.
+:func:`controllers.codegen.laws.program_for` builds the program of a designed law.
 """
 
 from __future__ import annotations
@@ -24,11 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexctl.model.errors import InputTypeError, InputValueError
-from flexctl.sim.digital import ZeroOrderHold, is_sampled
-from flexctl.sim.drives import bound_to_plant
+from flexctl.model.errors import InputValueError
 
-__all__ = ["ControllerProgram", "program_for", "ExportRefused"]
+__all__ = ["ControllerProgram", "ProgramSession", "ExportRefused"]
 
 
 class ExportRefused(InputValueError):
@@ -123,89 +118,6 @@ class ProgramSession:
         return u
 
 
-# ------------------------------------------------------------------------ the laws
-def program_for(controller, plant, *, sample_time: float | None = None,
-                initial_state=None) -> ControllerProgram:
-    """The :class:`ControllerProgram` of a designed ``controller`` run on ``plant``.
-
-    Parameters
-    ----------
-    controller : object
-        A flexctl feedback law: PD, LQR, ScheduledLQR, TrajectoryTracker, LQG, NMPC, one of
-        them sampled (:class:`~flexctl.sim.digital.ZeroOrderHold`) or driving an actuator
-        (:class:`~controllers.actuated.MotorVoltage`, :class:`~controllers.actuated.LaggedLQR`).
-    plant : flexctl.Model
-        The plant the law reads (its state order, sensors and actuator).
-    sample_time : float, optional
-        s: the rate a continuous estimator (LQG) is discretised at, or a static law sampled
-        at. A law that samples itself keeps its own and refuses another.
-    initial_state : array_like, optional
-        Plant state at the start, shape (n,): where an estimator's estimate starts (default:
-        at rest, zero).
-
-    Raises
-    ------
-    ExportRefused
-        For a law that cannot be written as C, with the reason.
-    """
-    from flexctl.model import Model
-
-    if not isinstance(plant, Model):
-        raise InputTypeError(f"export plant must be a flexctl Model; got {type(plant).__name__}")
-    if sample_time is not None:
-        from flexctl.sim.digital import _sample_time
-        sample_time = _sample_time("export", sample_time)
-    x0 = np.zeros(plant.n_states) if initial_state is None else np.asarray(
-        initial_state, dtype=float).reshape(-1)
-    if x0.shape != (plant.n_states,) or not np.all(np.isfinite(x0)):
-        raise InputValueError(f"export initial_state must be {plant.n_states} finite numbers "
-                              f"(the plant's states); got shape {x0.shape}")
-    return _dispatch(controller, plant, sample_time, x0)
-
-
-def _dispatch(controller, plant, sample_time, x0):
-    from controllers.actuated import MotorVoltage
-    from controllers.lqg import LQG
-    from controllers.nmpc import NMPC
-    from controllers.observer import Observed
-
-    if isinstance(controller, MotorVoltage):
-        return _voltage_program(controller, plant, sample_time, x0)
-    if isinstance(controller, ZeroOrderHold):
-        own = controller.sample_time
-        if sample_time is not None and abs(sample_time - own) > 1e-12 * own:
-            raise ExportRefused(f"export sample_time {sample_time:g} s differs from the "
-                                f"law's own {own:g} s")
-        return _static_program(controller.law, plant, own)
-    if isinstance(controller, NMPC):
-        _same_rate(controller, sample_time)
-        from .nmpc_program import nmpc_program
-        return nmpc_program(controller, plant, x0)
-    if isinstance(controller, LQG):
-        from .lqg_program import lqg_program
-        return lqg_program(controller, plant, sample_time, x0)
-    if isinstance(controller, Observed):
-        _same_rate(controller, sample_time)
-        from .observed_program import observed_program
-        return observed_program(controller, plant, x0)
-    if is_sampled(controller):
-        raise ExportRefused(f"export: the sampled controller {type(controller).__name__} has "
-                            "no C form (built-in laws only)")
-    return _static_program(controller, plant, sample_time or 0.0)
-
-
-def _same_rate(controller, sample_time):
-    own = controller.sample_time
-    if sample_time is not None and abs(sample_time - own) > 1e-12 * own:
-        raise ExportRefused(f"export sample_time {sample_time:g} s differs from the "
-                            f"{type(controller).__name__}'s own {own:g} s")
-
-
-_STATIC_KINDS = {"PD": "pd", "LQR": "lqr", "ScheduledLQR": "scheduled_lqr",
-                 "TrajectoryTracker": "tracker", "LaggedLQR": "lqr_wheel",
-                 "OpenLoop": "open_loop"}
-
-
 def _output(plant, voltage: bool = False) -> tuple:
     """(name, unit) of the command a law gives ``plant``."""
     if voltage:
@@ -214,108 +126,3 @@ def _output(plant, voltage: bool = False) -> tuple:
     if actuator is not None and actuator.kind == "reaction_wheel":
         return "torque_command", "N m"
     return "torque", "N m"
-
-
-def _static_law_expression(controller, plant, owner="export"):
-    """``(t, x, u)``: SX symbols of time and plant state, and the law's command."""
-    import casadi as ca
-
-    kind = _STATIC_KINDS.get(type(controller).__name__)
-    if kind is None or not callable(getattr(controller, "casadi_torque", None)):
-        name = getattr(controller, "__name__", type(controller).__name__)
-        raise ExportRefused(f"{owner}: {name} has no CasADi form to write as C; the built-in "
-                            "laws (PD, LQR, ScheduledLQR, TrajectoryTracker, LQG, NMPC) do")
-    if getattr(controller, "n_states", 0):
-        raise ExportRefused(f"{owner}: {type(controller).__name__} has internal states")
-    if not getattr(controller, "has_casadi_form", True):
-        raise ExportRefused(f"{owner}: {type(controller).__name__}'s reference has no CasADi "
-                            "form (a SlewProfile or a SlewSolution has)")
-    law = bound_to_plant(controller, plant)
-    t, x = ca.SX.sym("t"), ca.SX.sym("x", plant.n_states)
-    if kind == "tracker":
-        return kind, law, t, x, _tracker_torque(law, t, x)
-    return kind, law, t, x, ca.SX(law.casadi_torque(t, x))
-
-
-def _tracker_torque(tracker, t, x):
-    """The tracker's torque in the order of its numpy form, ``ff(t) - K (x - x_opt(t))``:
-    the state error first (its simulation form folds ``K`` into the Hermite coefficients,
-    which rounds differently where the error is small against ``K x``)."""
-    import casadi as ca
-
-    from .nmpc_program import _hermite_rows
-
-    solution, hold = tracker.solution, tracker._feedforward
-    optimal = _hermite_rows(t, np.asarray(solution.t, dtype=float),
-                            np.asarray(solution._hermite))
-    rows = tracker._rows(x.numel())
-    if rows is None:
-        from controllers.lqr import casadi_truncate_state
-        design = casadi_truncate_state(x, solution.model.layout)
-    else:
-        design = x[rows.tolist()]
-    outside = ca.logic_or(t < hold.t[0], t >= hold.t[-1])
-    feedforward = ca.if_else(outside, 0.0, hold.casadi(t))
-    u = feedforward - ca.dot(ca.DM(tracker.gain), design - optimal)
-    if tracker.torque_limit is not None:
-        u = ca.fmin(ca.fmax(u, -tracker.torque_limit), tracker.torque_limit)
-    return u
-
-
-
-def _static_program(controller, plant, sample_time) -> ControllerProgram:
-    import casadi as ca
-
-    kind, law, t, x, u = _static_law_expression(controller, plant)
-    m = ca.SX.sym("m", 0)
-    step = ca.Function("step", [t, x, m], [u, m], ["t", "v", "m"], ["u", "m_next"])
-    name, unit = _output(plant)
-    return ControllerProgram(
-        kind=kind, step=step, recover=None, input_names=tuple(plant.state_names),
-        input_kind="state", output_name=name, output_unit=unit, memory_init=np.zeros(0),
-        sample_time=float(sample_time), description=_describe(law, sample_time),
-        info={"design_modes": _design_modes(law)})
-
-
-def _describe(law, sample_time) -> str:
-    modes = _design_modes(law)
-    limit = getattr(law, "torque_limit", None)
-    return (f"{type(law).__name__}" + (f" on {modes} design modes" if modes else "")
-            + (f", command limited to {limit:g} N m" if limit else "")
-            + (f", sampled every {sample_time:g} s" if sample_time else ", continuous"))
-
-
-def _design_modes(law) -> int | None:
-    for owner in (law, getattr(law, "lqr", None), getattr(getattr(law, "solution", None),
-                                                          "model", None)):
-        modes = getattr(owner, "n_modes", None)
-        if isinstance(modes, (int, np.integer)):
-            return int(modes)
-    return None
-
-
-def _voltage_program(controller, plant, sample_time, x0) -> ControllerProgram:
-    """A DC motor's voltage for the torque of the inner law's program: ``V(u, hub rate)``."""
-    import casadi as ca
-
-    inner = program_for(controller.law, plant, sample_time=sample_time, initial_state=x0)
-    if inner.input_kind != "state":
-        raise ExportRefused("export: a DC motor's voltage needs the hub rate; the law inside "
-                            f"MotorVoltage ({inner.kind}) reads sensors, not the state")
-    motor, rate_index = controller.motor, plant.layout.theta_dot
-
-    def wrap(function):
-        if function is None:
-            return None
-        t, v, m = (ca.MX.sym(n, function.size_in(i)) for i, n in enumerate(("t", "v", "m")))
-        u, m_next = function(t, v, m)
-        volts = motor.voltage_for(u, v[rate_index])
-        return ca.Function(function.name(), [t, v, m], [volts, m_next], ["t", "v", "m"],
-                           ["u", "m_next"])
-
-    return ControllerProgram(
-        kind=inner.kind, step=wrap(inner.step), recover=wrap(inner.recover),
-        input_names=inner.input_names, input_kind="state", output_name="voltage",
-        output_unit="V", memory_init=inner.memory_init, sample_time=inner.sample_time,
-        description=f"{inner.description}, through the DC motor's voltage",
-        info=dict(inner.info))
