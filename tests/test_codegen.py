@@ -162,11 +162,15 @@ def test_sampled_static_law(designs, tmp_path):
 
 
 @pytest.mark.slow
-def test_nmpc_rti_matches_python_and_closes_the_loop(tmp_path):
-    scene = _scene("nmpc", **{"model.design_variant": "first_order"})
+@pytest.mark.parametrize("estimator", ["state", "kalman"])
+def test_nmpc_rti_matches_python_and_closes_the_loop(estimator, tmp_path):
+    scene = _scene("nmpc", **{"model.design_variant": "first_order",
+                              "controller.estimator": estimator})
     plant, built = _design(scene)
     mpc = built.controller
     exported = export_c(mpc, plant, tmp_path)
+    program = exported.program
+    assert program.input_kind == ("state" if estimator == "state" else "measurement")
     compiled = exported.compile()
     # step by step on the states of the Python loop
     result = flexctl.simulate(plant, 6.0, controller=mpc)
@@ -178,7 +182,8 @@ def test_nmpc_rti_matches_python_and_closes_the_loop(tmp_path):
     worst = 0.0
     for t, x in zip(samples, states):
         expected = session.step(t, x)
-        got, code = compiled.step(t, x)
+        v = x if estimator == "state" else program.measurement_matrix @ x
+        got, code = compiled.step(t, v)
         assert code == 0
         worst = max(worst, abs(got - expected) / max(abs(expected), 1.0))
     assert worst <= 1e-9
@@ -188,11 +193,51 @@ def test_nmpc_rti_matches_python_and_closes_the_loop(tmp_path):
     vib = [slew_metrics(r, np.pi / 2, end).residual_vibration for r in (result, loop)]
     assert vib[1] == pytest.approx(vib[0], rel=1e-6, abs=1e-9)
     report = loop.controller_report
-    print(f"\ncompiled NMPC (2 first_order design modes, horizon {mpc.horizon}): code "
-          f"{compiled.code_bytes} bytes, struct {compiled.struct_bytes} bytes, CPU per step "
-          f"median {report['cpu_time_median_s'] * 1e3:.3f} ms, p99 "
+    print(f"\ncompiled NMPC ({estimator}, 2 first_order design modes, horizon {mpc.horizon}): "
+          f"code {compiled.code_bytes} bytes, struct {compiled.struct_bytes} bytes, CPU per "
+          f"step median {report['cpu_time_median_s'] * 1e3:.3f} ms, p99 "
           f"{report['cpu_time_p99_s'] * 1e3:.3f} ms; Python "
           f"{result.controller_report['solve_time_median_s'] * 1e3:.3f} ms")
+
+
+def test_failed_qp_applies_the_shifted_plan_and_says_so(tmp_path):
+    """Rest at 1 rad within 5 samples of 0.01 N m is out of reach: every QP is infeasible;
+    the C step returns FLEXCTL_STEP_RECOVERED with the torque the Python law applies."""
+    from controllers import NMPC
+
+    plant = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=2,
+                                variant="first_order")
+    mpc = NMPC(model=plant, target=1.0, torque_limit=0.01, terminal="rest", horizon=5)
+    compiled = export_c(mpc, plant, tmp_path).compile()
+    session = mpc.start(plant, np.zeros(plant.n_states))
+    x = np.zeros(plant.n_states)
+    for k in range(4):
+        expected = session.step(0.02 * k, x)
+        assert compiled.step(0.02 * k, x) == (pytest.approx(expected, abs=1e-12), 1)
+    assert session.report()["failed_steps"] == 4
+
+
+@pytest.mark.slow
+def test_nmpc_on_a_hardware_scene_matches(tmp_path):
+    """flexible-link's NMPC: the DC motor's voltage constraints in the QP, the voltage out,
+    the sensors' Kalman filter in front, 500 Hz."""
+    from controllers.spec import ControllerSpec
+    from flexctl.app.scenes import run_slew
+
+    scene = flexctl.load_scene("flexible-link")
+    scene = dataclasses.replace(scene, controller=ControllerSpec(
+        kind="nmpc", settings={"sample_time": scene.sensors.sample_time}))
+    plant, built = _design(scene)
+    exported = export_c(built.controller, plant, tmp_path)
+    assert exported.program.info["qp_constraints"] > 0
+    assert exported.program.output_name == "voltage"
+    compiled = exported.compile()
+    runs = [run_slew(scene, lambda s, p, c=c: dataclasses.replace(built, controller=c))
+            for c in (built.controller, compiled.controller())]
+    (r_py, _, m_py), (r_c, _, m_c) = runs
+    assert r_c.controller_report["recovered_steps"] == 0
+    np.testing.assert_allclose(r_c.torque, r_py.torque, rtol=0, atol=1e-9)
+    assert m_c.residual_vibration == pytest.approx(m_py.residual_vibration, rel=1e-9)
 
 
 def test_observed_law_of_a_hardware_scene_matches(tmp_path):

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.model.checks import check_array
+from flexctl.model.errors import InputTypeError
 from flexctl.sim.digital import ZeroOrderHold, is_sampled
 from flexctl.sim.drives import bound_to_plant
 
@@ -52,11 +53,8 @@ def program_for(controller, plant, *, sample_time: float | None = None,
     if sample_time is not None:
         from flexctl.sim.digital import _sample_time
         sample_time = _sample_time("export", sample_time)
-    x0 = np.zeros(plant.n_states) if initial_state is None else np.asarray(
-        initial_state, dtype=float).reshape(-1)
-    if x0.shape != (plant.n_states,) or not np.all(np.isfinite(x0)):
-        raise InputValueError(f"export initial_state must be {plant.n_states} finite numbers "
-                              f"(the plant's states); got shape {x0.shape}")
+    x0 = np.zeros(plant.n_states) if initial_state is None else check_array(
+        "export", "initial_state", initial_state, shape=(plant.n_states,))
     return _dispatch(controller, plant, sample_time, x0)
 
 
