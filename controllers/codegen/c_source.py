@@ -86,14 +86,6 @@ def _renamed(function, name):
                        function.name_out())
 
 
-def _fix_generated(code: str) -> str:
-    """CasADi's code made to compile cleanly at ``-Wall -Wextra -Werror``: its
-    ``casadi_int`` entry points and parameters it does not read are marked as such."""
-    code = code.replace("#ifdef __cplusplus\nextern \"C\" {\n#endif", "")
-    code = code.replace("#ifdef __cplusplus\n} /* extern \"C\" */\n#endif", "")
-    return code
-
-
 def c_sources(program: ControllerProgram, prefix: str = "flexctl_ctrl",
               plant_states: int | None = None) -> CSources:
     """The C files of ``program`` (module docstring); ``plant_states``: the plant's state
@@ -113,8 +105,32 @@ def c_sources(program: ControllerProgram, prefix: str = "flexctl_ctrl",
     return CSources(header, source, _main(program, prefix, upper), _makefile(prefix), sizes)
 
 
+def unit_of(name: str) -> str:
+    """The unit of a state or reading by its name (``wing_a.q1_dot`` -> ``m/s``)."""
+    base = name.rsplit(".", 1)[-1]
+    rate = base.endswith("_dot")
+    base = base[:-4] if rate else base
+    if base in ("theta", "wheel_speed"):
+        return "rad/s" if rate or base == "wheel_speed" else "rad"
+    if base in ("root_moment", "wheel_torque"):
+        return "N m"
+    if base == "tip_acceleration":
+        return "m/s^2"
+    if base.startswith("hub_") or (base.startswith("q") and base[1:].isdigit()):
+        return "m/s" if rate else "m"       # modal coordinates: metres at phi = 1
+    return ""
+
+
 def _names_comment(program) -> str:
-    return "\n".join(f" *   [{i:2d}] {name}" for i, name in enumerate(program.input_names))
+    lines = []
+    for i, name in enumerate(program.input_names):
+        unit = unit_of(name)
+        lines.append(f" *   [{i:2d}] {name}" + (f" ({unit})" if unit else ""))
+    return "\n".join(lines)
+
+
+def _wrapped(text: str) -> str:
+    return "\n".join(" * " + line for line in textwrap.wrap(text, 88))
 
 
 def _header(program, upper, prefix, nx, measured) -> str:
@@ -126,7 +142,7 @@ def _header(program, upper, prefix, nx, measured) -> str:
     return f"""\
 /* {prefix}.h: a flexctl feedback law as self-contained C99.
  *
- * {program.description}
+{_wrapped(program.description)}
  * Input of the step: {kind}:
 {_names_comment(program)}
  * Output u: the {program.output_name} ({program.output_unit}).
@@ -196,7 +212,8 @@ def _source(program, prefix, upper, code, names, sizes) -> str:
     status = FLEXCTL_STEP_RECOVERED;
   }}"""
     return f"""\
-/* {prefix}.c: {program.description}
+/* {prefix}.c: a flexctl feedback law as self-contained C99.
+{_wrapped(program.description)}
  * Written by flexctl from its CasADi form; C99, no allocation, no mutable file-scope state.
  */
 #include "{prefix}.h"
@@ -213,7 +230,7 @@ def _source(program, prefix, upper, code, names, sizes) -> str:
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wunused-parameter"
 #endif
-{_fix_generated(code)}
+{code}
 #if defined(__GNUC__)
 #pragma GCC diagnostic pop
 #endif

@@ -168,7 +168,7 @@ def _describe(law, sample_time) -> str:
     limit = getattr(law, "torque_limit", None)
     return (f"{type(law).__name__}" + (f" on {modes} design modes" if modes else "")
             + (f", command limited to {limit:g} N m" if limit else "")
-            + (f", sampled every {sample_time:g} s" if sample_time else ", continuous"))
+            + (f", sampled every {sample_time:g} s" if sample_time else ""))
 
 
 def _design_modes(law) -> int | None:
