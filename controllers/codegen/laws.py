@@ -15,7 +15,6 @@ import numpy as np
 from flexctl.model.checks import check_array
 from flexctl.model.errors import InputTypeError
 from flexctl.sim.digital import ZeroOrderHold, is_sampled
-from flexctl.sim.drives import bound_to_plant
 
 from .program import ControllerProgram, ExportRefused, _output
 
@@ -97,16 +96,30 @@ def _same_rate(controller, sample_time):
                             f"{type(controller).__name__}'s own {own:g} s")
 
 
-_STATIC_KINDS = {"PD": "pd", "LQR": "lqr", "ScheduledLQR": "scheduled_lqr",
-                 "TrajectoryTracker": "tracker", "LaggedLQR": "lqr_wheel",
-                 "OpenLoop": "open_loop"}
+def _static_kind(controller) -> str | None:
+    """The kind of a built-in static law (subclasses included), or None."""
+    from controllers.actuated import LaggedLQR
+    from controllers.factory import OpenLoop
+    from controllers.lqr import LQR
+    from controllers.pd import PD
+    from controllers.scheduling import ScheduledLQR
+    from controllers.tracking import TrajectoryTracker
+
+    kinds = ((PD, "pd"), (LQR, "lqr"), (ScheduledLQR, "scheduled_lqr"),
+             (TrajectoryTracker, "tracker"), (LaggedLQR, "lqr_wheel"), (OpenLoop, "open_loop"))
+    return next((kind for cls, kind in kinds if isinstance(controller, cls)), None)
+
+
+def bound(law, plant):
+    """``law`` reading ``plant``'s states (``for_plant``), whatever plant it was bound to."""
+    return law.for_plant(plant) if callable(getattr(law, "for_plant", None)) else law
 
 
 def _static_law_expression(controller, plant, owner="export"):
     """``(t, x, u)``: SX symbols of time and plant state, and the law's command."""
     import casadi as ca
 
-    kind = _STATIC_KINDS.get(type(controller).__name__)
+    kind = _static_kind(controller)
     if kind is None or not callable(getattr(controller, "casadi_torque", None)):
         name = getattr(controller, "__name__", type(controller).__name__)
         raise ExportRefused(f"{owner}: {name} has no CasADi form to write as C; the built-in "
@@ -116,7 +129,7 @@ def _static_law_expression(controller, plant, owner="export"):
     if not getattr(controller, "has_casadi_form", True):
         raise ExportRefused(f"{owner}: {type(controller).__name__}'s reference has no CasADi "
                             "form (a SlewProfile or a SlewSolution has)")
-    law = bound_to_plant(controller, plant)
+    law = bound(controller, plant)
     t, x = ca.SX.sym("t"), ca.SX.sym("x", plant.n_states)
     if kind == "tracker":
         return kind, law, t, x, _tracker_torque(law, t, x)

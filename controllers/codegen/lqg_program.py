@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from flexctl.sim.drives import bound_to_plant
-
 from .program import ControllerProgram, ExportRefused, _output
 
 __all__ = ["lqg_program"]
@@ -28,7 +26,7 @@ def lqg_program(lqg, plant, sample_time, x0) -> ControllerProgram:
                             "to discretise it at")
     if not lqg.has_casadi_form:
         raise ExportRefused("export: the LQG's reference has no CasADi form")
-    lqg = bound_to_plant(lqg, plant)
+    lqg = lqg.for_plant(plant)
     sampled = SampledLQG(lqg, sample_time)
     n_y = lqg.measurement_matrix.shape[0]
     t, y, z = ca.SX.sym("t"), ca.SX.sym("v", n_y), ca.SX.sym("m", lqg.n_states)

@@ -6,8 +6,9 @@ The step is :meth:`controllers.observer.ObservedSession.step` for a law called e
 ``d = m T + r`` (``0 <= r < T``), the filter's epochs ``t_k - d`` and the command switches
 between them fall at the same offsets every sample, so each propagation is a fixed chain of
 holds (of ``r``, ``T - r`` or ``T`` seconds) with the commands of fixed earlier samples, a hold
-before the first sample left out. The memory is ``[z, P (column-major), the last m + 2
-commands (newest first), samples taken, the inner law's memory]``.
+before the first sample left out. The memory holds, in order: the filter state ``z``, its
+covariance ``P`` (column-major), the commands of the last ``m`` plus two samples (newest first),
+the samples taken, and the inner law's memory.
 """
 
 from __future__ import annotations
