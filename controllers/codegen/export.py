@@ -163,6 +163,10 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     """
     if isinstance(directory, bool) or not isinstance(directory, (str, os.PathLike)):
         raise InputTypeError(f"export directory must be a path; got {type(directory).__name__}")
+    from flexctl.model import Model
+
+    if not isinstance(plant, Model):
+        raise InputTypeError(f"export plant must be a flexctl Model; got {type(plant).__name__}")
     program = controller if isinstance(controller, ControllerProgram) else program_for(
         controller, plant, sample_time=sample_time, initial_state=initial_state)
     directory = Path(directory)
