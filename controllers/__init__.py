@@ -19,6 +19,7 @@ module                 contents
 ``actuated``           laws through an actuator: wheel-lag LQR, DC-motor voltage, limits
 ``observer``           a sampled discrete Kalman filter of noisy sensor readings
 ``lqg_sampled``        LQG with its estimator discretised at a sample time
+``iosys``              the laws as python-control I/O systems for ``control.interconnect``
 ``codegen``            a designed law as self-contained C99 (package)
 =====================  ==========================================================
 
@@ -44,6 +45,8 @@ from .analysis import (LoopMargins, PlantChannels, PolesVsSpin, loop_margins, lo
 from .actuated import (LaggedLQR, MotorVoltage, check_reference_fits, design_wheel_lqr,
                        through_actuator)
 from .observer import Observed, kalman_step
+from .iosys import to_iosys
+from .lqg_sampled import SampledLQG
 from .robustness import (Dispersion, RobustnessSummary, RobustnessTask, disperse,
                          robustness_summary)
 
@@ -63,6 +66,6 @@ __all__ = [
     "LoopMargins", "PlantChannels", "PolesVsSpin", "loop_margins", "loop_transfer",
     "plant_channels", "poles_vs_spin",
     "LaggedLQR", "MotorVoltage", "check_reference_fits", "design_wheel_lqr",
-    "through_actuator", "Observed", "kalman_step",
+    "through_actuator", "Observed", "kalman_step", "to_iosys", "SampledLQG",
     "Dispersion", "RobustnessSummary", "RobustnessTask", "disperse", "robustness_summary",
 ]

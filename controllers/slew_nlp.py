@@ -194,18 +194,8 @@ def resolution_reason(problem, model, disc: Discretisation) -> str | None:
 
 
 def _rk4_step(f, n: int, substeps: int, symbol=None):
-    import casadi as ca
-
-    symbol = symbol or ca.SX
-    x, u, h = symbol.sym("x", n), symbol.sym("u"), symbol.sym("h")
-    xk, dt = x, h / substeps
-    for _ in range(substeps):
-        k1 = f(xk, u)
-        k2 = f(xk + 0.5 * dt * k1, u)
-        k3 = f(xk + 0.5 * dt * k2, u)
-        k4 = f(xk + dt * k3, u)
-        xk = xk + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return ca.Function("rk4_hold", [x, u, h], [xk], ["x", "u", "h"], ["xf"])
+    from flexctl.model.discrete import rk4_function
+    return rk4_function(f, n, substeps, symbol)
 
 
 def _cvodes_step(f, n: int):

@@ -216,7 +216,7 @@ _SCHEMA = {
               "design_stiffness_factor", "design_mass_factor"},
     "maneuver": {"kind", "spin_rate", "ramp_time", "peak_torque", "duration", "angle_deg",
                  "torque_bound", "times", "values", "interpolation", "file"},
-    "simulation": {"t_final", "output_step", "rtol", "method"},
+    "simulation": {"t_final", "output_step", "rtol", "method", "states"},
     "controller": None,
     # checked by their own parsers (flexctl.app.scene_hardware): the keys depend on the kind
     "actuator": None,
@@ -332,8 +332,13 @@ class SimulationSpec:
     output_step: float | None = None
     rtol: float = 1e-8
     method: str = "auto"
+    #: ``timeseries.csv`` also carries every state (modal coordinates and rates, a free hub's
+    #: velocity, an actuator's states), not only the named outputs.
+    states: bool = False
 
     def __post_init__(self):
+        if not isinstance(self.states, bool):
+            raise SceneError(f"simulation.states must be true or false; got {self.states!r}")
         for key in ("t_final", "output_step", "rtol"):
             value = getattr(self, key)
             if key == "output_step" and value is None:

@@ -31,11 +31,13 @@ def signal_names(names) -> list:
     return out
 
 
-def to_nonlinear_iosystem(model):
+def to_nonlinear_iosystem(model, outputs: str = "named"):
     """The model as a python-control ``NonlinearIOSystem``.
 
-    States :attr:`Model.state_names`, input ``torque`` (N m), outputs
-    :attr:`Model.output_names` (an appendage's dot as an underscore, :func:`signal_names`). A state at which the mass matrix is singular raises
+    States :attr:`Model.state_names`, input :attr:`Model.input_names` (``torque``, N m, or an
+    actuator's command), outputs :attr:`Model.output_names` (``outputs="named"``) or the
+    states themselves (``outputs="states"``), an appendage's dot as an underscore
+    (:func:`signal_names`). A state at which the mass matrix is singular raises
     :class:`~flexctl.model.SingularMassMatrixError`.
 
     Examples
@@ -47,13 +49,22 @@ def to_nonlinear_iosystem(model):
     """
     import control
 
+    from .errors import InputValueError
+
+    if outputs not in ("named", "states"):
+        raise InputValueError(f"nonlinear outputs must be 'named' or 'states'; got {outputs!r}")
+
     def updfcn(t, x, u, params):
         return model.dynamics(t, x, np.asarray(u, dtype=float).reshape(-1)[0])
 
     def outfcn(t, x, u, params):
         return model.outputs(np.asarray(x, dtype=float))
 
-    return control.nlsys(updfcn, outfcn, states=signal_names(model.state_names),
+    states = signal_names(model.state_names)
+    if outputs == "states":
+        return control.nlsys(updfcn, None, states=states, inputs=list(model.input_names),
+                             outputs=list(states), name=f"{model.variant}_N{model.n_modes}")
+    return control.nlsys(updfcn, outfcn, states=states,
                          inputs=list(model.input_names), outputs=signal_names(model.output_names),
                          name=f"{model.variant}_N{model.n_modes}")
 

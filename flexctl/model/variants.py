@@ -601,10 +601,12 @@ class Model:
         return modal_visibility(self, spin_rate)
 
     # ------------------------------------------------------------------ exports
-    def nonlinear(self):
-        """Nonlinear plant as a python-control ``NonlinearIOSystem`` (:mod:`flexctl.model.exports`)."""
+    def nonlinear(self, outputs: str = "named"):
+        """Nonlinear plant as a python-control ``NonlinearIOSystem`` (:mod:`flexctl.model.exports`):
+        its outputs the model's named outputs (``"named"``), or its states (``"states"``, for
+        a state-feedback law's :func:`controllers.iosys.to_iosys` to connect to by name)."""
         from .exports import to_nonlinear_iosystem
-        return to_nonlinear_iosystem(self)
+        return to_nonlinear_iosystem(self, outputs)
 
     def casadi_outputs(self):
         """The outputs as a CasADi ``Function`` ``(x, u) -> y`` (inputs ``x`` (n x 1) and ``u``
@@ -620,6 +622,14 @@ class Model:
             self._c["casadi_outputs"] = ca.Function(
                 f"flexctl_{self.variant}_outputs", [x, u], [h(x)], ["x", "u"], ["y"])
         return self._c["casadi_outputs"]
+
+    def discretize(self, dt, method: str = "rk4", substeps=None, rtol: float = 1e-8):
+        """The model over one sample of ``dt`` s with the input held: a
+        :class:`~flexctl.model.discrete.DiscreteStep` around the CasADi Function
+        ``(x, u) -> x_next``, by RK4 substeps or CVODES, with its stated accuracy (see
+        :func:`flexctl.model.discrete.discretize`)."""
+        from .discrete import discretize
+        return discretize(self, dt, method, substeps, rtol)
 
     def casadi(self):
         """Dynamics as a CasADi ``Function`` ``(x, u) -> dx/dt`` (see :mod:`flexctl.model.exports`).

@@ -167,6 +167,37 @@ class SimulationResult:
             state_labels=signal_names(model.state_names), input_labels=list(model.input_names),
             sysname=f"flexctl_{model.variant}", success=self.ok, message=self.message)
 
+    def to_pandas(self, states: bool = True):
+        """The run as a ``pandas.DataFrame`` indexed by time ``t`` (s): the command (the
+        actuator's where there is one, else ``torque``), the hub ``torque``, the model's named
+        outputs, the actuator's signals and, with ``states``, every state, under the model's
+        names (an appendage's ``wing_a.q1``). pandas is an optional dependency.
+
+        Raises
+        ------
+        ImportError
+            If pandas is not installed (``pip install pandas``).
+        """
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("SimulationResult.to_pandas needs pandas: pip install pandas") \
+                from None
+        columns = {"torque": self.torque}
+        if self.command is not None:
+            columns["command"] = self.command
+        columns.update(self.outputs)
+        columns.update(self.actuator_signals)
+        if states:
+            columns.update({name: self.states[k] for k, name in enumerate(self.model.state_names)
+                            if name not in columns})
+        frame = pd.DataFrame({name: np.asarray(v, dtype=float).reshape(-1)
+                              for name, v in columns.items()},
+                             index=pd.Index(np.asarray(self.t, dtype=float), name="t"))
+        frame.attrs.update(status=self.status, message=self.message,
+                           variant=self.model.variant)
+        return frame
+
     @property
     def actuator_signals(self) -> dict:
         """The actuator's signals by name, each shape (P,) (``wheel_speed``, ``wheel_torque``;
