@@ -167,3 +167,110 @@ def test_timeseries_has_every_output_and_optionally_every_state(tmp_path):
     assert np.all(np.isfinite([float(r[k]) for r in rows[1:]]))
     assert main(["run", "hub-beam-mass", "--out", str(out), "--set",
                  "simulation.states=1"]) == 2
+
+
+# ---------------------------------------------------------------- physical parameters
+KEYS = ["beam.youngs_modulus", "hub.inertia", "masses[0].mass", "hub.friction"]
+
+
+def _rebuilt(model, key, value):
+    from flexctl.model.build import rebuild
+    from flexctl.model.parametric import with_parameter
+
+    return rebuild(model, system=with_parameter(model.system, key, value))
+
+
+def test_parametric_dynamics_exact_at_nominal_with_the_models_derivative():
+    import casadi as ca
+
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=3)
+    f = model.casadi(parameters=KEYS)
+    assert f.name_in() == ["x", "u", "p"]
+    p0 = model.parameter_values(KEYS)
+    rng = np.random.default_rng(1)
+    x = rng.normal(scale=0.01, size=model.n_states)
+    np.testing.assert_allclose(np.array(f(x, 0.7, p0)).ravel(), model.dynamics(0.0, x, 0.7),
+                               rtol=1e-13, atol=1e-15)
+    p = ca.SX.sym("p", len(KEYS))
+    jac = ca.Function("j", [p], [ca.jacobian(f(x, 0.7, p), p)])
+    got = np.array(jac(p0))
+    for i, key in enumerate(KEYS):
+        h = 1e-3 * (abs(p0[i]) or 1.0)
+        lower = p0[i] - h if p0[i] - h >= 0 else p0[i]
+        width = p0[i] + h - lower
+        diff = (_rebuilt(model, key, p0[i] + h).dynamics(0.0, x, 0.7)
+                - _rebuilt(model, key, lower).dynamics(0.0, x, 0.7)) / width
+        assert np.max(np.abs(got[:, i] - diff)) <= 2e-3 * np.max(np.abs(diff)) + 1e-12, key
+
+
+def test_parametric_dynamics_linear_parameters_exact_away_from_nominal():
+    """An undamped beam's stiffness and the hub friction enter the dynamics linearly: the
+    expansion is exact at other values too; the hub inertia (through 1/J) is first order."""
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=3)
+    f = model.casadi(parameters=KEYS)
+    p0 = model.parameter_values(KEYS)
+    x = np.random.default_rng(2).normal(scale=0.01, size=model.n_states)
+    x[model.layout.theta_dot] = 0.5
+    for i, (key, factor, tol) in enumerate([("beam.youngs_modulus", 1.3, 1e-10),
+                                            ("hub.inertia", 1.05, 2e-3)]):
+        p = p0.copy()
+        p[i] *= factor
+        exact = _rebuilt(model, key, p[i]).dynamics(0.0, x, 0.7)
+        got = np.array(f(x, 0.7, p)).ravel()
+        assert np.max(np.abs(got - exact)) <= tol * np.max(np.abs(exact)), key
+
+
+def test_parameters_of_a_structure_and_through_python_control():
+    import control
+
+    model = flexctl.build_model(flexctl.load_scene("two-array-free").system, n_modes=2)
+    keys = ["appendages[1].beam.youngs_modulus", "hub.inertia"]
+    f = model.casadi(parameters=keys)
+    p0 = model.parameter_values(keys)
+    x = np.zeros(model.n_states)
+    np.testing.assert_allclose(np.array(f(x, 1.0, p0)).ravel(), model.dynamics(0.0, x, 1.0),
+                               rtol=1e-13, atol=1e-15)
+    with pytest.raises(InputValueError, match="appendages"):
+        model.casadi(parameters=["beam.youngs_modulus"])
+    plant = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    system = plant.nonlinear(params=["beam.youngs_modulus"])
+    assert system.params == {"beam.youngs_modulus": 6.9e10}
+    x0 = np.zeros(plant.n_states)
+    x0[1] = 0.01
+    t = np.linspace(0.0, 1.0, 51)
+    stiffer = control.input_output_response(system, t, 0.0, X0=x0,
+                                            params={"beam.youngs_modulus": 8.0e10})
+    rebuilt = control.input_output_response(_rebuilt(plant, "beam.youngs_modulus", 8.0e10)
+                                            .nonlinear(), t, 0.0, X0=x0)
+    np.testing.assert_allclose(stiffer.outputs, rebuilt.outputs, rtol=0, atol=1e-9)
+
+
+def test_parameter_names_are_checked():
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    cases = [(["beam.colour"], InputValueError, "no 'colour'"),
+             (["masses[3].mass"], InputValueError, "index 3"),
+             (["hub.support"], InputValueError, "not a number"),
+             (["Beam.Length!"], InputValueError, "scene key"),
+             ([3], InputTypeError, "scene key"),
+             (["hub.inertia", "hub.inertia"], InputValueError, "twice"),
+             ([], InputValueError, "at least one"),
+             ("hub.inertia", InputTypeError, "list")]
+    for parameters, error, text in cases:
+        with pytest.raises(error, match=text):
+            model.casadi(parameters=parameters)
+    with pytest.raises(InputTypeError, match="params"):
+        model.nonlinear(params="hub.inertia")
+
+
+def test_discrete_step_with_parameters():
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    keys = ["beam.youngs_modulus", "hub.inertia"]
+    p0 = model.parameter_values(keys)
+    x = np.zeros(model.n_states)
+    x[1] = 0.01
+    for method in ("rk4", "cvodes"):
+        plain = model.discretize(0.02, method)
+        with_p = model.discretize(0.02, method, parameters=keys)
+        assert with_p.function.name_in() == ["x", "u", "p"]
+        np.testing.assert_allclose(np.array(with_p(x, 0.3, p0)).ravel(),
+                                   np.array(plain(x, 0.3)).ravel(), rtol=1e-12, atol=1e-15)

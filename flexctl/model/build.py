@@ -79,15 +79,17 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order",
                  matrices=assemble(system, int(n_modes)))
 
 
-def rebuild(model: Model, n_modes=None, variant: str | None = None) -> Model:
-    """The same plant as ``model`` (its actuator included) on other modes or another variant
-    (default: the model's own)."""
+def rebuild(model: Model, n_modes=None, variant: str | None = None, *, system=None) -> Model:
+    """The same plant as ``model`` (its actuator included) on other modes, another variant or
+    another ``system`` of the same kind (default: the model's own)."""
     n_modes = model.mode_spec if n_modes is None else n_modes
     variant = model.variant if variant is None else variant
     actuator = getattr(model, "actuator", None)
     if actuator is not None:
-        return actuated_model(model.source, n_modes, variant, actuator)
-    return build_model(model.system, n_modes=n_modes, variant=variant)
+        return actuated_model(model.source if system is None else system, n_modes, variant,
+                              actuator)
+    return build_model(model.system if system is None else system, n_modes=n_modes,
+                       variant=variant)
 
 
 def _build_structure_model(system, n_modes, variant: str) -> Model:

@@ -52,19 +52,22 @@ MAX_SUBSTEPS = 1000
 
 def rk4_function(f, n: int, substeps: int, symbol=None):
     """CasADi ``(x, u, h) -> x(h)``: ``substeps`` RK4 steps of ``f(x, u)`` over ``h`` s with
-    ``u`` held (``symbol``: ``casadi.SX`` (default) or ``casadi.MX``)."""
+    ``u`` held (``symbol``: ``casadi.SX`` (default) or ``casadi.MX``); for ``f(x, u, p)``,
+    ``(x, u, h, p) -> x(h)`` with ``p`` held too."""
     import casadi as ca
 
     symbol = symbol or ca.SX
     x, u, h = symbol.sym("x", n), symbol.sym("u", f.size1_in(1)), symbol.sym("h")
+    extra = [symbol.sym("p", f.size1_in(2))] if f.n_in() > 2 else []
     xk, dt = x, h / substeps
     for _ in range(substeps):
-        k1 = f(xk, u)
-        k2 = f(xk + 0.5 * dt * k1, u)
-        k3 = f(xk + 0.5 * dt * k2, u)
-        k4 = f(xk + dt * k3, u)
+        k1 = f(xk, u, *extra)
+        k2 = f(xk + 0.5 * dt * k1, u, *extra)
+        k3 = f(xk + 0.5 * dt * k2, u, *extra)
+        k4 = f(xk + dt * k3, u, *extra)
         xk = xk + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return ca.Function("rk4_hold", [x, u, h], [xk], ["x", "u", "h"], ["xf"])
+    return ca.Function("rk4_hold", [x, u, h, *extra], [xk], ["x", "u", "h"]
+                       + ["p"] * len(extra), ["xf"])
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,8 +150,8 @@ def _richardson(model, hold, finer, dt) -> float:
     return worst
 
 
-def discretize(model, dt, method: str = "rk4", substeps=None, rtol: float = 1e-8
-               ) -> DiscreteStep:
+def discretize(model, dt, method: str = "rk4", substeps=None, rtol: float = 1e-8,
+               parameters=None) -> DiscreteStep:
     """The model's step over ``dt`` s with the input held (module docstring).
 
     Parameters
@@ -161,6 +164,9 @@ def discretize(model, dt, method: str = "rk4", substeps=None, rtol: float = 1e-8
         RK4 steps per sample (1 to 1000); default the fewest with ``omega_max h <= 0.5``.
     rtol : float
         CVODES relative tolerance (1e-14 to 1e-2); absolute tolerance ``1e-3 rtol``.
+    parameters : list of str, optional
+        Physical parameters (scene keys) as a third input ``p``: ``(x, u, p) -> x_next``
+        (:meth:`flexctl.Model.casadi` with ``parameters``).
 
     Raises
     ------
@@ -174,9 +180,11 @@ def discretize(model, dt, method: str = "rk4", substeps=None, rtol: float = 1e-8
     if method not in METHODS:
         raise InputValueError(f"discretize method must be one of {', '.join(METHODS)}; got "
                               f"{method!r}")
-    n, f = model.n_states, model.casadi()
+    n, f = model.n_states, model.casadi(parameters)
     omega = _fastest(model)
     x, u = ca.SX.sym("x", n), ca.SX.sym("u", f.size1_in(1))
+    extra = [ca.SX.sym("p", f.size1_in(2))] if parameters is not None else []
+    names = ["x", "u"] + ["p"] * len(extra)
     if method == "rk4":
         auto = max(1, math.ceil(omega * dt / OMEGA_H))
         steps = auto if substeps is None else check_integer(
@@ -192,22 +200,25 @@ def discretize(model, dt, method: str = "rk4", substeps=None, rtol: float = 1e-8
                 f"omega h = {omega * dt / steps:.3g}, outside RK4's stability interval (2.8); "
                 f"use at least {math.ceil(omega * dt / 2.8)}")
         hold = rk4_function(f, n, steps)
-        x_next = hold(x, u, dt)
-        error = _richardson(model, hold, rk4_function(f, n, 2 * steps), dt)
+        x_next = hold(x, u, dt, *extra)
+        error = _richardson(model, rk4_function(model.casadi(), n, steps),
+                            rk4_function(model.casadi(), n, 2 * steps), dt)
         tolerance = None
     else:
         if substeps is not None:
             raise InputValueError("discretize substeps is for method='rk4'; CVODES chooses "
                                   "its own steps (set rtol)")
         tolerance = check_real("discretize", "rtol", rtol, minimum=1e-14, maximum=1e-2)
-        p = ca.SX.sym("p", f.size1_in(1))
+        held = ca.vertcat(u, *extra)
         integrator = ca.integrator("flexctl_cvodes_step", "cvodes",
-                                   {"x": x, "p": p, "ode": f(x, p)}, 0.0, dt,
+                                   {"x": x, "p": held, "ode": f(x, u, *extra)}, 0.0, dt,
                                    {"reltol": tolerance, "abstol": 1e-3 * tolerance})
         xs, us = ca.MX.sym("x", n), ca.MX.sym("u", f.size1_in(1))
-        function = ca.Function(f"flexctl_{model.variant}_step", [xs, us],
-                               [integrator(x0=xs, p=us)["xf"]], ["x", "u"], ["x_next"])
+        ps = [ca.MX.sym("p", f.size1_in(2))] if extra else []
+        function = ca.Function(f"flexctl_{model.variant}_step", [xs, us, *ps],
+                               [integrator(x0=xs, p=ca.vertcat(us, *ps))["xf"]], names,
+                               ["x_next"])
         return DiscreteStep(function, dt, method, None, tolerance, omega, tolerance)
-    function = ca.Function(f"flexctl_{model.variant}_step", [x, u], [x_next], ["x", "u"],
+    function = ca.Function(f"flexctl_{model.variant}_step", [x, u, *extra], [x_next], names,
                            ["x_next"])
     return DiscreteStep(function, dt, method, steps, tolerance, omega, error)

@@ -31,7 +31,7 @@ def signal_names(names) -> list:
     return out
 
 
-def to_nonlinear_iosystem(model, outputs: str = "named"):
+def to_nonlinear_iosystem(model, outputs: str = "named", params=None):
     """The model as a python-control ``NonlinearIOSystem``.
 
     States :attr:`Model.state_names`, input :attr:`Model.input_names` (``torque``, N m, or an
@@ -39,6 +39,12 @@ def to_nonlinear_iosystem(model, outputs: str = "named"):
     states themselves (``outputs="states"``), an appendage's dot as an underscore
     (:func:`signal_names`). A state at which the mass matrix is singular raises
     :class:`~flexctl.model.SingularMassMatrixError`.
+
+    ``params``: physical parameters by scene key (a list of keys, their nominal values the
+    defaults, or a dict of their values), the python-control way: ``updfcn`` and ``outfcn``
+    read them from ``params``, so ``control.input_output_response(sys, ..., params={...})``
+    runs the plant at other values (:mod:`flexctl.model.parametric`: exact at the nominal
+    values, first order in the change).
 
     Examples
     --------
@@ -54,6 +60,9 @@ def to_nonlinear_iosystem(model, outputs: str = "named"):
     if outputs not in ("named", "states"):
         raise InputValueError(f"nonlinear outputs must be 'named' or 'states'; got {outputs!r}")
 
+    if params is not None:
+        return _parametric_iosystem(model, outputs, params)
+
     def updfcn(t, x, u, params):
         return model.dynamics(t, x, np.asarray(u, dtype=float).reshape(-1)[0])
 
@@ -67,6 +76,49 @@ def to_nonlinear_iosystem(model, outputs: str = "named"):
     return control.nlsys(updfcn, outfcn, states=states,
                          inputs=list(model.input_names), outputs=signal_names(model.output_names),
                          name=f"{model.variant}_N{model.n_modes}")
+
+
+def _parametric_iosystem(model, outputs, params):
+    """:func:`to_nonlinear_iosystem` with physical parameters read from ``params``."""
+    import control
+
+    from .errors import InputTypeError
+
+    if isinstance(params, dict):
+        keys = list(params)
+        values = dict(zip(keys, model.parameter_values(keys)))
+        values.update({k: float(v) for k, v in params.items()})
+    elif isinstance(params, (list, tuple)) and not isinstance(params, str):
+        keys = list(params)
+        values = dict(zip(keys, model.parameter_values(keys)))
+    else:
+        raise InputTypeError("nonlinear params must be a list of scene keys or a dict of their "
+                             f"values; got {type(params).__name__}")
+    f = model.casadi(parameters=keys)
+    h = model._c.setdefault(("casadi_outputs", tuple(keys)),
+                            _parametric_outputs(model, keys))
+
+    def vector(params):
+        return np.array([float(params.get(k, values[k])) for k in keys])
+
+    def updfcn(t, x, u, params):
+        return np.array(f(x, np.asarray(u, dtype=float).reshape(-1)[:1], vector(params)),
+                        dtype=float).reshape(-1)
+
+    def outfcn(t, x, u, params):
+        return np.array(h(x, 0.0, vector(params)), dtype=float).reshape(-1)
+
+    states = signal_names(model.state_names)
+    return control.nlsys(updfcn, outfcn if outputs == "named" else None, states=states,
+                         inputs=list(model.input_names),
+                         outputs=signal_names(model.output_names) if outputs == "named"
+                         else list(states), params=values,
+                         name=f"{model.variant}_N{model.n_modes}")
+
+
+def _parametric_outputs(model, keys):
+    from .parametric import parametric_casadi
+    return parametric_casadi(model, keys, outputs=True)
 
 
 def _symbolic_dynamics(model, x, u):

@@ -601,12 +601,14 @@ class Model:
         return modal_visibility(self, spin_rate)
 
     # ------------------------------------------------------------------ exports
-    def nonlinear(self, outputs: str = "named"):
+    def nonlinear(self, outputs: str = "named", params=None):
         """Nonlinear plant as a python-control ``NonlinearIOSystem`` (:mod:`flexctl.model.exports`):
         its outputs the model's named outputs (``"named"``), or its states (``"states"``, for
-        a state-feedback law's :func:`controllers.iosys.to_iosys` to connect to by name)."""
+        a state-feedback law's :func:`controllers.iosys.to_iosys` to connect to by name);
+        ``params`` (scene keys, or a dict of their values) makes physical parameters
+        python-control ``params``."""
         from .exports import to_nonlinear_iosystem
-        return to_nonlinear_iosystem(self, outputs)
+        return to_nonlinear_iosystem(self, outputs, params)
 
     def casadi_outputs(self):
         """The outputs as a CasADi ``Function`` ``(x, u) -> y`` (inputs ``x`` (n x 1) and ``u``
@@ -623,19 +625,36 @@ class Model:
                 f"flexctl_{self.variant}_outputs", [x, u], [h(x)], ["x", "u"], ["y"])
         return self._c["casadi_outputs"]
 
-    def discretize(self, dt, method: str = "rk4", substeps=None, rtol: float = 1e-8):
+    def parameter_values(self, parameters) -> np.ndarray:
+        """Nominal values of the listed physical parameters (scene keys), shape (P,)."""
+        from .parametric import parameter_values
+        return parameter_values(self, parameters)
+
+    def discretize(self, dt, method: str = "rk4", substeps=None, rtol: float = 1e-8,
+                   parameters=None):
         """The model over one sample of ``dt`` s with the input held: a
         :class:`~flexctl.model.discrete.DiscreteStep` around the CasADi Function
-        ``(x, u) -> x_next``, by RK4 substeps or CVODES, with its stated accuracy (see
+        ``(x, u[, p]) -> x_next``, by RK4 substeps or CVODES, with its stated accuracy (see
         :func:`flexctl.model.discrete.discretize`)."""
         from .discrete import discretize
-        return discretize(self, dt, method, substeps, rtol)
+        return discretize(self, dt, method, substeps, rtol, parameters)
 
-    def casadi(self):
-        """Dynamics as a CasADi ``Function`` ``(x, u) -> dx/dt`` (see :mod:`flexctl.model.exports`).
+    def casadi(self, parameters=None):
+        """Dynamics as a CasADi ``Function`` ``(x, u) -> dx/dt`` (see :mod:`flexctl.model.exports`),
+        or ``(x, u, p) -> dx/dt`` with the listed physical ``parameters`` (scene keys such as
+        ``"beam.youngs_modulus"``, ``"hub.inertia"``, ``"masses[0].mass"``) as ``p``, in that
+        order: exact at their nominal values (:meth:`parameter_values`), differentiable in
+        ``p`` (:mod:`flexctl.model.parametric`).
 
-        Built once per model and cached.
+        Built once per model (and parameter list) and cached.
         """
+        if parameters is not None:
+            from .parametric import parameter_values, parametric_casadi
+            parameter_values(self, parameters)          # named as they must be
+            key = ("casadi", tuple(parameters))
+            if key not in self._c:
+                self._c[key] = parametric_casadi(self, parameters)
+            return self._c[key]
         if "casadi" not in self._c:
             from .exports import to_casadi
             self._c["casadi"] = to_casadi(self)
