@@ -35,7 +35,7 @@ import numpy as np
 from flexctl.model.errors import InputTypeError, InputValueError
 
 from .actuator_limits import SPEED_MARGIN, hub_torque_bound, speed_bound
-from .controllable import controllable_part, state_gain
+from .controllable import controllable_part, design_failure, state_gain
 from .lqr import LQR, LQRWeights, casadi_reference_state, design_lqr, lqr_weight_matrices, \
     reference_state
 from .reference import _casadi_saturate, _saturate
@@ -286,7 +286,10 @@ def design_wheel_lqr(design, wheel, weights: LQRWeights, *, reference=None,
     q[:n, :n] = q_m
     q_r = basis.T @ q @ basis
     a_r, b_r, q_r = projector @ a @ basis, projector @ b, 0.5 * (q_r + q_r.T)
-    gain = state_gain(a_r, b_r, q_r, r, sample_time) @ projector
+    with design_failure("reaction-wheel lqr", "design_wheel_lqr", design, weights=weights,
+                        time_constant=tau, sample_time=sample_time,
+                        solving="the LQR Riccati equation of the structure with the motor lag"):
+        gain = state_gain(a_r, b_r, q_r, r, sample_time) @ projector
     lqr = replace(base, gain=gain[:, :n], poles=np.linalg.eigvals(a - b @ gain))
     return LaggedLQR(lqr=lqr, actuator_gain=float(gain[0, n]), torque_limit=limit)
 

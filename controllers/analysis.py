@@ -147,6 +147,18 @@ class PlantChannels:
                                       f" got shape {value.shape}")
             object.__setattr__(self, name, _readonly(value))
 
+    def __repr__(self):
+        # One line: the matrices of the three channels would print hundreds of lines.
+        outputs = ", ".join(sys.output_labels[0] for sys in
+                            (self.hub_angle, self.tip_deflection, self.tip_angle))
+        frequencies = "".join(
+            f", first {kind} frequency {values[0]:.4g} rad/s"
+            for kind, values in (("natural", self.natural_frequencies),
+                                 ("clamped", self.clamped_frequencies)) if values.size)
+        return (f"PlantChannels(torque -> {outputs}; spin_rate={self.spin_rate:.6g} rad/s, "
+                f"{self.hub_angle.nstates} states, {self.natural_frequencies.size} modes"
+                f"{frequencies})")
+
 
 def plant_channels(model, spin_rate: float = 0.0) -> PlantChannels:
     """The hub-angle, tip-deflection and tip-angle channels of ``model.linearize(spin_rate)``.

@@ -26,12 +26,19 @@ Examples
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 
+from flexctl.model.errors import InputError, InputValueError
+
 __all__ = ["ControllablePart", "controllable_part", "lqr_on_part", "lqe_on_part",
-           "dlqr_on_part"]
+           "dlqr_on_part", "design_failure"]
+
+#: Packages whose ``ValueError`` or ``ArithmeticError`` is a numerical failure of a design (a
+#: Riccati equation without a stabilising solution, a singular matrix), not a bug of ours.
+SOLVER_PACKAGES = ("control", "slycot", "scipy", "numpy")
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,12 +111,16 @@ def state_gain(a, b, q_mat, r_mat, sample_time=None) -> np.ndarray:
     import control
 
     if sample_time is None:
-        return np.asarray(control.lqr(a, b, q_mat, r_mat)[0], dtype=float)
-    n = a.shape[0]
-    held = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, b.shape[1]))),
-                       float(sample_time), "zoh")
-    return np.asarray(control.dlqr(held.A, held.B, q_mat * sample_time,
-                                   np.atleast_2d(r_mat) * sample_time)[0], dtype=float)
+        gain = np.asarray(control.lqr(a, b, q_mat, r_mat)[0], dtype=float)
+    else:
+        n = a.shape[0]
+        held = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, b.shape[1]))),
+                           float(sample_time), "zoh")
+        gain = np.asarray(control.dlqr(held.A, held.B, q_mat * sample_time,
+                                       np.atleast_2d(r_mat) * sample_time)[0], dtype=float)
+    if not np.all(np.isfinite(gain)):
+        raise np.linalg.LinAlgError("the solver returned a gain that is not finite")
+    return gain
 
 
 def lqe_on_part(model, spin_rate, c_meas, process, measurement):
@@ -155,3 +166,115 @@ def dlqr_on_part(model, sample_time, q_mat, r_mat) -> np.ndarray:
     if part.dropped:
         p_mat = part.projector.T @ p_mat @ part.projector
     return 0.5 * (p_mat + p_mat.T)
+
+
+# ---------------------------------------------------------------------------- failures
+def _solver_failures() -> tuple:
+    """The exception types of a failed solve: numpy's and slycot's arithmetic errors and
+    python-control's own argument and dimension errors (a weight made asymmetric by
+    rounding)."""
+    import control.exception
+
+    kinds = [np.linalg.LinAlgError, control.exception.ControlArgument,
+             control.exception.ControlDimension]
+    try:
+        from slycot.exceptions import SlycotArithmeticError
+    except ImportError:            # python-control falls back on SciPy without slycot
+        pass
+    else:
+        kinds.append(SlycotArithmeticError)
+    return tuple(kinds)
+
+
+def _raised_in_solver(exc: BaseException) -> bool:
+    """True when ``exc`` was raised inside one of :data:`SOLVER_PACKAGES`."""
+    tb = exc.__traceback__
+    if tb is None:
+        return False
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    package = str(tb.tb_frame.f_globals.get("__name__", "")).partition(".")[0]
+    return package in SOLVER_PACKAGES
+
+
+def _model_facts(model, spin_rate: float) -> str:
+    """What of the design model decides whether a Riccati equation is solvable: its mode
+    count, its clamped frequencies (first and fastest, rad/s) and ``J0`` (kg m^2)."""
+    n_modes = getattr(model, "n_modes", None)
+    facts = [f"{n_modes} mode{'' if n_modes == 1 else 's'}"] if n_modes is not None else []
+    try:
+        w = np.asarray(model.natural_frequencies(spin_rate, hub="clamped"), dtype=float)
+    except (ValueError, ArithmeticError, TypeError, AttributeError):
+        w = np.zeros(0)        # the facts describe a failure: give what can be had
+    if w.size:
+        facts.append(f"first clamped frequency {w[0]:.4g} rad/s, fastest mode {w[-1]:.4g} rad/s")
+    inertia = getattr(model, "rigid_inertia", None)
+    if isinstance(inertia, (int, float)):
+        facts.append(f"J0 {inertia:.4g} kg m^2")
+    return ", ".join(facts)
+
+
+def _input_text(name: str, value) -> str:
+    if isinstance(value, np.ndarray):
+        value = np.array2string(value, precision=3, threshold=8, max_line_width=10_000)
+    elif isinstance(value, float):
+        value = f"{value:.4g}"
+    return f"{name}={value}"
+
+
+@contextmanager
+def design_failure(law: str, function: str, model, spin_rate: float = 0.0, *,
+                   solving: str = "the LQR Riccati equation", **inputs):
+    """Report a numerical failure of a controller design as an
+    :class:`~flexctl.model.errors.InputValueError` that names the design, its inputs and the
+    solver's reason, in one line.
+
+    Caught: ``numpy.linalg.LinAlgError``, slycot's ``SlycotArithmeticError``,
+    python-control's ``ControlArgument`` / ``ControlDimension``, and a ``ValueError`` or
+    ``ArithmeticError`` raised inside :data:`SOLVER_PACKAGES`. Everything else, the
+    project's own input errors first, passes through unchanged.
+
+    Parameters
+    ----------
+    law : str
+        The control law, e.g. ``"lqr"``.
+    function : str
+        The design function, e.g. ``"design_lqr"``.
+    model : flexctl.Model
+        The design model (its modes, clamped frequencies and ``J0`` go into the message).
+    spin_rate : float, optional
+        Steady hub rate of the linearisation, rad/s. Default 0.
+    solving : str, optional
+        What was being solved, e.g. ``"the Kalman filter Riccati equation"``.
+    **inputs
+        The design's inputs that matter (weights, sample time, ...), named in the message.
+
+    Examples
+    --------
+    >>> import flexctl
+    >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=1)
+    >>> with design_failure("lqr", "design_lqr", model, torque_weight=1.0):
+    ...     raise np.linalg.LinAlgError("Failed to find a finite solution.")
+    Traceback (most recent call last):
+    ...
+    flexctl.model.errors.InputValueError: lqr design (design_lqr) failed on a model with 1 \
+mode, first clamped frequency 3.566 rad/s, fastest mode 3.566 rad/s, J0 2.883 kg m^2 (spin \
+rate 0 rad/s, torque_weight=1): the LQR Riccati equation has no stabilising solution \
+(Failed to find a finite solution)
+    """
+    try:
+        yield
+    except InputError:
+        raise
+    except Exception as exc:
+        arithmetic = isinstance(exc, _solver_failures())
+        if not arithmetic and not (isinstance(exc, (ValueError, ArithmeticError))
+                                   and _raised_in_solver(exc)):
+            raise
+        detail = " ".join(str(exc).split()).rstrip(".;") or type(exc).__name__
+        reason = (f"{solving} has no stabilising solution ({detail})" if arithmetic
+                  else f"solving {solving} failed ({type(exc).__name__}: {detail})")
+        given = ", ".join([f"spin rate {spin_rate:g} rad/s"]
+                          + [_input_text(k, v) for k, v in inputs.items() if v is not None])
+        raise InputValueError(f"{law} design ({function}) failed on a model with "
+                              f"{_model_facts(model, spin_rate)} ({given}): {reason}") from exc

@@ -122,7 +122,7 @@ from .scheduling import design_scheduled_lqr
 from .shaping import bang_bang, design_shaper, shape
 from .spec import CONTROLLER_KINDS, ControllerSpec, SceneError
 from .tracking import TrajectoryTracker
-from .trajopt import SlewProblem, solve_slew
+from .trajopt import SlewProblem, SlewSolution, solve_slew
 
 __all__ = ["BuiltController", "OpenLoop", "from_spec"]
 
@@ -176,6 +176,30 @@ class BuiltController:
     maneuver_end: float
     design_modes: int
     info: dict = field(default_factory=dict)
+
+    @property
+    def reference_angle(self):
+        """The hub-angle reference the controller tracks, as ``angle(t)`` (rad, ``t`` in s, a
+        float or an array), or None for a law that tracks none (open loop, regulation).
+
+        Looked for through the wrappers that hold a law in ``law`` (zero-order hold,
+        observer, DC-motor voltage): a ``reference`` with ``angle(t)`` (a
+        :class:`~controllers.reference.SlewProfile`), or a planned slew
+        (:class:`~controllers.trajopt.SlewSolution`, the tracker's ``solution`` or the
+        NMPC's ``reference``) whose design-model hub angle is the reference.
+        """
+        law, seen = self.controller, set()
+        while law is not None and id(law) not in seen:
+            seen.add(id(law))
+            reference = getattr(law, "reference", None)
+            if callable(getattr(reference, "angle", None)):
+                return reference.angle
+            plan = reference if isinstance(reference, SlewSolution) \
+                else getattr(law, "solution", None)
+            if isinstance(plan, SlewSolution):
+                return lambda t, plan=plan: plan.model.layout.hub_angle(plan.state_at(t))
+            law = getattr(law, "law", None)
+        return None
 
 
 def _wrap(func, *args, **kwargs):

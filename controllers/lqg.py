@@ -32,12 +32,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from flexctl.model.checks import check_array
+from flexctl.model.checks import KeywordOnly, check_array
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.layout import StateLayout
 
 from .feedback import ReferenceFeedback
-from .controllable import lqe_on_part
+from .controllable import design_failure, lqe_on_part
 from .lqr import (LQRWeights, _gain_layout, _lqr_gain, _model, casadi_reference_state,
                   reference_state, static_deflection_gain)
 from .plant_state import mode_count
@@ -66,7 +66,7 @@ def _measurement_covariance(noise, model) -> np.ndarray:
 
 
 @dataclass(frozen=True, kw_only=True)
-class NoiseLevels:
+class NoiseLevels(KeywordOnly):
     """Noise intensities the Kalman filter is designed for, as standard deviations.
 
     Parameters
@@ -140,8 +140,10 @@ def estimator_gain(model, noise: NoiseLevels, spin_rate: float = 0.0) -> tuple:
         raise InputTypeError(f"estimator_gain.noise must be NoiseLevels; got "
                              f"{type(noise).__name__}")
     spin_rate = _real("estimator_gain", "spin_rate", spin_rate)
-    return lqe_on_part(model, spin_rate, _measurement_rows(model), noise.process_covariance,
-                       _measurement_covariance(noise, model))
+    with design_failure("lqg", "estimator_gain", model, spin_rate, noise=noise,
+                        solving="the Kalman filter Riccati equation"):
+        return lqe_on_part(model, spin_rate, _measurement_rows(model),
+                           noise.process_covariance, _measurement_covariance(noise, model))
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -468,7 +470,8 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
     if not isinstance(weights, LQRWeights):
         raise InputTypeError(f"design_lqg.weights must be LQRWeights; got "
                              f"{type(weights).__name__}")
-    gain, _ = _lqr_gain(model, weights, spin_rate)
+    with design_failure("lqg", "design_lqg", model, spin_rate, weights=weights):
+        gain, _ = _lqr_gain(model, weights, spin_rate)
     est_gain, _ = estimator_gain(model, noise, spin_rate)
     a, b = model.linear_matrices(spin_rate)
     controller = LQG(gain=gain, estimator_gain=est_gain, a=a, b=b, c=_measurement_rows(model),

@@ -44,11 +44,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from flexctl.model import Model
-from flexctl.model.checks import check_array, check_instance, check_integer
+from flexctl.model.checks import KeywordOnly, check_array, check_instance, check_integer
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.layout import StateLayout
 
-from .controllable import lqr_on_part
+from .controllable import design_failure, lqr_on_part
 from .feedback import ReferenceFeedback
 from .plant_state import DEFAULT_LAYOUT, design_rows, resized
 from .reference import _casadi_evaluate, _evaluate, _optional_positive, _real, _structure_key
@@ -199,7 +199,7 @@ WEIGHT_RANGE = 1e12
 
 
 @dataclass(frozen=True, kw_only=True)
-class LQRWeights:
+class LQRWeights(KeywordOnly):
     """Largest acceptable values (Bryson's rule) that weight the LQR cost.
 
     Each term adds ``(value / largest)^2`` to the cost integrand; ``None`` leaves it out.
@@ -414,7 +414,9 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
     spin_rate = _real("design_lqr", "spin_rate", spin_rate)
     if sample_time is not None:
         sample_time = _real("design_lqr", "sample_time", sample_time, minimum=0.0, strict=True)
-    gain, poles = _lqr_gain(model, weights, spin_rate, sample_time)
+    with design_failure("lqr", "design_lqr", model, spin_rate, weights=weights,
+                        sample_time=sample_time):
+        gain, poles = _lqr_gain(model, weights, spin_rate, sample_time)
     return LQR(gain=gain, reference=reference,
                feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
                torque_limit=torque_limit, spin_rate=spin_rate, poles=poles,

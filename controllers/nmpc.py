@@ -475,10 +475,14 @@ class NMPC:
     def _terminal_weight(self) -> np.ndarray:
         """``P``: the discrete LQR Riccati solution of the design model at rest, held over
         ``sample_time`` with weights ``Q`` and ``R``, shape (n, n)."""
-        from .controllable import dlqr_on_part
+        from .controllable import design_failure, dlqr_on_part
 
-        return dlqr_on_part(self.model, self.sample_time, np.diag(self.state_weights),
-                            np.array([[self.torque_weight]]))
+        with design_failure("nmpc", "NMPC terminal weight", self.model,
+                            state_weights=self.state_weights, torque_weight=self.torque_weight,
+                            sample_time=self.sample_time,
+                            solving="the discrete LQR Riccati equation"):
+            return dlqr_on_part(self.model, self.sample_time, np.diag(self.state_weights),
+                                np.array([[self.torque_weight]]))
 
     def _nlp_cost(self, xs, us, rx, rv, p_mat):
         """``1/2 |res|^2``: each stage's residuals weighted by ``sqrt(Q)`` and ``sqrt(R)``, the

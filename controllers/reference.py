@@ -37,6 +37,7 @@ import numpy as np
 
 from flexctl.model.errors import InputTypeError, InputValueError
 
+from flexctl.model.checks import KeywordOnly
 from flexctl.model.checks import check_real as _real
 from flexctl.sim.maneuvers import RIGID_PEAK_ACCELERATION, rigid_slew_duration
 
@@ -54,7 +55,7 @@ def _optional_positive(owner: str, name: str, value) -> float | None:
 
 
 @dataclass(frozen=True, kw_only=True)
-class SlewProfile:
+class SlewProfile(KeywordOnly):
     """Rest-to-rest slew of the hub angle from 0 to ``slew_angle``.
 
     Parameters

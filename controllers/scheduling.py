@@ -33,6 +33,7 @@ from flexctl.model.checks import check_array
 from flexctl.model.errors import InputValueError
 from flexctl.model.layout import StateLayout
 
+from .controllable import design_failure
 from .feedback import ReferenceFeedback
 from .lqr import (LQRWeights, _gain_layout, _lqr_gain, _model, casadi_reference_state,
                   casadi_truncate_state, reference_state, static_deflection_gain,
@@ -141,6 +142,13 @@ class ScheduledLQR(ReferenceFeedback):
         return self._casadi_apply(-ca.dot(gain, x_design - x_ref), acc)
 
 
+def _scheduled_gain(model, weights: LQRWeights, spin_rate: float) -> np.ndarray:
+    """The LQR gain of the schedule at ``spin_rate`` (rad/s), shape (1, n)."""
+    with design_failure("scheduled lqr", "design_scheduled_lqr", model, spin_rate,
+                        weights=weights):
+        return _lqr_gain(model, weights, spin_rate)[0]
+
+
 def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=None,
                          feedforward: bool = True, torque_limit: float | None = None,
                          flexible_reference: bool = True) -> ScheduledLQR:
@@ -164,7 +172,7 @@ def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=No
     """
     model = _model("design_scheduled_lqr", model)
     rates = _spin_rates("design_scheduled_lqr", spin_rates)
-    gains = np.vstack([_lqr_gain(model, weights, float(w))[0] for w in rates])
+    gains = np.vstack([_scheduled_gain(model, weights, float(w)) for w in rates])
     return ScheduledLQR(spin_rates=rates, gains=gains, reference=reference,
                         feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
                         torque_limit=torque_limit,

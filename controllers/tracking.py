@@ -17,7 +17,7 @@ from flexctl.model.errors import InputTypeError, InputValueError
 
 from flexctl.model import Model
 
-from .controllable import lqr_on_part
+from .controllable import design_failure, lqr_on_part
 from .lqr import casadi_truncate_state, truncate_state
 from .trajopt import HoldTorque, SlewSolution, _number
 
@@ -105,7 +105,9 @@ class TrajectoryTracker:
                                                                  self.torque_weight)
         _number("torque_limit", self.torque_limit, optional=True)
         # on the modes the torque moves (symmetric appendages, a free hub's translation left)
-        gain, _, _ = lqr_on_part(model, 0.0, np.diag(q), np.array([[r]]))
+        with design_failure("trajectory tracker lqr", "TrajectoryTracker", model,
+                            state_weights=q, torque_weight=r):
+            gain, _, _ = lqr_on_part(model, 0.0, np.diag(q), np.array([[r]]))
         gain = np.asarray(gain, dtype=float).reshape(-1)
         gain.setflags(write=False)
         object.__setattr__(self, "gain", gain)

@@ -65,7 +65,7 @@ import numpy as np
 
 from flexctl.model import DCMotor, Model, ReactionWheel
 from flexctl.model.actuators import as_actuator
-from flexctl.model.checks import check_choice, check_integer, check_real
+from flexctl.model.checks import KeywordOnly, check_choice, check_integer, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.layout import StateLayout
 from flexctl.sim.maneuvers import rigid_slew_duration
@@ -125,7 +125,7 @@ def rigid_minimum_time(angle: float, inertia: float, torque_bound: float) -> flo
 
 
 @dataclass(frozen=True, kw_only=True)
-class SlewProblem:
+class SlewProblem(KeywordOnly):
     """A rest-to-rest slew to optimise.
 
     Parameters

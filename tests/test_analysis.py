@@ -119,6 +119,16 @@ def test_tip_angle_channel_is_non_minimum_phase_and_hub_angle_is_not(system):
     np.testing.assert_array_equal(channels.tip_deflection.C[0], model.output_matrix[2])
 
 
+def test_plant_channels_repr_is_one_short_line(system):
+    channels = plant_channels(flexctl.build_model(system, 6), 2.0)
+    text = repr(channels)
+    assert "\n" not in text and len(text) < 200, text
+    assert text.startswith("PlantChannels(")
+    for identifying in ("theta", "tip_deflection", "tip_angle", "spin_rate=2 rad/s",
+                        "14 states", "6 modes"):
+        assert identifying in text, text
+
+
 # --------------------------------------------------------------------------- collocated PD
 @pytest.mark.parametrize("n_modes", [1, 2, 4, 8], ids=lambda n: f"N{n}")
 @pytest.mark.parametrize("bandwidth,damping_ratio", [(0.5, 0.3), (2.0, 0.9), (10.0, 1.0)],

@@ -102,8 +102,8 @@ def test_timeseries_header_and_columns(spacecraft_run):
     n = summary["n_modes"]
     header, data = _read_csv(out / "timeseries.csv")
     assert header == ["t", "theta", "theta_dot", "torque", "tip_deflection",
-                      *(f"q{i}" for i in range(1, n + 1))]
-    assert data.shape[1] == 5 + n
+                      *(f"q{i}" for i in range(1, n + 1)), "root_moment", "tip_angle"]
+    assert data.shape[1] == 7 + n
     assert data[0, 0] == 0.0
     assert np.all(np.diff(data[:, 0]) > 0)
     assert data[-1, 0] == pytest.approx(summary["t_end"], rel=CSV_RTOL)
@@ -315,6 +315,58 @@ def test_response_plot_marks_stop():
             "tip deflection (m)"} <= set(labels)
     notes = [t.get_text() for ax in fig.axes for t in ax.texts]
     assert any(note.startswith("diverged at t =") for note in notes)
+
+
+def _labelled_lines(ax) -> dict:
+    return {line.get_label(): line for line in ax.get_lines()
+            if not line.get_label().startswith("_")}
+
+
+def test_slew_response_plot_draws_reference_and_torque_bound(tmp_path, monkeypatch):
+    """``flexctl run slew-90`` draws on response.png the reference the tracker follows (it
+    ends at the 90 degree target) and the 6 N m torque bound at +-6 N m."""
+    from flexctl.app import plotting
+
+    drawn = []
+
+    def recorded(*args, **kwargs):
+        drawn.append(plot_response(*args, **kwargs))
+        return drawn[-1]
+
+    monkeypatch.setattr(plotting, "plot_response", recorded)
+    assert main(["run", "slew-90", "--out", str(tmp_path / "out")]) == EXIT_OK
+    assert (tmp_path / "out" / "response.png").read_bytes()[:8] == PNG_MAGIC
+    (fig,) = drawn
+    angle_ax, torque_ax = fig.axes[0], fig.axes[1]
+    maneuver = load_scene("slew-90").maneuver
+    reference = _labelled_lines(angle_ax)["reference"]
+    assert reference.get_linestyle() == "--"
+    assert reference.get_ydata()[0] == pytest.approx(0.0, abs=1e-9)
+    assert reference.get_ydata()[-1] == pytest.approx(maneuver.angle)
+    assert "reference" in [t.get_text() for t in angle_ax.get_legend().get_texts()]
+    bounds = sorted(line.get_ydata()[0] for line in torque_ax.get_lines()
+                    if line.get_label().lstrip("_") == "torque bound")
+    assert bounds == pytest.approx([-maneuver.torque_bound, maneuver.torque_bound])
+    assert "torque bound" in _labelled_lines(torque_ax)
+
+
+def test_slew_response_plot_without_reference_draws_the_target():
+    # 10 degrees: inside the first_order model's small-deflection range
+    scene = load_scene("slew-90", {"controller.kind": "bang_bang", "model.variant": "first_order",
+                                   "model.modes": 2, "maneuver.angle_deg": 10.0})
+    from flexctl.app.runner import execute
+
+    result, _, reference = execute(scene)
+    assert reference is None
+    fig = plot_response(result, reference=reference, target_angle=scene.maneuver.angle,
+                        torque_bound=scene.maneuver.torque_bound)
+    target = _labelled_lines(fig.axes[0])["target"]
+    assert list(target.get_ydata()) == [scene.maneuver.angle] * 2
+    assert "reference" not in _labelled_lines(fig.axes[0])
+    # Nothing of a slew is drawn on a run that is not one.
+    plain = plot_response(result)
+    assert set(_labelled_lines(plain.axes[0])) == {"hub angle"}
+    assert not _labelled_lines(plain.axes[1])
 
 
 def test_mode_shapes_plot_is_tip_normalised():

@@ -191,3 +191,48 @@ def test_rigid_inertia_is_the_inertia_of_the_undeformed_system():
     expected = HUB["inertia"] + beam_part + sum(m.mass * (b + m.position) ** 2 for m in masses)
     assert system.rigid_inertia == pytest.approx(expected, rel=DERIVED_RTOL)
     assert system.total_point_mass == pytest.approx(0.385, rel=DERIVED_RTOL)
+
+
+def _parameter_classes():
+    """The keyword-only parameter dataclasses users build by hand."""
+    from controllers.lqg import NoiseLevels
+    from controllers.lqr import LQRWeights
+    from controllers.reference import SlewProfile
+    from controllers.trajopt import SlewProblem
+    from flexctl.model.actuators import DCMotor, ReactionWheel
+    from flexctl.model.structure import Appendage, Structure
+    from flexctl.sim.maneuvers import SineTorque, Slew, SpinUp, TorqueSamples
+    from flexctl.sim.sensors import Sensors
+
+    return [Hub, Beam, PointMass, HubBeam, Appendage, Structure, ReactionWheel, DCMotor,
+            Sensors, SpinUp, SineTorque, Slew, TorqueSamples, LQRWeights, NoiseLevels,
+            SlewProfile, SlewProblem]
+
+
+@pytest.mark.parametrize("cls", _parameter_classes(), ids=lambda cls: cls.__name__)
+def test_a_positional_call_says_keywords_only_and_shows_the_keyword_form(cls):
+    from flexctl.model.errors import InputTypeError
+
+    required = [f.name for f in dataclasses.fields(cls)
+                if f.init and f.default is dataclasses.MISSING
+                and f.default_factory is dataclasses.MISSING]
+    with pytest.raises(InputTypeError) as caught:
+        cls(2.5, 0.1)
+    message = str(caught.value)
+    assert message.startswith(f"{cls.__name__} takes keyword arguments only: {cls.__name__}(")
+    assert message.endswith("got 2 positional: 2.5, 0.1"), message
+    for name in required:
+        assert f"{name}=..." in message, message
+    assert "__init__" not in message and "were given" not in message
+
+
+def test_keyword_only_parameters_still_copy_replace_and_pickle():
+    import copy
+    import pickle
+
+    hub = Hub(**HUB)
+    assert pickle.loads(pickle.dumps(hub)) == hub
+    assert copy.deepcopy(hub) == hub
+    assert dataclasses.replace(hub, radius=0.2).radius == 0.2
+    with pytest.raises(ValueError, match=r"hub\.radius"):
+        dataclasses.replace(hub, radius=-1.0)

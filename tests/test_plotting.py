@@ -185,7 +185,8 @@ def test_controller_comparison_draws_histories_and_metric_bars(runs):
     widths = [bar.get_width() for bar in residual.patches]
     assert widths == pytest.approx([metrics["push"].residual_vibration,
                                     metrics["gentle"]["residual_vibration"]])
-    assert residual.get_xscale() == "log"
+    # A log axis only when the residuals span a decade (see the test below).
+    assert residual.get_xscale() == ("log" if max(widths) / min(widths) >= 10 else "linear")
     # Not settled: a hatched bar to the end of the run.
     unsettled = settling.patches[1]
     assert unsettled.get_hatch() == "//" and unsettled.get_width() == runs["gentle"].t[-1]
@@ -214,3 +215,35 @@ def test_controller_comparison_without_metrics_has_three_axes(runs):
 def test_comparison_plots_reject_bad_arguments(runs, call, error, match):
     with pytest.raises(error, match=match):
         call(runs["push"])
+
+
+def _tick_labels_overlap(fig, ax) -> bool:
+    """Whether any two visible, non-empty x tick labels of ``ax`` overlap once drawn."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    boxes = [label.get_window_extent(renderer)
+             for label in ax.get_xticklabels(which="both")
+             if label.get_visible() and label.get_text()]
+    return any(a.overlaps(b) for k, a in enumerate(boxes) for b in boxes[k + 1:])
+
+
+@pytest.mark.parametrize("residuals, scale", [
+    pytest.param((7.7e-4, 8.4e-4), "linear", id="close-values-linear"),
+    pytest.param((2.0e-5, 1.9e-4), "linear", id="just-under-a-decade-linear"),
+    pytest.param((3.0e-6, 8.4e-4), "log", id="decades-apart-log"),
+])
+def test_controller_comparison_residual_axis_is_log_only_across_a_decade(runs, residuals,
+                                                                          scale):
+    results = {"push": runs["push"], "gentle": runs["gentle"]}
+    metrics = {label: {"residual_vibration": value, "settling_time": 1.0, "peak_torque": 2.0}
+               for label, value in zip(results, residuals)}
+    fig = plot_controller_comparison(results, metrics)
+    residual = fig.axes[3]
+    assert residual.get_xlabel() == "residual tip vibration (m)"
+    assert residual.get_xscale() == scale
+    if scale == "linear":
+        assert residual.get_xlim()[0] == 0.0
+    assert not _tick_labels_overlap(fig, residual)

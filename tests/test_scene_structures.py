@@ -815,9 +815,12 @@ def test_a_one_beam_run_writes_the_same_csv_as_before(tmp_path):
     result = run_scene(scene)
     write_run(scene, result, tmp_path)
     lines = (tmp_path / "timeseries.csv").read_text().splitlines()
-    assert lines[0] == "t,theta,theta_dot,torque,tip_deflection,q1,q2"
+    # the columns of before, then the other named outputs
+    assert lines[0] == "t,theta,theta_dot,torque,tip_deflection,q1,q2,root_moment,tip_angle"
     table = np.loadtxt(tmp_path / "timeseries.csv", delimiter=",", skiprows=1)
     np.testing.assert_allclose(table[:, 4], result.tip_deflection, rtol=1e-11, atol=1e-15)
+    np.testing.assert_allclose(table[:, 7], result.outputs["root_moment"], rtol=1e-11,
+                               atol=1e-15)
 
 
 def test_a_torque_samples_run_writes_its_manoeuvre_under_the_scene_keys(tmp_path):
@@ -841,7 +844,10 @@ def test_a_structure_run_writes_its_named_outputs(tmp_path, two_array_run):
     assert result.status == "ok", result.message
     summary = write_run(scene, result, tmp_path)
     header = (tmp_path / "timeseries.csv").read_text().splitlines()[0]
-    assert header.split(",") == structure_columns(scene.system)
+    columns = structure_columns(scene.system)
+    assert header.split(",")[:len(columns)] == columns
+    assert set(header.split(",")[len(columns):]) == \
+        set(result.model.output_names) - set(columns)
     table = np.loadtxt(tmp_path / "timeseries.csv", delimiter=",", skiprows=1)
     for k, name in enumerate(header.split(",")):
         want = {"t": result.t, "torque": result.torque}.get(name, result.outputs.get(name))

@@ -210,6 +210,42 @@ def test_bad_toml_files_are_rejected_by_name(tmp_path, edit, pattern):
         load_scene(path)
 
 
+def _as_appendage(data: dict) -> None:
+    """The one-beam form of ``data`` rewritten as one [[appendages]] entry, in place."""
+    data["appendages"] = [{"name": "arm", **data.pop("beam"), "masses": data.pop("masses")}]
+
+
+@pytest.mark.parametrize("edit, pattern", [
+    (lambda d: d["masses"][0].pop("position"),
+     r"^masses\.0\.position is required: distance d_k from the beam root, m"),
+    (lambda d: d["masses"][1].pop("mass"), r"^masses\.1\.mass is required: mass m_k, kg"),
+    (lambda d: d["hub"].pop("inertia"), r"^hub\.inertia is required: moment of inertia .*kg m\^2"),
+    (lambda d: d["beam"].pop("area"), r"^beam\.area is required: cross-section area A, m\^2"),
+    (lambda d: (_as_appendage(d), d["appendages"][0].pop("length")),
+     r"^appendages\.0\.length is required: length l, m"),
+    (lambda d: (_as_appendage(d), d["appendages"][0]["masses"][0].pop("position")),
+     r"^appendages\.0\.masses\.0\.position is required: distance d_k from the beam root"),
+    (lambda d: d.update(actuator={"kind": "reaction_wheel", "inertia": 0.02,
+                                  "torque_limit": 0.2, "time_constant": 0.05}),
+     r"^actuator\.speed_limit is required: largest wheel speed .*rad/s"),
+    (lambda d: d.update(actuator={"kind": "dc_motor", "resistance": 2.6, "torque_constant": 0.008,
+                                  "back_emf_constant": 0.008, "gear_ratio": 70.0}),
+     r"^actuator\.voltage_limit is required: V_max, V"),
+], ids=["mass-position", "mass-mass", "hub-inertia", "beam-area", "appendage-length",
+        "appendage-mass-position", "wheel-speed-limit", "motor-voltage-limit"])
+def test_a_missing_table_key_is_named_with_its_meaning_not_a_signature(edit, pattern):
+    import tomllib
+
+    from flexctl.app.scenes import parse_scene
+
+    data = tomllib.loads(SCENE_TOML)
+    edit(data)
+    with pytest.raises(SceneError, match=pattern) as caught:
+        parse_scene(data)
+    message = str(caught.value)
+    assert "__init__" not in message and "argument" not in message, message
+
+
 def test_missing_file_and_unknown_name_are_rejected(tmp_path):
     with pytest.raises(SceneError, match="does not exist"):
         load_scene(tmp_path / "nowhere.toml")

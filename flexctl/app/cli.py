@@ -333,7 +333,7 @@ def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
         with held:
             scene = load_scene(source, overrides=overrides)
             progress = progress_printer(lambda line: held.write_through(f"{PROG}: {line}"))
-            result, extra = execute(scene, progress=progress)
+            result, extra, reference = execute(scene, progress=progress)
     except INPUT_ERRORS as exc:
         raise _InputError(str(exc)) from None
     except BaseException:
@@ -342,7 +342,7 @@ def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
     held.replay()
     out = out_dir if out_dir is not None else DEFAULT_RUN_DIR / scene.name
     try:
-        return write_complete(scene, result, out, overrides, extra)
+        return write_complete(scene, result, out, overrides, extra, reference)
     except OSError as exc:
         reason = exc.strerror or str(exc)
         where = f" ({exc.filename})" if exc.filename else ""

@@ -46,7 +46,8 @@ _VARIANT_STYLES = {"first_order": dict(linestyle="-", linewidth=2.2),
                    "exact": dict(linestyle="-.", linewidth=2.0)}
 
 
-def plot_response(result, fig=None, title: str | None = None):
+def plot_response(result, fig=None, title: str | None = None, *, reference=None,
+                  target_angle: float | None = None, torque_bound: float | None = None):
     """Hub angle and rate, torque and tip deflection against time.
 
     Parameters
@@ -57,6 +58,16 @@ def plot_response(result, fig=None, title: str | None = None):
         Figure to draw into (it should be empty); default a new 8 x 7.5 in figure.
     title : str, optional
         Figure title; default the model variant, mode count and run status.
+    reference : callable, optional
+        The hub-angle reference a controller tracked, ``reference(t)`` (rad, ``t`` in s),
+        drawn dashed on the hub angle plot with the label ``"reference"``
+        (e.g. :attr:`controllers.factory.BuiltController.reference_angle`).
+    target_angle : float, optional
+        The slew's target hub angle, rad, drawn as a horizontal dashed line labelled
+        ``"target"`` when no ``reference`` is given.
+    torque_bound : float, optional
+        The actuator's torque bound, N m, drawn as dashed lines at ``+-torque_bound`` on the
+        torque plot (labelled ``"torque bound"``).
 
     Returns
     -------
@@ -78,19 +89,10 @@ def plot_response(result, fig=None, title: str | None = None):
     ax_angle, ax_torque, ax_tip = axes[:3]
     t = result.t
 
-    ax_angle.plot(t, result.theta, color="tab:blue", label="hub angle")
-    ax_angle.set_ylabel("hub angle (rad)")
-    ax_rate = ax_angle.twinx()
-    ax_rate.plot(t, result.theta_dot, color="tab:orange", label="hub rate")
-    ax_rate.set_ylabel("hub rate (rad/s)")
-    # The two scales are told apart by colour: a legend would hide data of either curve.
-    ax_angle.tick_params(axis="y", labelcolor="tab:blue")
-    ax_angle.yaxis.label.set_color("tab:blue")
-    ax_rate.tick_params(axis="y", labelcolor="tab:orange")
-    ax_rate.yaxis.label.set_color("tab:orange")
-
+    _draw_hub(result, ax_angle)
     ax_torque.plot(t, result.torque, color="tab:gray")
     ax_torque.set_ylabel("torque (N m)")
+    _draw_slew_goal(ax_angle, ax_torque, result, reference, target_angle, torque_bound)
 
     _draw_structure(result, ax_torque, ax_tip)
     ax_tip.set_ylabel("tip deflection (m)")
@@ -120,6 +122,59 @@ def plot_response(result, fig=None, title: str | None = None):
         title = f"{model.variant}, {modes}: {status} ({end})"
     fig.suptitle(title, color="black" if status == "ok" else colour)
     return fig
+
+
+def _draw_hub(result, ax_angle) -> None:
+    """Hub angle (rad) on ``ax_angle`` and hub rate (rad/s) on a twin axis on its right."""
+    ax_angle.plot(result.t, result.theta, color="tab:blue", label="hub angle")
+    ax_angle.set_ylabel("hub angle (rad)")
+    ax_rate = ax_angle.twinx()
+    ax_rate.plot(result.t, result.theta_dot, color="tab:orange", label="hub rate")
+    ax_rate.set_ylabel("hub rate (rad/s)")
+    # The two scales are told apart by colour: a legend would hide data of either curve.
+    ax_angle.tick_params(axis="y", labelcolor="tab:blue")
+    ax_angle.yaxis.label.set_color("tab:blue")
+    ax_rate.tick_params(axis="y", labelcolor="tab:orange")
+    ax_rate.yaxis.label.set_color("tab:orange")
+
+
+def _draw_slew_goal(ax_angle, ax_torque, result, reference, target_angle,
+                    torque_bound) -> None:
+    """The hub-angle reference (or else the target angle) and the torque bound, dashed and
+    labelled, each axes that got one with a small legend."""
+    t = result.t
+    if reference is not None and t.size:
+        ax_angle.plot(t, _sampled(reference, t), color="black", linestyle="--",
+                      linewidth=1.0, label="reference")
+    elif target_angle is not None:
+        ax_angle.axhline(float(target_angle), color="black", linestyle="--", linewidth=1.0,
+                         label="target")
+    else:
+        ax_angle = None
+    if torque_bound is not None:
+        for sign, label in ((1.0, "torque bound"), (-1.0, "_torque bound")):
+            ax_torque.axhline(sign * float(torque_bound), color="tab:red", linestyle="--",
+                              linewidth=1.0, label=label)
+        # the bound lines inside the frame, not on its edge
+        top = 1.1 * max(float(torque_bound), float(np.max(np.abs(result.torque), initial=0.0)))
+        ax_torque.set_ylim(-top, top)
+    else:
+        ax_torque = None
+    for ax in (ax_angle, ax_torque):
+        if ax is not None:
+            ax.legend(loc="lower right", fontsize="small")
+
+
+def _sampled(function, t: np.ndarray) -> np.ndarray:
+    """``function`` at the times ``t``: called on the array when it takes one, else point by
+    point."""
+    try:
+        values = np.asarray(function(t), dtype=float)
+    except (TypeError, ValueError):
+        values = None
+    if values is None or values.shape != t.shape:
+        values = np.array([float(function(float(ti))) for ti in t])
+    return values
 
 
 def _draw_actuator(result, axes) -> None:
@@ -370,10 +425,18 @@ def plot_tip_deflections(results, ax=None, title: str | None = None,
     return fig
 
 
-#: Metrics drawn as bars by :func:`plot_controller_comparison`: (key, label, log scale).
+#: Metrics drawn as bars by :func:`plot_controller_comparison`: (key, label, log scale
+#: allowed). A metric that may be log-scaled is, only when its values span a decade or more
+#: (:data:`_LOG_SPAN`).
 _COMPARISON_BARS = (("residual_vibration", "residual tip vibration (m)", True),
                     ("settling_time", "2 % settling time (s)", False),
                     ("peak_torque", "peak torque (N m)", False))
+
+
+#: Ratio of the largest to the smallest positive bar from which a log axis is used: below it a
+#: log axis covers less than a decade and makes close values (0.77 mm and 0.84 mm) look a
+#: decade apart.
+_LOG_SPAN = 10.0
 
 
 def _metric(metrics, key):
@@ -392,7 +455,8 @@ def plot_controller_comparison(results, metrics=None, target_angle: float | None
         One run per controller, labelled (e.g. by controller kind).
     metrics : dict of {str: SlewMetrics or dict}, optional
         Metrics per label (:func:`flexctl.sim.metrics.slew_metrics`); when given, a bar chart of
-        residual vibration (m, log scale), settling time (s) and peak torque (N m) is drawn
+        residual vibration (m; on a log axis when the values span a factor of 10 or more,
+        otherwise on a linear axis from zero), settling time (s) and peak torque (N m) is drawn
         next to the time histories. A settling time of ``inf`` or ``None`` (not settled) is
         drawn as a hatched bar up to the end of the run.
     target_angle : float, optional
@@ -477,7 +541,8 @@ def _draw_comparison_histories(fig, grid, runs, colours, target_angle, maneuver_
 def _draw_metric_bars(ax, metrics, key: str, axis_label: str, log: bool, colours,
                       t_end: float) -> None:
     """One metric of every run as horizontal bars, in the order of ``colours``; a run that
-    never settled gets a hatched settling-time bar up to ``t_end`` (s)."""
+    never settled gets a hatched settling-time bar up to ``t_end`` (s). With ``log``, the axis
+    is logarithmic only when the bars span a factor of :data:`_LOG_SPAN` or more."""
     labels = list(colours)
     positions = np.arange(len(labels))
     values = np.array([_metric(metrics[label], key) for label in labels])
@@ -488,9 +553,30 @@ def _draw_metric_bars(ax, metrics, key: str, axis_label: str, log: bool, colours
         if hatch and key == "settling_time":
             bar.set_hatch("//")
             bar.set_alpha(0.5)
-    if log and np.all(shown[np.isfinite(shown)] > 0):
-        ax.set_xscale("log")
+    _set_value_scale(ax, shown, log)
     ax.set_yticks(positions, labels, fontsize="small")
     ax.invert_yaxis()
     ax.set_xlabel(axis_label)
     ax.grid(True, axis="x", alpha=0.3)
+
+
+def _set_value_scale(ax, values, log: bool) -> None:
+    """The bars' value axis: log when allowed, every finite value is positive and they span
+    :data:`_LOG_SPAN` or more; otherwise linear from zero. Few ticks, labelled without
+    overlap (decades only on a log axis, a common power of ten on a linear one)."""
+    from matplotlib.ticker import LogLocator, MaxNLocator, NullFormatter, ScalarFormatter
+
+    finite = values[np.isfinite(values)]
+    positive = finite[finite > 0]
+    if (log and positive.size == finite.size and positive.size
+            and positive.max() / positive.min() >= _LOG_SPAN):
+        ax.set_xscale("log")
+        ax.xaxis.set_major_locator(LogLocator(base=10.0, numticks=5))
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        return
+    ax.xaxis.set_major_locator(MaxNLocator(nbins=4))
+    formatter = ScalarFormatter(useMathText=True)
+    formatter.set_powerlimits((-2, 3))
+    ax.xaxis.set_major_formatter(formatter)
+    if finite.size and finite.min() >= 0:
+        ax.set_xlim(left=0.0)

@@ -7,10 +7,14 @@ A run directory holds
                     rad/s, N m, m, m); one row per output time, up to the stop time. For a
                     :class:`~flexctl.model.Structure`: ``t,theta,theta_dot,torque``, then
                     ``hub_x,hub_y`` (m) for a free hub, then ``<name>.tip_deflection`` (m)
-                    of each appendage (:func:`structure_columns`). With an actuator, then
+                    of each appendage (:func:`structure_columns`). Then every other
+                    named output of the model (``root_moment`` N m, ``tip_angle`` rad, ...:
+                    :attr:`flexctl.Model.output_names`). With an actuator, then
                     ``wheel_speed,wheel_torque`` (rad/s, N m) for a reaction wheel or
                     ``motor_voltage,motor_current`` (V, A) for a DC motor, and ``torque``
-                    is the torque the actuator puts on the hub
+                    is the torque the actuator puts on the hub. With ``[simulation]
+                    states = true``, then every state not written yet (modal coordinates
+                    and rates, m and m/s; a free hub's velocity, m/s)
 ``summary.json``    scene, variant, modes, status, message, peak tip deflection, clamped
                     natural frequencies, overrides, wall time, and ``scene_table``: the
                     scene as run (see :func:`summarize`; ``flexctl run summary.json``
@@ -106,14 +110,22 @@ def structure_columns(structure: Structure) -> list:
     return ["t", "theta", "theta_dot", "torque", *hub, *tips]
 
 
-def _timeseries(result) -> tuple:
+def _timeseries(result, states: bool = False) -> tuple:
     """``(columns, table)`` of ``timeseries.csv``: a HubBeam's states, a Structure's named
-    outputs, the actuator's signals."""
+    outputs, then every other named output (``root_moment``, ``tip_angle``, ...), the
+    actuator's signals, and with ``states`` every state not yet written (modal rates, a free
+    hub's velocity, an actuator's states)."""
     columns, table = _mechanical_timeseries(result)
-    signals = result.actuator_signals
-    if not signals:
+    extra = {name: values for name, values in result.outputs.items() if name not in columns}
+    extra.update({name: v for name, v in result.actuator_signals.items() if name not in extra})
+    if states:
+        names = result.model.state_names
+        extra.update({name: result.states[k] for k, name in enumerate(names)
+                      if name not in columns and name not in extra})
+    if not extra:
         return columns, table
-    return columns + list(signals), np.column_stack([table] + list(signals.values()))
+    return columns + list(extra), np.column_stack(
+        [table] + [np.asarray(v, dtype=float).reshape(-1) for v in extra.values()])
 
 
 def _mechanical_timeseries(result) -> tuple:
@@ -310,10 +322,12 @@ def _structure_summary(model, result) -> dict:
 
 
 def write_run(scene, result, out_dir, overrides: dict | None = None,
-              extra: dict | None = None) -> dict:
+              extra: dict | None = None, reference=None) -> dict:
     """Write ``timeseries.csv``, ``summary.json`` and ``response.png`` of a run.
 
     A stopped run (``diverged`` or ``singular``) is written like any other, up to its stop time.
+    For a slew, ``response.png`` shows the hub-angle reference (or else the target angle) and
+    the torque bound, if any.
 
     Parameters
     ----------
@@ -325,6 +339,10 @@ def write_run(scene, result, out_dir, overrides: dict | None = None,
         Recorded in the summary.
     extra : dict, optional
         More summary entries (see :func:`summarize`).
+    reference : callable, optional
+        The hub-angle reference the controller tracked, ``angle(t)`` (rad; e.g.
+        :attr:`controllers.factory.BuiltController.reference_angle`), drawn on
+        ``response.png``.
 
     Returns
     -------
@@ -335,15 +353,18 @@ def write_run(scene, result, out_dir, overrides: dict | None = None,
     out.mkdir(parents=True, exist_ok=True)
     summary = summarize(scene, result, overrides, extra)
 
-    columns, table = _timeseries(result)
+    columns, table = _timeseries(result, scene.simulation.states)
     np.savetxt(out / TIMESERIES, table, delimiter=",", fmt=f"%.{CSV_DIGITS}g",
                header=",".join(columns), comments="")
     (out / SUMMARY).write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False)
                                + "\n")
 
     from .plotting import plot_response
+    goal = ({"target_angle": scene.maneuver.angle, "torque_bound": scene.maneuver.torque_bound}
+            if isinstance(scene.maneuver, Slew) else {})
     fig = plot_response(result, title=f"{scene.name}: {result.model.variant}, "
-                                      f"{result.model.n_modes} modes, {result.status}")
+                                      f"{result.model.n_modes} modes, {result.status}",
+                        reference=reference, **goal)
     fig.savefig(out / RESPONSE_PLOT, dpi=100)
 
     summary["files"] = {"timeseries": str(out / TIMESERIES), "summary": str(out / SUMMARY),

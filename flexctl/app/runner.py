@@ -32,7 +32,7 @@ def _run_controlled(scene, progress=None):
     extra = {"slew": slew}
     if result.controller_report is not None:
         extra["controller_report"] = result.controller_report
-    return result, extra
+    return result, extra, built.reference_angle
 
 
 def execute(scene, progress=None) -> tuple:
@@ -51,16 +51,21 @@ def execute(scene, progress=None) -> tuple:
         Entries for the run's ``summary.json`` beside the scene and the result: ``slew`` (the
         controller kind, design modes and slew metrics) and ``controller_report`` for a
         controlled slew; empty otherwise.
+    reference : callable or None
+        The hub-angle reference ``angle(t)`` (rad) the controller tracked
+        (:attr:`controllers.factory.BuiltController.reference_angle`); None without one.
     """
     if scene.controller is None:
-        return run_scene(scene, progress=progress), {}
+        return run_scene(scene, progress=progress), {}, None
     return _run_controlled(scene, progress)
 
 
-def write_complete(scene, result, out, overrides: dict, extra: dict) -> dict:
+def write_complete(scene, result, out, overrides: dict, extra: dict,
+                   reference=None) -> dict:
     """:func:`~flexctl.app.report.write_run` into a temporary directory next to ``out``; the
     files are moved into ``out`` only once every one is written, so a failure leaves ``out``
-    as it was.
+    as it was. ``reference`` is the hub-angle reference drawn on ``response.png`` (as
+    :func:`execute` returns it).
 
     Returns
     -------
@@ -79,7 +84,8 @@ def write_complete(scene, result, out, overrides: dict, extra: dict) -> dict:
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}-", suffix=".partial",
                                     dir=out.parent))
     try:
-        summary = write_run(scene, result, staging, overrides=overrides, extra=extra)
+        summary = write_run(scene, result, staging, overrides=overrides, extra=extra,
+                            reference=reference)
         out.mkdir(exist_ok=True)
         for path in sorted(staging.iterdir()):
             os.replace(path, out / path.name)

@@ -48,6 +48,10 @@ class ActuatedModel(StructureModel):
     #: The structure as given, before the actuator changed its hub (``system``: after).
     source: object = field(default=None, kw_only=True, repr=False)
 
+    def _rebuilt(self, system) -> "ActuatedModel":
+        """This model (modes, variant, actuator) of another ``system`` of the same kind."""
+        return actuated_model(system, self.mode_spec, self.variant, self.actuator)
+
     def __post_init__(self):
         super().__post_init__()
         mechanical = StructureModel(system=self.system, n_modes=self.n_modes,

@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .checks import check_real
+from .checks import KeywordOnly, check_real
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["ReactionWheel", "DCMotor", "ACTUATOR_KINDS", "SPEED_LIMIT_BAND", "as_actuator"]
@@ -65,7 +65,7 @@ MIN_SCALE = 1e-6
 
 
 @dataclass(frozen=True, kw_only=True)
-class ReactionWheel:
+class ReactionWheel(KeywordOnly):
     """A reaction wheel on the hub's axis (see the module Notes for its equations).
 
     Parameters
@@ -194,7 +194,7 @@ class ReactionWheel:
 
 
 @dataclass(frozen=True, kw_only=True)
-class DCMotor:
+class DCMotor(KeywordOnly):
     """A geared DC motor whose output shaft is the hub (see the module Notes).
 
     Parameters

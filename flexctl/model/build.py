@@ -14,9 +14,8 @@ from .errors import InputTypeError, InputValueError
 from .exact import EXACT_MAX_MODES
 from .matrices import assemble
 from .parameters import HubBeam
-from .structure import Structure, as_structure
-from .structure_matrices import assemble_structure, modes_per_appendage
-from .structure_model import StructureModel
+from .structure import Structure
+from .structure_model import structure_model
 from .variants import VARIANTS, Model
 
 __all__ = ["build_model", "rebuild"]
@@ -82,6 +81,8 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order",
 def rebuild(model: Model, n_modes=None, variant: str | None = None, *, system=None) -> Model:
     """The same plant as ``model`` (its actuator included) on other modes, another variant or
     another ``system`` of the same kind (default: the model's own)."""
+    if n_modes is None and variant is None and system is not None:
+        return model._rebuilt(system)
     n_modes = model.mode_spec if n_modes is None else n_modes
     variant = model.variant if variant is None else variant
     actuator = getattr(model, "actuator", None)
@@ -95,8 +96,4 @@ def rebuild(model: Model, n_modes=None, variant: str | None = None, *, system=No
 def _build_structure_model(system, n_modes, variant: str) -> Model:
     """A :class:`~flexctl.model.structure_model.StructureModel` of a Structure, or of a
     HubBeam on a free hub (its one appendage unnamed)."""
-    structure = as_structure(system)
-    modes = modes_per_appendage(structure, n_modes, variant)
-    matrices = assemble_structure(structure, modes)
-    return StructureModel(system=structure, n_modes=matrices.n_modes, variant=variant,
-                          matrices=matrices)
+    return structure_model(system, n_modes, variant)

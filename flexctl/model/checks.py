@@ -19,7 +19,9 @@ flexctl.model.errors.InputTypeError: nmpc.horizon must be an integer >= 1; got 2
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import reprlib
 from numbers import Integral, Real
 
 import numpy as np
@@ -27,7 +29,7 @@ import numpy as np
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["label", "check_real", "check_integer", "check_choice", "check_instance",
-           "check_array"]
+           "check_array", "KeywordOnly"]
 
 
 def label(owner: str, name: str) -> str:
@@ -139,3 +141,48 @@ def check_array(owner: str, name: str, value, *, shape: tuple | None = None,
         raise InputValueError(f"{where} must be >= {minimum:g}; got {array!r:.120}")
     array.setflags(write=False)
     return array
+
+
+class KeywordOnly:
+    """Base of the keyword-only parameter dataclasses (``Hub``, ``Beam``, ...): a positional
+    call is refused with an :class:`~flexctl.model.errors.InputTypeError` that shows the
+    keyword form, where Python would only say how many arguments it takes.
+
+    ``__new__`` runs before the dataclass's generated ``__init__``, so the check sits in one
+    place for every subclass and leaves the dataclass machinery (``dataclasses.replace``,
+    copying, pickling, which call by keyword or with no arguments) as it is.
+
+    Examples
+    --------
+    >>> from flexctl import Hub
+    >>> Hub(2.5, 0.1)
+    Traceback (most recent call last):
+    ...
+    flexctl.model.errors.InputTypeError: Hub takes keyword arguments only: Hub(inertia=..., \
+radius=..., friction=0.0, mass=0.0, support='pinned'); got 2 positional: 2.5, 0.1
+    """
+
+    __slots__ = ()
+
+    def __new__(cls, *args, **kwargs):
+        if args:
+            raise InputTypeError(f"{cls.__name__} takes keyword arguments only: "
+                                 f"{keyword_form(cls)}; got {len(args)} positional: "
+                                 f"{', '.join(map(_short_repr, args))}")
+        return super().__new__(cls)
+
+
+def _short_repr(value) -> str:
+    """``repr(value)`` cut to about 40 characters (an array, a long list)."""
+    short = reprlib.Repr()
+    short.maxstring = short.maxother = 40
+    return short.repr(value)
+
+
+def keyword_form(cls) -> str:
+    """``Name(required=..., optional=default, ...)``: how to call the dataclass ``cls``
+    (a default made by a factory shows as ``...`` too)."""
+    fields = [f for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
+    return f"{cls.__name__}(" + ", ".join(
+        f"{f.name}={'...' if f.default is dataclasses.MISSING else _short_repr(f.default)}"
+        for f in fields) + ")"

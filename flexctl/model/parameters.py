@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .checks import check_real
+from .checks import KeywordOnly, check_real
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["Hub", "Beam", "PointMass", "HubBeam", "check_real", "RATIO_LIMIT",
@@ -49,7 +49,7 @@ SUPPORTS = ("pinned", "free")
 
 
 @dataclass(frozen=True, kw_only=True)
-class Hub:
+class Hub(KeywordOnly):
     """Rigid hub rotating about its centre O, which is pinned or floats free in the plane.
 
     Parameters
@@ -89,7 +89,7 @@ class Hub:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Beam:
+class Beam(KeywordOnly):
     """Uniform Euler-Bernoulli cantilever clamped radially to the hub.
 
     Parameters
@@ -163,7 +163,7 @@ class Beam:
 
 
 @dataclass(frozen=True, kw_only=True)
-class PointMass:
+class PointMass(KeywordOnly):
     """Point mass carried by the beam.
 
     Parameters
@@ -171,7 +171,8 @@ class PointMass:
     mass : float
         Mass ``m_k``, kg (>= 0).
     position : float
-        Distance ``d_k`` from the beam root, m, in ``[0, length]`` (checked by :class:`HubBeam`).
+        Distance ``d_k`` from the beam root, m, in ``[0, length]``. Its holder
+        (:class:`HubBeam`, an appendage) checks it against the beam length.
     """
 
     mass: float
@@ -232,7 +233,7 @@ def carried_masses(owner: str, beam, masses, radius: float) -> tuple:
 
 
 @dataclass(frozen=True, kw_only=True)
-class HubBeam:
+class HubBeam(KeywordOnly):
     """A hub carrying a cantilever beam with any number of point masses.
 
     Parameters

@@ -129,8 +129,6 @@ def parametric_casadi(model, parameters, outputs: bool = False) -> object:
     """
     import casadi as ca
 
-    from .build import rebuild
-
     nominal = parameter_values(model, parameters)
     if not parameters:
         raise InputValueError("parameters must name at least one parameter")
@@ -144,9 +142,9 @@ def parametric_casadi(model, parameters, outputs: bool = False) -> object:
     value = f0(x, u)
     for i, key in enumerate(parameters):
         step = RELATIVE_STEP * (abs(nominal[i]) or 1.0)
-        upper = rebuild(model, system=with_parameter(system, key, nominal[i] + step))
+        upper = model._rebuilt(with_parameter(system, key, nominal[i] + step))
         try:
-            lower = rebuild(model, system=with_parameter(system, key, nominal[i] - step))
+            lower = model._rebuilt(with_parameter(system, key, nominal[i] - step))
             low, width = of(lower)(x, u), 2.0 * step
         except (InputTypeError, InputValueError, ValueError):
             low, width = value, step

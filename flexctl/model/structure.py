@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .checks import check_real
+from .checks import KeywordOnly, check_real
 from .errors import InputTypeError, InputValueError
 from .parameters import Beam, Hub, HubBeam, carried_masses
 
@@ -39,7 +39,7 @@ _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
 
 @dataclass(frozen=True, kw_only=True)
-class Appendage:
+class Appendage(KeywordOnly):
     """A cantilever beam with its point masses, clamped radially to the hub.
 
     Parameters
@@ -99,7 +99,7 @@ class Appendage:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Structure:
+class Structure(KeywordOnly):
     """A hub carrying any number of appendages.
 
     Parameters

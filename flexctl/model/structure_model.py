@@ -73,6 +73,10 @@ class StructureModel(Model):
         """Modes of each appendage."""
         return self.matrices.modes
 
+    def _rebuilt(self, system) -> "StructureModel":
+        """This model (modes, variant) of another ``system`` of the same kind."""
+        return structure_model(system, self.mode_spec, self.variant)
+
     @property
     def mode_spec(self) -> tuple:
         """The ``n_modes`` of :func:`flexctl.build_model` for these modes: :attr:`modes`."""
@@ -341,3 +345,16 @@ class StructureModel(Model):
         # which modes the torque moves and each output sees, beside the plant
         plant.modal_visibility = self.modal_visibility(spin_rate)
         return plant
+
+
+def structure_model(system, n_modes, variant: str) -> StructureModel:
+    """The :class:`StructureModel` of a Structure, or of a HubBeam on a free hub (its one
+    appendage unnamed), on ``n_modes`` (an int, a dict by name or one per appendage)."""
+    from .structure import as_structure
+    from .structure_matrices import assemble_structure, modes_per_appendage
+
+    structure = as_structure(system)
+    modes = modes_per_appendage(structure, n_modes, variant)
+    matrices = assemble_structure(structure, modes)
+    return StructureModel(system=structure, n_modes=matrices.n_modes, variant=variant,
+                          matrices=matrices)

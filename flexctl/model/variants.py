@@ -625,6 +625,11 @@ class Model:
                 f"flexctl_{self.variant}_outputs", [x, u], [h(x)], ["x", "u"], ["y"])
         return self._c["casadi_outputs"]
 
+    def _rebuilt(self, system) -> "Model":
+        """This model (modes, variant) of another ``system`` of the same kind."""
+        return Model(system=system, n_modes=self.n_modes, variant=self.variant,
+                     matrices=assemble(system, self.n_modes))
+
     def parameter_values(self, parameters) -> np.ndarray:
         """Nominal values of the listed physical parameters (scene keys), shape (P,)."""
         from .parametric import parameter_values

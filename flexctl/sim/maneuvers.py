@@ -27,6 +27,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ..model.checks import KeywordOnly
 from ..model.errors import InputTypeError, InputValueError
 from ..model.parameters import check_real as _real
 from ..model.variants import MAX_SPIN_RATE
@@ -87,7 +88,7 @@ def rigid_slew_duration(angle: float, inertia: float, torque_bound: float,
 
 
 @dataclass(frozen=True, kw_only=True)
-class SpinUp:
+class SpinUp(KeywordOnly):
     """Prescribed spin-up of the hub (Kane, Ryan and Banerjee 1987).
 
     ``theta = (w_s/T_s) [t^2/2 + (T_s/(2 pi))^2 (cos(2 pi t/T_s) - 1)]`` for ``t < T_s``,
@@ -160,7 +161,7 @@ class SpinUp:
 
 
 @dataclass(frozen=True, kw_only=True)
-class SineTorque:
+class SineTorque(KeywordOnly):
     """One period of sine torque: ``T_hm sin(2 pi t / T_m)`` for ``0 <= t <= T_m``, 0 after.
 
     Parameters
@@ -200,7 +201,7 @@ class SineTorque:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Slew:
+class Slew(KeywordOnly):
     """Rest-to-rest slew of the hub by ``angle``: a goal for a controller, not an input.
 
     Parameters
@@ -247,7 +248,7 @@ MAX_TORQUE_SAMPLES = 1_000_000
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
-class TorqueSamples:
+class TorqueSamples(KeywordOnly):
     """Hub torque given as a recorded history: samples ``(times, values)``.
 
     The torque is 0 before ``times[0]``. ``"hold"``: ``values[k]`` on ``[times[k],

@@ -63,7 +63,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.checks import check_array, check_instance, check_integer, check_real
+from ..model.checks import (KeywordOnly, check_array, check_instance, check_integer,
+                             check_real)
 from ..model.errors import InputValueError
 
 __all__ = ["Sensors", "SensorSession", "sensor_names", "measurement_matrix",
@@ -81,7 +82,7 @@ VARIANCE_FLOOR = 1e-12
 
 
 @dataclass(frozen=True, kw_only=True)
-class Sensors:
+class Sensors(KeywordOnly):
     """Settings of the sensors a sampled controller reads (see the module Notes).
 
     Parameters
