@@ -17,6 +17,7 @@ module         contents
 ``actuated``   ``ActuatedModel``: a structure driven through an actuator
 ``build``      ``build_model``: the model of a system
 ``exports``    the model as a python-control system or a CasADi function
+``reduction``  ``modal_truncation``, ``balanced_truncation``: reduced design models, their error
 ``discrete``   the model held over a sample: a CasADi step ``(x, u) -> x_next``
 =============  ==============================================================================
 
@@ -57,6 +58,7 @@ from .structure_model import StructureModel
 from .actuators import DCMotor, ReactionWheel
 from .actuated import ActuatedModel
 from .build import build_model
+from .reduction import Reduction, balanced_truncation, hinf_norm, modal_truncation
 
 __all__ = [
     "Beam", "Hub", "HubBeam", "PointMass", "check_real", "StateLayout", "Appendage",
@@ -65,4 +67,5 @@ __all__ = [
     "ModalMatrices", "assemble", "tension",
     "VARIANTS", "Model", "StructureModel", "SingularMassMatrixError", "build_model",
     "ReactionWheel", "DCMotor", "ActuatedModel",
+    "Reduction", "modal_truncation", "balanced_truncation", "hinf_norm",
 ]
