@@ -65,6 +65,11 @@ def _measurement_covariance(noise, model) -> np.ndarray:
     return np.diag([noise.angle ** 2] + [noise.root_moment ** 2] * roots)
 
 
+#: Bounds of a noise level (any unit): its square and its inverse square stay far inside the
+#: floating-point range of the Kalman filter's Riccati equation.
+MIN_NOISE, MAX_NOISE = 1e-100, 1e100
+
+
 @dataclass(frozen=True, kw_only=True)
 class NoiseLevels(KeywordOnly):
     """Noise intensities the Kalman filter is designed for, as standard deviations.
@@ -72,11 +77,11 @@ class NoiseLevels(KeywordOnly):
     Parameters
     ----------
     angle : float
-        Hub angle measurement noise, rad (> 0).
+        Hub angle measurement noise, rad (1e-100 to 1e100).
     root_moment : float
-        Root bending moment measurement noise, N m (> 0).
+        Root bending moment measurement noise, N m (1e-100 to 1e100).
     torque : float
-        Process noise: disturbance torque on the hub, N m (> 0).
+        Process noise: disturbance torque on the hub, N m (1e-100 to 1e100).
     """
 
     angle: float
@@ -84,9 +89,10 @@ class NoiseLevels(KeywordOnly):
     torque: float
 
     def __post_init__(self):
+        # their squares are the Riccati equation's covariances: both must stay finite
         for name in ("angle", "root_moment", "torque"):
             object.__setattr__(self, name, _real("noise", name, getattr(self, name),
-                                                 minimum=0.0, strict=True))
+                                                 minimum=MIN_NOISE, maximum=MAX_NOISE))
 
     @classmethod
     def from_sensors(cls, sensors, sample_time: float, torque: float = 0.1) -> "NoiseLevels":

@@ -390,3 +390,24 @@ def test_plots_reject_bad_arguments(call, match):
     model = build_model(load_scene("kane-spinup").system, n_modes=2)
     with pytest.raises((ValueError, TypeError), match=match):
         call(model)
+
+
+def test_warnings_outside_a_held_run_are_one_line_each_once(monkeypatch, capsys):
+    import warnings
+
+    from flexctl.app import cli
+
+    class StudyWarning(UserWarning):
+        pass
+
+    def noisy(args):
+        for _ in range(3):
+            warnings.warn("the tip\n    bends far", StudyWarning)
+        warnings.warn("another", StudyWarning)
+        return 0
+
+    monkeypatch.setattr(cli, "_cmd_scenes", noisy)
+    assert cli.main(["scenes"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["flexctl: warning: StudyWarning: the tip bends far",
+                   "flexctl: warning: StudyWarning: another"]

@@ -169,3 +169,14 @@ def test_flexctl_run_reports_a_failed_design_in_one_line(tmp_path, monkeypatch, 
     assert "has no stabilising solution (" in lines[0]
     assert "Traceback" not in captured.err
     assert not (tmp_path / "out").exists()
+
+
+def test_noise_levels_whose_squares_overflow_are_refused_by_name():
+    from controllers.lqg import NoiseLevels
+    from flexctl.app.cli import main
+
+    for value in (1e300, 1e-200, 0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(InputValueError, match="noise.torque"):
+            NoiseLevels(angle=1e-3, root_moment=0.1, torque=value)
+    assert main(["run", "slew-90", "--set", "controller.kind=lqg", "--set",
+                 "controller.process_torque=1e300", "--out", "/dev/null/x"]) == 2

@@ -306,9 +306,41 @@ class _HeldOutput:
             if self.streams.get(fd):
                 stream.write(self.streams[fd])
                 stream.flush()
+        seen = set()
         for w in self.caught:
-            text = " ".join(str(w.message).split())
-            print(f"{PROG}: warning: {w.category.__name__}: {text}", file=sys.stderr)
+            line = _warning_line(w.message, w.category)
+            if line not in seen:            # each warning once per run
+                seen.add(line)
+                print(line, file=sys.stderr)
+
+
+def _warning_line(message, category) -> str:
+    """A warning as the one console line ``flexctl: warning: Category: text``."""
+    text = " ".join(str(message).split())
+    return f"{PROG}: warning: {category.__name__}: {text}"
+
+
+class _OneLineWarnings:
+    """Every warning shown outside a held run (the demo's figures and sweeps, their worker
+    processes forked from this one) as one :func:`_warning_line`, each text once."""
+
+    def __init__(self):
+        self.seen = set()
+        self._catcher = warnings.catch_warnings()
+
+    def show(self, message, category, filename, lineno, file=None, line=None):
+        text = _warning_line(message, category)
+        if text not in self.seen:
+            self.seen.add(text)
+            print(text, file=sys.stderr if file is None else file, flush=True)
+
+    def __enter__(self):
+        self._catcher.__enter__()
+        warnings.showwarning = self.show
+        return self
+
+    def __exit__(self, *exc_info):
+        return self._catcher.__exit__(*exc_info)
 
 
 def _worker_count(text: str) -> int:
@@ -432,7 +464,8 @@ def main(argv=None) -> int:
             return EXIT_OK
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
     try:
-        return args.func(args)
+        with _OneLineWarnings():
+            return args.func(args)
     except Exception:   # a bug: say where, and do not pass it off as bad input
         traceback.print_exc()
         return EXIT_BUG
