@@ -39,7 +39,9 @@ from .trajopt import (SlewProblem, SlewSolution, TrajectoryOptimizationError,
                       rigid_minimum_time, solve_slew)
 from .tracking import TrajectoryTracker
 from .nmpc import NMPC, NMPCSession
-from .factory import BuiltController, OpenLoop, from_spec
+from .factory import BuiltController, DesignChangedWarning, OpenLoop, from_spec
+from .feedback import ReferenceSaturationWarning
+from .stability import LoopStability, LoopStabilityWarning, check_loop
 from .analysis import (LoopMargins, PlantChannels, PolesVsSpin, loop_margins, loop_transfer,
                        plant_channels, poles_vs_spin)
 from .actuated import (LaggedLQR, MotorVoltage, check_reference_fits, design_wheel_lqr,
@@ -62,7 +64,8 @@ __all__ = [
     "SlewProblem", "SlewSolution", "TrajectoryOptimizationError", "TrajectoryTracker",
     "rigid_minimum_time", "solve_slew",
     "NMPC", "NMPCSession",
-    "BuiltController", "OpenLoop", "from_spec",
+    "BuiltController", "DesignChangedWarning", "OpenLoop", "from_spec",
+    "ReferenceSaturationWarning", "LoopStability", "LoopStabilityWarning", "check_loop",
     "LoopMargins", "PlantChannels", "PolesVsSpin", "loop_margins", "loop_transfer",
     "plant_channels", "poles_vs_spin",
     "LaggedLQR", "MotorVoltage", "check_reference_fits", "design_wheel_lqr",

@@ -307,7 +307,7 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
                              f"{type(controller).__name__}")
     compensator = controller.compensator()
     meas = controller.for_plant(model).measurement_matrix
-    sensors = control.ss(a, b, meas, np.zeros((2, 1)), states=states, inputs=["torque"],
+    sensors = control.ss(a, b, meas, np.zeros((meas.shape[0], 1)), states=states, inputs=["torque"],
                          outputs=list(compensator.input_labels))
     loop = -control.series(sensors, compensator)
     loop.update_names(inputs=["torque"], outputs=["return_torque"], name=name)

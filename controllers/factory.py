@@ -101,9 +101,11 @@ from __future__ import annotations
 
 import dataclasses
 import time
+import warnings
 from dataclasses import dataclass, field
 
 from flexctl.model import Model, build_model
+from flexctl.model.errors import InputTypeError
 from flexctl.model.variants import EXACT_MAX_MODES
 from flexctl.sim.digital import ZeroOrderHold
 from flexctl.sim.maneuvers import Slew
@@ -121,10 +123,11 @@ from .reference import SlewProfile, minimum_slew_duration
 from .scheduling import design_scheduled_lqr
 from .shaping import bang_bang, design_shaper, shape
 from .spec import CONTROLLER_KINDS, ControllerSpec, SceneError
+from .stability import check_loop, warn_if_unstable
 from .tracking import TrajectoryTracker
 from .trajopt import SlewProblem, SlewSolution, solve_slew
 
-__all__ = ["BuiltController", "OpenLoop", "from_spec"]
+__all__ = ["BuiltController", "OpenLoop", "from_spec", "DesignChangedWarning"]
 
 class OpenLoop(StaticLaw):
     """A torque function of time played open loop, as a static controller.
@@ -200,6 +203,11 @@ class BuiltController:
                 return lambda t, plan=plan: plan.model.layout.hub_angle(plan.state_at(t))
             law = getattr(law, "law", None)
         return None
+
+
+class DesignChangedWarning(UserWarning):
+    """The scene's design was changed to one the hardware can fly (e.g. a reference slew
+    stretched to what the torque bound allows); the summary's ``slew.note`` says the same."""
 
 
 def _wrap(func, *args, **kwargs):
@@ -280,7 +288,19 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
                       scene.sensors is not None)
     else:
         built = _optimal(spec, design, angle, duration, bound, actuator)
-    return _hardware(scene, plant, spec, built)
+    return _checked(_hardware(scene, plant, spec, built), plant)
+
+
+def _checked(built: BuiltController, plant: Model) -> BuiltController:
+    """``built`` with its loop checked on the plant's linearisation (:mod:`.stability`): a
+    warning when unstable or nearly so, and ``info["loop_stability"]``. Open-loop kinds have
+    no loop to check."""
+    try:
+        check = check_loop(plant, built.controller)
+    except InputTypeError:                  # an open-loop torque: nothing feeds back
+        return built
+    warn_if_unstable(check, stacklevel=3)
+    return dataclasses.replace(built, info={**built.info, "loop_stability": check.as_dict()})
 
 
 def _hardware(scene, plant: Model, spec: ControllerSpec, built) -> BuiltController:
@@ -340,6 +360,7 @@ def _reference(spec: ControllerSpec, design: Model, angle, duration, bound) -> t
             info["reference_duration"] = feasible
             info["note"] = (f"the {profile_shape} reference needs {feasible:.3g} s at "
                             f"{bound:g} N m; stretched from {duration:.3g} s")
+            warnings.warn(f"controller: {info['note']}", DesignChangedWarning, stacklevel=4)
             duration = feasible
     profile = _wrap(SlewProfile, slew_angle=angle, duration=duration, shape=profile_shape)
     return profile, duration, info
@@ -383,8 +404,9 @@ def _feedback(spec: ControllerSpec, design: Model, plant: Model, angle, duration
         ctrl = _wrap(design_lqr, design, _lqr_weights(spec), spec.get("spin_rate"),
                      sample_time=sample_time, **common)
     elif kind == "lqg":
+        # the loop is checked once, as it runs (_checked)
         ctrl = _wrap(design_lqg, design, _lqr_weights(spec), _noise(spec),
-                     spec.get("spin_rate"), plant=plant, **common)
+                     spec.get("spin_rate"), plant=plant, check_stability=False, **common)
         if actuator is not None and actuator.kind == "dc_motor":
             ctrl = dataclasses.replace(ctrl, motor=actuator)
     else:

@@ -15,6 +15,7 @@ numpy and CasADi.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -26,7 +27,48 @@ from .plant_state import casadi_hub_state, design_rows, hub_state
 from .reference import _casadi_saturate, _check_reference, _has_casadi, _optional_positive, \
     _saturate
 
-__all__ = ["ReferenceFeedback"]
+__all__ = ["ReferenceFeedback", "ReferenceSaturationWarning", "warn_if_reference_saturates"]
+
+
+class ReferenceSaturationWarning(UserWarning):
+    """A reference whose feedforward alone asks more than the torque limit gives."""
+
+
+def warn_if_reference_saturates(owner: str, reference, inertia, torque_limit) -> float | None:
+    """Warn when the feedforward ``J acc_ref`` of ``reference`` exceeds ``torque_limit``.
+
+    Parameters
+    ----------
+    owner : str
+        The law's name in the message.
+    reference : object
+        A hub reference with ``peak_acceleration`` (rad/s^2), e.g. a
+        :class:`~controllers.reference.SlewProfile`; anything else is not checked.
+    inertia, torque_limit : float or None
+        Feedforward inertia (kg m^2) and saturation (N m); either None: nothing to check.
+
+    Returns
+    -------
+    float or None
+        The feedforward's peak, N m, when checked.
+    """
+    peak = getattr(reference, "peak_acceleration", None)
+    if peak is None or inertia is None or torque_limit is None:
+        return None
+    needed = float(inertia) * float(peak)
+    if needed > torque_limit * (1.0 + 1e-9):
+        from .reference import minimum_slew_duration
+
+        shortest = minimum_slew_duration(reference.slew_angle, inertia, torque_limit,
+                                         reference.shape)
+        warnings.warn(
+            f"{owner}: the reference slew of {reference.slew_angle:.6g} rad in "
+            f"{reference.duration:.6g} s needs {needed:.3g} N m of feedforward "
+            f"({inertia:.6g} kg m^2 times its peak acceleration {peak:.4g} rad/s^2), more "
+            f"than torque_limit = {torque_limit:.6g} N m: the torque saturates and the hub "
+            f"lags the reference; at this limit the slew needs at least {shortest:.4g} s "
+            "(controllers.minimum_slew_duration)", ReferenceSaturationWarning, stacklevel=4)
+    return needed
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -64,6 +106,9 @@ class ReferenceFeedback:
             self.owner, "feedforward_inertia", self.feedforward_inertia))
         object.__setattr__(self, "torque_limit", _optional_positive(
             self.owner, "torque_limit", self.torque_limit))
+        if self.plant_layout is None:       # once, at design (for_plant rebinds it)
+            warn_if_reference_saturates(self.owner, self.reference, self.feedforward_inertia,
+                                        self.torque_limit)
 
     def for_plant(self, model):
         """The same law reading the states of plant ``model`` (its ``model.layout``): needed

@@ -376,9 +376,17 @@ def _lqr_gain(model, weights, spin_rate, sample_time=None):
     return gain, poles
 
 
+def checked_on(controller, plant):
+    """:func:`controllers.stability.checked_on` (imported when called: it imports this)."""
+    from .stability import checked_on as check
+
+    return check(controller, plant, stacklevel=3)
+
+
 def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=None,
                feedforward: bool = True, torque_limit: float | None = None,
-               flexible_reference: bool = True, sample_time: float | None = None) -> LQR:
+               flexible_reference: bool = True, sample_time: float | None = None,
+               plant=None) -> LQR:
     """LQR on ``model.linearize(spin_rate)`` with the weights of :func:`lqr_weight_matrices`.
 
     Parameters
@@ -401,6 +409,10 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
         For a law run with a zero-order hold (s): the discrete LQR of the plant held over
         it (:func:`controllers.controllable.state_gain`), stable where the continuous gain
         held that long is not. Default: the continuous LQR.
+    plant : flexctl.Model, optional
+        The plant the law will run on (its own modes and variant): the loop is checked on
+        its linearisation (:func:`controllers.stability.check_loop`) and an unstable or
+        nearly unstable loop warns (:class:`~controllers.stability.LoopStabilityWarning`).
 
     Returns
     -------
@@ -417,11 +429,17 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
     with design_failure("lqr", "design_lqr", model, spin_rate, weights=weights,
                         sample_time=sample_time):
         gain, poles = _lqr_gain(model, weights, spin_rate, sample_time)
-    return LQR(gain=gain, reference=reference,
-               feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
-               torque_limit=torque_limit, spin_rate=spin_rate, poles=poles,
-               deflection_gain=static_deflection_gain(model) if flexible_reference else None,
-               layout=model.layout)
+    law = LQR(gain=gain, reference=reference,
+              feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
+              torque_limit=torque_limit, spin_rate=spin_rate, poles=poles,
+              deflection_gain=static_deflection_gain(model) if flexible_reference else None,
+              layout=model.layout)
+    if plant is not None and sample_time is not None:
+        from flexctl.sim.digital import ZeroOrderHold
+
+        checked_on(ZeroOrderHold(law, sample_time), plant)
+        return law
+    return checked_on(law, plant)
 
 
 def closed_loop_poles(model, gain, spin_rate: float = 0.0) -> np.ndarray:

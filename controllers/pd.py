@@ -154,7 +154,8 @@ def pd_gains(model_or_inertia, bandwidth: float, damping_ratio: float = 0.7) -> 
 
 
 def design_pd(model, bandwidth: float, damping_ratio: float = 0.7, *, reference=None,
-              feedforward: bool = True, torque_limit: float | None = None) -> PD:
+              feedforward: bool = True, torque_limit: float | None = None,
+              plant=None) -> PD:
     """PD controller from :func:`pd_gains`, with the rigid inertia ``J0`` as feedforward.
 
     Parameters
@@ -169,12 +170,18 @@ def design_pd(model, bandwidth: float, damping_ratio: float = 0.7, *, reference=
         Add ``J0 acc_ref`` (default True).
     torque_limit : float, optional
         N m.
+    plant : flexctl.Model, optional
+        The plant the law will run on (its own modes and variant): the loop is checked on
+        its linearisation (:func:`controllers.stability.check_loop`) and an unstable or
+        nearly unstable loop warns (:class:`~controllers.stability.LoopStabilityWarning`).
 
     Returns
     -------
     PD
     """
+    from .stability import checked_on
+
     kp, kd = pd_gains(model, bandwidth, damping_ratio)
     inertia = float(model.rigid_inertia) if feedforward else None
-    return PD(kp=kp, kd=kd, reference=reference, feedforward_inertia=inertia,
-              torque_limit=torque_limit)
+    return checked_on(PD(kp=kp, kd=kd, reference=reference, feedforward_inertia=inertia,
+                         torque_limit=torque_limit), plant)

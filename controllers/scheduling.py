@@ -36,7 +36,7 @@ from flexctl.model.layout import StateLayout
 from .controllable import design_failure
 from .feedback import ReferenceFeedback
 from .lqr import (LQRWeights, _gain_layout, _lqr_gain, _model, casadi_reference_state,
-                  casadi_truncate_state, reference_state, static_deflection_gain,
+                  casadi_truncate_state, checked_on, reference_state, static_deflection_gain,
                   truncate_state, truncation_matrix)
 from .reference import _real
 
@@ -151,7 +151,7 @@ def _scheduled_gain(model, weights: LQRWeights, spin_rate: float) -> np.ndarray:
 
 def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=None,
                          feedforward: bool = True, torque_limit: float | None = None,
-                         flexible_reference: bool = True) -> ScheduledLQR:
+                         flexible_reference: bool = True, plant=None) -> ScheduledLQR:
     """One LQR per spin rate on ``model.linearize(spin_rate)``, scheduled on ``|theta_dot|``.
 
     Parameters
@@ -165,6 +165,10 @@ def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=No
         ``design_lqr(model, weights, spin_rate).gain``.
     reference, feedforward, torque_limit, flexible_reference
         As in :func:`controllers.lqr.design_lqr`.
+    plant : flexctl.Model, optional
+        The plant the law will run on (its own modes and variant): the loop is checked on
+        its linearisation at rest (:func:`controllers.stability.check_loop`) and an unstable or
+        nearly unstable loop warns (:class:`~controllers.stability.LoopStabilityWarning`).
 
     Returns
     -------
@@ -173,9 +177,10 @@ def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=No
     model = _model("design_scheduled_lqr", model)
     rates = _spin_rates("design_scheduled_lqr", spin_rates)
     gains = np.vstack([_scheduled_gain(model, weights, float(w)) for w in rates])
-    return ScheduledLQR(spin_rates=rates, gains=gains, reference=reference,
-                        feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
-                        torque_limit=torque_limit,
-                        deflection_gain=(static_deflection_gain(model) if flexible_reference
-                                         else None),
-                        layout=model.layout)
+    law = ScheduledLQR(spin_rates=rates, gains=gains, reference=reference,
+                       feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
+                       torque_limit=torque_limit,
+                       deflection_gain=(static_deflection_gain(model) if flexible_reference
+                                        else None),
+                       layout=model.layout)
+    return checked_on(law, plant)

@@ -1,0 +1,361 @@
+"""Closed-loop stability of a design on the plant it will run on, checked at design time.
+
+A feedback law designed on ``M`` modes runs on a plant of ``N >= M`` modes. The modes the
+design left out come back through the torque (control spillover) and through what the law
+reads (observation spillover); on an undamped beam they sit on the imaginary axis, and a
+little spillover of the wrong phase makes them grow slowly: unseen in a few-second slew,
+fatal over minutes. :func:`check_loop` closes the loop of a law on the plant's linearisation
+and names every pole that grows or barely decays; :func:`warn_if_unstable` turns that into
+a :class:`LoopStabilityWarning`.
+
+Notes
+-----
+A continuous law (PD, LQR, scheduled LQR, the trajectory tracker, LQG) is closed as
+:func:`controllers.analysis.loop_transfer` breaks it; a law sampled with a zero-order hold
+(:class:`flexctl.sim.digital.ZeroOrderHold`) and NMPC's terminal LQR (discrete, held over
+the NMPC's sample time) are closed on the plant discretised at their sample time, each
+eigenvalue ``z`` read as ``s = log(z) / T``. A pole whose real part exceeds
+``-NEARLY_UNSTABLE_RATE`` (1/s) is reported: above ``+STABILITY_TOLERANCE`` times the
+loop's largest pole magnitude it grows (unstable), below it the loop is nearly unstable
+(an e-fold decay slower than ``1 / NEARLY_UNSTABLE_RATE`` s). Poles of modes the torque
+cannot move (:func:`controllers.controllable.controllable_part`: identical appendages
+bending against each other, a free hub's translation) are the plant's own, whatever the
+design: they are listed apart (``hidden_modes``) and do not count against it.
+
+Each reported pole is named by the plant's open-loop flexible mode nearest in frequency
+(``mode = 1`` the lowest); ``mode = 0`` is the rigid hub motion (below half the first
+flexible frequency).
+
+Examples
+--------
+>>> import flexctl
+>>> from controllers import design_pd
+>>> from controllers.stability import check_loop
+>>> plant = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=4)
+>>> design = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+>>> check = check_loop(plant, design_pd(design, bandwidth=2.0, damping_ratio=0.9))
+>>> check.stable, check.nearly_unstable, check.plant_modes
+(True, False, 4)
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from flexctl.model import Model
+from flexctl.model.checks import check_real
+from flexctl.model.errors import InputTypeError, InputValueError
+
+__all__ = ["LoopStability", "GrowingPole", "LoopStabilityWarning", "check_loop",
+           "warn_if_unstable", "checked_on", "NEARLY_UNSTABLE_RATE"]
+
+#: A pole that decays slower than this (1/s, an e-fold in 1000 s) is reported as nearly
+#: unstable: far longer than any manoeuvre, so the loop does not damp it in practice.
+NEARLY_UNSTABLE_RATE = 1e-3
+#: Relative frequency within which a closed-loop pole is taken to be a hidden mode's.
+_HIDDEN_TOLERANCE = 1e-6
+
+
+class LoopStabilityWarning(UserWarning):
+    """A design whose loop is unstable or nearly unstable on the plant it will run on."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class GrowingPole:
+    """One closed-loop pole (of a complex pair: the one with ``frequency >= 0``).
+
+    Attributes
+    ----------
+    mode : int
+        The plant's open-loop flexible mode nearest in frequency (1 = lowest), 0 for the rigid
+        hub motion.
+    frequency : float
+        Imaginary part, rad/s (>= 0).
+    growth_rate : float
+        Real part, 1/s: positive grows, negative decays.
+    """
+
+    mode: int
+    frequency: float
+    growth_rate: float
+
+    def describe(self) -> str:
+        """``"mode 3 at 68.49 rad/s grows at 0.0236 1/s"`` (or ``decays at``)."""
+        where = "the rigid hub motion" if self.mode == 0 else f"mode {self.mode}"
+        verb = "grows" if self.growth_rate > 0 else "decays only"
+        return (f"{where} at {self.frequency:.4g} rad/s {verb} at "
+                f"{abs(self.growth_rate):.3g} 1/s")
+
+
+@dataclass(frozen=True, kw_only=True)
+class LoopStability:
+    """What :func:`check_loop` found: the loop of a law on a plant.
+
+    Attributes
+    ----------
+    law : str
+        The law's kind (class name).
+    plant_variant : str
+    plant_modes : int
+        The plant's mode count (all appendages).
+    spin_rate : float
+        rad/s.
+    sample_time : float or None
+        s, for a loop closed in discrete time.
+    spectral_abscissa : float
+        Largest real part of the closed-loop poles (hidden modes left out), 1/s.
+    stable : bool
+        No pole grows (``spectral_abscissa < STABILITY_TOLERANCE`` times the largest pole
+        magnitude, as in :func:`controllers.analysis.loop_margins`).
+    poles : tuple of GrowingPole
+        The poles with real part above ``-NEARLY_UNSTABLE_RATE``, fastest growth first.
+    hidden_modes : tuple of float
+        Frequencies (rad/s) of the modes the torque cannot move, whatever the law.
+    """
+
+    law: str
+    plant_variant: str
+    plant_modes: int
+    spin_rate: float
+    sample_time: float | None
+    spectral_abscissa: float
+    stable: bool
+    poles: tuple
+    hidden_modes: tuple = ()
+
+    @property
+    def nearly_unstable(self) -> bool:
+        """Stable, but a pole decays slower than ``NEARLY_UNSTABLE_RATE``."""
+        return self.stable and bool(self.poles)
+
+    @property
+    def ok(self) -> bool:
+        """Neither unstable nor nearly unstable."""
+        return self.stable and not self.poles
+
+    def message(self) -> str:
+        """One line: the verdict, the worst pole, and how many more there are."""
+        where = (f"the {self.plant_variant} plant with {self.plant_modes} modes"
+                 + (f" at {self.spin_rate:g} rad/s spin" if self.spin_rate else ""))
+        if self.ok:
+            return f"{self.law} is stable on {where}"
+        state = "unstable" if not self.stable else "nearly unstable"
+        worst, rest = self.poles[0], self.poles[1:]
+        text = f"{self.law} is {state} on {where}: {worst.describe()}"
+        if worst.growth_rate > 0:
+            text += f" (an e-fold in {1.0 / worst.growth_rate:.3g} s)"
+        if rest:
+            text += "; also " + ", ".join(f"mode {p.mode} ({p.growth_rate:+.3g} 1/s)"
+                                          for p in rest)
+        return text
+
+    def as_dict(self) -> dict:
+        """Plain numbers for a summary or a table."""
+        worst = self.poles[0] if self.poles else None
+        return {"closed_loop_stable": self.stable, "nearly_unstable": self.nearly_unstable,
+                "spectral_abscissa": self.spectral_abscissa,
+                "plant_variant": self.plant_variant, "plant_modes": self.plant_modes,
+                "worst_mode": None if worst is None else worst.mode,
+                "worst_mode_frequency": None if worst is None else worst.frequency,
+                "worst_growth_rate": None if worst is None else worst.growth_rate,
+                "message": self.message()}
+
+
+# --------------------------------------------------------------------------- the loop
+def _unwrap(controller) -> tuple:
+    """The feedback law inside the wrappers (a zero-order hold, an observer, a DC motor's
+    voltage) and the sample time of a hold, if any."""
+    sample_time, seen = None, set()
+    law = controller
+    while id(law) not in seen:
+        seen.add(id(law))
+        if sample_time is None and getattr(law, "sample_time", None) is not None \
+                and hasattr(law, "law"):
+            sample_time = float(law.sample_time)
+        inner = getattr(law, "law", None)
+        if inner is None:
+            break
+        law = inner
+    return law, sample_time
+
+
+def _plant_for(plant, law):
+    """The plant the law's loop closes on: the actuated plant for a law that reads the
+    actuator's states (LQR with the wheel's lag), else the structure (the law's torque taken
+    as given)."""
+    from .actuated import LaggedLQR
+
+    return plant if isinstance(law, LaggedLQR) else getattr(plant, "mechanical", plant)
+
+
+def _nmpc_terminal(nmpc):
+    """NMPC's terminal LQR gain on its design model, held over its sample time: (1, n)."""
+    from .controllable import dlqr_on_part
+
+    model, period = nmpc.model, float(nmpc.sample_time)
+    p_mat = dlqr_on_part(model, period, np.diag(nmpc.state_weights),
+                         np.array([[nmpc.torque_weight]]))
+    a_d, b_d = _held(model, 0.0, period)
+    gain = np.linalg.solve(nmpc.torque_weight + b_d.T @ p_mat @ b_d, b_d.T @ p_mat @ a_d)
+    return gain, model.layout, period
+
+
+def _held(model, spin_rate: float, period: float) -> tuple:
+    """``A_d``, ``B_d`` of the linearisation held over ``period`` (zero-order hold)."""
+    import control
+
+    a, b = model.linear_matrices(spin_rate)
+    n = a.shape[0]
+    disc = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, 1))), period, "zoh")
+    return np.asarray(disc.A), np.asarray(disc.B)
+
+
+def _static_gain(plant: Model, law, spin_rate: float) -> np.ndarray | None:
+    """``K`` (1, n) of a static law on the plant's state, or None for a law with states."""
+    from .actuated import LaggedLQR
+    from .analysis import loop_transfer
+
+    if isinstance(law, LaggedLQR):
+        gain = np.array(law.lqr.state_gain(plant.layout), dtype=float).reshape(1, -1)
+        gain[0, plant.state_names.index("wheel_torque")] += law.actuator_gain
+        return gain
+    loop = loop_transfer(plant, law, spin_rate)
+    return np.asarray(loop.C, dtype=float) if loop.nstates == plant.n_states else None
+
+
+def _closed_loop(plant: Model, law, spin_rate: float, sample_time):
+    """Closed-loop matrix and its sample time (None: continuous)."""
+    import control
+
+    from .analysis import _design_gain, loop_transfer
+    from .nmpc import NMPC
+
+    if isinstance(law, NMPC):
+        gain, design, sample_time = _nmpc_terminal(law)
+        gain = _design_gain("check_loop", gain, plant.layout, design)
+    else:
+        gain = _static_gain(plant, law, spin_rate)
+        if gain is None and sample_time is not None:
+            raise InputValueError("check_loop: a law with internal states (LQG) runs "
+                                  "continuously; it cannot sit behind a zero-order hold")
+        if gain is None:
+            loop = loop_transfer(plant, law, spin_rate)
+            return np.asarray(control.feedback(loop).A, dtype=float), None
+    if sample_time is None:
+        a, b = plant.linear_matrices(spin_rate)
+        return a - b @ gain, None
+    a_d, b_d = _held(plant, spin_rate, sample_time)
+    return a_d - b_d @ gain, sample_time
+
+
+def _poles(matrix, sample_time, plant: Model, spin_rate: float) -> tuple:
+    """Closed-loop poles as ``s`` (1/s) and the open-loop mode each lies nearest to.
+
+    A discrete pole ``z`` is matched to the nearest open-loop ``exp(lambda T)`` in the
+    z-plane (a mode above the Nyquist frequency aliases), and its frequency is that mode's."""
+    a, _ = plant.linear_matrices(spin_rate)
+    open_loop = np.linalg.eigvals(a)
+    scale = max(1.0, float(np.max(np.abs(open_loop))))
+    flexible = np.sort(open_loop.imag[open_loop.imag > 1e-9 * scale])
+    eig = np.linalg.eigvals(matrix)
+    if sample_time is None:
+        return eig, np.array([_mode_of(float(abs(p.imag)), flexible) for p in eig]), flexible
+    targets = np.concatenate(([0.0], flexible, -flexible))
+    z_open = np.exp(1j * targets * sample_time)
+    nearest = np.array([int(np.argmin(np.abs(z_open - z / max(abs(z), 1e-300)))) for z in eig])
+    with np.errstate(divide="ignore"):
+        growth = np.log(np.abs(eig)) / sample_time
+    modes = np.where(nearest > flexible.size, nearest - flexible.size, nearest)
+    return growth + 1j * targets[nearest], modes, flexible
+
+
+def _mode_of(frequency: float, flexible: np.ndarray) -> int:
+    if flexible.size == 0 or frequency < 0.5 * flexible[0]:
+        return 0
+    return int(np.argmin(np.abs(flexible - frequency))) + 1
+
+
+def _hidden(plant: Model, spin_rate: float) -> tuple:
+    from .controllable import controllable_part
+
+    try:
+        return controllable_part(plant, spin_rate).dropped
+    except (AttributeError, NotImplementedError):    # a model with no modal report
+        return ()
+
+
+def check_loop(plant, controller, spin_rate: float = 0.0) -> LoopStability:
+    """Close a law's loop on the linearised plant and report its slow and growing poles.
+
+    Parameters
+    ----------
+    plant : flexctl.Model
+        The plant the law will run on, with its own mode count and variant (an actuated
+        plant is checked on its structure: the law's torque taken as given).
+    controller : object
+        PD, LQR, ScheduledLQR, TrajectoryTracker, LQG, a gain array, NMPC (its terminal LQR),
+        or any of these behind a zero-order hold, an observer or a DC motor's voltage.
+    spin_rate : float, optional
+        Steady hub rate of the linearisation, rad/s. Default 0.
+
+    Returns
+    -------
+    LoopStability
+
+    Raises
+    ------
+    InputTypeError
+        If ``plant`` is not a Model or the law is of no kind with a linear loop.
+    """
+    from .analysis import STABILITY_TOLERANCE
+    from .lqr import _model
+
+    plant = _model("check_loop", plant)
+    spin_rate = check_real("check_loop", "spin_rate", spin_rate)
+    law, sample_time = _unwrap(controller)
+    plant = _plant_for(plant, law)
+    try:
+        matrix, sample_time = _closed_loop(plant, law, spin_rate, sample_time)
+    except InputTypeError as exc:
+        raise InputTypeError(f"check_loop.controller: {exc}") from None
+    poles, modes, _ = _poles(matrix, sample_time, plant, spin_rate)
+    radius = max(1.0, float(np.max(np.abs(poles))))
+    hidden = _hidden(plant, spin_rate)
+    keep = np.array([not any(abs(abs(p.imag) - w) <= _HIDDEN_TOLERANCE * max(w, radius)
+                             and abs(p.real) <= _HIDDEN_TOLERANCE * max(w, radius)
+                             for w in hidden) for p in poles], dtype=bool)
+    poles, modes = (poles[keep], modes[keep]) if keep.any() else (np.zeros(1, complex), [0])
+    abscissa = float(np.max(poles.real))
+    slow = sorted((k for k, p in enumerate(poles)
+                   if p.real > -NEARLY_UNSTABLE_RATE and p.imag >= 0.0),
+                  key=lambda k: -poles[k].real)
+    reported = tuple(GrowingPole(mode=int(modes[k]), frequency=float(poles[k].imag),
+                                 growth_rate=float(poles[k].real)) for k in slow)
+    name = "NMPC terminal LQR" if type(law).__name__ == "NMPC" else type(law).__name__
+    return LoopStability(law=name, plant_variant=str(plant.variant),
+                         plant_modes=int(plant.layout.n_modes), spin_rate=spin_rate,
+                         sample_time=sample_time, spectral_abscissa=abscissa,
+                         stable=abscissa < STABILITY_TOLERANCE * radius, poles=reported,
+                         hidden_modes=tuple(float(w) for w in hidden))
+
+
+def warn_if_unstable(check: LoopStability, stacklevel: int = 2) -> LoopStability:
+    """Warn (:class:`LoopStabilityWarning`) when ``check`` is unstable or nearly so; return
+    ``check``."""
+    if not isinstance(check, LoopStability):
+        raise InputTypeError(f"warn_if_unstable.check must be a LoopStability; got "
+                             f"{type(check).__name__}")
+    if not check.ok:
+        warnings.warn(check.message(), LoopStabilityWarning, stacklevel=stacklevel + 1)
+    return check
+
+
+def checked_on(controller, plant, stacklevel: int = 2):
+    """``controller``, its loop checked on ``plant`` (warning when unstable or nearly so);
+    unchecked when ``plant`` is None. For the design functions' ``plant`` argument."""
+    if plant is not None:
+        warn_if_unstable(check_loop(plant, controller), stacklevel=stacklevel + 1)
+    return controller
