@@ -344,3 +344,76 @@ def test_outcomes_round_trip_through_the_store_bit_for_bit(tmp_path):
         bits({k: v for k, v in outputs.items() if k != "array"})
     assert type(back["flag"]) is bool and type(back["count"]) is int
     assert back["array"].tobytes() == outputs["array"].tobytes()
+
+
+# ---------------------------------------------------------------------------- the users
+def test_a_resumed_monte_carlo_study_equals_one_run(tmp_path):
+    from controllers import design_pd
+    from controllers.robustness import Dispersion, RobustnessTask, robustness_summary
+
+    system = flexctl.load_scene("slew-90").system
+    pd = design_pd(flexctl.build_model(system, 2), bandwidth=2.0, damping_ratio=0.9)
+    dispersion = Dispersion(youngs_modulus=0.3, point_mass=0.5, hub_inertia=0.3)
+    task = RobustnessTask(system=system, controller=pd, n_modes=3, dispersion=dispersion)
+    store = tmp_path / "robustness.sqlite"
+    sweep(task, {"sample": range(3)}, seed=SEED, store=store, progress=False)
+    with ThreadPoolExecutor(2) as pool:
+        table = sweep(task, {"sample": range(6)}, seed=SEED, store=store, resume=True,
+                      executor=pool, progress=False)
+    assert table.resumed == 3
+    assert_same_rows(table, sweep(task, {"sample": range(6)}, seed=SEED, progress=False))
+    first = dispersion.draw(task_seed(SEED, task_key({"sample": 0})))
+    assert {k: table.rows[0][k] for k in first} == first
+    assert len(set(table.column("youngs_modulus_scale").tolist())) == 6
+    assert robustness_summary(table).n_samples == 6
+
+
+@pytest.mark.parametrize("call, match", [
+    pytest.param(lambda t, d: t(sample=1), "sample=1 needs a dispersion", id="no-dispersion"),
+    pytest.param(lambda t, d: dataclasses.replace(t, dispersion=d)(youngs_modulus_scale=1.1,
+                                                                   seed=3),
+                 "draws its factors from the seed", id="factors-and-dispersion"),
+    pytest.param(lambda t, d: dataclasses.replace(t, dispersion=d)(sample=2),
+                 "got seed=None", id="no-seed"),
+    pytest.param(lambda t, d: dataclasses.replace(t, dispersion=0.1),
+                 "dispersion must be a Dispersion; got float", id="not-a-dispersion"),
+    pytest.param(lambda t, d: d.draw(-1), "draw seed must be an integer >= 0; got -1",
+                 id="negative-seed"),
+])
+def test_monte_carlo_draws_need_a_dispersion_and_a_seed(call, match):
+    from controllers import design_pd
+    from controllers.robustness import Dispersion, RobustnessTask
+
+    system = flexctl.load_scene("slew-90").system
+    pd = design_pd(flexctl.build_model(system, 2), bandwidth=2.0, damping_ratio=0.9)
+    task = RobustnessTask(system=system, controller=pd, n_modes=2)
+    with pytest.raises((ValueError, TypeError), match=match):
+        call(task, Dispersion())
+
+
+def test_a_resumed_bench_equals_one_run(tmp_path):
+    from flexctl.app.bench import BenchConfig, run_bench
+    from flexctl.app.cli import EXIT_BAD_INPUT, EXIT_OK, main
+
+    config = BenchConfig(scenes=("kane-spinup",), modes=(1, 2), variants=("first_order",),
+                         methods=("cvodes", "DOP853"), rtols=(1e-6,), reference_modes=4,
+                         reference_rtol=1e-10, t_final=5.0)
+    store = tmp_path / "bench.sqlite"
+    whole = run_bench(config, tmp_path / "one", progress=False, store=store)[0]
+    assert stored_keys(store) == len(whole.rows) == 4
+    with sqlite3.connect(store) as db:          # a bench stopped after its first two runs
+        db.execute("DELETE FROM runs WHERE rowid > 2")
+    resumed = run_bench(config, tmp_path / "two", progress=False, store=store, resume=True)[0]
+    assert stored_keys(store) == 4
+    got = [dataclasses.asdict(r) for r in resumed.rows]
+    want = [dataclasses.asdict(r) for r in whole.rows]
+    assert bits(got[:2]) == bits(want[:2])             # taken from the store, as measured
+    for row in got + want:                             # run again: all but the wall time
+        row.pop("wall_time_s")
+    assert bits(got) == bits(want)
+    args = ["bench", "--scene", "kane-spinup", "--modes", "1,2", "--variants", "first_order",
+            "--methods", "cvodes,DOP853", "--rtols", "1e-6", "--reference-modes", "4",
+            "--t-final", "5", "--no-progress", "--out", str(tmp_path / "cli"),
+            "--store", str(store)]
+    assert main(args) == EXIT_BAD_INPUT                # it holds runs: --resume or remove it
+    assert main(args + ["--resume"]) == EXIT_OK

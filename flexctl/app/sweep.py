@@ -327,20 +327,35 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
     _check_options(store, resume, seed, on_error, retries)
     points = _points(parameter_grid)
     keys = [task_key(p) for p in points]
-    index = {}
+    index = {}                          # key: (first grid index, point)
     for k, (key, point) in enumerate(zip(keys, points)):
         index.setdefault(key, (k, point))
-    seeded = _takes_seed(task)
     name = description or getattr(task, "__name__", type(task).__name__)
     start = time.perf_counter()
+    done, fresh = _outcomes(task, index, executor, name, store=store, resume=resume,
+                            seed=seed, progress=progress, on_error=on_error, retries=retries)
+    table = _sweep_table(points, keys, {**done, **fresh}, start, len(done))
+    if table.failed:
+        k = table.failed[0]
+        warnings.warn(f"sweep {name}: {len(table.failed)} of {len(table)} points failed (their "
+                      f"rows' 'failure' column says why); the first, point {k}: "
+                      f"{table.rows[k]['failure']}", RuntimeWarning, stacklevel=2)
+    return table
+
+
+def _outcomes(task, index: dict, executor, name: str, *, store, resume: bool, seed: int,
+              progress: bool, on_error: str, retries: int) -> tuple:
+    """``({key: TaskOutcome} taken from the store, {key: TaskOutcome} run now)`` for the
+    tasks ``index`` = ``{key: (grid index, point)}``; the options are :func:`sweep`'s."""
+    from tqdm import tqdm
+
+    seeded = _takes_seed(task)
     with contextlib.ExitStack() as stack:
         kept = None if store is None else stack.enter_context(SweepStore(
             store, task=_task_name(task), seed=seed if seeded else None, resume=resume))
         done = {} if kept is None else kept.outcomes(index)
         todo = {key: (point, task_seed(seed, key) if seeded and "seed" not in point else None)
                 for key, (_, point) in index.items() if key not in done}
-        from tqdm import tqdm
-
         bar = stack.enter_context(tqdm(total=len(index), initial=len(done), desc=name,
                                        disable=not progress, unit="point"))
         record = Recorder(kept, bar, name, index, raise_errors=on_error == "raise")
@@ -349,13 +364,7 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
             run_here(task, todo, record)
         else:
             run_on(executor, task, todo, record, retries)
-    table = _sweep_table(points, keys, {**done, **record.outcomes}, start, len(done))
-    if table.failed:
-        k = table.failed[0]
-        warnings.warn(f"sweep {name}: {len(table.failed)} of {len(table)} points failed (their "
-                      f"rows' 'failure' column says why); the first, point {k}: "
-                      f"{table.rows[k]['failure']}", RuntimeWarning, stacklevel=2)
-    return table
+    return done, record.outcomes
 
 
 def _check_task(task, executor) -> None:
