@@ -10,7 +10,14 @@ columns. Where the points run is the caller's choice:
 - the executor of a Dask distributed client, ``Client(...).get_executor()``: the workers of a
   cluster, the way past one machine.
 
-Anything with ``submit(fn, *args)`` returning futures with ``result()`` will do. Tasks go to
+Anything with ``submit(fn, *args)`` returning futures with ``result()`` will do, or a factory
+of executors (the sweep then replaces a process pool that a dying worker breaks). A long sweep
+keeps going: a task that raises becomes a row with its error (``on_error="record"``), a task
+lost with its worker is submitted again (``retries``), and with ``store="runs.sqlite"`` each
+finished task is committed to disk as it arrives, so that ``resume=True`` after a crash or a
+Ctrl-C runs only the rest (:mod:`flexctl.app.sweep_store`). A task with a ``seed`` parameter
+gets its own, derived from the sweep's ``seed`` and the point: the rows do not depend on the
+workers, the order, or an interruption. Tasks go to
 other processes by pickling, so a task must be a module-level function or an instance of a
 module-level class such as the frozen dataclasses here:
 
@@ -33,10 +40,8 @@ True
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
-import inspect
 import io
 import itertools
 import math
@@ -50,8 +55,8 @@ import numpy as np
 from ..sim.maneuvers import SineTorque
 from ..model.parameters import HubBeam, PointMass
 from ..model.errors import InputTypeError, InputValueError
-from .sweep_runner import Recorder, SweepError, is_executor, run_here, run_on
-from .sweep_store import SweepStore, task_key, task_seed
+from .sweep_runner import SweepError, is_executor, outcomes
+from .sweep_store import task_key
 
 __all__ = ["sweep", "parameter_grid", "SweepResult", "SweepError", "pareto_front",
            "response_amplitudes", "PointMassAmplitudes", "SceneTask"]
@@ -332,8 +337,8 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
         index.setdefault(key, (k, point))
     name = description or getattr(task, "__name__", type(task).__name__)
     start = time.perf_counter()
-    done, fresh = _outcomes(task, index, executor, name, store=store, resume=resume,
-                            seed=seed, progress=progress, on_error=on_error, retries=retries)
+    done, fresh = outcomes(task, index, executor, name, store=store, resume=resume,
+                           seed=seed, progress=progress, on_error=on_error, retries=retries)
     table = _sweep_table(points, keys, {**done, **fresh}, start, len(done))
     if table.failed:
         k = table.failed[0]
@@ -341,30 +346,6 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
                       f"rows' 'failure' column says why); the first, point {k}: "
                       f"{table.rows[k]['failure']}", RuntimeWarning, stacklevel=2)
     return table
-
-
-def _outcomes(task, index: dict, executor, name: str, *, store, resume: bool, seed: int,
-              progress: bool, on_error: str, retries: int) -> tuple:
-    """``({key: TaskOutcome} taken from the store, {key: TaskOutcome} run now)`` for the
-    tasks ``index`` = ``{key: (grid index, point)}``; the options are :func:`sweep`'s."""
-    from tqdm import tqdm
-
-    seeded = _takes_seed(task)
-    with contextlib.ExitStack() as stack:
-        kept = None if store is None else stack.enter_context(SweepStore(
-            store, task=_task_name(task), seed=seed if seeded else None, resume=resume))
-        done = {} if kept is None else kept.outcomes(index)
-        todo = {key: (point, task_seed(seed, key) if seeded and "seed" not in point else None)
-                for key, (_, point) in index.items() if key not in done}
-        bar = stack.enter_context(tqdm(total=len(index), initial=len(done), desc=name,
-                                       disable=not progress, unit="point"))
-        record = Recorder(kept, bar, name, index, raise_errors=on_error == "raise")
-        record.resumed(done)
-        if executor is None:
-            run_here(task, todo, record)
-        else:
-            run_on(executor, task, todo, record, retries)
-    return done, record.outcomes
 
 
 def _check_task(task, executor) -> None:
@@ -391,22 +372,6 @@ def _check_options(store, resume, seed, on_error, retries) -> None:
     if resume and store is None:
         raise InputValueError("sweep resume=True needs a store (the file of the sweep to "
                               "resume); got store=None")
-
-
-def _takes_seed(task) -> bool:
-    """True when ``task`` has a parameter named ``seed`` (``**kwargs`` does not count)."""
-    try:
-        parameter = inspect.signature(task).parameters.get("seed")
-    except (TypeError, ValueError):
-        return False
-    return parameter is not None and parameter.kind in (parameter.POSITIONAL_OR_KEYWORD,
-                                                        parameter.KEYWORD_ONLY)
-
-
-def _task_name(task) -> str:
-    """The task's qualified name, which a resumed store must match."""
-    kind = task if inspect.isfunction(task) else type(task)
-    return f"{kind.__module__}.{kind.__qualname__}"
 
 
 def _sweep_table(points: list, keys: list, outcomes: dict, start: float,

@@ -1,8 +1,9 @@
 """Running a sweep's tasks: here or on an executor, one outcome recorded as each arrives.
 
-:func:`flexctl.app.sweep.sweep` hands the tasks still to run to :func:`run_here` or
-:func:`run_on`, and a :class:`Recorder` that commits each outcome to the store, counts it and
-moves the progress bar. The concerns kept apart:
+:func:`flexctl.app.sweep.sweep` hands its tasks to :func:`outcomes`, which takes the ones a
+store holds and runs the others with :func:`run_here` or :func:`run_on`, and a
+:class:`Recorder` that commits each outcome to the store, counts it and moves the progress bar.
+The concerns kept apart:
 
 - a task that raises is an outcome (``status="failed"`` with its error), caught where it ran
   (:func:`evaluate`), so that anything a future raises means the worker was lost;
@@ -17,13 +18,16 @@ moves the progress bar. The concerns kept apart:
 from __future__ import annotations
 
 import concurrent.futures
+import contextlib
 import dataclasses
+import inspect
 import pickle
 from collections.abc import Mapping
 
-from .sweep_store import FAILED, OK, TaskOutcome
+from .sweep_store import FAILED, OK, SweepStore, TaskOutcome, task_seed
 
-__all__ = ["SweepError", "evaluate", "run_here", "run_on", "Recorder", "is_executor"]
+__all__ = ["SweepError", "outcomes", "evaluate", "run_here", "run_on", "Recorder",
+           "is_executor"]
 
 
 class SweepError(RuntimeError):
@@ -114,6 +118,46 @@ class Recorder:
         k, point = self.points[key]
         raise SweepError(f"sweep task {self.name} failed at point {k} {point}: "
                          f"{outcome.error}") from outcome.exception
+
+
+def outcomes(task, index: dict, executor, name: str, *, store, resume: bool, seed: int,
+              progress: bool, on_error: str, retries: int) -> tuple:
+    """``({key: TaskOutcome} taken from the store, {key: TaskOutcome} run now)`` for the
+    tasks ``index`` = ``{key: (grid index, point)}``; the options are :func:`sweep`'s."""
+    from tqdm import tqdm
+
+    seeded = _takes_seed(task)
+    with contextlib.ExitStack() as stack:
+        kept = None if store is None else stack.enter_context(SweepStore(
+            store, task=_task_name(task), seed=seed if seeded else None, resume=resume))
+        done = {} if kept is None else kept.outcomes(index)
+        todo = {key: (point, task_seed(seed, key) if seeded and "seed" not in point else None)
+                for key, (_, point) in index.items() if key not in done}
+        bar = stack.enter_context(tqdm(total=len(index), initial=len(done), desc=name,
+                                       disable=not progress, unit="point"))
+        record = Recorder(kept, bar, name, index, raise_errors=on_error == "raise")
+        record.resumed(done)
+        if executor is None:
+            run_here(task, todo, record)
+        else:
+            run_on(executor, task, todo, record, retries)
+    return done, record.outcomes
+
+
+def _takes_seed(task) -> bool:
+    """True when ``task`` has a parameter named ``seed`` (``**kwargs`` does not count)."""
+    try:
+        parameter = inspect.signature(task).parameters.get("seed")
+    except (TypeError, ValueError):
+        return False
+    return parameter is not None and parameter.kind in (parameter.POSITIONAL_OR_KEYWORD,
+                                                        parameter.KEYWORD_ONLY)
+
+
+def _task_name(task) -> str:
+    """The task's qualified name, which a resumed store must match."""
+    kind = task if inspect.isfunction(task) else type(task)
+    return f"{kind.__module__}.{kind.__qualname__}"
 
 
 def run_here(task, todo: dict, record: Recorder) -> None:
