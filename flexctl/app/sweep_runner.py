@@ -121,9 +121,10 @@ class Recorder:
 
 
 def outcomes(task, index: dict, executor, name: str, *, store, resume: bool, seed: int,
-              progress: bool, on_error: str, retries: int) -> tuple:
+             progress: bool, on_error: str, retries: int) -> tuple:
     """``({key: TaskOutcome} taken from the store, {key: TaskOutcome} run now)`` for the
-    tasks ``index`` = ``{key: (grid index, point)}``; the options are :func:`sweep`'s."""
+    tasks ``index`` = ``{key: (grid index, point)}``; the options are those of
+    :func:`flexctl.app.sweep.sweep`."""
     from tqdm import tqdm
 
     seeded = _takes_seed(task)
