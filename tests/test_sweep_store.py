@@ -183,6 +183,13 @@ def test_a_store_is_resumed_only_by_the_same_sweep(tmp_path, call, error, match)
     assert stored_keys(store) == len(GRID["x"])         # nothing lost or overwritten
 
 
+def test_a_file_that_is_not_a_store_is_refused_by_name(tmp_path):
+    garbage = tmp_path / "notes.txt"
+    garbage.write_text("not a database, but long enough to have a header page\n" * 40)
+    with pytest.raises(ValueError, match="sweep store must be an SQLite file .*notes.txt"):
+        sweep(noisy, GRID, store=garbage, progress=False)
+
+
 def test_a_task_without_seed_is_resumed_whatever_the_sweep_seed(tmp_path):
     store = tmp_path / "runs.sqlite"
     sweep(unseeded, {"x": [1, 2]}, seed=1, store=store, progress=False)
@@ -197,6 +204,7 @@ def test_failures_are_stored_with_their_error_and_can_be_run_again(tmp_path):
     with pytest.warns(RuntimeWarning, match="1 of 4 points failed"):
         table = sweep(task, grid, seed=SEED, store=store, progress=False)
     assert table.failed == (2,) and table.rows[2]["failure"].startswith("TypeError: ")
+    assert "4 rows, 1 failed" in repr(table)
     with pytest.raises(ValueError, match="belongs to a sweep with task"):
         SweepStore(store, task="other", seed=SEED, resume=True)
     with SweepStore(store, task=kept_task_name(task), seed=SEED, resume=True) as kept:

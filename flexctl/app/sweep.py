@@ -327,6 +327,13 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
         breaks.
     KeyboardInterrupt
         After cancelling the points not started; the finished ones are in the store.
+
+    Notes
+    -----
+    ``on_error="record"`` is the default because a study of thousands of runs should neither
+    stop at its first bad point nor lose the others; the warning at the end and
+    :attr:`SweepResult.failed` keep the failures in sight. Give ``"raise"`` where any failure
+    is a bug (the demo's figures).
     """
     _check_task(task, executor)
     _check_options(store, resume, seed, on_error, retries)
