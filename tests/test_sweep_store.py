@@ -425,3 +425,18 @@ def test_a_resumed_bench_equals_one_run(tmp_path):
             "--store", str(store)]
     assert main(args) == EXIT_BAD_INPUT                # it holds runs: --resume or remove it
     assert main(args + ["--resume"]) == EXIT_OK
+
+
+calls = []
+
+
+def logged(x):
+    calls.append(x)
+    return {"y": x}
+
+
+def test_a_serial_sweep_runs_in_grid_order_and_a_repeated_point_once():
+    calls.clear()
+    table = sweep(logged, [{"x": 3}, {"x": 1}, {"x": 3}, {"x": 2}], progress=False)
+    assert calls == [3, 1, 2]
+    assert table.column("y").tolist() == [3.0, 1.0, 3.0, 2.0]

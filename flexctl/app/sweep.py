@@ -322,18 +322,16 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
     Raises
     ------
     SweepError
-        With ``on_error="raise"``, when the task raises at a point (the message names the
-        point, the exception is its ``__cause__``); when an executor given (not a factory)
-        breaks.
+        With ``on_error="raise"``, when the task raises at a point (named; the exception is
+        the ``__cause__``); when an executor given (not a factory) breaks.
     KeyboardInterrupt
         After cancelling the points not started; the finished ones are in the store.
 
     Notes
     -----
-    ``on_error="record"`` is the default because a study of thousands of runs should neither
-    stop at its first bad point nor lose the others; the warning at the end and
-    :attr:`SweepResult.failed` keep the failures in sight. Give ``"raise"`` where any failure
-    is a bug (the demo's figures).
+    ``on_error="record"`` is the default: a study of thousands of runs should neither stop at
+    its first bad point nor lose the others; the warning and :attr:`SweepResult.failed` keep
+    the failures in sight. Give ``"raise"`` where any failure is a bug (the demo's figures).
     """
     _check_task(task, executor)
     _check_options(store, resume, seed, on_error, retries)
@@ -347,12 +345,17 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
     done, fresh = outcomes(task, index, executor, name, store=store, resume=resume,
                            seed=seed, progress=progress, on_error=on_error, retries=retries)
     table = _sweep_table(points, keys, {**done, **fresh}, start, len(done))
+    _warn_of_failures(table, name)
+    return table
+
+
+def _warn_of_failures(table: SweepResult, name: str) -> None:
+    """A RuntimeWarning (at the caller of :func:`sweep`) when points of ``table`` failed."""
     if table.failed:
         k = table.failed[0]
         warnings.warn(f"sweep {name}: {len(table.failed)} of {len(table)} points failed (their "
                       f"rows' 'failure' column says why); the first, point {k}: "
-                      f"{table.rows[k]['failure']}", RuntimeWarning, stacklevel=2)
-    return table
+                      f"{table.rows[k]['failure']}", RuntimeWarning, stacklevel=3)
 
 
 def _check_task(task, executor) -> None:
