@@ -205,6 +205,7 @@ def test_failures_are_stored_with_their_error_and_can_be_run_again(tmp_path):
         table = sweep(task, grid, seed=SEED, store=store, progress=False)
     assert table.failed == (2,) and table.rows[2]["failure"].startswith("TypeError: ")
     assert "4 rows, 1 failed" in repr(table)
+    assert table.where(x="two").failed == (0,) and table.where(x=3).failed == ()
     with pytest.raises(ValueError, match="belongs to a sweep with task"):
         SweepStore(store, task="other", seed=SEED, resume=True)
     with SweepStore(store, task=kept_task_name(task), seed=SEED, resume=True) as kept:

@@ -186,8 +186,11 @@ class SweepResult:
             if name not in self.columns:
                 raise KeyError(f"where: column must be one of {', '.join(self.columns)}; "
                                f"got {name!r}")
-        rows = tuple(r for r in self.rows if all(r.get(k) == v for k, v in equal.items()))
-        return dataclasses.replace(self, rows=rows)
+        kept = [k for k, r in enumerate(self.rows)
+                if all(r.get(name) == v for name, v in equal.items())]
+        failed = set(self.failed)
+        return dataclasses.replace(self, rows=tuple(self.rows[k] for k in kept),
+                                   failed=tuple(i for i, k in enumerate(kept) if k in failed))
 
     def scalar_columns(self) -> tuple:
         """Columns whose every value is a number, string, bool or None (CSV-ready)."""
