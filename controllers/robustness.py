@@ -362,6 +362,10 @@ def _rows(table) -> list:
     needed = ("closed_loop_stable", "gain_margin", "phase_margin", "stability_margin",
               "spectral_abscissa")
     for k, row in enumerate(rows):
+        if isinstance(row, Mapping) and "failure" in row:
+            raise InputValueError(f"robustness_summary.table row {k} is a failed sample "
+                                  f"({row['failure']}): summarise table.without_failures() "
+                                  "and report the failures apart")
         if not isinstance(row, Mapping) or any(name not in row for name in needed):
             raise InputValueError(f"robustness_summary.table row {k} must hold the columns "
                                   f"{', '.join(needed)} (a RobustnessTask row); got {row!r}")

@@ -206,6 +206,7 @@ def test_failures_are_stored_with_their_error_and_can_be_run_again(tmp_path):
     assert table.failed == (2,) and table.rows[2]["failure"].startswith("TypeError: ")
     assert "4 rows, 1 failed" in repr(table)
     assert table.where(x="two").failed == (0,) and table.where(x=3).failed == ()
+    assert [r["x"] for r in table.without_failures()] == [0, 1, 3]
     with pytest.raises(ValueError, match="belongs to a sweep with task"):
         SweepStore(store, task="other", seed=SEED, resume=True)
     with SweepStore(store, task=kept_task_name(task), seed=SEED, resume=True) as kept:
@@ -375,6 +376,12 @@ def test_a_resumed_monte_carlo_study_equals_one_run(tmp_path):
     assert {k: table.rows[0][k] for k in first} == first
     assert len(set(table.column("youngs_modulus_scale").tolist())) == 6
     assert robustness_summary(table).n_samples == 6
+    failed = dataclasses.replace(table, rows=table.rows[:5] + ({"sample": 5, "failure":
+                                                                  "LinAlgError: singular"},),
+                                 failed=(5,))
+    with pytest.raises(ValueError, match="row 5 is a failed sample .*without_failures"):
+        robustness_summary(failed)
+    assert robustness_summary(failed.without_failures()).n_samples == 5
 
 
 @pytest.mark.parametrize("call, match", [

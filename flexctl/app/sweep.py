@@ -192,6 +192,12 @@ class SweepResult:
         return dataclasses.replace(self, rows=tuple(self.rows[k] for k in kept),
                                    failed=tuple(i for i, k in enumerate(kept) if k in failed))
 
+    def without_failures(self) -> "SweepResult":
+        """The rows whose task succeeded (:attr:`failed` left out)."""
+        failed = set(self.failed)
+        return dataclasses.replace(self, failed=(), rows=tuple(
+            r for k, r in enumerate(self.rows) if k not in failed))
+
     def scalar_columns(self) -> tuple:
         """Columns whose every value is a number, string, bool or None (CSV-ready)."""
         scalar = (int, float, str, bool, np.number, type(None))
