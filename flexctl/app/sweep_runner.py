@@ -10,7 +10,8 @@ The concerns kept apart:
 - a task lost with its worker is submitted again, up to ``retries`` more times. Dask
   reschedules such a task by itself first (up to ``distributed.scheduler.allowed-failures``
   times, default 3), and raises ``KilledWorker`` past that; a process pool breaks as a whole
-  (``BrokenProcessPool``), and only a pool factory lets the sweep build a fresh one;
+  (``BrokenProcessPool``), and only a pool factory lets the sweep build a fresh one. A pool
+  cannot tell which task broke it, so every task lost in the break counts an attempt;
 - a Ctrl-C (or any exception out of the recorder) cancels the futures not yet started and
   propagates; every outcome recorded so far is already committed.
 """
