@@ -382,6 +382,10 @@ def test_a_resumed_monte_carlo_study_equals_one_run(tmp_path):
     with pytest.raises(ValueError, match="row 5 is a failed sample .*without_failures"):
         robustness_summary(failed)
     assert robustness_summary(failed.without_failures()).n_samples == 5
+    given = dataclasses.replace(task, dispersion=None)        # factors as the points
+    samples = dispersion.samples(2, seed=1)
+    rows = sweep(given, samples, seed=SEED, progress=False).rows
+    assert bits([dict(r) for r in rows]) == bits([given(**s) for s in samples])
 
 
 @pytest.mark.parametrize("call, match", [
