@@ -6,10 +6,14 @@ masses and hub inertia are off by random factors. :class:`Dispersion` draws the 
 :mod:`controllers.analysis`, optionally the slew it flies on the nonlinear plant), and
 :func:`robustness_summary` condenses the rows. The task is a picklable frozen dataclass, so
 the samples run through :func:`flexctl.app.sweep.sweep` on any ``concurrent.futures``-style
-executor, a Dask cluster's included::
+executor, a Dask cluster's included. Given a dispersion, the task draws each sample's factors
+from the seed the sweep derives from the sample's key, so a study kept in a store resumes after
+a crash, or grows from 200 to 400 samples, with exactly the rows of one uninterrupted run::
 
-    samples = Dispersion(youngs_modulus=0.1, point_mass=0.2, hub_inertia=0.1).samples(200)
-    table = sweep(RobustnessTask(system=system, controller=lqr), samples, executor=executor)
+    dispersion = Dispersion(youngs_modulus=0.1, point_mass=0.2, hub_inertia=0.1)
+    task = RobustnessTask(system=system, controller=lqr, dispersion=dispersion)
+    table = sweep(task, {"sample": range(200)}, executor=executor, seed=1,
+                  store="robustness.sqlite", resume=True)
     summary = robustness_summary(table)
 
 Examples
@@ -110,12 +114,38 @@ class Dispersion:
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise InputValueError(f"dispersion.samples seed must be an integer >= 0; got "
                                   f"{seed!r}")
-        rng = np.random.default_rng(int(seed))
+        return self._factors(np.random.default_rng(int(seed)), int(n_samples))
+
+    def draw(self, seed: int) -> dict:
+        """One draw of the factors :data:`SCALES` from its own seed.
+
+        The draw of a Monte Carlo sample that a sweep seeds by the sample's key
+        (:class:`RobustnessTask` with a ``dispersion``): it depends on ``seed`` alone, not on
+        how many samples there are or in which order they run.
+
+        Parameters
+        ----------
+        seed : int
+            Seed of :func:`numpy.random.default_rng`, >= 0.
+
+        Returns
+        -------
+        dict
+            ``{"youngs_modulus_scale": ..., "point_mass_scale": ..., "hub_inertia_scale":
+            ...}`` (Python floats).
+        """
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise InputValueError(f"dispersion.draw seed must be an integer >= 0; got "
+                                  f"{seed!r}")
+        return self._factors(np.random.default_rng(int(seed)), 1)[0]
+
+    def _factors(self, rng, n_samples: int) -> list:
+        """``n_samples`` draws from ``rng``, as dicts of :data:`SCALES`."""
         spread = np.array([self.youngs_modulus, self.point_mass, self.hub_inertia])
         if self.distribution == "uniform":
-            unit = rng.uniform(-1.0, 1.0, (int(n_samples), 3))
+            unit = rng.uniform(-1.0, 1.0, (n_samples, 3))
         else:
-            unit = np.clip(rng.standard_normal((int(n_samples), 3)), -NORMAL_CLIP, NORMAL_CLIP)
+            unit = np.clip(rng.standard_normal((n_samples, 3)), -NORMAL_CLIP, NORMAL_CLIP)
         factors = 1.0 + unit * spread
         return [dict(zip(SCALES, map(float, row))) for row in factors]
 
@@ -164,7 +194,8 @@ class RobustnessTask:
     """Sweep task: a fixed controller on one dispersed plant, judged by its loop.
 
     Called as ``task(youngs_modulus_scale=..., point_mass_scale=..., hub_inertia_scale=...)``
-    (:data:`SCALES`, each default 1): builds the dispersed plant (:func:`disperse`), its loop
+    (:data:`SCALES`, each default 1), or with a ``dispersion`` as ``task(sample=k, seed=s)``
+    (the factors drawn from ``s``): builds the dispersed plant (:func:`disperse`), its loop
     with the controller (:func:`~controllers.analysis.loop_transfer`) and the margins
     (:func:`~controllers.analysis.loop_margins`); with ``slew_time``, also flies the
     controller's slew on the nonlinear plant.
@@ -188,6 +219,11 @@ class RobustnessTask:
     slew_time : float, optional
         Simulated time of the slew, s (> the reference's end); needs a controller with a slew
         reference (:class:`~controllers.reference.SlewProfile`). Default: no simulation.
+    dispersion : Dispersion, optional
+        Draw the factors of each call from its ``seed`` (:meth:`Dispersion.draw`): a Monte
+        Carlo study is then a sweep over ``{"sample": range(n)}``, each sample seeded by the
+        sweep from its key, so that a resumed or redistributed study gives the same rows.
+        Default: the factors are the call's arguments.
 
     Notes
     -----
@@ -204,8 +240,12 @@ class RobustnessTask:
     spin_rate: float = 0.0
     sensor: str | None = None
     slew_time: float | None = None
+    dispersion: Dispersion | None = None
 
     def __post_init__(self):
+        if self.dispersion is not None and not isinstance(self.dispersion, Dispersion):
+            raise InputTypeError(f"robustness_task.dispersion must be a Dispersion; got "
+                                 f"{type(self.dispersion).__name__}")
         if not isinstance(self.system, HubBeam):
             raise InputTypeError(f"robustness_task.system must be a HubBeam; got "
                                  f"{type(self.system).__name__}")
@@ -232,8 +272,12 @@ class RobustnessTask:
                 "robustness_task", "slew_time", self.slew_time, minimum=reference[1],
                 strict=True))
 
-    def __call__(self, youngs_modulus_scale: float = 1.0, point_mass_scale: float = 1.0,
-                 hub_inertia_scale: float = 1.0) -> dict:
+    def __call__(self, youngs_modulus_scale: float | None = None,
+                 point_mass_scale: float | None = None, hub_inertia_scale: float | None = None,
+                 *, sample: int | None = None, seed: int | None = None) -> dict:
+        scales = self._scales(youngs_modulus_scale, point_mass_scale, hub_inertia_scale,
+                              sample, seed)
+        youngs_modulus_scale, point_mass_scale, hub_inertia_scale = scales
         system = disperse(self.system, youngs_modulus_scale=youngs_modulus_scale,
                           point_mass_scale=point_mass_scale,
                           hub_inertia_scale=hub_inertia_scale)
@@ -252,6 +296,24 @@ class RobustnessTask:
             row["status"] = result.status
             row.update(dataclasses.asdict(slew_metrics(result, angle, end)))
         return row
+
+    def _scales(self, youngs_modulus_scale, point_mass_scale, hub_inertia_scale, sample,
+                seed) -> tuple:
+        """The factors of a call: given (default 1), or drawn by the dispersion from the
+        seed of a Monte Carlo sample."""
+        given = (youngs_modulus_scale, point_mass_scale, hub_inertia_scale)
+        if self.dispersion is None:
+            if sample is not None:
+                raise InputValueError(f"robustness_task sample={sample!r} needs a dispersion "
+                                      "to draw it from; got dispersion=None")
+            return tuple(1.0 if v is None else v for v in given)
+        if seed is None or any(v is not None for v in given):
+            raise InputValueError("robustness_task with a dispersion draws its factors from "
+                                  "the seed a sweep gives each sample: call it as "
+                                  f"task(sample=k, seed=s); got seed={seed!r}, factors "
+                                  f"{given!r}")
+        drawn = self.dispersion.draw(seed)
+        return tuple(drawn[name] for name in SCALES)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -300,6 +362,10 @@ def _rows(table) -> list:
     needed = ("closed_loop_stable", "gain_margin", "phase_margin", "stability_margin",
               "spectral_abscissa")
     for k, row in enumerate(rows):
+        if isinstance(row, Mapping) and "failure" in row:
+            raise InputValueError(f"robustness_summary.table row {k} is a failed sample "
+                                  f"({row['failure']}): summarise table.without_failures() "
+                                  "and report the failures apart")
         if not isinstance(row, Mapping) or any(name not in row for name in needed):
             raise InputValueError(f"robustness_summary.table row {k} must hold the columns "
                                   f"{', '.join(needed)} (a RobustnessTask row); got {row!r}")

@@ -129,11 +129,28 @@ def test_failing_point_is_named_and_chained(with_pool):
     pool = ThreadPoolExecutor(max_workers=2) if with_pool else None
     try:
         with pytest.raises(SweepError, match=r"failing failed at point 2 \{'x': 2\}") as info:
-            sweep(failing, {"x": [0, 1, 2, 3]}, executor=pool, progress=False)
+            sweep(failing, {"x": [0, 1, 2, 3]}, executor=pool, progress=False,
+                  on_error="raise")
     finally:
         if pool is not None:
             pool.shutdown()
     assert isinstance(info.value.__cause__, ArithmeticError)
+
+
+@pytest.mark.parametrize("with_pool", [False, True], ids=["serial", "processes"])
+def test_failing_point_is_recorded_and_the_others_finish(with_pool):
+    pool = ProcessPoolExecutor(max_workers=2) if with_pool else None
+    try:
+        with pytest.warns(RuntimeWarning, match=r"1 of 4 points failed.*point 2: "
+                          r"ArithmeticError: no twos"):
+            table = sweep(failing, {"x": [0, 1, 2, 3]}, executor=pool, progress=False)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    assert table.failed == (2,)
+    assert table.rows[2] == {"x": 2, "failure": "ArithmeticError: no twos"}
+    assert [table.rows[k]["x2"] for k in (0, 1, 3)] == [0, 2, 6]
+    assert np.isnan(table.column("x2")[2])
 
 
 def test_progress_bar_reports_every_point(capsys):

@@ -8,6 +8,8 @@ module               contents
 ``scenes``           scene TOML files parsed into validated ``Scene`` values, and run
 ``builtin_scenes``   the scene files shipped with the package
 ``sweep``            parameter sweeps on any executor, Pareto fronts
+``sweep_store``      a sweep's finished tasks on disk (SQLite), task keys and seeds, resume
+``sweep_runner``     running a sweep's tasks: failures recorded, lost workers retried
 ``bench``            speed-against-error benchmarks of variants, modes and integrators
 ``bench_plot``       the bench's speed-against-error figure
 ``bench_report``     the bench's CSV, Markdown pages and report.md

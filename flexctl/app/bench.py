@@ -26,8 +26,8 @@ is ``flexctl bench``.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
-
 import itertools
 import math
 import time
@@ -48,6 +48,7 @@ from .bench_report import (CSV_COLUMNS, SUMMARY_LEVELS, fastest_within, summary_
                            write_index, write_scene)
 from .scenes import builtin_scenes, load_scene
 from .sweep import pareto_front
+from .sweep_store import OK, SweepStore, TaskOutcome, task_key
 
 __all__ = ["BenchConfig", "BenchRow", "SceneBench", "bench_scene", "run_bench", "finished_runs",
            "runs_on_front", "plot_speed_error", "write_scene", "summary_line", "BENCH_KINDS"]
@@ -285,7 +286,8 @@ def _drivable(scene):
     return scene
 
 
-def bench_scene(scene, config: BenchConfig, progress: bool = True) -> SceneBench:
+def bench_scene(scene, config: BenchConfig, progress: bool = True, *,
+                store: SweepStore | None = None) -> SceneBench:
     """Run the sweep of ``config`` on one scene (see the module docstring).
 
     Parameters
@@ -295,6 +297,10 @@ def bench_scene(scene, config: BenchConfig, progress: bool = True) -> SceneBench
     config : BenchConfig
     progress : bool, optional
         Show a tqdm progress bar on stderr.
+    store : SweepStore, optional
+        Where each run's row is committed as it finishes, and taken from when it is there
+        already (a resumed bench runs the references and the tight runs again, the yardsticks
+        of every error, and only the rows the store lacks).
 
     Returns
     -------
@@ -322,7 +328,7 @@ def bench_scene(scene, config: BenchConfig, progress: bool = True) -> SceneBench
     references, tight_runs = _tight_runs(tight, scene.name, config)
     truncation = _truncation_errors(tight, references, tight_runs, scene.variant, config.modes,
                                     chosen_extra)
-    rows = _sweep_rows(scene, config, t_final, references, tight_runs, bar)
+    rows = _sweep_rows(scene, config, t_final, references, tight_runs, bar, store)
     bar.close()
     return SceneBench(scene=scene, config=config, t_final=float(t_final), rows=tuple(rows),
                       references=_reference_summary(references), choice=choice,
@@ -372,37 +378,57 @@ def _truncation_errors(tight, references, tight_runs, variant: str, modes, chose
 
 
 def _sweep_rows(scene, config: BenchConfig, t_final: float, references, tight_runs,
-                bar) -> list:
+                bar, store=None) -> list:
     """A :class:`BenchRow` for every variant, mode count, integrator and tolerance.
 
     A method that failed or timed out on fewer modes is skipped on more (it would cost
-    more); ``bar`` advances once a row.
+    more); ``bar`` advances once a row. With a ``store`` (a
+    :class:`~flexctl.app.sweep_store.SweepStore`), a row it holds is taken from it, and every
+    row run is committed to it as it finishes.
     """
-    rows, given_up, nan = [], {}, math.nan
+    rows, given_up = [], {}
+    done = {} if store is None else store.outcomes()
     for variant, n, method, rtol in itertools.product(config.variants, config.modes,
                                                       config.methods, config.rtols):
         bar.update()
-        base, key = tight_runs[variant, n], (variant, method, rtol)
-        trunc = _relative_tip_error(base, references[variant]) if base is not None else nan
-        head = (scene.name, variant, n, method)
-        if key in given_up:          # it failed on fewer modes: more would cost more
-            rows.append(BenchRow(*head, method, rtol, "skipped", 0.0, nan, 0, nan, trunc, nan,
-                                 given_up[key]))
-            continue
-        result, wall, note = _run(build_model(scene.system, n, variant), scene, t_final,
-                                  method, rtol, config.time_limit)
-        if result is None:
-            status = "timeout" if note.startswith("stopped") else "error"
-            given_up[key] = f"{method} at rtol {rtol:g}: {status} on {n} modes"
-            rows.append(BenchRow(*head, method, rtol, status, 0.0, wall, 0, nan, trunc, nan,
-                                 note))
-            continue
-        rows.append(BenchRow(
-            *head, result.method, rtol, result.status, float(result.t[-1]), wall,
-            result.n_evaluations, _relative_tip_error(result, references[variant]), trunc,
-            _relative_tip_error(result, base) if base is not None else nan,
-            "" if result.ok and result.method == method else result.message))
+        key = task_key({"scene": scene.name, "variant": variant, "n_modes": n,
+                        "method": method, "rtol": rtol})
+        if key in done:
+            row = BenchRow(**done[key].outputs)
+        else:
+            row = _bench_row(scene, config, t_final, references[variant],
+                             tight_runs[variant, n], (variant, n, method, rtol),
+                             given_up.get((variant, method, rtol)))
+            if store is not None:
+                store.record(key, TaskOutcome(status=OK, outputs=dataclasses.asdict(row)))
+        if row.status in ("timeout", "error"):     # more modes would cost more
+            given_up.setdefault((variant, method, rtol),
+                                f"{method} at rtol {rtol:g}: {row.status} on {n} modes")
+        rows.append(row)
     return rows
+
+
+def _bench_row(scene, config: BenchConfig, t_final: float, reference, base, run: tuple,
+               given_up: str | None) -> BenchRow:
+    """The row of ``run`` = ``(variant, n_modes, method, rtol)`` against ``reference`` and
+    ``base`` (the same model at the reference tolerance, or None); ``"skipped"`` with the
+    reason ``given_up`` when the method failed on fewer modes."""
+    variant, n, method, rtol = run
+    nan = math.nan
+    trunc = _relative_tip_error(base, reference) if base is not None else nan
+    head = (scene.name, variant, n, method)
+    if given_up is not None:
+        return BenchRow(*head, method, rtol, "skipped", 0.0, nan, 0, nan, trunc, nan, given_up)
+    result, wall, note = _run(build_model(scene.system, n, variant), scene, t_final, method,
+                              rtol, config.time_limit)
+    if result is None:
+        status = "timeout" if note.startswith("stopped") else "error"
+        return BenchRow(*head, method, rtol, status, 0.0, wall, 0, nan, trunc, nan, note)
+    return BenchRow(
+        *head, result.method, rtol, result.status, float(result.t[-1]), wall,
+        result.n_evaluations, _relative_tip_error(result, reference), trunc,
+        _relative_tip_error(result, base) if base is not None else nan,
+        "" if result.ok and result.method == method else result.message)
 
 
 def _reference_summary(references) -> dict:
@@ -416,8 +442,23 @@ def _reference_summary(references) -> dict:
             for v, r in references.items()}
 
 
-def run_bench(config: BenchConfig, out_dir, progress: bool = True) -> list:
+def run_bench(config: BenchConfig, out_dir, progress: bool = True, *, store=None,
+              resume: bool = False) -> list:
     """Bench every scene of ``config`` and write its files and ``report.md`` to ``out_dir``.
+
+    Parameters
+    ----------
+    config : BenchConfig
+    out_dir : str or path-like
+    progress : bool, optional
+        Show a tqdm progress bar per scene on stderr.
+    store : str or path-like, optional
+        SQLite file that every run is committed to as it finishes
+        (:class:`~flexctl.app.sweep_store.SweepStore`, one key per scene, variant, modes,
+        method and rtol), so that a bench stopped by a crash or a Ctrl-C can resume.
+    resume : bool, optional
+        Take the runs the store already holds (from a bench with the same reference settings
+        and horizon); False (default) refuses a store that holds runs.
 
     Returns
     -------
@@ -429,8 +470,19 @@ def run_bench(config: BenchConfig, out_dir, progress: bool = True) -> list:
     else:                        # every built-in scene the bench can drive
         scenes = [s for s in scenes if isinstance(s.maneuver, BENCH_KINDS)]
     benches = []
-    for scene in scenes:
-        benches.append(bench_scene(scene, config, progress=progress))
-        write_scene(benches[-1], out_dir)
+    with contextlib.ExitStack() as stack:
+        kept = None if store is None else stack.enter_context(SweepStore(
+            store, task=_store_task(config), seed=None, resume=resume))
+        for scene in scenes:
+            benches.append(bench_scene(scene, config, progress=progress, store=kept))
+            write_scene(benches[-1], out_dir)
     write_index(Path(out_dir), benches)
     return benches
+
+
+def _store_task(config: BenchConfig) -> str:
+    """What a bench store is for: the settings a row's values depend on besides its key (a
+    resume may add scenes, modes, methods or tolerances)."""
+    return (f"flexctl.app.bench reference_modes={config.reference_modes} "
+            f"reference_rtol={config.reference_rtol!r} time_limit={config.time_limit!r} "
+            f"t_final={config.t_final!r}")

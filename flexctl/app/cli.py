@@ -5,7 +5,8 @@
     flexctl run SCENE [--set key=value ...] [--out DIR]
     flexctl scenes
     flexctl demo [--out DIR] [--workers N]
-    flexctl bench [--quick] [--scene SCENE ...] [--modes 1-12] [--out DIR] (see --help)
+    flexctl bench [--quick] [--scene SCENE ...] [--modes 1-12] [--out DIR]
+                  [--store FILE] [--resume] (see --help)
     flexctl --version
 
 ``SCENE`` is a TOML file or the name of a built-in scene; ``--set`` overrides one value by its
@@ -63,6 +64,8 @@ EXIT_STOPPED = 3
 PROG = "flexctl"
 DEFAULT_RUN_DIR = Path("flexctl-out")
 DEFAULT_DEMO_DIR = Path("flexctl-demo")
+#: The bench's store in its output directory when ``--resume`` names none.
+BENCH_STORE = "bench-runs.sqlite"
 #: Errors of loading or running a scene that are the user's input, reported in one line: the
 #: checks of parameters, scenes, controller settings and simulate raise these; any other
 #: exception is a bug and ends with its traceback (exit 1).
@@ -216,6 +219,11 @@ def _add_bench_command(commands) -> None:
     p.add_argument("--out", type=_out_dir, default=Path("flexctl-bench"), metavar="DIR",
                    help="output directory (default flexctl-bench)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--store", type=_out_dir, metavar="FILE",
+                   help="SQLite file that every run is committed to as it finishes (default "
+                   f"none; DIR/{BENCH_STORE} with --resume)")
+    p.add_argument("--resume", action="store_true", help="take the runs already in the "
+                   "store (after a crash or a Ctrl-C) and run only the others")
     p.set_defaults(func=_cmd_bench)
 
 
@@ -425,7 +433,9 @@ def _cmd_bench(args) -> int:
     start = time.perf_counter()
     try:
         config = BenchConfig.quick(**changes) if args.quick else BenchConfig(**changes)
-        benches = run_bench(config, args.out, progress=not args.no_progress)
+        store = args.store or (Path(args.out) / BENCH_STORE if args.resume else None)
+        benches = run_bench(config, args.out, progress=not args.no_progress, store=store,
+                            resume=args.resume)
     except (SceneError, ValueError, TypeError) as exc:
         return _error(exc)
     except OSError as exc:

@@ -79,7 +79,7 @@ def kane_spinup(out: Path, executor=None) -> Section:
     table = sweep(SceneTask(scene="kane-spinup", keep_result=True),
                   {"maneuver.spin_rate": KANE_SPIN_RATES,
                    "model.variant": ["first_order", "zero_order"]},
-                  executor=executor, progress=False)
+                  executor=executor, progress=False, on_error="raise")
     fig = Figure(figsize=(8.0, 8.0), layout="constrained")
     rows, verdicts = [], []
     for ax, w_s in zip(fig.subplots(3, 1, sharex=True), KANE_SPIN_RATES):
@@ -157,9 +157,9 @@ def hub_beam_mass(out: Path, executor=None, points: int = SWEEP_POINTS) -> Secti
     task = PointMassAmplitudes.from_scene("hub-beam-mass")
     ratios = np.round(np.linspace(0.0, 1.0, points), 4)
     by_position = sweep(task, {"mass_position_ratio": ratios}, executor=executor,
-                        progress=False, description="d/l")
+                        progress=False, description="d/l", on_error="raise")
     by_mass = sweep(task, {"mass_ratio": ratios}, executor=executor, progress=False,
-                    description="R_M")
+                    description="R_M", on_error="raise")
     by_position.to_csv(out / "paper000-fig6.csv")
     by_mass.to_csv(out / "paper000-fig8.csv")
 
@@ -301,7 +301,8 @@ def slew_comparison(out: Path, executor=None, kinds=None,
     scene = load_scene(scene_name)
     slew = scene.maneuver
     table = sweep(SceneTask(scene=scene_name, controller_factory=from_spec, keep_result=True),
-                  {"controller.kind": kinds}, executor=executor, progress=False)
+                  {"controller.kind": kinds}, executor=executor, progress=False,
+                  on_error="raise")
     stem = "controller-comparison" + ("" if scene_name == "slew-90" else f"-{scene_name}")
     csv = out / f"{stem}.csv"
     table.to_csv(csv)
@@ -356,7 +357,8 @@ def model_error(out: Path, executor=None, kinds=("trajopt+lqr", "nmpc")) -> Sect
                           "settling_time_s,solve_time_median_ms,solve_time_p99_ms"]
     for name in ("slew-90-model-error",):
         table = sweep(SceneTask(scene=name, controller_factory=from_spec, keep_result=True),
-                      {"controller.kind": list(kinds)}, executor=executor, progress=False)
+                      {"controller.kind": list(kinds)}, executor=executor, progress=False,
+                      on_error="raise")
         for r in table:
             n_plant = r["result"].model.n_modes
             report = r["result"].controller_report or {}

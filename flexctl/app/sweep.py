@@ -10,7 +10,14 @@ columns. Where the points run is the caller's choice:
 - the executor of a Dask distributed client, ``Client(...).get_executor()``: the workers of a
   cluster, the way past one machine.
 
-Anything with ``submit(fn, *args)`` returning futures with ``result()`` will do. Tasks go to
+Anything with ``submit(fn, *args)`` returning futures with ``result()`` will do, or a factory
+of executors (the sweep then replaces a process pool that a dying worker breaks). A long sweep
+keeps going: a task that raises becomes a row with its error (``on_error="record"``), a task
+lost with its worker is submitted again (``retries``), and with ``store="runs.sqlite"`` each
+finished task is committed to disk as it arrives, so that ``resume=True`` after a crash or a
+Ctrl-C runs only the rest (:mod:`flexctl.app.sweep_store`). A task with a ``seed`` parameter
+gets its own, derived from the sweep's ``seed`` and the point: the rows do not depend on the
+workers, the order, or an interruption. Tasks go to
 other processes by pickling, so a task must be a module-level function or an instance of a
 module-level class such as the frozen dataclasses here:
 
@@ -33,13 +40,13 @@ True
 
 from __future__ import annotations
 
-import concurrent.futures
 import csv
 import dataclasses
 import io
 import itertools
 import math
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -48,13 +55,11 @@ import numpy as np
 from ..sim.maneuvers import SineTorque
 from ..model.parameters import HubBeam, PointMass
 from ..model.errors import InputTypeError, InputValueError
+from .sweep_runner import SweepError, is_executor, outcomes
+from .sweep_store import task_key
 
 __all__ = ["sweep", "parameter_grid", "SweepResult", "SweepError", "pareto_front",
            "response_amplitudes", "PointMassAmplitudes", "SceneTask"]
-
-
-class SweepError(RuntimeError):
-    """A task failed at one point of a sweep; the message names the point."""
 
 
 # --------------------------------------------------------------------------- grids
@@ -132,12 +137,18 @@ class SweepResult:
         Names of the output columns (the union over rows, in order of first appearance).
     wall_time : float
         Wall time of the whole sweep, s.
+    failed : tuple of int
+        Indices of the rows whose task failed (their ``failure`` column holds the error).
+    resumed : int
+        Tasks taken from the store rather than run.
     """
 
     rows: tuple
     parameters: tuple
     outputs: tuple
     wall_time: float = 0.0
+    failed: tuple = ()
+    resumed: int = 0
 
     @property
     def columns(self) -> tuple:
@@ -151,8 +162,10 @@ class SweepResult:
         return iter(self.rows)
 
     def __repr__(self):
-        return (f"SweepResult({len(self.rows)} rows, parameters={list(self.parameters)}, "
-                f"outputs={list(self.outputs)}, wall_time={self.wall_time:.3g} s)")
+        failed = f", {len(self.failed)} failed" if self.failed else ""
+        return (f"SweepResult({len(self.rows)} rows{failed}, parameters="
+                f"{list(self.parameters)}, outputs={list(self.outputs)}, "
+                f"wall_time={self.wall_time:.3g} s)")
 
     def column(self, name: str) -> np.ndarray:
         """The values of one column, shape (rows,): float when all are numbers, else object.
@@ -173,8 +186,17 @@ class SweepResult:
             if name not in self.columns:
                 raise KeyError(f"where: column must be one of {', '.join(self.columns)}; "
                                f"got {name!r}")
-        rows = tuple(r for r in self.rows if all(r.get(k) == v for k, v in equal.items()))
-        return dataclasses.replace(self, rows=rows)
+        kept = [k for k, r in enumerate(self.rows)
+                if all(r.get(name) == v for name, v in equal.items())]
+        failed = set(self.failed)
+        return dataclasses.replace(self, rows=tuple(self.rows[k] for k in kept),
+                                   failed=tuple(i for i, k in enumerate(kept) if k in failed))
+
+    def without_failures(self) -> "SweepResult":
+        """The rows whose task succeeded (:attr:`failed` left out)."""
+        failed = set(self.failed)
+        return dataclasses.replace(self, failed=(), rows=tuple(
+            r for k, r in enumerate(self.rows) if k not in failed))
 
     def scalar_columns(self) -> tuple:
         """Columns whose every value is a number, string, bool or None (CSV-ready)."""
@@ -251,40 +273,55 @@ def pareto_front(*objectives) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- engine
-def _evaluate(task, point: dict) -> dict:
-    """Run ``task(**point)`` and return its outputs as a dict (module level: picklable)."""
-    out = task(**point)
-    if isinstance(out, Mapping):
-        return dict(out)
-    return {"value": out}
-
-
-def _is_executor(obj) -> bool:
-    return callable(getattr(obj, "submit", None))
+ON_ERROR = ("record", "raise")
 
 
 def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
-          description: str | None = None) -> SweepResult:
+          description: str | None = None, store=None, resume: bool = False, seed: int = 0,
+          on_error: str = "record", retries: int = 2) -> SweepResult:
     """Evaluate ``task(**point)`` at every point of a grid; return a tidy table.
 
     Parameters
     ----------
     task : callable
-        Called as ``task(**point)``; returns a dict of outputs ``{name: value}`` (or one value,
-        stored in the column ``value``). With an executor that runs in other processes it must
-        be picklable: a module-level function or an instance of a module-level class.
+        Called as ``task(**point)``, plus ``seed=`` when it has a ``seed`` parameter (and the
+        point none); returns a dict of outputs ``{name: value}`` (or one value, stored in the
+        column ``value``). With an executor that runs in other processes it must be
+        picklable: a module-level function or an instance of a module-level class.
     parameter_grid : dict or sequence of dict
         ``{name: values}``: every combination (:func:`parameter_grid`); or the points
-        themselves, ``[{name: value, ...}, ...]``.
-    executor : concurrent.futures.Executor-like, optional
+        themselves, ``[{name: value, ...}, ...]``. Values: numbers, strings, bools, None or
+        lists of them. A point given twice runs once.
+    executor : concurrent.futures.Executor-like or callable, optional
         Anything with ``submit(fn, *args)`` returning futures with ``result()``: a
         ``ProcessPoolExecutor``, a ``ThreadPoolExecutor``, or ``dask.distributed``'s
-        ``Client.get_executor()``. Default ``None``: run the points here, in order. The
-        caller owns the executor (the sweep does not shut it down).
+        ``Client.get_executor()``; the caller owns it (the sweep does not shut it down). Or
+        a factory of them (``lambda: ProcessPoolExecutor(4)``): the sweep owns what it
+        builds, and builds a fresh one when a worker is lost (a process pool breaks as a
+        whole). Default ``None``: run the points here, in order.
     progress : bool, optional
-        Show a progress bar (tqdm, on stderr). Default True.
+        Show a progress bar (tqdm, on stderr) with done, failed and remaining. Default True.
     description : str, optional
         Label of the progress bar; default the task's name.
+    store : str or path-like, optional
+        SQLite file that every finished task is committed to as it arrives
+        (:class:`~flexctl.app.sweep_store.SweepStore`); a crash, a lost worker or a Ctrl-C
+        loses only the tasks running. Default none (the table lives in memory only).
+    resume : bool, optional
+        Take the tasks the store already holds (``ok`` or ``failed``) and run only the
+        others. False (default) refuses a store that holds tasks.
+    seed : int, optional
+        The sweep's seed, >= 0 (default 0). A task with a ``seed`` parameter gets its own,
+        :func:`~flexctl.app.sweep_store.task_seed` of this seed and the point's key, so its
+        row does not depend on the worker, the order, or an interruption.
+    on_error : {"record", "raise"}, optional
+        ``"record"`` (default): a task that raises gives a row with its parameters and its
+        error in the column ``failure`` (outputs missing, NaN in :meth:`SweepResult.column`),
+        the sweep goes on and warns at the end. ``"raise"``: :class:`SweepError` at the first
+        failure, the points not started cancelled.
+    retries : int, optional
+        Times a task lost with its worker is submitted again, >= 0 (default 2); past that it
+        is recorded as failed. Dask reschedules such tasks by itself first.
 
     Returns
     -------
@@ -294,91 +331,84 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
     Raises
     ------
     SweepError
-        When the task raises at a point; the message names the point, the original exception
-        is its ``__cause__``, and the points not yet started are cancelled.
+        With ``on_error="raise"``, when the task raises at a point (named; the exception is
+        the ``__cause__``); when an executor given (not a factory) breaks.
+    KeyboardInterrupt
+        After cancelling the points not started; the finished ones are in the store.
+
+    Notes
+    -----
+    ``on_error="record"`` is the default: a study of thousands of runs should neither stop at
+    its first bad point nor lose the others; the warning and :attr:`SweepResult.failed` keep
+    the failures in sight. Give ``"raise"`` where any failure is a bug (the demo's figures).
     """
     _check_task(task, executor)
+    _check_options(store, resume, seed, on_error, retries)
     points = _points(parameter_grid)
-    from tqdm import tqdm
-
+    keys = [task_key(p) for p in points]
+    index = {}                          # key: (first grid index, point)
+    for k, (key, point) in enumerate(zip(keys, points)):
+        index.setdefault(key, (k, point))
     name = description or getattr(task, "__name__", type(task).__name__)
-    bar = tqdm(total=len(points), desc=name, disable=not progress, unit="point")
     start = time.perf_counter()
-    try:
-        if executor is None:
-            outputs = _outputs_here(task, points, name, bar)
-        else:
-            outputs = _outputs_on(executor, task, points, name, bar)
-    finally:
-        bar.close()
-    return _sweep_table(points, outputs, start)
+    done, fresh = outcomes(task, index, executor, name, store=store, resume=resume,
+                           seed=seed, progress=progress, on_error=on_error, retries=retries)
+    table = _sweep_table(points, keys, {**done, **fresh}, start, len(done))
+    _warn_of_failures(table, name)
+    return table
+
+
+def _warn_of_failures(table: SweepResult, name: str) -> None:
+    """A RuntimeWarning (at the caller of :func:`sweep`) when points of ``table`` failed."""
+    if table.failed:
+        k = table.failed[0]
+        warnings.warn(f"sweep {name}: {len(table.failed)} of {len(table)} points failed (their "
+                      f"rows' 'failure' column says why); the first, point {k}: "
+                      f"{table.rows[k]['failure']}", RuntimeWarning, stacklevel=3)
 
 
 def _check_task(task, executor) -> None:
-    """Raise unless ``task`` is callable and ``executor`` is None or has ``submit``."""
+    """Raise unless ``task`` is callable and ``executor`` an executor or a factory."""
     if not callable(task):
         raise InputTypeError(f"task must be callable as task(**point); got {type(task).__name__}")
-    if executor is not None and not _is_executor(executor):
+    if executor is not None and not (is_executor(executor) or callable(executor)):
         raise InputTypeError("executor must have a submit(fn, *args) method (a "
-                             "concurrent.futures executor or a Dask Client.get_executor()); "
-                             f"got {type(executor).__name__}")
+                             "concurrent.futures executor or a Dask Client.get_executor()), "
+                             f"or be a factory of one; got {type(executor).__name__}")
 
 
-def _point_failed(name: str, k: int, point: dict, exc: Exception) -> SweepError:
-    """The error of task ``name`` raising ``exc`` at point ``k``, naming the point."""
-    return SweepError(f"sweep task {name} failed at point {k} {point}: "
-                      f"{type(exc).__name__}: {exc}")
+def _check_options(store, resume, seed, on_error, retries) -> None:
+    """Raise unless the store, resume, seed, on_error and retries options are valid."""
+    if on_error not in ON_ERROR:
+        raise InputValueError(f"sweep on_error must be one of {', '.join(ON_ERROR)}; got "
+                              f"{on_error!r}")
+    if isinstance(retries, bool) or not isinstance(retries, (int, np.integer)) or retries < 0:
+        raise InputValueError(f"sweep retries must be an integer >= 0; got {retries!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputValueError(f"sweep seed must be an integer >= 0; got {seed!r}")
+    if not isinstance(resume, bool):
+        raise InputTypeError(f"sweep resume must be True or False; got {resume!r}")
+    if resume and store is None:
+        raise InputValueError("sweep resume=True needs a store (the file of the sweep to "
+                              "resume); got store=None")
 
 
-def _outputs_here(task, points: list, name: str, bar) -> list:
-    """The task's outputs at every point, run in this process in order."""
-    outputs = []
-    for k, point in enumerate(points):
-        try:
-            outputs.append(_evaluate(task, point))
-        except Exception as exc:
-            raise _point_failed(name, k, point, exc) from exc
-        bar.update()
-    return outputs
-
-
-def _outputs_on(executor, task, points: list, name: str, bar) -> list:
-    """The task's outputs at every point, in grid order, run on ``executor``.
-
-    ``concurrent.futures`` futures are collected as they finish, other future types in order;
-    on a failure (or an interrupt) the futures not yet started are cancelled.
-    """
-    outputs = [None] * len(points)
-    futures = [executor.submit(_evaluate, task, point) for point in points]
-    index = {id(f): k for k, f in enumerate(futures)}
-    try:
-        if all(isinstance(f, concurrent.futures.Future) for f in futures):
-            finished = concurrent.futures.as_completed(futures)
-        else:
-            finished = iter(futures)    # other future types: in order
-        for future in finished:
-            k = index[id(future)]
-            try:
-                outputs[k] = future.result()
-            except Exception as exc:
-                raise _point_failed(name, k, points[k], exc) from exc
-            bar.update()
-    except BaseException:
-        for future in futures:
-            future.cancel()
-        raise
-    return outputs
-
-
-def _sweep_table(points: list, outputs: list, start: float) -> SweepResult:
+def _sweep_table(points: list, keys: list, outcomes: dict, start: float,
+                 resumed: int) -> SweepResult:
     """The table of a sweep: one row per point, its parameters then the task's other
-    outputs; the wall time (s) runs from ``start`` (:func:`time.perf_counter`) to now."""
+    outputs (or ``failure``, the error of a failed task); the wall time (s) runs from
+    ``start`` (:func:`time.perf_counter`) to now."""
     parameters = tuple(dict.fromkeys(k for p in points for k in p))
-    names = tuple(dict.fromkeys(k for out in outputs for k in out))
-    rows = tuple({**point, **{k: v for k, v in out.items() if k not in point}}
-                 for point, out in zip(points, outputs))
-    return SweepResult(rows=rows, parameters=parameters, outputs=names,
-                       wall_time=time.perf_counter() - start)
+    rows, failed = [], []
+    for k, (point, key) in enumerate(zip(points, keys)):
+        outcome = outcomes[key]
+        out = outcome.outputs if outcome.ok else {"failure": outcome.error}
+        failed.extend([k] if not outcome.ok else [])
+        rows.append({**point, **{n: v for n, v in out.items() if n not in point}})
+    names = tuple(dict.fromkeys(n for row in rows for n in row if n not in parameters))
+    return SweepResult(rows=tuple(rows), parameters=parameters, outputs=names,
+                       wall_time=time.perf_counter() - start, failed=tuple(failed),
+                       resumed=resumed)
 
 
 # --------------------------------------------------------------------------- tasks
