@@ -47,6 +47,7 @@ per method family (:mod:`~flexctl.sim.strategies`), the stopping conditions
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -71,7 +72,8 @@ __all__ = ["simulate", "SimulationResult", "Controller", "StaticLaw", "StopReaso
 def simulate(model: Model, t_final: float, torque=None, hub_motion=None, controller=None,
              x0=None, *, rtol: float | None = None, atol=None, method: str = "auto",
              output_step: float | None = None, max_step: float = np.inf,
-             check_accuracy: bool = True, progress=None, sensors=None) -> SimulationResult:
+             check_accuracy: bool = True, progress=None, sensors=None,
+             check_validity: bool = True) -> SimulationResult:
     """Simulate the nonlinear model.
 
     Parameters
@@ -121,6 +123,13 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     sensors : Sensors, optional
         Read by a sampled controller with ``measures = True`` (:class:`controllers.Observed`)
         at its samples (:mod:`flexctl.sim.sensors`); kept in ``result.measurements``.
+    check_validity : bool, optional
+        Assess the model's range for this run (``result.validity``,
+        :func:`flexctl.sim.validity.assess_run`) and warn
+        (:class:`~flexctl.sim.energy.ModelValidityWarning`) when a small-deflection variant
+        was used beyond it, as a scene run does. Default True; the estimate's runs are made
+        only when the tip passes 2 % of the beam length
+        (:data:`~flexctl.sim.validity.SCREEN_DEFLECTION`). False leaves ``validity`` None.
 
     Returns
     -------
@@ -139,7 +148,14 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                           atol=atol, method=method, output_step=output_step,
                           max_step=max_step, check_accuracy=check_accuracy, progress=progress,
                           sensors=sensors)
-    return _simulate_sampled(request) if request.sampled else _simulate_continuous(request)
+    result = _simulate_sampled(request) if request.sampled else _simulate_continuous(request)
+    if not check_validity:
+        return result
+    from .validity import assess_run
+
+    drive = {"torque": torque, "hub_motion": hub_motion, "controller": controller,
+             "sensors": sensors}
+    return dataclasses.replace(result, validity=assess_run(result, **drive))
 
 
 def _simulate_continuous(request) -> SimulationResult:
