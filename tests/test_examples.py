@@ -14,10 +14,14 @@ import pytest
 
 jupytext = pytest.importorskip("jupytext")
 nbclient = pytest.importorskip("nbclient")
+nbformat = pytest.importorskip("nbformat")
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
+#: Where each executed notebook is saved with its outputs (git-ignored): the documentation site
+#: renders these copies, so it shows the plots without executing anything itself.
+EXECUTED = EXAMPLES / "_executed"
 #: Seconds a notebook may run (they take 3 to 20 s alone on 2 cores).
 CELL_TIMEOUT = 240
 #: Notebooks that take more than about 10 s (marked slow; CI still runs them).
@@ -79,3 +83,5 @@ def test_notebook_executes(script, monkeypatch):
     errors = [out for cell in notebook.cells if cell.cell_type == "code"
               for out in cell.get("outputs", []) if out.get("output_type") == "error"]
     assert not errors
+    EXECUTED.mkdir(exist_ok=True)
+    nbformat.write(notebook, EXECUTED / script.with_suffix(".ipynb").name)
