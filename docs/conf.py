@@ -15,6 +15,7 @@ from pathlib import Path
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(DOCS / "_ext"))
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 import flexctl  # noqa: E402
@@ -32,7 +33,8 @@ extensions = [
     "sphinx-mathjax-offline",
     "numpydoc",
     "myst_nb",
-    "sphinxarg.ext",
+    "cli_help",
+    "matplotlib.sphinxext.plot_directive",
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
@@ -62,6 +64,12 @@ myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence", "deflist"]
 myst_heading_anchors = 3
 nb_execution_mode = "off"
 nb_merge_streams = True
+
+# -- Plots drawn at build time (a few small simulations, seconds) ---------------------------------
+plot_include_source = True
+plot_html_show_source_link = False
+plot_html_show_formats = False
+plot_formats = [("png", 100)]
 
 # -- Doctests of the guide pages ----------------------------------------------------------------
 doctest_global_setup = "import os\nos.environ.setdefault('MPLBACKEND', 'Agg')"
