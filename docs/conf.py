@@ -51,7 +51,6 @@ html_static_path = []
 # -- API reference ------------------------------------------------------------------------------
 autosummary_generate = True
 autosummary_imported_members = True
-autodoc_default_options = {"members": False}
 autodoc_typehints = "none"
 numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
@@ -72,6 +71,9 @@ plot_html_show_formats = False
 plot_formats = [("png", 100)]
 
 # -- Doctests of the guide pages ----------------------------------------------------------------
+# Only the pages' own ``doctest`` blocks: the docstrings' examples need their module's namespace
+# and run under pytest's --doctest-modules.
+doctest_test_doctest_blocks = ""
 doctest_global_setup = "import os\nos.environ.setdefault('MPLBACKEND', 'Agg')"
 
 EXAMPLES = ROOT / "examples"
