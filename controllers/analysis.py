@@ -258,6 +258,7 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
           truncation to the design's ``M`` modes (:func:`~controllers.lqr.truncation_matrix`);
         - :class:`~controllers.lqg.LQG`: its compensator (:meth:`LQG.compensator`) reading
           ``[theta, root_moment]`` of this plant.
+
         References, feedforward and saturation play no part in the loop.
     spin_rate : float, optional
         Steady hub rate of the plant's linearisation, rad/s. Default 0.

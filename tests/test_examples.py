@@ -1,4 +1,4 @@
-"""The example notebooks: in sync with their scripts, listed in the README, and executed.
+"""The example notebooks: in sync with their scripts, listed on the site, and executed.
 
 Each notebook in ``examples/`` has a percent-format script twin (the source of truth, edited
 by hand; the paired ``.ipynb`` is updated with ``jupytext --sync``). The notebooks assert their
@@ -14,10 +14,14 @@ import pytest
 
 jupytext = pytest.importorskip("jupytext")
 nbclient = pytest.importorskip("nbclient")
+nbformat = pytest.importorskip("nbformat")
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
+#: Where each executed notebook is saved with its outputs (git-ignored): the documentation site
+#: renders these copies, so it shows the plots without executing anything itself.
+EXECUTED = EXAMPLES / "_executed"
 #: Seconds a notebook may run (they take 3 to 20 s alone on 2 cores).
 CELL_TIMEOUT = 240
 #: Notebooks that take more than about 10 s (marked slow; CI still runs them).
@@ -60,16 +64,18 @@ def test_notebook_asserts_its_numbers_and_has_no_stored_outputs(script):
     assert all(not cell.get("outputs") for cell in code)
 
 
-def test_readme_lists_every_notebook():
-    readme = (ROOT / "README.md").read_text()
+def test_site_lists_every_notebook():
+    listing = (ROOT / "docs" / "examples" / "index.md").read_text()
     for script in SCRIPTS:
-        assert f"examples/{script.stem}.ipynb" in readme, script.stem
+        assert f"{{doc}}`notebooks/{script.stem}`" in listing, script.stem
 
 
 @pytest.mark.parametrize("script", [_param(s) for s in SCRIPTS])
 def test_notebook_executes(script, monkeypatch):
-    # The kernel inherits this environment: no display, and the package from this checkout.
-    monkeypatch.setenv("MPLBACKEND", "Agg")
+    # The kernel inherits this environment: no display (Jupyter's inline backend, so that
+    # plt.show() stores each figure in the executed copy as it would in Jupyter), and the
+    # package from this checkout.
+    monkeypatch.setenv("MPLBACKEND", "module://matplotlib_inline.backend_inline")
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join(
         [str(ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
     notebook = jupytext.read(script.with_suffix(".ipynb"))
@@ -79,3 +85,5 @@ def test_notebook_executes(script, monkeypatch):
     errors = [out for cell in notebook.cells if cell.cell_type == "code"
               for out in cell.get("outputs", []) if out.get("output_type") == "error"]
     assert not errors
+    EXECUTED.mkdir(exist_ok=True)
+    nbformat.write(notebook, EXECUTED / script.with_suffix(".ipynb").name)

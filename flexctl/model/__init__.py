@@ -2,24 +2,24 @@
 
 Imports nothing from :mod:`flexctl.sim`, :mod:`flexctl.app` or :mod:`controllers`.
 
-=============  ==============================================================================
-module         contents
-=============  ==============================================================================
-``parameters`` ``Hub``, ``Beam``, ``PointMass``, ``HubBeam``: validated physical parameters
-``structure``  ``Appendage``, ``Structure``: several appendages on a pinned or free hub
-``layout``     ``StateLayout``: names and slices of every block of the state vector
-``modes``      cantilever roots and mode shapes at quadrature points
-``matrices``   the modal matrices, assembled once and cached
-``variants``   ``Model``: the variants of one beam on a pinned hub, built on one assembly
-``structure_matrices``, ``structure_dynamics``, ``structure_model``
-               ``StructureModel``: several appendages on a pinned or free hub
-``actuators``   ``ReactionWheel``, ``DCMotor``: what turns the hub
-``actuated``   ``ActuatedModel``: a structure driven through an actuator
-``build``      ``build_model``: the model of a system
-``exports``    the model as a python-control system or a CasADi function
-``reduction``  ``modal_truncation``, ``balanced_truncation``: reduced design models, their error
-``discrete``   the model held over a sample: a CasADi step ``(x, u) -> x_next``
-=============  ==============================================================================
+===============  ==============================================================================
+module           contents
+===============  ==============================================================================
+``parameters``   ``Hub``, ``Beam``, ``PointMass``, ``HubBeam``: validated physical parameters
+``structure``    ``Appendage``, ``Structure``: several appendages on a pinned or free hub
+``layout``       ``StateLayout``: names and slices of every block of the state vector
+``modes``        cantilever roots and mode shapes at quadrature points
+``matrices``     the modal matrices, assembled once and cached
+``variants``     ``Model``: the variants of one beam on a pinned hub, built on one assembly
+``structure*``   ``StructureModel``: several appendages on a pinned or free hub
+                 (``structure_matrices``, ``structure_dynamics``, ``structure_model``)
+``actuators``    ``ReactionWheel``, ``DCMotor``: what turns the hub
+``actuated``     ``ActuatedModel``: a structure driven through an actuator
+``build``        ``build_model``: the model of a system
+``exports``      the model as a python-control system or a CasADi function
+``reduction``    ``modal_truncation``, ``balanced_truncation``: reduced design models, their error
+``discrete``     the model held over a sample: a CasADi step ``(x, u) -> x_next``
+===============  ==============================================================================
 
 Conventions
 -----------

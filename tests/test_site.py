@@ -1,0 +1,205 @@
+"""The documentation site: built offline and strictly, complete, and rendered as a reader sees it.
+
+One HTML build (``sphinx-build -W --keep-going``: any warning fails it) and one doctest build
+of the pages' ``doctest`` blocks, into a temporary folder; then the checks read what was built.
+The docstrings' own examples run under pytest's ``--doctest-modules``, not here. The example
+notebooks are never executed by the build: it renders the copies that ``test_examples.py``
+executed (this file runs after it), or the notebooks without outputs when there are none.
+"""
+
+import importlib
+import os
+import re
+import subprocess
+import sys
+from html.parser import HTMLParser
+from pathlib import Path
+from urllib.parse import unquote, urlsplit
+
+import pytest
+
+pytest.importorskip("sphinx")
+pytest.importorskip("myst_nb")
+pytest.importorskip("numpydoc")
+from sphinx.util.inventory import InventoryFile  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+EXAMPLES = ROOT / "examples"
+EXECUTED = EXAMPLES / "_executed"
+#: Seconds a build may take (about 25 s for the HTML on 2 busy cores).
+BUILD_TIMEOUT = 600
+#: Packages whose every ``__all__`` name the API reference documents under the package's name.
+DOCUMENTED_AS_IS = ("flexctl", "controllers", "controllers.codegen")
+#: Layers whose names are documented under their own name, or under ``flexctl`` when
+#: ``import flexctl`` gives the same object.
+LAYERS = ("flexctl.model", "flexctl.sim")
+
+pytestmark = pytest.mark.slow
+
+
+def _sphinx(builder, out, doctrees):
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=os.pathsep.join(
+        [str(ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
+    command = [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", builder,
+               "-d", str(doctrees), str(DOCS), str(out)]
+    done = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True,
+                          timeout=BUILD_TIMEOUT)
+    assert done.returncode == 0, (
+        f"sphinx-build -b {builder} failed ({done.returncode}):\n{done.stdout}\n{done.stderr}")
+    # docutils errors that bypass Sphinx's logging (and so -W) still print 'ERROR/'.
+    assert "(ERROR/" not in done.stderr, done.stderr
+    return done
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    base = tmp_path_factory.mktemp("site")
+    _sphinx("html", base / "html", base / "doctrees")
+    return base
+
+
+@pytest.fixture(scope="module")
+def html(site):
+    return site / "html"
+
+
+@pytest.fixture(scope="module")
+def inventory(html):
+    with open(html / "objects.inv", "rb") as stream:
+        data = InventoryFile.load(stream, "", lambda base, uri: uri)
+    names = set()
+    for domain_role, objects in data.items():
+        if domain_role.startswith("py:"):
+            names.update(objects)
+    return names
+
+
+def test_pages_doctests_pass(site):
+    done = _sphinx("doctest", site / "doctest", site / "doctrees")
+    report = (site / "doctest" / "output.txt").read_text()
+    tests = int(re.search(r"^\s*(\d+) tests", report, re.M).group(1))
+    assert tests >= 5, report
+    assert re.search(r"^\s*0 failures in tests", report, re.M), report + done.stdout
+
+
+@pytest.mark.parametrize("package", DOCUMENTED_AS_IS)
+def test_every_public_name_is_in_the_api_reference(inventory, package):
+    module = importlib.import_module(package)
+    missing = [name for name in module.__all__ if f"{package}.{name}" not in inventory]
+    assert not missing, f"add to docs/api/*.rst (autosummary) the names of {package}: {missing}"
+
+
+@pytest.mark.parametrize("package", LAYERS)
+def test_every_public_name_of_the_layers_is_in_the_api_reference(inventory, package):
+    import flexctl
+    module = importlib.import_module(package)
+    missing = [name for name in module.__all__
+               if f"{package}.{name}" not in inventory
+               and not (f"flexctl.{name}" in inventory
+                        and getattr(flexctl, name, None) is getattr(module, name))]
+    assert not missing, f"add to docs/api/*.rst (autosummary) the names of {package}: {missing}"
+
+
+class _Page(HTMLParser):
+    """The links, images and scripts of one HTML page."""
+
+    def __init__(self):
+        super().__init__()
+        self.links, self.images, self.scripts = [], [], []
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        if tag == "a" and attrs.get("href"):
+            self.links.append(attrs["href"])
+        elif tag == "img" and attrs.get("src"):
+            self.images.append(attrs["src"])
+        elif tag == "script" and attrs.get("src"):
+            self.scripts.append(attrs["src"])
+
+
+def _page(path):
+    parser = _Page()
+    parser.feed(path.read_text(encoding="utf-8"))
+    return parser
+
+
+def _local(page_path, url):
+    parts = urlsplit(url)
+    if parts.scheme or parts.netloc or not parts.path:
+        return None
+    return (page_path.parent / unquote(parts.path)).resolve()
+
+
+def test_every_internal_link_image_and_script_resolves(html):
+    broken = []
+    for path in html.rglob("*.html"):
+        page = _page(path)
+        for url in page.links + page.images + page.scripts:
+            target = _local(path, url)
+            if target is not None and not target.exists():
+                broken.append(f"{path.relative_to(html)} -> {url}")
+    assert not broken, "\n".join(broken[:20])
+
+
+def test_math_is_served_by_the_site_itself(html):
+    page = _page(html / "theory" / "model.html")
+    mathjax = [src for src in page.scripts if "mathjax" in src.lower()]
+    assert mathjax and all(_local(html / "theory" / "model.html", s) for s in mathjax), mathjax
+    text = (html / "theory" / "model.html").read_text(encoding="utf-8")
+    assert text.count('class="math') >= 20
+    assert r"\dot\theta^2" in text
+
+
+def test_guide_and_api_pages_cross_reference_each_other(html):
+    start = _page(html / "getting_started.html")
+    assert any("api/generated/flexctl.build_model.html" in link for link in start.links)
+    assert any("theory/model.html" in link for link in start.links)
+    api = (html / "api" / "generated" / "flexctl.Model.html").read_text(encoding="utf-8")
+    assert 'id="flexctl.Model.linearize"' in api
+
+
+def test_guide_draws_its_plot(html):
+    page = _page(html / "guide" / "simulate.html")
+    assert any(src.endswith(".png") for src in page.images), page.images
+
+
+def test_cli_reference_has_every_command(html):
+    from flexctl.app.cli import _parser
+    text = (html / "cli.html").read_text(encoding="utf-8")
+    commands = next(a for a in _parser()._actions if a.__class__.__name__ == "_SubParsersAction")
+    for name in commands.choices:
+        assert f"usage: flexctl {name}" in text, name
+
+
+def test_notebooks_are_rendered_with_their_outputs(html):
+    notebooks = sorted(EXAMPLES.glob("[0-9][0-9]_*.ipynb"))
+    assert notebooks
+    for notebook in notebooks:
+        assert (html / "examples" / "notebooks" / f"{notebook.stem}.html").is_file()
+    executed = [n for n in notebooks if (EXECUTED / n.name).is_file()
+                and (EXECUTED / n.name).stat().st_mtime >= n.stat().st_mtime]
+    if not executed:
+        pytest.skip("no executed notebooks (run tests/test_examples.py first): "
+                    "the site shows the notebooks without outputs")
+    without_plots = [n.stem for n in executed
+                     if not _page(html / "examples" / "notebooks" / f"{n.stem}.html").images]
+    assert not without_plots, f"executed but rendered without a figure: {without_plots}"
+
+
+def test_readme_says_how_to_build_the_site():
+    readme = (ROOT / "README.md").read_text()
+    assert "sphinx -W" in readme and "docs/_build/html" in readme
+    assert 'pip install -e ".[test,docs]"' in readme
+
+
+def test_readme_example_runs():
+    readme = (ROOT / "README.md").read_text()
+    code = re.search(r"## Example\n\n```python\n(.*?)```", readme, re.S).group(1)
+    assert len(code.strip().splitlines()) <= 10
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True,
+                          text=True, timeout=BUILD_TIMEOUT)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[0] == "ok 0.42"
+    assert done.stdout.splitlines()[1].startswith("ok ")
