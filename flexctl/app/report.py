@@ -400,12 +400,21 @@ def format_summary(summary: dict) -> str:
         lines.append(f"  variant chosen automatically: {summary['variant_choice']['explanation']}")
     slew = summary.get("slew")
     if slew:
+        shown = slew.get("shown") or {}
         settle = slew["settling_time"]
-        settle = "not settled" if settle is None else f"settled (2 %) at {settle:.3g} s"
+        settle = ("not settled" if settle is None
+                  else f"settled (2 %) at {shown.get('settling_time', f'{settle:.3g} s')}")
+        residual = shown.get("residual_vibration", f"{slew['residual_vibration']:.3g} m")
         lines.append(f"  slew by {slew['controller']} (designed on {slew['design_modes']} "
                      f"modes): {settle}, overshoot {100 * slew['overshoot']:.2g} %, peak torque "
                      f"{slew['peak_torque']:.3g} N m, residual tip vibration "
-                     f"{slew['residual_vibration']:.3g} m after {slew['maneuver_end']:.3g} s")
+                     f"{residual} after {slew['maneuver_end']:.3g} s")
+        if slew.get("errors"):
+            lines.append(f"  metric errors: against the loop on the {slew['errors']['reference']}"
+                         " plant (twice the difference) and the run's accuracy check")
+        stability = slew.get("loop_stability")
+        if stability:
+            lines.append(f"  loop on the plant: {stability['message']}")
         if "solve_time_s" in slew:
             what = "reference trajectory " if slew["controller"] == "nmpc" else ""
             lines[-1] += (f", {what}solved in {slew['solve_time_s']:.3g} s "

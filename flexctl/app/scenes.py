@@ -107,7 +107,7 @@ from ..model.checks import check_real
 from ..model.parameters import Beam, Hub, HubBeam, PointMass
 from ..model.structure import MAX_ANGLE, MAX_APPENDAGES, Appendage, Structure
 from ..sim.simulation import METHODS, MIN_T_FINAL, SimulationResult, simulate
-from ..sim.validity import VariantChoice, assess, choose_variant
+from ..sim.validity import VariantChoice, assess_run, choose_variant
 from .scene_hardware import parse_actuator, parse_sensors
 from .scene_tables import construct as _construct
 
@@ -945,11 +945,16 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None, *,
     result = simulate(model, sim.t_final, rtol=sim.rtol, method=sim.method,
                       output_step=sim.output_step, progress=progress, check_validity=False,
                       **drive)
-    validity = assess(result, tolerance=scene.model.tolerance, **drive)
+    validity = assess_run(result, tolerance=scene.model.tolerance, **drive)
     return dataclasses.replace(result, validity=validity)
 
 
-def run_slew(scene: Scene, controller_factory=None, *, progress=None):
+#: Modes added to each appendage of the plant for the reference run of the metrics' errors.
+REFERENCE_EXTRA_MODES = 2
+
+
+def run_slew(scene: Scene, controller_factory=None, *, progress=None,
+             error_estimate: bool = True):
     """Design a slew scene's controller, run it against the scene's plant, measure the slew.
 
     Parameters
@@ -962,6 +967,12 @@ def run_slew(scene: Scene, controller_factory=None, *, progress=None):
         table).
     progress : bool or callable, optional
         As for :func:`flexctl.simulate` (the closed-loop run).
+    error_estimate : bool, optional
+        Give each metric its error (``metrics.errors``, :func:`flexctl.sim.metrics.
+        metric_errors`): the same closed loop is run again on the plant with
+        :data:`REFERENCE_EXTRA_MODES` more modes per appendage and exact geometry (mode
+        truncation and geometry), and the run's accuracy check adds the integration error.
+        Default True; False saves that run.
 
     Returns
     -------
@@ -969,7 +980,8 @@ def run_slew(scene: Scene, controller_factory=None, *, progress=None):
     built : object
         What the factory returned.
     metrics : SlewMetrics
-        Residual vibration measured after ``built.maneuver_end``.
+        Residual vibration measured after ``built.maneuver_end``; ``metrics.errors`` with
+        ``error_estimate`` (None when the reference run stopped early).
     """
     if not isinstance(scene.maneuver, Slew):
         raise SceneError(f"scene {scene.name!r} is not a slew; got maneuver "
@@ -980,7 +992,54 @@ def run_slew(scene: Scene, controller_factory=None, *, progress=None):
     built = controller_factory(scene, plant)
     _check_slew_fits(scene, built)
     result = run_scene(scene, controller=built.controller, model=plant, progress=progress)
-    return result, built, slew_metrics(result, scene.maneuver.angle, built.maneuver_end)
+    metrics = slew_metrics(result, scene.maneuver.angle, built.maneuver_end)
+    if error_estimate and result.status == "ok":
+        errors = _metric_errors(scene, plant, built, result)
+        metrics = dataclasses.replace(metrics, errors=errors)
+    return result, built, metrics
+
+
+def _reference_plant(plant: Model, validity) -> Model:
+    """The plant with :data:`REFERENCE_EXTRA_MODES` more modes per appendage (within what the
+    exact variant builds), and exact geometry unless the run's tip stayed in the range where
+    its small-deflection variant's geometric error is bounded without runs
+    (``validity.screened``)."""
+    from ..model.build import rebuild
+
+    spec = plant.mode_spec
+    more = (min(spec + REFERENCE_EXTRA_MODES, EXACT_MAX_MODES) if isinstance(spec, int)
+            else tuple(min(n + REFERENCE_EXTRA_MODES, EXACT_MAX_MODES) for n in spec))
+    small = validity is not None and validity.screened
+    return rebuild(plant, n_modes=more, variant=plant.variant if small else "exact")
+
+
+def _metric_errors(scene: Scene, plant: Model, built, result):
+    """:func:`~flexctl.sim.metrics.metric_errors` of a slew run, from its closed loop on
+    :func:`_reference_plant`; None when that run does not finish."""
+    import warnings
+
+    from ..sim.metrics import metric_errors
+
+    reference_plant = _reference_plant(plant, result.validity)
+    law = built.controller
+    if callable(getattr(law, "for_plant", None)):      # read the reference plant's sensors
+        law = law.for_plant(reference_plant)
+    drive = {"controller": law}
+    if getattr(law, "measures", False):
+        drive["sensors"] = scene.sensors
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")         # the run itself said what there is to say
+        reference = simulate(reference_plant, scene.simulation.t_final,
+                             rtol=scene.simulation.rtol, method=scene.simulation.method,
+                             output_step=scene.simulation.output_step, check_accuracy=False,
+                             check_validity=False, **drive)
+    if reference.status != "ok" or reference.t.shape != result.t.shape:
+        return None
+    geometry = 0.0
+    if reference_plant.variant != "exact":     # the screen's bound, as the validity states it
+        geometry = result.validity.geometric_error * result.peak_tip_deflection
+    return metric_errors(result, reference, scene.maneuver.angle, built.maneuver_end,
+                         geometry=geometry)
 
 
 def _check_slew_fits(scene: Scene, built) -> None:

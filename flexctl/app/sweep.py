@@ -583,7 +583,12 @@ class SceneTask:
                 raise SceneError(f"scene {scene.name!r} is a slew: give SceneTask a "
                                  "controller_factory (controllers.from_spec)")
             result, built, metrics = run_slew(scene, self.controller_factory)
-            out.update(dataclasses.asdict(metrics))
+            out.update({k: v for k, v in dataclasses.asdict(metrics).items() if k != "errors"})
+            for name in ("residual_vibration", "peak_tip_deflection", "final_error",
+                         "settling_time"):
+                error = metrics.error(name)
+                out[f"{name}_error"] = math.nan if error is None else error
+                out[f"{name}_shown"] = metrics.shown(name)
             out["maneuver_end"] = float(built.maneuver_end)
         else:
             result = run_scene(scene)

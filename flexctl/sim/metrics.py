@@ -19,7 +19,13 @@ import numpy as np
 from ..model.checks import check_array, check_real
 from ..model.errors import InputValueError
 
-__all__ = ["SlewMetrics", "slew_metrics", "settling_time"]
+__all__ = ["SlewMetrics", "MetricErrors", "slew_metrics", "metric_errors", "settling_time",
+           "format_metric", "ERROR_FACTOR"]
+
+#: The difference between the run and the reference run (the plant at more modes, exact
+#: geometry) is counted twice in each error: once for what it measures, once for what the
+#: reference itself still leaves out (the modes beyond it, the estimate's own error).
+ERROR_FACTOR = 2.0
 
 
 def settling_time(t, signal, target: float, band: float = 0.02) -> float:
@@ -69,13 +75,167 @@ class SlewMetrics:
     peak_torque: float
     peak_tip_deflection: float
     residual_vibration: float
+    errors: "MetricErrors | None" = None
 
     def as_dict(self) -> dict:
-        """Plain dictionary (JSON-ready; ``inf`` settling time becomes ``None``)."""
+        """Plain dictionary (JSON-ready; ``inf`` settling time becomes ``None``); with
+        :attr:`errors`, an ``errors`` entry of each metric's error and its shown text."""
+        out = asdict(self)
+        out.pop("errors")
+        if not np.isfinite(out["settling_time"]):
+            out["settling_time"] = None
+        if self.errors is not None:
+            out["errors"] = self.errors.as_dict()
+            out["shown"] = {name: self.shown(name) for name in _ERROR_UNITS}
+        return out
+
+    def error(self, name: str) -> float | None:
+        """The error estimate of metric ``name`` (its unit), or None without estimates."""
+        if name not in _ERROR_UNITS:
+            raise InputValueError(f"SlewMetrics.error name must be one of "
+                                  f"{', '.join(_ERROR_UNITS)}; got {name!r}")
+        return None if self.errors is None else getattr(self.errors, name)
+
+    def shown(self, name: str) -> str:
+        """Metric ``name`` as a person should read it: ``"0.219 ± 0.03 mm"``, or an upper
+        bound ``"< 0.6 mm"`` when the metric is smaller than its error
+        (:func:`format_metric`)."""
+        value = getattr(self, name) if name in _ERROR_UNITS else None
+        if value is None:
+            raise InputValueError(f"SlewMetrics.shown name must be one of "
+                                  f"{', '.join(_ERROR_UNITS)}; got {name!r}")
+        return format_metric(abs(value) if name == "final_error" else value,
+                             self.error(name), _ERROR_UNITS[name])
+
+
+#: The metrics that carry an error, with the unit they are shown in.
+_ERROR_UNITS = {"residual_vibration": "m", "peak_tip_deflection": "m", "final_error": "rad",
+                "settling_time": "s"}
+
+
+@dataclass(frozen=True, kw_only=True)
+class MetricErrors:
+    """Error estimates of a slew's metrics, in the metrics' units (see :func:`metric_errors`).
+
+    Attributes
+    ----------
+    residual_vibration, peak_tip_deflection : float
+        m.
+    final_error : float
+        rad.
+    settling_time : float
+        s (``inf`` when the run or the reference did not settle).
+    integration : float
+        The run's own integration error of the tip (its accuracy check), m; 0 where none ran.
+    geometry : float
+        The bound on the geometric error added to the tip metrics, m (0 when the reference
+        run had exact geometry).
+    model : float
+        Largest tip difference from the reference run, m.
+    reference : str
+        What the reference run was, e.g. ``"exact, 8 modes"``.
+    """
+
+    residual_vibration: float
+    peak_tip_deflection: float
+    final_error: float
+    settling_time: float
+    integration: float
+    model: float
+    reference: str
+    geometry: float = 0.0
+
+    def as_dict(self) -> dict:
+        """JSON types (an infinite settling-time error becomes None)."""
         out = asdict(self)
         if not np.isfinite(out["settling_time"]):
             out["settling_time"] = None
         return out
+
+
+def _tips(result) -> np.ndarray:
+    """Tip deflections of every appendage, shape (A, P), m."""
+    return np.atleast_2d(result.model.tip_deflections(result.states))
+
+
+def metric_errors(result, reference, angle: float, duration: float,
+                  band: float = 0.02, *, geometry: float = 0.0) -> MetricErrors:
+    """Error estimates of :func:`slew_metrics` of ``result``, from a more faithful run.
+
+    Parameters
+    ----------
+    result : SimulationResult
+        The run whose metrics are reported.
+    reference : SimulationResult
+        The same closed loop on a more faithful plant (more modes, exact geometry), at the
+        same output times.
+    angle, duration, band
+        As for :func:`slew_metrics`.
+    geometry : float, optional
+        A bound on the tip's geometric model error not in ``reference`` (a reference of the
+        run's own small-deflection variant), m; added to the tip metrics. Default 0.
+
+    Returns
+    -------
+    MetricErrors
+        Each metric's error is :data:`ERROR_FACTOR` times its difference between the two runs
+        (for the tip metrics, the largest tip-history difference over the span each metric
+        reads, which bounds the metric's change), plus the run's integration error
+        (``result.integration_error``, m of tip; divided by the arm ``b + l`` for the hub
+        angle).
+    """
+    if reference.t.shape != result.t.shape or not np.allclose(reference.t, result.t):
+        raise InputValueError("metric_errors.reference must share the run's output times; got "
+                              f"{reference.t.size} against {result.t.size} samples")
+    integration = float(result.integration_error or 0.0)
+    geometry = check_real("metric_errors", "geometry", geometry, minimum=0.0)
+    hub = getattr(result.model.system, "hub", None)
+    arm = float(np.max(result.model.lengths)) + float(getattr(hub, "radius", 0.0))
+    tips, tips_ref = _tips(result), _tips(reference)
+    difference = np.max(np.abs(tips - tips_ref), axis=0)
+    after = result.t >= duration
+    reported = slew_metrics(result, angle, duration, band)
+    other = slew_metrics(reference, angle, duration, band)
+    angle_error = (ERROR_FACTOR * abs(reported.final_error - other.final_error)
+                   + integration / arm)
+    settle = ERROR_FACTOR * abs(reported.settling_time - other.settling_time)
+    return MetricErrors(
+        residual_vibration=ERROR_FACTOR * float(np.max(difference[after], initial=0.0))
+        + integration + geometry,
+        peak_tip_deflection=ERROR_FACTOR * float(np.max(difference)) + integration + geometry,
+        final_error=angle_error,
+        settling_time=settle if np.isfinite(settle) else math.inf,
+        integration=integration, model=float(np.max(difference)), geometry=geometry,
+        reference=f"{reference.model.variant}, {reference.model.n_modes} modes")
+
+
+def format_metric(value: float, error: float | None, unit: str) -> str:
+    """``value`` with its error: ``"0.219 ± 0.03 mm"``, or ``"< 0.6 mm"`` when ``value`` is
+    smaller than ``error`` (the value is then no better known than its bound).
+
+    Lengths are shown in mm, angles in mrad, times in s.
+
+    Examples
+    --------
+    >>> format_metric(2.19e-4, 6e-4, "m")
+    '< 0.819 mm'
+    >>> format_metric(2.19e-3, 1e-4, "m")
+    '2.19 ± 0.1 mm'
+    >>> format_metric(1.5, None, "s")
+    '1.5 s'
+    """
+    scale, shown_unit = {"m": (1e3, "mm"), "rad": (1e3, "mrad"), "s": (1.0, "s")}[unit]
+    if value is None or not np.isfinite(value):
+        return "not reached" if unit == "s" else "n/a"
+    v = scale * float(value)
+    if error is None:
+        return f"{v:.3g} {shown_unit}"
+    if not np.isfinite(error):
+        return f"{v:.3g} {shown_unit} (error unknown)"
+    e = scale * float(error)
+    if v < e:
+        return f"< {v + e:.3g} {shown_unit}"
+    return f"{v:.3g} ± {e:.2g} {shown_unit}"
 
 
 def slew_metrics(result, angle: float, duration: float, band: float = 0.02) -> SlewMetrics:

@@ -51,8 +51,8 @@ class SimulationResult:
         methods, stopped runs, ``check_accuracy=False``).
     validity : ModelValidity or None
         Deflection reached and estimated geometric model error
-        (:func:`flexctl.sim.validity.assess`); set by scene runs, ``None`` from
-        :func:`simulate` itself.
+        (:func:`flexctl.sim.validity.assess_run`; for scene runs with the scene's tolerance);
+        ``None`` from ``simulate(..., check_validity=False)``.
     stop_reason : StopReason
         Why the run ended (``status`` is ``stop_reason.status``).
     energy_balance : EnergyBalance or None
