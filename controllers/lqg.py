@@ -1,17 +1,21 @@
 """LQG: LQR on the state estimated by a Kalman filter from hub angle and root bending moment.
 
 Only two signals are measured: the hub angle (an encoder) and the root bending moment of the
-beam (a strain gauge). A steady-state Kalman filter (:func:`control.lqe`) on the design model
-estimates the design state from them; the torque is the LQR law of :mod:`controllers.lqr`
+beam (a strain gauge). A steady-state Kalman filter (:func:`control.lqe`) estimates the state
+from them; the torque is the LQR law of :mod:`controllers.lqr` (designed on the design model)
 applied to the estimate. The filter runs as the controller's internal state ``z`` inside
 :func:`flexctl.simulate`, driven by the plant's measured outputs (the plant usually has more
 modes than the design model: build the controller for it with :meth:`LQG.for_plant`).
+:func:`design_lqg` given the plant builds the filter on the plant's modes (the design
+model's variant), so that the modes the regulator leaves alone are estimated rather than fed
+back through the innovation.
 
 Notes
 -----
-Design model with ``M`` modes, ``n_d = 2 M + 2`` states; plant with ``N >= M`` modes::
+Filter model with ``M`` modes (the design model's, or the plant's with
+``estimate_plant_modes``), ``n_d = 2 M + 2`` states; plant with ``N >= M`` modes::
 
-    z = x_hat = [theta, q_1..q_M, theta_dot, q_1_dot..q_M_dot]   (design state order)
+    z = x_hat = [theta, q_1..q_M, theta_dot, q_1_dot..q_M_dot]   (filter state order)
     y = [theta, root_moment] = C_meas x + v(t)                  (rad, N m)
     u = sat(-K (z - x_ref(t)) + J0 acc_ref(t))                  (N m)
     dz/dt = A z + B u + L (y - C z)
@@ -22,8 +26,10 @@ Design model with ``M`` modes, ``n_d = 2 M + 2`` states; plant with ``N >= M`` m
 ``angle^2`` (rad^2 s) and ``root_moment^2`` (N^2 m^2 s).
 
 With an undamped beam (``damping_ratio = 0``) the root moment carries the unmodelled modes
-too, and their feedback through the filter may destabilise them (observation spillover);
-check with :meth:`LQG.closed_loop_poles`.
+too, and a filter that leaves them out feeds them back through its innovation, which may
+destabilise them (observation spillover: slew-90's third mode grows at 0.024 1/s with a
+filter of the design's 2 modes). Check with :meth:`LQG.closed_loop_poles` or
+:func:`controllers.stability.check_loop`.
 """
 
 from __future__ import annotations
