@@ -189,6 +189,15 @@ def _slew_reference(controller):
     return float(reference.slew_angle), float(reference.start_time + reference.duration)
 
 
+def _worst_pole(model, loop, spin_rate: float):
+    """The closed loop's least damped pole, named by the plant mode it lies on."""
+    import control
+
+    from .stability import least_damped_pole
+
+    return least_damped_pole(model, control.feedback(loop).A, spin_rate)
+
+
 @dataclass(frozen=True, kw_only=True, eq=False)
 class RobustnessTask:
     """Sweep task: a fixed controller on one dispersed plant, judged by its loop.
@@ -283,9 +292,12 @@ class RobustnessTask:
                           hub_inertia_scale=hub_inertia_scale)
         model = build_model(system, self.n_modes, self.variant)
         loop = loop_transfer(model, self.controller, self.spin_rate, sensor=self.sensor)
+        worst = _worst_pole(model, loop, self.spin_rate)
         row = {"youngs_modulus_scale": float(youngs_modulus_scale),
                "point_mass_scale": float(point_mass_scale),
-               "hub_inertia_scale": float(hub_inertia_scale), **loop_margins(loop).as_dict()}
+               "hub_inertia_scale": float(hub_inertia_scale), **loop_margins(loop).as_dict(),
+               "worst_mode": worst.mode, "worst_mode_frequency": worst.frequency,
+               "worst_growth_rate": worst.growth_rate}
         row["first_frequency"] = float(model.natural_frequencies(self.spin_rate, "free")[0])
         if self.slew_time is not None:
             controller = self.controller

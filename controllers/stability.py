@@ -50,7 +50,8 @@ from flexctl.model.checks import check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 
 __all__ = ["LoopStability", "GrowingPole", "LoopStabilityWarning", "check_loop",
-           "warn_if_unstable", "checked_on", "NEARLY_UNSTABLE_RATE"]
+           "warn_if_unstable", "checked_on", "loop_stability", "least_damped_pole",
+           "NEARLY_UNSTABLE_RATE"]
 
 #: A pole that decays slower than this (1/s, an e-fold in 1000 s) is reported as nearly
 #: unstable: far longer than any manoeuvre, so the loop does not damp it in practice.
@@ -310,7 +311,6 @@ def check_loop(plant, controller, spin_rate: float = 0.0) -> LoopStability:
     InputTypeError
         If ``plant`` is not a Model or the law is of no kind with a linear loop.
     """
-    from .analysis import STABILITY_TOLERANCE
     from .lqr import _model
 
     plant = _model("check_loop", plant)
@@ -321,6 +321,30 @@ def check_loop(plant, controller, spin_rate: float = 0.0) -> LoopStability:
         matrix, sample_time = _closed_loop(plant, law, spin_rate, sample_time)
     except InputTypeError as exc:
         raise InputTypeError(f"check_loop.controller: {exc}") from None
+    name = "NMPC terminal LQR" if type(law).__name__ == "NMPC" else type(law).__name__
+    return loop_stability(plant, matrix, name, spin_rate, sample_time)
+
+
+def loop_stability(plant, matrix, law: str, spin_rate: float = 0.0,
+                   sample_time: float | None = None) -> LoopStability:
+    """The :class:`LoopStability` of a closed-loop matrix on ``plant``'s linearisation.
+
+    Parameters
+    ----------
+    plant : flexctl.Model
+        The plant whose modes name the poles (its states first in ``matrix``).
+    matrix : array_like, shape (n, n)
+        Closed-loop ``A`` (continuous) or ``A_d`` (held over ``sample_time``).
+    law : str
+        The law's name in the message.
+    spin_rate : float, optional
+        rad/s.
+    sample_time : float, optional
+        s, for a discrete ``matrix``.
+    """
+    from .analysis import STABILITY_TOLERANCE
+
+    matrix = np.asarray(matrix, dtype=float)
     poles, modes, _ = _poles(matrix, sample_time, plant, spin_rate)
     radius = max(1.0, float(np.max(np.abs(poles))))
     hidden = _hidden(plant, spin_rate)
@@ -334,12 +358,21 @@ def check_loop(plant, controller, spin_rate: float = 0.0) -> LoopStability:
                   key=lambda k: -poles[k].real)
     reported = tuple(GrowingPole(mode=int(modes[k]), frequency=float(poles[k].imag),
                                  growth_rate=float(poles[k].real)) for k in slow)
-    name = "NMPC terminal LQR" if type(law).__name__ == "NMPC" else type(law).__name__
-    return LoopStability(law=name, plant_variant=str(plant.variant),
-                         plant_modes=int(plant.layout.n_modes), spin_rate=spin_rate,
+    return LoopStability(law=law, plant_variant=str(plant.variant),
+                         plant_modes=int(plant.layout.n_modes), spin_rate=float(spin_rate),
                          sample_time=sample_time, spectral_abscissa=abscissa,
                          stable=abscissa < STABILITY_TOLERANCE * radius, poles=reported,
                          hidden_modes=tuple(float(w) for w in hidden))
+
+
+def least_damped_pole(plant, matrix, spin_rate: float = 0.0,
+                      sample_time: float | None = None) -> GrowingPole:
+    """The pole of largest real part of a closed-loop matrix on ``plant`` (as in
+    :func:`loop_stability`, hidden modes included), named by its mode."""
+    poles, modes, _ = _poles(np.asarray(matrix, dtype=float), sample_time, plant, spin_rate)
+    k = max((k for k, p in enumerate(poles) if p.imag >= 0.0), key=lambda k: poles[k].real)
+    return GrowingPole(mode=int(modes[k]), frequency=float(poles[k].imag),
+                       growth_rate=float(poles[k].real))
 
 
 def warn_if_unstable(check: LoopStability, stacklevel: int = 2) -> LoopStability:

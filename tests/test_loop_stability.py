@@ -160,3 +160,16 @@ def test_reference_beyond_the_torque_limit_warns_with_the_shortest_duration():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         design_pd(design, 2.0, reference=reference, torque_limit=1.01 * needed)
+
+
+def test_robustness_rows_name_the_least_damped_mode(slew90):
+    from controllers import RobustnessTask
+
+    scene, plant, design = slew90
+    old = _spillover_lqg(scene, plant, design)
+    row = RobustnessTask(system=scene.system, controller=old, n_modes=6)(
+        youngs_modulus_scale=1.0, point_mass_scale=1.0, hub_inertia_scale=1.0)
+    check = check_loop(plant, old)
+    assert row["closed_loop_stable"] is False
+    assert row["worst_mode"] == check.poles[0].mode == 3
+    assert row["worst_growth_rate"] == pytest.approx(check.poles[0].growth_rate, rel=1e-6)
