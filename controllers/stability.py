@@ -297,8 +297,11 @@ def check_loop(plant, controller, spin_rate: float = 0.0) -> LoopStability:
         The plant the law will run on, with its own mode count and variant (an actuated
         plant is checked on its structure: the law's torque taken as given).
     controller : object
-        PD, LQR, ScheduledLQR, TrajectoryTracker, LQG, a gain array, NMPC (its terminal LQR),
-        or any of these behind a zero-order hold, an observer or a DC motor's voltage.
+        PD, LQR, ScheduledLQR, TrajectoryTracker, LQG, a gain array, NMPC (its terminal LQR,
+        which is also the gain of its unconstrained real-time iteration), or any of these
+        behind a zero-order hold, an observer or a DC motor's voltage. Behind an observer
+        (:class:`controllers.Observed`) the law is checked on the true state: the sensors'
+        Kalman filter, sampling and delay are left out.
     spin_rate : float, optional
         Steady hub rate of the linearisation, rad/s. Default 0.
 
