@@ -74,6 +74,10 @@ def rk4_function(f, n: int, substeps: int, symbol=None):
 class DiscreteStep:
     """A model held over one sample (module docstring).
 
+    Called, and asked any :class:`casadi.Function` method (``name_in``, ``generate``,
+    ``jacobian``, ``map``, ...), it is its :attr:`function`; pass :attr:`function` itself
+    where a ``casadi.Function`` instance is required.
+
     Attributes
     ----------
     function : casadi.Function
@@ -102,6 +106,12 @@ class DiscreteStep:
 
     def __call__(self, *args, **kwargs):
         return self.function(*args, **kwargs)
+
+    def __getattr__(self, name):
+        # every casadi.Function method (name_in, generate, jacobian, expand, ...) on the step
+        if name.startswith("__") or name == "function":
+            raise AttributeError(name)
+        return getattr(self.function, name)
 
     def map(self, *args, **kwargs):
         """:meth:`casadi.Function.map` of :attr:`function`."""
