@@ -185,6 +185,8 @@ class LaggedLQR:
 
     n_states = 0
     owner = "lqr"
+    #: Its loop closes through the wheel's states (:func:`controllers.stability.check_loop`).
+    reads_actuator = True
 
     def for_plant(self, model):
         """The law reading ``model``'s states (the wheel torque among them)."""
@@ -192,6 +194,13 @@ class LaggedLQR:
             raise InputValueError("LaggedLQR needs a plant turned by a reaction wheel; got "
                                   f"states {model.state_names}")
         return replace(self, lqr=self.lqr.for_plant(model), plant_layout=model.layout)
+
+    def plant_gain(self, plant, spin_rate: float = 0.0) -> np.ndarray:
+        """``K`` on the actuated ``plant``'s state: the structure's gain and ``k_a`` on the
+        wheel torque, shape (1, n)."""
+        gain = np.array(self.lqr.state_gain(plant.layout), dtype=float).reshape(1, -1)
+        gain[0, plant.state_names.index("wheel_torque")] += self.actuator_gain
+        return gain
 
     def _lag_index(self, size: int) -> int:
         if self.plant_layout is None or self.plant_layout.n_states != size:

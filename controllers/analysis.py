@@ -61,22 +61,17 @@ from flexctl.model.layout import StateLayout
 from .lqg import LQG
 from .lqr import LQR, _model, truncation_matrix
 from .plant_state import resized
-from .pd import PD
+from .pd import PD, SENSORS
 from .scheduling import ScheduledLQR
+from .stability import STABILITY_TOLERANCE
 from .tracking import TrajectoryTracker
 
 __all__ = ["SENSORS", "PlantChannels", "plant_channels", "loop_transfer", "LoopMargins",
            "loop_margins", "PolesVsSpin", "poles_vs_spin"]
 
-#: Outputs a PD law may read (with their rates): the collocated hub angle, the tip angle
-#: ``theta + tip_deflection / (b + l)`` and the tip deflection in the hub frame.
-SENSORS = ("theta", "tip_angle", "tip_deflection")
 #: Relative distance within which a margin crossing is taken to sit on an undamped pole or
 #: zero of the loop (or, times the loop's largest pole magnitude, on the origin).
 AXIS_TOLERANCE = 1e-6
-#: A closed loop is stable when its largest pole real part is below ``-STABILITY_TOLERANCE``
-#: times its largest pole magnitude (eigenvalue rounding of an undamped mode is ~1e-13 of it).
-STABILITY_TOLERANCE = 1e-10
 
 
 def _readonly(array) -> np.ndarray:
@@ -195,16 +190,6 @@ def plant_channels(model, spin_rate: float = 0.0) -> PlantChannels:
 
 
 # --------------------------------------------------------------------------- loops
-def _sensor_gain(model: Model, a: np.ndarray, pd: PD, sensor: str) -> np.ndarray:
-    """``kp c + kd c A``: the PD law on output ``c x`` and its rate ``c A x`` (``c B = 0`` for
-    the position outputs of :data:`SENSORS`), shape (1, n)."""
-    if sensor not in SENSORS:
-        raise InputValueError(f"loop_transfer.sensor must be one of {', '.join(SENSORS)}; "
-                              f"got {sensor!r}")
-    row = model.output_matrix[model.output_names.index(sensor)]
-    return (pd.kp * row + pd.kd * (row @ a))[None, :]
-
-
 def _design_gain(owner: str, gain, plant: StateLayout,
                  design: StateLayout | None = None) -> np.ndarray:
     """A gain on a design state (layout ``design``, ``M <= N`` modes; by default the plant's
@@ -221,24 +206,22 @@ def _design_gain(owner: str, gain, plant: StateLayout,
     return gain @ truncation_matrix(plant, design)
 
 
-def _state_gain(model: Model, a: np.ndarray, controller, spin_rate: float, sensor):
+def _state_gain(model: Model, controller, spin_rate: float, sensor):
     """``K`` (1, n) of a static law on the plant state, or None for a dynamic law."""
-    plant = model.layout
     if isinstance(controller, PD):
-        return _sensor_gain(model, a, controller, "theta" if sensor is None else sensor)
+        sensor = "theta" if sensor is None else sensor
+        if sensor not in SENSORS:
+            raise InputValueError(f"loop_transfer.sensor must be one of {', '.join(SENSORS)}; "
+                                  f"got {sensor!r}")
+        return controller.plant_gain(model, spin_rate, sensor)
     if sensor is not None:
         raise InputValueError("loop_transfer.sensor applies to a PD law only (an LQR, LQG or "
                               f"tracker reads what it was designed for); got {sensor!r} with "
                               f"a {type(controller).__name__}")
-    if isinstance(controller, LQR):
-        return controller.state_gain(plant)
-    if isinstance(controller, ScheduledLQR):
-        return controller.state_gain(plant, spin_rate)
-    if isinstance(controller, TrajectoryTracker):
-        return _design_gain("loop_transfer", controller.gain, plant,
-                            controller.solution.model.layout)
     if isinstance(controller, np.ndarray):
-        return _design_gain("loop_transfer", controller, plant)
+        return _design_gain("loop_transfer", controller, model.layout)
+    if isinstance(controller, (LQR, ScheduledLQR, TrajectoryTracker)):
+        return controller.plant_gain(model, spin_rate)
     return None
 
 
@@ -297,7 +280,7 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
     spin_rate = check_real("loop_transfer", "spin_rate", spin_rate)
     a, b = model.linear_matrices(spin_rate)
     states = list(model.state_names)
-    gain = _state_gain(model, a, controller, spin_rate, sensor)
+    gain = _state_gain(model, controller, spin_rate, sensor)
     name = f"{type(controller).__name__.lower()}_loop"
     if gain is not None:
         return control.ss(a, b, gain, np.zeros((1, 1)), states=states, inputs=["torque"],

@@ -427,16 +427,20 @@ class LQG(ReferenceFeedback):
         return control.ss(a, self.estimator_gain, -self.gain, np.zeros((1, measured)),
                           inputs=inputs, outputs=["torque"], name="lqg")
 
-    def closed_loop_poles(self, model, spin_rate: float = 0.0) -> np.ndarray:
-        """Poles of ``model.linearize(spin_rate)`` (``N >= M`` modes) under this compensator,
-        shape (2 N + 2 + n_d,), 1/s."""
-        model = _model("lqg.closed_loop_poles", model)
+    def closed_loop_matrix(self, model, spin_rate: float = 0.0) -> np.ndarray:
+        """``A`` of ``model.linearize(spin_rate)`` (``N >= M`` modes) under this compensator,
+        states ``[x, z]``, shape (2 N + 2 + n_d, 2 N + 2 + n_d)."""
+        model = _model("lqg.closed_loop_matrix", model)
         meas = self.for_plant(model).measurement_matrix
         a_p, b_p = model.linear_matrices(spin_rate)
         top = np.hstack((a_p, -b_p @ self.gain))
         bottom = np.hstack((self.estimator_gain @ meas,
                             self.a - self.b @ self.gain - self.estimator_gain @ self.c))
-        return np.linalg.eigvals(np.vstack((top, bottom)))
+        return np.vstack((top, bottom))
+
+    def closed_loop_poles(self, model, spin_rate: float = 0.0) -> np.ndarray:
+        """Poles of :meth:`closed_loop_matrix`, shape (2 N + 2 + n_d,), 1/s."""
+        return np.linalg.eigvals(self.closed_loop_matrix(model, spin_rate))
 
 
 def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float = 0.0, *,

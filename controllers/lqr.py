@@ -330,6 +330,10 @@ class LQR(ReferenceFeedback):
         layout), shape (1, 2N+2)."""
         return self.gain @ truncation_matrix(n_modes, self.layout)
 
+    def plant_gain(self, plant, spin_rate: float = 0.0) -> np.ndarray:
+        """``K P`` on ``plant``'s state (any spin rate: the gain is fixed), shape (1, n)."""
+        return self.state_gain(plant.layout)
+
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, at time ``t`` (s) for plant state ``x`` (shape (2 N + 2,))."""
         x_design = self._design_state(x)

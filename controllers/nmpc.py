@@ -472,6 +472,22 @@ class NMPC:
                                       "ipopt.max_iter": 500, "error_on_fail": False})
         self._built.update(built)
 
+    def terminal_gain(self) -> tuple:
+        """The terminal LQR of the design model held over ``sample_time``: its gain ``K``
+        (shape (1, n), ``u = -K x``), the design state's layout and the sample time (s). It is
+        also the gain of the unconstrained real-time iteration (a finite horizon ending on
+        the Riccati solution gives the infinite-horizon gain at every stage)."""
+        import control
+
+        p_mat = self._terminal_weight()
+        a, b = self.model.linear_matrices(0.0)
+        m = a.shape[0]
+        held = control.c2d(control.ss(a, b, np.eye(m), np.zeros((m, 1))), self.sample_time,
+                           "zoh")
+        a_d, b_d = np.asarray(held.A), np.asarray(held.B)
+        gain = np.linalg.solve(self.torque_weight + b_d.T @ p_mat @ b_d, b_d.T @ p_mat @ a_d)
+        return gain, self.model.layout, float(self.sample_time)
+
     def _terminal_weight(self) -> np.ndarray:
         """``P``: the discrete LQR Riccati solution of the design model at rest, held over
         ``sample_time`` with weights ``Q`` and ``R``, shape (n, n)."""

@@ -27,6 +27,8 @@ from flexctl.model import Model
 from flexctl.model.checks import check_integer
 from flexctl.model.layout import StateLayout
 
+from flexctl.model.errors import InputValueError
+
 from .feedback import ReferenceFeedback
 from .reference import _casadi_evaluate, _evaluate, _real, _structure_key
 
@@ -39,6 +41,11 @@ def _rigid_inertia(owner: str, model_or_inertia) -> float:
     if isinstance(model_or_inertia, Model):
         return float(model_or_inertia.rigid_inertia)
     return _real(owner, "inertia", model_or_inertia, minimum=0.0, strict=True)
+
+
+#: Outputs a PD law may read (with their rates): the collocated hub angle, the tip angle
+#: ``theta + tip_deflection / (b + l)`` and the tip deflection in the hub frame.
+SENSORS = ("theta", "tip_angle", "tip_deflection")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -88,6 +95,17 @@ class PD(ReferenceFeedback):
         gain = np.zeros((1, layout.n_states))
         gain[0, layout.theta], gain[0, layout.theta_dot] = self.kp, self.kd
         return gain
+
+    def plant_gain(self, plant, spin_rate: float = 0.0, sensor: str = "theta") -> np.ndarray:
+        """``K`` with ``u = -K x`` on ``plant``'s linearisation at ``spin_rate``: ``kp c +
+        kd c A`` for the output ``c x`` the law reads (:data:`SENSORS`; ``c B = 0`` for
+        them), shape (1, n)."""
+        if sensor not in SENSORS:
+            raise InputValueError(f"pd.sensor must be one of {', '.join(SENSORS)}; got "
+                                  f"{sensor!r}")
+        a, _ = plant.linear_matrices(spin_rate)
+        row = plant.output_matrix[plant.output_names.index(sensor)]
+        return (self.kp * row + self.kd * (row @ a))[None, :]
 
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, at time ``t`` (s) for plant state ``x``."""

@@ -111,6 +111,10 @@ class ScheduledLQR(ReferenceFeedback):
         shape (1, 2N+2)."""
         return self.gain_at(spin_rate) @ truncation_matrix(n_modes, self.layout)
 
+    def plant_gain(self, plant, spin_rate: float = 0.0) -> np.ndarray:
+        """The gain at ``spin_rate`` on ``plant``'s state, shape (1, n)."""
+        return self.state_gain(plant.layout, spin_rate)
+
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, with the gain at the measured ``|theta_dot|``."""
         x_design = self._design_state(x)

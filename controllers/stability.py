@@ -56,6 +56,9 @@ __all__ = ["LoopStability", "GrowingPole", "LoopStabilityWarning", "check_loop",
 #: A pole that decays slower than this (1/s, an e-fold in 1000 s) is reported as nearly
 #: unstable: far longer than any manoeuvre, so the loop does not damp it in practice.
 NEARLY_UNSTABLE_RATE = 1e-3
+#: A closed loop is stable when its largest pole real part is below ``STABILITY_TOLERANCE``
+#: times its largest pole magnitude (eigenvalue rounding of an undamped mode is ~1e-13 of it).
+STABILITY_TOLERANCE = 1e-10
 #: Relative frequency within which a closed-loop pole is taken to be a hidden mode's.
 _HIDDEN_TOLERANCE = 1e-6
 
@@ -185,23 +188,10 @@ def _unwrap(controller) -> tuple:
 
 def _plant_for(plant, law):
     """The plant the law's loop closes on: the actuated plant for a law that reads the
-    actuator's states (LQR with the wheel's lag), else the structure (the law's torque taken
-    as given)."""
-    from .actuated import LaggedLQR
-
-    return plant if isinstance(law, LaggedLQR) else getattr(plant, "mechanical", plant)
-
-
-def _nmpc_terminal(nmpc):
-    """NMPC's terminal LQR gain on its design model, held over its sample time: (1, n)."""
-    from .controllable import dlqr_on_part
-
-    model, period = nmpc.model, float(nmpc.sample_time)
-    p_mat = dlqr_on_part(model, period, np.diag(nmpc.state_weights),
-                         np.array([[nmpc.torque_weight]]))
-    a_d, b_d = _held(model, 0.0, period)
-    gain = np.linalg.solve(nmpc.torque_weight + b_d.T @ p_mat @ b_d, b_d.T @ p_mat @ a_d)
-    return gain, model.layout, period
+    actuator's states (``reads_actuator``: LQR with the wheel's lag), else the structure
+    (the law's torque taken as given)."""
+    return plant if getattr(law, "reads_actuator", False) else getattr(plant, "mechanical",
+                                                                        plant)
 
 
 def _held(model, spin_rate: float, period: float) -> tuple:
@@ -214,37 +204,40 @@ def _held(model, spin_rate: float, period: float) -> tuple:
     return np.asarray(disc.A), np.asarray(disc.B)
 
 
-def _static_gain(plant: Model, law, spin_rate: float) -> np.ndarray | None:
-    """``K`` (1, n) of a static law on the plant's state, or None for a law with states."""
-    from .actuated import LaggedLQR
-    from .analysis import loop_transfer
-
-    if isinstance(law, LaggedLQR):
-        gain = np.array(law.lqr.state_gain(plant.layout), dtype=float).reshape(1, -1)
-        gain[0, plant.state_names.index("wheel_torque")] += law.actuator_gain
-        return gain
-    loop = loop_transfer(plant, law, spin_rate)
-    return np.asarray(loop.C, dtype=float) if loop.nstates == plant.n_states else None
+def _lifted(gain, plant_layout, design_layout) -> np.ndarray:
+    """A gain on the design state lifted to the plant state (zero on the other entries)."""
+    gain = np.asarray(gain, dtype=float).reshape(1, -1)
+    if design_layout is None or design_layout.n_states != gain.shape[1] \
+            or design_layout.n_modes > plant_layout.n_modes or not np.all(np.isfinite(gain)):
+        raise InputValueError(f"check_loop.controller gain must be finite with shape (1, 2 M "
+                              f"+ 2), M <= the plant's {plant_layout.n_modes} modes; got shape "
+                              f"{gain.shape}")
+    return gain @ np.eye(plant_layout.n_states)[plant_layout.projection(design_layout)]
 
 
 def _closed_loop(plant: Model, law, spin_rate: float, sample_time):
-    """Closed-loop matrix and its sample time (None: continuous)."""
-    import control
+    """Closed-loop matrix and its sample time (None: continuous), from the law's own linear
+    loop: ``terminal_gain()`` (NMPC), a gain array, ``plant_gain(plant, spin_rate)`` (the
+    static laws) or ``closed_loop_matrix(plant, spin_rate)`` (LQG)."""
+    from .plant_state import resized
 
-    from .analysis import _design_gain, loop_transfer
-    from .nmpc import NMPC
-
-    if isinstance(law, NMPC):
-        gain, design, sample_time = _nmpc_terminal(law)
-        gain = _design_gain("check_loop", gain, plant.layout, design)
-    else:
-        gain = _static_gain(plant, law, spin_rate)
-        if gain is None and sample_time is not None:
+    if callable(getattr(law, "terminal_gain", None)):
+        gain, design, sample_time = law.terminal_gain()
+        gain = _lifted(gain, plant.layout, design)
+    elif isinstance(law, np.ndarray):
+        gain = _lifted(law, plant.layout, resized(plant.layout, law.size))
+    elif callable(getattr(law, "plant_gain", None)):
+        gain = np.asarray(law.plant_gain(plant, spin_rate), dtype=float)
+    elif callable(getattr(law, "closed_loop_matrix", None)):
+        if sample_time is not None:
             raise InputValueError("check_loop: a law with internal states (LQG) runs "
                                   "continuously; it cannot sit behind a zero-order hold")
-        if gain is None:
-            loop = loop_transfer(plant, law, spin_rate)
-            return np.asarray(control.feedback(loop).A, dtype=float), None
+        return np.asarray(law.closed_loop_matrix(plant, spin_rate), dtype=float), None
+    else:
+        raise InputTypeError("check_loop.controller must be a PD, LQR, ScheduledLQR, "
+                             "TrajectoryTracker, LQG, NMPC or a gain array (or one of these "
+                             f"behind a hold, an observer or a motor); got "
+                             f"{type(law).__name__}")
     if sample_time is None:
         a, b = plant.linear_matrices(spin_rate)
         return a - b @ gain, None
@@ -314,16 +307,13 @@ def check_loop(plant, controller, spin_rate: float = 0.0) -> LoopStability:
     InputTypeError
         If ``plant`` is not a Model or the law is of no kind with a linear loop.
     """
-    from .lqr import _model
-
-    plant = _model("check_loop", plant)
+    if not isinstance(plant, Model):
+        raise InputTypeError(f"check_loop.plant must be a flexctl Model; got "
+                             f"{type(plant).__name__}")
     spin_rate = check_real("check_loop", "spin_rate", spin_rate)
     law, sample_time = _unwrap(controller)
     plant = _plant_for(plant, law)
-    try:
-        matrix, sample_time = _closed_loop(plant, law, spin_rate, sample_time)
-    except InputTypeError as exc:
-        raise InputTypeError(f"check_loop.controller: {exc}") from None
+    matrix, sample_time = _closed_loop(plant, law, spin_rate, sample_time)
     name = "NMPC terminal LQR" if type(law).__name__ == "NMPC" else type(law).__name__
     return loop_stability(plant, matrix, name, spin_rate, sample_time)
 
@@ -345,8 +335,6 @@ def loop_stability(plant, matrix, law: str, spin_rate: float = 0.0,
     sample_time : float, optional
         s, for a discrete ``matrix``.
     """
-    from .analysis import STABILITY_TOLERANCE
-
     matrix = np.asarray(matrix, dtype=float)
     poles, modes, _ = _poles(matrix, sample_time, plant, spin_rate)
     radius = max(1.0, float(np.max(np.abs(poles))))

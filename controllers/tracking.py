@@ -18,7 +18,7 @@ from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model import Model
 
 from .controllable import design_failure, lqr_on_part
-from .lqr import casadi_truncate_state, truncate_state
+from .lqr import casadi_truncate_state, truncate_state, truncation_matrix
 from .trajopt import HoldTorque, SlewSolution, _number
 
 __all__ = ["TrajectoryTracker"]
@@ -123,6 +123,11 @@ class TrajectoryTracker:
         if plant is None or plant.n_states != size:
             return None
         return plant.projection(design)
+
+    def plant_gain(self, plant, spin_rate: float = 0.0) -> np.ndarray:
+        """The feedback gain on ``plant``'s state, shape (1, n)."""
+        return self.gain.reshape(1, -1) @ truncation_matrix(plant.layout,
+                                                            self.solution.model.layout)
 
     def design_state(self, x) -> np.ndarray:
         """The design model's states picked out of a plant state ``x`` (shape (2 M + 2,))."""

@@ -39,7 +39,7 @@ from ..model import build_model
 from ..model.build import rebuild
 from .fidelity import DEFAULT_TOLERANCE, _as_input, _check_tolerance, _is_prescribed
 from .energy import ENERGY_TOLERANCE, ModelValidityWarning
-from .simulation import simulate
+from .runs import run_once
 
 __all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "assess", "assess_run",
            "choose_variant", "geometric_error", "ESTIMATE_MODES", "SCREEN_DEFLECTION"]
@@ -98,8 +98,7 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
                  "sensors": None if sensors is None else sensors.noiseless()}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            run = simulate(small, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False,
-                           check_validity=False, **drive)
+            run = run_once(small, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False, **drive)
         if run.status != "ok":
             return float("inf")
         tips.append(np.atleast_2d(small.tip_deflections(run.states)))
@@ -292,8 +291,7 @@ def _choose(system, maneuver, tolerance, t_final) -> VariantChoice:
     model = build_model(system, n_modes=ESTIMATE_MODES, variant="exact")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        run = simulate(model, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False,
-                       check_validity=False,
+        run = run_once(model, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False,
                        **{key: drive})
     ratio = run.deflection_ratio
     error = geometric_error(build_model(system, n_modes=ESTIMATE_MODES), t_final,

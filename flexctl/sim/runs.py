@@ -1,0 +1,86 @@
+"""One run of :func:`flexctl.simulate`, without the assessment of its model's range.
+
+:func:`run_once` validates the request (:mod:`~flexctl.sim.request`) and integrates it: a
+continuous drive through its strategy, stops and accuracy check, or a sampled controller
+(:mod:`~flexctl.sim.digital`). :func:`flexctl.simulate` adds the validity of the model
+(:mod:`~flexctl.sim.validity`), whose estimates are themselves runs made here.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .digital import run_sampled
+from .drives import PrescribedDrive, TorqueDrive
+from .fixed_step import RK4_OMEGA_H
+from .request import check_atol, plan_integration, run_request, state_scale
+from .result import SimulationResult, assemble_result, audit_energy
+from .stops import StopConditions, StopReason, tip_rows
+from .strategies import check_run_accuracy, rk4_accuracy_note, strategy_for
+
+__all__ = ["run_once"]
+
+
+def run_once(model, t_final: float, torque=None, hub_motion=None, controller=None, x0=None,
+             **options) -> SimulationResult:
+    """:func:`flexctl.simulate` without ``check_validity`` (``options``: its keywords)."""
+    request = run_request(model, t_final, torque, hub_motion, controller, x0, **options)
+    return _simulate_sampled(request) if request.sampled else _simulate_continuous(request)
+
+
+def _simulate_continuous(request) -> SimulationResult:
+    """:func:`run_once` with a continuous drive: its strategy, stops and accuracy check."""
+    model, hub_motion = request.model, request.hub_motion
+    drive = (PrescribedDrive(model, hub_motion, request.x_init) if request.prescribed
+             else TorqueDrive(model, request.torque, request.controller, request.x_init))
+    singular = model.variant == "consistent" and not request.prescribed
+    stops, plan = StopConditions(model, drive.layout, singular), plan_integration(request, drive)
+    drive.check_inputs()
+    strategy = strategy_for(plan.method)(request, plan, drive, stops)
+    start = time.perf_counter()
+    traj = strategy.run()
+    if request.check_accuracy and plan.method == "cvodes" and traj.reason is \
+            StopReason.REACHED_END and len(traj.compiled_segments) == len(plan.drive_cuts) - 1:
+        check_run_accuracy(request, plan, drive, traj, reporter=strategy)
+    return assemble_result(request, plan, drive, stops, traj, time.perf_counter() - start)
+
+
+def _simulate_sampled(request) -> SimulationResult:
+    """:func:`run_once` under a sampled controller (:mod:`flexctl.sim.digital`)."""
+    model, rtol = request.model, request.rtol
+    scale = (state_scale(model, model.layout) if request.atol is None
+             else check_atol(request.atol, model.n_states) / rtol)
+    stops = StopConditions(model, model.layout, singular=False)
+    integrator = "rk4" if request.method == "rk4" else "cvodes"
+    start = time.perf_counter()
+    # the coarse rk4 step: RK4_OMEGA_H over the fastest mode, at the initial spin too
+    omega_max = max(float(model.natural_frequencies(0.0, hub="free")[-1]),
+                    request.spin_frequency)
+    run = run_sampled(model, request.t_final, request.controller, request.x_init,
+                      torque=request.torque, output_step=request.step, scale=scale, rtol=rtol,
+                      bad_sample=stops.first_bad, check_accuracy=request.check_accuracy,
+                      integrator=integrator, h_max=RK4_OMEGA_H / omega_max,
+                      sensors=request.sensors)
+    wall = time.perf_counter() - start
+    note = "" if integrator != "rk4" else rk4_accuracy_note(
+        run.integration_error, tip_rows(model, model.layout) @ run.states, rtol, stacklevel=3)
+    message = run.message
+    if run.stop is None:
+        reason = StopReason.REACHED_END
+    elif run.stop == "integrator":
+        reason = StopReason.INTEGRATOR_FAILED
+    else:
+        reason = stops.reason_of_sample(run.stop_state)
+        message = stops.message(reason, float(run.t[-1]), run.states[:, -1])
+    balance, message = audit_energy(model, (run.t, run.states, run.torque), reason, message, 4)
+    if note:
+        message = f"{message} ({note})"
+    return SimulationResult.from_states(
+        model, run.t, run.states, run.torque, status=reason.status, message=message,
+        wall_time=wall, n_evaluations=run.n_evaluations, method=integrator, rtol=float(rtol),
+        controller_states=np.zeros((0, run.t.size)),
+        integration_error=run.integration_error,
+        controller_report=dict(run.report, controller_time=run.controller_time),
+        stop_reason=reason, energy_balance=balance, measurements=run.measurements)
