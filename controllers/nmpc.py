@@ -565,13 +565,17 @@ class NMPC:
         rows += horizon_rows(self.actuator, big_n)
         if self.terminal == "rest":
             rows += n
-        jit = _jit if compiled else (lambda function, model: function)
-        pieces = {"forward": jit(hold.map(big_n), self.model),
-                  "linear": jit(stage.map(big_n), lin_model), "hold_one": jit(hold, self.model),
+        # the condensing calls the symbolic pieces (a compiled one cannot be generated into
+        # another's C); each is compiled afterwards, on its own
+        pieces = {"forward": hold.map(big_n), "linear": stage.map(big_n), "hold_one": hold,
                   "q": q_diag, "r": r, "p": p_mat, "rows": rows,
                   "h_sparsity": ca.Sparsity.dense(big_n, big_n),
                   "a_sparsity": ca.Sparsity.dense(rows, big_n)}
         pieces.update(self._condensing(pieces, compiled))
+        if compiled:
+            for name, model in (("forward", self.model), ("linear", lin_model),
+                                ("hold_one", self.model)):
+                pieces[name] = _jit(pieces[name], model)
         return pieces
 
     def _condensing(self, pieces, compiled: bool = True) -> dict:
