@@ -155,3 +155,80 @@ def test_cache_directory_follows_the_environment(monkeypatch, tmp_path):
     assert compile_cache.cache_dir() == tmp_path / "flexctl"
     monkeypatch.setenv("FLEXCTL_CACHE_DIR", str(tmp_path / "mine"))
     assert compile_cache.cache_dir() == tmp_path / "mine"
+
+
+#: Final hub angle of a PD slew within this fraction of the commanded angle.
+SLEW_TOLERANCE = 1e-3
+
+
+@pytest.fixture(scope="module")
+def slew_model():
+    import flexctl
+
+    return flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=2)
+
+
+def _pd_slew(model, angle, duration=4.0):
+    from controllers.pd import design_pd
+    from controllers.reference import SlewProfile
+
+    return design_pd(model, bandwidth=2.0, damping_ratio=0.9, torque_limit=20.0,
+                     reference=SlewProfile(slew_angle=angle, duration=duration))
+
+
+@needs_compiler
+@pytest.mark.parametrize("method", ["rk4", "cvodes"])
+def test_angle_sweep_compiles_once(fresh, slew_model, method):
+    """A 10-point sweep over the slew angle (and the duration) builds its compiled functions
+    for the first point only, and every point reaches its own angle."""
+    import flexctl
+    from flexctl.sim import compiled as compiled_path
+    from flexctl.sim import fixed_step
+
+    fixed_step._STEP_CACHE.clear()
+    compiled_path._RHS_CACHE.clear()
+    builds = []
+    for k, angle in enumerate(np.linspace(0.3, 1.6, 10)):
+        rhs_before = len(compiled_path._RHS_CACHE)
+        result = flexctl.simulate(slew_model, 8.0, controller=_pd_slew(
+            slew_model, angle, 4.0 + 0.1 * k), method=method, check_accuracy=False)
+        assert result.status == "ok"
+        assert result.theta[-1] == pytest.approx(angle, rel=SLEW_TOLERANCE)
+        builds.append((compile_cache.STATS["compiles"], len(compiled_path._RHS_CACHE)
+                       - rhs_before))
+    compiles = [b[0] for b in builds]
+    assert compiles[0] <= len(fixed_step.CHUNKS)
+    assert compiles == [compiles[0]] * 10, "a later point compiled again"
+    assert [b[1] for b in builds[1:]] == [0] * 9, "a later point built another right-hand side"
+
+
+@needs_compiler
+def test_sine_amplitude_sweep_compiles_once(fresh, slew_model):
+    import flexctl
+    from flexctl.sim import fixed_step
+    from flexctl.sim.maneuvers import SineTorque
+
+    fixed_step._STEP_CACHE.clear()
+    for k, peak in enumerate((1.0, 2.0, 3.0)):
+        sine = SineTorque(peak_torque=peak, duration=2.0)
+        result = flexctl.simulate(slew_model, 3.0, sine, method="rk4", check_accuracy=False)
+        if k == 0:
+            first = compile_cache.STATS["compiles"]
+        # each run follows its own amplitude: as the error-controlled default does
+        reference = flexctl.simulate(slew_model, 3.0, sine, check_accuracy=False)
+        assert result.theta[-1] == pytest.approx(reference.theta[-1], rel=SLEW_TOLERANCE)
+    assert compile_cache.STATS["compiles"] == first
+
+
+@needs_compiler
+def test_compiled_and_virtual_machine_runs_agree(fresh, slew_model, monkeypatch):
+    import flexctl
+    from flexctl.sim import fixed_step
+
+    runs = []
+    for setting in ("1", "0"):
+        monkeypatch.setenv("FLEXCTL_COMPILE", setting)
+        fixed_step._STEP_CACHE.clear()
+        runs.append(flexctl.simulate(slew_model, 6.0, controller=_pd_slew(slew_model, 0.8),
+                                     method="rk4", check_accuracy=False))
+    np.testing.assert_allclose(runs[0].states, runs[1].states, rtol=1e-10, atol=1e-12)

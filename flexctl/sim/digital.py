@@ -35,7 +35,8 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from .stops import tip_rows
-from .compiled import CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, is_symbolic
+from .compiled import (CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, input_numbers,
+                       is_symbolic)
 from .fixed_step import (_STEP_CACHE, _STEP_CACHE_SIZE, _chunk_runs, _step_function,
                          run_steps)
 from .inputs import input_value, output_grid, time_function
@@ -317,12 +318,14 @@ class _RK4Hold:
         # the compiled loops are kept across runs (by model and torque), like the CVODES
         # integrators: a second run with other gains or another law costs no build
         key = _input_key(model, (torque, None, None), np.array([1.0]))
+        self.torque_numbers = input_numbers((torque, None, None))
         self.runs = _cached(_STEP_CACHE, _STEP_CACHE_SIZE,
                             None if key is None else ("rk4-hold", key),
                             (self.model, self.torque), self._build)
 
     def _build(self) -> dict:
-        step = _step_function(self.model, self.torque, None, _Held(0.0), 1)[0]
+        n_numbers = self.torque_numbers.size + 1
+        step = _step_function(self.model, self.torque, None, _Held(0.0), n_numbers)[0]
         return _chunk_runs(step, self.model)
 
     def __call__(self, lo, t_out, y, u, loose=False):
@@ -331,7 +334,8 @@ class _RK4Hold:
         yt = np.append(y, lo)
         for end in t_out:
             count = max(1, int(np.ceil((end - start) / h_max * (1.0 - 1e-12))))
-            yt = run_steps(self.runs, yt, (end - start) / count, count, [u])[0][:, -1]
+            yt = run_steps(self.runs, yt, (end - start) / count, count,
+                           np.append(self.torque_numbers, u))[0][:, -1]
             yt[-1] = end
             out.append(yt[:-1])
             evaluations += 4 * count

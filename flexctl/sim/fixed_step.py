@@ -22,8 +22,8 @@ from collections import OrderedDict
 
 import numpy as np
 
-from .compiled import (_cached, _closed_loop_dynamics, _input_key, drive_size,
-                       _parameter_values)
+from .compiled import (_cached, _closed_loop_dynamics, _input_key, _split_numbers,
+                       drive_size, hub_motion_casadi, input_numbers)
 from .compile_cache import compiled
 from ..model.exports import _symbolic_beam_dynamics
 
@@ -72,7 +72,8 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int):
 
     def f(time, state):
         if hub_motion is not None:
-            rate, acceleration = hub_motion.casadi(time)
+            rate, acceleration = hub_motion_casadi(
+                hub_motion, time, _split_numbers((torque, hub_motion, controller), c)[1])
             return _symbolic_beam_dynamics(model, state, rate, acceleration)
         return _closed_loop_dynamics(model, time, state, torque, controller, c)
 
@@ -262,7 +263,7 @@ class _RK4Runner:
 
     def __init__(self, model, edges, y0, tip_map, h_max, inputs):
         self.model, self.inputs = model, inputs
-        self.numbers = _parameter_values(inputs[-1])
+        self.numbers = input_numbers(inputs)
         self.base_key = _input_key(model, inputs, np.array([self.numbers.size], dtype=float))
         self.step, self.rate = _cached(
             _STEP_CACHE, _STEP_CACHE_SIZE,
