@@ -12,6 +12,8 @@ B. A 10-point sweep of PD slews over the angle (0.3 to 1.6 rad, durations 4.0 to
    before the cache (``--before DIR``, a checkout of it; skipped if not given) against this one
    with the cache cold and warm, each in a fresh process (model built before timing). Also the
    issue's example: a PD slew of 30 then of 45 degrees.
+C. Simulation of the exact model against first_order on the same scene and modes (the goals
+   table's first row), before and after, each in a fresh process.
 
 Run: ``python benchmarks/bench_compile.py [--before /path/to/old/checkout]``. Nothing is
 asserted; the script prints what it measures (the machine's two cores are shared).
@@ -103,6 +105,43 @@ def case_a() -> None:
             print(f"| {n_modes} | {variant} / first_order | | | | {vm_ratio:.1f} | "
                   f"{c_ratio:.1f} | |")
 
+#: One process of case C: best-of-3 wall time of each variant's run, as JSON.
+EXACT = r"""
+import json, sys, time, warnings
+warnings.simplefilter("ignore")
+import flexctl
+from flexctl import SineTorque
+system = flexctl.load_scene("hub-beam-mass").system
+out = {}
+for n_modes in (2, 4, 6):
+    for variant in ("first_order", "exact"):
+        model = flexctl.build_model(system, n_modes, variant)
+        if model.geometry is not None:
+            model.geometry
+        walls = []
+        for _ in range(3):
+            start = time.perf_counter()
+            flexctl.simulate(model, 6.0, SineTorque(peak_torque=2.0, duration=2.0), rtol=1e-8)
+            walls.append(time.perf_counter() - start)
+        out[f"{variant}{n_modes}"] = min(walls)
+print(json.dumps(out))
+"""
+
+
+def case_c(before: Path | None) -> None:
+    print("\n## C. Simulation exact / first_order, hub-beam-mass, sine torque 2 N m, 6 s, "
+          "rtol 1e-8 (CVODES with its accuracy check, best of 3)\n")
+    print("| code | modes | first_order (s) | exact (s) | ratio |")
+    print("|---|---|---|---|---|")
+    for label, tree in ([("before", before)] if before else []) + [("this", ROOT)]:
+        env = {**os.environ, "PYTHONPATH": str(tree)}
+        out = subprocess.run([sys.executable, "-c", EXACT], env=env, capture_output=True,
+                             text=True, timeout=1800, cwd=tree)
+        walls = json.loads(out.stdout.strip().splitlines()[-1])
+        for n_modes in (2, 4, 6):
+            fo, ex = walls[f"first_order{n_modes}"], walls[f"exact{n_modes}"]
+            print(f"| {label} | {n_modes} | {fo:.3f} | {ex:.3f} | {ex / fo:.1f} |")
+
 
 def per_evaluation(many, f) -> float:
     """Seconds per evaluation of ``f(x, u)`` at a small state, from ``many``, its map of MAP
@@ -166,6 +205,7 @@ def main() -> None:
             case_a()
     if not args.skip_b:
         case_b(args.before)
+    case_c(args.before)
 
 
 if __name__ == "__main__":
