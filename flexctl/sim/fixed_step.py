@@ -49,9 +49,9 @@ _END_INSIDE = 1e-9
 #: than CasADi's virtual machine, once the 0.2 to 0.5 s compile is paid, once.
 USE_JIT = True
 #: Steps per call of a compiled loop, largest first: a segment takes the largest that fits,
-#: then smaller ones, the last padded with steps of length 0 (which change
-#: nothing) where that wastes fewer steps than it makes. The loops do not depend on the number of steps, so runs of other lengths, steps
-#: or segments reuse them.
+#: then smaller ones, the last padded with steps of length 0 (which change nothing) where
+#: that wastes fewer steps than it makes. The loops do not depend on the number of steps, so
+#: runs of other lengths, steps or segments reuse them.
 CHUNKS = (1024, 64, 8)
 
 _STEP_CACHE: OrderedDict = OrderedDict()
