@@ -87,20 +87,30 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int):
             ca.Function("flexctl_rate", [ys, ts, c], [f(ts, ys)]))
 
 
-def _chunk_runs(step, model) -> dict:
-    """Compiled loops ``run_k([y; t], h, c) -> (Y, F)`` of ``k`` steps for each ``k`` in
-    :data:`CHUNKS`: ``h`` the step lengths, shape (1, k), ``Y`` the states with time after each
-    step, ``F`` the derivatives at each step's start."""
-    import casadi as ca
+class _ChunkRuns(dict):
+    """Compiled loops ``run_k([y; t], h, c) -> (Y, F)`` of ``k`` steps, ``k`` in
+    :data:`CHUNKS`, each built (and compiled) when first used: ``h`` the step lengths, shape
+    (1, k), ``Y`` the states with time after each step, ``F`` the derivatives at each step's
+    start."""
 
-    runs = {}
-    for k in CHUNKS:
-        chain = step.mapaccum(f"flexctl_rk4_chain{k}", k)
-        yt, hs = ca.MX.sym("yt", step.size1_in(0)), ca.MX.sym("h", 1, k)
-        c = ca.MX.sym("c", step.size1_in(2))
+    def __init__(self, step, model):
+        super().__init__()
+        self.step, self.model = step, model
+
+    def __missing__(self, k: int):
+        import casadi as ca
+
+        chain = self.step.mapaccum(f"flexctl_rk4_chain{k}", k)
+        yt, hs = ca.MX.sym("yt", self.step.size1_in(0)), ca.MX.sym("h", 1, k)
+        c = ca.MX.sym("c", self.step.size1_in(2))
         ys, fs = chain(yt, hs, ca.repmat(c, 1, k))
-        runs[k] = _jit(ca.Function(f"flexctl_rk4_run{k}", [yt, hs, c], [ys, fs]), model)
-    return runs
+        self[k] = _jit(ca.Function(f"flexctl_rk4_run{k}", [yt, hs, c], [ys, fs]), self.model)
+        return self[k]
+
+
+def _chunk_runs(step, model) -> dict:
+    """The compiled loops of ``step`` (:class:`_ChunkRuns`), built on first use."""
+    return _ChunkRuns(step, model)
 
 
 def run_steps(runs: dict, yt, h: float, count: int, numbers) -> tuple:
