@@ -37,8 +37,7 @@ import numpy as np
 from .stops import tip_rows
 from .compiled import (CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, input_numbers,
                        is_symbolic)
-from .fixed_step import (_STEP_CACHE, _STEP_CACHE_SIZE, _chunk_runs, _step_function,
-                         run_steps)
+from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
 from .inputs import input_value, output_grid, time_function
 from .drives import bound_to_plant
 from .sensors import sensor_names
@@ -315,18 +314,33 @@ class _RK4Hold:
 
     def __init__(self, model, torque, h_max):
         self.h_max, self.model, self.torque = float(h_max), model, torque
-        # the compiled loops are kept across runs (by model and torque), like the CVODES
-        # integrators: a second run with other gains or another law costs no build
-        key = _input_key(model, (torque, None, None), np.array([1.0]))
+        self.chains = {}
+        # the compiled loops are kept across runs (by model, torque kind and step count), like
+        # the CVODES integrators: a second run with other gains, another law or another
+        # torque amplitude costs no build (the torque's numbers and the held value enter as
+        # parameters)
+        self.key = _input_key(model, (torque, None, None), np.array([1.0]))
         self.torque_numbers = input_numbers((torque, None, None))
-        self.runs = _cached(_STEP_CACHE, _STEP_CACHE_SIZE,
-                            None if key is None else ("rk4-hold", key),
-                            (self.model, self.torque), self._build)
 
-    def _build(self) -> dict:
+    def _final(self, count):
+        """Compiled ``count`` steps: ``([y; t], h, [c; u]) -> [y; t]`` at the end."""
+        if count not in self.chains:
+            self.chains[count] = _cached(
+                _STEP_CACHE, _STEP_CACHE_SIZE,
+                None if self.key is None else ("rk4-hold", self.key, count),
+                (self.model, self.torque), lambda: self._build(count))
+        return self.chains[count]
+
+    def _build(self, count):
+        import casadi as ca
+
         n_numbers = self.torque_numbers.size + 1
         step = _step_function(self.model, self.torque, None, _Held(0.0), n_numbers)[0]
-        return _chunk_runs(step, self.model)
+        chain = step.mapaccum("flexctl_rk4_hold", count)
+        yt, h = ca.MX.sym("yt", step.size1_in(0)), ca.MX.sym("h")
+        c = ca.MX.sym("c", n_numbers)
+        ys = chain(yt, ca.repmat(h, 1, count), ca.repmat(c, 1, count))[0]
+        return _jit(ca.Function("flexctl_rk4_hold_end", [yt, h, c], [ys[:, -1]]), self.model)
 
     def __call__(self, lo, t_out, y, u, loose=False):
         h_max = self.h_max * (2.0 if loose else 1.0)
@@ -334,8 +348,8 @@ class _RK4Hold:
         yt = np.append(y, lo)
         for end in t_out:
             count = max(1, int(np.ceil((end - start) / h_max * (1.0 - 1e-12))))
-            yt = run_steps(self.runs, yt, (end - start) / count, count,
-                           np.append(self.torque_numbers, u))[0][:, -1]
+            yt = np.array(self._final(count)(yt, (end - start) / count,
+                                             np.append(self.torque_numbers, u))).reshape(-1)
             yt[-1] = end
             out.append(yt[:-1])
             evaluations += 4 * count

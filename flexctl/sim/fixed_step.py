@@ -52,7 +52,7 @@ USE_JIT = True
 #: then smaller ones, the last padded with steps of length 0 (which change nothing) where
 #: that wastes fewer steps than it makes. The loops do not depend on the number of steps, so
 #: runs of other lengths, steps or segments reuse them.
-CHUNKS = (1024, 64, 8)
+CHUNKS = (4096, 256, 16)
 
 _STEP_CACHE: OrderedDict = OrderedDict()
 _STEP_CACHE_SIZE = 64
