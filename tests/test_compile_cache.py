@@ -126,6 +126,22 @@ def test_no_compiler_runs_on_the_virtual_machine_with_one_warning(fresh, monkeyp
     assert float(results[2](3.0)) == 11.0
 
 
+@needs_compiler
+def test_a_function_without_c_code_stays_on_the_virtual_machine(fresh):
+    import casadi as ca
+
+    x = ca.SX.sym("x")
+    decay = ca.integrator("cc_decay", "cvodes", {"x": x, "ode": -x}, 0.0, 1.0)
+    start = ca.MX.sym("start")
+    f = ca.Function("cc_no_c_code", [start], [decay(x0=start)["xf"]])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = compiled(f)
+    assert result is f
+    assert [issubclass(w.category, CompileCacheWarning) for w in caught] == [True]
+    assert float(result(1.0)) == pytest.approx(np.exp(-1.0), rel=1e-4)   # CVODES defaults
+
+
 def test_compiling_off_by_environment(fresh, monkeypatch):
     import casadi as ca
 

@@ -163,13 +163,13 @@ def compiled(function, *, label: str | None = None):
         STATS["fallbacks"] += 1
         _warn_once("no C compiler found (set CC or put cc on the PATH)")
         return function
-    source = _source(function)
-    key = _key(source, tool)
     name = function.name()
-    if (name, key) in _LOADED:
-        STATS["hits"] += 1
-        return _LOADED[(name, key)]
     try:
+        source = _source(function)      # CasADi refuses functions it cannot generate
+        key = _key(source, tool)
+        if (name, key) in _LOADED:
+            STATS["hits"] += 1
+            return _LOADED[(name, key)]
         loaded = _load_or_build(name, key, source, tool, label or name)
     except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
         STATS["fallbacks"] += 1
