@@ -14,6 +14,8 @@ B. A 10-point sweep of PD slews over the angle (0.3 to 1.6 rad, durations 4.0 to
    issue's example: a PD slew of 30 then of 45 degrees.
 C. Simulation of the exact model against first_order on the same scene and modes (the goals
    table's first row), before and after, each in a fresh process.
+D. NMPC real-time iteration on slew-90's exact 2-mode design model: build time and solve time
+   per step (median, 99th percentile), before and after, cache cold and warm.
 
 Run: ``python benchmarks/bench_compile.py [--before /path/to/old/checkout]``. Nothing is
 asserted; the script prints what it measures (the machine's two cores are shared).
@@ -142,6 +144,42 @@ def case_c(before: Path | None) -> None:
             fo, ex = walls[f"first_order{n_modes}"], walls[f"exact{n_modes}"]
             print(f"| {label} | {n_modes} | {fo:.3f} | {ex:.3f} | {ex / fo:.1f} |")
 
+#: One process of case D: NMPC build time and per-step solve times, as JSON.
+NMPC = r"""
+import json, time, warnings
+import numpy as np
+warnings.simplefilter("ignore")
+import flexctl
+from controllers.nmpc import NMPC
+system = flexctl.load_scene("slew-90").system
+plant = flexctl.build_model(system, 4, "first_order")
+design = flexctl.build_model(system, 2, "exact")
+design.geometry
+mpc = NMPC(model=design, target=np.pi / 2, torque_limit=6.0, sample_time=0.02, horizon=20)
+start = time.perf_counter()
+mpc.prepare()
+build = time.perf_counter() - start
+report = flexctl.simulate(plant, 4.0, controller=mpc, check_accuracy=False).controller_report
+print(json.dumps({"build": build, "median": report["solve_time_median_s"],
+                  "p99": report["solve_time_p99_s"]}))
+"""
+
+
+def case_d(before: Path | None) -> None:
+    print("\n## D. NMPC real-time iteration, slew-90, exact 2-mode design model, horizon 20, "
+          "0.02 s samples, 4-mode first_order plant, 4 s (in-loop wall time per step)\n")
+    print("| code | cache | build (s) | median (ms) | p99 (ms) |")
+    print("|---|---|---|---|---|")
+    for label, tree in ([("before", before)] if before else []) + [("this", ROOT)]:
+        with tempfile.TemporaryDirectory() as cache:
+            for state in (("cold", "warm") if label == "this" else ("-",)):
+                env = {**os.environ, "PYTHONPATH": str(tree), "FLEXCTL_CACHE_DIR": cache}
+                out = subprocess.run([sys.executable, "-c", NMPC], env=env, cwd=tree,
+                                     capture_output=True, text=True, timeout=1800)
+                found = json.loads(out.stdout.strip().splitlines()[-1])
+                print(f"| {label} | {state} | {found['build']:.2f} | "
+                      f"{found['median'] * 1e3:.2f} | {found['p99'] * 1e3:.2f} |")
+
 
 def per_evaluation(many, f) -> float:
     """Seconds per evaluation of ``f(x, u)`` at a small state, from ``many``, its map of MAP
@@ -206,6 +244,7 @@ def main() -> None:
     if not args.skip_b:
         case_b(args.before)
     case_c(args.before)
+    case_d(args.before)
 
 
 if __name__ == "__main__":

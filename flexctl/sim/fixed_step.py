@@ -159,9 +159,11 @@ def hermite(t, starts, sizes, y, f) -> np.ndarray:
     return (h00 * y[:, k] + h10 * h * f[:, k] + h01 * y[:, k + 1] + h11 * h * f[:, k + 1])
 
 
-def _jit(function, model):
-    """``function`` compiled to machine code where allowed and possible, else itself."""
-    if not USE_JIT or model.variant == "exact":
+def _jit(function, model, any_variant: bool = False):
+    """``function`` compiled to machine code where allowed and possible, else itself (the
+    exact variant's only with ``any_variant``: for functions built on its vectorized
+    right-hand side, which compile in about a second)."""
+    if not USE_JIT or (model.variant == "exact" and not any_variant):
         return function
     return compiled(function)
 
