@@ -237,10 +237,10 @@ def solve_reference(design, slew):
 
 def compiled_pieces(mpc) -> str:
     """Whether the real-time iteration's shooting (forward) and Jacobian (linear) functions
-    were compiled to machine code (CasADi jit), from the built problem."""
+    were compiled to machine code (the compile cache), from the built problem."""
     built = getattr(mpc, "_built", {})
     try:
-        return "/".join("yes" if built[k].name().endswith("_jit") else "no"
+        return "/".join("yes" if built[k].is_a("External") else "no"
                         for k in ("forward", "linear"))
     except (KeyError, AttributeError):
         return "?"

@@ -51,7 +51,8 @@ from flexctl.model.layout import StateLayout
 from .controllable import design_failure, lqr_on_part
 from .feedback import ReferenceFeedback
 from .plant_state import DEFAULT_LAYOUT, design_rows, resized
-from .reference import _casadi_evaluate, _evaluate, _optional_positive, _real, _structure_key
+from .reference import (_casadi_evaluate, _evaluate, _optional_positive, _real,
+                        _reference_parameters)
 
 __all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation_matrix",
            "truncate_state", "reference_state", "closed_loop_poles", "static_deflection_gain"]
@@ -178,16 +179,19 @@ def casadi_truncate_state(x, n_design_modes):
     return x[design_rows(design, x.numel()).tolist()]
 
 
-def casadi_reference_state(reference, t, n_modes, deflection_gain=None) -> tuple:
-    """:func:`reference_state` on the CasADi symbol ``t``: ``(x_ref (2 M + 2, 1), acc_ref)``."""
+def casadi_reference_state(reference, t, n_modes, deflection_gain=None,
+                           reference_numbers=None) -> tuple:
+    """:func:`reference_state` on the CasADi symbol ``t``: ``(x_ref (2 M + 2, 1), acc_ref)``;
+    the reference's numbers are the symbols ``reference_numbers`` where given."""
     import casadi as ca
 
     layout = _layout("reference_state", n_modes)
-    angle, rate, acc = _casadi_evaluate(reference, t)
+    angle, rate, acc = _casadi_evaluate(reference, t, reference_numbers)
     q_ref = q_dot_ref = ca.DM.zeros(layout.n_modes)
     if deflection_gain is not None and reference is not None:
-        jerk = (_casadi_evaluate(reference, t + _JERK_STEP)[2]
-                - _casadi_evaluate(reference, t - _JERK_STEP)[2]) / (2.0 * _JERK_STEP)
+        jerk = (_casadi_evaluate(reference, t + _JERK_STEP, reference_numbers)[2]
+                - _casadi_evaluate(reference, t - _JERK_STEP, reference_numbers)[2]) \
+            / (2.0 * _JERK_STEP)
         gain = (deflection_gain if isinstance(deflection_gain, (ca.SX, ca.MX))
                 else ca.DM(np.asarray(deflection_gain, dtype=float)))
         q_ref, q_dot_ref = -gain * acc, -gain * jerk
@@ -345,14 +349,17 @@ class LQR(ReferenceFeedback):
     def casadi_parameters(self) -> tuple:
         """``(structure, values)``: what shapes :meth:`casadi_torque` (design state
         layout, reference, which options are on) and its numbers ``[K, feedforward_inertia,
-        torque_limit, deflection_gain]`` (0 for an option that is off, no deflection gain for a
-        rigid reference). Compiled runs of LQR laws of one structure share their integrators."""
-        structure = (self.layout, _structure_key(self.reference),
+        torque_limit, deflection_gain, reference numbers]`` (0 for an option that is off, no
+        deflection gain for a rigid reference). Compiled runs of LQR laws of one structure (a
+        slew of any angle and duration included) share their integrators."""
+        reference, numbers = _reference_parameters(self.reference)
+        structure = (self.layout, reference,
                      self.feedforward_inertia is None, self.torque_limit is None,
                      self.deflection_gain is None)
         extra = () if self.deflection_gain is None else self.deflection_gain
         return structure, np.concatenate((self.gain[0], [self.feedforward_inertia or 0.0,
-                                                         self.torque_limit or 0.0], extra))
+                                                         self.torque_limit or 0.0], extra,
+                                          numbers))
 
     def casadi_torque(self, t, x, parameters=None):
         """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``; the numbers
@@ -360,15 +367,18 @@ class LQR(ReferenceFeedback):
         import casadi as ca
 
         gain, inertia, limit = ca.DM(self.gain[0]), None, None
-        deflection = self.deflection_gain
+        deflection, numbers = self.deflection_gain, None
         if parameters is not None:
-            # the numbers in casadi_parameters' order: gain row, inertia, limit, deflection
-            gain, inertia, limit, rest = ca.vertsplit(
-                parameters, [0, self.gain.shape[1], self.gain.shape[1] + 1,
-                             self.gain.shape[1] + 2, parameters.numel()])
+            # the numbers in casadi_parameters' order: gain row, inertia, limit, deflection,
+            # reference
+            m = self.gain.shape[1]
+            d = 0 if deflection is None else np.size(deflection)
+            gain, inertia, limit, rest, numbers = ca.vertsplit(
+                parameters, [0, m, m + 1, m + 2, m + 2 + d, parameters.numel()])
             deflection = None if deflection is None else rest
         x_design = self._casadi_design_state(x)
-        x_ref, acc = casadi_reference_state(self.reference, t, self.layout, deflection)
+        x_ref, acc = casadi_reference_state(self.reference, t, self.layout, deflection,
+                                            numbers)
         return self._casadi_apply(-ca.dot(gain, x_design - x_ref), acc, inertia, limit)
 
 

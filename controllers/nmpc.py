@@ -94,8 +94,14 @@ def _hold_function(model: Model, sample_time: float, substeps: int):
     (s), by ``substeps`` RK4 steps of the model's dynamics."""
     import casadi as ca
 
-    step = _rk4_step(model.casadi(), model.n_states, substeps)     # (x, u, h) -> x(h)
-    x, u = ca.SX.sym("x", model.n_states), ca.SX.sym("u")
+    if model.variant == "exact":
+        # the exact model's vectorized form: the same function, a few thousand times fewer
+        # operations written out, so the hold compiles in about a second
+        sym, f = ca.MX, model.geometry.rhs_vectorized
+    else:
+        sym, f = ca.SX, model.casadi()
+    step = _rk4_step(f, model.n_states, substeps, sym)     # (x, u, h) -> x(h)
+    x, u = sym.sym("x", model.n_states), sym.sym("u")
     return ca.Function("nmpc_hold", [x, u], [step(x, u, sample_time)])
 
 
@@ -581,13 +587,17 @@ class NMPC:
         rows += horizon_rows(self.actuator, big_n)
         if self.terminal == "rest":
             rows += n
-        jit = _jit if compiled else (lambda function, model: function)
-        pieces = {"forward": jit(hold.map(big_n), self.model),
-                  "linear": jit(stage.map(big_n), lin_model), "hold_one": jit(hold, self.model),
+        # the condensing calls the symbolic pieces (a compiled one cannot be generated into
+        # another's C); each is compiled afterwards, on its own
+        pieces = {"forward": hold.map(big_n), "linear": stage.map(big_n), "hold_one": hold,
                   "q": q_diag, "r": r, "p": p_mat, "rows": rows,
                   "h_sparsity": ca.Sparsity.dense(big_n, big_n),
                   "a_sparsity": ca.Sparsity.dense(rows, big_n)}
         pieces.update(self._condensing(pieces, compiled))
+        if compiled:
+            for name, model in (("forward", self.model), ("linear", lin_model),
+                                ("hold_one", self.model)):
+                pieces[name] = _jit(pieces[name], model, any_variant=True)
         return pieces
 
     def _condensing(self, pieces, compiled: bool = True) -> dict:
@@ -616,7 +626,7 @@ class NMPC:
         # compiling the condensing costs 5 to 7 s of gcc and pays from about 30 steps
         # (measured at 40: 1.2 against 1.55 ms a step; at 20 no difference)
         if compiled and big_n >= JIT_CONDENSE_FROM:
-            condense = _jit(condense, self.model)
+            condense = _jit(condense, self.model, any_variant=True)
         return {"condense": condense, "expand": _expansion(w, n, big_n)}
 
     def _condensed_constraints(self, g_mats, e, xs, us, u_prev, base) -> tuple:
@@ -714,7 +724,8 @@ class _ExtendedKalman:
         self.rows = _measurement_rows(model)
         x, u = ca.SX.sym("x", model.n_states), ca.SX.sym("u")
         lin = _hold_function(mpc.linearisation_model, mpc.sample_time, mpc.substeps)(x, u)
-        self.hold = _jit(_hold_function(model, mpc.sample_time, mpc.substeps), model)
+        self.hold = _jit(_hold_function(model, mpc.sample_time, mpc.substeps), model,
+                         any_variant=True)
         self.jacobians = _jit(ca.Function("nmpc_ekf_jac", [x, u], [ca.jacobian(lin, x),
                                                                     ca.jacobian(lin, u)]),
                               mpc.linearisation_model)

@@ -30,7 +30,7 @@ from flexctl.model.layout import StateLayout
 from flexctl.model.errors import InputValueError
 
 from .feedback import ReferenceFeedback
-from .reference import _casadi_evaluate, _evaluate, _real, _structure_key
+from .reference import _casadi_evaluate, _evaluate, _real, _reference_parameters
 
 __all__ = ["PD", "pd_gains", "design_pd"]
 
@@ -116,22 +116,23 @@ class PD(ReferenceFeedback):
     @property
     def casadi_parameters(self) -> tuple:
         """``(structure, values)``: what shapes :meth:`casadi_torque` (the reference, which
-        options are on) and its numbers ``[kp, kd, feedforward_inertia, torque_limit]`` (0 for
-        an option that is off). Compiled runs of PD laws of one structure share their
-        integrators."""
-        structure = (_structure_key(self.reference), self.feedforward_inertia is None,
-                     self.torque_limit is None)
-        return structure, np.array([self.kp, self.kd, self.feedforward_inertia or 0.0,
-                                    self.torque_limit or 0.0])
+        options are on) and its numbers ``[kp, kd, feedforward_inertia, torque_limit,
+        reference numbers]`` (0 for an option that is off). Compiled runs of PD laws of one
+        structure (a slew of any angle and duration included) share their integrators."""
+        reference, numbers = _reference_parameters(self.reference)
+        structure = (reference, self.feedforward_inertia is None, self.torque_limit is None)
+        return structure, np.concatenate(([self.kp, self.kd, self.feedforward_inertia or 0.0,
+                                           self.torque_limit or 0.0], numbers))
 
     def casadi_torque(self, t, x, parameters=None):
         """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``; the numbers
         are symbols too when ``parameters`` (the values of :attr:`casadi_parameters`) is given."""
-        kp, kd, inertia, limit = self.kp, self.kd, None, None
+        kp, kd, inertia, limit, numbers = self.kp, self.kd, None, None, None
         if parameters is not None:
             kp, kd, inertia, limit = parameters[0], parameters[1], parameters[2], parameters[3]
+            numbers = parameters[4:]
         theta, rate = self._casadi_hub_state(x)
-        angle_ref, rate_ref, acc_ref = _casadi_evaluate(self.reference, t)
+        angle_ref, rate_ref, acc_ref = _casadi_evaluate(self.reference, t, numbers)
         return self._casadi_apply(kp * (angle_ref - theta) + kd * (rate_ref - rate), acc_ref,
                                   inertia, limit)
 

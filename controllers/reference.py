@@ -110,12 +110,23 @@ class SlewProfile(KeywordOnly):
         """Largest ``|acceleration|``, rad/s^2."""
         return RIGID_PEAK_ACCELERATION[self.shape] * abs(self.slew_angle) / self.duration ** 2
 
-    def casadi_reference(self, t):
+    @property
+    def casadi_parameters(self) -> tuple:
+        """``(structure, values)``: the shape shapes :meth:`casadi_reference`; its numbers are
+        ``[slew_angle, duration, start_time]`` (compiled laws following slews of one shape
+        share one function)."""
+        return (self.shape,), np.array([self.slew_angle, self.duration, self.start_time])
+
+    def casadi_reference(self, t, parameters=None):
         """Angle, rate and acceleration as CasADi expressions of the symbol ``t`` (the
-        formulas of :meth:`angle`, :meth:`rate`, :meth:`acceleration`)."""
+        formulas of :meth:`angle`, :meth:`rate`, :meth:`acceleration`); the numbers are symbols
+        too when ``parameters`` (laid out as :attr:`casadi_parameters`) is given."""
         import casadi as ca
 
-        tau = ca.fmin(ca.fmax((t - self.start_time) / self.duration, 0.0), 1.0)
+        angle, duration, start = self.slew_angle, self.duration, self.start_time
+        if parameters is not None:
+            angle, duration, start = parameters[0], parameters[1], parameters[2]
+        tau = ca.fmin(ca.fmax((t - start) / duration, 0.0), 1.0)
         if self.shape == "poly7":
             s = tau ** 4 * (35.0 + tau * (-84.0 + tau * (70.0 - 20.0 * tau)))
             ds = 140.0 * (tau * (1.0 - tau)) ** 3
@@ -124,8 +135,7 @@ class SlewProfile(KeywordOnly):
             s = tau - ca.sin(2.0 * np.pi * tau) / (2.0 * np.pi)
             ds = 1.0 - ca.cos(2.0 * np.pi * tau)
             dds = 2.0 * np.pi * ca.sin(2.0 * np.pi * tau)
-        return (self.slew_angle * s, self.slew_angle / self.duration * ds,
-                self.slew_angle / self.duration ** 2 * dds)
+        return angle * s, angle / duration * ds, angle / duration ** 2 * dds
 
     def _tau(self, t):
         t = np.asarray(t, dtype=float)
@@ -237,10 +247,23 @@ def _structure_key(source):
     return source
 
 
-def _casadi_evaluate(reference, t):
-    """:func:`_evaluate` on the CasADi symbol ``t``."""
+def _reference_parameters(reference) -> tuple:
+    """``(structure, values)`` of a reference inside a compiled law: its own
+    ``casadi_parameters`` where it offers them (its numbers then enter as parameters), else
+    the reference itself as structure (:func:`_structure_key`) and no numbers."""
+    own = getattr(reference, "casadi_parameters", None) if reference is not None else None
+    if own is None:
+        return _structure_key(reference), np.zeros(0)
+    return (type(reference), own[0]), np.asarray(own[1], dtype=float).reshape(-1)
+
+
+def _casadi_evaluate(reference, t, parameters=None):
+    """:func:`_evaluate` on the CasADi symbol ``t``; the reference's numbers are the symbols
+    ``parameters`` where given (laid out as :func:`_reference_parameters`)."""
     if reference is None:
         return 0.0, 0.0, 0.0
+    if parameters is not None and parameters.numel() > 0:
+        return reference.casadi_reference(t, parameters)
     return reference.casadi_reference(t)
 
 

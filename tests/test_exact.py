@@ -211,3 +211,34 @@ def test_slew_90_optimised_on_exact_suppresses_vibration_on_the_finite_element_b
 def test_exact_refuses_more_modes_than_it_can_build(n_modes):
     with pytest.raises(ValueError, match=r"n_modes must be at most 24 for the exact variant"):
         build_model(_system("hub-beam-mass"), n_modes=n_modes, variant="exact")
+
+
+#: The vectorized right-hand side against the scalar one: the same arithmetic in another
+#: order, so they differ by round-off, amplified by the mass matrix's condition number.
+ROUND_OFF = 1e-14
+
+
+@pytest.mark.parametrize("name", SYSTEMS)
+@pytest.mark.parametrize("n_modes", [2, 4, 6])
+def test_vectorized_rhs_is_the_scalar_rhs(name, n_modes):
+    model = build_model(_system(name), n_modes, "exact")
+    rng = np.random.default_rng(n_modes)
+    deflection = 0.3 * model.system.beam.length / np.abs(model.matrices.tip)
+    scale = np.r_[1.0, deflection, 2.0, model.matrices.beam_frequencies * deflection]
+    x = rng.uniform(-1.0, 1.0, (model.n_states, 8)) * scale[:, None]
+    u = rng.uniform(-5.0, 5.0, (1, 8))
+    scalar = np.array(model.geometry.rhs(x, u))
+    vectorized = np.array(model.geometry.rhs_vectorized(x, u))
+    for k in range(x.shape[1]):
+        condition = np.linalg.cond(model.mass_matrix(x[:, k]))
+        np.testing.assert_allclose(vectorized[:, k], scalar[:, k], rtol=0,
+                                   atol=ROUND_OFF * condition * np.max(np.abs(scalar[:, k])))
+
+
+def test_vectorized_rhs_does_not_grow_with_the_quadrature_nodes():
+    from flexctl.model.exact import vectorized_rhs
+
+    model = build_model(_system("hub-beam-mass"), 3, "exact")
+    counts = {panels: vectorized_rhs(model.system, 3, panels, model.matrices).n_instructions()
+              for panels in (2, 4, 32)}
+    assert len(set(counts.values())) == 1, counts

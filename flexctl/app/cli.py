@@ -165,6 +165,14 @@ def _parser() -> argparse.ArgumentParser:
     demo.set_defaults(func=_cmd_demo)
 
     _add_bench_command(commands)
+    cache = commands.add_parser(
+        "cache", help="list or clear the compiled-function cache",
+        description="CasADi functions compiled to machine code are kept in a cache directory "
+        "($FLEXCTL_CACHE_DIR, else $XDG_CACHE_HOME/flexctl or ~/.cache/flexctl) and reused by "
+        "later runs. 'info' shows the directory, its entries, their size and the compiler; "
+        "'clear' removes the entries.")
+    cache.add_argument("action", choices=("info", "clear"), help="what to do")
+    cache.set_defaults(func=_cmd_cache)
     return parser
 
 
@@ -459,6 +467,18 @@ def _cmd_demo(args) -> int:
     for text in surprises:
         print(f"{PROG}: unexpected: {text}", file=sys.stderr)
     return EXIT_STOPPED if surprises else EXIT_OK
+
+
+def _cmd_cache(args) -> int:
+    from ..sim.compile_cache import cache_dir, cache_info, clear_cache
+    try:
+        if args.action == "clear":
+            print(f"removed {clear_cache()} compiled functions from {cache_dir()}")
+        else:
+            print(cache_info())
+    except OSError as exc:
+        return _error(f"cannot read the cache {cache_dir()}: {exc.strerror or exc}")
+    return EXIT_OK
 
 
 def main(argv=None) -> int:

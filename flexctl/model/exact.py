@@ -47,6 +47,7 @@ from .modes import mode_shapes
 from .parameters import HubBeam
 
 __all__ = ["EXACT_MAX_MODES", "ExactGeometry", "PanelRule", "choose_panels", "exact_geometry", "appendage_terms",
+           "vectorized_rhs",
            "PANEL_TOLERANCE", "PANEL_POINTS"]
 
 #: Most modes the exact variant takes (20 modes: a 445k-instruction right-hand side, 4 s to build).
@@ -142,7 +143,11 @@ class ExactGeometry:
     n_panels : int
         Gauss-Legendre panels of the quadrature (:class:`PanelRule`).
     rhs : casadi.Function
-        ``(x, u) -> xdot``, torque ``u`` in N m.
+        ``(x, u) -> xdot``, torque ``u`` in N m (SX: every quadrature node written out).
+    rhs_vectorized : casadi.Function
+        The same as an MX function of whole-vector operations over the quadrature nodes
+        (:func:`vectorized_rhs`): its operations and generated code do not grow with the
+        nodes; several times faster on CasADi's virtual machine and quick to compile.
     beam : casadi.Function
         ``(q, q_dot, rate, acceleration) -> q_tt`` under a prescribed hub motion.
     torque : casadi.Function
@@ -159,6 +164,7 @@ class ExactGeometry:
     n_modes: int
     n_panels: int
     rhs: object = field(repr=False)
+    rhs_vectorized: object = field(repr=False)
     beam: object = field(repr=False)
     torque: object = field(repr=False)
     mass: object = field(repr=False)
@@ -236,21 +242,40 @@ def _terms(system, n_modes, n_panels, q, q_dot, rate):
     return mass, ca.vertcat(t["b_t"], t["b_q"]), t["tip"]
 
 
-def _rhs(system: HubBeam, n_modes: int, n_panels: int, matrices):
-    """``(x, u) -> xdot`` and the symbols and terms it was built from."""
+def _rhs(system: HubBeam, n_modes: int, n_panels: int, matrices, vectorized: bool = False):
+    """``(x, u) -> xdot`` and the symbols and terms it was built from: SX (every node's
+    arithmetic written out) or, ``vectorized``, MX (one operation per vector of nodes)."""
     import casadi as ca
 
     n, layout = n_modes, StateLayout.single(n_modes)
-    x = ca.SX.sym("x", layout.n_states)
-    u = ca.SX.sym("u")
+    sym = ca.MX if vectorized else ca.SX
+    x = sym.sym("x", layout.n_states)
+    u = sym.sym("u")
     _, q, rate, q_dot = layout.split(x)
     mass, bias, tip = _terms(system, n, n_panels, q, q_dot, rate)
     elastic = -ca.mtimes(ca.DM(matrices.K_ff), q) - ca.mtimes(ca.DM(matrices.C_ff), q_dot)
     generalized = ca.vertcat(u - system.hub.friction * rate, elastic) - bias
-    acc = ca.solve(mass, generalized)
-    rhs = ca.Function(f"flexctl_exact_N{n}", [x, u], [ca.vertcat(x[layout.velocities], acc)],
+    if vectorized:
+        # the small dense solve as scalar code (an MX solve needs a linear solver plugin)
+        m_sym, g_sym = ca.SX.sym("M", n + 1, n + 1), ca.SX.sym("g", n + 1)
+        solve = ca.Function(f"flexctl_exact_solve_N{n}", [m_sym, g_sym],
+                            [ca.solve(m_sym, g_sym)])
+        acc = solve(mass, generalized)
+    else:
+        acc = ca.solve(mass, generalized)
+    name = f"flexctl_exact_{'vec_' if vectorized else ''}N{n}"
+    rhs = ca.Function(name, [x, u], [ca.vertcat(x[layout.velocities], acc)],
                       ["x", "u"], ["xdot"])
     return rhs, x, mass, bias, tip
+
+
+def vectorized_rhs(system: HubBeam, n_modes: int, n_panels: int, matrices):
+    """The exact right-hand side ``(x, u) -> xdot`` as an MX function of whole-vector
+    operations: the nodes' slopes, integrands and Jacobian rows as vectors and matrices, the
+    integrals as products with the constant (sparse) quadrature matrices, the mass-matrix
+    blocks as matrix products. Its operation count, and so its generated code, does not depend
+    on the number of quadrature nodes (only the constant tables grow with them)."""
+    return _rhs(system, n_modes, n_panels, matrices, vectorized=True)[0]
 
 
 def _build(system: HubBeam, n_modes: int, n_panels: int, matrices) -> ExactGeometry:
@@ -283,7 +308,8 @@ def _build(system: HubBeam, n_modes: int, n_panels: int, matrices) -> ExactGeome
     kinetic = 0.5 * ca.dot(v, ca.mtimes(mass, v))
     energy = ca.Function(f"{name}_energy", [x],
                          [kinetic + 0.5 * ca.dot(q, ca.mtimes(stiffness, q))], ["x"], ["E"])
-    return ExactGeometry(system=system, n_modes=n, n_panels=n_panels, rhs=rhs, beam=beam,
+    return ExactGeometry(system=system, n_modes=n, n_panels=n_panels, rhs=rhs,
+                         rhs_vectorized=vectorized_rhs(system, n, n_panels, matrices), beam=beam,
                          torque=torque, mass=mass_fn, tip=tip_fn, energy=energy)
 
 

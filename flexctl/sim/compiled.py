@@ -100,34 +100,67 @@ def piecewise_constant(t, edges, values):
     return out
 
 
-def _parametric(controller) -> bool:
-    """A static controller whose numbers enter its CasADi form as parameters: it offers
-    ``casadi_parameters`` (``(structure, values)``) and ``casadi_torque(t, x, parameters)``."""
-    return (controller is not None and not getattr(controller, "n_states", 0)
-            and getattr(controller, "casadi_parameters", None) is not None)
+def _parametric(source) -> bool:
+    """An input whose numbers enter its CasADi form as parameters, so that inputs differing
+    only in numbers share one compiled function: it offers ``casadi_parameters``
+    (``(structure, values)``) and takes the values as symbols, ``casadi(t, parameters)`` (a
+    torque or hub motion) or ``casadi_torque(t, x, parameters)`` (a static controller)."""
+    return (source is not None and not getattr(source, "n_states", 0)
+            and not getattr(source, "state_dependent", False)
+            and getattr(source, "casadi_parameters", None) is not None)
 
 
-def _parameter_values(controller) -> np.ndarray:
-    """The numbers of a parametric controller (:func:`_parametric`), else none."""
-    if not _parametric(controller):
+def _parameter_values(source) -> np.ndarray:
+    """The numbers of a parametric input (:func:`_parametric`), else none."""
+    if not _parametric(source):
         return np.zeros(0)
-    return np.asarray(controller.casadi_parameters[1], dtype=float).reshape(-1)
+    return np.asarray(source.casadi_parameters[1], dtype=float).reshape(-1)
 
 
-def _applied_torque(t, x, z, torque, controller, parameters):
-    """CasADi hub torque of ``torque`` plus ``controller`` (numbers from ``parameters``, a
-    symbol, for a parametric controller)."""
+def input_numbers(inputs) -> np.ndarray:
+    """The numbers of ``inputs = (torque, hub_motion, controller)``, in that order: the
+    parameter vector ``c`` of their compiled functions."""
+    return np.concatenate([_parameter_values(source) for source in inputs])
+
+
+def _split_numbers(inputs, c) -> list:
+    """``c`` (a CasADi symbol laid out as :func:`input_numbers`) cut into each input's part
+    (None for an input without parameters)."""
+    parts, start = [], 0
+    for source in inputs:
+        size = _parameter_values(source).size
+        parts.append(c[start:start + size] if _parametric(source) else None)
+        start += size
+    return parts
+
+
+def _applied_torque(t, x, z, torque, controller, parameters=(None, None)):
+    """CasADi hub torque of ``torque`` plus ``controller``; ``parameters`` holds each one's
+    numbers as symbols (:func:`_split_numbers`; None: its numbers are constants)."""
     u = 0.0
+    torque_numbers, controller_numbers = parameters
     if torque is not None:
-        u = u + (torque.casadi(t, x) if getattr(torque, "state_dependent", False)
-                 else torque.casadi(t))
+        if getattr(torque, "state_dependent", False):
+            u = u + torque.casadi(t, x)
+        elif torque_numbers is not None:
+            u = u + torque.casadi(t, torque_numbers)
+        else:
+            u = u + torque.casadi(t)
     if controller is None:
         return u
     if getattr(controller, "n_states", 0):
         return u + controller.casadi_torque(t, x, z)
-    if _parametric(controller):
-        return u + controller.casadi_torque(t, x, parameters)
+    if controller_numbers is not None:
+        return u + controller.casadi_torque(t, x, controller_numbers)
     return u + controller.casadi_torque(t, x)
+
+
+def hub_motion_casadi(hub_motion, t, parameters=None) -> tuple:
+    """Rate and acceleration of a hub motion on the symbol ``t`` (its numbers the symbols
+    ``parameters`` where given)."""
+    if parameters is not None:
+        return hub_motion.casadi(t, parameters)
+    return hub_motion.casadi(t)
 
 
 def drive_size(model, hub_motion=None, controller=None) -> int:
@@ -140,12 +173,16 @@ def drive_size(model, hub_motion=None, controller=None) -> int:
 
 def _closed_loop_dynamics(model, t, y, torque, controller, parameters=None):
     """CasADi ``d[x, z]/dt`` of the plant ``x`` under ``torque`` and ``controller``, whose
-    internal states ``z`` (if any) follow ``casadi_derivative``."""
+    internal states ``z`` (if any) follow ``casadi_derivative``; ``parameters`` the symbol of
+    their numbers (:func:`input_numbers` of ``(torque, None, controller)``)."""
     import casadi as ca
 
     plant = slice(0, model.n_states)
     x, z = y[plant], y[plant.stop:]
-    u = _applied_torque(t, x, z, torque, controller, parameters)
+    numbers = (None, None)
+    if parameters is not None:
+        numbers = tuple(_split_numbers((torque, None, controller), parameters)[::2])
+    u = _applied_torque(t, x, z, torque, controller, numbers)
     if isinstance(x, ca.MX):
         dx = model.integration_rhs()(x, u)
     else:
@@ -172,16 +209,14 @@ def _immutable(source) -> bool:
 def _input_key(model, inputs, scale):
     """Cache key of a right-hand side, or None when an input may change after use.
 
-    Inputs count by identity, except a parametric controller (:func:`_parametric`), which
-    counts by its class and structure: controllers that differ only in numbers share one
-    right-hand side and its integrators.
+    Inputs count by identity, except parametric ones (:func:`_parametric`), which count by
+    their class and structure: inputs that differ only in numbers share one right-hand side
+    and its integrators.
     """
     if not all(_immutable(source) for source in inputs):
         return None
-    parts = [id(source) for source in inputs]
-    controller = inputs[-1]
-    if _parametric(controller):
-        parts[-1] = (type(controller), controller.casadi_parameters[0])
+    parts = [(type(source), source.casadi_parameters[0]) if _parametric(source)
+             else id(source) for source in inputs]
     return (id(model), *parts, scale.tobytes())
 
 
@@ -204,14 +239,15 @@ def _rhs_function(model, scale, torque, hub_motion, controller):
     """The scaled right-hand side as a CasADi DAE ``Function`` (``casadi.dyn_in`` inputs) in
     the segment's own time ``tau`` in [0, 1]: ``t = t_0 + tau h`` with the parameters
     ``p = [t_0, h, t_last, c]``, ``t_last`` the last time at which the inputs are evaluated and
-    ``c`` the numbers of a parametric controller (:func:`_parametric`).
+    ``c`` the numbers of the parametric inputs (:func:`input_numbers`).
 
     One function (and one integrator per output pattern) then serves every segment: the holds
     of an optimal torque differ only in ``t_0``.
     """
     import casadi as ca
 
-    n_numbers = _parameter_values(controller).size
+    inputs = (torque, hub_motion, controller)
+    n_numbers = input_numbers(inputs).size
     # the exact model enters through a call (Model.integration_rhs), which keeps its cheap
     # Newton Jacobian; the others are inlined into scalar expressions
     sym = ca.MX if model.variant == "exact" and hub_motion is None else ca.SX
@@ -220,7 +256,8 @@ def _rhs_function(model, scale, torque, hub_motion, controller):
     y = ys * ca.DM(scale)
     t_in = ca.fmin(p[0] + tau * p[1], p[2])
     if hub_motion is not None:
-        rate, acceleration = hub_motion.casadi(t_in)
+        rate, acceleration = hub_motion_casadi(hub_motion, t_in,
+                                               _split_numbers(inputs, p[3:])[1])
         dy = _symbolic_beam_dynamics(model, y, rate, acceleration)
     else:
         dy = _closed_loop_dynamics(model, t_in, y, torque, controller, p[3:])
@@ -249,7 +286,7 @@ def numeric_rhs(model, torque=None, hub_motion=None, controller=None):
     # some 150 (argument conversion)
     buffer, evaluate = rhs.buffer()
     t_arg, y_arg, out = np.zeros(1), np.zeros(n_y), np.zeros(n_y)
-    p_arg = np.concatenate(([0.0, 1.0, 0.0], _parameter_values(controller)))
+    p_arg = np.concatenate(([0.0, 1.0, 0.0], input_numbers(inputs)))
     for k, arg in ((0, t_arg), (1, y_arg), (3, p_arg)):
         buffer.set_arg(k, memoryview(arg))
     buffer.set_res(0, memoryview(out))
@@ -285,12 +322,14 @@ def torque_history(model, t, states, controller_states, torque=None, controller=
 
     nz = controller_states.shape[0]
 
-    numbers = _parameter_values(controller)
+    inputs = (torque, None, controller)
+    numbers = input_numbers(inputs)
 
     def build():
         ts, x, z = ca.SX.sym("t"), ca.SX.sym("x", model.n_states), ca.SX.sym("z", nz)
         c = ca.SX.sym("c", numbers.size)
-        u = ca.SX(_applied_torque(ts, x, z, torque, controller, c))
+        u = ca.SX(_applied_torque(ts, x, z, torque, controller,
+                                  tuple(_split_numbers(inputs, c)[::2])))
         return ca.Function("flexctl_torque", [ts, x, z, c], [u])
 
     key = _input_key(model, (torque, None, controller), np.array([nz], dtype=float))
@@ -365,7 +404,7 @@ class SegmentIntegrator:
         # the inputs see the segment's own piece at its closed end, as on the SciPy path: a
         # solver that evaluates past the last output time must not see the next hold
         self._parameters = [t_start, length, float(np.nextafter(t_end, t_start)),
-                            *_parameter_values(controller)]
+                            *input_numbers(inputs)]
         self._f = _cached(_INTEGRATOR_CACHE, INTEGRATOR_CACHE_SIZE, key, (model, *inputs),
                           lambda: ca.integrator(f"flexctl_{solver}", solver, rhs, 0.0,
                                                 [float(v) for v in fractions], opts))

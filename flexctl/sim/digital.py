@@ -35,8 +35,9 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from .stops import tip_rows
-from .compiled import CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, is_symbolic
-from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
+from .compiled import (CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, input_numbers,
+                       is_symbolic)
+from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _InPlace, _jit, _step_function
 from .inputs import input_value, output_grid, time_function
 from .drives import bound_to_plant
 from .sensors import sensor_names
@@ -314,12 +315,15 @@ class _RK4Hold:
     def __init__(self, model, torque, h_max):
         self.h_max, self.model, self.torque = float(h_max), model, torque
         self.chains = {}
-        # the compiled loops are kept across runs (by model, torque and step count), like the
-        # CVODES integrators: a second run with other gains or another law costs no build
+        # the compiled loops are kept across runs (by model, torque kind and step count), like
+        # the CVODES integrators: a second run with other gains, another law or another
+        # torque amplitude costs no build (the torque's numbers and the held value enter as
+        # parameters)
         self.key = _input_key(model, (torque, None, None), np.array([1.0]))
+        self.torque_numbers = input_numbers((torque, None, None))
 
     def _final(self, count):
-        """Compiled ``count`` steps: ``([y; t], h, u) -> [y; t]`` at the end."""
+        """Compiled ``count`` steps: ``([y; t], h, [c; u]) -> [y; t]`` at the end."""
         if count not in self.chains:
             self.chains[count] = _cached(
                 _STEP_CACHE, _STEP_CACHE_SIZE,
@@ -330,11 +334,14 @@ class _RK4Hold:
     def _build(self, count):
         import casadi as ca
 
-        step = _step_function(self.model, self.torque, None, _Held(0.0), 1)[0]
+        n_numbers = self.torque_numbers.size + 1
+        step = _step_function(self.model, self.torque, None, _Held(0.0), n_numbers)[0]
         chain = step.mapaccum("flexctl_rk4_hold", count)
-        args = chain.mx_in()
-        ys = chain.call(args)[0]
-        return _jit(ca.Function("flexctl_rk4_hold_end", args, [ys[:, -1]]), self.model)
+        yt, h = ca.MX.sym("yt", step.size1_in(0)), ca.MX.sym("h")
+        c = ca.MX.sym("c", n_numbers)
+        ys = chain(yt, ca.repmat(h, 1, count), ca.repmat(c, 1, count))[0]
+        return _InPlace(_jit(ca.Function("flexctl_rk4_hold_end", [yt, h, c],
+                                         [ca.densify(ys[:, -1])]), self.model))
 
     def __call__(self, lo, t_out, y, u, loose=False):
         h_max = self.h_max * (2.0 if loose else 1.0)
@@ -342,7 +349,8 @@ class _RK4Hold:
         yt = np.append(y, lo)
         for end in t_out:
             count = max(1, int(np.ceil((end - start) / h_max * (1.0 - 1e-12))))
-            yt = np.array(self._final(count)(yt, (end - start) / count, u)).reshape(-1)
+            yt = self._final(count)(yt, (end - start) / count,
+                                    np.append(self.torque_numbers, u))[0].reshape(-1).copy()
             yt[-1] = end
             out.append(yt[:-1])
             evaluations += 4 * count

@@ -18,14 +18,13 @@ again (at most ``MAX_HALVINGS`` times).
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections import OrderedDict
 
 import numpy as np
 
-from .compiled import (_cached, _closed_loop_dynamics, _input_key, drive_size,
-                       _parameter_values)
+from .compiled import (_cached, _closed_loop_dynamics, _input_key, _split_numbers,
+                       drive_size, hub_motion_casadi, input_numbers)
+from .compile_cache import compiled
 from ..model.exports import _symbolic_beam_dynamics
 
 __all__ = ["RK4_OMEGA_H", "RK4_STABILITY", "MAX_HALVINGS", "step_times", "FixedStepRun",
@@ -44,12 +43,16 @@ MAX_STEPS = 20_000_000
 #: a step boundary (a breakpoint) is seen from the left inside the step, as by the other paths.
 _END_INSIDE = 1e-9
 
-#: Compile each run's loop to machine code (CasADi ``jit`` through the system C compiler)
-#: where a compiler is present, for the models that compile quickly (not the exact variant,
-#: whose quadrature takes many seconds to compile): about 6 times faster per step than CasADi's
-#: virtual machine, once the 0.2 to 0.5 s compile is paid (cached per model, inputs and step
-#: count). A failed compile falls back to the virtual machine silently.
+#: Compile the loops to machine code (:mod:`flexctl.sim.compile_cache`, kept across runs and
+#: processes) where a compiler is present, for the models that compile quickly (not the exact
+#: variant, whose quadrature takes many seconds to compile): about 6 times faster per step
+#: than CasADi's virtual machine, once the 0.2 to 0.5 s compile is paid, once.
 USE_JIT = True
+#: Steps per call of a compiled loop, largest first: a segment takes the largest that fits,
+#: then smaller ones, the last padded with steps of length 0 (which change nothing) where
+#: that wastes fewer steps than it makes. The loops do not depend on the number of steps, so
+#: runs of other lengths, steps or segments reuse them.
+CHUNKS = (4096, 256, 16)
 
 _STEP_CACHE: OrderedDict = OrderedDict()
 _STEP_CACHE_SIZE = 64
@@ -69,7 +72,8 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int):
 
     def f(time, state):
         if hub_motion is not None:
-            rate, acceleration = hub_motion.casadi(time)
+            rate, acceleration = hub_motion_casadi(
+                hub_motion, time, _split_numbers((torque, hub_motion, controller), c)[1])
             return _symbolic_beam_dynamics(model, state, rate, acceleration)
         return _closed_loop_dynamics(model, time, state, torque, controller, c)
 
@@ -83,19 +87,77 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int):
             ca.Function("flexctl_rate", [ys, ts, c], [f(ts, ys)]))
 
 
-def _segment_runs(step, count: int, tip_map, model):
-    """Compiled runs of ``count`` steps: ``full([y; t], h, c) -> (Y, F)`` (states with time
-    and derivatives at every step) and ``tips([y; t], h, c) -> (tip, [y; t]_end)`` (tip
-    deflection at every step end and the last state), for the coarse run of a pair."""
-    import casadi as ca
+class _ChunkRuns(dict):
+    """Compiled loops ``run_k([y; t], h, c) -> (Y, F)`` of ``k`` steps, ``k`` in
+    :data:`CHUNKS`, each built (and compiled) when first used: ``h`` the step lengths, shape
+    (1, k), ``Y`` the states with time after each step, ``F`` the derivatives at each step's
+    start."""
 
-    chain = step.mapaccum("flexctl_rk4_run", count)
-    args = chain.mx_in()
-    ys, fs = chain.call(args)
-    ny = tip_map.shape[-1]
-    tips = ca.mtimes(ca.DM(tip_map), ys[:ny, :])
-    return (_jit(ca.Function("flexctl_rk4_full", args, [ys, fs]), model),
-            _jit(ca.Function("flexctl_rk4_tips", args, [tips, ys[:, -1]]), model))
+    def __init__(self, step, model):
+        super().__init__()
+        self.step, self.model = step, model
+
+    def __missing__(self, k: int):
+        import casadi as ca
+
+        chain = self.step.mapaccum(f"flexctl_rk4_chain{k}", k)
+        yt, hs = ca.MX.sym("yt", self.step.size1_in(0)), ca.MX.sym("h", 1, k)
+        c = ca.MX.sym("c", self.step.size1_in(2))
+        ys, fs = chain(yt, hs, ca.repmat(c, 1, k))
+        self[k] = _InPlace(_jit(ca.Function(f"flexctl_rk4_run{k}", [yt, hs, c],
+                                            [ca.densify(ys), ca.densify(fs)]), self.model))
+        return self[k]
+
+
+class _InPlace:
+    """A CasADi function evaluated on numpy buffers of its own: a call copies the arguments
+    in and returns views of the results (valid until the next call), with none of the
+    conversion to and from ``DM`` that costs some 20 us per thousand numbers."""
+
+    def __init__(self, function):
+        self.function = function
+        self.args = [np.zeros(function.nnz_in(i)) for i in range(function.n_in())]
+        self.results = [np.zeros(function.nnz_out(i)) for i in range(function.n_out())]
+        self.shapes = [function.size_out(i) for i in range(function.n_out())]
+        self.buffer, self.evaluate = function.buffer()
+        for i, arg in enumerate(self.args):
+            self.buffer.set_arg(i, memoryview(arg))
+        for i, result in enumerate(self.results):
+            self.buffer.set_res(i, memoryview(result))
+
+    def __call__(self, *args):
+        for buffer, value in zip(self.args, args):
+            buffer[:] = np.ravel(value, order="F")
+        self.evaluate()
+        # dense results, column-major
+        return [r.reshape(shape[1], shape[0]).T for r, shape in zip(self.results, self.shapes)]
+
+
+def _chunk_runs(step, model) -> dict:
+    """The compiled loops of ``step`` (:class:`_ChunkRuns`), built on first use."""
+    return _ChunkRuns(step, model)
+
+
+def run_steps(runs: dict, yt, h: float, count: int, numbers) -> tuple:
+    """``count`` RK4 steps of length ``h`` from ``yt = [y; t]`` by the loops of
+    :func:`_chunk_runs`: ``(Y, F)`` of shapes (m + 1, count) and (m, count)."""
+    ys, fs, done = [], [], 0
+    while done < count:
+        left = count - done
+        # one padded call where it wastes no more steps than it makes, else the largest
+        # loop that fits
+        k = min((k for k in CHUNKS if k >= left), default=None)
+        if k is None or k - left > left:
+            k = next((k for k in CHUNKS if k <= left), CHUNKS[-1])
+        used = min(k, left)
+        steps = np.zeros((1, k))
+        steps[0, :used] = h
+        y_k, f_k = runs[k](yt, steps, numbers)
+        ys.append(y_k[:, :used].copy())
+        fs.append(f_k[:, :used].copy())
+        yt = ys[-1][:, -1]
+        done += used
+    return np.concatenate(ys, axis=1), np.concatenate(fs, axis=1)
 
 
 def hermite(t, starts, sizes, y, f) -> np.ndarray:
@@ -122,21 +184,13 @@ def hermite(t, starts, sizes, y, f) -> np.ndarray:
     return (h00 * y[:, k] + h10 * h * f[:, k] + h01 * y[:, k + 1] + h11 * h * f[:, k + 1])
 
 
-def _jit(function, model):
-    """``function`` compiled to machine code where allowed and possible, else itself."""
-    if not USE_JIT or model.variant == "exact":
+def _jit(function, model, any_variant: bool = False):
+    """``function`` compiled to machine code where allowed and possible, else itself (the
+    exact variant's only with ``any_variant``: for functions built on its vectorized
+    right-hand side, which compile in about a second)."""
+    if not USE_JIT or (model.variant == "exact" and not any_variant):
         return function
-    import casadi as ca
-
-    try:
-        args = function.mx_in()
-        return ca.Function(f"{function.name()}_jit", args, function.call(args),
-                           {"jit": True, "compiler": "shell",
-                            "jit_name": f"flexctl_jit_{os.getpid()}",
-                            "jit_options": {"flags": ["-O2"], "verbose": False,
-                                            "directory": tempfile.gettempdir() + os.sep}})
-    except Exception:       # no compiler, or it failed: CasADi raises RuntimeError
-        return function
+    return compiled(function)
 
 
 def step_times(edges, h_max: float, refine: int = 1) -> tuple:
@@ -242,11 +296,11 @@ def integrate_fixed_step(model, edges, t_out, y0, tip_map, h_max: float, rtol: f
 
 class _RK4Runner:
     """RK4 runs of one drive over fixed step boundaries at a given refinement: the compiled
-    loops (cached per step count), the tip at the step ends, the states for dense output."""
+    loops (shared by every step count), the tip at the step ends, the states for dense output."""
 
     def __init__(self, model, edges, y0, tip_map, h_max, inputs):
         self.model, self.inputs = model, inputs
-        self.numbers = _parameter_values(inputs[-1])
+        self.numbers = input_numbers(inputs)
         self.base_key = _input_key(model, inputs, np.array([self.numbers.size], dtype=float))
         self.step, self.rate = _cached(
             _STEP_CACHE, _STEP_CACHE_SIZE,
@@ -263,38 +317,27 @@ class _RK4Runner:
                              f"{2 ** (MAX_HALVINGS + 1) * self.base.sum()} RK4 steps, more "
                              f"than the limit {MAX_STEPS}")
 
-    def runs(self, count):
-        """The compiled loops of ``count`` steps: (states and derivatives, tip and end)."""
-        key = (None if self.base_key is None
-               else ("rk4-runs", self.base_key, count, self.tip_map.tobytes()))
+    def runs(self) -> dict:
+        """The compiled loops of :func:`_chunk_runs`."""
+        key = None if self.base_key is None else ("rk4-runs", self.base_key)
         return _cached(_STEP_CACHE, _STEP_CACHE_SIZE, key, (self.model, *self.inputs),
-                       lambda: _segment_runs(self.step, count, self.tip_map, self.model))
-
-    def _segments(self, refine):
-        """``(start, width, count, loops)`` of each segment at refinement ``refine``."""
-        for lo, width, count in zip(self.edges[:-1], self.widths, self.base * refine):
-            yield lo, width, int(count), self.runs(int(count))
+                       lambda: _chunk_runs(self.step, self.model))
 
     def step_end_tips(self, refine) -> np.ndarray:
         """Each appendage's tip at every step end, m, shape (K, steps)."""
-        yt = np.append(self.y0, self.edges[0])
-        tips = []
-        with np.errstate(invalid="ignore", over="ignore"):
-            for lo, width, count, loops in self._segments(refine):
-                tip, yt = (np.array(v) for v in loops[1](yt, width / count, self.numbers))
-                tips.append(tip.reshape(self.tip_map.shape[0], -1))
-                yt = yt.reshape(-1)
-                yt[-1] = lo + width          # time exactly at the segment's end
-        return np.concatenate(tips, axis=1)
+        ny = self.y0.size
+        return self.tip_map @ self.states(refine)[0][:ny, 1:]
 
     def states(self, refine):
         """States at the step ends, derivatives, step starts and sizes, for dense output."""
         yt = np.append(self.y0, self.edges[0])
         blocks, derivatives, starts, sizes = [], [], [], []
+        runs = self.runs()
         with np.errstate(invalid="ignore", over="ignore"):
-            for lo, width, count, loops in self._segments(refine):
+            for lo, width, count in zip(self.edges[:-1], self.widths, self.base * refine):
+                count = int(count)
                 h = width / count
-                ys, fs = (np.array(v) for v in loops[0](yt, h, self.numbers))
+                ys, fs = run_steps(runs, yt, h, count, self.numbers)
                 blocks.append(ys)
                 derivatives.append(fs)
                 starts.append(lo + h * np.arange(count))

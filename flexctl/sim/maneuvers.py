@@ -149,11 +149,20 @@ class SpinUp(KeywordOnly):
         ws, ts = self.spin_rate, self.ramp_time
         return np.where(t < ts, ws / ts * (1.0 - np.cos(2.0 * np.pi * t / ts)), 0.0)
 
-    def casadi(self, t):
-        """Rate and acceleration as CasADi expressions of the symbol ``t``."""
+    @property
+    def casadi_parameters(self) -> tuple:
+        """``(structure, values)``: nothing shapes :meth:`casadi` but the class; its numbers
+        are ``[spin_rate, ramp_time]`` (compiled runs of spin-ups share one function)."""
+        return (), np.array([self.spin_rate, self.ramp_time])
+
+    def casadi(self, t, parameters=None):
+        """Rate and acceleration as CasADi expressions of the symbol ``t``; the numbers are
+        symbols too when ``parameters`` (laid out as :attr:`casadi_parameters`) is given."""
         import casadi as ca
 
         ws, ts = self.spin_rate, self.ramp_time
+        if parameters is not None:
+            ws, ts = parameters[0], parameters[1]
         k = 2.0 * np.pi / ts
         rate = ca.if_else(t < ts, ws / ts * (t - ca.sin(k * t) / k), ws)
         acceleration = ca.if_else(t < ts, ws / ts * (1.0 - ca.cos(k * t)), 0.0)
@@ -192,12 +201,22 @@ class SineTorque(KeywordOnly):
         on = (t >= 0.0) & (t <= self.duration)
         return np.where(on, self.peak_torque * np.sin(2.0 * np.pi * t / self.duration), 0.0)
 
-    def casadi(self, t):
-        """The torque as a CasADi expression of the symbol ``t``."""
+    @property
+    def casadi_parameters(self) -> tuple:
+        """``(structure, values)``: nothing shapes :meth:`casadi` but the class; its numbers
+        are ``[peak_torque, duration]`` (compiled runs of sine torques share one function)."""
+        return (), np.array([self.peak_torque, self.duration])
+
+    def casadi(self, t, parameters=None):
+        """The torque as a CasADi expression of the symbol ``t``; the numbers are symbols too
+        when ``parameters`` (laid out as :attr:`casadi_parameters`) is given."""
         import casadi as ca
 
-        on = ca.logic_and(t >= 0.0, t <= self.duration)
-        return ca.if_else(on, self.peak_torque * ca.sin(2.0 * np.pi * t / self.duration), 0.0)
+        peak, duration = self.peak_torque, self.duration
+        if parameters is not None:
+            peak, duration = parameters[0], parameters[1]
+        on = ca.logic_and(t >= 0.0, t <= duration)
+        return ca.if_else(on, peak * ca.sin(2.0 * np.pi * t / duration), 0.0)
 
 
 @dataclass(frozen=True, kw_only=True)

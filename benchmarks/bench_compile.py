@@ -1,0 +1,251 @@
+"""Benchmark: the persistent compiled-function cache (issue 21, deliverables 1, 3 and 5).
+
+A. Compile time per model and time per right-hand-side evaluation: ``model.casadi()`` of
+   ``hub-beam-mass`` (first_order and exact, 2, 4 and 6 modes, and the exact model's
+   vectorized form ``geometry.rhs_vectorized``, which CVODES evaluates) compiled through
+   :func:`flexctl.sim.compile_cache.compiled` with the cache cold (a fresh directory: generate,
+   compile, load) and warm (generate, hash, load the library), and one evaluation on CasADi's
+   virtual machine against the compiled code (the mean over a ``map`` of 1000 evaluations, best
+   of 20), with the ratio exact / first_order.
+B. A 10-point sweep of PD slews over the angle (0.3 to 1.6 rad, durations 4.0 to 4.9 s, 8 s
+   each, slew-90's system, 2 modes) with ``method="rk4"`` and with the default method: the code
+   before the cache (``--before DIR``, a checkout of it; skipped if not given) against this one
+   with the cache cold and warm, each in a fresh process (model built before timing). Also the
+   issue's example: a PD slew of 30 then of 45 degrees.
+C. Simulation of the exact model against first_order on the same scene and modes (the goals
+   table's first row), before and after, each in a fresh process.
+D. NMPC real-time iteration on slew-90's exact 2-mode design model: build time and solve time
+   per step (median, 99th percentile), before and after, cache cold and warm.
+
+Run: ``python benchmarks/bench_compile.py [--before /path/to/old/checkout]``. Nothing is
+asserted; the script prints what it measures (the machine's two cores are shared).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+MAP = 1000
+REPEATS = 20
+
+#: One process of case B: prints JSON with each point's wall time and the compile counters.
+SWEEP = r"""
+import json, sys, time, warnings
+import numpy as np
+warnings.simplefilter("ignore")
+import flexctl
+from controllers.pd import design_pd
+from controllers.reference import SlewProfile
+method = sys.argv[1]
+model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=2)
+angles = [float(a) for a in sys.argv[2].split(",")]
+walls = []
+for k, angle in enumerate(angles):
+    pd = design_pd(model, bandwidth=2.0, damping_ratio=0.9, torque_limit=20.0,
+                   reference=SlewProfile(slew_angle=angle, duration=4.0 + 0.1 * k))
+    start = time.perf_counter()
+    result = flexctl.simulate(model, 8.0, controller=pd, method=method)
+    walls.append(time.perf_counter() - start)
+    assert result.status == "ok"
+try:
+    from flexctl.sim.compile_cache import STATS
+except ImportError:
+    STATS = {}
+print(json.dumps({"walls": walls, "stats": STATS}))
+"""
+
+
+def case_a() -> None:
+    import casadi as ca
+
+    import flexctl
+    from flexctl.sim import compile_cache
+
+    system = flexctl.load_scene("hub-beam-mass").system
+    print("## A. Compile time per model and time per right-hand-side evaluation\n")
+    print(f"compiler: {compile_cache.cache_info().compiler}; flags "
+          f"{' '.join(compile_cache.FLAGS)}; CasADi {ca.__version__}\n")
+    print("| modes | variant | C (kB) | cold compile (s) | warm load (s) | VM eval (us) | "
+          "compiled eval (us) | VM / compiled |")
+    print("|---|---|---|---|---|---|---|---|")
+    evals = {}
+    for n_modes in (2, 4, 6):
+        for variant in ("first_order", "exact", "exact vectorized"):
+            model = flexctl.build_model(system, n_modes, variant.split()[0])
+            f = model.casadi() if variant != "exact vectorized" \
+                else model.geometry.rhs_vectorized
+            many = f.map(MAP, "serial")
+            size = len(compile_cache._source(f)) // 1024
+            start = time.perf_counter()
+            fast = compile_cache.compiled(f)
+            cold = time.perf_counter() - start
+            compile_cache._LOADED.clear()
+            start = time.perf_counter()
+            compile_cache.compiled(f)
+            warm = time.perf_counter() - start
+            fast_many = compile_cache.compiled(many)
+            vm = per_evaluation(many, f)
+            machine = per_evaluation(fast_many, f)
+            evals[n_modes, variant] = (vm, machine)
+            print(f"| {n_modes} | {variant} | {size} | {cold:.2f} | {warm:.3f} | "
+                  f"{vm * 1e6:.2f} | {machine * 1e6:.3f} | {vm / machine:.0f} |")
+        for variant in ("exact", "exact vectorized"):
+            vm_ratio = evals[n_modes, variant][0] / evals[n_modes, "first_order"][0]
+            c_ratio = evals[n_modes, variant][1] / evals[n_modes, "first_order"][1]
+            print(f"| {n_modes} | {variant} / first_order | | | | {vm_ratio:.1f} | "
+                  f"{c_ratio:.1f} | |")
+
+#: One process of case C: best-of-3 wall time of each variant's run, as JSON.
+EXACT = r"""
+import json, sys, time, warnings
+warnings.simplefilter("ignore")
+import flexctl
+from flexctl import SineTorque
+system = flexctl.load_scene("hub-beam-mass").system
+out = {}
+for n_modes in (2, 4, 6):
+    for variant in ("first_order", "exact"):
+        model = flexctl.build_model(system, n_modes, variant)
+        if model.geometry is not None:
+            model.geometry
+        walls = []
+        for _ in range(3):
+            start = time.perf_counter()
+            flexctl.simulate(model, 6.0, SineTorque(peak_torque=2.0, duration=2.0), rtol=1e-8)
+            walls.append(time.perf_counter() - start)
+        out[f"{variant}{n_modes}"] = min(walls)
+print(json.dumps(out))
+"""
+
+
+def case_c(before: Path | None) -> None:
+    print("\n## C. Simulation exact / first_order, hub-beam-mass, sine torque 2 N m, 6 s, "
+          "rtol 1e-8 (CVODES with its accuracy check, best of 3)\n")
+    print("| code | modes | first_order (s) | exact (s) | ratio |")
+    print("|---|---|---|---|---|")
+    for label, tree in ([("before", before)] if before else []) + [("this", ROOT)]:
+        env = {**os.environ, "PYTHONPATH": str(tree)}
+        out = subprocess.run([sys.executable, "-c", EXACT], env=env, capture_output=True,
+                             text=True, timeout=1800, cwd=tree)
+        walls = json.loads(out.stdout.strip().splitlines()[-1])
+        for n_modes in (2, 4, 6):
+            fo, ex = walls[f"first_order{n_modes}"], walls[f"exact{n_modes}"]
+            print(f"| {label} | {n_modes} | {fo:.3f} | {ex:.3f} | {ex / fo:.1f} |")
+
+#: One process of case D: NMPC build time and per-step solve times, as JSON.
+NMPC = r"""
+import json, time, warnings
+import numpy as np
+warnings.simplefilter("ignore")
+import flexctl
+from controllers.nmpc import NMPC
+system = flexctl.load_scene("slew-90").system
+plant = flexctl.build_model(system, 4, "first_order")
+design = flexctl.build_model(system, 2, "exact")
+design.geometry
+mpc = NMPC(model=design, target=np.pi / 2, torque_limit=6.0, sample_time=0.02, horizon=20)
+start = time.perf_counter()
+mpc.prepare()
+build = time.perf_counter() - start
+report = flexctl.simulate(plant, 4.0, controller=mpc, check_accuracy=False).controller_report
+print(json.dumps({"build": build, "median": report["solve_time_median_s"],
+                  "p99": report["solve_time_p99_s"]}))
+"""
+
+
+def case_d(before: Path | None) -> None:
+    print("\n## D. NMPC real-time iteration, slew-90, exact 2-mode design model, horizon 20, "
+          "0.02 s samples, 4-mode first_order plant, 4 s (in-loop wall time per step)\n")
+    print("| code | cache | build (s) | median (ms) | p99 (ms) |")
+    print("|---|---|---|---|---|")
+    for label, tree in ([("before", before)] if before else []) + [("this", ROOT)]:
+        with tempfile.TemporaryDirectory() as cache:
+            for state in (("cold", "warm") if label == "this" else ("-",)):
+                env = {**os.environ, "PYTHONPATH": str(tree), "FLEXCTL_CACHE_DIR": cache}
+                out = subprocess.run([sys.executable, "-c", NMPC], env=env, cwd=tree,
+                                     capture_output=True, text=True, timeout=1800)
+                found = json.loads(out.stdout.strip().splitlines()[-1])
+                print(f"| {label} | {state} | {found['build']:.2f} | "
+                      f"{found['median'] * 1e3:.2f} | {found['p99'] * 1e3:.2f} |")
+
+
+def per_evaluation(many, f) -> float:
+    """Seconds per evaluation of ``f(x, u)`` at a small state, from ``many``, its map of MAP
+    (on the virtual machine or compiled), best of REPEATS."""
+    x = np.full((f.size1_in(0), MAP), 1e-3)
+    u = np.full((1, MAP), 0.1)
+    many(x, u)
+    times = []
+    for _ in range(REPEATS):
+        start = time.perf_counter()
+        many(x, u)
+        times.append(time.perf_counter() - start)
+    return min(times) / MAP
+
+
+def sweep(tree: Path, method: str, angles, cache: str) -> dict:
+    env = {**os.environ, "PYTHONPATH": str(tree), "FLEXCTL_CACHE_DIR": cache,
+           "MPLBACKEND": "Agg"}
+    out = subprocess.run([sys.executable, "-c", SWEEP, method, ",".join(map(str, angles))],
+                         env=env, capture_output=True, text=True, timeout=1800, cwd=tree)
+    if out.returncode != 0:
+        raise RuntimeError(out.stderr[-2000:])
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def case_b(before: Path | None) -> None:
+    angles = np.linspace(0.3, 1.6, 10).round(6)
+    print("\n## B. 10-point PD slew-angle sweep, slew-90 system, 2 modes, 8 s each\n")
+    print("| code | method | cache | first point (s) | other 9 (s, total) | sweep (s) | "
+          "compiles |")
+    print("|---|---|---|---|---|---|---|")
+    trees = ([("before", before)] if before else []) + [("this", ROOT)]
+    for label, tree in trees:
+        for method in ("rk4", "auto"):
+            with tempfile.TemporaryDirectory() as cache:
+                states = ("cold", "warm") if label == "this" else ("-",)
+                for state in states:
+                    found = sweep(tree, method, angles, cache)
+                    walls = found["walls"]
+                    print(f"| {label} | {method} | {state} | {walls[0]:.3f} | "
+                          f"{sum(walls[1:]):.3f} | {sum(walls):.3f} | "
+                          f"{found['stats'].get('compiles', '-')} |")
+    print("\nThe issue's example, a PD slew of 30 then of 45 degrees (s each):\n")
+    for label, tree in trees:
+        for method in ("rk4", "auto"):
+            with tempfile.TemporaryDirectory() as cache:
+                walls = sweep(tree, method, np.radians([30.0, 45.0]), cache)["walls"]
+            print(f"- {label}, {method}: {walls[0]:.3f} then {walls[1]:.3f}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--before", type=Path, default=None,
+                        help="a checkout of the code before the cache, for case B")
+    parser.add_argument("--skip-a", action="store_true", help="case B only")
+    parser.add_argument("--skip-b", action="store_true", help="case A only")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as cache:
+        os.environ["FLEXCTL_CACHE_DIR"] = cache
+        if not args.skip_a:
+            case_a()
+    if not args.skip_b:
+        case_b(args.before)
+    case_c(args.before)
+    case_d(args.before)
+
+
+if __name__ == "__main__":
+    main()

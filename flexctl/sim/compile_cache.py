@@ -1,0 +1,314 @@
+"""A persistent cache of CasADi functions compiled to machine code.
+
+:func:`compiled` turns a CasADi ``Function`` into one that runs as machine code: its C source
+(CasADi's code generator) is compiled once into a shared library in the cache directory and
+loaded with ``casadi.external``; later calls, in this process or any other, load the library
+without compiling again.
+
+- **Key.** A library's name is the SHA-256 of the generated C, the CasADi version, the
+  compiler (its path and ``--version`` line) and the flags: any change to the function (its
+  structure; the numbers that are parameters do not appear in it), to CasADi or to the
+  compiler makes a new entry, and an unchanged function is never compiled twice.
+- **Location.** ``$FLEXCTL_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/flexctl``, else
+  ``~/.cache/flexctl``; a ``compiled/`` folder in it holds ``<name>-<hash>.so`` files.
+- **Atomicity.** The source and the library are written to temporary names in the cache
+  directory and moved into place with ``os.replace``: a reader sees a whole library or none.
+  Workers of a sweep that want the same function at once take turns on a lock file, so one
+  compiles and the others load its library (without ``fcntl`` each compiles, still safely).
+- **Fallback.** Without a C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang`` on the path),
+  or where compiling fails, the function runs on CasADi's virtual machine as before, and one
+  warning line says so, once per process. ``FLEXCTL_COMPILE=0`` turns compiling off.
+- **Progress.** A compile that takes more than :data:`PROGRESS_AFTER` seconds says so on one
+  stderr line, finished with its duration.
+- **Damage.** A library that does not load (truncated, foreign) is compiled again.
+
+:func:`cache_info` and :func:`clear_cache` back ``flexctl cache info`` and
+``flexctl cache clear``; :data:`STATS` counts compiles, loads and in-process hits.
+
+Examples
+--------
+>>> import casadi as ca
+>>> from flexctl.sim.compile_cache import compiled
+>>> x = ca.SX.sym("x")
+>>> f = compiled(ca.Function("doc_square", [x], [x ** 2]))
+>>> float(f(3.0))
+9.0
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["compiled", "cache_dir", "cache_info", "clear_cache", "compiler", "CacheInfo",
+           "CompileCacheWarning", "STATS", "FLAGS", "PROGRESS_AFTER"]
+
+#: Compiler flags of every library (part of the key).
+FLAGS = ("-O2", "-fPIC", "-shared")
+#: A compile longer than this (s) reports itself on stderr.
+PROGRESS_AFTER = 1.0
+#: Where libraries go, under the cache directory.
+_SUBDIR = "compiled"
+_SUFFIX = ".so" if sys.platform != "win32" else ".dll"
+
+#: Counts since the process started: ``compiles`` (libraries built), ``loads`` (libraries
+#: loaded from disk), ``hits`` (functions found already loaded), ``fallbacks`` (functions left
+#: on the virtual machine).
+STATS = {"compiles": 0, "loads": 0, "hits": 0, "fallbacks": 0}
+
+_LOADED: dict = {}
+_WARNED: set = set()
+_COMPILER: dict = {}
+
+
+class CompileCacheWarning(RuntimeWarning):
+    """Compiled functions are not available: they run on CasADi's virtual machine."""
+
+
+def cache_dir() -> Path:
+    """The cache directory: ``$FLEXCTL_CACHE_DIR``, ``$XDG_CACHE_HOME/flexctl`` or
+    ``~/.cache/flexctl`` (not created here)."""
+    override = os.environ.get("FLEXCTL_CACHE_DIR")
+    if override:
+        return Path(override).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join("~", ".cache")
+    return Path(base).expanduser() / "flexctl"
+
+
+def compiler() -> tuple | None:
+    """``(path, version line)`` of the C compiler: ``$CC`` if set (a program name or path),
+    else the first of ``cc``, ``gcc``, ``clang`` on the path; None when there is none."""
+    wanted = os.environ.get("CC") or None
+    names = (wanted,) if wanted else ("cc", "gcc", "clang")
+    memo_key = (names, os.environ.get("PATH", ""))
+    if memo_key not in _COMPILER:
+        found = None
+        for name in names:
+            path = shutil.which(name)
+            if path is None:
+                continue
+            try:
+                out = subprocess.run([path, "--version"], capture_output=True, text=True,
+                                     timeout=30)
+            except (OSError, subprocess.SubprocessError):
+                continue
+            if out.returncode == 0:
+                found = (path, (out.stdout.splitlines() or [""])[0].strip())
+                break
+        _COMPILER[memo_key] = found
+    return _COMPILER[memo_key]
+
+
+def _enabled() -> bool:
+    return os.environ.get("FLEXCTL_COMPILE", "1").strip().lower() not in ("0", "no", "false",
+                                                                           "off")
+
+
+def _warn_once(reason: str) -> None:
+    if reason not in _WARNED:
+        _WARNED.add(reason)
+        warnings.warn(f"{reason}: CasADi functions run on the virtual machine (correct, "
+                      "several times slower)", CompileCacheWarning, stacklevel=3)
+
+
+def _source(function) -> str:
+    """The C source of ``function`` alone (its sub-functions included)."""
+    import casadi as ca
+
+    generator = ca.CodeGenerator(f"{function.name()}.c", {"with_header": False})
+    generator.add(function)
+    return generator.dump()
+
+
+def _key(source: str, tool: tuple) -> str:
+    import casadi as ca
+
+    digest = hashlib.sha256()
+    for part in (source, ca.__version__, tool[0], tool[1], " ".join(FLAGS)):
+        digest.update(part.encode("utf-8"))
+        digest.update(b"\0")
+    return digest.hexdigest()[:32]
+
+
+def compiled(function, *, label: str | None = None):
+    """``function`` as machine code from the persistent cache, else ``function`` itself.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        Any function CasADi can generate C for (SX or MX; no external calls inside).
+    label : str, optional
+        What to call it in a progress line. Default: its name.
+
+    Returns
+    -------
+    casadi.Function
+        A ``casadi.external`` of the same name, inputs and outputs (evaluation only: take
+        derivatives of ``function`` before compiling), or ``function`` where compiling is off,
+        impossible (one warning) or failed (one warning).
+    """
+    if not _enabled():
+        return function
+    tool = compiler()
+    if tool is None:
+        STATS["fallbacks"] += 1
+        _warn_once("no C compiler found (set CC or put cc on the PATH)")
+        return function
+    name = function.name()
+    try:
+        source = _source(function)      # CasADi refuses functions it cannot generate
+        key = _key(source, tool)
+        if (name, key) in _LOADED:
+            STATS["hits"] += 1
+            return _LOADED[(name, key)]
+        loaded = _load_or_build(name, key, source, tool, label or name)
+    except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
+        STATS["fallbacks"] += 1
+        _warn_once(f"compiling {name} failed ({' '.join(str(exc).split())[:200]})")
+        return function
+    _LOADED[(name, key)] = loaded
+    return loaded
+
+
+def _load_or_build(name: str, key: str, source: str, tool: tuple, label: str):
+    """Load ``<name>-<key>`` from the cache directory, compiling it first if absent or bad."""
+    folder = cache_dir() / _SUBDIR
+    folder.mkdir(parents=True, exist_ok=True)
+    library = folder / f"{name}-{key}{_SUFFIX}"
+    loaded = _try_load(name, library)
+    if loaded is not None:
+        return loaded
+    with _lock(library.with_suffix(".lock")):
+        loaded = _try_load(name, library)      # another worker may have built it meanwhile
+        if loaded is None:
+            _build(library, source, tool, label)
+            loaded = _try_load(name, library)
+    if loaded is None:
+        raise RuntimeError(f"the library compiled for {name} does not load")
+    return loaded
+
+
+def _try_load(name: str, library: Path):
+    """The function in ``library``, or None when the file is absent or does not load (it is
+    then removed, to be compiled again)."""
+    import casadi as ca
+
+    if not library.is_file():
+        return None
+    try:
+        function = ca.external(name, str(library))
+    except RuntimeError:
+        with contextlib.suppress(OSError):
+            library.unlink()
+        return None
+    STATS["loads"] += 1
+    return function
+
+
+@contextlib.contextmanager
+def _lock(path: Path):
+    """An exclusive lock on ``path`` among processes (a no-op without ``fcntl``)."""
+    try:
+        import fcntl
+    except ImportError:         # pragma: no cover - Windows: atomic replace alone
+        yield
+        return
+    with open(path, "a+b") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def _build(library: Path, source: str, tool: tuple, label: str) -> None:
+    """Compile ``source`` into ``library`` through temporary files in the same directory."""
+    folder = library.parent
+    fd, c_path = tempfile.mkstemp(prefix=".build-", suffix=".c", dir=folder)
+    out_path = c_path[:-2] + _SUFFIX
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(source)
+        command = [tool[0], *FLAGS, c_path, "-o", out_path, "-lm"]
+        start = time.perf_counter()
+        process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                   text=True)
+        try:
+            _, errors = process.communicate(timeout=PROGRESS_AFTER)
+        except subprocess.TimeoutExpired:
+            print(f"flexctl: compiling {label} ({len(source) // 1024} kB of C; once, kept in "
+                  f"{folder}) ...", end="", file=sys.stderr, flush=True)
+            _, errors = process.communicate()
+            print(f" {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+        if process.returncode != 0:
+            raise RuntimeError(f"{tool[0]} exited with {process.returncode}: "
+                               f"{errors.strip()[-300:]}")
+        os.replace(out_path, library)
+        STATS["compiles"] += 1
+    finally:
+        for path in (c_path, out_path):
+            with contextlib.suppress(OSError):
+                os.unlink(path)
+
+
+@dataclass(frozen=True)
+class CacheInfo:
+    """What the cache holds.
+
+    Attributes
+    ----------
+    directory : pathlib.Path
+    entries : int
+        Compiled libraries.
+    size : int
+        Their total size, bytes.
+    compiler : str
+        The compiler's version line, or why there is none.
+    """
+
+    directory: Path
+    entries: int
+    size: int
+    compiler: str
+
+    def __str__(self):
+        return (f"directory: {self.directory}\nentries: {self.entries}\n"
+                f"size: {self.size / 1e6:.1f} MB\ncompiler: {self.compiler}")
+
+
+def _libraries() -> list:
+    folder = cache_dir() / _SUBDIR
+    return sorted(folder.glob(f"*{_SUFFIX}")) if folder.is_dir() else []
+
+
+def cache_info() -> CacheInfo:
+    """The cache directory, its number of libraries, their size and the compiler."""
+    files = _libraries()
+    tool = compiler()
+    if not _enabled():
+        what = "compiling off (FLEXCTL_COMPILE=0)"
+    else:
+        what = "none found (functions run on CasADi's virtual machine)" if tool is None \
+            else f"{tool[1]} ({tool[0]})"
+    return CacheInfo(directory=cache_dir(), entries=len(files),
+                     size=sum(f.stat().st_size for f in files), compiler=what)
+
+
+def clear_cache() -> int:
+    """Remove every compiled library (and leftover build and lock files); return how many
+    libraries were removed. Functions already loaded in this process stay usable."""
+    folder = cache_dir() / _SUBDIR
+    removed = len(_libraries())
+    if folder.is_dir():
+        shutil.rmtree(folder, ignore_errors=True)
+    _LOADED.clear()
+    return removed

@@ -1,0 +1,253 @@
+"""The persistent compiled-function cache: one compile per function across processes and
+concurrent workers, the virtual machine with one warning where there is no compiler, a damaged
+entry compiled again, and ``flexctl cache info`` / ``clear``."""
+
+import json
+import os
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from flexctl.app.cli import main
+from flexctl.sim import compile_cache
+from flexctl.sim.compile_cache import CompileCacheWarning, compiled
+
+ROOT = Path(__file__).resolve().parents[1]
+
+needs_compiler = pytest.mark.skipif(compile_cache.compiler() is None,
+                                    reason="no C compiler")
+
+#: A worker process: compile a small function named by argv[1] (its structure set by
+#: argv[2]), evaluate it, print the cache counters and the value as JSON.
+WORKER = """
+import json, sys
+import casadi as ca
+from flexctl.sim.compile_cache import compiled, STATS
+x = ca.SX.sym("x", 3)
+f = compiled(ca.Function(sys.argv[1], [x], [ca.sin(x) * x[0] + float(sys.argv[2])]))
+print(json.dumps({"stats": STATS, "value": [float(v) for v in f([1.0, 2.0, 3.0]).full().ravel()],
+                  "external": f.is_a("External")}))
+"""
+
+
+def expected(shift: float) -> list:
+    x = np.array([1.0, 2.0, 3.0])
+    return list(np.sin(x) * x[0] + shift)
+
+
+def run_worker(cache: Path, name: str, shift: float = 0.5, wait: bool = True):
+    env = {**os.environ, "FLEXCTL_CACHE_DIR": str(cache), "PYTHONPATH": str(ROOT)}
+    env.pop("FLEXCTL_COMPILE", None)
+    process = subprocess.Popen([sys.executable, "-c", WORKER, name, repr(shift)], env=env,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return process if not wait else finish(process)
+
+
+def finish(process) -> dict:
+    out, err = process.communicate(timeout=300)
+    assert process.returncode == 0, err
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def libraries(cache: Path) -> list:
+    return sorted((cache / "compiled").glob("*.so"))
+
+
+@pytest.fixture
+def fresh(monkeypatch, tmp_path):
+    """An empty cache directory for this process, with no memory of earlier loads."""
+    monkeypatch.setenv("FLEXCTL_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("FLEXCTL_COMPILE", raising=False)
+    monkeypatch.setattr(compile_cache, "_LOADED", {})
+    monkeypatch.setattr(compile_cache, "_WARNED", set())
+    monkeypatch.setattr(compile_cache, "_COMPILER", {})
+    return tmp_path / "cache"
+
+
+@needs_compiler
+def test_one_compile_across_processes(fresh):
+    first = run_worker(fresh, "cc_across")
+    second = run_worker(fresh, "cc_across")
+    assert first["stats"]["compiles"] == 1 and first["external"]
+    assert second["stats"]["compiles"] == 0 and second["stats"]["loads"] == 1
+    np.testing.assert_allclose(second["value"], expected(0.5), rtol=1e-14)
+    assert len(libraries(fresh)) == 1
+
+
+@needs_compiler
+def test_another_structure_is_another_entry(fresh):
+    run_worker(fresh, "cc_structure", 0.5)
+    other = run_worker(fresh, "cc_structure", 1.5)
+    assert other["stats"]["compiles"] == 1
+    np.testing.assert_allclose(other["value"], expected(1.5), rtol=1e-14)
+    assert len(libraries(fresh)) == 2
+
+
+@needs_compiler
+def test_concurrent_workers_make_one_valid_library(fresh):
+    workers = [run_worker(fresh, "cc_concurrent", wait=False) for _ in range(4)]
+    results = [finish(w) for w in workers]
+    assert sum(r["stats"]["compiles"] for r in results) == 1
+    for r in results:
+        assert r["external"]
+        np.testing.assert_allclose(r["value"], expected(0.5), rtol=1e-14)
+    assert len(libraries(fresh)) == 1
+    assert not list((fresh / "compiled").glob(".build-*")), "temporary files left behind"
+
+
+@needs_compiler
+def test_damaged_entry_is_compiled_again(fresh):
+    run_worker(fresh, "cc_damaged")
+    (library,) = libraries(fresh)
+    library.write_bytes(b"not a shared library")
+    again = run_worker(fresh, "cc_damaged")
+    assert again["stats"]["compiles"] == 1 and again["external"]
+    np.testing.assert_allclose(again["value"], expected(0.5), rtol=1e-14)
+
+
+def test_no_compiler_runs_on_the_virtual_machine_with_one_warning(fresh, monkeypatch):
+    import casadi as ca
+
+    monkeypatch.setenv("CC", str(fresh / "no-such-compiler"))
+    x = ca.SX.sym("x")
+    functions = [ca.Function(f"cc_none{k}", [x], [x ** 2 + k]) for k in range(3)]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        results = [compiled(f) for f in functions]
+    assert [r is f for r, f in zip(results, functions)] == [True] * 3
+    messages = [w for w in caught if issubclass(w.category, CompileCacheWarning)]
+    assert len(messages) == 1
+    assert "no C compiler" in str(messages[0].message)
+    assert "virtual machine" in str(messages[0].message)
+    assert float(results[2](3.0)) == 11.0
+
+
+@needs_compiler
+def test_a_function_without_c_code_stays_on_the_virtual_machine(fresh):
+    import casadi as ca
+
+    x = ca.SX.sym("x")
+    decay = ca.integrator("cc_decay", "cvodes", {"x": x, "ode": -x}, 0.0, 1.0)
+    start = ca.MX.sym("start")
+    f = ca.Function("cc_no_c_code", [start], [decay(x0=start)["xf"]])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = compiled(f)
+    assert result is f
+    assert [issubclass(w.category, CompileCacheWarning) for w in caught] == [True]
+    assert float(result(1.0)) == pytest.approx(np.exp(-1.0), rel=1e-4)   # CVODES defaults
+
+
+def test_compiling_off_by_environment(fresh, monkeypatch):
+    import casadi as ca
+
+    monkeypatch.setenv("FLEXCTL_COMPILE", "0")
+    x = ca.SX.sym("x")
+    f = ca.Function("cc_off", [x], [2 * x])
+    assert compiled(f) is f
+    assert not (fresh / "compiled").exists()
+
+
+@needs_compiler
+def test_cli_cache_info_and_clear(fresh, capsys):
+    run_worker(fresh, "cc_cli")
+    assert main(["cache", "info"]) == 0
+    out = capsys.readouterr().out
+    assert f"directory: {fresh}" in out and "entries: 1" in out
+    assert main(["cache", "clear"]) == 0
+    assert "removed 1 " in capsys.readouterr().out
+    assert libraries(fresh) == []
+    assert main(["cache", "info"]) == 0
+    assert "entries: 0" in capsys.readouterr().out
+
+
+def test_cache_directory_follows_the_environment(monkeypatch, tmp_path):
+    monkeypatch.delenv("FLEXCTL_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert compile_cache.cache_dir() == tmp_path / "flexctl"
+    monkeypatch.setenv("FLEXCTL_CACHE_DIR", str(tmp_path / "mine"))
+    assert compile_cache.cache_dir() == tmp_path / "mine"
+
+
+#: Final hub angle of a PD slew within this fraction of the commanded angle.
+SLEW_TOLERANCE = 1e-3
+
+
+@pytest.fixture(scope="module")
+def slew_model():
+    import flexctl
+
+    return flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=2)
+
+
+def _pd_slew(model, angle, duration=4.0):
+    from controllers.pd import design_pd
+    from controllers.reference import SlewProfile
+
+    return design_pd(model, bandwidth=2.0, damping_ratio=0.9, torque_limit=20.0,
+                     reference=SlewProfile(slew_angle=angle, duration=duration))
+
+
+@needs_compiler
+@pytest.mark.parametrize("method", ["rk4", "cvodes"])
+def test_angle_sweep_compiles_once(fresh, slew_model, method):
+    """A 10-point sweep over the slew angle (and the duration) builds its compiled functions
+    for the first point only, and every point reaches its own angle."""
+    import flexctl
+    from flexctl.sim import compiled as compiled_path
+    from flexctl.sim import fixed_step
+
+    fixed_step._STEP_CACHE.clear()
+    compiled_path._RHS_CACHE.clear()
+    before = compile_cache.STATS["compiles"]
+    builds = []
+    for k, angle in enumerate(np.linspace(0.3, 1.6, 10)):
+        rhs_before = set(compiled_path._RHS_CACHE)
+        result = flexctl.simulate(slew_model, 8.0, controller=_pd_slew(
+            slew_model, angle, 4.0 + 0.1 * k), method=method, check_accuracy=False)
+        assert result.status == "ok"
+        assert result.theta[-1] == pytest.approx(angle, rel=SLEW_TOLERANCE)
+        # right-hand sides of this model (not of any model a check builds on the way)
+        new = [key for key in set(compiled_path._RHS_CACHE) - rhs_before
+               if id(slew_model) in (key[0], key[1][0] if isinstance(key[1], tuple) else None)]
+        builds.append((compile_cache.STATS["compiles"] - before, len(new)))
+    compiles = [b[0] for b in builds]
+    assert compiles[0] <= len(fixed_step.CHUNKS)
+    assert compiles == [compiles[0]] * 10, "a later point compiled again"
+    assert [b[1] for b in builds[1:]] == [0] * 9, "a later point built another right-hand side"
+
+
+@needs_compiler
+def test_sine_amplitude_sweep_compiles_once(fresh, slew_model):
+    import flexctl
+    from flexctl.sim import fixed_step
+    from flexctl.sim.maneuvers import SineTorque
+
+    fixed_step._STEP_CACHE.clear()
+    for k, peak in enumerate((1.0, 2.0, 3.0)):
+        sine = SineTorque(peak_torque=peak, duration=2.0)
+        result = flexctl.simulate(slew_model, 3.0, sine, method="rk4", check_accuracy=False)
+        if k == 0:
+            first = compile_cache.STATS["compiles"]
+        # each run follows its own amplitude: as the error-controlled default does
+        reference = flexctl.simulate(slew_model, 3.0, sine, check_accuracy=False)
+        assert result.theta[-1] == pytest.approx(reference.theta[-1], rel=SLEW_TOLERANCE)
+    assert compile_cache.STATS["compiles"] == first
+
+
+@needs_compiler
+def test_compiled_and_virtual_machine_runs_agree(fresh, slew_model, monkeypatch):
+    import flexctl
+    from flexctl.sim import fixed_step
+
+    runs = []
+    for setting in ("1", "0"):
+        monkeypatch.setenv("FLEXCTL_COMPILE", setting)
+        fixed_step._STEP_CACHE.clear()
+        runs.append(flexctl.simulate(slew_model, 6.0, controller=_pd_slew(slew_model, 0.8),
+                                     method="rk4", check_accuracy=False))
+    np.testing.assert_allclose(runs[0].states, runs[1].states, rtol=1e-10, atol=1e-12)
