@@ -385,3 +385,20 @@ def test_exact_variant_at_large_amplitude(case, request):
         momentum = model.angular_momentum(result.states[:, ::100])
         scale = np.max(np.abs(impulse))
         assert np.max(np.abs(momentum - impulse)) <= EXACT_MOMENTUM_RTOL * scale
+
+
+def test_many_modes_are_named_up_front_with_the_fastest_mode():
+    from flexctl import load_scene
+    from flexctl.sim.request import MANY_MODES, ManyModesWarning
+
+    system = load_scene("hub-beam-mass").system
+    torque = SineTorque(peak_torque=2.0, duration=2.0)
+    many = build_model(system, MANY_MODES + 6)
+    fastest = many.natural_frequencies(0.0, hub="free")[-1]
+    with pytest.warns(ManyModesWarning, match=rf"{MANY_MODES + 6} modes .* {fastest:.4g} rad/s"
+                      r".*modes = \"auto\""):
+        result = simulate(many, 0.002, torque=torque, check_accuracy=False)
+    assert result.status == "ok"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ManyModesWarning)
+        simulate(build_model(system, MANY_MODES), 0.002, torque=torque, check_accuracy=False)

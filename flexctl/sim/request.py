@@ -29,7 +29,7 @@ from ..model import Model, SingularMassMatrixError
 from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["RunRequest", "IntegrationPlan", "run_request", "plan_integration", "state_scale",
-           "StiffnessWarning", "METHODS"]
+           "StiffnessWarning", "ManyModesWarning", "MANY_MODES", "METHODS"]
 
 #: Integration methods: "auto" (CVODES when every input has a CasADi form, else DOP853),
 #: "cvodes" (compiled, :mod:`flexctl.sim.compiled`), "rk4" (compiled fixed step,
@@ -78,6 +78,31 @@ CVODES_STEPS_PER_RADIAN = 10.0
 
 class StiffnessWarning(RuntimeWarning):
     """An explicit method was asked for on a model whose fastest mode makes it crawl."""
+
+
+class ManyModesWarning(RuntimeWarning):
+    """A run of more modes than a manoeuvre usually excites, said before it starts."""
+
+
+#: Modes per appendage above which a run says up front what its fastest mode costs: a
+#: torque of a few seconds excites a handful (``modes = "auto"`` picked 3 to 6 on the
+#: built-in scenes at 1 %), and every mode more is integrated to the run's tolerance.
+MANY_MODES = 24
+
+
+def _warn_many_modes(model) -> None:
+    """Warn (:class:`ManyModesWarning`) for more than :data:`MANY_MODES` modes on an
+    appendage, naming the fastest mode and the mode choice that fits a manoeuvre."""
+    most = int(np.max(np.atleast_1d(getattr(model, "modes", model.n_modes))))
+    if most <= MANY_MODES:
+        return
+    fastest = float(model.natural_frequencies(0.0, hub="free")[-1])
+    warnings.warn(
+        f"{most} modes on an appendage: the fastest at {fastest:.4g} rad/s (a period of "
+        f"{2.0 * np.pi / fastest:.3g} s) is integrated to the run's tolerance, far above what "
+        "a smooth torque excites, and the run's cost grows with it; "
+        "flexctl.sim.fidelity.choose_modes (a scene's [model] modes = \"auto\") gives the "
+        "modes a manoeuvre needs", ManyModesWarning, stacklevel=4)
 
 
 @dataclass(frozen=True, eq=False)
@@ -326,6 +351,7 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
         controller = bound_to_plant(as_controller(controller, x_init), model)
     _check_reach(model, x_init, x0)
     sensors = _check_sensors(sensors, controller)
+    _warn_many_modes(model)
     return RunRequest(model=model, t_final=float(t_final), method=method, rtol=float(rtol),
                       atol=atol, grid=grid, step=float(step), max_step=max_step,
                       check_accuracy=bool(check_accuracy), torque=torque,
