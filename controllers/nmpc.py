@@ -94,10 +94,12 @@ def _hold_function(model: Model, sample_time: float, substeps: int):
     (s), by ``substeps`` RK4 steps of the model's dynamics."""
     import casadi as ca
 
-    if model.variant == "exact":
-        # the exact model's vectorized form: the same function, a few thousand times fewer
-        # operations written out, so the hold compiles in about a second
-        sym, f = ca.MX, model.geometry.rhs_vectorized
+    # one beam's exact model has a vectorized form: the same function, a few thousand times
+    # fewer operations written out, so the hold compiles in about a second
+    vectorized = (getattr(getattr(model, "geometry", None), "rhs_vectorized", None)
+                  if model.variant == "exact" else None)
+    if vectorized is not None:
+        sym, f = ca.MX, vectorized
     else:
         sym, f = ca.SX, model.casadi()
     step = _rk4_step(f, model.n_states, substeps, sym)     # (x, u, h) -> x(h)
