@@ -532,4 +532,7 @@ def _filter_model(model, plant):
         return model
     from flexctl.model.build import rebuild
 
-    return rebuild(model, n_modes=plant.mode_spec)
+    spec = plant.mode_spec
+    if isinstance(model.mode_spec, int) and not isinstance(spec, int):
+        spec = int(sum(spec))       # one beam's design for a plant built as a structure
+    return rebuild(model, n_modes=spec)

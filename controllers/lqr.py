@@ -373,8 +373,9 @@ class LQR(ReferenceFeedback):
             # reference
             m = self.gain.shape[1]
             d = 0 if deflection is None else np.size(deflection)
-            gain, inertia, limit, rest, numbers = ca.vertsplit(
-                parameters, [0, m, m + 1, m + 2, m + 2 + d, parameters.numel()])
+            # sizes: the gain row, the inertia, the limit, the deflection gain; the rest
+            offsets = np.cumsum([0, m, 1, 1, d]).tolist() + [parameters.numel()]
+            gain, inertia, limit, rest, numbers = ca.vertsplit(parameters, offsets)
             deflection = None if deflection is None else rest
         x_design = self._casadi_design_state(x)
         x_ref, acc = casadi_reference_state(self.reference, t, self.layout, deflection,

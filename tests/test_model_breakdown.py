@@ -112,7 +112,9 @@ def test_quadrature_of_a_fast_loop_is_not_blamed_on_the_model():
     assert balance.relative_imbalance > ENERGY_TOLERANCE            # 0.4: the samples'
     assert abs(balance.neglected) < 1e-2 * balance.throughput       # 6e-4: not the model's
     assert not balance.violated
-    assert not any(issubclass(w.category, ModelValidityWarning) for w in caught)
+    # simulate may still say the geometry is out of range, never that energy is created
+    assert not any("energy" in str(w.message) for w in caught
+                   if issubclass(w.category, ModelValidityWarning))
 
 
 def test_outputs_that_miss_the_torque_are_not_blamed_on_the_model():
@@ -126,7 +128,9 @@ def test_outputs_that_miss_the_torque_are_not_blamed_on_the_model():
     assert abs(balance.work) < 1e-9 and balance.throughput > 0.1
     assert abs(balance.neglected) < 1e-3 * balance.throughput
     assert not balance.violated
-    assert not any(issubclass(w.category, ModelValidityWarning) for w in caught)
+    # simulate may still say the geometry is out of range, never that energy is created
+    assert not any("energy" in str(w.message) for w in caught
+                   if issubclass(w.category, ModelValidityWarning))
 
 
 def test_zero_order_divergence_names_the_energy_and_the_lost_stiffness():

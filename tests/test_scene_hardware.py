@@ -295,7 +295,7 @@ def test_lqg_on_a_motor_integrates_the_torque_the_motor_gives():
                       plant=plant)
     x0 = plant.rest_state()
     x0[plant.layout.theta] = -1.0
-    rows = plant.layout.projection(design.layout)
+    rows = plant.layout.projection(base.layout)      # the estimate: the filter's modes
     errors = {}
     for motor in (None, scene.actuator):
         law = dataclasses.replace(base, motor=motor, initial_estimate=x0[rows])
@@ -303,8 +303,8 @@ def test_lqg_on_a_motor_integrates_the_torque_the_motor_gives():
         volts = result.actuator_signals["motor_voltage"]
         assert result.ok and np.max(np.abs(volts)) == scene.actuator.voltage_limit
         error = np.abs(result.controller_states - result.states[rows])
-        errors[motor is not None] = (np.max(error[design.layout.theta]),
-                                     np.max(error[design.layout.theta_dot]))
+        errors[motor is not None] = (np.max(error[base.layout.theta]),
+                                     np.max(error[base.layout.theta_dot]))
     assert errors[True][0] <= 0.2 * errors[False][0]
     assert errors[True][1] <= 0.2 * errors[False][1]
 

@@ -122,9 +122,9 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         at its samples (:mod:`flexctl.sim.sensors`); kept in ``result.measurements``.
     check_validity : bool, optional
         Assess the model's range (``result.validity``, :func:`~flexctl.sim.validity.
-        assess_run`: past a tip of 2 % of the length, on two small models driven by this
-        run's input history) and warn when a small-deflection variant left it, as a scene
-        run does. Default True.
+        assess_run`: past a tip of 2 % of the length, by running the same inputs on two
+        small models; a controller that records or counts sees those runs too) and warn
+        when a small-deflection variant left it, as a scene run does. Default True.
 
     Returns
     -------
@@ -144,18 +144,5 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
                       check_accuracy=check_accuracy, progress=progress, sensors=sensors)
     if not check_validity:
         return result
-    return dataclasses.replace(result, validity=assess_run(result, **_replayed_input(
-        result, hub_motion)))
-
-
-def _replayed_input(result, hub_motion) -> dict:
-    """The run's input for the validity estimate's runs: a prescribed hub motion as given;
-    else the history of what drove the plant (the actuator's command, or the hub torque)
-    played back, so that a controller or a torque function is not called again (a Python
-    law may count, record or draw noise)."""
-    if hub_motion is not None:
-        return {"hub_motion": hub_motion}
-    if result.t.size < 2:
-        return {}
-    drive = result.torque if result.command is None else result.command
-    return {"torque": (result.t, np.asarray(drive, dtype=float).reshape(-1))}
+    return dataclasses.replace(result, validity=assess_run(
+        result, torque=torque, hub_motion=hub_motion, controller=controller, sensors=sensors))

@@ -85,7 +85,7 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     if model.variant == "exact":
         return 0.0
     # a controller reads at least the modes it was designed on
-    n_modes = min(max(n_modes, int(getattr(controller, "n_modes", 0) or 0)), min(model.modes))
+    n_modes = min(max(n_modes, _law_modes(controller)), min(model.modes))
     tips = []
     for variant in (model.variant, "exact"):
         small = rebuild(model, n_modes=n_modes, variant=variant)
@@ -106,6 +106,18 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     # deflection of 1e-38 m has no geometric error, only the integrators' rounding
     peak = np.maximum(np.max(np.abs(tips[1]), axis=1), DEFLECTION_FLOOR * model.lengths)
     return float(np.max(np.max(np.abs(tips[0] - tips[1]), axis=1) / peak))
+
+
+def _law_modes(controller) -> int:
+    """The most modes a law reads, through its wrappers (a hold, an observer, a motor's
+    voltage hold the law in ``law``): 0 for none."""
+    most, seen = 0, set()
+    while controller is not None and id(controller) not in seen:
+        seen.add(id(controller))
+        modes = getattr(controller, "n_modes", 0)
+        most = max(most, modes if isinstance(modes, int) else 0)
+        controller = getattr(controller, "law", None)
+    return most
 
 
 @dataclass(frozen=True, kw_only=True)
