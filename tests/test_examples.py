@@ -22,6 +22,9 @@ SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
 #: Where each executed notebook is saved with its outputs (git-ignored): the documentation site
 #: renders these copies, so it shows the plots without executing anything itself.
 EXECUTED = EXAMPLES / "_executed"
+#: With pytest-xdist, the notebooks run on one worker, before the site that renders them
+#: (``--dist loadgroup``; tests/test_site.py is in the same group).
+pytestmark = pytest.mark.xdist_group("notebooks")
 #: Seconds a notebook may run (they take 3 to 20 s alone on 2 cores).
 CELL_TIMEOUT = 240
 #: Notebooks that take more than about 10 s (marked slow; CI still runs them).
@@ -86,4 +89,8 @@ def test_notebook_executes(script, monkeypatch):
               for out in cell.get("outputs", []) if out.get("output_type") == "error"]
     assert not errors
     EXECUTED.mkdir(exist_ok=True)
-    nbformat.write(notebook, EXECUTED / script.with_suffix(".ipynb").name)
+    # written whole, then moved into place: the site's build may read it at any moment
+    target = EXECUTED / script.with_suffix(".ipynb").name
+    partial = target.with_suffix(f".{os.getpid()}.partial")
+    nbformat.write(notebook, partial)
+    os.replace(partial, target)

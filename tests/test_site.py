@@ -35,7 +35,8 @@ DOCUMENTED_AS_IS = ("flexctl", "controllers", "controllers.codegen")
 #: ``import flexctl`` gives the same object.
 LAYERS = ("flexctl.model", "flexctl.sim")
 
-pytestmark = pytest.mark.slow
+#: After the notebooks, on their worker under pytest-xdist (tests/test_examples.py).
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("notebooks")]
 
 
 def _sphinx(builder, out, doctrees):
