@@ -409,16 +409,16 @@ def format_summary(summary: dict) -> str:
                      f"modes): {settle}, overshoot {100 * slew['overshoot']:.2g} %, peak torque "
                      f"{slew['peak_torque']:.3g} N m, residual tip vibration "
                      f"{residual} after {slew['maneuver_end']:.3g} s")
+        if "solve_time_s" in slew:
+            what = "reference trajectory " if slew["controller"] == "nmpc" else ""
+            lines[-1] += (f", {what}solved in {slew['solve_time_s']:.3g} s "
+                          f"({slew['ipopt_status']})")
         if slew.get("errors"):
             lines.append(f"  metric errors: against the loop on the {slew['errors']['reference']}"
                          " plant (twice the difference) and the run's accuracy check")
         stability = slew.get("loop_stability")
         if stability:
             lines.append(f"  loop on the plant: {stability['message']}")
-        if "solve_time_s" in slew:
-            what = "reference trajectory " if slew["controller"] == "nmpc" else ""
-            lines[-1] += (f", {what}solved in {slew['solve_time_s']:.3g} s "
-                          f"({slew['ipopt_status']})")
     sampled = summary.get("controller_report")
     if sampled:
         line = (f"  sampled every {1e3 * sampled['sample_time']:.3g} ms "
