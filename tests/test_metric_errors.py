@@ -200,3 +200,19 @@ def test_without_the_estimate_there_are_no_errors():
 ], ids=["bound", "value", "equal", "no-error", "not-settled", "unknown"])
 def test_format_metric_shows_a_value_below_its_error_as_a_bound(value, error, unit, shown):
     assert format_metric(value, error, unit) == shown
+
+
+def test_console_summary_shows_the_metrics_with_errors_and_the_loop_check(lqr_slew, tmp_path):
+    from flexctl.app.report import format_summary
+    from flexctl.app.runner import execute, write_complete
+
+    scene, _ = lqr_slew
+    result, extra, reference = execute(scene)
+    summary = write_complete(scene, result, tmp_path / "run", {}, extra, reference)
+    lines = format_summary(summary).splitlines()
+    slew = next(line for line in lines if "slew by lqr" in line)
+    assert "residual tip vibration" in slew and "±" in slew
+    assert any(line.strip().startswith("metric errors: against the loop on the exact, 8 modes")
+               for line in lines)
+    assert any(line.strip() == "loop on the plant: LQR is stable on the exact plant with 6 "
+               "modes" for line in lines)
