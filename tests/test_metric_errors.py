@@ -216,3 +216,8 @@ def test_console_summary_shows_the_metrics_with_errors_and_the_loop_check(lqr_sl
                for line in lines)
     assert any(line.strip() == "loop on the plant: LQR is stable on the exact plant with 6 "
                "modes" for line in lines)
+
+
+def test_format_metric_refuses_an_unknown_unit():
+    with pytest.raises(InputValueError, match="format_metric.unit must be one of m, rad, s"):
+        format_metric(1.0, 0.1, "mm")

@@ -224,7 +224,11 @@ def format_metric(value: float, error: float | None, unit: str) -> str:
     >>> format_metric(1.5, None, "s")
     '1.5 s'
     """
-    scale, shown_unit = {"m": (1e3, "mm"), "rad": (1e3, "mrad"), "s": (1.0, "s")}[unit]
+    units = {"m": (1e3, "mm"), "rad": (1e3, "mrad"), "s": (1.0, "s")}
+    if unit not in units:
+        raise InputValueError(f"format_metric.unit must be one of {', '.join(units)}; got "
+                              f"{unit!r}")
+    scale, shown_unit = units[unit]
     if value is None or not np.isfinite(value):
         return "not reached" if unit == "s" else "n/a"
     v = scale * float(value)
