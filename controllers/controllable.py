@@ -105,6 +105,16 @@ def lqr_on_part(model, spin_rate, q_mat, r_mat, sample_time=None):
     return gain, np.linalg.eigvals(a - b @ gain), part
 
 
+def held(a, b, sample_time: float) -> tuple:
+    """``(A_d, B_d)``: ``x' = A x + B u`` with ``u`` held over ``sample_time`` (s)."""
+    import control
+
+    n = a.shape[0]
+    held_sys = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, b.shape[1]))),
+                           float(sample_time), "zoh")
+    return np.asarray(held_sys.A), np.asarray(held_sys.B)
+
+
 def state_gain(a, b, q_mat, r_mat, sample_time=None) -> np.ndarray:
     """The LQR gain of ``(A, B)``, shape (1, n): continuous, or discrete for the plant held
     over ``sample_time`` (s) with the weights ``Q T`` and ``R T``."""
@@ -113,10 +123,8 @@ def state_gain(a, b, q_mat, r_mat, sample_time=None) -> np.ndarray:
     if sample_time is None:
         gain = np.asarray(control.lqr(a, b, q_mat, r_mat)[0], dtype=float)
     else:
-        n = a.shape[0]
-        held = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, b.shape[1]))),
-                           float(sample_time), "zoh")
-        gain = np.asarray(control.dlqr(held.A, held.B, q_mat * sample_time,
+        a_d, b_d = held(a, b, sample_time)
+        gain = np.asarray(control.dlqr(a_d, b_d, q_mat * sample_time,
                                        np.atleast_2d(r_mat) * sample_time)[0], dtype=float)
     if not np.all(np.isfinite(gain)):
         raise np.linalg.LinAlgError("the solver returned a gain that is not finite")
@@ -159,9 +167,8 @@ def dlqr_on_part(model, sample_time, q_mat, r_mat) -> np.ndarray:
     if part.dropped:
         a, b = part.reduce(a, b)
         q_mat = part.basis.T @ q_mat @ part.basis
-    m = a.shape[0]
-    sys_d = control.c2d(control.ss(a, b, np.eye(m), np.zeros((m, 1))), sample_time, "zoh")
-    _, p_mat, _ = control.dlqr(sys_d.A, sys_d.B, 0.5 * (q_mat + q_mat.T), r_mat)
+    a_d, b_d = held(a, b, sample_time)
+    _, p_mat, _ = control.dlqr(a_d, b_d, 0.5 * (q_mat + q_mat.T), r_mat)
     p_mat = np.asarray(p_mat)
     if part.dropped:
         p_mat = part.projector.T @ p_mat @ part.projector

@@ -485,14 +485,10 @@ class NMPC:
         (shape (1, n), ``u = -K x``), the design state's layout and the sample time (s). It is
         also the gain of the unconstrained real-time iteration (a finite horizon ending on
         the Riccati solution gives the infinite-horizon gain at every stage)."""
-        import control
+        from .controllable import held
 
         p_mat = self._terminal_weight()
-        a, b = self.model.linear_matrices(0.0)
-        m = a.shape[0]
-        held = control.c2d(control.ss(a, b, np.eye(m), np.zeros((m, 1))), self.sample_time,
-                           "zoh")
-        a_d, b_d = np.asarray(held.A), np.asarray(held.B)
+        a_d, b_d = held(*self.model.linear_matrices(0.0), self.sample_time)
         gain = np.linalg.solve(self.torque_weight + b_d.T @ p_mat @ b_d, b_d.T @ p_mat @ a_d)
         return gain, self.model.layout, float(self.sample_time)
 

@@ -194,16 +194,6 @@ def _plant_for(plant, law):
                                                                         plant)
 
 
-def _held(model, spin_rate: float, period: float) -> tuple:
-    """``A_d``, ``B_d`` of the linearisation held over ``period`` (zero-order hold)."""
-    import control
-
-    a, b = model.linear_matrices(spin_rate)
-    n = a.shape[0]
-    disc = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, 1))), period, "zoh")
-    return np.asarray(disc.A), np.asarray(disc.B)
-
-
 def _lifted(gain, plant_layout, design_layout) -> np.ndarray:
     """A gain on the design state lifted to the plant state (zero on the other entries)."""
     gain = np.asarray(gain, dtype=float).reshape(1, -1)
@@ -241,7 +231,9 @@ def _closed_loop(plant: Model, law, spin_rate: float, sample_time):
     if sample_time is None:
         a, b = plant.linear_matrices(spin_rate)
         return a - b @ gain, None
-    a_d, b_d = _held(plant, spin_rate, sample_time)
+    from .controllable import held
+
+    a_d, b_d = held(*plant.linear_matrices(spin_rate), sample_time)
     return a_d - b_d @ gain, sample_time
 
 

@@ -573,6 +573,7 @@ class SceneTask:
 
     def __call__(self, **overrides) -> dict:
         from ..sim.maneuvers import Slew
+        from ..sim.metrics import ERROR_METRICS
         from .scenes import SceneError, load_scene, run_scene, run_slew
 
         start = time.perf_counter()
@@ -584,8 +585,7 @@ class SceneTask:
                                  "controller_factory (controllers.from_spec)")
             result, built, metrics = run_slew(scene, self.controller_factory)
             out.update({k: v for k, v in dataclasses.asdict(metrics).items() if k != "errors"})
-            for name in ("residual_vibration", "peak_tip_deflection", "final_error",
-                         "settling_time"):
+            for name in ERROR_METRICS:
                 error = metrics.error(name)
                 out[f"{name}_error"] = math.nan if error is None else error
                 out[f"{name}_shown"] = metrics.shown(name)

@@ -19,7 +19,7 @@ import numpy as np
 from ..model.checks import check_array, check_real
 from ..model.errors import InputValueError
 
-__all__ = ["SlewMetrics", "MetricErrors", "slew_metrics", "metric_errors", "settling_time",
+__all__ = ["SlewMetrics", "MetricErrors", "ERROR_METRICS", "slew_metrics", "metric_errors", "settling_time",
            "format_metric", "ERROR_FACTOR"]
 
 #: The difference between the run and the reference run (the plant at more modes, exact
@@ -111,6 +111,8 @@ class SlewMetrics:
 #: The metrics that carry an error, with the unit they are shown in.
 _ERROR_UNITS = {"residual_vibration": "m", "peak_tip_deflection": "m", "final_error": "rad",
                 "settling_time": "s"}
+#: Their names, in that order.
+ERROR_METRICS = tuple(_ERROR_UNITS)
 
 
 @dataclass(frozen=True, kw_only=True)
