@@ -218,6 +218,8 @@ def test_console_summary_shows_the_metrics_with_errors_and_the_loop_check(lqr_sl
                "modes" for line in lines)
 
 
-def test_format_metric_refuses_an_unknown_unit():
+def test_format_metric_refuses_an_unknown_unit_and_a_negative_error():
     with pytest.raises(InputValueError, match="format_metric.unit must be one of m, rad, s"):
         format_metric(1.0, 0.1, "mm")
+    with pytest.raises(InputValueError, match="format_metric.error must be >= 0"):
+        format_metric(1.0, -1e300, "m")

@@ -238,6 +238,9 @@ def format_metric(value: float, error: float | None, unit: str) -> str:
         return f"{v:.3g} {shown_unit}"
     if not np.isfinite(error):
         return f"{v:.3g} {shown_unit} (error unknown)"
+    if error < 0:
+        raise InputValueError(f"format_metric.error must be >= 0 (or None, NaN, inf: "
+                              f"unknown); got {error!r}")
     e = scale * float(error)
     if v < e:
         return f"< {v + e:.3g} {shown_unit}"
