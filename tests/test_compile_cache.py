@@ -208,7 +208,8 @@ def test_angle_sweep_compiles_once(fresh, slew_model, method):
     for k, angle in enumerate(np.linspace(0.3, 1.6, 10)):
         rhs_before = set(compiled_path._RHS_CACHE)
         result = flexctl.simulate(slew_model, 8.0, controller=_pd_slew(
-            slew_model, angle, 4.0 + 0.1 * k), method=method, check_accuracy=False)
+            slew_model, angle, 4.0 + 0.1 * k), method=method, check_accuracy=False,
+            check_validity=False)     # the estimate's exact model compiles once, on its own
         assert result.status == "ok"
         assert result.theta[-1] == pytest.approx(angle, rel=SLEW_TOLERANCE)
         # right-hand sides of this model (not of any model a check builds on the way)
@@ -251,3 +252,78 @@ def test_compiled_and_virtual_machine_runs_agree(fresh, slew_model, monkeypatch)
         runs.append(flexctl.simulate(slew_model, 6.0, controller=_pd_slew(slew_model, 0.8),
                                      method="rk4", check_accuracy=False))
     np.testing.assert_allclose(runs[0].states, runs[1].states, rtol=1e-10, atol=1e-12)
+
+
+# --------------------------------------------------------------- the exact model, compiled
+def _exact_pair():
+    """Two exact 2-mode models of hub-beam-mass that differ only in numbers."""
+    import dataclasses
+
+    import flexctl
+
+    system = flexctl.load_scene("hub-beam-mass").system
+    stiffer = dataclasses.replace(system, beam=dataclasses.replace(
+        system.beam, youngs_modulus=1.3 * system.beam.youngs_modulus))
+    return (flexctl.build_model(system, 2, variant="exact"),
+            flexctl.build_model(stiffer, 2, variant="exact"))
+
+
+def test_lifted_constants_compute_the_same_numbers():
+    from flexctl.sim.compile_cache import lift_constants
+
+    model, _ = _exact_pair()
+    lifted, constants = lift_constants(model.geometry.rhs)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        x, u = 0.2 * rng.standard_normal(model.n_states), rng.standard_normal()
+        np.testing.assert_array_equal(np.array(lifted(x, u, constants)),
+                                      np.array(model.geometry.rhs(x, u)))
+    assert lift_constants(model.geometry.rhs, max_instructions=10) is None
+
+
+@needs_compiler
+def test_models_differing_in_numbers_share_one_library(fresh, monkeypatch):
+    """The exact right-hand side is compiled once per structure: another beam stiffness
+    loads the same library, and the compiled runs agree with the virtual machine's."""
+    import flexctl
+    from flexctl.sim import native_rhs
+
+    monkeypatch.setattr(native_rhs, "_NATIVE", native_rhs.weakref.WeakKeyDictionary())
+    monkeypatch.setattr(native_rhs, "_BUILT", native_rhs.weakref.WeakKeyDictionary())
+    first, second = _exact_pair()
+    push = flexctl.SineTorque(peak_torque=1.0, duration=1.0)
+    before = dict(compile_cache.STATS)
+    runs = [flexctl.simulate(m, 2.0, torque=push, check_validity=False) for m in (first, second)]
+    assert compile_cache.STATS["compiles"] - before["compiles"] == 1
+    assert len(libraries(fresh)) == 1
+    # a stiffer beam bends less under the same push: the numbers are not shared
+    assert np.max(np.abs(runs[1].tip_deflection)) < 0.9 * np.max(np.abs(runs[0].tip_deflection))
+    monkeypatch.setenv("FLEXCTL_COMPILE", "0")
+    monkeypatch.setattr(native_rhs, "_NATIVE", native_rhs.weakref.WeakKeyDictionary())
+    vm = flexctl.simulate(flexctl.build_model(first.system, 2, variant="exact"), 2.0,
+                          torque=push, check_validity=False)
+    np.testing.assert_allclose(runs[0].tip_deflection, vm.tip_deflection, rtol=0,
+                               atol=1e-9 * np.max(np.abs(vm.tip_deflection)))
+
+
+@needs_compiler
+def test_prescribed_motion_on_the_compiled_exact_beam(fresh, monkeypatch):
+    """Under a prescribed spin-up the compiled exact beam and hub torque agree with the
+    virtual machine's."""
+    import flexctl
+
+    from flexctl.sim import native_rhs
+
+    scene = flexctl.load_scene("kane-spinup")
+    runs = []
+    for setting in ("1", "0"):
+        monkeypatch.setenv("FLEXCTL_COMPILE", setting)
+        monkeypatch.setattr(native_rhs, "_NATIVE", native_rhs.weakref.WeakKeyDictionary())
+        model = flexctl.build_model(scene.system, 2, variant="exact")
+        runs.append(flexctl.simulate(model, 12.0, hub_motion=scene.maneuver,
+                                     check_validity=False, rtol=1e-9))
+    peak = np.max(np.abs(runs[1].tip_deflection))
+    np.testing.assert_allclose(runs[0].tip_deflection, runs[1].tip_deflection, rtol=0,
+                               atol=1e-7 * peak)
+    np.testing.assert_allclose(runs[0].torque, runs[1].torque, rtol=0,
+                               atol=1e-7 * np.max(np.abs(runs[1].torque)))

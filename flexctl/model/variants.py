@@ -244,35 +244,90 @@ class Model:
             self._c["geometry"] = exact_geometry(self.matrices)
         return self._c["geometry"]
 
-    def integration_rhs(self):
+    def integration_rhs(self, evaluate=None):
         """The dynamics as a CasADi ``Function`` ``(x, u) -> xdot`` for implicit integrators.
 
         For the exact variant, its own right-hand side with the Jacobian of the first_order
-        model in place of its own: Newton iterations of an implicit method need only an
-        approximate Jacobian (accuracy is that of the right-hand side), and the exact one
-        costs many evaluations of the right-hand side. The right-hand side is the vectorized
-        form (:attr:`~flexctl.model.exact.ExactGeometry.rhs_vectorized`: two to four times
-        faster on CasADi's virtual machine, and quick to compile). The same as
-        :meth:`casadi` otherwise.
+        model in place of its own (:meth:`newton_jacobian`): Newton iterations of an implicit
+        method need only an approximate Jacobian (accuracy is that of the right-hand side),
+        and the exact one costs many evaluations of the right-hand side. The right-hand side
+        is the vectorized form (:attr:`~flexctl.model.exact.ExactGeometry.rhs_vectorized`:
+        two to four times faster on CasADi's virtual machine, and quick to compile), or
+        ``evaluate(x, u)`` (MX symbols in, MX expression out) when given, e.g. a call of a
+        compiled :meth:`casadi`. The same as :meth:`casadi` otherwise.
         """
         if self.variant != "exact":
             return self.casadi()
-        if "integration_rhs" not in self._c:
+        if evaluate is None and "integration_rhs" in self._c:
+            return self._c["integration_rhs"]
+        import casadi as ca
+
+        xm, um = ca.MX.sym("x", self.n_states), ca.MX.sym("u")
+        xdot = (self.geometry.rhs_vectorized if evaluate is None else evaluate)(xm, um)
+        name = f"flexctl_exact_newton_N{self.n_modes}"
+        function = ca.Function(name, [xm, um], [xdot], ["x", "u"], ["xdot"],
+                               {"custom_jacobian": self.newton_jacobian("rhs"),
+                                "jac_penalty": 0})
+        if evaluate is None:
+            self._c["integration_rhs"] = function
+        return function
+
+    def integration_beam(self, evaluate=None):
+        """The beam under a prescribed hub motion as a CasADi ``Function``
+        ``(y, rate, acceleration) -> dy/dt`` for implicit integrators, ``y = [q, q_dot]``.
+
+        For the exact variant, as :meth:`integration_rhs`: the exact beam
+        (:attr:`~flexctl.model.exact.ExactGeometry.beam`, or ``evaluate(q, q_dot, rate,
+        acceleration)`` returning ``q_tt``) with first_order's Jacobian for Newton's method.
+        """
+        import casadi as ca
+
+        from .exports import _symbolic_beam_dynamics
+
+        n = self.n_modes
+        ym, rate, acc = ca.MX.sym("y", 2 * n), ca.MX.sym("rate"), ca.MX.sym("acceleration")
+        if self.variant != "exact":
+            return ca.Function("flexctl_beam", [ym, rate, acc],
+                               [_symbolic_beam_dynamics(self, ym, rate, acc)],
+                               ["y", "rate", "acceleration"], ["ydot"])
+        q_tt = (self.geometry.beam if evaluate is None else evaluate)(ym[:n], ym[n:], rate, acc)
+        return ca.Function(f"flexctl_exact_beam_newton_N{n}", [ym, rate, acc],
+                           [ca.vertcat(ym[n:], q_tt)], ["y", "rate", "acceleration"],
+                           ["ydot"], {"custom_jacobian": self.newton_jacobian("beam"),
+                                      "jac_penalty": 0})
+
+    def newton_jacobian(self, form: str = "rhs"):
+        """first_order's Jacobian in the form CasADi's ``custom_jacobian`` takes: of
+        ``(x, u) -> xdot`` (``form="rhs"``) or of ``(y, rate, acceleration) -> dy/dt``
+        (``form="beam"``), with the nominal output as its last input."""
+        key = ("newton_jacobian", form)
+        if key not in self._c:
             import casadi as ca
 
-            n = self.n_states
+            from .exports import _symbolic_beam_dynamics
+
             linear = Model(system=self.system, n_modes=self.n_modes, variant="first_order",
-                           matrices=self.matrices).casadi()
-            x, u, out = ca.SX.sym("x", n), ca.SX.sym("u"), ca.SX.sym("out", n)
-            name = f"flexctl_exact_newton_N{self.n_modes}"
-            jac = ca.Function(f"jac_{name}", [x, u, out],
-                              [ca.jacobian(linear(x, u), x), ca.jacobian(linear(x, u), u)],
-                              ["x", "u", "out_xdot"], ["jac_xdot_x", "jac_xdot_u"])
-            xm, um = ca.MX.sym("x", n), ca.MX.sym("u")
-            self._c["integration_rhs"] = ca.Function(
-                name, [xm, um], [self.geometry.rhs_vectorized(xm, um)], ["x", "u"], ["xdot"],
-                {"custom_jacobian": jac, "jac_penalty": 0})
-        return self._c["integration_rhs"]
+                           matrices=self.matrices)
+            if form == "rhs":
+                x, u, out = (ca.SX.sym("x", self.n_states), ca.SX.sym("u"),
+                             ca.SX.sym("out", self.n_states))
+                xdot = linear.casadi()(x, u)
+                names, args = ["x", "u", "out_xdot"], [x, u, out]
+                outputs, out_names = [ca.jacobian(xdot, x), ca.jacobian(xdot, u)], \
+                    ["jac_xdot_x", "jac_xdot_u"]
+                prefix = "flexctl_exact_newton"
+            else:
+                n = self.n_modes
+                y, rate, acc, out = (ca.SX.sym("y", 2 * n), ca.SX.sym("rate"),
+                                     ca.SX.sym("acceleration"), ca.SX.sym("out", 2 * n))
+                ydot = _symbolic_beam_dynamics(linear, y, rate, acc)
+                names, args = ["y", "rate", "acceleration", "out_ydot"], [y, rate, acc, out]
+                outputs = [ca.jacobian(ydot, v) for v in (y, rate, acc)]
+                out_names = ["jac_ydot_y", "jac_ydot_rate", "jac_ydot_acceleration"]
+                prefix = "flexctl_exact_beam_newton"
+            self._c[key] = ca.Function(f"jac_{prefix}_N{self.n_modes}", args, outputs, names,
+                                       out_names)
+        return self._c[key]
 
     def _exact_mass(self, x) -> list:
         q = np.atleast_2d(self.layout.modal(x).T).T

@@ -49,7 +49,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["compiled", "cache_dir", "cache_info", "clear_cache", "compiler", "CacheInfo",
+__all__ = ["compiled", "lift_constants", "cache_dir", "cache_info", "clear_cache", "compiler", "CacheInfo",
            "CompileCacheWarning", "STATS", "FLAGS", "PROGRESS_AFTER"]
 
 #: Compiler flags of every library (part of the key).
@@ -177,6 +177,70 @@ def compiled(function, *, label: str | None = None):
         return function
     _LOADED[(name, key)] = loaded
     return loaded
+
+
+def lift_constants(function, max_instructions: int | None = None):
+    """``function`` with its numbers moved into a last input, so that its code, and the key of
+    its library, depend on its structure alone.
+
+    An SX function's constants (a model's matrices, quadrature weights, mode shapes) are
+    written into its generated C, so two models that differ only in numbers (a Monte Carlo
+    sample, another beam length) would each compile. The lifted function ``g(*inputs, c)``
+    computes the same operations in the same order with the constants read from ``c``: one
+    library serves every such model.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        An SX function without calls to other functions.
+    max_instructions : int, optional
+        Return None for a larger function (too slow to lift and compile).
+
+    Returns
+    -------
+    (casadi.Function, ndarray) or None
+        The lifted function (named ``<name>_lifted``) and the constants ``c`` it takes, or
+        None when ``function`` is not an SX function, calls others or is too large.
+
+    Examples
+    --------
+    >>> import casadi as ca, numpy as np
+    >>> x = ca.SX.sym("x")
+    >>> g, c = lift_constants(ca.Function("doc_affine", [x], [3.0 * x + 2.5]))
+    >>> c.tolist(), float(g(2.0, c))
+    ([3.0, 2.5], 8.5)
+    """
+    import casadi as ca
+    import numpy as np
+
+    if not isinstance(function, ca.Function) or not function.is_a("SXFunction"):
+        return None
+    count = function.n_instructions()
+    if max_instructions is not None and count > max_instructions:
+        return None
+    inputs = function.sx_in()
+    outputs = [ca.SX.zeros(function.sparsity_out(k)) for k in range(function.n_out())]
+    work, values, symbols = [None] * function.sz_w(), [], []
+    for k in range(count):
+        op = function.instruction_id(k)
+        out, arg = function.instruction_output(k), function.instruction_input(k)
+        if op == ca.OP_CONST:
+            symbols.append(ca.SX.sym(f"c{len(values)}"))
+            values.append(function.instruction_constant(k))
+            work[out[0]] = symbols[-1]
+        elif op == ca.OP_INPUT:
+            work[out[0]] = inputs[arg[0]].nz[arg[1]]
+        elif op == ca.OP_OUTPUT:
+            outputs[out[0]].nz[out[1]] = work[arg[0]]
+        elif op == ca.OP_CALL:
+            return None
+        elif len(arg) > 1 and arg[1] >= 0:
+            work[out[0]] = ca.SX.binary(op, work[arg[0]], work[arg[1]])
+        else:
+            work[out[0]] = ca.SX.unary(op, work[arg[0]])
+    lifted = ca.Function(f"{function.name()}_lifted", [*inputs, ca.vertcat(*symbols)],
+                         outputs, [*function.name_in(), "constants"], function.name_out())
+    return lifted, np.array(values, dtype=float)
 
 
 def _load_or_build(name: str, key: str, source: str, tool: tuple, label: str):

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..model.exports import _symbolic_beam_dynamics, _symbolic_dynamics
 from ..model.errors import InputValueError
+from .native_rhs import integration_beam, integration_rhs
 
 __all__ = ["is_symbolic", "piecewise_constant", "torque_history", "SegmentIntegrator",
            "integrate_segments", "numeric_rhs"]
@@ -174,22 +175,62 @@ def drive_size(model, hub_motion=None, controller=None) -> int:
 def _closed_loop_dynamics(model, t, y, torque, controller, parameters=None):
     """CasADi ``d[x, z]/dt`` of the plant ``x`` under ``torque`` and ``controller``, whose
     internal states ``z`` (if any) follow ``casadi_derivative``; ``parameters`` the symbol of
-    their numbers (:func:`input_numbers` of ``(torque, None, controller)``)."""
+    their numbers (:func:`input_numbers` of ``(torque, None, controller)``). Scalar (SX)
+    expressions, the model inlined."""
     import casadi as ca
 
-    plant = slice(0, model.n_states)
-    x, z = y[plant], y[plant.stop:]
+    u, dz = _drive_terms(model, t, y, torque, controller, parameters)
+    dx = _symbolic_dynamics(model, y[:model.n_states], ca.vertcat(u))
+    return dx if dz is None else ca.vertcat(dx, dz)
+
+
+def _drive_terms(model, t, y, torque, controller, parameters=None) -> tuple:
+    """The hub torque ``u`` and the controller's ``dz/dt`` (None without internal states) at
+    ``y = [x, z]``, as CasADi expressions."""
+    x, z = y[:model.n_states], y[model.n_states:]
     numbers = (None, None)
     if parameters is not None:
         numbers = tuple(_split_numbers((torque, None, controller), parameters)[::2])
     u = _applied_torque(t, x, z, torque, controller, numbers)
-    if isinstance(x, ca.MX):
-        dx = model.integration_rhs()(x, u)
-    else:
-        dx = _symbolic_dynamics(model, x, ca.vertcat(u))
     if controller is not None and getattr(controller, "n_states", 0):
-        return ca.vertcat(dx, controller.casadi_derivative(t, x, z))
-    return dx
+        return u, controller.casadi_derivative(t, x, z)
+    return u, None
+
+
+def _calls_model(model, hub_motion) -> bool:
+    """The model enters the right-hand side through a call (:mod:`flexctl.sim.native_rhs`:
+    compiled, with first_order's cheap Newton Jacobian) rather than inlined: the one-beam
+    exact model, and an exact structure under a torque."""
+    return model.variant == "exact" and (hub_motion is None or not hasattr(model, "functions"))
+
+
+def _called_model_dynamics(model, scale, inputs, n_numbers):
+    """``(ys, tau, p) -> d ys / d tau`` (see :func:`_rhs_function`) as MX with two calls: one
+    scalar (SX) function for the time, the inputs and any controller states, and the model."""
+    import casadi as ca
+
+    torque, hub_motion, controller = inputs
+    n = scale.size
+    ys, tau, p = ca.SX.sym("ys", n), ca.SX.sym("tau"), ca.SX.sym("p", 3 + n_numbers)
+    y = ys * ca.DM(scale)
+    t_in = ca.fmin(p[0] + tau * p[1], p[2])
+    if hub_motion is not None:
+        terms = list(hub_motion_casadi(hub_motion, t_in, _split_numbers(inputs, p[3:])[1]))
+    else:
+        u, dz = _drive_terms(model, t_in, y, torque, controller, p[3:])
+        terms = [ca.vertcat(u)] + ([] if dz is None else [dz])
+    drive = ca.Function("flexctl_drive", [ys, tau, p], terms)
+    ys_m, tau_m, p_m = ca.MX.sym("ys", n), ca.MX.sym("tau"), ca.MX.sym("p", 3 + n_numbers)
+    y_m = ys_m * ca.DM(scale)
+    out = drive(ys_m, tau_m, p_m)
+    out = out if isinstance(out, (list, tuple)) else [out]
+    if hub_motion is not None:
+        dy = integration_beam(model)(y_m, out[0], out[1])
+    else:
+        dy = integration_rhs(model)(y_m[:model.n_states], out[0])
+        if len(out) > 1:
+            dy = ca.vertcat(dy, out[1])
+    return ys_m, tau_m, p_m, dy
 
 
 #: Right-hand sides and integrators kept for reuse, by the identity of the model and inputs
@@ -248,19 +289,21 @@ def _rhs_function(model, scale, torque, hub_motion, controller):
 
     inputs = (torque, hub_motion, controller)
     n_numbers = input_numbers(inputs).size
-    # the exact model enters through a call (Model.integration_rhs), which keeps its cheap
-    # Newton Jacobian; the others are inlined into scalar expressions
-    sym = ca.MX if model.variant == "exact" and hub_motion is None else ca.SX
-    ys, tau = sym.sym("ys", scale.size), sym.sym("tau")
-    p = sym.sym("p", 3 + n_numbers)
-    y = ys * ca.DM(scale)
-    t_in = ca.fmin(p[0] + tau * p[1], p[2])
-    if hub_motion is not None:
-        rate, acceleration = hub_motion_casadi(hub_motion, t_in,
-                                               _split_numbers(inputs, p[3:])[1])
-        dy = _symbolic_beam_dynamics(model, y, rate, acceleration)
+    if _calls_model(model, hub_motion):
+        ys, tau, p, dy = _called_model_dynamics(model, scale, inputs, n_numbers)
+        sym = ca.MX
     else:
-        dy = _closed_loop_dynamics(model, t_in, y, torque, controller, p[3:])
+        sym = ca.SX
+        ys, tau = sym.sym("ys", scale.size), sym.sym("tau")
+        p = sym.sym("p", 3 + n_numbers)
+        y = ys * ca.DM(scale)
+        t_in = ca.fmin(p[0] + tau * p[1], p[2])
+        if hub_motion is not None:
+            rate, acceleration = hub_motion_casadi(hub_motion, t_in,
+                                                   _split_numbers(inputs, p[3:])[1])
+            dy = _symbolic_beam_dynamics(model, y, rate, acceleration)
+        else:
+            dy = _closed_loop_dynamics(model, t_in, y, torque, controller, p[3:])
     empty = sym(0, 1)
     return ca.Function("flexctl_rhs", [tau, ys, empty, p, empty],
                        [p[1] * dy / ca.DM(scale), empty, empty, empty], ca.dyn_in(),

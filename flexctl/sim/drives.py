@@ -16,6 +16,7 @@ import numpy as np
 
 from .compiled import torque_history
 from .inputs import input_value, time_function
+from .native_rhs import prescribed_torque
 from ..model import Model
 from ..model.errors import InputTypeError, InputValueError
 
@@ -182,6 +183,9 @@ class PrescribedDrive(_Drive):
         """The torque the motion needs, N m, shape (P,)."""
         model = self.model
         acc = self.hub_motion.acceleration(t_all)
+        native = prescribed_torque(model, states, acc)
+        if native is not None:
+            return native
         _, q, rate, q_dot = model.layout.split(states)
         qdd = model.beam_accelerations(q, q_dot, rate, acc)
         return model.hub_torque(states, acc, qdd)

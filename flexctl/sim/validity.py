@@ -47,7 +47,7 @@ __all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "assess", "
 #: Modes of the two models compared by :func:`geometric_error`.
 ESTIMATE_MODES = 2
 #: Relative tolerance of the estimate's runs (far below any tolerance asked of the estimate).
-ESTIMATE_RTOL = 1e-7
+ESTIMATE_RTOL = 1e-6
 #: The estimate's errors are relative to the peak deflection, or to this fraction of the beam
 #: length if the peak is smaller: the geometric nonlinearity goes as the square of the
 #: deflection, 1e-18 of it there.

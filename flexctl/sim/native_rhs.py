@@ -1,0 +1,100 @@
+"""The exact model's right-hand sides for the integrators, as machine code.
+
+CVODES evaluates a model's right-hand side tens of thousands of times a run. For the exact
+variant that evaluation dominates on CasADi's virtual machine (11 us at 4 modes against 1 us
+for first_order). Here its scalar form (:attr:`~flexctl.model.exact.ExactGeometry.rhs`,
+every quadrature node written out) is compiled through the persistent cache
+(:mod:`flexctl.sim.compile_cache`) with its numbers lifted into an input
+(:func:`~flexctl.sim.compile_cache.lift_constants`): one library per structure (modes,
+panels, point masses), whatever the beam's numbers, so that a Monte Carlo over the structure
+compiles once. It is wrapped with first_order's Jacobian for Newton's method
+(:meth:`flexctl.Model.integration_rhs`), as on the virtual machine.
+
+Where compiling is off or impossible, or the function is larger than
+:data:`MAX_INSTRUCTIONS`, the model's own (virtual machine) form is used.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+from .compile_cache import compiled, lift_constants
+
+__all__ = ["integration_rhs", "integration_beam", "prescribed_torque", "MAX_INSTRUCTIONS"]
+
+#: Largest scalar right-hand side compiled (instructions; 6 modes on hub-beam-mass: about
+#: 25 000, 550 kB of C compiled in 3 to 4 s, once).
+MAX_INSTRUCTIONS = 60_000
+
+#: The compiled functions of each exact geometry (shared by the models built on it).
+_NATIVE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+#: The wrapped right-hand sides of each model.
+_BUILT: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _native(geometry, form: str):
+    """``geometry.rhs``, ``.beam`` or ``.torque`` as a function of the same inputs that calls
+    its compiled lifted form with the geometry's constants, or None to stay on the virtual
+    machine."""
+    import casadi as ca
+
+    entry = _NATIVE.setdefault(geometry, {})
+    if form not in entry:
+        function = getattr(geometry, form)
+        lifted = lift_constants(function, MAX_INSTRUCTIONS)
+        native = None
+        if lifted is not None:
+            built = compiled(lifted[0], label=f"{function.name()} (once per model structure)")
+            if built is not lifted[0]:          # else compiling is off, impossible or failed
+                args = [ca.MX.sym(function.name_in(k), function.sparsity_in(k))
+                        for k in range(function.n_in())]
+                native = ca.Function(f"{function.name()}_native", args,
+                                     [built(*args, ca.DM(lifted[1]))], function.name_in(),
+                                     function.name_out())
+        entry[form] = native
+    return entry[form]
+
+
+def _built(model, form: str):
+    entry = _BUILT.setdefault(model, {})
+    if form not in entry:
+        native = _native(model.geometry, form)
+        build = model.integration_rhs if form == "rhs" else model.integration_beam
+        entry[form] = build(native)
+    return entry[form]
+
+
+def integration_rhs(model):
+    """``(x, u) -> xdot`` for implicit integrators: compiled for a one-beam exact model,
+    :meth:`flexctl.Model.integration_rhs` otherwise."""
+    if model.variant != "exact" or hasattr(model, "functions"):
+        return model.integration_rhs()
+    return _built(model, "rhs")
+
+
+def integration_beam(model):
+    """``(y, rate, acceleration) -> dy/dt`` under a prescribed hub motion, ``y = [q,
+    q_dot]``: compiled for a one-beam exact model, :meth:`flexctl.Model.integration_beam`
+    otherwise."""
+    if model.variant != "exact" or hasattr(model, "functions"):
+        return model.integration_beam()
+    return _built(model, "beam")
+
+
+def prescribed_torque(model, states, acceleration):
+    """The hub torque a prescribed motion needs, N m, shape (P,), at ``states`` (n, P) with
+    hub ``acceleration`` (P,): the beam's accelerations, then the hub equation, both
+    compiled for a one-beam exact model; None where they are not (the caller then uses the
+    model's own :meth:`~flexctl.Model.beam_accelerations` and :meth:`~flexctl.Model.hub_torque`)."""
+    import numpy as np
+
+    if model.variant != "exact" or hasattr(model, "functions"):
+        return None
+    beam, torque = _native(model.geometry, "beam"), _native(model.geometry, "torque")
+    if beam is None or torque is None:
+        return None
+    _, q, rate, q_dot = model.layout.split(states)
+    points = np.shape(states)[1]
+    acc = np.asarray(acceleration, dtype=float).reshape(1, points)
+    q_tt = beam.map(points)(q, q_dot, rate.reshape(1, points), acc)
+    return np.array(torque.map(points)(states, acc, q_tt)).reshape(points)
