@@ -22,9 +22,9 @@ from .compile_cache import compiled, lift_constants
 
 __all__ = ["integration_rhs", "integration_beam", "prescribed_torque", "MAX_INSTRUCTIONS"]
 
-#: Largest scalar right-hand side compiled (instructions; 6 modes on hub-beam-mass: about
-#: 25 000, 550 kB of C compiled in 3 to 4 s, once).
-MAX_INSTRUCTIONS = 60_000
+#: Largest scalar function compiled, instructions (hub-beam-mass on 6 modes: 23 000, 550 kB of
+#: C compiled in 3 to 4 s, once; on 8 modes: 39 000). Larger ones stay on the virtual machine.
+MAX_INSTRUCTIONS = 30_000
 
 #: The compiled functions of each exact geometry (shared by the models built on it).
 _NATIVE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
