@@ -44,7 +44,7 @@ def _native(geometry, form: str):
         lifted = lift_constants(function, MAX_INSTRUCTIONS)
         native = None
         if lifted is not None:
-            built = compiled(lifted[0], label=f"{function.name()} (once per model structure)")
+            built = compiled(lifted[0], label=function.name())
             if built is not lifted[0]:          # else compiling is off, impossible or failed
                 args = [ca.MX.sym(function.name_in(k), function.sparsity_in(k))
                         for k in range(function.n_in())]
