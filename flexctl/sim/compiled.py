@@ -207,33 +207,35 @@ def _calls_model(model, hub_motion) -> bool:
     return model.variant == "exact" and (hub_motion is None or not hasattr(model, "functions"))
 
 
-def _called_model_dynamics(model, scale, inputs, n_numbers):
-    """``(ys, tau, p) -> d ys / d tau`` (see :func:`_rhs_function`) as MX with two calls: one
-    scalar (SX) function for the time, the inputs and any controller states, and the model."""
+def _drive_symbols(model, scale, inputs, n_numbers) -> tuple:
+    """SX symbols ``ys``, ``tau``, ``p`` of :func:`_rhs_function`, the state ``y = ys * scale``
+    and the drive's terms at ``t = min(t_0 + tau h, t_last)``: ``[rate, acceleration]`` of a
+    hub motion, or ``[u]`` and, with controller states, ``[u, dz/dt]``."""
     import casadi as ca
 
     torque, hub_motion, controller = inputs
-    n = scale.size
-    ys, tau, p = ca.SX.sym("ys", n), ca.SX.sym("tau"), ca.SX.sym("p", 3 + n_numbers)
+    ys, tau, p = ca.SX.sym("ys", scale.size), ca.SX.sym("tau"), ca.SX.sym("p", 3 + n_numbers)
     y = ys * ca.DM(scale)
     t_in = ca.fmin(p[0] + tau * p[1], p[2])
     if hub_motion is not None:
-        terms = list(hub_motion_casadi(hub_motion, t_in, _split_numbers(inputs, p[3:])[1]))
-    else:
-        u, dz = _drive_terms(model, t_in, y, torque, controller, p[3:])
-        terms = [ca.vertcat(u)] + ([] if dz is None else [dz])
-    drive = ca.Function("flexctl_drive", [ys, tau, p], terms)
-    ys_m, tau_m, p_m = ca.MX.sym("ys", n), ca.MX.sym("tau"), ca.MX.sym("p", 3 + n_numbers)
-    y_m = ys_m * ca.DM(scale)
-    out = drive(ys_m, tau_m, p_m)
-    out = out if isinstance(out, (list, tuple)) else [out]
-    if hub_motion is not None:
-        dy = integration_beam(model)(y_m, out[0], out[1])
-    else:
-        dy = integration_rhs(model)(y_m[:model.n_states], out[0])
-        if len(out) > 1:
-            dy = ca.vertcat(dy, out[1])
-    return ys_m, tau_m, p_m, dy
+        return ys, tau, p, y, list(hub_motion_casadi(hub_motion, t_in,
+                                                     _split_numbers(inputs, p[3:])[1]))
+    u, dz = _drive_terms(model, t_in, y, torque, controller, p[3:])
+    return ys, tau, p, y, [ca.vertcat(u)] + ([] if dz is None else [dz])
+
+
+def _model_dynamics(model, y, terms, prescribed: bool, inline: bool):
+    """``dy/dt`` from the drive's ``terms`` (:func:`_drive_symbols`): the model inlined into
+    scalar expressions, or called (:mod:`flexctl.sim.native_rhs`)."""
+    import casadi as ca
+
+    if prescribed:
+        return (_symbolic_beam_dynamics(model, y, *terms) if inline
+                else integration_beam(model)(y, *terms))
+    x = y[:model.n_states]
+    dx = (_symbolic_dynamics(model, x, terms[0]) if inline
+          else integration_rhs(model)(x, terms[0]))
+    return dx if len(terms) == 1 else ca.vertcat(dx, terms[1])
 
 
 #: Right-hand sides and integrators kept for reuse, by the identity of the model and inputs
@@ -291,22 +293,15 @@ def _rhs_function(model, scale, torque, hub_motion, controller):
     import casadi as ca
 
     inputs = (torque, hub_motion, controller)
-    n_numbers = input_numbers(inputs).size
-    if _calls_model(model, hub_motion):
-        ys, tau, p, dy = _called_model_dynamics(model, scale, inputs, n_numbers)
-        sym = ca.MX
-    else:
-        sym = ca.SX
-        ys, tau = sym.sym("ys", scale.size), sym.sym("tau")
-        p = sym.sym("p", 3 + n_numbers)
+    ys, tau, p, y, terms = _drive_symbols(model, scale, inputs, input_numbers(inputs).size)
+    sym = ca.MX if _calls_model(model, hub_motion) else ca.SX
+    if sym is ca.MX:
+        # two calls: the drive (one scalar function) and the model
+        drive = ca.Function("flexctl_drive", [ys, tau, p], terms)
+        ys, tau, p = ca.MX.sym("ys", scale.size), ca.MX.sym("tau"), ca.MX.sym("p", p.numel())
         y = ys * ca.DM(scale)
-        t_in = ca.fmin(p[0] + tau * p[1], p[2])
-        if hub_motion is not None:
-            rate, acceleration = hub_motion_casadi(hub_motion, t_in,
-                                                   _split_numbers(inputs, p[3:])[1])
-            dy = _symbolic_beam_dynamics(model, y, rate, acceleration)
-        else:
-            dy = _closed_loop_dynamics(model, t_in, y, torque, controller, p[3:])
+        terms = drive.call([ys, tau, p])
+    dy = _model_dynamics(model, y, terms, hub_motion is not None, inline=sym is ca.SX)
     empty = sym(0, 1)
     return ca.Function("flexctl_rhs", [tau, ys, empty, p, empty],
                        [p[1] * dy / ca.DM(scale), empty, empty, empty], ca.dyn_in(),
