@@ -327,3 +327,15 @@ def test_prescribed_motion_on_the_compiled_exact_beam(fresh, monkeypatch):
                                atol=1e-7 * peak)
     np.testing.assert_allclose(runs[0].torque, runs[1].torque, rtol=0,
                                atol=1e-7 * np.max(np.abs(runs[1].torque)))
+
+
+@pytest.mark.parametrize("bad", ["10", float("nan"), float("inf"), -1, 1.5, True])
+def test_lift_constants_refuses_a_bad_size_by_name(bad):
+    import casadi as ca
+
+    from flexctl.model.errors import InputTypeError, InputValueError
+    from flexctl.sim.compile_cache import lift_constants
+
+    x = ca.SX.sym("x")
+    with pytest.raises((InputTypeError, InputValueError), match="max_instructions"):
+        lift_constants(ca.Function("doc_double", [x], [2 * x]), bad)

@@ -213,6 +213,11 @@ def lift_constants(function, max_instructions: int | None = None):
     import casadi as ca
     import numpy as np
 
+    from ..model.checks import check_integer
+
+    if max_instructions is not None:
+        max_instructions = check_integer("lift_constants", "max_instructions",
+                                         max_instructions, minimum=0)
     if not isinstance(function, ca.Function) or not function.is_a("SXFunction"):
         return None
     count = function.n_instructions()
