@@ -20,6 +20,7 @@ from flexctl.model.errors import InputValueError
 
 from .actuator_limits import hold_voltages, speed_bound, wheel_speed_function
 from .hold_grid import LARGEST_STEP, MAX_SUBSTEPS, mode_tolerances, steps_per_hold
+from .native_dynamics import design_dynamics
 
 __all__ = ["MAX_INTERVALS", "MAX_ELEMENTS", "MAX_MODE_PHASE", "Discretisation", "discretisation",
            "transcription_for", "rk4_substeps", "refuse_fast_modes", "resolution_reason",
@@ -287,7 +288,7 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
     scale = ca.DM(state_scale(model, problem, problem.duration or t_guess))
     collocation = disc.transcription == "collocation"
     m, d = (disc.steps_per_hold, problem.degree) if collocation else (1, 0)
-    f = model.casadi()
+    f = design_dynamics(model)
 
     opti = ca.Opti()
     grid = opti.variable(n, m * K + 1)                 # X, or the element boundaries

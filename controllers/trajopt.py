@@ -643,7 +643,8 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
     Parameters
     ----------
     model : flexctl.Model
-        Design model; its dynamics enter through :meth:`flexctl.Model.casadi`.
+        Design model; its dynamics enter through :meth:`flexctl.Model.casadi`, for the exact
+        variant compiled with their derivatives (:mod:`controllers.native_dynamics`).
     problem : SlewProblem
     initial_guess : SlewSolution or tuple (t, states, torque), optional
         Warm start: a previous solution (any grid; resampled in normalised time) or arrays

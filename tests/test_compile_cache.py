@@ -339,3 +339,86 @@ def test_lift_constants_refuses_a_bad_size_by_name(bad):
     x = ca.SX.sym("x")
     with pytest.raises((InputTypeError, InputValueError), match="max_instructions"):
         lift_constants(ca.Function("doc_double", [x], [2 * x]), bad)
+
+
+# ------------------------------------------------- compiled derivatives for the optimisers
+def _second_order(function, n: int, points: int = 7):
+    """Values, constraint Jacobian and Lagrangian Hessian of ``function`` (x (n,), u) mapped
+    over ``points`` points, as CasADi's NLP callbacks build them (MX AD through the call)."""
+    import casadi as ca
+
+    X, U, L = ca.MX.sym("X", n, points), ca.MX.sym("U", 1, points), ca.MX.sym("L", n, points)
+    y = function.map(points)(X, U)
+    z = ca.vertcat(ca.vec(X), ca.vec(U))
+    return ca.Function("second_order", [X, U, L],
+                       [y, ca.jacobian(ca.vec(y), z), ca.hessian(ca.sum1(ca.sum2(L * y)), z)[0]])
+
+
+def test_with_derivatives_holds_the_fixed_input_constant():
+    import casadi as ca
+
+    from flexctl.sim.compile_cache import with_derivatives
+
+    x, c = ca.SX.sym("x", 2), ca.SX.sym("c", 2)
+    f = ca.Function("t_f", [x, c], [ca.vertcat(c[0] * ca.sin(x[0]) * x[1], c[1] * x[1] ** 3)],
+                    ["x", "c"], ["y"])
+    jac, adj, jac_adj = with_derivatives(f, fixed=(1,))
+    assert (jac.name(), adj.name(), jac_adj.name()) == ("jac_t_f", "adj1_t_f", "jac_adj1_t_f")
+    assert jac.name_out() == ["jac_y_x", "jac_y_c"]
+    assert jac.sparsity_out(1).nnz() == 0             # the constants are not differentiated
+    x0, c0, seed = np.array([0.3, -1.2]), np.array([2.0, 0.5]), np.array([0.7, -0.4])
+    np.testing.assert_allclose(np.array(jac(x0, c0, 0)[0]),
+                               np.array(f.jacobian()(x0, c0, 0)[0]), rtol=1e-14)
+    sens = adj(x0, c0, 0, seed)
+    np.testing.assert_allclose(np.array(sens[0]).ravel(),
+                               np.array(f.reverse(1)(x0, c0, 0, seed)[0]).ravel(), rtol=1e-14)
+    np.testing.assert_array_equal(np.array(sens[1]).ravel(), 0.0)
+    with pytest.raises(TypeError, match="SX casadi.Function"):
+        with_derivatives("t_f")
+
+
+@needs_compiler
+def test_compiled_design_dynamics_have_the_models_derivatives(fresh, monkeypatch):
+    """The exact design model compiled with its derivatives gives the same values, Jacobian
+    and Lagrangian Hessian as the model on the virtual machine; first_order stays as is."""
+    import flexctl
+
+    from controllers import native_dynamics
+
+    monkeypatch.setattr(native_dynamics, "_BUILT", native_dynamics.weakref.WeakKeyDictionary())
+    system = flexctl.load_scene("hub-beam-mass").system
+    model = flexctl.build_model(system, 1, variant="exact")
+    native = native_dynamics.design_dynamics(model)
+    assert native is not model.casadi() and compile_cache.STATS["compiles"] >= 1
+    rng = np.random.default_rng(11)
+    args = (0.3 * rng.standard_normal((model.n_states, 7)), rng.standard_normal((1, 7)),
+            rng.standard_normal((model.n_states, 7)))
+    for mine, theirs in zip(_second_order(native, model.n_states)(*args),
+                            _second_order(model.casadi(), model.n_states)(*args)):
+        theirs = np.array(theirs.full() if hasattr(theirs, "full") else theirs)
+        np.testing.assert_allclose(np.array(mine.full()), theirs, rtol=0,
+                                   atol=1e-12 * np.max(np.abs(theirs)))
+    linear = flexctl.build_model(system, 1, variant="first_order")
+    assert native_dynamics.design_dynamics(linear).name() == linear.casadi().name()
+
+
+@needs_compiler
+def test_exact_slew_optimum_is_the_same_compiled(fresh, monkeypatch):
+    """An optimal slew of the exact model: the same optimum with IPOPT's callbacks compiled
+    and on the virtual machine."""
+    import flexctl
+
+    from controllers import native_dynamics
+    from controllers.trajopt import SlewProblem, solve_slew
+
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, 1, variant="exact")
+    problem = SlewProblem(angle=1.0, duration=3.0, torque_bound=5.0, n_intervals=20)
+    costs = []
+    for setting in ("1", "0"):
+        monkeypatch.setenv("FLEXCTL_COMPILE", setting)
+        monkeypatch.setattr(native_dynamics, "_BUILT",
+                            native_dynamics.weakref.WeakKeyDictionary())
+        solution = solve_slew(model, problem)
+        assert solution.return_status == "Solve_Succeeded"
+        costs.append(solution.cost)
+    assert costs[0] == pytest.approx(costs[1], rel=1e-9)

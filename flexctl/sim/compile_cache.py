@@ -49,11 +49,15 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["compiled", "lift_constants", "cache_dir", "cache_info", "clear_cache", "compiler", "CacheInfo",
+__all__ = ["compiled", "lift_constants", "with_derivatives", "cache_dir", "cache_info", "clear_cache", "compiler", "CacheInfo",
            "CompileCacheWarning", "STATS", "FLAGS", "PROGRESS_AFTER"]
 
-#: Compiler flags of every library (part of the key).
-FLAGS = ("-O2", "-fPIC", "-shared")
+#: Compiler flags of every library (part of the key). ``-Og`` runs the generated straight-line
+#: code as fast as ``-O2`` (within 3 % on the exact model's right-hand side and its
+#: derivatives) and compiles it up to 13 times sooner: the register allocation of ``-O1`` and
+#: above grows faster than linearly with a function's length (``benchmarks/bench_compile.py
+#: --flags``).
+FLAGS = ("-Og", "-fPIC", "-shared")
 #: A compile longer than this (s) reports itself on stderr.
 PROGRESS_AFTER = 1.0
 #: Where libraries go, under the cache directory.
@@ -120,12 +124,13 @@ def _warn_once(reason: str) -> None:
                       "several times slower)", CompileCacheWarning, stacklevel=3)
 
 
-def _source(function) -> str:
-    """The C source of ``function`` alone (its sub-functions included)."""
+def _source(function, companions=()) -> str:
+    """The C source of ``function`` and its ``companions`` (their sub-functions included)."""
     import casadi as ca
 
     generator = ca.CodeGenerator(f"{function.name()}.c", {"with_header": False})
-    generator.add(function)
+    for each in (function, *companions):
+        generator.add(each)
     return generator.dump()
 
 
@@ -139,7 +144,7 @@ def _key(source: str, tool: tuple) -> str:
     return digest.hexdigest()[:32]
 
 
-def compiled(function, *, label: str | None = None):
+def compiled(function, *, label: str | None = None, companions=(), options=None):
     """``function`` as machine code from the persistent cache, else ``function`` itself.
 
     Parameters
@@ -148,13 +153,20 @@ def compiled(function, *, label: str | None = None):
         Any function CasADi can generate C for (SX or MX; no external calls inside).
     label : str, optional
         What to call it in a progress line. Default: its name.
+    companions : sequence of casadi.Function, optional
+        Functions compiled into the same library. ``casadi.external`` takes the ones named
+        ``jac_<name>``, ``adj1_<name>`` and ``jac_adj1_<name>`` (the signatures of CasADi's
+        ``jacobian()``, ``reverse(1)`` and ``reverse(1).jacobian()``) as the derivatives of
+        ``<name>``: see :func:`with_derivatives`.
+    options : dict, optional
+        Options of ``casadi.external`` (e.g. ``{"jac_penalty": -1}``).
 
     Returns
     -------
     casadi.Function
-        A ``casadi.external`` of the same name, inputs and outputs (evaluation only: take
-        derivatives of ``function`` before compiling), or ``function`` where compiling is off,
-        impossible (one warning) or failed (one warning).
+        A ``casadi.external`` of the same name, inputs and outputs (differentiable only
+        through its companions: take other derivatives of ``function`` before compiling), or
+        ``function`` where compiling is off, impossible (one warning) or failed (one warning).
     """
     if not _enabled():
         return function
@@ -165,12 +177,12 @@ def compiled(function, *, label: str | None = None):
         return function
     name = function.name()
     try:
-        source = _source(function)      # CasADi refuses functions it cannot generate
+        source = _source(function, companions)  # CasADi refuses what it cannot generate
         key = _key(source, tool)
         if (name, key) in _LOADED:
             STATS["hits"] += 1
             return _LOADED[(name, key)]
-        loaded = _load_or_build(name, key, source, tool, label or name)
+        loaded = _load_or_build(name, key, source, tool, label or name, options or {})
     except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
         STATS["fallbacks"] += 1
         _warn_once(f"compiling {name} failed ({' '.join(str(exc).split())[:200]})")
@@ -248,25 +260,113 @@ def lift_constants(function, max_instructions: int | None = None):
     return lifted, np.array(values, dtype=float)
 
 
-def _load_or_build(name: str, key: str, source: str, tool: tuple, label: str):
+def with_derivatives(function, fixed=()):
+    """The companions of ``function`` that give its compiled form first and second
+    derivatives (see :func:`compiled`).
+
+    Built in SX like CasADi's own ``jacobian()``, ``reverse(1)`` and
+    ``reverse(1).jacobian()``, except that the inputs listed in ``fixed`` (the constants of
+    :func:`lift_constants`, say) are not differentiated: their blocks are structurally zero,
+    which spares the Jacobians thousands of columns that no caller asks for.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        An SX function with dense inputs.
+    fixed : sequence of int, optional
+        Inputs held constant.
+
+    Returns
+    -------
+    tuple of casadi.Function
+        ``(jac_<name>, adj1_<name>, jac_adj1_<name>)``. With these in its library, a compiled
+        function's forward derivatives come from ``jac_<name>``, its reverse ones from
+        ``adj1_<name>`` (with the option ``jac_penalty = -1``), and the derivatives of those
+        (an optimiser's exact Hessian) from ``jac_adj1_<name>``.
+
+    Examples
+    --------
+    >>> import casadi as ca
+    >>> x, c = ca.SX.sym("x", 2), ca.SX.sym("c")
+    >>> f = ca.Function("doc_f", [x, c], [c * x[0] * x[1]], ["x", "c"], ["y"])
+    >>> [g.name() for g in with_derivatives(f, fixed=(1,))]
+    ['jac_doc_f', 'adj1_doc_f', 'jac_adj1_doc_f']
+    """
+    import casadi as ca
+    import numpy as np
+
+    from ..model.errors import InputTypeError, InputValueError
+
+    if not isinstance(function, ca.Function) or not function.is_a("SXFunction"):
+        raise InputTypeError(f"with_derivatives: function must be an SX casadi.Function; got "
+                             f"{type(function).__name__}")
+    if not all(function.sparsity_in(k).is_dense() for k in range(function.n_in())):
+        raise InputValueError("with_derivatives: every input of function must be dense")
+    name, inputs = function.name(), function.sx_in()
+    free = [k for k in range(function.n_in()) if k not in set(fixed)]
+    outputs = function.call(inputs)
+    out_names = [f"out_{o}" for o in function.name_out()]
+    outs = [ca.SX.sym(o, function.sparsity_out(k)) for k, o in enumerate(out_names)]
+    jac = _jacobian_function(f"jac_{name}", inputs + outs, function.name_in() + out_names,
+                             outputs, function.name_out(), free)
+    seeds = [ca.SX.sym(f"adj_{o}", function.sparsity_out(k))
+             for k, o in enumerate(function.name_out())]
+    weighted = sum(ca.dot(seed, out) for seed, out in zip(seeds, outputs))
+    gradient = ca.gradient(weighted, ca.vertcat(*[ca.vec(inputs[k]) for k in free]))
+    parts = iter(ca.vertsplit(gradient, list(np.cumsum([0] + [inputs[k].numel()
+                                                              for k in free]))))
+    sensitivities = [ca.reshape(ca.densify(next(parts)), inputs[k].shape) if k in free
+                     else ca.SX.zeros(inputs[k].shape) for k in range(function.n_in())]
+    adj_in = inputs + outs + seeds
+    adj_in_names = function.name_in() + out_names + [f"adj_{o}" for o in function.name_out()]
+    adj_out_names = [f"adj_{i}" for i in function.name_in()]
+    adj = ca.Function(f"adj1_{name}", adj_in, sensitivities, adj_in_names, adj_out_names)
+    adj_outs = [ca.SX.sym(f"out_{o}", adj.sparsity_out(k)) for k, o in enumerate(adj_out_names)]
+    n_in = function.n_in()
+    jac_adj = _jacobian_function(
+        f"jac_adj1_{name}", adj_in + adj_outs, adj_in_names + [f"out_{o}" for o in adj_out_names],
+        sensitivities, adj_out_names, [k for k in range(len(adj_in)) if k >= n_in or k in free])
+    return jac, adj, jac_adj
+
+
+def _jacobian_function(name: str, inputs: list, in_names: list, outputs: list, out_names: list,
+                       free: list):
+    """``name(*inputs) -> jac_<o>_<i>`` for every output ``o`` and input ``i`` (CasADi's
+    Jacobian signature; the last inputs are the nominal outputs): structurally zero where the
+    input is not in ``free``."""
+    import casadi as ca
+
+    blocks, names = [], []
+    differentiated = len(inputs) - len(outputs)          # the rest are the nominal outputs
+    for o, out_name in zip(outputs, out_names):
+        for k, (i, in_name) in enumerate(zip(inputs[:differentiated],
+                                             in_names[:differentiated])):
+            blocks.append(ca.jacobian(ca.vec(o), ca.vec(i)) if k in free
+                          else ca.SX(o.numel(), i.numel()))
+            names.append(f"jac_{out_name}_{in_name}")
+    return ca.Function(name, inputs, blocks, in_names, names)
+
+
+def _load_or_build(name: str, key: str, source: str, tool: tuple, label: str,
+                   options: dict):
     """Load ``<name>-<key>`` from the cache directory, compiling it first if absent or bad."""
     folder = cache_dir() / _SUBDIR
     folder.mkdir(parents=True, exist_ok=True)
     library = folder / f"{name}-{key}{_SUFFIX}"
-    loaded = _try_load(name, library)
+    loaded = _try_load(name, library, options)
     if loaded is not None:
         return loaded
     with _lock(library.with_suffix(".lock")):
-        loaded = _try_load(name, library)      # another worker may have built it meanwhile
+        loaded = _try_load(name, library, options)  # another worker may have built it meanwhile
         if loaded is None:
             _build(library, source, tool, label)
-            loaded = _try_load(name, library)
+            loaded = _try_load(name, library, options)
     if loaded is None:
         raise RuntimeError(f"the library compiled for {name} does not load")
     return loaded
 
 
-def _try_load(name: str, library: Path):
+def _try_load(name: str, library: Path, options: dict | None = None):
     """The function in ``library``, or None when the file is absent or does not load (it is
     then removed, to be compiled again)."""
     import casadi as ca
@@ -274,7 +374,7 @@ def _try_load(name: str, library: Path):
     if not library.is_file():
         return None
     try:
-        function = ca.external(name, str(library))
+        function = ca.external(name, str(library), options or {})
     except RuntimeError:
         with contextlib.suppress(OSError):
             library.unlink()

@@ -1,0 +1,71 @@
+"""A design model's dynamics for the optimisers, compiled with their derivatives.
+
+IPOPT's callbacks in a trajectory optimisation (:mod:`controllers.trajopt`) evaluate the
+design model's dynamics, their Jacobian and the Hessian of the Lagrangian at every collocation
+point of every iteration. For the exact variant these dominate: on CasADi's virtual machine
+they took 93 % of a two-array slew's 17 s solve. :func:`design_dynamics` returns the model's
+``(x, u) -> xdot`` whose value, first derivatives and second derivatives run as machine code
+from the persistent cache (:mod:`flexctl.sim.compile_cache`): one library per structure (its
+numbers are lifted into an input, :func:`~flexctl.sim.compile_cache.lift_constants`) holding
+the function and the derivative functions CasADi's algorithmic differentiation asks for
+(:func:`~flexctl.sim.compile_cache.with_derivatives`). The other variants' dynamics are a few
+hundred operations and stay as they are (inlined SX).
+
+Where compiling is off or impossible, or the dynamics are longer than
+:data:`MAX_INSTRUCTIONS`, the model's own :meth:`~flexctl.Model.casadi` is returned.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+from flexctl.sim.compile_cache import compiled, lift_constants, with_derivatives
+
+__all__ = ["design_dynamics", "MAX_INSTRUCTIONS"]
+
+#: Longest dynamics compiled with their derivatives, instructions. The Hessian's code is about
+#: ten times longer: the two-array design model (2 modes per array, free hub: 9 900
+#: instructions, Hessian 109 000) compiles in about 9 s, once.
+MAX_INSTRUCTIONS = 12_000
+
+_BUILT: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def design_dynamics(model):
+    """``(x, u) -> xdot`` of ``model`` for an optimiser: compiled with its first and second
+    derivatives for the exact variant, :meth:`flexctl.Model.casadi` otherwise.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        A design model (one beam or a structure).
+
+    Returns
+    -------
+    casadi.Function
+        Inputs ``x`` (n,) and ``u`` (1,), output ``xdot`` (n,), as :meth:`~flexctl.Model.casadi`.
+    """
+    if model.variant != "exact":
+        return model.casadi()
+    if model not in _BUILT:
+        _BUILT[model] = _native(model.casadi())
+    return _BUILT[model]
+
+
+def _native(function):
+    """``function`` calling its compiled lifted form, or ``function`` itself."""
+    import casadi as ca
+
+    lifted = lift_constants(function, MAX_INSTRUCTIONS)
+    if lifted is None:
+        return function
+    inner, constants = lifted
+    built = compiled(inner, label=f"{function.name()} and its derivatives",
+                     companions=with_derivatives(inner, fixed=(inner.n_in() - 1,)),
+                     options={"jac_penalty": -1})
+    if built is inner:                  # compiling is off, impossible or failed
+        return function
+    args = [ca.MX.sym(function.name_in(k), function.sparsity_in(k))
+            for k in range(function.n_in())]
+    return ca.Function(f"{function.name()}_native", args, [built(*args, ca.DM(constants))],
+                       function.name_in(), function.name_out())
