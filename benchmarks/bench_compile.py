@@ -16,6 +16,11 @@ C. Simulation of the exact model against first_order on the same scene and modes
    table's first row), before and after, each in a fresh process.
 D. NMPC real-time iteration on slew-90's exact 2-mode design model: build time and solve time
    per step (median, 99th percentile), before and after, cache cold and warm.
+E. Trajectory optimisation (``--trajopt``) on the exact design models of ``slew-90`` and
+   ``two-array-slew`` against first_order: compiled (cache cold and warm) and on the virtual
+   machine (``FLEXCTL_COMPILE=0``).
+F. Compiler flags (``--flags``): compile time and evaluation time of the exact design models'
+   dynamics, Jacobian and Lagrangian Hessian at ``-Og`` and ``-O2``.
 
 Run: ``python benchmarks/bench_compile.py [--before /path/to/old/checkout]``. Nothing is
 asserted; the script prints what it measures (the machine's two cores are shared).
@@ -189,6 +194,112 @@ def case_d(before: Path | None) -> None:
                       f"{found['median'] * 1e3:.2f} | {found['p99'] * 1e3:.2f} |")
 
 
+#: One process of case E: solve_slew on a scene's design model, first run and best of 3 later
+#: runs, with IPOPT's iterations, as JSON.
+TRAJOPT = r"""
+import json, sys, time, warnings
+warnings.simplefilter("ignore")
+import flexctl
+from controllers.trajopt import SlewProblem, solve_slew
+scene = flexctl.load_scene(sys.argv[1])
+slew = scene.maneuver
+model = flexctl.build_model(scene.system, scene.model.design_modes, sys.argv[2])
+problem = SlewProblem(angle=slew.angle, duration=slew.duration, torque_bound=slew.torque_bound)
+walls, iterations = [], []
+for _ in range(4):
+    start = time.perf_counter()
+    solution = solve_slew(model, problem)
+    walls.append(time.perf_counter() - start)
+    iterations.append(solution.iterations)
+print(json.dumps({"first": walls[0], "best": min(walls[1:]), "iterations": iterations[-1],
+                  "cost": solution.cost}))
+"""
+
+
+def case_e() -> None:
+    print("\n## E. Trajectory optimisation, exact / first_order design model (40 holds, each "
+          "variant's default transcription; first run, and best of the next 3), each in a "
+          "fresh process\n")
+    print("| scene | design | compiled | cache | first run (s) | best (s) | iterations | cost |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name in ("slew-90", "two-array-slew"):
+        rows = {}
+        for variant, setting in (("first_order", "1"), ("exact", "0"), ("exact", "1")):
+            with tempfile.TemporaryDirectory() as cache:
+                states = ("cold", "warm") if (variant, setting) == ("exact", "1") else ("-",)
+                for state in states:
+                    env = {**os.environ, "PYTHONPATH": str(ROOT), "FLEXCTL_CACHE_DIR": cache,
+                           "FLEXCTL_COMPILE": setting}
+                    out = subprocess.run([sys.executable, "-c", TRAJOPT, name, variant],
+                                         env=env, capture_output=True, text=True,
+                                         timeout=1800, cwd=ROOT)
+                    found = json.loads(out.stdout.strip().splitlines()[-1])
+                    rows[variant, setting, state] = found
+                    print(f"| {name} | {variant} | {'yes' if setting == '1' else 'no'} | "
+                          f"{state} | {found['first']:.2f} | {found['best']:.3f} | "
+                          f"{found['iterations']} | {found['cost']:.6g} |")
+        base = rows["first_order", "1", "-"]["best"]
+        print(f"\n{name}: exact / first_order, best runs: compiled "
+              f"{rows['exact', '1', 'warm']['best'] / base:.1f}x (cold cache, first run "
+              f"{rows['exact', '1', 'cold']['first'] / base:.0f}x), virtual machine "
+              f"{rows['exact', '0', '-']['best'] / base:.1f}x\n")
+
+
+def case_f() -> None:
+    """Compile time and evaluation time per point of the exact design models' dynamics,
+    Jacobian and Lagrangian Hessian, at -Og and -O2 (lifted constants, a map of 300 points)."""
+    import casadi as ca
+
+    import flexctl
+    from flexctl.sim.compile_cache import _source, compiler, lift_constants
+
+    print("\n## F. Compiler flags: the exact design models' dynamics and derivatives\n")
+    print("| scene | function | instructions | C (kB) | flags | compile (s) | compiled (us) | "
+          "virtual machine (us) |")
+    print("|---|---|---|---|---|---|---|---|")
+    points = 300
+    for name in ("slew-90", "two-array-slew"):
+        scene = flexctl.load_scene(name)
+        model = flexctl.build_model(scene.system, scene.model.design_modes, "exact")
+        f = model.casadi()
+        x, u, lam = (ca.SX.sym("x", model.n_states), ca.SX.sym("u"),
+                     ca.SX.sym("lam", model.n_states))
+        xdot, z = f(x, u), ca.vertcat(x, u)
+        functions = (f, ca.Function("jacobian", [x, u], [ca.jacobian(xdot, z)]),
+                     ca.Function("hessian", [x, u, lam],
+                                 [ca.hessian(ca.dot(lam, xdot), z)[0]]))
+        for function in functions:
+            lifted, constants = lift_constants(function)
+            source = _source(lifted)
+            args = [np.full((function.size1_in(k), points), 0.01) for k in range(function.n_in())]
+            on_vm = best_time(lambda: function.map(points)(*args)) / points
+            with tempfile.TemporaryDirectory() as folder:
+                c_file = Path(folder) / "f.c"
+                c_file.write_text(source)
+                for flags in ("-Og", "-O2"):
+                    library = Path(folder) / f"f{flags}.so"
+                    start = time.perf_counter()
+                    subprocess.run([compiler()[0], flags, "-fPIC", "-shared", str(c_file),
+                                    "-o", str(library), "-lm"], check=True)
+                    took = time.perf_counter() - start
+                    native = ca.external(lifted.name(), str(library)).map(
+                        "many", "serial", points, [function.n_in()], [])
+                    run = best_time(lambda: native(*args, constants)) / points
+                    print(f"| {name} | {function.name()} | {function.n_instructions()} | "
+                          f"{len(source) // 1024} | {flags} | {took:.2f} | {run * 1e6:.2f} | "
+                          f"{on_vm * 1e6:.2f} |")
+
+
+def best_time(call, repeats: int = 5) -> float:
+    call()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        call()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
 def per_evaluation(many, f) -> float:
     """Seconds per evaluation of ``f(x, u)`` at a small state, from ``many``, its map of MAP
     (on the virtual machine or compiled), best of REPEATS."""
@@ -245,9 +356,14 @@ def main() -> None:
     parser.add_argument("--skip-a", action="store_true", help="case B only")
     parser.add_argument("--skip-b", action="store_true", help="case A only")
     parser.add_argument("--only-c", action="store_true", help="case C only")
+    parser.add_argument("--trajopt", action="store_true", help="case E only")
+    parser.add_argument("--flags", action="store_true", help="case F only")
     args = parser.parse_args()
     if args.only_c:
         case_c(args.before)
+        return
+    if args.trajopt or args.flags:
+        (case_e if args.trajopt else case_f)()
         return
     with tempfile.TemporaryDirectory() as cache:
         os.environ["FLEXCTL_CACHE_DIR"] = cache

@@ -434,3 +434,29 @@ def test_the_interval_count_a_refusal_names_solves_to_the_converged_cost():
     better = int(re.search(r"use n_intervals = (\d+)", str(info.value)).group(1))
     solution = solve_slew(model, slew_90_problem(better))
     assert solution.cost == pytest.approx(converged_cost("first_order", 4), rel=COST_TOL)
+
+
+def test_free_hub_slew_ends_where_momentum_puts_the_hub():
+    """A free hub's centre is not a terminal constraint (the torque exerts no net force), yet
+    the optimal slew ends with it at the rest state the model gives: still, and where the
+    turn about the fixed centre of mass puts it."""
+    import flexctl
+    from controllers.slew_nlp import terminal_rows
+    from controllers.trajopt import SlewProblem, solve_slew
+
+    scene = flexctl.load_scene("single-wing-free")
+    model = flexctl.build_model(scene.system, 1, variant="first_order")
+    layout = model.layout
+    rows = terminal_rows(layout)
+    assert len(rows) == layout.n_states - 4
+    assert not set(rows) & set(range(layout.n_states)[layout.hub_position])
+    problem = SlewProblem(angle=0.5, duration=3.0, torque_bound=20.0, n_intervals=30)
+    solution = solve_slew(model, problem)
+    end = solution.states[:, -1]
+    target = problem.target_state(model)
+    assert np.linalg.norm(target[layout.hub_position]) > 1e-4      # the hub does move
+    np.testing.assert_allclose(end[rows], target[rows], rtol=0, atol=1e-8)
+    # the rest follows from the discretised dynamics, within their integration error
+    free = [k for k in range(layout.n_states) if k not in rows]
+    np.testing.assert_allclose(end[free], target[free], rtol=0,
+                               atol=1e-5 * np.linalg.norm(target[layout.hub_position]))

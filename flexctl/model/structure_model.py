@@ -189,9 +189,18 @@ class StructureModel(Model):
         self._pinned_only("the hub torque of a prescribed motion")
         return self._batch(self.functions.torque, x, theta_tt, q_tt)[0]
 
-    def integration_rhs(self):
-        """The dynamics for implicit integrators (:meth:`Model.integration_rhs`)."""
-        return self.casadi()
+    def integration_rhs(self, evaluate=None):
+        """The dynamics for implicit integrators (:meth:`Model.integration_rhs`): the same as
+        :meth:`casadi`, or ``evaluate(x, u)`` (MX in, MX out; e.g. a call of a compiled
+        :meth:`casadi`) with the first_order structure's Jacobian for Newton's method."""
+        if evaluate is None or self.variant != "exact":
+            return self.casadi()
+        import casadi as ca
+
+        xm, um = ca.MX.sym("x", self.n_states), ca.MX.sym("u")
+        return ca.Function(f"flexctl_exact_newton_N{self.n_modes}", [xm, um],
+                           [evaluate(xm, um)], ["x", "u"], ["xdot"],
+                           {"custom_jacobian": self.newton_jacobian("rhs"), "jac_penalty": 0})
 
     # ------------------------------------------------------------------ outputs
     @property

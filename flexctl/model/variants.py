@@ -306,8 +306,9 @@ class Model:
 
             from .exports import _symbolic_beam_dynamics
 
-            linear = Model(system=self.system, n_modes=self.n_modes, variant="first_order",
-                           matrices=self.matrices)
+            # the same structure and matrices (a StructureModel stays one)
+            linear = type(self)(system=self.system, n_modes=self.n_modes,
+                                variant="first_order", matrices=self.matrices)
             if form == "rhs":
                 x, u, out = (ca.SX.sym("x", self.n_states), ca.SX.sym("u"),
                              ca.SX.sym("out", self.n_states))

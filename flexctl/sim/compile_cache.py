@@ -302,47 +302,63 @@ def with_derivatives(function, fixed=()):
                              f"{type(function).__name__}")
     if not all(function.sparsity_in(k).is_dense() for k in range(function.n_in())):
         raise InputValueError("with_derivatives: every input of function must be dense")
-    name, inputs = function.name(), function.sx_in()
-    free = [k for k in range(function.n_in()) if k not in set(fixed)]
+    name, inputs, n_in = function.name(), function.sx_in(), function.n_in()
+    free = [k for k in range(n_in) if k not in set(fixed)]
     outputs = function.call(inputs)
     out_names = [f"out_{o}" for o in function.name_out()]
     outs = [ca.SX.sym(o, function.sparsity_out(k)) for k, o in enumerate(out_names)]
-    jac = _jacobian_function(f"jac_{name}", inputs + outs, function.name_in() + out_names,
-                             outputs, function.name_out(), free)
     seeds = [ca.SX.sym(f"adj_{o}", function.sparsity_out(k))
              for k, o in enumerate(function.name_out())]
-    weighted = sum(ca.dot(seed, out) for seed, out in zip(seeds, outputs))
-    gradient = ca.gradient(weighted, ca.vertcat(*[ca.vec(inputs[k]) for k in free]))
-    parts = iter(ca.vertsplit(gradient, list(np.cumsum([0] + [inputs[k].numel()
-                                                              for k in free]))))
-    sensitivities = [ca.reshape(ca.densify(next(parts)), inputs[k].shape) if k in free
-                     else ca.SX.zeros(inputs[k].shape) for k in range(function.n_in())]
+    z = ca.vertcat(*[ca.vec(inputs[k]) for k in free])
+    stacked = ca.vertcat(*[ca.vec(o) for o in outputs])
+    jz = ca.jacobian(stacked, z)
+    jac = _jacobian_function(f"jac_{name}", inputs + outs, function.name_in() + out_names,
+                             function.name_out(), free, jz,
+                             [o.numel() for o in outputs])
+    weighted = ca.dot(ca.vertcat(*[ca.vec(seed) for seed in seeds]), stacked)
+    gradient = ca.gradient(weighted, z)                  # reverse mode: one sweep
+    offsets = np.cumsum([0] + [inputs[k].numel() for k in free])
+    span = dict(zip(free, zip(offsets[:-1], offsets[1:])))
+    sensitivities = [ca.reshape(ca.densify(gradient[int(span[k][0]):int(span[k][1])]),
+                                inputs[k].shape) if k in free else ca.SX.zeros(inputs[k].shape)
+                     for k in range(n_in)]
     adj_in = inputs + outs + seeds
     adj_in_names = function.name_in() + out_names + [f"adj_{o}" for o in function.name_out()]
     adj_out_names = [f"adj_{i}" for i in function.name_in()]
     adj = ca.Function(f"adj1_{name}", adj_in, sensitivities, adj_in_names, adj_out_names)
+    # the sensitivities' Jacobian: the Lagrangian's Hessian in the free inputs, and the
+    # transposed Jacobian in the seeds (the same expressions as jac_<name>'s)
+    hessian, columns = ca.hessian(weighted, z)[0], z.numel() + stacked.numel()
+    rows = [ca.horzcat(hessian[int(span[k][0]):int(span[k][1]), :],
+                       jz.T[int(span[k][0]):int(span[k][1]), :]) if k in free
+            else ca.SX(inputs[k].numel(), columns) for k in range(n_in)]
     adj_outs = [ca.SX.sym(f"out_{o}", adj.sparsity_out(k)) for k, o in enumerate(adj_out_names)]
-    n_in = function.n_in()
     jac_adj = _jacobian_function(
         f"jac_adj1_{name}", adj_in + adj_outs, adj_in_names + [f"out_{o}" for o in adj_out_names],
-        sensitivities, adj_out_names, [k for k in range(len(adj_in)) if k >= n_in or k in free])
+        adj_out_names, free + [len(inputs) + len(outs) + j for j in range(len(seeds))],
+        ca.vertcat(*rows), [inputs[k].numel() for k in range(n_in)])
     return jac, adj, jac_adj
 
 
-def _jacobian_function(name: str, inputs: list, in_names: list, outputs: list, out_names: list,
-                       free: list):
-    """``name(*inputs) -> jac_<o>_<i>`` for every output ``o`` and input ``i`` (CasADi's
-    Jacobian signature; the last inputs are the nominal outputs): structurally zero where the
-    input is not in ``free``."""
+def _jacobian_function(name: str, inputs: list, in_names: list, out_names: list, free: list,
+                       whole, heights: list):
+    """``name(*inputs) -> jac_<o>_<i>`` for every output ``o`` (of ``heights`` entries) and
+    every input ``i`` but the trailing nominal outputs (CasADi's Jacobian signature): the
+    blocks of ``whole``, the Jacobian of the stacked outputs in the stacked ``free`` inputs,
+    and structurally zero in the other inputs."""
     import casadi as ca
+    import numpy as np
 
+    differentiated = len(inputs) - len(out_names)        # the rest are the nominal outputs
+    rows = np.cumsum([0] + list(heights))
+    columns = dict(zip(free, np.cumsum([0] + [inputs[k].numel() for k in free])))
     blocks, names = [], []
-    differentiated = len(inputs) - len(outputs)          # the rest are the nominal outputs
-    for o, out_name in zip(outputs, out_names):
-        for k, (i, in_name) in enumerate(zip(inputs[:differentiated],
-                                             in_names[:differentiated])):
-            blocks.append(ca.jacobian(ca.vec(o), ca.vec(i)) if k in free
-                          else ca.SX(o.numel(), i.numel()))
+    for j, out_name in enumerate(out_names):
+        for k, in_name in enumerate(in_names[:differentiated]):
+            width = inputs[k].numel()
+            blocks.append(whole[int(rows[j]):int(rows[j + 1]),
+                                int(columns[k]):int(columns[k]) + width] if k in free
+                          else ca.SX(int(rows[j + 1] - rows[j]), width))
             names.append(f"jac_{out_name}_{in_name}")
     return ca.Function(name, inputs, blocks, in_names, names)
 

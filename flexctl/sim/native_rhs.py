@@ -8,7 +8,9 @@ every quadrature node written out) is compiled through the persistent cache
 (:func:`~flexctl.sim.compile_cache.lift_constants`): one library per structure (modes,
 panels, point masses), whatever the beam's numbers, so that a Monte Carlo over the structure
 compiles once. It is wrapped with first_order's Jacobian for Newton's method
-(:meth:`flexctl.Model.integration_rhs`), as on the virtual machine.
+(:meth:`flexctl.Model.integration_rhs`), as on the virtual machine. A structure's exact
+right-hand side (several appendages, a free hub) is compiled the same way, with the
+first_order structure's Jacobian.
 
 Where compiling is off or impossible, or the function is larger than
 :data:`MAX_INSTRUCTIONS`, the model's own (virtual machine) form is used.
@@ -65,9 +67,9 @@ def _built(model, form: str):
 
 
 def integration_rhs(model):
-    """``(x, u) -> xdot`` for implicit integrators: compiled for a one-beam exact model,
-    :meth:`flexctl.Model.integration_rhs` otherwise."""
-    if model.variant != "exact" or hasattr(model, "functions"):
+    """``(x, u) -> xdot`` for implicit integrators: compiled for an exact model (one beam or
+    a structure), :meth:`flexctl.Model.integration_rhs` otherwise."""
+    if model.variant != "exact":
         return model.integration_rhs()
     return _built(model, "rhs")
 
