@@ -35,6 +35,8 @@ deflection is the lateral tip position ``p_y(l)`` in the hub frame and whose tip
 
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -306,9 +308,8 @@ class Model:
 
             from .exports import _symbolic_beam_dynamics
 
-            # the same structure and matrices (a StructureModel stays one)
-            linear = type(self)(system=self.system, n_modes=self.n_modes,
-                                variant="first_order", matrices=self.matrices)
+            # the same kind of model on the same matrices (a structure's, an actuated one's)
+            linear = dataclasses.replace(self, variant="first_order")
             if form == "rhs":
                 x, u, out = (ca.SX.sym("x", self.n_states), ca.SX.sym("u"),
                              ca.SX.sym("out", self.n_states))
