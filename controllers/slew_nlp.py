@@ -291,19 +291,39 @@ def terminal_constraints(model, target) -> np.ndarray:
     linearisation is ``c'' = -S c + beta u`` in the configuration ``c`` (half the states);
     each group of equal eigenvalues of ``S`` (the rigid rotation, each frequency squared)
     whose modal input ``V^-1 beta`` is not zero gives one row in the configuration and one
-    in the rates. On a pinned single beam every mode is controllable and ``R`` is square.
+    in the rates (``beta``: the input's column and an actuator's states' columns). On a
+    pinned single beam every mode is controllable and ``R`` is square. Other states (an
+    actuator's) keep a row each.
     """
     import casadi as ca
 
-    n = model.n_states
-    half = n // 2
+    n, layout = model.n_states, model.layout
     x, u = ca.SX.sym("x", n), ca.SX.sym("u")
     xdot = model.casadi()(x, u)
     a, b = (np.array(ca.Function("rest", [x, u], [ca.jacobian(xdot, v)])(target, 0.0),
                      dtype=float) for v in (x, u))
-    values, vectors = np.linalg.eig(-a[half:, :half])
+    coords, rates = np.arange(n)[layout.coordinates], np.arange(n)[layout.velocities]
+    others = np.setdiff1d(np.arange(n), np.r_[coords, rates])
+    values, vectors = np.linalg.eig(-a[np.ix_(rates, coords)])
     values, left = values.real, np.linalg.inv(vectors)
-    modal = left @ b[half:, 0]
+    # what drives the rates: the input, and an actuator's states (a wheel's torque)
+    modal = left @ np.column_stack([b[rates, 0], a[np.ix_(rates, others)]])
+    strongest = float(np.max(np.abs(modal)))
+    rows = []
+    for g in _equal_groups(values):
+        directions, strengths, _ = np.linalg.svd(modal[g, :])
+        for k in np.flatnonzero(strengths > 1e-8 * strongest):
+            row = np.real(directions[:, k].conj() @ left[g, :])
+            rows.append(row / np.linalg.norm(row))
+    ends = np.zeros((2 * len(rows), n))
+    if rows:
+        ends[:len(rows), coords] = rows
+        ends[len(rows):, rates] = rows
+    return np.vstack([ends, np.eye(n)[others]])
+
+
+def _equal_groups(values) -> list:
+    """Indices of ``values`` grouped where they are equal to rounding (sorted ascending)."""
     order = np.argsort(values)
     top = max(float(np.max(np.abs(values))), 1e-300)
     groups, current = [], [order[0]]
@@ -313,16 +333,7 @@ def terminal_constraints(model, target) -> np.ndarray:
         else:
             groups.append(current)
             current = [j]
-    groups.append(current)
-    strength = [float(np.linalg.norm(modal[g])) for g in groups]
-    rows = []
-    for g, size in zip(groups, strength):
-        if size > 1e-8 * max(strength):
-            row = np.real(modal[g] @ left[g, :])
-            rows.append(row / np.linalg.norm(row))
-    rows = np.array(rows)
-    zero = np.zeros_like(rows)
-    return np.vstack([np.hstack([rows, zero]), np.hstack([zero, rows])])
+    return groups + [current]
 
 
 def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float) -> Transcribed:

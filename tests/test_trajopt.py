@@ -477,3 +477,22 @@ def test_terminal_constraints_skip_the_modes_a_torque_cannot_reach():
     rows = terminal_constraints(single, single.rest_state(1.0))
     assert rows.shape == (single.n_states, single.n_states)
     assert np.linalg.matrix_rank(rows) == single.n_states
+
+
+@pytest.mark.parametrize("actuator", ["wheel", "motor"])
+def test_terminal_constraints_keep_an_actuators_states(actuator):
+    """An actuated design model (a wheel's speed and torque, a motor's current): every
+    mechanical mode of one beam is reached through the actuator, and the actuator's states
+    keep an end row each."""
+    import flexctl
+    from controllers.slew_nlp import terminal_constraints
+    from flexctl.model import DCMotor, ReactionWheel
+
+    device = (ReactionWheel(inertia=0.01, torque_limit=10.0, speed_limit=200.0,
+                            time_constant=0.002) if actuator == "wheel" else
+              DCMotor(resistance=1.0, torque_constant=0.05, back_emf_constant=0.05,
+                      gear_ratio=50.0, voltage_limit=4.0, rotor_inertia=1e-4))
+    model = flexctl.build_model(flexctl.load_scene("slew-90").system, 2, actuator=device)
+    rows = terminal_constraints(model, model.rest_state(0.3))
+    assert rows.shape == (model.n_states, model.n_states)
+    assert np.linalg.matrix_rank(rows) == model.n_states

@@ -49,8 +49,9 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["compiled", "lift_constants", "with_derivatives", "cache_dir", "cache_info", "clear_cache", "compiler", "CacheInfo",
-           "CompileCacheWarning", "STATS", "FLAGS", "PROGRESS_AFTER"]
+__all__ = ["compiled", "lift_constants", "with_derivatives", "cache_dir", "cache_info",
+           "clear_cache", "compiler", "CacheInfo", "CompileCacheWarning", "STATS", "FLAGS",
+           "PROGRESS_AFTER"]
 
 #: Compiler flags of every library (part of the key). ``-Og`` runs the generated straight-line
 #: code as fast as ``-O2`` (within 3 % on the exact model's right-hand side and its
