@@ -201,6 +201,8 @@ def comparison(method, variant):
                                            keep_result=True), [point], progress=False))[0]
         except SweepError as exc:
             row = f"failed: {exc.__cause__ or exc}"
+        if isinstance(row, dict) and "result" not in row:       # a refused point
+            row = f"refused: {row.get('failure', 'no result')}"
         runs[kind] = (time.perf_counter() - start, row)
     return runs
 

@@ -8,8 +8,10 @@ they took 93 % of a two-array slew's 17 s solve. :func:`design_dynamics` returns
 from the persistent cache (:mod:`flexctl.sim.compile_cache`): one library per structure (its
 numbers are lifted into an input, :func:`~flexctl.sim.compile_cache.lift_constants`) holding
 the function and the derivative functions CasADi's algorithmic differentiation asks for
-(:func:`~flexctl.sim.compile_cache.with_derivatives`). The other variants' dynamics are a few
-hundred operations and stay as they are (inlined SX).
+(:func:`~flexctl.sim.compile_cache.with_derivatives`). The other variants' dynamics, a few
+hundred operations, are compiled the same way: on CasADi's virtual machine the calls and the
+derivative graphs around them cost more than the arithmetic. A multiple-shooting hold (RK4
+substeps of the dynamics) is compiled as one function (:func:`with_compiled_derivatives`).
 
 Where compiling is off or impossible, or the dynamics are longer than
 :data:`MAX_INSTRUCTIONS`, the model's own :meth:`~flexctl.Model.casadi` is returned.
@@ -21,7 +23,7 @@ import weakref
 
 from flexctl.sim.compile_cache import compiled, lift_constants, with_derivatives
 
-__all__ = ["design_dynamics", "MAX_INSTRUCTIONS"]
+__all__ = ["design_dynamics", "with_compiled_derivatives", "MAX_INSTRUCTIONS"]
 
 #: Longest dynamics compiled with their derivatives, instructions. The Hessian's code is about
 #: ten times longer: the two-array design model (2 modes per array, free hub: 9 900
@@ -32,28 +34,33 @@ _BUILT: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def design_dynamics(model):
-    """``(x, u) -> xdot`` of ``model`` for an optimiser: compiled with its first and second
-    derivatives for the exact variant, :meth:`flexctl.Model.casadi` otherwise.
+    """``(x, u) -> xdot`` of ``model`` for an optimiser, compiled with its first and second
+    derivatives (:func:`with_compiled_derivatives` of :meth:`flexctl.Model.casadi`).
 
     Parameters
     ----------
     model : flexctl.Model
-        A design model (one beam or a structure).
+        A design model (one beam or a structure, any variant).
 
     Returns
     -------
     casadi.Function
         Inputs ``x`` (n,) and ``u`` (1,), output ``xdot`` (n,), as :meth:`~flexctl.Model.casadi`.
     """
-    if model.variant != "exact":
-        return model.casadi()
     if model not in _BUILT:
-        _BUILT[model] = _native(model.casadi())
+        _BUILT[model] = with_compiled_derivatives(model.casadi())
     return _BUILT[model]
 
 
-def _native(function):
-    """``function`` calling its compiled lifted form, or ``function`` itself."""
+def with_compiled_derivatives(function):
+    """An SX ``function`` as an MX function of the same inputs and outputs that calls its
+    compiled form, whose value, Jacobian and second derivatives run as machine code; or
+    ``function`` itself where compiling is off or impossible, or it is longer than
+    :data:`MAX_INSTRUCTIONS` or not SX.
+
+    Its numbers are lifted into an input (:func:`~flexctl.sim.compile_cache.lift_constants`),
+    so that one library serves every function of the same structure.
+    """
     import casadi as ca
 
     lifted = lift_constants(function, MAX_INSTRUCTIONS)

@@ -11,6 +11,7 @@ dynamics enter as CasADi ``Function`` objects mapped over the holds or collocati
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +21,7 @@ from flexctl.model.errors import InputValueError
 
 from .actuator_limits import hold_voltages, speed_bound, wheel_speed_function
 from .hold_grid import LARGEST_STEP, MAX_SUBSTEPS, mode_tolerances, steps_per_hold
-from .native_dynamics import design_dynamics
+from .native_dynamics import MAX_INSTRUCTIONS, design_dynamics, with_compiled_derivatives
 
 __all__ = ["MAX_INTERVALS", "MAX_ELEMENTS", "MAX_MODE_PHASE", "Discretisation", "discretisation",
            "transcription_for", "rk4_substeps", "refuse_fast_modes", "resolution_reason",
@@ -38,6 +39,9 @@ MAX_ELEMENTS = 2000
 #: RK4 steps of the largest stable step integrate. Beyond it no discretisation within the
 #: limits follows the mode, and the hold analysis loses its accuracy in floating point.
 MAX_MODE_PHASE = MAX_INTERVALS * MAX_SUBSTEPS * LARGEST_STEP["rk4"]
+
+#: The RK4 hold of each design model, by substeps (built and compiled once per model).
+_HOLD_STEPS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 #: Lower bound on the free final time, as a fraction of the rigid-body minimum time (kept
 #: below 1 so that the physical bound is found by the optimiser, not imposed on it).
@@ -200,6 +204,26 @@ def _rk4_step(f, n: int, substeps: int, symbol=None):
     return rk4_function(f, n, substeps, symbol)
 
 
+def _hold_step(model, disc: Discretisation):
+    """``(x, u, h) -> x(h)`` of one hold of the design model: CVODES, or RK4 substeps written
+    out and compiled with their derivatives (:func:`with_compiled_derivatives`); where those
+    would be long (the exact model, many substeps), substeps that call the compiled dynamics,
+    so that CasADi differentiates the dynamics once rather than once per substep."""
+    import casadi as ca
+
+    plain, n = model.casadi(), model.n_states
+    if disc.method != "rk4":
+        return _cvodes_step(plain, n)
+    steps = _HOLD_STEPS.setdefault(model, {})
+    if disc.steps_per_hold not in steps:
+        if 4 * disc.steps_per_hold * plain.n_instructions() <= MAX_INSTRUCTIONS:
+            step = with_compiled_derivatives(_rk4_step(plain, n, disc.steps_per_hold, ca.SX))
+        else:
+            step = _rk4_step(design_dynamics(model), n, disc.steps_per_hold, ca.MX)
+        steps[disc.steps_per_hold] = step
+    return steps[disc.steps_per_hold]
+
+
 def _cvodes_step(f, n: int):
     import casadi as ca
 
@@ -347,7 +371,7 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
     scale = ca.DM(state_scale(model, problem, problem.duration or t_guess))
     collocation = disc.transcription == "collocation"
     m, d = (disc.steps_per_hold, problem.degree) if collocation else (1, 0)
-    f = design_dynamics(model)
+    f = design_dynamics(model) if collocation else None
 
     opti = ca.Opti()
     grid = opti.variable(n, m * K + 1)                 # X, or the element boundaries
@@ -362,13 +386,7 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
 
     opti.subject_to(grid[:, 0] == 0, scale)
     if not collocation:
-        if disc.method == "rk4":
-            # the exact dynamics are large: calling them (MX) rather than inlining them (SX)
-            # lets CasADi differentiate them once instead of once per substep
-            step = _rk4_step(f, n, disc.steps_per_hold,
-                             ca.MX if model.variant == "exact" else ca.SX)
-        else:
-            step = _cvodes_step(f, n)
+        step = _hold_step(model, disc)
         opti.subject_to(X[:, 1:] == step.map(K)(X[:, :-1], U, h), ca.repmat(scale, 1, K))
     else:
         opti.set_linear_scale(Xc, ca.repmat(scale, 1, d * m * K))
