@@ -23,12 +23,17 @@ import weakref
 
 from flexctl.sim.compile_cache import compiled, lift_constants, with_derivatives
 
-__all__ = ["design_dynamics", "with_compiled_derivatives", "MAX_INSTRUCTIONS"]
+__all__ = ["design_dynamics", "with_compiled_derivatives", "MAX_INSTRUCTIONS", "MAX_LIBRARY"]
 
 #: Longest dynamics compiled with their derivatives, instructions. The Hessian's code is about
 #: ten times longer: the two-array design model (2 modes per array, free hub: 9 900
 #: instructions, Hessian 109 000) compiles in about 9 s, once.
 MAX_INSTRUCTIONS = 12_000
+#: Longest library (the function and its derivatives), instructions: about 5 s of ``-Og``. An
+#: RK4 hold of many substeps has a Hessian far longer than its dynamics' (two arrays, first
+#: order, 6 substeps: 6 100 instructions, Hessian 262 000, 39 s to compile); its substeps then
+#: call the compiled dynamics instead (:func:`controllers.slew_nlp.transcribe`).
+MAX_LIBRARY = 120_000
 
 _BUILT: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
@@ -55,8 +60,9 @@ def design_dynamics(model):
 def with_compiled_derivatives(function):
     """An SX ``function`` as an MX function of the same inputs and outputs that calls its
     compiled form, whose value, Jacobian and second derivatives run as machine code; or
-    ``function`` itself where compiling is off or impossible, or it is longer than
-    :data:`MAX_INSTRUCTIONS` or not SX.
+    ``function`` itself where compiling is off or impossible, it is longer than
+    :data:`MAX_INSTRUCTIONS` or not SX, or its library would be longer than
+    :data:`MAX_LIBRARY`.
 
     Its numbers are lifted into an input (:func:`~flexctl.sim.compile_cache.lift_constants`),
     so that one library serves every function of the same structure.
@@ -67,9 +73,11 @@ def with_compiled_derivatives(function):
     if lifted is None:
         return function
     inner, constants = lifted
+    companions = with_derivatives(inner, fixed=(inner.n_in() - 1,))
+    if sum(f.n_instructions() for f in (inner, *companions)) > MAX_LIBRARY:
+        return function
     built = compiled(inner, label=f"{function.name()} and its derivatives",
-                     companions=with_derivatives(inner, fixed=(inner.n_in() - 1,)),
-                     options={"jac_penalty": -1})
+                     companions=companions, options={"jac_penalty": -1})
     if built is inner:                  # compiling is off, impossible or failed
         return function
     args = [ca.MX.sym(function.name_in(k), function.sparsity_in(k))

@@ -216,9 +216,13 @@ def _hold_step(model, disc: Discretisation):
         return _cvodes_step(plain, n)
     steps = _HOLD_STEPS.setdefault(model, {})
     if disc.steps_per_hold not in steps:
+        step = None
         if 4 * disc.steps_per_hold * plain.n_instructions() <= MAX_INSTRUCTIONS:
-            step = with_compiled_derivatives(_rk4_step(plain, n, disc.steps_per_hold, ca.SX))
-        else:
+            written = _rk4_step(plain, n, disc.steps_per_hold, ca.SX)
+            step = with_compiled_derivatives(written)
+            if step is written and design_dynamics(model) is not plain:
+                step = None             # too long a library: call the compiled dynamics
+        if step is None:
             step = _rk4_step(design_dynamics(model), n, disc.steps_per_hold, ca.MX)
         steps[disc.steps_per_hold] = step
     return steps[disc.steps_per_hold]
