@@ -23,17 +23,22 @@ import weakref
 
 from flexctl.sim.compile_cache import compiled, lift_constants, with_derivatives
 
-__all__ = ["design_dynamics", "with_compiled_derivatives", "MAX_INSTRUCTIONS", "MAX_LIBRARY"]
+__all__ = ["design_dynamics", "with_compiled_derivatives", "MAX_INSTRUCTIONS", "MAX_LIBRARY",
+           "MAX_HOLD_LIBRARY"]
 
 #: Longest dynamics compiled with their derivatives, instructions. The Hessian's code is about
 #: ten times longer: the two-array design model (2 modes per array, free hub: 9 900
 #: instructions, Hessian 109 000) compiles in about 9 s, once.
 MAX_INSTRUCTIONS = 12_000
-#: Longest library (the function and its derivatives), instructions: about 5 s of ``-Og``. An
-#: RK4 hold of many substeps has a Hessian far longer than its dynamics' (two arrays, first
-#: order, 6 substeps: 6 100 instructions, Hessian 262 000, 39 s to compile); its substeps then
-#: call the compiled dynamics instead (:func:`controllers.slew_nlp.transcribe`).
-MAX_LIBRARY = 120_000
+#: Longest library (the function and its derivatives) compiled by default, instructions: the
+#: exact two-array design model (2 modes per array) makes 218 000, about 15 s of ``-Og``, once,
+#: for IPOPT callbacks ten times faster.
+MAX_LIBRARY = 250_000
+#: Longest library of an RK4 hold: a hold of many substeps has a Hessian far longer than its
+#: dynamics' (two arrays, first order, 6 substeps: 6 100 instructions, Hessian 262 000, 39 s
+#: to compile), and its substeps can call the compiled dynamics instead
+#: (:func:`controllers.slew_nlp.transcribe`).
+MAX_HOLD_LIBRARY = 120_000
 
 _BUILT: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
@@ -57,12 +62,12 @@ def design_dynamics(model):
     return _BUILT[model]
 
 
-def with_compiled_derivatives(function):
+def with_compiled_derivatives(function, max_library: int = MAX_LIBRARY):
     """An SX ``function`` as an MX function of the same inputs and outputs that calls its
     compiled form, whose value, Jacobian and second derivatives run as machine code; or
     ``function`` itself where compiling is off or impossible, it is longer than
-    :data:`MAX_INSTRUCTIONS` or not SX, or its library would be longer than
-    :data:`MAX_LIBRARY`.
+    :data:`MAX_INSTRUCTIONS` or not SX, or its library would be longer than ``max_library``
+    instructions (default :data:`MAX_LIBRARY`).
 
     Its numbers are lifted into an input (:func:`~flexctl.sim.compile_cache.lift_constants`),
     so that one library serves every function of the same structure.
@@ -74,7 +79,7 @@ def with_compiled_derivatives(function):
         return function
     inner, constants = lifted
     companions = with_derivatives(inner, fixed=(inner.n_in() - 1,))
-    if sum(f.n_instructions() for f in (inner, *companions)) > MAX_LIBRARY:
+    if sum(f.n_instructions() for f in (inner, *companions)) > max_library:
         return function
     built = compiled(inner, label=f"{function.name()} and its derivatives",
                      companions=companions, options={"jac_penalty": -1})

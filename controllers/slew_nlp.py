@@ -21,7 +21,8 @@ from flexctl.model.errors import InputValueError
 
 from .actuator_limits import hold_voltages, speed_bound, wheel_speed_function
 from .hold_grid import LARGEST_STEP, MAX_SUBSTEPS, mode_tolerances, steps_per_hold
-from .native_dynamics import MAX_INSTRUCTIONS, design_dynamics, with_compiled_derivatives
+from .native_dynamics import (MAX_HOLD_LIBRARY, MAX_INSTRUCTIONS, design_dynamics,
+                              with_compiled_derivatives)
 
 __all__ = ["MAX_INTERVALS", "MAX_ELEMENTS", "MAX_MODE_PHASE", "Discretisation", "discretisation",
            "transcription_for", "rk4_substeps", "refuse_fast_modes", "resolution_reason",
@@ -219,7 +220,7 @@ def _hold_step(model, disc: Discretisation):
         step = None
         if 4 * disc.steps_per_hold * plain.n_instructions() <= MAX_INSTRUCTIONS:
             written = _rk4_step(plain, n, disc.steps_per_hold, ca.SX)
-            step = with_compiled_derivatives(written)
+            step = with_compiled_derivatives(written, MAX_HOLD_LIBRARY)
             if step is written and design_dynamics(model) is not plain:
                 step = None             # too long a library: call the compiled dynamics
         if step is None:
