@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import weakref
 
+from flexctl.model.checks import check_integer
 from flexctl.sim.compile_cache import compiled, lift_constants, with_derivatives
 
 __all__ = ["design_dynamics", "with_compiled_derivatives", "MAX_INSTRUCTIONS", "MAX_LIBRARY",
@@ -74,6 +75,8 @@ def with_compiled_derivatives(function, max_library: int = MAX_LIBRARY):
     """
     import casadi as ca
 
+    max_library = check_integer("with_compiled_derivatives", "max_library", max_library,
+                                minimum=0)
     lifted = lift_constants(function, MAX_INSTRUCTIONS)
     if lifted is None:
         return function

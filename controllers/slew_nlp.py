@@ -326,7 +326,10 @@ def terminal_constraints(model, target) -> np.ndarray:
     """
     import casadi as ca
 
+    from flexctl.model.checks import check_array
+
     n, layout = model.n_states, model.layout
+    target = check_array("terminal_constraints", "target", target, shape=(n,))
     x, u = ca.SX.sym("x", n), ca.SX.sym("u")
     xdot = model.casadi()(x, u)
     a, b = (np.array(ca.Function("rest", [x, u], [ca.jacobian(xdot, v)])(target, 0.0),

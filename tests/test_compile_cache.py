@@ -446,3 +446,35 @@ def test_exact_structure_runs_compiled_and_agrees(fresh, monkeypatch):
     peak = np.max(np.abs(runs[1].tip_deflection))
     np.testing.assert_allclose(runs[0].tip_deflection, runs[1].tip_deflection, rtol=0,
                                atol=1e-8 * peak)
+
+
+@pytest.mark.parametrize("fixed", [(5,), (-1,), (0.5,), "0", 3, (True,), (float("nan"),)])
+def test_with_derivatives_refuses_a_bad_fixed_input_by_name(fixed):
+    import casadi as ca
+
+    from flexctl.sim.compile_cache import with_derivatives
+
+    x, c = ca.SX.sym("x", 2), ca.SX.sym("c")
+    f = ca.Function("t_bad", [x, c], [c * x[0] * x[1]])
+    with pytest.raises((TypeError, ValueError), match="fixed"):
+        with_derivatives(f, fixed=fixed)
+
+
+@pytest.mark.parametrize("bad", ["10", float("nan"), float("inf"), -1, 1.5, True])
+def test_with_compiled_derivatives_refuses_a_bad_size_by_name(bad):
+    import casadi as ca
+
+    from controllers.native_dynamics import with_compiled_derivatives
+
+    x = ca.SX.sym("x")
+    with pytest.raises((TypeError, ValueError), match="max_library"):
+        with_compiled_derivatives(ca.Function("t_sq", [x], [x ** 2]), bad)
+
+
+@pytest.mark.parametrize("companions, options", [(("jac_f",), None), (3, None), ((), "x")])
+def test_compiled_refuses_bad_companions_and_options_by_name(companions, options):
+    import casadi as ca
+
+    x = ca.SX.sym("x")
+    with pytest.raises(TypeError, match="companions|options"):
+        compiled(ca.Function("t_sq2", [x], [x ** 2]), companions=companions, options=options)

@@ -496,3 +496,13 @@ def test_terminal_constraints_keep_an_actuators_states(actuator):
     rows = terminal_constraints(model, model.rest_state(0.3))
     assert rows.shape == (model.n_states, model.n_states)
     assert np.linalg.matrix_rank(rows) == model.n_states
+
+
+@pytest.mark.parametrize("bad", [np.zeros(3), np.full(6, np.nan), "rest", np.full(6, np.inf)])
+def test_terminal_constraints_refuse_a_bad_target_by_name(bad):
+    import flexctl
+    from controllers.slew_nlp import terminal_constraints
+
+    model = flexctl.build_model(flexctl.load_scene("slew-90").system, 2, "first_order")
+    with pytest.raises((TypeError, ValueError), match="target"):
+        terminal_constraints(model, bad)

@@ -169,6 +169,17 @@ def compiled(function, *, label: str | None = None, companions=(), options=None)
         through its companions: take other derivatives of ``function`` before compiling), or
         ``function`` where compiling is off, impossible (one warning) or failed (one warning).
     """
+    import casadi as ca
+
+    from ..model.errors import InputTypeError
+
+    companions = tuple(companions) if isinstance(companions, (list, tuple)) else companions
+    if not isinstance(companions, tuple) or not all(isinstance(c, ca.Function)
+                                                    for c in companions):
+        raise InputTypeError(f"compiled: companions must be a sequence of casadi.Function; got "
+                             f"{companions!r}"[:200])
+    if options is not None and not isinstance(options, dict):
+        raise InputTypeError(f"compiled: options must be a dict; got {type(options).__name__}")
     if not _enabled():
         return function
     tool = compiler()
@@ -296,6 +307,7 @@ def with_derivatives(function, fixed=()):
     import casadi as ca
     import numpy as np
 
+    from ..model.checks import check_integer
     from ..model.errors import InputTypeError, InputValueError
 
     if not isinstance(function, ca.Function) or not function.is_a("SXFunction"):
@@ -304,7 +316,12 @@ def with_derivatives(function, fixed=()):
     if not all(function.sparsity_in(k).is_dense() for k in range(function.n_in())):
         raise InputValueError("with_derivatives: every input of function must be dense")
     name, inputs, n_in = function.name(), function.sx_in(), function.n_in()
-    free = [k for k in range(n_in) if k not in set(fixed)]
+    if isinstance(fixed, (str, bytes)) or not hasattr(fixed, "__iter__"):
+        raise InputTypeError(f"with_derivatives: fixed must be a sequence of input indices; "
+                             f"got {fixed!r}")
+    held = {check_integer("with_derivatives", "fixed", k, minimum=0, maximum=n_in - 1)
+            for k in fixed}
+    free = [k for k in range(n_in) if k not in held]
     outputs = function.call(inputs)
     out_names = [f"out_{o}" for o in function.name_out()]
     outs = [ca.SX.sym(o, function.sparsity_out(k)) for k, o in enumerate(out_names)]
