@@ -307,21 +307,8 @@ def with_derivatives(function, fixed=()):
     import casadi as ca
     import numpy as np
 
-    from ..model.checks import check_integer
-    from ..model.errors import InputTypeError, InputValueError
-
-    if not isinstance(function, ca.Function) or not function.is_a("SXFunction"):
-        raise InputTypeError(f"with_derivatives: function must be an SX casadi.Function; got "
-                             f"{type(function).__name__}")
-    if not all(function.sparsity_in(k).is_dense() for k in range(function.n_in())):
-        raise InputValueError("with_derivatives: every input of function must be dense")
+    free = _free_inputs(function, fixed)
     name, inputs, n_in = function.name(), function.sx_in(), function.n_in()
-    if isinstance(fixed, (str, bytes)) or not hasattr(fixed, "__iter__"):
-        raise InputTypeError(f"with_derivatives: fixed must be a sequence of input indices; "
-                             f"got {fixed!r}")
-    held = {check_integer("with_derivatives", "fixed", k, minimum=0, maximum=n_in - 1)
-            for k in fixed}
-    free = [k for k in range(n_in) if k not in held]
     outputs = function.call(inputs)
     out_names = [f"out_{o}" for o in function.name_out()]
     outs = [ca.SX.sym(o, function.sparsity_out(k)) for k, o in enumerate(out_names)]
@@ -356,6 +343,28 @@ def with_derivatives(function, fixed=()):
         adj_out_names, free + [len(inputs) + len(outs) + j for j in range(len(seeds))],
         ca.vertcat(*rows), [inputs[k].numel() for k in range(n_in)])
     return jac, adj, jac_adj
+
+
+def _free_inputs(function, fixed) -> list:
+    """The inputs of ``function`` that :func:`with_derivatives` differentiates: all but
+    ``fixed``, after checking both."""
+    import casadi as ca
+
+    from ..model.checks import check_integer
+    from ..model.errors import InputTypeError, InputValueError
+
+    if not isinstance(function, ca.Function) or not function.is_a("SXFunction"):
+        raise InputTypeError(f"with_derivatives: function must be an SX casadi.Function; got "
+                             f"{type(function).__name__}")
+    n_in = function.n_in()
+    if not all(function.sparsity_in(k).is_dense() for k in range(n_in)):
+        raise InputValueError("with_derivatives: every input of function must be dense")
+    if isinstance(fixed, (str, bytes)) or not hasattr(fixed, "__iter__"):
+        raise InputTypeError(f"with_derivatives: fixed must be a sequence of input indices; "
+                             f"got {fixed!r}")
+    held = {check_integer("with_derivatives", "fixed", k, minimum=0, maximum=n_in - 1)
+            for k in fixed}
+    return [k for k in range(n_in) if k not in held]
 
 
 def _jacobian_function(name: str, inputs: list, in_names: list, out_names: list, free: list,
