@@ -28,8 +28,8 @@ __all__ = ["design_dynamics", "with_compiled_derivatives", "MAX_INSTRUCTIONS", "
            "MAX_HOLD_LIBRARY"]
 
 #: Longest dynamics compiled with their derivatives, instructions. The Hessian's code is about
-#: ten times longer: the two-array design model (2 modes per array, free hub: 9 900
-#: instructions, Hessian 109 000) compiles in about 9 s, once.
+#: ten times longer: the exact two-array design model (2 modes per array, free hub: 9 900
+#: instructions, Hessian 109 000) makes a library of 218 000 (see :data:`MAX_LIBRARY`).
 MAX_INSTRUCTIONS = 12_000
 #: Longest library (the function and its derivatives) compiled by default, instructions: the
 #: exact two-array design model (2 modes per array) makes 218 000, about 15 s of ``-Og``, once,
