@@ -324,16 +324,12 @@ def terminal_constraints(model, target) -> np.ndarray:
     pinned single beam every mode is controllable and ``R`` is square. Other states (an
     actuator's) keep a row each.
     """
-    import casadi as ca
-
     from flexctl.model.checks import check_array
+    from flexctl.model.exports import dynamics_jacobians
 
     n, layout = model.n_states, model.layout
     target = check_array("terminal_constraints", "target", target, shape=(n,))
-    x, u = ca.SX.sym("x", n), ca.SX.sym("u")
-    xdot = model.casadi()(x, u)
-    a, b = (np.array(ca.Function("rest", [x, u], [ca.jacobian(xdot, v)])(target, 0.0),
-                     dtype=float) for v in (x, u))
+    _, a, b = dynamics_jacobians(model, target)
     coords, rates = np.arange(n)[layout.coordinates], np.arange(n)[layout.velocities]
     others = np.setdiff1d(np.arange(n), np.r_[coords, rates])
     values, vectors = np.linalg.eig(-a[np.ix_(rates, coords)])

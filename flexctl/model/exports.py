@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["to_nonlinear_iosystem", "to_casadi", "to_casadi_outputs", "signal_names",
-           "linearize_at"]
+           "linearize_at", "dynamics_jacobians"]
 
 
 def signal_names(names) -> list:
@@ -197,6 +197,22 @@ def to_casadi(model, sx: bool = True):
                        [_symbolic_dynamics(model, x, u)], ["x", "u"], ["xdot"])
 
 
+def dynamics_jacobians(model, x0, u0=0.0) -> tuple:
+    """``f(x0, u0)`` (n,), ``A = df/dx`` (n, n) and ``B = df/du`` (n, 1) of
+    :meth:`Model.casadi` at a state and torque already checked; the CasADi function is built
+    once per model."""
+    import casadi as ca
+
+    if "dynamics_jacobians" not in model._c:
+        x, u = ca.SX.sym("x", model.n_states), ca.SX.sym("u")
+        xdot = model.casadi()(x, u)
+        model._c["dynamics_jacobians"] = ca.Function(
+            "flexctl_dynamics_jacobians", [x, u],
+            [xdot, ca.jacobian(xdot, x), ca.jacobian(xdot, u)])
+    drift, a, b = (np.array(m, dtype=float) for m in model._c["dynamics_jacobians"](x0, u0))
+    return drift.reshape(-1), a, b
+
+
 def linearize_at(model, x0, u0=0.0):
     """The model linearised about any state ``x0`` and input ``u0`` (deflected, spinning,
     accelerating), a python-control ``StateSpace`` in the deviations from them:
@@ -220,11 +236,12 @@ def linearize_at(model, x0, u0=0.0):
     n = model.n_states
     x0 = check_array("linearize", "x0", x0, shape=(n,))
     u0 = check_real("linearize", "u0", u0)
-    x, u = ca.SX.sym("x", n), ca.SX.sym("u")
-    xdot, y = model.casadi()(x, u), to_casadi_outputs(model)(x)
-    jac = ca.Function("flexctl_linearize_at", [x, u],
-                      [xdot, ca.jacobian(xdot, x), ca.jacobian(xdot, u), ca.jacobian(y, x)])
-    drift, a, b, c = (np.array(m, dtype=float) for m in jac(x0, u0))
+    drift, a, b = dynamics_jacobians(model, x0, u0)
+    if "output_jacobian" not in model._c:           # built once per model
+        x = ca.SX.sym("x", n)
+        model._c["output_jacobian"] = ca.Function(
+            "flexctl_output_jacobian", [x], [ca.jacobian(to_casadi_outputs(model)(x), x)])
+    c = np.array(model._c["output_jacobian"](x0), dtype=float)
     if not all(np.all(np.isfinite(m)) for m in (drift, a, b, c)):
         raise InputValueError("linearize: the Jacobians are not finite at x0 (the mass matrix "
                               "is singular there)")

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..model.exports import _symbolic_beam_dynamics, _symbolic_dynamics
 from ..model.errors import InputValueError
-from .native_rhs import integration_beam, integration_rhs
+from .native_rhs import compiles_prescribed, integration_beam, integration_rhs
 
 __all__ = ["is_symbolic", "piecewise_constant", "torque_history", "SegmentIntegrator",
            "integrate_segments", "numeric_rhs"]
@@ -204,7 +204,7 @@ def _calls_model(model, hub_motion) -> bool:
     """The model enters the right-hand side through a call (:mod:`flexctl.sim.native_rhs`:
     compiled, with first_order's cheap Newton Jacobian) rather than inlined: the one-beam
     exact model, and an exact structure under a torque."""
-    return model.variant == "exact" and (hub_motion is None or not hasattr(model, "functions"))
+    return model.variant == "exact" and (hub_motion is None or compiles_prescribed(model))
 
 
 def _drive_symbols(model, scale, inputs, n_numbers) -> tuple:

@@ -22,7 +22,8 @@ import weakref
 
 from .compile_cache import compiled, lift_constants
 
-__all__ = ["integration_rhs", "integration_beam", "prescribed_torque", "MAX_INSTRUCTIONS"]
+__all__ = ["integration_rhs", "integration_beam", "prescribed_torque", "compiles_prescribed",
+           "MAX_INSTRUCTIONS"]
 
 #: Largest scalar function compiled, instructions (with ``-Og``: two arrays of 5 modes, 31 500
 #: instructions, 740 kB of C, compile in 2 s; hub-beam-mass on 10 modes, 51 500, in 4.5 s; on
@@ -67,6 +68,12 @@ def _built(model, form: str):
     return entry[form]
 
 
+def compiles_prescribed(model) -> bool:
+    """Whether a prescribed hub motion of ``model`` runs its compiled beam and hub torque:
+    the one-beam exact model (a structure's prescribed motion stays inlined)."""
+    return model.variant == "exact" and not hasattr(model, "functions")
+
+
 def integration_rhs(model):
     """``(x, u) -> xdot`` for implicit integrators: compiled for an exact model (one beam or
     a structure), :meth:`flexctl.Model.integration_rhs` otherwise."""
@@ -79,7 +86,7 @@ def integration_beam(model):
     """``(y, rate, acceleration) -> dy/dt`` under a prescribed hub motion, ``y = [q,
     q_dot]``: compiled for a one-beam exact model, :meth:`flexctl.Model.integration_beam`
     otherwise."""
-    if model.variant != "exact" or hasattr(model, "functions"):
+    if not compiles_prescribed(model):
         return model.integration_beam()
     return _built(model, "beam")
 
@@ -91,7 +98,7 @@ def prescribed_torque(model, states, acceleration):
     model's own :meth:`~flexctl.Model.beam_accelerations` and :meth:`~flexctl.Model.hub_torque`)."""
     import numpy as np
 
-    if model.variant != "exact" or hasattr(model, "functions"):
+    if not compiles_prescribed(model):
         return None
     beam, torque = _native(model.geometry, "beam"), _native(model.geometry, "torque")
     if beam is None or torque is None:
