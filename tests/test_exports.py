@@ -157,3 +157,28 @@ def test_casadi_outputs_and_time_response_carry_the_named_signals(scene):
     assert np.allclose(response.outputs, model.outputs(result.states))
     assert np.allclose(response.states, result.states) and response.success
     assert np.allclose(response.inputs, 0.01)
+
+
+@pytest.mark.parametrize("x0, u0", [(np.zeros(3), 0.0), (np.full(6, np.nan), 0.0),
+                                    (np.zeros(6), float("inf")), ("rest", 0.0),
+                                    (np.zeros(6), "1"), (np.zeros((6, 6)), 0.0)])
+def test_dynamics_jacobians_refuse_bad_points_by_name(x0, u0):
+    import flexctl
+    from flexctl.model.exports import dynamics_jacobians
+
+    model = flexctl.build_model(flexctl.load_scene("slew-90").system, 2)
+    with pytest.raises((TypeError, ValueError), match="x0|u0"):
+        dynamics_jacobians(model, x0, u0)
+
+
+def test_dynamics_jacobians_are_the_linearisation():
+    """At rest, ``A`` and ``B`` are the linearised plant's, and the drift is zero."""
+    import flexctl
+    from flexctl.model.exports import dynamics_jacobians
+
+    model = flexctl.build_model(flexctl.load_scene("slew-90").system, 2)
+    drift, a, b = dynamics_jacobians(model, model.layout.zeros())
+    plant = model.linearize()
+    np.testing.assert_allclose(a, plant.A, rtol=1e-12, atol=1e-12 * np.max(np.abs(a)))
+    np.testing.assert_allclose(b, plant.B, rtol=1e-12, atol=1e-14)
+    np.testing.assert_array_equal(drift, 0.0)

@@ -199,10 +199,14 @@ def to_casadi(model, sx: bool = True):
 
 def dynamics_jacobians(model, x0, u0=0.0) -> tuple:
     """``f(x0, u0)`` (n,), ``A = df/dx`` (n, n) and ``B = df/du`` (n, 1) of
-    :meth:`Model.casadi` at a state and torque already checked; the CasADi function is built
-    once per model."""
+    :meth:`Model.casadi` at state ``x0`` (n,) and torque ``u0`` (N m); the CasADi function is
+    built once per model."""
     import casadi as ca
 
+    from .checks import check_array, check_real
+
+    x0 = check_array("dynamics_jacobians", "x0", x0, shape=(model.n_states,))
+    u0 = check_real("dynamics_jacobians", "u0", u0)
     if "dynamics_jacobians" not in model._c:
         x, u = ca.SX.sym("x", model.n_states), ca.SX.sym("u")
         xdot = model.casadi()(x, u)
