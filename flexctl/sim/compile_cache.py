@@ -54,8 +54,8 @@ __all__ = ["compiled", "lift_constants", "with_derivatives", "cache_dir", "cache
            "PROGRESS_AFTER"]
 
 #: Compiler flags of every library (part of the key). ``-Og`` runs the generated straight-line
-#: code as fast as ``-O2`` (within 3 % on the exact model's right-hand side and its
-#: derivatives) and compiles it up to 13 times sooner: the register allocation of ``-O1`` and
+#: code about as fast as ``-O2`` (within 6 % on the exact model's right-hand side and its
+#: derivatives) and compiles it up to 14 times sooner: the register allocation of ``-O1`` and
 #: above grows faster than linearly with a function's length (``benchmarks/bench_compile.py
 #: --flags``).
 FLAGS = ("-Og", "-fPIC", "-shared")
