@@ -49,7 +49,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["compiled", "lift_constants", "with_derivatives", "cache_dir", "cache_info",
+__all__ = ["compiled", "lift_constants", "with_derivatives", "jacobian_companion", "cache_dir", "cache_info",
            "clear_cache", "compiler", "CacheInfo", "CompileCacheWarning", "STATS", "FLAGS",
            "PROGRESS_AFTER"]
 
@@ -308,18 +308,11 @@ def with_derivatives(function, fixed=()):
     import numpy as np
 
     free = _free_inputs(function, fixed)
-    name, inputs, n_in = function.name(), function.sx_in(), function.n_in()
-    outputs = function.call(inputs)
+    name, n_in = function.name(), function.n_in()
+    jac, inputs, outs, z, stacked, jz = _jacobian_parts(function, free)
     out_names = [f"out_{o}" for o in function.name_out()]
-    outs = [ca.SX.sym(o, function.sparsity_out(k)) for k, o in enumerate(out_names)]
     seeds = [ca.SX.sym(f"adj_{o}", function.sparsity_out(k))
              for k, o in enumerate(function.name_out())]
-    z = ca.vertcat(*[ca.vec(inputs[k]) for k in free])
-    stacked = ca.vertcat(*[ca.vec(o) for o in outputs])
-    jz = ca.jacobian(stacked, z)
-    jac = _jacobian_function(f"jac_{name}", inputs + outs, function.name_in() + out_names,
-                             function.name_out(), free, jz,
-                             [o.numel() for o in outputs])
     weighted = ca.dot(ca.vertcat(*[ca.vec(seed) for seed in seeds]), stacked)
     gradient = ca.gradient(weighted, z)                  # reverse mode: one sweep
     offsets = np.cumsum([0] + [inputs[k].numel() for k in free])
@@ -343,6 +336,41 @@ def with_derivatives(function, fixed=()):
         adj_out_names, free + [len(inputs) + len(outs) + j for j in range(len(seeds))],
         ca.vertcat(*rows), [inputs[k].numel() for k in range(n_in)])
     return jac, adj, jac_adj
+
+
+def jacobian_companion(function, fixed=()):
+    """``jac_<name>``, the first companion of :func:`with_derivatives` alone: enough for a
+    compiled function whose callers take first derivatives only (an integrator's Newton
+    iterations).
+
+    Examples
+    --------
+    >>> import casadi as ca
+    >>> x, c = ca.SX.sym("x", 2), ca.SX.sym("c")
+    >>> f = ca.Function("doc_g", [x, c], [c * x[0] * x[1]], ["x", "c"], ["y"])
+    >>> jacobian_companion(f, fixed=(1,)).name_out()
+    ['jac_y_x', 'jac_y_c']
+    """
+    return _jacobian_parts(function, _free_inputs(function, fixed))[0]
+
+
+def _jacobian_parts(function, free: list) -> tuple:
+    """``jac_<name>`` of ``function`` in its ``free`` inputs, with what it is made of: the
+    symbolic inputs, the nominal outputs' symbols, the stacked free inputs, the stacked
+    outputs and their Jacobian."""
+    import casadi as ca
+
+    inputs = function.sx_in()
+    outputs = function.call(inputs)
+    out_names = [f"out_{o}" for o in function.name_out()]
+    outs = [ca.SX.sym(o, function.sparsity_out(k)) for k, o in enumerate(out_names)]
+    z = ca.vertcat(*[ca.vec(inputs[k]) for k in free])
+    stacked = ca.vertcat(*[ca.vec(o) for o in outputs])
+    jz = ca.jacobian(stacked, z)
+    jac = _jacobian_function(f"jac_{function.name()}", inputs + outs,
+                             function.name_in() + out_names, function.name_out(), free, jz,
+                             [o.numel() for o in outputs])
+    return jac, inputs, outs, z, stacked, jz
 
 
 def _free_inputs(function, fixed) -> list:

@@ -258,10 +258,10 @@ class _SensorFeed:
         """Sample ``k``'s reading, shape (m,)."""
         x, u = self.seen.pop(k, (self.x0, 0.0))
         xdot = self.model.dynamics(0.0, x, u) if self.rates else None
-        reading = np.asarray(self.session.read(x, xdot), dtype=float)
-        self.readings.append(reading)
-        self.truth.append(np.asarray(self.session.true_values(x, xdot), dtype=float))
-        return reading
+        reading, truth = self.session.measure(x, xdot)
+        self.readings.append(np.asarray(reading, dtype=float))
+        self.truth.append(np.asarray(truth, dtype=float))
+        return self.readings[-1]
 
     def record(self, sample_times) -> dict:
         """``{"t": (K,), name: (K,) reading..., "true": {name: (K,)}}``."""

@@ -20,15 +20,20 @@ from __future__ import annotations
 
 import weakref
 
-from .compile_cache import compiled, lift_constants
+from .compile_cache import compiled, jacobian_companion, lift_constants
 
 __all__ = ["integration_rhs", "integration_beam", "prescribed_torque", "compiles_prescribed",
-           "MAX_INSTRUCTIONS"]
+           "native_dae", "MAX_INSTRUCTIONS", "MAX_DAE_INSTRUCTIONS"]
 
 #: Largest scalar function compiled, instructions (with ``-Og``: two arrays of 5 modes, 31 500
 #: instructions, 740 kB of C, compile in 2 s; hub-beam-mass on 10 modes, 51 500, in 4.5 s; on
 #: 14 modes, 163 000, in 24 s), once. Larger ones stay on the virtual machine.
 MAX_INSTRUCTIONS = 60_000
+
+#: Largest integrator right-hand side (:func:`native_dae`) compiled, instructions. A
+#: first_order structure's drive and dynamics are a few hundred to a few thousand; its
+#: Jacobian is some five times longer.
+MAX_DAE_INSTRUCTIONS = 20_000
 
 #: The compiled functions of each exact geometry (shared by the models built on it).
 _NATIVE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -108,3 +113,47 @@ def prescribed_torque(model, states, acceleration):
     acc = np.asarray(acceleration, dtype=float).reshape(1, points)
     q_tt = beam.map(points)(q, q_dot, rate.reshape(1, points), acc)
     return np.array(torque.map(points)(states, acc, q_tt)).reshape(points)
+
+
+def native_dae(dae):
+    """An integrator's scalar right-hand side as machine code, with its Jacobian.
+
+    Parameters
+    ----------
+    dae : casadi.Function
+        An SX function of CasADi's integrator signature (``casadi.dyn_in()`` to
+        ``casadi.dyn_out()``) with an ODE output only (``z``, ``u``, ``alg``, ``quad`` and
+        ``zero`` empty), as :func:`flexctl.sim.compiled.SegmentIntegrator` builds.
+
+    Returns
+    -------
+    casadi.Function or None
+        The same signature and values, computed by a compiled library (numbers lifted into an
+        input, :func:`~flexctl.sim.compile_cache.lift_constants`, so that one library serves
+        every model and input of the same structure) that also holds the Jacobian of the ODE
+        in ``t``, ``x`` and ``p``: CVODES's Newton iterations call it in one piece. None where
+        compiling is off or impossible, or ``dae`` is not such a function or is longer than
+        :data:`MAX_DAE_INSTRUCTIONS`.
+    """
+    import casadi as ca
+
+    if (not isinstance(dae, ca.Function) or not dae.is_a("SXFunction")
+            or dae.n_in() != 5 or dae.n_out() != 4
+            or any(dae.nnz_in(k) for k in (2, 4)) or any(dae.nnz_out(k) for k in (1, 2, 3))):
+        return None
+    t, x, p = dae.sx_in(0), dae.sx_in(1), dae.sx_in(3)
+    ode = dae(t, x, ca.SX(0, 1), p, ca.SX(0, 1))[0]
+    core = ca.Function(f"{dae.name()}_ode", [t, x, p], [ode], ["t", "x", "p"], ["ode"])
+    lifted = lift_constants(core, MAX_DAE_INSTRUCTIONS)
+    if lifted is None:
+        return None
+    function, constants = lifted
+    built = compiled(function, label=dae.name(),
+                     companions=(jacobian_companion(function, fixed=(3,)),))
+    if built is function:
+        return None
+    tm, xm, pm = (ca.MX.sym(n, dae.sparsity_in(k)) for n, k in (("t", 0), ("x", 1), ("p", 3)))
+    empty = ca.MX(0, 1)
+    return ca.Function(dae.name(), [tm, xm, empty, pm, empty],
+                       [built(tm, xm, pm, ca.DM(constants)), empty, empty, empty],
+                       ca.dyn_in(), ca.dyn_out())

@@ -324,6 +324,11 @@ class SensorSession:
     def read(self, x, xdot=None) -> np.ndarray:
         """One reading of every sensor from the (already delayed) true state ``x`` (n,),
         advancing the noise by one sample; shape (m,), in :attr:`names` order."""
+        return self.measure(x, xdot)[0]
+
+    def measure(self, x, xdot=None) -> tuple:
+        """:meth:`read` and :meth:`true_values` of one sample together: ``(readings,
+        values)``, each shape (m,)."""
         values = self.true_values(x, xdot)
         draws = self._rng.standard_normal(values.size + 1)
         if self.samples:
@@ -334,7 +339,7 @@ class SensorSession:
         if step:
             readings[0] = step * np.round(values[0] / step)
         self.samples += 1
-        return readings
+        return readings, values
 
     def __repr__(self):
         return (f"SensorSession({len(self.names)} readings every {self.sample_time:g} s, "
