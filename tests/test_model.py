@@ -369,3 +369,33 @@ def test_state_of_wrong_size_is_rejected(hub_beam_mass_system):
     model = build_model(hub_beam_mass_system, n_modes=3)
     with pytest.raises(ValueError, match=r"state.*\(8,\)"):
         model.dynamics(0.0, np.zeros(7), 0.0)
+
+
+def test_equal_build_calls_share_one_model_and_others_do_not():
+    """build_model keeps the model of an equal call (its assembled matrices, compiled
+    functions and integrators come with it); any other number, mode count, variant or
+    actuator is a model of its own, and refused input is refused every time."""
+    import dataclasses
+
+    from flexctl import load_scene
+    from flexctl.model.actuators import ReactionWheel
+
+    system = load_scene("hub-beam-mass").system
+    model = build_model(system, 3)
+    assert build_model(system, n_modes=3, variant="first_order") is model
+    stiffer = dataclasses.replace(system, beam=dataclasses.replace(
+        system.beam, youngs_modulus=2.0 * system.beam.youngs_modulus))
+    others = [build_model(stiffer, 3), build_model(system, 4),
+              build_model(system, 3, variant="zero_order"),
+              build_model(system, 3, actuator=ReactionWheel(
+                  inertia=1e-3, torque_limit=0.1, speed_limit=600.0, time_constant=0.05))]
+    assert all(other is not model for other in others)
+    assert others[0].natural_frequencies()[0] == pytest.approx(
+        np.sqrt(2.0) * model.natural_frequencies()[0], rel=1e-9)
+    for _ in range(2):
+        with pytest.raises(ValueError, match="n_modes"):
+            build_model(system, 0)
+    free = load_scene("two-array-free").system
+    assert build_model(free, {"wing_a": 2, "wing_b": 3}) is build_model(
+        free, {"wing_b": 3, "wing_a": 2})
+    assert build_model(free, [2, 3]) is build_model(free, (2, 3))

@@ -27,6 +27,7 @@ Like the command line, this module sits on top of both packages: it imports
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
 import warnings
@@ -494,12 +495,11 @@ def frequency_plot(out: Path, source: str = "kane-spinup") -> Path:
     return path
 
 
-def sections(out: Path, workers: int, surprises: list, progress=print) -> list:
-    """Every section of this module, the sweeps and comparisons on a pool of ``workers``
-    processes; a section that fails on bad input or in a sweep is listed in ``surprises``
-    (a genuine bug keeps its traceback)."""
-    from concurrent.futures import ProcessPoolExecutor
-
+def sections(out: Path, workers: int, surprises: list, progress=print, *,
+             executor=None) -> list:
+    """Every section of this module, the sweeps and comparisons on ``executor`` or else a pool
+    of ``workers`` processes; a section that fails on bad input or in a sweep is listed in
+    ``surprises`` (a genuine bug keeps its traceback)."""
     from .sweep import SweepError
 
     cases = (("paper 001 Fig. 4", kane_spinup, True),
@@ -513,9 +513,8 @@ def sections(out: Path, workers: int, surprises: list, progress=print) -> list:
              ("design-model error", model_error, True),
              ("large deflection", lambda o, pool: large_deflection(o), False),
              ("actuators and sensors", hardware, True))
-    pool = ProcessPoolExecutor(max_workers=workers) if workers > 1 else None
     made = []
-    try:
+    with _pool(workers, executor) as pool:
         for label, make, pooled in cases:
             begin = time.perf_counter()
             try:
@@ -524,10 +523,28 @@ def sections(out: Path, workers: int, surprises: list, progress=print) -> list:
                 surprises.append(f"{label} failed: {exc}")
                 continue
             progress(f"{label}: {time.perf_counter() - begin:.1f} s")
-    finally:
-        if pool is not None:
-            pool.shutdown()
     return made
+
+
+@contextlib.contextmanager
+def _pool(workers: int, executor=None):
+    """``executor`` as it is, or a pool of ``workers`` processes for the block (None for
+    one worker: everything runs in this process)."""
+    if executor is not None or workers <= 1:
+        yield executor
+        return
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        yield pool
+
+
+def _submit(pool, function, *args):
+    """``function(*args)`` on ``pool`` (None: here, now), as a call that gives its result."""
+    if pool is None:
+        value = function(*args)
+        return lambda: value
+    return pool.submit(function, *args).result
 
 
 def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print) -> tuple:
@@ -540,7 +557,9 @@ def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print)
         Output directory; each run writes into ``out / label``.
     run_one : callable
         ``run_one(source, overrides, out_dir) -> summary``: loads, runs and writes one scene
-        (the command line's, which holds the run's output and maps its errors).
+        (the command line's, which holds the run's output and maps its errors). With more
+        than one worker the scenes run side by side in the pool's processes, so it must be
+        picklable (a module-level function).
     workers : int
         Processes for the sweeps and comparisons.
     progress : callable
@@ -557,17 +576,22 @@ def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print)
         after = next((k for k, p in enumerate(plan) if p[1] == extra[1]), len(plan) - 1)
         plan.insert(after + 1, extra)
     runs, surprises = [], []
-    for label, source, overrides, expected in plan:
-        summary = run_one(source, overrides, out / label)
-        runs.append((label, summary))
-        note = "" if summary["status"] == expected else f" (expected {expected})"
-        progress(f"{label}: {summary['status']}{note}, peak tip deflection "
-                 f"{summary['peak_tip_deflection']:.4g} m, t = {summary['t_end']:.4g} s, "
-                 f"{summary['wall_time_s']:.2f} s")
-        if note:
-            surprises.append(f"{label} ended {summary['status']}{note}: {summary['message']}")
-    freq_plot = frequency_plot(out)
-    made = sections(out, workers, surprises, progress)
+    with _pool(workers) as pool:
+        # the scenes side by side on the pool (each writes its own folder), reported in order
+        pending = [(label, expected, _submit(pool, run_one, source, overrides, out / label))
+                   for label, source, overrides, expected in plan]
+        for label, expected, outcome in pending:
+            summary = outcome()
+            runs.append((label, summary))
+            note = "" if summary["status"] == expected else f" (expected {expected})"
+            progress(f"{label}: {summary['status']}{note}, peak tip deflection "
+                     f"{summary['peak_tip_deflection']:.4g} m, t = {summary['t_end']:.4g} s, "
+                     f"{summary['wall_time_s']:.2f} s")
+            if note:
+                surprises.append(f"{label} ended {summary['status']}{note}: "
+                                 f"{summary['message']}")
+        freq_plot = frequency_plot(out)
+        made = sections(out, workers, surprises, progress, executor=pool)
     report = write_demo_report(out, runs, freq_plot, intro=DEMO_INTRO,
                                frequency_note=DEMO_FREQUENCY_NOTE, sections=made)
     return report, surprises

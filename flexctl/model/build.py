@@ -7,6 +7,8 @@ A :class:`~flexctl.model.parameters.HubBeam` (one beam on a pinned hub) gives a
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 from .actuated import actuated_model
 from .actuators import as_actuator
 from .checks import check_choice, check_integer
@@ -19,6 +21,12 @@ from .structure_model import structure_model
 from .variants import VARIANTS, Model
 
 __all__ = ["build_model", "rebuild"]
+
+
+#: Models kept by :func:`build_model` for its calls with equal arguments, least recently
+#: used dropped first.
+MODEL_MEMORY = 32
+_BUILT: OrderedDict = OrderedDict()
 
 
 def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order", *,
@@ -44,6 +52,8 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order",
     Returns
     -------
     Model
+        Models are immutable: a call equal to one of the last :data:`MODEL_MEMORY` returns the
+        same object, with what it has computed and compiled so far.
 
     Examples
     --------
@@ -55,6 +65,36 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order",
     >>> model.natural_frequencies().round(2)
     array([ 2.91, 18.24, 51.08])
     """
+    key = _memory_key(system, n_modes, variant, actuator)
+    if key is not None and key in _BUILT:
+        _BUILT.move_to_end(key)
+        return _BUILT[key]
+    model = _build(system, n_modes, variant, actuator)
+    if key is not None:
+        _BUILT[key] = model
+        while len(_BUILT) > MODEL_MEMORY:
+            _BUILT.popitem(last=False)
+    return model
+
+
+def _memory_key(system, n_modes, variant, actuator):
+    """The key under which an equal earlier call's model is kept: the arguments by value
+    (frozen, validated dataclasses; a dict of modes by its items), or None when one of them
+    is not hashable (it is then built afresh, and checked there)."""
+    modes = tuple(sorted(n_modes.items())) if isinstance(n_modes, dict) else n_modes
+    if isinstance(modes, list):
+        modes = tuple(modes)
+    # the type of each part counts too: 2 and 2.0, or True and 1, are equal but not the same
+    # argument (the one may be refused where the other is not)
+    key = tuple((type(part), part) for part in (system, modes, variant, actuator))
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
+def _build(system, n_modes, variant, actuator) -> Model:
     variant = check_choice("", "variant", variant, VARIANTS)
     actuator = as_actuator(actuator)
     if actuator is not None:

@@ -33,6 +33,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..model.exports import _symbolic_beam_dynamics, _symbolic_dynamics
+from .buffers import InPlace
 from ..model.errors import InputValueError
 from .native_rhs import compiles_prescribed, integration_beam, integration_rhs, native_dae
 
@@ -473,10 +474,8 @@ class _BufferedIntegrator:
     the buffers busy (another thread) takes the ordinary path."""
 
     def __init__(self, function):
-        from .fixed_step import _InPlace
-
         self.function = function
-        self._in_place = _InPlace(function)
+        self._in_place = InPlace(function)
         self._lock = threading.Lock()
 
     def __call__(self, x0, parameters) -> tuple:

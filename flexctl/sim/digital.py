@@ -37,7 +37,8 @@ import numpy as np
 from .stops import tip_rows
 from .compiled import (CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, input_numbers,
                        is_symbolic)
-from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _InPlace, _jit, _step_function
+from .buffers import InPlace
+from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
 from .inputs import input_value, output_grid, time_function
 from .drives import bound_to_plant
 from .sensors import sensor_names
@@ -340,7 +341,7 @@ class _RK4Hold:
         yt, h = ca.MX.sym("yt", step.size1_in(0)), ca.MX.sym("h")
         c = ca.MX.sym("c", n_numbers)
         ys = chain(yt, ca.repmat(h, 1, count), ca.repmat(c, 1, count))[0]
-        return _InPlace(_jit(ca.Function("flexctl_rk4_hold_end", [yt, h, c],
+        return InPlace(_jit(ca.Function("flexctl_rk4_hold_end", [yt, h, c],
                                          [ca.densify(ys[:, -1])]), self.model))
 
     def __call__(self, lo, t_out, y, u, loose=False):

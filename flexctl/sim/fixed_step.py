@@ -24,6 +24,7 @@ import numpy as np
 
 from .compiled import (_cached, _closed_loop_dynamics, _input_key, _split_numbers,
                        drive_size, hub_motion_casadi, input_numbers)
+from .buffers import InPlace
 from .compile_cache import compiled
 from ..model.exports import _symbolic_beam_dynamics
 
@@ -104,33 +105,9 @@ class _ChunkRuns(dict):
         yt, hs = ca.MX.sym("yt", self.step.size1_in(0)), ca.MX.sym("h", 1, k)
         c = ca.MX.sym("c", self.step.size1_in(2))
         ys, fs = chain(yt, hs, ca.repmat(c, 1, k))
-        self[k] = _InPlace(_jit(ca.Function(f"flexctl_rk4_run{k}", [yt, hs, c],
+        self[k] = InPlace(_jit(ca.Function(f"flexctl_rk4_run{k}", [yt, hs, c],
                                             [ca.densify(ys), ca.densify(fs)]), self.model))
         return self[k]
-
-
-class _InPlace:
-    """A CasADi function evaluated on numpy buffers of its own: a call copies the arguments
-    in and returns views of the results (valid until the next call), with none of the
-    conversion to and from ``DM`` that costs some 20 us per thousand numbers."""
-
-    def __init__(self, function):
-        self.function = function
-        self.args = [np.zeros(function.nnz_in(i)) for i in range(function.n_in())]
-        self.results = [np.zeros(function.nnz_out(i)) for i in range(function.n_out())]
-        self.shapes = [function.size_out(i) for i in range(function.n_out())]
-        self.buffer, self.evaluate = function.buffer()
-        for i, arg in enumerate(self.args):
-            self.buffer.set_arg(i, memoryview(arg))
-        for i, result in enumerate(self.results):
-            self.buffer.set_res(i, memoryview(result))
-
-    def __call__(self, *args):
-        for buffer, value in zip(self.args, args):
-            buffer[:] = np.ravel(value, order="F")
-        self.evaluate()
-        # dense results, column-major
-        return [r.reshape(shape[1], shape[0]).T for r, shape in zip(self.results, self.shapes)]
 
 
 def _chunk_runs(step, model) -> dict:
