@@ -7,6 +7,7 @@ A :class:`~flexctl.model.parameters.HubBeam` (one beam on a pinned hub) gives a
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 
 from .actuated import actuated_model
@@ -27,6 +28,7 @@ __all__ = ["build_model", "rebuild"]
 #: used dropped first.
 MODEL_MEMORY = 32
 _BUILT: OrderedDict = OrderedDict()
+_BUILT_LOCK = threading.Lock()
 
 
 def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order", *,
@@ -66,14 +68,17 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order",
     array([ 2.91, 18.24, 51.08])
     """
     key = _memory_key(system, n_modes, variant, actuator)
-    if key is not None and key in _BUILT:
-        _BUILT.move_to_end(key)
-        return _BUILT[key]
+    with _BUILT_LOCK:
+        kept = _BUILT.get(key) if key is not None else None
+        if kept is not None:
+            _BUILT.move_to_end(key)
+            return kept
     model = _build(system, n_modes, variant, actuator)
     if key is not None:
-        _BUILT[key] = model
-        while len(_BUILT) > MODEL_MEMORY:
-            _BUILT.popitem(last=False)
+        with _BUILT_LOCK:
+            model = _BUILT.setdefault(key, model)     # a thread that built it first wins
+            while len(_BUILT) > MODEL_MEMORY:
+                _BUILT.popitem(last=False)
     return model
 
 

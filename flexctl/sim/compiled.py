@@ -27,6 +27,7 @@ immutable (frozen dataclasses, as the built-in ones are).
 
 from __future__ import annotations
 
+import copy
 import threading
 from collections import OrderedDict
 
@@ -384,6 +385,14 @@ def torque_history(model, t, states, controller_states, torque=None, controller=
                                     np.repeat(numbers[:, None], t.size, axis=1))).reshape(-1)
 
 
+def min_step_fraction(t_end: float, length: float) -> float:
+    """CVODES's shortest step over a segment of ``length`` s ending at ``t_end`` s, as a
+    fraction of the segment: a step this small means a singularity, not accuracy, so the run
+    fails fast and the caller locates it (a power of ten, so that segments share
+    integrators)."""
+    return 10.0 ** np.floor(np.log10(1e-12 * max(1.0, t_end) / length))
+
+
 class SegmentIntegrator:
     """CVODES integration of a model over one smooth segment, onto given output times.
 
@@ -434,10 +443,7 @@ class SegmentIntegrator:
         opts = {"reltol": float(rtol), "abstol": float(rtol), "max_num_steps": int(max_steps),
                 "disable_internal_warnings": True, "show_eval_warnings": False}
         if solver == "cvodes":
-            # a step this small means a singularity, not accuracy: fail fast and let the
-            # caller locate it (a power of ten, in fractions of the segment, to share)
-            opts["min_step_size"] = 10.0 ** np.floor(np.log10(1e-12 * max(1.0, t_end)
-                                                              / length))
+            opts["min_step_size"] = min_step_fraction(t_end, length)
         if max_order is not None:
             opts["max_multistep_order"] = int(max_order)
         if max_step is not None and max_step < length:
@@ -455,6 +461,16 @@ class SegmentIntegrator:
                                 [float(v) for v in fractions], opts)))
         self._f = self._run.function
         self._stats = {}
+
+    def moved(self, t_start: float, t_end: float, numbers) -> "SegmentIntegrator":
+        """This integrator on another segment of the same shape: from ``t_start`` to
+        ``t_end`` (s), with the output times at the same offsets, the same
+        :func:`min_step_fraction` and the inputs' ``numbers`` (:func:`input_numbers`)."""
+        moved = copy.copy(self)
+        moved._parameters = [float(t_start), float(t_end) - float(t_start),
+                             float(np.nextafter(t_end, t_start)), *numbers]
+        moved._stats = {}
+        return moved
 
     def __call__(self, y0) -> np.ndarray:
         """States at the output times, shape (m, K); raises ``RuntimeError`` if CVODES fails."""

@@ -36,7 +36,7 @@ import numpy as np
 
 from .stops import tip_rows
 from .compiled import (CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, input_numbers,
-                       is_symbolic)
+                       is_symbolic, min_step_fraction)
 from .buffers import InPlace
 from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
 from .inputs import input_value, output_grid, time_function
@@ -295,12 +295,23 @@ class _CvodesHold:
     def __init__(self, model, torque, scale, rtol, max_steps):
         self.model, self.torque, self.scale = model, torque, scale
         self.rtol, self.max_steps = rtol, max_steps
+        self.torque_numbers = input_numbers((torque, None, None))
+        # one integrator per shape of sample (output offsets, tolerance, shortest step),
+        # moved from sample to sample: a regular grid builds one or two
+        self.shapes = {}
 
     def __call__(self, lo, t_out, y, u, loose=False):
-        integ = SegmentIntegrator(self.model, lo, t_out, self.scale,
-                                  self.rtol * (CHECK_FACTOR if loose else 1.0),
-                                  torque=self.torque, controller=_Held(u),
-                                  max_steps=self.max_steps)
+        length = t_out[-1] - lo
+        shape = (loose, np.round(t_out - lo, 12).tobytes(), min_step_fraction(t_out[-1], length))
+        integ = self.shapes.get(shape)
+        if integ is None:
+            integ = SegmentIntegrator(self.model, lo, t_out, self.scale,
+                                      self.rtol * (CHECK_FACTOR if loose else 1.0),
+                                      torque=self.torque, controller=_Held(u),
+                                      max_steps=self.max_steps)
+            self.shapes[shape] = integ
+        else:
+            integ = integ.moved(lo, t_out[-1], (*self.torque_numbers, u))
         return integ(y), integ.n_evaluations
 
 
