@@ -210,6 +210,22 @@ def _calls_model(model, hub_motion) -> bool:
     return model.variant == "exact" and (hub_motion is None or compiles_prescribed(model))
 
 
+#: Modes above which a one-beam small-deflection model enters the integrators in matrix form
+#: (MX: products with its dense modal matrices) rather than written out in scalars (SX, then
+#: compiled). The scalar form's Jacobian, which CVODES's Newton iterations need, is built in
+#: time that grows as the cube of the modes (22 s at 200 modes, for each tolerance) and
+#: compiles slowly; the matrix form's is built at once and evaluated with dense products. On
+#: hub-beam-mass (3 s of a sine torque, second runs) the compiled scalar form is 12 to 20 %
+#: faster at 8 to 16 modes, and the two are level from 24 on.
+MATRIX_FORM_MODES = 12
+
+
+def _matrix_form(model) -> bool:
+    """Whether ``model`` enters the integrators in matrix form (:data:`MATRIX_FORM_MODES`)."""
+    return (model.variant != "exact" and not hasattr(model, "functions")
+            and model.n_modes > MATRIX_FORM_MODES)
+
+
 def _drive_symbols(model, scale, inputs, n_numbers) -> tuple:
     """SX symbols ``ys``, ``tau``, ``p`` of :func:`_rhs_function`, the state ``y = ys * scale``
     and the drive's terms at ``t = min(t_0 + tau h, t_last)``: ``[rate, acceleration]`` of a
@@ -297,14 +313,16 @@ def _rhs_function(model, scale, torque, hub_motion, controller):
 
     inputs = (torque, hub_motion, controller)
     ys, tau, p, y, terms = _drive_symbols(model, scale, inputs, input_numbers(inputs).size)
-    sym = ca.MX if _calls_model(model, hub_motion) else ca.SX
+    matrix_form = _matrix_form(model)
+    sym = ca.MX if matrix_form or _calls_model(model, hub_motion) else ca.SX
     if sym is ca.MX:
         # two calls: the drive (one scalar function) and the model
         drive = ca.Function("flexctl_drive", [ys, tau, p], terms)
         ys, tau, p = ca.MX.sym("ys", scale.size), ca.MX.sym("tau"), ca.MX.sym("p", p.numel())
         y = ys * ca.DM(scale)
         terms = drive.call([ys, tau, p])
-    dy = _model_dynamics(model, y, terms, hub_motion is not None, inline=sym is ca.SX)
+    dy = _model_dynamics(model, y, terms, hub_motion is not None,
+                         inline=sym is ca.SX or matrix_form)
     empty = sym(0, 1)
     function = ca.Function("flexctl_rhs", [tau, ys, empty, p, empty],
                            [p[1] * dy / ca.DM(scale), empty, empty, empty], ca.dyn_in(),

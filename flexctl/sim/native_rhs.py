@@ -30,10 +30,11 @@ __all__ = ["integration_rhs", "integration_beam", "prescribed_torque", "compiles
 #: 14 modes, 163 000, in 24 s), once. Larger ones stay on the virtual machine.
 MAX_INSTRUCTIONS = 60_000
 
-#: Largest integrator right-hand side (:func:`native_dae`) compiled, instructions. A
-#: first_order structure's drive and dynamics are a few hundred to a few thousand; its
-#: Jacobian is some five times longer.
-MAX_DAE_INSTRUCTIONS = 20_000
+#: Largest integrator library (:func:`native_dae`: the right-hand side and its Jacobian)
+#: compiled, instructions: about 2 s of ``-Og``, once. A first_order structure's drive and
+#: dynamics are a few hundred to a few thousand instructions; its Jacobian is some five times
+#: longer.
+MAX_DAE_INSTRUCTIONS = 30_000
 
 #: The compiled functions of each exact geometry (shared by the models built on it).
 _NATIVE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -132,8 +133,8 @@ def native_dae(dae):
         input, :func:`~flexctl.sim.compile_cache.lift_constants`, so that one library serves
         every model and input of the same structure) that also holds the Jacobian of the ODE
         in ``t``, ``x`` and ``p``: CVODES's Newton iterations call it in one piece. None where
-        compiling is off or impossible, or ``dae`` is not such a function or is longer than
-        :data:`MAX_DAE_INSTRUCTIONS`.
+        compiling is off or impossible, or ``dae`` is not such a function or it and its
+        Jacobian are longer than :data:`MAX_DAE_INSTRUCTIONS`.
     """
     import casadi as ca
 
@@ -148,8 +149,10 @@ def native_dae(dae):
     if lifted is None:
         return None
     function, constants = lifted
-    built = compiled(function, label=dae.name(),
-                     companions=(jacobian_companion(function, fixed=(3,)),))
+    jacobian = jacobian_companion(function, fixed=(3,))
+    if function.n_instructions() + jacobian.n_instructions() > MAX_DAE_INSTRUCTIONS:
+        return None
+    built = compiled(function, label=dae.name(), companions=(jacobian,))
     if built is function:
         return None
     tm, xm, pm = (ca.MX.sym(n, dae.sparsity_in(k)) for n, k in (("t", 0), ("x", 1), ("p", 3)))
