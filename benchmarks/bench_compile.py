@@ -21,6 +21,11 @@ E. Trajectory optimisation (``--trajopt``) on the exact design models of ``slew-
    machine (``FLEXCTL_COMPILE=0``).
 F. Compiler flags (``--flags``): compile time and evaluation time of the exact design models'
    dynamics, Jacobian and Lagrangian Hessian at ``-Og`` and ``-O2``.
+G. Many modes and sample loops (``--loops``), before (``--before DIR``) and this code, each
+   in a fresh process with the cache cold and then warm: ``simulate`` on ``hub-beam-mass``
+   with 40 and 200 modes under the 2 N m sine torque for 0.05 s (the issue's example), and
+   ``run_slew`` of ``wheel-slew`` (a sampled LQR with observer and noisy sensors on the
+   free-hub structure with a reaction wheel, 1800 samples, and its reference run).
 
 Run: ``python benchmarks/bench_compile.py [--before /path/to/old/checkout]``. Nothing is
 asserted; the script prints what it measures (the machine's two cores are shared).
@@ -349,6 +354,45 @@ def case_b(before: Path | None) -> None:
             print(f"- {label}, {method}: {walls[0]:.3f} then {walls[1]:.3f}")
 
 
+#: One process of case G: wall times of the many-mode runs and of the wheel slew, as JSON.
+LOOPS = r"""
+import json, time, warnings
+warnings.simplefilter("ignore")
+import flexctl
+from flexctl.app.scenes import run_slew
+system = flexctl.load_scene("hub-beam-mass").system
+walls = {}
+for n_modes in (40, 200):
+    model = flexctl.build_model(system, n_modes)
+    start = time.perf_counter()
+    result = flexctl.simulate(model, 0.05, torque=flexctl.SineTorque(peak_torque=2.0,
+                                                                      duration=2.0))
+    walls[f"modes{n_modes}"] = time.perf_counter() - start
+    assert result.status == "ok", result.message
+start = time.perf_counter()
+result = run_slew(flexctl.load_scene("wheel-slew"))[0]
+walls["wheel"] = time.perf_counter() - start
+walls["wheel_error"] = result.integration_error
+print(json.dumps(walls))
+"""
+
+
+def case_g(before: Path | None) -> None:
+    print("\n## G. Many modes and sample loops, each in a fresh process (wall time, s)\n")
+    print("| code | cache | 40 modes, 0.05 s | 200 modes, 0.05 s | wheel-slew run_slew | "
+          "its integration error (m) |")
+    print("|---|---|---|---|---|---|")
+    for label, tree in ([("before", before)] if before else []) + [("this", ROOT)]:
+        with tempfile.TemporaryDirectory() as cache:
+            for state in ("cold", "warm"):
+                env = {**os.environ, "PYTHONPATH": str(tree), "FLEXCTL_CACHE_DIR": cache}
+                out = subprocess.run([sys.executable, "-c", LOOPS], env=env, cwd=tree,
+                                     capture_output=True, text=True, timeout=1800)
+                walls = json.loads(out.stdout.strip().splitlines()[-1])
+                print(f"| {label} | {state} | {walls['modes40']:.2f} | {walls['modes200']:.2f} "
+                      f"| {walls['wheel']:.2f} | {walls['wheel_error']:.3g} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before", type=Path, default=None,
@@ -358,9 +402,10 @@ def main() -> None:
     parser.add_argument("--only-c", action="store_true", help="case C only")
     parser.add_argument("--trajopt", action="store_true", help="case E only")
     parser.add_argument("--flags", action="store_true", help="case F only")
+    parser.add_argument("--loops", action="store_true", help="case G only")
     args = parser.parse_args()
-    if args.only_c:
-        case_c(args.before)
+    if args.only_c or args.loops:
+        (case_c if args.only_c else case_g)(args.before)
         return
     if args.trajopt or args.flags:
         (case_e if args.trajopt else case_f)()
@@ -373,6 +418,7 @@ def main() -> None:
         case_b(args.before)
     case_c(args.before)
     case_d(args.before)
+    case_g(args.before)
 
 
 if __name__ == "__main__":

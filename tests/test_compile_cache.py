@@ -452,12 +452,44 @@ def test_exact_structure_runs_compiled_and_agrees(fresh, monkeypatch):
 def test_with_derivatives_refuses_a_bad_fixed_input_by_name(fixed):
     import casadi as ca
 
-    from flexctl.sim.compile_cache import with_derivatives
+    from flexctl.sim.compile_cache import jacobian_companion, with_derivatives
 
     x, c = ca.SX.sym("x", 2), ca.SX.sym("c")
     f = ca.Function("t_bad", [x, c], [c * x[0] * x[1]])
-    with pytest.raises((TypeError, ValueError), match="fixed"):
-        with_derivatives(f, fixed=fixed)
+    for build in (with_derivatives, jacobian_companion):
+        with pytest.raises((TypeError, ValueError), match=f"{build.__name__}.*fixed"):
+            build(f, fixed=fixed)
+
+
+@pytest.mark.parametrize("function", ["f", None, 3.0, "mx"], ids=["str", "none", "float", "mx"])
+def test_jacobian_companion_refuses_what_is_not_an_sx_function(function):
+    import casadi as ca
+
+    from flexctl.sim.compile_cache import jacobian_companion
+
+    if function == "mx":
+        x = ca.MX.sym("x", 2)
+        function = ca.Function("t_mx", [x], [x * x])
+    with pytest.raises(TypeError, match="jacobian_companion: function must be an SX"):
+        jacobian_companion(function)
+
+
+def test_jacobian_companion_gives_the_jacobian_in_the_free_inputs():
+    """Its blocks are the Jacobian of the outputs in each free input, and zero (structurally)
+    in the fixed ones."""
+    import casadi as ca
+
+    from flexctl.sim.compile_cache import jacobian_companion
+
+    x, c = ca.SX.sym("x", 2), ca.SX.sym("c")
+    f = ca.Function("t_jac", [x, c], [ca.vertcat(c * x[0] * x[1], ca.sin(x[0]))], ["x", "c"],
+                    ["y"])
+    jac = jacobian_companion(f, fixed=(1,))
+    x0, c0 = np.array([0.3, -1.2]), 2.5
+    blocks = jac(x0, c0, f(x0, c0))
+    expected = np.array([[c0 * x0[1], c0 * x0[0]], [np.cos(x0[0]), 0.0]])
+    np.testing.assert_allclose(np.array(blocks[0]), expected, rtol=1e-14)
+    assert jac.sparsity_out(1).nnz() == 0
 
 
 @pytest.mark.parametrize("bad", ["10", float("nan"), float("inf"), -1, 1.5, True])

@@ -502,27 +502,33 @@ def sections(out: Path, workers: int, surprises: list, progress=print, *,
     ``surprises`` (a genuine bug keeps its traceback)."""
     from .sweep import SweepError
 
-    cases = (("paper 001 Fig. 4", kane_spinup, True),
-             ("paper 001 Fig. 5", lambda o, pool: spacecraft_torque(o), False),
-             ("paper 000 Figs. 5-8", hub_beam_mass, True),
-             ("controller comparison", slew_comparison, True),
-             ("structures", lambda o, pool: structures(o), False),
+    # a section with sweeps hands their points to the pool; one without runs on the pool
+    # whole, beside them (None: a section with sweeps)
+    cases = (("paper 001 Fig. 4", kane_spinup, None),
+             ("paper 001 Fig. 5", None, spacecraft_torque),
+             ("paper 000 Figs. 5-8", hub_beam_mass, None),
+             ("controller comparison", slew_comparison, None),
+             ("structures", None, structures),
              ("controller comparison, two arrays",
               lambda o, pool: slew_comparison(o, pool, kinds=FREE_HUB_KINDS,
-                                              scene_name="two-array-slew"), True),
-             ("design-model error", model_error, True),
-             ("large deflection", lambda o, pool: large_deflection(o), False),
-             ("actuators and sensors", hardware, True))
+                                              scene_name="two-array-slew"), None),
+             ("design-model error", model_error, None),
+             ("large deflection", None, large_deflection),
+             ("actuators and sensors", hardware, None))
     made = []
     with _pool(workers, executor) as pool:
-        for label, make, pooled in cases:
+        start = time.perf_counter()
+        beside = {label: _submit(pool, whole, out) for label, _, whole in cases if whole}
+        for label, make, _ in cases:
             begin = time.perf_counter()
             try:
-                made.append(make(out, pool if pooled else None))
+                made.append(beside[label]() if label in beside else make(out, pool))
             except (SweepError, InputError) as exc:
                 surprises.append(f"{label} failed: {exc}")
                 continue
-            progress(f"{label}: {time.perf_counter() - begin:.1f} s")
+            progress(f"{label}: {time.perf_counter() - begin:.1f} s" if label not in beside
+                     else f"{label}: done {time.perf_counter() - start:.1f} s after the "
+                     "first section started (run beside the others)")
     return made
 
 

@@ -351,7 +351,7 @@ def jacobian_companion(function, fixed=()):
     >>> jacobian_companion(f, fixed=(1,)).name_out()
     ['jac_y_x', 'jac_y_c']
     """
-    return _jacobian_parts(function, _free_inputs(function, fixed))[0]
+    return _jacobian_parts(function, _free_inputs(function, fixed, "jacobian_companion"))[0]
 
 
 def _jacobian_parts(function, free: list) -> tuple:
@@ -373,24 +373,24 @@ def _jacobian_parts(function, free: list) -> tuple:
     return jac, inputs, outs, z, stacked, jz
 
 
-def _free_inputs(function, fixed) -> list:
-    """The inputs of ``function`` that :func:`with_derivatives` differentiates: all but
-    ``fixed``, after checking both."""
+def _free_inputs(function, fixed, owner: str = "with_derivatives") -> list:
+    """The inputs of ``function`` that :func:`with_derivatives` (or ``owner``)
+    differentiates: all but ``fixed``, after checking both."""
     import casadi as ca
 
     from ..model.checks import check_integer
     from ..model.errors import InputTypeError, InputValueError
 
     if not isinstance(function, ca.Function) or not function.is_a("SXFunction"):
-        raise InputTypeError(f"with_derivatives: function must be an SX casadi.Function; got "
+        raise InputTypeError(f"{owner}: function must be an SX casadi.Function; got "
                              f"{type(function).__name__}")
     n_in = function.n_in()
     if not all(function.sparsity_in(k).is_dense() for k in range(n_in)):
-        raise InputValueError("with_derivatives: every input of function must be dense")
+        raise InputValueError(f"{owner}: every input of function must be dense")
     if isinstance(fixed, (str, bytes)) or not hasattr(fixed, "__iter__"):
-        raise InputTypeError(f"with_derivatives: fixed must be a sequence of input indices; "
+        raise InputTypeError(f"{owner}: fixed must be a sequence of input indices; "
                              f"got {fixed!r}")
-    held = {check_integer("with_derivatives", "fixed", k, minimum=0, maximum=n_in - 1)
+    held = {check_integer(owner, "fixed", k, minimum=0, maximum=n_in - 1)
             for k in fixed}
     return [k for k in range(n_in) if k not in held]
 
