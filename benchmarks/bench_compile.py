@@ -149,17 +149,23 @@ def case_c(before: Path | None) -> None:
           "to 4th run, and the first run, which builds and, cold, compiles)\n")
     print("| code | cache | modes | first_order (s) | exact (s) | ratio | exact first run (s) |")
     print("|---|---|---|---|---|---|---|")
+    for label, state, walls in fresh_processes(before, EXACT):
+        for n_modes in (2, 4, 6):
+            fo, ex = walls[f"first_order{n_modes}"], walls[f"exact{n_modes}"]
+            print(f"| {label} | {state} | {n_modes} | {fo:.3f} | {ex:.3f} | "
+                  f"{ex / fo:.2f} | {walls[f'exact{n_modes}_first']:.2f} |")
+
+
+def fresh_processes(before: Path | None, script: str, before_states=("cold", "warm")):
+    """``(code, cache state, JSON)`` of ``script`` run in a fresh process per cache state
+    (one empty cache directory per code), on the code ``before`` if given and on this one."""
     for label, tree in ([("before", before)] if before else []) + [("this", ROOT)]:
         with tempfile.TemporaryDirectory() as cache:
-            for state in ("cold", "warm"):
+            for state in (("cold", "warm") if label == "this" else before_states):
                 env = {**os.environ, "PYTHONPATH": str(tree), "FLEXCTL_CACHE_DIR": cache}
-                out = subprocess.run([sys.executable, "-c", EXACT], env=env,
-                                     capture_output=True, text=True, timeout=1800, cwd=tree)
-                walls = json.loads(out.stdout.strip().splitlines()[-1])
-                for n_modes in (2, 4, 6):
-                    fo, ex = walls[f"first_order{n_modes}"], walls[f"exact{n_modes}"]
-                    print(f"| {label} | {state} | {n_modes} | {fo:.3f} | {ex:.3f} | "
-                          f"{ex / fo:.2f} | {walls[f'exact{n_modes}_first']:.2f} |")
+                out = subprocess.run([sys.executable, "-c", script], env=env, cwd=tree,
+                                     capture_output=True, text=True, timeout=1800)
+                yield label, state, json.loads(out.stdout.strip().splitlines()[-1])
 
 
 #: One process of case D: NMPC build time and per-step solve times, as JSON.
@@ -188,15 +194,9 @@ def case_d(before: Path | None) -> None:
           "0.02 s samples, 4-mode first_order plant, 4 s (in-loop wall time per step)\n")
     print("| code | cache | build (s) | median (ms) | p99 (ms) |")
     print("|---|---|---|---|---|")
-    for label, tree in ([("before", before)] if before else []) + [("this", ROOT)]:
-        with tempfile.TemporaryDirectory() as cache:
-            for state in (("cold", "warm") if label == "this" else ("-",)):
-                env = {**os.environ, "PYTHONPATH": str(tree), "FLEXCTL_CACHE_DIR": cache}
-                out = subprocess.run([sys.executable, "-c", NMPC], env=env, cwd=tree,
-                                     capture_output=True, text=True, timeout=1800)
-                found = json.loads(out.stdout.strip().splitlines()[-1])
-                print(f"| {label} | {state} | {found['build']:.2f} | "
-                      f"{found['median'] * 1e3:.2f} | {found['p99'] * 1e3:.2f} |")
+    for label, state, found in fresh_processes(before, NMPC, before_states=("-",)):
+        print(f"| {label} | {state} | {found['build']:.2f} | "
+              f"{found['median'] * 1e3:.2f} | {found['p99'] * 1e3:.2f} |")
 
 
 #: One process of case E: solve_slew on a scene's design model, first run and best of 3 later
@@ -382,15 +382,9 @@ def case_g(before: Path | None) -> None:
     print("| code | cache | 40 modes, 0.05 s | 200 modes, 0.05 s | wheel-slew run_slew | "
           "its integration error (m) |")
     print("|---|---|---|---|---|---|")
-    for label, tree in ([("before", before)] if before else []) + [("this", ROOT)]:
-        with tempfile.TemporaryDirectory() as cache:
-            for state in ("cold", "warm"):
-                env = {**os.environ, "PYTHONPATH": str(tree), "FLEXCTL_CACHE_DIR": cache}
-                out = subprocess.run([sys.executable, "-c", LOOPS], env=env, cwd=tree,
-                                     capture_output=True, text=True, timeout=1800)
-                walls = json.loads(out.stdout.strip().splitlines()[-1])
-                print(f"| {label} | {state} | {walls['modes40']:.2f} | {walls['modes200']:.2f} "
-                      f"| {walls['wheel']:.2f} | {walls['wheel_error']:.3g} |")
+    for label, state, walls in fresh_processes(before, LOOPS):
+        print(f"| {label} | {state} | {walls['modes40']:.2f} | {walls['modes200']:.2f} "
+              f"| {walls['wheel']:.2f} | {walls['wheel_error']:.3g} |")
 
 
 def main() -> None:

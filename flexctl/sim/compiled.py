@@ -34,8 +34,8 @@ from collections import OrderedDict
 import numpy as np
 
 from ..model.exports import _symbolic_beam_dynamics, _symbolic_dynamics
-from .buffers import InPlace
 from ..model.errors import InputValueError
+from .buffers import InPlace
 from .native_rhs import compiles_prescribed, integration_beam, integration_rhs, native_dae
 
 __all__ = ["is_symbolic", "piecewise_constant", "torque_history", "SegmentIntegrator",
@@ -477,7 +477,6 @@ class SegmentIntegrator:
                             lambda: _BufferedIntegrator(ca.integrator(
                                 f"flexctl_{solver}", solver, rhs, 0.0,
                                 [float(v) for v in fractions], opts)))
-        self._f = self._run.function
         self._stats = {}
 
     def moved(self, t_start: float, t_end: float, numbers) -> "SegmentIntegrator":

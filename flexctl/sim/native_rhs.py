@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import weakref
 
+from .compile_cache import _enabled as compiling_enabled
 from .compile_cache import compiled, jacobian_companion, lift_constants
 
 __all__ = ["integration_rhs", "integration_beam", "prescribed_torque", "compiles_prescribed",
@@ -138,7 +139,7 @@ def native_dae(dae):
     """
     import casadi as ca
 
-    if (not isinstance(dae, ca.Function) or not dae.is_a("SXFunction")
+    if (not compiling_enabled() or not isinstance(dae, ca.Function) or not dae.is_a("SXFunction")
             or dae.n_in() != 5 or dae.n_out() != 4
             or any(dae.nnz_in(k) for k in (2, 4)) or any(dae.nnz_out(k) for k in (1, 2, 3))):
         return None
