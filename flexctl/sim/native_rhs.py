@@ -107,14 +107,35 @@ def prescribed_torque(model, states, acceleration):
 
     if not compiles_prescribed(model):
         return None
-    beam, torque = _native(model.geometry, "beam"), _native(model.geometry, "torque")
+    points = np.shape(states)[1]
+    along = _torque_along(model, points)
+    if along is None:
+        return None
+    acc = np.asarray(acceleration, dtype=float).reshape(1, points)
+    return np.array(along(states, acc)).reshape(points)
+
+
+def _torque_along(model, points: int):
+    """``(states (n, P), acceleration (1, P)) -> torque (1, P)`` from the compiled beam and
+    hub equations, for ``points`` points; the last one built is kept with the geometry (a run
+    and its accuracy check ask for the same); None where they are not compiled."""
+    import casadi as ca
+
+    geometry = model.geometry
+    entry = _NATIVE.setdefault(geometry, {})
+    kept = entry.get("torque_along")
+    if kept is not None and kept[0] == points:
+        return kept[1]
+    beam, torque = _native(geometry, "beam"), _native(geometry, "torque")
     if beam is None or torque is None:
         return None
-    _, q, rate, q_dot = model.layout.split(states)
-    points = np.shape(states)[1]
-    acc = np.asarray(acceleration, dtype=float).reshape(1, points)
-    q_tt = beam.map(points)(q, q_dot, rate.reshape(1, points), acc)
-    return np.array(torque.map(points)(states, acc, q_tt)).reshape(points)
+    x, acc = ca.MX.sym("x", model.n_states), ca.MX.sym("acceleration")
+    _, q, rate, q_dot = model.layout.split(x)
+    one = ca.Function("flexctl_torque_along", [x, acc],
+                      [torque(x, acc, beam(q, q_dot, rate, acc))])
+    along = one.map(points)
+    entry["torque_along"] = (points, along)
+    return along
 
 
 def native_dae(dae):
