@@ -170,3 +170,34 @@ def test_callable_law_and_rk4_agree(plant):
     by_pd = flexctl.simulate(plant, 2.0, controller=ZeroOrderHold(PD_LAW, 0.01), x0=x0,
                              output_step=0.01, method="rk4")
     assert np.max(np.abs(by_callable.theta - by_pd.theta)) < 1e-5
+
+
+@pytest.mark.parametrize("t_start, t_end, numbers", [
+    (float("nan"), 1.0, (0.1,)), (0.0, float("inf"), (0.1,)), (1.0, 1.0, (0.1,)),
+    (2.0, 1.0, (0.1,)), (0.0, 1.0, ()), (0.0, 1.0, (0.1, 0.2)), (0.0, 1.0, (float("nan"),))],
+    ids=["nan-start", "inf-end", "empty", "backwards", "too-few", "too-many", "nan-number"])
+def test_a_moved_segment_integrator_refuses_bad_times_and_numbers(t_start, t_end, numbers):
+    from flexctl.sim.compiled import SegmentIntegrator
+    from flexctl.sim.digital import _Held
+
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, 2)
+    integ = SegmentIntegrator(model, 0.0, np.array([0.5, 1.0]), np.ones(model.n_states), 1e-8,
+                              controller=_Held(0.1))
+    with pytest.raises(ValueError, match="SegmentIntegrator.moved"):
+        integ.moved(t_start, t_end, numbers)
+
+
+def test_a_moved_segment_integrator_runs_the_later_segment():
+    """Moved to a later hold with another held torque, it integrates what a new integrator
+    built for that segment does."""
+    from flexctl.sim.compiled import SegmentIntegrator
+    from flexctl.sim.digital import _Held
+
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, 2)
+    scale, y0 = np.ones(model.n_states), np.linspace(0.01, 0.02, model.n_states)
+    first = SegmentIntegrator(model, 0.0, np.array([0.5, 1.0]), scale, 1e-10,
+                              controller=_Held(0.1))
+    fresh = SegmentIntegrator(model, 3.0, np.array([3.5, 4.0]), scale, 1e-10,
+                              controller=_Held(-0.4))
+    np.testing.assert_allclose(first.moved(3.0, 4.0, (-0.4,))(y0), fresh(y0), rtol=1e-12,
+                               atol=1e-15)

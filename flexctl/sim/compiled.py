@@ -483,9 +483,17 @@ class SegmentIntegrator:
         """This integrator on another segment of the same shape: from ``t_start`` to
         ``t_end`` (s), with the output times at the same offsets, the same
         :func:`min_step_fraction` and the inputs' ``numbers`` (:func:`input_numbers`)."""
+        t_start, t_end = float(t_start), float(t_end)
+        numbers = [float(v) for v in numbers]
+        if not (np.isfinite(t_start) and np.isfinite(t_end) and t_end > t_start):
+            raise InputValueError(f"SegmentIntegrator.moved needs finite times with t_end > "
+                                  f"t_start; got t_start = {t_start!r}, t_end = {t_end!r}")
+        if len(numbers) != len(self._parameters) - 3 or not np.all(np.isfinite(numbers)):
+            raise InputValueError(f"SegmentIntegrator.moved needs {len(self._parameters) - 3} "
+                                  f"finite input numbers; got {numbers!r}"[:300])
         moved = copy.copy(self)
-        moved._parameters = [float(t_start), float(t_end) - float(t_start),
-                             float(np.nextafter(t_end, t_start)), *numbers]
+        moved._parameters = [t_start, t_end - t_start, float(np.nextafter(t_end, t_start)),
+                             *numbers]
         moved._stats = {}
         return moved
 
