@@ -107,3 +107,25 @@ def test_python_inputs_refused():
     # (a torque CasADi cannot trace: a branch on t; a traceable one runs compiled)
     with pytest.raises(InputError, match="rk4"):
         flexctl.simulate(model, 1.0, torque=lambda t: 0.1 if t < 0.5 else 0.0, method="rk4")
+
+
+def test_threads_sharing_the_compiled_loops_get_their_own_runs():
+    """Runs on threads share one model's compiled rk4 loops and CVODES integrators (the gains
+    are parameters): each thread's run is the one it makes alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, 2)
+    x0 = np.zeros(model.n_states)
+    x0[0] = -0.5
+    gains = [(3.0 + k, 2.0 + 0.5 * k) for k in range(6)]
+
+    def run(gain, method):
+        return flexctl.simulate(model, 3.0, controller=PD(kp=gain[0], kd=gain[1]), x0=x0,
+                                method=method, check_validity=False).states
+
+    for method in ("rk4", "cvodes"):
+        alone = [run(gain, method) for gain in gains]
+        with ThreadPoolExecutor(max_workers=3) as pool:
+            together = list(pool.map(lambda gain: run(gain, method), gains * 2))
+        for k, states in enumerate(together):
+            np.testing.assert_array_equal(states, alone[k % len(gains)], err_msg=method)

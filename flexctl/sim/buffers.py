@@ -8,6 +8,8 @@ from sample to sample) call it through :class:`InPlace` instead.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 __all__ = ["InPlace"]
@@ -15,8 +17,9 @@ __all__ = ["InPlace"]
 
 class InPlace:
     """A CasADi function evaluated on numpy buffers of its own: a call copies the arguments
-    in and returns views of the results (valid until the next call), with none of the
-    conversion to and from ``DM`` that costs some 20 us per thousand numbers."""
+    in and the results out, with none of the conversion to and from ``DM`` that costs some
+    20 us per thousand numbers. Calls from several threads take turns (the buffers are
+    shared)."""
 
     def __init__(self, function):
         self.function = function
@@ -28,10 +31,24 @@ class InPlace:
             self.buffer.set_arg(i, memoryview(arg))
         for i, result in enumerate(self.results):
             self.buffer.set_res(i, memoryview(result))
+        self._lock = threading.Lock()
 
-    def __call__(self, *args):
-        for buffer, value in zip(self.args, args):
-            buffer[:] = np.ravel(value, order="F")
-        self.evaluate()
-        # dense results, column-major
-        return [r.reshape(shape[1], shape[0]).T for r, shape in zip(self.results, self.shapes)]
+    def __call__(self, *args) -> list:
+        """The dense results, shapes as the function's outputs, for ``args`` (as many as the
+        function's first inputs; the rest keep their last values)."""
+        return self._evaluate(args, False)[0]
+
+    def call_with_stats(self, *args) -> tuple:
+        """``(results, stats)``: :meth:`__call__` and the function's statistics of that call
+        (an integrator's steps and evaluations)."""
+        return self._evaluate(args, True)
+
+    def _evaluate(self, args, with_stats: bool) -> tuple:
+        with self._lock:
+            for buffer, value in zip(self.args, args):
+                buffer[:] = np.ravel(value, order="F")
+            self.evaluate()
+            # dense results, column-major
+            results = [r.reshape(shape[1], shape[0]).T.copy()
+                       for r, shape in zip(self.results, self.shapes)]
+            return results, (self.buffer.stats() if with_stats else None)
