@@ -214,8 +214,8 @@ def _calls_model(model, hub_motion) -> bool:
 #: compiled). The scalar form's Jacobian, which CVODES's Newton iterations need, is built in
 #: time that grows as the cube of the modes (22 s at 200 modes, for each tolerance) and
 #: compiles slowly; the matrix form's is built at once and evaluated with dense products. On
-#: hub-beam-mass (3 s of a sine torque, second runs) the compiled scalar form is 12 to 20 %
-#: faster at 8 to 16 modes, and the two are level from 24 on.
+#: hub-beam-mass (3 s of a sine torque, second runs) the compiled scalar form took 14 to 22 %
+#: less time at 8 to 16 modes, 7 % less at 24 and 2 % more at 32.
 MATRIX_FORM_MODES = 12
 
 
