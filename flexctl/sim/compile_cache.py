@@ -49,8 +49,8 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["compiled", "lift_constants", "with_derivatives", "jacobian_companion", "cache_dir", "cache_info",
-           "clear_cache", "compiler", "CacheInfo", "CompileCacheWarning", "STATS", "FLAGS",
+__all__ = ["compiled", "lift_constants", "with_derivatives", "jacobian_companion", "cache_dir",
+           "cache_info", "clear_cache", "compiler", "compiling_enabled", "CacheInfo", "CompileCacheWarning", "STATS", "FLAGS",
            "PROGRESS_AFTER"]
 
 #: Compiler flags of every library (part of the key). ``-Og`` runs the generated straight-line
@@ -113,7 +113,8 @@ def compiler() -> tuple | None:
     return _COMPILER[memo_key]
 
 
-def _enabled() -> bool:
+def compiling_enabled() -> bool:
+    """False when ``FLEXCTL_COMPILE`` turns compiling off (``0``, ``no``, ``false``, ``off``)."""
     return os.environ.get("FLEXCTL_COMPILE", "1").strip().lower() not in ("0", "no", "false",
                                                                            "off")
 
@@ -180,7 +181,7 @@ def compiled(function, *, label: str | None = None, companions=(), options=None)
                              f"{companions!r}"[:200])
     if options is not None and not isinstance(options, dict):
         raise InputTypeError(f"compiled: options must be a dict; got {type(options).__name__}")
-    if not _enabled():
+    if not compiling_enabled():
         return function
     tool = compiler()
     if tool is None:
@@ -534,7 +535,7 @@ def cache_info() -> CacheInfo:
     """The cache directory, its number of libraries, their size and the compiler."""
     files = _libraries()
     tool = compiler()
-    if not _enabled():
+    if not compiling_enabled():
         what = "compiling off (FLEXCTL_COMPILE=0)"
     else:
         what = "none found (functions run on CasADi's virtual machine)" if tool is None \

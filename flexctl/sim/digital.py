@@ -362,7 +362,7 @@ class _RK4Hold:
         for end in t_out:
             count = max(1, int(np.ceil((end - start) / h_max * (1.0 - 1e-12))))
             yt = self._final(count)(yt, (end - start) / count,
-                                    np.append(self.torque_numbers, u))[0].reshape(-1).copy()
+                                    np.append(self.torque_numbers, u))[0].reshape(-1)
             yt[-1] = end
             out.append(yt[:-1])
             evaluations += 4 * count

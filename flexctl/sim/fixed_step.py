@@ -130,8 +130,8 @@ def run_steps(runs: dict, yt, h: float, count: int, numbers) -> tuple:
         steps = np.zeros((1, k))
         steps[0, :used] = h
         y_k, f_k = runs[k](yt, steps, numbers)
-        ys.append(y_k[:, :used].copy())
-        fs.append(f_k[:, :used].copy())
+        ys.append(y_k[:, :used])           # the loops hand out arrays of their own
+        fs.append(f_k[:, :used])
         yt = ys[-1][:, -1]
         done += used
     return np.concatenate(ys, axis=1), np.concatenate(fs, axis=1)

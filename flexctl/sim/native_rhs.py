@@ -20,8 +20,7 @@ from __future__ import annotations
 
 import weakref
 
-from .compile_cache import _enabled as compiling_enabled
-from .compile_cache import compiled, jacobian_companion, lift_constants
+from .compile_cache import compiled, compiling_enabled, jacobian_companion, lift_constants
 
 __all__ = ["integration_rhs", "integration_beam", "prescribed_torque", "compiles_prescribed",
            "native_dae", "MAX_INSTRUCTIONS", "MAX_DAE_INSTRUCTIONS"]
