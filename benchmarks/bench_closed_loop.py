@@ -50,6 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import casadi as ca                                   # noqa: E402
+import equal_error                                     # noqa: E402
 from equal_error import TARGET, measure  # noqa: E402
 
 from controllers import PD, from_spec                 # noqa: E402
@@ -133,6 +134,11 @@ def closed_loop_case():
         ratio = times[label] / bare
         print(f"   {label} / bare CVODES = {ratio:.2f} (target <= 2: "
               f"{'met' if ratio <= 2 else 'missed'})")
+    cpu = equal_error.CPU_TIMES
+    print("   CPU time (every thread) / bare CVODES: " + ", ".join(
+        f"{label} {cpu[label] / cpu['bare casadi CVODES']:.2f}" for label in
+        ("flexctl.simulate, cold", "flexctl.simulate, warm", "flexctl, cold, no check"))
+        + " (the accuracy check runs beside the run on a spare core)")
     print(f"   DOP853 path / compiled path (cold) = "
           f"{times['flexctl, DOP853 (SciPy)'] / times['flexctl.simulate, cold']:.1f}")
     return times

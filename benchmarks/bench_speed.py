@@ -45,8 +45,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import casadi as ca                               # noqa: E402
-from equal_error import (ATOL_SCALE, TARGET, measure, python_control_tip,  # noqa: E402
-                         relative_error)
+from equal_error import (ATOL_SCALE, CPU_TIMES, TARGET, measure,  # noqa: E402
+                         python_control_tip, relative_error)
 import control                                    # noqa: E402
 
 from flexctl import SpinUp, load_scene, simulate  # noqa: E402
@@ -154,6 +154,12 @@ def compare(name, with_python_control):
           f"accuracy check, without the validity estimate (the geometric error of the "
           f"small-deflection model, two 2-mode runs): "
           f"{times['flexctl, no validity estimate'] / times['bare casadi CVODES']:.2f}")
+    cpu, bare_cpu = CPU_TIMES, CPU_TIMES["bare casadi CVODES"]
+    print(f"   CPU time (every thread) against bare CVODES: flexctl "
+          f"{cpu['flexctl.simulate (cvodes)'] / bare_cpu:.2f}, without the validity estimate "
+          f"{cpu['flexctl, no validity estimate'] / bare_cpu:.2f}, no checks "
+          f"{cpu['flexctl, no checks'] / bare_cpu:.2f} (the accuracy check runs beside the run "
+          f"on a spare core: wall time counts the longer of the two, CPU time both)")
     if with_python_control:
         pc = {k: v for k, v in times.items() if k.startswith("python-control")}
         fastest = min(pc, key=pc.get)

@@ -16,12 +16,22 @@ def relative_error(tip, reference):
     return float(np.max(np.abs(tip - reference)) / np.max(np.abs(reference)))
 
 
-def median_time(run, repeats):
-    times = []
+#: CPU time (s, every thread of the process) of the last :func:`median_time` per label of
+#: :func:`measure`: flexctl's accuracy check runs on a second core beside its run, so wall
+#: time and CPU time differ.
+CPU_TIMES: dict = {}
+
+
+def median_time(run, repeats, cpu=False):
+    """Median wall time of ``repeats`` calls of ``run``, s; with ``cpu``, ``(wall, cpu)``."""
+    times, cpus = [], []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         run()
         times.append(time.perf_counter() - start)
+        cpus.append(time.process_time() - start_cpu)
+    if cpu:
+        return statistics.median(times), statistics.median(cpus)
     return statistics.median(times)
 
 
@@ -59,10 +69,10 @@ def measure(tools, reference, width=40):
     """Tune and time each tool of ``{label: (run, repeats)}``: ``{label: seconds}``, printing
     a table row per tool."""
     times = {}
-    print(f"   {'tool':<{width}} {'rtol':>9} {'error':>9} {'median time':>12}")
+    print(f"   {'tool':<{width}} {'rtol':>9} {'error':>9} {'median time':>12} {'CPU time':>10}")
     for label, (run, repeats) in tools.items():
         rtol, error = tune(run, reference)
-        times[label] = median_time(lambda: run(rtol), repeats)
-        print(f"   {label:<{width}} {rtol:>9.2g} {error:>9.2g} {times[label]:>10.4f} s",
-              flush=True)
+        times[label], CPU_TIMES[label] = median_time(lambda: run(rtol), repeats, cpu=True)
+        print(f"   {label:<{width}} {rtol:>9.2g} {error:>9.2g} {times[label]:>10.4f} s "
+              f"{CPU_TIMES[label]:>8.4f} s", flush=True)
     return times

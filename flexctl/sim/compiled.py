@@ -38,7 +38,8 @@ from .buffers import InPlace
 from .native_rhs import compiles_prescribed, integration_beam, integration_rhs, native_dae
 
 __all__ = ["is_symbolic", "piecewise_constant", "torque_history", "SegmentIntegrator",
-           "integrate_segments", "numeric_rhs"]
+           "integrate_segments", "numeric_rhs", "check_run", "start_check",
+           "segment_integrators", "run_segments"]
 
 
 def _has_form(source, method: str) -> bool:
@@ -512,7 +513,7 @@ class SegmentIntegrator:
 
 
 def integrate_segments(model, segments, y0, scale, rtol, **options):
-    """Integrate over consecutive smooth segments, each onto its output times.
+    """Integrate consecutive segments with CVODES (one :class:`SegmentIntegrator` each).
 
     Parameters
     ----------
@@ -537,9 +538,27 @@ def integrate_segments(model, segments, y0, scale, rtol, **options):
     RuntimeError
         If the solver fails on a segment.
     """
+    return run_segments(segment_integrators(model, segments, scale, rtol, **options), y0)
+
+
+def segment_integrators(model, segments, scale, rtol, **options) -> list:
+    """One :class:`SegmentIntegrator` per segment (arguments as :func:`integrate_segments`).
+
+    Building them is CasADi symbolic work, which must stay in one thread; calling them
+    (:func:`run_segments`) is numeric and may run on another.
+    """
+    return [SegmentIntegrator(model, t_start, t_out, scale, rtol, **options)
+            for t_start, t_out in segments]
+
+
+def run_segments(integrators, y0, cancelled=None) -> tuple:
+    """``(states, n_evaluations)`` of ``integrators`` chained from ``y0`` (see
+    :func:`integrate_segments`); ``cancelled``, a ``threading.Event``, is looked at before
+    each segment and stops the run with a ``RuntimeError`` once set."""
     blocks, n_eval, y = [], 0, np.asarray(y0, dtype=float)
-    for t_start, t_out in segments:
-        integ = SegmentIntegrator(model, t_start, t_out, scale, rtol, **options)
+    for integ in integrators:
+        if cancelled is not None and cancelled.is_set():
+            raise RuntimeError("integration cancelled")
         block = integ(y)
         n_eval += integ.n_evaluations
         blocks.append(block)
@@ -573,12 +592,54 @@ def _subsample(segments):
     return check, np.concatenate(picks)
 
 
-def verify_accuracy(model, segments, y0, scale, rtol, y_main, tip_map, n_main, **options):
+def _run_or_none(integrators, y0, cancelled=None):
+    try:
+        return run_segments(integrators, y0, cancelled)
+    except RuntimeError:
+        return None
+
+
+def check_run(model, segments, y0, scale, rtol, **options):
+    """The accuracy check's own run: :func:`integrate_segments` at ``CHECK_FACTOR`` times
+    the tolerance onto at most ``CHECK_POINTS`` of each segment's output times, as
+    ``(states, n_evaluations)``, or None if it failed.
+
+    It needs only the run's plan, not its result: :func:`start_check` runs it beside the run.
+    """
+    return start_check(model, segments, y0, scale, rtol, beside=False, **options).result()
+
+
+def start_check(model, segments, y0, scale, rtol, beside=True, **options):
+    """:func:`check_run`, started on a spare core (:class:`~flexctl.sim.background.Beside`)
+    to run while the run it checks runs (``beside``), or to run in the caller's thread when
+    its result is asked for; give it to :func:`verify_accuracy` as ``check``, or
+    ``abandon()`` it if the run stops early.
+
+    Its integrators are built here, in the caller's thread: CasADi's symbolic work is not
+    thread-safe, while its numerical evaluation is and lets go of Python's lock.
+    """
+    import threading
+
+    from .background import Beside
+
+    try:
+        integrators = segment_integrators(model, _subsample(segments)[0], scale,
+                                          CHECK_FACTOR * rtol, **options)
+    except RuntimeError:
+        integrators = None
+    if integrators is None:
+        return Beside(lambda: None, beside=False)
+    return Beside(_run_or_none, integrators, y0, cancelled=threading.Event(), beside=beside)
+
+
+def verify_accuracy(model, segments, y0, scale, rtol, y_main, tip_map, n_main, check=None,
+                    **options):
     """Estimate the integration error of a compiled run, and mend a run that went wrong.
 
     The run is repeated at ``CHECK_FACTOR`` times the tolerance, onto at most
-    ``CHECK_POINTS`` of each segment's output times; the largest difference in tip deflection
-    there is the error estimate (conservative: it is the error of the looser run). If the
+    ``CHECK_POINTS`` of each segment's output times (:func:`check_run`); the largest
+    difference in tip deflection there is the error estimate (conservative: it is the error
+    of the looser run). If the
     two disagree by more than ``ALARM_FACTOR * rtol`` of the peak while the run took more than
     ``EFFORT_FACTOR`` times the evaluations of the check, high-order BDF has amplified an
     undamped high-frequency mode, and the run is redone with A-stable BDF2 (IDAS).
@@ -593,6 +654,9 @@ def verify_accuracy(model, segments, y0, scale, rtol, y_main, tip_map, n_main, *
         ``tips = tip_map @ y``, one row per appendage.
     n_main : int
         Right-hand-side evaluations of the run to check.
+    check : Beside, optional
+        The check run already started (:func:`start_check` with the same arguments);
+        default: run it now.
 
     Returns
     -------
@@ -606,11 +670,11 @@ def verify_accuracy(model, segments, y0, scale, rtol, y_main, tip_map, n_main, *
     """
     tip_main = tip_map @ y_main
     check_segments, picks = _subsample(segments)
-    try:
-        y_check, n_eval = integrate_segments(model, check_segments, y0, scale,
-                                             CHECK_FACTOR * rtol, **options)
-    except RuntimeError:
+    found = (check_run(model, segments, y0, scale, rtol, **options) if check is None
+             else check.result())
+    if found is None:
         return y_main, None, "accuracy check could not run (the check integration failed)", 0
+    y_check, n_eval = found
     error = float(np.max(np.abs(tip_main[:, picks] - tip_map @ y_check)))
     peak = max(float(np.max(np.abs(tip_main))), float(np.max(abs(tip_map) @ scale)) * 1e-3)
     if error <= ALARM_FACTOR * rtol * peak or n_main <= EFFORT_FACTOR * max(n_eval, 1):

@@ -18,7 +18,8 @@ from .fixed_step import RK4_OMEGA_H
 from .request import check_atol, plan_integration, run_request, state_scale
 from .result import SimulationResult, assemble_result, audit_energy
 from .stops import StopConditions, StopReason, tip_rows
-from .strategies import check_run_accuracy, rk4_accuracy_note, strategy_for
+from .strategies import (check_run_accuracy, rk4_accuracy_note, start_accuracy_check,
+                         strategy_for)
 
 __all__ = ["run_once"]
 
@@ -40,10 +41,20 @@ def _simulate_continuous(request) -> SimulationResult:
     drive.check_inputs()
     strategy = strategy_for(plan.method)(request, plan, drive, stops)
     start = time.perf_counter()
-    traj = strategy.run()
-    if request.check_accuracy and plan.method == "cvodes" and traj.reason is \
-            StopReason.REACHED_END and len(traj.compiled_segments) == len(plan.drive_cuts) - 1:
-        check_run_accuracy(request, plan, drive, traj, reporter=strategy)
+    # the check needs only the plan: it runs beside the run, on a spare core if there is one
+    check = start_accuracy_check(request, plan, drive) \
+        if request.check_accuracy and plan.method == "cvodes" else None
+    try:
+        traj = strategy.run()
+    except BaseException:
+        if check is not None:
+            check.abandon()
+        raise
+    if check is not None and traj.reason is StopReason.REACHED_END and \
+            len(traj.compiled_segments) == len(plan.drive_cuts) - 1:
+        check_run_accuracy(request, plan, drive, traj, reporter=strategy, check=check)
+    elif check is not None:
+        check.abandon()
     return assemble_result(request, plan, drive, stops, traj, time.perf_counter() - start)
 
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .compiled import SegmentIntegrator, numeric_rhs, verify_accuracy
+from .compiled import SegmentIntegrator, numeric_rhs, start_check, verify_accuracy
 from .fixed_step import MAX_HALVINGS, RK4_OMEGA_H, integrate_fixed_step
 from .inputs import jacobian_frequency
 from .progress import Progress
@@ -31,7 +31,7 @@ from ..model import SingularMassMatrixError
 from ..model.errors import InputValueError
 
 __all__ = ["Trajectory", "CvodesSegments", "FixedStepRK4", "ScipyIVP", "strategy_for",
-           "check_run_accuracy", "rk4_accuracy_note", "AccuracyWarning",
+           "check_run_accuracy", "start_accuracy_check", "planned_segments", "rk4_accuracy_note", "AccuracyWarning",
            "FALLBACK_EVALUATIONS"]
 
 #: Where a compiled segment fails, SciPy locates the stop with at most this many evaluations
@@ -104,14 +104,11 @@ class _Segments:
 
     def run(self) -> Trajectory:
         """Integrate every segment until the end or a stop."""
-        drive, grid = self.drive, self.request.grid
+        drive = self.drive
         traj = Trajectory(ts=[np.array([0.0])], ys=[drive.y_init[:, None]])
         y = drive.y_init
-        cuts = self.plan.drive_cuts
-        for lo, hi in zip(cuts[:-1], cuts[1:]):
-            t_eval = grid[(grid > lo) & (grid <= hi)]
-            if t_eval.size == 0 or t_eval[-1] < hi:
-                t_eval = np.append(t_eval, hi)
+        for lo, t_eval in planned_segments(self.plan, self.request.grid):
+            hi = float(t_eval[-1])
             drive.segment_end = np.nextafter(hi, lo)
             y = self.segment(traj, lo, hi, t_eval, y)
             if y is None:
@@ -301,23 +298,48 @@ def rk4_accuracy_note(error, tip, rtol: float, detail: str = "", stacklevel: int
     return note
 
 
+def planned_segments(plan, grid) -> list:
+    """``(t_start, t_out)`` of every segment between two of ``plan.drive_cuts``: the output
+    times of ``grid`` inside it, and its end."""
+    segments, cuts = [], plan.drive_cuts
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        t_eval = grid[(grid > lo) & (grid <= hi)]
+        if t_eval.size == 0 or t_eval[-1] < hi:
+            t_eval = np.append(t_eval, hi)
+        segments.append((lo, t_eval))
+    return segments
+
+
+def _check_options(request, plan) -> dict:
+    return dict(torque=request.torque, hub_motion=request.hub_motion,
+                controller=request.controller, max_step=plan.cvodes_step)
+
+
+def start_accuracy_check(request, plan, drive):
+    """The accuracy check of a CVODES run (:func:`~flexctl.sim.compiled.check_run`), started
+    beside the run on a spare core before the run starts: it needs only the plan. Hand it
+    to :func:`check_run_accuracy`, or ``abandon()`` it if the run stops early."""
+    return start_check(request.model, planned_segments(plan, request.grid), drive.y_init,
+                       plan.scale, request.rtol, **_check_options(request, plan))
+
+
 def strategy_for(method: str):
     """The strategy class of an integration method."""
     return {"cvodes": CvodesSegments, "rk4": FixedStepRK4}.get(method, ScipyIVP)
 
 
-def check_run_accuracy(request, plan, drive, traj: Trajectory, reporter=None):
+def check_run_accuracy(request, plan, drive, traj: Trajectory, reporter=None, check=None):
     """Repeat a compiled run that reached its end at 10 times the tolerance
     (:func:`flexctl.sim.compiled.verify_accuracy`): ``traj.integration_error``, and the run
-    redone with BDF2 where the two disagree grossly (with an :class:`AccuracyWarning`)."""
+    redone with BDF2 where the two disagree grossly (with an :class:`AccuracyWarning`).
+    ``check``: the check run already started (:func:`start_accuracy_check`)."""
     if reporter is not None:
         reporter.report(request.t_final, "checking accuracy")
     tip_map = tip_rows(request.model, drive.layout)
     y_checked, traj.integration_error, traj.accuracy_note, n_check = verify_accuracy(
         request.model, traj.compiled_segments, drive.y_init, plan.scale, request.rtol,
-        np.concatenate(traj.ys[1:], axis=1), tip_map, traj.n_eval, torque=request.torque,
-        hub_motion=request.hub_motion, controller=request.controller,
-        max_step=plan.cvodes_step)
+        np.concatenate(traj.ys[1:], axis=1), tip_map, traj.n_eval, check=check,
+        **_check_options(request, plan))
     traj.n_eval += n_check
     traj.ys = [traj.ys[0], y_checked]
     if traj.accuracy_note:

@@ -1,0 +1,174 @@
+"""Work beside the caller (flexctl.sim.background): the accuracy check on a spare core gives
+the same run, the same error estimate and the same mended runs as the check made after it."""
+
+import multiprocessing
+import threading
+import warnings
+
+import numpy as np
+import pytest
+
+import flexctl
+from flexctl.sim import background
+from flexctl.sim.background import Beside
+from flexctl.sim.maneuvers import SineTorque
+
+
+@pytest.fixture
+def beside(monkeypatch):
+    """Calls go to a pool thread even where the machine has one core."""
+    monkeypatch.setattr(background, "ENABLED", True)
+    monkeypatch.setattr(background, "spare_cores", lambda: 1)
+    return background
+
+
+def test_result_comes_from_a_pool_thread(beside):
+    running = threading.Event()
+
+    def name():
+        running.set()
+        return threading.current_thread().name
+    job = Beside(name)
+    assert job.started and running.wait(10.0)  # not yet started: result() would run it here
+    assert job.result().startswith("flexctl-beside")
+
+
+def test_exception_reaches_the_caller(beside):
+    def fails():
+        raise RuntimeError("the check integration failed")
+    with pytest.raises(RuntimeError, match="check integration failed"):
+        Beside(fails).result()
+
+
+def test_disabled_runs_in_the_callers_thread(monkeypatch):
+    monkeypatch.setattr(background, "ENABLED", False)
+    job = Beside(lambda: threading.current_thread().name)
+    assert not job.started
+    assert job.result() == threading.current_thread().name
+    assert not Beside(sum, [1], beside=True).started
+
+
+def test_not_beside_runs_when_asked(beside):
+    calls = []
+    job = Beside(calls.append, 1, beside=False)
+    assert not job.started and calls == []
+    job.result()
+    assert calls == [1]
+
+
+def test_call_from_a_pool_thread_runs_inline(beside):
+    # a pool thread that asks for work beside it must not wait on its own pool
+    running = threading.Event()
+
+    def nested():
+        running.set()
+        inner = Beside(lambda: threading.current_thread().name)
+        return inner.started, inner.result()
+    outer = Beside(nested)
+    assert running.wait(10.0)                  # the outer call is on the pool thread
+    started, name = outer.result()
+    assert not started and name.startswith("flexctl-beside")
+
+
+def test_abandon_sets_the_event_and_a_queued_call_never_runs(beside):
+    gate, ran = threading.Event(), []
+    blocker = Beside(gate.wait, 10.0)           # holds the one pool thread
+    queued = Beside(ran.append, 1, cancelled=threading.Event())
+    queued.abandon()
+    gate.set()
+    assert blocker.result() is True
+    assert queued.cancelled.is_set() and ran == []
+
+
+def test_a_cancelled_chain_stops_before_its_next_segment():
+    from flexctl.sim.compiled import run_segments
+
+    calls = []
+
+    class Segment:
+        n_evaluations = 1
+
+        def __call__(self, y):
+            calls.append(1)
+            return np.column_stack((y, y))
+
+    stop = threading.Event()
+    states, n = run_segments([Segment(), Segment()], np.zeros(2), stop)
+    assert states.shape == (2, 4) and n == 2
+    stop.set()
+    with pytest.raises(RuntimeError, match="cancelled"):
+        run_segments([Segment()], np.zeros(2), stop)
+    assert len(calls) == 2
+
+
+def _runs(name):
+    scene = flexctl.load_scene(name)
+    model = flexctl.build_model(scene.system, n_modes=3)
+    drive = ({"hub_motion": scene.maneuver} if name == "kane-spinup"
+             else {"torque": SineTorque(peak_torque=2.0, duration=2.0)})
+    return model, drive
+
+
+@pytest.mark.parametrize("name", ["kane-spinup", "hub-beam-mass"])
+def test_check_beside_equals_check_after(beside, monkeypatch, name):
+    model, drive = _runs(name)
+    results = {}
+    for enabled in (False, True):
+        monkeypatch.setattr(background, "ENABLED", enabled)
+        results[enabled] = flexctl.simulate(model, 4.0, rtol=1e-6, check_validity=False,
+                                            **drive)
+    after, during = results[False], results[True]
+    assert after.ok and during.ok
+    assert np.array_equal(after.states, during.states)
+    assert after.integration_error is not None
+    assert during.integration_error == after.integration_error
+    assert during.n_evaluations == after.n_evaluations
+
+
+def test_check_on_threads_equals_check_alone(beside):
+    # simulations on user threads, each with its check beside it, give the runs made alone
+    model, drive = _runs("hub-beam-mass")
+    peaks = [0.5, 1.0, 1.5, 2.0]
+
+    def run(peak):
+        result = flexctl.simulate(model, 2.0, rtol=1e-7, check_validity=False,
+                                  torque=SineTorque(peak_torque=peak, duration=2.0))
+        return result.states, result.integration_error
+
+    alone = [run(p) for p in peaks]
+    from concurrent.futures import ThreadPoolExecutor
+    with ThreadPoolExecutor(3) as pool:
+        together = list(pool.map(run, peaks * 2))
+    for (states, error), (again, error_again) in zip(alone * 2, together):
+        assert np.array_equal(states, again) and error == error_again
+
+
+def test_a_run_that_stops_early_abandons_its_check(beside):
+    # a torque far beyond the beam's strength: the run stops on the deflection limit
+    scene = flexctl.load_scene("hub-beam-mass")
+    model = flexctl.build_model(scene.system, n_modes=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = flexctl.simulate(model, 4.0, torque=SineTorque(peak_torque=1e5, duration=2.0),
+                                  check_validity=False)
+    assert result.status != "ok"
+    assert result.integration_error is None
+
+
+def _child(queue):
+    model, drive = _runs("hub-beam-mass")
+    result = flexctl.simulate(model, 1.0, check_validity=False, **drive)
+    queue.put((result.ok, result.integration_error is not None))
+
+
+@pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(),
+                    reason="needs fork")
+def test_forked_child_builds_its_own_pool(beside):
+    Beside(sum, [1]).result()                      # the parent's pool exists
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_child, args=(queue,))
+    child.start()
+    child.join(120)
+    assert child.exitcode == 0
+    assert queue.get(timeout=5) == (True, True)
