@@ -98,3 +98,37 @@ def test_closed_loop_slew_on_first_order_reports_and_warns(kind):
         result, _, _ = flexctl.run_slew(scene, from_spec)
     assert result.validity.deflection_ratio > 0.2
     assert result.validity.geometric_error > scene.model.tolerance
+
+
+def test_estimate_runs_equal_full_runs():
+    # the estimate keeps only its runs' states (run_states): the same tips as whole runs
+    from controllers import PD
+    from flexctl.sim.runs import run_once, run_states
+    from flexctl.sim.validity import ESTIMATE_RTOL
+
+    system = flexctl.load_scene("slew-90").system
+    pd = PD(kp=12.0, kd=8.0, torque_limit=6.0)
+    tips = []
+    for variant in ("first_order", "exact"):
+        small = build_model(system, n_modes=2, variant=variant)
+        x_small = np.zeros(small.n_states)
+        x_small[0] = -np.pi / 2
+        full = run_once(small, 6.0, controller=pd, x0=x_small, rtol=ESTIMATE_RTOL,
+                        check_accuracy=False)
+        ok, states = run_states(small, 6.0, controller=pd, x0=x_small, rtol=ESTIMATE_RTOL,
+                                check_accuracy=False)
+        assert full.ok and ok
+        assert np.array_equal(states, full.states)
+        tips.append(small.tip_deflections(states))
+    expected = np.max(np.abs(tips[0] - tips[1])) / np.max(np.abs(tips[1]))
+    assert expected > 1e-4                          # a slew with a geometric error to find
+
+
+def test_estimate_run_that_stops_gives_no_states():
+    from flexctl.sim.runs import run_states
+
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ok, states = run_states(model, 4.0, torque=SineTorque(peak_torque=1e5, duration=2.0))
+    assert not ok and states is None

@@ -399,8 +399,12 @@ def torque_history(model, t, states, controller_states, torque=None, controller=
     law = _cached(_RHS_CACHE, RHS_CACHE_SIZE, None if key is None else ("torque", key),
                   (model, torque, controller), build)
     t = np.asarray(t, dtype=float).reshape(1, -1)
-    return np.array(law.map(t.size)(t, states, controller_states,
-                                    np.repeat(numbers[:, None], t.size, axis=1))).reshape(-1)
+    # the map over a run's points, kept with the law: building it costs more than calling it
+    mapped = _cached(_RHS_CACHE, RHS_CACHE_SIZE,
+                     None if key is None else ("torque map", key, t.size),
+                     (model, torque, controller), lambda: law.map(t.size))
+    return np.array(mapped(t, states, controller_states,
+                           np.repeat(numbers[:, None], t.size, axis=1))).reshape(-1)
 
 
 def min_step_fraction(t_end: float, length: float) -> float:

@@ -16,12 +16,12 @@ from .digital import run_sampled
 from .drives import PrescribedDrive, TorqueDrive
 from .fixed_step import RK4_OMEGA_H
 from .request import check_atol, plan_integration, run_request, state_scale
-from .result import SimulationResult, assemble_result, audit_energy
+from .result import SimulationResult, _output_samples, assemble_result, audit_energy
 from .stops import StopConditions, StopReason, tip_rows
 from .strategies import (check_run_accuracy, rk4_accuracy_note, start_accuracy_check,
                          strategy_for)
 
-__all__ = ["run_once"]
+__all__ = ["run_once", "run_states"]
 
 
 def run_once(model, t_final: float, torque=None, hub_motion=None, controller=None, x0=None,
@@ -31,8 +31,34 @@ def run_once(model, t_final: float, torque=None, hub_motion=None, controller=Non
     return _simulate_sampled(request) if request.sampled else _simulate_continuous(request)
 
 
+def run_states(model, t_final: float, torque=None, hub_motion=None, controller=None,
+               x0=None, **options) -> tuple:
+    """``(ok, states)``: whether :func:`run_once` reaches ``t_final``, and its plant states
+    on its output grid, without the result's outputs, torque history and energy audit (for
+    runs whose states alone are wanted: the validity estimate's). ``states`` is None when
+    the run stops early."""
+    request = run_request(model, t_final, torque, hub_motion, controller, x0, **options)
+    if request.sampled:
+        run = _simulate_sampled(request)
+        return (True, run.states) if run.status == "ok" else (False, None)
+    _, _, drive, _, traj = _integrate(request)
+    if traj.reason is not StopReason.REACHED_END:
+        return False, None
+    states = np.asarray(drive.plant_state(*_output_samples(request.grid, traj)), dtype=float)
+    if not np.all(np.isfinite(states)):
+        return False, None
+    return True, states
+
+
 def _simulate_continuous(request) -> SimulationResult:
     """:func:`run_once` with a continuous drive: its strategy, stops and accuracy check."""
+    plan, stops, drive, start, traj = _integrate(request)
+    return assemble_result(request, plan, drive, stops, traj, time.perf_counter() - start)
+
+
+def _integrate(request) -> tuple:
+    """``(plan, stops, drive, start time, trajectory)`` of a continuous drive's run: its
+    strategy, stops and accuracy check."""
     model, hub_motion = request.model, request.hub_motion
     drive = (PrescribedDrive(model, hub_motion, request.x_init) if request.prescribed
              else TorqueDrive(model, request.torque, request.controller, request.x_init))
@@ -55,7 +81,7 @@ def _simulate_continuous(request) -> SimulationResult:
         check_run_accuracy(request, plan, drive, traj, reporter=strategy, check=check)
     elif check is not None:
         check.abandon()
-    return assemble_result(request, plan, drive, stops, traj, time.perf_counter() - start)
+    return plan, stops, drive, start, traj
 
 
 def _simulate_sampled(request) -> SimulationResult:

@@ -39,7 +39,7 @@ from ..model import build_model
 from ..model.build import rebuild
 from .fidelity import DEFAULT_TOLERANCE, _as_input, _check_tolerance, _is_prescribed
 from .energy import ENERGY_TOLERANCE, ModelValidityWarning
-from .runs import run_once
+from .runs import run_once, run_states
 
 __all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "assess", "assess_run",
            "choose_variant", "geometric_error", "ESTIMATE_MODES", "SCREEN_DEFLECTION"]
@@ -98,10 +98,11 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
                  "sensors": None if sensors is None else sensors.noiseless()}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            run = run_once(small, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False, **drive)
-        if run.status != "ok":
+            ok, states = run_states(small, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False,
+                                    **drive)
+        if not ok:
             return float("inf")
-        tips.append(np.atleast_2d(small.tip_deflections(run.states)))
+        tips.append(np.atleast_2d(small.tip_deflections(states)))
     # each appendage relative to its peak, but not below DEFLECTION_FLOOR of its length: a
     # deflection of 1e-38 m has no geometric error, only the integrators' rounding
     peak = np.maximum(np.max(np.abs(tips[1]), axis=1), DEFLECTION_FLOOR * model.lengths)
