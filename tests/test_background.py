@@ -29,7 +29,7 @@ def test_result_comes_from_a_pool_thread(beside):
         running.set()
         return threading.current_thread().name
     job = Beside(name)
-    assert job.started and running.wait(10.0)  # not yet started: result() would run it here
+    assert job.started and running.wait(10.0)
     assert job.result().startswith("flexctl-beside")
 
 
@@ -70,14 +70,36 @@ def test_call_from_a_pool_thread_runs_inline(beside):
     assert not started and name.startswith("flexctl-beside")
 
 
-def test_abandon_sets_the_event_and_a_queued_call_never_runs(beside):
+def test_with_every_spare_core_taken_a_call_waits_for_result(beside):
     gate, ran = threading.Event(), []
-    blocker = Beside(gate.wait, 10.0)           # holds the one pool thread
-    queued = Beside(ran.append, 1, cancelled=threading.Event())
-    queued.abandon()
+    blocker = Beside(gate.wait, 10.0)           # takes the one spare core
+    assert blocker.started
+    waiting = Beside(ran.append, 1, cancelled=threading.Event())
+    assert not waiting.started and ran == []
+    waiting.abandon()                           # given up: it never runs
+    assert waiting.cancelled.is_set() and ran == []
     gate.set()
     assert blocker.result() is True
-    assert queued.cancelled.is_set() and ran == []
+    later = Beside(ran.append, 2)               # the core is free again
+    assert later.started
+    later.result()
+    assert ran == [2]
+
+
+def test_abandoned_call_does_not_hold_up_exit(tmp_path):
+    # a call still running when the interpreter ends is not waited for
+    import subprocess
+    import sys
+    import time
+
+    script = ("import time\nfrom flexctl.sim import background as b\n"
+              "b.ENABLED = True\nb.spare_cores = lambda: 1\n"
+              "job = b.Beside(time.sleep, 60.0)\nassert job.started\njob.abandon()\n")
+    start = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=50)
+    assert done.returncode == 0, done.stderr
+    assert time.perf_counter() - start < 30.0
 
 
 def test_a_cancelled_chain_stops_before_its_next_segment():

@@ -1,12 +1,16 @@
-"""Work started beside the caller on a spare core: a run's accuracy check, an estimate's runs.
+"""Work started beside the caller on a spare core: a run's accuracy check.
 
 CasADi lets go of Python's global interpreter lock while its integrators run, so a second
-integration on another thread runs on another core. :class:`Beside` starts a call on a small
-module-wide pool of threads (one per core beyond the first) and gives its result when asked;
-the caller meanwhile does its own work. Where no core is spare (one core, the pool busy with
-another caller's work, or this is itself a pool thread), the call runs in the caller's thread
-when its result is asked for, exactly as it would have without this module: the results are
-the same either way, only the wall time differs.
+integration on another thread runs on another core. :class:`Beside` starts a call on a thread
+of its own, at most one per core beyond the first, and gives its result when asked; the
+caller meanwhile does its own work. Where no core is spare (one core, every spare core taken
+by another call, or this is itself such a thread), the call runs in the caller's thread when
+its result is asked for, exactly as it would have without this module: the results are the
+same either way, only the wall time differs.
+
+CasADi's symbolic work is not thread-safe (its expressions are reference-counted without
+atomics), its numerical evaluation is: a call started here must only evaluate functions
+built before it started (see :func:`flexctl.sim.compiled.start_check`).
 
 ``FLEXCTL_BACKGROUND=0`` in the environment, or :data:`ENABLED` set to False, runs every call
 in the caller's thread.
@@ -22,7 +26,6 @@ from __future__ import annotations
 
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
 
 __all__ = ["Beside", "ENABLED", "spare_cores"]
 
@@ -31,7 +34,7 @@ ENABLED = os.environ.get("FLEXCTL_BACKGROUND", "1").strip() not in ("0", "false"
 
 _PREFIX = "flexctl-beside"
 _LOCK = threading.Lock()
-_POOL: dict = {}          # {"pid": ..., "executor": ...}: rebuilt in a forked child
+_SLOTS: dict = {}         # {"pid": ..., "free": semaphore}: rebuilt in a forked child
 
 
 def spare_cores() -> int:
@@ -43,59 +46,74 @@ def spare_cores() -> int:
     return max(0, cores - 1)
 
 
-def _executor():
-    """The pool of this process (a forked child builds its own: its parent's threads are
-    not in it), or None where no core is spare."""
-    workers = spare_cores()
-    if workers == 0:
-        return None
+def _free_slots():
+    """The semaphore counting this process's spare cores not yet taken by a call (a forked
+    child counts its own: its parent's threads are not in it)."""
     with _LOCK:
-        if _POOL.get("pid") != os.getpid():
-            _POOL.update(pid=os.getpid(), executor=ThreadPoolExecutor(
-                max_workers=workers, thread_name_prefix=_PREFIX))
-        return _POOL["executor"]
+        if _SLOTS.get("pid") != os.getpid():
+            _SLOTS.update(pid=os.getpid(), free=threading.Semaphore(max(1, spare_cores())))
+        return _SLOTS["free"]
 
 
 class Beside:
     """``function(*args, **kwargs)``, started on a spare core if there is one (and
     ``beside`` is true: false makes a call that runs when its result is asked for).
 
-    :meth:`result` returns its value (or raises its exception), waiting for it if it is
-    running, running it in the caller's thread if it has not started. :meth:`abandon` says
-    the result will not be asked for: a call not yet started never starts. A call already
-    running finishes on its own, unless it takes a keyword ``cancelled``: a
-    ``threading.Event`` that :meth:`abandon` sets, for the function to look at between
+    A call that starts runs on a daemon thread of its own, so an abandoned call never holds
+    up the interpreter's exit. :meth:`result` returns its value (or raises its exception),
+    waiting for it; a call that did not start (no core spare, or this is itself such a
+    thread) runs in the caller's thread when :meth:`result` asks for it. :meth:`abandon` says
+    the result will not be asked for: a call not started never runs, and a running call that
+    takes a keyword ``cancelled`` (a ``threading.Event``) finds it set, to look at between
     pieces of its work.
     """
 
     def __init__(self, function, *args, beside: bool = True, **kwargs):
         self._call = (function, args, kwargs)
         self.cancelled = kwargs.get("cancelled")
-        self._future = None
-        if beside and ENABLED and not threading.current_thread().name.startswith(_PREFIX):
-            executor = _executor()
-            if executor is not None:
-                try:
-                    self._future = executor.submit(function, *args, **kwargs)
-                except RuntimeError:           # pragma: no cover - interpreter shutting down
-                    self._future = None
+        self._done = None
+        self._outcome = (None, None)
+        if not (beside and ENABLED and spare_cores() > 0) or \
+                threading.current_thread().name.startswith(_PREFIX):
+            return
+        free = _free_slots()
+        if not free.acquire(blocking=False):
+            return
+        self._done = threading.Event()
+        try:
+            threading.Thread(target=self._work, args=(free,), name=_PREFIX,
+                             daemon=True).start()
+        except RuntimeError:                   # pragma: no cover - no thread to be had
+            free.release()
+            self._done = None
+
+    def _work(self, free) -> None:
+        function, args, kwargs = self._call
+        try:
+            self._outcome = (function(*args, **kwargs), None)
+        except BaseException as exc:           # handed to the caller by result()
+            self._outcome = (None, exc)
+        finally:
+            free.release()
+            self._done.set()
 
     @property
     def started(self) -> bool:
-        """Whether the call was handed to a pool thread."""
-        return self._future is not None
+        """Whether the call runs on a thread of its own."""
+        return self._done is not None
 
     def result(self):
-        """The call's value: from the pool thread, or computed now if it never started."""
-        future = self._future
-        if future is not None and not future.cancel():
-            return future.result()
-        function, args, kwargs = self._call
-        return function(*args, **kwargs)
+        """The call's value: from its thread, or computed now if it never started."""
+        if self._done is None:
+            function, args, kwargs = self._call
+            return function(*args, **kwargs)
+        self._done.wait()
+        value, error = self._outcome
+        if error is not None:
+            raise error
+        return value
 
     def abandon(self) -> None:
-        """Give up the result: cancel the call if it has not started, else ask it to stop."""
+        """Give up the result: set the call's ``cancelled`` event, if it has one."""
         if self.cancelled is not None:
             self.cancelled.set()
-        if self._future is not None:
-            self._future.cancel()

@@ -629,11 +629,15 @@ def start_check(model, segments, y0, scale, rtol, beside=True, **options):
     try:
         integrators = segment_integrators(model, _subsample(segments)[0], scale,
                                           CHECK_FACTOR * rtol, **options)
-    except RuntimeError:
-        integrators = None
-    if integrators is None:
+    except RuntimeError:                # CasADi's: the check cannot run
         return Beside(lambda: None, beside=False)
+    except Exception as exc:            # noqa: BLE001 - the run raises it first, if at all
+        return Beside(_raise, exc, beside=False)
     return Beside(_run_or_none, integrators, y0, cancelled=threading.Event(), beside=beside)
+
+
+def _raise(exc):
+    raise exc
 
 
 def verify_accuracy(model, segments, y0, scale, rtol, y_main, tip_map, n_main, check=None,
