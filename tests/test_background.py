@@ -177,6 +177,21 @@ def test_a_run_that_stops_early_abandons_its_check(beside):
     assert result.integration_error is None
 
 
+@pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(),
+                    reason="needs fork")
+def test_fork_waits_for_running_calls(beside):
+    gate = threading.Event()
+    job = Beside(gate.wait, 0.5)
+    assert job.started and background._RUNNING
+    context = multiprocessing.get_context("fork")
+    child = context.Process(target=int)
+    child.start()                              # the fork waits for the call to end
+    assert not background._RUNNING
+    child.join(60)
+    assert child.exitcode == 0
+    assert job.result() is False               # it ran to its time-out, then the fork went
+
+
 def _child(queue):
     model, drive = _runs("hub-beam-mass")
     result = flexctl.simulate(model, 1.0, check_validity=False, **drive)

@@ -35,6 +35,9 @@ ENABLED = os.environ.get("FLEXCTL_BACKGROUND", "1").strip() not in ("0", "false"
 _PREFIX = "flexctl-beside"
 _LOCK = threading.Lock()
 _SLOTS: dict = {}         # {"pid": ..., "free": semaphore}: rebuilt in a forked child
+_RUNNING: set = set()     # the done events of the calls running now
+#: Longest wait, s, for running calls to finish before this process forks.
+FORK_WAIT = 120.0
 
 
 def spare_cores() -> int:
@@ -55,12 +58,24 @@ def _free_slots():
         return _SLOTS["free"]
 
 
+def _before_fork() -> None:
+    """Let the running calls finish before the process forks: a child forked while one
+    holds a lock inside CasADi would find that lock taken for ever."""
+    for done in list(_RUNNING):
+        done.wait(FORK_WAIT)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(before=_before_fork)
+
+
 class Beside:
     """``function(*args, **kwargs)``, started on a spare core if there is one (and
     ``beside`` is true: false makes a call that runs when its result is asked for).
 
     A call that starts runs on a daemon thread of its own, so an abandoned call never holds
-    up the interpreter's exit. :meth:`result` returns its value (or raises its exception),
+    up the interpreter's exit; a fork waits for it (at most :data:`FORK_WAIT` s), so that no
+    child is forked in the middle of a CasADi call. :meth:`result` returns its value (or raises its exception),
     waiting for it; a call that did not start (no core spare, or this is itself such a
     thread) runs in the caller's thread when :meth:`result` asks for it. :meth:`abandon` says
     the result will not be asked for: a call not started never runs, and a running call that
@@ -80,10 +95,12 @@ class Beside:
         if not free.acquire(blocking=False):
             return
         self._done = threading.Event()
+        _RUNNING.add(self._done)
         try:
             threading.Thread(target=self._work, args=(free,), name=_PREFIX,
                              daemon=True).start()
         except RuntimeError:                   # pragma: no cover - no thread to be had
+            _RUNNING.discard(self._done)
             free.release()
             self._done = None
 
@@ -95,6 +112,7 @@ class Beside:
             self._outcome = (None, exc)
         finally:
             free.release()
+            _RUNNING.discard(self._done)
             self._done.set()
 
     @property
