@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# one BLAS thread per test worker, as under the command line (flexctl.sim.blas_threads)
+os.environ.setdefault("FLEXCTL_BLAS_THREADS", "1")
 
 import flexctl  # noqa: E402
 

@@ -51,6 +51,7 @@ from ..model.errors import InputError, InputValueError
 from .bench import BenchConfig, run_bench, summary_line
 from .demo import DEMO_WORKERS, run_demo
 from .report import format_summary
+from ..sim.blas_threads import DEFAULT_THREADS, threads_from_environment
 from ..sim.progress import progress_printer
 from .runner import execute, write_complete
 from .scenes import SceneError, builtin_scenes, load_scene
@@ -493,6 +494,9 @@ def main(argv=None) -> int:
         if exc.code is None:
             return EXIT_OK
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
+    # one BLAS thread per process (flexctl.sim.blas_threads), in the worker processes too
+    os.environ.setdefault("FLEXCTL_BLAS_THREADS", str(DEFAULT_THREADS))
+    threads_from_environment()
     try:
         with _OneLineWarnings():
             return args.func(args)

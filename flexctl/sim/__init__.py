@@ -42,3 +42,7 @@ __all__ = [
     "SlewMetrics", "settling_time", "slew_metrics",
     "ModeChoice", "choose_modes",
 ]
+
+from .blas_threads import threads_from_environment as _blas_threads  # noqa: E402
+
+_blas_threads()                 # FLEXCTL_BLAS_THREADS, if set
