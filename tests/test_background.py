@@ -192,6 +192,34 @@ def test_fork_waits_for_running_calls(beside):
     assert job.result() is False               # it ran to its time-out, then the fork went
 
 
+def _evaluate_in_child(buffer, queue):
+    queue.put(float(buffer(2.0)[0][0, 0]))
+
+
+@pytest.mark.skipif("fork" not in multiprocessing.get_all_start_methods(),
+                    reason="needs fork")
+def test_child_forked_while_a_buffer_is_busy_gets_a_fresh_lock():
+    # the lock of an integrator's buffer, held by a check running beside its run at the fork,
+    # would never be released in the child
+    import casadi as ca
+
+    from flexctl.sim.buffers import InPlace
+
+    x = ca.SX.sym("x")
+    buffer = InPlace(ca.Function("double", [x], [2 * x]))
+    buffer._lock.acquire()                     # as if a thread were evaluating it
+    try:
+        context = multiprocessing.get_context("fork")
+        queue = context.Queue()
+        child = context.Process(target=_evaluate_in_child, args=(buffer, queue))
+        child.start()
+        child.join(60)
+    finally:
+        buffer._lock.release()
+    assert child.exitcode == 0
+    assert queue.get(timeout=5) == 4.0
+
+
 def _child(queue):
     model, drive = _runs("hub-beam-mass")
     result = flexctl.simulate(model, 1.0, check_validity=False, **drive)

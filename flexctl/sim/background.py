@@ -36,8 +36,9 @@ _PREFIX = "flexctl-beside"
 _LOCK = threading.Lock()
 _SLOTS: dict = {}         # {"pid": ..., "free": semaphore}: rebuilt in a forked child
 _RUNNING: set = set()     # the done events of the calls running now
-#: Longest wait, s, for running calls to finish before this process forks.
-FORK_WAIT = 120.0
+#: Longest wait, s, for running calls to finish before this process forks (a call abandoned
+#: by a run that stopped early may integrate on for as long as the run did).
+FORK_WAIT = 2.0
 
 
 def spare_cores() -> int:
@@ -59,14 +60,24 @@ def _free_slots():
 
 
 def _before_fork() -> None:
-    """Let the running calls finish before the process forks: a child forked while one
-    holds a lock inside CasADi would find that lock taken for ever."""
+    """Give the running calls up to :data:`FORK_WAIT` s to finish before the process forks,
+    so that the child is not forked in the middle of one (the child gets fresh locks on the
+    integrators' buffers, :mod:`flexctl.sim.buffers`, in case it is)."""
+    import time
+
+    end = time.monotonic() + FORK_WAIT
     for done in list(_RUNNING):
-        done.wait(FORK_WAIT)
+        if not done.wait(max(0.0, end - time.monotonic())):
+            break
+
+
+def _after_fork_in_child() -> None:
+    """The child runs none of its parent's calls."""
+    _RUNNING.clear()
 
 
 if hasattr(os, "register_at_fork"):
-    os.register_at_fork(before=_before_fork)
+    os.register_at_fork(before=_before_fork, after_in_child=_after_fork_in_child)
 
 
 class Beside:
@@ -74,13 +85,13 @@ class Beside:
     ``beside`` is true: false makes a call that runs when its result is asked for).
 
     A call that starts runs on a daemon thread of its own, so an abandoned call never holds
-    up the interpreter's exit; a fork waits for it (at most :data:`FORK_WAIT` s), so that no
-    child is forked in the middle of a CasADi call. :meth:`result` returns its value (or raises its exception),
-    waiting for it; a call that did not start (no core spare, or this is itself such a
-    thread) runs in the caller's thread when :meth:`result` asks for it. :meth:`abandon` says
-    the result will not be asked for: a call not started never runs, and a running call that
-    takes a keyword ``cancelled`` (a ``threading.Event``) finds it set, to look at between
-    pieces of its work.
+    up the interpreter's exit; a fork waits for it (at most :data:`FORK_WAIT` s), so that a
+    child is not forked in the middle of a CasADi call. :meth:`result` returns its value (or
+    raises its exception), waiting for it; a call that did not start (no core spare, or this
+    is itself such a thread) runs in the caller's thread when :meth:`result` asks for it.
+    :meth:`abandon` says the result will not be asked for: a call not started never runs,
+    and a running call that takes a keyword ``cancelled`` (a ``threading.Event``) finds it
+    set, to look at between pieces of its work.
     """
 
     def __init__(self, function, *args, beside: bool = True, **kwargs):

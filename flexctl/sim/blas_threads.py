@@ -1,12 +1,13 @@
 """The threads of the OpenBLAS libraries under numpy, SciPy, CasADi and slycot.
 
-The wheels of numpy, SciPy, CasADi and slycot (python-control's) each carry an OpenBLAS that starts one thread per core
-and, after a call it shared out, keeps the spare threads spinning for a while, waiting for
-more work. flexctl's matrices are a few dozen rows: sharing them out gains nothing, and the
-spinning threads take a core from the work beside them (an accuracy check on a spare core,
-another worker process of a sweep). Measured on two cores: ``solve_slew`` on slew-90's exact
-design model took the same wall time with SciPy's OpenBLAS on one thread and on two (0.085 s)
-and half the CPU time; ``flexctl demo`` went from 46 s to 43 s.
+The wheels of numpy, SciPy, CasADi and slycot (python-control's) each carry an OpenBLAS that
+starts one thread per core and, after a call it shared out, keeps the spare threads spinning
+for a while, waiting for more work. flexctl's matrices are a few dozen rows: sharing them
+out gains nothing, and the spinning threads take a core from the work beside them (an
+accuracy check on a spare core, another worker process of a sweep). Measured on two cores:
+``solve_slew`` on slew-90's exact design model took the same wall time with SciPy's OpenBLAS
+on one thread and on two (0.085 s) and half the CPU time; ``flexctl demo`` went from about
+46 s to 44 s.
 
 The command line (``flexctl``) and the test suite put every one of them on
 :data:`DEFAULT_THREADS` thread; a program that imports flexctl keeps its own settings unless

@@ -8,11 +8,27 @@ from sample to sample) call it through :class:`InPlace` instead.
 
 from __future__ import annotations
 
+import os
 import threading
+import weakref
 
 import numpy as np
 
 __all__ = ["InPlace"]
+
+_ALL: "weakref.WeakSet" = weakref.WeakSet()
+
+
+def _fresh_locks_in_child() -> None:
+    """A forked child has only the thread that forked: a lock another thread held (an
+    accuracy check running beside its run, :mod:`flexctl.sim.background`) would stay taken
+    for ever, so every buffer gets a new one."""
+    for buffer in list(_ALL):
+        buffer._lock = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_fresh_locks_in_child)
 
 
 class InPlace:
@@ -32,6 +48,7 @@ class InPlace:
         for i, result in enumerate(self.results):
             self.buffer.set_res(i, memoryview(result))
         self._lock = threading.Lock()
+        _ALL.add(self)
 
     def __call__(self, *args) -> list:
         """The dense results, shapes as the function's outputs, for ``args`` (as many as the

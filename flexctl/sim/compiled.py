@@ -620,12 +620,19 @@ def start_check(model, segments, y0, scale, rtol, beside=True, **options):
     ``abandon()`` it if the run stops early.
 
     Its integrators are built here, in the caller's thread: CasADi's symbolic work is not
-    thread-safe, while its numerical evaluation is and lets go of Python's lock.
+    thread-safe, while its numerical evaluation is and lets go of Python's lock. A step
+    budget ``max_steps`` (between output times, as the run's) grows with the check's wider
+    output spacing: a check abandoned by a run that stopped early (a diverging one, say)
+    then gives up when the run would have, rather than integrating on for minutes.
     """
     import threading
 
     from .background import Beside
 
+    if options.get("max_steps") is not None:
+        # a budget between output times: the check's are CHECK_POINTS per segment at most
+        stride = max(max(1, len(t_out) // CHECK_POINTS) for _, t_out in segments)
+        options = {**options, "max_steps": int(options["max_steps"]) * stride}
     try:
         integrators = segment_integrators(model, _subsample(segments)[0], scale,
                                           CHECK_FACTOR * rtol, **options)

@@ -31,8 +31,8 @@ from ..model import SingularMassMatrixError
 from ..model.errors import InputValueError
 
 __all__ = ["Trajectory", "CvodesSegments", "FixedStepRK4", "ScipyIVP", "strategy_for",
-           "check_run_accuracy", "start_accuracy_check", "planned_segments", "rk4_accuracy_note", "AccuracyWarning",
-           "FALLBACK_EVALUATIONS"]
+           "check_run_accuracy", "start_accuracy_check", "planned_segments",
+           "rk4_accuracy_note", "AccuracyWarning", "FALLBACK_EVALUATIONS"]
 
 #: Where a compiled segment fails, SciPy locates the stop with at most this many evaluations
 #: of the right-hand side (1 to 5 s of DOP853 steps); a state so stiff that they do not
@@ -311,8 +311,10 @@ def planned_segments(plan, grid) -> list:
 
 
 def _check_options(request, plan) -> dict:
+    """The check's integrator options: the run's inputs, largest step and step budget."""
     return dict(torque=request.torque, hub_motion=request.hub_motion,
-                controller=request.controller, max_step=plan.cvodes_step)
+                controller=request.controller, max_step=plan.cvodes_step,
+                max_steps=plan.cvodes_steps)
 
 
 def start_accuracy_check(request, plan, drive):
