@@ -397,7 +397,11 @@ def main() -> None:
     parser.add_argument("--trajopt", action="store_true", help="case E only")
     parser.add_argument("--flags", action="store_true", help="case F only")
     parser.add_argument("--loops", action="store_true", help="case G only")
+    parser.add_argument("--nmpc", action="store_true", help="case D only")
     args = parser.parse_args()
+    if args.nmpc:
+        case_d(args.before)
+        return
     if args.only_c or args.loops:
         (case_c if args.only_c else case_g)(args.before)
         return
