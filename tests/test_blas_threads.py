@@ -18,7 +18,8 @@ def test_every_library_found_takes_the_count():
     assert all(count == 1 for count in limit_blas_threads(1).values())
 
 
-@pytest.mark.parametrize("bad", [0, -1, 1.5, "2", None, True])
+@pytest.mark.parametrize("bad", [0, -1, 1.5, "2", None, True, float("nan"), float("inf"),
+                                 10 ** 12])
 def test_bad_counts_are_refused(bad):
     with pytest.raises(InputError, match="count"):
         limit_blas_threads(bad)
@@ -27,8 +28,10 @@ def test_bad_counts_are_refused(bad):
 def test_environment(monkeypatch):
     monkeypatch.setenv("FLEXCTL_BLAS_THREADS", "0")
     assert threads_from_environment(1) == {}              # 0: left alone
-    monkeypatch.setenv("FLEXCTL_BLAS_THREADS", "many")
-    assert set(threads_from_environment(1).values()) <= {1}   # not a count: the default
+    for bad in ("many", "nan", "-3", "1e9", str(10 ** 12)):
+        monkeypatch.setenv("FLEXCTL_BLAS_THREADS", bad)       # not a count: the default
+        assert set(threads_from_environment(1).values()) <= {1}
+        assert threads_from_environment() == {}
     monkeypatch.delenv("FLEXCTL_BLAS_THREADS")
     assert threads_from_environment() == {}
 

@@ -22,10 +22,12 @@ import glob
 import os
 from pathlib import Path
 
-__all__ = ["limit_blas_threads", "DEFAULT_THREADS"]
+__all__ = ["limit_blas_threads", "DEFAULT_THREADS", "MAX_THREADS"]
 
 #: Threads of each OpenBLAS under the command line and the test suite.
 DEFAULT_THREADS = 1
+#: Most threads :func:`limit_blas_threads` takes (OpenBLAS's own builds stop at 64 to 512).
+MAX_THREADS = 1024
 #: ``(package, library file pattern beside it, setter, getter)`` of each OpenBLAS.
 _LIBRARIES = (
     # the wheel holds three copies; its plugins (IPOPT's MUMPS) load the one of this soname
@@ -64,7 +66,8 @@ def _found() -> list:
 
 
 def limit_blas_threads(count: int = DEFAULT_THREADS) -> dict:
-    """Put the OpenBLAS of numpy, SciPy, CasADi and slycot on ``count`` (>= 1) threads.
+    """Put the OpenBLAS of numpy, SciPy, CasADi and slycot on ``count`` threads (1 to
+    :data:`MAX_THREADS`).
 
     Returns
     -------
@@ -79,7 +82,8 @@ def limit_blas_threads(count: int = DEFAULT_THREADS) -> dict:
     """
     from ..model.checks import check_integer
 
-    count = check_integer("limit_blas_threads", "count", count, minimum=1)
+    count = check_integer("limit_blas_threads", "count", count, minimum=1,
+                          maximum=MAX_THREADS)
     threads = {}
     for package, set_threads, get_threads in _found():
         set_threads(count)
@@ -89,10 +93,14 @@ def limit_blas_threads(count: int = DEFAULT_THREADS) -> dict:
 
 def threads_from_environment(default: int | None = None) -> dict:
     """Apply ``FLEXCTL_BLAS_THREADS`` (a count; ``0``: leave the libraries alone), else
-    ``default`` (None: leave them alone). A value that is not an integer is ignored."""
+    ``default`` (None: leave them alone). A value that is not an integer from 0 to
+    :data:`MAX_THREADS` is ignored (``default`` applies): importing flexctl never fails on
+    it."""
     text = os.environ.get("FLEXCTL_BLAS_THREADS", "").strip()
     try:
         count = int(text) if text else default
     except ValueError:
+        count = default
+    if count is not None and not 0 <= count <= MAX_THREADS:
         count = default
     return limit_blas_threads(count) if count is not None and count > 0 else {}
