@@ -583,13 +583,18 @@ ALARM_FACTOR = 1e4
 EFFORT_FACTOR = 20.0
 
 
+def _stride(t_out) -> int:
+    """Every how many output times of a segment the check keeps one."""
+    return max(1, len(t_out) // CHECK_POINTS)
+
+
 def _subsample(segments):
     """At most ``CHECK_POINTS`` output times per segment (its end always kept), and the
     indices of those times among all the segments' outputs."""
     check, picks, offset = [], [], 0
     for t_start, t_out in segments:
         k = len(t_out)
-        keep = np.unique(np.r_[np.arange(0, k, max(1, k // CHECK_POINTS)), k - 1])
+        keep = np.unique(np.r_[np.arange(0, k, _stride(t_out)), k - 1])
         check.append((t_start, np.asarray(t_out)[keep]))
         picks.append(offset + keep)
         offset += k
@@ -631,7 +636,7 @@ def start_check(model, segments, y0, scale, rtol, beside=True, **options):
 
     if options.get("max_steps") is not None:
         # a budget between output times: the check's are CHECK_POINTS per segment at most
-        stride = max(max(1, len(t_out) // CHECK_POINTS) for _, t_out in segments)
+        stride = max(_stride(t_out) for _, t_out in segments)
         options = {**options, "max_steps": int(options["max_steps"]) * stride}
     try:
         integrators = segment_integrators(model, _subsample(segments)[0], scale,

@@ -259,7 +259,7 @@ def mechanical_arrays(model, t, states, inputs):
     return model.mechanical, t, model.mechanical_states(states), torque
 
 
-def _output_samples(grid, traj):
+def output_samples(grid, traj):
     """The trajectory's samples on the output grid and at its last time, cut before the first
     non-finite one: ``(t, y)``."""
     t_all = np.concatenate(traj.ts)
@@ -297,7 +297,7 @@ def assemble_result(request, plan, drive, stops, traj, wall: float) -> Simulatio
     """The :class:`SimulationResult` of an integrated run: outputs, torque, stop message,
     energy audit and the notes of the stiffness guard and the accuracy check."""
     model = request.model
-    t_all, y_all = _output_samples(request.grid, traj)
+    t_all, y_all = output_samples(request.grid, traj)
     states = np.asarray(drive.plant_state(t_all, y_all))
     z_all = drive.controller_states(y_all)
     torque = np.asarray(drive.torque_output(t_all, states, z_all, request.symbolic),

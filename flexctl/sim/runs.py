@@ -16,7 +16,7 @@ from .digital import run_sampled
 from .drives import PrescribedDrive, TorqueDrive
 from .fixed_step import RK4_OMEGA_H
 from .request import check_atol, plan_integration, run_request, state_scale
-from .result import SimulationResult, _output_samples, assemble_result, audit_energy
+from .result import SimulationResult, output_samples, assemble_result, audit_energy
 from .stops import StopConditions, StopReason, tip_rows
 from .strategies import (check_run_accuracy, rk4_accuracy_note, start_accuracy_check,
                          strategy_for)
@@ -44,7 +44,7 @@ def run_states(model, t_final: float, torque=None, hub_motion=None, controller=N
     _, _, drive, _, traj = _integrate(request)
     if traj.reason is not StopReason.REACHED_END:
         return False, None
-    states = np.asarray(drive.plant_state(*_output_samples(request.grid, traj)), dtype=float)
+    states = np.asarray(drive.plant_state(*output_samples(request.grid, traj)), dtype=float)
     if not np.all(np.isfinite(states)):
         return False, None
     return True, states
