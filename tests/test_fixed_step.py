@@ -9,6 +9,7 @@ import flexctl
 from controllers import PD
 from flexctl.model.errors import InputError
 from flexctl.sim.fixed_step import RK4_OMEGA_H, RK4_STABILITY, hermite, step_times
+from flexctl.sim.compiled import input_numbers
 from flexctl.sim.maneuvers import SineTorque
 
 
@@ -129,3 +130,37 @@ def test_threads_sharing_the_compiled_loops_get_their_own_runs():
             together = list(pool.map(lambda gain: run(gain, method), gains * 2))
         for k, states in enumerate(together):
             np.testing.assert_array_equal(states, alone[k % len(gains)], err_msg=method)
+
+
+@pytest.mark.parametrize("drive", ["hub_motion", "controller"])
+def test_exact_model_steps_compiled_and_agree_with_cvodes(drive, monkeypatch):
+    # the exact variant's RK4 step runs as machine code; the same run on CasADi's virtual
+    # machine and a tight CVODES run agree with it
+    from flexctl.sim import fixed_step
+
+    scene = flexctl.load_scene("kane-spinup" if drive == "hub_motion" else "slew-90")
+    model = flexctl.build_model(scene.system, n_modes=2, variant="exact")
+    if drive == "hub_motion":
+        t_final, inputs = 10.0, {"hub_motion": scene.maneuver}
+    else:
+        x0 = np.zeros(model.n_states)
+        x0[0] = -np.pi / 2
+        t_final, inputs = 4.0, {"controller": PD(kp=12.0, kd=8.0, torque_limit=6.0), "x0": x0}
+    drives = (None, inputs.get("hub_motion"), inputs.get("controller"))
+    step = fixed_step._step_function(model, *drives, input_numbers(drives).size)[0]
+    assert step.is_a("External")
+    run = flexctl.simulate(model, t_final, method="rk4", rtol=1e-4, check_validity=False,
+                           **inputs)
+    tight = flexctl.simulate(model, t_final, rtol=1e-10, check_validity=False, **inputs)
+    assert run.ok and run.method == "rk4"
+    actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
+    assert actual <= run.integration_error <= 1e-4 * run.peak_tip_deflection
+    monkeypatch.setattr(fixed_step, "USE_JIT", False)
+    fixed_step._STEP_CACHE.clear()
+    try:
+        machine = flexctl.simulate(model, t_final, method="rk4", rtol=1e-4,
+                                   check_validity=False, **inputs)
+    finally:
+        fixed_step._STEP_CACHE.clear()
+    assert np.allclose(machine.tip_deflection, run.tip_deflection, rtol=0.0,
+                       atol=1e-12 * run.peak_tip_deflection)

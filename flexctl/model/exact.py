@@ -47,7 +47,7 @@ from .modes import mode_shapes
 from .parameters import HubBeam
 
 __all__ = ["EXACT_MAX_MODES", "ExactGeometry", "PanelRule", "choose_panels", "exact_geometry", "appendage_terms",
-           "vectorized_rhs",
+           "vectorized_rhs", "symmetric_solve", "VELOCITY_FROM_JACOBIAN",
            "PANEL_TOLERANCE", "PANEL_POINTS"]
 
 #: Most modes the exact variant takes (20 modes: a 445k-instruction right-hand side, 4 s to build).
@@ -58,6 +58,9 @@ PANEL_POINTS = 8
 PANEL_TOLERANCE = 1e-6
 #: Candidate panel counts.
 PANEL_CANDIDATES = (1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64)
+#: Most modes for which the scalar form computes the beam's velocities as ``J q_t`` rather
+#: than integrating them along the beam.
+VELOCITY_FROM_JACOBIAN = 8
 #: Tip deflection of the test state on which the panel count is chosen, relative to the length.
 TEST_DEFLECTION = 0.4
 
@@ -191,9 +194,12 @@ def appendage_terms(system, n_modes, n_panels, q, q_dot, rate) -> dict:
     psi = ca.mtimes(slope_shapes, q)
     psi_t = ca.mtimes(slope_shapes, q_dot)
     cos, sin = ca.cos(psi), ca.sin(psi)
-    # integrands of p_x - b, p_y, p_x_t, p_y_t and of the q_t^2 part of p_tt
-    integrands = ca.horzcat(cos, sin, -sin * psi_t, cos * psi_t,
-                            -cos * psi_t ** 2, -sin * psi_t ** 2)
+    # scalar form: the velocities as J q_t (2 N - 1 operations a point) where that is cheaper
+    # than integrating their own integrands (some 18 a point)
+    velocities_from_jacobian = isinstance(q, ca.SX) and n_modes <= VELOCITY_FROM_JACOBIAN
+    # integrands of p_x - b, p_y, [p_x_t, p_y_t,] and of the q_t^2 part of p_tt
+    integrands = ca.horzcat(cos, sin, -cos * psi_t ** 2, -sin * psi_t ** 2,
+                            *(() if velocities_from_jacobian else (-sin * psi_t, cos * psi_t)))
     beam_weights = ca.DM(rule.weights)
     tip = ca.vertcat(b + ca.dot(beam_weights, cos), ca.dot(beam_weights, sin))
     jac_x = -ca.repmat(sin, 1, n_modes) * slope_shapes
@@ -215,13 +221,17 @@ def appendage_terms(system, n_modes, n_panels, q, q_dot, rate) -> dict:
     for weights, integrate in points:
         w = ca.DM(weights)
         p = integrate(integrands)
-        px, py, pxt, pyt, ax, ay = (p[:, k] for k in range(6))
+        px, py, ax, ay = (p[:, k] for k in range(4))
         px = px + b
         jx, jy = integrate(jac_x), integrate(jac_y)
+        if velocities_from_jacobian:
+            pxt, pyt = ca.mtimes(jx, q_dot), ca.mtimes(jy, q_dot)
+        else:
+            pxt, pyt = p[:, 4], p[:, 5]
         wjx, wjy = ca.repmat(w, 1, n_modes) * jx, ca.repmat(w, 1, n_modes) * jy
         out["m_tt"] = out["m_tt"] + ca.dot(w, px ** 2 + py ** 2)
         out["m_tq"] = out["m_tq"] + ca.mtimes(px.T, wjy) - ca.mtimes(py.T, wjx)
-        out["m_qq"] = out["m_qq"] + ca.mtimes(jx.T, wjx) + ca.mtimes(jy.T, wjy)
+        out["m_qq"] = out["m_qq"] + _gram(jx, wjx, jy, wjy)
         # velocity terms of the inertial acceleration: p_tt(q_tt = 0), Coriolis, centripetal
         gx = ax - 2.0 * rate * pyt - rate ** 2 * px
         gy = ay + 2.0 * rate * pxt - rate ** 2 * py
@@ -231,6 +241,51 @@ def appendage_terms(system, n_modes, n_panels, q, q_dot, rate) -> dict:
         out["first_q"] = out["first_q"] + ca.vertcat(ca.sum1(wjx), ca.sum1(wjy))
         out["first_acc"] = out["first_acc"] + ca.vertcat(ca.dot(w, ax), ca.dot(w, ay))
     return out
+
+
+def _gram(jx, wjx, jy, wjy):
+    """``jx^T wjx + jy^T wjy``, symmetric: in scalar form (SX) each pair of modes once."""
+    import casadi as ca
+
+    if not isinstance(jx, ca.SX):
+        return ca.mtimes(jx.T, wjx) + ca.mtimes(jy.T, wjy)
+    n = jx.shape[1]
+    entries = {(i, j): ca.dot(jx[:, i], wjx[:, j]) + ca.dot(jy[:, i], wjy[:, j])
+               for i in range(n) for j in range(i, n)}
+    return ca.blockcat([[entries[min(i, j), max(i, j)] for j in range(n)] for i in range(n)])
+
+
+def symmetric_solve(matrix, rhs):
+    """``matrix^-1 rhs`` for a symmetric positive definite SX ``matrix`` (n, n) by an
+    ``L D L^T`` factorisation written out (about a third of the operations of CasADi's
+    general symbolic solve); only its upper triangle is read."""
+    import casadi as ca
+
+    n = matrix.shape[0]
+    lower, diag = {}, []
+    for j in range(n):
+        d = matrix[j, j]
+        for k in range(j):
+            d = d - lower[j, k] * lower[j, k] * diag[k]
+        diag.append(d)
+        for i in range(j + 1, n):
+            v = matrix[j, i]
+            for k in range(j):
+                v = v - lower[i, k] * lower[j, k] * diag[k]
+            lower[i, j] = v / d
+    y = []
+    for i in range(n):
+        v = rhs[i]
+        for k in range(i):
+            v = v - lower[i, k] * y[k]
+        y.append(v)
+    x = [None] * n
+    for i in reversed(range(n)):
+        v = y[i] / diag[i]
+        for k in range(i + 1, n):
+            v = v - lower[k, i] * x[k]
+        x[i] = v
+    return ca.vertcat(*x)
 
 
 def _terms(system, n_modes, n_panels, q, q_dot, rate):
@@ -259,10 +314,10 @@ def _rhs(system: HubBeam, n_modes: int, n_panels: int, matrices, vectorized: boo
         # the small dense solve as scalar code (an MX solve needs a linear solver plugin)
         m_sym, g_sym = ca.SX.sym("M", n + 1, n + 1), ca.SX.sym("g", n + 1)
         solve = ca.Function(f"flexctl_exact_solve_N{n}", [m_sym, g_sym],
-                            [ca.solve(m_sym, g_sym)])
+                            [symmetric_solve(m_sym, g_sym)])
         acc = solve(mass, generalized)
     else:
-        acc = ca.solve(mass, generalized)
+        acc = symmetric_solve(mass, generalized)
     name = f"flexctl_exact_{'vec_' if vectorized else ''}N{n}"
     rhs = ca.Function(name, [x, u], [ca.vertcat(x[layout.velocities], acc)],
                       ["x", "u"], ["xdot"])
@@ -299,7 +354,8 @@ def _build(system: HubBeam, n_modes: int, n_panels: int, matrices) -> ExactGeome
     m_b, bias_b, _ = _terms(system, n, n_panels, qs, qds, w)
     load = (-ca.mtimes(stiffness, qs) - ca.mtimes(damping, qds) - bias_b[1:]
             - m_b[1:, 0] * acc_hub)
-    beam = ca.Function(f"{name}_beam", [qs, qds, w, acc_hub], [ca.solve(m_b[1:, 1:], load)],
+    beam = ca.Function(f"{name}_beam", [qs, qds, w, acc_hub],
+                       [symmetric_solve(m_b[1:, 1:], load)],
                        ["q", "q_dot", "rate", "acceleration"], ["q_tt"])
 
     mass_fn = ca.Function(f"{name}_mass", [q], [mass], ["q"], ["M"])

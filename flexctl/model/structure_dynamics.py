@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .exact import appendage_terms, choose_panels
+from .exact import appendage_terms, choose_panels, symmetric_solve
 from .layout import StateLayout
 
 __all__ = ["StructureFunctions", "structure_functions"]
@@ -160,7 +160,8 @@ def _solve(mass, rhs, variables):
     n = mass.size1()
     rest = mass[1:, 1:]
     if n == 1 or ca.depends_on(rest, variables):
-        return ca.solve(mass, rhs)
+        # the kinetic-energy metric is symmetric positive definite
+        return symmetric_solve(mass, rhs) if isinstance(mass, ca.SX) else ca.solve(mass, rhs)
     inverse = _constant_inverse(rest)
     column = mass[1:, 0]
     g = ca.mtimes(inverse, column)

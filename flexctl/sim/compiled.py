@@ -175,18 +175,21 @@ def drive_size(model, hub_motion=None, controller=None) -> int:
     return model.n_states + int(getattr(controller, "n_states", 0) or 0)
 
 
-def _closed_loop_dynamics(model, t, y, torque, controller, parameters=None):
+def _closed_loop_dynamics(model, t, y, torque, controller, parameters=None, rhs=None):
     """CasADi ``d[x, z]/dt`` of the plant ``x`` under ``torque`` and ``controller``, whose
     internal states ``z`` (if any) follow ``casadi_derivative``; ``parameters`` the symbol of
     their numbers (:func:`input_numbers` of ``(torque, None, controller)``). On SX symbols the
-    model is inlined; on MX (the exact model's fixed-step loop) it enters through
+    model is inlined; on MX (the exact model's fixed-step loop) it enters through ``rhs``
+    (``(x, u) -> xdot``, e.g. the compiled one of :mod:`flexctl.sim.native_rhs`), by default
     :meth:`flexctl.Model.integration_rhs`, whose code does not grow with the quadrature."""
     import casadi as ca
 
     u, dz = _drive_terms(model, t, y, torque, controller, parameters)
     x = y[:model.n_states]
-    dx = (model.integration_rhs()(x, u) if isinstance(x, ca.MX)
-          else _symbolic_dynamics(model, x, ca.vertcat(u)))
+    if isinstance(x, ca.MX):
+        dx = (model.integration_rhs() if rhs is None else rhs)(x, u)
+    else:
+        dx = _symbolic_dynamics(model, x, ca.vertcat(u))
     return dx if dz is None else ca.vertcat(dx, dz)
 
 

@@ -26,6 +26,7 @@ from .compiled import (_cached, _closed_loop_dynamics, _input_key, _split_number
                        drive_size, hub_motion_casadi, input_numbers)
 from .buffers import InPlace
 from .compile_cache import compiled
+from .native_rhs import MAX_INSTRUCTIONS
 from ..model.exports import _symbolic_beam_dynamics
 
 __all__ = ["RK4_OMEGA_H", "RK4_STABILITY", "MAX_HALVINGS", "step_times", "FixedStepRun",
@@ -45,9 +46,9 @@ MAX_STEPS = 20_000_000
 _END_INSIDE = 1e-9
 
 #: Compile the loops to machine code (:mod:`flexctl.sim.compile_cache`, kept across runs and
-#: processes) where a compiler is present, for the models that compile quickly (not the exact
-#: variant, whose quadrature takes many seconds to compile): about 6 times faster per step
-#: than CasADi's virtual machine, once the 0.2 to 0.5 s compile is paid, once.
+#: processes) where a compiler is present: about 6 times faster per step than CasADi's virtual
+#: machine, once the 0.2 to 0.5 s compile is paid, once. The exact variant, whose quadrature
+#: takes seconds to compile, compiles its step alone (:func:`_exact_step`).
 USE_JIT = True
 #: Steps per call of a compiled loop, largest first: a segment takes the largest that fits,
 #: then smaller ones, the last padded with steps of length 0 (which change nothing) where
@@ -71,12 +72,15 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int):
     yt, h, c = sym.sym("yt", ny + 1), sym.sym("h"), sym.sym("c", n_numbers)
     y, t = yt[:ny], yt[ny]
 
+    # the exact model enters as a call of its scalar form, written once in the step's code
+    rhs = model.casadi() if model.variant == "exact" else None
+
     def f(time, state):
         if hub_motion is not None:
             rate, acceleration = hub_motion_casadi(
                 hub_motion, time, _split_numbers((torque, hub_motion, controller), c)[1])
             return _symbolic_beam_dynamics(model, state, rate, acceleration)
-        return _closed_loop_dynamics(model, time, state, torque, controller, c)
+        return _closed_loop_dynamics(model, time, state, torque, controller, c, rhs=rhs)
 
     k1 = f(t, y)
     k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
@@ -84,8 +88,21 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int):
     k4 = f(t + h * (1.0 - _END_INSIDE), y + h * k3)
     y_next = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
     ys, ts = sym.sym("y", ny), sym.sym("t")
-    return (ca.Function("flexctl_rk4_step", [yt, h, c], [ca.vertcat(y_next, t + h), k1]),
-            ca.Function("flexctl_rate", [ys, ts, c], [f(ts, ys)]))
+    step = ca.Function("flexctl_rk4_step", [yt, h, c], [ca.vertcat(y_next, t + h), k1])
+    if model.variant == "exact":
+        step = _exact_step(step, rhs)
+    return step, ca.Function("flexctl_rate", [ys, ts, c], [f(ts, ys)])
+
+
+def _exact_step(step, rhs):
+    """The exact model's RK4 ``step`` as machine code (:mod:`flexctl.sim.compile_cache`) where
+    its dynamics ``rhs`` are short enough to compile in a few seconds, else ``step``: the
+    compiled loops of the other variants write the dynamics out in every loop's code, which for
+    the exact model would be several such compilations; its loops call the compiled step
+    instead, each step a few microseconds of arithmetic against well under one of the call."""
+    if not USE_JIT or rhs.n_instructions() > MAX_INSTRUCTIONS:
+        return step
+    return compiled(step, label="the exact model's RK4 step")
 
 
 class _ChunkRuns(dict):
