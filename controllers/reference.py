@@ -31,6 +31,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -141,6 +142,22 @@ class SlewProfile(KeywordOnly):
         t = np.asarray(t, dtype=float)
         return np.clip((t - self.start_time) / self.duration, 0.0, 1.0)
 
+    def at(self, t: float) -> tuple:
+        """Angle (rad), rate (rad/s) and acceleration (rad/s^2) at one time ``t`` (s), as
+        floats: the formulas of :meth:`angle`, :meth:`rate` and :meth:`acceleration` on a
+        scalar, as a sampled law reads them at every sample."""
+        tau = min(max((float(t) - self.start_time) / self.duration, 0.0), 1.0)
+        if self.shape == "poly7":
+            s = tau ** 4 * (35.0 + tau * (-84.0 + tau * (70.0 - 20.0 * tau)))
+            ds = 140.0 * (tau * (1.0 - tau)) ** 3
+            dds = 420.0 * (tau * (1.0 - tau)) ** 2 * (1.0 - 2.0 * tau)
+        else:
+            s = tau - math.sin(2.0 * math.pi * tau) / (2.0 * math.pi)
+            ds = 1.0 - math.cos(2.0 * math.pi * tau)
+            dds = 2.0 * math.pi * math.sin(2.0 * math.pi * tau)
+        return (self.slew_angle * s, self.slew_angle / self.duration * ds,
+                self.slew_angle / self.duration ** 2 * dds)
+
     def angle(self, t):
         """Reference hub angle, rad."""
         tau = self._tau(t)
@@ -221,6 +238,8 @@ def _evaluate(reference, t: float):
     """Reference angle (rad), rate (rad/s) and acceleration (rad/s^2) at ``t``; 0 for None."""
     if reference is None:
         return 0.0, 0.0, 0.0
+    if isinstance(reference, SlewProfile):
+        return reference.at(t)
     return (float(reference.angle(t)), float(reference.rate(t)),
             float(reference.acceleration(t)))
 

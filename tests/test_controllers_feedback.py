@@ -95,6 +95,10 @@ def test_slew_profile_is_rest_to_rest_and_consistent(shape_name):
     assert np.max(np.abs(slew.acceleration(t))) == pytest.approx(slew.peak_acceleration,
                                                                  rel=1e-6)
     assert slew.breakpoints == (0.5, 2.0)
+    # the one-time form a sampled law reads gives the same numbers as the array methods
+    for time in (0.0, 0.5, 0.9, 1.25, 1.99, 2.0, 2.7):
+        assert slew.at(time) == (float(slew.angle(time)), float(slew.rate(time)),
+                                 float(slew.acceleration(time)))
 
 
 def test_minimum_slew_duration_meets_torque_limit():

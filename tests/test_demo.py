@@ -110,3 +110,45 @@ def test_structures_section_shows_what_a_second_array_and_a_free_hub_change(tmp_
     assert float(wing["rigid inertia (kg m^2)"]) < float(one["rigid inertia (kg m^2)"])
     assert float(wing["hub travel (mm)"]) > 1.0 and float(free["hub travel (mm)"]) < 1e-6
 
+
+
+def _fine_section(out):
+    return demo.Section(title="fine")
+
+
+def _refused_section(out):
+    from flexctl.model.errors import InputValueError
+    raise InputValueError("refused.value must be positive; got -1")
+
+
+def _broken_section(out):
+    raise ZeroDivisionError("a genuine bug")
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_sections_keep_the_report_order_and_list_refusals(tmp_path, monkeypatch, workers):
+    # sent longest first, reported as they finish, returned in the report's order; a section
+    # refused on bad input becomes a surprise, the others still come
+    monkeypatch.setattr(demo, "SECTIONS", (("a", _fine_section), ("b", _refused_section),
+                                           ("c", _fine_section)))
+    monkeypatch.setattr(demo, "SECTION_ORDER", ("c", "b", "a"))
+    surprises, lines = [], []
+    made = demo.sections(tmp_path / "new", workers, surprises, lines.append)
+    assert [s.title for s in made] == ["fine", "fine"]
+    assert surprises == ["b failed: refused.value must be positive; got -1"]
+    assert sorted(lines) == ["a: done", "c: done"]
+    assert (tmp_path / "new").is_dir()
+
+
+def test_a_section_with_a_bug_keeps_its_traceback(tmp_path, monkeypatch):
+    monkeypatch.setattr(demo, "SECTIONS", (("a", _broken_section),))
+    monkeypatch.setattr(demo, "SECTION_ORDER", ("a",))
+    with pytest.raises(ZeroDivisionError, match="a genuine bug"):
+        demo.sections(tmp_path, 1, [], print)
+
+
+def test_every_section_and_long_scene_is_scheduled_once():
+    from flexctl.app.scenes import builtin_scenes
+
+    assert sorted(demo.SECTION_ORDER) == sorted(label for label, _ in demo.SECTIONS)
+    assert set(demo.LONG_SCENES) <= set(builtin_scenes())

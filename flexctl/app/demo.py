@@ -4,8 +4,12 @@
 :data:`DEMO_COMPARISONS`), draws the frequency plot, makes every section below and
 writes ``report.md``. Each section function runs one case, saves its figures (PNG) and
 tables (CSV) into the demo directory, and returns a :class:`Section` that
-:func:`flexctl.app.report.write_demo_report` turns into Markdown. The sweeps go through :func:`flexctl.app.sweep.sweep` on the executor given (the demo
-passes a process pool). Sizes are chosen to finish in well under a minute on two cores.
+:func:`flexctl.app.report.write_demo_report` turns into Markdown; its sweeps go through
+:func:`flexctl.app.sweep.sweep` on the executor given, if any. The demo sends every section
+and every scene to one process pool at once, the longest first (:data:`SECTION_ORDER`,
+:data:`LONG_SCENES`), so that its processes are busy to the end; each reports as it finishes,
+and the report keeps its own order. Sizes are chosen to finish in well under a minute on two
+cores.
 
 ==========================  =================================================================
 section                     content
@@ -48,6 +52,7 @@ from .sweep import PointMassAmplitudes, SceneTask, response_amplitudes, sweep
 
 __all__ = ["Section", "kane_spinup", "spacecraft_torque", "hub_beam_mass", "slew_comparison",
            "model_error", "large_deflection", "frequency_plot", "sections", "run_demo",
+           "SECTIONS", "SECTION_ORDER", "LONG_SCENES",
            "PAPER_VALUES", "SWEEP_POINTS", "DEMO_COMPARISONS", "DEMO_INTRO", "DEMO_WORKERS",
            "DEMO_FREQUENCY_NOTE"]
 
@@ -495,41 +500,85 @@ def frequency_plot(out: Path, source: str = "kane-spinup") -> Path:
     return path
 
 
+def _two_array_comparison(out: Path, executor=None) -> Section:
+    """:func:`slew_comparison` on the free-hub ``two-array-slew``."""
+    return slew_comparison(out, executor, kinds=FREE_HUB_KINDS, scene_name="two-array-slew")
+
+
+#: The sections, in the report's order: (label, function ``f(out) -> Section``).
+SECTIONS = (("paper 001 Fig. 4", kane_spinup),
+            ("paper 001 Fig. 5", spacecraft_torque),
+            ("paper 000 Figs. 5-8", hub_beam_mass),
+            ("controller comparison", slew_comparison),
+            ("structures", structures),
+            ("controller comparison, two arrays", _two_array_comparison),
+            ("design-model error", model_error),
+            ("large deflection", large_deflection),
+            ("actuators and sensors", hardware))
+#: The order in which the sections go to the pool: longest first (CPU seconds of each, measured
+#: one after the other in one process on this project's 2-core machine, in the comments), so
+#: that the short ones and the scenes fill the processes' ends.
+SECTION_ORDER = ("actuators and sensors",                # 16.4
+                 "controller comparison",                # 9.5
+                 "controller comparison, two arrays",    # 8.4
+                 "paper 000 Figs. 5-8",                  # 4.6
+                 "design-model error",                   # 4.0
+                 "large deflection",                     # 3.1
+                 "structures",                           # 1.3
+                 "paper 001 Fig. 4",                     # 1.1
+                 "paper 001 Fig. 5")                     # 0.9
+
+
+#: The scenes that take longest (a sampled loop with sensors, an optimised slew), sent to the
+#: pool before the others.
+LONG_SCENES = ("wheel-slew", "flexible-link", "slew-90-model-error", "two-array-slew")
+
+
 def sections(out: Path, workers: int, surprises: list, progress=print, *,
              executor=None) -> list:
-    """Every section of this module, the sweeps and comparisons on ``executor`` or else a pool
-    of ``workers`` processes; a section that fails on bad input or in a sweep is listed in
-    ``surprises`` (a genuine bug keeps its traceback)."""
+    """Every section of :data:`SECTIONS`, each whole on ``executor`` or else a pool of
+    ``workers`` processes, the longest first; a section that fails on bad input or in a sweep
+    is listed in ``surprises`` (a genuine bug keeps its traceback)."""
+    Path(out).mkdir(parents=True, exist_ok=True)
+    with _pool(workers, executor) as pool:
+        pending = _submit_sections(pool, out)
+        made = {}
+        for label in _finished(pending):
+            made.update(_section_outcome(label, pending[label], surprises, progress))
+    return [made[label] for label, _ in SECTIONS if label in made]
+
+
+def _submit_sections(pool, out: Path) -> dict:
+    """Every section on ``pool``, longest first (:data:`SECTION_ORDER`): label -> its
+    pending result (:func:`_submit`)."""
+    functions = dict(SECTIONS)
+    return {label: _submit(pool, functions[label], out) for label in SECTION_ORDER}
+
+
+def _section_outcome(label: str, pending, surprises: list, progress, start=None) -> dict:
+    """``{label: Section}`` of a finished section, or ``{}`` with the failure in
+    ``surprises``."""
     from .sweep import SweepError
 
-    # a section with sweeps hands their points to the pool; one without runs on the pool
-    # whole, beside them (None: a section with sweeps)
-    cases = (("paper 001 Fig. 4", kane_spinup, None),
-             ("paper 001 Fig. 5", None, spacecraft_torque),
-             ("paper 000 Figs. 5-8", hub_beam_mass, None),
-             ("controller comparison", slew_comparison, None),
-             ("structures", None, structures),
-             ("controller comparison, two arrays",
-              lambda o, pool: slew_comparison(o, pool, kinds=FREE_HUB_KINDS,
-                                              scene_name="two-array-slew"), None),
-             ("design-model error", model_error, None),
-             ("large deflection", None, large_deflection),
-             ("actuators and sensors", hardware, None))
-    made = []
-    with _pool(workers, executor) as pool:
-        start = time.perf_counter()
-        beside = {label: _submit(pool, whole, out) for label, _, whole in cases if whole}
-        for label, make, _ in cases:
-            begin = time.perf_counter()
-            try:
-                made.append(beside[label]() if label in beside else make(out, pool))
-            except (SweepError, InputError) as exc:
-                surprises.append(f"{label} failed: {exc}")
-                continue
-            progress(f"{label}: {time.perf_counter() - begin:.1f} s" if label not in beside
-                     else f"{label}: done {time.perf_counter() - start:.1f} s after the "
-                     "first section started (run beside the others)")
-    return made
+    try:
+        section = pending.result()
+    except (SweepError, InputError) as exc:
+        surprises.append(f"{label} failed: {exc}")
+        return {}
+    when = "" if start is None else f": done {time.perf_counter() - start:.1f} s after the start"
+    progress(f"{label}{when or ': done'}")
+    return {label: section}
+
+
+def _finished(pending: dict):
+    """The keys of ``pending`` (results of :func:`_submit`) as their work finishes."""
+    from concurrent.futures import as_completed
+
+    futures = {value: key for key, value in pending.items()
+               if not isinstance(value, _Done)}
+    yield from (key for key, value in pending.items() if isinstance(value, _Done))
+    for future in as_completed(futures):
+        yield futures[future]
 
 
 @contextlib.contextmanager
@@ -545,12 +594,28 @@ def _pool(workers: int, executor=None):
         yield pool
 
 
+class _Done:
+    """A result computed here, with the ``result()`` of a pool's future."""
+
+    def __init__(self, function, *args):
+        self._value, self._error = None, None
+        try:
+            self._value = function(*args)
+        except Exception as exc:          # raised where the result is asked for, as a pool's
+            self._error = exc
+
+    def result(self):
+        if self._error is not None:
+            raise self._error
+        return self._value
+
+
 def _submit(pool, function, *args):
-    """``function(*args)`` on ``pool`` (None: here, now), as a call that gives its result."""
+    """``function(*args)`` on ``pool`` (a future), or here and now when ``pool`` is None (a
+    :class:`_Done`); either gives its result, or raises its exception, from ``result()``."""
     if pool is None:
-        value = function(*args)
-        return lambda: value
-    return pool.submit(function, *args).result
+        return _Done(function, *args)
+    return pool.submit(function, *args)
 
 
 def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print) -> tuple:
@@ -581,15 +646,27 @@ def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print)
     for extra in DEMO_COMPARISONS:
         after = next((k for k, p in enumerate(plan) if p[1] == extra[1]), len(plan) - 1)
         plan.insert(after + 1, extra)
-    runs, surprises = [], []
+    surprises, runs, made = [], {}, {}
+    start = time.perf_counter()
+    Path(out).mkdir(parents=True, exist_ok=True)
     with _pool(workers) as pool:
-        # the scenes side by side on the pool (each writes its own folder), reported in order
-        pending = [(label, expected, _submit(pool, run_one, source, overrides, out / label))
-                   for label, source, overrides, expected in plan]
-        for label, expected, outcome in pending:
-            summary = outcome()
-            runs.append((label, summary))
-            note = "" if summary["status"] == expected else f" (expected {expected})"
+        # everything goes to the pool at once, the long sections first and the scenes (each
+        # writes its own folder) after them, so that no process waits; each is reported as
+        # it finishes, and the report keeps the order of the plan
+        pending = _submit_sections(pool, out)
+        expected = {}
+        for label, source, overrides, status in sorted(
+                plan, key=lambda p: p[0] not in LONG_SCENES):
+            pending[label] = _submit(pool, run_one, source, overrides, out / label)
+            expected[label] = status
+        for label in _finished(pending):
+            if label not in expected:
+                made.update(_section_outcome(label, pending[label], surprises, progress,
+                                             start))
+                continue
+            summary = runs[label] = pending[label].result()
+            note = "" if summary["status"] == expected[label] else \
+                f" (expected {expected[label]})"
             progress(f"{label}: {summary['status']}{note}, peak tip deflection "
                      f"{summary['peak_tip_deflection']:.4g} m, t = {summary['t_end']:.4g} s, "
                      f"{summary['wall_time_s']:.2f} s")
@@ -597,7 +674,8 @@ def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print)
                 surprises.append(f"{label} ended {summary['status']}{note}: "
                                  f"{summary['message']}")
         freq_plot = frequency_plot(out)
-        made = sections(out, workers, surprises, progress, executor=pool)
+    runs = [(label, runs[label]) for label, *_ in plan]
+    made = [made[label] for label, _ in SECTIONS if label in made]
     report = write_demo_report(out, runs, freq_plot, intro=DEMO_INTRO,
                                frequency_note=DEMO_FREQUENCY_NOTE, sections=made)
     return report, surprises

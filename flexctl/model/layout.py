@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -314,9 +315,13 @@ class StateLayout:
 
     def projection(self, other: "StateLayout") -> np.ndarray:
         """Indices of this layout's states that form the state of ``other`` (a layout of the
-        same blocks on fewer modes, e.g. a design model): each appendage's first modes."""
+        same blocks on fewer modes, e.g. a design model): each appendage's first modes.
+        Read-only (kept for the next call: a sampled law asks at every sample)."""
         if not isinstance(other, StateLayout):
             raise InputTypeError(f"other must be a StateLayout; got {type(other).__name__}")
+        return _projection(self, other)
+
+    def _projection(self, other: "StateLayout") -> np.ndarray:
         if other.appendage_names != self.appendage_names or other.free_hub != self.free_hub \
                 or other.rotation != self.rotation:
             raise InputValueError("the layouts must have the same appendages and hub")
@@ -334,7 +339,9 @@ class StateLayout:
                     raise InputValueError(f"appendage {name!r} has {dict(self.appendages)[name]}"
                                           f" modes here; cannot give {modes}")
                 rows += [offset + start + k for k in range(modes)]
-        return np.array(rows, dtype=int)
+        rows = np.array(rows, dtype=int)
+        rows.setflags(write=False)
+        return rows
 
     # ------------------------------------------------------------------ accessors
     def hub_angle(self, x):
@@ -439,3 +446,8 @@ class StateLayout:
         hub = "free hub" if self.free_hub else "pinned hub"
         extra = "".join(f", {name} ({len(labels)})" for name, labels in self.extra)
         return f"StateLayout({hub}, {apps}{extra}; {self.n_states} states)"
+
+
+@lru_cache(maxsize=256)
+def _projection(layout: StateLayout, other: StateLayout) -> np.ndarray:
+    return layout._projection(other)
