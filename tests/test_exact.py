@@ -8,6 +8,7 @@ by Richardson extrapolation of 32 and 64 elements.
 """
 
 import dataclasses
+
 import casadi as ca
 import numpy as np
 import pytest

@@ -1,5 +1,6 @@
 """Compiled fixed-step RK4 (method="rk4"): accuracy, error estimate, breakpoints, stops."""
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -8,8 +9,9 @@ import pytest
 import flexctl
 from controllers import PD
 from flexctl.model.errors import InputError
-from flexctl.sim.fixed_step import RK4_OMEGA_H, RK4_STABILITY, hermite, step_times
+from flexctl.sim import compile_cache
 from flexctl.sim.compiled import input_numbers
+from flexctl.sim.fixed_step import RK4_OMEGA_H, RK4_STABILITY, hermite, step_times
 from flexctl.sim.maneuvers import SineTorque
 
 
@@ -146,11 +148,26 @@ def test_exact_model_steps_compiled_and_agree_with_cvodes(drive, monkeypatch):
         x0 = np.zeros(model.n_states)
         x0[0] = -np.pi / 2
         t_final, inputs = 4.0, {"controller": PD(kp=12.0, kd=8.0, torque_limit=6.0), "x0": x0}
-    drives = (None, inputs.get("hub_motion"), inputs.get("controller"))
-    step = fixed_step._step_function(model, *drives, input_numbers(drives).size)[0]
-    assert step.is_a("External")
     run = flexctl.simulate(model, t_final, method="rk4", rtol=1e-4, check_validity=False,
                            **inputs)
+    # the step's library takes the model's numbers as an input: a stiffer beam of the same
+    # structure calls the same library (no compile, no load), with its own numbers
+    stiffer = dataclasses.replace(scene.system, beam=dataclasses.replace(
+        scene.system.beam, youngs_modulus=1.1 * scene.system.beam.youngs_modulus))
+    other = flexctl.build_model(stiffer, n_modes=2, variant="exact")
+    before = dict(compile_cache.STATS)
+    drives = (None, inputs.get("hub_motion"), inputs.get("controller"))
+    fixed_step._step_function(other, *drives, input_numbers(drives).size)
+    assert compile_cache.STATS["compiles"] == before["compiles"]
+    assert compile_cache.STATS["loads"] == before["loads"]
+    assert compile_cache.STATS["hits"] == before["hits"] + 1
+    stiff_run = flexctl.simulate(other, t_final, method="rk4", rtol=1e-4, check_validity=False,
+                                 **inputs)
+    stiff_tight = flexctl.simulate(other, t_final, rtol=1e-10, check_validity=False, **inputs)
+    assert np.max(np.abs(stiff_run.tip_deflection - stiff_tight.tip_deflection)) \
+        <= stiff_run.integration_error
+    assert np.max(np.abs(stiff_run.tip_deflection - run.tip_deflection)) \
+        > 100.0 * run.integration_error
     tight = flexctl.simulate(model, t_final, rtol=1e-10, check_validity=False, **inputs)
     assert run.ok and run.method == "rk4"
     actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))

@@ -179,8 +179,8 @@ def _closed_loop_dynamics(model, t, y, torque, controller, parameters=None, rhs=
     """CasADi ``d[x, z]/dt`` of the plant ``x`` under ``torque`` and ``controller``, whose
     internal states ``z`` (if any) follow ``casadi_derivative``; ``parameters`` the symbol of
     their numbers (:func:`input_numbers` of ``(torque, None, controller)``). On SX symbols the
-    model is inlined; on MX (the exact model's fixed-step loop) it enters through ``rhs``
-    (``(x, u) -> xdot``, e.g. the compiled one of :mod:`flexctl.sim.native_rhs`), by default
+    model is inlined; on MX (the exact model's fixed-step step) it enters through ``rhs``
+    (``(x, u) -> xdot``: a call of its scalar form, its numbers an input), by default
     :meth:`flexctl.Model.integration_rhs`, whose code does not grow with the quadrature."""
     import casadi as ca
 

@@ -25,7 +25,7 @@ import numpy as np
 from .compiled import (_cached, _closed_loop_dynamics, _input_key, _split_numbers,
                        drive_size, hub_motion_casadi, input_numbers)
 from .buffers import InPlace
-from .compile_cache import compiled
+from .compile_cache import compiled, lift_constants
 from .native_rhs import MAX_INSTRUCTIONS
 from ..model.exports import _symbolic_beam_dynamics
 
@@ -64,45 +64,71 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int):
     """CasADi ``step([y; t], h, c) -> ([y_next; t + h], f(t, y))``: one RK4 step of the drive
     (plant and controller states, or ``[q, q_dot]`` under a prescribed hub motion), time
     carried with the state, and the derivative at the step's start for dense output; and
-    ``rate(y, t, c) -> f`` alone."""
+    ``rate(y, t, c) -> f`` alone. The exact model's step is compiled on its own
+    (:func:`_exact_step`)."""
     import casadi as ca
 
     sym = ca.MX if model.variant == "exact" else ca.SX
     ny = drive_size(model, hub_motion, controller)
     yt, h, c = sym.sym("yt", ny + 1), sym.sym("h"), sym.sym("c", n_numbers)
     y, t = yt[:ny], yt[ny]
+    core = _exact_core(model, hub_motion)
+    lifted = None if core is None else lift_constants(core, MAX_INSTRUCTIONS)
+    numbers = None if lifted is None else sym.sym("numbers", lifted[1].size)
 
-    # the exact model enters as a call of its scalar form, written once in the step's code
-    rhs = model.casadi() if model.variant == "exact" else None
-
-    def f(time, state):
+    def f(time, state, model_numbers=None):
         if hub_motion is not None:
             rate, acceleration = hub_motion_casadi(
                 hub_motion, time, _split_numbers((torque, hub_motion, controller), c)[1])
-            return _symbolic_beam_dynamics(model, state, rate, acceleration)
+            if model_numbers is None:
+                return _symbolic_beam_dynamics(model, state, rate, acceleration)
+            beam = model.layout.without_rotation()
+            q, q_dot = beam.modal(state), beam.modal_rates(state)
+            return ca.vertcat(q_dot, lifted[0](q, q_dot, rate, acceleration, model_numbers))
+        rhs = None if model_numbers is None else (lambda x, u: lifted[0](x, u, model_numbers))
         return _closed_loop_dynamics(model, time, state, torque, controller, c, rhs=rhs)
 
-    k1 = f(t, y)
-    k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
-    k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
-    k4 = f(t + h * (1.0 - _END_INSIDE), y + h * k3)
+    k1 = f(t, y, numbers)
+    k2 = f(t + 0.5 * h, y + 0.5 * h * k1, numbers)
+    k3 = f(t + 0.5 * h, y + 0.5 * h * k2, numbers)
+    k4 = f(t + h * (1.0 - _END_INSIDE), y + h * k3, numbers)
     y_next = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
     ys, ts = sym.sym("y", ny), sym.sym("t")
-    step = ca.Function("flexctl_rk4_step", [yt, h, c], [ca.vertcat(y_next, t + h), k1])
-    if model.variant == "exact":
-        step = _exact_step(step, rhs)
-    return step, ca.Function("flexctl_rate", [ys, ts, c], [f(ts, ys)])
+    rate = ca.Function("flexctl_rate", [ys, ts, c], [f(ts, ys)])
+    if lifted is None:
+        return (ca.Function("flexctl_rk4_step", [yt, h, c], [ca.vertcat(y_next, t + h), k1]),
+                rate)
+    step = ca.Function("flexctl_exact_rk4_step", [yt, h, c, numbers],
+                       [ca.vertcat(y_next, t + h), k1])
+    return _exact_step(step, lifted[1]), rate
 
 
-def _exact_step(step, rhs):
-    """The exact model's RK4 ``step`` as machine code (:mod:`flexctl.sim.compile_cache`) where
-    its dynamics ``rhs`` are short enough to compile in a few seconds, else ``step``: the
-    compiled loops of the other variants write the dynamics out in every loop's code, which for
-    the exact model would be several such compilations; its loops call the compiled step
-    instead, each step a few microseconds of arithmetic against well under one of the call."""
-    if not USE_JIT or rhs.n_instructions() > MAX_INSTRUCTIONS:
-        return step
-    return compiled(step, label="the exact model's RK4 step")
+def _exact_core(model, hub_motion):
+    """The exact model's scalar function that its RK4 step calls: its beam under a prescribed
+    hub motion (one beam), its right-hand side under a torque (one beam or a structure);
+    None for the other variants (written out in the step) and a structure's prescribed
+    motion (inlined as the other variants)."""
+    if model.variant != "exact":
+        return None
+    if hub_motion is not None:
+        return None if hasattr(model, "functions") else model.geometry.beam
+    return model.casadi()
+
+
+def _exact_step(step, numbers):
+    """The exact model's RK4 ``step`` (``[y; t], h, c, model numbers``) as machine code from
+    the persistent cache (:mod:`flexctl.sim.compile_cache`), called with the model's
+    ``numbers``: ``([y; t], h, c) -> ...``. The model's numbers are an input, so that one
+    library serves every model of a structure (a Monte Carlo over the beam compiles once). The
+    other variants' loops are compiled whole; the exact model's quadrature would be written
+    into each of them, several compilations of seconds each, so its loops (on CasADi's
+    virtual machine) call this step instead: some microseconds of arithmetic a step against
+    well under one for the call."""
+    import casadi as ca
+
+    built = compiled(step, label="the exact model's RK4 step") if USE_JIT else step
+    yt, h, c = (ca.MX.sym(step.name_in(k), step.sparsity_in(k)) for k in range(3))
+    return ca.Function("flexctl_rk4_step", [yt, h, c], built(yt, h, c, ca.DM(numbers)))
 
 
 class _ChunkRuns(dict):
