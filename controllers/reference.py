@@ -146,7 +146,8 @@ class SlewProfile(KeywordOnly):
         """Angle (rad), rate (rad/s) and acceleration (rad/s^2) at one time ``t`` (s), as
         floats: the formulas of :meth:`angle`, :meth:`rate` and :meth:`acceleration` on a
         scalar, as a sampled law reads them at every sample."""
-        tau = min(max((float(t) - self.start_time) / self.duration, 0.0), 1.0)
+        t = _real("slew.at", "t", t)
+        tau = min(max((t - self.start_time) / self.duration, 0.0), 1.0)
         if self.shape == "poly7":
             s = tau ** 4 * (35.0 + tau * (-84.0 + tau * (70.0 - 20.0 * tau)))
             ds = 140.0 * (tau * (1.0 - tau)) ** 3

@@ -99,6 +99,10 @@ def test_slew_profile_is_rest_to_rest_and_consistent(shape_name):
     for time in (0.0, 0.5, 0.9, 1.25, 1.99, 2.0, 2.7):
         assert slew.at(time) == (float(slew.angle(time)), float(slew.rate(time)),
                                  float(slew.acceleration(time)))
+    for bad, error in ((float("nan"), ValueError), (float("inf"), ValueError),
+                       ("1.0", TypeError), (None, TypeError), (True, TypeError)):
+        with pytest.raises(error, match="slew.at.t"):
+            slew.at(bad)
 
 
 def test_minimum_slew_duration_meets_torque_limit():
