@@ -55,6 +55,18 @@ def _optional_positive(owner: str, name: str, value) -> float | None:
     return _real(owner, name, value, minimum=0.0, strict=True, optional=True)
 
 
+def _shape_terms(shape: str, tau, sin, cos) -> tuple:
+    """The profile ``s`` and its derivatives ``s'``, ``s''`` in normalised time ``tau`` (a
+    float or a CasADi symbol, with the matching ``sin`` and ``cos``)."""
+    if shape == "poly7":
+        return (tau ** 4 * (35.0 + tau * (-84.0 + tau * (70.0 - 20.0 * tau))),
+                140.0 * (tau * (1.0 - tau)) ** 3,
+                420.0 * (tau * (1.0 - tau)) ** 2 * (1.0 - 2.0 * tau))
+    return (tau - sin(2.0 * math.pi * tau) / (2.0 * math.pi),
+            1.0 - cos(2.0 * math.pi * tau),
+            2.0 * math.pi * sin(2.0 * math.pi * tau))
+
+
 @dataclass(frozen=True, kw_only=True)
 class SlewProfile(KeywordOnly):
     """Rest-to-rest slew of the hub angle from 0 to ``slew_angle``.
@@ -128,14 +140,7 @@ class SlewProfile(KeywordOnly):
         if parameters is not None:
             angle, duration, start = parameters[0], parameters[1], parameters[2]
         tau = ca.fmin(ca.fmax((t - start) / duration, 0.0), 1.0)
-        if self.shape == "poly7":
-            s = tau ** 4 * (35.0 + tau * (-84.0 + tau * (70.0 - 20.0 * tau)))
-            ds = 140.0 * (tau * (1.0 - tau)) ** 3
-            dds = 420.0 * (tau * (1.0 - tau)) ** 2 * (1.0 - 2.0 * tau)
-        else:
-            s = tau - ca.sin(2.0 * np.pi * tau) / (2.0 * np.pi)
-            ds = 1.0 - ca.cos(2.0 * np.pi * tau)
-            dds = 2.0 * np.pi * ca.sin(2.0 * np.pi * tau)
+        s, ds, dds = _shape_terms(self.shape, tau, ca.sin, ca.cos)
         return angle * s, angle / duration * ds, angle / duration ** 2 * dds
 
     def _tau(self, t):
@@ -148,14 +153,7 @@ class SlewProfile(KeywordOnly):
         scalar, as a sampled law reads them at every sample."""
         t = _real("slew.at", "t", t)
         tau = min(max((t - self.start_time) / self.duration, 0.0), 1.0)
-        if self.shape == "poly7":
-            s = tau ** 4 * (35.0 + tau * (-84.0 + tau * (70.0 - 20.0 * tau)))
-            ds = 140.0 * (tau * (1.0 - tau)) ** 3
-            dds = 420.0 * (tau * (1.0 - tau)) ** 2 * (1.0 - 2.0 * tau)
-        else:
-            s = tau - math.sin(2.0 * math.pi * tau) / (2.0 * math.pi)
-            ds = 1.0 - math.cos(2.0 * math.pi * tau)
-            dds = 2.0 * math.pi * math.sin(2.0 * math.pi * tau)
+        s, ds, dds = _shape_terms(self.shape, tau, math.sin, math.cos)
         return (self.slew_angle * s, self.slew_angle / self.duration * ds,
                 self.slew_angle / self.duration ** 2 * dds)
 
