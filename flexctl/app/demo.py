@@ -653,18 +653,19 @@ def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print)
         # everything goes to the pool at once, the long sections first and the scenes (each
         # writes its own folder) after them, so that no process waits; each is reported as
         # it finishes, and the report keeps the order of the plan
-        pending = _submit_sections(pool, out)
+        pending = {("section", label): call
+                   for label, call in _submit_sections(pool, out).items()}
         expected = {}
         for label, source, overrides, status in sorted(
                 plan, key=lambda p: p[0] not in LONG_SCENES):
-            pending[label] = _submit(pool, run_one, source, overrides, out / label)
+            pending["scene", label] = _submit(pool, run_one, source, overrides, out / label)
             expected[label] = status
-        for label in _finished(pending):
-            if label not in expected:
-                made.update(_section_outcome(label, pending[label], surprises, progress,
+        for kind, label in _finished(pending):
+            if kind == "section":
+                made.update(_section_outcome(label, pending[kind, label], surprises, progress,
                                              start))
                 continue
-            summary = runs[label] = pending[label].result()
+            summary = runs[label] = pending[kind, label].result()
             note = "" if summary["status"] == expected[label] else \
                 f" (expected {expected[label]})"
             progress(f"{label}: {summary['status']}{note}, peak tip deflection "
