@@ -594,6 +594,17 @@ def _pool(workers: int, executor=None):
         yield pool
 
 
+def _import_before_fork() -> None:
+    """Import what every worker needs (the controllers, python-control, matplotlib's Agg
+    figures: about a second each) once, here, before the pool's processes start: where they
+    are forked (Linux's default), they inherit the modules instead of importing them."""
+    import control  # noqa: F401
+    import matplotlib.backends.backend_agg  # noqa: F401
+    import matplotlib.figure  # noqa: F401
+
+    import controllers  # noqa: F401
+
+
 class _Done:
     """A result computed here, with the ``result()`` of a pool's future."""
 
@@ -649,6 +660,8 @@ def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print)
     surprises, runs, made = [], {}, {}
     start = time.perf_counter()
     Path(out).mkdir(parents=True, exist_ok=True)
+    if workers > 1:
+        _import_before_fork()
     with _pool(workers) as pool:
         # everything goes to the pool at once, the long sections first and the scenes (each
         # writes its own folder) after them, so that no process waits; each is reported as
