@@ -270,3 +270,12 @@ def test_symmetric_solve_keeps_an_ill_conditioned_mass_matrix_accurate():
         worst = max(worst, np.max(np.abs(found - reference)) / np.max(np.abs(reference)))
     assert np.linalg.cond(mass) > 1e6
     assert worst < 1e-7
+
+
+def test_symmetric_solve_refuses_mismatched_shapes():
+    from flexctl.model.errors import InputValueError
+    from flexctl.model.exact import symmetric_solve
+
+    for matrix, rhs in (((3, 2), (3, 1)), ((3, 3), (2, 1)), ((3, 3), (3, 2))):
+        with pytest.raises(InputValueError, match="square matrix"):
+            symmetric_solve(ca.SX.sym("m", *matrix), ca.SX.sym("g", *rhs))

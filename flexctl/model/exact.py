@@ -42,6 +42,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from .errors import InputValueError
 from .layout import StateLayout
 from .modes import mode_shapes
 from .parameters import HubBeam
@@ -262,6 +263,9 @@ def symmetric_solve(matrix, rhs):
     import casadi as ca
 
     n = matrix.shape[0]
+    if matrix.shape != (n, n) or rhs.shape != (n, 1):
+        raise InputValueError(f"symmetric_solve needs a square matrix and a right-hand side of "
+                              f"its size; got shapes {matrix.shape} and {rhs.shape}")
     lower, diag = {}, []
     for j in range(n):
         d = matrix[j, j]

@@ -18,6 +18,7 @@ again (at most ``MAX_HALVINGS`` times).
 
 from __future__ import annotations
 
+import weakref
 from collections import OrderedDict
 
 import numpy as np
@@ -57,6 +58,8 @@ USE_JIT = True
 CHUNKS = (4096, 256, 16)
 
 _STEP_CACHE: OrderedDict = OrderedDict()
+#: Each exact model's lifted step dynamics (:func:`_lifted_core`).
+_LIFTED: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 _STEP_CACHE_SIZE = 64
 
 
@@ -72,8 +75,7 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int):
     ny = drive_size(model, hub_motion, controller)
     yt, h, c = sym.sym("yt", ny + 1), sym.sym("h"), sym.sym("c", n_numbers)
     y, t = yt[:ny], yt[ny]
-    core = _exact_core(model, hub_motion)
-    lifted = None if core is None else lift_constants(core, MAX_INSTRUCTIONS)
+    lifted = _lifted_core(model, hub_motion)
     numbers = None if lifted is None else sym.sym("numbers", lifted[1].size)
 
     def f(time, state, model_numbers=None):
@@ -101,6 +103,19 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int):
     step = ca.Function("flexctl_exact_rk4_step", [yt, h, c, numbers],
                        [ca.vertcat(y_next, t + h), k1])
     return _exact_step(step, lifted[1]), rate
+
+
+def _lifted_core(model, hub_motion):
+    """:func:`_exact_core` with its numbers lifted (``(function, numbers)``,
+    :func:`~flexctl.sim.compile_cache.lift_constants`), kept with the model: a sampled loop
+    builds a step for each count of steps per sample. None where there is no core or it is
+    too long to compile."""
+    kind = "prescribed" if hub_motion is not None else "torque"
+    kept = _LIFTED.setdefault(model, {})
+    if kind not in kept:
+        core = _exact_core(model, hub_motion)
+        kept[kind] = None if core is None else lift_constants(core, MAX_INSTRUCTIONS)
+    return kept[kind]
 
 
 def _exact_core(model, hub_motion):
