@@ -237,7 +237,7 @@ def _evaluate(reference, t: float):
     """Reference angle (rad), rate (rad/s) and acceleration (rad/s^2) at ``t``; 0 for None."""
     if reference is None:
         return 0.0, 0.0, 0.0
-    if isinstance(reference, SlewProfile):
+    if isinstance(reference, SlewProfile) and isinstance(t, (float, int, np.floating)):
         return reference.at(t)
     return (float(reference.angle(t)), float(reference.rate(t)),
             float(reference.acceleration(t)))
