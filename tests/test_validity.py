@@ -38,6 +38,31 @@ def test_estimate_tracks_the_full_difference(case):
     assert full / TRACKING_FACTOR <= estimate <= full * TRACKING_FACTOR, (estimate, full)
 
 
+def test_estimate_starts_from_the_runs_initial_state():
+    """A PD law from 90 deg off target, at rest: the estimate's runs start where the run does
+    (they once started at rest, on target, and saw no motion at all), and the run's reported
+    estimate tracks the difference of the 6-mode first_order and exact runs."""
+    from controllers import PD
+
+    system = flexctl.load_scene("slew-90").system
+    pd = PD(kp=12.0, kd=8.0, torque_limit=6.0)
+    x0 = np.zeros(build_model(system, 6).n_states)
+    x0[0] = -np.pi / 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ModelValidityWarning)
+        runs = {v: simulate(build_model(system, 6, v), 6.0, controller=pd, x0=x0)
+                for v in ("first_order", "exact")}
+    exact = runs["exact"].tip_deflection
+    full = np.max(np.abs(runs["first_order"].tip_deflection - exact)) / np.max(np.abs(exact))
+    reported = runs["first_order"].validity.geometric_error
+    assert full > 1e-2
+    assert full / TRACKING_FACTOR <= reported <= full * TRACKING_FACTOR, (reported, full)
+    # from rest on target the law does nothing: no geometric error
+    assert geometric_error(build_model(system, 6), 6.0, controller=pd) < 1e-9
+    with pytest.raises(ValueError, match="x0 must have the model's 14 states"):
+        geometric_error(build_model(system, 6), 6.0, controller=pd, x0=np.zeros(3))
+
+
 def test_exact_has_no_geometric_error_and_first_order_warns():
     system = flexctl.load_scene("hub-beam-mass").system
     drive = {"torque": SineTorque(peak_torque=6.0, duration=1.2)}

@@ -37,6 +37,7 @@ import numpy as np
 
 from ..model import build_model
 from ..model.build import rebuild
+from ..model.errors import InputValueError
 from .fidelity import DEFAULT_TOLERANCE, _as_input, _check_tolerance, _is_prescribed
 from .energy import ENERGY_TOLERANCE, ModelValidityWarning
 from .runs import run_once, run_states
@@ -62,7 +63,7 @@ SCREEN_FACTOR = 0.4
 
 
 def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, controller=None,
-                    n_modes: int = ESTIMATE_MODES, sensors=None) -> float:
+                    n_modes: int = ESTIMATE_MODES, sensors=None, x0=None) -> float:
     """Estimated relative tip error of ``model``'s variant against exact geometry.
 
     Parameters
@@ -75,6 +76,10 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         The run's inputs, as for :func:`flexctl.simulate`.
     n_modes : int
         Modes of the two compared models.
+    x0 : array_like, shape (n,), optional
+        The run's initial plant state (``model``'s layout; default rest): each compared
+        model starts from its states of the same names (the modes beyond ``n_modes`` left
+        out).
 
     Returns
     -------
@@ -95,7 +100,8 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         # with noiseless readings: a quantised, noisy loop's vibration is not repeatable from
         # one model to the other, while the model error is the manoeuvre's
         drive = {"torque": torque, "hub_motion": hub_motion, "controller": on_small,
-                 "sensors": None if sensors is None else sensors.noiseless()}
+                 "sensors": None if sensors is None else sensors.noiseless(),
+                 "x0": _initial_state_of(small, model, x0)}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             ok, states = run_states(small, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False,
@@ -107,6 +113,20 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     # deflection of 1e-38 m has no geometric error, only the integrators' rounding
     peak = np.maximum(np.max(np.abs(tips[1]), axis=1), DEFLECTION_FLOOR * model.lengths)
     return float(np.max(np.max(np.abs(tips[0] - tips[1]), axis=1) / peak))
+
+
+def _initial_state_of(small, model, x0):
+    """``model``'s initial state ``x0`` on the layout of ``small`` (the same plant on fewer
+    modes), state by state name; None for rest."""
+    if x0 is None:
+        return None
+    x0 = np.asarray(x0, dtype=float).reshape(-1)
+    names = model.layout.names
+    if x0.size != len(names):
+        raise InputValueError(f"geometric_error x0 must have the model's {len(names)} states; "
+                              f"got {x0.size}")
+    index = {name: k for k, name in enumerate(names)}
+    return x0[[index[name] for name in small.layout.names]]
 
 
 def _law_modes(controller) -> int:
@@ -245,8 +265,10 @@ def assess(result, *, torque=None, hub_motion=None, controller=None, sensors=Non
     _check_tolerance(tolerance)
     model = result.model
     t_end = float(result.t[-1]) if result.t.size else 0.0
+    x0 = result.states[:, 0] if np.ndim(result.states) == 2 and result.t.size else None
     error = (geometric_error(model, t_end, torque=torque, hub_motion=hub_motion,
-                             controller=controller, sensors=sensors) if t_end > 0 else 0.0)
+                             controller=controller, sensors=sensors, x0=x0)
+             if t_end > 0 else 0.0)
     validity = ModelValidity(variant=model.variant,
                              deflection_ratio=result.deflection_ratio,
                              geometric_error=error, tolerance=float(tolerance),
