@@ -7,7 +7,7 @@ every mode:
 
 * :func:`geometric_error` runs the run's variant and the exact variant, both on
   :data:`ESTIMATE_MODES` modes, under the run's own inputs (torque, hub motion or controller)
-  and returns their largest tip difference relative to the exact peak. The geometric
+  from the run's initial state, and returns their largest tip difference relative to the exact peak. The geometric
   nonlinearity lives in the low modes that carry the deflection, so the few-mode difference
   tracks the difference of the full models (``tests/test_validity.py`` checks it on the
   papers' manoeuvres and a slew, within a factor of 2).
