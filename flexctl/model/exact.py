@@ -47,8 +47,8 @@ from .layout import StateLayout
 from .modes import mode_shapes
 from .parameters import HubBeam
 
-__all__ = ["EXACT_MAX_MODES", "ExactGeometry", "PanelRule", "choose_panels", "exact_geometry", "appendage_terms",
-           "vectorized_rhs", "symmetric_solve", "VELOCITY_FROM_JACOBIAN",
+__all__ = ["EXACT_MAX_MODES", "ExactGeometry", "PanelRule", "choose_panels", "exact_geometry",
+           "appendage_terms", "vectorized_rhs", "symmetric_solve", "VELOCITY_FROM_JACOBIAN",
            "PANEL_TOLERANCE", "PANEL_POINTS"]
 
 #: Most modes the exact variant takes (20 modes: a 445k-instruction right-hand side, 4 s to build).

@@ -7,10 +7,10 @@ every mode:
 
 * :func:`geometric_error` runs the run's variant and the exact variant, both on
   :data:`ESTIMATE_MODES` modes, under the run's own inputs (torque, hub motion or controller)
-  from the run's initial state, and returns their largest tip difference relative to the exact peak. The geometric
-  nonlinearity lives in the low modes that carry the deflection, so the few-mode difference
-  tracks the difference of the full models (``tests/test_validity.py`` checks it on the
-  papers' manoeuvres and a slew, within a factor of 2).
+  from the run's initial state, and returns their largest tip difference relative to the
+  exact peak. The geometric nonlinearity lives in the low modes that carry the deflection, so
+  the few-mode difference tracks the difference of the full models (``tests/test_validity.py``
+  checks it on the papers' manoeuvres and slews, within a factor of 2).
 * :func:`assess` adds the deflection ratio, the run's own energy balance
   (:class:`~flexctl.sim.energy.EnergyBalance`, measured by :func:`flexctl.simulate` from
   its outputs) and a warning when the estimate passes a tolerance or the balance is broken.
