@@ -59,8 +59,11 @@ def test_estimate_starts_from_the_runs_initial_state():
     assert full / TRACKING_FACTOR <= reported <= full * TRACKING_FACTOR, (reported, full)
     # from rest on target the law does nothing: no geometric error
     assert geometric_error(build_model(system, 6), 6.0, controller=pd) < 1e-9
-    with pytest.raises(ValueError, match="x0 must have the model's 14 states"):
-        geometric_error(build_model(system, 6), 6.0, controller=pd, x0=np.zeros(3))
+    for bad in (np.zeros(3), np.zeros((2, 7)), np.full(14, np.nan), np.full(14, np.inf)):
+        with pytest.raises(ValueError, match="x0 must be the model's 14 states"):
+            geometric_error(build_model(system, 6), 6.0, controller=pd, x0=bad)
+    with pytest.raises(TypeError, match="x0 must be the model's 14 states"):
+        geometric_error(build_model(system, 6), 6.0, controller=pd, x0="abc")
 
 
 def test_exact_has_no_geometric_error_and_first_order_warns():

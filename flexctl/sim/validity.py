@@ -37,7 +37,7 @@ import numpy as np
 
 from ..model import build_model
 from ..model.build import rebuild
-from ..model.errors import InputValueError
+from ..model.errors import InputTypeError, InputValueError
 from .fidelity import DEFAULT_TOLERANCE, _as_input, _check_tolerance, _is_prescribed
 from .energy import ENERGY_TOLERANCE, ModelValidityWarning
 from .runs import run_once, run_states
@@ -120,11 +120,16 @@ def _initial_state_of(small, model, x0):
     modes), state by state name; None for rest."""
     if x0 is None:
         return None
-    x0 = np.asarray(x0, dtype=float).reshape(-1)
     names = model.layout.names
-    if x0.size != len(names):
-        raise InputValueError(f"geometric_error x0 must have the model's {len(names)} states; "
-                              f"got {x0.size}")
+    try:
+        x0 = np.asarray(x0, dtype=float)
+    except (TypeError, ValueError):
+        raise InputTypeError(f"geometric_error x0 must be the model's {len(names)} states as "
+                             f"numbers; got {x0!r}"[:300]) from None
+    if x0.shape != (len(names),) or not np.all(np.isfinite(x0)):
+        raise InputValueError(f"geometric_error x0 must be the model's {len(names)} states as "
+                              f"finite numbers; got shape {x0.shape}"
+                              f"{'' if x0.shape != (len(names),) else ' with a non-finite entry'}")
     index = {name: k for k, name in enumerate(names)}
     return x0[[index[name] for name in small.layout.names]]
 
