@@ -565,8 +565,8 @@ def _section_outcome(label: str, pending, surprises: list, progress, start=None)
     except (SweepError, InputError) as exc:
         surprises.append(f"{label} failed: {exc}")
         return {}
-    when = "" if start is None else f": done {time.perf_counter() - start:.1f} s after the start"
-    progress(f"{label}{when or ': done'}")
+    when = "" if start is None else f" {time.perf_counter() - start:.1f} s after the start"
+    progress(f"{label}: done{when}")
     return {label: section}
 
 

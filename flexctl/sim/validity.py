@@ -37,9 +37,10 @@ import numpy as np
 
 from ..model import build_model
 from ..model.build import rebuild
-from ..model.errors import InputTypeError, InputValueError
+from ..model.errors import InputValueError
 from .fidelity import DEFAULT_TOLERANCE, _as_input, _check_tolerance, _is_prescribed
 from .energy import ENERGY_TOLERANCE, ModelValidityWarning
+from .inputs import as_vector
 from .runs import run_once, run_states
 
 __all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "assess", "assess_run",
@@ -89,6 +90,7 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     """
     if model.variant == "exact":
         return 0.0
+    x0 = _checked_initial_state(model, x0)
     # a controller reads at least the modes it was designed on
     n_modes = min(max(n_modes, _law_modes(controller)), min(model.modes))
     tips = []
@@ -115,22 +117,25 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     return float(np.max(np.max(np.abs(tips[0] - tips[1]), axis=1) / peak))
 
 
-def _initial_state_of(small, model, x0):
-    """``model``'s initial state ``x0`` on the layout of ``small`` (the same plant on fewer
-    modes), state by state name; None for rest."""
+def _checked_initial_state(model, x0):
+    """``x0`` as ``model``'s states (shape (n,), finite), or None for rest."""
     if x0 is None:
         return None
-    names = model.layout.names
-    try:
-        x0 = np.asarray(x0, dtype=float)
-    except (TypeError, ValueError):
-        raise InputTypeError(f"geometric_error x0 must be the model's {len(names)} states as "
-                             f"numbers; got {x0!r}"[:300]) from None
-    if x0.shape != (len(names),) or not np.all(np.isfinite(x0)):
-        raise InputValueError(f"geometric_error x0 must be the model's {len(names)} states as "
-                              f"finite numbers; got shape {x0.shape}"
-                              f"{'' if x0.shape != (len(names),) else ' with a non-finite entry'}")
-    index = {name: k for k, name in enumerate(names)}
+    n = model.layout.n_states
+    x0 = as_vector("geometric_error x0", x0, f"the model's {n} states as numbers")
+    if x0.shape != (n,) or not np.all(np.isfinite(x0)):
+        raise InputValueError(f"geometric_error x0 must be the model's {n} states as finite "
+                              f"numbers; got shape {x0.shape}"
+                              f"{'' if x0.shape != (n,) else ' with a non-finite entry'}")
+    return x0
+
+
+def _initial_state_of(small, model, x0):
+    """``model``'s checked initial state ``x0`` on the layout of ``small`` (the same plant on
+    fewer modes), state by state name; None for rest."""
+    if x0 is None:
+        return None
+    index = {name: k for k, name in enumerate(model.layout.names)}
     return x0[[index[name] for name in small.layout.names]]
 
 
