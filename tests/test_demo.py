@@ -152,3 +152,13 @@ def test_every_section_and_long_scene_is_scheduled_once():
 
     assert sorted(demo.SECTION_ORDER) == sorted(label for label, _ in demo.SECTIONS)
     assert set(demo.LONG_SCENES) <= set(builtin_scenes())
+
+
+@pytest.mark.parametrize("workers", [0, -1, 1.5, "2", float("nan"), 10 ** 9, True])
+def test_demo_refuses_a_worker_count_by_name(tmp_path, workers):
+    from flexctl.model.errors import InputError
+
+    with pytest.raises(InputError, match="demo.workers must be an integer in"):
+        demo.sections(tmp_path, workers, [], print)
+    with pytest.raises(InputError, match="demo.workers must be an integer in"):
+        demo.run_demo(tmp_path, print, workers=workers)

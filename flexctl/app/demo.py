@@ -585,6 +585,8 @@ def _finished(pending: dict):
 def _pool(workers: int, executor=None):
     """``executor`` as it is, or a pool of ``workers`` processes for the block (None for
     one worker: everything runs in this process)."""
+    if executor is None:
+        workers = _checked_workers(workers)
     if executor is not None or workers <= 1:
         yield executor
         return
@@ -592,6 +594,13 @@ def _pool(workers: int, executor=None):
 
     with ProcessPoolExecutor(max_workers=workers) as pool:
         yield pool
+
+
+def _checked_workers(workers) -> int:
+    """``workers`` as a process count from 1 to 1024, or a clear error naming it."""
+    from ..model.checks import check_integer
+
+    return check_integer("demo", "workers", workers, minimum=1, maximum=1024)
 
 
 def _import_before_fork() -> None:
@@ -657,6 +666,7 @@ def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print)
     for extra in DEMO_COMPARISONS:
         after = next((k for k, p in enumerate(plan) if p[1] == extra[1]), len(plan) - 1)
         plan.insert(after + 1, extra)
+    workers = _checked_workers(workers)
     surprises, runs, made = [], {}, {}
     start = time.perf_counter()
     Path(out).mkdir(parents=True, exist_ok=True)
