@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -197,5 +198,12 @@ def as_structure(system) -> Structure:
     if isinstance(system, Structure):
         return system
     if isinstance(system, HubBeam):
-        return Structure.from_hub_beam(system)
+        return _one_appendage(system)
     raise InputTypeError(f"system must be a HubBeam or a Structure; got {type(system).__name__}")
+
+
+@lru_cache(maxsize=64)
+def _one_appendage(system: HubBeam) -> Structure:
+    """:meth:`Structure.from_hub_beam`, kept: a model asks for its structure on every run
+    (both are frozen)."""
+    return Structure.from_hub_beam(system)

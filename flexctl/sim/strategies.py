@@ -23,7 +23,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .compiled import SegmentIntegrator, numeric_rhs, start_check, verify_accuracy
-from .fixed_step import MAX_HALVINGS, RK4_OMEGA_H, integrate_fixed_step
+from .fixed_step import MAX_HALVINGS, RK4_FIRST_OMEGA_H, RK4_OMEGA_H, integrate_fixed_step
 from .inputs import jacobian_frequency
 from .progress import Progress
 from .stops import StopReason, tip_rows
@@ -246,9 +246,10 @@ class FixedStepRK4:
     def __init__(self, request, plan, drive, stops):
         self.request, self.plan, self.drive, self.stops = request, plan, drive, stops
 
-    def _step_bound(self) -> float:
-        """The coarse step: :data:`RK4_OMEGA_H` over the fastest frequency the run meets
-        (the plant's, the loop's, the initial spin's, a prescribed spin's)."""
+    def _step_bounds(self) -> tuple:
+        """The first returned run's step and the resolved step, s: :data:`RK4_FIRST_OMEGA_H`
+        and :data:`RK4_OMEGA_H` over the fastest frequency the run meets (the plant's, the
+        loop's, the initial spin's, a prescribed spin's)."""
         request, plan = self.request, self.plan
         omega_max = max(plan.omega_plant, plan.loop_frequency, request.spin_frequency)
         if request.prescribed:
@@ -257,17 +258,19 @@ class FixedStepRK4:
             if np.isfinite(spin_max) and spin_max > 0.0:
                 omega_max = max(omega_max, float(request.model.natural_frequencies(
                     spin_max, hub="clamped")[-1]))
-        return min(RK4_OMEGA_H / omega_max, 0.5 * request.max_step)
+        return (min(RK4_FIRST_OMEGA_H / omega_max, 0.5 * request.max_step),
+                min(RK4_OMEGA_H / omega_max, 0.5 * request.max_step))
 
     def run(self) -> Trajectory:
         request, drive, stops = self.request, self.drive, self.stops
         tip_map = tip_rows(request.model, drive.layout)
+        h_first, h_resolved = self._step_bounds()
         try:
             fixed = integrate_fixed_step(request.model, np.array(self.plan.cuts), request.grid,
-                                         drive.y_init, tip_map, self._step_bound(),
+                                         drive.y_init, tip_map, h_first,
                                          request.rtol, torque=request.torque,
                                          hub_motion=request.hub_motion,
-                                         controller=request.controller)
+                                         controller=request.controller, h_resolved=h_resolved)
         except ValueError as exc:
             raise InputValueError(f"method 'rk4': {exc}; use method 'cvodes'") from None
         traj = Trajectory(ts=[np.array([0.0])], ys=[drive.y_init[:, None]],
