@@ -5,7 +5,9 @@ A flight computer reads the sensors at ``t_k = k T``, computes a torque and hold
 :class:`SampledController` this way: the plant is integrated from sample to sample with the
 held torque as a constant (compiled CVODES, one integrator shared by every sample), and the
 controller is called once per sample, from Python, so that it may keep any memory it likes (a
-warm start, an estimate, statistics).
+warm start, an estimate, statistics). A plant that is not stiff over a sample takes compiled
+Dormand-Prince steps instead, whose size carries over from sample to sample
+(:mod:`flexctl.sim.embedded_rk`, ``method="auto"`` or ``"RK45"``).
 
 - :class:`ZeroOrderHold` turns a continuous law (any static :class:`flexctl.Controller`, e.g.
   PD or LQR, or a callable ``law(t, x)``) into a sampled one: the same law, continuous or
@@ -39,6 +41,7 @@ from .compiled import (CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, inp
                        is_symbolic, min_step_fraction)
 from .buffers import InPlace
 from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
+from .embedded_rk import EmbeddedHold, _Held
 from .inputs import input_value, output_grid, time_function
 from .drives import bound_to_plant
 from .sensors import sensor_names
@@ -160,25 +163,6 @@ class ZeroOrderHold:
             z = np.zeros(0)
             return _HoldSession(lambda t, x: law.torque(t, x, z))
         return _HoldSession(law)
-
-
-@dataclass(frozen=True)
-class _Held:
-    """The held torque as a parametric static controller: one compiled right-hand side and
-    one integrator serve every sample, the torque entering as a number."""
-
-    value: float
-    n_states = 0
-
-    def torque(self, t, x, z=None):
-        return self.value
-
-    @property
-    def casadi_parameters(self) -> tuple:
-        return ("held",), (self.value,)
-
-    def casadi_torque(self, t, x, parameters=None):
-        return parameters[0]
 
 
 @dataclass(frozen=True, eq=False)
@@ -398,9 +382,11 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
         stopping condition, or None.
     check_accuracy : bool
         Estimate the integration error (see :class:`SampledRun`).
-    integrator : {"cvodes", "rk4"}
-        Error-controlled CVODES from sample to sample, or compiled fixed-step RK4 with steps
-        of at most ``h_max`` (s).
+    integrator : {"cvodes", "RK45", "rk4"}
+        Error-controlled CVODES from sample to sample; error-controlled Dormand-Prince 5(4)
+        steps whose size carries over from sample to sample, the first ``h_max`` (s)
+        (:class:`~flexctl.sim.embedded_rk.EmbeddedHold`); or compiled fixed-step RK4 with
+        steps of at most ``h_max``.
     sensors : Sensors, optional
         The controller's session gets their readings (:mod:`flexctl.sim.sensors`) instead of
         the state; they are recorded in ``measurements``.
@@ -419,8 +405,12 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
     if not isinstance(session, ControllerSession):
         raise InputTypeError("controller.start must return a session with step(t, x) and "
                              f"report(); got {type(session).__name__}")
-    hold = (_RK4Hold(model, torque, h_max) if integrator == "rk4"
-            else _CvodesHold(model, torque, scale, rtol, max_steps))
+    if integrator == "rk4":
+        hold = _RK4Hold(model, torque, h_max)
+    elif integrator == "RK45":
+        hold = EmbeddedHold(model, torque, scale, rtol, max_steps, h_first=h_max)
+    else:
+        hold = _CvodesHold(model, torque, scale, rtol, max_steps)
     log = _SampleLog(x0=np.asarray(x0, dtype=float), t_final=float(t_final))
     feed = None if sensors is None else _SensorFeed(model, sensors, edges, x0,
                                                     controller.sample_time)

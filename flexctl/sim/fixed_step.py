@@ -70,12 +70,16 @@ _LIFTED: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 _STEP_CACHE_SIZE = 64
 
 
-def _step_function(model, torque, hub_motion, controller, n_numbers: int):
+def _step_function(model, torque, hub_motion, controller, n_numbers: int, scheme=None):
     """CasADi ``step([y; t], h, c) -> ([y_next; t + h], f(t, y))``: one RK4 step of the drive
     (plant and controller states, or ``[q, q_dot]`` under a prescribed hub motion), time
     carried with the state, and the derivative at the step's start for dense output; and
     ``rate(y, t, c) -> f`` alone. The exact model's step is compiled on its own
-    (:func:`_exact_step`)."""
+    (:func:`_exact_step`).
+
+    ``scheme(f, t, y, h, extra)`` may replace RK4: it returns the step's outputs after
+    ``[y_next; t + h]``, given the drive's ``f(time, state)``; ``extra`` are the step's
+    further inputs (``scheme.inputs``: ``(name, rows)`` pairs) as symbols."""
     import casadi as ca
 
     sym = ca.MX if model.variant == "exact" else ca.SX
@@ -97,19 +101,25 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int):
         rhs = None if model_numbers is None else (lambda x, u: lifted[0](x, u, model_numbers))
         return _closed_loop_dynamics(model, time, state, torque, controller, c, rhs=rhs)
 
-    k1 = f(t, y, numbers)
-    k2 = f(t + 0.5 * h, y + 0.5 * h * k1, numbers)
-    k3 = f(t + 0.5 * h, y + 0.5 * h * k2, numbers)
-    k4 = f(t + h * (1.0 - _END_INSIDE), y + h * k3, numbers)
-    y_next = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
     ys, ts = sym.sym("y", ny), sym.sym("t")
     rate = ca.Function("flexctl_rate", [ys, ts, c], [f(ts, ys)])
+    extra = [] if scheme is None else [sym.sym(name, rows) for name, rows in scheme.inputs]
+    if scheme is None:
+        k1 = f(t, y, numbers)
+        k2 = f(t + 0.5 * h, y + 0.5 * h * k1, numbers)
+        k3 = f(t + 0.5 * h, y + 0.5 * h * k2, numbers)
+        k4 = f(t + h * (1.0 - _END_INSIDE), y + h * k3, numbers)
+        y_next, outputs, name = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4), [k1], "rk4"
+    else:
+        y_next, *outputs = scheme(lambda time, state: f(time, state, numbers), t, y, h, extra)
+        name = scheme.name
+    args = [yt, h, c, *extra]
     if lifted is None:
-        return (ca.Function("flexctl_rk4_step", [yt, h, c], [ca.vertcat(y_next, t + h), k1]),
-                rate)
-    step = ca.Function("flexctl_exact_rk4_step", [yt, h, c, numbers],
-                       [ca.vertcat(y_next, t + h), k1])
-    return _exact_step(step, lifted[1]), rate
+        return (ca.Function(f"flexctl_{name}_step", args,
+                            [ca.vertcat(y_next, t + h), *outputs]), rate)
+    step = ca.Function(f"flexctl_exact_{name}_step", args + [numbers],
+                       [ca.vertcat(y_next, t + h), *outputs])
+    return _exact_step(step, lifted[1], "RK4" if scheme is None else scheme.label), rate
 
 
 def _lifted_core(model, hub_motion):
@@ -137,10 +147,10 @@ def _exact_core(model, hub_motion):
     return model.casadi()
 
 
-def _exact_step(step, numbers):
-    """The exact model's RK4 ``step`` (``[y; t], h, c, model numbers``) as machine code from
-    the persistent cache (:mod:`flexctl.sim.compile_cache`), called with the model's
-    ``numbers``: ``([y; t], h, c) -> ...``. The model's numbers are an input, so that one
+def _exact_step(step, numbers, label: str = "RK4"):
+    """The exact model's ``label`` ``step`` (``[y; t], h, c, ..., model numbers``) as machine
+    code from the persistent cache (:mod:`flexctl.sim.compile_cache`), called with the model's
+    ``numbers``: ``([y; t], h, c, ...) -> ...``. The model's numbers are an input, so that one
     library serves every model of a structure (a Monte Carlo over the beam compiles once). The
     other variants' loops are compiled whole; the exact model's quadrature would be written
     into each of them, several compilations of seconds each, so its loops (on CasADi's
@@ -148,9 +158,10 @@ def _exact_step(step, numbers):
     well under one for the call."""
     import casadi as ca
 
-    built = compiled(step, label="the exact model's RK4 step") if USE_JIT else step
-    yt, h, c = (ca.MX.sym(step.name_in(k), step.sparsity_in(k)) for k in range(3))
-    return ca.Function("flexctl_rk4_step", [yt, h, c], built(yt, h, c, ca.DM(numbers)))
+    built = compiled(step, label=f"the exact model's {label} step") if USE_JIT else step
+    args = [ca.MX.sym(step.name_in(k), step.sparsity_in(k)) for k in range(step.n_in() - 1)]
+    return ca.Function(step.name().replace("_exact", ""), args,
+                       built(*args, ca.DM(numbers)))
 
 
 class _ChunkRuns(dict):

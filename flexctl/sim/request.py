@@ -29,12 +29,17 @@ from ..model import Model, SingularMassMatrixError
 from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["RunRequest", "IntegrationPlan", "run_request", "plan_integration", "state_scale",
-           "StiffnessWarning", "ManyModesWarning", "MANY_MODES", "METHODS"]
+           "StiffnessWarning", "ManyModesWarning", "MANY_MODES", "METHODS", "SAMPLED_METHODS"]
 
 #: Integration methods: "auto" (CVODES when every input has a CasADi form, else DOP853),
 #: "cvodes" (compiled, :mod:`flexctl.sim.compiled`), "rk4" (compiled fixed step,
 #: :mod:`flexctl.sim.fixed_step`) and the ``scipy.integrate.solve_ivp`` methods.
 METHODS = ("auto", "cvodes", "rk4", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+#: The methods of a sampled controller's loop: "auto" (resolved for each run by
+#: :func:`flexctl.sim.embedded_rk.choose_hold`: the compiled Dormand-Prince pair, the scheme
+#: of SciPy's "RK45", for a plant that is not stiff over a sample; CVODES otherwise),
+#: "cvodes", "RK45" and "rk4", all compiled (:mod:`flexctl.sim.digital`).
+SAMPLED_METHODS = ("auto", "cvodes", "RK45", "rk4")
 #: Default tolerances: of the error-controlled methods, and of "rk4" (relative to the peak tip
 #: deflection, for "fast, and 1 % is enough").
 DEFAULT_RTOL = 1e-8
@@ -115,7 +120,9 @@ class RunRequest:
     t_final : float
         s.
     method : str
-        The method asked for, ``"auto"`` resolved (the stiffness guard may still change it).
+        The method asked for, ``"auto"`` resolved (the stiffness guard may still change it);
+        a sampled controller's ``"auto"`` is resolved by its run
+        (:func:`~flexctl.sim.embedded_rk.choose_hold`), which knows the plant's fastest pole.
     rtol : float
     atol : object
         As given (``None``: each state's physical scale times ``rtol``).
@@ -226,17 +233,17 @@ def _step_bound(max_step: float, *sources) -> float:
 def _resolve_method(method, symbolic, controller, untraced) -> str:
     """The method the inputs allow: ``"auto"`` resolved, a compiled one refused for Python
     inputs."""
-    if is_sampled(controller) and method not in ("auto", "cvodes", "rk4"):
+    if is_sampled(controller) and method not in SAMPLED_METHODS:
         raise InputValueError(f"method {method!r}: a sampled controller (sample_time "
                               f"{controller.sample_time!r} s) runs on the compiled path; use "
-                              "method 'auto' or 'cvodes'")
+                              "method 'auto', 'cvodes', 'RK45' or 'rk4'")
     if method in ("cvodes", "rk4") and not symbolic:
         raise InputValueError(f"method {method!r} needs inputs with a CasADi form (the built-in "
                               "manoeuvres, torque samples, controllers with casadi_torque); "
                               "got a Python callable"
                               + (f" (the torque function could not be traced: {untraced})"
                                  if untraced else ""))
-    if method == "auto":
+    if method == "auto" and not is_sampled(controller):
         return "cvodes" if symbolic else "DOP853"
     return method
 

@@ -15,6 +15,7 @@ import numpy as np
 from .digital import run_sampled
 from .drives import PrescribedDrive, TorqueDrive
 from .fixed_step import RK4_OMEGA_H
+from .embedded_rk import choose_hold
 from .request import check_atol, plan_integration, run_request, state_scale
 from .result import SimulationResult, output_samples, assemble_result, audit_energy
 from .stops import StopConditions, StopReason, tip_rows
@@ -90,16 +91,26 @@ def _simulate_sampled(request) -> SimulationResult:
     scale = (state_scale(model, model.layout) if request.atol is None
              else check_atol(request.atol, model.n_states) / rtol)
     stops = StopConditions(model, model.layout, singular=False)
-    integrator = "rk4" if request.method == "rk4" else "cvodes"
     start = time.perf_counter()
-    # the coarse rk4 step: RK4_OMEGA_H over the fastest mode, at the initial spin too
-    omega_max = max(float(model.natural_frequencies(0.0, hub="free")[-1]),
-                    request.spin_frequency)
+    integrator = request.method
+    if integrator == "rk4":
+        # the coarse rk4 step: RK4_OMEGA_H over the fastest mode, at the initial spin too
+        omega_max = max(float(model.natural_frequencies(0.0, hub="free")[-1]),
+                        request.spin_frequency)
+        h_max = RK4_OMEGA_H / omega_max
+    elif integrator in ("auto", "RK45"):
+        chosen, omega = choose_hold(model, request.x_init, scale,
+                                    request.controller.sample_time, request.spin_frequency)
+        integrator = chosen if integrator == "auto" else integrator
+        # the first step of the embedded pair: a radian of the fastest pole
+        h_max = min(request.controller.sample_time,
+                    1.0 / omega if 0.0 < omega < np.inf else np.inf)
+    else:
+        h_max = None
     run = run_sampled(model, request.t_final, request.controller, request.x_init,
                       torque=request.torque, output_step=request.step, scale=scale, rtol=rtol,
                       bad_sample=stops.first_bad, check_accuracy=request.check_accuracy,
-                      integrator=integrator, h_max=RK4_OMEGA_H / omega_max,
-                      sensors=request.sensors)
+                      integrator=integrator, h_max=h_max, sensors=request.sensors)
     wall = time.perf_counter() - start
     note = "" if integrator != "rk4" else rk4_accuracy_note(
         run.integration_error, tip_rows(model, model.layout) @ run.states, rtol, stacklevel=3)
