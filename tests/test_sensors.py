@@ -174,6 +174,29 @@ def test_measurement_matrix_is_the_readings_at_rest(which, model, two_arrays, rn
 
 
 # ---------------------------------------------------------------------- contracts
+@pytest.mark.parametrize("scene, variant", [("hub-beam-mass", "first_order"),
+                                            ("hub-beam-mass", "exact"),
+                                            ("two-array-free", "exact"),
+                                            ("wheel-slew", None), ("flexible-link", None)])
+def test_root_moments_are_read_as_the_models_outputs(scene, variant, rng):
+    # the sensors read the root moments by rows over the state: they must be the model's own
+    # outputs, for every variant and at deflections far from small (a wheel's or a motor's
+    # states in the layout too)
+    from flexctl.app.scenes import load_scene
+    from flexctl.sim.sensors import _root_outputs, _root_rows
+
+    loaded = load_scene(scene)
+    plant = (loaded.build_model() if variant is None
+             else flexctl.build_model(loaded.system, n_modes=3, variant=variant))
+    rows = _root_rows(plant)
+    for _ in range(5):
+        x = rng.normal(size=plant.n_states)
+        x[plant.layout.q] *= 0.2 * float(np.min(plant.lengths))
+        expected = np.asarray(plant.outputs(x))[_root_outputs(plant)]
+        np.testing.assert_allclose(rows @ x, expected, rtol=1e-12,
+                                   atol=1e-12 * np.max(np.abs(expected)))
+
+
 def test_sensor_names_follow_the_outputs(two_arrays, model):
     assert sensor_names(two_arrays, Sensors(tip_acceleration_noise=0.1)) == (
         "theta", "theta_dot", "wing_a.root_moment", "wing_b.root_moment",

@@ -16,7 +16,7 @@ SciPy and Hairer's DOPRI5); the next is ``h * min(5, max(0.2, 0.9 e^(-1/5)))``. 
 exactly at the output times inside a sample (an output grid point, a sensor's read time).
 
 :func:`choose_hold` picks this pair or CVODES for ``method="auto"``: the pair when the fastest
-pole of the held plant (:func:`~flexctl.sim.inputs.jacobian_frequency`) allows a sample in a
+pole of the held plant (the largest eigenvalue of its Jacobian) allows a sample in a
 few steps within the pair's stability region, CVODES for a stiff plant (many modes, a fast
 motor current) whose explicit steps would be stability-bound.
 """
@@ -31,7 +31,6 @@ import numpy as np
 from .compiled import CHECK_FACTOR, _cached, _input_key, input_numbers
 from .buffers import InPlace
 from .fixed_step import _END_INSIDE, _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
-from .inputs import jacobian_frequency
 
 __all__ = ["EmbeddedHold", "choose_hold", "DORMAND_PRINCE", "STIFF_SAMPLE", "SAFETY"]
 
@@ -59,6 +58,7 @@ SAFETY, GROWTH, SHRINK = 0.9, 5.0, 0.2
 #: A step shorter than this fraction of the time reached (or of 1 s) is a singularity, not
 #: accuracy: the sample fails.
 MIN_STEP = 1e-12
+
 
 
 @dataclass(frozen=True)
@@ -213,13 +213,15 @@ class EmbeddedHold:
         return out, 7 * attempts
 
 
-def choose_hold(model, x0, scale, sample_time: float, spin_frequency: float = 0.0) -> tuple:
+def choose_hold(model, sample_time: float, spin_frequency: float = 0.0) -> tuple:
     """``(integrator, omega)`` for a sampled loop under ``method="auto"``: ``"RK45"`` (an
     :class:`EmbeddedHold`) when the fastest pole ``omega`` (1/s) of the plant under a held
-    torque, at ``x0`` (finite differences of steps ``1e-6 scale``), or the spin frequency,
-    times ``sample_time`` is at most :data:`STIFF_SAMPLE`; else ``"cvodes"``."""
-    omega = jacobian_frequency(lambda t, x: model.dynamics(t, x, 0.0), 0.0,
-                               np.asarray(x0, dtype=float), np.asarray(scale, dtype=float))
+    torque (the largest eigenvalue of its linearisation at rest, its actuator's included),
+    or the spin frequency, times ``sample_time`` is at most :data:`STIFF_SAMPLE`; else
+    ``"cvodes"``."""
+    a = np.asarray(model.linear_matrices(0.0)[0], dtype=float)
+    omega = (float(np.max(np.abs(np.linalg.eigvals(a)))) if np.all(np.isfinite(a))
+             else math.inf)
     omega = max(omega, float(spin_frequency))
     stiff = not math.isfinite(omega) or omega * sample_time > STIFF_SAMPLE
     return ("cvodes" if stiff else "RK45"), omega

@@ -99,8 +99,8 @@ def _simulate_sampled(request) -> SimulationResult:
                         request.spin_frequency)
         h_max = RK4_OMEGA_H / omega_max
     elif integrator in ("auto", "RK45"):
-        chosen, omega = choose_hold(model, request.x_init, scale,
-                                    request.controller.sample_time, request.spin_frequency)
+        chosen, omega = choose_hold(model, request.controller.sample_time,
+                                    request.spin_frequency)
         integrator = chosen if integrator == "auto" else integrator
         # the first step of the embedded pair: a radian of the fastest pole
         h_max = min(request.controller.sample_time,

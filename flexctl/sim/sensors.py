@@ -178,6 +178,15 @@ def _root_outputs(model) -> list:
     return [k for k, name in enumerate(model.output_names) if name.endswith("root_moment")]
 
 
+def _root_rows(model) -> np.ndarray:
+    """Rows ``R`` (shape (K, n)) with the root bending moments ``R @ x``, N m, in output
+    order: ``EI w''(0) = sum_i EI phi_i''(0) q_i`` is linear in the modal coordinates for
+    every variant (the exact one's curvature is the slope angle's derivative, itself linear
+    in them), so a sample reads them without a call of the model's outputs."""
+    return np.vstack([model.layout.embed(row)
+                      for row in np.atleast_2d(np.asarray(model.matrices.root, dtype=float))])
+
+
 def sensor_names(model, sensors: Sensors) -> tuple:
     """Names of the readings of ``sensors`` on ``model``, in reading order (module Notes)."""
     names = ("theta", "theta_dot") + tuple(model.output_names[k] for k in _root_outputs(model))
@@ -287,7 +296,7 @@ class SensorSession:
                                       minimum=0.0, strict=True)
         self.names = sensor_names(model, sensors)
         self.samples = 0
-        self._roots = _root_outputs(model)
+        self._roots = _root_rows(model)
         # white parts only: the encoder quantises, the bias is a state of its own
         white = np.sqrt(_variances(model, sensors, self.sample_time, with_bias=True))
         white[0] = 0.0
@@ -310,7 +319,7 @@ class SensorSession:
         x = self._state(x)
         layout = self.model.layout
         values = [x[layout.theta], x[layout.theta_dot]]
-        values += list(np.asarray(self.model.outputs(x), dtype=float)[self._roots])
+        values += list(self._roots @ x)
         if self.sensors.has_accelerometers:
             if xdot is None:
                 raise InputValueError(
