@@ -399,3 +399,21 @@ def test_equal_build_calls_share_one_model_and_others_do_not():
     assert build_model(free, {"wing_a": 2, "wing_b": 3}) is build_model(
         free, {"wing_b": 3, "wing_a": 2})
     assert build_model(free, [2, 3]) is build_model(free, (2, 3))
+
+
+def test_natural_frequencies_kept_per_spin_are_the_callers_own_copies(kane_system):
+    import scipy.linalg
+
+    from flexctl.model.variants import KEPT_SPINS
+
+    model = build_model(kane_system, n_modes=3)
+    first = model.natural_frequencies(4.0)
+    first[:] = -1.0                                  # the caller's array, not the kept one
+    again = model.natural_frequencies(4.0)
+    direct = np.sqrt(scipy.linalg.eigh(model.stiffness_matrix(4.0), model.matrices.M_ff,
+                                       eigvals_only=True))
+    np.testing.assert_allclose(again, direct, rtol=1e-12)
+    assert np.all(again > model.natural_frequencies(0.0))     # spin stiffens every mode
+    for spin in np.linspace(0.1, 5.0, 40):            # the kept spins stay few
+        model.natural_frequencies(float(spin))
+    assert len(model._c["frequencies"]) <= KEPT_SPINS

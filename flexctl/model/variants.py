@@ -56,6 +56,8 @@ VARIANTS = ("first_order", "zero_order", "consistent", "exact")
 #: Largest steady spin rate the linear analysis takes, rad/s: its square multiplies the modal
 #: matrices, and must stay far from overflow.
 MAX_SPIN_RATE = 1e100
+#: Spin rates whose natural frequencies a model keeps (the last ones asked for).
+KEPT_SPINS = 16
 OUTPUT_NAMES = ("theta", "theta_dot", "tip_deflection", "root_moment", "tip_angle")
 
 
@@ -605,10 +607,12 @@ class Model:
         spin_rate = _spin(spin_rate)
         if not isinstance(hub, str) or hub not in ("clamped", "free"):
             raise InputValueError(f"hub must be 'clamped' or 'free'; got {hub!r}")
-        key = ("frequencies", hub)
-        if spin_rate == 0.0 and key in self._c:
-            # at rest (asked by every run for its stiffness and duration checks): computed once
-            return self._c[key].copy()
+        key = ("frequencies", hub, spin_rate)
+        kept = self._c.setdefault("frequencies", {})
+        if key in kept:
+            # asked by every run (its stiffness and duration checks, a prescribed spin's
+            # fastest mode): kept for the last few spins
+            return kept[key].copy()
         stiff = self.stiffness_matrix(spin_rate)
         if hub == "clamped":
             lam = scipy.linalg.eigh(stiff, self.matrices.M_ff, eigvals_only=True)
@@ -619,8 +623,9 @@ class Model:
             reduced = mat.M_ff - np.outer(mat.m_tf, mat.m_tf) / mat.J0
             lam = scipy.linalg.eigh(stiff, reduced, eigvals_only=True)
         frequencies = np.sort(np.sign(lam) * np.sqrt(np.abs(lam)))
-        if spin_rate == 0.0:
-            self._c[key] = frequencies.copy()
+        if len(kept) >= KEPT_SPINS:
+            kept.pop(next(iter(kept)))
+        kept[key] = frequencies.copy()
         return frequencies
 
     def linearize(self, spin_rate: float = 0.0, *, x0=None, u0=None):

@@ -265,7 +265,10 @@ def output_samples(grid, traj):
     t_all = np.concatenate(traj.ts)
     y_all = np.concatenate(traj.ys, axis=1)
     # segment ends at breakpoints off the grid were integration restarts, not outputs
-    keep = np.concatenate(([True], np.diff(t_all) > 0)) & np.isin(t_all, grid)
+    grid = np.asarray(grid, dtype=float)
+    at = np.minimum(np.searchsorted(grid, t_all), max(grid.size - 1, 0))
+    on_grid = grid[at] == t_all if grid.size else np.zeros(t_all.size, dtype=bool)
+    keep = np.concatenate(([True], np.diff(t_all) > 0)) & on_grid
     keep[-1] = True
     t_all, y_all = t_all[keep], y_all[:, keep]
     finite = np.all(np.isfinite(y_all), axis=0)
