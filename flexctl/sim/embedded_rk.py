@@ -16,9 +16,9 @@ SciPy and Hairer's DOPRI5); the next is ``h * min(5, max(0.2, 0.9 e^(-1/5)))``. 
 exactly at the output times inside a sample (an output grid point, a sensor's read time).
 
 :func:`choose_hold` picks this pair or CVODES for ``method="auto"``: the pair when the fastest
-pole of the held plant (the largest eigenvalue of its Jacobian) allows a sample in a
-few steps within the pair's stability region, CVODES for a stiff plant (many modes, a fast
-motor current) whose explicit steps would be stability-bound.
+pole of the held plant (the largest eigenvalue of its linearisation at rest) allows a sample
+in a few steps within the pair's stability region, CVODES for a stiff plant (many modes, a
+fast actuator) whose explicit steps would be stability-bound.
 """
 
 from __future__ import annotations
