@@ -17,7 +17,12 @@ zero-order hold (``ZeroOrderHold``): the CVODES sample-to-sample path against th
 Dormand-Prince one (``RK45``, what ``method="auto"`` takes for this plant) and the rk4 one,
 their wall time per sample and their error against a tight run.
 
-Run: ``python benchmarks/bench_fixed_step.py [--repeats 20]``. Nothing is asserted; the script
+Case C, sampled loops: CVODES from sample to sample against the Dormand-Prince pair
+(``method="RK45"``, :mod:`flexctl.sim.embedded_rk`) on plants of 6 to 30 modes under a PD law
+at 100 Hz, rtol 1e-8, no validity estimate: wall time per sample, and each run's error
+against CVODES at rtol 1e-12 beside its own estimate.
+
+Run: ``python benchmarks/bench_fixed_step.py [--repeats 20] [--only-c]``. Nothing is asserted; the script
 prints what it measures (and the load of the machine, which shares its two cores).
 """
 
@@ -146,14 +151,47 @@ def case_b(repeats):
     print()
 
 
+#: Case C's plants: (scene, modes, variant, PD gains, initial hub angle in rad, duration in s).
+SAMPLED_PLANTS = (("slew-90", 6, "first_order", (12.0, 8.0, 6.0), -np.pi / 2, 6.0),
+                  ("slew-90", 4, "exact", (12.0, 8.0, 6.0), -np.pi / 2, 6.0),
+                  ("slew-90", 12, "first_order", (12.0, 8.0, 6.0), -np.pi / 2, 6.0),
+                  ("hub-beam-mass", 30, "first_order", (20.0, 10.0, None), -0.5, 3.0))
+
+
+def case_c(repeats):
+    print("## C. Sampled PD at 100 Hz, rtol 1e-8, no validity estimate: CVODES against the "
+          "Dormand-Prince pair\n")
+    print("| plant | integration | per sample (us) | error vs tight | estimated |")
+    print("|---|---|---|---|---|")
+    for name, n_modes, variant, (kp, kd, limit), angle, t_final in SAMPLED_PLANTS:
+        model = build_model(load_scene(name).system, n_modes=n_modes, variant=variant)
+        x0 = model.rest_state(angle)
+        law = ZeroOrderHold(PD(kp=kp, kd=kd, torque_limit=limit), sample_time=0.01)
+        options = dict(controller=law, x0=x0, check_validity=False)
+        tight = simulate(model, t_final, rtol=1e-12, method="cvodes", **options)
+        peak = tight.peak_tip_deflection
+        for method in ("cvodes", "RK45"):
+            result, _, median = timed(lambda: simulate(model, t_final, method=method, **options),
+                                      max(2, repeats // 5))
+            error = np.max(np.abs(result.tip_deflection - tight.tip_deflection)) / peak
+            samples = result.controller_report["samples"]
+            print(f"| {name}, {variant}, {n_modes} modes | {result.method} | "
+                  f"{1e6 * median / samples:.4g} | {error:.2g} | "
+                  f"{result.integration_error / peak:.2g} |")
+    print()
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=20)
+    parser.add_argument("--only-c", action="store_true", help="case C only")
     args = parser.parse_args(argv)
     print(f"load average at start: {os.getloadavg()[0]:.2f} (2 cores)\n")
-    case_a(args.repeats)
-    case_a_exact(args.repeats)
-    case_b(args.repeats)
+    if not args.only_c:
+        case_a(args.repeats)
+        case_a_exact(args.repeats)
+        case_b(args.repeats)
+    case_c(args.repeats)
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 
