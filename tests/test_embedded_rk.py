@@ -82,6 +82,12 @@ def test_a_stiff_plant_keeps_cvodes():
     assert choose_hold(few, 0.01)[0] == "RK45"
     # a spin far above the modes makes a fast plant of a slow one
     assert choose_hold(few, 0.01, spin_frequency=2e4)[0] == "cvodes"
+    for name, bad in (("sample_time", 0.0), ("sample_time", np.nan), ("sample_time", "0.01"),
+                      ("spin_frequency", np.inf), ("model", None)):
+        arguments = dict(model=few, sample_time=0.01, spin_frequency=0.0)
+        arguments[name] = bad
+        with pytest.raises(InputError, match=name):
+            choose_hold(**arguments)
 
 
 def test_a_state_that_blows_up_fails_the_sample():
@@ -95,9 +101,17 @@ def test_a_state_that_blows_up_fails_the_sample():
     y[1] = np.nan
     with pytest.raises(RuntimeError):
         hold(0.01, np.array([0.02]), y, 0.5)
-    for bad in (0.0, -1e-3, np.inf, np.nan):
-        with pytest.raises(ValueError, match="h_first"):
+    for bad in (0.0, -1e-3, np.inf, np.nan, "1e-3", None):
+        with pytest.raises(InputError, match="h_first"):
             EmbeddedHold(model, None, scale, 1e-8, 1000, h_first=bad)
+    for name, bad in (("scale", scale[:-1]), ("scale", -scale), ("scale", scale * np.nan),
+                      ("rtol", 0.0), ("rtol", np.inf), ("rtol", 2.0), ("max_steps", 0),
+                      ("max_steps", 10.5), ("model", "plant"), ("torque", lambda t: 1.0)):
+        arguments = dict(model=model, torque=None, scale=scale, rtol=1e-8, max_steps=1000,
+                         h_first=1e-3)
+        arguments[name] = bad
+        with pytest.raises(InputError, match=name):
+            EmbeddedHold(**arguments)
     tiny = EmbeddedHold(model, None, scale, 1e-8, 3, h_first=1e-3)
     with pytest.raises(RuntimeError, match="more than 3 steps"):
         tiny(0.0, np.array([1.0]), np.zeros(model.n_states), 0.5)

@@ -28,9 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compiled import CHECK_FACTOR, _cached, _input_key, input_numbers
+from .compiled import CHECK_FACTOR, _cached, _input_key, input_numbers, is_symbolic
 from .buffers import InPlace
 from .fixed_step import _END_INSIDE, _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
+from ..model.checks import check_array, check_instance, check_integer, check_real
+from ..model.errors import InputValueError
 
 __all__ = ["EmbeddedHold", "choose_hold", "DORMAND_PRINCE", "STIFF_SAMPLE", "SAFETY"]
 
@@ -141,12 +143,22 @@ class EmbeddedHold:
     error_divisor = 1.0
 
     def __init__(self, model, torque, scale, rtol: float, max_steps: int, h_first: float):
-        if not (math.isfinite(h_first) and h_first > 0.0):
-            raise ValueError(f"EmbeddedHold h_first must be a positive finite step in s; got "
-                             f"{h_first!r}")
+        from ..model import Model
+
+        check_instance("EmbeddedHold", "model", model, Model)
+        if torque is not None and not is_symbolic(torque=torque):
+            raise InputValueError("EmbeddedHold torque must have a CasADi form (casadi(t)) or "
+                                  f"be None; got {type(torque).__name__}")
+        n = model.layout.n_states
+        self.scale = check_array("EmbeddedHold", "scale", scale, shape=(n,))
+        if np.any(self.scale <= 0.0):
+            raise InputValueError(f"EmbeddedHold scale must be positive (the states' sizes); "
+                                  f"got a smallest entry of {float(np.min(self.scale))!r}")
+        self.rtol = check_real("EmbeddedHold", "rtol", rtol, minimum=0.0, strict=True,
+                               maximum=1.0)
+        self.max_steps = check_integer("EmbeddedHold", "max_steps", max_steps, minimum=1)
+        h_first = check_real("EmbeddedHold", "h_first", h_first, minimum=0.0, strict=True)
         self.model, self.torque = model, torque
-        self.scale = np.asarray(scale, dtype=float)
-        self.rtol, self.max_steps = float(rtol), int(max_steps)
         self.torque_numbers = input_numbers((torque, None, None))
         n_numbers = self.torque_numbers.size + 1
         key = _input_key(model, (torque, None, None), np.array([1.0]))
@@ -170,7 +182,10 @@ class EmbeddedHold:
             self._h[loose] = float(h_first)
 
     def __call__(self, lo, t_out, y, u, loose=False):
-        run = self._runs[loose]
+        """States at ``t_out`` (ascending, after ``lo``, s) from ``y`` (n,) at ``lo`` under the
+        held torque ``u`` (N m): ``(states (n, K), evaluations)``; ``RuntimeError`` when a step
+        cannot be taken (a non-finite state, the step budget, a step too short)."""
+        run = self._runs[bool(loose)]
         with run._lock:       # its buffers are this hold's: written and read here directly
             return self._sample(run, lo, t_out, y, u, loose)
 
@@ -219,9 +234,15 @@ def choose_hold(model, sample_time: float, spin_frequency: float = 0.0) -> tuple
     torque (the largest eigenvalue of its linearisation at rest, its actuator's included),
     or the spin frequency, times ``sample_time`` is at most :data:`STIFF_SAMPLE`; else
     ``"cvodes"``."""
+    from ..model import Model
+
+    check_instance("choose_hold", "model", model, Model)
+    sample_time = check_real("choose_hold", "sample_time", sample_time, minimum=0.0,
+                             strict=True)
+    spin_frequency = abs(check_real("choose_hold", "spin_frequency", spin_frequency))
     a = np.asarray(model.linear_matrices(0.0)[0], dtype=float)
     omega = (float(np.max(np.abs(np.linalg.eigvals(a)))) if np.all(np.isfinite(a))
              else math.inf)
-    omega = max(omega, float(spin_frequency))
+    omega = max(omega, spin_frequency)
     stiff = not math.isfinite(omega) or omega * sample_time > STIFF_SAMPLE
     return ("cvodes" if stiff else "RK45"), omega
