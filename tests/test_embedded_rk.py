@@ -124,3 +124,25 @@ def test_other_methods_are_refused_for_a_sampled_law_by_name(slew, method):
         warnings.simplefilter("ignore")
         with pytest.raises(InputError, match=f"method '{method}'.*'RK45'"):
             flexctl.simulate(model, 1.0, controller=law, x0=x0, method=method)
+
+
+def test_threads_running_sampled_loops_get_their_own_runs():
+    """Sampled runs on threads share one model's compiled step (the gains and the held torque
+    are numbers): each thread's run is the one it makes alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, 3)
+    x0 = model.rest_state(-0.5)
+    gains = [(3.0 + k, 2.0 + 0.5 * k) for k in range(6)]
+
+    def run(gain):
+        law = ZeroOrderHold(PD(kp=gain[0], kd=gain[1]), sample_time=0.02)
+        result = flexctl.simulate(model, 2.0, controller=law, x0=x0, check_validity=False)
+        assert result.method == "RK45"
+        return result.states
+
+    alone = [run(gain) for gain in gains]
+    with ThreadPoolExecutor(max_workers=3) as pool:
+        together = list(pool.map(run, gains * 2))
+    for k, states in enumerate(together):
+        np.testing.assert_array_equal(states, alone[k % len(gains)])
