@@ -132,7 +132,6 @@ def case_b(repeats):
     x0[0] = -np.pi / 2
     law = ZeroOrderHold(PD(kp=12.0, kd=8.0, torque_limit=6.0), sample_time=0.01)
     tight = simulate(model, 6.0, controller=law, x0=x0, rtol=1e-12, output_step=0.01)
-    peak = tight.peak_tip_deflection
     print("## B. PD sampled at 100 Hz (zero-order hold), slew-90 system, 6-mode first_order "
           "plant, 6 s\n")
     print("| integration | best (ms) | median (ms) | per sample (us) | error vs tight | "
@@ -142,13 +141,21 @@ def case_b(repeats):
         def run():
             return simulate(model, 6.0, controller=law, x0=x0, method=method,
                             output_step=0.01)
-        result, best, median = timed(run, max(3, repeats // 4))
-        error = np.max(np.abs(result.tip_deflection - tight.tip_deflection)) / peak
-        samples = result.controller_report["samples"]
-        print(f"| {method} | {1e3 * best:.3g} | {1e3 * median:.3g} | "
-              f"{1e6 * median / samples:.3g} | {error:.2g} | "
-              f"{result.integration_error / peak:.2g} |")
+        best, median, per_sample, error, estimate = sampled_timing(run, tight,
+                                                                   max(3, repeats // 4))[1:]
+        print(f"| {method} | {1e3 * best:.3g} | {1e3 * median:.3g} | {per_sample:.3g} | "
+              f"{error:.2g} | {estimate:.2g} |")
     print()
+
+
+def sampled_timing(run, tight, repeats):
+    """``(result, best s, median s, median us per sample, error, estimated error)`` of a
+    sampled run (:func:`timed`), its errors relative to the peak of the ``tight`` run."""
+    result, best, median = timed(run, repeats)
+    peak = tight.peak_tip_deflection
+    error = np.max(np.abs(result.tip_deflection - tight.tip_deflection)) / peak
+    per_sample = 1e6 * median / result.controller_report["samples"]
+    return result, best, median, per_sample, error, result.integration_error / peak
 
 
 #: Case C's plants: (scene, modes, variant, PD gains, initial hub angle in rad, duration in s).
@@ -169,15 +176,12 @@ def case_c(repeats):
         law = ZeroOrderHold(PD(kp=kp, kd=kd, torque_limit=limit), sample_time=0.01)
         options = dict(controller=law, x0=x0, check_validity=False)
         tight = simulate(model, t_final, rtol=1e-12, method="cvodes", **options)
-        peak = tight.peak_tip_deflection
         for method in ("cvodes", "RK45"):
-            result, _, median = timed(lambda: simulate(model, t_final, method=method, **options),
-                                      max(2, repeats // 5))
-            error = np.max(np.abs(result.tip_deflection - tight.tip_deflection)) / peak
-            samples = result.controller_report["samples"]
+            result, _, _, per_sample, error, estimate = sampled_timing(
+                lambda: simulate(model, t_final, method=method, **options), tight,
+                max(2, repeats // 5))
             print(f"| {name}, {variant}, {n_modes} modes | {result.method} | "
-                  f"{1e6 * median / samples:.4g} | {error:.2g} | "
-                  f"{result.integration_error / peak:.2g} |")
+                  f"{per_sample:.4g} | {error:.2g} | {estimate:.2g} |")
     print()
 
 
