@@ -157,32 +157,21 @@ class SlewProfile(KeywordOnly):
         return (self.slew_angle * s, self.slew_angle / self.duration * ds,
                 self.slew_angle / self.duration ** 2 * dds)
 
+    def _terms(self, t) -> tuple:
+        """``s``, ``s'`` and ``s''`` at times ``t`` (:func:`_shape_terms` on arrays)."""
+        return _shape_terms(self.shape, self._tau(t), np.sin, np.cos)
+
     def angle(self, t):
         """Reference hub angle, rad."""
-        tau = self._tau(t)
-        if self.shape == "poly7":
-            s = tau ** 4 * (35.0 + tau * (-84.0 + tau * (70.0 - 20.0 * tau)))
-        else:
-            s = tau - np.sin(2.0 * np.pi * tau) / (2.0 * np.pi)
-        return self.slew_angle * s
+        return self.slew_angle * self._terms(t)[0]
 
     def rate(self, t):
         """Reference hub rate, rad/s."""
-        tau = self._tau(t)
-        if self.shape == "poly7":
-            ds = 140.0 * (tau * (1.0 - tau)) ** 3
-        else:
-            ds = 1.0 - np.cos(2.0 * np.pi * tau)
-        return self.slew_angle / self.duration * ds
+        return self.slew_angle / self.duration * self._terms(t)[1]
 
     def acceleration(self, t):
         """Reference hub acceleration, rad/s^2."""
-        tau = self._tau(t)
-        if self.shape == "poly7":
-            dds = 420.0 * (tau * (1.0 - tau)) ** 2 * (1.0 - 2.0 * tau)
-        else:
-            dds = 2.0 * np.pi * np.sin(2.0 * np.pi * tau)
-        return self.slew_angle / self.duration ** 2 * dds
+        return self.slew_angle / self.duration ** 2 * self._terms(t)[2]
 
 
 def minimum_slew_duration(slew_angle: float, inertia: float, torque_limit: float,

@@ -518,15 +518,15 @@ SECTIONS = (("paper 001 Fig. 4", kane_spinup),
 #: The order in which the sections go to the pool: longest first (CPU seconds of each, measured
 #: one after the other in one process on this project's 2-core machine, in the comments), so
 #: that the short ones and the scenes fill the processes' ends.
-SECTION_ORDER = ("actuators and sensors",                # 16.4
-                 "controller comparison",                # 9.5
-                 "controller comparison, two arrays",    # 8.4
-                 "paper 000 Figs. 5-8",                  # 4.6
-                 "design-model error",                   # 4.0
-                 "large deflection",                     # 3.1
-                 "structures",                           # 1.3
-                 "paper 001 Fig. 4",                     # 1.1
-                 "paper 001 Fig. 5")                     # 0.9
+SECTION_ORDER = ("actuators and sensors",                # 11.4
+                 "controller comparison, two arrays",    # 9.3
+                 "controller comparison",                # 9.0
+                 "design-model error",                   # 4.5
+                 "large deflection",                     # 3.2
+                 "paper 000 Figs. 5-8",                  # 2.7
+                 "structures",                           # 1.1
+                 "paper 001 Fig. 5",                     # 0.8
+                 "paper 001 Fig. 4")                     # 0.7
 
 
 #: The scenes that take longest (a sampled loop with sensors, an optimised slew), sent to the
