@@ -33,6 +33,9 @@ PLANT_MODES, DESIGN_MODES = 4, 2
 SLEW = np.pi / 2
 T_FINAL = 4.0
 
+#: The compiled paths a run with CasADi inputs may take under method="auto".
+COMPILED = ("cvodes", "RK45")
+
 
 @pytest.fixture(scope="module")
 def scene():
@@ -153,7 +156,7 @@ def test_compiled_closed_loop_agrees_with_scipy(controllers, plant, name):
                              rtol=CLOSED_LOOP_RTOL, output_step=0.01)
             for method in ("auto", "DOP853")}
     compiled, scipy = runs["auto"], runs["DOP853"]
-    assert compiled.method == "cvodes" and compiled.ok and scipy.ok, compiled.message
+    assert compiled.method in COMPILED and compiled.ok and scipy.ok, compiled.message
     np.testing.assert_array_equal(compiled.t, scipy.t)
     peak = scipy.peak_tip_deflection
     assert np.max(np.abs(compiled.tip_deflection - scipy.tip_deflection)) <= TIP_AGREEMENT * peak

@@ -28,13 +28,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compiled import CHECK_FACTOR, _cached, _input_key, input_numbers, is_symbolic
+from .compiled import (CHECK_FACTOR, _cached, _input_key, drive_size, input_numbers,
+                       is_symbolic)
+from .compile_cache import compiled
 from .buffers import InPlace
-from .fixed_step import _END_INSIDE, _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
+from .fixed_step import (_END_INSIDE, _STEP_CACHE, _STEP_CACHE_SIZE, _drive_symbols, _jit,
+                         _step_function)
 from ..model.checks import check_array, check_instance, check_integer, check_real
 from ..model.errors import InputValueError
 
-__all__ = ["EmbeddedHold", "choose_hold", "DORMAND_PRINCE", "STIFF_SAMPLE", "SAFETY"]
+__all__ = ["EmbeddedHold", "EmbeddedRun", "choose_hold", "DORMAND_PRINCE", "DENSE_OUTPUT",
+           "STIFF_SAMPLE", "SAFETY", "ATTEMPTS"]
 
 #: The Dormand-Prince 5(4) tableau: nodes ``c``, stages ``a``, fifth-order weights ``b`` (also
 #: the last stage's row) and the error weights ``e = b - b_hat`` (``b_hat`` of fourth order).
@@ -50,6 +54,17 @@ DORMAND_PRINCE = {
     "b": (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0.0),
     "e": (71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40),
 }
+#: The coefficients of Dormand-Prince's continuous extension of order 4 (Hairer, Norsett
+#: and Wanner's DOPRI5; also SciPy's ``RK45`` interpolant), one per stage: with
+#: ``dy = y5 - y``, ``b = h k1 - dy``, ``r4 = dy - h k7 - b`` and ``r5 = h sum(d_i k_i)``,
+#: ``y(t + theta h) = y + theta (dy + (1 - theta) (b + theta (r4 + (1 - theta) r5)))``.
+DENSE_OUTPUT = (-12715105075 / 11282082432, 0.0, 87487479700 / 32700410799,
+                -10690763975 / 1880347072, 701980252875 / 199316789632,
+                -1453857185 / 822651844, 69997945 / 29380423)
+#: Step attempts per compiled call of a continuous run (:class:`EmbeddedRun`): the calls'
+#: Python overhead is paid once for this many steps; the attempts left once a segment is done
+#: change nothing.
+ATTEMPTS = 128
 #: Largest ``omega_max T`` (fastest pole of the held plant times the sample time) for which
 #: ``method="auto"`` takes the pair: the pair is stable up to ``|h lambda|`` of about 3.3 on
 #: the imaginary axis, so a sample then needs at most some 30 stability-bound steps (7
@@ -246,3 +261,186 @@ def choose_hold(model, sample_time: float, spin_frequency: float = 0.0) -> tuple
     omega = max(omega, spin_frequency)
     stiff = not math.isfinite(omega) or omega * sample_time > STIFF_SAMPLE
     return ("cvodes" if stiff else "RK45"), omega
+
+
+def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
+    """``(run, lifted numbers or None)``: the compiled ``run(s, t_end, h_max, c, atol, rtol[,
+    numbers]) -> (s_end, info, dense)`` of ``attempts`` Dormand-Prince step attempts of the
+    drive of ``inputs = (torque, hub_motion, controller)`` from ``s = [t; h; y]`` towards
+    ``t_end``, each accepted or rejected by the error control inside the call.
+
+    ``info`` (4, attempts) holds for each attempt whether it was accepted, its start time,
+    its length and its error norm; ``dense`` (5 ny, attempts) the step's start state and the
+    four vectors of the continuous extension (:data:`DENSE_OUTPUT`). Once ``t = t_end`` the
+    remaining attempts change nothing."""
+    import casadi as ca
+
+    torque, hub_motion, controller = inputs
+    drive = _drive_symbols(model, torque, hub_motion, controller, n_numbers)
+    sym, ny, c, numbers, f = (drive[k] for k in ("sym", "ny", "c", "numbers", "f"))
+    s, t_end, h_max = sym.sym("s", ny + 2), sym.sym("t_end"), sym.sym("h_max")
+    atol, rtol = sym.sym("atol", ny), sym.sym("rtol")
+    t, h, y = s[0], s[1], s[2:]
+    left = t_end - t
+    live = left > 0.0
+    h_try = ca.fmin(h, h_max)
+    # the last step of a segment ends on it (and is not left a sliver)
+    last = left <= 1.1 * h_try
+    step = ca.if_else(last, left, h_try)
+    tableau, ks = DORMAND_PRINCE, []
+    for node, row in zip(tableau["c"], tableau["a"]):
+        stage = y
+        for a, k in zip(row, ks):
+            if a != 0.0:
+                stage = stage + step * a * k
+        # a stage at the step's end sees the inputs from the left, as RK4's does
+        ks.append(f(t + step * (node if node < 1.0 else 1.0 - _END_INSIDE), stage))
+    y5 = y + step * sum(b * k for b, k in zip(tableau["b"], ks) if b != 0.0)
+    error = step * sum(e * k for e, k in zip(tableau["e"], ks) if e != 0.0)
+    norm = ca.sqrt(ca.sumsqr(error / (atol + rtol * ca.fmax(ca.fabs(y), ca.fabs(y5)))) / ny)
+    accepted = ca.logic_and(norm <= 1.0, live)            # a NaN norm never is
+    change = SAFETY * norm ** -0.2
+    grown = ca.fmin(GROWTH, change) * step
+    h_next = ca.if_else(live, ca.if_else(accepted, ca.if_else(last, ca.fmax(h, grown), grown),
+                                         ca.fmax(SHRINK, change) * step), h)
+    t_next = ca.if_else(accepted, ca.if_else(last, t_end, t + step), t)
+    dy = y5 - y
+    spline = step * ks[0] - dy
+    dense = ca.vertcat(y, dy, spline, dy - step * ks[6] - spline,
+                       step * sum(d * k for d, k in zip(DENSE_OUTPUT, ks) if d != 0.0))
+    args = [s, t_end, h_max, c, atol, rtol] + ([] if numbers is None else [numbers])
+    attempt = ca.Function("flexctl_dopri5_attempt", args,
+                          [ca.vertcat(t_next, h_next, ca.if_else(accepted, y5, y)),
+                           ca.vertcat(accepted, t, step, norm), dense])
+    # an attempt after the segment's end is skipped: the state passes through, unchanged
+    idle_args = [ca.MX.sym(attempt.name_in(k), attempt.sparsity_in(k))
+                 for k in range(attempt.n_in())]
+    idle = ca.Function("flexctl_dopri5_idle", idle_args,
+                       [idle_args[0], ca.vertcat(0.0, idle_args[0][0], 0.0, 0.0),
+                        ca.MX.zeros(5 * ny)])
+    switch = ca.Function.conditional("flexctl_dopri5_switch", [attempt], idle)
+    call = [ca.MX.sym(attempt.name_in(k), attempt.sparsity_in(k))
+            for k in range(attempt.n_in())]
+    body = ca.Function("flexctl_dopri5_body", call,
+                       switch(call[0][0] >= call[1], *call))
+    chain = body.mapaccum("flexctl_dopri5_chain", attempts, [0], [0])
+    # MX arguments keep the chain a loop over one body in the generated code
+    call = [ca.MX.sym(body.name_in(k), body.sparsity_in(k)) for k in range(body.n_in())]
+    ends, info, dense_all = chain(*call)
+    run = ca.Function(f"flexctl_dopri5_run{attempts}", call,
+                      [ends[:, -1], info, dense_all])
+    if numbers is None:
+        return _jit(run, model), None
+    return (compiled(run, label="the exact model's Dormand-Prince steps"),
+            drive["lifted_values"])
+
+
+class EmbeddedRun:
+    """A continuous run's segments by Dormand-Prince 5(4) steps with error control, the step
+    size carried from segment to segment, :data:`ATTEMPTS` attempts per compiled call and the
+    output times read from the continuous extension (:data:`DENSE_OUTPUT`).
+
+    Parameters
+    ----------
+    model : Model
+    torque, hub_motion, controller :
+        The run's inputs, each with a CasADi form (:func:`~flexctl.sim.compiled.is_symbolic`).
+    scale : ndarray, shape (m,)
+        Physical size of each integrated state (the drive's: plant and controller states, or
+        ``[q, q_dot]`` under a prescribed hub motion); the absolute tolerance is
+        ``rtol * scale``.
+    rtol : float
+        Relative tolerance of each step's local error (weighted RMS norm, as CVODES).
+    max_steps : int
+        Most step attempts between two output times (as CVODES's ``max_num_steps``).
+    h_first : float
+        The first step tried, s.
+    max_step : float, optional
+        Longest step, s (an input's own bound). Default: none.
+
+    Notes
+    -----
+    ``run(lo, t_out, y) -> (states (m, K), evaluations)`` integrates from ``y`` at ``lo`` onto
+    the output times ``t_out`` (ascending, after ``lo``; the last is the segment's end, where
+    an input may jump). ``RuntimeError`` when a step cannot be taken: a non-finite state, the
+    step budget, a step too short.
+    """
+
+    def __init__(self, model, torque=None, hub_motion=None, controller=None, *, scale,
+                 rtol: float, max_steps: int, h_first: float, max_step: float | None = None):
+        from ..model import Model
+
+        check_instance("EmbeddedRun", "model", model, Model)
+        inputs = (torque, hub_motion, controller)
+        if not is_symbolic(torque=torque, hub_motion=hub_motion, controller=controller):
+            raise InputValueError("EmbeddedRun inputs must each have a CasADi form (casadi(t), "
+                                  "casadi_torque); got a Python callable")
+        m = drive_size(model, hub_motion, controller)
+        scale = check_array("EmbeddedRun", "scale", scale, shape=(m,))
+        if np.any(scale <= 0.0):
+            raise InputValueError(f"EmbeddedRun scale must be positive (the states' sizes); "
+                                  f"got a smallest entry of {float(np.min(scale))!r}")
+        rtol = check_real("EmbeddedRun", "rtol", rtol, minimum=0.0, strict=True, maximum=1.0)
+        self.max_steps = check_integer("EmbeddedRun", "max_steps", max_steps, minimum=1)
+        self.h = check_real("EmbeddedRun", "h_first", h_first, minimum=0.0, strict=True)
+        if max_step is None or (isinstance(max_step, float) and max_step == math.inf):
+            max_step = math.inf
+        else:
+            max_step = check_real("EmbeddedRun", "max_step", max_step, minimum=0.0,
+                                  strict=True)
+        numbers = input_numbers(inputs)
+        key = _input_key(model, inputs, np.array([1.0]))
+        run, lifted = _cached(_STEP_CACHE, _STEP_CACHE_SIZE,
+                              None if key is None else ("dopri5-run", key), (model, *inputs),
+                              lambda: _attempt_chain(model, inputs, numbers.size))
+        self._run, self._size = InPlace(run), m
+        for k, value in enumerate([0.0, math.inf, max_step, numbers, rtol * scale, rtol]):
+            if k > 0:
+                self._run.args[k][:] = value
+        if lifted is not None:
+            self._run.args[6][:] = lifted
+
+    def __call__(self, lo, t_out, y) -> tuple:
+        """States at ``t_out`` from ``y`` at ``lo``: ``(states (m, K), evaluations)``."""
+        run = self._run
+        with run._lock:        # its buffers are this run's: written and read here directly
+            return self._segment(run, float(lo), np.asarray(t_out, dtype=float),
+                                 np.asarray(y, dtype=float))
+
+    def _segment(self, run, lo, t_out, y):
+        m, attempts = self._size, 0
+        # the carry: time, step size, then the drive's state
+        carry, end = run.args[0], float(t_out[-1])
+        run.args[1][0] = end
+        carry[0], carry[1], carry[2:] = lo, self.h, y
+        out, done = np.empty((m, t_out.size)), 0
+        budget = self.max_steps * t_out.size
+        while carry[0] < end:
+            run.evaluate()
+            final, info, dense = run.results
+            info = info.reshape(-1, 4)
+            live = info[:, 1] < end
+            attempts += int(np.count_nonzero(live))
+            taken = info[:, 0] > 0.5
+            t_now = float(final[0])
+            if not math.isfinite(t_now) or not np.all(np.isfinite(final[2:])):
+                raise RuntimeError(f"non-finite state after t = {carry[0]:.6g} s")
+            reached = int(np.searchsorted(t_out, t_now, side="right"))
+            if reached > done:
+                starts, lengths = info[taken, 1], info[taken, 2]
+                parts = dense.reshape(-1, 5, m)[taken]
+                which = np.searchsorted(starts, t_out[done:reached], side="right") - 1
+                theta = ((t_out[done:reached] - starts[which]) / lengths[which])[:, None]
+                p = parts[which]
+                out[:, done:reached] = (p[:, 0] + theta * (p[:, 1] + (1.0 - theta) * (
+                    p[:, 2] + theta * (p[:, 3] + (1.0 - theta) * p[:, 4])))).T
+                done = reached
+            h = float(final[1])
+            carry[:] = final
+            if attempts > budget:
+                raise RuntimeError(f"more than {budget} steps before t = {end:.6g} s")
+            if not h >= MIN_STEP * max(1.0, abs(t_now)):
+                raise RuntimeError(f"step size {h:.3g} s at t = {t_now:.6g} s")
+        out[:, -1] = carry[2:]
+        self.h = float(carry[1])
+        return out, 7 * attempts

@@ -70,6 +70,36 @@ _LIFTED: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 _STEP_CACHE_SIZE = 64
 
 
+def _drive_symbols(model, torque, hub_motion, controller, n_numbers: int) -> dict:
+    """The symbols of a drive's compiled step: ``sym`` (SX, or MX for the exact model), ``ny``
+    (the drive's state size), ``c`` (the inputs' numbers, ``n_numbers`` rows), ``numbers``
+    (the exact model's lifted numbers as a symbol, else None) with their values
+    ``lifted_values``, and ``f(time, state)``, the drive's derivative (plant and controller
+    states, or ``[q, q_dot]`` under a prescribed hub motion) on them."""
+    import casadi as ca
+
+    sym = ca.MX if model.variant == "exact" else ca.SX
+    ny = drive_size(model, hub_motion, controller)
+    c = sym.sym("c", n_numbers)
+    lifted = _lifted_core(model, hub_motion)
+    numbers = None if lifted is None else sym.sym("numbers", lifted[1].size)
+
+    def f(time, state, model_numbers=numbers):
+        if hub_motion is not None:
+            rate, acceleration = hub_motion_casadi(
+                hub_motion, time, _split_numbers((torque, hub_motion, controller), c)[1])
+            if model_numbers is None:
+                return _symbolic_beam_dynamics(model, state, rate, acceleration)
+            beam = model.layout.without_rotation()
+            q, q_dot = beam.modal(state), beam.modal_rates(state)
+            return ca.vertcat(q_dot, lifted[0](q, q_dot, rate, acceleration, model_numbers))
+        rhs = None if model_numbers is None else (lambda x, u: lifted[0](x, u, model_numbers))
+        return _closed_loop_dynamics(model, time, state, torque, controller, c, rhs=rhs)
+
+    return {"sym": sym, "ny": ny, "c": c, "numbers": numbers, "f": f,
+            "lifted_values": None if lifted is None else lifted[1]}
+
+
 def _step_function(model, torque, hub_motion, controller, n_numbers: int, scheme=None):
     """CasADi ``step([y; t], h, c) -> ([y_next; t + h], f(t, y))``: one RK4 step of the drive
     (plant and controller states, or ``[q, q_dot]`` under a prescribed hub motion), time
@@ -82,44 +112,30 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int, scheme
     further inputs (``scheme.inputs``: ``(name, rows)`` pairs) as symbols."""
     import casadi as ca
 
-    sym = ca.MX if model.variant == "exact" else ca.SX
-    ny = drive_size(model, hub_motion, controller)
-    yt, h, c = sym.sym("yt", ny + 1), sym.sym("h"), sym.sym("c", n_numbers)
+    drive = _drive_symbols(model, torque, hub_motion, controller, n_numbers)
+    sym, ny, c, numbers, f = (drive[k] for k in ("sym", "ny", "c", "numbers", "f"))
+    yt, h = sym.sym("yt", ny + 1), sym.sym("h")
     y, t = yt[:ny], yt[ny]
-    lifted = _lifted_core(model, hub_motion)
-    numbers = None if lifted is None else sym.sym("numbers", lifted[1].size)
-
-    def f(time, state, model_numbers=None):
-        if hub_motion is not None:
-            rate, acceleration = hub_motion_casadi(
-                hub_motion, time, _split_numbers((torque, hub_motion, controller), c)[1])
-            if model_numbers is None:
-                return _symbolic_beam_dynamics(model, state, rate, acceleration)
-            beam = model.layout.without_rotation()
-            q, q_dot = beam.modal(state), beam.modal_rates(state)
-            return ca.vertcat(q_dot, lifted[0](q, q_dot, rate, acceleration, model_numbers))
-        rhs = None if model_numbers is None else (lambda x, u: lifted[0](x, u, model_numbers))
-        return _closed_loop_dynamics(model, time, state, torque, controller, c, rhs=rhs)
-
     ys, ts = sym.sym("y", ny), sym.sym("t")
-    rate = ca.Function("flexctl_rate", [ys, ts, c], [f(ts, ys)])
+    rate = ca.Function("flexctl_rate", [ys, ts, c], [f(ts, ys, None)])
     extra = [] if scheme is None else [sym.sym(name, rows) for name, rows in scheme.inputs]
     if scheme is None:
-        k1 = f(t, y, numbers)
-        k2 = f(t + 0.5 * h, y + 0.5 * h * k1, numbers)
-        k3 = f(t + 0.5 * h, y + 0.5 * h * k2, numbers)
-        k4 = f(t + h * (1.0 - _END_INSIDE), y + h * k3, numbers)
+        k1 = f(t, y)
+        k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
+        k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
+        k4 = f(t + h * (1.0 - _END_INSIDE), y + h * k3)
         y_next, outputs, name = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4), [k1], "rk4"
     else:
-        y_next, *outputs = scheme(lambda time, state: f(time, state, numbers), t, y, h, extra)
+        y_next, *outputs = scheme(f, t, y, h, extra)
         name = scheme.name
     args = [yt, h, c, *extra]
-    if lifted is None:
+    if numbers is None:
         return (ca.Function(f"flexctl_{name}_step", args,
                             [ca.vertcat(y_next, t + h), *outputs]), rate)
     step = ca.Function(f"flexctl_exact_{name}_step", args + [numbers],
                        [ca.vertcat(y_next, t + h), *outputs])
-    return _exact_step(step, lifted[1], "RK4" if scheme is None else scheme.label), rate
+    return (_exact_step(step, drive["lifted_values"],
+                        "RK4" if scheme is None else scheme.label), rate)
 
 
 def _lifted_core(model, hub_motion):

@@ -3,13 +3,17 @@
 - :class:`CvodesSegments`: the compiled right-hand side integrated by CVODES segment by
   segment (between the inputs' breakpoints); where a segment fails or passes a stopping
   condition, SciPy locates the stop from the last good sample on a bounded budget.
+- :class:`EmbeddedSegments`: the same segments by compiled Dormand-Prince 5(4) steps with
+  error control (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), the output times read from
+  the pair's continuous extension; SciPy locates a stop as behind CVODES.
 - :class:`FixedStepRK4`: the compiled fixed-step loop of :mod:`flexctl.sim.fixed_step`, one
   call for the whole run, its step halved until a step-doubling estimate meets ``rtol``.
 - :class:`ScipyIVP`: ``scipy.integrate.solve_ivp`` segment by segment, with the stopping
   conditions as terminal events.
 
 Each hands back a :class:`Trajectory`: the samples it integrated and why it stopped. The
-accuracy check of a compiled run (:func:`check_run_accuracy`) is its own step.
+accuracy check of a compiled run (:func:`check_run_accuracy`: CVODES's;
+:func:`check_embedded_accuracy`: the pair's) is its own step.
 """
 
 from __future__ import annotations
@@ -22,7 +26,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .compiled import SegmentIntegrator, numeric_rhs, start_check, verify_accuracy
+from .background import Beside
+from .compiled import (CHECK_FACTOR, SegmentIntegrator, numeric_rhs, start_check,
+                       verify_accuracy)
+from .embedded_rk import EmbeddedRun
 from .fixed_step import MAX_HALVINGS, RK4_FIRST_OMEGA_H, RK4_OMEGA_H, integrate_fixed_step
 from .inputs import jacobian_frequency
 from .progress import Progress
@@ -30,9 +37,11 @@ from .stops import StopReason, tip_rows
 from ..model import SingularMassMatrixError
 from ..model.errors import InputValueError
 
-__all__ = ["Trajectory", "CvodesSegments", "FixedStepRK4", "ScipyIVP", "strategy_for",
+__all__ = ["Trajectory", "CvodesSegments", "EmbeddedSegments", "FixedStepRK4", "ScipyIVP",
+           "strategy_for",
            "check_run_accuracy", "start_accuracy_check", "planned_segments",
-           "rk4_accuracy_note", "AccuracyWarning", "FALLBACK_EVALUATIONS"]
+           "rk4_accuracy_note", "AccuracyWarning", "FALLBACK_EVALUATIONS",
+           "check_embedded_accuracy", "start_embedded_check"]
 
 #: Where a compiled segment fails, SciPy locates the stop with at most this many evaluations
 #: of the right-hand side (1 to 5 s of DOP853 steps); a state so stiff that they do not
@@ -215,15 +224,20 @@ class CvodesSegments(_Segments):
             raise FloatingPointError("the state derivative is not finite")
         return dy
 
-    def segment(self, traj, lo, hi, t_eval, y):
+    def integrate(self, lo, t_eval, y) -> tuple:
+        """``(states at t_eval, evaluations)`` of one segment from ``y`` at ``lo``;
+        ``RuntimeError`` where the integrator fails."""
         request, plan = self.request, self.plan
+        integ = SegmentIntegrator(request.model, lo, t_eval, plan.scale, request.rtol,
+                                  torque=request.torque, hub_motion=request.hub_motion,
+                                  controller=request.controller,
+                                  max_steps=plan.cvodes_steps, max_step=plan.cvodes_step)
+        return integ(y), integ.n_evaluations
+
+    def segment(self, traj, lo, hi, t_eval, y):
         try:
-            integ = SegmentIntegrator(request.model, lo, t_eval, plan.scale, request.rtol,
-                                      torque=request.torque, hub_motion=request.hub_motion,
-                                      controller=request.controller,
-                                      max_steps=plan.cvodes_steps, max_step=plan.cvodes_step)
-            y_seg = integ(y)
-            traj.n_eval += integ.n_evaluations
+            y_seg, n_eval = self.integrate(lo, t_eval, y)
+            traj.n_eval += n_eval
             bad = self.stops.first_bad(y_seg)
         except RuntimeError:
             y_seg, bad = None, 0
@@ -238,6 +252,75 @@ class CvodesSegments(_Segments):
             lo, y = float(t_eval[bad - 1]), y_seg[:, bad - 1]
         locate = _Budgeted(self.fallback_rhs or self.drive.rhs, FALLBACK_EVALUATIONS)
         return self.solve_ivp(traj, lo, hi, t_eval[bad:], y, locate)
+
+
+def _embedded_run(request, plan, rtol: float) -> EmbeddedRun:
+    """The compiled Dormand-Prince run of ``request`` at ``rtol``: its first step a radian of
+    the fastest pole it meets (mode, loop, spin)."""
+    omega = max(plan.omega_plant, plan.loop_frequency, request.spin_frequency)
+    return EmbeddedRun(request.model, request.torque, request.hub_motion, request.controller,
+                       scale=plan.scale, rtol=rtol, max_steps=plan.cvodes_steps,
+                       h_first=min(1.0 / omega if omega > 0.0 else math.inf, request.step),
+                       max_step=plan.cvodes_step)
+
+
+class EmbeddedSegments(CvodesSegments):
+    """The segments by compiled Dormand-Prince 5(4) steps with error control
+    (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), the step size carried from one segment
+    to the next; SciPy locates a stop within a segment, as behind CVODES."""
+
+    def __init__(self, request, plan, drive, stops):
+        super().__init__(request, plan, drive, stops)
+        self._steps = _embedded_run(request, plan, request.rtol)
+
+    def integrate(self, lo, t_eval, y) -> tuple:
+        return self._steps(lo, t_eval, y)
+
+
+def _embedded_replay(steps, segments, y0, cancelled=None):
+    """The states of ``steps`` (an :class:`EmbeddedRun`) over ``segments`` from ``y0``, and
+    its evaluations; None when it fails or is cancelled."""
+    states, evaluations, y = [], 0, y0
+    for lo, t_out in segments:
+        if cancelled is not None and cancelled.is_set():
+            return None
+        try:
+            part, n_eval = steps(lo, t_out, y)
+        except RuntimeError:
+            return None
+        states.append(part)
+        evaluations += n_eval
+        y = part[:, -1]
+    return np.concatenate(states, axis=1), evaluations
+
+
+def start_embedded_check(request, plan, drive):
+    """The replay of a Dormand-Prince run at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times
+    its tolerance, with a step size of its own, started beside the run on a spare core (its
+    compiled steps let go of Python's lock): give it to :func:`check_embedded_accuracy`, or
+    ``abandon()`` it if the run stops early."""
+    import threading
+
+    steps = _embedded_run(request, plan, min(CHECK_FACTOR * request.rtol, 1.0))
+    return Beside(_embedded_replay, steps, planned_segments(plan, request.grid),
+                  drive.y_init, cancelled=threading.Event())
+
+
+def check_embedded_accuracy(request, drive, traj: Trajectory, check, reporter=None):
+    """``traj.integration_error`` of a Dormand-Prince run that reached its end: the largest
+    tip difference from its replay at 10 times the tolerance (conservative: the error of the
+    looser run), at every output time."""
+    if reporter is not None:
+        reporter.report(request.t_final, "checking accuracy")
+    found = check.result()
+    if found is None:
+        traj.accuracy_note = "accuracy check could not run (the check integration failed)"
+        return
+    y_check, n_check = found
+    tip_map = tip_rows(request.model, drive.layout)
+    y_main = np.concatenate(traj.ys[1:], axis=1)
+    traj.integration_error = float(np.max(np.abs(tip_map @ (y_main - y_check))))
+    traj.n_eval += n_check
 
 
 class FixedStepRK4:
@@ -328,8 +411,11 @@ def start_accuracy_check(request, plan, drive):
                        plan.scale, request.rtol, **_check_options(request, plan))
 
 
-def strategy_for(method: str):
-    """The strategy class of an integration method."""
+def strategy_for(method: str, symbolic: bool = False):
+    """The strategy class of an integration method (``RK45``: the compiled pair when the
+    inputs have a CasADi form, SciPy's otherwise)."""
+    if method == "RK45" and symbolic:
+        return EmbeddedSegments
     return {"cvodes": CvodesSegments, "rk4": FixedStepRK4}.get(method, ScipyIVP)
 
 

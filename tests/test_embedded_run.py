@@ -1,0 +1,155 @@
+"""Continuous runs on compiled Dormand-Prince steps (flexctl.sim.embedded_rk.EmbeddedRun)."""
+
+import threading
+
+import numpy as np
+import pytest
+
+import flexctl
+from controllers import PD
+from flexctl.model.errors import InputError
+from flexctl.sim.maneuvers import TorqueSamples
+from flexctl.sim.embedded_rk import DENSE_OUTPUT, DORMAND_PRINCE, EmbeddedRun
+from flexctl.sim.request import (EXPLICIT_STEP_LIMIT, PAIR_INSTRUCTIONS, choose_continuous,
+                                 rhs_instructions, state_scale)
+
+
+@pytest.fixture(scope="module")
+def slew():
+    """slew-90's 6-mode first_order plant, 90 deg off, under a saturated PD law, and a tight
+    CVODES reference."""
+    model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=6)
+    x0 = np.zeros(model.n_states)
+    x0[0] = -np.pi / 2
+    law = PD(kp=12.0, kd=8.0, torque_limit=6.0)
+    tight = flexctl.simulate(model, 4.0, controller=law, x0=x0, rtol=1e-12, method="cvodes",
+                             output_step=0.005, check_validity=False)
+    return model, x0, law, tight
+
+
+def test_the_continuous_extension_is_of_order_four():
+    # y(t + theta h) of y' = y: the extension's error shrinks as h^5 at theta = 1/2
+    errors = []
+    for h in (0.2, 0.1):
+        ks, c, a = [], DORMAND_PRINCE["c"], DORMAND_PRINCE["a"]
+        for node, row in zip(c, a):
+            ks.append(1.0 + h * sum(w * k for w, k in zip(row, ks)))
+        y5 = 1.0 + h * sum(b * k for b, k in zip(DORMAND_PRINCE["b"], ks))
+        dy, theta = y5 - 1.0, 0.5
+        spline = h * ks[0] - dy
+        r4, r5 = dy - h * ks[6] - spline, h * sum(d * k for d, k in zip(DENSE_OUTPUT, ks))
+        value = 1.0 + theta * (dy + (1 - theta) * (spline + theta * (r4 + (1 - theta) * r5)))
+        errors.append(abs(value - np.exp(theta * h)))
+    assert 2 ** 4.5 < errors[0] / errors[1] < 2 ** 5.5
+
+
+@pytest.mark.parametrize("rtol", [1e-5, 1e-8])
+def test_auto_takes_the_pair_and_its_estimate_bounds_the_error(slew, rtol):
+    model, x0, law, tight = slew
+    run = flexctl.simulate(model, 4.0, controller=law, x0=x0, rtol=rtol, output_step=0.005,
+                           check_validity=False)
+    assert run.method == "RK45" and run.ok
+    np.testing.assert_array_equal(run.t, tight.t)
+    actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
+    assert actual <= run.integration_error <= 100 * rtol * tight.peak_tip_deflection
+    # the torque the law applied follows the same trajectory
+    np.testing.assert_allclose(run.torque, tight.torque, atol=1e3 * rtol * 6.0)
+
+
+def test_segments_and_a_prescribed_hub_motion_run_on_the_pair():
+    scene = flexctl.load_scene("kane-spinup")
+    model = flexctl.build_model(scene.system, n_modes=3)
+    motion = scene.maneuver
+    run = flexctl.simulate(model, 20.0, hub_motion=motion, rtol=1e-6, output_step=0.05,
+                           check_validity=False)
+    tight = flexctl.simulate(model, 20.0, hub_motion=motion, rtol=1e-12, method="cvodes",
+                             output_step=0.05, check_validity=False)
+    assert run.method == "RK45" and run.ok
+    actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
+    assert actual <= run.integration_error <= 1e-4 * tight.peak_tip_deflection
+
+
+def test_a_held_torque_sees_each_hold_from_the_left():
+    # torque samples jump at their breakpoints: each segment ends on one
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=3)
+    torque = TorqueSamples(times=[0.0, 0.3, 0.7, 1.0], values=[1.0, -2.0, 0.5, 0.0])
+    run = flexctl.simulate(model, 1.5, torque=torque, rtol=1e-8, check_validity=False)
+    tight = flexctl.simulate(model, 1.5, torque=torque, rtol=1e-12, method="cvodes",
+                             check_validity=False)
+    assert run.method == "RK45"
+    assert np.max(np.abs(run.tip_deflection - tight.tip_deflection)) <= run.integration_error
+
+
+def test_expensive_or_stiff_runs_keep_cvodes():
+    system = flexctl.load_scene("slew-90").system
+    cheap = flexctl.build_model(system, n_modes=6)
+    exact = flexctl.build_model(system, n_modes=4, variant="exact")
+    omega = float(cheap.natural_frequencies(0.0, hub="free")[-1])
+    assert rhs_instructions(cheap) <= PAIR_INSTRUCTIONS < rhs_instructions(exact)
+    assert choose_continuous(cheap, 6.0, omega) == "RK45"
+    assert choose_continuous(exact, 6.0, omega) == "cvodes"
+    # a run long enough that the pair's steps, bound by the fastest mode, pass the limit
+    assert choose_continuous(cheap, 2.0 * EXPLICIT_STEP_LIMIT / omega, omega) == "cvodes"
+    # a spin far above the modes counts as the fastest pole
+    assert choose_continuous(cheap, 6.0, 1e6) == "cvodes"
+
+
+def test_a_python_torque_keeps_scipy():
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    state = {"n": 0}
+
+    def torque(t):
+        state["n"] += 1               # a side effect: not traced into a CasADi form
+        return 0.1 if t < 0.5 else 0.0
+    run = flexctl.simulate(model, 1.0, torque=torque, check_validity=False)
+    assert run.ok and run.method == "DOP853"
+
+
+def test_bad_arguments_are_refused_by_name(slew):
+    model, _, law, _ = slew
+    scale = state_scale(model, model.layout)
+    good = dict(controller=law, scale=scale, rtol=1e-6, max_steps=100, h_first=1e-3)
+    EmbeddedRun(model, **good)
+    for name, value in [("scale", scale[:-1]), ("scale", -scale), ("rtol", 0.0),
+                        ("rtol", 2.0), ("rtol", float("nan")), ("max_steps", 0),
+                        ("max_steps", 2.5), ("h_first", 0.0), ("h_first", float("inf")),
+                        ("h_first", "1e-3"), ("max_step", -1.0), ("max_step", "x")]:
+        with pytest.raises(InputError, match=name):
+            EmbeddedRun(model, **{**good, name: value})
+    with pytest.raises(InputError, match="CasADi form"):
+        EmbeddedRun(model, torque=lambda t: 0.0, scale=scale, rtol=1e-6, max_steps=10,
+                    h_first=1e-3)
+    with pytest.raises(InputError, match="model"):
+        EmbeddedRun("model", **good)
+
+
+def test_a_step_budget_and_a_non_finite_state_fail_the_segment(slew):
+    model, x0, law, _ = slew
+    scale = state_scale(model, model.layout)
+    run = EmbeddedRun(model, controller=law, scale=scale, rtol=1e-10, max_steps=1,
+                      h_first=1e-3)
+    with pytest.raises(RuntimeError, match="steps"):
+        run(0.0, np.array([1.0]), x0)
+    run = EmbeddedRun(model, controller=law, scale=scale, rtol=1e-6, max_steps=1000,
+                      h_first=1e-3)
+    bad = x0.copy()
+    bad[1] = np.nan
+    with pytest.raises(RuntimeError):
+        run(0.0, np.array([0.5, 1.0]), bad)
+
+
+def test_threads_share_the_compiled_steps_and_agree(slew):
+    model, x0, law, _ = slew
+    results = {}
+
+    def work(k):
+        results[k] = flexctl.simulate(model, 2.0, controller=law, x0=x0, rtol=1e-7,
+                                      check_validity=False).tip_deflection
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(3)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    np.testing.assert_array_equal(results[0], results[1])
+    np.testing.assert_array_equal(results[0], results[2])
