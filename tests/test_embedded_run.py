@@ -153,3 +153,39 @@ def test_threads_share_the_compiled_steps_and_agree(slew):
         thread.join()
     np.testing.assert_array_equal(results[0], results[1])
     np.testing.assert_array_equal(results[0], results[2])
+
+
+@pytest.mark.parametrize("options", [{"rtol": 0.5}, {"rtol": 1e-2}, {"atol": 1e3}],
+                         ids=["rtol-0.5", "rtol-1e-2", "atol-1e3"])
+def test_a_loose_tolerance_is_held_stable_by_the_step_bound(slew, options):
+    # the error control sees nothing at these tolerances: the bound of half a radian of the
+    # fastest pole keeps the undamped modes from growing, and the check still bounds the error
+    model, x0, law, tight = slew
+    run = flexctl.simulate(model, 4.0, controller=law, x0=x0, output_step=0.005,
+                           check_validity=False, **options)
+    assert run.ok and run.method == "RK45", run.message
+    actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
+    assert actual <= run.integration_error <= 1e-2 * tight.peak_tip_deflection
+
+
+def test_a_run_whose_steps_are_all_bound_still_has_an_estimate(slew):
+    model, _, _, _ = slew
+    torque = flexctl.SineTorque(peak_torque=2.0, duration=2.0)
+    run = flexctl.simulate(model, 3.0, torque=torque, max_step=1e-4, check_validity=False)
+    tight = flexctl.simulate(model, 3.0, torque=torque, rtol=1e-12, method="cvodes",
+                             check_validity=False)
+    assert run.method == "RK45"
+    actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
+    # 3e4 steps: both errors are at the rounding level, some 1e-11 of the peak
+    assert 0.0 < run.integration_error
+    assert actual <= max(run.integration_error, 1e-10 * tight.peak_tip_deflection)
+
+
+def test_a_diverging_run_stops_where_it_passes_the_length(slew):
+    model, _, _, _ = slew
+    torque = flexctl.SineTorque(peak_torque=1e6, duration=2.0)
+    run = flexctl.simulate(model, 3.0, torque=torque, check_validity=False)
+    assert run.status == "diverged" and "passed the beam length" in run.message
+    assert run.t[-1] < 0.05 and np.all(np.isfinite(run.states))
+    # the compiled steps end within a call of the stop, not at the segment's end (2 s)
+    assert run.n_evaluations < 7 * 128 * 20

@@ -38,7 +38,7 @@ from ..model.checks import check_array, check_instance, check_integer, check_rea
 from ..model.errors import InputValueError
 
 __all__ = ["EmbeddedHold", "EmbeddedRun", "choose_hold", "DORMAND_PRINCE", "DENSE_OUTPUT",
-           "STIFF_SAMPLE", "SAFETY", "ATTEMPTS"]
+           "STIFF_SAMPLE", "SAFETY", "ATTEMPTS", "PAIR_OMEGA_H"]
 
 #: The Dormand-Prince 5(4) tableau: nodes ``c``, stages ``a``, fifth-order weights ``b`` (also
 #: the last stage's row) and the error weights ``e = b - b_hat`` (``b_hat`` of fourth order).
@@ -61,6 +61,15 @@ DORMAND_PRINCE = {
 DENSE_OUTPUT = (-12715105075 / 11282082432, 0.0, 87487479700 / 32700410799,
                 -10690763975 / 1880347072, 701980252875 / 199316789632,
                 -1453857185 / 822651844, 69997945 / 29380423)
+#: Longest step of a continuous run, in radians of its fastest pole. The pair's stability
+#: function stays within ``1 + 1.4e-6`` on the imaginary axis up to ``|h lambda| = 1`` and
+#: grows past it (1.03 at 2, 1.44 at 3): an undamped fast mode whose error the control does
+#: not see (a loose ``rtol``, a large ``atol``) must not be stepped past 1, or it grows step
+#: after step. The run takes at most half that, so that its accuracy check, replayed with
+#: twice the longest step, is still stable and still a different run. At the usual
+#: tolerances the error control keeps the steps about this short anyway (``omega h`` of 0.49
+#: on slew-90's 6-mode plant at rtol 1e-6).
+PAIR_OMEGA_H = 0.5
 #: Step attempts per compiled call of a continuous run (:class:`EmbeddedRun`): the calls'
 #: Python overhead is paid once for this many steps; the attempts left once a segment is done
 #: change nothing.
@@ -360,10 +369,10 @@ class EmbeddedRun:
 
     Notes
     -----
-    ``run(lo, t_out, y) -> (states (m, K), evaluations)`` integrates from ``y`` at ``lo`` onto
-    the output times ``t_out`` (ascending, after ``lo``; the last is the segment's end, where
-    an input may jump). ``RuntimeError`` when a step cannot be taken: a non-finite state, the
-    step budget, a step too short.
+    ``run(lo, t_out, y, stop=None) -> (states (m, K), evaluations)`` integrates from ``y`` at
+    ``lo`` onto the output times ``t_out`` (ascending, after ``lo``; the last is the segment's
+    end, where an input may jump). ``RuntimeError`` when a step cannot be taken: a non-finite
+    state, the step budget, a step too short.
     """
 
     def __init__(self, model, torque=None, hub_motion=None, controller=None, *, scale,
@@ -400,14 +409,17 @@ class EmbeddedRun:
         if lifted is not None:
             self._run.args[6][:] = lifted
 
-    def __call__(self, lo, t_out, y) -> tuple:
-        """States at ``t_out`` from ``y`` at ``lo``: ``(states (m, K), evaluations)``."""
+    def __call__(self, lo, t_out, y, stop=None) -> tuple:
+        """States at ``t_out`` from ``y`` at ``lo``: ``(states (m, K), evaluations)``.
+        ``stop(states)``, if given, is asked after each call about the states it added (the
+        index of the first that ends the run, or None): the states end after that call's,
+        fewer than ``K``, rather than integrating a run that has ended."""
         run = self._run
         with run._lock:        # its buffers are this run's: written and read here directly
             return self._segment(run, float(lo), np.asarray(t_out, dtype=float),
-                                 np.asarray(y, dtype=float))
+                                 np.asarray(y, dtype=float), stop)
 
-    def _segment(self, run, lo, t_out, y):
+    def _segment(self, run, lo, t_out, y, stop):
         m, attempts = self._size, 0
         # the carry: time, step size, then the drive's state
         carry, end = run.args[0], float(t_out[-1])
@@ -434,6 +446,8 @@ class EmbeddedRun:
                 p = parts[which]
                 out[:, done:reached] = (p[:, 0] + theta * (p[:, 1] + (1.0 - theta) * (
                     p[:, 2] + theta * (p[:, 3] + (1.0 - theta) * p[:, 4])))).T
+                if stop is not None and stop(out[:, done:reached]) is not None:
+                    return out[:, :reached], 7 * attempts
                 done = reached
             h = float(final[1])
             carry[:] = final

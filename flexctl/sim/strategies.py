@@ -29,7 +29,7 @@ from scipy.integrate import solve_ivp
 from .background import Beside
 from .compiled import (CHECK_FACTOR, SegmentIntegrator, numeric_rhs, start_check,
                        verify_accuracy)
-from .embedded_rk import EmbeddedRun
+from .embedded_rk import PAIR_OMEGA_H, EmbeddedRun
 from .fixed_step import MAX_HALVINGS, RK4_FIRST_OMEGA_H, RK4_OMEGA_H, integrate_fixed_step
 from .inputs import jacobian_frequency
 from .progress import Progress
@@ -254,14 +254,22 @@ class CvodesSegments(_Segments):
         return self.solve_ivp(traj, lo, hi, t_eval[bad:], y, locate)
 
 
-def _embedded_run(request, plan, rtol: float) -> EmbeddedRun:
+def _embedded_run(request, plan, rtol: float, looser: bool = False) -> EmbeddedRun:
     """The compiled Dormand-Prince run of ``request`` at ``rtol``: its first step a radian of
-    the fastest pole it meets (mode, loop, spin)."""
+    the fastest pole it meets (mode, loop, spin), its steps at most
+    :data:`~flexctl.sim.embedded_rk.PAIR_OMEGA_H` radians of it and the inputs' own bound.
+    ``looser``: the accuracy check's replay, whose longest step is twice the run's, so that a
+    run whose steps are all bound is not replayed step for step."""
     omega = max(plan.omega_plant, plan.loop_frequency, request.spin_frequency)
+    bound = min(PAIR_OMEGA_H / omega if omega > 0.0 else math.inf,
+                math.inf if plan.cvodes_step is None else plan.cvodes_step)
+    if looser:
+        bound *= 2.0
     return EmbeddedRun(request.model, request.torque, request.hub_motion, request.controller,
                        scale=plan.scale, rtol=rtol, max_steps=plan.cvodes_steps,
-                       h_first=min(1.0 / omega if omega > 0.0 else math.inf, request.step),
-                       max_step=plan.cvodes_step)
+                       h_first=min(1.0 / omega if omega > 0.0 else math.inf, request.step,
+                                   bound),
+                       max_step=bound)
 
 
 class EmbeddedSegments(CvodesSegments):
@@ -274,7 +282,8 @@ class EmbeddedSegments(CvodesSegments):
         self._steps = _embedded_run(request, plan, request.rtol)
 
     def integrate(self, lo, t_eval, y) -> tuple:
-        return self._steps(lo, t_eval, y)
+        # a run that passes a stop ends there, not at the segment's end
+        return self._steps(lo, t_eval, y, stop=self.stops.first_bad)
 
 
 def _embedded_replay(steps, segments, y0, cancelled=None):
@@ -296,12 +305,13 @@ def _embedded_replay(steps, segments, y0, cancelled=None):
 
 def start_embedded_check(request, plan, drive):
     """The replay of a Dormand-Prince run at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times
-    its tolerance, with a step size of its own, started beside the run on a spare core (its
+    its tolerance and twice its longest step, with a step size of its own, started beside the
+    run on a spare core (its
     compiled steps let go of Python's lock): give it to :func:`check_embedded_accuracy`, or
     ``abandon()`` it if the run stops early."""
     import threading
 
-    steps = _embedded_run(request, plan, min(CHECK_FACTOR * request.rtol, 1.0))
+    steps = _embedded_run(request, plan, min(CHECK_FACTOR * request.rtol, 1.0), looser=True)
     return Beside(_embedded_replay, steps, planned_segments(plan, request.grid),
                   drive.y_init, cancelled=threading.Event())
 
