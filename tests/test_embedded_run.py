@@ -189,3 +189,23 @@ def test_a_diverging_run_stops_where_it_passes_the_length(slew):
     assert run.t[-1] < 0.05 and np.all(np.isfinite(run.states))
     # the compiled steps end within a call of the stop, not at the segment's end (2 s)
     assert run.n_evaluations < 7 * 128 * 20
+
+
+def test_a_replay_ends_when_cancelled_or_past_a_stop(slew):
+    # an abandoned accuracy check must not integrate on beside the next run
+    from flexctl.sim.strategies import _embedded_replay
+
+    model, x0, law, _ = slew
+    scale = state_scale(model, model.layout)
+    segments = [(0.0, np.linspace(0.5, 4.0, 8))]
+    cancelled = threading.Event()
+
+    def steps(stop):
+        return EmbeddedRun(model, controller=law, scale=scale, rtol=1e-6, max_steps=1000,
+                           h_first=1e-3)
+    whole = _embedded_replay(steps(None), segments, x0, lambda states: None, cancelled)
+    assert whole is not None and whole[0].shape == (model.n_states, 8)
+    # past a stop (here the first sample), the replay gives no states
+    assert _embedded_replay(steps(None), segments, x0, lambda states: 0, cancelled) is None
+    cancelled.set()
+    assert _embedded_replay(steps(None), segments, x0, lambda states: None, cancelled) is None

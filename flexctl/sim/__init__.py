@@ -9,7 +9,7 @@ module            contents
 ``simulation``    ``simulate``: a thin driver over the parts below
 ``request``       the validated run request and its integration plan (tolerances, stiffness guard)
 ``drives``        what drives a run: prescribed hub, torque and continuous ``Controller``
-``strategies``    one integration strategy per method family (CVODES, rk4, ``solve_ivp``)
+``strategies``    one integration strategy per method family (CVODES, the pair, rk4, SciPy)
 ``stops``         stopping conditions and their physical reasons (``StopReason``)
 ``result``        ``SimulationResult`` and its assembly
 ``inputs``        argument checks, ``SampledTorque`` (a torque given as samples)
@@ -17,7 +17,8 @@ module            contents
 ``compiled``      the CasADi/CVODES integration of a symbolic drive
 ``fixed_step``    compiled fixed-step RK4 with a step-doubling error estimate (``method="rk4"``)
 ``digital``       sampled controllers: ``ZeroOrderHold``, the ``SampledController`` protocol
-``embedded_rk``   sample to sample by Dormand-Prince steps whose size carries over (``RK45``)
+``embedded_rk``   compiled Dormand-Prince steps (``RK45``): sample to sample, and continuous
+                  runs with dense output
 ``sensors``       noisy, quantised, late sensor readings (``Sensors``)
 ``energy``        energy balance of small-deflection runs (``energy_balance``)
 ``validity``      geometric model error of a run, the variant a manoeuvre needs

@@ -501,7 +501,7 @@ def stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
                     "them one, e.g. the built-in manoeuvres, to run on cvodes)")
 
 
-def choose_continuous(model: Model, t_final: float, omega_max: float, hub_motion=None) -> str:
+def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
     """The method of a continuous ``method="auto"`` run whose inputs have a CasADi form:
     ``"RK45"`` (compiled Dormand-Prince steps, :class:`~flexctl.sim.embedded_rk.EmbeddedRun`)
     or ``"cvodes"``.
@@ -522,17 +522,12 @@ def choose_continuous(model: Model, t_final: float, omega_max: float, hub_motion
     # and the stop is located and named, where explicit steps could step across it
     if model.variant == "consistent" or not steps <= EXPLICIT_STEP_LIMIT:
         return "cvodes"
-    return "RK45" if rhs_instructions(model, hub_motion) <= PAIR_INSTRUCTIONS else "cvodes"
+    return "RK45" if rhs_instructions(model) <= PAIR_INSTRUCTIONS else "cvodes"
 
 
-def rhs_instructions(model: Model, hub_motion=None) -> float:
-    """Instructions of one evaluation of ``model``'s compiled right-hand side (the exact
-    model's lifted core; ``inf`` where it has none)."""
-    if model.variant == "exact":
-        from .fixed_step import _lifted_core
-
-        lifted = _lifted_core(model, hub_motion)
-        return math.inf if lifted is None else float(lifted[0].n_instructions())
+def rhs_instructions(model: Model) -> float:
+    """Instructions of one evaluation of ``model``'s right-hand side in scalar form
+    (``model.casadi()``; ``inf`` where it has none)."""
     function = model.casadi()
     return float(function.n_instructions()) if function.is_a("SXFunction") else math.inf
 
@@ -557,8 +552,7 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
     loop = _loop_frequency(request, drive, atol / rtol, omega_plant)
     if request.method == "auto":
         method, note = choose_continuous(model, t_final, max(omega_plant, loop,
-                                                             request.spin_frequency),
-                                         request.hub_motion), ""
+                                                             request.spin_frequency)), ""
     else:
         method, note = stiffness_guard(model, t_final, request.method, request.symbolic,
                                        request.prescribed, loop)

@@ -75,7 +75,7 @@ def _integrate(request) -> tuple:
     if request.check_accuracy and kind is CvodesSegments:
         check = start_accuracy_check(request, plan, drive)
     elif request.check_accuracy and kind is EmbeddedSegments:
-        check = start_embedded_check(request, plan, drive)
+        check = start_embedded_check(request, plan, drive, stops)
     try:
         traj = strategy.run()
     except BaseException:

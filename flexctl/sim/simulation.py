@@ -30,7 +30,12 @@ Methods
 -------
 ``"cvodes"`` is compiled SUNDIALS integration (:mod:`flexctl.sim.compiled`); every such run
 is repeated at 10 times the tolerance to estimate its integration error, and redone with
-A-stable BDF2 if the two disagree grossly. An explicit SciPy method (DOP853, RK45, RK23) on a
+A-stable BDF2 if the two disagree grossly. ``"RK45"`` with inputs that have a CasADi form is
+compiled Dormand-Prince 5(4) stepping (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), its
+outputs read from the pair's continuous extension and its error estimated by a replay at 10
+times the tolerance. ``"auto"`` takes it where it costs less than CVODES (a cheap right-hand
+side, a fastest pole that leaves few steps: :func:`flexctl.sim.request.choose_continuous`),
+else CVODES, and ``"DOP853"`` for inputs without a CasADi form. An explicit SciPy method (DOP853, RK45, RK23) on a
 model too stiff for it is replaced by ``"cvodes"`` when the inputs allow, with a
 :class:`StiffnessWarning` and a note in the result's ``message`` (the result's ``method`` is
 the one used; :func:`flexctl.sim.request.stiffness_guard`). ``"rk4"`` is compiled fixed-step
@@ -98,10 +103,9 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     atol : float or array_like, optional
         Absolute tolerance; default ``rtol`` times each state's physical scale.
     method : str, optional
-        ``"auto"`` (default: ``"cvodes"`` when every input has a CasADi form, else
-        ``"DOP853"``), ``"cvodes"``, ``"rk4"`` or a ``scipy.integrate.solve_ivp`` method
-        (``"DOP853"``, ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``); see
-        the module's Methods.
+        ``"auto"`` (default), ``"cvodes"``, ``"rk4"`` or a ``scipy.integrate.solve_ivp``
+        method (``"DOP853"``, ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``);
+        see the module's Methods.
     output_step : float, optional
         Spacing of the output times, s. Default: ``t_final / 2000``.
     max_step : float, optional
@@ -109,8 +113,9 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         step-doubling pair). An input's own ``max_step`` (a sampled torque's sample
         interval) bounds it too.
     check_accuracy : bool, optional
-        On ``"cvodes"``: repeat the run at 10 times the tolerance for
-        ``result.integration_error`` (:func:`flexctl.sim.compiled.verify_accuracy`).
+        On ``"cvodes"`` and compiled ``"RK45"``: repeat the run at 10 times the tolerance
+        for ``result.integration_error`` (:func:`flexctl.sim.compiled.verify_accuracy`,
+        :func:`flexctl.sim.strategies.check_embedded_accuracy`).
         Default True.
     progress : bool or callable, optional
         ``True`` prints the simulated time reached and the time to go to stderr every 5 s

@@ -286,16 +286,20 @@ class EmbeddedSegments(CvodesSegments):
         return self._steps(lo, t_eval, y, stop=self.stops.first_bad)
 
 
-def _embedded_replay(steps, segments, y0, cancelled=None):
+def _embedded_replay(steps, segments, y0, stop, cancelled):
     """The states of ``steps`` (an :class:`EmbeddedRun`) over ``segments`` from ``y0``, and
-    its evaluations; None when it fails or is cancelled."""
+    its evaluations; None when it fails, passes a stop (``stop(states)``, as the run's) or is
+    cancelled (looked at after every compiled call)."""
+    def ended(states):
+        return 0 if cancelled.is_set() else stop(states)
+
     states, evaluations, y = [], 0, y0
     for lo, t_out in segments:
-        if cancelled is not None and cancelled.is_set():
-            return None
         try:
-            part, n_eval = steps(lo, t_out, y)
+            part, n_eval = steps(lo, t_out, y, stop=ended)
         except RuntimeError:
+            return None
+        if part.shape[1] < len(t_out):
             return None
         states.append(part)
         evaluations += n_eval
@@ -303,17 +307,17 @@ def _embedded_replay(steps, segments, y0, cancelled=None):
     return np.concatenate(states, axis=1), evaluations
 
 
-def start_embedded_check(request, plan, drive):
+def start_embedded_check(request, plan, drive, stops):
     """The replay of a Dormand-Prince run at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times
     its tolerance and twice its longest step, with a step size of its own, started beside the
-    run on a spare core (its
-    compiled steps let go of Python's lock): give it to :func:`check_embedded_accuracy`, or
-    ``abandon()`` it if the run stops early."""
+    run on a spare core (its compiled steps let go of Python's lock): give it to
+    :func:`check_embedded_accuracy`, or ``abandon()`` it if the run stops early, which ends it
+    within a compiled call. A replay that passes one of the run's ``stops`` ends there."""
     import threading
 
     steps = _embedded_run(request, plan, min(CHECK_FACTOR * request.rtol, 1.0), looser=True)
     return Beside(_embedded_replay, steps, planned_segments(plan, request.grid),
-                  drive.y_init, cancelled=threading.Event())
+                  drive.y_init, stops.first_bad, cancelled=threading.Event())
 
 
 def check_embedded_accuracy(request, drive, traj: Trajectory, check, reporter=None):
