@@ -3,7 +3,8 @@
 Cases, all on 4-mode first_order models:
 
 A. ``kane-spinup`` (30 s, prescribed spin-up to 4 rad/s): ``flexctl.simulate`` (method "auto",
-   which takes the compiled CVODES path) against a bare CVODES integration of the same beam
+   which takes compiled Dormand-Prince steps on these cheap 4-mode models, CVODES on costlier
+   ones: :func:`flexctl.sim.request.choose_continuous`) against a bare CVODES integration of the same beam
    equations, ``M_ff q'' + (K_ff - theta_t^2 D) q = -m_tf theta_tt``, written below with casadi
    from ``model.matrices``.
 B. ``hub-beam-mass`` (20 s, one period of 2 N m sine torque): the same two, and python-control's
@@ -134,7 +135,7 @@ def compare(name, with_python_control):
     print(f"   reference: DOP853 at rtol {REFERENCE_RTOL:g} ({time.perf_counter() - start:.1f} s);"
           f" flexctl cvodes at 1e-12 differs from it by {check:.2g}")
 
-    tools = {"flexctl.simulate (cvodes)": (flex, REPEATS),
+    tools = {"flexctl.simulate (auto)": (flex, REPEATS),
              "flexctl, no validity estimate": (
                  flexctl_tip(model, scene, t_final, check_validity=False), REPEATS),
              "flexctl, no checks": (flexctl_tip(model, scene, t_final, False, False), REPEATS),
@@ -144,7 +145,7 @@ def compare(name, with_python_control):
             tools[f"python-control {method}"] = (
                 python_control_run(model, scene, t_final, method), REPEATS_SLOW)
     times = measure(tools, reference, width=28)
-    flex_time = times["flexctl.simulate (cvodes)"]
+    flex_time = times["flexctl.simulate (auto)"]
     ratio = flex_time / times["bare casadi CVODES"]
     print(f"   flexctl / bare CVODES = {ratio:.2f} (target <= 2: "
           f"{'met' if ratio <= 2 else 'missed'}); without its accuracy check (the run at 10x "
@@ -156,7 +157,7 @@ def compare(name, with_python_control):
           f"{times['flexctl, no validity estimate'] / times['bare casadi CVODES']:.2f}")
     cpu, bare_cpu = CPU_TIMES, CPU_TIMES["bare casadi CVODES"]
     print(f"   CPU time (every thread) against bare CVODES: flexctl "
-          f"{cpu['flexctl.simulate (cvodes)'] / bare_cpu:.2f}, without the validity estimate "
+          f"{cpu['flexctl.simulate (auto)'] / bare_cpu:.2f}, without the validity estimate "
           f"{cpu['flexctl, no validity estimate'] / bare_cpu:.2f}, no checks "
           f"{cpu['flexctl, no checks'] / bare_cpu:.2f} (the accuracy check runs beside the run "
           f"on a spare core: wall time counts the longer of the two, CPU time both)")

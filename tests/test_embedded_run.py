@@ -200,12 +200,12 @@ def test_a_replay_ends_when_cancelled_or_past_a_stop(slew):
     segments = [(0.0, np.linspace(0.5, 4.0, 8))]
     cancelled = threading.Event()
 
-    def steps(stop):
+    def steps():
         return EmbeddedRun(model, controller=law, scale=scale, rtol=1e-6, max_steps=1000,
                            h_first=1e-3)
-    whole = _embedded_replay(steps(None), segments, x0, lambda states: None, cancelled)
+    whole = _embedded_replay(steps(), segments, x0, lambda states: None, cancelled)
     assert whole is not None and whole[0].shape == (model.n_states, 8)
     # past a stop (here the first sample), the replay gives no states
-    assert _embedded_replay(steps(None), segments, x0, lambda states: 0, cancelled) is None
+    assert _embedded_replay(steps(), segments, x0, lambda states: 0, cancelled) is None
     cancelled.set()
-    assert _embedded_replay(steps(None), segments, x0, lambda states: None, cancelled) is None
+    assert _embedded_replay(steps(), segments, x0, lambda states: None, cancelled) is None
