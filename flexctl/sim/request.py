@@ -513,9 +513,10 @@ def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
     each. The pair is cheaper while an evaluation of the right-hand side costs about a
     microsecond or less (:data:`PAIR_INSTRUCTIONS` compiled instructions) and its steps stay
     within :data:`EXPLICIT_STEP_LIMIT`. Measured on slew-90 under a saturated PD law at rtol
-    1e-6 (``benchmarks/bench_closed_loop.py``): first_order on 6 modes (259 instructions)
-    10 ms against CVODES's 25 ms; exact on 2 modes (3966) 8.5 ms against 9.1 ms; exact on 4
-    and 6 modes 46 and 147 ms against 31 and 72 ms.
+    1e-6, 6 s, without the accuracy check: first_order on 6 modes (259 instructions) 8.6 ms
+    against CVODES's 25.5 ms; exact on 2 modes (3966) 8.3 ms against 9.2 ms; exact on 4 and 6
+    modes (10 018 and 19 482) 44 and 142 ms against 31 and 74 ms. The consistent variant
+    keeps CVODES.
     """
     steps = float(omega_max) * float(t_final) / EXPLICIT_STABILITY_LIMITS["RK45"]
     # the consistent variant's mass matrix can turn singular on the way: CVODES stops there
