@@ -107,6 +107,27 @@ class _Held:
         return parameters[0]
 
 
+def _dopri5_step(f, t, y, h, atol, rtol) -> tuple:
+    """One Dormand-Prince step of ``y' = f(time, y)`` from ``y`` at ``t``, as CasADi
+    expressions: ``(stages, y5, norm)``, the seven stage derivatives, the fifth-order solution
+    and the weighted RMS norm of the embedded error estimate (CVODES's weights,
+    ``atol + rtol max(|y|, |y5|)``)."""
+    import casadi as ca
+
+    tableau, ks = DORMAND_PRINCE, []
+    for node, row in zip(tableau["c"], tableau["a"]):
+        stage = y
+        for a, k in zip(row, ks):
+            if a != 0.0:
+                stage = stage + h * a * k
+        # a stage at the step's end sees the held input from the left, as RK4's does
+        ks.append(f(t + h * (node if node < 1.0 else 1.0 - _END_INSIDE), stage))
+    y5 = y + h * sum(b * k for b, k in zip(tableau["b"], ks) if b != 0.0)
+    error = h * sum(e * k for e, k in zip(tableau["e"], ks) if e != 0.0)
+    weight = atol + rtol * ca.fmax(ca.fabs(y), ca.fabs(y5))
+    return ks, y5, ca.sqrt(ca.sumsqr(error / weight) / y.numel())
+
+
 class _DormandPrince:
     """The scheme for :func:`~flexctl.sim.fixed_step._step_function`: one Dormand-Prince step
     and the weighted norm of its error estimate."""
@@ -117,22 +138,7 @@ class _DormandPrince:
         self.inputs = (("atol", ny), ("rtol", 1))
 
     def __call__(self, f, t, y, h, extra):
-        import casadi as ca
-
-        atol, rtol = extra
-        tableau = DORMAND_PRINCE
-        ks = []
-        for c, row in zip(tableau["c"], tableau["a"]):
-            stage = y
-            for a, k in zip(row, ks):
-                if a != 0.0:
-                    stage = stage + h * a * k
-            # a stage at the step's end sees the held input from the left, as RK4's does
-            ks.append(f(t + h * (c if c < 1.0 else 1.0 - _END_INSIDE), stage))
-        y5 = y + h * sum(b * k for b, k in zip(tableau["b"], ks) if b != 0.0)
-        error = h * sum(e * k for e, k in zip(tableau["e"], ks) if e != 0.0)
-        weight = atol + rtol * ca.fmax(ca.fabs(y), ca.fabs(y5))
-        norm = ca.sqrt(ca.sumsqr(error / weight) / y.numel())
+        _, y5, norm = _dopri5_step(f, t, y, h, *extra)
         return y5, norm
 
 
@@ -296,17 +302,7 @@ def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
     # the last step of a segment ends on it (and is not left a sliver)
     last = left <= 1.1 * h_try
     step = ca.if_else(last, left, h_try)
-    tableau, ks = DORMAND_PRINCE, []
-    for node, row in zip(tableau["c"], tableau["a"]):
-        stage = y
-        for a, k in zip(row, ks):
-            if a != 0.0:
-                stage = stage + step * a * k
-        # a stage at the step's end sees the inputs from the left, as RK4's does
-        ks.append(f(t + step * (node if node < 1.0 else 1.0 - _END_INSIDE), stage))
-    y5 = y + step * sum(b * k for b, k in zip(tableau["b"], ks) if b != 0.0)
-    error = step * sum(e * k for e, k in zip(tableau["e"], ks) if e != 0.0)
-    norm = ca.sqrt(ca.sumsqr(error / (atol + rtol * ca.fmax(ca.fabs(y), ca.fabs(y5)))) / ny)
+    ks, y5, norm = _dopri5_step(f, t, y, step, atol, rtol)
     accepted = ca.logic_and(norm <= 1.0, live)            # a NaN norm never is
     change = SAFETY * norm ** -0.2
     grown = ca.fmin(GROWTH, change) * step
