@@ -591,3 +591,29 @@ def test_sampled_loop_with_sensors_runs_compiled_and_agrees(fresh, monkeypatch):
         if name != "true":
             np.testing.assert_allclose(readings[0][name], readings[1][name], rtol=1e-6,
                                        atol=1e-9)
+
+
+@needs_compiler
+def test_first_order_beams_differing_in_numbers_share_one_pair_library(fresh):
+    """The continuous Dormand-Prince steps of the small-deflection variants lift the model's
+    numbers out of their code: a Monte Carlo over the beam compiles them once."""
+    import dataclasses
+
+    import flexctl
+    from controllers import PD
+
+    base = flexctl.load_scene("slew-90").system
+    law = PD(kp=12.0, kd=8.0, torque_limit=6.0)
+    before, peaks = dict(compile_cache.STATS), []
+    for length in (1.7, 1.9):
+        system = dataclasses.replace(base, beam=dataclasses.replace(base.beam, length=length))
+        model = flexctl.build_model(system, n_modes=3)
+        x0 = model.rest_state(-np.pi / 2)
+        run = flexctl.simulate(model, 2.0, controller=law, x0=x0, check_accuracy=False,
+                               check_validity=False)
+        assert run.method == "RK45"
+        peaks.append(run.peak_tip_deflection)
+    assert compile_cache.STATS["compiles"] - before["compiles"] == 1
+    assert len([p for p in libraries(fresh) if "dopri5" in p.name]) == 1
+    # the longer, softer beam deflects more: each run has its own numbers
+    assert peaks[1] > 1.1 * peaks[0]

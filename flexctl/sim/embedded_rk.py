@@ -30,10 +30,12 @@ import numpy as np
 
 from .compiled import (CHECK_FACTOR, _cached, _input_key, drive_size, input_numbers,
                        is_symbolic)
-from .compile_cache import compiled
+from .compile_cache import compiled, lift_constants
 from .buffers import InPlace
+from . import fixed_step
 from .fixed_step import (_END_INSIDE, _STEP_CACHE, _STEP_CACHE_SIZE, _drive_symbols, _jit,
                          _step_function)
+from .native_rhs import MAX_INSTRUCTIONS
 from ..model.checks import check_array, check_instance, check_integer, check_real
 from ..model.errors import InputValueError
 
@@ -280,7 +282,8 @@ def choose_hold(model, sample_time: float, spin_frequency: float = 0.0) -> tuple
 
 def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
     """``(run, lifted numbers or None)``: the compiled ``run(s, t_end, h_max, c, atol, rtol[,
-    numbers]) -> (s_end, info, dense)`` of ``attempts`` Dormand-Prince step attempts of the
+    numbers]) -> (s_end, info, dense)`` (``numbers``: the model's numbers, lifted out of its
+    code, :func:`~flexctl.sim.compile_cache.lift_constants`) of ``attempts`` Dormand-Prince step attempts of the
     drive of ``inputs = (torque, hub_motion, controller)`` from ``s = [t; h; y]`` towards
     ``t_end``, each accepted or rejected by the error control inside the call.
 
@@ -317,6 +320,13 @@ def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
     attempt = ca.Function("flexctl_dopri5_attempt", args,
                           [ca.vertcat(t_next, h_next, ca.if_else(accepted, y5, y)),
                            ca.vertcat(accepted, t, step, norm), dense])
+    values = drive["lifted_values"]
+    if numbers is None:
+        # the other variants' numbers (the model's matrices, the tableau) lifted into an
+        # input too: models that differ only in numbers share one library
+        lifted = lift_constants(attempt, MAX_INSTRUCTIONS)
+        if lifted is not None:
+            attempt, values = lifted
     # an attempt after the segment's end is skipped: the state passes through, unchanged
     idle_args = [ca.MX.sym(attempt.name_in(k), attempt.sparsity_in(k))
                  for k in range(attempt.n_in())]
@@ -334,10 +344,10 @@ def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
     ends, info, dense_all = chain(*call)
     run = ca.Function(f"flexctl_dopri5_run{attempts}", call,
                       [ends[:, -1], info, dense_all])
-    if numbers is None:
+    if values is None:
         return _jit(run, model), None
-    return (compiled(run, label="the exact model's Dormand-Prince steps"),
-            drive["lifted_values"])
+    label = f"the {model.variant} model's Dormand-Prince steps"
+    return (compiled(run, label=label) if fixed_step.USE_JIT else run), values
 
 
 class EmbeddedRun:
