@@ -295,7 +295,26 @@ def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
 
     torque, hub_motion, controller = inputs
     drive = _drive_symbols(model, torque, hub_motion, controller, n_numbers)
-    sym, ny, c, numbers, f = (drive[k] for k in ("sym", "ny", "c", "numbers", "f"))
+    ny, c, numbers, f = (drive[k] for k in ("ny", "c", "numbers", "f"))
+    values = drive["lifted_values"]
+    if drive["sym"] is ca.SX:
+        # the drive's derivative as one scalar function, its numbers (the model's matrices)
+        # lifted into an input: the step calls it seven times, so that its code is written
+        # once, and models that differ only in numbers share one library
+        ts, ys = ca.SX.sym("t"), ca.SX.sym("y", ny)
+        rate = ca.Function("flexctl_drive_rate", [ts, ys, c], [f(ts, ys)])
+        lifted = lift_constants(rate, MAX_INSTRUCTIONS)
+        if lifted is not None:
+            rate, values = lifted
+        # called, not inlined, by the step's scalar code
+        inputs = rate.sx_in()
+        rate = ca.Function(rate.name(), inputs, [rate(*inputs)], {"never_inline": True})
+        numbers = None if values is None else ca.SX.sym("numbers", values.size)
+        extra = [] if numbers is None else [numbers]
+
+        def f(time, state):
+            return rate(time, state, c, *extra)
+    sym = drive["sym"]
     s, t_end, h_max = sym.sym("s", ny + 2), sym.sym("t_end"), sym.sym("h_max")
     atol, rtol = sym.sym("atol", ny), sym.sym("rtol")
     t, h, y = s[0], s[1], s[2:]
@@ -320,13 +339,6 @@ def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
     attempt = ca.Function("flexctl_dopri5_attempt", args,
                           [ca.vertcat(t_next, h_next, ca.if_else(accepted, y5, y)),
                            ca.vertcat(accepted, t, step, norm), dense])
-    values = drive["lifted_values"]
-    if numbers is None:
-        # the other variants' numbers (the model's matrices, the tableau) lifted into an
-        # input too: models that differ only in numbers share one library
-        lifted = lift_constants(attempt, MAX_INSTRUCTIONS)
-        if lifted is not None:
-            attempt, values = lifted
     # an attempt after the segment's end is skipped: the state passes through, unchanged
     idle_args = [ca.MX.sym(attempt.name_in(k), attempt.sparsity_in(k))
                  for k in range(attempt.n_in())]
@@ -344,8 +356,6 @@ def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
     ends, info, dense_all = chain(*call)
     run = ca.Function(f"flexctl_dopri5_run{attempts}", call,
                       [ends[:, -1], info, dense_all])
-    if values is None:
-        return _jit(run, model), None
     label = f"the {model.variant} model's Dormand-Prince steps"
     return (compiled(run, label=label) if fixed_step.USE_JIT else run), values
 
