@@ -39,10 +39,17 @@ def slew():
     return model, x0, law, tight
 
 
+@pytest.mark.parametrize("sampled", [True, False], ids=["sampled", "continuous"])
 @pytest.mark.parametrize("rtol", [1e-5, 1e-8])
-def test_auto_takes_the_pair_and_meets_its_estimate(slew, rtol):
+def test_auto_takes_the_pair_and_meets_its_estimate(slew, rtol, sampled):
     model, x0, law, tight = slew
-    # outputs four times per sample: steps end on them inside each sample
+    if not sampled:
+        # the PD law itself, continuous: the pair's steps over the whole run
+        # (flexctl.sim.embedded_rk.EmbeddedRun), its outputs from the continuous extension
+        law = law.law
+        tight = flexctl.simulate(model, 3.0, controller=law, x0=x0, rtol=1e-12,
+                                 method="cvodes", output_step=0.0025, check_validity=False)
+    # four outputs a sample: a sampled loop's steps end on them, a continuous run reads them
     run = flexctl.simulate(model, 3.0, controller=law, x0=x0, rtol=rtol, output_step=0.0025,
                            check_validity=False)
     assert run.method == "RK45" and run.ok
@@ -50,7 +57,7 @@ def test_auto_takes_the_pair_and_meets_its_estimate(slew, rtol):
     actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
     assert actual <= run.integration_error
     assert run.integration_error <= 100 * rtol * tight.peak_tip_deflection
-    # the held torques are the law's at the samples, as on CVODES
+    # the torques are the law's, as on CVODES
     cvodes = flexctl.simulate(model, 3.0, controller=law, x0=x0, rtol=rtol, method="cvodes",
                               output_step=0.0025, check_validity=False)
     assert cvodes.method == "cvodes"

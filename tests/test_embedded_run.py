@@ -43,19 +43,6 @@ def test_the_continuous_extension_is_of_order_four():
     assert 2 ** 4.5 < errors[0] / errors[1] < 2 ** 5.5
 
 
-@pytest.mark.parametrize("rtol", [1e-5, 1e-8])
-def test_auto_takes_the_pair_and_its_estimate_bounds_the_error(slew, rtol):
-    model, x0, law, tight = slew
-    run = flexctl.simulate(model, 4.0, controller=law, x0=x0, rtol=rtol, output_step=0.005,
-                           check_validity=False)
-    assert run.method == "RK45" and run.ok
-    np.testing.assert_array_equal(run.t, tight.t)
-    actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
-    assert actual <= run.integration_error <= 100 * rtol * tight.peak_tip_deflection
-    # the torque the law applied follows the same trajectory
-    np.testing.assert_allclose(run.torque, tight.torque, atol=1e3 * rtol * 6.0)
-
-
 def test_segments_and_a_prescribed_hub_motion_run_on_the_pair():
     scene = flexctl.load_scene("kane-spinup")
     model = flexctl.build_model(scene.system, n_modes=3)
