@@ -19,6 +19,7 @@ import numpy as np
 
 from .compiled import is_symbolic
 from .digital import is_sampled
+from .embedded_rk import PAIR_OMEGA_H
 from .drives import as_controller, bound_to_plant
 from .inputs import (as_vector, check_method, check_rtol, check_time, jacobian_frequency,
                      output_grid, time_function)
@@ -506,11 +507,11 @@ def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
     ``"RK45"`` (compiled Dormand-Prince steps, :class:`~flexctl.sim.embedded_rk.EmbeddedRun`)
     or ``"cvodes"``.
 
-    On these undamped models the pair's error control holds the fastest pole ``omega_max``
-    (rad/s) to about ``omega_max h = 0.67`` (:data:`EXPLICIT_STABILITY_LIMITS`), so a run
-    takes some ``omega_max t_final / 0.67`` steps of 7 evaluations, where CVODES takes about
-    half as many steps of one or two evaluations each but spends some 3 us of its own on
-    each. The pair is cheaper while an evaluation of the right-hand side costs about a
+    On these undamped models the pair's steps are held to ``omega_max h`` of about 0.5 on the
+    fastest pole ``omega_max`` (rad/s), by its error control and by its bound
+    (:data:`~flexctl.sim.embedded_rk.PAIR_OMEGA_H`), so a run takes some
+    ``omega_max t_final / 0.5`` steps of 7 evaluations, where CVODES takes about half as many
+    steps of one or two evaluations each but spends some 3 us of its own on each. The pair is cheaper while an evaluation of the right-hand side costs about a
     microsecond or less (:data:`PAIR_INSTRUCTIONS` compiled instructions) and its steps stay
     within :data:`EXPLICIT_STEP_LIMIT`. Measured on slew-90 under a saturated PD law at rtol
     1e-6, 6 s, without the accuracy check: first_order on 6 modes (259 instructions) 8.6 ms
@@ -518,7 +519,7 @@ def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
     modes (10 018 and 19 482) 44 and 142 ms against 31 and 74 ms. The consistent variant
     keeps CVODES.
     """
-    steps = float(omega_max) * float(t_final) / EXPLICIT_STABILITY_LIMITS["RK45"]
+    steps = float(omega_max) * float(t_final) / PAIR_OMEGA_H
     # the consistent variant's mass matrix can turn singular on the way: CVODES stops there
     # and the stop is located and named, where explicit steps could step across it
     if model.variant == "consistent" or not steps <= EXPLICIT_STEP_LIMIT:
