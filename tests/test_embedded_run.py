@@ -9,8 +9,8 @@ import flexctl
 from controllers import PD
 from flexctl.model.errors import InputError
 from flexctl.sim.maneuvers import TorqueSamples
-from flexctl.sim.embedded_rk import DENSE_OUTPUT, DORMAND_PRINCE, EmbeddedRun
-from flexctl.sim.request import (EXPLICIT_STEP_LIMIT, PAIR_INSTRUCTIONS, choose_continuous,
+from flexctl.sim.embedded_rk import DENSE_OUTPUT, DORMAND_PRINCE, PAIR_OMEGA_H, EmbeddedRun
+from flexctl.sim.request import (PAIR_INSTRUCTIONS, PAIR_WORK, choose_continuous,
                                  rhs_instructions, state_scale)
 
 
@@ -75,8 +75,11 @@ def test_expensive_or_stiff_runs_keep_cvodes():
     assert rhs_instructions(cheap) <= PAIR_INSTRUCTIONS < rhs_instructions(exact)
     assert choose_continuous(cheap, 6.0, omega) == "RK45"
     assert choose_continuous(exact, 6.0, omega) == "cvodes"
-    # a run long enough that the pair's steps, bound by the fastest mode, pass the limit
-    assert choose_continuous(cheap, 2.0 * EXPLICIT_STEP_LIMIT / omega, omega) == "cvodes"
+    # a run so long that the pair's steps, bound by the fastest mode, times the right-hand
+    # side's instructions pass the work it is allowed
+    steps = PAIR_WORK / rhs_instructions(cheap)
+    assert choose_continuous(cheap, 0.9 * steps * PAIR_OMEGA_H / omega, omega) == "RK45"
+    assert choose_continuous(cheap, 1.1 * steps * PAIR_OMEGA_H / omega, omega) == "cvodes"
     # a spin far above the modes counts as the fastest pole
     assert choose_continuous(cheap, 6.0, 1e6) == "cvodes"
 

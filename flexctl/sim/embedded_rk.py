@@ -283,9 +283,10 @@ def choose_hold(model, sample_time: float, spin_frequency: float = 0.0) -> tuple
 def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
     """``(run, lifted numbers or None)``: the compiled ``run(s, t_end, h_max, c, atol, rtol[,
     numbers]) -> (s_end, info, dense)`` (``numbers``: the model's numbers, lifted out of its
-    code, :func:`~flexctl.sim.compile_cache.lift_constants`) of ``attempts`` Dormand-Prince step attempts of the
-    drive of ``inputs = (torque, hub_motion, controller)`` from ``s = [t; h; y]`` towards
-    ``t_end``, each accepted or rejected by the error control inside the call.
+    code, :func:`~flexctl.sim.compile_cache.lift_constants`) of ``attempts`` Dormand-Prince
+    step attempts of the drive of ``inputs = (torque, hub_motion, controller)`` from
+    ``s = [t; h; y]`` towards ``t_end``, each accepted or rejected by the error control
+    inside the call.
 
     ``info`` (4, attempts) holds for each attempt whether it was accepted, its start time,
     its length and its error norm; ``dense`` (5 ny, attempts) the step's start state and the

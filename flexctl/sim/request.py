@@ -64,6 +64,9 @@ EXPLICIT_STEP_LIMIT = 10_000
 #: a continuous ``method="auto"`` run takes the compiled Dormand-Prince pair rather than
 #: CVODES (:func:`choose_continuous`).
 PAIR_INSTRUCTIONS = 5000
+#: Most steps times instructions of a right-hand side for the pair (:func:`choose_continuous`):
+#: about 0.17 s of its arithmetic (7 evaluations a step at some 0.4 ns an instruction).
+PAIR_WORK = 6e7
 #: The closed loop counts as made stiff by its controller when its fastest pole is this many
 #: times the plant's fastest mode.
 LOOP_FACTOR = 2.0
@@ -511,20 +514,37 @@ def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
     fastest pole ``omega_max`` (rad/s), by its error control and by its bound
     (:data:`~flexctl.sim.embedded_rk.PAIR_OMEGA_H`), so a run takes some
     ``omega_max t_final / 0.5`` steps of 7 evaluations, where CVODES takes about half as many
-    steps of one or two evaluations each but spends some 3 us of its own on each. The pair is cheaper while an evaluation of the right-hand side costs about a
-    microsecond or less (:data:`PAIR_INSTRUCTIONS` compiled instructions) and its steps stay
-    within :data:`EXPLICIT_STEP_LIMIT`. Measured on slew-90 under a saturated PD law at rtol
-    1e-6, 6 s, without the accuracy check: first_order on 6 modes (259 instructions) 8.6 ms
-    against CVODES's 25.5 ms; exact on 2 modes (3966) 8.3 ms against 9.2 ms; exact on 4 and 6
-    modes (10 018 and 19 482) 44 and 142 ms against 31 and 74 ms. The consistent variant
-    keeps CVODES.
+    steps of one or two evaluations each but spends some 3 us of its own on each. The pair is
+    cheaper while an evaluation of the right-hand side costs about a microsecond or less
+    (:data:`PAIR_INSTRUCTIONS` compiled instructions) and its steps times those instructions
+    stay within :data:`PAIR_WORK`: past that, CVODES at a loose tolerance steps over fast
+    modes that the inputs leave alone. Measured at rtol 1e-4, 1e-6 and 1e-8 (ms, without the
+    accuracy check; the pair's steps times instructions last):
+
+    =======================================  ===========  ===========  =======
+    run                                      CVODES       the pair     work
+    =======================================  ===========  ===========  =======
+    slew-90 PD, first_order, 6 modes, 6 s    -/25/-       -/8.6/-      1.0e6
+    slew-90 PD, exact, 2 modes, 6 s          -/9.2/-      -/8.3/-      1.3e6
+    hub-beam-mass, 6 modes, 20 s             52/51/67     25/25/25     3.4e6
+    spacecraft-torque, 6 modes, 20 s         121/300/653  42/72/158    7.6e6
+    hub-beam-mass, 12 modes, 20 s            318/309/303  158/154/158  5.0e7
+    hub-beam-mass, 20 modes, 2 s             88/-/160     110/-/109    3.7e7
+    hub-beam-mass, 30 modes, 2 s             251/-/730    453/-/461    1.8e8
+    =======================================  ===========  ===========  =======
+
+    The exact model on 4 and 6 modes (10 018 and 19 482 instructions) took 44 and 142 ms on
+    the pair against CVODES's 31 and 74 ms (slew-90 PD, 1e-6). The consistent variant keeps
+    CVODES.
     """
     steps = float(omega_max) * float(t_final) / PAIR_OMEGA_H
     # the consistent variant's mass matrix can turn singular on the way: CVODES stops there
     # and the stop is located and named, where explicit steps could step across it
-    if model.variant == "consistent" or not steps <= EXPLICIT_STEP_LIMIT:
+    if model.variant == "consistent" or not math.isfinite(steps):
         return "cvodes"
-    return "RK45" if rhs_instructions(model) <= PAIR_INSTRUCTIONS else "cvodes"
+    instructions = rhs_instructions(model)
+    cheap = instructions <= PAIR_INSTRUCTIONS and steps * instructions <= PAIR_WORK
+    return "RK45" if cheap else "cvodes"
 
 
 def rhs_instructions(model: Model) -> float:
@@ -552,9 +572,12 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
     omega_plant = float(model.natural_frequencies(
         0.0, hub="clamped" if request.prescribed else "free")[-1])
     loop = _loop_frequency(request, drive, atol / rtol, omega_plant)
+    fastest = max(omega_plant, loop, request.spin_frequency)
     if request.method == "auto":
-        method, note = choose_continuous(model, t_final, max(omega_plant, loop,
-                                                             request.spin_frequency)), ""
+        method, note = choose_continuous(model, t_final, fastest), ""
+    elif request.method == "RK45" and request.symbolic and \
+            choose_continuous(model, t_final, fastest) == "RK45":
+        method, note = "RK45", ""          # the compiled pair, within its work
     else:
         method, note = stiffness_guard(model, t_final, request.method, request.symbolic,
                                        request.prescribed, loop)

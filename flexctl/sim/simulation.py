@@ -35,8 +35,9 @@ compiled Dormand-Prince 5(4) stepping (:class:`~flexctl.sim.embedded_rk.Embedded
 outputs read from the pair's continuous extension and its error estimated by a replay at 10
 times the tolerance. ``"auto"`` takes it where it costs less than CVODES (a cheap right-hand
 side, a fastest pole that leaves few steps: :func:`flexctl.sim.request.choose_continuous`),
-else CVODES, and ``"DOP853"`` for inputs without a CasADi form. An explicit SciPy method (DOP853, RK45, RK23) on a
-model too stiff for it is replaced by ``"cvodes"`` when the inputs allow, with a
+else CVODES, and ``"DOP853"`` for inputs without a CasADi form. An explicit SciPy method
+(DOP853, RK45, RK23) on a model too stiff for it is replaced by ``"cvodes"`` when the inputs
+allow, with a
 :class:`StiffnessWarning` and a note in the result's ``message`` (the result's ``method`` is
 the one used; :func:`flexctl.sim.request.stiffness_guard`). ``"rk4"`` is compiled fixed-step
 RK4 for loose tolerances, its step set by the fastest mode and halved until a step-doubling
