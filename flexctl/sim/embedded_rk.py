@@ -416,15 +416,17 @@ class EmbeddedRun:
                                   strict=True)
         numbers = input_numbers(inputs)
         key = _input_key(model, inputs, np.array([1.0]))
-        run, lifted = _cached(_STEP_CACHE, _STEP_CACHE_SIZE,
-                              None if key is None else ("dopri5-run", key), (model, *inputs),
-                              lambda: _attempt_chain(model, inputs, numbers.size))
+        run, model_numbers = _cached(_STEP_CACHE, _STEP_CACHE_SIZE,
+                                     None if key is None else ("dopri5-run", key),
+                                     (model, *inputs),
+                                     lambda: _attempt_chain(model, inputs, numbers.size))
         self._run, self._size = InPlace(run), m
-        for k, value in enumerate([0.0, math.inf, max_step, numbers, rtol * scale, rtol]):
-            if k > 0:
-                self._run.args[k][:] = value
-        if lifted is not None:
-            self._run.args[6][:] = lifted
+        # the buffers keep every input but the carry and the segment's end, set per call
+        fixed = [max_step, numbers, rtol * scale, rtol]
+        if model_numbers is not None:
+            fixed.append(model_numbers)
+        for k, value in enumerate(fixed, start=2):
+            self._run.args[k][:] = value
 
     def __call__(self, lo, t_out, y, stop=None) -> tuple:
         """States at ``t_out`` from ``y`` at ``lo``: ``(states (m, K), evaluations)``.
