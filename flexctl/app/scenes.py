@@ -64,7 +64,7 @@ Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as sh
     t_final = 20.0
     output_step = 0.01                   # optional
     rtol = 1e-8                          # optional
-    method = "auto"                      # optional: auto | cvodes | a solve_ivp method
+    method = "auto"                      # optional: auto | cvodes | rk4 | a solve_ivp method
 
 Unknown keys and bad values raise :class:`SceneError` naming the key. The one-beam form
 (``[beam]``, ``[[masses]]``) gives :attr:`Scene.system` a :class:`~flexctl.model.HubBeam` on a
