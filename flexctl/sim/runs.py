@@ -19,9 +19,7 @@ from .embedded_rk import choose_hold
 from .request import check_atol, plan_integration, run_request, state_scale
 from .result import SimulationResult, output_samples, assemble_result, audit_energy
 from .stops import StopConditions, StopReason, tip_rows
-from .strategies import (CvodesSegments, EmbeddedSegments, check_embedded_accuracy,
-                         check_run_accuracy, rk4_accuracy_note, start_accuracy_check,
-                         start_embedded_check, strategy_for)
+from .strategies import rk4_accuracy_note, strategy_for
 
 __all__ = ["run_once", "run_states"]
 
@@ -67,15 +65,10 @@ def _integrate(request) -> tuple:
     singular = model.variant == "consistent" and not request.prescribed
     stops, plan = StopConditions(model, drive.layout, singular), plan_integration(request, drive)
     drive.check_inputs()
-    kind = strategy_for(plan.method, request.symbolic)
-    strategy = kind(request, plan, drive, stops)
+    strategy = strategy_for(plan.method, request.symbolic)(request, plan, drive, stops)
     start = time.perf_counter()
     # the check needs only the plan: it runs beside the run, on a spare core if there is one
-    check = None
-    if request.check_accuracy and kind is CvodesSegments:
-        check = start_accuracy_check(request, plan, drive)
-    elif request.check_accuracy and kind is EmbeddedSegments:
-        check = start_embedded_check(request, plan, drive, stops)
+    check = strategy.start_check() if request.check_accuracy else None
     try:
         traj = strategy.run()
     except BaseException:
@@ -84,10 +77,7 @@ def _integrate(request) -> tuple:
         raise
     if check is not None and traj.reason is StopReason.REACHED_END and \
             len(traj.compiled_segments) == len(plan.drive_cuts) - 1:
-        if kind is EmbeddedSegments:
-            check_embedded_accuracy(request, drive, traj, check, reporter=strategy)
-        else:
-            check_run_accuracy(request, plan, drive, traj, reporter=strategy, check=check)
+        strategy.finish_check(traj, check)
     elif check is not None:
         check.abandon()
     return plan, stops, drive, start, traj

@@ -12,8 +12,10 @@
   conditions as terminal events.
 
 Each hands back a :class:`Trajectory`: the samples it integrated and why it stopped. The
-accuracy check of a compiled run (:func:`check_run_accuracy`: CVODES's;
-:func:`check_embedded_accuracy`: the pair's) is its own step.
+accuracy check of an error-controlled compiled run is its own step, which the strategy
+starts beside the run (``start_check``) and completes once the run reaches its end
+(``finish_check``): :func:`check_run_accuracy` for CVODES, :func:`check_embedded_accuracy`
+for the pair.
 """
 
 from __future__ import annotations
@@ -136,6 +138,13 @@ class _Segments:
         """Integrate ``[lo, hi]`` from ``y``: the state at ``hi``, or None after a stop."""
         return self.solve_ivp(traj, lo, hi, t_eval, y, self.drive.rhs)
 
+    def start_check(self):
+        """The accuracy check of a compiled run, started beside it (None: no check)."""
+        return None
+
+    def finish_check(self, traj, check) -> None:
+        """Complete ``traj`` (reached its end) with the result of :meth:`start_check`."""
+
     def solve_ivp(self, traj, lo, hi, t_eval, y, rhs):
         """``solve_ivp`` over ``[lo, hi]`` with the stops as terminal events."""
         plan, request = self.plan, self.request
@@ -224,6 +233,13 @@ class CvodesSegments(_Segments):
             raise FloatingPointError("the state derivative is not finite")
         return dy
 
+    def start_check(self):
+        return start_accuracy_check(self.request, self.plan, self.drive)
+
+    def finish_check(self, traj, check) -> None:
+        check_run_accuracy(self.request, self.plan, self.drive, traj, reporter=self,
+                           check=check)
+
     def integrate(self, lo, t_eval, y) -> tuple:
         """``(states at t_eval, evaluations)`` of one segment from ``y`` at ``lo``;
         ``RuntimeError`` where the integrator fails."""
@@ -280,6 +296,12 @@ class EmbeddedSegments(CvodesSegments):
     def __init__(self, request, plan, drive, stops):
         super().__init__(request, plan, drive, stops)
         self._steps = _embedded_run(request, plan, request.rtol)
+
+    def start_check(self):
+        return start_embedded_check(self.request, self.plan, self.drive, self.stops)
+
+    def finish_check(self, traj, check) -> None:
+        check_embedded_accuracy(self.request, self.drive, traj, check, reporter=self)
 
     def integrate(self, lo, t_eval, y) -> tuple:
         # a run that passes a stop ends there, not at the segment's end
@@ -342,6 +364,10 @@ class FixedStepRK4:
 
     def __init__(self, request, plan, drive, stops):
         self.request, self.plan, self.drive, self.stops = request, plan, drive, stops
+
+    def start_check(self):
+        """None: the run's step-doubling pair is its own accuracy check."""
+        return None
 
     def _step_bounds(self) -> tuple:
         """The first returned run's step and the resolved step, s: :data:`RK4_FIRST_OMEGA_H`
