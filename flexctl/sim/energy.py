@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import cumulative_trapezoid, trapezoid
 
 from ..model import Model
 
@@ -145,6 +144,13 @@ def _neglected_energy(model: Model, rate, q, inertia) -> np.ndarray:
     return np.concatenate(([0.0], np.cumsum(steps)))
 
 
+def _running_integral(f, t) -> np.ndarray:
+    """Trapezoidal ``int_{t_0}^{t_k} f`` at every sample ``k`` (0 at the first), shape (P,)."""
+    out = np.zeros(np.shape(t))
+    np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(t), out=out[1:])
+    return out
+
+
 def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     """The :class:`EnergyBalance` of a run of a small-deflection model from its outputs.
 
@@ -170,10 +176,12 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     _, q, w, qd = model.layout.split(x)
     energy = np.asarray(model.energy(x), dtype=float).reshape(-1)
     power = np.asarray(torque, dtype=float) * w
-    work = cumulative_trapezoid(power, t, initial=0.0)
-    lost = cumulative_trapezoid(model.system.hub.friction * w ** 2
-                                + np.einsum("ip,ij,jp->p", qd, mat.C_ff, qd), t, initial=0.0)
+    work = _running_integral(power, t)
+    lost = _running_integral(model.system.hub.friction * w ** 2
+                              + np.einsum("ip,ij,jp->p", qd, mat.C_ff, qd), t)
     residual = energy - energy[0] - work + lost
+    magnitude = np.abs(power)
+    gross = float(np.sum(0.5 * (magnitude[1:] + magnitude[:-1]) * np.diff(t)))
     k = int(np.argmax(np.abs(residual)))
     inertia = np.einsum("ip,ij,jp->p", q, mat.D, q)
     neglected = _neglected_energy(model, w, q, inertia)
@@ -181,8 +189,7 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     return EnergyBalance(
         variant=model.variant, energy_start=float(energy[0]), imbalance=float(residual[k]),
         time=float(t[k]), energy=float(energy[k]), work=float(work[k]), lost=float(lost[k]),
-        throughput=float(max(max(energy[0], 0.0) + trapezoid(np.abs(power), t),
-                             np.max(np.abs(energy)))),
+        throughput=float(max(max(energy[0], 0.0) + gross, np.max(np.abs(energy)))),
         hub_inertia=float(model.effective_hub_inertia(np.zeros(model.n_states))),
         inertia_change=float(inertia[int(np.argmax(np.abs(inertia)))]),
         neglected=float(neglected[int(np.argmax(np.abs(neglected)))]),

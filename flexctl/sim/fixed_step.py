@@ -246,11 +246,12 @@ def hermite(t, starts, sizes, y, f) -> np.ndarray:
     ndarray, shape (m, P)
     """
     k = np.clip(np.searchsorted(starts, t, side="right") - 1, 0, starts.size - 1)
-    h = sizes[k]
-    s = np.clip((t - starts[k]) / h, 0.0, 1.0)
-    h00, h10 = 2 * s ** 3 - 3 * s ** 2 + 1, s ** 3 - 2 * s ** 2 + s
-    h01, h11 = -2 * s ** 3 + 3 * s ** 2, s ** 3 - s ** 2
-    return (h00 * y[:, k] + h10 * h * f[:, k] + h01 * y[:, k + 1] + h11 * h * f[:, k + 1])
+    s = np.clip((t - starts[k]) / sizes[k], 0.0, 1.0)
+    # per step, y(s) = y_0 + s (h f_0 + s (c_2 + s c_3)) in Horner form
+    hf0, hf1 = sizes * f[:, :-1], sizes * f[:, 1:]
+    dy = y[:, 1:] - y[:, :-1]
+    c2, c3 = 3.0 * dy - 2.0 * hf0 - hf1, hf0 + hf1 - 2.0 * dy
+    return y[:, k] + s * (hf0[:, k] + s * (c2[:, k] + s * c3[:, k]))
 
 
 def _jit(function, model, any_variant: bool = False):
