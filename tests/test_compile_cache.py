@@ -63,6 +63,7 @@ def fresh(monkeypatch, tmp_path):
     monkeypatch.setenv("FLEXCTL_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv("FLEXCTL_COMPILE", raising=False)
     monkeypatch.setattr(compile_cache, "_LOADED", {})
+    monkeypatch.setattr(compile_cache, "_LIFTED", {})
     monkeypatch.setattr(compile_cache, "_WARNED", set())
     monkeypatch.setattr(compile_cache, "_COMPILER", {})
     return tmp_path / "cache"
@@ -107,6 +108,81 @@ def test_damaged_entry_is_compiled_again(fresh):
     again = run_worker(fresh, "cc_damaged")
     assert again["stats"]["compiles"] == 1 and again["external"]
     np.testing.assert_allclose(again["value"], expected(0.5), rtol=1e-14)
+
+
+def _no_c_generation(*args):
+    raise AssertionError("the C source was generated again")
+
+
+@needs_compiler
+def test_a_later_process_loads_its_library_without_generating_c(fresh, monkeypatch):
+    import casadi as ca
+
+    x = ca.SX.sym("x", 2)
+    function = ca.Function("cc_index", [x], [ca.exp(x) * x[1]])
+    first = compiled(function)
+    assert first.is_a("External") and compile_cache.STATS["compiles"] >= 1
+    monkeypatch.setattr(compile_cache, "_LOADED", {})          # as in another process
+    monkeypatch.setattr(compile_cache, "_source", _no_c_generation)
+    again = compiled(ca.Function("cc_index", [x], [ca.exp(x) * x[1]]))
+    assert again.is_a("External")
+    np.testing.assert_array_equal(np.array(again([0.3, -1.2])), np.array(first([0.3, -1.2])))
+    assert len(libraries(fresh)) == 1
+
+
+@needs_compiler
+def test_an_index_naming_a_missing_library_compiles_through(fresh, monkeypatch):
+    import casadi as ca
+
+    x = ca.SX.sym("x")
+    function = ca.Function("cc_stale", [x], [x ** 3 + 1.0])
+    compiled(function)
+    (index,) = (fresh / "compiled").glob("cc_stale-*.key")
+    index.write_text("0" * 32)                      # a key with no library behind it
+    monkeypatch.setattr(compile_cache, "_LOADED", {})
+    again = compiled(function)
+    assert again.is_a("External") and float(again(2.0)) == 9.0
+    assert index.read_text() != "0" * 32            # the index names the real library again
+    index.write_text("not a key")
+    monkeypatch.setattr(compile_cache, "_LOADED", {})
+    assert float(compiled(function)(-1.0)) == 0.0
+
+
+@needs_compiler
+def test_lifted_functions_are_read_back_from_the_cache(fresh, monkeypatch):
+    from flexctl.sim.compile_cache import lift_constants
+
+    model, _ = _exact_pair()
+    lifted, constants = lift_constants(model.geometry.rhs)
+    (stored,) = (fresh / "compiled").glob("lifted-*.casadi")
+    lift = compile_cache._lift
+    monkeypatch.setattr(compile_cache, "_LIFTED", {})          # as in another process
+    monkeypatch.setattr(compile_cache, "_lift", _no_c_generation)
+    read, read_constants = lift_constants(model.geometry.rhs)
+    np.testing.assert_array_equal(read_constants, constants)
+    x = 0.1 * np.arange(1, model.n_states + 1)
+    np.testing.assert_array_equal(np.array(read(x, 0.7, read_constants)),
+                                  np.array(model.geometry.rhs(x, 0.7)))
+    # a damaged entry is lifted again
+    stored.write_text("damaged")
+    monkeypatch.setattr(compile_cache, "_LIFTED", {})
+    monkeypatch.setattr(compile_cache, "_lift", lift)
+    again, again_constants = lift_constants(model.geometry.rhs)
+    np.testing.assert_array_equal(again_constants, constants)
+    assert stored.read_text() != "damaged"
+
+
+def test_lifting_writes_nothing_with_compiling_off(fresh, monkeypatch):
+    import casadi as ca
+
+    from flexctl.sim.compile_cache import lift_constants
+
+    monkeypatch.setenv("FLEXCTL_COMPILE", "0")
+    x = ca.SX.sym("x")
+    lifted, constants = lift_constants(ca.Function("cc_off_lift", [x], [2.5 * x - 1.0]))
+    assert sorted(constants.tolist()) == [1.0, 2.5]
+    assert float(lifted(2.0, constants)) == 4.0
+    assert not fresh.exists() or not list(fresh.rglob("lifted-*"))
 
 
 def test_no_compiler_runs_on_the_virtual_machine_with_one_warning(fresh, monkeypatch):

@@ -8,7 +8,12 @@ without compiling again.
 - **Key.** A library's name is the SHA-256 of the generated C, the CasADi version, the
   compiler (its path and ``--version`` line) and the flags: any change to the function (its
   structure; the numbers that are parameters do not appear in it), to CasADi or to the
-  compiler makes a new entry, and an unchanged function is never compiled twice.
+  compiler makes a new entry, and an unchanged function is never compiled twice. A small
+  index file beside the library names it by the SHA-256 of the function's CasADi
+  serialisation (and of the same CasADi, compiler and flags), so that a later process finds
+  it without generating the C again: serialising costs a third to a tenth of that.
+- **Lifted constants.** :func:`lift_constants` keeps what it made in the same folder, by the
+  serialisation's SHA-256 of the function it lifted: reading it back costs a fifth of lifting.
 - **Location.** ``$FLEXCTL_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/flexctl``, else
   ``~/.cache/flexctl``; a ``compiled/`` folder in it holds ``<name>-<hash>.so`` files.
 - **Atomicity.** The source and the library are written to temporary names in the cache
@@ -44,6 +49,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import warnings
 from dataclasses import dataclass
@@ -190,18 +196,73 @@ def compiled(function, *, label: str | None = None, companions=(), options=None)
         return function
     name = function.name()
     try:
-        source = _source(function, companions)  # CasADi refuses what it cannot generate
-        key = _key(source, tool)
-        if (name, key) in _LOADED:
+        fingerprint = _fingerprint((function, *companions), tool)
+        if (name, fingerprint) in _LOADED:
             STATS["hits"] += 1
-            return _LOADED[(name, key)]
-        loaded = _load_or_build(name, key, source, tool, label or name, options or {})
+            return _LOADED[(name, fingerprint)]
+        # a library built before for this very function is found without generating its C
+        key = _read_index(name, fingerprint)
+        loaded = None if key is None else _try_load(name, _library(name, key), options or {})
+        if loaded is None:
+            source = _source(function, companions)  # CasADi refuses what it cannot generate
+            key = _key(source, tool)
+            loaded = _load_or_build(name, key, source, tool, label or name, options or {})
+            _write_index(name, fingerprint, key)
     except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
         STATS["fallbacks"] += 1
         _warn_once(f"compiling {name} failed ({' '.join(str(exc).split())[:200]})")
         return function
-    _LOADED[(name, key)] = loaded
+    _LOADED[(name, fingerprint)] = loaded
     return loaded
+
+
+def _fingerprint(functions, tool: tuple) -> str:
+    """SHA-256 of the functions' CasADi serialisations (their whole definition: operations,
+    numbers, sparsity, names; the same from one process to the next), the CasADi version, the
+    compiler and the flags."""
+    import casadi as ca
+
+    digest = hashlib.sha256()
+    for part in (*(f.serialize() for f in functions), ca.__version__, tool[0], tool[1],
+                 " ".join(FLAGS)):
+        digest.update(part.encode("utf-8"))
+        digest.update(b"\0")
+    return digest.hexdigest()[:32]
+
+
+def _library(name: str, key: str) -> Path:
+    return cache_dir() / _SUBDIR / f"{name}-{key}{_SUFFIX}"
+
+
+def _index(name: str, fingerprint: str) -> Path:
+    return cache_dir() / _SUBDIR / f"{name}-{fingerprint}.key"
+
+
+def _read_index(name: str, fingerprint: str) -> str | None:
+    """The key of the library once built for the function of ``fingerprint``, if recorded."""
+    try:
+        key = _index(name, fingerprint).read_text(encoding="ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        return None
+    return key if len(key) == 32 and all(c in "0123456789abcdef" for c in key) else None
+
+
+def _write_index(name: str, fingerprint: str, key: str) -> None:
+    """Record (atomically) that the function of ``fingerprint`` compiles to library ``key``."""
+    _atomic_write(_index(name, fingerprint), key.encode("ascii"))
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file in its directory."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, temporary = tempfile.mkstemp(prefix=".write-", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+        os.replace(temporary, path)
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(temporary)
 
 
 def lift_constants(function, max_instructions: int | None = None):
@@ -245,13 +306,81 @@ def lift_constants(function, max_instructions: int | None = None):
                                          max_instructions, minimum=0)
     if not isinstance(function, ca.Function) or not function.is_a("SXFunction"):
         return None
-    count = function.n_instructions()
-    if max_instructions is not None and count > max_instructions:
+    if max_instructions is not None and function.n_instructions() > max_instructions:
         return None
+    try:
+        fingerprint = hashlib.sha256(function.serialize().encode("utf-8")).hexdigest()[:32]
+    except RuntimeError:                # pragma: no cover - every SX function serialises
+        return _lift(function)
+    with _LIFTED_LOCK:
+        found = _LIFTED.get(fingerprint, _MISSING)
+    if found is _MISSING:
+        found = _read_lifted(fingerprint)
+        if found is None:
+            found = _lift(function)
+            if found is not None:
+                _write_lifted(fingerprint, *found)
+        with _LIFTED_LOCK:
+            _LIFTED[fingerprint] = found
+            while len(_LIFTED) > _LIFTED_SIZE:
+                _LIFTED.pop(next(iter(_LIFTED)))
+    return None if found is None else (found[0], found[1].copy())
+
+
+#: Lifted functions made or read in this process, by fingerprint of the function lifted
+#: (the oldest dropped beyond :data:`_LIFTED_SIZE`).
+_LIFTED: dict = {}
+_LIFTED_SIZE = 64
+_LIFTED_LOCK = threading.Lock()
+_MISSING = object()
+
+
+def _lifted_path(fingerprint: str) -> Path:
+    return cache_dir() / _SUBDIR / f"lifted-{fingerprint}.casadi"
+
+
+def _read_lifted(fingerprint: str):
+    """``(lifted function, constants)`` stored for the function of ``fingerprint`` in the
+    cache directory (where compiling is on), else None."""
+    import casadi as ca
+    import numpy as np
+
+    if not compiling_enabled() or compiler() is None:
+        return None
+    try:
+        text = _lifted_path(fingerprint).read_text(encoding="ascii")
+        reader = ca.StringDeserializer(text)
+        lifted, values = reader.unpack(), reader.unpack()
+    except (OSError, UnicodeDecodeError, RuntimeError):
+        return None
+    if not isinstance(lifted, ca.Function) or not isinstance(values, ca.DM):
+        return None
+    return lifted, np.array(values, dtype=float).reshape(-1)
+
+
+def _write_lifted(fingerprint: str, lifted, values) -> None:
+    """Store a lifted function and its constants beside the libraries (where compiling is on:
+    reading it back costs a fifth of lifting again)."""
+    import casadi as ca
+
+    if not compiling_enabled() or compiler() is None:
+        return
+    writer = ca.StringSerializer()
+    writer.pack(lifted)
+    writer.pack(ca.DM(values))
+    with contextlib.suppress(OSError):
+        _atomic_write(_lifted_path(fingerprint), writer.encode().encode("ascii"))
+
+
+def _lift(function):
+    """:func:`lift_constants`' work: ``(lifted, constants)`` or None (a call inside)."""
+    import casadi as ca
+    import numpy as np
+
     inputs = function.sx_in()
     outputs = [ca.SX.zeros(function.sparsity_out(k)) for k in range(function.n_out())]
     work, values, symbols = [None] * function.sz_w(), [], []
-    for k in range(count):
+    for k in range(function.n_instructions()):
         op = function.instruction_id(k)
         out, arg = function.instruction_output(k), function.instruction_input(k)
         if op == ca.OP_CONST:
@@ -422,9 +551,8 @@ def _jacobian_function(name: str, inputs: list, in_names: list, out_names: list,
 def _load_or_build(name: str, key: str, source: str, tool: tuple, label: str,
                    options: dict):
     """Load ``<name>-<key>`` from the cache directory, compiling it first if absent or bad."""
-    folder = cache_dir() / _SUBDIR
-    folder.mkdir(parents=True, exist_ok=True)
-    library = folder / f"{name}-{key}{_SUFFIX}"
+    library = _library(name, key)
+    library.parent.mkdir(parents=True, exist_ok=True)
     loaded = _try_load(name, library, options)
     if loaded is not None:
         return loaded
