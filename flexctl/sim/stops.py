@@ -169,10 +169,12 @@ class StopConditions:
         self.j_floor = (SINGULAR_FRACTION * float(model.effective_hub_inertia(
             model.layout.zeros())) if model.variant == "consistent" else 0.0)
         self._plant = slice(0, model.n_states)
+        # each appendage's tip over the integrated states, divided by its reach: (K, n)
+        self._scaled_tips = tip_rows(model, layout) / self.reach[:, None]
 
     def reach_ratio(self, y):
         """Largest ``|phi_k(l_k)^T q_k| / reach_k`` of integrated state(s) ``y``."""
-        return reach_ratio(self.model, self.layout.modal(y))
+        return np.max(np.abs(self._scaled_tips @ y), axis=0)
 
     def events(self) -> list:
         """Terminal events for ``solve_ivp``: the tip first, then the singular mass."""
