@@ -8,10 +8,10 @@ without compiling again.
 - **Key.** A library's name is the SHA-256 of the generated C, the CasADi version, the
   compiler (its path and ``--version`` line) and the flags: any change to the function (its
   structure; the numbers that are parameters do not appear in it), to CasADi or to the
-  compiler makes a new entry, and an unchanged function is never compiled twice. A small
-  index file beside the library names it by the SHA-256 of the function's CasADi
-  serialisation (and of the same CasADi, compiler and flags), so that a later process finds
-  it without generating the C again: serialising costs a third to a tenth of that.
+  compiler makes a new entry, and an unchanged function is never compiled twice. For an SX
+  function a small index file beside the library names it by the SHA-256 of the function's
+  CasADi serialisation (and of the same CasADi, compiler and flags), so that a later process
+  finds it without generating the C again: serialising costs a third to a tenth of that.
 - **Lifted constants.** :func:`lift_constants` keeps what it made in the same folder, by the
   serialisation's SHA-256 of the function it lifted: reading it back costs a fifth of lifting.
 - **Location.** ``$FLEXCTL_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/flexctl``, else
@@ -195,24 +195,34 @@ def compiled(function, *, label: str | None = None, companions=(), options=None)
         _warn_once("no C compiler found (set CC or put cc on the PATH)")
         return function
     name = function.name()
+    # SX functions serialise in a third to a tenth of the time their C takes to generate, and
+    # are looked up by their serialisation; MX ones (loops of calls) take longer to serialise
+    # than to generate, and are looked up by their C
+    indexed = all(f.is_a("SXFunction") for f in (function, *companions))
     try:
-        fingerprint = _fingerprint((function, *companions), tool)
-        if (name, fingerprint) in _LOADED:
+        if indexed:
+            memo = fingerprint = _fingerprint((function, *companions), tool)
+        else:
+            source = _source(function, companions)  # CasADi refuses what it cannot generate
+            memo = _key(source, tool)
+        if (name, memo) in _LOADED:
             STATS["hits"] += 1
-            return _LOADED[(name, fingerprint)]
+            return _LOADED[(name, memo)]
         # a library built before for this very function is found without generating its C
-        key = _read_index(name, fingerprint)
+        key = _read_index(name, fingerprint) if indexed else memo
         loaded = None if key is None else _try_load(name, _library(name, key), options or {})
         if loaded is None:
-            source = _source(function, companions)  # CasADi refuses what it cannot generate
-            key = _key(source, tool)
+            if indexed:
+                source = _source(function, companions)
+                key = _key(source, tool)
             loaded = _load_or_build(name, key, source, tool, label or name, options or {})
-            _write_index(name, fingerprint, key)
+            if indexed:
+                _write_index(name, fingerprint, key)
     except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
         STATS["fallbacks"] += 1
         _warn_once(f"compiling {name} failed ({' '.join(str(exc).split())[:200]})")
         return function
-    _LOADED[(name, fingerprint)] = loaded
+    _LOADED[(name, memo)] = loaded
     return loaded
 
 
@@ -297,7 +307,6 @@ def lift_constants(function, max_instructions: int | None = None):
     ([3.0, 2.5], 8.5)
     """
     import casadi as ca
-    import numpy as np
 
     from ..model.checks import check_integer
 
