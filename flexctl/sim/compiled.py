@@ -444,11 +444,16 @@ class SegmentIntegrator:
     max_step : float, optional
         Longest step, s (e.g. a sampled torque's sample interval, so that no sample is
         stepped over). Default: unbounded.
+    multistep : {"bdf", "adams"}
+        CVODES's linear multistep family (ignored by IDAS, which is BDF): ``"adams"``
+        (Adams-Moulton, orders 1 to 12) for lightly damped oscillations, which BDF's orders 3
+        to 5 follow with short steps; ``"bdf"`` (default) where fast poles are damped
+        (:func:`flexctl.sim.request.choose_multistep`).
     """
 
     def __init__(self, model, t_start, t_out, scale, rtol, torque=None, hub_motion=None,
                  controller=None, max_steps=1_000_000, solver="cvodes", max_order=None,
-                 max_step=None):
+                 max_step=None, multistep="bdf"):
         import casadi as ca
 
         scale = np.asarray(scale, dtype=float)
@@ -469,6 +474,10 @@ class SegmentIntegrator:
                 "disable_internal_warnings": True, "show_eval_warnings": False}
         if solver == "cvodes":
             opts["min_step_size"] = min_step_fraction(t_end, length)
+            if multistep not in ("bdf", "adams"):
+                raise InputValueError(f"SegmentIntegrator multistep must be 'bdf' or "
+                                      f"'adams'; got {multistep!r}")
+            opts["linear_multistep_method"] = multistep
         if max_order is not None:
             opts["max_multistep_order"] = int(max_order)
         if max_step is not None and max_step < length:

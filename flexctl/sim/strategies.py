@@ -247,7 +247,8 @@ class CvodesSegments(_Segments):
         integ = SegmentIntegrator(request.model, lo, t_eval, plan.scale, request.rtol,
                                   torque=request.torque, hub_motion=request.hub_motion,
                                   controller=request.controller,
-                                  max_steps=plan.cvodes_steps, max_step=plan.cvodes_step)
+                                  max_steps=plan.cvodes_steps, max_step=plan.cvodes_step,
+                                  multistep=plan.cvodes_multistep)
         return integ(y), integ.n_evaluations
 
     def segment(self, traj, lo, hi, t_eval, y):
@@ -437,10 +438,11 @@ def planned_segments(plan, grid) -> list:
 
 
 def _check_options(request, plan) -> dict:
-    """The check's integrator options: the run's inputs, largest step and step budget."""
+    """The check's integrator options: the run's inputs, largest step, step budget and
+    multistep family."""
     return dict(torque=request.torque, hub_motion=request.hub_motion,
                 controller=request.controller, max_step=plan.cvodes_step,
-                max_steps=plan.cvodes_steps)
+                max_steps=plan.cvodes_steps, multistep=plan.cvodes_multistep)
 
 
 def start_accuracy_check(request, plan, drive):
