@@ -80,8 +80,9 @@ def flexctl_tip(model, scene, t_final, check_accuracy=True, check_validity=True)
     return run
 
 
-def bare_cvodes_tip(model, scene, t_final):
-    """CVODES on the model's equations written directly with casadi (no flexctl code)."""
+def bare_cvodes_tip(model, scene, t_final, multistep="bdf"):
+    """CVODES on the model's equations written directly with casadi (no flexctl code), with
+    its default BDF or with Adams (``multistep``)."""
     mat, n = model.matrices, model.n_modes
     grid = output_grid(t_final)
     prescribed = isinstance(scene.maneuver, SpinUp)
@@ -107,7 +108,8 @@ def bare_cvodes_tip(model, scene, t_final):
         integrator = ca.integrator("bare", "cvodes", {"x": x, "t": t, "ode": ode}, 0.0,
                                    list(grid[1:]), {"reltol": rtol,
                                                     "abstol": rtol * ATOL_SCALE,
-                                                    "max_num_steps": 10 ** 7})
+                                                    "max_num_steps": 10 ** 7,
+                                                    "linear_multistep_method": multistep})
         xf = np.array(integrator(x0=np.zeros(x.numel()))["xf"])
         q_out = xf[:n] if prescribed else xf[1:n + 1]
         return np.concatenate(([0.0], mat.tip @ q_out))
@@ -139,7 +141,9 @@ def compare(name, with_python_control):
              "flexctl, no validity estimate": (
                  flexctl_tip(model, scene, t_final, check_validity=False), REPEATS),
              "flexctl, no checks": (flexctl_tip(model, scene, t_final, False, False), REPEATS),
-             "bare casadi CVODES": (bare_cvodes_tip(model, scene, t_final), REPEATS)}
+             "bare casadi CVODES": (bare_cvodes_tip(model, scene, t_final), REPEATS),
+             "bare casadi CVODES, Adams": (bare_cvodes_tip(model, scene, t_final, "adams"),
+                                           REPEATS)}
     if with_python_control:
         for method in PYTHON_CONTROL_METHODS:
             tools[f"python-control {method}"] = (
@@ -155,6 +159,11 @@ def compare(name, with_python_control):
           f"accuracy check, without the validity estimate (the geometric error of the "
           f"small-deflection model, two 2-mode runs): "
           f"{times['flexctl, no validity estimate'] / times['bare casadi CVODES']:.2f}")
+    adams = times["bare casadi CVODES, Adams"]
+    print(f"   against bare CVODES with Adams (flexctl's choice for these undamped models): "
+          f"flexctl {flex_time / adams:.2f}, without the validity estimate "
+          f"{times['flexctl, no validity estimate'] / adams:.2f}, no checks "
+          f"{times['flexctl, no checks'] / adams:.2f}")
     cpu, bare_cpu = CPU_TIMES, CPU_TIMES["bare casadi CVODES"]
     print(f"   CPU time (every thread) against bare CVODES: flexctl "
           f"{cpu['flexctl.simulate (auto)'] / bare_cpu:.2f}, without the validity estimate "
