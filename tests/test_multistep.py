@@ -48,6 +48,7 @@ def test_fast_decays_keep_bdf(slew_system):
     # modes turning far more than ADAMS_PHASE radians: BDF steps over them
     assert choose_multistep(model, omega, 0.0, 1.01 * ADAMS_PHASE / omega) == "bdf"
     assert choose_multistep(model, omega, 0.0, 0.99 * ADAMS_PHASE / omega) == "adams"
+    assert choose_multistep(model, float("inf"), 0.0, 1.0) == "bdf"
 
 
 def test_a_plant_behind_an_actuator_keeps_bdf():
@@ -92,3 +93,29 @@ def test_segment_integrator_refuses_an_unknown_family_by_name(slew_system, bad):
     with pytest.raises(InputValueError, match="multistep"):
         SegmentIntegrator(model, 0.0, np.array([0.5, 1.0]), np.ones(model.n_states), 1e-6,
                           torque=SineTorque(peak_torque=1.0, duration=1.0), multistep=bad)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), -1.0, "fast", None, True])
+def test_choices_refuse_a_bad_rate_by_name(slew_system, bad):
+    from flexctl.sim.request import choose_continuous
+
+    model = build_model(slew_system, 2)
+    with pytest.raises((InputValueError, TypeError), match="omega_max"):
+        choose_continuous(model, 1.0, bad)
+    with pytest.raises((InputValueError, TypeError), match="omega_plant"):
+        choose_multistep(model, bad, 0.0, 1.0)
+    with pytest.raises((InputValueError, TypeError), match="loop_frequency"):
+        choose_multistep(model, 1.0, bad, 1.0)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), -1.0, float("inf"), "long"])
+def test_choices_refuse_a_bad_horizon_or_model_by_name(slew_system, bad):
+    from flexctl.sim.request import choose_continuous
+
+    model = build_model(slew_system, 2)
+    with pytest.raises((InputValueError, TypeError), match="t_final"):
+        choose_multistep(model, 1.0, 0.0, bad)
+    with pytest.raises((InputValueError, TypeError), match="t_final"):
+        choose_continuous(model, bad, 1.0)
+    with pytest.raises(TypeError, match="model"):
+        choose_multistep(slew_system, 1.0, 0.0, 1.0)
