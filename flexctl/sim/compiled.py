@@ -673,8 +673,9 @@ def verify_accuracy(model, segments, y0, scale, rtol, y_main, tip_map, n_main, c
     difference in tip deflection there is the error estimate (conservative: it is the error
     of the looser run). If the
     two disagree by more than ``ALARM_FACTOR * rtol`` of the peak while the run took more than
-    ``EFFORT_FACTOR`` times the evaluations of the check, high-order BDF has amplified an
-    undamped high-frequency mode, and the run is redone with A-stable BDF2 (IDAS).
+    ``EFFORT_FACTOR`` times the evaluations of the check, high-order multistep steps (BDF's
+    orders 3 to 5, or Adams-Moulton's) have amplified an undamped high-frequency mode, and
+    the run is redone with A-stable BDF2 (IDAS).
 
     Parameters
     ----------
@@ -713,7 +714,8 @@ def verify_accuracy(model, segments, y0, scale, rtol, y_main, tip_map, n_main, c
         return y_main, error, "", n_eval
     found = (f"accuracy check: CVODES and a check run at {CHECK_FACTOR:g}x the tolerance "
              f"disagreed by {error:.3g} m at the tip, the mark of undamped high-frequency "
-             "modes that BDF orders 3 to 5 amplify")
+             "modes that high-order multistep steps amplify (BDF's orders 3 to 5, "
+             "Adams-Moulton's beyond its stability interval)")
     options = {**options, "solver": "idas", "max_order": 2}
     try:
         y_fixed, n_fixed = integrate_segments(model, segments, y0, scale, rtol, **options)
