@@ -13,7 +13,8 @@ without compiling again.
   CasADi serialisation (and of the same CasADi, compiler and flags), so that a later process
   finds it without generating the C again: serialising costs a third to a tenth of that.
 - **Lifted constants.** :func:`lift_constants` keeps what it made in the same folder, by the
-  serialisation's SHA-256 of the function it lifted: reading it back costs a fifth of lifting.
+  SHA-256 of the serialisation of the function it lifted and the CasADi version: reading it
+  back costs a fifth of lifting.
 - **Location.** ``$FLEXCTL_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/flexctl``, else
   ``~/.cache/flexctl``; a ``compiled/`` folder in it holds ``<name>-<hash>.so`` files.
 - **Atomicity.** The source and the library are written to temporary names in the cache
@@ -318,7 +319,8 @@ def lift_constants(function, max_instructions: int | None = None):
     if max_instructions is not None and function.n_instructions() > max_instructions:
         return None
     try:
-        fingerprint = hashlib.sha256(function.serialize().encode("utf-8")).hexdigest()[:32]
+        fingerprint = hashlib.sha256((function.serialize() + "\0" + ca.__version__)
+                                     .encode("utf-8")).hexdigest()[:32]
     except RuntimeError:                # pragma: no cover - every SX function serialises
         return _lift(function)
     with _LIFTED_LOCK:
