@@ -693,3 +693,44 @@ def test_first_order_beams_differing_in_numbers_share_one_pair_library(fresh):
     assert len([p for p in libraries(fresh) if "dopri5" in p.name]) == 1
     # the longer, softer beam deflects more: each run has its own numbers
     assert peaks[1] > 1.1 * peaks[0]
+
+
+@needs_compiler
+def test_an_index_naming_another_functions_library_is_not_trusted(fresh, monkeypatch):
+    import casadi as ca
+
+    x, y = ca.SX.sym("x"), ca.SX.sym("y", 2)
+    one = ca.Function("cc_swap", [x], [x * 2.0])
+    other = ca.Function("cc_swap", [y], [ca.sin(y)])       # same name, another signature
+    compiled(one)
+    compiled(other)
+    indexes = sorted((fresh / "compiled").glob("cc_swap-*.key"))
+    keys = [path.read_text() for path in indexes]
+    for path, key in zip(indexes, reversed(keys)):           # each names the other's library
+        path.write_text(key)
+    monkeypatch.setattr(compile_cache, "_LOADED", {})
+    assert float(compiled(one)(1.5)) == 3.0
+    np.testing.assert_allclose(np.array(compiled(other)([0.1, 0.2])).ravel(),
+                               np.sin([0.1, 0.2]), rtol=1e-15)
+
+
+@needs_compiler
+def test_a_stored_lifted_function_of_another_shape_is_lifted_again(fresh, monkeypatch):
+    import casadi as ca
+
+    from flexctl.sim.compile_cache import lift_constants
+
+    x, y = ca.SX.sym("x"), ca.SX.sym("y", 2)
+    one = ca.Function("cc_lift_swap", [x], [3.0 * x])
+    other = ca.Function("cc_lift_swap", [y], [ca.sum1(4.0 * y)])
+    lift_constants(one)
+    lift_constants(other)
+    stored = sorted((fresh / "compiled").glob("lifted-*.casadi"))
+    texts = [path.read_text() for path in stored]
+    for path, text in zip(stored, reversed(texts)):
+        path.write_text(text)
+    monkeypatch.setattr(compile_cache, "_LIFTED", {})
+    lifted, constants = lift_constants(one)
+    assert constants.tolist() == [3.0] and float(lifted(2.0, constants)) == 6.0
+    lifted, constants = lift_constants(other)
+    assert constants.tolist() == [4.0] and float(lifted([1.0, 2.0], constants)) == 12.0

@@ -212,6 +212,8 @@ def compiled(function, *, label: str | None = None, companions=(), options=None)
         # a library built before for this very function is found without generating its C
         key = _read_index(name, fingerprint) if indexed else memo
         loaded = None if key is None else _try_load(name, _library(name, key), options or {})
+        if loaded is not None and not _same_signature(loaded, function):
+            loaded = None               # an index naming another function's library
         if loaded is None:
             if indexed:
                 source = _source(function, companions)
@@ -225,6 +227,18 @@ def compiled(function, *, label: str | None = None, companions=(), options=None)
         return function
     _LOADED[(name, memo)] = loaded
     return loaded
+
+
+def _same_signature(found, function, extra_inputs: int = 0) -> bool:
+    """Whether ``found`` has ``function``'s outputs and inputs (and ``extra_inputs`` more),
+    their names and sparsity."""
+    n_in = function.n_in()
+    return (found.n_in() == n_in + extra_inputs and found.n_out() == function.n_out()
+            and found.name_in()[:n_in] == function.name_in()
+            and found.name_out() == function.name_out()
+            and all(found.sparsity_in(k) == function.sparsity_in(k) for k in range(n_in))
+            and all(found.sparsity_out(k) == function.sparsity_out(k)
+                    for k in range(function.n_out())))
 
 
 def _fingerprint(functions, tool: tuple) -> str:
@@ -327,6 +341,11 @@ def lift_constants(function, max_instructions: int | None = None):
         found = _LIFTED.get(fingerprint, _MISSING)
     if found is _MISSING:
         found = _read_lifted(fingerprint)
+        if found is not None and not (
+                found[0].name() == f"{function.name()}_lifted"
+                and _same_signature(found[0], function, extra_inputs=1)
+                and found[0].nnz_in(function.n_in()) == found[1].size):
+            found = None                # not what lifting this function makes: lift again
         if found is None:
             found = _lift(function)
             if found is not None:
