@@ -154,7 +154,8 @@ def test_lifted_functions_are_read_back_from_the_cache(fresh, monkeypatch):
 
     model, _ = _exact_pair()
     lifted, constants = lift_constants(model.geometry.rhs)
-    (stored,) = (fresh / "compiled").glob("lifted-*.casadi")
+    (stored,) = (fresh / "compiled").glob("lifted-*.constants")
+    assert len(list((fresh / "compiled").glob("lifted-*.casadi"))) == 1
     lift = compile_cache._lift
     monkeypatch.setattr(compile_cache, "_LIFTED", {})          # as in another process
     monkeypatch.setattr(compile_cache, "_lift", _no_c_generation)
@@ -164,12 +165,18 @@ def test_lifted_functions_are_read_back_from_the_cache(fresh, monkeypatch):
     np.testing.assert_array_equal(np.array(read(x, 0.7, read_constants)),
                                   np.array(model.geometry.rhs(x, 0.7)))
     # a damaged entry is lifted again
-    stored.write_text("damaged")
-    monkeypatch.setattr(compile_cache, "_LIFTED", {})
+    # another beam's numbers: a constants file of its own, the same lifted function
     monkeypatch.setattr(compile_cache, "_lift", lift)
+    _, stiffer = _exact_pair()
+    lift_constants(stiffer.geometry.rhs)
+    assert len(list((fresh / "compiled").glob("lifted-*.constants"))) == 2
+    assert len(list((fresh / "compiled").glob("lifted-*.casadi"))) == 1
+    # a damaged entry is lifted again
+    stored.write_bytes(b"damaged")
+    monkeypatch.setattr(compile_cache, "_LIFTED", {})
     again, again_constants = lift_constants(model.geometry.rhs)
     np.testing.assert_array_equal(again_constants, constants)
-    assert stored.read_text() != "damaged"
+    assert stored.read_bytes() != b"damaged"
 
 
 def test_lifting_writes_nothing_with_compiling_off(fresh, monkeypatch):
@@ -725,12 +732,27 @@ def test_a_stored_lifted_function_of_another_shape_is_lifted_again(fresh, monkey
     other = ca.Function("cc_lift_swap", [y], [ca.sum1(4.0 * y)])
     lift_constants(one)
     lift_constants(other)
-    stored = sorted((fresh / "compiled").glob("lifted-*.casadi"))
-    texts = [path.read_text() for path in stored]
-    for path, text in zip(stored, reversed(texts)):
-        path.write_text(text)
+    stored = sorted((fresh / "compiled").glob("lifted-*.constants"))
+    texts = [path.read_bytes() for path in stored]
+    for path, text in zip(stored, reversed(texts)):      # each names the other's function
+        path.write_bytes(text)
     monkeypatch.setattr(compile_cache, "_LIFTED", {})
     lifted, constants = lift_constants(one)
     assert constants.tolist() == [3.0] and float(lifted(2.0, constants)) == 6.0
     lifted, constants = lift_constants(other)
     assert constants.tolist() == [4.0] and float(lifted([1.0, 2.0], constants)) == 12.0
+
+
+@needs_compiler
+def test_lifted_constants_beyond_the_limit_are_pruned(fresh, monkeypatch):
+    import casadi as ca
+
+    from flexctl.sim.compile_cache import lift_constants
+
+    monkeypatch.setattr(compile_cache, "LIFTED_KEEP", 2)
+    x = ca.SX.sym("x")
+    for k in range(4):                  # one structure, four models' numbers
+        lift_constants(ca.Function("cc_prune", [x], [(k + 1.5) * x]))
+    folder = fresh / "compiled"
+    assert len(list(folder.glob("lifted-*.constants"))) == 2
+    assert len(list(folder.glob("lifted-*.casadi"))) == 1

@@ -13,8 +13,9 @@ without compiling again.
   CasADi serialisation (and of the same CasADi, compiler and flags), so that a later process
   finds it without generating the C again: serialising costs a third to a tenth of that.
 - **Lifted constants.** :func:`lift_constants` keeps what it made in the same folder, by the
-  SHA-256 of the serialisation of the function it lifted and the CasADi version: reading it
-  back costs a fifth of lifting.
+  SHA-256 of the serialisation of the function it lifted and the CasADi version: the lifted
+  function once per structure, the constants once per model (the :data:`LIFTED_KEEP` most
+  recently used). Reading them back costs a fifth of lifting.
 - **Location.** ``$FLEXCTL_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/flexctl``, else
   ``~/.cache/flexctl``; a ``compiled/`` folder in it holds ``<name>-<hash>.so`` files.
 - **Atomicity.** The source and the library are written to temporary names in the cache
@@ -57,8 +58,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["compiled", "lift_constants", "with_derivatives", "jacobian_companion", "cache_dir",
-           "cache_info", "clear_cache", "compiler", "compiling_enabled", "CacheInfo", "CompileCacheWarning", "STATS", "FLAGS",
-           "PROGRESS_AFTER"]
+           "cache_info", "clear_cache", "compiler", "compiling_enabled", "CacheInfo",
+           "CompileCacheWarning", "STATS", "FLAGS", "PROGRESS_AFTER", "LIFTED_KEEP"]
 
 #: Compiler flags of every library (part of the key). ``-Og`` runs the generated straight-line
 #: code about as fast as ``-O2`` (within 6 % on the exact model's right-hand side and its
@@ -365,41 +366,94 @@ _LIFTED_LOCK = threading.Lock()
 _MISSING = object()
 
 
-def _lifted_path(fingerprint: str) -> Path:
-    return cache_dir() / _SUBDIR / f"lifted-{fingerprint}.casadi"
+#: Most files of lifted constants kept (one per model lifted: a Monte Carlo sample, another
+#: beam length); beyond it the least recently used go. The lifted functions themselves are
+#: one per structure.
+LIFTED_KEEP = 512
+#: Lifted functions read in this process, by the hash of their serialisation.
+_STRUCTURES: dict = {}
+
+
+def _constants_path(fingerprint: str) -> Path:
+    return cache_dir() / _SUBDIR / f"lifted-{fingerprint}.constants"
+
+
+def _structure_path(structure: str) -> Path:
+    return cache_dir() / _SUBDIR / f"lifted-{structure}.casadi"
 
 
 def _read_lifted(fingerprint: str):
     """``(lifted function, constants)`` stored for the function of ``fingerprint`` in the
-    cache directory (where compiling is on), else None."""
+    cache directory (where compiling is on), else None.
+
+    A ``.constants`` file holds the hash of the lifted function (one ``.casadi`` file per
+    structure, shared by every model of it) on its first line, then the constants as
+    float64."""
     import casadi as ca
     import numpy as np
 
     if not compiling_enabled() or compiler() is None:
         return None
+    path = _constants_path(fingerprint)
     try:
-        text = _lifted_path(fingerprint).read_text(encoding="ascii")
-        reader = ca.StringDeserializer(text)
-        lifted, values = reader.unpack(), reader.unpack()
+        data = path.read_bytes()
+        structure, values = data[:32].decode("ascii"), data[33:]
+        if data[32:33] != b"\n" or len(values) % 8:
+            return None
+        with _LIFTED_LOCK:
+            lifted = _STRUCTURES.get(structure)
+        if lifted is None:
+            lifted = ca.StringDeserializer(
+                _structure_path(structure).read_text(encoding="ascii")).unpack()
+            if not isinstance(lifted, ca.Function):
+                return None
+            with _LIFTED_LOCK:
+                _STRUCTURES[structure] = lifted
+                while len(_STRUCTURES) > _LIFTED_SIZE:
+                    _STRUCTURES.pop(next(iter(_STRUCTURES)))
+        os.utime(path)                  # recently used: kept by _prune_constants
     except (OSError, UnicodeDecodeError, RuntimeError):
         return None
-    if not isinstance(lifted, ca.Function) or not isinstance(values, ca.DM):
-        return None
-    return lifted, np.array(values, dtype=float).reshape(-1)
+    return lifted, np.frombuffer(values, dtype="<f8").astype(float)
 
 
 def _write_lifted(fingerprint: str, lifted, values) -> None:
-    """Store a lifted function and its constants beside the libraries (where compiling is on:
-    reading it back costs a fifth of lifting again)."""
+    """Store a lifted function (once per structure) and its constants (per model) beside the
+    libraries, where compiling is on: reading them back costs a fifth of lifting again."""
     import casadi as ca
+    import numpy as np
 
     if not compiling_enabled() or compiler() is None:
         return
-    writer = ca.StringSerializer()
-    writer.pack(lifted)
-    writer.pack(ca.DM(values))
+    text = lifted.serialize()
+    structure = hashlib.sha256((text + "\0" + ca.__version__).encode("utf-8")).hexdigest()[:32]
     with contextlib.suppress(OSError):
-        _atomic_write(_lifted_path(fingerprint), writer.encode().encode("ascii"))
+        if not _structure_path(structure).is_file():
+            writer = ca.StringSerializer()
+            writer.pack(lifted)
+            _atomic_write(_structure_path(structure), writer.encode().encode("ascii"))
+        _atomic_write(_constants_path(fingerprint), structure.encode("ascii") + b"\n"
+                      + np.asarray(values, dtype="<f8").tobytes())
+        _prune_constants()
+
+
+def _prune_constants() -> None:
+    """Remove the least recently used constants files beyond :data:`LIFTED_KEEP`."""
+    folder = cache_dir() / _SUBDIR
+    files = list(folder.glob("lifted-*.constants"))
+    if len(files) <= LIFTED_KEEP:
+        return
+    aged = sorted(files, key=_mtime)
+    for path in aged[:len(files) - LIFTED_KEEP]:
+        with contextlib.suppress(OSError):
+            path.unlink()
+
+
+def _mtime(path: Path) -> float:
+    try:
+        return path.stat().st_mtime
+    except OSError:
+        return 0.0
 
 
 def _lift(function):
@@ -669,7 +723,8 @@ class CacheInfo:
     entries : int
         Compiled libraries.
     size : int
-        Their total size, bytes.
+        Total size of the cache's files, bytes: the libraries, their index files and the
+        lifted functions kept beside them.
     compiler : str
         The compiler's version line, or why there is none.
     """
@@ -698,8 +753,18 @@ def cache_info() -> CacheInfo:
     else:
         what = "none found (functions run on CasADi's virtual machine)" if tool is None \
             else f"{tool[1]} ({tool[0]})"
+    folder = cache_dir() / _SUBDIR
+    every = [f for f in folder.iterdir() if f.is_file()] if folder.is_dir() else []
     return CacheInfo(directory=cache_dir(), entries=len(files),
-                     size=sum(f.stat().st_size for f in files), compiler=what)
+                     size=sum(_size(f) for f in every), compiler=what)
+
+
+def _size(path: Path) -> int:
+    """Bytes of ``path``, 0 if another process removed it meanwhile."""
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0
 
 
 def clear_cache() -> int:

@@ -32,7 +32,8 @@ from ..model.checks import check_instance, check_real
 from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["RunRequest", "IntegrationPlan", "run_request", "plan_integration", "state_scale",
-           "StiffnessWarning", "ManyModesWarning", "MANY_MODES", "METHODS", "SAMPLED_METHODS"]
+           "StiffnessWarning", "ManyModesWarning", "MANY_MODES", "METHODS", "SAMPLED_METHODS",
+           "choose_continuous", "choose_multistep", "ADAMS_DAMPING", "ADAMS_PHASE"]
 
 #: Integration methods: "auto" (CVODES when every input has a CasADi form, else DOP853),
 #: "cvodes" (compiled, :mod:`flexctl.sim.compiled`), "rk4" (compiled fixed step,
