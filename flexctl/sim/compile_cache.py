@@ -274,8 +274,11 @@ def _read_index(name: str, fingerprint: str) -> str | None:
 
 
 def _write_index(name: str, fingerprint: str, key: str) -> None:
-    """Record (atomically) that the function of ``fingerprint`` compiles to library ``key``."""
-    _atomic_write(_index(name, fingerprint), key.encode("ascii"))
+    """Record (atomically) that the function of ``fingerprint`` compiles to library ``key``;
+    where that fails (the cache cleared meanwhile, a full disk), the library is still good
+    and the next process generates the C once more."""
+    with contextlib.suppress(OSError):
+        _atomic_write(_index(name, fingerprint), key.encode("ascii"))
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
