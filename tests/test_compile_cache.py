@@ -702,6 +702,14 @@ def test_first_order_beams_differing_in_numbers_share_one_pair_library(fresh):
     assert peaks[1] > 1.1 * peaks[0]
 
 
+def _swap_files(cache: Path, pattern: str) -> None:
+    """Give the two files of the cache matching ``pattern`` each other's contents."""
+    first, second = sorted((cache / "compiled").glob(pattern))
+    contents = first.read_bytes(), second.read_bytes()
+    first.write_bytes(contents[1])
+    second.write_bytes(contents[0])
+
+
 @needs_compiler
 def test_an_index_naming_another_functions_library_is_not_trusted(fresh, monkeypatch):
     import casadi as ca
@@ -711,10 +719,7 @@ def test_an_index_naming_another_functions_library_is_not_trusted(fresh, monkeyp
     other = ca.Function("cc_swap", [y], [ca.sin(y)])       # same name, another signature
     compiled(one)
     compiled(other)
-    indexes = sorted((fresh / "compiled").glob("cc_swap-*.key"))
-    keys = [path.read_text() for path in indexes]
-    for path, key in zip(indexes, reversed(keys)):           # each names the other's library
-        path.write_text(key)
+    _swap_files(fresh, "cc_swap-*.key")                      # each names the other's library
     monkeypatch.setattr(compile_cache, "_LOADED", {})
     assert float(compiled(one)(1.5)) == 3.0
     np.testing.assert_allclose(np.array(compiled(other)([0.1, 0.2])).ravel(),
@@ -732,10 +737,7 @@ def test_a_stored_lifted_function_of_another_shape_is_lifted_again(fresh, monkey
     other = ca.Function("cc_lift_swap", [y], [ca.sum1(4.0 * y)])
     lift_constants(one)
     lift_constants(other)
-    stored = sorted((fresh / "compiled").glob("lifted-*.constants"))
-    texts = [path.read_bytes() for path in stored]
-    for path, text in zip(stored, reversed(texts)):      # each names the other's function
-        path.write_bytes(text)
+    _swap_files(fresh, "lifted-*.constants")                 # each names the other's function
     monkeypatch.setattr(compile_cache, "_LIFTED", {})
     lifted, constants = lift_constants(one)
     assert constants.tolist() == [3.0] and float(lifted(2.0, constants)) == 6.0
