@@ -534,13 +534,16 @@ def choose_multistep(model: Model, omega_plant: float, loop_frequency: float = 0
     On these models the fast poles are the beam modes, undamped or lightly damped, and they
     must be resolved by any method. BDF's orders 3 to 5 amplify such oscillations at long
     steps, so CVODES holds them to short, low-order steps (and the accuracy check sometimes
-    redoes a run with BDF2), while Adams-Moulton follows them at high order. At rtol 1e-6,
-    measured with the errors against a run at 1e-11 (BDF / Adams): slew-90 under a saturated
-    PD, exact, 4 modes 31 / 24 ms (errors 3.5e-6 / 1.4e-6 of the peak) and 6 modes 76 / 50 ms
-    (2.5e-6 / 2.3e-6); hub-beam-mass's sine torque on 30 first_order modes over 2 s 625 /
-    46 ms (3e-7 / 6e-6), 12 modes over 20 s 302 / 172 ms (1.7e-7 / 1.7e-5);
-    spacecraft-torque, 6 modes, 295 / 213 ms (7e-4 / 5e-5); the Kane spin-up, 4 modes,
-    first_order 19 / 14 ms and exact 47 / 35 ms (3.1e-6 / 5e-7).
+    redoes a run with BDF2), while Adams-Moulton follows them at high order. At rtol 1e-6 with
+    the accuracy check, BDF / Adams in ms, and their largest tip errors against a run at 1e-11
+    relative to the peak (``benchmarks/bench_multistep.py``): slew-90 under a saturated PD,
+    exact, 4 modes 32.5 / 24.5 (3.5e-6 / 1.4e-6) and 6 modes 76.0 / 50.8 (2.5e-6 / 2.3e-6);
+    hub-beam-mass's sine torque on 30 first_order modes over 2 s 630 / 48 (3e-7 / 6.1e-6);
+    spacecraft-torque, 6 modes, 330 / 253 (7e-4 / 5.1e-5); the Kane spin-up, 4 modes,
+    first_order 25.9 / 17.9 (3.1e-6 / 5.5e-7) and exact 63.2 / 47.3 (3.1e-6 / 4.5e-7). On 12
+    modes over 20 s,
+    which the phase bound below keeps on BDF, Adams took 231 ms against 346 but its error
+    was 1.7e-5 against 1.7e-7.
 
     BDF stays where a pole decays fast, which Adams-Moulton would follow with steps as short
     as its time constant: a beam damping ratio above :data:`ADAMS_DAMPING` (the highest
@@ -550,8 +553,9 @@ def choose_multistep(model: Model, omega_plant: float, loop_frequency: float = 0
     :data:`ADAMS_PHASE` radians over the run (``t_final``, s): such modes lie far above
     anything the inputs excite, and BDF steps over them where Adams would resolve each
     period (a beam a million times stiffer, 4 modes over 4 s, deflects quasi-statically
-    under BDF and carries tolerance-sized vibration under Adams). A plant behind an actuator keeps BDF too: a wheel's torque
-    lag, a motor's back-EMF damping and a smoothed friction knee are fast decays of their own.
+    under BDF and carries tolerance-sized vibration under Adams). A plant behind an actuator
+    keeps BDF too: a wheel's torque lag, a motor's back-EMF damping and a smoothed friction
+    knee are fast decays of their own.
     """
     check_instance("choose_multistep", "model", model, Model, "flexctl Model")
     omega_plant = _rate("choose_multistep", "omega_plant", omega_plant)
