@@ -541,9 +541,8 @@ def choose_multistep(model: Model, omega_plant: float, loop_frequency: float = 0
     hub-beam-mass's sine torque on 30 first_order modes over 2 s 630 / 48 (3e-7 / 6.1e-6);
     spacecraft-torque, 6 modes, 330 / 253 (7e-4 / 5.1e-5); the Kane spin-up, 4 modes,
     first_order 25.9 / 17.9 (3.1e-6 / 5.5e-7) and exact 63.2 / 47.3 (3.1e-6 / 4.5e-7). On 12
-    modes over 20 s,
-    which the phase bound below keeps on BDF, Adams took 231 ms against 346 but its error
-    was 1.7e-5 against 1.7e-7.
+    modes over 20 s, which the phase bound below keeps on BDF, Adams took 231 ms against 346
+    but its error was 1.7e-5 against 1.7e-7.
 
     BDF stays where a pole decays fast, which Adams-Moulton would follow with steps as short
     as its time constant: a beam damping ratio above :data:`ADAMS_DAMPING` (the highest
