@@ -39,8 +39,9 @@ def label(owner: str, name: str) -> str:
 
 def check_real(owner: str, name: str, value, *, minimum: float | None = None,
                strict: bool = False, maximum: float | None = None,
-               optional: bool = False) -> float | None:
-    """A finite real number within bounds, as float (``None`` passes when ``optional``).
+               optional: bool = False, infinite: bool = False) -> float | None:
+    """A finite real number within bounds, as float (``None`` passes when ``optional``;
+    an infinity within the bounds when ``infinite``).
 
     Raises ``TypeError`` for a non-number (bool included) and ``ValueError`` naming
     ``owner.name``, the rule and the value for NaN, infinity or a value out of bounds
@@ -52,7 +53,7 @@ def check_real(owner: str, name: str, value, *, minimum: float | None = None,
     if isinstance(value, bool) or not isinstance(value, Real):
         raise InputTypeError(f"{where} must be a real number; got {value!r} of type "
                              f"{type(value).__name__}")
-    rule = "finite"
+    rule = "a number (infinity allowed)" if infinite else "finite"
     if minimum is not None:
         rule += f" and {'>' if strict else '>='} {minimum:g}"
     if maximum is not None:
@@ -63,7 +64,7 @@ def check_real(owner: str, name: str, value, *, minimum: float | None = None,
         exponent = int(abs(int(value)).bit_length() * math.log10(2.0))
         raise InputValueError(f"{where} must be {rule}; got a number of about "
                               f"1e{exponent}, beyond the float range") from None
-    ok = math.isfinite(value)
+    ok = not math.isnan(value) if infinite else math.isfinite(value)
     if ok and minimum is not None:
         ok = value > minimum if strict else value >= minimum
     if ok and maximum is not None:

@@ -514,18 +514,6 @@ def stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
                     "them one, e.g. the built-in manoeuvres, to run on cvodes)")
 
 
-def _rate(owner: str, name: str, value) -> float:
-    """A frequency in rad/s: a real number >= 0, ``inf`` allowed (a model beyond floating
-    point, which the callers send to CVODES's BDF), NaN refused."""
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise InputTypeError(f"{owner}: {name} must be a real number (rad/s); got "
-                             f"{value!r} of type {type(value).__name__}")
-    value = float(value)
-    if not value >= 0.0:
-        raise InputValueError(f"{owner}: {name} must be >= 0 rad/s; got {value!r}")
-    return value
-
-
 def choose_multistep(model: Model, omega_plant: float, loop_frequency: float = 0.0,
                      t_final: float = 0.0) -> str:
     """CVODES's multistep family for a run: ``"adams"`` where every fast pole is a lightly
@@ -557,8 +545,11 @@ def choose_multistep(model: Model, omega_plant: float, loop_frequency: float = 0
     knee are fast decays of their own.
     """
     check_instance("choose_multistep", "model", model, Model, "flexctl Model")
-    omega_plant = _rate("choose_multistep", "omega_plant", omega_plant)
-    loop_frequency = _rate("choose_multistep", "loop_frequency", loop_frequency)
+    # a rate of inf (a model beyond floating point) is allowed: it goes to BDF
+    omega_plant = check_real("choose_multistep", "omega_plant", omega_plant, minimum=0.0,
+                             infinite=True)
+    loop_frequency = check_real("choose_multistep", "loop_frequency", loop_frequency,
+                                minimum=0.0, infinite=True)
     t_final = check_real("choose_multistep", "t_final", t_final, minimum=0.0)
     if getattr(model, "actuator", None) is not None:
         return "bdf"
@@ -610,7 +601,8 @@ def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
     """
     check_instance("choose_continuous", "model", model, Model, "flexctl Model")
     t_final = check_real("choose_continuous", "t_final", t_final, minimum=0.0)
-    omega_max = _rate("choose_continuous", "omega_max", omega_max)
+    omega_max = check_real("choose_continuous", "omega_max", omega_max, minimum=0.0,
+                           infinite=True)
     steps = omega_max * t_final / PAIR_OMEGA_H
     # the consistent variant's mass matrix can turn singular on the way: CVODES stops there
     # and the stop is located and named, where explicit steps could step across it
