@@ -456,6 +456,9 @@ class SegmentIntegrator:
                  max_step=None, multistep="bdf"):
         import casadi as ca
 
+        if solver == "cvodes" and multistep not in ("bdf", "adams"):
+            raise InputValueError(f"SegmentIntegrator multistep must be 'bdf' or 'adams'; got "
+                                  f"{multistep!r}")
         scale = np.asarray(scale, dtype=float)
         t_out = np.asarray(t_out, dtype=float)
         inputs = (torque, hub_motion, controller)
@@ -474,9 +477,6 @@ class SegmentIntegrator:
                 "disable_internal_warnings": True, "show_eval_warnings": False}
         if solver == "cvodes":
             opts["min_step_size"] = min_step_fraction(t_end, length)
-            if multistep not in ("bdf", "adams"):
-                raise InputValueError(f"SegmentIntegrator multistep must be 'bdf' or "
-                                      f"'adams'; got {multistep!r}")
             opts["linear_multistep_method"] = multistep
         if max_order is not None:
             opts["max_multistep_order"] = int(max_order)
