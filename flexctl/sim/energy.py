@@ -180,8 +180,6 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     lost = _running_integral(model.system.hub.friction * w ** 2
                               + np.einsum("ip,ij,jp->p", qd, mat.C_ff, qd), t)
     residual = energy - energy[0] - work + lost
-    magnitude = np.abs(power)
-    gross = float(np.sum(0.5 * (magnitude[1:] + magnitude[:-1]) * np.diff(t)))
     k = int(np.argmax(np.abs(residual)))
     inertia = np.einsum("ip,ij,jp->p", q, mat.D, q)
     neglected = _neglected_energy(model, w, q, inertia)
@@ -189,7 +187,8 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     return EnergyBalance(
         variant=model.variant, energy_start=float(energy[0]), imbalance=float(residual[k]),
         time=float(t[k]), energy=float(energy[k]), work=float(work[k]), lost=float(lost[k]),
-        throughput=float(max(max(energy[0], 0.0) + gross, np.max(np.abs(energy)))),
+        throughput=float(max(max(energy[0], 0.0) + _running_integral(np.abs(power), t)[-1],
+                             np.max(np.abs(energy)))),
         hub_inertia=float(model.effective_hub_inertia(np.zeros(model.n_states))),
         inertia_change=float(inertia[int(np.argmax(np.abs(inertia)))]),
         neglected=float(neglected[int(np.argmax(np.abs(neglected)))]),

@@ -28,7 +28,9 @@ The arrays of a stopped run end at the stop time; they never hold NaN or overflo
 
 Methods
 -------
-``"cvodes"`` is compiled SUNDIALS integration (:mod:`flexctl.sim.compiled`); every such run
+``"cvodes"`` is compiled SUNDIALS integration (:mod:`flexctl.sim.compiled`), Adams-Moulton
+for lightly damped oscillations and BDF where poles decay fast
+(:func:`flexctl.sim.request.choose_multistep`); every such run
 is repeated at 10 times the tolerance to estimate its integration error, and redone with
 A-stable BDF2 if the two disagree grossly. ``"RK45"`` with inputs that have a CasADi form is
 compiled Dormand-Prince 5(4) stepping (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), its
