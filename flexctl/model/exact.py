@@ -26,37 +26,41 @@ equations are those of the consistent variant; linearised about a steady spin th
 first_order's (the tests pin both).
 
 The inner integrals ``int_0^s`` and the outer ones ``int_0^l`` use Gauss-Legendre panels
-(:class:`PanelRule`): the beam is cut into equal panels of ``PANEL_POINTS`` Gauss points; inside
-a panel the cumulative integral is that of the interpolating polynomial, and whole panels
-before it add their Gauss sums. Every integral then costs ``O(n PANEL_POINTS)`` operations for
-``n`` points instead of the ``O(n^2)`` of one global polynomial, at the same accuracy. The
-number of panels is chosen per model (:func:`choose_panels`): the fewest for which the
-accelerations at a strongly deflected test state agree with those on the next candidate to
-:data:`PANEL_TOLERANCE`.
+(:class:`PanelRule`): the beam is cut into equal panels of ``P`` Gauss points each; inside a
+panel the cumulative integral is that of the interpolating polynomial, and whole panels before
+it add their Gauss sums. Every integral then costs ``O(n P)`` operations for ``n`` points
+instead of the ``O(n^2)`` of one global polynomial, at the same accuracy. The rule (points per
+panel and panels, a :class:`Quadrature`) is chosen per model (:func:`choose_rule`): the one of
+fewest operations whose accelerations at a strongly deflected test state agree with those of a
+converged reference rule to :data:`PANEL_TOLERANCE`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 
-from .errors import InputValueError
+from .checks import check_integer
+from .errors import InputTypeError, InputValueError
 from .layout import StateLayout
 from .modes import mode_shapes
 from .parameters import HubBeam
 
-__all__ = ["EXACT_MAX_MODES", "ExactGeometry", "PanelRule", "choose_panels", "exact_geometry",
-           "appendage_terms", "vectorized_rhs", "symmetric_solve", "VELOCITY_FROM_JACOBIAN",
-           "PANEL_TOLERANCE", "PANEL_POINTS"]
+__all__ = ["EXACT_MAX_MODES", "ExactGeometry", "PanelRule", "Quadrature", "choose_rule",
+           "exact_geometry", "appendage_terms", "vectorized_rhs", "symmetric_solve",
+           "VELOCITY_FROM_JACOBIAN", "PANEL_TOLERANCE", "POINT_CANDIDATES", "PANEL_CANDIDATES",
+           "REFERENCE_POINTS", "reference_rule"]
 
 #: Most modes the exact variant takes (20 modes: a 445k-instruction right-hand side, 4 s to build).
 EXACT_MAX_MODES = 24
-#: Gauss points per panel.
-PANEL_POINTS = 8
-#: Relative agreement of the accelerations on two panel counts that fixes the smaller one.
+#: Largest difference of a chosen rule's accelerations from the reference rule's at the test
+#: state, relative to their largest entry.
 PANEL_TOLERANCE = 1e-6
+#: Candidate Gauss points per panel.
+POINT_CANDIDATES = tuple(range(4, 17))
 #: Candidate panel counts.
 PANEL_CANDIDATES = (1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64)
 #: Most modes for which the scalar form computes the beam's velocities as ``J q_t`` rather
@@ -66,14 +70,48 @@ VELOCITY_FROM_JACOBIAN = 8
 TEST_DEFLECTION = 0.4
 
 
+class Quadrature(NamedTuple):
+    """Size of a :class:`PanelRule`: Gauss points per panel and equal panels along the beam."""
+
+    points: int
+    panels: int
+
+    @classmethod
+    def checked(cls, owner: str, value) -> "Quadrature":
+        """``value`` (a pair of positive integers) as a Quadrature, or a clear error naming
+        ``owner``."""
+        if not isinstance(value, tuple) or len(value) != 2:
+            raise InputTypeError(f"{owner}.quadrature must be a Quadrature(points, panels); "
+                                 f"got {value!r} of type {type(value).__name__}"[:300])
+        return cls(check_integer(owner, "quadrature.points", value[0], minimum=1),
+                   check_integer(owner, "quadrature.panels", value[1], minimum=1))
+
+
+#: Gauss points per panel of the rule every candidate is compared with, on
+#: :func:`reference_rule` panels.
+REFERENCE_POINTS = 12
+
+
+def reference_rule(n_modes: int) -> Quadrature:
+    """The rule the candidates on ``n_modes`` modes are compared with: some 36 points per half
+    wave of the fastest mode's slope (``3 N`` panels of :data:`REFERENCE_POINTS`, at least 4
+    and at most 64), converged far below :data:`PANEL_TOLERANCE`."""
+    return Quadrature(REFERENCE_POINTS, min(64, max(4, 3 * n_modes)))
+
+
 @dataclass(frozen=True, eq=False)
 class PanelRule:
     """Composite Gauss-Legendre rule on ``[0, length]`` that also integrates from the root.
 
     Attributes
     ----------
+    n_panels : int
+    length : float
+        Beam length, m.
+    points : int
+        Gauss points per panel.
     nodes : ndarray, shape (n,)
-        Gauss points, ascending, m (``n = n_panels * PANEL_POINTS``).
+        Gauss points, ascending, m (``n = n_panels * points``).
     weights : ndarray, shape (n,)
         Weights of ``int_0^l``, m.
     local : ndarray, shape (n, n)
@@ -88,6 +126,7 @@ class PanelRule:
 
     n_panels: int
     length: float
+    points: int
     nodes: np.ndarray
     weights: np.ndarray
     local: np.ndarray
@@ -95,36 +134,44 @@ class PanelRule:
     before: np.ndarray
 
     @classmethod
-    def build(cls, n_panels: int, length: float) -> "PanelRule":
+    def build(cls, n_panels: int, length: float, points: int) -> "PanelRule":
         leg = np.polynomial.legendre
-        g, w = leg.leggauss(PANEL_POINTS)
-        coefficients = np.linalg.inv(leg.legvander(g, PANEL_POINTS - 1))
-        local = leg.legvander(g, PANEL_POINTS) @ leg.legint(coefficients, lbnd=-1.0, axis=0)
+        g, w = leg.leggauss(points)
+        local = leg.legvander(g, points) @ _integrated(points)
         half = 0.5 * length / n_panels
         nodes = np.concatenate([(2 * p + 1 + g) * half for p in range(n_panels)])
         eye = np.eye(n_panels)
-        return cls(n_panels=n_panels, length=length, nodes=nodes,
+        return cls(n_panels=n_panels, length=length, points=points, nodes=nodes,
                    weights=np.tile(half * w, n_panels),
                    local=np.kron(eye, half * local),
                    sums=np.kron(eye, half * w[None, :]),
                    before=np.kron(np.tril(np.ones((n_panels, n_panels)), -1),
-                                  np.ones((PANEL_POINTS, 1))))
+                                  np.ones((points, 1))))
 
-    def at(self, positions) -> np.ndarray:
-        """Rows that integrate from the root to each position (m), shape (P, n)."""
+    def at(self, positions) -> tuple:
+        """``(local, before)``: ``local @ f + before @ (sums @ f)`` integrates ``f`` from the
+        root to each position (m); ``local`` (P, n) holds the position's own panel only,
+        ``before`` (P, n_panels) is 1 on the whole panels before it."""
         leg = np.polynomial.legendre
-        g, w = leg.leggauss(PANEL_POINTS)
-        coefficients = np.linalg.inv(leg.legvander(g, PANEL_POINTS - 1))
-        integrated = leg.legint(coefficients, lbnd=-1.0, axis=0)
         h = self.length / self.n_panels
-        rows = np.zeros((len(positions), self.nodes.size))
+        local = np.zeros((len(positions), self.nodes.size))
+        before = np.zeros((len(positions), self.n_panels))
         for k, s in enumerate(positions):
             p = min(int(s // h), self.n_panels - 1)
             xi = 2.0 * (s - p * h) / h - 1.0
-            block = slice(p * PANEL_POINTS, (p + 1) * PANEL_POINTS)
-            rows[k, block] = 0.5 * h * leg.legvander(np.array([xi]), PANEL_POINTS) @ integrated
-            rows[k, :p * PANEL_POINTS] = self.weights[:p * PANEL_POINTS]
-        return rows
+            block = slice(p * self.points, (p + 1) * self.points)
+            local[k, block] = 0.5 * h * leg.legvander(np.array([xi]), self.points) \
+                @ _integrated(self.points)
+            before[k, :p] = 1.0
+        return local, before
+
+
+def _integrated(points: int) -> np.ndarray:
+    """Legendre coefficients (rows, degree 0 to ``points``) of the integral from -1 of the
+    polynomial through the values at ``points`` Gauss points (columns)."""
+    leg = np.polynomial.legendre
+    g = leg.leggauss(points)[0]
+    return leg.legint(np.linalg.inv(leg.legvander(g, points - 1)), lbnd=-1.0, axis=0)
 
 
 def _sparse(a):
@@ -144,8 +191,9 @@ class ExactGeometry:
     ----------
     system : HubBeam
     n_modes : int
-    n_panels : int
-        Gauss-Legendre panels of the quadrature (:class:`PanelRule`).
+    quadrature : Quadrature
+        Gauss points per panel and panels of the quadrature (:class:`PanelRule`,
+        :func:`choose_rule`).
     rhs : casadi.Function
         ``(x, u) -> xdot``, torque ``u`` in N m (SX: every quadrature node written out).
     rhs_vectorized : casadi.Function
@@ -166,7 +214,7 @@ class ExactGeometry:
 
     system: HubBeam
     n_modes: int
-    n_panels: int
+    quadrature: Quadrature
     rhs: object = field(repr=False)
     rhs_vectorized: object = field(repr=False)
     beam: object = field(repr=False)
@@ -176,41 +224,46 @@ class ExactGeometry:
     energy: object = field(repr=False)
 
 
-def appendage_terms(system, n_modes, n_panels, q, q_dot, rate) -> dict:
+def appendage_terms(system, n_modes, quadrature, q, q_dot, rate) -> dict:
     """One beam's share of the exact equations in its own frame, as CasADi expressions.
 
     ``system`` is a :class:`~flexctl.model.parameters.HubBeam` (its hub's inertia is left
-    out: the caller adds it). The frame is the beam's: its root at ``(b, 0)``, its axis along
-    ``x``. Keys: ``m_tt`` (scalar), ``m_tq`` (1, N), ``m_qq`` (N, N), ``b_t``, ``b_q`` (N,):
-    the mass-matrix blocks and velocity terms of the pinned-hub equations; ``first`` (2,):
-    the first moment ``int p dm``; ``first_q`` (2, N): its Jacobian ``int J dm``;
-    ``first_acc`` (2,): ``int (p_tt at q_tt = 0) dm``; ``tip`` (2,): the tip position.
+    out: the caller adds it); ``quadrature`` a :class:`Quadrature` (:func:`choose_rule`). The
+    frame is the beam's: its root at ``(b, 0)``, its axis along ``x``. Keys: ``m_tt``
+    (scalar), ``m_tq`` (1, N), ``m_qq`` (N, N), ``b_t``, ``b_q`` (N,): the mass-matrix blocks
+    and velocity terms of the pinned-hub equations; ``first`` (2,): the first moment
+    ``int p dm``; ``first_q`` (2, N): its Jacobian ``int J dm``; ``first_acc`` (2,):
+    ``int (p_tt at q_tt = 0) dm``; ``tip`` (2,): the tip position.
     """
     import casadi as ca
 
     b, l = system.hub.radius, system.beam.length
-    rule = PanelRule.build(n_panels, l)
+    quadrature = Quadrature.checked("appendage_terms", quadrature)
+    rule = PanelRule.build(quadrature.panels, l, quadrature.points)
     local, sums, before = _sparse(rule.local), _sparse(rule.sums), _sparse(rule.before)
     slope_shapes = ca.DM(mode_shapes(n_modes, rule.nodes / l, derivative=1, length=l).T)
     psi = ca.mtimes(slope_shapes, q)
     psi_t = ca.mtimes(slope_shapes, q_dot)
     cos, sin = ca.cos(psi), ca.sin(psi)
     # scalar form: the velocities as J q_t (2 N - 1 operations a point) where that is cheaper
-    # than integrating their own integrands (some 18 a point)
+    # than integrating their own integrands
     velocities_from_jacobian = isinstance(q, ca.SX) and n_modes <= VELOCITY_FROM_JACOBIAN
     # integrands of p_x - b, p_y, [p_x_t, p_y_t,] and of the q_t^2 part of p_tt
     integrands = ca.horzcat(cos, sin, -cos * psi_t ** 2, -sin * psi_t ** 2,
                             *(() if velocities_from_jacobian else (-sin * psi_t, cos * psi_t)))
-    beam_weights = ca.DM(rule.weights)
-    tip = ca.vertcat(b + ca.dot(beam_weights, cos), ca.dot(beam_weights, sin))
     jac_x = -ca.repmat(sin, 1, n_modes) * slope_shapes
     jac_y = ca.repmat(cos, 1, n_modes) * slope_shapes
+    # each integrand's whole-panel sums, shared by the beam's points, the masses and the tip
+    panel_sums = [ca.mtimes(sums, f) for f in (integrands, jac_x, jac_y)]
+    tip = ca.vertcat(b + ca.sum1(panel_sums[0][:, 0]), ca.sum1(panel_sums[0][:, 1]))
 
-    def along_beam(f):
-        return ca.mtimes(local, f) + ca.mtimes(before, ca.mtimes(sums, f))
+    def along_beam(f, f_sums):
+        return ca.mtimes(local, f) + ca.mtimes(before, f_sums)
 
-    def at_masses(f):
-        return ca.mtimes(_sparse(rule.at([m.position for m in system.masses])), f)
+    mass_local, mass_before = (_sparse(a) for a in rule.at([m.position for m in system.masses]))
+
+    def at_masses(f, f_sums):
+        return ca.mtimes(mass_local, f) + ca.mtimes(mass_before, f_sums)
 
     # (weights, integral from the root) of the beam's points and of the point masses
     points = [(system.beam.linear_density * rule.weights, along_beam)]
@@ -221,10 +274,10 @@ def appendage_terms(system, n_modes, n_panels, q, q_dot, rate) -> dict:
                tip=tip)
     for weights, integrate in points:
         w = ca.DM(weights)
-        p = integrate(integrands)
+        p, jx, jy = (integrate(f, f_sums) for f, f_sums in
+                     zip((integrands, jac_x, jac_y), panel_sums))
         px, py, ax, ay = (p[:, k] for k in range(4))
         px = px + b
-        jx, jy = integrate(jac_x), integrate(jac_y)
         if velocities_from_jacobian:
             pxt, pyt = ca.mtimes(jx, q_dot), ca.mtimes(jy, q_dot)
         else:
@@ -292,16 +345,28 @@ def symmetric_solve(matrix, rhs):
     return ca.vertcat(*x)
 
 
-def _terms(system, n_modes, n_panels, q, q_dot, rate):
+def _terms(system, n_modes, quadrature, q, q_dot, rate):
     """Mass matrix ``M(q)``, bias ``[b_theta; b_q]`` and tip position, as CasADi expressions."""
     import casadi as ca
 
-    t = appendage_terms(system, n_modes, n_panels, q, q_dot, rate)
+    t = appendage_terms(system, n_modes, quadrature, q, q_dot, rate)
     mass = ca.blockcat([[system.hub.inertia + t["m_tt"], t["m_tq"]], [t["m_tq"].T, t["m_qq"]]])
     return mass, ca.vertcat(t["b_t"], t["b_q"]), t["tip"]
 
 
-def _rhs(system: HubBeam, n_modes: int, n_panels: int, matrices, vectorized: bool = False):
+def _equations(system: HubBeam, matrices, quadrature, x, u):
+    """``M(q)``, the generalized forces ``f`` of ``M(q) [theta_tt; q_tt] = f``, the velocity
+    terms ``[b_theta; b_q]`` in them and the tip position at state ``x`` and torque ``u``:
+    CasADi expressions of symbols or numbers."""
+    import casadi as ca
+
+    _, q, rate, q_dot = StateLayout.single(matrices.n_modes).split(x)
+    mass, bias, tip = _terms(system, matrices.n_modes, quadrature, q, q_dot, rate)
+    elastic = -ca.mtimes(ca.DM(matrices.K_ff), q) - ca.mtimes(ca.DM(matrices.C_ff), q_dot)
+    return mass, ca.vertcat(u - system.hub.friction * rate, elastic) - bias, bias, tip
+
+
+def _rhs(system: HubBeam, n_modes: int, quadrature, matrices, vectorized: bool = False):
     """``(x, u) -> xdot`` and the symbols and terms it was built from: SX (every node's
     arithmetic written out) or, ``vectorized``, MX (one operation per vector of nodes)."""
     import casadi as ca
@@ -310,10 +375,7 @@ def _rhs(system: HubBeam, n_modes: int, n_panels: int, matrices, vectorized: boo
     sym = ca.MX if vectorized else ca.SX
     x = sym.sym("x", layout.n_states)
     u = sym.sym("u")
-    _, q, rate, q_dot = layout.split(x)
-    mass, bias, tip = _terms(system, n, n_panels, q, q_dot, rate)
-    elastic = -ca.mtimes(ca.DM(matrices.K_ff), q) - ca.mtimes(ca.DM(matrices.C_ff), q_dot)
-    generalized = ca.vertcat(u - system.hub.friction * rate, elastic) - bias
+    mass, generalized, bias, tip = _equations(system, matrices, quadrature, x, u)
     if vectorized:
         # the small dense solve as scalar code (an MX solve needs a linear solver plugin)
         m_sym, g_sym = ca.SX.sym("M", n + 1, n + 1), ca.SX.sym("g", n + 1)
@@ -324,24 +386,26 @@ def _rhs(system: HubBeam, n_modes: int, n_panels: int, matrices, vectorized: boo
         acc = symmetric_solve(mass, generalized)
     name = f"flexctl_exact_{'vec_' if vectorized else ''}N{n}"
     rhs = ca.Function(name, [x, u], [ca.vertcat(x[layout.velocities], acc)],
-                      ["x", "u"], ["xdot"])
+                      ["x", "u"], ["xdot"], {} if vectorized else {"cse": True})
     return rhs, x, mass, bias, tip
 
 
-def vectorized_rhs(system: HubBeam, n_modes: int, n_panels: int, matrices):
+def vectorized_rhs(system: HubBeam, n_modes: int, quadrature, matrices):
     """The exact right-hand side ``(x, u) -> xdot`` as an MX function of whole-vector
     operations: the nodes' slopes, integrands and Jacobian rows as vectors and matrices, the
     integrals as products with the constant (sparse) quadrature matrices, the mass-matrix
     blocks as matrix products. Its operation count, and so its generated code, does not depend
-    on the number of quadrature nodes (only the constant tables grow with them)."""
-    return _rhs(system, n_modes, n_panels, matrices, vectorized=True)[0]
+    on the number of quadrature nodes (only the constant tables grow with them).
+    ``quadrature`` is a :class:`Quadrature`."""
+    quadrature = Quadrature.checked("vectorized_rhs", quadrature)
+    return _rhs(system, n_modes, quadrature, matrices, vectorized=True)[0]
 
 
-def _build(system: HubBeam, n_modes: int, n_panels: int, matrices) -> ExactGeometry:
+def _build(system: HubBeam, n_modes: int, quadrature, matrices) -> ExactGeometry:
     import casadi as ca
 
     n, layout = n_modes, StateLayout.single(n_modes)
-    rhs, x, mass, bias, tip = _rhs(system, n, n_panels, matrices)
+    rhs, x, mass, bias, tip = _rhs(system, n, quadrature, matrices)
     q, rate = layout.modal(x), layout.hub_rate(x)
     stiffness, damping = ca.DM(matrices.K_ff), ca.DM(matrices.C_ff)
     friction = system.hub.friction
@@ -355,12 +419,12 @@ def _build(system: HubBeam, n_modes: int, n_panels: int, matrices) -> ExactGeome
 
     qs, qds = ca.SX.sym("q", n), ca.SX.sym("q_dot", n)
     w, acc_hub = ca.SX.sym("rate"), ca.SX.sym("acceleration")
-    m_b, bias_b, _ = _terms(system, n, n_panels, qs, qds, w)
+    m_b, bias_b, _ = _terms(system, n, quadrature, qs, qds, w)
     load = (-ca.mtimes(stiffness, qs) - ca.mtimes(damping, qds) - bias_b[1:]
             - m_b[1:, 0] * acc_hub)
     beam = ca.Function(f"{name}_beam", [qs, qds, w, acc_hub],
                        [symmetric_solve(m_b[1:, 1:], load)],
-                       ["q", "q_dot", "rate", "acceleration"], ["q_tt"])
+                       ["q", "q_dot", "rate", "acceleration"], ["q_tt"], {"cse": True})
 
     mass_fn = ca.Function(f"{name}_mass", [q], [mass], ["q"], ["M"])
     tip_fn = ca.Function(f"{name}_tip", [q], [tip], ["q"], ["p_tip"])
@@ -368,44 +432,87 @@ def _build(system: HubBeam, n_modes: int, n_panels: int, matrices) -> ExactGeome
     kinetic = 0.5 * ca.dot(v, ca.mtimes(mass, v))
     energy = ca.Function(f"{name}_energy", [x],
                          [kinetic + 0.5 * ca.dot(q, ca.mtimes(stiffness, q))], ["x"], ["E"])
-    return ExactGeometry(system=system, n_modes=n, n_panels=n_panels, rhs=rhs,
-                         rhs_vectorized=vectorized_rhs(system, n, n_panels, matrices), beam=beam,
+    return ExactGeometry(system=system, n_modes=n, quadrature=quadrature, rhs=rhs,
+                         rhs_vectorized=vectorized_rhs(system, n, quadrature, matrices), beam=beam,
                          torque=torque, mass=mass_fn, tip=tip_fn, energy=energy)
 
 
-def _test_state(system: HubBeam, matrices) -> np.ndarray:
-    """A strongly deflected, fast state: modal amplitudes falling as ``1 / i^4`` (as a static load spreads over the modes) with the first
-    tip deflection ``TEST_DEFLECTION * l``, rates at each mode's own frequency."""
+def _test_states(system: HubBeam, matrices) -> list:
+    """Two strongly deflected, fast states: modal amplitudes falling as ``1 / i^4`` (as a
+    static load spreads over the modes) with the hub turning at the first beam frequency, and
+    as ``1 / i^2`` (the higher modes rung up) with the hub at three times it; each mode's tip
+    deflection is ``TEST_DEFLECTION * l`` over that power of ``i``, its rate its amplitude
+    times its own frequency."""
     n = matrices.n_modes
     i = np.arange(1, n + 1)
-    q = TEST_DEFLECTION * system.beam.length / np.abs(matrices.tip) / i ** 4
     omega = matrices.beam_frequencies
-    return StateLayout.single(n).join(q=q, theta_dot=omega[0], q_dot=omega * q)
+    states = []
+    for power, spin in ((4, 1.0), (2, 3.0)):
+        q = TEST_DEFLECTION * system.beam.length / np.abs(matrices.tip) / i ** power
+        states.append(StateLayout.single(n).join(q=q, theta_dot=spin * omega[0],
+                                                 q_dot=omega * q))
+    return states
 
 
-def choose_panels(system: HubBeam, matrices) -> int:
-    """The fewest Gauss-Legendre panels that resolve the exact model on its modes.
+def choose_rule(system: HubBeam, matrices) -> Quadrature:
+    """The quadrature of fewest operations that resolves the exact model on its modes.
 
-    The accelerations at the test state (:func:`_test_state`) on successive candidate panel
-    counts are compared; the first count that agrees with the next within
-    :data:`PANEL_TOLERANCE` (relative to their largest entry) is taken.
+    Candidates (:data:`POINT_CANDIDATES` points per panel times :data:`PANEL_CANDIDATES`
+    panels) are tried in the order of their operation count (:func:`_operations`); the first
+    whose accelerations at each test state (:func:`_test_states`) agree with those of
+    :func:`reference_rule` within :data:`PANEL_TOLERANCE` (relative to the largest) is taken.
+    A candidate with fewer panels than one of the same points that failed is skipped.
     """
-    x = _test_state(system, matrices)
-    previous = None
-    for n_panels in PANEL_CANDIDATES:
-        acc = np.array(_rhs(system, matrices.n_modes, n_panels, matrices)[0](x, 1.0))
-        acc = acc.ravel()[StateLayout.single(matrices.n_modes).velocities]
-        if previous is not None:
-            scale = max(np.max(np.abs(acc)), 1e-300)
-            if np.max(np.abs(acc - previous[1])) <= PANEL_TOLERANCE * scale:
-                return previous[0]
-        previous = (n_panels, acc)
-    return previous[0]
+    states = _test_states(system, matrices)
+    reference = [_test_accelerations(system, matrices, reference_rule(matrices.n_modes), x)
+                 for x in states]
+    candidates = sorted((_operations(Quadrature(p, k), matrices.n_modes, len(system.masses)),
+                         Quadrature(p, k)) for p in POINT_CANDIDATES for k in PANEL_CANDIDATES)
+    failed: dict = {}
+    for _, rule in candidates:
+        if rule.panels <= failed.get(rule.points, 0):
+            continue
+        if all(_agrees(_test_accelerations(system, matrices, rule, x), r)
+               for x, r in zip(states, reference)):
+            return rule
+        failed[rule.points] = rule.panels
+    return reference_rule(matrices.n_modes)
+
+
+def _agrees(accelerations, reference) -> bool:
+    """Within :data:`PANEL_TOLERANCE` of ``reference``'s largest entry (False on NaN)."""
+    scale = max(float(np.max(np.abs(reference))), np.finfo(float).tiny)
+    return bool(np.max(np.abs(accelerations - reference)) <= PANEL_TOLERANCE * scale)
+
+
+def _test_accelerations(system, matrices, quadrature, x) -> np.ndarray:
+    """Accelerations ``[theta_tt, q_tt]`` at state ``x`` with the torque 1 N m on
+    ``quadrature``, computed on numbers (no function is built); NaN where too few points make
+    the mass matrix singular."""
+    import casadi as ca
+
+    mass, generalized, _, _ = _equations(system, matrices, quadrature, ca.DM(x), 1.0)
+    try:
+        return np.linalg.solve(np.array(mass), np.array(generalized).ravel())
+    except np.linalg.LinAlgError:
+        return np.full(matrices.n_modes + 1, np.nan)
+
+
+def _operations(quadrature: Quadrature, n_modes: int, n_masses: int) -> float:
+    """Estimated scalar operations of one right-hand side on ``quadrature``: the integrals
+    from the root of every integrand (``2 N + 4`` of them: the local polynomial, the panels
+    before), their panel sums and the values at the masses, and the per-point products."""
+    points, panels = quadrature
+    n = points * panels
+    columns = 2 * n_modes + 4 + (2 if n_modes > VELOCITY_FROM_JACOBIAN else 0)
+    integrals = columns * (n * (2 * points + 0.5 * (panels - 1)) + 2 * n
+                           + n_masses * (2 * points + panels))
+    return integrals + n * (2 * n_modes ** 2 + 16 * n_modes + 30)
 
 
 @lru_cache(maxsize=32)
 def _cached(system: HubBeam, n_modes: int, matrices) -> ExactGeometry:
-    return _build(system, n_modes, choose_panels(system, matrices), matrices)
+    return _build(system, n_modes, choose_rule(system, matrices), matrices)
 
 
 def exact_geometry(matrices) -> ExactGeometry:

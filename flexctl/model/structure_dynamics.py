@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .exact import appendage_terms, choose_panels, symmetric_solve
+from .exact import appendage_terms, choose_rule, symmetric_solve
 from .layout import StateLayout
 
 __all__ = ["StructureFunctions", "structure_functions"]
@@ -51,8 +51,8 @@ class StructureFunctions:
     beam : ``(q, q_dot, rate, acceleration) -> q_tt`` under a prescribed hub rotation
         (pinned hub)
     torque : ``(x, theta_tt, q_tt) -> T_h`` (pinned hub)
-    panels : tuple of int
-        Gauss-Legendre panels of each appendage (exact variant), else ().
+    rules : tuple of Quadrature
+        Gauss-Legendre points per panel and panels of each appendage (exact variant), else ().
     hub_torque, signals : ``(x, u) -> T_hub``, ``(x, u) -> s``
         With an actuator (:mod:`flexctl.model.actuated`): the torque it puts on the structure
         and its signals; ``None`` otherwise.
@@ -66,7 +66,7 @@ class StructureFunctions:
     outputs: object = field(repr=False)
     beam: object = field(repr=False)
     torque: object = field(repr=False)
-    panels: tuple = ()
+    rules: tuple = ()
     hub_torque: object = field(default=None, repr=False)
     signals: object = field(default=None, repr=False)
 
@@ -99,7 +99,7 @@ def _small_blocks(mat, variant, q, q_dot, rate, for_energy=False):
                 first_acc=dm.zeros(2), tips=tips)
 
 
-def _exact_blocks(mat, panels, q, q_dot, rate):
+def _exact_blocks(mat, rules, q, q_dot, rate):
     """Pinned-hub blocks and first moments of the exact variant, appendage by appendage."""
     import casadi as ca
 
@@ -109,7 +109,7 @@ def _exact_blocks(mat, panels, q, q_dot, rate):
                first_acc=ca.SX.zeros(2), tips=[])
     for k, (part, app) in enumerate(zip(mat.parts, mat.system.appendages)):
         block = mat.slices[k]
-        t = appendage_terms(part.system, part.n_modes, panels[k], q[block], q_dot[block], rate)
+        t = appendage_terms(part.system, part.n_modes, rules[k], q[block], q_dot[block], rate)
         rot = ca.DM(np.array([[np.cos(app.angle), -np.sin(app.angle)],
                               [np.sin(app.angle), np.cos(app.angle)]]))
         out["m_tt"] = out["m_tt"] + t["m_tt"]
@@ -175,13 +175,13 @@ def structure_functions(model) -> StructureFunctions:
 
     mat, variant, layout = model.matrices, model.variant, model.layout
     free = mat.system.free
-    panels = _panels(mat) if variant == "exact" else ()
+    rules = _rules(mat) if variant == "exact" else ()
     x, u = ca.SX.sym("x", layout.n_states), ca.SX.sym("u")
     theta, q, rate, q_dot = layout.split(x)
 
     def blocks(for_energy=False, qq=q, qd=q_dot, w=rate):
         if variant == "exact":
-            return _exact_blocks(mat, panels, qq, qd, w)
+            return _exact_blocks(mat, rules, qq, qd, w)
         return _small_blocks(mat, variant, qq, qd, w, for_energy)
 
     terms = blocks()
@@ -218,11 +218,11 @@ def structure_functions(model) -> StructureFunctions:
         outputs=ca.Function("structure_outputs", [x], [_outputs(model, x, terms["tips"])],
                             ["x"], ["y"]))
     functions.update(_prescribed(model, blocks, free))
-    return StructureFunctions(panels=panels, **functions)
+    return StructureFunctions(rules=rules, **functions)
 
 
-def _panels(mat) -> tuple:
-    """Gauss-Legendre panels of each appendage: :func:`~flexctl.model.exact.choose_panels` on
+def _rules(mat) -> tuple:
+    """Quadrature of each appendage: :func:`~flexctl.model.exact.choose_rule` on
     the appendage with the rest of the structure's inertia as its hub (the accelerations it
     compares depend on the hub it turns)."""
     from .matrices import assemble
@@ -233,7 +233,7 @@ def _panels(mat) -> tuple:
         others = mat.J0 - part.J0
         system = dataclasses.replace(part.system, hub=Hub(inertia=others,
                                                           radius=part.system.hub.radius))
-        out.append(choose_panels(system, assemble(system, part.n_modes)))
+        out.append(choose_rule(system, assemble(system, part.n_modes)))
     return tuple(out)
 
 
