@@ -103,6 +103,13 @@ def reference_rule(n_modes: int) -> Quadrature:
 class PanelRule:
     """Composite Gauss-Legendre rule on ``[0, length]`` that also integrates from the root.
 
+    Inside a panel the integral from the panel's start to each node is that of the
+    polynomial through the panel's values. The nodes lie in mirror pairs about the panel's
+    centre (and one at the centre for odd ``points``), so the polynomial is split into its even
+    part, whose integral from the centre is odd, and its odd part, whose integral is even:
+    each half is a matrix of half the size, on the pair sums ``E`` and differences ``O``
+    (:meth:`integrate`), about half the operations of the full matrix.
+
     Attributes
     ----------
     n_panels : int
@@ -114,14 +121,21 @@ class PanelRule:
         Gauss points, ascending, m (``n = n_panels * points``).
     weights : ndarray, shape (n,)
         Weights of ``int_0^l``, m.
-    local : ndarray, shape (n, n)
-        Block diagonal: ``(local @ f)[j]`` integrates ``f`` from the start of the panel of
-        ``nodes[j]`` to ``nodes[j]``.
-    sums : ndarray, shape (n_panels, n)
-        Gauss sum of each whole panel.
-    before : ndarray, shape (n, n_panels)
-        1 where the panel lies wholly before ``nodes[j]``, so that
-        ``int_0^{nodes[j]} f = local @ f + before @ (sums @ f)``.
+    left, right : ndarray of int, shape (n_pairs,)
+        Each pair's node before the panel's centre and its mirror image.
+    centre : ndarray of int, shape (n_panels,) or (0,)
+        The node at each panel's centre (odd ``points``).
+    even, odd : ndarray, shape (n_half, n_half_e), (n_half, n_pairs)
+        From ``E`` (the pair sums, then the centre values) and ``O`` (the pair differences) to
+        the integrals from the panel's start at the left nodes and the centres
+        (``n_half = n_pairs + centre.size``): ``even @ E + odd @ O``.
+    sums : ndarray, shape (n_panels, n_half_e)
+        Gauss sum of each whole panel from ``E``.
+    before_half, upto_right : ndarray, shape (n_half, n_panels), (n_pairs, n_panels)
+        1 on the whole panels before each left or centre node; on the panels up to and
+        including each right node's own.
+    order : ndarray of int, shape (n,)
+        Where each node's integral lies in ``[left and centre nodes; right nodes]``.
     """
 
     n_panels: int
@@ -129,29 +143,73 @@ class PanelRule:
     points: int
     nodes: np.ndarray
     weights: np.ndarray
-    local: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    centre: np.ndarray
+    even: np.ndarray
+    odd: np.ndarray
     sums: np.ndarray
-    before: np.ndarray
+    before_half: np.ndarray
+    upto_right: np.ndarray
+    order: np.ndarray
 
     @classmethod
     def build(cls, n_panels: int, length: float, points: int) -> "PanelRule":
         leg = np.polynomial.legendre
         g, w = leg.leggauss(points)
-        local = leg.legvander(g, points) @ _integrated(points)
         half = 0.5 * length / n_panels
+        local = half * leg.legvander(g, points) @ _integrated(points)
         nodes = np.concatenate([(2 * p + 1 + g) * half for p in range(n_panels)])
-        eye = np.eye(n_panels)
+        n, h = n_panels * points, points // 2
+        starts = points * np.arange(n_panels)
+        left = (starts[:, None] + np.arange(h)[None, :]).ravel()
+        right = (starts[:, None] + points - 1 - np.arange(h)[None, :]).ravel()
+        centre = starts + h if points % 2 else np.zeros(0, dtype=int)
+        # E = [f(left) + f(right); f(centre)], O = f(left) - f(right); from_e, from_o give f
+        # from them for an even and an odd f
+        from_e = np.zeros((n, left.size + centre.size))
+        from_o = np.zeros((n, left.size))
+        pairs = np.arange(left.size)
+        from_e[left, pairs] = from_e[right, pairs] = 0.5
+        from_e[centre, left.size + np.arange(centre.size)] = 1.0
+        from_o[left, pairs], from_o[right, pairs] = 0.5, -0.5
+        whole = np.kron(np.eye(n_panels), local)
+        first = np.concatenate([left, centre])
+        panel = np.arange(n) // points
+        below = panel[:, None] > np.arange(n_panels)[None, :]
         return cls(n_panels=n_panels, length=length, points=points, nodes=nodes,
-                   weights=np.tile(half * w, n_panels),
-                   local=np.kron(eye, half * local),
-                   sums=np.kron(eye, half * w[None, :]),
-                   before=np.kron(np.tril(np.ones((n_panels, n_panels)), -1),
-                                  np.ones((points, 1))))
+                   weights=np.tile(half * w, n_panels), left=left, right=right, centre=centre,
+                   even=(whole @ from_e)[first], odd=(whole @ from_o)[first],
+                   sums=np.kron(np.eye(n_panels), half * w[None, :]) @ from_e,
+                   before_half=below[first].astype(float),
+                   upto_right=(panel[right][:, None] >= np.arange(n_panels)[None, :]
+                               ).astype(float),
+                   order=np.argsort(np.concatenate([first, right])))
+
+    def integrate(self, f):
+        """``(F, S)``: ``F`` (n, c) the integrals from the root to every node of the columns
+        of ``f`` (n, c; CasADi or numpy), ``S`` (n_panels, c) their whole-panel sums."""
+        import casadi as ca
+
+        left, right = list(map(int, self.left)), list(map(int, self.right))
+        pair_sums = f[left, :] + f[right, :]
+        e = ca.vertcat(pair_sums, f[list(map(int, self.centre)), :]) if self.centre.size \
+            else pair_sums
+        o = f[left, :] - f[right, :]
+        sums = ca.mtimes(_sparse(self.sums), e)
+        from_even = ca.mtimes(_sparse(self.even), e)
+        from_odd = ca.mtimes(_sparse(self.odd), o)
+        n_pairs = len(left)
+        first = from_even + from_odd + ca.mtimes(_sparse(self.before_half), sums)
+        second = ca.mtimes(_sparse(self.upto_right), sums) - from_even[:n_pairs, :] \
+            + from_odd[:n_pairs, :]
+        return ca.vertcat(first, second)[list(map(int, self.order)), :], sums
 
     def at(self, positions) -> tuple:
-        """``(local, before)``: ``local @ f + before @ (sums @ f)`` integrates ``f`` from the
-        root to each position (m); ``local`` (P, n) holds the position's own panel only,
-        ``before`` (P, n_panels) is 1 on the whole panels before it."""
+        """``(local, before)``: ``local @ f + before @ S`` (``S`` from :meth:`integrate`)
+        integrates ``f`` from the root to each position (m); ``local`` (P, n) holds the
+        position's own panel only, ``before`` (P, n_panels) is 1 on the whole panels before
+        it."""
         leg = np.polynomial.legendre
         h = self.length / self.n_panels
         local = np.zeros((len(positions), self.nodes.size))
@@ -240,7 +298,6 @@ def appendage_terms(system, n_modes, quadrature, q, q_dot, rate) -> dict:
     b, l = system.hub.radius, system.beam.length
     quadrature = Quadrature.checked("appendage_terms", quadrature)
     rule = PanelRule.build(quadrature.panels, l, quadrature.points)
-    local, sums, before = _sparse(rule.local), _sparse(rule.sums), _sparse(rule.before)
     slope_shapes = ca.DM(mode_shapes(n_modes, rule.nodes / l, derivative=1, length=l).T)
     psi = ca.mtimes(slope_shapes, q)
     psi_t = ca.mtimes(slope_shapes, q_dot)
@@ -253,29 +310,26 @@ def appendage_terms(system, n_modes, quadrature, q, q_dot, rate) -> dict:
                             *(() if velocities_from_jacobian else (-sin * psi_t, cos * psi_t)))
     jac_x = -ca.repmat(sin, 1, n_modes) * slope_shapes
     jac_y = ca.repmat(cos, 1, n_modes) * slope_shapes
-    # each integrand's whole-panel sums, shared by the beam's points, the masses and the tip
-    panel_sums = [ca.mtimes(sums, f) for f in (integrands, jac_x, jac_y)]
-    tip = ca.vertcat(b + ca.sum1(panel_sums[0][:, 0]), ca.sum1(panel_sums[0][:, 1]))
-
-    def along_beam(f, f_sums):
-        return ca.mtimes(local, f) + ca.mtimes(before, f_sums)
-
+    # every integrand's integrals from the root and whole-panel sums, the latter shared by the
+    # point masses and the tip
+    along = [rule.integrate(f) for f in (integrands, jac_x, jac_y)]
+    tip = ca.vertcat(b + ca.sum1(along[0][1][:, 0]), ca.sum1(along[0][1][:, 1]))
     mass_local, mass_before = (_sparse(a) for a in rule.at([m.position for m in system.masses]))
 
     def at_masses(f, f_sums):
         return ca.mtimes(mass_local, f) + ca.mtimes(mass_before, f_sums)
 
     # (weights, integral from the root) of the beam's points and of the point masses
-    points = [(system.beam.linear_density * rule.weights, along_beam)]
+    points = [(system.beam.linear_density * rule.weights, [f for f, _ in along])]
     if system.masses:
-        points.append((np.array([m.mass for m in system.masses]), at_masses))
+        points.append((np.array([m.mass for m in system.masses]),
+                       [at_masses(f, f_sums) for f, (_, f_sums) in
+                        zip((integrands, jac_x, jac_y), along)]))
     out = dict.fromkeys(("m_tt", "m_tq", "m_qq", "b_t", "b_q"), 0.0)
     out.update(first=ca.DM.zeros(2), first_q=ca.DM.zeros(2, n_modes), first_acc=ca.DM.zeros(2),
                tip=tip)
-    for weights, integrate in points:
+    for weights, (p, jx, jy) in points:
         w = ca.DM(weights)
-        p, jx, jy = (integrate(f, f_sums) for f, f_sums in
-                     zip((integrands, jac_x, jac_y), panel_sums))
         px, py, ax, ay = (p[:, k] for k in range(4))
         px = px + b
         if velocities_from_jacobian:
@@ -500,12 +554,13 @@ def _test_accelerations(system, matrices, quadrature, x) -> np.ndarray:
 
 def _operations(quadrature: Quadrature, n_modes: int, n_masses: int) -> float:
     """Estimated scalar operations of one right-hand side on ``quadrature``: the integrals
-    from the root of every integrand (``2 N + 4`` of them: the local polynomial, the panels
-    before), their panel sums and the values at the masses, and the per-point products."""
+    from the root of every integrand (``2 N + 4`` of them: the two half-size local matrices
+    of :meth:`PanelRule.integrate`, the panels before) and their values at the masses, and
+    the per-point products."""
     points, panels = quadrature
     n = points * panels
     columns = 2 * n_modes + 4 + (2 if n_modes > VELOCITY_FROM_JACOBIAN else 0)
-    integrals = columns * (n * (2 * points + 0.5 * (panels - 1)) + 2 * n
+    integrals = columns * (n * (points + 3 + 0.5 * (panels - 1))
                            + n_masses * (2 * points + panels))
     return integrals + n * (2 * n_modes ** 2 + 16 * n_modes + 30)
 

@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .exact import appendage_terms, choose_rule, symmetric_solve
-from .layout import StateLayout
 
 __all__ = ["StructureFunctions", "structure_functions"]
 

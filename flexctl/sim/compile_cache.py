@@ -540,7 +540,8 @@ def with_derivatives(function, fixed=()):
     adj_in = inputs + outs + seeds
     adj_in_names = function.name_in() + out_names + [f"adj_{o}" for o in function.name_out()]
     adj_out_names = [f"adj_{i}" for i in function.name_in()]
-    adj = ca.Function(f"adj1_{name}", adj_in, sensitivities, adj_in_names, adj_out_names)
+    adj = ca.Function(f"adj1_{name}", adj_in, sensitivities, adj_in_names, adj_out_names,
+                      {"cse": True})
     # the sensitivities' Jacobian: the Lagrangian's Hessian in the free inputs, and the
     # transposed Jacobian in the seeds (the same expressions as jac_<name>'s)
     hessian, columns = ca.hessian(weighted, z)[0], z.numel() + stacked.numel()
@@ -632,7 +633,9 @@ def _jacobian_function(name: str, inputs: list, in_names: list, out_names: list,
                                 int(columns[k]):int(columns[k]) + width] if k in free
                           else ca.SX(int(rows[j + 1] - rows[j]), width))
             names.append(f"jac_{out_name}_{in_name}")
-    return ca.Function(name, inputs, blocks, in_names, names)
+    # common subexpressions eliminated: a fifth fewer instructions in the exact model's
+    # Lagrangian Hessian, whose forward-over-reverse sweeps repeat many products
+    return ca.Function(name, inputs, blocks, in_names, names, {"cse": True})
 
 
 def _load_or_build(name: str, key: str, source: str, tool: tuple, label: str,
