@@ -8,6 +8,7 @@ by Richardson extrapolation of 32 and 64 elements.
 """
 
 import dataclasses
+import math
 
 import casadi as ca
 import numpy as np
@@ -321,3 +322,38 @@ def test_quadrature_is_checked(quadrature):
     model = build_model(_system("hub-beam-mass"), 2, "first_order")
     with pytest.raises((InputTypeError, InputValueError), match="quadrature"):
         vectorized_rhs(model.system, 2, quadrature, model.matrices)
+
+
+@pytest.mark.parametrize("points", [4, 5, 8, 11])
+@pytest.mark.parametrize("form", ["numbers", "scalar", "vectorized"])
+def test_panel_rule_integrates_from_the_root(points, form):
+    """PanelRule.integrate gives int_0^s f at every node and each panel's sum: exactly for a
+    polynomial of the panel's degree, and for any f the integral of each panel's
+    interpolating polynomial (the whole-matrix form, computed here in numpy), in its even/odd
+    form (numbers, SX) and its whole-matrix form (MX) alike."""
+    from flexctl.model.exact import PanelRule
+
+    rule = PanelRule.build(3, 1.7, points)
+    s = rule.nodes
+    values = np.column_stack([s ** (points - 1), np.cos(3.0 * s)])
+    edges = np.linspace(0.0, 1.7, 4)
+    exact = np.column_stack([s ** points / points,
+                             rule.local @ values[:, 1] + rule.before @ rule.panel_sums
+                             @ values[:, 1]])
+    exact_sums = np.column_stack([np.diff(edges ** points) / points,
+                                  np.diff(np.sin(3.0 * edges)) / 3.0])
+    if form == "numbers":
+        integrals, sums = rule.integrate(values)
+    else:
+        sym = ca.SX if form == "scalar" else ca.MX
+        f = sym.sym("f", *values.shape)
+        integrals, sums = ca.Function("integrate", [f], rule.integrate(f))(values)
+    np.testing.assert_allclose(np.array(integrals), exact, rtol=0, atol=1e-12)
+    # Gauss sums: exact for the polynomial; for the cosine within the Gauss rule's error
+    # bound, h^(2P+1) (P!)^4 / ((2P+1) ((2P)!)^3) max|f^(2P)| on panels of width h
+    np.testing.assert_allclose(np.array(sums)[:, 0], exact_sums[:, 0], rtol=0, atol=1e-12)
+    h, fact = 1.7 / 3, math.factorial
+    bound = (h ** (2 * points + 1) * fact(points) ** 4 * 3.0 ** (2 * points)
+             / ((2 * points + 1) * fact(2 * points) ** 3))
+    np.testing.assert_allclose(np.array(sums)[:, 1], exact_sums[:, 1], rtol=0,
+                               atol=bound + 1e-15)

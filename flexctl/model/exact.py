@@ -38,7 +38,7 @@ converged reference rule to :data:`PANEL_TOLERANCE`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -108,7 +108,9 @@ class PanelRule:
     centre (and one at the centre for odd ``points``), so the polynomial is split into its even
     part, whose integral from the centre is odd, and its odd part, whose integral is even:
     each half is a matrix of half the size, on the pair sums ``E`` and differences ``O``
-    (:meth:`integrate`), about half the operations of the full matrix.
+    (:meth:`integrate`), about half the operations of the full matrix. Vectorized (MX)
+    expressions take the whole-matrix form instead (:attr:`local`, :attr:`panel_sums`,
+    :attr:`before`): one sparse product each, where the pairs' gathers would add operations.
 
     Attributes
     ----------
@@ -155,10 +157,8 @@ class PanelRule:
 
     @classmethod
     def build(cls, n_panels: int, length: float, points: int) -> "PanelRule":
-        leg = np.polynomial.legendre
-        g, w = leg.leggauss(points)
+        g, w = np.polynomial.legendre.leggauss(points)
         half = 0.5 * length / n_panels
-        local = half * leg.legvander(g, points) @ _integrated(points)
         nodes = np.concatenate([(2 * p + 1 + g) * half for p in range(n_panels)])
         n, h = n_panels * points, points // 2
         starts = points * np.arange(n_panels)
@@ -173,7 +173,7 @@ class PanelRule:
         from_e[left, pairs] = from_e[right, pairs] = 0.5
         from_e[centre, left.size + np.arange(centre.size)] = 1.0
         from_o[left, pairs], from_o[right, pairs] = 0.5, -0.5
-        whole = np.kron(np.eye(n_panels), local)
+        whole = np.kron(np.eye(n_panels), _local(points, half))
         first = np.concatenate([left, centre])
         panel = np.arange(n) // points
         below = panel[:, None] > np.arange(n_panels)[None, :]
@@ -191,6 +191,10 @@ class PanelRule:
         of ``f`` (n, c; CasADi or numpy), ``S`` (n_panels, c) their whole-panel sums."""
         import casadi as ca
 
+        if isinstance(f, ca.MX):
+            sums = ca.mtimes(_sparse(self.panel_sums), f)
+            return (ca.mtimes(_sparse(self.local), f)
+                    + ca.mtimes(_sparse(self.before), sums), sums)
         left, right = list(map(int, self.left)), list(map(int, self.right))
         pair_sums = f[left, :] + f[right, :]
         e = ca.vertcat(pair_sums, f[list(map(int, self.centre)), :]) if self.centre.size \
@@ -204,6 +208,24 @@ class PanelRule:
         second = ca.mtimes(_sparse(self.upto_right), sums) - from_even[:n_pairs, :] \
             + from_odd[:n_pairs, :]
         return ca.vertcat(first, second)[list(map(int, self.order)), :], sums
+
+    @cached_property
+    def local(self) -> np.ndarray:
+        """Block diagonal (n, n): ``(local @ f)[j]`` integrates ``f`` from the start of the
+        panel of ``nodes[j]`` to ``nodes[j]``."""
+        return np.kron(np.eye(self.n_panels),
+                       _local(self.points, 0.5 * self.length / self.n_panels))
+
+    @cached_property
+    def panel_sums(self) -> np.ndarray:
+        """Gauss sum of each whole panel from the nodes' values, shape (n_panels, n)."""
+        return np.kron(np.eye(self.n_panels), np.reshape(self.weights[:self.points], (1, -1)))
+
+    @cached_property
+    def before(self) -> np.ndarray:
+        """1 where the panel lies wholly before ``nodes[j]``, shape (n, n_panels)."""
+        panel = np.arange(self.nodes.size) // self.points
+        return (panel[:, None] > np.arange(self.n_panels)[None, :]).astype(float)
 
     def at(self, positions) -> tuple:
         """``(local, before)``: ``local @ f + before @ S`` (``S`` from :meth:`integrate`)
@@ -222,6 +244,13 @@ class PanelRule:
                 @ _integrated(self.points)
             before[k, :p] = 1.0
         return local, before
+
+
+def _local(points: int, half: float) -> np.ndarray:
+    """(points, points): the integrals from a panel's start (of half-width ``half``, m) to
+    each of its Gauss points of the polynomial through the values there."""
+    leg = np.polynomial.legendre
+    return half * leg.legvander(leg.leggauss(points)[0], points) @ _integrated(points)
 
 
 def _integrated(points: int) -> np.ndarray:
