@@ -156,7 +156,10 @@ class PanelRule:
     order: np.ndarray
 
     @classmethod
+    @lru_cache(maxsize=256)
     def build(cls, n_panels: int, length: float, points: int) -> "PanelRule":
+        """The rule of ``n_panels`` equal panels of ``points`` Gauss points on
+        ``[0, length]`` (built once per size, cached)."""
         g, w = np.polynomial.legendre.leggauss(points)
         half = 0.5 * length / n_panels
         nodes = np.concatenate([(2 * p + 1 + g) * half for p in range(n_panels)])
@@ -177,14 +180,16 @@ class PanelRule:
         first = np.concatenate([left, centre])
         panel = np.arange(n) // points
         below = panel[:, None] > np.arange(n_panels)[None, :]
-        return cls(n_panels=n_panels, length=length, points=points, nodes=nodes,
-                   weights=np.tile(half * w, n_panels), left=left, right=right, centre=centre,
-                   even=(whole @ from_e)[first], odd=(whole @ from_o)[first],
-                   sums=np.kron(np.eye(n_panels), half * w[None, :]) @ from_e,
-                   before_half=below[first].astype(float),
-                   upto_right=(panel[right][:, None] >= np.arange(n_panels)[None, :]
-                               ).astype(float),
-                   order=np.argsort(np.concatenate([first, right])))
+        arrays = dict(nodes=nodes, weights=np.tile(half * w, n_panels), left=left, right=right,
+                      centre=centre, even=(whole @ from_e)[first], odd=(whole @ from_o)[first],
+                      sums=np.kron(np.eye(n_panels), half * w[None, :]) @ from_e,
+                      before_half=below[first].astype(float),
+                      upto_right=(panel[right][:, None] >= np.arange(n_panels)[None, :]
+                                  ).astype(float),
+                      order=np.argsort(np.concatenate([first, right])))
+        for a in arrays.values():             # shared by every caller of the cached rule
+            a.setflags(write=False)
+        return cls(n_panels=n_panels, length=length, points=points, **arrays)
 
     def integrate(self, f):
         """``(F, S)``: ``F`` (n, c) the integrals from the root to every node of the columns
@@ -192,22 +197,38 @@ class PanelRule:
         import casadi as ca
 
         if isinstance(f, ca.MX):
-            sums = ca.mtimes(_sparse(self.panel_sums), f)
-            return (ca.mtimes(_sparse(self.local), f)
-                    + ca.mtimes(_sparse(self.before), sums), sums)
+            sums = ca.mtimes(self.sparse('panel_sums'), f)
+            return (ca.mtimes(self.sparse('local'), f)
+                    + ca.mtimes(self.sparse('before'), sums), sums)
         left, right = list(map(int, self.left)), list(map(int, self.right))
         pair_sums = f[left, :] + f[right, :]
         e = ca.vertcat(pair_sums, f[list(map(int, self.centre)), :]) if self.centre.size \
             else pair_sums
         o = f[left, :] - f[right, :]
-        sums = ca.mtimes(_sparse(self.sums), e)
-        from_even = ca.mtimes(_sparse(self.even), e)
-        from_odd = ca.mtimes(_sparse(self.odd), o)
+        sums = ca.mtimes(self.sparse('sums'), e)
+        from_even = ca.mtimes(self.sparse('even'), e)
+        from_odd = ca.mtimes(self.sparse('odd'), o)
         n_pairs = len(left)
-        first = from_even + from_odd + ca.mtimes(_sparse(self.before_half), sums)
-        second = ca.mtimes(_sparse(self.upto_right), sums) - from_even[:n_pairs, :] \
+        first = from_even + from_odd + ca.mtimes(self.sparse('before_half'), sums)
+        second = ca.mtimes(self.sparse('upto_right'), sums) - from_even[:n_pairs, :] \
             + from_odd[:n_pairs, :]
         return ca.vertcat(first, second)[list(map(int, self.order)), :], sums
+
+    def sparse(self, name: str):
+        """The matrix attribute ``name`` as a sparse CasADi ``DM`` (converted once)."""
+        return self._memo(("sparse", name), lambda: _sparse(getattr(self, name)))
+
+    def slopes(self, n_modes: int):
+        """``phi_i'(s)`` of the first ``n_modes`` cantilever modes at the nodes, a CasADi
+        ``DM`` (n, n_modes), 1/m (computed once)."""
+        return self._memo(("slopes", n_modes), lambda: _dense(mode_shapes(
+            n_modes, self.nodes / self.length, derivative=1, length=self.length).T))
+
+    def _memo(self, key, make):
+        cache = self.__dict__.setdefault("_memo_cache", {})    # the rule is frozen and shared
+        if key not in cache:
+            cache[key] = make()
+        return cache[key]
 
     @cached_property
     def local(self) -> np.ndarray:
@@ -246,19 +267,35 @@ class PanelRule:
         return local, before
 
 
+@lru_cache(maxsize=64)
+def _local_unit(points: int) -> np.ndarray:
+    """:func:`_local` on a panel of half-width 1 (read-only)."""
+    leg = np.polynomial.legendre
+    local = leg.legvander(leg.leggauss(points)[0], points) @ _integrated(points)
+    local.setflags(write=False)
+    return local
+
+
 def _local(points: int, half: float) -> np.ndarray:
     """(points, points): the integrals from a panel's start (of half-width ``half``, m) to
     each of its Gauss points of the polynomial through the values there."""
-    leg = np.polynomial.legendre
-    return half * leg.legvander(leg.leggauss(points)[0], points) @ _integrated(points)
+    return half * _local_unit(points)
 
 
+@lru_cache(maxsize=64)
 def _integrated(points: int) -> np.ndarray:
     """Legendre coefficients (rows, degree 0 to ``points``) of the integral from -1 of the
-    polynomial through the values at ``points`` Gauss points (columns)."""
+    polynomial through the values at ``points`` Gauss points (columns; read-only)."""
     leg = np.polynomial.legendre
     g = leg.leggauss(points)[0]
-    return leg.legint(np.linalg.inv(leg.legvander(g, points - 1)), lbnd=-1.0, axis=0)
+    out = leg.legint(np.linalg.inv(leg.legvander(g, points - 1)), lbnd=-1.0, axis=0)
+    out.setflags(write=False)
+    return out
+
+
+def _dense(a):
+    import casadi as ca
+    return ca.DM(a)
 
 
 def _sparse(a):
@@ -327,7 +364,7 @@ def appendage_terms(system, n_modes, quadrature, q, q_dot, rate) -> dict:
     b, l = system.hub.radius, system.beam.length
     quadrature = Quadrature.checked("appendage_terms", quadrature)
     rule = PanelRule.build(quadrature.panels, l, quadrature.points)
-    slope_shapes = ca.DM(mode_shapes(n_modes, rule.nodes / l, derivative=1, length=l).T)
+    slope_shapes = rule.slopes(n_modes)
     psi = ca.mtimes(slope_shapes, q)
     psi_t = ca.mtimes(slope_shapes, q_dot)
     cos, sin = ca.cos(psi), ca.sin(psi)
@@ -544,21 +581,22 @@ def choose_rule(system: HubBeam, matrices) -> Quadrature:
     panels) are tried in the order of their operation count (:func:`_operations`); the first
     whose accelerations at each test state (:func:`_test_states`) agree with those of
     :func:`reference_rule` within :data:`PANEL_TOLERANCE` (relative to the largest) is taken.
-    A candidate with fewer panels than one of the same points that failed is skipped.
+    A candidate with no more points per panel and no more panels than one that failed is
+    skipped: it is no more accurate.
     """
     states = _test_states(system, matrices)
     reference = [_test_accelerations(system, matrices, reference_rule(matrices.n_modes), x)
                  for x in states]
     candidates = sorted((_operations(Quadrature(p, k), matrices.n_modes, len(system.masses)),
                          Quadrature(p, k)) for p in POINT_CANDIDATES for k in PANEL_CANDIDATES)
-    failed: dict = {}
+    failed: list = []
     for _, rule in candidates:
-        if rule.panels <= failed.get(rule.points, 0):
+        if any(rule.points <= p and rule.panels <= k for p, k in failed):
             continue
         if all(_agrees(_test_accelerations(system, matrices, rule, x), r)
                for x, r in zip(states, reference)):
             return rule
-        failed[rule.points] = rule.panels
+        failed.append(rule)
     return reference_rule(matrices.n_modes)
 
 
