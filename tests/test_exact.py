@@ -357,3 +357,15 @@ def test_panel_rule_integrates_from_the_root(points, form):
              / ((2 * points + 1) * fact(2 * points) ** 3))
     np.testing.assert_allclose(np.array(sums)[:, 1], exact_sums[:, 1], rtol=0,
                                atol=bound + 1e-15)
+
+
+@pytest.mark.parametrize("args", [(0, 1.0, 8), (2, 0.0, 8), (2, -1.0, 8), (2, float("nan"), 8),
+                                  (2, float("inf"), 8), (2, 1.0, 0), (2, 1.0, 10 ** 6),
+                                  (10 ** 9, 1.0, 4), ([2], 1.0, 4), (2, 1.0, 4.0),
+                                  (True, 1.0, 4), (2, "1", 4)])
+def test_panel_rule_refuses_bad_sizes(args):
+    from flexctl.model.errors import InputTypeError, InputValueError
+    from flexctl.model.exact import PanelRule
+
+    with pytest.raises((InputTypeError, InputValueError), match="PanelRule.build"):
+        PanelRule.build(*args)

@@ -1,7 +1,8 @@
 """Controller designs whose Riccati equation cannot be solved say so, by name, in one line.
 
-A model with an absurd beam (1500 m: a length given in millimetres) has clamped frequencies of
-micro-radians per second beside a hub inertia of 1e9 kg m^2; the Riccati solvers fail on it.
+A model with an absurd beam (1.8e6 m: slew-90's 1.8 m given in micrometres) has clamped
+frequencies far below micro-radians per second beside a hub inertia of some 1e18 kg m^2; the
+Riccati solvers fail on it.
 Every design reports that as an :class:`~flexctl.model.errors.InputValueError` naming the law,
 the design function, the model's frequencies and ``J0``, its weights and the solver's reason
 (:func:`controllers.controllable.design_failure`), and ``flexctl run`` prints it in one line.
@@ -17,8 +18,8 @@ from controllers.controllable import design_failure
 from flexctl.app.cli import EXIT_BAD_INPUT, main
 from flexctl.model.errors import InputValueError
 
-#: A beam length in millimetres read as metres.
-ABSURD_LENGTH = 1500.0
+#: A beam length in micrometres read as metres.
+ABSURD_LENGTH = 1.8e6
 WEIGHTS = LQRWeights(hub_angle=0.05, torque=6.0)
 #: What every design failure message says about the model and the solver.
 MODEL_FACTS = (r"failed on a model with 2 modes, first clamped frequency \S+ rad/s, fastest "
@@ -27,7 +28,7 @@ MODEL_FACTS = (r"failed on a model with 2 modes, first clamped frequency \S+ rad
 
 @pytest.fixture(scope="module")
 def absurd_model():
-    """slew-90's system with a 1500 m beam, as its exact plant with 2 modes."""
+    """slew-90's system with a 1.8e6 m beam, as its exact plant with 2 modes."""
     scene = flexctl.load_scene("slew-90", {"beam.length": ABSURD_LENGTH})
     return flexctl.build_model(scene.system, n_modes=2, variant="exact")
 
@@ -97,7 +98,7 @@ def test_a_riccati_failure_names_the_design_the_model_and_the_reason(absurd_mode
 
 
 def test_the_estimator_design_names_the_kalman_filter(monkeypatch):
-    """The 1500 m model's filter happens to solve; a solver failure is put in its place."""
+    """A Kalman filter whose Riccati solver fails (a failure put in its place here)."""
     from controllers import lqg
 
     def unsolvable(*args, **kwargs):
@@ -155,7 +156,7 @@ def test_design_failure_converts_solver_failures_only():
 
 
 def test_flexctl_run_reports_a_failed_design_in_one_line(tmp_path, monkeypatch, capsys):
-    """``--set beam.length=1500`` (millimetres by mistake): exit 2 and one line that names
+    """``--set beam.length=1.8e+06`` (micrometres by mistake): exit 2 and one line that names
     the design and the reason."""
     monkeypatch.chdir(tmp_path)
     code = main(["run", "slew-90", "--set", f"beam.length={ABSURD_LENGTH:g}",

@@ -69,7 +69,7 @@ def _heavy_tip_on_a_massless_hub():
 
 
 def test_a_state_too_stiff_to_follow_ends_with_its_stiffness_named(monkeypatch):
-    """Where the compiled integrator cannot pass a state (made to fail at t = 0 here) and
+    """Where CVODES cannot pass a state (made to fail at t = 0 here) and
     the explicit fallback runs out of its evaluations on a stiff beam (1e5 times stiffer than
     hub-beam-mass's; the budget cut to 2000 evaluations), the run ends as an integrator
     failure naming the stiffness it met."""
@@ -85,7 +85,8 @@ def test_a_state_too_stiff_to_follow_ends_with_its_stiffness_named(monkeypatch):
     model = flexctl.build_model(dataclasses.replace(base, beam=beam), n_modes=2,
                                 variant="exact")
     result = flexctl.simulate(model, 1.0, torque=flexctl.SineTorque(peak_torque=1.0,
-                                                                     duration=0.5))
+                                                                     duration=0.5),
+                              method="cvodes")
     assert result.stop_reason is StopReason.INTEGRATOR_FAILED
     assert "2e+03 evaluations of DOP853" in result.message
     assert "stiff (fastest rate" in result.message

@@ -43,7 +43,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .checks import check_integer
+from .checks import check_integer, check_real
 from .errors import InputTypeError, InputValueError
 from .layout import StateLayout
 from .modes import mode_shapes
@@ -61,6 +61,8 @@ EXACT_MAX_MODES = 24
 PANEL_TOLERANCE = 1e-6
 #: Candidate Gauss points per panel.
 POINT_CANDIDATES = tuple(range(4, 17))
+#: Most Gauss points per panel and most panels of a :class:`PanelRule`.
+MAX_POINTS, MAX_PANELS = 64, 1024
 #: Candidate panel counts.
 PANEL_CANDIDATES = (1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64)
 #: Most modes for which the scalar form computes the beam's velocities as ``J q_t`` rather
@@ -83,8 +85,10 @@ class Quadrature(NamedTuple):
         if not isinstance(value, tuple) or len(value) != 2:
             raise InputTypeError(f"{owner}.quadrature must be a Quadrature(points, panels); "
                                  f"got {value!r} of type {type(value).__name__}"[:300])
-        return cls(check_integer(owner, "quadrature.points", value[0], minimum=1),
-                   check_integer(owner, "quadrature.panels", value[1], minimum=1))
+        return cls(check_integer(owner, "quadrature.points", value[0], minimum=1,
+                                 maximum=MAX_POINTS),
+                   check_integer(owner, "quadrature.panels", value[1], minimum=1,
+                                 maximum=MAX_PANELS))
 
 
 #: Gauss points per panel of the rule every candidate is compared with, on
@@ -156,10 +160,19 @@ class PanelRule:
     order: np.ndarray
 
     @classmethod
-    @lru_cache(maxsize=256)
     def build(cls, n_panels: int, length: float, points: int) -> "PanelRule":
-        """The rule of ``n_panels`` equal panels of ``points`` Gauss points on
-        ``[0, length]`` (built once per size, cached)."""
+        """The rule of ``n_panels`` equal panels (1 to :data:`MAX_PANELS`) of ``points``
+        Gauss points (1 to :data:`MAX_POINTS`) on ``[0, length]`` (m, positive), built once
+        per size (cached)."""
+        owner = "PanelRule.build"
+        return cls._build(check_integer(owner, "n_panels", n_panels, minimum=1,
+                                        maximum=MAX_PANELS),
+                          check_real(owner, "length", length, minimum=0.0, strict=True),
+                          check_integer(owner, "points", points, minimum=1, maximum=MAX_POINTS))
+
+    @classmethod
+    @lru_cache(maxsize=256)
+    def _build(cls, n_panels: int, length: float, points: int) -> "PanelRule":
         g, w = np.polynomial.legendre.leggauss(points)
         half = 0.5 * length / n_panels
         nodes = np.concatenate([(2 * p + 1 + g) * half for p in range(n_panels)])
