@@ -369,3 +369,19 @@ def test_panel_rule_refuses_bad_sizes(args):
 
     with pytest.raises((InputTypeError, InputValueError), match="PanelRule.build"):
         PanelRule.build(*args)
+
+
+def test_choose_rule_refuses_what_is_not_a_system_and_its_matrices():
+    from flexctl.model.errors import InputTypeError, InputValueError
+    from flexctl.model.exact import choose_rule
+    from flexctl.model.matrices import assemble
+
+    system = _system("slew-90")
+    matrices = assemble(system, 2)
+    with pytest.raises(InputTypeError, match="choose_rule.system"):
+        choose_rule(None, matrices)
+    with pytest.raises(InputTypeError, match="choose_rule.matrices"):
+        choose_rule(system, np.eye(3))
+    heavier = dataclasses.replace(system, hub=dataclasses.replace(system.hub, inertia=2.0))
+    with pytest.raises(InputValueError, match="another system"):
+        choose_rule(heavier, matrices)

@@ -43,7 +43,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .checks import check_integer, check_real
+from .checks import check_instance, check_integer, check_real
 from .errors import InputTypeError, InputValueError
 from .layout import StateLayout
 from .modes import mode_shapes
@@ -596,7 +596,20 @@ def choose_rule(system: HubBeam, matrices) -> Quadrature:
     :func:`reference_rule` within :data:`PANEL_TOLERANCE` (relative to the largest) is taken.
     A candidate with no more points per panel and no more panels than one that failed is
     skipped: it is no more accurate.
+
+    Parameters
+    ----------
+    system : HubBeam
+    matrices : ModalMatrices
+        The system's assembled matrices (:func:`~flexctl.model.matrices.assemble`).
     """
+    from .matrices import ModalMatrices
+
+    check_instance("choose_rule", "system", system, HubBeam)
+    check_instance("choose_rule", "matrices", matrices, ModalMatrices)
+    if matrices.system != system:
+        raise InputValueError("choose_rule.matrices must be assembled from choose_rule.system; "
+                              "they describe another system")
     states = _test_states(system, matrices)
     reference = [_test_accelerations(system, matrices, reference_rule(matrices.n_modes), x)
                  for x in states]
