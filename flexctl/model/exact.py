@@ -31,8 +31,8 @@ panel the cumulative integral is that of the interpolating polynomial, and whole
 it add their Gauss sums. Every integral then costs ``O(n P)`` operations for ``n`` points
 instead of the ``O(n^2)`` of one global polynomial, at the same accuracy. The rule (points per
 panel and panels, a :class:`Quadrature`) is chosen per model (:func:`choose_rule`): the one of
-fewest operations whose accelerations at a strongly deflected test state agree with those of a
-converged reference rule to :data:`PANEL_TOLERANCE`.
+fewest operations whose accelerations at two strongly deflected, fast test states agree with
+those of a converged reference rule to :data:`PANEL_TOLERANCE`.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ __all__ = ["EXACT_MAX_MODES", "ExactGeometry", "PanelRule", "Quadrature", "choos
 
 #: Most modes the exact variant takes (20 modes: a 445k-instruction right-hand side, 4 s to build).
 EXACT_MAX_MODES = 24
-#: Largest difference of a chosen rule's accelerations from the reference rule's at the test
+#: Largest difference of a chosen rule's accelerations from the reference rule's at each test
 #: state, relative to their largest entry.
 PANEL_TOLERANCE = 1e-6
 #: Candidate Gauss points per panel.
@@ -229,19 +229,26 @@ class PanelRule:
 
     def sparse(self, name: str):
         """The matrix attribute ``name`` as a sparse CasADi ``DM`` (converted once)."""
-        return self._memo(("sparse", name), lambda: _sparse(getattr(self, name)))
+        key = ("sparse", name)
+        if key not in self._converted:
+            self._converted[key] = _sparse(getattr(self, name))
+        return self._converted[key]
 
     def slopes(self, n_modes: int):
         """``phi_i'(s)`` of the first ``n_modes`` cantilever modes at the nodes, a CasADi
         ``DM`` (n, n_modes), 1/m (computed once)."""
-        return self._memo(("slopes", n_modes), lambda: _dense(mode_shapes(
-            n_modes, self.nodes / self.length, derivative=1, length=self.length).T))
+        import casadi as ca
 
-    def _memo(self, key, make):
-        cache = self.__dict__.setdefault("_memo_cache", {})    # the rule is frozen and shared
-        if key not in cache:
-            cache[key] = make()
-        return cache[key]
+        key = ("slopes", n_modes)
+        if key not in self._converted:
+            self._converted[key] = ca.DM(mode_shapes(n_modes, self.nodes / self.length,
+                                                     derivative=1, length=self.length).T)
+        return self._converted[key]
+
+    @cached_property
+    def _converted(self) -> dict:
+        """What :meth:`sparse` and :meth:`slopes` computed, kept with the (shared) rule."""
+        return {}
 
     @cached_property
     def local(self) -> np.ndarray:
@@ -304,11 +311,6 @@ def _integrated(points: int) -> np.ndarray:
     out = leg.legint(np.linalg.inv(leg.legvander(g, points - 1)), lbnd=-1.0, axis=0)
     out.setflags(write=False)
     return out
-
-
-def _dense(a):
-    import casadi as ca
-    return ca.DM(a)
 
 
 def _sparse(a):
