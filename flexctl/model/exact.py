@@ -597,7 +597,8 @@ def choose_rule(system: HubBeam, matrices) -> Quadrature:
     whose accelerations at each test state (:func:`_test_states`) agree with those of
     :func:`reference_rule` within :data:`PANEL_TOLERANCE` (relative to the largest) is taken.
     A candidate with no more points per panel and no more panels than one that failed is
-    skipped: it is no more accurate.
+    skipped: it is no more accurate. The choice is kept per system and mode count (the
+    appendages of a structure are often alike).
 
     Parameters
     ----------
@@ -612,6 +613,15 @@ def choose_rule(system: HubBeam, matrices) -> Quadrature:
     if matrices.system != system:
         raise InputValueError("choose_rule.matrices must be assembled from choose_rule.system; "
                               "they describe another system")
+    return _chosen(system, matrices.n_modes)
+
+
+@lru_cache(maxsize=256)
+def _chosen(system: HubBeam, n_modes: int) -> Quadrature:
+    """:func:`choose_rule`'s search, once per ``(system, n_modes)``."""
+    from .matrices import assemble
+
+    matrices = assemble(system, n_modes)
     states = _test_states(system, matrices)
     reference = [_test_accelerations(system, matrices, reference_rule(matrices.n_modes), x)
                  for x in states]
