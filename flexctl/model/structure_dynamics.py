@@ -196,7 +196,7 @@ def structure_functions(model) -> StructureFunctions:
         parts.update(hub_position=x[layout.hub_velocity],
                      hub_velocity=ca.mtimes(rot, acc[1:3]))
     rhs = ca.Function(f"flexctl_{variant}_structure", [x, u], [layout.join(**parts)],
-                      ["x", "u"], ["xdot"])
+                      ["x", "u"], ["xdot"], {"cse": True})
 
     velocity = ca.vertcat(rate, v_hub, q_dot) if free else ca.vertcat(rate, q_dot)
     e_mass = mass if variant == "exact" else _assemble(blocks(True), mat, free, q_dot, rate)[0]
