@@ -121,8 +121,10 @@ def case_a() -> None:
 EXACT = r"""
 import json, sys, time, warnings
 warnings.simplefilter("ignore")
+import numpy as np
 import flexctl
 from flexctl import SineTorque
+from flexctl.sim.compile_cache import compiled
 system = flexctl.load_scene("hub-beam-mass").system
 out = {}
 for n_modes in (2, 4, 6):
@@ -134,26 +136,51 @@ for n_modes in (2, 4, 6):
         for _ in range(4):
             start = time.perf_counter()
             # without the validity estimate, which only the small-deflection variants run
-            flexctl.simulate(model, 6.0, SineTorque(peak_torque=2.0, duration=2.0), rtol=1e-8,
-                             check_validity=False)
+            result = flexctl.simulate(model, 6.0, SineTorque(peak_torque=2.0, duration=2.0),
+                                      rtol=1e-8, check_validity=False)
             walls.append(time.perf_counter() - start)
         out[f"{variant}{n_modes}"] = min(walls[1:])
         out[f"{variant}{n_modes}_first"] = walls[0]
+        out[f"{variant}{n_modes}_how"] = f"{result.method}, {result.n_evaluations}"
+        # the run's own evaluations (its accuracy check runs beside it, on the other core)
+        # times one compiled evaluation of the model alone (the mean over a map of 1000, best
+        # of 20): the least an integrator taking as many could spend
+        alone = flexctl.simulate(model, 6.0, SineTorque(peak_torque=2.0, duration=2.0),
+                                 rtol=1e-8, check_validity=False, check_accuracy=False)
+        many = compiled(model.casadi().map(1000, "serial"))
+        x, u = np.full((model.n_states, 1000), 1e-3), np.full((1, 1000), 0.1)
+        many(x, u)
+        each = []
+        for _ in range(20):
+            start = time.perf_counter()
+            many(x, u)
+            each.append((time.perf_counter() - start) / 1000)
+        out[f"{variant}{n_modes}_floor"] = alone.n_evaluations * min(each)
 print(json.dumps(out))
 """
 
 
 def case_c(before: Path | None) -> None:
     print("\n## C. Simulation exact / first_order, hub-beam-mass, sine torque 2 N m, 6 s, "
-          "rtol 1e-8 (CVODES with its accuracy check, no validity estimate; best of the 2nd "
-          "to 4th run, and the first run, which builds and, cold, compiles)\n")
-    print("| code | cache | modes | first_order (s) | exact (s) | ratio | exact first run (s) |")
-    print("|---|---|---|---|---|---|---|")
+          "rtol 1e-8 (method auto: the compiled pair or CVODES; with the accuracy check, no "
+          "validity estimate; best of the 2nd to 4th run, and the first run, which builds "
+          "and, cold, compiles; the last run's method and right-hand-side evaluations, the "
+          "accuracy check's included; the floor: the exact run's evaluations without its "
+          "check, which runs on the other core, times one compiled evaluation of its "
+          "right-hand side, over first_order's whole run)\n")
+    print("| code | cache | modes | first_order (s) | exact (s) | ratio | exact first run (s) | "
+          "first_order: method, evaluations | exact: method, evaluations | floor (s) | "
+          "floor / first_order |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for label, state, walls in fresh_processes(before, EXACT):
         for n_modes in (2, 4, 6):
             fo, ex = walls[f"first_order{n_modes}"], walls[f"exact{n_modes}"]
+            how = [walls.get(f"{variant}{n_modes}_how", "-")
+                   for variant in ("first_order", "exact")]
+            floor = walls.get(f"exact{n_modes}_floor", float("nan"))
             print(f"| {label} | {state} | {n_modes} | {fo:.3f} | {ex:.3f} | "
-                  f"{ex / fo:.2f} | {walls[f'exact{n_modes}_first']:.2f} |")
+                  f"{ex / fo:.2f} | {walls[f'exact{n_modes}_first']:.2f} | {how[0]} | "
+                  f"{how[1]} | {floor:.4f} | {floor / fo:.2f} |")
 
 
 def fresh_processes(before: Path | None, script: str, before_states=("cold", "warm")):

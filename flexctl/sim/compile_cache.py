@@ -57,7 +57,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["compiled", "lift_constants", "with_derivatives", "jacobian_companion", "cache_dir",
+__all__ = ["compiled", "compiled_source", "lift_constants", "with_derivatives", "jacobian_companion", "cache_dir",
            "cache_info", "clear_cache", "compiler", "compiling_enabled", "CacheInfo",
            "CompileCacheWarning", "STATS", "FLAGS", "PROGRESS_AFTER", "LIFTED_KEEP"]
 
@@ -636,6 +636,53 @@ def _jacobian_function(name: str, inputs: list, in_names: list, out_names: list,
     # common subexpressions eliminated: a fifth fewer instructions in the exact model's
     # Lagrangian Hessian, whose forward-over-reverse sweeps repeat many products
     return ca.Function(name, inputs, blocks, in_names, names, {"cse": True})
+
+
+def compiled_source(name: str, source: str, *, label: str | None = None):
+    """A function written in C (CasADi's external interface: ``<name>``, ``<name>_n_in``,
+    ``<name>_sparsity_in``, ``<name>_work``, ...) from the persistent cache, or None.
+
+    Parameters
+    ----------
+    name : str
+        The function's C name.
+    source : str
+        The whole C file (generated CasADi code it calls included); its hash is the key.
+    label : str, optional
+        What to call it in a progress line. Default: ``name``.
+
+    Returns
+    -------
+    casadi.Function or None
+        ``casadi.external(name, library)``; None where compiling is off, impossible (one
+        warning) or failed (one warning): there is no virtual machine for hand-written C.
+    """
+    from ..model.errors import InputTypeError
+
+    if not isinstance(name, str) or not name.isidentifier():
+        raise InputTypeError(f"compiled_source: name must be a C identifier; got {name!r}"[:200])
+    if not isinstance(source, str) or not source:
+        raise InputTypeError("compiled_source: source must be the C file as a non-empty str; "
+                             f"got {type(source).__name__}")
+    if not compiling_enabled():
+        return None
+    tool = compiler()
+    if tool is None:
+        STATS["fallbacks"] += 1
+        _warn_once("no C compiler found (set CC or put cc on the PATH)")
+        return None
+    key = _key(source, tool)
+    if (name, key) in _LOADED:
+        STATS["hits"] += 1
+        return _LOADED[(name, key)]
+    try:
+        loaded = _load_or_build(name, key, source, tool, label or name, {})
+    except (OSError, RuntimeError, subprocess.SubprocessError) as exc:
+        STATS["fallbacks"] += 1
+        _warn_once(f"compiling {name} failed ({' '.join(str(exc).split())[:200]})")
+        return None
+    _LOADED[(name, key)] = loaded
+    return loaded
 
 
 def _load_or_build(name: str, key: str, source: str, tool: tuple, label: str,

@@ -33,11 +33,13 @@ from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["RunRequest", "IntegrationPlan", "run_request", "plan_integration", "state_scale",
            "StiffnessWarning", "ManyModesWarning", "MANY_MODES", "METHODS", "SAMPLED_METHODS",
-           "choose_continuous", "choose_multistep", "ADAMS_DAMPING", "ADAMS_PHASE"]
+           "choose_continuous", "choose_multistep", "ADAMS_DAMPING", "ADAMS_PHASE", "BDF_REPLACES"]
 
-#: Integration methods: "auto" (CVODES when every input has a CasADi form, else DOP853),
-#: "cvodes" (compiled, :mod:`flexctl.sim.compiled`), "rk4" (compiled fixed step,
-#: :mod:`flexctl.sim.fixed_step`) and the ``scipy.integrate.solve_ivp`` methods.
+#: Integration methods: "auto" (resolved by :func:`plan_integration` when every input has a
+#: CasADi form, else DOP853), "cvodes" (compiled, :mod:`flexctl.sim.compiled`), "rk4"
+#: (compiled fixed step, :mod:`flexctl.sim.fixed_step`) and the ``scipy.integrate.solve_ivp``
+#: methods ("RK45" and "BDF" compiled where the inputs have a CasADi form:
+#: :mod:`flexctl.sim.embedded_rk`, :mod:`flexctl.sim.compiled_bdf`).
 METHODS = ("auto", "cvodes", "rk4", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
 #: The methods of a sampled controller's loop: "auto" (resolved for each run by
 #: :func:`flexctl.sim.embedded_rk.choose_hold`: the compiled Dormand-Prince pair, the scheme
@@ -69,6 +71,11 @@ PAIR_INSTRUCTIONS = 5000
 #: Most steps times instructions of a right-hand side for the pair (:func:`choose_continuous`):
 #: about 0.17 s of its arithmetic (7 evaluations a step at some 0.4 ns an instruction).
 PAIR_WORK = 6e7
+#: The choices of :func:`choose_continuous` that a continuous ``method="auto"`` run replaces
+#: by the compiled BDF (:mod:`flexctl.sim.compiled_bdf`) where it can have it, per variant:
+#: the exact model's, whose right-hand side costs far more than the integrator's own work
+#: (see :func:`choose_continuous` for the measurements).
+BDF_REPLACES = {"exact": ("cvodes", "RK45")}
 #: The closed loop counts as made stiff by its controller when its fastest pole is this many
 #: times the plant's fastest mode.
 LOOP_FACTOR = 2.0
@@ -420,6 +427,8 @@ class IntegrationPlan:
         CVODES's multistep family (:func:`choose_multistep`).
     stiffness_note : str
         What the stiffness guard did ("" when nothing).
+    compiled : bool
+        ``method="BDF"`` runs compiled (:mod:`flexctl.sim.compiled_bdf`), not SciPy's.
     """
 
     method: str
@@ -433,11 +442,14 @@ class IntegrationPlan:
     cvodes_step: float | None
     stiffness_note: str
     cvodes_multistep: str = "bdf"
+    compiled: bool = False
 
     @property
     def fallback(self) -> str:
-        """The SciPy method that locates a stop: DOP853 behind CVODES, else the method."""
-        return "DOP853" if self.method == "cvodes" else self.method
+        """The SciPy method that locates a stop: DOP853 behind CVODES and the compiled BDF,
+        else the method."""
+        return "DOP853" if self.method == "cvodes" or (self.method == "BDF" and self.compiled) \
+            else self.method
 
     @property
     def scale(self) -> np.ndarray:
@@ -641,8 +653,13 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
     fastest = max(omega_plant, loop, request.spin_frequency)
     # a Jacobian beyond floating point: no rate to trust, CVODES's BDF takes the run
     fastest, loop = (v if v == v else math.inf for v in (fastest, loop))
+    compiled = False
     if request.method == "auto":
         method, note = choose_continuous(model, t_final, fastest), ""
+        if method in BDF_REPLACES.get(model.variant, ()) and _compiled_bdf(request):
+            method, compiled = "BDF", True
+    elif request.method == "BDF" and request.symbolic and _compiled_bdf(request):
+        method, note, compiled = "BDF", "", True
     elif request.method == "RK45" and request.symbolic and \
             choose_continuous(model, t_final, fastest) == "RK45":
         method, note = "RK45", ""          # the compiled pair, within its work
@@ -659,5 +676,13 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
         drive_cuts=cuts if request.report is None else progress_cuts(cuts, t_final),
         omega_plant=omega_plant, loop_frequency=loop, cvodes_steps=steps,
         cvodes_step=request.max_step if np.isfinite(request.max_step) else None,
-        stiffness_note=note,
+        stiffness_note=note, compiled=compiled,
         cvodes_multistep=choose_multistep(model, omega_plant, loop, t_final))
+
+
+def _compiled_bdf(request: RunRequest) -> bool:
+    """Whether ``request`` can run on the compiled BDF (built and compiled here if not yet)."""
+    from .compiled_bdf import bdf_available
+
+    return request.symbolic and bdf_available(request.model, request.torque,
+                                              request.hub_motion, request.controller)

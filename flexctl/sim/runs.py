@@ -65,7 +65,8 @@ def _integrate(request) -> tuple:
     singular = model.variant == "consistent" and not request.prescribed
     stops, plan = StopConditions(model, drive.layout, singular), plan_integration(request, drive)
     drive.check_inputs()
-    strategy = strategy_for(plan.method, request.symbolic)(request, plan, drive, stops)
+    symbolic = request.symbolic and (plan.method != "BDF" or plan.compiled)
+    strategy = strategy_for(plan.method, symbolic)(request, plan, drive, stops)
     start = time.perf_counter()
     # the check needs only the plan: it runs beside the run, on a spare core if there is one
     check = strategy.start_check() if request.check_accuracy else None

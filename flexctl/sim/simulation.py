@@ -35,9 +35,12 @@ is repeated at 10 times the tolerance to estimate its integration error, and red
 A-stable BDF2 if the two disagree grossly. ``"RK45"`` with inputs that have a CasADi form is
 compiled Dormand-Prince 5(4) stepping (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), its
 outputs read from the pair's continuous extension and its error estimated by a replay at 10
-times the tolerance. ``"auto"`` takes it where it costs less than CVODES (a cheap right-hand
-side, a fastest pole that leaves few steps: :func:`flexctl.sim.request.choose_continuous`),
-else CVODES, and ``"DOP853"`` for inputs without a CasADi form. An explicit SciPy method
+times the tolerance. ``"BDF"`` with such inputs is a compiled variable-order BDF
+(:class:`~flexctl.sim.compiled_bdf.BdfRun`), checked the same way. ``"auto"`` takes the pair
+where it costs less than CVODES (a cheap right-hand side, a fastest pole that leaves few
+steps: :func:`flexctl.sim.request.choose_continuous`), else CVODES, the compiled BDF for the
+exact model in place of either (:data:`flexctl.sim.request.BDF_REPLACES`), and ``"DOP853"``
+for inputs without a CasADi form. An explicit SciPy method
 (DOP853, RK45, RK23) on a model too stiff for it is replaced by ``"cvodes"`` when the inputs
 allow, with a
 :class:`StiffnessWarning` and a note in the result's ``message`` (the result's ``method`` is
@@ -116,7 +119,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         step-doubling pair). An input's own ``max_step`` (a sampled torque's sample
         interval) bounds it too.
     check_accuracy : bool, optional
-        On ``"cvodes"`` and compiled ``"RK45"``: repeat the run at 10 times the tolerance
+        On ``"cvodes"`` and compiled ``"RK45"`` and ``"BDF"``: repeat the run at 10 times the
+        tolerance
         for ``result.integration_error`` (:func:`flexctl.sim.compiled.verify_accuracy`,
         :func:`flexctl.sim.strategies.check_embedded_accuracy`).
         Default True.

@@ -6,6 +6,8 @@
 - :class:`EmbeddedSegments`: the same segments by compiled Dormand-Prince 5(4) steps with
   error control (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), the output times read from
   the pair's continuous extension; SciPy locates a stop as behind CVODES.
+- :class:`BdfSegments`: the same segments by compiled variable-order BDF steps
+  (:class:`~flexctl.sim.compiled_bdf.BdfRun`), the output times read from its interpolant.
 - :class:`FixedStepRK4`: the compiled fixed-step loop of :mod:`flexctl.sim.fixed_step`, one
   call for the whole run, its step halved until a step-doubling estimate meets ``rtol``.
 - :class:`ScipyIVP`: ``scipy.integrate.solve_ivp`` segment by segment, with the stopping
@@ -15,7 +17,7 @@ Each hands back a :class:`Trajectory`: the samples it integrated and why it stop
 accuracy check of an error-controlled compiled run is its own step, which the strategy
 starts beside the run (``start_check``) and completes once the run reaches its end
 (``finish_check``): :func:`check_run_accuracy` for CVODES, :func:`check_embedded_accuracy`
-for the pair.
+for the pair and the compiled BDF.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from scipy.integrate import solve_ivp
 from .background import Beside
 from .compiled import (CHECK_FACTOR, SegmentIntegrator, numeric_rhs, start_check,
                        verify_accuracy)
+from .compiled_bdf import BdfRun
 from .embedded_rk import PAIR_OMEGA_H, EmbeddedRun
 from .fixed_step import MAX_HALVINGS, RK4_FIRST_OMEGA_H, RK4_OMEGA_H, integrate_fixed_step
 from .inputs import jacobian_frequency
@@ -39,7 +42,8 @@ from .stops import StopReason, tip_rows
 from ..model import SingularMassMatrixError
 from ..model.errors import InputValueError
 
-__all__ = ["Trajectory", "CvodesSegments", "EmbeddedSegments", "FixedStepRK4", "ScipyIVP",
+__all__ = ["Trajectory", "CvodesSegments", "EmbeddedSegments", "BdfSegments", "FixedStepRK4",
+           "ScipyIVP",
            "strategy_for",
            "check_run_accuracy", "start_accuracy_check", "planned_segments",
            "rk4_accuracy_note", "AccuracyWarning", "FALLBACK_EVALUATIONS",
@@ -289,6 +293,17 @@ def _embedded_run(request, plan, rtol: float, looser: bool = False) -> EmbeddedR
                        max_step=bound)
 
 
+def _bdf_run(request, plan, rtol: float) -> BdfRun:
+    """The compiled BDF run of ``request`` at ``rtol``: its first step a hundredth of a
+    radian of the fastest pole it meets (mode, loop, spin; order 1 grows it as the accuracy
+    allows), no longest step but the inputs' own bound."""
+    omega = max(plan.omega_plant, plan.loop_frequency, request.spin_frequency)
+    return BdfRun(request.model, request.torque, request.hub_motion, request.controller,
+                  scale=plan.scale, rtol=rtol, max_steps=plan.cvodes_steps,
+                  h_first=min(0.01 / omega if omega > 0.0 else math.inf, request.step),
+                  max_step=math.inf if plan.cvodes_step is None else plan.cvodes_step)
+
+
 class EmbeddedSegments(CvodesSegments):
     """The segments by compiled Dormand-Prince 5(4) steps with error control
     (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), the step size carried from one segment
@@ -307,6 +322,24 @@ class EmbeddedSegments(CvodesSegments):
     def integrate(self, lo, t_eval, y) -> tuple:
         # a run that passes a stop ends there, not at the segment's end
         return self._steps(lo, t_eval, y, stop=self.stops.first_bad)
+
+
+class BdfSegments(EmbeddedSegments):
+    """The segments by compiled variable-order BDF steps (:class:`~flexctl.sim.compiled_bdf.BdfRun`),
+    each segment from order 1; the accuracy check replays them at
+    :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance beside the run; SciPy
+    locates a stop within a segment, as behind CVODES."""
+
+    def __init__(self, request, plan, drive, stops):
+        CvodesSegments.__init__(self, request, plan, drive, stops)
+        self._steps = _bdf_run(request, plan, request.rtol)
+
+    def start_check(self):
+        import threading
+
+        steps = _bdf_run(self.request, self.plan, min(CHECK_FACTOR * self.request.rtol, 0.5))
+        return Beside(_embedded_replay, steps, planned_segments(self.plan, self.request.grid),
+                      self.drive.y_init, self.stops.first_bad, cancelled=threading.Event())
 
 
 def _embedded_replay(steps, segments, y0, stop, cancelled):
@@ -458,6 +491,8 @@ def strategy_for(method: str, symbolic: bool = False):
     inputs have a CasADi form, SciPy's otherwise)."""
     if method == "RK45" and symbolic:
         return EmbeddedSegments
+    if method == "BDF" and symbolic:
+        return BdfSegments
     return {"cvodes": CvodesSegments, "rk4": FixedStepRK4}.get(method, ScipyIVP)
 
 

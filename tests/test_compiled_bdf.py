@@ -1,0 +1,165 @@
+"""Continuous runs on the compiled variable-order BDF (flexctl.sim.compiled_bdf.BdfRun)."""
+
+import threading
+
+import numpy as np
+import pytest
+
+import flexctl
+from controllers import PD
+from flexctl.model.errors import InputError
+from flexctl.sim.compiled import integrate_segments
+from flexctl.sim.compiled_bdf import OUTPUTS, BdfRun, bdf_available
+from flexctl.sim.request import state_scale
+
+TORQUE = flexctl.SineTorque(peak_torque=2.0, duration=2.0)
+
+
+@pytest.fixture(scope="module")
+def exact():
+    """hub-beam-mass's exact 2-mode model and a tight CVODES run under a sine torque."""
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, 2, "exact")
+    tight = flexctl.simulate(model, 4.0, TORQUE, rtol=1e-12, method="cvodes",
+                             check_validity=False)
+    return model, tight
+
+
+def _error(run, tight) -> float:
+    return float(np.max(np.abs(run.tip_deflection - tight.tip_deflection)))
+
+
+@pytest.mark.parametrize("rtol", [1e-6, 1e-8])
+def test_the_exact_model_runs_on_it_by_default_within_its_estimate(exact, rtol):
+    model, tight = exact
+    run = flexctl.simulate(model, 4.0, TORQUE, rtol=rtol, check_validity=False)
+    assert run.ok and run.method == "BDF"
+    actual = _error(run, tight)
+    # the estimate is the difference from a replay at ten times the tolerance
+    assert actual <= run.integration_error <= 200 * rtol * tight.peak_tip_deflection
+
+
+def test_first_order_keeps_its_choice_and_agrees_when_asked(exact):
+    model = flexctl.build_model(exact[0].system, 2)
+    tight = flexctl.simulate(model, 4.0, TORQUE, rtol=1e-12, method="cvodes",
+                             check_validity=False)
+    assert flexctl.simulate(model, 4.0, TORQUE, check_validity=False).method == "RK45"
+    run = flexctl.simulate(model, 4.0, TORQUE, rtol=1e-8, method="BDF", check_validity=False)
+    assert run.method == "BDF"
+    assert _error(run, tight) <= run.integration_error <= 2e-6 * tight.peak_tip_deflection
+
+
+def test_a_closed_loop_and_a_prescribed_motion_match_tight_runs():
+    model = flexctl.build_model(flexctl.load_scene("slew-90").system, 3, "exact")
+    x0 = np.zeros(model.n_states)
+    x0[0] = -np.pi / 2
+    law = PD(kp=12.0, kd=8.0, torque_limit=6.0)
+    options = dict(controller=law, x0=x0, check_validity=False)
+    run = flexctl.simulate(model, 4.0, rtol=1e-7, **options)
+    tight = flexctl.simulate(model, 4.0, rtol=1e-12, method="cvodes", **options)
+    assert run.method == "BDF" and run.ok
+    assert _error(run, tight) <= run.integration_error <= 1e-4 * tight.peak_tip_deflection
+
+    scene = flexctl.load_scene("kane-spinup")
+    kane = flexctl.build_model(scene.system, 2, "exact")
+    run = flexctl.simulate(kane, 20.0, hub_motion=scene.maneuver, rtol=1e-7,
+                           check_validity=False)
+    tight = flexctl.simulate(kane, 20.0, hub_motion=scene.maneuver, rtol=1e-12,
+                             method="cvodes", check_validity=False)
+    assert run.method == "BDF" and run.ok
+    assert _error(run, tight) <= run.integration_error <= 1e-4 * tight.peak_tip_deflection
+
+
+def test_output_times_do_not_change_the_steps(exact):
+    # the outputs are read from the interpolant: the steps, and the state at the end, are
+    # the same for two output times and for more than one call's worth
+    model, _ = exact
+    scale = state_scale(model, model.layout)
+    few, many = np.array([1.0, 3.0]), np.linspace(0.01, 3.0, 3 * OUTPUTS + 7)
+    results = []
+    for times in (few, many):
+        run = BdfRun(model, TORQUE, scale=scale, rtol=1e-8, max_steps=10_000, h_first=1e-4)
+        results.append(run(0.0, times, np.zeros(model.n_states)))
+        results.append(run.last_stats["steps"])
+    (states_few, _), steps_few, (states_many, _), steps_many = results
+    assert steps_few == steps_many
+    np.testing.assert_allclose(states_many[:, -1], states_few[:, -1], rtol=0, atol=1e-13)
+    # and the interpolated states are those of a tight CVODES run at the same times, within
+    # the tolerance (each state against its size)
+    tight, _ = integrate_segments(model, [(0.0, many)], np.zeros(model.n_states), scale,
+                                  1e-12, torque=TORQUE)
+    assert np.max(np.abs(states_many - tight) / scale[:, None]) < 1e-5
+
+
+def test_a_diverging_run_is_stopped_and_named(exact):
+    model, _ = exact
+    torque = flexctl.SineTorque(peak_torque=1e6, duration=2.0)
+    run = flexctl.simulate(model, 3.0, torque=torque, method="BDF", check_validity=False)
+    reference = flexctl.simulate(model, 3.0, torque=torque, method="cvodes",
+                                 check_validity=False)
+    assert run.status == reference.status == "diverged"
+    assert np.all(np.isfinite(run.states)) and run.t[-1] < 0.1
+
+
+def test_bad_arguments_are_refused_by_name(exact):
+    model, _ = exact
+    scale = state_scale(model, model.layout)
+    good = dict(torque=TORQUE, scale=scale, rtol=1e-6, max_steps=100, h_first=1e-3)
+    BdfRun(model, **good)
+    for name, value in [("scale", scale[:-1]), ("scale", -scale), ("rtol", 0.0),
+                        ("rtol", 2.0), ("rtol", float("nan")), ("max_steps", 0),
+                        ("max_steps", 2.5), ("h_first", 0.0), ("h_first", float("inf")),
+                        ("h_first", "1e-3"), ("max_step", -1.0), ("max_step", "x")]:
+        with pytest.raises(InputError, match=name):
+            BdfRun(model, **{**good, name: value})
+    with pytest.raises(InputError, match="CasADi form"):
+        BdfRun(model, torque=lambda t: 0.0, scale=scale, rtol=1e-6, max_steps=10,
+               h_first=1e-3)
+    with pytest.raises(InputError, match="model"):
+        BdfRun("model", **good)
+    run = BdfRun(model, **good)
+    for times in ([0.5, 0.4], [0.0, 1.0], [0.5, np.nan]):
+        with pytest.raises(InputError, match="output times"):
+            run(0.0, np.array(times), np.zeros(model.n_states))
+
+
+def test_a_step_budget_and_a_non_finite_state_fail_the_segment(exact):
+    model, _ = exact
+    scale = state_scale(model, model.layout)
+    run = BdfRun(model, TORQUE, scale=scale, rtol=1e-10, max_steps=1, h_first=1e-3)
+    with pytest.raises(RuntimeError, match="budget"):
+        run(0.0, np.array([1.0]), np.zeros(model.n_states))
+    run = BdfRun(model, TORQUE, scale=scale, rtol=1e-6, max_steps=1000, h_first=1e-3)
+    bad = np.zeros(model.n_states)
+    bad[1] = np.nan
+    with pytest.raises(RuntimeError, match="not finite"):
+        run(0.0, np.array([0.5, 1.0]), bad)
+
+
+def test_without_compiling_the_exact_model_keeps_its_other_methods(exact, monkeypatch):
+    model, tight = exact
+    monkeypatch.setenv("FLEXCTL_COMPILE", "0")
+    assert not bdf_available(model, TORQUE)
+    run = flexctl.simulate(model, 1.0, TORQUE, check_validity=False)
+    assert run.ok and run.method != "BDF"
+    with pytest.raises(InputError, match="no compiled integrator"):
+        BdfRun(model, TORQUE, scale=state_scale(model, model.layout), rtol=1e-6,
+               max_steps=10, h_first=1e-3)
+    # an explicit BDF is then SciPy's
+    assert flexctl.simulate(model, 0.5, TORQUE, method="BDF", check_validity=False).ok
+
+
+def test_threads_share_the_library_and_agree(exact):
+    model, _ = exact
+    results = {}
+
+    def work(k):
+        results[k] = flexctl.simulate(model, 2.0, TORQUE, rtol=1e-7,
+                                      check_validity=False).tip_deflection
+
+    threads = [threading.Thread(target=work, args=(k,)) for k in range(3)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    np.testing.assert_array_equal(results[0], results[1])
+    np.testing.assert_array_equal(results[0], results[2])
