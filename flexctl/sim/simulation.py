@@ -120,10 +120,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         interval) bounds it too.
     check_accuracy : bool, optional
         On ``"cvodes"`` and compiled ``"RK45"`` and ``"BDF"``: repeat the run at 10 times the
-        tolerance
-        for ``result.integration_error`` (:func:`flexctl.sim.compiled.verify_accuracy`,
-        :func:`flexctl.sim.strategies.check_embedded_accuracy`).
-        Default True.
+        tolerance for ``result.integration_error`` (:func:`flexctl.sim.compiled.verify_accuracy`,
+        :func:`flexctl.sim.strategies.check_embedded_accuracy`). Default True.
     progress : bool or callable, optional
         ``True`` prints the simulated time reached and the time to go to stderr every 5 s
         once the run has taken 5 s; a callable gets a :class:`~flexctl.sim.progress.Progress`
