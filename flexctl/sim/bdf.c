@@ -15,8 +15,9 @@
  *                              J (N x N)]
  *          1 y0 (N)           the state at t when the carry is not started
  *          2 t_out (K)        output times, ascending, after t
- *          3 settings (8)     [outputs used, rtol, first step, longest step, step budget,
- *                              t_bound (no step passes it), Newton tolerance, t0]
+ *          3 settings (9)     [outputs used, rtol, first step, longest step, step budget,
+ *                              t_bound (no step passes it), Newton tolerance, t0, the
+ *                              address of the model's compiled right-hand side (BDF_CORE)]
  *          4 atol (N)
  *          5 c, 6 F's numbers, 7 J's numbers
  * Outputs: 0 carry (BDF_NC), 1 states (N x K), 2 info (8) [status, outputs done, steps,
@@ -24,6 +25,7 @@
  * Status:  0 every output reached, 1 step budget spent, 2 step too short, 3 a state or
  *          derivative not finite that no shorter step avoids.
  */
+#include <stdint.h>
 #define BDF_CAT2(a, b) a##b
 #define BDF_CAT(a, b) BDF_CAT2(a, b)
 #define BDF_MAX 5
@@ -41,16 +43,24 @@ static const casadi_int bdf_s_carry[3] = {BDF_NC, 1, 1};
 static const casadi_int bdf_s_n[3] = {BDF_N, 1, 1};
 static const casadi_int bdf_s_k[3] = {BDF_K, 1, 1};
 static const casadi_int bdf_s_8[3] = {8, 1, 1};
+static const casadi_int bdf_s_9[3] = {9, 1, 1};
 static const casadi_int bdf_s_c[3] = {BDF_NCIN, 1, 1};
 static const casadi_int bdf_s_fn[3] = {BDF_NFNUM, 1, 1};
 static const casadi_int bdf_s_jn[3] = {BDF_NJNUM, 1, 1};
 static const casadi_int bdf_s_states[3] = {BDF_N, BDF_K, 1};
 
 #define BDF_MAXOF(a, b) ((a) > (b) ? (a) : (b))
-#define BDF_SUB_ARG BDF_MAXOF(BDF_F_ARG, BDF_J_ARG)
-#define BDF_SUB_RES BDF_MAXOF(BDF_F_RES, BDF_J_RES)
-#define BDF_SUB_IW BDF_MAXOF(BDF_F_IW, BDF_J_IW)
-#define BDF_SUB_W BDF_MAXOF(BDF_F_W, BDF_J_W)
+#ifndef BDF_CORE
+#define BDF_CORE_ARG 0
+#define BDF_CORE_RES 0
+#define BDF_CORE_IW 0
+#define BDF_CORE_W 0
+#define BDF_NPRE 1
+#endif
+#define BDF_SUB_ARG BDF_MAXOF(BDF_MAXOF(BDF_F_ARG, BDF_J_ARG), BDF_CORE_ARG)
+#define BDF_SUB_RES BDF_MAXOF(BDF_MAXOF(BDF_F_RES, BDF_J_RES), BDF_CORE_RES)
+#define BDF_SUB_IW BDF_MAXOF(BDF_MAXOF(BDF_F_IW, BDF_J_IW), BDF_CORE_IW)
+#define BDF_SUB_W BDF_MAXOF(BDF_MAXOF(BDF_F_W, BDF_J_W), BDF_CORE_W)
 /* own work: 9 vectors of N and the LU factors (N x N) */
 #define BDF_OWN_W (9 * BDF_N + BDF_N * BDF_N)
 
@@ -62,8 +72,36 @@ typedef struct {
   const casadi_real *c, *fnum, *jnum;
   casadi_real tt;
   double n_f, n_j;
+  int (*core)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int);
+  casadi_real pre[BDF_NPRE];
 } bdf_ctx;
 
+#ifdef BDF_CORE
+/* F is the drive's own part (the torque and the controller's state derivative, or the hub's
+ * rate and acceleration); the model's right-hand side is a compiled function of the cache,
+ * called through its address: one library of it serves every drive */
+static int bdf_f(bdf_ctx *x, double t, const double *y, double *out) {
+  int i;
+  x->tt = t;
+  x->n_f += 1.0;
+  x->arg[0] = &x->tt; x->arg[1] = y; x->arg[2] = x->c;
+  x->res[0] = x->pre;
+  if (BDF_F(x->arg, x->res, x->iw, x->w, 0)) return 1;
+#if BDF_MOTION
+  /* y = [q, q_dot]: q_tt of the beam at the hub's rate and acceleration */
+  x->arg[0] = y; x->arg[1] = y + BDF_NQ; x->arg[2] = x->pre; x->arg[3] = x->pre + 1;
+  x->arg[4] = x->fnum;
+  x->res[0] = out + BDF_NQ;
+  for (i = 0; i < BDF_NQ; ++i) out[i] = y[BDF_NQ + i];
+#else
+  /* y = [x, z]: dx/dt of the model under the torque, then the controller's dz/dt */
+  x->arg[0] = y; x->arg[1] = x->pre; x->arg[2] = x->fnum;
+  x->res[0] = out;
+  for (i = 0; i < BDF_N - BDF_NX; ++i) out[BDF_NX + i] = x->pre[1 + i];
+#endif
+  return x->core(x->arg, x->res, x->iw, x->w, 0);
+}
+#else
 static int bdf_f(bdf_ctx *x, double t, const double *y, double *out) {
   x->tt = t;
   x->arg[0] = &x->tt; x->arg[1] = y; x->arg[2] = x->c; x->arg[3] = x->fnum;
@@ -71,6 +109,7 @@ static int bdf_f(bdf_ctx *x, double t, const double *y, double *out) {
   x->n_f += 1.0;
   return BDF_F(x->arg, x->res, x->iw, x->w, 0);
 }
+#endif
 
 static int bdf_j(bdf_ctx *x, double t, const double *y, double *out) {
   x->tt = t;
@@ -194,6 +233,11 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
   bdf_ctx x;
   x.arg = arg + 8; x.res = res + 3; x.iw = iw + BDF_N; x.w = w + BDF_OWN_W;
   x.c = arg[5]; x.fnum = arg[6]; x.jnum = arg[7]; x.n_f = 0.0; x.n_j = 0.0;
+  x.core = 0;
+#ifdef BDF_CORE
+  x.core = (int (*)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int))
+    (uintptr_t) set[8];
+#endif
   yp = w; psi = yp + BDF_N; dd = psi + BDF_N; f = dd + BDF_N; dy = f + BDF_N;
   scale = dy + BDF_N; ynew = scale + BDF_N; err = ynew + BDF_N; lu = err + 2 * BDF_N;
   gam[0] = 0.0;
@@ -379,7 +423,7 @@ CASADI_SYMBOL_EXPORT const casadi_int *BDF_CAT(BDF_NAME, _sparsity_in)(casadi_in
     case 0: return bdf_s_carry;
     case 1: return bdf_s_n;
     case 2: return bdf_s_k;
-    case 3: return bdf_s_8;
+    case 3: return bdf_s_9;
     case 4: return bdf_s_n;
     case 5: return bdf_s_c;
     case 6: return bdf_s_fn;

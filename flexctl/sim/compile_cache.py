@@ -57,7 +57,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["compiled", "compiled_source", "lift_constants", "with_derivatives", "jacobian_companion", "cache_dir",
+__all__ = ["compiled", "compiled_source", "entry_point", "lift_constants", "with_derivatives", "jacobian_companion", "cache_dir",
            "cache_info", "clear_cache", "compiler", "compiling_enabled", "CacheInfo",
            "CompileCacheWarning", "STATS", "FLAGS", "PROGRESS_AFTER", "LIFTED_KEEP"]
 
@@ -79,6 +79,9 @@ _SUFFIX = ".so" if sys.platform != "win32" else ".dll"
 STATS = {"compiles": 0, "loads": 0, "hits": 0, "fallbacks": 0}
 
 _LOADED: dict = {}
+#: The library and C name of each function loaded from the cache, by the function's id (the
+#: function kept with them, so that the id is not reused).
+_ORIGIN: dict = {}
 _WARNED: set = set()
 _COMPILER: dict = {}
 
@@ -717,7 +720,22 @@ def _try_load(name: str, library: Path, options: dict | None = None):
             library.unlink()
         return None
     STATS["loads"] += 1
+    _ORIGIN[id(function)] = (function, library, name)
     return function
+
+
+def entry_point(function):
+    """``(address, keep)`` of a function loaded from the cache (:func:`compiled`): the
+    address of its C entry point (CasADi's signature ``int f(const double **arg, double
+    **res, casadi_int *iw, double *w, int mem)``) and an object to keep alive as long as
+    the address is used; None for a function not loaded from the cache."""
+    import ctypes
+
+    origin = _ORIGIN.get(id(function))
+    if origin is None or origin[0] is not function:
+        return None
+    library = ctypes.CDLL(str(origin[1]))       # the library CasADi has open: the same copy
+    return ctypes.cast(getattr(library, origin[2]), ctypes.c_void_p).value, library
 
 
 @contextlib.contextmanager

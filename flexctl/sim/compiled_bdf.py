@@ -54,37 +54,57 @@ STATUS = {1: "step budget spent", 2: "step too short", 3: "state or derivative n
 _TEMPLATE = Path(__file__).with_name("bdf.c")
 
 
-def _functions(model, inputs, n_numbers: int):
-    """``(F, J, f_values, j_values)``: the drive's derivative ``F(t, y, c, numbers)`` and
-    the Newton Jacobian ``J(t, y, c, numbers)`` (dense), their numbers lifted; None where
-    the drive has no compilable form."""
+def _functions(model, inputs, n_numbers: int) -> dict | None:
+    """The pieces of a drive's integrator library, or None where the drive has none: ``F``,
+    the drive's derivative ``F(t, y, c, numbers)`` (its numbers lifted) or, for the exact
+    model, its own part ``F(t, y, c)`` (torque and controller's derivative, or the hub's rate
+    and acceleration) beside ``core``, the model's compiled right-hand side (``address``,
+    ``keep``: :func:`~flexctl.sim.compile_cache.entry_point`); ``J(t, y, c, numbers)``, the
+    dense Newton Jacobian (first_order's for the exact model); the numbers ``f_values``,
+    ``j_values``; ``defines`` of the C template."""
     import casadi as ca
 
     from ..model.build import rebuild
+    from .compiled import _drive_terms, _split_numbers, hub_motion_casadi
+    from .compile_cache import compiled, entry_point
+    from .fixed_step import _lifted_core
 
     torque, hub_motion, controller = inputs
     drive = _drive_symbols(model, torque, hub_motion, controller, n_numbers)
-    ny = drive["ny"]
+    ny, c = drive["ny"], drive["c"]
+    ts, ys = ca.SX.sym("t"), ca.SX.sym("y", ny)
+    out = {"defines": {}, "address": 0.0, "keep": None}
     if drive["sym"] is ca.SX:
-        ts, ys = ca.SX.sym("t"), ca.SX.sym("y", ny)
-        rate = ca.Function("flexctl_bdf_rate", [ts, ys, drive["c"]], [drive["f"](ts, ys)])
+        rate = ca.Function("flexctl_bdf_rate", [ts, ys, c], [drive["f"](ts, ys)])
         lifted = lift_constants(rate, MAX_INSTRUCTIONS)
         if lifted is None:
             return None
         f_function, f_values = lifted
         twin = drive
     else:
-        if drive["numbers"] is None:
+        lifted = _lifted_core(model, hub_motion)
+        core = None if lifted is None else compiled(lifted[0], label=lifted[0].name())
+        point = None if core is None else entry_point(core)
+        if point is None:
             return None
-        ts, ys = ca.MX.sym("t"), ca.MX.sym("y", ny)
-        f_function = ca.Function("flexctl_bdf_rate", [ts, ys, drive["c"], drive["numbers"]],
-                                 [drive["f"](ts, ys)])
-        f_values = drive["lifted_values"]
+        cs = ca.SX.sym("c", n_numbers)
+        if hub_motion is not None:
+            own = ca.vertcat(*hub_motion_casadi(hub_motion, ts,
+                                                _split_numbers(inputs, cs)[1]))
+        else:
+            u, dz = _drive_terms(model, ts, ys, torque, controller, cs)
+            own = ca.vertcat(u, *(() if dz is None else (dz,)))
+        f_function, f_values = ca.Function("flexctl_bdf_own", [ts, ys, cs], [own]), lifted[1]
+        out.update(address=float(point[0]), keep=(core, point[1]))
+        out["defines"] = {"BDF_CORE": 1, "BDF_MOTION": int(hub_motion is not None),
+                          "BDF_NX": model.n_states, "BDF_NQ": ny // 2,
+                          "BDF_NPRE": own.numel(), "BDF_CORE_ARG": core.sz_arg(),
+                          "BDF_CORE_RES": core.sz_res(), "BDF_CORE_IW": core.sz_iw(),
+                          "BDF_CORE_W": core.sz_w()}
         twin = _drive_symbols(rebuild(model, variant="first_order"), torque, hub_motion,
                               controller, n_numbers)
         if twin["sym"] is not ca.SX:
             return None
-    ts, ys = ca.SX.sym("t"), ca.SX.sym("y", ny)
     jacobian = ca.Function("flexctl_bdf_jacobian", [ts, ys, twin["c"]],
                            [ca.densify(ca.jacobian(twin["f"](ts, ys), ys))], {"cse": True})
     lifted = lift_constants(jacobian, MAX_DAE_INSTRUCTIONS)
@@ -92,30 +112,32 @@ def _functions(model, inputs, n_numbers: int):
         return None
     j_function, j_values = lifted
     # fixed C names for the integrator's code
-    f_args = f_function.mx_in() if f_function.is_a("MXFunction") else f_function.sx_in()
-    f_named = ca.Function("flexctl_bdf_f", f_args, [f_function(*f_args)])
-    j_args = j_function.sx_in()
-    j_named = ca.Function("flexctl_bdf_j", j_args, [j_function(*j_args)])
-    return f_named, j_named, np.asarray(f_values, dtype=float), np.asarray(j_values, dtype=float)
+    f_args, j_args = f_function.sx_in(), j_function.sx_in()
+    out.update(F=ca.Function("flexctl_bdf_f", f_args, [f_function(*f_args)]),
+               J=ca.Function("flexctl_bdf_j", j_args, [j_function(*j_args)]),
+               f_values=np.asarray(f_values, dtype=float).ravel(),
+               j_values=np.asarray(j_values, dtype=float).ravel())
+    return out
 
 
 def _library(model, inputs, n_numbers: int):
-    """``(external, f_values, j_values, ny)`` of the compiled integrator for this drive, or
-    None."""
+    """``(external, pieces)`` of the compiled integrator for this drive (``pieces`` from
+    :func:`_functions`), or None."""
     import casadi as ca
 
-    built = _functions(model, inputs, n_numbers)
-    if built is None:
+    pieces = _functions(model, inputs, n_numbers)
+    if pieces is None:
         return None
-    f_named, j_named, f_values, j_values = built
     generator = ca.CodeGenerator("flexctl_bdf.c", {"with_header": False})
-    generator.add(f_named)
-    generator.add(j_named)
-    ny = f_named.size1_in(1)
+    generator.add(pieces["F"])
+    generator.add(pieces["J"])
+    ny = pieces["J"].size1_in(1)
     defines = {"BDF_NAME": "flexctl_bdf", "BDF_F": "flexctl_bdf_f", "BDF_J": "flexctl_bdf_j",
                "BDF_N": ny, "BDF_K": OUTPUTS, "BDF_NCIN": max(1, n_numbers),
-               "BDF_NFNUM": max(1, f_values.size), "BDF_NJNUM": max(1, j_values.size)}
-    for tag, function in (("F", f_named), ("J", j_named)):
+               "BDF_NFNUM": max(1, pieces["f_values"].size),
+               "BDF_NJNUM": max(1, pieces["j_values"].size), **pieces["defines"]}
+    for tag in ("F", "J"):
+        function = pieces[tag]
         defines.update({f"BDF_{tag}_ARG": function.sz_arg(), f"BDF_{tag}_RES": function.sz_res(),
                         f"BDF_{tag}_IW": function.sz_iw(), f"BDF_{tag}_W": function.sz_w()})
     source = (generator.dump() + "\n"
@@ -125,7 +147,7 @@ def _library(model, inputs, n_numbers: int):
                                label=f"the {model.variant} model's BDF integrator")
     if external is None:
         return None
-    return external, f_values, j_values, ny
+    return external, pieces
 
 
 def bdf_available(model, torque=None, hub_motion=None, controller=None) -> bool:
@@ -205,14 +227,15 @@ class BdfRun:
                                   "large to compile); use CVODES")
         from .buffers import InPlace
 
-        external, f_values, j_values, ny = built
+        external, pieces = built
         self._run, self._size = InPlace(external), m
+        self._keep, self._address = pieces["keep"], pieces["address"]
         numbers = input_numbers(inputs)
         args = self._run.args
         args[4][:] = self.rtol * scale
         args[5][:numbers.size] = numbers
-        args[6][:f_values.size] = f_values
-        args[7][:j_values.size] = j_values
+        args[6][:pieces["f_values"].size] = pieces["f_values"]
+        args[7][:pieces["j_values"].size] = pieces["j_values"]
         self.last_stats = {}
 
     def __call__(self, lo, t_out, y, stop=None) -> tuple:
@@ -241,7 +264,8 @@ class BdfRun:
             times[:chunk.size] = chunk
             times[chunk.size:] = chunk[-1]
             settings[:] = (chunk.size, self.rtol, self.h, self.max_step,
-                           float(self.max_steps) * chunk.size, end, NEWTON_TOLERANCE, lo)
+                           float(self.max_steps) * chunk.size, end, NEWTON_TOLERANCE, lo,
+                           self._address)
             run.evaluate()
             carry[:] = run.results[0]
             info = run.results[2]
