@@ -762,3 +762,28 @@ def test_lifted_constants_beyond_the_limit_are_pruned(fresh, monkeypatch):
     folder = fresh / "compiled"
     assert len(list(folder.glob("lifted-*.constants"))) == 2
     assert len(list(folder.glob("lifted-*.casadi"))) == 1
+
+
+@needs_compiler
+def test_entry_point_calls_the_loaded_code_and_refuses_what_it_cannot_name(fresh):
+    """The address of a cached function's C entry point computes what the function does;
+    a function not loaded from the cache has none."""
+    import ctypes
+
+    import casadi as ca
+
+    x = ca.SX.sym("x")
+    plain = ca.Function("t_entry_point", [x], [3.0 * x + 1.0])
+    assert compile_cache.entry_point(plain) is None
+    built = compile_cache.compiled(plain)
+    address, keep = compile_cache.entry_point(built)
+    assert keep is not None
+    signature = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p,
+                                 ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int)
+    value, out = (ctypes.c_double * 1)(2.0), (ctypes.c_double * 1)()
+    args = (ctypes.c_void_p * 1)(ctypes.addressof(value))
+    results = (ctypes.c_void_p * 1)(ctypes.addressof(out))
+    assert signature(address)(args, results, None, None, 0) == 0
+    assert out[0] == 7.0
+    # another function of the same name and signature is not the one loaded
+    assert compile_cache.entry_point(ca.Function("t_entry_point", [x], [x])) is None

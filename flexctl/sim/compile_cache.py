@@ -734,8 +734,11 @@ def entry_point(function):
     origin = _ORIGIN.get(id(function))
     if origin is None or origin[0] is not function:
         return None
-    library = ctypes.CDLL(str(origin[1]))       # the library CasADi has open: the same copy
-    return ctypes.cast(getattr(library, origin[2]), ctypes.c_void_p).value, library
+    try:                # the library CasADi has open: the same copy
+        library = ctypes.CDLL(str(origin[1]))
+        return ctypes.cast(getattr(library, origin[2]), ctypes.c_void_p).value, library
+    except (OSError, AttributeError):
+        return None
 
 
 @contextlib.contextmanager
