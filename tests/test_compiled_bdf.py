@@ -10,6 +10,7 @@ from controllers import PD
 from flexctl.model.errors import InputError
 from flexctl.sim.compiled import integrate_segments
 from flexctl.sim.compiled_bdf import OUTPUTS, BdfRun, bdf_available
+from flexctl.sim.embedded_rk import EmbeddedRun
 from flexctl.sim.request import state_scale
 
 TORQUE = flexctl.SineTorque(peak_torque=2.0, duration=2.0)
@@ -100,23 +101,30 @@ def test_a_diverging_run_is_stopped_and_named(exact):
     assert np.all(np.isfinite(run.states)) and run.t[-1] < 0.1
 
 
-def test_bad_arguments_are_refused_by_name(exact):
+@pytest.mark.parametrize("run_class", [BdfRun, EmbeddedRun])
+def test_bad_arguments_are_refused_by_name(exact, run_class):
+    # both compiled continuous runs check their arguments alike
     model, _ = exact
     scale = state_scale(model, model.layout)
     good = dict(torque=TORQUE, scale=scale, rtol=1e-6, max_steps=100, h_first=1e-3)
-    BdfRun(model, **good)
+    run_class(model, **good)
     for name, value in [("scale", scale[:-1]), ("scale", -scale), ("rtol", 0.0),
                         ("rtol", 2.0), ("rtol", float("nan")), ("max_steps", 0),
                         ("max_steps", 2.5), ("h_first", 0.0), ("h_first", float("inf")),
                         ("h_first", "1e-3"), ("max_step", -1.0), ("max_step", "x")]:
         with pytest.raises(InputError, match=name):
-            BdfRun(model, **{**good, name: value})
+            run_class(model, **{**good, name: value})
     with pytest.raises(InputError, match="CasADi form"):
-        BdfRun(model, torque=lambda t: 0.0, scale=scale, rtol=1e-6, max_steps=10,
-               h_first=1e-3)
+        run_class(model, torque=lambda t: 0.0, scale=scale, rtol=1e-6, max_steps=10,
+                  h_first=1e-3)
     with pytest.raises(InputError, match="model"):
-        BdfRun("model", **good)
-    run = BdfRun(model, **good)
+        run_class("model", **good)
+
+
+def test_output_times_must_follow_the_start(exact):
+    model, _ = exact
+    run = BdfRun(model, TORQUE, scale=state_scale(model, model.layout), rtol=1e-6,
+                 max_steps=100, h_first=1e-3)
     for times in ([0.5, 0.4], [0.0, 1.0], [0.5, np.nan]):
         with pytest.raises(InputError, match="output times"):
             run(0.0, np.array(times), np.zeros(model.n_states))

@@ -7,7 +7,6 @@ import pytest
 
 import flexctl
 from controllers import PD
-from flexctl.model.errors import InputError
 from flexctl.sim.maneuvers import TorqueSamples
 from flexctl.sim.embedded_rk import DENSE_OUTPUT, DORMAND_PRINCE, PAIR_OMEGA_H, EmbeddedRun
 from flexctl.sim.request import (PAIR_INSTRUCTIONS, PAIR_WORK, choose_continuous,
@@ -93,24 +92,6 @@ def test_a_python_torque_keeps_scipy():
         return 0.1 if t < 0.5 else 0.0
     run = flexctl.simulate(model, 1.0, torque=torque, check_validity=False)
     assert run.ok and run.method == "DOP853"
-
-
-def test_bad_arguments_are_refused_by_name(slew):
-    model, _, law, _ = slew
-    scale = state_scale(model, model.layout)
-    good = dict(controller=law, scale=scale, rtol=1e-6, max_steps=100, h_first=1e-3)
-    EmbeddedRun(model, **good)
-    for name, value in [("scale", scale[:-1]), ("scale", -scale), ("rtol", 0.0),
-                        ("rtol", 2.0), ("rtol", float("nan")), ("max_steps", 0),
-                        ("max_steps", 2.5), ("h_first", 0.0), ("h_first", float("inf")),
-                        ("h_first", "1e-3"), ("max_step", -1.0), ("max_step", "x")]:
-        with pytest.raises(InputError, match=name):
-            EmbeddedRun(model, **{**good, name: value})
-    with pytest.raises(InputError, match="CasADi form"):
-        EmbeddedRun(model, torque=lambda t: 0.0, scale=scale, rtol=1e-6, max_steps=10,
-                    h_first=1e-3)
-    with pytest.raises(InputError, match="model"):
-        EmbeddedRun("model", **good)
 
 
 def test_a_step_budget_and_a_non_finite_state_fail_the_segment(slew):

@@ -130,6 +130,18 @@ def compiling_enabled() -> bool:
                                                                            "off")
 
 
+def _tool() -> tuple | None:
+    """The compiler (:func:`compiler`) where compiling is on and one is found; None
+    otherwise (counted, and one warning when there is none)."""
+    if not compiling_enabled():
+        return None
+    tool = compiler()
+    if tool is None:
+        STATS["fallbacks"] += 1
+        _warn_once("no C compiler found (set CC or put cc on the PATH)")
+    return tool
+
+
 def _warn_once(reason: str) -> None:
     if reason not in _WARNED:
         _WARNED.add(reason)
@@ -192,12 +204,8 @@ def compiled(function, *, label: str | None = None, companions=(), options=None)
                              f"{companions!r}"[:200])
     if options is not None and not isinstance(options, dict):
         raise InputTypeError(f"compiled: options must be a dict; got {type(options).__name__}")
-    if not compiling_enabled():
-        return function
-    tool = compiler()
+    tool = _tool()
     if tool is None:
-        STATS["fallbacks"] += 1
-        _warn_once("no C compiler found (set CC or put cc on the PATH)")
         return function
     name = function.name()
     # SX functions serialise in a third to a tenth of the time their C takes to generate, and
@@ -667,12 +675,8 @@ def compiled_source(name: str, source: str, *, label: str | None = None):
     if not isinstance(source, str) or not source:
         raise InputTypeError("compiled_source: source must be the C file as a non-empty str; "
                              f"got {type(source).__name__}")
-    if not compiling_enabled():
-        return None
-    tool = compiler()
+    tool = _tool()
     if tool is None:
-        STATS["fallbacks"] += 1
-        _warn_once("no C compiler found (set CC or put cc on the PATH)")
         return None
     key = _key(source, tool)
     if (name, key) in _LOADED:

@@ -29,16 +29,15 @@ compiler, a drive small enough to compile).
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 
-from .compiled import _cached, _input_key, drive_size, input_numbers, is_symbolic
+from .compiled import _cached, _input_key, input_numbers, is_symbolic
 from .compile_cache import compiled_source, compiling_enabled, compiler, lift_constants
+from .embedded_rk import checked_run_arguments
 from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _drive_symbols
 from .native_rhs import MAX_DAE_INSTRUCTIONS, MAX_INSTRUCTIONS
-from ..model.checks import check_array, check_instance, check_integer, check_real
 from ..model.errors import InputValueError
 
 __all__ = ["BdfRun", "bdf_available", "OUTPUTS", "NEWTON_TOLERANCE", "STATUS"]
@@ -199,26 +198,9 @@ class BdfRun:
 
     def __init__(self, model, torque=None, hub_motion=None, controller=None, *, scale,
                  rtol: float, max_steps: int, h_first: float, max_step: float | None = None):
-        from ..model import Model
-
-        check_instance("BdfRun", "model", model, Model)
         inputs = (torque, hub_motion, controller)
-        if not is_symbolic(torque=torque, hub_motion=hub_motion, controller=controller):
-            raise InputValueError("BdfRun inputs must each have a CasADi form (casadi(t), "
-                                  "casadi_torque); got a Python callable")
-        m = drive_size(model, hub_motion, controller)
-        scale = check_array("BdfRun", "scale", scale, shape=(m,))
-        if np.any(scale <= 0.0):
-            raise InputValueError(f"BdfRun scale must be positive (the states' sizes); got a "
-                                  f"smallest entry of {float(np.min(scale))!r}")
-        self.rtol = check_real("BdfRun", "rtol", rtol, minimum=0.0, strict=True, maximum=1.0)
-        self.max_steps = check_integer("BdfRun", "max_steps", max_steps, minimum=1)
-        self.h = check_real("BdfRun", "h_first", h_first, minimum=0.0, strict=True)
-        if max_step is None or (isinstance(max_step, float) and max_step == math.inf):
-            self.max_step = math.inf
-        else:
-            self.max_step = check_real("BdfRun", "max_step", max_step, minimum=0.0,
-                                       strict=True)
+        m, scale, self.rtol, self.max_steps, self.h, self.max_step = checked_run_arguments(
+            "BdfRun", model, inputs, scale, rtol, max_steps, h_first, max_step)
         built = _built(model, inputs) if compiling_enabled() and compiler() is not None \
             else None
         if built is None or model.variant == "consistent":

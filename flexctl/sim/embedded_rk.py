@@ -361,6 +361,34 @@ def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
     return (compiled(run, label=label) if fixed_step.USE_JIT else run), values
 
 
+def checked_run_arguments(owner: str, model, inputs, scale, rtol, max_steps, h_first,
+                          max_step) -> tuple:
+    """The arguments of a continuous run's compiled steps (:class:`EmbeddedRun`,
+    :class:`~flexctl.sim.compiled_bdf.BdfRun`) checked, each refused by name:
+    ``(m, scale, rtol, max_steps, h_first, max_step)``, ``m`` the drive's size and
+    ``max_step`` ``inf`` when None."""
+    from ..model import Model
+
+    check_instance(owner, "model", model, Model)
+    torque, hub_motion, controller = inputs
+    if not is_symbolic(torque=torque, hub_motion=hub_motion, controller=controller):
+        raise InputValueError(f"{owner} inputs must each have a CasADi form (casadi(t), "
+                              "casadi_torque); got a Python callable")
+    m = drive_size(model, hub_motion, controller)
+    scale = check_array(owner, "scale", scale, shape=(m,))
+    if np.any(scale <= 0.0):
+        raise InputValueError(f"{owner} scale must be positive (the states' sizes); got a "
+                              f"smallest entry of {float(np.min(scale))!r}")
+    rtol = check_real(owner, "rtol", rtol, minimum=0.0, strict=True, maximum=1.0)
+    max_steps = check_integer(owner, "max_steps", max_steps, minimum=1)
+    h_first = check_real(owner, "h_first", h_first, minimum=0.0, strict=True)
+    if max_step is None or (isinstance(max_step, float) and max_step == math.inf):
+        max_step = math.inf
+    else:
+        max_step = check_real(owner, "max_step", max_step, minimum=0.0, strict=True)
+    return m, scale, rtol, max_steps, h_first, max_step
+
+
 class EmbeddedRun:
     """A continuous run's segments by Dormand-Prince 5(4) steps with error control, the step
     size carried from segment to segment, :data:`ATTEMPTS` attempts per compiled call and the
@@ -394,26 +422,9 @@ class EmbeddedRun:
 
     def __init__(self, model, torque=None, hub_motion=None, controller=None, *, scale,
                  rtol: float, max_steps: int, h_first: float, max_step: float | None = None):
-        from ..model import Model
-
-        check_instance("EmbeddedRun", "model", model, Model)
         inputs = (torque, hub_motion, controller)
-        if not is_symbolic(torque=torque, hub_motion=hub_motion, controller=controller):
-            raise InputValueError("EmbeddedRun inputs must each have a CasADi form (casadi(t), "
-                                  "casadi_torque); got a Python callable")
-        m = drive_size(model, hub_motion, controller)
-        scale = check_array("EmbeddedRun", "scale", scale, shape=(m,))
-        if np.any(scale <= 0.0):
-            raise InputValueError(f"EmbeddedRun scale must be positive (the states' sizes); "
-                                  f"got a smallest entry of {float(np.min(scale))!r}")
-        rtol = check_real("EmbeddedRun", "rtol", rtol, minimum=0.0, strict=True, maximum=1.0)
-        self.max_steps = check_integer("EmbeddedRun", "max_steps", max_steps, minimum=1)
-        self.h = check_real("EmbeddedRun", "h_first", h_first, minimum=0.0, strict=True)
-        if max_step is None or (isinstance(max_step, float) and max_step == math.inf):
-            max_step = math.inf
-        else:
-            max_step = check_real("EmbeddedRun", "max_step", max_step, minimum=0.0,
-                                  strict=True)
+        m, scale, rtol, self.max_steps, self.h, max_step = checked_run_arguments(
+            "EmbeddedRun", model, inputs, scale, rtol, max_steps, h_first, max_step)
         numbers = input_numbers(inputs)
         key = _input_key(model, inputs, np.array([1.0]))
         run, model_numbers = _cached(_STEP_CACHE, _STEP_CACHE_SIZE,
