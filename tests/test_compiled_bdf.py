@@ -1,11 +1,10 @@
 """Continuous runs on the compiled variable-order BDF (flexctl.sim.compiled_bdf.BdfRun)."""
 
-import threading
-
 import numpy as np
 import pytest
 
 import flexctl
+from conftest import in_threads
 from controllers import PD
 from flexctl.model.errors import InputError
 from flexctl.sim.compiled import integrate_segments
@@ -158,16 +157,7 @@ def test_without_compiling_the_exact_model_keeps_its_other_methods(exact, monkey
 
 def test_threads_share_the_library_and_agree(exact):
     model, _ = exact
-    results = {}
-
-    def work(k):
-        results[k] = flexctl.simulate(model, 2.0, TORQUE, rtol=1e-7,
-                                      check_validity=False).tip_deflection
-
-    threads = [threading.Thread(target=work, args=(k,)) for k in range(3)]
-    for thread in threads:
-        thread.start()
-    for thread in threads:
-        thread.join()
+    results = in_threads(lambda k: flexctl.simulate(model, 2.0, TORQUE, rtol=1e-7,
+                                                    check_validity=False).tip_deflection)
     np.testing.assert_array_equal(results[0], results[1])
     np.testing.assert_array_equal(results[0], results[2])

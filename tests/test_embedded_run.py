@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import flexctl
+from conftest import in_threads
 from controllers import PD
 from flexctl.sim.maneuvers import TorqueSamples
 from flexctl.sim.embedded_rk import DENSE_OUTPUT, DORMAND_PRINCE, PAIR_OMEGA_H, EmbeddedRun
@@ -111,17 +112,8 @@ def test_a_step_budget_and_a_non_finite_state_fail_the_segment(slew):
 
 def test_threads_share_the_compiled_steps_and_agree(slew):
     model, x0, law, _ = slew
-    results = {}
-
-    def work(k):
-        results[k] = flexctl.simulate(model, 2.0, controller=law, x0=x0, rtol=1e-7,
-                                      check_validity=False).tip_deflection
-
-    threads = [threading.Thread(target=work, args=(k,)) for k in range(3)]
-    for thread in threads:
-        thread.start()
-    for thread in threads:
-        thread.join()
+    results = in_threads(lambda k: flexctl.simulate(
+        model, 2.0, controller=law, x0=x0, rtol=1e-7, check_validity=False).tip_deflection)
     np.testing.assert_array_equal(results[0], results[1])
     np.testing.assert_array_equal(results[0], results[2])
 

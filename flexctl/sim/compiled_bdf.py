@@ -35,7 +35,7 @@ import numpy as np
 
 from .compiled import _cached, _input_key, input_numbers, is_symbolic
 from .compile_cache import compiled_source, compiling_enabled, compiler, lift_constants
-from .embedded_rk import checked_run_arguments
+from .embedded_rk import CompiledRun, checked_run_arguments
 from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _drive_symbols
 from .native_rhs import MAX_DAE_INSTRUCTIONS, MAX_INSTRUCTIONS
 from ..model.errors import InputValueError
@@ -167,7 +167,7 @@ def _built(model, inputs):
                    (model, *inputs), lambda: _library(model, inputs, numbers.size))
 
 
-class BdfRun:
+class BdfRun(CompiledRun):
     """A continuous run's segments by compiled variable-order BDF steps with error control,
     each segment from order 1 and the step size carried from the segment before.
 
@@ -219,16 +219,6 @@ class BdfRun:
         args[6][:pieces["f_values"].size] = pieces["f_values"]
         args[7][:pieces["j_values"].size] = pieces["j_values"]
         self.last_stats = {}
-
-    def __call__(self, lo, t_out, y, stop=None) -> tuple:
-        """States at ``t_out`` from ``y`` at ``lo``: ``(states (m, K), evaluations)``.
-        ``stop(states)``, if given, is asked after each call about the states it added (the
-        index of the first that ends the run, or None): the states end after that call's,
-        fewer than ``K``, rather than integrating a run that has ended."""
-        run = self._run
-        with run._lock:        # its buffers are this run's: written and read here directly
-            return self._segment(run, float(lo), np.asarray(t_out, dtype=float),
-                                 np.asarray(y, dtype=float), stop)
 
     def _segment(self, run, lo, t_out, y, stop):
         m, end = self._size, float(t_out[-1])

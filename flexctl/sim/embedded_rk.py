@@ -39,7 +39,7 @@ from .native_rhs import MAX_INSTRUCTIONS
 from ..model.checks import check_array, check_instance, check_integer, check_real
 from ..model.errors import InputValueError
 
-__all__ = ["EmbeddedHold", "EmbeddedRun", "choose_hold", "DORMAND_PRINCE", "DENSE_OUTPUT",
+__all__ = ["EmbeddedHold", "EmbeddedRun", "CompiledRun", "checked_run_arguments", "choose_hold", "DORMAND_PRINCE", "DENSE_OUTPUT",
            "STIFF_SAMPLE", "SAFETY", "ATTEMPTS", "PAIR_OMEGA_H"]
 
 #: The Dormand-Prince 5(4) tableau: nodes ``c``, stages ``a``, fifth-order weights ``b`` (also
@@ -389,7 +389,25 @@ def checked_run_arguments(owner: str, model, inputs, scale, rtol, max_steps, h_f
     return m, scale, rtol, max_steps, h_first, max_step
 
 
-class EmbeddedRun:
+class CompiledRun:
+    """A continuous run's segments by one compiled function on buffers of its own
+    (``self._run``, an :class:`~flexctl.sim.buffers.InPlace`): the call that
+    :class:`EmbeddedRun` and :class:`~flexctl.sim.compiled_bdf.BdfRun` share; each has its
+    ``_segment``."""
+
+    def __call__(self, lo, t_out, y, stop=None) -> tuple:
+        """States at ``t_out`` from ``y`` at ``lo``: ``(states (m, K), evaluations)``.
+        ``stop(states)``, if given, is asked after each call about the states it added (the
+        index of the first that ends the run, or None): the states end after that call's,
+        fewer than ``K``, rather than integrating a run that has ended."""
+        run = self._run
+        with run._lock:        # its buffers are this run's: written and read here directly
+            return self._segment(run, float(lo), np.asarray(t_out, dtype=float),
+                                 np.asarray(y, dtype=float), stop)
+
+
+
+class EmbeddedRun(CompiledRun):
     """A continuous run's segments by Dormand-Prince 5(4) steps with error control, the step
     size carried from segment to segment, :data:`ATTEMPTS` attempts per compiled call and the
     output times read from the continuous extension (:data:`DENSE_OUTPUT`).
@@ -438,16 +456,6 @@ class EmbeddedRun:
             fixed.append(model_numbers)
         for k, value in enumerate(fixed, start=2):
             self._run.args[k][:] = value
-
-    def __call__(self, lo, t_out, y, stop=None) -> tuple:
-        """States at ``t_out`` from ``y`` at ``lo``: ``(states (m, K), evaluations)``.
-        ``stop(states)``, if given, is asked after each call about the states it added (the
-        index of the first that ends the run, or None): the states end after that call's,
-        fewer than ``K``, rather than integrating a run that has ended."""
-        run = self._run
-        with run._lock:        # its buffers are this run's: written and read here directly
-            return self._segment(run, float(lo), np.asarray(t_out, dtype=float),
-                                 np.asarray(y, dtype=float), stop)
 
     def _segment(self, run, lo, t_out, y, stop):
         m, attempts = self._size, 0
