@@ -161,3 +161,14 @@ def test_threads_share_the_library_and_agree(exact):
                                                     check_validity=False).tip_deflection)
     np.testing.assert_array_equal(results[0], results[1])
     np.testing.assert_array_equal(results[0], results[2])
+
+
+def test_a_run_without_a_finite_pole_starts_from_its_output_step(exact, monkeypatch):
+    # a Jacobian beyond floating point gives no rate: the first step is the output step's
+    from flexctl.sim import request
+
+    monkeypatch.setattr(request, "_loop_frequency", lambda *args: float("nan"))
+    model, tight = exact
+    run = flexctl.simulate(model, 4.0, TORQUE, rtol=1e-8, check_validity=False)
+    assert run.ok and run.method == "BDF"
+    assert _error(run, tight) <= run.integration_error

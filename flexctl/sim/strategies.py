@@ -296,11 +296,13 @@ def _embedded_run(request, plan, rtol: float, looser: bool = False) -> EmbeddedR
 def _bdf_run(request, plan, rtol: float) -> BdfRun:
     """The compiled BDF run of ``request`` at ``rtol``: its first step a hundredth of a
     radian of the fastest pole it meets (mode, loop, spin; order 1 grows it as the accuracy
-    allows), no longest step but the inputs' own bound."""
+    allows) or, with no finite pole, the output step; no longest step but the inputs' own
+    bound."""
     omega = max(plan.omega_plant, plan.loop_frequency, request.spin_frequency)
     return BdfRun(request.model, request.torque, request.hub_motion, request.controller,
                   scale=plan.scale, rtol=rtol, max_steps=plan.cvodes_steps,
-                  h_first=min(0.01 / omega if omega > 0.0 else math.inf, request.step),
+                  h_first=min(0.01 / omega if 0.0 < omega < math.inf else math.inf,
+                              request.step),
                   max_step=math.inf if plan.cvodes_step is None else plan.cvodes_step)
 
 
