@@ -257,9 +257,11 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
   const double *set = arg[3], *atol = arg[4], *t_out = arg[2];
   double *carry = res[0], *states = res[1], *info = res[2];
   double *d, *yp, *psi, *dd, *f, *dy, *scale, *ynew, *err, *jac, *lu;
-  double t, h, rate, rtol = set[1], max_step = set[3], t_bound = set[5], tol = set[6];
+  double t = set[7], h = set[2], rate = 1.0, rtol = set[1], max_step = set[3];
+  double t_bound = set[5], tol = set[6];
   double budget = set[4], steps = 0.0, rejected = 0.0, n_lu = 0.0, c_lu = 0.0;
-  int n_out = (int) set[0], done = 0, order, equal, i, k, status = 0, lu_ok = 0, jac_now = 0;
+  int n_out = (int) set[0], done = 0, order = 1, equal = 0, i, k, status = 0, lu_ok = 0;
+  int jac_now = 0;
   int fails = 0;
   bdf_ctx x;
   x.arg = arg + 8; x.res = res + 3; x.iw = iw + BDF_N; x.w = w + BDF_OWN_W;
