@@ -787,3 +787,23 @@ def test_entry_point_calls_the_loaded_code_and_refuses_what_it_cannot_name(fresh
     assert out[0] == 7.0
     # another function of the same name and signature is not the one loaded
     assert compile_cache.entry_point(ca.Function("t_entry_point", [x], [x])) is None
+
+
+@pytest.mark.parametrize("name, source", [("1bad", "int x;"), ("a b", "int x;"), (None, "int x;"),
+                                          ("ok_name", ""), ("ok_name", None), ("ok_name", 3)])
+def test_compiled_source_refuses_a_bad_name_or_source(name, source):
+    from flexctl.model.errors import InputError
+
+    with pytest.raises(InputError, match="compiled_source"):
+        compile_cache.compiled_source(name, source)
+
+
+def test_compiled_source_is_none_where_compiling_is_off(monkeypatch):
+    monkeypatch.setenv("FLEXCTL_COMPILE", "0")
+    assert compile_cache.compiled_source("t_off", "int t_off;") is None
+
+
+@needs_compiler
+def test_compiled_source_that_does_not_compile_falls_back_with_a_warning(fresh):
+    with pytest.warns(compile_cache.CompileCacheWarning, match="t_broken"):
+        assert compile_cache.compiled_source("t_broken", "this is not C;") is None
