@@ -190,3 +190,12 @@ def test_a_heavy_tip_on_a_massless_hub_converges_on_its_own_jacobian():
     assert run.ok and run.method == "BDF"
     assert run.n_evaluations < 20_000
     assert _error(run, tight) <= run.integration_error
+
+
+def test_a_loose_tolerance_still_has_an_honest_estimate(exact):
+    # at rtol 0.5 the replay cannot be ten times looser: it is ten times tighter, and the
+    # estimate bounds the run's actual error rather than reading zero
+    model, tight = exact
+    run = flexctl.simulate(model, 4.0, TORQUE, rtol=0.5, method="BDF", check_validity=False)
+    assert run.ok
+    assert 0.0 < _error(run, tight) <= 2.0 * run.integration_error
