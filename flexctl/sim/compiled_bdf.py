@@ -115,7 +115,7 @@ def _functions(model, inputs, n_numbers: int) -> dict | None:
     f_args = f_function.sx_in()
     out.update(F=ca.Function("flexctl_bdf_f", f_args, [f_function(*f_args)]), J=None,
                f_values=np.asarray(f_values, dtype=float).ravel(), j_values=np.zeros(0))
-    if out["defines"]:
+    if drive["sym"] is not ca.SX:
         return out                      # the exact model's Jacobian: by differences, in C
     jacobian = ca.Function("flexctl_bdf_jacobian", [ts, ys, twin["c"]],
                            [ca.densify(ca.jacobian(twin["f"](ts, ys), ys))], {"cse": True})
@@ -212,15 +212,13 @@ class BdfRun(CompiledRun):
         inputs = (torque, hub_motion, controller)
         m, scale, self.rtol, self.max_steps, self.h, self.max_step = checked_run_arguments(
             "BdfRun", model, inputs, scale, rtol, max_steps, h_first, max_step)
-        built = _built(model, inputs) if compiling_enabled() and compiler() is not None \
-            else None
-        if built is None or model.variant == "consistent":
+        if not bdf_available(model, *inputs):
             raise InputValueError("BdfRun: this drive has no compiled integrator (compiling "
                                   "off, no C compiler, the consistent variant, or a drive too "
                                   "large to compile); use CVODES")
         from .buffers import InPlace
 
-        external, pieces = built
+        external, pieces = _built(model, inputs)
         self._run, self._size = InPlace(external), m
         self._keep, self._address = pieces["keep"], pieces["address"]
         numbers = input_numbers(inputs)

@@ -684,5 +684,5 @@ def _compiled_bdf(request: RunRequest) -> bool:
     """Whether ``request`` can run on the compiled BDF (built and compiled here if not yet)."""
     from .compiled_bdf import bdf_available
 
-    return request.symbolic and bdf_available(request.model, request.torque,
-                                              request.hub_motion, request.controller)
+    return bdf_available(request.model, request.torque, request.hub_motion,
+                         request.controller)
