@@ -166,12 +166,14 @@ def bdf_available(model, torque=None, hub_motion=None, controller=None) -> bool:
     enough to compile (built, and compiled, here if not yet)."""
     if not is_symbolic(torque=torque, hub_motion=hub_motion, controller=controller):
         return False
-    if not compiling_enabled() or compiler() is None or model.variant == "consistent":
-        return False
     return _built(model, (torque, hub_motion, controller)) is not None
 
 
 def _built(model, inputs):
+    """:func:`_library` of the drive, kept by model and inputs; None where compiling is off,
+    there is no compiler, the model is the consistent variant or the drive has no form."""
+    if not compiling_enabled() or compiler() is None or model.variant == "consistent":
+        return None
     numbers = input_numbers(inputs)
     key = _input_key(model, inputs, np.array([1.0]))
     return _cached(_STEP_CACHE, _STEP_CACHE_SIZE, None if key is None else ("bdf", key),
@@ -212,13 +214,14 @@ class BdfRun(CompiledRun):
         inputs = (torque, hub_motion, controller)
         m, scale, self.rtol, self.max_steps, self.h, self.max_step = checked_run_arguments(
             "BdfRun", model, inputs, scale, rtol, max_steps, h_first, max_step)
-        if not bdf_available(model, *inputs):
+        built = _built(model, inputs)
+        if built is None:
             raise InputValueError("BdfRun: this drive has no compiled integrator (compiling "
                                   "off, no C compiler, the consistent variant, or a drive too "
                                   "large to compile); use CVODES")
         from .buffers import InPlace
 
-        external, pieces = _built(model, inputs)
+        external, pieces = built
         self._run, self._size = InPlace(external), m
         self._keep, self._address = pieces["keep"], pieces["address"]
         numbers = input_numbers(inputs)
