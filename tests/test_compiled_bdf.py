@@ -199,3 +199,27 @@ def test_a_loose_tolerance_still_has_an_honest_estimate(exact):
     run = flexctl.simulate(model, 4.0, TORQUE, rtol=0.5, method="BDF", check_validity=False)
     assert run.ok
     assert 0.0 < _error(run, tight) <= 2.0 * run.integration_error
+
+
+def test_an_absolute_tolerance_beyond_the_motion_is_refused_by_state(exact):
+    # at atol 1e3 the run and its replay agreed on a wrong answer: estimate 7e-15, error 0.29 m
+    model, _ = exact
+    limit = 100.0 * state_scale(model, model.layout)
+    with pytest.raises(InputError, match=r"atol for theta is 1000, more than 100 times.*"
+                                         r"at most 0\.1 there"):
+        flexctl.simulate(model, 4.0, TORQUE, atol=1e3, check_validity=False)
+    looser = limit.copy()
+    looser[model.layout.names.index("q1")] *= 1.01
+    with pytest.raises(InputError, match=r"atol for q1 is"):
+        flexctl.simulate(model, 4.0, TORQUE, atol=looser, check_validity=False)
+
+
+def test_the_loosest_absolute_tolerance_flags_its_run(exact):
+    # at the limit the error control hardly sees the beam: the run is far off, and its
+    # estimate says so rather than reading zero
+    model, tight = exact
+    run = flexctl.simulate(model, 4.0, TORQUE, atol=99.0 * state_scale(model, model.layout),
+                           check_validity=False)
+    assert run.ok and run.method == "BDF"
+    assert run.integration_error >= 0.05 * tight.peak_tip_deflection
+    assert _error(run, tight) <= 10.0 * run.integration_error

@@ -87,8 +87,9 @@ def _integrate(request) -> tuple:
 def _simulate_sampled(request) -> SimulationResult:
     """:func:`run_once` under a sampled controller (:mod:`flexctl.sim.digital`)."""
     model, rtol = request.model, request.rtol
-    scale = (state_scale(model, model.layout) if request.atol is None
-             else check_atol(request.atol, model.n_states) / rtol)
+    scale = state_scale(model, model.layout)
+    if request.atol is not None:
+        scale = check_atol(request.atol, scale, model.layout.names) / rtol
     stops = StopConditions(model, model.layout, singular=False)
     start = time.perf_counter()
     integrator = request.method

@@ -107,7 +107,10 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         Relative tolerance of the error-controlled integrator. Default 1e-8. For ``"rk4"``:
         the largest estimated tip-deflection error relative to its peak, default 1e-2.
     atol : float or array_like, optional
-        Absolute tolerance; default ``rtol`` times each state's physical scale.
+        Absolute tolerance, one or one per state; default ``rtol`` times each state's
+        physical scale (:func:`~flexctl.sim.request.state_scale`). More than
+        :data:`~flexctl.sim.request.ATOL_LIMIT` (100) times that scale is refused (a tenth
+        of the shortest beam's length, 0.1 rad): the error control would not see the motion.
     method : str, optional
         ``"auto"`` (default), ``"cvodes"``, ``"rk4"`` or a ``scipy.integrate.solve_ivp``
         method (``"DOP853"``, ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``);
