@@ -1,4 +1,5 @@
-"""Continuous runs on the compiled variable-order BDF (flexctl.sim.compiled_bdf.BdfRun)."""
+"""Continuous runs on the compiled variable-order BDF and Adams-Moulton methods
+(flexctl.sim.compiled_bdf.BdfRun)."""
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ from flexctl.model.errors import InputError
 from flexctl.sim.compiled import integrate_segments
 from flexctl.sim.compiled_bdf import OUTPUTS, BdfRun, bdf_available
 from flexctl.sim.embedded_rk import EmbeddedRun
-from flexctl.sim.request import state_scale
+from flexctl.sim.request import StiffnessWarning, state_scale
 
 TORQUE = flexctl.SineTorque(peak_torque=2.0, duration=2.0)
 
@@ -28,11 +29,17 @@ def _error(run, tight) -> float:
     return float(np.max(np.abs(run.tip_deflection - tight.tip_deflection)))
 
 
+#: The compiled methods by the method asked for: "auto" takes Adams-Moulton on these lightly
+#: damped beams at these tolerances.
+METHODS = [("auto", "Adams"), ("BDF", "BDF")]
+
+
+@pytest.mark.parametrize("method, taken", METHODS, ids=["auto", "BDF"])
 @pytest.mark.parametrize("rtol", [1e-6, 1e-8])
-def test_the_exact_model_runs_on_it_by_default_within_its_estimate(exact, rtol):
+def test_the_exact_model_runs_on_it_by_default_within_its_estimate(exact, rtol, method, taken):
     model, tight = exact
-    run = flexctl.simulate(model, 4.0, TORQUE, rtol=rtol, check_validity=False)
-    assert run.ok and run.method == "BDF"
+    run = flexctl.simulate(model, 4.0, TORQUE, rtol=rtol, method=method, check_validity=False)
+    assert run.ok and run.method == taken
     actual = _error(run, tight)
     # the estimate is the difference from a replay at ten times the tolerance
     assert actual <= run.integration_error <= 200 * rtol * tight.peak_tip_deflection
@@ -48,28 +55,30 @@ def test_first_order_keeps_its_choice_and_agrees_when_asked(exact):
     assert _error(run, tight) <= run.integration_error <= 2e-6 * tight.peak_tip_deflection
 
 
-def test_a_closed_loop_and_a_prescribed_motion_match_tight_runs():
+@pytest.mark.parametrize("method, taken", METHODS, ids=["auto", "BDF"])
+def test_a_closed_loop_and_a_prescribed_motion_match_tight_runs(method, taken):
     model = flexctl.build_model(flexctl.load_scene("slew-90").system, 3, "exact")
     x0 = np.zeros(model.n_states)
     x0[0] = -np.pi / 2
     law = PD(kp=12.0, kd=8.0, torque_limit=6.0)
     options = dict(controller=law, x0=x0, check_validity=False)
-    run = flexctl.simulate(model, 4.0, rtol=1e-7, **options)
+    run = flexctl.simulate(model, 4.0, rtol=1e-7, method=method, **options)
     tight = flexctl.simulate(model, 4.0, rtol=1e-12, method="cvodes", **options)
-    assert run.method == "BDF" and run.ok
+    assert run.method == taken and run.ok
     assert _error(run, tight) <= run.integration_error <= 1e-4 * tight.peak_tip_deflection
 
     scene = flexctl.load_scene("kane-spinup")
     kane = flexctl.build_model(scene.system, 2, "exact")
-    run = flexctl.simulate(kane, 20.0, hub_motion=scene.maneuver, rtol=1e-7,
+    run = flexctl.simulate(kane, 20.0, hub_motion=scene.maneuver, rtol=1e-7, method=method,
                            check_validity=False)
     tight = flexctl.simulate(kane, 20.0, hub_motion=scene.maneuver, rtol=1e-12,
                              method="cvodes", check_validity=False)
-    assert run.method == "BDF" and run.ok
+    assert run.method == taken and run.ok
     assert _error(run, tight) <= run.integration_error <= 1e-4 * tight.peak_tip_deflection
 
 
-def test_output_times_do_not_change_the_steps(exact):
+@pytest.mark.parametrize("family", ["bdf", "adams"])
+def test_output_times_do_not_change_the_steps(exact, family):
     # the outputs are read from the interpolant: the steps, and the state at the end, are
     # the same for two output times and for more than one call's worth
     model, _ = exact
@@ -77,7 +86,8 @@ def test_output_times_do_not_change_the_steps(exact):
     few, many = np.array([1.0, 3.0]), np.linspace(0.01, 3.0, 3 * OUTPUTS + 7)
     results = []
     for times in (few, many):
-        run = BdfRun(model, TORQUE, scale=scale, rtol=1e-8, max_steps=10_000, h_first=1e-4)
+        run = BdfRun(model, TORQUE, scale=scale, rtol=1e-8, max_steps=10_000, h_first=1e-4,
+                     family=family)
         results.append(run(0.0, times, np.zeros(model.n_states)))
         results.append(run.last_stats["steps"])
     (states_few, _), steps_few, (states_many, _), steps_many = results
@@ -90,10 +100,12 @@ def test_output_times_do_not_change_the_steps(exact):
     assert np.max(np.abs(states_many - tight) / scale[:, None]) < 1e-5
 
 
-def test_a_diverging_run_is_stopped_and_named(exact):
+@pytest.mark.parametrize("method", ["BDF", "Adams"])
+def test_a_diverging_run_is_stopped_and_named(exact, method):
     model, _ = exact
     torque = flexctl.SineTorque(peak_torque=1e6, duration=2.0)
-    run = flexctl.simulate(model, 3.0, torque=torque, method="BDF", check_validity=False)
+    run = flexctl.simulate(model, 3.0, torque=torque, method=method, check_validity=False)
+    assert run.method == method
     reference = flexctl.simulate(model, 3.0, torque=torque, method="cvodes",
                                  check_validity=False)
     assert run.status == reference.status == "diverged"
@@ -129,13 +141,16 @@ def test_output_times_must_follow_the_start(exact):
             run(0.0, np.array(times), np.zeros(model.n_states))
 
 
-def test_a_step_budget_and_a_non_finite_state_fail_the_segment(exact):
+@pytest.mark.parametrize("family", ["bdf", "adams"])
+def test_a_step_budget_and_a_non_finite_state_fail_the_segment(exact, family):
     model, _ = exact
     scale = state_scale(model, model.layout)
-    run = BdfRun(model, TORQUE, scale=scale, rtol=1e-10, max_steps=1, h_first=1e-3)
+    run = BdfRun(model, TORQUE, scale=scale, rtol=1e-10, max_steps=1, h_first=1e-3,
+                 family=family)
     with pytest.raises(RuntimeError, match="budget"):
         run(0.0, np.array([1.0]), np.zeros(model.n_states))
-    run = BdfRun(model, TORQUE, scale=scale, rtol=1e-6, max_steps=1000, h_first=1e-3)
+    run = BdfRun(model, TORQUE, scale=scale, rtol=1e-6, max_steps=1000, h_first=1e-3,
+                 family=family)
     bad = np.zeros(model.n_states)
     bad[1] = np.nan
     with pytest.raises(RuntimeError, match="not finite"):
@@ -146,8 +161,12 @@ def test_without_compiling_the_exact_model_keeps_its_other_methods(exact, monkey
     model, tight = exact
     monkeypatch.setenv("FLEXCTL_COMPILE", "0")
     assert not bdf_available(model, TORQUE)
+    assert not bdf_available(model, TORQUE, family="adams")
     run = flexctl.simulate(model, 1.0, TORQUE, check_validity=False)
-    assert run.ok and run.method != "BDF"
+    assert run.ok and run.method not in ("BDF", "Adams")
+    # an explicit Adams is CVODES's
+    assert flexctl.simulate(model, 0.5, TORQUE, method="Adams",
+                            check_validity=False).method == "cvodes"
     with pytest.raises(InputError, match="no compiled integrator"):
         BdfRun(model, TORQUE, scale=state_scale(model, model.layout), rtol=1e-6,
                max_steps=10, h_first=1e-3)
@@ -170,13 +189,16 @@ def test_a_run_without_a_finite_pole_starts_from_its_output_step(exact, monkeypa
     monkeypatch.setattr(request, "_loop_frequency", lambda *args: float("nan"))
     model, tight = exact
     run = flexctl.simulate(model, 4.0, TORQUE, rtol=1e-8, check_validity=False)
+    # no rate: not a lightly damped oscillation either, the BDF takes it
     assert run.ok and run.method == "BDF"
     assert _error(run, tight) <= run.integration_error
 
 
-def test_a_heavy_tip_on_a_massless_hub_converges_on_its_own_jacobian():
+@pytest.mark.parametrize("method, taken", METHODS, ids=["auto", "BDF"])
+def test_a_heavy_tip_on_a_massless_hub_converges_on_its_own_jacobian(method, taken):
     # first_order's Jacobian is far from the exact model's here: Newton's iterations on it
     # took 162 000 evaluations or more; on the exact model's, by differences, some 4 400
+    # (BDF) and 2 500 (Adams)
     import dataclasses
 
     base = flexctl.load_scene("hub-beam-mass").system
@@ -184,10 +206,10 @@ def test_a_heavy_tip_on_a_massless_hub_converges_on_its_own_jacobian():
                                  masses=(flexctl.PointMass(mass=6e5, position=1.8),))
     model = flexctl.build_model(system, 2, "exact")
     torque = flexctl.SineTorque(peak_torque=1.0, duration=0.5)
-    run = flexctl.simulate(model, 1.0, torque, check_validity=False)
+    run = flexctl.simulate(model, 1.0, torque, method=method, check_validity=False)
     tight = flexctl.simulate(model, 1.0, torque, rtol=1e-12, method="RK45",
                              check_validity=False)
-    assert run.ok and run.method == "BDF"
+    assert run.ok and run.method == taken
     assert run.n_evaluations < 20_000
     assert _error(run, tight) <= run.integration_error
 
@@ -223,3 +245,43 @@ def test_the_loosest_absolute_tolerance_flags_its_run(exact):
     assert run.ok and run.method == "BDF"
     assert run.integration_error >= 0.05 * tight.peak_tip_deflection
     assert _error(run, tight) <= 10.0 * run.integration_error
+
+
+def test_auto_takes_adams_only_where_the_error_control_sees_the_modes(exact):
+    # Adams-Moulton's orders 3 and more amplify an undamped oscillation a little each step:
+    # at a tolerance, or its check's, looser than ADAMS_TOLERANCE, or on beams damped
+    # beyond ADAMS_DAMPING, the run takes the BDF
+    import dataclasses
+
+    from flexctl.sim.request import ADAMS_TOLERANCE
+
+    model, tight = exact
+    scale = state_scale(model, model.layout)
+
+    def method(run_model=model, **options):
+        return flexctl.simulate(run_model, 1.0, TORQUE, check_validity=False,
+                                **options).method
+
+    assert method(rtol=ADAMS_TOLERANCE / 10) == "Adams"
+    assert method(rtol=ADAMS_TOLERANCE) == "BDF"
+    assert method(atol=ADAMS_TOLERANCE / 10 * scale) == "Adams"
+    assert method(atol=ADAMS_TOLERANCE * scale) == "BDF"
+    system = model.system
+    damped = dataclasses.replace(system, beam=dataclasses.replace(system.beam,
+                                                                  damping_ratio=0.3))
+    assert method(flexctl.build_model(damped, 2, "exact")) == "BDF"
+    # asked for, it is taken, and its estimate still bounds its error at rtol 1e-4; looser,
+    # with a warning
+    run = flexctl.simulate(model, 4.0, TORQUE, rtol=1e-4, method="Adams", check_validity=False)
+    assert run.method == "Adams" and _error(run, tight) <= run.integration_error
+    with pytest.warns(StiffnessWarning, match="method 'Adams' at rtol 0.001"):
+        assert method(rtol=ADAMS_TOLERANCE, method="Adams") == "Adams"
+
+
+def test_adams_with_a_sampled_controller_or_python_inputs_is_refused(exact):
+    model, _ = exact
+    sampled = flexctl.sim.ZeroOrderHold(PD(kp=1.0, kd=1.0), sample_time=0.01)
+    with pytest.raises(InputError, match="sampled controller"):
+        flexctl.simulate(model, 1.0, controller=sampled, method="Adams")
+    with pytest.raises(InputError, match="CasADi form"):
+        flexctl.simulate(model, 1.0, controller=lambda t, x: -x[0], method="Adams")

@@ -349,6 +349,10 @@ class ExactGeometry:
         ``q -> [p_x(l), p_y(l)]``, tip position in the hub frame, m.
     energy : casadi.Function
         ``x -> E``, kinetic plus bending energy, J.
+    slopes : ndarray, shape (n, N)
+        ``phi_i'`` at the quadrature's nodes, 1/m (read-only).
+    weights : ndarray, shape (n,)
+        The quadrature's weights of ``int_0^l``, m (read-only).
     """
 
     system: HubBeam
@@ -361,6 +365,16 @@ class ExactGeometry:
     mass: object = field(repr=False)
     tip: object = field(repr=False)
     energy: object = field(repr=False)
+    slopes: np.ndarray = field(repr=False)
+    weights: np.ndarray = field(repr=False)
+
+    def tip_positions(self, q) -> np.ndarray:
+        """:attr:`tip` on numbers, in NumPy: ``[b + int_0^l cos psi, int_0^l sin psi]`` on the
+        same nodes and weights, m, shape (2,) for ``q`` (N,) or (2, P) for ``q`` (N, P) (a
+        run's output times: no CasADi call per column)."""
+        psi = self.slopes @ np.asarray(q, dtype=float)
+        return np.stack((self.system.hub.radius + self.weights @ np.cos(psi),
+                         self.weights @ np.sin(psi)))
 
 
 def appendage_terms(system, n_modes, quadrature, q, q_dot, rate) -> dict:
@@ -567,9 +581,13 @@ def _build(system: HubBeam, n_modes: int, quadrature, matrices) -> ExactGeometry
     kinetic = 0.5 * ca.dot(v, ca.mtimes(mass, v))
     energy = ca.Function(f"{name}_energy", [x],
                          [kinetic + 0.5 * ca.dot(q, ca.mtimes(stiffness, q))], ["x"], ["E"])
+    rule = PanelRule.build(quadrature.panels, system.beam.length, quadrature.points)
+    slopes = np.array(rule.slopes(n))
+    slopes.setflags(write=False)
     return ExactGeometry(system=system, n_modes=n, quadrature=quadrature, rhs=rhs,
                          rhs_vectorized=vectorized_rhs(system, n, quadrature, matrices), beam=beam,
-                         torque=torque, mass=mass_fn, tip=tip_fn, energy=energy)
+                         torque=torque, mass=mass_fn, tip=tip_fn, energy=energy, slopes=slopes,
+                         weights=rule.weights)
 
 
 def _test_states(system: HubBeam, matrices) -> list:

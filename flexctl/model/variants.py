@@ -480,7 +480,7 @@ class Model:
         x = self._check_state(x)
         q = self.layout.modal(x)
         if self.variant == "exact":
-            return self._evaluate(self.geometry.tip, x.ndim > 1, q)
+            return self.geometry.tip_positions(q)
         tip_y = self.matrices.tip @ q
         return np.stack((np.full_like(tip_y, self.system.hub.radius
                                       + self.system.beam.length), tip_y))

@@ -29,7 +29,14 @@
 #include <stdint.h>
 #define BDF_CAT2(a, b) a##b
 #define BDF_CAT(a, b) BDF_CAT2(a, b)
+#ifndef BDF_ADAMS
+#define BDF_ADAMS 0
+#endif
+#if BDF_ADAMS
+#define BDF_MAX 12
+#else
 #define BDF_MAX 5
+#endif
 #define BDF_NC (8 + (BDF_MAX + 3) * BDF_N + BDF_N * BDF_N)
 /* most Newton iterations of a step */
 #define BDF_NEWTON 4
@@ -202,6 +209,13 @@ static void bdf_solve(const double *lu, const casadi_int *piv, double *b) {
   }
 }
 
+static int bdf_finite(const double *v) {
+  int i;
+  for (i = 0; i < BDF_N; ++i) if (!isfinite(v[i])) return 0;
+  return 1;
+}
+
+#if !BDF_ADAMS
 /* D[0..order] <- (R U)^T D[0..order], the differences rescaled to a step `factor` times
  * as long (SciPy's change_D) */
 static void bdf_change(double *d, int order, double factor) {
@@ -241,12 +255,6 @@ static void bdf_dense(const double *d, int order, double h, double t, double to,
     prod *= (to - (t - h * (k - 1))) / (h * k);
     for (i = 0; i < BDF_N; ++i) out[i] += d[k * BDF_N + i] * prod;
   }
-}
-
-static int bdf_finite(const double *v) {
-  int i;
-  for (i = 0; i < BDF_N; ++i) if (!isfinite(v[i])) return 0;
-  return 1;
 }
 
 CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, casadi_int *iw,
@@ -449,6 +457,288 @@ finish:
   info[5] = n_lu; info[6] = t; info[7] = rejected;
   return 0;
 }
+
+#else
+/* Adams-Moulton, orders 1 to BDF_MAX (12), in Nordsieck form with the fixed-leading
+ * coefficients of LSODE (Hindmarsh 1983; Radhakrishnan and Hindmarsh, "Description and use
+ * of LSODE", 1993): z = [y, h y', h^2 y''/2, ...] predicted by the Pascal triangle and
+ * corrected by l acor; the corrector solved by Newton's (chord) iterations on
+ * (I - h l_0 J) with LSODE's convergence test on the rate carried from the steps before;
+ * the order and step chosen by LSODE's rules (biases 1.2, 1.3, 1.4 at, below and above the
+ * order; no change below 1.1 times; no change within order + 1 steps of the last). The
+ * carry's D is the Nordsieck array, its column BDF_MAX also the correction kept for the
+ * order-up test. */
+#define ADAMS_MAXCOR 3
+#define ADAMS_MXNCF 10
+
+/* the coefficients l (el[q][0..q]) and error constants (tesco[q][0..2]) of each order q
+ * (LSODE's cfode for its Adams methods) */
+static void adams_coefficients(double el[BDF_MAX + 1][BDF_MAX + 2],
+                               double tesco[BDF_MAX + 2][3]) {
+  double pc[BDF_MAX + 2], rqfac = 1.0, rq1fac;
+  int nq, i, ib;
+  for (nq = 0; nq <= BDF_MAX + 1; ++nq) tesco[nq][0] = tesco[nq][1] = tesco[nq][2] = 0.0;
+  for (nq = 0; nq <= BDF_MAX; ++nq)
+    for (i = 0; i <= BDF_MAX + 1; ++i) el[nq][i] = 0.0;
+  el[1][0] = 1.0; el[1][1] = 1.0;
+  tesco[1][0] = 0.0; tesco[1][1] = 2.0; tesco[2][0] = 1.0; tesco[BDF_MAX][2] = 0.0;
+  pc[0] = 1.0;
+  for (nq = 2; nq <= BDF_MAX; ++nq) {
+    double pint, xpin, tsign = 1.0, agamq;
+    rq1fac = rqfac;
+    rqfac = rqfac / nq;
+    /* pc: the coefficients of p(x) (x + nq - 1), p(x) = (x + 1) ... (x + nq - 2) */
+    pc[nq - 1] = 0.0;
+    for (ib = 1; ib <= nq - 1; ++ib) {
+      i = nq + 1 - ib;
+      pc[i - 1] = pc[i - 2] + (nq - 1) * pc[i - 1];
+    }
+    pc[0] = (nq - 1) * pc[0];
+    /* the integrals from -1 to 0 of p(x) and x p(x) */
+    pint = pc[0];
+    xpin = pc[0] / 2.0;
+    for (i = 2; i <= nq; ++i) {
+      tsign = -tsign;
+      pint += tsign * pc[i - 1] / i;
+      xpin += tsign * pc[i - 1] / (i + 1);
+    }
+    el[nq][0] = pint * rq1fac;
+    el[nq][1] = 1.0;
+    for (i = 2; i <= nq; ++i) el[nq][i] = rq1fac * pc[i - 1] / i;
+    agamq = rqfac * xpin;
+    tesco[nq][1] = 1.0 / agamq;
+    if (nq < BDF_MAX) tesco[nq + 1][0] = 1.0 / agamq * rqfac / (nq + 1);
+    tesco[nq - 1][2] = 1.0 / agamq;
+  }
+}
+
+/* z[0..q] <- z P (the Pascal triangle), forwards (predict) or backwards (retract) */
+static void adams_predict(double *z, int q, int back) {
+  int j, k, i;
+  for (k = 0; k < q; ++k)
+    for (j = q; j > k; --j)
+      for (i = 0; i < BDF_N; ++i) {
+        if (back) z[(j - 1) * BDF_N + i] -= z[j * BDF_N + i];
+        else z[(j - 1) * BDF_N + i] += z[j * BDF_N + i];
+      }
+}
+
+/* z[j] *= r^j, j = 1..q: the Nordsieck array of a step r times as long */
+static void adams_rescale(double *z, int q, double r) {
+  double f = 1.0;
+  int j, i;
+  for (j = 1; j <= q; ++j) {
+    f *= r;
+    for (i = 0; i < BDF_N; ++i) z[j * BDF_N + i] *= f;
+  }
+}
+
+/* the state at `to` from the Nordsieck array at t (step h, order q) */
+static void adams_dense(const double *z, int q, double h, double t, double to, double *out) {
+  double s = (to - t) / h;
+  int j, i;
+  for (i = 0; i < BDF_N; ++i) out[i] = z[q * BDF_N + i];
+  for (j = q - 1; j >= 0; --j)
+    for (i = 0; i < BDF_N; ++i) out[i] = out[i] * s + z[j * BDF_N + i];
+}
+
+CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, casadi_int *iw,
+                                  casadi_real *w, int mem) {
+  double el[BDF_MAX + 1][BDF_MAX + 2], tesco[BDF_MAX + 2][3];
+  const double *set = arg[3], *atol = arg[4], *t_out = arg[2];
+  double *carry = res[0], *states = res[1], *info = res[2];
+  double *z, *y, *savf, *acor, *dy, *ewt, *jac, *lu;
+  double t = set[7], h = set[2], crate = 0.7, rmax = 1e4, rtol = set[1];
+  double max_step = set[3], t_bound = set[5];
+  double budget = set[4], steps = 0.0, rejected = 0.0, n_lu = 0.0, c_lu = 0.0;
+  int n_out = (int) set[0], done = 0, nq = 1, ialth = 2, i, status = 0, lu_ok = 0, j;
+  int jac_now = 0, kflag = 0, ncf = 0;
+  bdf_ctx x;
+  x.arg = arg + 8; x.res = res + 3; x.iw = iw + BDF_N; x.w = w + BDF_OWN_W;
+  x.c = arg[5]; x.fnum = arg[6]; x.jnum = arg[7]; x.n_f = 0.0; x.n_j = 0.0;
+  x.core = 0;
+#ifdef BDF_CORE
+  x.core = (int (*)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int))
+    (uintptr_t) set[8];
+#endif
+  y = w; savf = y + BDF_N; acor = savf + BDF_N; dy = acor + BDF_N; ewt = dy + BDF_N;
+  lu = ewt + 2 * BDF_N;
+  x.tmp = lu + BDF_N * BDF_N; x.size = x.tmp + 3 * BDF_N;
+  for (i = 0; i < BDF_N; ++i) x.size[i] = atol[i] / rtol;
+  adams_coefficients(el, tesco);
+  for (i = 0; i < BDF_NC; ++i) carry[i] = arg[0][i];
+  for (i = 0; i < BDF_N * BDF_K; ++i) states[i] = NAN;
+  z = carry + 8;
+  jac = z + (BDF_MAX + 3) * BDF_N;
+  if (n_out < 1 || n_out > BDF_K) { status = 4; goto finish; }
+  if (carry[4] == 0.0) {                    /* a fresh start: order 1, z = [y0, h f0] */
+    carry[0] = set[7]; carry[1] = set[2]; carry[2] = 1.0; carry[3] = 2.0; carry[4] = 1.0;
+    carry[5] = 0.7; carry[6] = 1e4;
+    for (i = 0; i < (BDF_MAX + 3) * BDF_N; ++i) z[i] = 0.0;
+    for (i = 0; i < BDF_N; ++i) z[i] = arg[1][i];
+    if (bdf_f(&x, carry[0], z, savf) || !bdf_finite(savf)) { status = 3; goto finish; }
+    for (i = 0; i < BDF_N; ++i) z[BDF_N + i] = carry[1] * savf[i];
+    if (bdf_j(&x, carry[0], z, jac)) { status = 3; goto finish; }
+    jac_now = 1;
+  }
+  t = carry[0]; h = carry[1]; nq = (int) carry[2]; ialth = (int) carry[3];
+  crate = carry[5]; rmax = carry[6];
+  while (done < n_out) {
+    double t_new, c, del = 0.0, delp = 0.0, dsm, min_step, limit;
+    int m = 0, converged = 0;
+    while (done < n_out && t_out[done] <= t) {
+      adams_dense(z, nq, h, t, t_out[done], states + done * BDF_N);
+      ++done;
+    }
+    if (done >= n_out) break;
+    if (steps >= budget) { status = 1; break; }
+    min_step = 10.0 * fabs(nextafter(t, INFINITY) - t);
+    limit = max_step < t_bound - t ? max_step : t_bound - t;
+    if (h > limit) {
+      adams_rescale(z, nq, limit / h);
+      h = limit; ialth = nq + 1;
+    }
+    if (h < min_step) { status = 2; break; }
+    for (i = 0; i < BDF_N; ++i) ewt[i] = atol[i] + rtol * fabs(z[i]);
+    t_new = t + h;
+    adams_predict(z, nq, 0);
+    c = h * el[nq][0];
+    /* Newton's (chord) iterations on acor: (I - c J) dy = h f(y) - z1 - acor,
+     * y = z0 + l_0 acor */
+    for (;;) {
+      int bad = 0;
+      if (!lu_ok || c != c_lu) {
+        for (i = 0; i < BDF_N * BDF_N; ++i) lu[i] = -c * jac[i];
+        for (i = 0; i < BDF_N; ++i) lu[i + i * BDF_N] += 1.0;
+        n_lu += 1.0;
+        c_lu = c;
+        if (!bdf_lu(lu, iw)) bad = 1;
+        lu_ok = !bad;
+      }
+      if (!bad) {
+        for (i = 0; i < BDF_N; ++i) { y[i] = z[i]; acor[i] = 0.0; }
+        for (m = 0; m < ADAMS_MAXCOR; ++m) {
+          double dcon;
+          if (bdf_f(&x, t_new, y, savf) || !bdf_finite(savf)) break;
+          for (i = 0; i < BDF_N; ++i) dy[i] = h * savf[i] - (z[BDF_N + i] + acor[i]);
+          bdf_solve(lu, iw, dy);
+          del = bdf_norm(dy, ewt);
+          if (!isfinite(del)) break;
+          for (i = 0; i < BDF_N; ++i) {
+            acor[i] += dy[i];
+            y[i] = z[i] + el[nq][0] * acor[i];
+          }
+          if (m > 0) crate = BDF_MAXOF(0.2 * crate, del / delp);
+          dcon = del * (1.5 * crate < 1.0 ? 1.5 * crate : 1.0)
+            / (tesco[nq][1] * (0.5 / (nq + 2)));
+          if (dcon <= 1.0) { converged = 1; break; }
+          if (m >= 1 && del > 2.0 * delp) break;
+          delp = del;
+        }
+      }
+      if (converged) break;
+      if (jac_now) break;
+      /* the Jacobian at the predicted state, and the step again */
+      if (bdf_j(&x, t_new, z, jac)) { status = 3; goto finish; }
+      jac_now = 1; lu_ok = 0; crate = 0.7;
+    }
+    if (!converged) {
+      /* LSODE: the prediction retracted, a step a quarter as long */
+      adams_predict(z, nq, 1);
+      rejected += 1.0; steps += 1.0; ++ncf; rmax = 2.0;
+      if (ncf >= ADAMS_MXNCF || h * 0.25 < min_step) {
+        status = bdf_finite(y) ? 2 : 3;
+        break;
+      }
+      adams_rescale(z, nq, 0.25);
+      h *= 0.25; ialth = nq + 1; lu_ok = 0;
+      continue;
+    }
+    steps += 1.0;
+    dsm = (m == 0 ? del : bdf_norm(acor, ewt)) / tesco[nq][1];
+    if (!(dsm <= 1.0)) {
+      /* failed error test: retracted; the step (and one order lower) the estimate allows,
+       * at most a fifth after two failures; after three, order 1 from h f(y) */
+      double rhsm, rhdn = 0.0, rh;
+      int newq = nq;
+      --kflag;
+      adams_predict(z, nq, 1);
+      rejected += 1.0; rmax = 2.0;
+      if (kflag <= -3) {
+        double r = 0.1;
+        if (h * r < min_step) { status = 2; break; }
+        h *= r;
+        if (bdf_f(&x, t, z, savf) || !bdf_finite(savf)) { status = 3; break; }
+        for (i = 0; i < BDF_N; ++i) z[BDF_N + i] = h * savf[i];
+        nq = 1; ialth = 5; lu_ok = 0;
+        continue;
+      }
+      rhsm = isfinite(dsm) ? 1.0 / (1.2 * pow(dsm, 1.0 / (nq + 1)) + 1.2e-6) : 0.1;
+      if (nq > 1) {
+        double ddn = bdf_norm(z + nq * BDF_N, ewt) / tesco[nq][0];
+        rhdn = 1.0 / (1.3 * pow(ddn, 1.0 / nq) + 1.3e-6);
+      }
+      rh = rhsm;
+      if (rhdn > rhsm) { newq = nq - 1; rh = rhdn > 1.0 ? 1.0 : rhdn; }
+      if (kflag <= -2 && rh > 0.2) rh = 0.2;
+      if (rh < 0.1) rh = 0.1;
+      if (rh > rmax) rh = rmax;
+      nq = newq;
+      adams_rescale(z, nq, rh);
+      h *= rh; ialth = nq + 1;
+      if (h < min_step) { status = 2; break; }
+      continue;
+    }
+    /* accepted */
+    kflag = 0; ncf = 0; jac_now = 0;
+    t = t_new;
+    for (j = 0; j <= nq; ++j)
+      for (i = 0; i < BDF_N; ++i) z[j * BDF_N + i] += el[nq][j] * acor[i];
+    --ialth;
+    if (ialth == 1 && nq < BDF_MAX) {
+      for (i = 0; i < BDF_N; ++i) z[BDF_MAX * BDF_N + i] = acor[i];
+    } else if (ialth == 0) {
+      double rhup = 0.0, rhsm, rhdn = 0.0, rh;
+      int newq = nq;
+      if (nq < BDF_MAX) {
+        double dup;
+        for (i = 0; i < BDF_N; ++i) dy[i] = acor[i] - z[BDF_MAX * BDF_N + i];
+        dup = bdf_norm(dy, ewt) / tesco[nq][2];
+        rhup = 1.0 / (1.4 * pow(dup, 1.0 / (nq + 2)) + 1.4e-6);
+      }
+      rhsm = 1.0 / (1.2 * pow(dsm, 1.0 / (nq + 1)) + 1.2e-6);
+      if (nq > 1) {
+        double ddn = bdf_norm(z + nq * BDF_N, ewt) / tesco[nq][0];
+        rhdn = 1.0 / (1.3 * pow(ddn, 1.0 / nq) + 1.3e-6);
+      }
+      rh = rhsm;
+      if (rhup > rh && rhup > rhdn) { newq = nq + 1; rh = rhup; }
+      else if (rhdn > rh) { newq = nq - 1; rh = rhdn; }
+      if (rh < 1.1) {
+        ialth = 3;
+      } else {
+        if (newq > nq)
+          for (i = 0; i < BDF_N; ++i) z[newq * BDF_N + i] = acor[i] * el[nq][nq] / (nq + 1);
+        nq = newq;
+        if (rh > rmax) rh = rmax;
+        adams_rescale(z, nq, rh);
+        h *= rh; ialth = nq + 1; rmax = 10.0;
+      }
+    }
+    while (done < n_out && t_out[done] <= t) {
+      adams_dense(z, nq, h, t, t_out[done], states + done * BDF_N);
+      ++done;
+    }
+    if (!bdf_finite(z)) { status = 3; break; }
+  }
+finish:
+  carry[0] = t; carry[1] = h; carry[2] = nq; carry[3] = ialth; carry[5] = crate;
+  carry[6] = rmax;
+  info[0] = status; info[1] = done; info[2] = steps; info[3] = x.n_f; info[4] = x.n_j;
+  info[5] = n_lu; info[6] = t; info[7] = rejected;
+  return 0;
+}
+#endif
 
 CASADI_SYMBOL_EXPORT casadi_int BDF_CAT(BDF_NAME, _n_in)(void) { return 8; }
 CASADI_SYMBOL_EXPORT casadi_int BDF_CAT(BDF_NAME, _n_out)(void) { return 3; }

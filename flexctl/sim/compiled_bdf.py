@@ -63,6 +63,8 @@ NEWTON_TOLERANCE = 0.03
 STATUS = {1: "step budget spent", 2: "step too short", 3: "state or derivative not finite",
           4: "output count out of range"}
 _TEMPLATE = Path(__file__).with_name("bdf.c")
+#: The families of formulas the template holds, by the name a run gives them.
+FAMILIES = {"bdf": "BDF", "adams": "Adams"}
 
 
 def _functions(model, inputs, n_numbers: int) -> dict | None:
@@ -129,9 +131,9 @@ def _functions(model, inputs, n_numbers: int) -> dict | None:
     return out
 
 
-def _library(model, inputs, n_numbers: int):
-    """``(external, pieces)`` of the compiled integrator for this drive (``pieces`` from
-    :func:`_functions`), or None."""
+def _library(model, inputs, n_numbers: int, family: str = "bdf"):
+    """``(external, pieces)`` of the compiled integrator of ``family`` (``"bdf"`` or
+    ``"adams"``) for this drive (``pieces`` from :func:`_functions`), or None."""
     import casadi as ca
 
     pieces = _functions(model, inputs, n_numbers)
@@ -145,7 +147,8 @@ def _library(model, inputs, n_numbers: int):
     defines = {"BDF_NAME": "flexctl_bdf", "BDF_F": "flexctl_bdf_f", "BDF_J": "flexctl_bdf_j",
                "BDF_N": ny, "BDF_K": OUTPUTS, "BDF_NCIN": max(1, n_numbers),
                "BDF_NFNUM": max(1, pieces["f_values"].size),
-               "BDF_NJNUM": max(1, pieces["j_values"].size), **pieces["defines"]}
+               "BDF_NJNUM": max(1, pieces["j_values"].size),
+               "BDF_ADAMS": int(family == "adams"), **pieces["defines"]}
     for tag in ("F", "J") if pieces["J"] is not None else ("F",):
         function = pieces[tag]
         defines.update({f"BDF_{tag}_ARG": function.sz_arg(), f"BDF_{tag}_RES": function.sz_res(),
@@ -154,30 +157,34 @@ def _library(model, inputs, n_numbers: int):
               + "".join(f"#define {k} {v}\n" for k, v in defines.items())
               + _TEMPLATE.read_text(encoding="utf-8"))
     external = compiled_source("flexctl_bdf", source,
-                               label=f"the {model.variant} model's BDF integrator")
+                               label=f"the {model.variant} model's {FAMILIES[family]} "
+                                     f"integrator")
     if external is None:
         return None
     return external, pieces
 
 
-def bdf_available(model, torque=None, hub_motion=None, controller=None) -> bool:
-    """Whether :class:`BdfRun` can integrate this drive: every input with a CasADi form,
-    compiling on, a C compiler, and a drive whose right-hand side and Jacobian are small
-    enough to compile (built, and compiled, here if not yet)."""
+def bdf_available(model, torque=None, hub_motion=None, controller=None,
+                  family: str = "bdf") -> bool:
+    """Whether :class:`BdfRun` can integrate this drive with ``family``: every input with a
+    CasADi form, compiling on, a C compiler, and a drive whose right-hand side and Jacobian
+    are small enough to compile (built, and compiled, here if not yet)."""
     if not is_symbolic(torque=torque, hub_motion=hub_motion, controller=controller):
         return False
-    return _built(model, (torque, hub_motion, controller)) is not None
+    return _built(model, (torque, hub_motion, controller), family) is not None
 
 
-def _built(model, inputs):
+def _built(model, inputs, family: str = "bdf"):
     """:func:`_library` of the drive, kept by model and inputs; None where compiling is off,
     there is no compiler, the model is the consistent variant or the drive has no form."""
+    if family not in FAMILIES:
+        raise InputValueError(f"family must be one of {sorted(FAMILIES)}; got {family!r}"[:300])
     if not compiling_enabled() or compiler() is None or model.variant == "consistent":
         return None
     numbers = input_numbers(inputs)
     key = _input_key(model, inputs, np.array([1.0]))
-    return _cached(_STEP_CACHE, _STEP_CACHE_SIZE, None if key is None else ("bdf", key),
-                   (model, *inputs), lambda: _library(model, inputs, numbers.size))
+    return _cached(_STEP_CACHE, _STEP_CACHE_SIZE, None if key is None else (family, key),
+                   (model, *inputs), lambda: _library(model, inputs, numbers.size, family))
 
 
 class BdfRun(CompiledRun):
@@ -210,11 +217,13 @@ class BdfRun(CompiledRun):
     """
 
     def __init__(self, model, torque=None, hub_motion=None, controller=None, *, scale,
-                 rtol: float, max_steps: int, h_first: float, max_step: float | None = None):
+                 rtol: float, max_steps: int, h_first: float, max_step: float | None = None,
+                 family: str = "bdf"):
         inputs = (torque, hub_motion, controller)
         m, scale, self.rtol, self.max_steps, self.h, self.max_step = checked_run_arguments(
             "BdfRun", model, inputs, scale, rtol, max_steps, h_first, max_step)
-        built = _built(model, inputs)
+        built = _built(model, inputs, family)
+        self.family = family
         if built is None:
             raise InputValueError("BdfRun: this drive has no compiled integrator (compiling "
                                   "off, no C compiler, the consistent variant, or a drive too "
@@ -274,7 +283,8 @@ class BdfRun(CompiledRun):
                 continue                # this call's share of the budget: the next goes on
             if status != 0:
                 self.last_stats = stats
-                raise RuntimeError(f"BDF: {STATUS.get(status, status)} at t = {info[6]:.6g} s")
+                raise RuntimeError(f"{FAMILIES[self.family]}: {STATUS.get(status, status)} "
+                                   f"at t = {info[6]:.6g} s")
         self.h = float(carry[1]) if carry[1] > 0.0 else self.h
         self.last_stats = stats
         return out, evaluations

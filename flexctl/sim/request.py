@@ -17,7 +17,7 @@ from numbers import Real
 
 import numpy as np
 
-from .compiled import is_symbolic
+from .compiled import CHECK_FACTOR, is_symbolic
 from .digital import is_sampled
 from .embedded_rk import PAIR_OMEGA_H
 from .drives import as_controller, bound_to_plant
@@ -33,14 +33,17 @@ from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["RunRequest", "IntegrationPlan", "run_request", "plan_integration", "state_scale",
            "StiffnessWarning", "ManyModesWarning", "MANY_MODES", "METHODS", "SAMPLED_METHODS",
-           "choose_continuous", "choose_multistep", "ADAMS_DAMPING", "ADAMS_PHASE", "BDF_REPLACES"]
+           "choose_continuous", "choose_multistep", "ADAMS_DAMPING", "ADAMS_PHASE", "BDF_REPLACES",
+           "ADAMS_TOLERANCE", "ATOL_LIMIT"]
 
 #: Integration methods: "auto" (resolved by :func:`plan_integration` when every input has a
 #: CasADi form, else DOP853), "cvodes" (compiled, :mod:`flexctl.sim.compiled`), "rk4"
 #: (compiled fixed step, :mod:`flexctl.sim.fixed_step`) and the ``scipy.integrate.solve_ivp``
 #: methods ("RK45" and "BDF" compiled where the inputs have a CasADi form:
-#: :mod:`flexctl.sim.embedded_rk`, :mod:`flexctl.sim.compiled_bdf`).
-METHODS = ("auto", "cvodes", "rk4", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+#: :mod:`flexctl.sim.embedded_rk`, :mod:`flexctl.sim.compiled_bdf`), and "Adams" (the compiled
+#: Adams-Moulton methods of :mod:`flexctl.sim.compiled_bdf`; CVODES's where it cannot be
+#: compiled).
+METHODS = ("auto", "cvodes", "rk4", "Adams", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
 #: The methods of a sampled controller's loop: "auto" (resolved for each run by
 #: :func:`flexctl.sim.embedded_rk.choose_hold`: the compiled Dormand-Prince pair, the scheme
 #: of SciPy's "RK45", for a plant that is not stiff over a sample; CVODES otherwise),
@@ -79,6 +82,20 @@ BDF_REPLACES = {"exact": ("cvodes", "RK45")}
 #: Largest ``atol`` accepted, in multiples of each state's physical size (:func:`state_scale`):
 #: a tenth of the shortest beam's length for a coordinate, 0.1 rad for the hub angle.
 ATOL_LIMIT = 100.0
+#: Loosest tolerance at which a continuous ``method="auto"`` run takes the compiled
+#: Adams-Moulton methods (:data:`BDF_REPLACES`), in the run and in its accuracy check at ten
+#: times its tolerance: ``rtol`` and ``atol`` over each state's physical size. Adams-Moulton's orders 3 and 4, and 7 and more, amplify an undamped
+#: oscillation a little at every step (by 0.25 % at ``omega h = 0.5`` at order 3, by 59 % at
+#: order 12), which only an error control that sees the oscillation holds back. On
+#: hub-beam-mass's exact model under a 2 N m sine torque over 20 s at rtol 1e-6, with ``atol``
+#: 1e-3 times the physical sizes, the compiled run's estimate bounded its error (7e-3 /
+#: 2e-3, 5e-3 / 4e-4, 8e-3 / 6e-4 of the peak on 2, 4, 6 modes) and at 1e-2 times them
+#: still did; at 0.1 times them it fell short (0.46 against 0.71 on 4 modes), at 1 it could
+#: not run on 6 modes, and at 10 the run diverged on 4 and 6 modes, where the compiled BDF
+#: stays bounded and says how far off it is. At rtol 1e-3 the run's estimates still bounded
+#: its errors, but its check at 1e-2 was far off (2.1 times the peak against an error of
+#: 6e-3 on 6 modes) and took longer than the run. Looser runs take the BDF.
+ADAMS_TOLERANCE = 1e-3
 #: The closed loop counts as made stiff by its controller when its fastest pole is this many
 #: times the plant's fastest mode.
 LOOP_FACTOR = 2.0
@@ -262,7 +279,7 @@ def _resolve_method(method, symbolic, controller, untraced) -> str:
         raise InputValueError(f"method {method!r}: a sampled controller (sample_time "
                               f"{controller.sample_time!r} s) runs on the compiled path; use "
                               "method 'auto', 'cvodes', 'RK45' or 'rk4'")
-    if method in ("cvodes", "rk4") and not symbolic:
+    if method in ("cvodes", "rk4", "Adams") and not symbolic:
         raise InputValueError(f"method {method!r} needs inputs with a CasADi form (the built-in "
                               "manoeuvres, torque samples, controllers with casadi_torque); "
                               "got a Python callable"
@@ -368,7 +385,7 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
                          or is_symbolic(controller=controller))
     torque, untraced = torque_input(
         torque, t_final=t_final, n_states=model.n_states,
-        trace=(method in ("auto", "cvodes", "rk4") and hub_motion is None
+        trace=(method in ("auto", "cvodes", "rk4", "Adams") and hub_motion is None
                and compiled_feedback),
         state_scale=state_scale(model, model.layout))
     max_step = _step_bound(max_step, torque)
@@ -448,7 +465,8 @@ class IntegrationPlan:
     stiffness_note : str
         What the stiffness guard did ("" when nothing).
     compiled : bool
-        ``method="BDF"`` runs compiled (:mod:`flexctl.sim.compiled_bdf`), not SciPy's.
+        ``method="BDF"`` runs compiled (:mod:`flexctl.sim.compiled_bdf`), not SciPy's
+        (``"Adams"`` is always compiled).
     """
 
     method: str
@@ -466,10 +484,10 @@ class IntegrationPlan:
 
     @property
     def fallback(self) -> str:
-        """The SciPy method that locates a stop: DOP853 behind CVODES and the compiled BDF,
-        else the method."""
-        return "DOP853" if self.method == "cvodes" or (self.method == "BDF" and self.compiled) \
-            else self.method
+        """The SciPy method that locates a stop: DOP853 behind CVODES and the compiled
+        multistep methods, else the method."""
+        return "DOP853" if self.method in ("cvodes", "Adams") or (
+            self.method == "BDF" and self.compiled) else self.method
 
     @property
     def scale(self) -> np.ndarray:
@@ -674,12 +692,27 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
     # a Jacobian beyond floating point: no rate to trust, CVODES's BDF takes the run
     fastest, loop = (v if v == v else math.inf for v in (fastest, loop))
     compiled = False
+    multistep = choose_multistep(model, omega_plant, loop, t_final)
+    # Adams-Moulton only where the error control sees the modes (ADAMS_TOLERANCE), in the
+    # run and in its accuracy check at CHECK_FACTOR times the tolerance
+    seen = ADAMS_TOLERANCE / CHECK_FACTOR
+    adams_seen = rtol <= seen and bool(np.all(atol <= seen * state_scale(model, drive.layout)))
     if request.method == "auto":
         method, note = choose_continuous(model, t_final, fastest), ""
-        if method in BDF_REPLACES.get(model.variant, ()) and _compiled_bdf(request):
-            method, compiled = "BDF", True
+        if method in BDF_REPLACES.get(model.variant, ()):
+            family = "adams" if multistep == "adams" and adams_seen else "bdf"
+            if _compiled_bdf(request, family):
+                method, compiled = ("Adams" if family == "adams" else "BDF"), True
     elif request.method == "BDF" and request.symbolic and _compiled_bdf(request):
         method, note, compiled = "BDF", "", True
+    elif request.method == "Adams":
+        # compiled, or CVODES's Adams-Moulton where it cannot be (no compiler, compiling off)
+        compiled = _compiled_bdf(request, "adams")
+        method, multistep = ("Adams" if compiled else "cvodes"), "adams"
+        note = "" if adams_seen else (
+            f"method 'Adams' at rtol {rtol:g} or an atol beyond {seen:g} of the states' sizes: "
+            "its error control (and its check's, at 10 times the tolerance) may not see an "
+            "undamped mode that Adams-Moulton's steps amplify; method 'auto' takes BDF there")
     elif request.method == "RK45" and request.symbolic and \
             choose_continuous(model, t_final, fastest) == "RK45":
         method, note = "RK45", ""          # the compiled pair, within its work
@@ -697,12 +730,13 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
         omega_plant=omega_plant, loop_frequency=loop, cvodes_steps=steps,
         cvodes_step=request.max_step if np.isfinite(request.max_step) else None,
         stiffness_note=note, compiled=compiled,
-        cvodes_multistep=choose_multistep(model, omega_plant, loop, t_final))
+        cvodes_multistep=multistep)
 
 
-def _compiled_bdf(request: RunRequest) -> bool:
-    """Whether ``request`` can run on the compiled BDF (built and compiled here if not yet)."""
+def _compiled_bdf(request: RunRequest, family: str = "bdf") -> bool:
+    """Whether ``request`` can run on the compiled multistep ``family`` (``"bdf"``,
+    ``"adams"``; built and compiled here if not yet)."""
     from .compiled_bdf import bdf_available
 
     return bdf_available(request.model, request.torque, request.hub_motion,
-                         request.controller)
+                         request.controller, family)

@@ -300,6 +300,7 @@ def _bdf_run(request, plan, rtol: float) -> BdfRun:
     bound."""
     omega = max(plan.omega_plant, plan.loop_frequency, request.spin_frequency)
     return BdfRun(request.model, request.torque, request.hub_motion, request.controller,
+                  family="adams" if plan.method == "Adams" else "bdf",
                   scale=plan.scale, rtol=rtol, max_steps=plan.cvodes_steps,
                   h_first=min(0.01 / omega if 0.0 < omega < math.inf else math.inf,
                               request.step),
@@ -497,7 +498,7 @@ def strategy_for(method: str, symbolic: bool = False):
     inputs have a CasADi form, SciPy's otherwise)."""
     if method == "RK45" and symbolic:
         return EmbeddedSegments
-    if method == "BDF" and symbolic:
+    if method == "Adams" or (method == "BDF" and symbolic):
         return BdfSegments
     return {"cvodes": CvodesSegments, "rk4": FixedStepRK4}.get(method, ScipyIVP)
 
