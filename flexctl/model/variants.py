@@ -42,8 +42,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from .checks import check_choice, check_integer, check_real
-from .errors import InputTypeError, InputValueError
+from .checks import check_real
+from .errors import InputValueError
 from .exact import EXACT_MAX_MODES, exact_geometry
 from .exports import signal_names
 from .layout import StateLayout
