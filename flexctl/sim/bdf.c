@@ -470,6 +470,10 @@ finish:
  * order-up test. */
 #define ADAMS_MAXCOR 3
 #define ADAMS_MXNCF 10
+/* LSODE's biases of the step each order allows: at, one below and one above the order */
+#define ADAMS_BIAS 1.2
+#define ADAMS_BIAS_DOWN 1.3
+#define ADAMS_BIAS_UP 1.4
 
 /* the coefficients l (el[q][0..q]) and error constants (tesco[q][0..2]) of each order q
  * (LSODE's cfode for its Adams methods) */
@@ -673,10 +677,10 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
         nq = 1; ialth = 5; lu_ok = 0;
         continue;
       }
-      rhsm = isfinite(dsm) ? 1.0 / (1.2 * pow(dsm, 1.0 / (nq + 1)) + 1.2e-6) : 0.1;
+      rhsm = isfinite(dsm) ? 1.0 / (ADAMS_BIAS * pow(dsm, 1.0 / (nq + 1)) + 1e-6) : 0.1;
       if (nq > 1) {
         double ddn = bdf_norm(z + nq * BDF_N, ewt) / tesco[nq][0];
-        rhdn = 1.0 / (1.3 * pow(ddn, 1.0 / nq) + 1.3e-6);
+        rhdn = 1.0 / (ADAMS_BIAS_DOWN * pow(ddn, 1.0 / nq) + 1e-6);
       }
       rh = rhsm;
       if (rhdn > rhsm) { newq = nq - 1; rh = rhdn > 1.0 ? 1.0 : rhdn; }
@@ -704,12 +708,12 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
         double dup;
         for (i = 0; i < BDF_N; ++i) dy[i] = acor[i] - z[BDF_MAX * BDF_N + i];
         dup = bdf_norm(dy, ewt) / tesco[nq][2];
-        rhup = 1.0 / (1.4 * pow(dup, 1.0 / (nq + 2)) + 1.4e-6);
+        rhup = 1.0 / (ADAMS_BIAS_UP * pow(dup, 1.0 / (nq + 2)) + 1e-6);
       }
-      rhsm = 1.0 / (1.2 * pow(dsm, 1.0 / (nq + 1)) + 1.2e-6);
+      rhsm = 1.0 / (ADAMS_BIAS * pow(dsm, 1.0 / (nq + 1)) + 1e-6);
       if (nq > 1) {
         double ddn = bdf_norm(z + nq * BDF_N, ewt) / tesco[nq][0];
-        rhdn = 1.0 / (1.3 * pow(ddn, 1.0 / nq) + 1.3e-6);
+        rhdn = 1.0 / (ADAMS_BIAS_DOWN * pow(ddn, 1.0 / nq) + 1e-6);
       }
       rh = rhsm;
       if (rhup > rh && rhup > rhdn) { newq = nq + 1; rh = rhup; }
