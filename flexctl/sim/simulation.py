@@ -35,12 +35,18 @@ is repeated at 10 times the tolerance to estimate its integration error, and red
 A-stable BDF2 if the two disagree grossly. ``"RK45"`` with inputs that have a CasADi form is
 compiled Dormand-Prince 5(4) stepping (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), its
 outputs read from the pair's continuous extension and its error estimated by a replay at 10
-times the tolerance. ``"BDF"`` with such inputs is a compiled variable-order BDF
-(:class:`~flexctl.sim.compiled_bdf.BdfRun`), checked the same way. ``"auto"`` takes the pair
-where it costs less than CVODES (a cheap right-hand side, a fastest pole that leaves few
-steps: :func:`flexctl.sim.request.choose_continuous`), else CVODES, the compiled BDF for the
-exact model in place of either (:data:`flexctl.sim.request.BDF_REPLACES`), and ``"DOP853"``
-for inputs without a CasADi form. An explicit SciPy method
+times the tolerance. ``"BDF"`` with such inputs is a compiled variable-order BDF and
+``"Adams"`` compiled Adams-Moulton methods of orders 1 to 12
+(:class:`~flexctl.sim.compiled_bdf.BdfRun`; CVODES's Adams-Moulton where nothing can be
+compiled), checked the same way. ``"auto"`` takes the pair where it costs less than CVODES (a
+cheap right-hand side, a fastest pole that leaves few steps:
+:func:`flexctl.sim.request.choose_continuous`), else CVODES, for the exact model in place of
+either the compiled Adams-Moulton methods where CVODES would take Adams and the tolerance lets
+the error control see the modes (:data:`flexctl.sim.request.ADAMS_TOLERANCE`), else the
+compiled BDF (:data:`flexctl.sim.request.BDF_REPLACES`), and ``"DOP853"`` for inputs without a
+CasADi form. An ``atol`` beyond :data:`~flexctl.sim.request.ATOL_LIMIT` times a state's
+physical size (a tenth of the shortest beam's length, 0.1 rad) is refused: the error control
+would not see the motion. An explicit SciPy method
 (DOP853, RK45, RK23) on a model too stiff for it is replaced by ``"cvodes"`` when the inputs
 allow, with a
 :class:`StiffnessWarning` and a note in the result's ``message`` (the result's ``method`` is
@@ -108,13 +114,11 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         the largest estimated tip-deflection error relative to its peak, default 1e-2.
     atol : float or array_like, optional
         Absolute tolerance, one or one per state; default ``rtol`` times each state's
-        physical scale (:func:`~flexctl.sim.request.state_scale`). More than
-        :data:`~flexctl.sim.request.ATOL_LIMIT` (100) times that scale is refused (a tenth
-        of the shortest beam's length, 0.1 rad): the error control would not see the motion.
+        physical scale (:func:`~flexctl.sim.request.state_scale`), at most 100 times it.
     method : str, optional
-        ``"auto"`` (default), ``"cvodes"``, ``"rk4"`` or a ``scipy.integrate.solve_ivp``
-        method (``"DOP853"``, ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``);
-        see the module's Methods.
+        ``"auto"`` (default), ``"cvodes"``, ``"rk4"``, ``"Adams"`` or a ``solve_ivp`` method
+        (``"DOP853"``, ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``); see
+        the module's Methods.
     output_step : float, optional
         Spacing of the output times, s. Default: ``t_final / 2000``.
     max_step : float, optional
@@ -122,7 +126,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         step-doubling pair). An input's own ``max_step`` (a sampled torque's sample
         interval) bounds it too.
     check_accuracy : bool, optional
-        On ``"cvodes"`` and compiled ``"RK45"`` and ``"BDF"``: repeat the run at 10 times the
+        On ``"cvodes"``, ``"Adams"``, compiled ``"RK45"`` and ``"BDF"``: repeat at 10 times the
         tolerance for ``result.integration_error`` (:func:`flexctl.sim.compiled.verify_accuracy`,
         :func:`flexctl.sim.strategies.check_embedded_accuracy`). Default True.
     progress : bool or callable, optional
