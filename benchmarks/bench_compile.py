@@ -162,7 +162,7 @@ print(json.dumps(out))
 
 def case_c(before: Path | None) -> None:
     print("\n## C. Simulation exact / first_order, hub-beam-mass, sine torque 2 N m, 6 s, "
-          "rtol 1e-8 (method auto: the compiled pair, CVODES or the compiled BDF; with the "
+          "rtol 1e-8 (method auto: the compiled pair, CVODES, the compiled BDF or Adams; with the "
           "accuracy check, no validity estimate; best of the 2nd to 4th run, and the first "
           "run, which builds "
           "and, cold, compiles; the last run's method and right-hand-side evaluations, the "

@@ -7,6 +7,12 @@
  * file ahead of this code; with BDF_CORE, F is the drive's own part, the model's right-hand
  * side is called through its address and J is taken by differences of the two.
  *
+ * With BDF_ADAMS 1 the same interface integrates by the Adams-Moulton methods of orders 1 to
+ * 12 in LSODE's Nordsieck form instead: the carry is then [t, h, order, steps to the next
+ * change of step or order, started, convergence rate, largest step factor, 0, the Nordsieck
+ * array (15 x N: columns 0 to 12, column 12 holding the correction kept for the order-up
+ * test below order 12), J (N x N)].
+ *
  * The file is a template: BDF_NAME, BDF_F, BDF_J, BDF_N, BDF_K and the work sizes of F and J
  * are defined by flexctl.sim.compiled_bdf before it is appended. One call integrates from
  * the carried state onto up to BDF_K output times (dense output from the backward

@@ -1,4 +1,5 @@
-"""Compiled variable-order BDF: a continuous run's segments integrated in machine code.
+"""Compiled multistep methods (variable-order BDF, Adams-Moulton): a continuous run's
+segments integrated in machine code.
 
 CVODES takes few steps on these models (its BDF reaches order 5 and its Newton iterations
 converge in about one evaluation a step), but through CasADi's interface each step costs
@@ -8,7 +9,13 @@ same family of formulas (the numerical differentiation formulas of orders 1 to 5
 ``BDF``, Shampine and Reichelt 1997, with CVODES's choice of step and order and its test
 that accepts a Newton iteration by the convergence rate of the steps before) is written in C
 (``bdf.c``) and compiled with the drive's right-hand side and its Newton Jacobian, generated
-by CasADi: a step costs its evaluations and a few hundred operations of its own.
+by CasADi: a step costs its evaluations and a few hundred operations of its own. The same
+template holds the Adams-Moulton methods of orders 1 to 12 (``family="adams"``) in LSODE's
+Nordsieck form (Hindmarsh 1983; Radhakrishnan and Hindmarsh 1993): its coefficients, Newton
+test, and choice of step and order. On lightly damped beams they take some 40 % fewer steps
+than the BDF, whose orders 3 to 5 damp and amplify the oscillations they must follow
+(hub-beam-mass's exact 6-mode model under a sine torque at rtol 1e-8, 6 s: 4 394 steps
+against 7 120), at one evaluation a step too.
 
 - **Jacobian.** The other variants' own (CasADi's, compiled into the library); the exact
   model's by forward differences of its compiled right-hand side (N + 1 evaluations), which
@@ -48,7 +55,8 @@ from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _drive_symbols
 from .native_rhs import MAX_DAE_INSTRUCTIONS, MAX_INSTRUCTIONS
 from ..model.errors import InputValueError
 
-__all__ = ["BdfRun", "bdf_available", "OUTPUTS", "CALL_STEPS", "NEWTON_TOLERANCE", "STATUS"]
+__all__ = ["BdfRun", "bdf_available", "OUTPUTS", "CALL_STEPS", "NEWTON_TOLERANCE", "STATUS",
+           "FAMILIES"]
 
 #: Output times per compiled call (the states handed back after each, for a run's stops).
 OUTPUTS = 128
@@ -57,7 +65,8 @@ OUTPUTS = 128
 #: a compiled call when the interpreter exits aborts the process).
 CALL_STEPS = 2000
 #: Newton iterations stop once the correction left is estimated below this, in the weighted
-#: norm of the error test (where 1 is the tolerance).
+#: norm of the error test (where 1 is the tolerance); the BDF's (the Adams-Moulton methods
+#: take LSODE's test, on the order's error constant).
 NEWTON_TOLERANCE = 0.03
 #: What the library's status codes mean.
 STATUS = {1: "step budget spent", 2: "step too short", 3: "state or derivative not finite",
@@ -188,8 +197,9 @@ def _built(model, inputs, family: str = "bdf"):
 
 
 class BdfRun(CompiledRun):
-    """A continuous run's segments by compiled variable-order BDF steps with error control,
-    each segment from order 1 and the step size carried from the segment before.
+    """A continuous run's segments by compiled variable-order BDF or Adams-Moulton steps with
+    error control, each segment from order 1 and the step size carried from the segment
+    before.
 
     Parameters
     ----------
@@ -206,6 +216,8 @@ class BdfRun(CompiledRun):
         The first step tried, s.
     max_step : float, optional
         Longest step, s. Default: none.
+    family : {"bdf", "adams"}, optional
+        The formulas (:data:`FAMILIES`). Default ``"bdf"``.
 
     Notes
     -----
