@@ -561,7 +561,7 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
   double el[BDF_MAX + 1][BDF_MAX + 2], tesco[BDF_MAX + 2][3];
   const double *set = arg[3], *atol = arg[4], *t_out = arg[2];
   double *carry = res[0], *states = res[1], *info = res[2];
-  double *z, *y, *savf, *acor, *dy, *ewt, *jac, *lu;
+  double *z, *y, *savf, *acor, *dy, *ewt, *jac, *lu, *ymag;
   double t = set[7], h = set[2], crate = 0.7, rmax = 1e4, rtol = set[1];
   double max_step = set[3], t_bound = set[5];
   double budget = set[4], steps = 0.0, rejected = 0.0, n_lu = 0.0, c_lu = 0.0;
@@ -577,7 +577,7 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
 #endif
   y = w; savf = y + BDF_N; acor = savf + BDF_N; dy = acor + BDF_N; ewt = dy + BDF_N;
   lu = ewt + 2 * BDF_N;
-  x.tmp = lu + BDF_N * BDF_N; x.size = x.tmp + 3 * BDF_N;
+  x.tmp = lu + BDF_N * BDF_N; x.size = x.tmp + 3 * BDF_N; ymag = x.size + BDF_N;
   for (i = 0; i < BDF_N; ++i) x.size[i] = atol[i] / rtol;
   adams_coefficients(el, tesco);
   for (i = 0; i < BDF_NC; ++i) carry[i] = arg[0][i];
@@ -613,9 +613,16 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
       h = limit; ialth = nq + 1;
     }
     if (h < min_step) { status = 2; break; }
-    for (i = 0; i < BDF_N; ++i) ewt[i] = atol[i] + rtol * fabs(z[i]);
     t_new = t + h;
+    for (i = 0; i < BDF_N; ++i) ymag[i] = fabs(z[i]);
     adams_predict(z, nq, 0);
+    /* the weights of the error norm: the tolerance at the largest of the state before the
+     * step, its prediction and (for the error test) its correction; LSODE takes the state
+     * before alone, which from a state at rest and a vanishing atol leaves no tolerance */
+    for (i = 0; i < BDF_N; ++i) {
+      ymag[i] = BDF_MAXOF(ymag[i], fabs(z[i]));
+      ewt[i] = atol[i] + rtol * ymag[i];
+    }
     c = h * el[nq][0];
     /* Newton's (chord) iterations on acor: (I - c J) dy = h f(y) - z1 - acor,
      * y = z0 + l_0 acor */
@@ -636,12 +643,15 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
           if (bdf_f(&x, t_new, y, savf) || !bdf_finite(savf)) break;
           for (i = 0; i < BDF_N; ++i) dy[i] = h * savf[i] - (z[BDF_N + i] + acor[i]);
           bdf_solve(lu, iw, dy);
-          del = bdf_norm(dy, ewt);
-          if (!isfinite(del)) break;
           for (i = 0; i < BDF_N; ++i) {
             acor[i] += dy[i];
             y[i] = z[i] + el[nq][0] * acor[i];
+            /* weighted at the new iterate too: a state that starts the step at rest has no
+             * size of its own */
+            ewt[i] = atol[i] + rtol * BDF_MAXOF(ymag[i], fabs(y[i]));
           }
+          del = bdf_norm(dy, ewt);
+          if (!isfinite(del)) break;
           if (m > 0) crate = BDF_MAXOF(0.2 * crate, del / delp);
           dcon = del * (1.5 * crate < 1.0 ? 1.5 * crate : 1.0)
             / (tesco[nq][1] * (0.5 / (nq + 2)));
@@ -669,7 +679,7 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
       continue;
     }
     steps += 1.0;
-    dsm = (m == 0 ? del : bdf_norm(acor, ewt)) / tesco[nq][1];
+    dsm = bdf_norm(acor, ewt) / tesco[nq][1];
     if (!(dsm <= 1.0)) {
       /* failed error test: retracted; the step (and one order lower) the estimate allows,
        * at most a fifth after two failures; after three, order 1 from h f(y) */
