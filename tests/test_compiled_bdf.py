@@ -297,3 +297,38 @@ def test_a_vanishing_atol_from_rest_is_a_relative_tolerance(exact, method):
                            check_validity=False)
     assert run.ok and run.method == method
     assert _error(run, tight) <= run.integration_error <= 1e-5 * tight.peak_tip_deflection
+
+
+@pytest.mark.parametrize("method", ["Adams", "BDF"])
+def test_segments_ending_on_breakpoints_keep_their_estimate(method):
+    # a bang-bang slew cuts the run at 1 and 2 s: steps that ended an ulp or two short of a
+    # cut left a rest too short to take, the segment went to SciPy and the estimate was lost
+    from controllers import OpenLoop, bang_bang
+
+    system = flexctl.load_scene("slew-90").system
+    plant = flexctl.build_model(system, 4, "exact")
+    law = OpenLoop(bang_bang(flexctl.build_model(system, 2), np.pi / 2, duration=2.0))
+    options = dict(controller=law, check_validity=False)
+    run = flexctl.simulate(plant, 4.0, rtol=1e-7, method=method, **options)
+    tight = flexctl.simulate(plant, 4.0, rtol=1e-12, method="cvodes", **options)
+    assert run.ok and run.method == method and run.integration_error is not None
+    assert _error(run, tight) <= run.integration_error <= 1e-4 * tight.peak_tip_deflection
+
+
+def test_a_segment_the_compiled_run_cannot_take_is_named_without_an_estimate(exact,
+                                                                              monkeypatch):
+    from flexctl.sim import compiled_bdf
+
+    model, tight = exact
+    segment = compiled_bdf.BdfRun._segment
+
+    def failing(self, run, lo, t_out, y, stop):
+        if lo > 1.0:                      # the sine torque's second segment, from 2 s
+            raise RuntimeError("BDF: step too short at t = 2 s")
+        return segment(self, run, lo, t_out, y, stop)
+
+    monkeypatch.setattr(compiled_bdf.BdfRun, "_segment", failing)
+    run = flexctl.simulate(model, 4.0, TORQUE, rtol=1e-8, check_validity=False)
+    assert run.ok and run.integration_error is None
+    assert "accuracy check not run: the compiled integrator failed" in run.message
+    assert _error(run, tight) <= 1e-5 * tight.peak_tip_deflection

@@ -327,13 +327,15 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
       bdf_change(d, order, max_step / h);
       h = max_step; equal = 0;
     }
-    if (t + h > t_bound) {
+    if (t + h > t_bound || t_bound - t - h < 100.0 * min_step) {
+      /* cut onto the segment's end, or stretched onto it from within a few ulps */
       double shorter = t_bound - t;
       bdf_change(d, order, shorter / h);
       h = shorter; equal = 0;
     }
     if (h < min_step) { status = 2; break; }
-    t_new = t + h;
+    /* a step cut to the segment's end ends on it, not an ulp short of its last output */
+    t_new = h >= t_bound - t ? t_bound : t + h;
     for (i = 0; i < BDF_N; ++i) {
       double s = 0.0, p = 0.0;
       for (k = 0; k <= order; ++k) s += d[k * BDF_N + i];
@@ -608,12 +610,15 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
     if (steps >= budget) { status = 1; break; }
     min_step = 10.0 * fabs(nextafter(t, INFINITY) - t);
     limit = max_step < t_bound - t ? max_step : t_bound - t;
-    if (h > limit) {
+    /* a step that would end within a few ulps of the segment's end is stretched onto it:
+     * the rest would be too short to take */
+    if (h > limit || (limit == t_bound - t && limit - h < 100.0 * min_step)) {
       adams_rescale(z, nq, limit / h);
       h = limit; ialth = nq + 1;
     }
     if (h < min_step) { status = 2; break; }
-    t_new = t + h;
+    /* a step cut to the segment's end ends on it, not an ulp short of its last output */
+    t_new = h >= t_bound - t ? t_bound : t + h;
     for (i = 0; i < BDF_N; ++i) ymag[i] = fabs(z[i]);
     adams_predict(z, nq, 0);
     /* the weights of the error norm: the tolerance at the largest of the state before the

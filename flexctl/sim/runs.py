@@ -81,6 +81,11 @@ def _integrate(request) -> tuple:
         strategy.finish_check(traj, check)
     elif check is not None:
         check.abandon()
+        if traj.reason is StopReason.REACHED_END and not traj.accuracy_note:
+            # a segment the compiled integrator could not take went to SciPy: the replay
+            # does not describe that run, and no estimate is better than a wrong one
+            traj.accuracy_note = ("accuracy check not run: the compiled integrator failed on "
+                                  "a segment, which SciPy integrated instead")
     return plan, stops, drive, start, traj
 
 
