@@ -215,6 +215,34 @@ static void bdf_solve(const double *lu, const casadi_int *piv, double *b) {
   }
 }
 
+/* the evaluation context of a call: CasADi's work arrays past the integrator's own, the
+ * numbers, the model's compiled right-hand side (BDF_CORE), the counters at 0 */
+static void bdf_start(bdf_ctx *x, const casadi_real **arg, casadi_real **res, casadi_int *iw,
+                      casadi_real *w) {
+  x->arg = arg + 8; x->res = res + 3; x->iw = iw + BDF_N; x->w = w + BDF_OWN_W;
+  x->c = arg[5]; x->fnum = arg[6]; x->jnum = arg[7]; x->n_f = 0.0; x->n_j = 0.0;
+  x->core = 0;
+#ifdef BDF_CORE
+  x->core = (int (*)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int))
+    (uintptr_t) arg[3][8];
+#endif
+}
+
+/* lu <- the LU factors of I - c J (Newton's iteration matrix); 0 when singular */
+static int bdf_iteration_matrix(const double *jac, double c, double *lu, casadi_int *piv) {
+  int i;
+  for (i = 0; i < BDF_N * BDF_N; ++i) lu[i] = -c * jac[i];
+  for (i = 0; i < BDF_N; ++i) lu[i + i * BDF_N] += 1.0;
+  return bdf_lu(lu, piv);
+}
+
+/* the call's counts (see the outputs above) */
+static void bdf_info(double *info, int status, int done, double steps, const bdf_ctx *x,
+                     double n_lu, double t, double rejected) {
+  info[0] = status; info[1] = done; info[2] = steps; info[3] = x->n_f; info[4] = x->n_j;
+  info[5] = n_lu; info[6] = t; info[7] = rejected;
+}
+
 static int bdf_finite(const double *v) {
   int i;
   for (i = 0; i < BDF_N; ++i) if (!isfinite(v[i])) return 0;
@@ -278,13 +306,7 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
   int jac_now = 0;
   int fails = 0;
   bdf_ctx x;
-  x.arg = arg + 8; x.res = res + 3; x.iw = iw + BDF_N; x.w = w + BDF_OWN_W;
-  x.c = arg[5]; x.fnum = arg[6]; x.jnum = arg[7]; x.n_f = 0.0; x.n_j = 0.0;
-  x.core = 0;
-#ifdef BDF_CORE
-  x.core = (int (*)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int))
-    (uintptr_t) set[8];
-#endif
+  bdf_start(&x, arg, res, iw, w);
   yp = w; psi = yp + BDF_N; dd = psi + BDF_N; f = dd + BDF_N; dy = f + BDF_N;
   scale = dy + BDF_N; ynew = scale + BDF_N; err = ynew + BDF_N; lu = err + 2 * BDF_N;
   x.tmp = lu + BDF_N * BDF_N; x.size = x.tmp + 3 * BDF_N;
@@ -349,11 +371,9 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
     for (;;) {
       int bad = 0;
       if (!lu_ok || c != c_lu) {
-        for (i = 0; i < BDF_N * BDF_N; ++i) lu[i] = -c * jac[i];
-        for (i = 0; i < BDF_N; ++i) lu[i + i * BDF_N] += 1.0;
         n_lu += 1.0;
         c_lu = c;
-        if (!bdf_lu(lu, iw)) bad = 1;
+        bad = !bdf_iteration_matrix(jac, c, lu, iw);
         lu_ok = !bad;
       }
       if (!bad) {
@@ -461,8 +481,7 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
   }
 finish:
   carry[0] = t; carry[1] = h; carry[2] = order; carry[3] = equal; carry[5] = rate;
-  info[0] = status; info[1] = done; info[2] = steps; info[3] = x.n_f; info[4] = x.n_j;
-  info[5] = n_lu; info[6] = t; info[7] = rejected;
+  bdf_info(info, status, done, steps, &x, n_lu, t, rejected);
   return 0;
 }
 
@@ -570,13 +589,7 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
   int n_out = (int) set[0], done = 0, nq = 1, ialth = 2, i, status = 0, lu_ok = 0, j;
   int jac_now = 0, kflag = 0, ncf = 0;
   bdf_ctx x;
-  x.arg = arg + 8; x.res = res + 3; x.iw = iw + BDF_N; x.w = w + BDF_OWN_W;
-  x.c = arg[5]; x.fnum = arg[6]; x.jnum = arg[7]; x.n_f = 0.0; x.n_j = 0.0;
-  x.core = 0;
-#ifdef BDF_CORE
-  x.core = (int (*)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int))
-    (uintptr_t) set[8];
-#endif
+  bdf_start(&x, arg, res, iw, w);
   y = w; savf = y + BDF_N; acor = savf + BDF_N; dy = acor + BDF_N; ewt = dy + BDF_N;
   lu = ewt + 2 * BDF_N;
   x.tmp = lu + BDF_N * BDF_N; x.size = x.tmp + 3 * BDF_N; ymag = x.size + BDF_N;
@@ -634,11 +647,9 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
     for (;;) {
       int bad = 0;
       if (!lu_ok || c != c_lu) {
-        for (i = 0; i < BDF_N * BDF_N; ++i) lu[i] = -c * jac[i];
-        for (i = 0; i < BDF_N; ++i) lu[i + i * BDF_N] += 1.0;
         n_lu += 1.0;
         c_lu = c;
-        if (!bdf_lu(lu, iw)) bad = 1;
+        bad = !bdf_iteration_matrix(jac, c, lu, iw);
         lu_ok = !bad;
       }
       if (!bad) {
@@ -763,8 +774,7 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
 finish:
   carry[0] = t; carry[1] = h; carry[2] = nq; carry[3] = ialth; carry[5] = crate;
   carry[6] = rmax;
-  info[0] = status; info[1] = done; info[2] = steps; info[3] = x.n_f; info[4] = x.n_j;
-  info[5] = n_lu; info[6] = t; info[7] = rejected;
+  bdf_info(info, status, done, steps, &x, n_lu, t, rejected);
   return 0;
 }
 #endif
