@@ -249,6 +249,22 @@ static int bdf_finite(const double *v) {
   return 1;
 }
 
+/* a fresh start at order 1 from y0 at the settings' t0 and first step: the carry's time,
+ * step, order and started flag, its array [y0, h f0, 0, ...] (the backward differences and
+ * the Nordsieck array alike) and the Jacobian at y0; nonzero when f or J cannot be had */
+static int bdf_fresh(bdf_ctx *x, double *carry, const double *y0, const double *set,
+                     double *f) {
+  double *d = carry + 8, *jac = d + (BDF_MAX + 3) * BDF_N;
+  int i;
+  carry[0] = set[7]; carry[1] = set[2]; carry[2] = 1.0; carry[4] = 1.0;
+  for (i = 0; i < (BDF_MAX + 3) * BDF_N; ++i) d[i] = 0.0;
+  for (i = 0; i < BDF_N; ++i) d[i] = y0[i];
+  if (bdf_f(x, carry[0], d, f) || !bdf_finite(f)) return 1;
+  for (i = 0; i < BDF_N; ++i) d[BDF_N + i] = carry[1] * f[i];
+  return bdf_j(x, carry[0], d, jac);
+}
+
+
 #if !BDF_ADAMS
 /* D[0..order] <- (R U)^T D[0..order], the differences rescaled to a step `factor` times
  * as long (SciPy's change_D) */
@@ -323,14 +339,8 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
   jac = d + (BDF_MAX + 3) * BDF_N;
   if (n_out < 1 || n_out > BDF_K) { status = 4; goto finish; }
   if (carry[4] == 0.0) {                    /* a fresh start: order 1, D = [y0, h f0] */
-    carry[0] = set[7];
-    carry[1] = set[2];
-    carry[2] = 1.0; carry[3] = 0.0; carry[4] = 1.0; carry[5] = 1.0;
-    for (i = 0; i < (BDF_MAX + 3) * BDF_N; ++i) d[i] = 0.0;
-    for (i = 0; i < BDF_N; ++i) d[i] = arg[1][i];
-    if (bdf_f(&x, carry[0], d, f) || !bdf_finite(f)) { status = 3; goto finish; }
-    for (i = 0; i < BDF_N; ++i) d[BDF_N + i] = carry[1] * f[i];
-    if (bdf_j(&x, carry[0], d, jac)) { status = 3; goto finish; }
+    if (bdf_fresh(&x, carry, arg[1], set, f)) { status = 3; goto finish; }
+    carry[3] = 0.0; carry[5] = 1.0;
     jac_now = 1;
   }
   t = carry[0]; h = carry[1]; order = (int) carry[2]; equal = (int) carry[3]; rate = carry[5];
@@ -371,10 +381,8 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
     for (;;) {
       int bad = 0;
       if (!lu_ok || c != c_lu) {
-        n_lu += 1.0;
-        c_lu = c;
-        bad = !bdf_iteration_matrix(jac, c, lu, iw);
-        lu_ok = !bad;
+        lu_ok = bdf_iteration_matrix(jac, c, lu, iw);
+        n_lu += 1.0; c_lu = c; bad = !lu_ok;
       }
       if (!bad) {
         for (i = 0; i < BDF_N; ++i) { ynew[i] = yp[i]; dd[i] = 0.0; }
@@ -601,13 +609,8 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
   jac = z + (BDF_MAX + 3) * BDF_N;
   if (n_out < 1 || n_out > BDF_K) { status = 4; goto finish; }
   if (carry[4] == 0.0) {                    /* a fresh start: order 1, z = [y0, h f0] */
-    carry[0] = set[7]; carry[1] = set[2]; carry[2] = 1.0; carry[3] = 2.0; carry[4] = 1.0;
-    carry[5] = 0.7; carry[6] = 1e4;
-    for (i = 0; i < (BDF_MAX + 3) * BDF_N; ++i) z[i] = 0.0;
-    for (i = 0; i < BDF_N; ++i) z[i] = arg[1][i];
-    if (bdf_f(&x, carry[0], z, savf) || !bdf_finite(savf)) { status = 3; goto finish; }
-    for (i = 0; i < BDF_N; ++i) z[BDF_N + i] = carry[1] * savf[i];
-    if (bdf_j(&x, carry[0], z, jac)) { status = 3; goto finish; }
+    if (bdf_fresh(&x, carry, arg[1], set, savf)) { status = 3; goto finish; }
+    carry[3] = 2.0; carry[5] = 0.7; carry[6] = 1e4;
     jac_now = 1;
   }
   t = carry[0]; h = carry[1]; nq = (int) carry[2]; ialth = (int) carry[3];
@@ -647,10 +650,8 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
     for (;;) {
       int bad = 0;
       if (!lu_ok || c != c_lu) {
-        n_lu += 1.0;
-        c_lu = c;
-        bad = !bdf_iteration_matrix(jac, c, lu, iw);
-        lu_ok = !bad;
+        lu_ok = bdf_iteration_matrix(jac, c, lu, iw);
+        n_lu += 1.0; c_lu = c; bad = !lu_ok;
       }
       if (!bad) {
         for (i = 0; i < BDF_N; ++i) { y[i] = z[i]; acor[i] = 0.0; }
