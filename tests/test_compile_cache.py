@@ -807,3 +807,29 @@ def test_compiled_source_is_none_where_compiling_is_off(monkeypatch):
 def test_compiled_source_that_does_not_compile_falls_back_with_a_warning(fresh):
     with pytest.warns(compile_cache.CompileCacheWarning, match="t_broken"):
         assert compile_cache.compiled_source("t_broken", "this is not C;") is None
+
+
+@needs_compiler
+def test_hand_written_loops_are_compiled_with_their_own_flags(fresh, monkeypatch):
+    # LOOP_FLAGS are part of the key: the same source is a second library, called alike
+    import casadi as ca
+
+    x = ca.SX.sym("x")
+    generator = ca.CodeGenerator("t_loops.c", {"with_header": False})
+    generator.add(ca.Function("t_loops", [x], [3.0 * x + 1.0]))
+    source = generator.dump()
+    commands = []
+    popen = compile_cache.subprocess.Popen
+
+    def recording(command, **options):
+        commands.append(command)
+        return popen(command, **options)
+
+    monkeypatch.setattr(compile_cache.subprocess, "Popen", recording)
+    plain = compile_cache.compiled_source("t_loops", source)
+    loops = compile_cache.compiled_source("t_loops", source, loops=True)
+    assert float(plain(2.0)) == float(loops(2.0)) == 7.0
+    builds = [c for c in commands if c[-1] == "-lm"]
+    assert [c[1:1 + len(compile_cache.FLAGS)] for c in builds] == [
+        list(compile_cache.FLAGS), list(compile_cache.LOOP_FLAGS)]
+    assert len(list(fresh.rglob(f"t_loops-*{compile_cache._SUFFIX}"))) == 2

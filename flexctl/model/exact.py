@@ -382,6 +382,11 @@ class ExactGeometry:
         return np.stack((self.system.hub.radius + self.weights @ np.cos(psi),
                          self.weights @ np.sin(psi)))
 
+    def tip_deflections(self, q) -> np.ndarray:
+        """The second row of :meth:`tip_positions` alone, ``int_0^l sin psi``, m, shape ()
+        or (P,)."""
+        return self.weights @ np.sin(self.slopes @ np.asarray(q, dtype=float))
+
 
 def appendage_terms(system, n_modes, quadrature, q, q_dot, rate) -> dict:
     """One beam's share of the exact equations in its own frame, as CasADi expressions.

@@ -487,6 +487,9 @@ class Model:
 
     def tip_deflection(self, x) -> np.ndarray:
         """Lateral tip deflection in the hub frame, m, shape () or (P,)."""
+        if self.variant == "exact":
+            x = self._check_state(x)
+            return self.geometry.tip_deflections(self.layout.modal(x))
         return self.tip_position(x)[1]
 
     def outputs(self, x) -> np.ndarray:

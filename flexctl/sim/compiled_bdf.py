@@ -167,7 +167,7 @@ def _library(model, inputs, n_numbers: int, family: str = "bdf"):
               + _TEMPLATE.read_text(encoding="utf-8"))
     external = compiled_source("flexctl_bdf", source,
                                label=f"the {model.variant} model's {FAMILIES[family]} "
-                                     f"integrator")
+                                     f"integrator", loops=True)
     if external is None:
         return None
     return external, pieces
