@@ -12,10 +12,10 @@ that accepts a Newton iteration by the convergence rate of the steps before) is 
 by CasADi: a step costs its evaluations and a few hundred operations of its own. The same
 template holds the Adams-Moulton methods of orders 1 to 12 (``family="adams"``) in LSODE's
 Nordsieck form (Hindmarsh 1983; Radhakrishnan and Hindmarsh 1993): its coefficients, Newton
-test, and choice of step and order (its biases raised by 0.2). On lightly damped beams they take some 40 % fewer steps
-than the BDF, whose orders 3 to 5 damp and amplify the oscillations they must follow
-(hub-beam-mass's exact 6-mode model under a sine torque at rtol 1e-8, 6 s: 4 394 steps
-against 7 120), at one evaluation a step too.
+test, and choice of step and order (its biases raised by 0.2). On lightly damped beams they
+take some 40 % fewer steps than the BDF, whose orders 3 to 5 damp and amplify the
+oscillations they must follow (hub-beam-mass's exact 6-mode model under a sine torque at
+rtol 1e-8, 6 s: 4 394 steps against 7 120), at one evaluation a step too.
 
 - **Jacobian.** The other variants' own (CasADi's, compiled into the library); the exact
   model's by forward differences of its compiled right-hand side (N + 1 evaluations), which

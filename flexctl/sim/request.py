@@ -84,8 +84,9 @@ BDF_REPLACES = {"exact": ("cvodes", "RK45")}
 ATOL_LIMIT = 100.0
 #: Loosest tolerance at which a continuous ``method="auto"`` run takes the compiled
 #: Adams-Moulton methods (:data:`BDF_REPLACES`), in the run and in its accuracy check at ten
-#: times its tolerance: ``rtol`` and ``atol`` over each state's physical size. Adams-Moulton's orders 3 and 4, and 7 and more, amplify an undamped
-#: oscillation a little at every step (by 0.25 % at ``omega h = 0.5`` at order 3, by 59 % at
+#: times its tolerance: ``rtol`` and ``atol`` over each state's physical size.
+#: Adams-Moulton's orders 3 and 4, and 7 and more, amplify an undamped oscillation a little
+#: at every step (by 0.25 % at ``omega h = 0.5`` at order 3, by 59 % at
 #: order 12), which only an error control that sees the oscillation holds back. On
 #: hub-beam-mass's exact model under a 2 N m sine torque over 20 s at rtol 1e-6, with ``atol``
 #: 1e-3 times the physical sizes, the compiled run's estimate bounded its error (7e-3 /

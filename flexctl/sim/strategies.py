@@ -6,8 +6,9 @@
 - :class:`EmbeddedSegments`: the same segments by compiled Dormand-Prince 5(4) steps with
   error control (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), the output times read from
   the pair's continuous extension; SciPy locates a stop as behind CVODES.
-- :class:`BdfSegments`: the same segments by compiled variable-order BDF steps
-  (:class:`~flexctl.sim.compiled_bdf.BdfRun`), the output times read from its interpolant.
+- :class:`BdfSegments`: the same segments by compiled variable-order BDF or Adams-Moulton
+  steps (:class:`~flexctl.sim.compiled_bdf.BdfRun`), the output times read from their
+  interpolants.
 - :class:`FixedStepRK4`: the compiled fixed-step loop of :mod:`flexctl.sim.fixed_step`, one
   call for the whole run, its step halved until a step-doubling estimate meets ``rtol``.
 - :class:`ScipyIVP`: ``scipy.integrate.solve_ivp`` segment by segment, with the stopping
@@ -328,10 +329,10 @@ class EmbeddedSegments(CvodesSegments):
 
 
 class BdfSegments(EmbeddedSegments):
-    """The segments by compiled variable-order BDF steps (:class:`~flexctl.sim.compiled_bdf.BdfRun`),
-    each segment from order 1; the accuracy check replays them at
-    :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance beside the run; SciPy
-    locates a stop within a segment, as behind CVODES."""
+    """The segments by compiled variable-order BDF or Adams-Moulton steps
+    (:class:`~flexctl.sim.compiled_bdf.BdfRun`), each segment from order 1; the accuracy
+    check replays them at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance
+    beside the run; SciPy locates a stop within a segment, as behind CVODES."""
 
     def __init__(self, request, plan, drive, stops):
         CvodesSegments.__init__(self, request, plan, drive, stops)
