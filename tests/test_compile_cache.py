@@ -798,6 +798,13 @@ def test_compiled_source_refuses_a_bad_name_or_source(name, source):
         compile_cache.compiled_source(name, source)
 
 
+def test_compiled_source_refuses_loops_that_are_not_a_bool():
+    from flexctl.model.errors import InputError
+
+    with pytest.raises(InputError, match="loops must be True or False; got 'yes'"):
+        compile_cache.compiled_source("ok_name", "int x;", loops="yes")
+
+
 def test_compiled_source_is_none_where_compiling_is_off(monkeypatch):
     monkeypatch.setenv("FLEXCTL_COMPILE", "0")
     assert compile_cache.compiled_source("t_off", "int t_off;") is None

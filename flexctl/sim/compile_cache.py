@@ -683,6 +683,8 @@ def compiled_source(name: str, source: str, *, label: str | None = None, loops: 
     if not isinstance(source, str) or not source:
         raise InputTypeError("compiled_source: source must be the C file as a non-empty str; "
                              f"got {type(source).__name__}")
+    if not isinstance(loops, bool):
+        raise InputTypeError(f"compiled_source: loops must be True or False; got {loops!r}"[:200])
     tool = _tool()
     if tool is None:
         return None
