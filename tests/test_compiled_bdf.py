@@ -332,3 +332,10 @@ def test_a_segment_the_compiled_run_cannot_take_is_named_without_an_estimate(exa
     assert run.ok and run.integration_error is None
     assert "accuracy check not run: the compiled integrator failed" in run.message
     assert _error(run, tight) <= 1e-5 * tight.peak_tip_deflection
+
+
+def test_an_unknown_family_is_refused_by_name(exact):
+    model, _ = exact
+    with pytest.raises(InputError, match="family must be one of.*'rk'"):
+        BdfRun(model, TORQUE, scale=state_scale(model, model.layout), rtol=1e-6,
+               max_steps=10, h_first=1e-3, family="rk")
