@@ -682,10 +682,9 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
     """The integration of ``drive`` under ``request``; warns (:class:`StiffnessWarning`) when
     the stiffness guard changes or keeps an explicit method on a stiff run."""
     model, rtol, t_final = request.model, request.rtol, request.t_final
-    if request.atol is None:
-        atol = rtol * state_scale(model, drive.layout)
-    else:
-        atol = check_atol(request.atol, state_scale(model, drive.layout), drive.layout.names)
+    sizes = state_scale(model, drive.layout)
+    atol = rtol * sizes if request.atol is None else check_atol(request.atol, sizes,
+                                                                 drive.layout.names)
     omega_plant = float(model.natural_frequencies(
         0.0, hub="clamped" if request.prescribed else "free")[-1])
     loop = _loop_frequency(request, drive, atol / rtol, omega_plant)
@@ -697,7 +696,7 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
     # Adams-Moulton only where the error control sees the modes (ADAMS_TOLERANCE), in the
     # run and in its accuracy check at CHECK_FACTOR times the tolerance
     seen = ADAMS_TOLERANCE / CHECK_FACTOR
-    adams_seen = rtol <= seen and bool(np.all(atol <= seen * state_scale(model, drive.layout)))
+    adams_seen = rtol <= seen and bool(np.all(atol <= seen * sizes))
     if request.method == "auto":
         method, note = choose_continuous(model, t_final, fastest), ""
         if method in BDF_REPLACES.get(model.variant, ()):

@@ -295,7 +295,8 @@ def _embedded_run(request, plan, rtol: float, looser: bool = False) -> EmbeddedR
 
 
 def _bdf_run(request, plan, rtol: float) -> BdfRun:
-    """The compiled BDF run of ``request`` at ``rtol``: its first step a hundredth of a
+    """The compiled multistep run of ``request`` at ``rtol`` (Adams-Moulton where the plan's
+    method is ``"Adams"``, else BDF): its first step a hundredth of a
     radian of the fastest pole it meets (mode, loop, spin; order 1 grows it as the accuracy
     allows) or, with no finite pole, the output step; no longest step but the inputs' own
     bound."""
