@@ -51,6 +51,7 @@ from flexctl.model.layout import StateLayout
 from .controllable import design_failure, lqr_on_part
 from .feedback import ReferenceFeedback
 from .plant_state import DEFAULT_LAYOUT, design_rows, resized
+from .spec import WEIGHT_RANGE
 from .reference import (_casadi_evaluate, _evaluate, _optional_positive, _real,
                         _reference_parameters)
 
@@ -198,8 +199,8 @@ def casadi_reference_state(reference, t, n_modes, deflection_gain=None,
     return layout.join(theta=angle, q=q_ref, theta_dot=rate, q_dot=q_dot_ref), acc
 
 
-#: Bryson values of :class:`LQRWeights` must lie within [1 / WEIGHT_RANGE, WEIGHT_RANGE].
-WEIGHT_RANGE = 1e12
+#: Bryson values of :class:`LQRWeights` must lie within [1 / WEIGHT_RANGE, WEIGHT_RANGE]
+#: (owned by :mod:`controllers.spec`, which the scene parser reads).
 
 
 @dataclass(frozen=True, kw_only=True)

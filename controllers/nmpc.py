@@ -65,6 +65,7 @@ from .actuator_limits import (check_design_model, horizon_constraints, horizon_r
 from .lqg import NoiseLevels, _measurement_rows
 from .plant_state import design_rows
 from .slew_nlp import _rk4_step
+from .spec import MODES, QP_SOLVERS, TERMINALS
 from .trajopt import SlewSolution
 
 __all__ = ["NMPC", "NMPCSession", "OMEGA_H", "QP_SOLVERS"]
@@ -72,10 +73,6 @@ __all__ = ["NMPC", "NMPCSession", "OMEGA_H", "QP_SOLVERS"]
 #: Largest ``omega_max h`` of the RK4 substeps in the prediction model (RK4 is stable up to
 #: ``2 sqrt 2``; 1 keeps the fastest design mode's phase error per hold small).
 OMEGA_H = 1.0
-#: QP solvers of the real-time iteration, where the installed CasADi has them.
-QP_SOLVERS = ("qrqp", "osqp", "qpoases", "hpipm")
-MODES = ("rti", "converged")
-TERMINALS = ("lqr", "rest")
 #: Most RK4 substeps per hold.
 MAX_SUBSTEPS = 50
 #: The condensing is compiled to machine code from this horizon on. On slew-90's exact 2-mode

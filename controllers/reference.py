@@ -42,9 +42,9 @@ from flexctl.model.checks import KeywordOnly
 from flexctl.model.checks import check_real as _real
 from flexctl.sim.maneuvers import RIGID_PEAK_ACCELERATION, rigid_slew_duration
 
-__all__ = ["SlewProfile", "minimum_slew_duration", "SHAPES"]
+from .spec import SHAPES
 
-SHAPES = ("poly7", "cycloidal")
+__all__ = ["SlewProfile", "minimum_slew_duration", "SHAPES"]
 
 #: Peak rate of each unit profile, rad/s.
 _PEAK_RATE = {"poly7": 35.0 / 16.0, "cycloidal": 2.0}

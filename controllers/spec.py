@@ -37,16 +37,16 @@ from numbers import Integral, Real
 
 from flexctl.model.errors import InputValueError
 
-# Choices owned by the controller modules, spelled out here because flexctl's package import
-# reaches this module while those modules are still loading; tests/test_controller_registry.py
-# pins them to the modules' constants.
-WEIGHT_RANGE = 1e12                                     # controllers.lqr.WEIGHT_RANGE
-SHAPES = ("poly7", "cycloidal")                         # controllers.reference.SHAPES
-OBJECTIVES = ("effort", "time")                         # controllers.trajopt.OBJECTIVES
-TRANSCRIPTIONS = ("multiple_shooting", "collocation")   # controllers.trajopt.TRANSCRIPTIONS
-MODES = ("rti", "converged")                            # controllers.nmpc.MODES
-QP_SOLVERS = ("qrqp", "osqp", "qpoases", "hpipm")       # controllers.nmpc.QP_SOLVERS
-TERMINALS = ("lqr", "rest")                             # controllers.nmpc.TERMINALS
+# Choices of the controller kinds' settings, owned here (the registry the scene parser reads) and
+# imported by the modules that act on them (controllers.lqr, reference, trajopt, nmpc).
+#: Bryson values of ``LQRWeights`` lie within [1 / WEIGHT_RANGE, WEIGHT_RANGE].
+WEIGHT_RANGE = 1e12
+SHAPES = ("poly7", "cycloidal")
+OBJECTIVES = ("effort", "time")
+TRANSCRIPTIONS = ("multiple_shooting", "collocation")
+MODES = ("rti", "converged")
+QP_SOLVERS = ("qrqp", "osqp", "qpoases", "hpipm")
+TERMINALS = ("lqr", "rest")
 
 __all__ = ["CONTROLLER_KEYS", "CONTROLLER_KINDS", "ControllerKind", "ControllerSpec",
            "FORMER_NAMES", "SceneError", "Setting", "current_name", "current_names",

@@ -75,6 +75,7 @@ from .actuator_limits import (check_design_model, demand, hub_torque_bound, mini
 from .hold_grid import MAX_SUBSTEPS
 from .plant_state import DEFAULT_LAYOUT, resized
 from .slew_checks import refuse_unsolvable
+from .spec import OBJECTIVES, TRANSCRIPTIONS
 from .slew_nlp import (MAX_INTERVALS, Discretisation, Transcribed, discretisation, rk4_substeps,
                        transcribe, transcription_for)
 
@@ -82,10 +83,8 @@ __all__ = ["SlewProblem", "SlewSolution", "TrajectoryOptimizationError", "HoldTo
            "Discretisation", "solve_slew", "rigid_minimum_time", "rk4_substeps",
            "slew_discretisation", "transcription_for"]
 
-TRANSCRIPTIONS = ("multiple_shooting", "collocation")
 INTEGRATORS = ("rk4", "cvodes")
 COLLOCATION_SCHEMES = ("radau", "legendre")
-OBJECTIVES = ("effort", "time")
 #: Default upper bound on the free final time, in rigid-body minimum times.
 MAX_TIME_FACTOR = 10.0
 #: Factor by which a free-time guess is slowed until the actuator can give it.

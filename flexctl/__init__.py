@@ -11,14 +11,33 @@ Three layers, each a subpackage, and the flow is one way:
 A lower layer never imports a higher one (``tests/test_architecture.py``).
 """
 
-from .model import (VARIANTS, Appendage, Beam, DCMotor, Hub, HubBeam, Model, PointMass,
-                    ReactionWheel, SingularMassMatrixError, Structure, build_model)
-from .sim import Controller, SimulationResult, SineTorque, SpinUp, simulate
-from .app.scenes import Scene, SceneError, builtin_scenes, load_scene, run_scene, run_slew
+import importlib
 
-__all__ = [
-    "Beam", "Hub", "HubBeam", "PointMass", "Appendage", "Structure", "ReactionWheel", "DCMotor", "VARIANTS", "Model", "SingularMassMatrixError",
-    "build_model", "SineTorque", "SpinUp", "Controller", "SimulationResult", "simulate",
-    "Scene", "SceneError", "builtin_scenes", "load_scene", "run_scene", "run_slew",
-]
+#: Each top-level name and the module that defines it, imported on first use, so that
+#: ``import flexctl.model`` or ``import flexctl.sim`` loads neither the application layer nor
+#: :mod:`controllers` (PEP 562).
+_SOURCES = {
+    **dict.fromkeys(("Beam", "Hub", "HubBeam", "PointMass", "Appendage", "Structure",
+                     "ReactionWheel", "DCMotor", "VARIANTS", "Model", "SingularMassMatrixError",
+                     "build_model"), "flexctl.model"),
+    **dict.fromkeys(("SineTorque", "SpinUp", "Controller", "SimulationResult", "simulate"),
+                    "flexctl.sim"),
+    **dict.fromkeys(("Scene", "SceneError", "builtin_scenes", "load_scene", "run_scene",
+                     "run_slew"), "flexctl.app.scenes"),
+}
+__all__ = list(_SOURCES)
+
+
+def __getattr__(name):
+    if name not in _SOURCES:
+        raise AttributeError(f"module 'flexctl' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_SOURCES[name]), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_SOURCES))
+
+
 __version__ = "0.1.0"

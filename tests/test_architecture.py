@@ -190,3 +190,26 @@ def test_long_function_check_catches_one(tmp_path):
     source = tmp_path / "mod.py"
     source.write_text("def f():\n" + "    x = 1\n" * MAX_FUNCTION_LINES)
     assert long_functions(source) == [("f", MAX_FUNCTION_LINES + 1)]
+
+
+@pytest.mark.parametrize("lower", ["flexctl.model", "flexctl.sim", "flexctl"])
+def test_importing_a_lower_layer_loads_nothing_above_it(lower):
+    # run in a fresh interpreter: this one has loaded every layer already
+    import subprocess
+    import sys
+
+    code = (f"import sys, {lower}\n"
+            "print(' '.join(sorted(m for m in sys.modules\n"
+            "      if m.startswith(('flexctl.app', 'controllers')) or m == 'controllers')))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=ROOT, check=True)
+    assert done.stdout.split() == [], f"import {lower} loaded {done.stdout}"
+
+
+def test_top_level_names_load_on_first_use():
+    import flexctl
+
+    assert set(flexctl.__all__) <= set(dir(flexctl))
+    assert flexctl.load_scene.__module__ == "flexctl.app.scenes"
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        flexctl.nothing

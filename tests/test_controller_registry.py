@@ -15,13 +15,14 @@ def test_factory_docstring_table_is_the_registry():
     assert spec.settings_table() in factory.__doc__
 
 
-def test_choices_spelled_in_the_registry_are_the_modules_constants():
-    assert spec.SHAPES == reference.SHAPES
-    assert spec.OBJECTIVES == trajopt.OBJECTIVES
-    assert spec.TRANSCRIPTIONS == trajopt.TRANSCRIPTIONS
-    assert (spec.MODES, spec.QP_SOLVERS, spec.TERMINALS) == \
-        (nmpc.MODES, nmpc.QP_SOLVERS, nmpc.TERMINALS)
-    assert spec.WEIGHT_RANGE == lqr.WEIGHT_RANGE
+def test_choices_of_the_registry_are_the_modules_constants():
+    # one owner: the modules act on the registry's own objects, not on copies
+    assert reference.SHAPES is spec.SHAPES
+    assert trajopt.OBJECTIVES is spec.OBJECTIVES
+    assert trajopt.TRANSCRIPTIONS is spec.TRANSCRIPTIONS
+    assert (nmpc.MODES, nmpc.QP_SOLVERS, nmpc.TERMINALS) == (spec.MODES, spec.QP_SOLVERS,
+                                                             spec.TERMINALS)
+    assert nmpc.QP_SOLVERS is spec.QP_SOLVERS and lqr.WEIGHT_RANGE is spec.WEIGHT_RANGE
 
 
 def test_nmpc_defaults_agree_with_the_controller_class():
