@@ -82,7 +82,7 @@ import control.optimal as opt                            # noqa: E402
 
 import flexctl                                           # noqa: E402
 from controllers import NMPC, SlewProblem, solve_slew    # noqa: E402
-from controllers.nmpc import _default_weights, _hold_function  # noqa: E402
+from controllers.nmpc import _default_weights, hold_function  # noqa: E402
 from flexctl.sim.metrics import slew_metrics             # noqa: E402
 
 SCENE = "slew-90"
@@ -423,7 +423,7 @@ def python_control_problem(design, horizon, sample_time, angle, bound, substeps)
     """python-control's discrete-time versions of the MPC problem: linear (the RK4 hold's
     Jacobians at rest) and nonlinear (the RK4 hold), cost, constraints and time points."""
     n = design.n_states
-    hold = _hold_function(design, sample_time, substeps)
+    hold = hold_function(design, sample_time, substeps)
     x, u = ca.SX.sym("x", n), ca.SX.sym("u")
     step = hold(x, u)
     jac = ca.Function("hold_jacobian", [x, u], [ca.jacobian(step, x), ca.jacobian(step, u)])

@@ -38,7 +38,7 @@ from .actuator_limits import SPEED_MARGIN, hub_torque_bound, speed_bound
 from .controllable import controllable_part, design_failure, state_gain
 from .lqr import LQR, LQRWeights, casadi_reference_state, design_lqr, lqr_weight_matrices, \
     reference_state
-from .reference import _casadi_saturate, _saturate
+from .reference import casadi_saturate, saturate
 
 __all__ = ["MotorVoltage", "LaggedLQR", "design_wheel_lqr", "through_actuator"]
 
@@ -238,7 +238,7 @@ class LaggedLQR:
         ff = self._feedforward(acc)
         u = -float(lqr.gain[0] @ (lqr._design_state(x) - x_ref)) \
             - self.actuator_gain * (x[self._lag_index(x.size)] - ff) + ff
-        return _saturate(u, self.torque_limit)
+        return saturate(u, self.torque_limit)
 
     def casadi_torque(self, t, x, z=None):
         """:meth:`torque` as a CasADi expression."""
@@ -249,7 +249,7 @@ class LaggedLQR:
         ff = self._feedforward(acc)
         u = -ca.dot(ca.DM(lqr.gain[0]), lqr._casadi_design_state(x) - x_ref) \
             - self.actuator_gain * (x[self._lag_index(x.numel())] - ff) + ff
-        return u if self.torque_limit is None else _casadi_saturate(u, self.torque_limit)
+        return u if self.torque_limit is None else casadi_saturate(u, self.torque_limit)
 
 
 def design_wheel_lqr(design, wheel, weights: LQRWeights, *, reference=None,

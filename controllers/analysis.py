@@ -59,7 +59,7 @@ from flexctl.model.checks import check_real
 from flexctl.model.layout import StateLayout
 
 from .lqg import LQG
-from .lqr import LQR, _model, truncation_matrix
+from .lqr import LQR, checked_model, truncation_matrix
 from .plant_state import resized
 from .pd import PD, SENSORS
 from .scheduling import ScheduledLQR
@@ -178,7 +178,7 @@ def plant_channels(model, spin_rate: float = 0.0) -> PlantChannels:
     >>> bool(np.allclose(zeros, channels.clamped_frequencies))
     True
     """
-    model = _model("plant_channels", model)
+    model = checked_model("plant_channels", model)
     spin_rate = check_real("plant_channels", "spin_rate", spin_rate)
     plant = model.linearize(spin_rate)
     return PlantChannels(spin_rate=spin_rate,
@@ -276,7 +276,7 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
     """
     import control
 
-    model = _model("loop_transfer", model)
+    model = checked_model("loop_transfer", model)
     spin_rate = check_real("loop_transfer", "spin_rate", spin_rate)
     a, b = model.linear_matrices(spin_rate)
     states = list(model.state_names)
@@ -578,7 +578,7 @@ def poles_vs_spin(model, spin_rates, controller=None, *,
     """
     import control
 
-    model = _model("poles_vs_spin", model)
+    model = checked_model("poles_vs_spin", model)
     rates = _spin_rates(spin_rates)
     n = model.n_modes
     plant_poles, zeros, frequencies, closed = [], [], [], []

@@ -24,8 +24,8 @@ import numpy as np
 from flexctl.model.errors import InputValueError
 
 from .plant_state import casadi_hub_state, design_rows, hub_state
-from .reference import _casadi_saturate, _check_reference, _has_casadi, _optional_positive, \
-    _saturate
+from .reference import casadi_saturate, check_reference, has_casadi, optional_positive, \
+    saturate
 
 __all__ = ["ReferenceFeedback", "ReferenceSaturationWarning", "warn_if_reference_saturates"]
 
@@ -101,10 +101,10 @@ class ReferenceFeedback:
     n_states = 0
 
     def __post_init__(self):
-        object.__setattr__(self, "reference", _check_reference(self.owner, self.reference))
-        object.__setattr__(self, "feedforward_inertia", _optional_positive(
+        object.__setattr__(self, "reference", check_reference(self.owner, self.reference))
+        object.__setattr__(self, "feedforward_inertia", optional_positive(
             self.owner, "feedforward_inertia", self.feedforward_inertia))
-        object.__setattr__(self, "torque_limit", _optional_positive(
+        object.__setattr__(self, "torque_limit", optional_positive(
             self.owner, "torque_limit", self.torque_limit))
         if self.plant_layout is None:       # once, at design (for_plant rebinds it)
             warn_if_reference_saturates(self.owner, self.reference, self.feedforward_inertia,
@@ -165,7 +165,7 @@ class ReferenceFeedback:
     @property
     def has_casadi_form(self) -> bool:
         """True when the reference (if any) has a CasADi form (``casadi_reference``)."""
-        return _has_casadi(self.reference)
+        return has_casadi(self.reference)
 
     def initial_state(self, x0) -> np.ndarray:
         """No internal state: shape (0,)."""
@@ -179,7 +179,7 @@ class ReferenceFeedback:
         """``feedback + J acc_ref``, saturated, N m."""
         if self.feedforward_inertia is not None:
             feedback += self.feedforward_inertia * acceleration
-        return _saturate(feedback, self.torque_limit)
+        return saturate(feedback, self.torque_limit)
 
     def _casadi_apply(self, feedback, acceleration, inertia=None, limit=None):
         """:meth:`_apply` on CasADi expressions; ``inertia`` and ``limit`` replace the
@@ -190,4 +190,4 @@ class ReferenceFeedback:
                 * acceleration
         if self.torque_limit is None:
             return feedback
-        return _casadi_saturate(feedback, self.torque_limit if limit is None else limit)
+        return casadi_saturate(feedback, self.torque_limit if limit is None else limit)

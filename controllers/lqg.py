@@ -38,16 +38,16 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from flexctl.model.checks import KeywordOnly, check_array
+from flexctl.model.checks import KeywordOnly, check_array, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.layout import StateLayout
 
 from .feedback import ReferenceFeedback
 from .controllable import design_failure, lqe_on_part
-from .lqr import (LQRWeights, _gain_layout, _lqr_gain, _model, casadi_reference_state,
+from .lqr import (LQRWeights, gain_layout, lqr_gain, checked_model, casadi_reference_state,
                   checked_on, reference_state, static_deflection_gain, truncation_matrix)
 from .plant_state import mode_count
-from .reference import _has_casadi, _real
+from .reference import has_casadi
 
 __all__ = ["NoiseLevels", "LQG", "design_lqg", "estimator_gain", "SumOfSines",
            "MEASURED_OUTPUTS", "measured_outputs"]
@@ -60,7 +60,7 @@ def measured_outputs(model) -> tuple:
     return ("theta",) + tuple(n for n in model.output_names if n.endswith("root_moment"))
 
 
-def _measurement_rows(model) -> np.ndarray:
+def measurement_rows(model) -> np.ndarray:
     rows = [model.output_names.index(name) for name in measured_outputs(model)]
     return np.array(model.output_matrix[rows], dtype=float)
 
@@ -97,7 +97,7 @@ class NoiseLevels(KeywordOnly):
     def __post_init__(self):
         # their squares are the Riccati equation's covariances: both must stay finite
         for name in ("angle", "root_moment", "torque"):
-            object.__setattr__(self, name, _real("noise", name, getattr(self, name),
+            object.__setattr__(self, name, check_real("noise", name, getattr(self, name),
                                                  minimum=MIN_NOISE, maximum=MAX_NOISE))
 
     @classmethod
@@ -120,7 +120,7 @@ class NoiseLevels(KeywordOnly):
         if not isinstance(sensors, Sensors):
             raise InputTypeError("noise.sensors must be a flexctl.sim.sensors.Sensors; got "
                                  f"{type(sensors).__name__}")
-        period = _real("noise", "sample_time", sample_time, minimum=0.0, strict=True)
+        period = check_real("noise", "sample_time", sample_time, minimum=0.0, strict=True)
         angle = max(sensors.encoder_resolution ** 2 / 12.0, VARIANCE_FLOOR)
         moment = max(sensors.root_moment_noise ** 2, VARIANCE_FLOOR)
         return cls(angle=float(np.sqrt(angle * period)),
@@ -147,14 +147,14 @@ def estimator_gain(model, noise: NoiseLevels, spin_rate: float = 0.0) -> tuple:
     poles : ndarray, shape (2 M + 2,)
         Estimator poles ``eig(A - L C_meas)``, 1/s.
     """
-    model = _model("estimator_gain", model)
+    model = checked_model("estimator_gain", model)
     if not isinstance(noise, NoiseLevels):
         raise InputTypeError(f"estimator_gain.noise must be NoiseLevels; got "
                              f"{type(noise).__name__}")
-    spin_rate = _real("estimator_gain", "spin_rate", spin_rate)
+    spin_rate = check_real("estimator_gain", "spin_rate", spin_rate)
     with design_failure("lqg", "estimator_gain", model, spin_rate, noise=noise,
                         solving="the Kalman filter Riccati equation"):
-        return lqe_on_part(model, spin_rate, _measurement_rows(model),
+        return lqe_on_part(model, spin_rate, measurement_rows(model),
                            noise.process_covariance, _measurement_covariance(noise, model))
 
 
@@ -207,7 +207,7 @@ class SumOfSines:
         std = np.atleast_1d(check_array("sum_of_sines", "std", std, finite=False))
         if std.ndim != 1 or not np.all(np.isfinite(std)) or np.any(std < 0):
             raise InputValueError(f"sum_of_sines.std must be finite values >= 0; got {std!r}")
-        bandwidth = _real("sum_of_sines", "bandwidth", bandwidth, minimum=0.0, strict=True)
+        bandwidth = check_real("sum_of_sines", "bandwidth", bandwidth, minimum=0.0, strict=True)
         rng = np.random.default_rng(seed)
         shape = (std.size, int(n_sines))
         freqs = rng.uniform(0.05, 1.0, shape) * bandwidth
@@ -278,7 +278,7 @@ class LQG(ReferenceFeedback):
 
     def __post_init__(self):
         nd = check_array("lqg", "a", self.a, finite=False, shape=(None, None)).shape[0]
-        layout = _gain_layout("lqg", self.layout, nd)
+        layout = gain_layout("lqg", self.layout, nd)
         # theta and each appendage's root moment
         nm = 1 + len(layout.appendages)
         shapes = {"gain": (1, nd), "estimator_gain": (nd, nm), "a": (nd, nd), "b": (nd, 1),
@@ -328,11 +328,11 @@ class LQG(ReferenceFeedback):
 
     def for_plant(self, model) -> "LQG":
         """The same controller reading the sensors of ``model`` (``N >= M`` modes)."""
-        model = _model("lqg.for_plant", model)
+        model = checked_model("lqg.for_plant", model)
         if model.n_modes < self.n_modes:
             raise InputValueError(f"lqg.for_plant plant must have at least the design's "
                                   f"{self.n_modes} modes; got n_modes = {model.n_modes}")
-        return replace(self, measurement_matrix=_measurement_rows(model),
+        return replace(self, measurement_matrix=measurement_rows(model),
                        plant_layout=model.layout)
 
     def measure(self, t: float, x) -> np.ndarray:
@@ -379,7 +379,7 @@ class LQG(ReferenceFeedback):
     @property
     def has_casadi_form(self) -> bool:
         """True when the reference and the measurement noise (if any) have CasADi forms."""
-        return _has_casadi(self.reference) and _has_casadi(self.measurement_noise, "casadi")
+        return has_casadi(self.reference) and has_casadi(self.measurement_noise, "casadi")
 
     def casadi_measure(self, t, x):
         """:meth:`measure` of the CasADi symbols ``t`` and ``x``, shape (2, 1)."""
@@ -430,7 +430,7 @@ class LQG(ReferenceFeedback):
     def closed_loop_matrix(self, model, spin_rate: float = 0.0) -> np.ndarray:
         """``A`` of ``model.linearize(spin_rate)`` (``N >= M`` modes) under this compensator,
         states ``[x, z]``, shape (2 N + 2 + n_d, 2 N + 2 + n_d)."""
-        model = _model("lqg.closed_loop_matrix", model)
+        model = checked_model("lqg.closed_loop_matrix", model)
         meas = self.for_plant(model).measurement_matrix
         a_p, b_p = model.linear_matrices(spin_rate)
         top = np.hstack((a_p, -b_p @ self.gain))
@@ -499,19 +499,19 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
     >>> lqg.n_states, bool(lqg.closed_loop_poles(model).real.max() < 0)
     (6, True)
     """
-    model = _model("design_lqg", model)
-    spin_rate = _real("design_lqg", "spin_rate", spin_rate)
+    model = checked_model("design_lqg", model)
+    spin_rate = check_real("design_lqg", "spin_rate", spin_rate)
     if not isinstance(weights, LQRWeights):
         raise InputTypeError(f"design_lqg.weights must be LQRWeights; got "
                              f"{type(weights).__name__}")
     with design_failure("lqg", "design_lqg", model, spin_rate, weights=weights):
-        gain, _ = _lqr_gain(model, weights, spin_rate)
+        gain, _ = lqr_gain(model, weights, spin_rate)
     filtered = _filter_model(model, plant) if estimate_plant_modes else model
     gain = gain @ truncation_matrix(filtered.layout, model.layout)
     est_gain, _ = estimator_gain(filtered, noise, spin_rate)
     a, b = filtered.linear_matrices(spin_rate)
     controller = LQG(gain=gain, estimator_gain=est_gain, a=a, b=b,
-                     c=_measurement_rows(filtered), measurement_matrix=_measurement_rows(filtered),
+                     c=measurement_rows(filtered), measurement_matrix=measurement_rows(filtered),
                      measurement_noise=measurement_noise, reference=reference,
                      feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
                      torque_limit=torque_limit,
@@ -527,7 +527,7 @@ def _filter_model(model, plant):
     """The design model on the plant's modes (the model itself when the plant has no more)."""
     if plant is None:
         return model
-    plant = _model("design_lqg.plant", plant)
+    plant = checked_model("design_lqg.plant", plant)
     if plant.layout.n_modes <= model.layout.n_modes:
         return model
     from flexctl.model.build import rebuild

@@ -34,7 +34,7 @@ import numpy as np
 import scipy.linalg
 
 from flexctl.model.checks import check_instance
-from flexctl.sim.digital import _sample_time
+from flexctl.sim.digital import check_sample_time
 from flexctl.sim.drives import bound_to_plant
 
 from .lqg import LQG
@@ -78,7 +78,7 @@ class SampledLQG:
 
     def __post_init__(self):
         check_instance("sampled_lqg", "lqg", self.lqg, LQG)
-        object.__setattr__(self, "sample_time", _sample_time("SampledLQG", self.sample_time))
+        object.__setattr__(self, "sample_time", check_sample_time("SampledLQG", self.sample_time))
         phi, gamma = discretised_estimator(self.lqg, self.sample_time)
         phi.setflags(write=False)
         gamma.setflags(write=False)

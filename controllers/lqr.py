@@ -44,7 +44,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from flexctl.model import Model
-from flexctl.model.checks import KeywordOnly, check_array, check_instance, check_integer
+from flexctl.model.checks import (KeywordOnly, check_array, check_instance, check_integer,
+                                  check_real)
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.layout import StateLayout
 
@@ -52,14 +53,14 @@ from .controllable import design_failure, lqr_on_part
 from .feedback import ReferenceFeedback
 from .plant_state import DEFAULT_LAYOUT, design_rows, resized
 from .spec import WEIGHT_RANGE
-from .reference import (_casadi_evaluate, _evaluate, _optional_positive, _real,
-                        _reference_parameters)
+from .reference import (casadi_evaluate, evaluate_reference, optional_positive,
+                        reference_parameters)
 
 __all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation_matrix",
            "truncate_state", "reference_state", "closed_loop_poles", "static_deflection_gain"]
 
 
-def _model(owner: str, model) -> Model:
+def checked_model(owner: str, model) -> Model:
     """``model`` itself when it is a flexctl :class:`~flexctl.Model`."""
     return check_instance(owner, "model", model, Model, "flexctl Model")
 
@@ -76,7 +77,7 @@ def _layout(owner: str, design) -> StateLayout:
     return StateLayout.single(_n_modes(owner, "n_design_modes", design))
 
 
-def _gain_layout(owner: str, layout, n_states: int) -> StateLayout:
+def gain_layout(owner: str, layout, n_states: int) -> StateLayout:
     """The layout of a design state of ``n_states`` entries (a gain's width): ``layout``
     checked against it, or one appendage on a pinned hub (a gain given without a model)."""
     if layout is None:
@@ -150,7 +151,7 @@ def static_deflection_gain(model) -> np.ndarray:
     Under a slow hub acceleration ``theta_tt`` the beam equation ``M_ff q_tt + K_ff q =
     -m_tf theta_tt`` leaves ``q = -K_ff^-1 m_tf theta_tt``, m per rad/s^2, shape (M,).
     """
-    return _model("static_deflection_gain", model).quasi_static_gain()
+    return checked_model("static_deflection_gain", model).quasi_static_gain()
 
 
 def reference_state(reference, t: float, n_modes, deflection_gain=None) -> tuple:
@@ -163,12 +164,12 @@ def reference_state(reference, t: float, n_modes, deflection_gain=None) -> tuple
     ``n_modes`` is ``M`` or the design state's layout.
     """
     layout = _layout("reference_state", n_modes)
-    angle, rate, acc = _evaluate(reference, t)
+    angle, rate, acc = evaluate_reference(reference, t)
     x_ref = layout.zeros()
     x_ref[layout.theta], x_ref[layout.theta_dot] = angle, rate
     if deflection_gain is not None and reference is not None:
-        jerk = (_evaluate(reference, t + _JERK_STEP)[2]
-                - _evaluate(reference, t - _JERK_STEP)[2]) / (2.0 * _JERK_STEP)
+        jerk = (evaluate_reference(reference, t + _JERK_STEP)[2]
+                - evaluate_reference(reference, t - _JERK_STEP)[2]) / (2.0 * _JERK_STEP)
         x_ref[layout.q] = -deflection_gain * acc
         x_ref[layout.q_dot] = -deflection_gain * jerk
     return x_ref, acc
@@ -187,11 +188,11 @@ def casadi_reference_state(reference, t, n_modes, deflection_gain=None,
     import casadi as ca
 
     layout = _layout("reference_state", n_modes)
-    angle, rate, acc = _casadi_evaluate(reference, t, reference_numbers)
+    angle, rate, acc = casadi_evaluate(reference, t, reference_numbers)
     q_ref = q_dot_ref = ca.DM.zeros(layout.n_modes)
     if deflection_gain is not None and reference is not None:
-        jerk = (_casadi_evaluate(reference, t + _JERK_STEP, reference_numbers)[2]
-                - _casadi_evaluate(reference, t - _JERK_STEP, reference_numbers)[2]) \
+        jerk = (casadi_evaluate(reference, t + _JERK_STEP, reference_numbers)[2]
+                - casadi_evaluate(reference, t - _JERK_STEP, reference_numbers)[2]) \
             / (2.0 * _JERK_STEP)
         gain = (deflection_gain if isinstance(deflection_gain, (ca.SX, ca.MX))
                 else ca.DM(np.asarray(deflection_gain, dtype=float)))
@@ -233,11 +234,11 @@ class LQRWeights(KeywordOnly):
 
     def __post_init__(self):
         for name in ("hub_angle", "torque"):
-            object.__setattr__(self, name, _real("lqr_weights", name, getattr(self, name),
+            object.__setattr__(self, name, check_real("lqr_weights", name, getattr(self, name),
                                                  minimum=0.0, strict=True))
         for name in ("hub_rate", "tip_deflection", "modal_energy"):
             object.__setattr__(self, name,
-                               _optional_positive("lqr_weights", name, getattr(self, name)))
+                               optional_positive("lqr_weights", name, getattr(self, name)))
         for name in ("hub_angle", "torque", "hub_rate", "tip_deflection", "modal_energy"):
             value = getattr(self, name)
             # the cost squares their inverses: 1e-200 overflows, and weights this far apart
@@ -253,7 +254,7 @@ def lqr_weight_matrices(model, weights: LQRWeights) -> tuple:
     ``x^T Q x = (theta/hub_angle)^2 + (theta_dot/hub_rate)^2 + (tip/tip_deflection)^2
     + E(q, q_dot)/modal_energy`` and ``R = 1/torque^2``, with states in the model's order.
     """
-    model = _model("lqr_weight_matrices", model)
+    model = checked_model("lqr_weight_matrices", model)
     if not isinstance(weights, LQRWeights):
         raise InputTypeError(f"lqr_weight_matrices.weights must be LQRWeights; got "
                              f"{type(weights).__name__}")
@@ -321,8 +322,8 @@ class LQR(ReferenceFeedback):
                                   f"shape {gain.shape}")
         gain.setflags(write=False)
         object.__setattr__(self, "gain", gain)
-        object.__setattr__(self, "layout", _gain_layout("lqr", self.layout, gain.shape[1]))
-        object.__setattr__(self, "spin_rate", _real("lqr", "spin_rate", self.spin_rate))
+        object.__setattr__(self, "layout", gain_layout("lqr", self.layout, gain.shape[1]))
+        object.__setattr__(self, "spin_rate", check_real("lqr", "spin_rate", self.spin_rate))
         super().__post_init__()
 
     @property
@@ -353,7 +354,7 @@ class LQR(ReferenceFeedback):
         torque_limit, deflection_gain, reference numbers]`` (0 for an option that is off, no
         deflection gain for a rigid reference). Compiled runs of LQR laws of one structure (a
         slew of any angle and duration included) share their integrators."""
-        reference, numbers = _reference_parameters(self.reference)
+        reference, numbers = reference_parameters(self.reference)
         structure = (self.layout, reference,
                      self.feedforward_inertia is None, self.torque_limit is None,
                      self.deflection_gain is None)
@@ -384,7 +385,7 @@ class LQR(ReferenceFeedback):
         return self._casadi_apply(-ca.dot(gain, x_design - x_ref), acc, inertia, limit)
 
 
-def _lqr_gain(model, weights, spin_rate, sample_time=None):
+def lqr_gain(model, weights, spin_rate, sample_time=None):
     """Gain and closed-loop poles on the modes the torque moves (:mod:`controllers.controllable`:
     all of them for one beam, where this is ``control.lqr`` of the linearisation)."""
     q_mat, r_mat = lqr_weight_matrices(model, weights)
@@ -438,13 +439,13 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
         (symmetric appendages bending against each other, a free hub's translation;
         :mod:`controllers.controllable`).
     """
-    model = _model("design_lqr", model)
-    spin_rate = _real("design_lqr", "spin_rate", spin_rate)
+    model = checked_model("design_lqr", model)
+    spin_rate = check_real("design_lqr", "spin_rate", spin_rate)
     if sample_time is not None:
-        sample_time = _real("design_lqr", "sample_time", sample_time, minimum=0.0, strict=True)
+        sample_time = check_real("design_lqr", "sample_time", sample_time, minimum=0.0, strict=True)
     with design_failure("lqr", "design_lqr", model, spin_rate, weights=weights,
                         sample_time=sample_time):
-        gain, poles = _lqr_gain(model, weights, spin_rate, sample_time)
+        gain, poles = lqr_gain(model, weights, spin_rate, sample_time)
     law = LQR(gain=gain, reference=reference,
               feedforward_inertia=float(model.rigid_inertia) if feedforward else None,
               torque_limit=torque_limit, spin_rate=spin_rate, poles=poles,
@@ -476,7 +477,7 @@ def closed_loop_poles(model, gain, spin_rate: float = 0.0) -> np.ndarray:
     ndarray, shape (2 N + 2,)
         1/s.
     """
-    model = _model("closed_loop_poles", model)
+    model = checked_model("closed_loop_poles", model)
     a, b = model.linear_matrices(spin_rate)
     gain = check_array("closed_loop_poles", "gain", gain).reshape(1, -1)
     if gain.shape[1] != model.n_states:

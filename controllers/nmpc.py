@@ -56,15 +56,15 @@ import numpy as np
 
 from flexctl.model import DCMotor, Model, ReactionWheel
 from flexctl.model.checks import check_array, check_real
+from flexctl.model.discrete import rk4_function
 from flexctl.model.errors import InputTypeError, InputValueError
-from flexctl.sim.digital import _sample_time
-from flexctl.sim.fixed_step import _jit
+from flexctl.sim.digital import check_sample_time
+from flexctl.sim.fixed_step import jit_compiled
 
 from .actuator_limits import (check_design_model, horizon_constraints, horizon_rows,
                               hub_torque_bound, linearised_horizon_constraints)
-from .lqg import NoiseLevels, _measurement_rows
+from .lqg import NoiseLevels, measurement_rows
 from .plant_state import design_rows
-from .slew_nlp import _rk4_step
 from .spec import MODES, QP_SOLVERS, TERMINALS
 from .trajopt import SlewSolution
 
@@ -89,7 +89,7 @@ def _positive(name, value, optional=False):
     return check_real("nmpc", name, value, minimum=0.0, strict=True, optional=optional)
 
 
-def _hold_function(model: Model, sample_time: float, substeps: int):
+def hold_function(model: Model, sample_time: float, substeps: int):
     """CasADi ``F(x, u)``: the state after one hold of torque ``u`` (N m) over ``sample_time``
     (s), by ``substeps`` RK4 steps of the model's dynamics."""
     import casadi as ca
@@ -102,7 +102,7 @@ def _hold_function(model: Model, sample_time: float, substeps: int):
         sym, f = ca.MX, vectorized
     else:
         sym, f = ca.SX, model.casadi()
-    step = _rk4_step(f, model.n_states, substeps, sym)     # (x, u, h) -> x(h)
+    step = rk4_function(f, model.n_states, substeps, sym)     # (x, u, h) -> x(h)
     x, u = sym.sym("x", model.n_states), sym.sym("u")
     return ca.Function("nmpc_hold", [x, u], [step(x, u, sample_time)])
 
@@ -117,7 +117,7 @@ ANGLE_FRACTION = 0.05 / np.sqrt(10.0)
 TIP_FRACTION = 0.003
 
 
-def _conic(name: str, solver: str, h_sparsity, a_sparsity):
+def conic_solver(name: str, solver: str, h_sparsity, a_sparsity):
     """A quiet CasADi QP solver that reports failure in its stats rather than raising."""
     import casadi as ca
 
@@ -147,14 +147,14 @@ def _default_weights(model: Model, angle: float, torque_limit: float):
     return 1.0 / allowed ** 2, 1.0 / torque_limit ** 2
 
 
-def _state_slice(n: int, j: int) -> slice:
+def state_slice(n: int, j: int) -> slice:
     """``x_j`` in a vector of stages ``[x_0, u_0, x_1, u_1, ..., x_N]`` (``n`` states each):
     the decision variables, and the references ``[r_0, v_0, ..., r_N]``."""
     return slice(j * (n + 1), j * (n + 1) + n)
 
 
-def _input_index(n: int, j: int) -> int:
-    """``u_j`` in a vector of stages (see :func:`_state_slice`)."""
+def input_index(n: int, j: int) -> int:
+    """``u_j`` in a vector of stages (see :func:`state_slice`)."""
     return j * (n + 1) + n
 
 
@@ -168,9 +168,9 @@ def _parameters(par, n: int) -> tuple:
 
 
 def _stages(v, n: int, big_n: int) -> tuple:
-    """The ``N + 1`` states and ``N`` torques of a vector of stages (:func:`_state_slice`)."""
-    return ([v[_state_slice(n, j)] for j in range(big_n + 1)],
-            [v[_input_index(n, j)] for j in range(big_n)])
+    """The ``N + 1`` states and ``N`` torques of a vector of stages (:func:`state_slice`)."""
+    return ([v[state_slice(n, j)] for j in range(big_n + 1)],
+            [v[input_index(n, j)] for j in range(big_n)])
 
 
 def _state_steps(pieces: dict, xs, us, x_meas) -> tuple:
@@ -312,7 +312,7 @@ class NMPC:
                                   f"{self.target!r}")
         object.__setattr__(self, "target", float(self.target))
         object.__setattr__(self, "torque_limit", _positive("torque_limit", self.torque_limit))
-        object.__setattr__(self, "sample_time", _sample_time("nmpc", self.sample_time))
+        object.__setattr__(self, "sample_time", check_sample_time("nmpc", self.sample_time))
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, np.integer)) \
                 or not 2 <= self.horizon <= 500:
             raise InputValueError(f"nmpc.horizon must be an integer in [2, 500] samples; got "
@@ -447,7 +447,7 @@ class NMPC:
 
         model, big_n, n = self.model, self.horizon, self.model.n_states
         sym = ca.MX if model.variant == "exact" else ca.SX
-        hold = _hold_function(model, self.sample_time, self.substeps)
+        hold = hold_function(model, self.sample_time, self.substeps)
         p_mat = self._terminal_weight()
         # decision variables [x_0, u_0, ..., x_{N-1}, u_{N-1}, x_N]; parameters: measured x,
         # previous u, then the references [r_0, v_0, ..., r_N] in the same stage order
@@ -460,7 +460,7 @@ class NMPC:
         g, lbg, ubg = self._nlp_constraints(hold, xs, us, x_meas, u_prev, rx)
         lbw = np.full(w.numel(), -np.inf)
         ubw = np.full(w.numel(), np.inf)
-        u_index = np.array([_input_index(n, j) for j in range(big_n)])
+        u_index = np.array([input_index(n, j) for j in range(big_n)])
         lbw[u_index], ubw[u_index] = -self.hub_torque_limit, self.hub_torque_limit
 
         built = {"n": n, "nw": w.numel(), "u_index": u_index, "lbg": lbg, "ubg": ubg,
@@ -468,10 +468,10 @@ class NMPC:
         built.update(self._condensed(hold, self.state_weights, self.torque_weight, p_mat))
         built["hold"] = built["hold_one"]
         a_sp, h_sp = built["a_sparsity"], built["h_sparsity"]
-        built["qp"] = _conic("nmpc_qp", self.qp_solver, h_sp, a_sp)
+        built["qp"] = conic_solver("nmpc_qp", self.qp_solver, h_sp, a_sp)
         # a degenerate active set (torque and rate bounds both active) can stop an active-set
         # solver; the step is then solved again by the ADMM solver, which does not mind
-        built["qp_fallback"] = (_conic("nmpc_qp_fallback", "osqp", h_sp, a_sp)
+        built["qp_fallback"] = (conic_solver("nmpc_qp_fallback", "osqp", h_sp, a_sp)
                                 if self.qp_solver != "osqp" else None)
         if self.mode == "converged":
             built["nlp"] = ca.nlpsol("nmpc_nlp", "ipopt", {"x": w, "p": par, "f": cost, "g": g},
@@ -572,7 +572,7 @@ class NMPC:
 
         n, big_n = self.model.n_states, self.horizon
         lin_model = self.linearisation_model
-        lin_hold = hold if lin_model is self.model else _hold_function(
+        lin_hold = hold if lin_model is self.model else hold_function(
             lin_model, self.sample_time, self.substeps)
         x, u = ca.SX.sym("x", n), ca.SX.sym("u")
         f = lin_hold(x, u)
@@ -595,7 +595,7 @@ class NMPC:
         if compiled:
             for name, model in (("forward", self.model), ("linear", lin_model),
                                 ("hold_one", self.model)):
-                pieces[name] = _jit(pieces[name], model, any_variant=True)
+                pieces[name] = jit_compiled(pieces[name], model, any_variant=True)
         return pieces
 
     def _condensing(self, pieces, compiled: bool = True) -> dict:
@@ -622,7 +622,7 @@ class NMPC:
              -self.hub_torque_limit - us, self.hub_torque_limit - us, ca.vertcat(*e),
              ca.densify(ca.vertcat(*g_mats))])
         if compiled and big_n >= JIT_CONDENSE_FROM:
-            condense = _jit(condense, self.model, any_variant=True)
+            condense = jit_compiled(condense, self.model, any_variant=True)
         return {"condense": condense, "expand": _expansion(w, n, big_n)}
 
     def _condensed_constraints(self, g_mats, e, xs, us, u_prev, base) -> tuple:
@@ -697,7 +697,7 @@ class NMPC:
         rows = model.layout.projection(self.model.layout)
         session = NMPCSession(self, self._problem(), np.asarray(x0, dtype=float), rows)
         if self.noise is not None:
-            session.filter = _ExtendedKalman(self, _measurement_rows(model),
+            session.filter = _ExtendedKalman(self, measurement_rows(model),
                                              np.asarray(x0, dtype=float)[rows])
         return session
 
@@ -717,12 +717,12 @@ class _ExtendedKalman:
         model = mpc.model
         self.mpc = mpc
         self.plant_rows = plant_rows
-        self.rows = _measurement_rows(model)
+        self.rows = measurement_rows(model)
         x, u = ca.SX.sym("x", model.n_states), ca.SX.sym("u")
-        lin = _hold_function(mpc.linearisation_model, mpc.sample_time, mpc.substeps)(x, u)
-        self.hold = _jit(_hold_function(model, mpc.sample_time, mpc.substeps), model,
+        lin = hold_function(mpc.linearisation_model, mpc.sample_time, mpc.substeps)(x, u)
+        self.hold = jit_compiled(hold_function(model, mpc.sample_time, mpc.substeps), model,
                          any_variant=True)
-        self.jacobians = _jit(ca.Function("nmpc_ekf_jac", [x, u], [ca.jacobian(lin, x),
+        self.jacobians = jit_compiled(ca.Function("nmpc_ekf_jac", [x, u], [ca.jacobian(lin, x),
                                                                     ca.jacobian(lin, u)]),
                               mpc.linearisation_model)
         self.r = mpc.noise.measurement_covariance
@@ -766,7 +766,7 @@ class NMPCSession:
         refs, torques = mpc.reference_at(mpc.sample_time * np.arange(big_n + 1))
         w = np.zeros(built["nw"])
         for j in range(big_n + 1):
-            w[_state_slice(n, j)] = refs[:, j] if mpc.reference is not None else x_design
+            w[state_slice(n, j)] = refs[:, j] if mpc.reference is not None else x_design
         bound = mpc.hub_torque_limit
         w[built["u_index"]] = np.clip(torques[:big_n], -bound, bound)
         self.w = w

@@ -24,23 +24,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexctl.model import Model
-from flexctl.model.checks import check_integer
+from flexctl.model.checks import check_integer, check_real
 from flexctl.model.layout import StateLayout
 
 from flexctl.model.errors import InputValueError
 
 from .feedback import ReferenceFeedback
-from .reference import _casadi_evaluate, _evaluate, _real, _reference_parameters
+from .reference import casadi_evaluate, evaluate_reference, reference_parameters
 
 __all__ = ["PD", "pd_gains", "design_pd"]
 
 
-def _rigid_inertia(owner: str, model_or_inertia) -> float:
+def checked_rigid_inertia(owner: str, model_or_inertia) -> float:
     """``model.rigid_inertia`` of a flexctl Model (``J_0``, about the centre of mass for a
     free hub), or a given inertia (kg m^2, > 0)."""
     if isinstance(model_or_inertia, Model):
         return float(model_or_inertia.rigid_inertia)
-    return _real(owner, "inertia", model_or_inertia, minimum=0.0, strict=True)
+    return check_real(owner, "inertia", model_or_inertia, minimum=0.0, strict=True)
 
 
 #: Outputs a PD law may read (with their rates): the collocated hub angle, the tip angle
@@ -82,8 +82,8 @@ class PD(ReferenceFeedback):
     owner = "pd"
 
     def __post_init__(self):
-        object.__setattr__(self, "kp", _real("pd", "kp", self.kp, minimum=0.0, strict=True))
-        object.__setattr__(self, "kd", _real("pd", "kd", self.kd, minimum=0.0, strict=True))
+        object.__setattr__(self, "kp", check_real("pd", "kp", self.kp, minimum=0.0, strict=True))
+        object.__setattr__(self, "kd", check_real("pd", "kd", self.kd, minimum=0.0, strict=True))
         super().__post_init__()
 
     def state_gain(self, n_modes) -> np.ndarray:
@@ -110,7 +110,7 @@ class PD(ReferenceFeedback):
     def torque(self, t: float, x, z=None) -> float:
         """Hub torque, N m, at time ``t`` (s) for plant state ``x``."""
         theta, rate = self._hub_state(x)
-        angle_ref, rate_ref, acc_ref = _evaluate(self.reference, t)
+        angle_ref, rate_ref, acc_ref = evaluate_reference(self.reference, t)
         return self._apply(self.kp * (angle_ref - theta) + self.kd * (rate_ref - rate), acc_ref)
 
     @property
@@ -119,7 +119,7 @@ class PD(ReferenceFeedback):
         options are on) and its numbers ``[kp, kd, feedforward_inertia, torque_limit,
         reference numbers]`` (0 for an option that is off). Compiled runs of PD laws of one
         structure (a slew of any angle and duration included) share their integrators."""
-        reference, numbers = _reference_parameters(self.reference)
+        reference, numbers = reference_parameters(self.reference)
         structure = (reference, self.feedforward_inertia is None, self.torque_limit is None)
         return structure, np.concatenate(([self.kp, self.kd, self.feedforward_inertia or 0.0,
                                            self.torque_limit or 0.0], numbers))
@@ -132,7 +132,7 @@ class PD(ReferenceFeedback):
             kp, kd, inertia, limit = parameters[0], parameters[1], parameters[2], parameters[3]
             numbers = parameters[4:]
         theta, rate = self._casadi_hub_state(x)
-        angle_ref, rate_ref, acc_ref = _casadi_evaluate(self.reference, t, numbers)
+        angle_ref, rate_ref, acc_ref = casadi_evaluate(self.reference, t, numbers)
         return self._casadi_apply(kp * (angle_ref - theta) + kd * (rate_ref - rate), acc_ref,
                                   inertia, limit)
 
@@ -165,9 +165,9 @@ def pd_gains(model_or_inertia, bandwidth: float, damping_ratio: float = 0.7) -> 
     >>> pd_gains(2.0, bandwidth=3.0, damping_ratio=1.0)
     (18.0, 12.0)
     """
-    inertia = _rigid_inertia("pd_gains", model_or_inertia)
-    w = _real("pd_gains", "bandwidth", bandwidth, minimum=0.0, strict=True)
-    zeta = _real("pd_gains", "damping_ratio", damping_ratio, minimum=0.0, strict=True,
+    inertia = checked_rigid_inertia("pd_gains", model_or_inertia)
+    w = check_real("pd_gains", "bandwidth", bandwidth, minimum=0.0, strict=True)
+    zeta = check_real("pd_gains", "damping_ratio", damping_ratio, minimum=0.0, strict=True,
                  maximum=1.0)
     return inertia * w ** 2, 2.0 * zeta * w * inertia
 

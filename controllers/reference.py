@@ -50,7 +50,7 @@ __all__ = ["SlewProfile", "minimum_slew_duration", "SHAPES"]
 _PEAK_RATE = {"poly7": 35.0 / 16.0, "cycloidal": 2.0}
 
 
-def _optional_positive(owner: str, name: str, value) -> float | None:
+def optional_positive(owner: str, name: str, value) -> float | None:
     """``None`` or a finite number > 0."""
     return _real(owner, name, value, minimum=0.0, strict=True, optional=True)
 
@@ -211,7 +211,7 @@ def minimum_slew_duration(slew_angle: float, inertia: float, torque_limit: float
     return rigid_slew_duration(angle, inertia, limit, shape)
 
 
-def _check_reference(owner: str, reference):
+def check_reference(owner: str, reference):
     """``reference`` must be ``None`` or have callable ``angle``, ``rate``, ``acceleration``."""
     if reference is None:
         return None
@@ -222,7 +222,7 @@ def _check_reference(owner: str, reference):
     return reference
 
 
-def _evaluate(reference, t: float):
+def evaluate_reference(reference, t: float):
     """Reference angle (rad), rate (rad/s) and acceleration (rad/s^2) at ``t``; 0 for None."""
     if reference is None:
         return 0.0, 0.0, 0.0
@@ -232,13 +232,13 @@ def _evaluate(reference, t: float):
             float(reference.acceleration(t)))
 
 
-def _saturate(torque: float, limit: float | None) -> float:
+def saturate(torque: float, limit: float | None) -> float:
     """Clip ``torque`` to ``[-limit, limit]`` (no clipping for ``limit=None``)."""
     return torque if limit is None else min(max(torque, -limit), limit)
 
 
 # ---- CasADi forms of the helpers above, for the compiled simulation path ----------------
-def _has_casadi(source, method: str = "casadi_reference") -> bool:
+def has_casadi(source, method: str = "casadi_reference") -> bool:
     """``source`` is absent or offers a CasADi form ``method`` (and does not disown it)."""
     return source is None or (callable(getattr(source, method, None))
                               and bool(getattr(source, "has_casadi_form", True)))
@@ -254,7 +254,7 @@ def _structure_key(source):
     return source
 
 
-def _reference_parameters(reference) -> tuple:
+def reference_parameters(reference) -> tuple:
     """``(structure, values)`` of a reference inside a compiled law: its own
     ``casadi_parameters`` where it offers them (its numbers then enter as parameters), else
     the reference itself as structure (:func:`_structure_key`) and no numbers."""
@@ -264,9 +264,9 @@ def _reference_parameters(reference) -> tuple:
     return (type(reference), own[0]), np.asarray(own[1], dtype=float).reshape(-1)
 
 
-def _casadi_evaluate(reference, t, parameters=None):
-    """:func:`_evaluate` on the CasADi symbol ``t``; the reference's numbers are the symbols
-    ``parameters`` where given (laid out as :func:`_reference_parameters`)."""
+def casadi_evaluate(reference, t, parameters=None):
+    """:func:`evaluate_reference` on the CasADi symbol ``t``; the reference's numbers are the symbols
+    ``parameters`` where given (laid out as :func:`reference_parameters`)."""
     if reference is None:
         return 0.0, 0.0, 0.0
     if parameters is not None and parameters.numel() > 0:
@@ -274,8 +274,8 @@ def _casadi_evaluate(reference, t, parameters=None):
     return reference.casadi_reference(t)
 
 
-def _casadi_saturate(torque, limit: float | None):
-    """:func:`_saturate` of a CasADi expression."""
+def casadi_saturate(torque, limit: float | None):
+    """:func:`saturate` of a CasADi expression."""
     import casadi as ca
 
     return torque if limit is None else ca.fmin(ca.fmax(torque, -limit), limit)

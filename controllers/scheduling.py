@@ -29,16 +29,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexctl.model.checks import check_array
+from flexctl.model.checks import check_array, check_real
 from flexctl.model.errors import InputValueError
 from flexctl.model.layout import StateLayout
 
 from .controllable import design_failure
 from .feedback import ReferenceFeedback
-from .lqr import (LQRWeights, _gain_layout, _lqr_gain, _model, casadi_reference_state,
+from .lqr import (LQRWeights, gain_layout, lqr_gain, checked_model, casadi_reference_state,
                   casadi_truncate_state, checked_on, reference_state, static_deflection_gain,
                   truncate_state, truncation_matrix)
-from .reference import _real
 
 __all__ = ["ScheduledLQR", "design_scheduled_lqr"]
 
@@ -86,7 +85,7 @@ class ScheduledLQR(ReferenceFeedback):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
         object.__setattr__(self, "layout",
-                           _gain_layout("scheduled_lqr", self.layout, gains.shape[1]))
+                           gain_layout("scheduled_lqr", self.layout, gains.shape[1]))
         super().__post_init__()
 
     @property
@@ -96,7 +95,7 @@ class ScheduledLQR(ReferenceFeedback):
 
     def gain_at(self, spin_rate: float) -> np.ndarray:
         """Interpolated gain at hub rate ``spin_rate`` (rad/s, either sign), shape (1, 2M+2)."""
-        w = abs(_real("scheduled_lqr", "spin_rate", spin_rate))
+        w = abs(check_real("scheduled_lqr", "spin_rate", spin_rate))
         rates = self.spin_rates
         if rates.size == 1 or w <= rates[0]:
             return self.gains[:1].copy()
@@ -150,7 +149,7 @@ def _scheduled_gain(model, weights: LQRWeights, spin_rate: float) -> np.ndarray:
     """The LQR gain of the schedule at ``spin_rate`` (rad/s), shape (1, n)."""
     with design_failure("scheduled lqr", "design_scheduled_lqr", model, spin_rate,
                         weights=weights):
-        return _lqr_gain(model, weights, spin_rate)[0]
+        return lqr_gain(model, weights, spin_rate)[0]
 
 
 def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=None,
@@ -178,7 +177,7 @@ def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=No
     -------
     ScheduledLQR
     """
-    model = _model("design_scheduled_lqr", model)
+    model = checked_model("design_scheduled_lqr", model)
     rates = _spin_rates("design_scheduled_lqr", spin_rates)
     gains = np.vstack([_scheduled_gain(model, weights, float(w)) for w in rates])
     law = ScheduledLQR(spin_rates=rates, gains=gains, reference=reference,

@@ -40,12 +40,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from flexctl.model.checks import check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 
 from flexctl.sim.maneuvers import rigid_slew_duration
 
-from .pd import _rigid_inertia
-from .reference import _real
+from .pd import checked_rigid_inertia
 
 __all__ = ["BangBang", "bang_bang", "Shaper", "zv_shaper", "zvd_shaper", "design_shaper",
            "convolve", "shaper_frequencies",
@@ -81,14 +81,14 @@ class BangBang:
     start_time: float = 0.0
 
     def __post_init__(self):
-        angle = _real("bang_bang", "slew_angle", self.slew_angle)
+        angle = check_real("bang_bang", "slew_angle", self.slew_angle)
         if angle == 0.0:
             raise InputValueError("bang_bang.slew_angle must be nonzero; got 0.0")
         object.__setattr__(self, "slew_angle", angle)
         for name in ("inertia", "peak_torque"):
-            object.__setattr__(self, name, _real("bang_bang", name, getattr(self, name),
+            object.__setattr__(self, name, check_real("bang_bang", name, getattr(self, name),
                                                  minimum=0.0, strict=True))
-        object.__setattr__(self, "start_time", _real("bang_bang", "start_time",
+        object.__setattr__(self, "start_time", check_real("bang_bang", "start_time",
                                                      self.start_time, minimum=0.0))
 
     @property
@@ -158,13 +158,13 @@ def bang_bang(model_or_inertia, slew_angle: float, *, torque_limit: float | None
     start_time : float, optional
         s.
     """
-    inertia = _rigid_inertia("bang_bang", model_or_inertia)
+    inertia = checked_rigid_inertia("bang_bang", model_or_inertia)
     if (torque_limit is None) == (duration is None):
         raise InputValueError("bang_bang needs exactly one of torque_limit and duration; got "
                               f"torque_limit={torque_limit!r}, duration={duration!r}")
     if duration is not None:
-        duration = _real("bang_bang", "duration", duration, minimum=0.0, strict=True)
-        angle = _real("bang_bang", "slew_angle", slew_angle)
+        duration = check_real("bang_bang", "duration", duration, minimum=0.0, strict=True)
+        angle = check_real("bang_bang", "slew_angle", slew_angle)
         torque_limit = 4.0 * abs(angle) * inertia / duration ** 2
     return BangBang(slew_angle=slew_angle, inertia=inertia, peak_torque=torque_limit,
                     start_time=start_time)
@@ -186,8 +186,8 @@ class Shaper:
     amplitudes: tuple
 
     def __post_init__(self):
-        times = tuple(_real("shaper", "times", t) for t in self.times)
-        amps = tuple(_real("shaper", "amplitudes", a, minimum=0.0, strict=True)
+        times = tuple(check_real("shaper", "times", t) for t in self.times)
+        amps = tuple(check_real("shaper", "amplitudes", a, minimum=0.0, strict=True)
                      for a in self.amplitudes)
         if len(times) != len(amps) or not times or times[0] != 0.0 \
                 or any(b <= a for a, b in zip(times, times[1:])):
@@ -206,8 +206,8 @@ class Shaper:
 
 
 def _shaper_terms(owner, frequency, damping_ratio):
-    w = _real(owner, "frequency", frequency, minimum=0.0, strict=True)
-    zeta = _real(owner, "damping_ratio", damping_ratio, minimum=0.0, maximum=1.0)
+    w = check_real(owner, "frequency", frequency, minimum=0.0, strict=True)
+    zeta = check_real(owner, "damping_ratio", damping_ratio, minimum=0.0, maximum=1.0)
     if zeta >= 1.0:
         raise InputValueError(f"{owner}.damping_ratio must be < 1 (an oscillating mode); "
                               f"got {zeta}")

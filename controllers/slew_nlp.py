@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from flexctl.model import DCMotor, ReactionWheel
+from flexctl.model.discrete import rk4_function
 from flexctl.model.errors import InputValueError
 
 from .actuator_limits import hold_voltages, speed_bound, wheel_speed_function
@@ -201,11 +202,6 @@ def resolution_reason(problem, model, disc: Discretisation) -> str | None:
     return None
 
 
-def _rk4_step(f, n: int, substeps: int, symbol=None):
-    from flexctl.model.discrete import rk4_function
-    return rk4_function(f, n, substeps, symbol)
-
-
 def _hold_step(model, disc: Discretisation):
     """``(x, u, h) -> x(h)`` of one hold of the design model: CVODES, or RK4 substeps written
     out and compiled with their derivatives (:func:`with_compiled_derivatives`); where those
@@ -220,12 +216,12 @@ def _hold_step(model, disc: Discretisation):
     if disc.steps_per_hold not in steps:
         step = None
         if 4 * disc.steps_per_hold * plain.n_instructions() <= MAX_INSTRUCTIONS:
-            written = _rk4_step(plain, n, disc.steps_per_hold, ca.SX)
+            written = rk4_function(plain, n, disc.steps_per_hold, ca.SX)
             step = with_compiled_derivatives(written, MAX_HOLD_LIBRARY)
             if step is written and design_dynamics(model) is not plain:
                 step = None             # too long a library: call the compiled dynamics
         if step is None:
-            step = _rk4_step(design_dynamics(model), n, disc.steps_per_hold, ca.MX)
+            step = rk4_function(design_dynamics(model), n, disc.steps_per_hold, ca.MX)
         steps[disc.steps_per_hold] = step
     return steps[disc.steps_per_hold]
 

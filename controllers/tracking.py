@@ -19,7 +19,7 @@ from flexctl.model import Model
 
 from .controllable import design_failure, lqr_on_part
 from .lqr import casadi_truncate_state, truncate_state, truncation_matrix
-from .trajopt import HoldTorque, SlewSolution, _number
+from .trajopt import HoldTorque, SlewSolution, checked_number
 
 __all__ = ["TrajectoryTracker"]
 
@@ -101,9 +101,9 @@ class TrajectoryTracker:
         if q.shape != (model.n_states,) or not np.all(np.isfinite(q)) or np.any(q < 0):
             raise InputValueError(f"state_weights must be {model.n_states} finite numbers >= 0; "
                                   f"got {self.state_weights!r}")
-        r = r_default if self.torque_weight is None else _number("torque_weight",
+        r = r_default if self.torque_weight is None else checked_number("torque_weight",
                                                                  self.torque_weight)
-        _number("torque_limit", self.torque_limit, optional=True)
+        checked_number("torque_limit", self.torque_limit, optional=True)
         # on the modes the torque moves (symmetric appendages, a free hub's translation left)
         with design_failure("trajectory tracker lqr", "TrajectoryTracker", model,
                             state_weights=q, torque_weight=r):

@@ -101,7 +101,7 @@ class TrajectoryOptimizationError(RuntimeError):
         self.iterations = iterations
 
 
-def _number(name, value, *, positive=True, optional=False):
+def checked_number(name, value, *, positive=True, optional=False):
     return check_real("", name, value, minimum=0.0 if positive else None, strict=positive,
                       optional=optional)
 
@@ -201,16 +201,16 @@ class SlewProblem(KeywordOnly):
     degree: int = field(default=3, init=False)
 
     def __post_init__(self):
-        angle = _number("angle", self.angle, positive=False)
+        angle = checked_number("angle", self.angle, positive=False)
         if angle == 0.0:
             raise InputValueError("angle must be non-zero (rad); got 0.0")
         set_ = lambda name, v: object.__setattr__(self, name, v)  # noqa: E731
         set_("angle", angle)
-        set_("duration", _number("duration", self.duration, optional=True))
-        set_("torque_bound", _number("torque_bound", self.torque_bound))
+        set_("duration", checked_number("duration", self.duration, optional=True))
+        set_("torque_bound", checked_number("torque_bound", self.torque_bound))
         set_("n_intervals", _integer("n_intervals", self.n_intervals, 2, MAX_INTERVALS))
         for name in ("torque_rate_bound", "tip_bound", "max_duration"):
-            set_(name, _number(name, getattr(self, name), optional=True))
+            set_(name, checked_number(name, getattr(self, name), optional=True))
         objective = ("time" if self.duration is None else "effort") if self.objective is None \
             else self.objective
         _choice("objective", objective, OBJECTIVES)

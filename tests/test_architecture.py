@@ -213,3 +213,24 @@ def test_top_level_names_load_on_first_use():
     assert flexctl.load_scene.__module__ == "flexctl.app.scenes"
     with pytest.raises(AttributeError, match="no attribute 'nothing'"):
         flexctl.nothing
+
+
+def private_imports(path: Path) -> list:
+    """``(module, name)`` of every ``_private`` name that ``path`` imports from another module
+    (a name one module shares with another is a public name of the lower one)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    return [("." * node.level + (node.module or ""), alias.name) for node in ast.walk(tree)
+            if isinstance(node, ast.ImportFrom) for alias in node.names
+            if alias.name.startswith("_") and not alias.name.startswith("__")]
+
+
+@pytest.mark.parametrize("module", sorted(module_files()), ids=sorted(module_files()))
+def test_no_private_name_is_imported_across_modules(module):
+    found = private_imports(module_files()[module])
+    assert not found, f"{module} imports private names: {found}"
+
+
+def test_private_import_check_catches_one(tmp_path):
+    source = tmp_path / "mod.py"
+    source.write_text("from .compiled import _cached, public\nfrom os import path\n")
+    assert private_imports(source) == [(".compiled", "_cached")]

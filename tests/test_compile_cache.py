@@ -284,7 +284,7 @@ def test_angle_sweep_compiles_once(fresh, slew_model, method):
     from flexctl.sim import compiled as compiled_path
     from flexctl.sim import fixed_step
 
-    fixed_step._STEP_CACHE.clear()
+    fixed_step.STEP_CACHE.clear()
     compiled_path._RHS_CACHE.clear()
     before = compile_cache.STATS["compiles"]
     builds = []
@@ -311,7 +311,7 @@ def test_sine_amplitude_sweep_compiles_once(fresh, slew_model):
     from flexctl.sim import fixed_step
     from flexctl.sim.maneuvers import SineTorque
 
-    fixed_step._STEP_CACHE.clear()
+    fixed_step.STEP_CACHE.clear()
     for k, peak in enumerate((1.0, 2.0, 3.0)):
         sine = SineTorque(peak_torque=peak, duration=2.0)
         result = flexctl.simulate(slew_model, 3.0, sine, method="rk4", check_accuracy=False)
@@ -331,7 +331,7 @@ def test_compiled_and_virtual_machine_runs_agree(fresh, slew_model, monkeypatch)
     runs = []
     for setting in ("1", "0"):
         monkeypatch.setenv("FLEXCTL_COMPILE", setting)
-        fixed_step._STEP_CACHE.clear()
+        fixed_step.STEP_CACHE.clear()
         runs.append(flexctl.simulate(slew_model, 6.0, controller=_pd_slew(slew_model, 0.8),
                                      method="rk4", check_accuracy=False))
     np.testing.assert_allclose(runs[0].states, runs[1].states, rtol=1e-10, atol=1e-12)

@@ -182,7 +182,7 @@ def test_exact_model_steps_compiled_and_agree_with_cvodes(drive, monkeypatch):
     other = flexctl.build_model(stiffer, n_modes=2, variant="exact")
     before = dict(compile_cache.STATS)
     drives = (None, inputs.get("hub_motion"), inputs.get("controller"))
-    fixed_step._step_function(other, *drives, input_numbers(drives).size)
+    fixed_step.step_function(other, *drives, input_numbers(drives).size)
     assert compile_cache.STATS["compiles"] == before["compiles"]
     assert compile_cache.STATS["loads"] == before["loads"]
     assert compile_cache.STATS["hits"] == before["hits"] + 1
@@ -198,11 +198,11 @@ def test_exact_model_steps_compiled_and_agree_with_cvodes(drive, monkeypatch):
     actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
     assert actual <= run.integration_error <= 1e-4 * run.peak_tip_deflection
     monkeypatch.setattr(fixed_step, "USE_JIT", False)
-    fixed_step._STEP_CACHE.clear()
+    fixed_step.STEP_CACHE.clear()
     try:
         machine = flexctl.simulate(model, t_final, method="rk4", rtol=1e-4,
                                    check_validity=False, **inputs)
     finally:
-        fixed_step._STEP_CACHE.clear()
+        fixed_step.STEP_CACHE.clear()
     assert np.allclose(machine.tip_deflection, run.tip_deflection, rtol=0.0,
                        atol=1e-12 * run.peak_tip_deflection)

@@ -16,7 +16,7 @@ from flexctl.model.checks import check_array
 from flexctl.model.errors import InputTypeError
 from flexctl.sim.digital import ZeroOrderHold, is_sampled
 
-from .program import ControllerProgram, ExportRefused, _output
+from .program import ControllerProgram, ExportRefused, plant_output
 
 __all__ = ["program_for"]
 
@@ -50,8 +50,8 @@ def program_for(controller, plant, *, sample_time: float | None = None,
     if not isinstance(plant, Model):
         raise InputTypeError(f"export plant must be a flexctl Model; got {type(plant).__name__}")
     if sample_time is not None:
-        from flexctl.sim.digital import _sample_time
-        sample_time = _sample_time("export", sample_time)
+        from flexctl.sim.digital import check_sample_time
+        sample_time = check_sample_time("export", sample_time)
     x0 = np.zeros(plant.n_states) if initial_state is None else check_array(
         "export", "initial_state", initial_state, shape=(plant.n_states,))
     return _dispatch(controller, plant, sample_time, x0)
@@ -142,10 +142,10 @@ def _tracker_torque(tracker, t, x):
     which rounds differently where the error is small against ``K x``)."""
     import casadi as ca
 
-    from .nmpc_program import _hermite_rows
+    from .nmpc_program import hermite_rows
 
     solution, hold = tracker.solution, tracker._feedforward
-    optimal = _hermite_rows(t, np.asarray(solution.t, dtype=float),
+    optimal = hermite_rows(t, np.asarray(solution.t, dtype=float),
                             np.asarray(solution._hermite))
     rows = tracker._rows(x.numel())
     if rows is None:
@@ -168,7 +168,7 @@ def _static_program(controller, plant, sample_time) -> ControllerProgram:
     kind, law, t, x, u = _static_law_expression(controller, plant)
     m = ca.SX.sym("m", 0)
     step = ca.Function("step", [t, x, m], [u, m], ["t", "v", "m"], ["u", "m_next"])
-    name, unit = _output(plant)
+    name, unit = plant_output(plant)
     return ControllerProgram(
         kind=kind, step=step, recover=None, input_names=tuple(plant.state_names),
         input_kind="state", output_name=name, output_unit=unit, memory_init=np.zeros(0),

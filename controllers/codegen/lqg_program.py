@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .program import ControllerProgram, ExportRefused, _output
+from .program import ControllerProgram, ExportRefused, plant_output
 
 __all__ = ["lqg_program"]
 
@@ -34,7 +34,7 @@ def lqg_program(lqg, plant, sample_time, x0) -> ControllerProgram:
     z_next = ca.mtimes(ca.DM(sampled.phi), z) + ca.mtimes(ca.DM(sampled.gamma),
                                                           ca.vertcat(u, y))
     step = ca.Function("step", [t, y, z], [u, z_next], ["t", "v", "m"], ["u", "m_next"])
-    name, unit = _output(plant)
+    name, unit = plant_output(plant)
     return ControllerProgram(
         kind="lqg", step=step, recover=None, input_names=tuple(measured_outputs(plant)),
         input_kind="measurement", output_name=name, output_unit=unit,

@@ -25,7 +25,7 @@ import numpy as np
 
 from flexctl.model.errors import InputValueError
 
-from .program import ControllerProgram, ExportRefused, _output
+from .program import ControllerProgram, ExportRefused, plant_output
 
 __all__ = ["nmpc_program"]
 
@@ -49,7 +49,7 @@ def _all_finite(v):
     return ca.sum1(ok) >= v.numel()
 
 
-def _hermite_rows(t, grid, coef):
+def hermite_rows(t, grid, coef):
     """``state_at(t)`` of a :class:`~controllers.trajopt.SlewSolution` (its grid, Hermite
     coefficients (K, 4, n)), shape (n, 1)."""
     import casadi as ca
@@ -94,7 +94,7 @@ def _reference(mpc, t):
     time = ca.SX.sym("t")
     held = (_impulse_at(time + step, edges, impulse) - _impulse_at(time, edges, impulse)) / step
     at = ca.Function("nmpc_reference", [time],
-                     [ca.vertcat(_hermite_rows(time, grid, coef), held)])
+                     [ca.vertcat(hermite_rows(time, grid, coef), held)])
     stages = at.map(big_n + 1)(ca.repmat(t, 1, big_n + 1)
                                + ca.DM(step * np.arange(big_n + 1)).T)      # (n + 1, N + 1)
     return ca.vertcat(ca.vec(stages[:, :big_n]), stages[:n, big_n])
@@ -105,14 +105,14 @@ def _first_guess(mpc, built, x_design):
     reference, or ``x_design`` held."""
     import casadi as ca
 
-    from controllers.nmpc import _state_slice
+    from controllers.nmpc import state_slice
 
     n, big_n = built["n"], mpc.horizon
     if mpc.reference is not None:
         refs, torques = mpc.reference_at(mpc.sample_time * np.arange(big_n + 1))
         w = np.zeros(built["nw"])
         for j in range(big_n + 1):
-            w[_state_slice(n, j)] = refs[:, j]
+            w[state_slice(n, j)] = refs[:, j]
         bound = mpc.hub_torque_limit
         w[built["u_index"]] = np.clip(torques[:big_n], -bound, bound)
         return ca.DM(w)
@@ -137,16 +137,16 @@ class _Filter:
     def __init__(self, mpc, plant, x0_design):
         import casadi as ca
 
-        from controllers.lqg import _measurement_rows
-        from controllers.nmpc import _hold_function
+        from controllers.lqg import measurement_rows
+        from controllers.nmpc import hold_function
 
         model = mpc.model
         n = model.n_states
         self.n = n
-        self.plant_rows = _measurement_rows(plant)
-        self.rows = _measurement_rows(model)
+        self.plant_rows = measurement_rows(plant)
+        self.rows = measurement_rows(model)
         x, u = ca.MX.sym("x", n), ca.MX.sym("u")
-        lin = _hold_function(mpc.linearisation_model, mpc.sample_time, mpc.substeps)(x, u)
+        lin = hold_function(mpc.linearisation_model, mpc.sample_time, mpc.substeps)(x, u)
         self.jacobians = ca.Function("nmpc_ekf_jac", [x, u], [ca.jacobian(lin, x),
                                                                ca.jacobian(lin, u)])
         self.r = np.asarray(mpc.noise.measurement_covariance, dtype=float)
@@ -176,19 +176,19 @@ def nmpc_program(mpc, plant, x0) -> ControllerProgram:
     """The :class:`~controllers.codegen.program.ControllerProgram` of ``mpc`` on ``plant``."""
     import casadi as ca
 
-    from controllers.nmpc import _conic, _input_index
+    from controllers.nmpc import conic_solver, input_index
 
     _check(mpc, plant)
     mpc._problem()          # validates and sets the sizes
     model, big_n = mpc.model, mpc.horizon
     n = model.n_states
     built = dict(mpc._built)
-    from controllers.nmpc import _hold_function
+    from controllers.nmpc import hold_function
 
-    hold = _hold_function(model, mpc.sample_time, mpc.substeps)
+    hold = hold_function(model, mpc.sample_time, mpc.substeps)
     pieces = mpc._condensed(hold, mpc.state_weights, mpc.torque_weight,
                             mpc._terminal_weight(), compiled=False)
-    qp = _conic("nmpc_qp", "qrqp", pieces["h_sparsity"], pieces["a_sparsity"])
+    qp = conic_solver("nmpc_qp", "qrqp", pieces["h_sparsity"], pieces["a_sparsity"])
     nw = built["nw"]
     rows = plant.layout.projection(model.layout)
     ekf = None if mpc.noise is None else _Filter(mpc, plant, np.asarray(x0, dtype=float)[rows])
@@ -215,7 +215,7 @@ def nmpc_program(mpc, plant, x0) -> ControllerProgram:
 
     def finish(plan, name):
         bound = mpc.hub_torque_limit
-        u = ca.fmin(ca.fmax(plan[_input_index(n, 0)], -bound), bound)
+        u = ca.fmin(ca.fmax(plan[input_index(n, 0)], -bound), bound)
         if mpc.torque_rate_limit is not None:
             step = mpc.torque_rate_limit * mpc.sample_time
             u = ca.if_else(started, ca.fmin(ca.fmax(u, u_prev - step), u_prev + step), u)
@@ -230,7 +230,7 @@ def nmpc_program(mpc, plant, x0) -> ControllerProgram:
     else:
         from controllers.lqg import measured_outputs
         names, kind, matrix = tuple(measured_outputs(plant)), "measurement", ekf.plant_rows
-    out_name, unit = _output(plant)
+    out_name, unit = plant_output(plant)
     return ControllerProgram(
         kind="nmpc", step=finish(planned, "step"), recover=finish(guess, "recover"),
         input_names=names, input_kind=kind, output_name=out_name, output_unit=unit,

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .program import ControllerProgram, ExportRefused, _output
+from .program import ControllerProgram, ExportRefused, plant_output
 
 __all__ = ["observed_program"]
 
@@ -107,7 +107,7 @@ def observed_program(observed, plant, x0, inner: ControllerProgram) -> Controlle
     memory = np.concatenate((session._z, session._p.reshape(-1, order="F"), np.zeros(history),
                              [0.0], inner.memory_init))
     name, unit = (inner.output_name, inner.output_unit) if inner.output_name == "voltage" \
-        else _output(plant)
+        else plant_output(plant)
     return ControllerProgram(
         kind=inner.kind, step=finish(inner.step, "step"),
         recover=None if inner.recover is None else finish(inner.recover, "recover"),

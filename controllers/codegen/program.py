@@ -118,7 +118,7 @@ class ProgramSession:
         return u
 
 
-def _output(plant, voltage: bool = False) -> tuple:
+def plant_output(plant, voltage: bool = False) -> tuple:
     """(name, unit) of the command a law gives ``plant``."""
     if voltage:
         return "voltage", "V"

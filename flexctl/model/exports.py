@@ -121,7 +121,7 @@ def _parametric_outputs(model, keys):
     return parametric_casadi(model, keys, outputs=True)
 
 
-def _symbolic_dynamics(model, x, u):
+def symbolic_dynamics(model, x, u):
     """CasADi expression of ``dx/dt`` in the symbols ``x`` (n,) and ``u`` (1,)."""
     import casadi as ca
 
@@ -144,7 +144,7 @@ def _symbolic_dynamics(model, x, u):
     return model.layout.join(theta=w, q=qd, theta_dot=theta_tt, q_dot=q_tt)
 
 
-def _symbolic_beam_dynamics(model, y, rate, acceleration):
+def symbolic_beam_dynamics(model, y, rate, acceleration):
     """CasADi ``d[q, q_dot]/dt`` under prescribed hub ``rate`` and ``acceleration``."""
     import casadi as ca
 
@@ -194,7 +194,7 @@ def to_casadi(model, sx: bool = True):
     x = sym("x", model.n_states)
     u = sym("u", 1)
     return ca.Function(f"flexctl_{model.variant}_N{model.n_modes}", [x, u],
-                       [_symbolic_dynamics(model, x, u)], ["x", "u"], ["xdot"])
+                       [symbolic_dynamics(model, x, u)], ["x", "u"], ["xdot"])
 
 
 def dynamics_jacobians(model, x0, u0=0.0) -> tuple:

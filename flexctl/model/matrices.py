@@ -56,7 +56,7 @@ def tension(system: HubBeam, x) -> np.ndarray:
     return n
 
 
-def _quadrature(system: HubBeam, n_modes: int):
+def beam_quadrature(system: HubBeam, n_modes: int):
     """Gauss-Legendre nodes (m) and weights over the beam, cut at every mass position."""
     l = system.beam.length
     cuts = sorted({0.0, l, *(m.position for m in system.masses)})
@@ -96,7 +96,7 @@ def condensed_hub_inertia(system: HubBeam, n_modes: int) -> float:
     """
     beam, b = system.beam, system.hub.radius
     l = beam.length
-    x, w = _quadrature(system, n_modes)
+    x, w = beam_quadrature(system, n_modes)
     positions = np.concatenate((x, [m.position for m in system.masses]))
     weights = np.concatenate((beam.linear_density * w, [m.mass for m in system.masses]))
     keep = weights > 0.0
@@ -172,7 +172,7 @@ def _assemble(system: HubBeam, n_modes: int) -> ModalMatrices:
     z = cantilever_roots(n_modes)
     omega = z ** 2 * np.sqrt(ei / (rho_a * l ** 4))
 
-    x, w = _quadrature(system, n_modes)
+    x, w = beam_quadrature(system, n_modes)
     phi = mode_shapes(n_modes, x / l)
     dphi = mode_shapes(n_modes, x / l, derivative=1, length=l)
 

@@ -36,7 +36,7 @@ import scipy.linalg
 from .checks import check_integer
 from .errors import InputTypeError, InputValueError
 from .exact import EXACT_MAX_MODES
-from .matrices import ModalMatrices, _quadrature, assemble, condensed_hub_inertia
+from .matrices import ModalMatrices, beam_quadrature, assemble, condensed_hub_inertia
 from .modes import mode_shapes
 from .structure import Structure
 
@@ -122,7 +122,7 @@ class StructureMatrices:
 def _mode_first_moment(part: ModalMatrices) -> np.ndarray:
     """``s = rhoA int phi + sum_j m_j phi(d_j)``, kg, shape (N_k,)."""
     system, n = part.system, part.n_modes
-    x, w = _quadrature(system, n)
+    x, w = beam_quadrature(system, n)
     l = system.beam.length
     s = system.beam.linear_density * (mode_shapes(n, x / l) @ w)
     for m in system.masses:

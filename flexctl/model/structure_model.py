@@ -35,7 +35,7 @@ from .errors import InputValueError
 from .exports import signal_names
 from .layout import StateLayout
 from .structure_dynamics import structure_functions
-from .variants import Model, SingularMassMatrixError, _at_operating_point, _spin, _system_name
+from .variants import Model, SingularMassMatrixError, at_operating_point, checked_spin, system_name
 
 __all__ = ["StructureModel", "output_names"]
 
@@ -291,7 +291,7 @@ class StructureModel(Model):
 
     # ------------------------------------------------------------------ linear analysis
     def _spin_for(self, spin_rate, what: str) -> float:
-        spin_rate = _spin(spin_rate)
+        spin_rate = checked_spin(spin_rate)
         if spin_rate != 0.0 and self.system.free:
             raise InputValueError(
                 f"spin_rate must be 0 for the {what} of a free hub; got {spin_rate!r}: at a "
@@ -302,7 +302,7 @@ class StructureModel(Model):
     def stiffness_matrix(self, spin_rate: float = 0.0) -> np.ndarray:
         """Beam stiffness at a steady spin, ``K_ff - spin_rate^2 D``, N/m, shape (N, N)
         (for a free hub: its beams' stiffness while the hub is held spinning)."""
-        spin_rate = _spin(spin_rate)
+        spin_rate = checked_spin(spin_rate)
         return self.matrices.K_ff - spin_rate ** 2 * self._c["stiff_d"]
 
     def second_order_form(self, spin_rate: float = 0.0):
@@ -321,7 +321,7 @@ class StructureModel(Model):
             raise InputValueError(f"hub must be 'clamped' or 'free'; got {hub!r}")
         # a free hub held spinning has clamped beams; turning freely it has no steady spin
         spin_rate = self._spin_for(spin_rate, "natural frequencies") if hub == "free" \
-            else _spin(spin_rate)
+            else checked_spin(spin_rate)
         stiff = self.stiffness_matrix(spin_rate)
         mass = self.rest_mass_matrix()
         n_h = mass.shape[0] - self.matrices.n_modes
@@ -343,13 +343,13 @@ class StructureModel(Model):
         import control
 
         if x0 is not None or u0 is not None:
-            return _at_operating_point(self, spin_rate, x0, u0)
+            return at_operating_point(self, spin_rate, x0, u0)
         spin_rate = self._spin_for(spin_rate, "linearisation")
         a, b = self.linear_matrices(spin_rate)
         plant = control.ss(a, b, self.output_matrix, np.zeros((len(self.output_names), 1)),
                           states=signal_names(self.state_names), inputs=list(self.input_names),
                           outputs=signal_names(self.output_names),
-                          name=_system_name(f"{self.variant}_structure_spin{spin_rate:g}"))
+                          name=system_name(f"{self.variant}_structure_spin{spin_rate:g}"))
 
         # which modes the torque moves and each output sees, beside the plant
         plant.modal_visibility = self.modal_visibility(spin_rate)

@@ -286,13 +286,13 @@ class Model:
         """
         import casadi as ca
 
-        from .exports import _symbolic_beam_dynamics
+        from .exports import symbolic_beam_dynamics
 
         n = self.n_modes
         ym, rate, acc = ca.MX.sym("y", 2 * n), ca.MX.sym("rate"), ca.MX.sym("acceleration")
         if self.variant != "exact":
             return ca.Function("flexctl_beam", [ym, rate, acc],
-                               [_symbolic_beam_dynamics(self, ym, rate, acc)],
+                               [symbolic_beam_dynamics(self, ym, rate, acc)],
                                ["y", "rate", "acceleration"], ["ydot"])
         q_tt = (self.geometry.beam if evaluate is None else evaluate)(ym[:n], ym[n:], rate, acc)
         return ca.Function(f"flexctl_exact_beam_newton_N{n}", [ym, rate, acc],
@@ -308,7 +308,7 @@ class Model:
         if key not in self._c:
             import casadi as ca
 
-            from .exports import _symbolic_beam_dynamics
+            from .exports import symbolic_beam_dynamics
 
             # the same kind of model on the same matrices (a structure's, an actuated one's)
             linear = dataclasses.replace(self, variant="first_order")
@@ -324,7 +324,7 @@ class Model:
                 n = self.n_modes
                 y, rate, acc, out = (ca.SX.sym("y", 2 * n), ca.SX.sym("rate"),
                                      ca.SX.sym("acceleration"), ca.SX.sym("out", 2 * n))
-                ydot = _symbolic_beam_dynamics(linear, y, rate, acc)
+                ydot = symbolic_beam_dynamics(linear, y, rate, acc)
                 names, args = ["y", "rate", "acceleration", "out_ydot"], [y, rate, acc, out]
                 outputs = [ca.jacobian(ydot, v) for v in (y, rate, acc)]
                 out_names = ["jac_ydot_y", "jac_ydot_rate", "jac_ydot_acceleration"]
@@ -550,7 +550,7 @@ class Model:
         """Beam stiffness at a steady spin, ``K_ff - spin_rate^2 D``, N/m, shape (N, N).
 
         The exact variant's linearisation has the stiffness of first_order."""
-        spin_rate = _spin(spin_rate)
+        spin_rate = checked_spin(spin_rate)
         return self.matrices.K_ff - spin_rate ** 2 * self._c["stiff_d"]
 
     def second_order_form(self, spin_rate: float = 0.0):
@@ -563,7 +563,7 @@ class Model:
         mass, stiffness, damping : ndarray, shape (n_c, n_c)
         load : ndarray, shape (n_c,)
         """
-        spin_rate = _spin(spin_rate)
+        spin_rate = checked_spin(spin_rate)
         layout = self.layout
         # the coordinate block keeps the state's order: layout.q and layout.theta index both
         n_c, q, hub = layout.n_coordinates, layout.q, layout.theta
@@ -607,7 +607,7 @@ class Model:
             A mode that has lost its stiffness (zero_order above its first clamped frequency)
             is returned as a negative number whose magnitude is its exponential growth rate, 1/s.
         """
-        spin_rate = _spin(spin_rate)
+        spin_rate = checked_spin(spin_rate)
         if not isinstance(hub, str) or hub not in ("clamped", "free"):
             raise InputValueError(f"hub must be 'clamped' or 'free'; got {hub!r}")
         key = ("frequencies", hub, spin_rate)
@@ -652,12 +652,12 @@ class Model:
         import control
 
         if x0 is not None or u0 is not None:
-            return _at_operating_point(self, spin_rate, x0, u0)
+            return at_operating_point(self, spin_rate, x0, u0)
         a, b = self.linear_matrices(spin_rate)
         plant = control.ss(a, b, self.output_matrix, np.zeros((len(self.output_names), 1)),
                           states=signal_names(self.state_names), inputs=list(self.input_names),
                           outputs=signal_names(self.output_names),
-                          name=_system_name(f"{self.variant}_N{self.n_modes}_spin{spin_rate:g}"))
+                          name=system_name(f"{self.variant}_N{self.n_modes}_spin{spin_rate:g}"))
         # which modes the torque moves and each output sees, beside the plant
         plant.modal_visibility = self.modal_visibility(spin_rate)
         return plant
@@ -734,7 +734,7 @@ class Model:
         return self._c["casadi"]
 
 
-def _at_operating_point(model, spin_rate, x0, u0):
+def at_operating_point(model, spin_rate, x0, u0):
     """:func:`~flexctl.model.exports.linearize_at`, the operating point given once."""
     from .exports import linearize_at
 
@@ -745,12 +745,12 @@ def _at_operating_point(model, spin_rate, x0, u0):
                         0.0 if u0 is None else u0)
 
 
-def _system_name(text: str) -> str:
+def system_name(text: str) -> str:
     """A python-control system name (no dots allowed): ``1.5`` -> ``1p5``, ``-2`` -> ``m2``."""
     return text.replace(".", "p").replace("-", "m")
 
 
-def _spin(spin_rate) -> float:
+def checked_spin(spin_rate) -> float:
     spin_rate = check_real("", "spin_rate", spin_rate)
     if abs(spin_rate) > MAX_SPIN_RATE:
         # spin_rate^2 times the modal matrices overflowed (OverflowError at 1e300 rad/s)

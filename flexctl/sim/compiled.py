@@ -32,7 +32,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from ..model.exports import _symbolic_beam_dynamics, _symbolic_dynamics
+from ..model.exports import symbolic_beam_dynamics, symbolic_dynamics
 from ..model.errors import InputValueError
 from .buffers import InPlace
 from .native_rhs import compiles_prescribed, integration_beam, integration_rhs, native_dae
@@ -127,7 +127,7 @@ def input_numbers(inputs) -> np.ndarray:
     return np.concatenate([_parameter_values(source) for source in inputs])
 
 
-def _split_numbers(inputs, c) -> list:
+def split_numbers(inputs, c) -> list:
     """``c`` (a CasADi symbol laid out as :func:`input_numbers`) cut into each input's part
     (None for an input without parameters)."""
     parts, start = [], 0
@@ -140,7 +140,7 @@ def _split_numbers(inputs, c) -> list:
 
 def _applied_torque(t, x, z, torque, controller, parameters=(None, None)):
     """CasADi hub torque of ``torque`` plus ``controller``; ``parameters`` holds each one's
-    numbers as symbols (:func:`_split_numbers`; None: its numbers are constants)."""
+    numbers as symbols (:func:`split_numbers`; None: its numbers are constants)."""
     u = 0.0
     torque_numbers, controller_numbers = parameters
     if torque is not None:
@@ -175,7 +175,7 @@ def drive_size(model, hub_motion=None, controller=None) -> int:
     return model.n_states + int(getattr(controller, "n_states", 0) or 0)
 
 
-def _closed_loop_dynamics(model, t, y, torque, controller, parameters=None, rhs=None):
+def closed_loop_dynamics(model, t, y, torque, controller, parameters=None, rhs=None):
     """CasADi ``d[x, z]/dt`` of the plant ``x`` under ``torque`` and ``controller``, whose
     internal states ``z`` (if any) follow ``casadi_derivative``; ``parameters`` the symbol of
     their numbers (:func:`input_numbers` of ``(torque, None, controller)``). On SX symbols the
@@ -184,22 +184,22 @@ def _closed_loop_dynamics(model, t, y, torque, controller, parameters=None, rhs=
     :meth:`flexctl.Model.integration_rhs`, whose code does not grow with the quadrature."""
     import casadi as ca
 
-    u, dz = _drive_terms(model, t, y, torque, controller, parameters)
+    u, dz = drive_terms(model, t, y, torque, controller, parameters)
     x = y[:model.n_states]
     if isinstance(x, ca.MX):
         dx = (model.integration_rhs() if rhs is None else rhs)(x, u)
     else:
-        dx = _symbolic_dynamics(model, x, ca.vertcat(u))
+        dx = symbolic_dynamics(model, x, ca.vertcat(u))
     return dx if dz is None else ca.vertcat(dx, dz)
 
 
-def _drive_terms(model, t, y, torque, controller, parameters=None) -> tuple:
+def drive_terms(model, t, y, torque, controller, parameters=None) -> tuple:
     """The hub torque ``u`` and the controller's ``dz/dt`` (None without internal states) at
     ``y = [x, z]``, as CasADi expressions."""
     x, z = y[:model.n_states], y[model.n_states:]
     numbers = (None, None)
     if parameters is not None:
-        numbers = tuple(_split_numbers((torque, None, controller), parameters)[::2])
+        numbers = tuple(split_numbers((torque, None, controller), parameters)[::2])
     u = _applied_torque(t, x, z, torque, controller, numbers)
     if controller is not None and getattr(controller, "n_states", 0):
         return u, controller.casadi_derivative(t, x, z)
@@ -241,8 +241,8 @@ def _drive_symbols(model, scale, inputs, n_numbers) -> tuple:
     t_in = ca.fmin(p[0] + tau * p[1], p[2])
     if hub_motion is not None:
         return ys, tau, p, y, list(hub_motion_casadi(hub_motion, t_in,
-                                                     _split_numbers(inputs, p[3:])[1]))
-    u, dz = _drive_terms(model, t_in, y, torque, controller, p[3:])
+                                                     split_numbers(inputs, p[3:])[1]))
+    u, dz = drive_terms(model, t_in, y, torque, controller, p[3:])
     return ys, tau, p, y, [ca.vertcat(u)] + ([] if dz is None else [dz])
 
 
@@ -252,10 +252,10 @@ def _model_dynamics(model, y, terms, prescribed: bool, inline: bool):
     import casadi as ca
 
     if prescribed:
-        return (_symbolic_beam_dynamics(model, y, *terms) if inline
+        return (symbolic_beam_dynamics(model, y, *terms) if inline
                 else integration_beam(model)(y, *terms))
     x = y[:model.n_states]
-    dx = (_symbolic_dynamics(model, x, terms[0]) if inline
+    dx = (symbolic_dynamics(model, x, terms[0]) if inline
           else integration_rhs(model)(x, terms[0]))
     return dx if len(terms) == 1 else ca.vertcat(dx, terms[1])
 
@@ -274,7 +274,7 @@ def _immutable(source) -> bool:
     return source is None or (params is not None and params.frozen)
 
 
-def _input_key(model, inputs, scale):
+def input_key(model, inputs, scale):
     """Cache key of a right-hand side, or None when an input may change after use.
 
     Inputs count by identity, except parametric ones (:func:`_parametric`), which count by
@@ -288,7 +288,7 @@ def _input_key(model, inputs, scale):
     return (id(model), *parts, scale.tobytes())
 
 
-def _cached(cache, size, key, keep_alive, build):
+def cached_build(cache, size, key, keep_alive, build):
     """``build()``, remembered under ``key`` (None: not remembered). ``keep_alive`` holds the
     objects whose ``id`` is in the key, so that no other object can take their ids."""
     if key is None:
@@ -345,8 +345,8 @@ def numeric_rhs(model, torque=None, hub_motion=None, controller=None):
     n_y = drive_size(model, hub_motion, controller)
     scale = np.ones(n_y)
     inputs = (torque, hub_motion, controller)
-    rhs_key = _input_key(model, inputs, scale)
-    rhs = _cached(_RHS_CACHE, RHS_CACHE_SIZE, rhs_key, (model, *inputs),
+    rhs_key = input_key(model, inputs, scale)
+    rhs = cached_build(_RHS_CACHE, RHS_CACHE_SIZE, rhs_key, (model, *inputs),
                   lambda: _rhs_function(model, scale, *inputs))
     # a buffer evaluates in about 2 microseconds where a Python call of the Function takes
     # some 150 (argument conversion)
@@ -395,15 +395,15 @@ def torque_history(model, t, states, controller_states, torque=None, controller=
         ts, x, z = ca.SX.sym("t"), ca.SX.sym("x", model.n_states), ca.SX.sym("z", nz)
         c = ca.SX.sym("c", numbers.size)
         u = ca.SX(_applied_torque(ts, x, z, torque, controller,
-                                  tuple(_split_numbers(inputs, c)[::2])))
+                                  tuple(split_numbers(inputs, c)[::2])))
         return ca.Function("flexctl_torque", [ts, x, z, c], [u])
 
-    key = _input_key(model, (torque, None, controller), np.array([nz], dtype=float))
-    law = _cached(_RHS_CACHE, RHS_CACHE_SIZE, None if key is None else ("torque", key),
+    key = input_key(model, (torque, None, controller), np.array([nz], dtype=float))
+    law = cached_build(_RHS_CACHE, RHS_CACHE_SIZE, None if key is None else ("torque", key),
                   (model, torque, controller), build)
     t = np.asarray(t, dtype=float).reshape(1, -1)
     # the map over a run's points, kept with the law: building it costs more than calling it
-    mapped = _cached(_RHS_CACHE, RHS_CACHE_SIZE,
+    mapped = cached_build(_RHS_CACHE, RHS_CACHE_SIZE,
                      None if key is None else ("torque map", key, t.size),
                      (model, torque, controller), lambda: law.map(t.size))
     return np.array(mapped(t, states, controller_states,
@@ -462,8 +462,8 @@ class SegmentIntegrator:
         scale = np.asarray(scale, dtype=float)
         t_out = np.asarray(t_out, dtype=float)
         inputs = (torque, hub_motion, controller)
-        rhs_key = _input_key(model, inputs, scale)
-        rhs = _cached(_RHS_CACHE, RHS_CACHE_SIZE, rhs_key, (model, *inputs),
+        rhs_key = input_key(model, inputs, scale)
+        rhs = cached_build(_RHS_CACHE, RHS_CACHE_SIZE, rhs_key, (model, *inputs),
                       lambda: _rhs_function(model, scale, *inputs))
         t_start, t_end = float(t_start), float(t_out[-1])
         length = t_end - t_start
@@ -491,7 +491,7 @@ class SegmentIntegrator:
                             *input_numbers(inputs)]
         # called through numpy buffers (InPlace): some 60 us a call less than with a dict,
         # which a sample loop makes thousands of times
-        self._run = _cached(_INTEGRATOR_CACHE, INTEGRATOR_CACHE_SIZE, key, (model, *inputs),
+        self._run = cached_build(_INTEGRATOR_CACHE, INTEGRATOR_CACHE_SIZE, key, (model, *inputs),
                             lambda: InPlace(ca.integrator(
                                 f"flexctl_{solver}", solver, rhs, 0.0,
                                 [float(v) for v in fractions], opts)))

@@ -48,10 +48,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .compiled import _cached, _input_key, input_numbers, is_symbolic
+from .compiled import cached_build, input_key, input_numbers, is_symbolic
 from .compile_cache import compiled_source, compiling_enabled, compiler, lift_constants
 from .embedded_rk import CompiledRun, checked_run_arguments
-from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _drive_symbols
+from .fixed_step import STEP_CACHE, STEP_CACHE_SIZE, drive_symbols
 from .native_rhs import MAX_DAE_INSTRUCTIONS, MAX_INSTRUCTIONS
 from ..model.errors import InputValueError
 
@@ -86,12 +86,12 @@ def _functions(model, inputs, n_numbers: int) -> dict | None:
     differences); the numbers ``f_values``, ``j_values``; ``defines`` of the C template."""
     import casadi as ca
 
-    from .compiled import _drive_terms, _split_numbers, hub_motion_casadi
+    from .compiled import drive_terms, split_numbers, hub_motion_casadi
     from .compile_cache import compiled, entry_point
-    from .fixed_step import _lifted_core
+    from .fixed_step import lifted_core
 
     torque, hub_motion, controller = inputs
-    drive = _drive_symbols(model, torque, hub_motion, controller, n_numbers)
+    drive = drive_symbols(model, torque, hub_motion, controller, n_numbers)
     ny, c = drive["ny"], drive["c"]
     ts, ys = ca.SX.sym("t"), ca.SX.sym("y", ny)
     out = {"defines": {}, "address": 0.0, "keep": None}
@@ -103,7 +103,7 @@ def _functions(model, inputs, n_numbers: int) -> dict | None:
         f_function, f_values = lifted
         twin = drive
     else:
-        lifted = _lifted_core(model, hub_motion)
+        lifted = lifted_core(model, hub_motion)
         core = None if lifted is None else compiled(lifted[0], label=lifted[0].name())
         point = None if core is None else entry_point(core)
         if point is None:
@@ -111,9 +111,9 @@ def _functions(model, inputs, n_numbers: int) -> dict | None:
         cs = ca.SX.sym("c", n_numbers)
         if hub_motion is not None:
             own = ca.vertcat(*hub_motion_casadi(hub_motion, ts,
-                                                _split_numbers(inputs, cs)[1]))
+                                                split_numbers(inputs, cs)[1]))
         else:
-            u, dz = _drive_terms(model, ts, ys, torque, controller, cs)
+            u, dz = drive_terms(model, ts, ys, torque, controller, cs)
             own = ca.vertcat(u, *(() if dz is None else (dz,)))
         f_function, f_values = ca.Function("flexctl_bdf_own", [ts, ys, cs], [own]), lifted[1]
         out.update(address=float(point[0]), keep=(core, point[1]))
@@ -191,8 +191,8 @@ def _built(model, inputs, family: str = "bdf"):
     if not compiling_enabled() or compiler() is None or model.variant == "consistent":
         return None
     numbers = input_numbers(inputs)
-    key = _input_key(model, inputs, np.array([1.0]))
-    return _cached(_STEP_CACHE, _STEP_CACHE_SIZE, None if key is None else (family, key),
+    key = input_key(model, inputs, np.array([1.0]))
+    return cached_build(STEP_CACHE, STEP_CACHE_SIZE, None if key is None else (family, key),
                    (model, *inputs), lambda: _library(model, inputs, numbers.size, family))
 
 

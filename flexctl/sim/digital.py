@@ -37,11 +37,11 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from .stops import tip_rows
-from .compiled import (CHECK_FACTOR, SegmentIntegrator, _cached, _input_key, input_numbers,
+from .compiled import (CHECK_FACTOR, SegmentIntegrator, cached_build, input_key, input_numbers,
                        is_symbolic, min_step_fraction)
 from .buffers import InPlace
-from .fixed_step import _STEP_CACHE, _STEP_CACHE_SIZE, _jit, _step_function
-from .embedded_rk import EmbeddedHold, _Held
+from .fixed_step import STEP_CACHE, STEP_CACHE_SIZE, jit_compiled, step_function
+from .embedded_rk import EmbeddedHold, HeldTorque
 from .inputs import input_value, output_grid, time_function
 from .drives import bound_to_plant
 from .sensors import sensor_names
@@ -89,7 +89,7 @@ def is_sampled(controller) -> bool:
             and callable(getattr(controller, "start", None)))
 
 
-def _sample_time(owner: str, value) -> float:
+def check_sample_time(owner: str, value) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise InputTypeError(f"{owner} sample_time must be a number of seconds; got "
                              f"{type(value).__name__} {value!r}")
@@ -133,7 +133,7 @@ class ZeroOrderHold:
     sample_time: float
 
     def __post_init__(self):
-        object.__setattr__(self, "sample_time", _sample_time("ZeroOrderHold",
+        object.__setattr__(self, "sample_time", check_sample_time("ZeroOrderHold",
                                                              self.sample_time))
         law = self.law
         if is_sampled(law):
@@ -291,7 +291,7 @@ class _CvodesHold:
         if integ is None:
             integ = SegmentIntegrator(self.model, lo, t_out, self.scale,
                                       self.rtol * (CHECK_FACTOR if loose else 1.0),
-                                      torque=self.torque, controller=_Held(u),
+                                      torque=self.torque, controller=HeldTorque(u),
                                       max_steps=self.max_steps)
             self.shapes[shape] = integ
         else:
@@ -315,14 +315,14 @@ class _RK4Hold:
         # the CVODES integrators: a second run with other gains, another law or another
         # torque amplitude costs no build (the torque's numbers and the held value enter as
         # parameters)
-        self.key = _input_key(model, (torque, None, None), np.array([1.0]))
+        self.key = input_key(model, (torque, None, None), np.array([1.0]))
         self.torque_numbers = input_numbers((torque, None, None))
 
     def _final(self, count):
         """Compiled ``count`` steps: ``([y; t], h, [c; u]) -> [y; t]`` at the end."""
         if count not in self.chains:
-            self.chains[count] = _cached(
-                _STEP_CACHE, _STEP_CACHE_SIZE,
+            self.chains[count] = cached_build(
+                STEP_CACHE, STEP_CACHE_SIZE,
                 None if self.key is None else ("rk4-hold", self.key, count),
                 (self.model, self.torque), lambda: self._build(count))
         return self.chains[count]
@@ -331,12 +331,12 @@ class _RK4Hold:
         import casadi as ca
 
         n_numbers = self.torque_numbers.size + 1
-        step = _step_function(self.model, self.torque, None, _Held(0.0), n_numbers)[0]
+        step = step_function(self.model, self.torque, None, HeldTorque(0.0), n_numbers)[0]
         chain = step.mapaccum("flexctl_rk4_hold", count)
         yt, h = ca.MX.sym("yt", step.size1_in(0)), ca.MX.sym("h")
         c = ca.MX.sym("c", n_numbers)
         ys = chain(yt, ca.repmat(h, 1, count), ca.repmat(c, 1, count))[0]
-        return InPlace(_jit(ca.Function("flexctl_rk4_hold_end", [yt, h, c],
+        return InPlace(jit_compiled(ca.Function("flexctl_rk4_hold_end", [yt, h, c],
                                          [ca.densify(ys[:, -1])]), self.model))
 
     def __call__(self, lo, t_out, y, u, loose=False):

@@ -28,13 +28,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .compiled import (CHECK_FACTOR, _cached, _input_key, drive_size, input_numbers,
+from .compiled import (CHECK_FACTOR, cached_build, input_key, drive_size, input_numbers,
                        is_symbolic)
 from .compile_cache import compiled, lift_constants
 from .buffers import InPlace
 from . import fixed_step
-from .fixed_step import (_END_INSIDE, _STEP_CACHE, _STEP_CACHE_SIZE, _drive_symbols, _jit,
-                         _step_function)
+from .fixed_step import (END_INSIDE, STEP_CACHE, STEP_CACHE_SIZE, drive_symbols, jit_compiled,
+                         step_function)
 from .native_rhs import MAX_INSTRUCTIONS
 from ..model.checks import check_array, check_instance, check_integer, check_real
 from ..model.errors import InputValueError
@@ -90,7 +90,7 @@ MIN_STEP = 1e-12
 
 
 @dataclass(frozen=True)
-class _Held:
+class HeldTorque:
     """The held torque as a parametric static controller: one compiled right-hand side and
     one integrator (or step) serve every sample of every hold, the torque entering as a
     number."""
@@ -123,7 +123,7 @@ def _dopri5_step(f, t, y, h, atol, rtol) -> tuple:
             if a != 0.0:
                 stage = stage + h * a * k
         # a stage at the step's end sees the held input from the left, as RK4's does
-        ks.append(f(t + h * (node if node < 1.0 else 1.0 - _END_INSIDE), stage))
+        ks.append(f(t + h * (node if node < 1.0 else 1.0 - END_INSIDE), stage))
     y5 = y + h * sum(b * k for b, k in zip(tableau["b"], ks) if b != 0.0)
     error = h * sum(e * k for e, k in zip(tableau["e"], ks) if e != 0.0)
     weight = atol + rtol * ca.fmax(ca.fabs(y), ca.fabs(y5))
@@ -131,7 +131,7 @@ def _dopri5_step(f, t, y, h, atol, rtol) -> tuple:
 
 
 class _DormandPrince:
-    """The scheme for :func:`~flexctl.sim.fixed_step._step_function`: one Dormand-Prince step
+    """The scheme for :func:`~flexctl.sim.fixed_step.step_function`: one Dormand-Prince step
     and the weighted norm of its error estimate."""
 
     name, label = "dopri5", "Dormand-Prince"
@@ -193,15 +193,15 @@ class EmbeddedHold:
         self.model, self.torque = model, torque
         self.torque_numbers = input_numbers((torque, None, None))
         n_numbers = self.torque_numbers.size + 1
-        key = _input_key(model, (torque, None, None), np.array([1.0]))
+        key = input_key(model, (torque, None, None), np.array([1.0]))
         ny = self.scale.size
 
         def build():
-            step = _step_function(model, torque, None, _Held(0.0), n_numbers,
+            step = step_function(model, torque, None, HeldTorque(0.0), n_numbers,
                                   scheme=_DormandPrince(ny))[0]
-            return _jit(step, model)
+            return jit_compiled(step, model)
 
-        step = _cached(_STEP_CACHE, _STEP_CACHE_SIZE,
+        step = cached_build(STEP_CACHE, STEP_CACHE_SIZE,
                        None if key is None else ("dopri5", key), (model, torque), build)
         self._runs, self._h = {}, {}
         for loose in (False, True):
@@ -295,7 +295,7 @@ def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
     import casadi as ca
 
     torque, hub_motion, controller = inputs
-    drive = _drive_symbols(model, torque, hub_motion, controller, n_numbers)
+    drive = drive_symbols(model, torque, hub_motion, controller, n_numbers)
     ny, c, numbers, f = (drive[k] for k in ("ny", "c", "numbers", "f"))
     values = drive["lifted_values"]
     if drive["sym"] is ca.SX:
@@ -443,8 +443,8 @@ class EmbeddedRun(CompiledRun):
         m, scale, rtol, self.max_steps, self.h, max_step = checked_run_arguments(
             "EmbeddedRun", model, inputs, scale, rtol, max_steps, h_first, max_step)
         numbers = input_numbers(inputs)
-        key = _input_key(model, inputs, np.array([1.0]))
-        run, model_numbers = _cached(_STEP_CACHE, _STEP_CACHE_SIZE,
+        key = input_key(model, inputs, np.array([1.0]))
+        run, model_numbers = cached_build(STEP_CACHE, STEP_CACHE_SIZE,
                                      None if key is None else ("dopri5-run", key),
                                      (model, *inputs),
                                      lambda: _attempt_chain(model, inputs, numbers.size))

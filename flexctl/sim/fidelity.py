@@ -125,7 +125,7 @@ class ModeChoice:
                                   f"appendage); got {self.n_modes!r}")
         object.__setattr__(self, "n_modes", tuple(int(n) for n in counts)
                            if isinstance(self.n_modes, tuple) else int(self.n_modes))
-        _check_tolerance(self.tolerance)
+        check_tolerance(self.tolerance)
         if self.variant not in VARIANTS:
             raise InputValueError(f"variant must be one of {', '.join(VARIANTS)}; "
                                   f"got {self.variant!r}")
@@ -155,7 +155,7 @@ class ModeChoice:
                 "stiffening_matters": self.stiffening_matters, "explanation": self.explanation}
 
 
-def _check_tolerance(tolerance):
+def check_tolerance(tolerance):
     if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float, np.floating)) \
             or not 0.0 < tolerance < 1.0:
         raise InputValueError(f"tolerance must be a relative error in (0, 1); got {tolerance!r}")
@@ -182,11 +182,11 @@ def rigid_slew_torque(system: HubBeam, slew: Slew) -> SineTorque:
     return SineTorque(peak_torque=2.0 * math.pi * j0 * angle / duration ** 2, duration=duration)
 
 
-def _as_input(system: HubBeam, maneuver):
+def maneuver_input(system: HubBeam, maneuver):
     return rigid_slew_torque(system, maneuver) if isinstance(maneuver, Slew) else maneuver
 
 
-def _is_prescribed(maneuver) -> bool:
+def is_prescribed(maneuver) -> bool:
     if all(callable(getattr(maneuver, a, None)) for a in ("angle", "rate", "acceleration")):
         return True
     if callable(maneuver):
@@ -214,8 +214,8 @@ def largest_spin_rate(system: HubBeam, maneuver, t) -> float:
     ``integral_0^t T dt / J_0`` (the beam taken rigid).
     """
     t = np.asarray(t, dtype=float)
-    maneuver = _as_input(system, maneuver)
-    if _is_prescribed(maneuver):
+    maneuver = maneuver_input(system, maneuver)
+    if is_prescribed(maneuver):
         return float(np.max(np.abs(maneuver.rate(t))))
     torque = np.asarray(maneuver(t), dtype=float) * np.ones_like(t)
     momentum = np.concatenate(([0.0], np.cumsum(0.5 * (torque[1:] + torque[:-1]) * np.diff(t))))
@@ -296,8 +296,8 @@ def linear_tip_responses(system: HubBeam, maneuver, mode_counts, *, t_final: flo
         False when some model has lost stiffness at that spin (zero_order above its first
         clamped frequency): its response then grows exponentially.
     """
-    maneuver = _as_input(system, maneuver)
-    prescribed = _is_prescribed(maneuver)
+    maneuver = maneuver_input(system, maneuver)
+    prescribed = is_prescribed(maneuver)
     t = _time_grid(maneuver, t_final)
     u = np.asarray(maneuver.acceleration(t) if prescribed else maneuver(t), dtype=float)
     u = u * np.ones_like(t)
@@ -377,7 +377,7 @@ def choose_modes(system: HubBeam, maneuver, tolerance: float = DEFAULT_TOLERANCE
     if isinstance(system, Structure):
         return _choose_structure_modes(system, maneuver, tolerance, variant, max_modes,
                                        reference_modes=reference_modes, t_final=t_final)
-    _check_tolerance(tolerance)
+    check_tolerance(tolerance)
     if variant not in VARIANTS:
         raise InputValueError(f"variant must be one of {', '.join(VARIANTS)}; got {variant!r}")
     if isinstance(max_modes, bool) or not isinstance(max_modes, (int, np.integer)) \
@@ -389,9 +389,9 @@ def choose_modes(system: HubBeam, maneuver, tolerance: float = DEFAULT_TOLERANCE
             or not max_modes < reference_modes <= 200:
         raise InputValueError(f"reference_modes must be an integer in (max_modes = "
                               f"{max_modes}, 200]; got {reference_modes!r}")
-    prescribed = _is_prescribed(_as_input(system, maneuver))
+    prescribed = is_prescribed(maneuver_input(system, maneuver))
     if t_final is None:
-        scale = max((float(b) for b in getattr(_as_input(system, maneuver), "breakpoints", ())
+        scale = max((float(b) for b in getattr(maneuver_input(system, maneuver), "breakpoints", ())
                      or ()), default=0.0)
         key = "prescribed" if prescribed else "torque"
         t_final = HORIZON_FACTOR[key] * scale if scale > 0 else 10.0

@@ -23,12 +23,12 @@ from collections import OrderedDict
 
 import numpy as np
 
-from .compiled import (_cached, _closed_loop_dynamics, _input_key, _split_numbers,
+from .compiled import (cached_build, closed_loop_dynamics, input_key, split_numbers,
                        drive_size, hub_motion_casadi, input_numbers)
 from .buffers import InPlace
 from .compile_cache import compiled, lift_constants
 from .native_rhs import MAX_INSTRUCTIONS
-from ..model.exports import _symbolic_beam_dynamics
+from ..model.exports import symbolic_beam_dynamics
 
 __all__ = ["RK4_OMEGA_H", "RK4_FIRST_OMEGA_H", "RK4_STABILITY", "MAX_HALVINGS", "step_times",
            "FixedStepRun", "integrate_fixed_step"]
@@ -51,7 +51,7 @@ MAX_HALVINGS = 5
 MAX_STEPS = 20_000_000
 #: Stage times stop this fraction of a step short of its end, so that an input that jumps at
 #: a step boundary (a breakpoint) is seen from the left inside the step, as by the other paths.
-_END_INSIDE = 1e-9
+END_INSIDE = 1e-9
 
 #: Compile the loops to machine code (:mod:`flexctl.sim.compile_cache`, kept across runs and
 #: processes) where a compiler is present: about 6 times faster per step than CasADi's virtual
@@ -64,13 +64,13 @@ USE_JIT = True
 #: runs of other lengths, steps or segments reuse them.
 CHUNKS = (4096, 256, 16)
 
-_STEP_CACHE: OrderedDict = OrderedDict()
-#: Each exact model's lifted step dynamics (:func:`_lifted_core`).
+STEP_CACHE: OrderedDict = OrderedDict()
+#: Each exact model's lifted step dynamics (:func:`lifted_core`).
 _LIFTED: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-_STEP_CACHE_SIZE = 64
+STEP_CACHE_SIZE = 64
 
 
-def _drive_symbols(model, torque, hub_motion, controller, n_numbers: int) -> dict:
+def drive_symbols(model, torque, hub_motion, controller, n_numbers: int) -> dict:
     """The symbols of a drive's compiled step: ``sym`` (SX, or MX for the exact model), ``ny``
     (the drive's state size), ``c`` (the inputs' numbers, ``n_numbers`` rows), ``numbers``
     (the exact model's lifted numbers as a symbol, else None) with their values
@@ -81,26 +81,26 @@ def _drive_symbols(model, torque, hub_motion, controller, n_numbers: int) -> dic
     sym = ca.MX if model.variant == "exact" else ca.SX
     ny = drive_size(model, hub_motion, controller)
     c = sym.sym("c", n_numbers)
-    lifted = _lifted_core(model, hub_motion)
+    lifted = lifted_core(model, hub_motion)
     numbers = None if lifted is None else sym.sym("numbers", lifted[1].size)
 
     def f(time, state, model_numbers=numbers):
         if hub_motion is not None:
             rate, acceleration = hub_motion_casadi(
-                hub_motion, time, _split_numbers((torque, hub_motion, controller), c)[1])
+                hub_motion, time, split_numbers((torque, hub_motion, controller), c)[1])
             if model_numbers is None:
-                return _symbolic_beam_dynamics(model, state, rate, acceleration)
+                return symbolic_beam_dynamics(model, state, rate, acceleration)
             beam = model.layout.without_rotation()
             q, q_dot = beam.modal(state), beam.modal_rates(state)
             return ca.vertcat(q_dot, lifted[0](q, q_dot, rate, acceleration, model_numbers))
         rhs = None if model_numbers is None else (lambda x, u: lifted[0](x, u, model_numbers))
-        return _closed_loop_dynamics(model, time, state, torque, controller, c, rhs=rhs)
+        return closed_loop_dynamics(model, time, state, torque, controller, c, rhs=rhs)
 
     return {"sym": sym, "ny": ny, "c": c, "numbers": numbers, "f": f,
             "lifted_values": None if lifted is None else lifted[1]}
 
 
-def _step_function(model, torque, hub_motion, controller, n_numbers: int, scheme=None):
+def step_function(model, torque, hub_motion, controller, n_numbers: int, scheme=None):
     """CasADi ``step([y; t], h, c) -> ([y_next; t + h], f(t, y))``: one RK4 step of the drive
     (plant and controller states, or ``[q, q_dot]`` under a prescribed hub motion), time
     carried with the state, and the derivative at the step's start for dense output; and
@@ -112,7 +112,7 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int, scheme
     further inputs (``scheme.inputs``: ``(name, rows)`` pairs) as symbols."""
     import casadi as ca
 
-    drive = _drive_symbols(model, torque, hub_motion, controller, n_numbers)
+    drive = drive_symbols(model, torque, hub_motion, controller, n_numbers)
     sym, ny, c, numbers, f = (drive[k] for k in ("sym", "ny", "c", "numbers", "f"))
     yt, h = sym.sym("yt", ny + 1), sym.sym("h")
     y, t = yt[:ny], yt[ny]
@@ -123,7 +123,7 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int, scheme
         k1 = f(t, y)
         k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
         k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
-        k4 = f(t + h * (1.0 - _END_INSIDE), y + h * k3)
+        k4 = f(t + h * (1.0 - END_INSIDE), y + h * k3)
         y_next, outputs, name = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4), [k1], "rk4"
     else:
         y_next, *outputs = scheme(f, t, y, h, extra)
@@ -138,7 +138,7 @@ def _step_function(model, torque, hub_motion, controller, n_numbers: int, scheme
                         "RK4" if scheme is None else scheme.label), rate)
 
 
-def _lifted_core(model, hub_motion):
+def lifted_core(model, hub_motion):
     """:func:`_exact_core` with its numbers lifted (``(function, numbers)``,
     :func:`~flexctl.sim.compile_cache.lift_constants`), kept with the model: a sampled loop
     builds a step for each count of steps per sample. None where there is no core or it is
@@ -197,7 +197,7 @@ class _ChunkRuns(dict):
         yt, hs = ca.MX.sym("yt", self.step.size1_in(0)), ca.MX.sym("h", 1, k)
         c = ca.MX.sym("c", self.step.size1_in(2))
         ys, fs = chain(yt, hs, ca.repmat(c, 1, k))
-        self[k] = InPlace(_jit(ca.Function(f"flexctl_rk4_run{k}", [yt, hs, c],
+        self[k] = InPlace(jit_compiled(ca.Function(f"flexctl_rk4_run{k}", [yt, hs, c],
                                             [ca.densify(ys), ca.densify(fs)]), self.model))
         return self[k]
 
@@ -254,7 +254,7 @@ def hermite(t, starts, sizes, y, f) -> np.ndarray:
     return y[:, k] + s * (hf0[:, k] + s * (c2[:, k] + s * c3[:, k]))
 
 
-def _jit(function, model, any_variant: bool = False):
+def jit_compiled(function, model, any_variant: bool = False):
     """``function`` compiled to machine code where allowed and possible, else itself (the
     exact variant's only with ``any_variant``: for functions built on its vectorized
     right-hand side, which compile in about a second)."""
@@ -377,11 +377,11 @@ class _RK4Runner:
     def __init__(self, model, edges, y0, tip_map, h_max, inputs):
         self.model, self.inputs = model, inputs
         self.numbers = input_numbers(inputs)
-        self.base_key = _input_key(model, inputs, np.array([self.numbers.size], dtype=float))
-        self.step, self.rate = _cached(
-            _STEP_CACHE, _STEP_CACHE_SIZE,
+        self.base_key = input_key(model, inputs, np.array([self.numbers.size], dtype=float))
+        self.step, self.rate = cached_build(
+            STEP_CACHE, STEP_CACHE_SIZE,
             None if self.base_key is None else ("rk4", self.base_key), (model, *inputs),
-            lambda: _step_function(model, *inputs, self.numbers.size))
+            lambda: step_function(model, *inputs, self.numbers.size))
         self.tip_map = np.atleast_2d(np.asarray(tip_map, dtype=float))
         self.y0 = np.asarray(y0, dtype=float)
         self.edges = np.asarray(edges, dtype=float)
@@ -396,7 +396,7 @@ class _RK4Runner:
     def runs(self) -> dict:
         """The compiled loops of :func:`_chunk_runs`."""
         key = None if self.base_key is None else ("rk4-runs", self.base_key)
-        return _cached(_STEP_CACHE, _STEP_CACHE_SIZE, key, (self.model, *self.inputs),
+        return cached_build(STEP_CACHE, STEP_CACHE_SIZE, key, (self.model, *self.inputs),
                        lambda: _chunk_runs(self.step, self.model))
 
     def step_end_tips(self, refine) -> np.ndarray:

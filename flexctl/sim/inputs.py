@@ -134,7 +134,7 @@ def input_value(name: str, value, t: float, unit: str = "N m") -> float:
     return value
 
 
-def _required_positional(func) -> int | None:
+def required_positional(func) -> int | None:
     """Number of arguments ``func`` needs, or None when its signature cannot be read."""
     try:
         params = inspect.signature(func).parameters.values()
@@ -152,7 +152,7 @@ def time_function(func, name: str):
     if not callable(func):
         raise InputTypeError(f"{name} must be callable as {name}(t) or {name}(t, x); "
                              f"got {type(func).__name__}")
-    n_required = _required_positional(func)
+    n_required = required_positional(func)
     if n_required is not None and not 0 <= n_required <= 2 or _takes_no_time(func):
         what = ("a required keyword-only argument" if n_required is not None and n_required < 0
                 else "no argument" if n_required == 0

@@ -55,7 +55,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..model.errors import InputTypeError
-from .inputs import (SampledTorque, _required_positional, input_value, sampled_torque,
+from .inputs import (SampledTorque, required_positional, input_value, sampled_torque,
                      time_function)
 
 __all__ = ["TRACE_RTOL", "CHECK_FRACTIONS", "TracedTorque", "TracedStateTorque", "trace_torque",
@@ -246,7 +246,7 @@ def trace_torque(function, *, t_final: float, n_states: int | None = None, state
     """
     if getattr(function, "has_casadi_form", True) is False:
         return None, "it sets has_casadi_form = False"
-    state_dependent = _required_positional(function) == 2
+    state_dependent = required_positional(function) == 2
     if state_dependent and n_states is None:
         return None, "it takes the state x, whose size was not given"
     form, reason = _symbolic_form(function, n_states if state_dependent else None)

@@ -38,7 +38,7 @@ import numpy as np
 from ..model import build_model
 from ..model.build import rebuild
 from ..model.errors import InputValueError
-from .fidelity import DEFAULT_TOLERANCE, _as_input, _check_tolerance, _is_prescribed
+from .fidelity import DEFAULT_TOLERANCE, maneuver_input, check_tolerance, is_prescribed
 from .energy import ENERGY_TOLERANCE, ModelValidityWarning
 from .inputs import as_vector
 from .runs import run_once, run_states
@@ -239,7 +239,7 @@ def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors
     exact variant has no geometric error; every other run is assessed by :func:`assess`.
     Used by :func:`flexctl.simulate` for every run (``check_validity``).
     """
-    _check_tolerance(tolerance)
+    check_tolerance(tolerance)
     model = result.model
     ratio = float(result.deflection_ratio) if np.isfinite(result.deflection_ratio) else np.inf
     if model.variant != "exact" and ratio > SCREEN_DEFLECTION:
@@ -272,7 +272,7 @@ def assess(result, *, torque=None, hub_motion=None, controller=None, sensors=Non
         Issue a :class:`ModelValidityWarning` when the estimate is above ``tolerance`` or the
         run's energy balance is violated.
     """
-    _check_tolerance(tolerance)
+    check_tolerance(tolerance)
     model = result.model
     t_end = float(result.t[-1]) if result.t.size else 0.0
     x0 = result.states[:, 0] if np.ndim(result.states) == 2 and result.t.size else None
@@ -325,14 +325,14 @@ def choose_variant(system, maneuver, tolerance: float = DEFAULT_TOLERANCE, *,
     first_order when :func:`geometric_error` of first_order on the manoeuvre (a slew by its
     rigid rest-to-rest torque) is within ``tolerance``; exact otherwise.
     """
-    _check_tolerance(tolerance)
+    check_tolerance(tolerance)
     return _choose(system, maneuver, float(tolerance), float(t_final))
 
 
 @lru_cache(maxsize=64)
 def _choose(system, maneuver, tolerance, t_final) -> VariantChoice:
-    drive = _as_input(system, maneuver)
-    key = "hub_motion" if _is_prescribed(drive) else "torque"
+    drive = maneuver_input(system, maneuver)
+    key = "hub_motion" if is_prescribed(drive) else "torque"
     model = build_model(system, n_modes=ESTIMATE_MODES, variant="exact")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
