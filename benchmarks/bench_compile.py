@@ -56,8 +56,8 @@ import json, sys, time, warnings
 import numpy as np
 warnings.simplefilter("ignore")
 import flexctl
-from controllers.pd import design_pd
-from controllers.reference import SlewProfile
+from controllers.feedback.pd import design_pd
+from controllers.slew.reference import SlewProfile
 method = sys.argv[1]
 model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=2)
 angles = [float(a) for a in sys.argv[2].split(",")]
@@ -202,7 +202,7 @@ import json, time, warnings
 import numpy as np
 warnings.simplefilter("ignore")
 import flexctl
-from controllers.nmpc import NMPC
+from controllers.mpc.nmpc import NMPC
 system = flexctl.load_scene("slew-90").system
 plant = flexctl.build_model(system, 4, "first_order")
 design = flexctl.build_model(system, 2, "exact")
@@ -233,7 +233,7 @@ TRAJOPT = r"""
 import json, sys, time, warnings
 warnings.simplefilter("ignore")
 import flexctl
-from controllers.trajopt import SlewProblem, solve_slew
+from controllers.slew.trajopt import SlewProblem, solve_slew
 scene = flexctl.load_scene(sys.argv[1])
 slew = scene.maneuver
 model = flexctl.build_model(scene.system, scene.model.design_modes, sys.argv[2])

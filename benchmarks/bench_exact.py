@@ -56,7 +56,7 @@ def simulation_rows():
 
 
 def trajopt_rows():
-    from controllers.trajopt import SlewProblem, solve_slew, transcription_for
+    from controllers.slew.trajopt import SlewProblem, solve_slew, transcription_for
 
     scene = flexctl.load_scene("slew-90")
     slew = scene.maneuver

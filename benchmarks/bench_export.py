@@ -24,7 +24,7 @@ import numpy as np
 import flexctl
 from controllers import from_spec
 from controllers.codegen import export_c
-from controllers.lqg_sampled import SampledLQG
+from controllers.feedback.lqg_sampled import SampledLQG
 
 CASES = (
     ("slew-90", {"controller.kind": "pd"}),

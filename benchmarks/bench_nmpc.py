@@ -1,4 +1,5 @@
-"""Benchmark: nonlinear MPC (:mod:`controllers.nmpc`) in the loop, its slews, and python-control.
+"""Benchmark: nonlinear MPC (:mod:`controllers.mpc.nmpc`) in the loop, its slews, and
+python-control.
 
 Issue 12, item 3 ("Targets"). Three cases, every number measured on this machine when run:
 
@@ -29,7 +30,7 @@ B. **Slew quality.** ``slew-90`` (nominal) and ``slew-90-model-error`` (design m
 C. **python-control on the same problem.** The 2-mode first_order design model of ``slew-90``,
    regulation from rest to 90 deg at rest (a constant target, so that python-control's
    time-invariant quadratic cost is the same objective), horizon 20 samples of 0.02 s,
-   ``Q, R`` of :func:`controllers.nmpc._default_weights`, terminal cost the discrete LQR
+   ``Q, R`` of :func:`controllers.mpc.nmpc._default_weights`, terminal cost the discrete LQR
    Riccati matrix ``P``, ``|u| <= 6 N m``:
 
        min sum_{j<N} |x_j - r|_Q^2 + R u_j^2 + |x_N - r|_P^2,  x_{j+1} = F(x_j, u_j)
@@ -82,7 +83,7 @@ import control.optimal as opt                            # noqa: E402
 
 import flexctl                                           # noqa: E402
 from controllers import NMPC, SlewProblem, solve_slew    # noqa: E402
-from controllers.nmpc import _default_weights, hold_function  # noqa: E402
+from controllers.mpc.nmpc import _default_weights, hold_function  # noqa: E402
 from flexctl.sim.metrics import slew_metrics             # noqa: E402
 
 SCENE = "slew-90"
@@ -526,7 +527,7 @@ def python_control_case(steps_linear=2, steps_nonlinear=1, samples_iosystem=1,
     print(f"Problem: {SCENE}'s system, design model {design.variant} with {design.n_modes} "
           f"modes ({design.n_states} states), regulation from rest to "
           f"{np.degrees(angle):g} deg at rest, horizon {horizon} x {sample_time:g} s, Q and R "
-          f"of controllers.nmpc._default_weights, terminal cost the discrete LQR Riccati "
+          f"of controllers.mpc.nmpc._default_weights, terminal cost the discrete LQR Riccati "
           f"matrix, |u| <= {bound:g} N m. Prediction: RK4 hold, {mpc.substeps} substep(s) per "
           f"sample (its linearisation at rest differs from control.c2d's zoh by at most "
           f"{problem['zoh_gap']:.1e} per entry). flexctl ran {len(u_flex)} samples "

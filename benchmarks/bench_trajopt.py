@@ -1,4 +1,4 @@
-"""Benchmarks of :func:`controllers.trajopt.solve_slew` on ``slew-90``.
+"""Benchmarks of :func:`controllers.slew.trajopt.solve_slew` on ``slew-90``.
 
 1. ``--grid``: robustness to fast modes. Every design-mode count 1 to 8 and interval count
    (20, 30, 40, 60, 80, 120, 200) of the slew-90 system, on the first_order and exact design
@@ -45,8 +45,8 @@ import control.optimal as opt                     # noqa: E402
 
 import flexctl                                    # noqa: E402
 from flexctl import build_model                   # noqa: E402
-from controllers.trajopt import (HoldTorque, SlewProblem, TrajectoryOptimizationError,  # noqa: E402
-                                 solve_slew)
+from controllers.slew.trajopt import (HoldTorque, SlewProblem, TrajectoryOptimizationError,  # noqa: E402
+                                      solve_slew)
 
 ANGLE = math.radians(90.0)       # rad
 DURATION = 2.0                   # s
@@ -186,7 +186,7 @@ GRID_INTERVALS = (20, 30, 40, 60, 80, 120, 200)
 GRID_VARIANTS = ("first_order", "exact")
 #: Holds of the converged reference, the first that is not refused: their least effort is
 #: within 0.006 % (400) or 0.02 % (240, for 5 exact modes, whose 400 holds would take
-#: minutes) of a continuous torque's (``controllers.hold_grid.hold_effort_excess``).
+#: minutes) of a continuous torque's (``controllers.design.hold_grid.hold_effort_excess``).
 REFERENCE_INTERVALS = (400, 240)
 COST_TOLERANCE = 0.01            # relative error of a solved cell against the converged value
 END_STATE_TOL = 1e-3             # end state of the re-simulated torque / motion of its kind

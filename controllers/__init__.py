@@ -1,56 +1,54 @@
-"""Controllers for flexctl plants: one module per controller family.
+"""Controllers for flexctl plants, in subpackages by what they do.
 
-=====================  ==========================================================
-module                 contents
-=====================  ==========================================================
-``reference``          smooth rest-to-rest slew profiles (poly7, cycloidal)
-``pd``                 collocated PD on hub angle and rate
-``lqr``                LQR with Bryson-style physical weights, state truncation
-``plant_state``        the plant's state layout, design state and hub state a law reads
-``lqg``                Kalman filter on hub angle and root moment plus LQR
-``scheduling``         LQR gains scheduled on the spin rate
-``shaping``            rigid bang-bang torque and ZV / ZVD input shaping
-``trajopt``            CasADi/IPOPT slew optimisation
-``tracking``           feedforward plus LQR feedback about an optimal slew
-``spec``               the kinds and settings a scene's [controller] table may hold
-``factory``            the controller a slew scene's [controller] table asks for
-``analysis``           loop transfer functions, stability margins, poles against spin
-``robustness``         Monte Carlo dispersion of stiffness, point masses, hub inertia
-``actuated``           laws through an actuator: wheel-lag LQR, DC-motor voltage, limits
-``observer``           a sampled discrete Kalman filter of noisy sensor readings
-``lqg_sampled``        LQG with its estimator discretised at a sample time
-``iosys``              the laws as python-control I/O systems for ``control.interconnect``
-``codegen``            a designed law as self-contained C99 (package)
-=====================  ==========================================================
+======================  ========================================================================
+subpackage or module    contents
+======================  ========================================================================
+``design``              what every design shares: the plant state a law reads, controllability,
+                        the loop-stability check, actuator limits, holds, compiled dynamics
+``slew``                reference profiles, input shaping, trajectory optimisation
+``feedback``            PD, LQR, LQG, gain scheduling, tracking, observers, actuator-aware laws,
+                        the laws as python-control I/O systems
+``mpc``                 nonlinear MPC
+``analysis``            loop transfer functions, margins, poles against spin, robustness
+``spec``                the kinds and settings a scene's [controller] table may hold (imported
+                        by the parts above for their choices)
+``factory``             the controller a slew scene's [controller] table asks for
+``codegen``             a designed law as self-contained C99
+======================  ========================================================================
+
+Each part imports only the ones listed before it, and ``spec`` (``tests/test_architecture.py``). Every
+public name is importable from ``controllers`` itself; the modules' former flat paths
+(``controllers.lqr``, ``controllers.trajopt``, ...) name the same modules
+(:data:`FORMER_PATHS`).
 
 The package depends on :mod:`flexctl.model` and :mod:`flexctl.sim` (models and the simulation
 protocol); only the application layer :mod:`flexctl.app` imports it.
 """
 
-from .reference import SlewProfile, minimum_slew_duration
-from .pd import PD, design_pd, pd_gains
-from .lqr import (LQR, LQRWeights, closed_loop_poles, design_lqr, lqr_weight_matrices,
-                  reference_state, truncate_state, truncation_matrix)
-from .lqg import LQG, NoiseLevels, SumOfSines, design_lqg, estimator_gain
-from .scheduling import ScheduledLQR, design_scheduled_lqr
-from .shaping import (BangBang, ShapedReference, ShapedTorque, Shaper, bang_bang,
-                      design_shaper, shape, zv_shaper, zvd_shaper)
-from .trajopt import (SlewProblem, SlewSolution, TrajectoryOptimizationError,
-                      rigid_minimum_time, solve_slew)
-from .tracking import TrajectoryTracker
-from .nmpc import NMPC, NMPCSession
+from .slew.reference import SlewProfile, minimum_slew_duration
+from .feedback.pd import PD, design_pd, pd_gains
+from .feedback.lqr import (LQR, LQRWeights, closed_loop_poles, design_lqr, lqr_weight_matrices,
+                           reference_state, truncate_state, truncation_matrix)
+from .feedback.lqg import LQG, NoiseLevels, SumOfSines, design_lqg, estimator_gain
+from .feedback.scheduling import ScheduledLQR, design_scheduled_lqr
+from .slew.shaping import (BangBang, ShapedReference, ShapedTorque, Shaper, bang_bang,
+                           design_shaper, shape, zv_shaper, zvd_shaper)
+from .slew.trajopt import (SlewProblem, SlewSolution, TrajectoryOptimizationError,
+                           rigid_minimum_time, solve_slew)
+from .feedback.tracking import TrajectoryTracker
+from .mpc.nmpc import NMPC, NMPCSession
 from .factory import BuiltController, DesignChangedWarning, OpenLoop, from_spec
-from .feedback import ReferenceSaturationWarning
-from .stability import LoopStability, LoopStabilityWarning, check_loop
-from .analysis import (LoopMargins, PlantChannels, PolesVsSpin, loop_margins, loop_transfer,
-                       plant_channels, poles_vs_spin)
-from .actuated import (LaggedLQR, MotorVoltage, check_reference_fits, design_wheel_lqr,
-                       through_actuator)
-from .observer import Observed, kalman_step
-from .iosys import to_iosys
-from .lqg_sampled import SampledLQG
-from .robustness import (Dispersion, RobustnessSummary, RobustnessTask, disperse,
-                         robustness_summary)
+from .feedback.reference_feedback import ReferenceSaturationWarning
+from .design.stability import LoopStability, LoopStabilityWarning, check_loop
+from .analysis.loops import (LoopMargins, PlantChannels, PolesVsSpin, loop_margins,
+                             loop_transfer, plant_channels, poles_vs_spin)
+from .feedback.actuated import (LaggedLQR, MotorVoltage, check_reference_fits, design_wheel_lqr,
+                                through_actuator)
+from .feedback.observer import Observed, kalman_step
+from .feedback.iosys import to_iosys
+from .feedback.lqg_sampled import SampledLQG
+from .analysis.robustness import (Dispersion, RobustnessSummary, RobustnessTask, disperse,
+                                  robustness_summary)
 
 __all__ = [
     "SlewProfile", "minimum_slew_duration",
@@ -72,3 +70,33 @@ __all__ = [
     "through_actuator", "Observed", "kalman_step", "to_iosys", "SampledLQG",
     "Dispersion", "RobustnessSummary", "RobustnessTask", "disperse", "robustness_summary",
 ]
+
+#: Each module's former path (the flat package of earlier releases) and the module it names now.
+FORMER_PATHS = {
+    "plant_state": "design.plant_state", "controllable": "design.controllable",
+    "actuator_limits": "design.actuator_limits", "native_dynamics": "design.native_dynamics",
+    "stability": "design.stability", "hold_grid": "design.hold_grid",
+    "reference": "slew.reference", "shaping": "slew.shaping", "trajopt": "slew.trajopt",
+    "slew_nlp": "slew.slew_nlp", "slew_checks": "slew.slew_checks",
+    "pd": "feedback.pd", "lqr": "feedback.lqr", "lqg": "feedback.lqg",
+    "lqg_sampled": "feedback.lqg_sampled", "scheduling": "feedback.scheduling",
+    "tracking": "feedback.tracking", "observer": "feedback.observer",
+    "actuated": "feedback.actuated", "iosys": "feedback.iosys", "nmpc": "mpc.nmpc",
+    "robustness": "analysis.robustness",
+}
+
+
+def _keep_former_paths():
+    """``import controllers.lqr`` and ``from controllers import lqr`` name the module that
+    lives at ``controllers.feedback.lqr`` now (``controllers.feedback`` and
+    ``controllers.analysis``, once modules, are packages holding their names)."""
+    import importlib
+    import sys
+
+    for former, current in FORMER_PATHS.items():
+        module = importlib.import_module(f"{__name__}.{current}")
+        sys.modules[f"{__name__}.{former}"] = module
+        globals()[former] = module
+
+
+_keep_former_paths()

@@ -112,20 +112,20 @@ from flexctl.sim.maneuvers import Slew
 from flexctl.sim.sensors import DEFAULT_SAMPLE_TIME as DEFAULT_SENSOR_SAMPLE_TIME
 from flexctl.sim.simulation import StaticLaw
 
-from .actuated import (actuator_torque_bound, check_reference_fits, design_wheel_lqr,
-                       through_actuator)
-from .lqg import NoiseLevels, design_lqg
-from .lqr import LQRWeights, design_lqr
-from .nmpc import NMPC
-from .observer import Observed
-from .pd import design_pd
-from .reference import SlewProfile, minimum_slew_duration
-from .scheduling import design_scheduled_lqr
-from .shaping import bang_bang, design_shaper, shape
+from .feedback.actuated import (actuator_torque_bound, check_reference_fits, design_wheel_lqr,
+                                through_actuator)
+from .feedback.lqg import NoiseLevels, design_lqg
+from .feedback.lqr import LQRWeights, design_lqr
+from .mpc.nmpc import NMPC
+from .feedback.observer import Observed
+from .feedback.pd import design_pd
+from .slew.reference import SlewProfile, minimum_slew_duration
+from .feedback.scheduling import design_scheduled_lqr
+from .slew.shaping import bang_bang, design_shaper, shape
 from .spec import CONTROLLER_KINDS, ControllerSpec, SceneError
-from .stability import check_loop, warn_if_unstable
-from .tracking import TrajectoryTracker
-from .trajopt import SlewProblem, SlewSolution, solve_slew
+from .design.stability import check_loop, warn_if_unstable
+from .feedback.tracking import TrajectoryTracker
+from .slew.trajopt import SlewProblem, SlewSolution, solve_slew
 
 __all__ = ["BuiltController", "OpenLoop", "from_spec", "DesignChangedWarning"]
 
@@ -187,8 +187,8 @@ class BuiltController:
 
         Looked for through the wrappers that hold a law in ``law`` (zero-order hold,
         observer, DC-motor voltage): a ``reference`` with ``angle(t)`` (a
-        :class:`~controllers.reference.SlewProfile`), or a planned slew
-        (:class:`~controllers.trajopt.SlewSolution`, the tracker's ``solution`` or the
+        :class:`~controllers.slew.reference.SlewProfile`), or a planned slew
+        (:class:`~controllers.slew.trajopt.SlewSolution`, the tracker's ``solution`` or the
         NMPC's ``reference``) whose design-model hub angle is the reference.
         """
         law, seen = self.controller, set()

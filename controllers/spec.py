@@ -38,7 +38,7 @@ from numbers import Integral, Real
 from flexctl.model.errors import InputValueError
 
 # Choices of the controller kinds' settings, owned here (the registry the scene parser reads) and
-# imported by the modules that act on them (controllers.lqr, reference, trajopt, nmpc).
+# imported by the modules that act on them (controllers.feedback.lqr, reference, trajopt, nmpc).
 #: Bryson values of ``LQRWeights`` lie within [1 / WEIGHT_RANGE, WEIGHT_RANGE].
 WEIGHT_RANGE = 1e12
 SHAPES = ("poly7", "cycloidal")

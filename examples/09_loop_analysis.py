@@ -17,9 +17,9 @@
 # # 9. The flexible loop in the frequency domain
 #
 # Control engineers judge a flexible loop first by its Bode plot, its margins and where its
-# poles sit. `controllers.analysis` gives that view of any controller on a flexctl plant,
+# poles sit. `controllers.analysis.loops` gives that view of any controller on a flexctl plant,
 # built on python-control (every system is a `control.StateSpace`), and
-# `controllers.robustness` runs a Monte Carlo study of it through `flexctl.app.sweep`. This
+# `controllers.analysis.robustness` runs a Monte Carlo study of it through `flexctl.app.sweep`. This
 # notebook, on the `slew-90` system (1.8 m beam, 85 g near the tip, an undamped beam),
 #
 # 1. looks at the plant's channels: the hub angle (collocated with the torque) and the tip;
@@ -90,7 +90,7 @@ assert np.max(tip_zeros.real) > 1.0
 # by a factor of about 60.
 #
 # (On an undamped beam the phase flips by 180 deg at every pole and zero; the margins leave
-# those singular crossings out, see `controllers.analysis`.)
+# those singular crossings out, see `controllers.analysis.loops`.)
 
 # %%
 pd = from_spec(flexctl.load_scene("slew-90", overrides={"controller.kind": "pd"}),

@@ -133,8 +133,8 @@ for label in ("two arrays, free", "single wing, free"):
 # 3-mode plant.
 
 # %%
-from controllers.lqr import LQRWeights, design_lqr  # noqa: E402
-from controllers.reference import SlewProfile  # noqa: E402
+from controllers.feedback.lqr import LQRWeights, design_lqr  # noqa: E402
+from controllers.slew.reference import SlewProfile  # noqa: E402
 
 craft = systems["two arrays, free"]
 design = build_model(craft, n_modes=2)

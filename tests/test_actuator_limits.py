@@ -22,9 +22,9 @@ from hypothesis import strategies as st
 
 import flexctl
 from controllers import NMPC, SlewProblem, solve_slew
-from controllers.actuator_limits import (SPEED_MARGIN, RigidLimits, minimum_duration,
-                                         rigid_slew_time, wheel_speed_function)
-from controllers.trajopt import rigid_minimum_time
+from controllers.design.actuator_limits import (SPEED_MARGIN, RigidLimits, minimum_duration,
+                                                rigid_slew_time, wheel_speed_function)
+from controllers.slew.trajopt import rigid_minimum_time
 from flexctl import DCMotor, ReactionWheel
 from flexctl.model.actuators import SPEED_LIMIT_BAND
 from flexctl.model.errors import InputTypeError, InputValueError

@@ -1,4 +1,5 @@
-"""The frequency-domain view of the flexible loop (controllers.analysis, controllers.robustness,
+"""The frequency-domain view of the flexible loop (controllers.analysis.loops,
+controllers.analysis.robustness,
 flexctl.app.plotting_loops): physics and contracts.
 
 Physics checked against independent facts, not numbers of the code itself:
@@ -12,7 +13,7 @@ Physics checked against independent facts, not numbers of the code itself:
 - LQR on its own design model has Kalman's margins (phase >= 60 deg, gain up to infinity and
   down to 1/2, |1 + L| >= 1); LQG has finite ones;
 - every gain margin is the gain at which the closed-loop eigenvalues cross the axis;
-- the closed loop's poles equal those of controllers.lqr.closed_loop_poles and
+- the closed loop's poles equal those of controllers.feedback.lqr.closed_loop_poles and
   LQG.closed_loop_poles, built without python-control;
 - a Young's modulus factor s scales every frequency by sqrt(s).
 """
@@ -29,10 +30,10 @@ from hypothesis import strategies as st
 import flexctl
 from controllers import (PD, LQRWeights, NoiseLevels, closed_loop_poles, design_lqg,
                          design_lqr, design_pd, pd_gains)
-from controllers.analysis import (SENSORS, LoopMargins, loop_margins, loop_transfer,
-                                  plant_channels, poles_vs_spin)
-from controllers.robustness import (SCALES, Dispersion, RobustnessTask, disperse,
-                                    robustness_summary)
+from controllers.analysis.loops import (SENSORS, LoopMargins, loop_margins, loop_transfer,
+                                        plant_channels, poles_vs_spin)
+from controllers.analysis.robustness import (SCALES, Dispersion, RobustnessTask, disperse,
+                                             robustness_summary)
 from flexctl.model.errors import InputTypeError, InputValueError
 
 from conftest import scene_system

@@ -147,11 +147,11 @@ def test_only_the_app_layer_imports_controllers():
 
 def test_hidden_imports_inside_functions_are_found(tmp_path):
     source = tmp_path / "mod.py"
-    source.write_text("def f():\n    from ..app import cli\n    import controllers.pd\n")
+    source.write_text("def f():\n    from ..app import cli\n    import controllers.feedback.pd\n")
     modules = {"flexctl.sim.mod": source, "flexctl.app.cli": None, "flexctl.app": None,
-               "controllers.pd": None, "controllers": None}
+               "controllers.feedback.pd": None, "controllers": None}
     assert imported_modules("flexctl.sim.mod", source, modules) == {"flexctl.app.cli",
-                                                                    "controllers.pd"}
+                                                                    "controllers.feedback.pd"}
     source.write_text("from ..model import Model\nfrom . import maneuvers\n")
     modules = {"flexctl.sim.mod": source, "flexctl.model": None, "flexctl.sim.maneuvers": None}
     assert imported_modules("flexctl.sim.mod", source, modules) == {"flexctl.model",
@@ -162,7 +162,7 @@ def test_checks_catch_an_upward_import_and_a_cycle():
     graph = {"flexctl.model.variants": {"flexctl.sim.simulation"},
              "flexctl.sim.simulation": {"flexctl.model.variants"},
              "flexctl.app.cli": {"flexctl.app.bench"}, "flexctl.app.bench": {"flexctl.app.cli"},
-             "controllers.pd": {"flexctl.model.variants"}}
+             "controllers.feedback.pd": {"flexctl.model.variants"}}
     assert upward_imports(graph) == [("flexctl.model.variants", "flexctl.sim.simulation")]
     assert import_cycles(graph) == [["flexctl.app.bench", "flexctl.app.cli"],
                                     ["flexctl.model.variants", "flexctl.sim.simulation"]]
@@ -234,3 +234,42 @@ def test_private_import_check_catches_one(tmp_path):
     source = tmp_path / "mod.py"
     source.write_text("from .compiled import _cached, public\nfrom os import path\n")
     assert private_imports(source) == [(".compiled", "_cached")]
+
+
+#: The parts of :mod:`controllers` from the lowest; each imports only itself and those before it.
+CONTROLLER_PARTS = ("spec", "design", "slew", "feedback", "mpc", "analysis", "factory",
+                    "codegen")
+
+
+def controller_part(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if parts[0] == "controllers" and len(parts) > 1 else None
+
+
+def test_every_controllers_module_has_a_part():
+    parts = {controller_part(m) for m in GRAPH if m.startswith("controllers.")}
+    assert parts <= set(CONTROLLER_PARTS), parts - set(CONTROLLER_PARTS)
+
+
+@pytest.mark.parametrize("module", sorted(m for m in GRAPH if controller_part(m)))
+def test_controllers_parts_import_downwards(module):
+    rank = {name: i for i, name in enumerate(CONTROLLER_PARTS)}
+    own = rank[controller_part(module)]
+    upward = [dst for dst in GRAPH[module]
+              if controller_part(dst) and rank[controller_part(dst)] > own]
+    assert not upward, f"{module} imports {upward}, above its part"
+
+
+def test_former_flat_paths_name_the_moved_modules():
+    import importlib
+
+    import controllers
+
+    for former, current in controllers.FORMER_PATHS.items():
+        module = importlib.import_module(f"controllers.{current}")
+        assert importlib.import_module(f"controllers.{former}") is module
+        assert getattr(controllers, former) is module
+    from controllers.feedback import ReferenceFeedback
+    from controllers.analysis import loop_margins
+    assert ReferenceFeedback.__module__ == "controllers.feedback.reference_feedback"
+    assert loop_margins.__module__ == "controllers.analysis.loops"

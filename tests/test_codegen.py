@@ -14,7 +14,7 @@ import flexctl
 from controllers import from_spec
 from controllers.codegen import (C_FLAGS, CompileError, ExportRefused, export_c,
                                  program_for)
-from controllers.lqg_sampled import SampledLQG
+from controllers.feedback.lqg_sampled import SampledLQG
 from flexctl.app.cli import main
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.digital import ZeroOrderHold

@@ -268,8 +268,8 @@ def slew_model():
 
 
 def _pd_slew(model, angle, duration=4.0):
-    from controllers.pd import design_pd
-    from controllers.reference import SlewProfile
+    from controllers.feedback.pd import design_pd
+    from controllers.slew.reference import SlewProfile
 
     return design_pd(model, bandwidth=2.0, damping_ratio=0.9, torque_limit=20.0,
                      reference=SlewProfile(slew_angle=angle, duration=duration))
@@ -495,7 +495,7 @@ def test_exact_slew_optimum_is_the_same_compiled(fresh, monkeypatch):
     import flexctl
 
     from controllers import native_dynamics
-    from controllers.trajopt import SlewProblem, solve_slew
+    from controllers.slew.trajopt import SlewProblem, solve_slew
 
     model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, 1, variant="exact")
     problem = SlewProblem(angle=1.0, duration=3.0, torque_bound=5.0, n_intervals=20)
@@ -583,7 +583,7 @@ def test_jacobian_companion_gives_the_jacobian_in_the_free_inputs():
 def test_with_compiled_derivatives_refuses_a_bad_size_by_name(bad):
     import casadi as ca
 
-    from controllers.native_dynamics import with_compiled_derivatives
+    from controllers.design.native_dynamics import with_compiled_derivatives
 
     x = ca.SX.sym("x")
     with pytest.raises((TypeError, ValueError), match="max_library"):
@@ -609,7 +609,7 @@ def test_native_dae_has_the_virtual_machines_values_and_jacobian(fresh):
 
     import flexctl
     from flexctl.sim import compiled as compiled_path
-    from flexctl.sim.digital import _Held
+    from flexctl.sim.embedded_rk import HeldTorque
     from flexctl.sim.native_rhs import native_dae
 
     model = flexctl.load_scene("wheel-slew").build_model()
@@ -617,7 +617,7 @@ def test_native_dae_has_the_virtual_machines_values_and_jacobian(fresh):
     monkey = compiled_path.native_dae
     try:
         compiled_path.native_dae = lambda dae: None            # the SX function itself
-        vm = compiled_path._rhs_function(model, scale, None, None, _Held(0.0))
+        vm = compiled_path._rhs_function(model, scale, None, None, HeldTorque(0.0))
     finally:
         compiled_path.native_dae = monkey
     native = native_dae(vm)

@@ -14,7 +14,7 @@ import pytest
 from controllers import (LQRWeights, NoiseLevels, OpenLoop, SlewProfile, SumOfSines,
                          bang_bang, design_lqg, design_lqr, design_pd,
                          design_scheduled_lqr, design_shaper, from_spec, shape)
-from controllers.pd import PD
+from controllers.feedback.pd import PD
 from flexctl import build_model, load_scene, simulate
 from flexctl.sim import compiled
 from flexctl.sim.compiled import is_symbolic, piecewise_constant

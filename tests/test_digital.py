@@ -5,7 +5,7 @@ import pytest
 
 import flexctl
 from controllers import PD, LQG, design_lqg, LQRWeights
-from controllers.lqg import NoiseLevels
+from controllers.feedback.lqg import NoiseLevels
 from flexctl.model.errors import InputError
 from flexctl.sim.digital import ZeroOrderHold, is_sampled
 
@@ -178,11 +178,11 @@ def test_callable_law_and_rk4_agree(plant):
     ids=["nan-start", "inf-end", "empty", "backwards", "too-few", "too-many", "nan-number"])
 def test_a_moved_segment_integrator_refuses_bad_times_and_numbers(t_start, t_end, numbers):
     from flexctl.sim.compiled import SegmentIntegrator
-    from flexctl.sim.digital import _Held
+    from flexctl.sim.embedded_rk import HeldTorque
 
     model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, 2)
     integ = SegmentIntegrator(model, 0.0, np.array([0.5, 1.0]), np.ones(model.n_states), 1e-8,
-                              controller=_Held(0.1))
+                              controller=HeldTorque(0.1))
     with pytest.raises(ValueError, match="SegmentIntegrator.moved"):
         integ.moved(t_start, t_end, numbers)
 
@@ -191,13 +191,13 @@ def test_a_moved_segment_integrator_runs_the_later_segment():
     """Moved to a later hold with another held torque, it integrates what a new integrator
     built for that segment does."""
     from flexctl.sim.compiled import SegmentIntegrator
-    from flexctl.sim.digital import _Held
+    from flexctl.sim.embedded_rk import HeldTorque
 
     model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, 2)
     scale, y0 = np.ones(model.n_states), np.linspace(0.01, 0.02, model.n_states)
     first = SegmentIntegrator(model, 0.0, np.array([0.5, 1.0]), scale, 1e-10,
-                              controller=_Held(0.1))
+                              controller=HeldTorque(0.1))
     fresh = SegmentIntegrator(model, 3.0, np.array([3.5, 4.0]), scale, 1e-10,
-                              controller=_Held(-0.4))
+                              controller=HeldTorque(-0.4))
     np.testing.assert_allclose(first.moved(3.0, 4.0, (-0.4,))(y0), fresh(y0), rtol=1e-12,
                                atol=1e-15)

@@ -1,4 +1,5 @@
-"""Designs checked on the plant they run on (controllers.stability), and LQG without spillover.
+"""Designs checked on the plant they run on (controllers.design.stability), and LQG without
+spillover.
 
 The facts checked: a loop's reported growth rates are the eigenvalues of the closed loop
 built independently here; a held law's discrete check tends to the continuous one as the
@@ -19,8 +20,8 @@ import flexctl
 from controllers import (LQRWeights, NoiseLevels, SlewProfile, design_lqg, design_lqr,
                          design_pd, from_spec)
 from controllers.factory import _design_model, _lqr_weights, _noise
-from controllers.stability import (NEARLY_UNSTABLE_RATE, LoopStability, LoopStabilityWarning,
-                                   check_loop)
+from controllers.design.stability import (NEARLY_UNSTABLE_RATE, LoopStability, LoopStabilityWarning,
+                                          check_loop)
 from flexctl.model.errors import InputTypeError
 from flexctl.sim.digital import ZeroOrderHold
 

@@ -5,7 +5,7 @@ frequencies far below micro-radians per second beside a hub inertia of some 1e18
 Riccati solvers fail on it.
 Every design reports that as an :class:`~flexctl.model.errors.InputValueError` naming the law,
 the design function, the model's frequencies and ``J0``, its weights and the solver's reason
-(:func:`controllers.controllable.design_failure`), and ``flexctl run`` prints it in one line.
+(:func:`controllers.design.controllable.design_failure`), and ``flexctl run`` prints it in one line.
 """
 
 import numpy as np
@@ -14,7 +14,7 @@ import scipy.linalg
 
 import flexctl
 from controllers import LQRWeights, NoiseLevels
-from controllers.controllable import design_failure
+from controllers.design.controllable import design_failure
 from flexctl.app.cli import EXIT_BAD_INPUT, main
 from flexctl.model.errors import InputValueError
 
@@ -58,7 +58,7 @@ def _design_scheduled(model):
 
 
 def _design_wheel_lqr(model):
-    from controllers.actuated import design_wheel_lqr
+    from controllers.feedback.actuated import design_wheel_lqr
     from flexctl.model.actuators import ReactionWheel
 
     wheel = ReactionWheel(inertia=0.02, torque_limit=0.2, speed_limit=600.0, time_constant=0.05)
@@ -116,8 +116,8 @@ def test_the_estimator_design_names_the_kalman_filter(monkeypatch):
 def test_zero_tracking_weights_leave_the_tracker_riccati_unsolvable():
     """No weight on any state: the rigid-body mode is not detectable in the cost, and the
     tracker's LQR has no stabilising solution on a sound model."""
-    from controllers.tracking import TrajectoryTracker
-    from controllers.trajopt import SlewProblem, solve_slew
+    from controllers.feedback.tracking import TrajectoryTracker
+    from controllers.slew.trajopt import SlewProblem, solve_slew
 
     model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
     solution = solve_slew(model, SlewProblem(angle=0.5, duration=2.0, torque_bound=6.0))
@@ -173,7 +173,7 @@ def test_flexctl_run_reports_a_failed_design_in_one_line(tmp_path, monkeypatch, 
 
 
 def test_noise_levels_whose_squares_overflow_are_refused_by_name():
-    from controllers.lqg import NoiseLevels
+    from controllers.feedback.lqg import NoiseLevels
     from flexctl.app.cli import main
 
     for value in (1e300, 1e-200, 0.0, -1.0, float("nan"), float("inf")):

@@ -1,4 +1,4 @@
-"""Nonlinear MPC (controllers.nmpc): constraints, real-time iteration against convergence,
+"""Nonlinear MPC (controllers.mpc.nmpc): constraints, real-time iteration against convergence,
 warm start, the sampled loop and its report, and slews against trajopt+lqr."""
 
 import warnings
@@ -8,7 +8,7 @@ import pytest
 
 import flexctl
 from controllers import NMPC, SlewProblem, solve_slew
-from controllers.nmpc import OMEGA_H
+from controllers.mpc.nmpc import OMEGA_H
 from flexctl.model.errors import InputError
 
 

@@ -195,10 +195,10 @@ def test_rigid_inertia_is_the_inertia_of_the_undeformed_system():
 
 def _parameter_classes():
     """The keyword-only parameter dataclasses users build by hand."""
-    from controllers.lqg import NoiseLevels
-    from controllers.lqr import LQRWeights
-    from controllers.reference import SlewProfile
-    from controllers.trajopt import SlewProblem
+    from controllers.feedback.lqg import NoiseLevels
+    from controllers.feedback.lqr import LQRWeights
+    from controllers.slew.reference import SlewProfile
+    from controllers.slew.trajopt import SlewProblem
     from flexctl.model.actuators import DCMotor, ReactionWheel
     from flexctl.model.structure import Appendage, Structure
     from flexctl.sim.maneuvers import SineTorque, Slew, SpinUp, TorqueSamples

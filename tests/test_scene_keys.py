@@ -14,14 +14,14 @@ from importlib import resources
 import pytest
 
 from controllers import factory
-from controllers.lqg import NoiseLevels, design_lqg
-from controllers.lqr import LQRWeights, design_lqr
-from controllers.nmpc import NMPC
-from controllers.pd import design_pd
-from controllers.reference import SlewProfile
-from controllers.scheduling import design_scheduled_lqr
+from controllers.feedback.lqg import NoiseLevels, design_lqg
+from controllers.feedback.lqr import LQRWeights, design_lqr
+from controllers.mpc.nmpc import NMPC
+from controllers.feedback.pd import design_pd
+from controllers.slew.reference import SlewProfile
+from controllers.feedback.scheduling import design_scheduled_lqr
 from controllers.spec import CONTROLLER_KINDS, FORMER_NAMES
-from controllers.trajopt import SlewProblem
+from controllers.slew.trajopt import SlewProblem
 from flexctl import SceneError, load_scene
 from flexctl.app import scenes
 from flexctl.model import build_model

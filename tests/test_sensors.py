@@ -1,5 +1,6 @@
 """Noisy sampled sensors (flexctl.sim.sensors) and the Kalman estimator that reads them
-(controllers.observer): the statistics of each reading, the tip accelerometer's physics, and
+(controllers.feedback.observer): the statistics of each reading, the tip accelerometer's physics,
+and
 the estimate's convergence on an exactly discretised plant.
 
 The closed loops here are run on the linear plant discretised exactly (zero-order hold), not by
@@ -17,7 +18,7 @@ import scipy.linalg
 
 import flexctl
 from controllers import PD
-from controllers.observer import Observed, kalman_step
+from controllers.feedback.observer import Observed, kalman_step
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.sensors import (VARIANCE_FLOOR, Sensors, measurement_matrix,
                                  noise_covariance, sensor_names)

@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 import flexctl
 from flexctl.model.errors import InputError
 from controllers import SlewProblem, TrajectoryOptimizationError, solve_slew
-from controllers.slew_nlp import MAX_INTERVALS
+from controllers.slew.slew_nlp import MAX_INTERVALS
 
 BASE = flexctl.load_scene("slew-90").system
 ANGLE, DURATION, TORQUE_BOUND = 1.57, 5.0, 1.0      # rad, s, N m: solvable on BASE

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from controllers import OpenLoop, from_spec, solve_slew, SlewProblem
-from controllers.shaping import bang_bang, design_shaper, shape
+from controllers.slew.shaping import bang_bang, design_shaper, shape
 from flexctl import SceneError, build_model, load_scene, run_scene, simulate
 from flexctl.app.cli import main
 from flexctl.sim.metrics import slew_metrics

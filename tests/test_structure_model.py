@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from controllers.controllable import controllable_part
-from controllers.lqr import LQRWeights, design_lqr
-from controllers.shaping import design_shaper, shaper_frequencies
+from controllers.design.controllable import controllable_part
+from controllers.feedback.lqr import LQRWeights, design_lqr
+from controllers.slew.shaping import design_shaper, shaper_frequencies
 from flexctl import (VARIANTS, Appendage, Beam, Hub, HubBeam, PointMass, SineTorque,
                      Structure, build_model, simulate)
 from flexctl.model.errors import InputValueError
@@ -93,7 +93,7 @@ def test_lqr_designs_on_the_modes_the_torque_moves(support):
 
 def test_lqr_slews_the_free_two_array_craft_and_keeps_its_centre_of_mass():
     craft = twins("free")
-    from controllers.reference import SlewProfile
+    from controllers.slew.reference import SlewProfile
 
     slew = SlewProfile(slew_angle=0.5, duration=4.0)
     lqr = design_lqr(build_model(craft, 2),

@@ -359,7 +359,7 @@ def test_outcomes_round_trip_through_the_store_bit_for_bit(tmp_path):
 # ---------------------------------------------------------------------------- the users
 def test_a_resumed_monte_carlo_study_equals_one_run(tmp_path):
     from controllers import design_pd
-    from controllers.robustness import Dispersion, RobustnessTask, robustness_summary
+    from controllers.analysis.robustness import Dispersion, RobustnessTask, robustness_summary
 
     system = flexctl.load_scene("slew-90").system
     pd = design_pd(flexctl.build_model(system, 2), bandwidth=2.0, damping_ratio=0.9)
@@ -402,7 +402,7 @@ def test_a_resumed_monte_carlo_study_equals_one_run(tmp_path):
 ])
 def test_monte_carlo_draws_need_a_dispersion_and_a_seed(call, match):
     from controllers import design_pd
-    from controllers.robustness import Dispersion, RobustnessTask
+    from controllers.analysis.robustness import Dispersion, RobustnessTask
 
     system = flexctl.load_scene("slew-90").system
     pd = design_pd(flexctl.build_model(system, 2), bandwidth=2.0, damping_ratio=0.9)

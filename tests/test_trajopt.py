@@ -19,10 +19,10 @@ import pytest
 
 import flexctl
 from controllers import trajopt
-from controllers.hold_grid import HOLD_EFFORT_TOLERANCE, hold_effort_excess
-from controllers.trajopt import (HoldTorque, SlewProblem, TrajectoryOptimizationError,
-                                 rigid_minimum_time, solve_slew)
-from controllers.tracking import TrajectoryTracker
+from controllers.design.hold_grid import HOLD_EFFORT_TOLERANCE, hold_effort_excess
+from controllers.slew.trajopt import (HoldTorque, SlewProblem, TrajectoryOptimizationError,
+                                      rigid_minimum_time, solve_slew)
+from controllers.feedback.tracking import TrajectoryTracker
 
 SYSTEM = flexctl.load_scene("hub-beam-mass").system
 ANGLE = math.pi / 2            # rad
@@ -441,8 +441,8 @@ def test_free_hub_slew_ends_where_momentum_puts_the_hub():
     the optimal slew ends with it at the rest state the model gives: still, and where the
     turn about the fixed centre of mass puts it."""
     import flexctl
-    from controllers.slew_nlp import terminal_constraints
-    from controllers.trajopt import SlewProblem, solve_slew
+    from controllers.slew.slew_nlp import terminal_constraints
+    from controllers.slew.trajopt import SlewProblem, solve_slew
 
     scene = flexctl.load_scene("single-wing-free")
     model = flexctl.build_model(scene.system, 1, variant="first_order")
@@ -464,7 +464,7 @@ def test_terminal_constraints_skip_the_modes_a_torque_cannot_reach():
     """Two identical arrays on a pinned hub: the modes that bend both alike are not excited
     by the hub torque and are left out of the end condition; one array: every state is."""
     import flexctl
-    from controllers.slew_nlp import terminal_constraints
+    from controllers.slew.slew_nlp import terminal_constraints
 
     scene = flexctl.load_scene("two-array-free")
     pinned = dataclasses.replace(scene.system, hub=dataclasses.replace(scene.system.hub,
@@ -485,7 +485,7 @@ def test_terminal_constraints_keep_an_actuators_states(actuator):
     mechanical mode of one beam is reached through the actuator, and the actuator's states
     keep an end row each."""
     import flexctl
-    from controllers.slew_nlp import terminal_constraints
+    from controllers.slew.slew_nlp import terminal_constraints
     from flexctl.model import DCMotor, ReactionWheel
 
     device = (ReactionWheel(inertia=0.01, torque_limit=10.0, speed_limit=200.0,
@@ -501,7 +501,7 @@ def test_terminal_constraints_keep_an_actuators_states(actuator):
 @pytest.mark.parametrize("bad", [np.zeros(3), np.full(6, np.nan), "rest", np.full(6, np.inf)])
 def test_terminal_constraints_refuse_a_bad_target_by_name(bad):
     import flexctl
-    from controllers.slew_nlp import terminal_constraints
+    from controllers.slew.slew_nlp import terminal_constraints
 
     model = flexctl.build_model(flexctl.load_scene("slew-90").system, 2, "first_order")
     with pytest.raises((TypeError, ValueError), match="target"):

@@ -274,7 +274,7 @@ class CompiledController:
     @property
     def measures(self) -> bool:
         """True when the law reads the sensors' readings (handed over by the simulation,
-        ``simulate(..., sensors=)``), as :class:`controllers.observer.Observed` does."""
+        ``simulate(..., sensors=)``), as :class:`controllers.feedback.observer.Observed` does."""
         program = self.law.program
         return program.input_kind == "measurement" and program.measurement_matrix is None
 

@@ -30,7 +30,8 @@ def program_for(controller, plant, *, sample_time: float | None = None,
     controller : object
         A flexctl feedback law: PD, LQR, ScheduledLQR, TrajectoryTracker, LQG, NMPC, one of
         them sampled (:class:`~flexctl.sim.digital.ZeroOrderHold`) or driving an actuator
-        (:class:`~controllers.actuated.MotorVoltage`, :class:`~controllers.actuated.LaggedLQR`).
+        (:class:`~controllers.feedback.actuated.MotorVoltage`,
+        :class:`~controllers.feedback.actuated.LaggedLQR`).
     plant : flexctl.Model
         The plant the law reads (its state order, sensors and actuator).
     sample_time : float, optional
@@ -58,10 +59,10 @@ def program_for(controller, plant, *, sample_time: float | None = None,
 
 
 def _dispatch(controller, plant, sample_time, x0):
-    from controllers.actuated import MotorVoltage
-    from controllers.lqg import LQG
-    from controllers.nmpc import NMPC
-    from controllers.observer import Observed
+    from controllers.feedback.actuated import MotorVoltage
+    from controllers.feedback.lqg import LQG
+    from controllers.mpc.nmpc import NMPC
+    from controllers.feedback.observer import Observed
 
     if isinstance(controller, MotorVoltage):
         return _voltage_program(controller, plant, sample_time, x0)
@@ -98,12 +99,12 @@ def _same_rate(controller, sample_time):
 
 def _static_kind(controller) -> str | None:
     """The kind of a built-in static law (subclasses included), or None."""
-    from controllers.actuated import LaggedLQR
+    from controllers.feedback.actuated import LaggedLQR
     from controllers.factory import OpenLoop
-    from controllers.lqr import LQR
-    from controllers.pd import PD
-    from controllers.scheduling import ScheduledLQR
-    from controllers.tracking import TrajectoryTracker
+    from controllers.feedback.lqr import LQR
+    from controllers.feedback.pd import PD
+    from controllers.feedback.scheduling import ScheduledLQR
+    from controllers.feedback.tracking import TrajectoryTracker
 
     kinds = ((PD, "pd"), (LQR, "lqr"), (ScheduledLQR, "scheduled_lqr"),
              (TrajectoryTracker, "tracker"), (LaggedLQR, "lqr_wheel"), (OpenLoop, "open_loop"))
@@ -149,7 +150,7 @@ def _tracker_torque(tracker, t, x):
                             np.asarray(solution._hermite))
     rows = tracker._rows(x.numel())
     if rows is None:
-        from controllers.lqr import casadi_truncate_state
+        from controllers.feedback.lqr import casadi_truncate_state
         design = casadi_truncate_state(x, solution.model.layout)
     else:
         design = x[rows.tolist()]

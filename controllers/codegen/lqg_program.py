@@ -1,6 +1,6 @@
 """LQG with its estimator discretised at the sample time, as a CasADi step function.
 
-The step is :class:`controllers.lqg_sampled.SampledLQG`'s: ``u_k = law(t_k, z_k)``, then
+The step is :class:`controllers.feedback.lqg_sampled.SampledLQG`'s: ``u_k = law(t_k, z_k)``, then
 ``z_{k+1} = Phi z_k + Gamma [u_k; y_k]``; its input is the readings ``y`` (hub angle and each
 appendage's root moment), its memory the estimate ``z``.
 """
@@ -18,8 +18,8 @@ def lqg_program(lqg, plant, sample_time, x0) -> ControllerProgram:
     """The program of ``lqg`` on ``plant``, its estimator discretised at ``sample_time``."""
     import casadi as ca
 
-    from controllers.lqg import measured_outputs
-    from controllers.lqg_sampled import SampledLQG
+    from controllers.feedback.lqg import measured_outputs
+    from controllers.feedback.lqg_sampled import SampledLQG
 
     if sample_time is None:
         raise ExportRefused("export: LQG's estimator is continuous; give the sample_time (s) "

@@ -1,6 +1,6 @@
 """The NMPC's real-time iteration as one CasADi step function (:mod:`controllers.codegen`).
 
-The step is :meth:`controllers.nmpc.NMPCSession.step` in the ``"rti"`` mode, every operation
+The step is :meth:`controllers.mpc.nmpc.NMPCSession.step` in the ``"rti"`` mode, every operation
 a CasADi expression, so that CasADi writes it as C with its QP solver (``qrqp``, an
 active-set solver whose code CasADi generates):
 
@@ -10,7 +10,7 @@ active-set solver whose code CasADi generates):
    Hermite cubics and the mean of its held torque over each sample);
 3. the warm start: the previous plan shifted one sample, its last hold repeated (the first
    step: the reference, or the state held);
-4. condense (the compiled pieces of :meth:`controllers.nmpc.NMPC._condensed`), solve the QP,
+4. condense (the compiled pieces of :meth:`controllers.mpc.nmpc.NMPC._condensed`), solve the QP,
    expand;
 5. the first torque, clipped to the torque limit and, after the first step, to the torque-rate
    limit.
@@ -50,7 +50,7 @@ def _all_finite(v):
 
 
 def hermite_rows(t, grid, coef):
-    """``state_at(t)`` of a :class:`~controllers.trajopt.SlewSolution` (its grid, Hermite
+    """``state_at(t)`` of a :class:`~controllers.slew.trajopt.SlewSolution` (its grid, Hermite
     coefficients (K, 4, n)), shape (n, 1)."""
     import casadi as ca
 
@@ -101,11 +101,11 @@ def _reference(mpc, t):
 
 
 def _first_guess(mpc, built, x_design):
-    """The plan before the first step (:class:`~controllers.nmpc.NMPCSession`'s start): the
+    """The plan before the first step (:class:`~controllers.mpc.nmpc.NMPCSession`'s start): the
     reference, or ``x_design`` held."""
     import casadi as ca
 
-    from controllers.nmpc import state_slice
+    from controllers.mpc.nmpc import state_slice
 
     n, big_n = built["n"], mpc.horizon
     if mpc.reference is not None:
@@ -122,7 +122,7 @@ def _first_guess(mpc, built, x_design):
 
 def _shifted(w, n, hold):
     """The plan moved one sample on, its last hold repeated (the plan itself when that is
-    not finite), as :meth:`~controllers.nmpc.NMPCSession._shift`."""
+    not finite), as :meth:`~controllers.mpc.nmpc.NMPCSession._shift`."""
     import casadi as ca
 
     width = n + 1
@@ -132,13 +132,13 @@ def _shifted(w, n, hold):
 
 
 class _Filter:
-    """The extended Kalman filter of :class:`controllers.nmpc._ExtendedKalman` in CasADi."""
+    """The extended Kalman filter of :class:`controllers.mpc.nmpc._ExtendedKalman` in CasADi."""
 
     def __init__(self, mpc, plant, x0_design):
         import casadi as ca
 
-        from controllers.lqg import measurement_rows
-        from controllers.nmpc import hold_function
+        from controllers.feedback.lqg import measurement_rows
+        from controllers.mpc.nmpc import hold_function
 
         model = mpc.model
         n = model.n_states
@@ -176,14 +176,14 @@ def nmpc_program(mpc, plant, x0) -> ControllerProgram:
     """The :class:`~controllers.codegen.program.ControllerProgram` of ``mpc`` on ``plant``."""
     import casadi as ca
 
-    from controllers.nmpc import conic_solver, input_index
+    from controllers.mpc.nmpc import conic_solver, input_index
 
     _check(mpc, plant)
     mpc._problem()          # validates and sets the sizes
     model, big_n = mpc.model, mpc.horizon
     n = model.n_states
     built = dict(mpc._built)
-    from controllers.nmpc import hold_function
+    from controllers.mpc.nmpc import hold_function
 
     hold = hold_function(model, mpc.sample_time, mpc.substeps)
     pieces = mpc._condensed(hold, mpc.state_weights, mpc.torque_weight,
@@ -228,7 +228,7 @@ def nmpc_program(mpc, plant, x0) -> ControllerProgram:
     if ekf is None:
         names, kind, matrix = tuple(plant.state_names), "state", None
     else:
-        from controllers.lqg import measured_outputs
+        from controllers.feedback.lqg import measured_outputs
         names, kind, matrix = tuple(measured_outputs(plant)), "measurement", ekf.plant_rows
     out_name, unit = plant_output(plant)
     return ControllerProgram(

@@ -1,7 +1,8 @@
-"""A state law on the sensors' discrete Kalman filter (:class:`controllers.observer.Observed`)
+"""A state law on the sensors' discrete Kalman filter
+(:class:`controllers.feedback.observer.Observed`)
 as a CasADi step function.
 
-The step is :meth:`controllers.observer.ObservedSession.step` for a law called every
+The step is :meth:`controllers.feedback.observer.ObservedSession.step` for a law called every
 ``sample_time`` (the flight computer's fixed rate): with the transport delay
 ``d = m T + r`` (``0 <= r < T``), the filter's epochs ``t_k - d`` and the command switches
 between them fall at the same offsets every sample, so each propagation is a fixed chain of
@@ -31,7 +32,7 @@ def _pieces(sample_time: float, delay: float) -> tuple:
 
 
 def _update(z, p, y, mats, offset):
-    """:func:`controllers.observer.kalman_update` (Joseph form) on CasADi expressions."""
+    """:func:`controllers.feedback.observer.kalman_update` (Joseph form) on CasADi expressions."""
     import casadi as ca
 
     c_mat, r_mat = ca.DM(mats.C), ca.DM(mats.R)
@@ -48,7 +49,7 @@ def observed_program(observed, plant, x0, inner: ControllerProgram) -> Controlle
     ``inner`` (reading the state)."""
     import casadi as ca
 
-    from controllers.observer import ObservedSession
+    from controllers.feedback.observer import ObservedSession
 
     if inner.input_kind != "state":
         raise ExportRefused("export: the law inside Observed must read the state")

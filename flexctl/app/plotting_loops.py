@@ -1,4 +1,4 @@
-"""Figures of the frequency-domain view of a flexible loop (:mod:`controllers.analysis`).
+"""Figures of the frequency-domain view of a flexible loop (:mod:`controllers.analysis.loops`).
 
 python-control draws the Bode and pole-zero plots (``bode_plot``, ``pole_zero_plot``) into
 axes of a bare :class:`matplotlib.figure.Figure` (:mod:`flexctl.app.figures`: no pyplot, safe
@@ -10,7 +10,7 @@ Examples
 --------
 >>> import flexctl
 >>> from controllers import design_pd
->>> from controllers.analysis import loop_transfer, plant_channels
+>>> from controllers.analysis.loops import loop_transfer, plant_channels
 >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
 >>> loop = loop_transfer(model, design_pd(model, bandwidth=2.0))
 >>> fig = plot_bode({"PD": loop}, natural_frequencies=model.natural_frequencies(hub="free"))
@@ -93,7 +93,7 @@ def plot_bode(systems, *, natural_frequencies=None, omega_limits=None, omega_num
     Parameters
     ----------
     systems : control.LTI or dict of {str: control.LTI}
-        SISO systems, e.g. :func:`~controllers.analysis.loop_transfer` of several controllers.
+        SISO systems, e.g. :func:`~controllers.analysis.loops.loop_transfer` of several controllers.
     natural_frequencies : array_like, optional
         Flexible frequencies to mark, rad/s (e.g. ``model.natural_frequencies(hub="free")``).
     omega_limits : (float, float), optional
@@ -165,7 +165,7 @@ def plot_poles_vs_spin(table, *, which: str = "closed_loop", ax=None, cmap: str 
 
     Parameters
     ----------
-    table : controllers.analysis.PolesVsSpin
+    table : controllers.analysis.loops.PolesVsSpin
     which : {"closed_loop", "plant"}, optional
         The closed-loop poles (default), or the plant's poles (crosses) with the hub-angle
         zeros (dots).
@@ -223,7 +223,7 @@ def plot_frequencies_vs_spin(table, *, ax=None, title: str | None = None):
 
     Parameters
     ----------
-    table : controllers.analysis.PolesVsSpin
+    table : controllers.analysis.loops.PolesVsSpin
     ax : matplotlib.axes.Axes, optional
     title : str, optional
 
@@ -260,7 +260,7 @@ def plot_robustness(table, x: str = "youngs_modulus_scale", y: str = "phase_marg
     Parameters
     ----------
     table : SweepResult or sequence of dict
-        Rows of :class:`controllers.robustness.RobustnessTask`.
+        Rows of :class:`controllers.analysis.robustness.RobustnessTask`.
     x, y : str, optional
         Column names. Defaults ``youngs_modulus_scale`` and ``phase_margin``.
     ax : matplotlib.axes.Axes, optional

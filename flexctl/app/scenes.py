@@ -936,7 +936,7 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None, *,
         drive = {"hub_motion": scene.maneuver}
     elif getattr(model, "actuator", None) is not None and model.actuator.kind == "dc_motor":
         # the manoeuvre's hub torque, asked of the motor as the voltage that gives it
-        from controllers.actuated import through_actuator
+        from controllers.feedback.actuated import through_actuator
         from controllers.factory import OpenLoop
         drive = {"controller": through_actuator(OpenLoop(scene.maneuver), model)}
     else:

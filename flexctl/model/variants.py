@@ -672,7 +672,7 @@ class Model:
     def nonlinear(self, outputs: str = "named", params=None):
         """Nonlinear plant as a python-control ``NonlinearIOSystem`` (:mod:`flexctl.model.exports`):
         its outputs the model's named outputs (``"named"``), or its states (``"states"``, for
-        a state-feedback law's :func:`controllers.iosys.to_iosys` to connect to by name);
+        a state-feedback law's :func:`controllers.feedback.iosys.to_iosys` to connect to by name);
         ``params`` (scene keys, or a dict of their values) makes physical parameters
         python-control ``params``."""
         from .exports import to_nonlinear_iosystem

@@ -12,7 +12,7 @@ Dormand-Prince steps instead, whose size carries over from sample to sample
 - :class:`ZeroOrderHold` turns a continuous law (any static :class:`flexctl.Controller`, e.g.
   PD or LQR, or a callable ``law(t, x)``) into a sampled one: the same law, continuous or
   sampled, is one switch.
-- A controller with its own solver (e.g. :class:`controllers.nmpc.NMPC`) implements
+- A controller with its own solver (e.g. :class:`controllers.mpc.nmpc.NMPC`) implements
   :class:`SampledController` directly: ``start`` gives a session whose ``step`` is called at
   each sample and whose ``report`` lands in ``SimulationResult.controller_report``.
 

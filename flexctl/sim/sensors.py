@@ -5,7 +5,7 @@ optionally, an accelerometer at every tip, all read once per sample. :class:`Sen
 their settings (frozen, validated); :meth:`Sensors.start` gives a :class:`SensorSession`, the
 random state of one run, whose :meth:`~SensorSession.read` turns the plant's true state into
 one vector of readings. :func:`measurement_matrix` and :func:`noise_covariance` give the same
-readings to a Kalman filter (``controllers.observer``).
+readings to a Kalman filter (``controllers.feedback.observer``).
 
 Notes
 -----
@@ -64,7 +64,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.checks import (KeywordOnly, check_array, check_instance, check_integer,
-                             check_real)
+                            check_real)
 from ..model.errors import InputValueError
 
 __all__ = ["Sensors", "SensorSession", "sensor_names", "measurement_matrix",

@@ -11,14 +11,14 @@ a :class:`LoopStabilityWarning`.
 Notes
 -----
 A continuous law (PD, LQR, scheduled LQR, the trajectory tracker, LQG) is closed as
-:func:`controllers.analysis.loop_transfer` breaks it; a law sampled with a zero-order hold
+:func:`controllers.analysis.loops.loop_transfer` breaks it; a law sampled with a zero-order hold
 (:class:`flexctl.sim.digital.ZeroOrderHold`) and NMPC's terminal LQR (discrete, held over
 the NMPC's sample time) are closed on the plant discretised at their sample time, each
 eigenvalue ``z`` read as ``s = log(z) / T``. A pole whose real part exceeds
 ``-NEARLY_UNSTABLE_RATE`` (1/s) is reported: above ``+STABILITY_TOLERANCE`` times the
 loop's largest pole magnitude it grows (unstable), below it the loop is nearly unstable
 (an e-fold decay slower than ``1 / NEARLY_UNSTABLE_RATE`` s). Poles of modes the torque
-cannot move (:func:`controllers.controllable.controllable_part`: identical appendages
+cannot move (:func:`controllers.design.controllable.controllable_part`: identical appendages
 bending against each other, a free hub's translation) are the plant's own, whatever the
 design: they are listed apart (``hidden_modes``) and do not count against it.
 
@@ -30,7 +30,7 @@ Examples
 --------
 >>> import flexctl
 >>> from controllers import design_pd
->>> from controllers.stability import check_loop
+>>> from controllers.design.stability import check_loop
 >>> plant = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=4)
 >>> design = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
 >>> check = check_loop(plant, design_pd(design, bandwidth=2.0, damping_ratio=0.9))
@@ -113,7 +113,7 @@ class LoopStability:
         Largest real part of the closed-loop poles (hidden modes left out), 1/s.
     stable : bool
         No pole grows (``spectral_abscissa < STABILITY_TOLERANCE`` times the largest pole
-        magnitude, as in :func:`controllers.analysis.loop_margins`).
+        magnitude, as in :func:`controllers.analysis.loops.loop_margins`).
     poles : tuple of GrowingPole
         The poles with real part above ``-NEARLY_UNSTABLE_RATE``, fastest growth first.
     hidden_modes : tuple of float

@@ -42,7 +42,7 @@ Examples
 --------
 >>> import numpy as np
 >>> import flexctl
->>> from controllers.observer import Observed
+>>> from controllers.feedback.observer import Observed
 >>> from flexctl.sim.sensors import Sensors
 >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
 >>> law = lambda t, x: -3.0 * x[0] - 4.0 * x[3]

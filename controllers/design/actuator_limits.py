@@ -1,6 +1,7 @@
 """The limits of the actuator that turns the hub, for controllers that plan the hub torque.
 
-Trajectory optimisation (:mod:`controllers.trajopt`) and NMPC (:mod:`controllers.nmpc`) plan
+Trajectory optimisation (:mod:`controllers.slew.trajopt`) and NMPC (:mod:`controllers.mpc.nmpc`)
+plan
 the hub torque ``u`` on a design model whose input is that torque. The actuator
 (:mod:`flexctl.model.actuators`) that must give it bounds the torque, and through the
 structure's state, what it can give; this module writes those bounds once for both.

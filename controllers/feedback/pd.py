@@ -8,8 +8,8 @@ Examples
 --------
 >>> import numpy as np
 >>> import flexctl
->>> from controllers.pd import design_pd
->>> from controllers.reference import SlewProfile
+>>> from controllers.feedback.pd import design_pd
+>>> from controllers.slew.reference import SlewProfile
 >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
 >>> pd = design_pd(model, bandwidth=3.0, damping_ratio=0.9,
 ...                reference=SlewProfile(slew_angle=np.pi / 2, duration=2.0))
@@ -23,24 +23,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexctl.model import Model
 from flexctl.model.checks import check_integer, check_real
 from flexctl.model.layout import StateLayout
 
 from flexctl.model.errors import InputValueError
 
-from .feedback import ReferenceFeedback
-from .reference import casadi_evaluate, evaluate_reference, reference_parameters
+from ..design.plant_state import checked_rigid_inertia
+from .reference_feedback import ReferenceFeedback
+from ..slew.reference import casadi_evaluate, evaluate_reference, reference_parameters
 
 __all__ = ["PD", "pd_gains", "design_pd"]
-
-
-def checked_rigid_inertia(owner: str, model_or_inertia) -> float:
-    """``model.rigid_inertia`` of a flexctl Model (``J_0``, about the centre of mass for a
-    free hub), or a given inertia (kg m^2, > 0)."""
-    if isinstance(model_or_inertia, Model):
-        return float(model_or_inertia.rigid_inertia)
-    return check_real(owner, "inertia", model_or_inertia, minimum=0.0, strict=True)
 
 
 #: Outputs a PD law may read (with their rates): the collocated hub angle, the tip angle
@@ -63,7 +55,7 @@ class PD(ReferenceFeedback):
         Rate gain, N m s/rad (> 0; with ``kd = 0`` the undamped beam would never settle).
     reference : object, optional
         Hub reference with ``angle(t)``, ``rate(t)``, ``acceleration(t)`` (rad, rad/s, rad/s^2),
-        e.g. :class:`~controllers.reference.SlewProfile`. Default: regulate to 0.
+        e.g. :class:`~controllers.slew.reference.SlewProfile`. Default: regulate to 0.
     feedforward_inertia : float, optional
         ``J`` of the feedforward term, kg m^2 (> 0), normally the rigid inertia ``J0``.
         Default: no feedforward.
@@ -73,7 +65,7 @@ class PD(ReferenceFeedback):
     Notes
     -----
     The plant state is ``x = [theta, q_1..q_N, theta_dot, q_1_dot..q_N_dot]`` for any ``N``;
-    only ``theta`` and ``theta_dot`` are read (:func:`controllers.plant_state.hub_state`).
+    only ``theta`` and ``theta_dot`` are read (:func:`controllers.design.plant_state.hub_state`).
     """
 
     kp: float
@@ -191,14 +183,14 @@ def design_pd(model, bandwidth: float, damping_ratio: float = 0.7, *, reference=
         N m.
     plant : flexctl.Model, optional
         The plant the law will run on (its own modes and variant): the loop is checked on
-        its linearisation (:func:`controllers.stability.check_loop`) and an unstable or
-        nearly unstable loop warns (:class:`~controllers.stability.LoopStabilityWarning`).
+        its linearisation (:func:`controllers.design.stability.check_loop`) and an unstable or
+        nearly unstable loop warns (:class:`~controllers.design.stability.LoopStabilityWarning`).
 
     Returns
     -------
     PD
     """
-    from .stability import checked_on
+    from ..design.stability import checked_on
 
     kp, kd = pd_gains(model, bandwidth, damping_ratio)
     inertia = float(model.rigid_inertia) if feedforward else None

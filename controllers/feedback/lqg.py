@@ -2,7 +2,8 @@
 
 Only two signals are measured: the hub angle (an encoder) and the root bending moment of the
 beam (a strain gauge). A steady-state Kalman filter (:func:`control.lqe`) estimates the state
-from them; the torque is the LQR law of :mod:`controllers.lqr` (designed on the design model)
+from them; the torque is the LQR law of :mod:`controllers.feedback.lqr` (designed on the design
+model)
 applied to the estimate. The filter runs as the controller's internal state ``z`` inside
 :func:`flexctl.simulate`, driven by the plant's measured outputs (the plant usually has more
 modes than the design model: build the controller for it with :meth:`LQG.for_plant`).
@@ -29,7 +30,7 @@ With an undamped beam (``damping_ratio = 0``) the root moment carries the unmode
 too, and a filter that leaves them out feeds them back through its innovation, which may
 destabilise them (observation spillover: slew-90's third mode grows at 0.024 1/s with a
 filter of the design's 2 modes). Check with :meth:`LQG.closed_loop_poles` or
-:func:`controllers.stability.check_loop`.
+:func:`controllers.design.stability.check_loop`.
 """
 
 from __future__ import annotations
@@ -42,12 +43,12 @@ from flexctl.model.checks import KeywordOnly, check_array, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.layout import StateLayout
 
-from .feedback import ReferenceFeedback
-from .controllable import design_failure, lqe_on_part
+from .reference_feedback import ReferenceFeedback
+from ..design.controllable import design_failure, lqe_on_part
 from .lqr import (LQRWeights, gain_layout, lqr_gain, checked_model, casadi_reference_state,
                   checked_on, reference_state, static_deflection_gain, truncation_matrix)
-from .plant_state import mode_count
-from .reference import has_casadi
+from ..design.plant_state import mode_count
+from ..slew.reference import has_casadi
 
 __all__ = ["NoiseLevels", "LQG", "design_lqg", "estimator_gain", "SumOfSines",
            "MEASURED_OUTPUTS", "measured_outputs"]
@@ -248,16 +249,16 @@ class LQG(ReferenceFeedback):
     measurement_noise : callable, optional
         ``v(t)``, shape (2,), added to the measurements (e.g. :class:`SumOfSines`).
     reference, feedforward_inertia, torque_limit
-        As in :class:`~controllers.lqr.LQR`.
+        As in :class:`~controllers.feedback.lqr.LQR`.
     initial_estimate : ndarray, shape (n_d,), optional
         ``z(0)``; default zeros (the filter knows nothing of the initial state).
     deflection_gain : ndarray, shape (M,), optional
-        As in :class:`~controllers.lqr.LQR`.
+        As in :class:`~controllers.feedback.lqr.LQR`.
     layout : StateLayout, optional
-        The design state's (and estimate's) layout, as in :class:`~controllers.lqr.LQR`.
+        The design state's (and estimate's) layout, as in :class:`~controllers.feedback.lqr.LQR`.
     motor : DCMotor, optional
         The DC motor that turns the hub (its command a voltage,
-        :class:`~controllers.actuated.MotorVoltage`): the torque is kept on the motor's
+        :class:`~controllers.feedback.actuated.MotorVoltage`): the torque is kept on the motor's
         voltage line at the estimated hub rate, ``|T + d w_hat| <= g V_max``, so that the
         filter integrates the torque the motor can give (anti-windup), not the one asked.
     """
@@ -463,7 +464,7 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
     model : flexctl.Model
         Design model (``M`` modes).
     weights : LQRWeights
-        Regulator weights (see :func:`controllers.lqr.lqr_weight_matrices`).
+        Regulator weights (see :func:`controllers.feedback.lqr.lqr_weight_matrices`).
     noise : NoiseLevels
         Noise the filter is designed for.
     spin_rate : float, optional
@@ -472,15 +473,15 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
         Model whose sensors the controller reads in simulation (``N >= M`` modes). Default:
         ``model``.
     reference, feedforward, torque_limit, flexible_reference
-        As in :func:`controllers.lqr.design_lqr`.
+        As in :func:`controllers.feedback.lqr.design_lqr`.
     measurement_noise : callable, optional
         ``v(t)`` added to the measurements in simulation, shape (2,).
     estimate_plant_modes : bool, optional
         Model every mode of ``plant`` in the filter (default True); False models the design
         model's modes only (cheaper, and unstable on an undamped plant with more modes).
     check_stability : bool, optional
-        Check the loop on ``plant`` (:func:`controllers.stability.check_loop`) and warn
-        (:class:`~controllers.stability.LoopStabilityWarning`) when it is unstable or nearly
+        Check the loop on ``plant`` (:func:`controllers.design.stability.check_loop`) and warn
+        (:class:`~controllers.design.stability.LoopStabilityWarning`) when it is unstable or nearly
         so. Default True.
 
     Returns
@@ -492,7 +493,7 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
     Examples
     --------
     >>> import flexctl
-    >>> from controllers.lqr import LQRWeights
+    >>> from controllers.feedback.lqr import LQRWeights
     >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
     >>> lqg = design_lqg(model, LQRWeights(hub_angle=0.1, hub_rate=0.02, torque=2.0),
     ...                  NoiseLevels(angle=1e-3, root_moment=0.1, torque=1.0))

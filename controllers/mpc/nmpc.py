@@ -10,13 +10,13 @@ variant, the geometrically exact one included),
           |V(u_j, rate_j)| <= V_max, |V(u_j, rate_j+1)| <= V_max    (actuator: a DC motor)
           [x_N = r_N]                                        (terminal = "rest")
 
-with ``r_j, v_j`` the reference (a :class:`~controllers.trajopt.SlewSolution` or a rest
+with ``r_j, v_j`` the reference (a :class:`~controllers.slew.trajopt.SlewSolution` or a rest
 target), ``P`` the discrete LQR Riccati solution of the design model at rest (terminal
 cost), and applies ``u_0`` until the next sample (a :class:`flexctl.sim.digital.SampledController`).
 With an ``actuator`` the hub torque stays within what it can give
-(:mod:`controllers.actuator_limits`): ``u_max`` is also a reaction wheel's torque limit,
+(:mod:`controllers.design.actuator_limits`): ``u_max`` is also a reaction wheel's torque limit,
 ``Omega(x)`` the wheel's speed relative to the hub for zero total momentum, ``w_max`` its speed
-limit less :data:`~controllers.actuator_limits.SPEED_MARGIN`; ``V(u, rate)`` the voltage a DC
+limit less :data:`~controllers.design.actuator_limits.SPEED_MARGIN`; ``V(u, rate)`` the voltage a DC
 motor needs for the hub torque ``u`` at the hub rate. The output is still the hub torque.
 
 Two solution modes:
@@ -35,7 +35,7 @@ fastest mode, inside RK4's stability interval.
 Examples
 --------
 >>> import numpy as np, flexctl
->>> from controllers.nmpc import NMPC
+>>> from controllers.mpc.nmpc import NMPC
 >>> model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=2,
 ...                             variant="first_order")
 >>> mpc = NMPC(model=model, target=np.pi / 2, torque_limit=6.0, sample_time=0.05, horizon=20)
@@ -61,12 +61,12 @@ from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.digital import check_sample_time
 from flexctl.sim.fixed_step import jit_compiled
 
-from .actuator_limits import (check_design_model, horizon_constraints, horizon_rows,
-                              hub_torque_bound, linearised_horizon_constraints)
-from .lqg import NoiseLevels, measurement_rows
-from .plant_state import design_rows
-from .spec import MODES, QP_SOLVERS, TERMINALS
-from .trajopt import SlewSolution
+from ..design.actuator_limits import (check_design_model, horizon_constraints, horizon_rows,
+                                      hub_torque_bound, linearised_horizon_constraints)
+from ..feedback.lqg import NoiseLevels, measurement_rows
+from ..design.plant_state import design_rows
+from ..spec import MODES, QP_SOLVERS, TERMINALS
+from ..slew.trajopt import SlewSolution
 
 __all__ = ["NMPC", "NMPCSession", "OMEGA_H", "QP_SOLVERS"]
 
@@ -267,7 +267,8 @@ class NMPC:
     substeps : int, optional
         RK4 substeps per hold; default the fewest with ``omega_max h <= OMEGA_H``.
     actuator : ReactionWheel or DCMotor, optional
-        What gives the hub torque (:mod:`controllers.actuator_limits`): the torque also within
+        What gives the hub torque (:mod:`controllers.design.actuator_limits`): the torque also
+        within
         a wheel's torque limit (:attr:`hub_torque_limit`) and the predicted wheel speed within
         its speed limit (less the margin; hub, beams and wheel at zero total momentum); or the
         voltage for each planned torque at the predicted hub rates within a motor's voltage
@@ -485,7 +486,7 @@ class NMPC:
         (shape (1, n), ``u = -K x``), the design state's layout and the sample time (s). It is
         also the gain of the unconstrained real-time iteration (a finite horizon ending on
         the Riccati solution gives the infinite-horizon gain at every stage)."""
-        from .controllable import held
+        from ..design.controllable import held
 
         p_mat = self._terminal_weight()
         a_d, b_d = held(*self.model.linear_matrices(0.0), self.sample_time)
@@ -495,7 +496,7 @@ class NMPC:
     def _terminal_weight(self) -> np.ndarray:
         """``P``: the discrete LQR Riccati solution of the design model at rest, held over
         ``sample_time`` with weights ``Q`` and ``R``, shape (n, n)."""
-        from .controllable import design_failure, dlqr_on_part
+        from ..design.controllable import design_failure, dlqr_on_part
 
         with design_failure("nmpc", "NMPC terminal weight", self.model,
                             state_weights=self.state_weights, torque_weight=self.torque_weight,
@@ -516,7 +517,7 @@ class NMPC:
             residuals.append(ca.DM(sq) * (xs[j] - rx[j]))
             residuals.append(np.sqrt(r) * (us[j] - rv[j]))
         # P = F^T F; P is only semidefinite when the torque cannot move some modes
-        # (controllers.controllable), so F comes from its eigenvalues, not Cholesky
+        # (controllers.design.controllable), so F comes from its eigenvalues, not Cholesky
         lam, vec = np.linalg.eigh(0.5 * (p_mat + p_mat.T))
         factor = np.sqrt(np.clip(lam, 0.0, None))[:, None] * vec.T
         residuals.append(ca.mtimes(ca.DM(factor), xs[big_n] - rx[big_n]))
@@ -751,7 +752,7 @@ class NMPCSession:
 
     ``rows`` are the indices of the design state in the plant state
     (``plant.layout.projection(mpc.model.layout)``); by default those of a plant of the design
-    model's blocks with ``x0``'s length (:func:`controllers.plant_state.design_rows`).
+    model's blocks with ``x0``'s length (:func:`controllers.design.plant_state.design_rows`).
     """
 
     def __init__(self, mpc: NMPC, built: dict, x0, rows=None):

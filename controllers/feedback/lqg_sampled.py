@@ -1,6 +1,7 @@
 """LQG run on a flight computer: its estimator discretised at a sample time.
 
-:class:`~controllers.lqg.LQG` integrates its Kalman filter ``dz/dt = A z + B u + L (y - C z)``
+:class:`~controllers.feedback.lqg.LQG` integrates its Kalman filter
+``dz/dt = A z + B u + L (y - C z)``
 continuously. Sampled every ``T`` seconds, with the torque ``u_k`` and the readings ``y_k`` held
 over the sample (zero-order hold), the same filter is exactly
 
@@ -15,9 +16,9 @@ writes as C.
 Examples
 --------
 >>> import numpy as np, flexctl
->>> from controllers.lqg import NoiseLevels, design_lqg
->>> from controllers.lqr import LQRWeights
->>> from controllers.lqg_sampled import SampledLQG
+>>> from controllers.feedback.lqg import NoiseLevels, design_lqg
+>>> from controllers.feedback.lqr import LQRWeights
+>>> from controllers.feedback.lqg_sampled import SampledLQG
 >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
 >>> lqg = design_lqg(model, LQRWeights(hub_angle=0.05, torque=5.0),
 ...                  NoiseLevels(angle=1e-4, root_moment=1e-3, torque=0.1))
@@ -56,7 +57,7 @@ def discretised_estimator(lqg: LQG, sample_time: float) -> tuple:
 
 @dataclass(frozen=True, eq=False)
 class SampledLQG:
-    """An :class:`~controllers.lqg.LQG` with its estimator discretised at ``sample_time``.
+    """An :class:`~controllers.feedback.lqg.LQG` with its estimator discretised at ``sample_time``.
 
     Parameters
     ----------

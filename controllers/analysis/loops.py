@@ -37,7 +37,7 @@ Examples
 --------
 >>> import flexctl
 >>> from controllers import design_pd
->>> from controllers.analysis import loop_margins, loop_transfer
+>>> from controllers.analysis.loops import loop_margins, loop_transfer
 >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=3)
 >>> pd = design_pd(model, bandwidth=2.0, damping_ratio=0.9)
 >>> margins = loop_margins(loop_transfer(model, pd))
@@ -58,13 +58,13 @@ from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.checks import check_real
 from flexctl.model.layout import StateLayout
 
-from .lqg import LQG
-from .lqr import LQR, checked_model, truncation_matrix
-from .plant_state import resized
-from .pd import PD, SENSORS
-from .scheduling import ScheduledLQR
-from .stability import STABILITY_TOLERANCE
-from .tracking import TrajectoryTracker
+from ..feedback.lqg import LQG
+from ..feedback.lqr import LQR, checked_model, truncation_matrix
+from ..design.plant_state import resized
+from ..feedback.pd import PD, SENSORS
+from ..feedback.scheduling import ScheduledLQR
+from ..design.stability import STABILITY_TOLERANCE
+from ..feedback.tracking import TrajectoryTracker
 
 __all__ = ["SENSORS", "PlantChannels", "plant_channels", "loop_transfer", "LoopMargins",
            "loop_margins", "PolesVsSpin", "poles_vs_spin"]
@@ -234,12 +234,14 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
         The plant, linearised about ``spin_rate`` (``N`` modes; the controller may have been
         designed on fewer).
     controller : PD, LQR, ScheduledLQR, TrajectoryTracker, LQG or ndarray
-        - :class:`~controllers.pd.PD`: ``u = -kp y - kd y_dot`` on the output ``sensor``;
-        - :class:`~controllers.lqr.LQR`, :class:`~controllers.scheduling.ScheduledLQR` (its
-          gain at ``spin_rate``), :class:`~controllers.tracking.TrajectoryTracker` (its
+        - :class:`~controllers.feedback.pd.PD`: ``u = -kp y - kd y_dot`` on the output ``sensor``;
+        - :class:`~controllers.feedback.lqr.LQR`,
+          :class:`~controllers.feedback.scheduling.ScheduledLQR` (its
+          gain at ``spin_rate``), :class:`~controllers.feedback.tracking.TrajectoryTracker` (its
           feedback gain) or a gain array of shape (1, 2 M + 2): ``u = -K P x`` with ``P`` the
-          truncation to the design's ``M`` modes (:func:`~controllers.lqr.truncation_matrix`);
-        - :class:`~controllers.lqg.LQG`: its compensator (:meth:`LQG.compensator`) reading
+          truncation to the design's ``M`` modes
+          (:func:`~controllers.feedback.lqr.truncation_matrix`);
+        - :class:`~controllers.feedback.lqg.LQG`: its compensator (:meth:`LQG.compensator`) reading
           ``[theta, root_moment]`` of this plant.
 
         References, feedforward and saturation play no part in the loop.

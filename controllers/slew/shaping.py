@@ -45,7 +45,7 @@ from flexctl.model.errors import InputTypeError, InputValueError
 
 from flexctl.sim.maneuvers import rigid_slew_duration
 
-from .pd import checked_rigid_inertia
+from ..design.plant_state import checked_rigid_inertia
 
 __all__ = ["BangBang", "bang_bang", "Shaper", "zv_shaper", "zvd_shaper", "design_shaper",
            "convolve", "shaper_frequencies",
@@ -327,7 +327,7 @@ class ShapedReference:
     """Reference ``sum_i A_i base(t - t_i)`` for angle, rate and acceleration.
 
     ``base`` must rest at its initial value before its start (as
-    :class:`~controllers.reference.SlewProfile` does).
+    :class:`~controllers.slew.reference.SlewProfile` does).
     """
 
     base: object
@@ -377,7 +377,8 @@ def shape(command, shaper: Shaper):
     command : callable or reference
         A torque function of time (e.g. :class:`BangBang`), or a reference with ``angle``,
         ``rate`` and ``acceleration`` methods (e.g. a
-        :class:`~controllers.reference.SlewProfile`). A :class:`BangBang` is shaped as a torque.
+        :class:`~controllers.slew.reference.SlewProfile`). A :class:`BangBang` is shaped as a
+        torque.
     shaper : Shaper
 
     Returns

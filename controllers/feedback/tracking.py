@@ -1,6 +1,6 @@
 """Tracking of an optimal slew: feedforward torque plus LQR feedback about the trajectory.
 
-:class:`TrajectoryTracker` follows a :class:`~controllers.trajopt.SlewSolution` on a plant that
+:class:`TrajectoryTracker` follows a :class:`~controllers.slew.trajopt.SlewSolution` on a plant that
 differs from the design model (more modes, parameter errors): the optimal torque as
 feedforward plus LQR feedback on the deviation from the optimal state trajectory.
 """
@@ -17,9 +17,9 @@ from flexctl.model.errors import InputTypeError, InputValueError
 
 from flexctl.model import Model
 
-from .controllable import design_failure, lqr_on_part
+from ..design.controllable import design_failure, lqr_on_part
 from .lqr import casadi_truncate_state, truncate_state, truncation_matrix
-from .trajopt import HoldTorque, SlewSolution, checked_number
+from ..slew.trajopt import HoldTorque, SlewSolution, checked_number
 
 __all__ = ["TrajectoryTracker"]
 

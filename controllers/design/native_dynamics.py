@@ -1,6 +1,6 @@
 """A design model's dynamics for the optimisers, compiled with their derivatives.
 
-IPOPT's callbacks in a trajectory optimisation (:mod:`controllers.trajopt`) evaluate the
+IPOPT's callbacks in a trajectory optimisation (:mod:`controllers.slew.trajopt`) evaluate the
 design model's dynamics, their Jacobian and the Hessian of the Lagrangian at every collocation
 point of every iteration. For the exact variant these dominate: on CasADi's virtual machine
 they took 93 % of a two-array slew's 17 s solve. :func:`design_dynamics` returns the model's
@@ -38,7 +38,7 @@ MAX_LIBRARY = 250_000
 #: Longest library of an RK4 hold: a hold of many substeps has a Hessian far longer than its
 #: dynamics' (two arrays, first order, 6 substeps: 6 100 instructions, Hessian 262 000, 39 s
 #: to compile), and its substeps can call the compiled dynamics instead
-#: (:func:`controllers.slew_nlp.transcribe`).
+#: (:func:`controllers.slew.slew_nlp.transcribe`).
 MAX_HOLD_LIBRARY = 120_000
 
 _BUILT: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()

@@ -15,7 +15,7 @@ With ``N`` plant modes and ``M <= N`` design modes, the plant state is
 ``P = truncation_matrix(N, M)``. Both orders are the design model's
 :class:`~flexctl.model.layout.StateLayout` (``model.layout``) on ``M`` and ``N`` modes: the
 design state is the plant's ``plant_layout.projection(design_layout)``
-(:mod:`controllers.plant_state`). A reference slew sets
+(:mod:`controllers.design.plant_state`). A reference slew sets
 ``x_ref = [theta_ref, 0..0, rate_ref, 0..0]`` and the torque is
 ``u = -K (x_d - x_ref) + J0 acc_ref`` (the feedforward optional), clipped to the torque limit.
 
@@ -30,7 +30,7 @@ with more modes.
 Examples
 --------
 >>> import flexctl
->>> from controllers.lqr import LQRWeights, design_lqr
+>>> from controllers.feedback.lqr import LQRWeights, design_lqr
 >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
 >>> lqr = design_lqr(model, LQRWeights(hub_angle=0.05, torque=5.0, tip_deflection=0.05))
 >>> lqr.gain.shape, bool(lqr.poles.real.max() < 0)
@@ -49,12 +49,12 @@ from flexctl.model.checks import (KeywordOnly, check_array, check_instance, chec
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.layout import StateLayout
 
-from .controllable import design_failure, lqr_on_part
-from .feedback import ReferenceFeedback
-from .plant_state import DEFAULT_LAYOUT, design_rows, resized
-from .spec import WEIGHT_RANGE
-from .reference import (casadi_evaluate, evaluate_reference, optional_positive,
-                        reference_parameters)
+from ..design.controllable import design_failure, lqr_on_part
+from .reference_feedback import ReferenceFeedback
+from ..design.plant_state import DEFAULT_LAYOUT, design_rows, resized
+from ..spec import WEIGHT_RANGE
+from ..slew.reference import (casadi_evaluate, evaluate_reference, optional_positive,
+                              reference_parameters)
 
 __all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation_matrix",
            "truncate_state", "reference_state", "closed_loop_poles", "static_deflection_gain"]
@@ -287,7 +287,7 @@ class LQR(ReferenceFeedback):
         ``K`` on the design state, N m per state unit.
     reference : object, optional
         Hub reference with ``angle``, ``rate``, ``acceleration`` (e.g. a
-        :class:`~controllers.reference.SlewProfile`). Default: regulate to 0.
+        :class:`~controllers.slew.reference.SlewProfile`). Default: regulate to 0.
     feedforward_inertia : float, optional
         ``J`` of the feedforward term, kg m^2 (> 0). Default none.
     torque_limit : float, optional
@@ -386,7 +386,8 @@ class LQR(ReferenceFeedback):
 
 
 def lqr_gain(model, weights, spin_rate, sample_time=None):
-    """Gain and closed-loop poles on the modes the torque moves (:mod:`controllers.controllable`:
+    """Gain and closed-loop poles on the modes the torque moves
+    (:mod:`controllers.design.controllable`:
     all of them for one beam, where this is ``control.lqr`` of the linearisation)."""
     q_mat, r_mat = lqr_weight_matrices(model, weights)
     gain, poles, _ = lqr_on_part(model, spin_rate, q_mat, r_mat, sample_time)
@@ -394,8 +395,8 @@ def lqr_gain(model, weights, spin_rate, sample_time=None):
 
 
 def checked_on(controller, plant):
-    """:func:`controllers.stability.checked_on` (imported when called: it imports this)."""
-    from .stability import checked_on as check
+    """:func:`controllers.design.stability.checked_on` (imported when called: it imports this)."""
+    from ..design.stability import checked_on as check
 
     return check(controller, plant, stacklevel=3)
 
@@ -424,12 +425,12 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
         (:func:`reference_state`) rather than a straight beam. Default True.
     sample_time : float, optional
         For a law run with a zero-order hold (s): the discrete LQR of the plant held over
-        it (:func:`controllers.controllable.state_gain`), stable where the continuous gain
+        it (:func:`controllers.design.controllable.state_gain`), stable where the continuous gain
         held that long is not. Default: the continuous LQR.
     plant : flexctl.Model, optional
         The plant the law will run on (its own modes and variant): the loop is checked on
-        its linearisation (:func:`controllers.stability.check_loop`) and an unstable or
-        nearly unstable loop warns (:class:`~controllers.stability.LoopStabilityWarning`).
+        its linearisation (:func:`controllers.design.stability.check_loop`) and an unstable or
+        nearly unstable loop warns (:class:`~controllers.design.stability.LoopStabilityWarning`).
 
     Returns
     -------
@@ -437,7 +438,7 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
         ``gain`` equals ``control.lqr(model.linearize(spin_rate), Q, R)[0]`` when the torque
         moves every mode; otherwise the LQR gain of the modes it moves, zero on the others
         (symmetric appendages bending against each other, a free hub's translation;
-        :mod:`controllers.controllable`).
+        :mod:`controllers.design.controllable`).
     """
     model = checked_model("design_lqr", model)
     spin_rate = check_real("design_lqr", "spin_rate", spin_rate)

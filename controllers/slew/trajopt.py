@@ -3,7 +3,8 @@
 :func:`solve_slew` turns a :class:`SlewProblem` into a :class:`SlewSolution`: the hub torque,
 held constant on each of ``K`` intervals, that slews the hub of a :class:`~flexctl.Model`
 by ``angle`` from rest to rest with every flexible state back at zero, at minimum effort over
-a given duration or in minimum time. :class:`controllers.tracking.TrajectoryTracker` follows
+a given duration or in minimum time. :class:`controllers.feedback.tracking.TrajectoryTracker`
+follows
 such a solution on a plant that differs from the design model.
 
 Notes
@@ -41,17 +42,19 @@ The constraints, in this order (the order of ``opti.g`` and of
 the design model's fastest mode (:func:`slew_discretisation`). The states are scaled for IPOPT
 (``opti.set_linear_scale``) by their physical sizes; values and multipliers stay in SI units.
 The rate bound treats the torque as zero before and after the slew, so the first and last
-holds are limited to ``r h``. With an ``actuator`` (:mod:`controllers.actuator_limits`), ``u_max``
+holds are limited to ``r h``. With an ``actuator`` (:mod:`controllers.design.actuator_limits`),
+``u_max``
 is the torque bound and a reaction wheel's torque limit; ``Omega(x)`` is the wheel's speed
 relative to the hub, ``w_max`` its speed limit less
-:data:`~controllers.actuator_limits.SPEED_MARGIN`; ``V(u, rate)`` the voltage a DC motor needs
+:data:`~controllers.design.actuator_limits.SPEED_MARGIN`; ``V(u, rate)`` the voltage a DC motor
+needs
 for the hub torque ``u`` at the hub rate.
 
 Before anything is built, :func:`solve_slew` refuses a slew whose holds cannot reach its
-true optimum (:mod:`controllers.hold_grid`): fewer holds than terminal conditions, or holds
+true optimum (:mod:`controllers.design.hold_grid`): fewer holds than terminal conditions, or holds
 that alias a design mode so that stopping it costs more than
-:data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` above the converged effort; and a slew
-the actuator cannot give (:func:`controllers.actuator_limits.refuse_infeasible`).
+:data:`~controllers.design.hold_grid.HOLD_EFFORT_TOLERANCE` above the converged effort; and a slew
+the actuator cannot give (:func:`controllers.design.actuator_limits.refuse_infeasible`).
 """
 
 from __future__ import annotations
@@ -70,12 +73,12 @@ from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.layout import StateLayout
 from flexctl.sim.maneuvers import rigid_slew_duration
 
-from .actuator_limits import (check_design_model, demand, hub_torque_bound, minimum_duration,
-                              refuse_infeasible, speed_bound)
-from .hold_grid import MAX_SUBSTEPS
-from .plant_state import DEFAULT_LAYOUT, resized
+from ..design.actuator_limits import (check_design_model, demand, hub_torque_bound,
+                                      minimum_duration, refuse_infeasible, speed_bound)
+from ..design.hold_grid import MAX_SUBSTEPS
+from ..design.plant_state import DEFAULT_LAYOUT, resized
 from .slew_checks import refuse_unsolvable
-from .spec import OBJECTIVES, TRANSCRIPTIONS
+from ..spec import OBJECTIVES, TRANSCRIPTIONS
 from .slew_nlp import (MAX_INTERVALS, Discretisation, Transcribed, discretisation, rk4_substeps,
                        transcribe, transcription_for)
 
@@ -154,7 +157,7 @@ class SlewProblem(KeywordOnly):
     substeps : int, optional
         RK4 steps per hold (>= 1). Default: chosen by :func:`rk4_substeps` from the design
         model's fastest mode, which they integrate over the slew within
-        :data:`~controllers.hold_grid.PHASE_TOLERANCE` of its amplitude (and inside RK4's
+        :data:`~controllers.design.hold_grid.PHASE_TOLERANCE` of its amplitude (and inside RK4's
         stability interval).
     collocation_scheme : {"radau", "legendre"}, optional
         Collocation only: the points (degree :attr:`degree`, 3) of each of the ``m`` elements
@@ -165,9 +168,9 @@ class SlewProblem(KeywordOnly):
         minimum time. Minimum time only.
     actuator : ReactionWheel or DCMotor, optional
         What gives the hub torque, whose limits the slew keeps
-        (:mod:`controllers.actuator_limits`): a reaction wheel's torque limit (the hub torque
+        (:mod:`controllers.design.actuator_limits`): a reaction wheel's torque limit (the hub torque
         within :attr:`hub_torque_bound`) and speed limit (less
-        :data:`~controllers.actuator_limits.SPEED_MARGIN`, at every state of the grid, for a
+        :data:`~controllers.design.actuator_limits.SPEED_MARGIN`, at every state of the grid, for a
         slew from rest with zero total momentum); a DC motor's voltage limit (the voltage for
         each hold's torque at the hub rate at both its ends, the motor's torque-speed line).
         The design model is the structure's (for a motor, with the rotor's reflected inertia:
@@ -358,7 +361,8 @@ class SlewSolution:
         """What the plan asks of ``problem.actuator``: the wheel speed relative to the hub at
         the grid times, rad/s, shape (K+1,); or the motor voltage at the start (row 0) and end
         (row 1) of each hold, V, shape (2, K); ``None`` without an actuator.
-        (:func:`controllers.actuator_limits.demand`, from :attr:`states` and :attr:`torque`.)"""
+        (:func:`controllers.design.actuator_limits.demand`, from :attr:`states` and
+        :attr:`torque`.)"""
         return demand(self.model, self.problem.actuator, self.states, self.torque)
 
     @property
@@ -444,8 +448,8 @@ def slew_discretisation(problem: SlewProblem, model: Model,
     """The discretisation :func:`solve_slew` uses for ``problem`` on ``model``.
 
     RK4 substeps and collocation elements are chosen from the design model's fastest mode
-    (:func:`controllers.hold_grid.steps_per_hold`): every scheme integrates it over the slew
-    within :data:`~controllers.hold_grid.PHASE_TOLERANCE` of its amplitude. ``duration`` (s)
+    (:func:`controllers.design.hold_grid.steps_per_hold`): every scheme integrates it over the slew
+    within :data:`~controllers.design.hold_grid.PHASE_TOLERANCE` of its amplitude. ``duration`` (s)
     overrides the duration a free-time problem is sized for.
 
     Examples
@@ -466,7 +470,7 @@ def _refuse_before_solving(model: Model, problem: SlewProblem) -> None:
 
     Too few holds for the terminal conditions, a slew the actuator cannot give, a duration
     below the rigid-body minimum time, and holds whose least effort exceeds the converged one
-    by more than :data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` (fixed duration only).
+    by more than :data:`~controllers.design.hold_grid.HOLD_EFFORT_TOLERANCE` (fixed duration only).
     """
     n, N, K = model.n_states, model.n_modes, problem.n_intervals
     if K < n:
@@ -495,7 +499,7 @@ def _refuse_before_solving(model: Model, problem: SlewProblem) -> None:
 
 def _refuse_for_actuator(model: Model, problem: SlewProblem) -> None:
     """Raise on a design model the actuator cannot drive, or a slew it cannot give
-    (:func:`controllers.actuator_limits.refuse_infeasible`)."""
+    (:func:`controllers.design.actuator_limits.refuse_infeasible`)."""
     actuator = check_design_model(model, problem.actuator)
     if actuator is None:
         return
@@ -552,7 +556,7 @@ def _failure(status: str, iterations: int, problem: SlewProblem) -> TrajectoryOp
 
 def _time_bounds(model: Model, problem: SlewProblem) -> tuple:
     """``(rigid-body minimum time, longest free duration)``, s: within the actuator's limits
-    too (:func:`controllers.actuator_limits.minimum_duration`)."""
+    too (:func:`controllers.design.actuator_limits.minimum_duration`)."""
     t_rigid = rigid_minimum_time(problem.angle, model.rigid_inertia, problem.torque_bound)
     if problem.actuator is not None:
         t_rigid = max(t_rigid, minimum_duration(model, problem.actuator, problem.angle,
@@ -634,16 +638,18 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
     (``ValueError`` naming the setting and a value that works): fewer holds than terminal
     conditions; holds too coarse for the design modes, whose least effort exceeds the
     converged (continuous-torque) effort by more than
-    :data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` (:mod:`controllers.hold_grid`); or
+    :data:`~controllers.design.hold_grid.HOLD_EFFORT_TOLERANCE`
+    (:mod:`controllers.design.hold_grid`); or
     an exact design model whose derivatives would take minutes
-    (:data:`~controllers.slew_checks.MAX_EXACT_WORK`). Each hold is integrated with the steps the
+    (:data:`~controllers.slew.slew_checks.MAX_EXACT_WORK`). Each hold is integrated with the steps
+    the
     fastest design mode needs (:func:`slew_discretisation`).
 
     Parameters
     ----------
     model : flexctl.Model
         Design model; its dynamics enter through :meth:`flexctl.Model.casadi`, for the exact
-        variant compiled with their derivatives (:mod:`controllers.native_dynamics`).
+        variant compiled with their derivatives (:mod:`controllers.design.native_dynamics`).
     problem : SlewProblem
     initial_guess : SlewSolution or tuple (t, states, torque), optional
         Warm start: a previous solution (any grid; resampled in normalised time) or arrays

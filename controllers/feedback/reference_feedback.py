@@ -1,7 +1,7 @@
 """The common part of the feedback laws that track a hub reference.
 
-PD (:mod:`controllers.pd`), LQR (:mod:`controllers.lqr`), gain-scheduled LQR
-(:mod:`controllers.scheduling`) and LQG (:mod:`controllers.lqg`) all apply
+PD (:mod:`controllers.feedback.pd`), LQR (:mod:`controllers.feedback.lqr`), gain-scheduled LQR
+(:mod:`controllers.feedback.scheduling`) and LQG (:mod:`controllers.feedback.lqg`) all apply
 
 ``torque = feedback(t, x) + J acc_ref(t)``, clipped to ``[-torque_limit, torque_limit]``,
 
@@ -23,8 +23,8 @@ import numpy as np
 
 from flexctl.model.errors import InputValueError
 
-from .plant_state import casadi_hub_state, design_rows, hub_state
-from .reference import casadi_saturate, check_reference, has_casadi, optional_positive, \
+from ..design.plant_state import casadi_hub_state, design_rows, hub_state
+from ..slew.reference import casadi_saturate, check_reference, has_casadi, optional_positive, \
     saturate
 
 __all__ = ["ReferenceFeedback", "ReferenceSaturationWarning", "warn_if_reference_saturates"]
@@ -43,7 +43,7 @@ def warn_if_reference_saturates(owner: str, reference, inertia, torque_limit) ->
         The law's name in the message.
     reference : object
         A hub reference with ``peak_acceleration`` (rad/s^2), e.g. a
-        :class:`~controllers.reference.SlewProfile`; anything else is not checked.
+        :class:`~controllers.slew.reference.SlewProfile`; anything else is not checked.
     inertia, torque_limit : float or None
         Feedforward inertia (kg m^2) and saturation (N m); either None: nothing to check.
 
@@ -57,7 +57,7 @@ def warn_if_reference_saturates(owner: str, reference, inertia, torque_limit) ->
         return None
     needed = float(inertia) * float(peak)
     if needed > torque_limit * (1.0 + 1e-9):
-        from .reference import minimum_slew_duration
+        from ..slew.reference import minimum_slew_duration
 
         shortest = minimum_slew_duration(reference.slew_angle, inertia, torque_limit,
                                          reference.shape)
@@ -82,7 +82,7 @@ class ReferenceFeedback:
     ----------
     reference : object, optional
         Hub reference with ``angle(t)``, ``rate(t)``, ``acceleration(t)`` (rad, rad/s,
-        rad/s^2), e.g. :class:`~controllers.reference.SlewProfile`. Default: regulate to 0.
+        rad/s^2), e.g. :class:`~controllers.slew.reference.SlewProfile`. Default: regulate to 0.
     feedforward_inertia : float, optional
         ``J`` of the feedforward term ``J acc_ref``, kg m^2 (> 0). Default: no feedforward.
     torque_limit : float, optional

@@ -1,10 +1,10 @@
-"""The discretisation and NLP of a slew for CasADi Opti (see :mod:`controllers.trajopt`).
+"""The discretisation and NLP of a slew for CasADi Opti (see :mod:`controllers.slew.trajopt`).
 
 :func:`discretisation` chooses how each torque hold is integrated (RK4 substeps, CVODES, or
 collocation elements) from the design model's fastest mode; :func:`transcribe` builds the
 problem that :func:`controllers.solve_slew` hands to IPOPT, in the variable and constraint
-order of the :mod:`controllers.trajopt` Notes, from a
-:class:`~controllers.trajopt.SlewProblem`, a :class:`Discretisation` and a guess. The
+order of the :mod:`controllers.slew.trajopt` Notes, from a
+:class:`~controllers.slew.trajopt.SlewProblem`, a :class:`Discretisation` and a guess. The
 dynamics enter as CasADi ``Function`` objects mapped over the holds or collocation points.
 """
 
@@ -21,10 +21,10 @@ from flexctl.model import DCMotor, ReactionWheel
 from flexctl.model.discrete import rk4_function
 from flexctl.model.errors import InputValueError
 
-from .actuator_limits import hold_voltages, speed_bound, wheel_speed_function
-from .hold_grid import LARGEST_STEP, MAX_SUBSTEPS, mode_tolerances, steps_per_hold
-from .native_dynamics import (MAX_HOLD_LIBRARY, MAX_INSTRUCTIONS, design_dynamics,
-                              with_compiled_derivatives)
+from ..design.actuator_limits import hold_voltages, speed_bound, wheel_speed_function
+from ..design.hold_grid import LARGEST_STEP, MAX_SUBSTEPS, mode_tolerances, steps_per_hold
+from ..design.native_dynamics import (MAX_HOLD_LIBRARY, MAX_INSTRUCTIONS, design_dynamics,
+                                      with_compiled_derivatives)
 
 __all__ = ["MAX_INTERVALS", "MAX_ELEMENTS", "MAX_MODE_PHASE", "Discretisation", "discretisation",
            "transcription_for", "rk4_substeps", "refuse_fast_modes", "resolution_reason",
@@ -68,8 +68,8 @@ def rk4_substeps(model, hold: float, duration: float | None = None) -> int:
     """RK4 substeps per hold of ``hold`` seconds for the design modes of ``model``.
 
     As many as integrate each mode over ``duration`` (s; default one hold) within its
-    tolerance (:func:`controllers.hold_grid.mode_tolerances`,
-    :func:`controllers.hold_grid.steps_per_hold`).
+    tolerance (:func:`controllers.design.hold_grid.mode_tolerances`,
+    :func:`controllers.design.hold_grid.steps_per_hold`).
 
     Raises
     ------
@@ -157,7 +157,7 @@ class Discretisation:
 
 def discretisation(problem, model, t_rigid: float, longest: float,
                    duration: float | None = None, check: bool = True) -> Discretisation:
-    """:func:`controllers.trajopt.slew_discretisation`, given the rigid-body minimum time and
+    """:func:`controllers.slew.trajopt.slew_discretisation`, given the rigid-body minimum time and
     the longest free duration (s). ``check=False`` returns the steps even beyond the limits
     (:func:`resolution_reason` says why they are refused)."""
     transcription = transcription_for(problem, model)
@@ -438,7 +438,7 @@ def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float)
 def _actuator_constraints(opti, model, actuator, grid, Xc, held) -> None:
     """The wheel speed at the element boundaries after the start (and the collocation
     points), or the motor voltage at both ends of every element, within the actuator's limit
-    (:mod:`controllers.actuator_limits`); ``held`` (m, K) is each element's torque."""
+    (:mod:`controllers.design.actuator_limits`); ``held`` (m, K) is each element's torque."""
     import casadi as ca
 
     if isinstance(actuator, ReactionWheel):

@@ -6,7 +6,7 @@ pass *every* check: the next interval count (``n_intervals``), the most design m
 (``model.design_modes``), and for the exact variant the first_order design variant.
 
 - **Aliasing** (fixed duration): holds whose least effort exceeds the converged one by more
-  than :data:`~controllers.hold_grid.HOLD_EFFORT_TOLERANCE` (:class:`~.hold_grid.HoldGrid`).
+  than :data:`~controllers.design.hold_grid.HOLD_EFFORT_TOLERANCE` (:class:`~.hold_grid.HoldGrid`).
 - **Work** (exact variant): the exact dynamics' derivatives cost about ``n_states ** 3`` per
   evaluation; more than :data:`MAX_EXACT_WORK` per IPOPT iteration is minutes of solving.
 """
@@ -19,7 +19,7 @@ import math
 
 from flexctl.model.errors import InputValueError
 
-from .hold_grid import HoldGrid, largest_step, mode_tolerances
+from ..design.hold_grid import HoldGrid, largest_step, mode_tolerances
 from .slew_nlp import (MAX_INTERVALS, Discretisation, discretisation, refuse_fast_modes,
                        resolution_reason, transcription_for)
 
@@ -155,7 +155,7 @@ def refuse_unsolvable(model, problem, t_rigid: float, longest: float) -> None:
     Examples
     --------
     >>> import flexctl
-    >>> from controllers.trajopt import SlewProblem
+    >>> from controllers.slew.trajopt import SlewProblem
     >>> model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=4)
     >>> problem = SlewProblem(angle=1.57, duration=2.0, torque_bound=6.0, n_intervals=40)
     >>> refuse_unsolvable(model, problem, 1.0, 10.0)

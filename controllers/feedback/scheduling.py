@@ -2,7 +2,8 @@
 
 The beam stiffness of a spinning hub is ``K_ff - Omega^2 D`` (MODEL.md section 4), so the plant
 linearised about a steady spin changes with ``Omega``. :func:`design_scheduled_lqr` solves one
-LQR per design spin rate with :func:`controllers.lqr.design_lqr`; :class:`ScheduledLQR` then
+LQR per design spin rate with :func:`controllers.feedback.lqr.design_lqr`; :class:`ScheduledLQR`
+then
 interpolates the gains linearly in the measured hub rate.
 
 Notes
@@ -10,12 +11,12 @@ Notes
 The linearisation depends on ``Omega`` only through ``Omega^2`` (there is no Coriolis coupling
 in the planar model), so the gains are scheduled on ``|theta_dot|`` and the design spin rates
 are ``>= 0``. Outside the designed range the end gains are held. States and the torque law are
-those of :mod:`controllers.lqr` with ``K = K(|theta_dot|)``.
+those of :mod:`controllers.feedback.lqr` with ``K = K(|theta_dot|)``.
 
 Examples
 --------
 >>> import flexctl
->>> from controllers.lqr import LQRWeights
+>>> from controllers.feedback.lqr import LQRWeights
 >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
 >>> sched = design_scheduled_lqr(model, LQRWeights(hub_angle=0.1, hub_rate=0.02, torque=2.0),
 ...                              spin_rates=[0.0, 1.0, 2.0])
@@ -33,8 +34,8 @@ from flexctl.model.checks import check_array, check_real
 from flexctl.model.errors import InputValueError
 from flexctl.model.layout import StateLayout
 
-from .controllable import design_failure
-from .feedback import ReferenceFeedback
+from ..design.controllable import design_failure
+from .reference_feedback import ReferenceFeedback
 from .lqr import (LQRWeights, gain_layout, lqr_gain, checked_model, casadi_reference_state,
                   casadi_truncate_state, checked_on, reference_state, static_deflection_gain,
                   truncate_state, truncation_matrix)
@@ -64,7 +65,7 @@ class ScheduledLQR(ReferenceFeedback):
     gains : array_like, shape (S, 2 M + 2)
         LQR gain at each design spin rate.
     reference, feedforward_inertia, torque_limit, deflection_gain, layout
-        As in :class:`~controllers.lqr.LQR`.
+        As in :class:`~controllers.feedback.lqr.LQR`.
     """
 
     spin_rates: np.ndarray
@@ -167,11 +168,12 @@ def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=No
         rad/s, ``>= 0``, strictly increasing; the gain at each equals
         ``design_lqr(model, weights, spin_rate).gain``.
     reference, feedforward, torque_limit, flexible_reference
-        As in :func:`controllers.lqr.design_lqr`.
+        As in :func:`controllers.feedback.lqr.design_lqr`.
     plant : flexctl.Model, optional
         The plant the law will run on (its own modes and variant): the loop is checked on
-        its linearisation at rest (:func:`controllers.stability.check_loop`) and an unstable or
-        nearly unstable loop warns (:class:`~controllers.stability.LoopStabilityWarning`).
+        its linearisation at rest (:func:`controllers.design.stability.check_loop`) and an unstable
+        or
+        nearly unstable loop warns (:class:`~controllers.design.stability.LoopStabilityWarning`).
 
     Returns
     -------

@@ -223,7 +223,7 @@ def _linear_form(model):
 
     For one beam every mode: the model's own ``A``, ``B`` and layout, ``P`` None. With modes
     the torque cannot move (symmetric appendages, a free hub's translation), the
-    :class:`~controllers.controllable.ControllablePart` in its modal coordinates ``z = P x``,
+    :class:`~controllers.design.controllable.ControllablePart` in its modal coordinates ``z = P x``,
     ordered as a one-beam layout's (the rigid rotation first)."""
     from .controllable import controllable_part
 

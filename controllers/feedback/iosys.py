@@ -19,7 +19,7 @@ Examples
 --------
 >>> import numpy as np, control, flexctl
 >>> from controllers import design_pd
->>> from controllers.iosys import to_iosys
+>>> from controllers.feedback.iosys import to_iosys
 >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
 >>> pd = design_pd(model, bandwidth=3.0, damping_ratio=0.9)
 >>> law = to_iosys(pd, model)

@@ -24,6 +24,7 @@ import functools
 
 import numpy as np
 
+from flexctl.model.checks import check_real
 from flexctl.model.errors import InputValueError
 from flexctl.model.layout import StateLayout
 
@@ -102,3 +103,13 @@ def casadi_hub_state(x) -> tuple:
     if layout is None:
         raise InputValueError(f"{_HUB_STATE_RULE}; got shape {x.shape}")
     return layout.hub_angle(x), layout.hub_rate(x)
+
+
+def checked_rigid_inertia(owner: str, model_or_inertia) -> float:
+    """``model.rigid_inertia`` of a flexctl Model (``J_0``, about the centre of mass for a
+    free hub), or a given inertia (kg m^2, > 0)."""
+    from flexctl.model import Model
+
+    if isinstance(model_or_inertia, Model):
+        return float(model_or_inertia.rigid_inertia)
+    return check_real(owner, "inertia", model_or_inertia, minimum=0.0, strict=True)

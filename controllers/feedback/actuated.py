@@ -34,11 +34,11 @@ import numpy as np
 
 from flexctl.model.errors import InputTypeError, InputValueError
 
-from .actuator_limits import SPEED_MARGIN, hub_torque_bound, speed_bound
-from .controllable import controllable_part, design_failure, state_gain
+from ..design.actuator_limits import SPEED_MARGIN, hub_torque_bound, speed_bound
+from ..design.controllable import controllable_part, design_failure, state_gain
 from .lqr import LQR, LQRWeights, casadi_reference_state, design_lqr, lqr_weight_matrices, \
     reference_state
-from .reference import casadi_saturate, saturate
+from ..slew.reference import casadi_saturate, saturate
 
 __all__ = ["MotorVoltage", "LaggedLQR", "design_wheel_lqr", "through_actuator"]
 
@@ -185,7 +185,7 @@ class LaggedLQR:
 
     n_states = 0
     owner = "lqr"
-    #: Its loop closes through the wheel's states (:func:`controllers.stability.check_loop`).
+    #: Its loop closes through the wheel's states (:func:`controllers.design.stability.check_loop`).
     reads_actuator = True
 
     def for_plant(self, model):
@@ -265,7 +265,8 @@ def design_wheel_lqr(design, wheel, weights: LQRWeights, *, reference=None,
     wheel : ReactionWheel
     weights : LQRWeights
     reference, feedforward, torque_limit, flexible_reference
-        As for :func:`controllers.lqr.design_lqr`; ``torque_limit`` defaults to the wheel's.
+        As for :func:`controllers.feedback.lqr.design_lqr`; ``torque_limit`` defaults to the
+        wheel's.
     sample_time : float, optional
         For a law run sampled with a zero-order hold (s): the discrete LQR of the augmented
         plant held over ``sample_time`` (weights ``Q T`` and ``R T``, the continuous cost's

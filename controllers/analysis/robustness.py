@@ -3,7 +3,7 @@
 A controller designed once on the nominal system meets plants whose Young's modulus, point
 masses and hub inertia are off by random factors. :class:`Dispersion` draws the factors,
 :class:`RobustnessTask` judges the loop on one dispersed plant (stability and margins from
-:mod:`controllers.analysis`, optionally the slew it flies on the nonlinear plant), and
+:mod:`controllers.analysis.loops`, optionally the slew it flies on the nonlinear plant), and
 :func:`robustness_summary` condenses the rows. The task is a picklable frozen dataclass, so
 the samples run through :func:`flexctl.app.sweep.sweep` on any ``concurrent.futures``-style
 executor, a Dask cluster's included. Given a dispersion, the task draws each sample's factors
@@ -44,8 +44,8 @@ from flexctl.model.checks import check_real
 from flexctl.sim.metrics import slew_metrics
 from flexctl.sim.simulation import simulate
 
-from .analysis import loop_margins, loop_transfer
-from .lqg import LQG
+from .loops import loop_margins, loop_transfer
+from ..feedback.lqg import LQG
 
 __all__ = ["SCALES", "DISTRIBUTIONS", "Dispersion", "disperse", "RobustnessTask",
            "RobustnessSummary", "robustness_summary"]
@@ -193,7 +193,7 @@ def _worst_pole(model, loop, spin_rate: float):
     """The closed loop's least damped pole, named by the plant mode it lies on."""
     import control
 
-    from .stability import least_damped_pole
+    from ..design.stability import least_damped_pole
 
     return least_damped_pole(model, control.feedback(loop).A, spin_rate)
 
@@ -205,8 +205,8 @@ class RobustnessTask:
     Called as ``task(youngs_modulus_scale=..., point_mass_scale=..., hub_inertia_scale=...)``
     (:data:`SCALES`, each default 1), or with a ``dispersion`` as ``task(sample=k, seed=s)``
     (the factors drawn from ``s``): builds the dispersed plant (:func:`disperse`), its loop
-    with the controller (:func:`~controllers.analysis.loop_transfer`) and the margins
-    (:func:`~controllers.analysis.loop_margins`); with ``slew_time``, also flies the
+    with the controller (:func:`~controllers.analysis.loops.loop_transfer`) and the margins
+    (:func:`~controllers.analysis.loops.loop_margins`); with ``slew_time``, also flies the
     controller's slew on the nonlinear plant.
 
     Parameters
@@ -214,7 +214,7 @@ class RobustnessTask:
     system : HubBeam
         The nominal system.
     controller : object
-        Any controller :func:`~controllers.analysis.loop_transfer` takes, designed on the
+        Any controller :func:`~controllers.analysis.loops.loop_transfer` takes, designed on the
         nominal system (an LQG reads the dispersed plant's sensors).
     n_modes : int, optional
         Modes of the plant. Default 4.
@@ -224,10 +224,10 @@ class RobustnessTask:
     spin_rate : float, optional
         Steady hub rate of the linearisation, rad/s. Default 0.
     sensor : str, optional
-        For a PD law (:data:`~controllers.analysis.SENSORS`).
+        For a PD law (:data:`~controllers.analysis.loops.SENSORS`).
     slew_time : float, optional
         Simulated time of the slew, s (> the reference's end); needs a controller with a slew
-        reference (:class:`~controllers.reference.SlewProfile`). Default: no simulation.
+        reference (:class:`~controllers.slew.reference.SlewProfile`). Default: no simulation.
     dispersion : Dispersion, optional
         Draw the factors of each call from its ``seed`` (:meth:`Dispersion.draw`): a Monte
         Carlo study is then a sweep over ``{"sample": range(n)}``, each sample seeded by the
@@ -237,7 +237,7 @@ class RobustnessTask:
     Notes
     -----
     A call returns a dict: the factors :data:`SCALES`, the
-    :class:`~controllers.analysis.LoopMargins` fields,
+    :class:`~controllers.analysis.loops.LoopMargins` fields,
     ``first_frequency`` (lowest hub-free flexible frequency, rad/s) and, with ``slew_time``,
     ``status`` and the :class:`~flexctl.sim.metrics.SlewMetrics` fields.
     """
@@ -392,7 +392,7 @@ def robustness_summary(table) -> RobustnessSummary:
     Parameters
     ----------
     table : SweepResult or sequence of dict
-        Rows with the :class:`~controllers.analysis.LoopMargins` columns.
+        Rows with the :class:`~controllers.analysis.loops.LoopMargins` columns.
 
     Returns
     -------

@@ -21,7 +21,7 @@ and acceleration (its jerk steps).
 Examples
 --------
 >>> import numpy as np
->>> from controllers.reference import SlewProfile
+>>> from controllers.slew.reference import SlewProfile
 >>> slew = SlewProfile(slew_angle=np.pi / 2, duration=2.0)
 >>> float(slew.angle(1.0)), float(slew.rate(0.0)), float(slew.angle(5.0))
 (0.7853981633974483, 0.0, 1.5707963267948966)
@@ -42,7 +42,7 @@ from flexctl.model.checks import KeywordOnly
 from flexctl.model.checks import check_real as _real
 from flexctl.sim.maneuvers import RIGID_PEAK_ACCELERATION, rigid_slew_duration
 
-from .spec import SHAPES
+from ..spec import SHAPES
 
 __all__ = ["SlewProfile", "minimum_slew_duration", "SHAPES"]
 
@@ -265,7 +265,8 @@ def reference_parameters(reference) -> tuple:
 
 
 def casadi_evaluate(reference, t, parameters=None):
-    """:func:`evaluate_reference` on the CasADi symbol ``t``; the reference's numbers are the symbols
+    """:func:`evaluate_reference` on the CasADi symbol ``t``; the reference's numbers are the
+    symbols
     ``parameters`` where given (laid out as :func:`reference_parameters`)."""
     if reference is None:
         return 0.0, 0.0, 0.0
