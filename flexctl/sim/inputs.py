@@ -251,14 +251,16 @@ class SampledTorque:
     ``"spline"``.
 
     No integrator may step over a sample: a pulse one sample long after a quiet start would
-    go unseen by steps grown long at rest. On a near-uniform grid (the shortest interval at
-    least ``1 / UNIFORM_RATIO`` of the mean one) the torque bounds every step by its
-    shortest interval (:attr:`max_step`) and the integration goes straight through the jumps
-    of a hold and the kinks of a line, resolving them by error control; otherwise it restarts
-    at every sample (:attr:`breakpoints`). On the 2001 samples of ``hub-beam-mass``'s 20 s
-    push, restarting at every sample made a run 20 to 40 times as long for the same error as
-    the bounded step did (2 and 4 modes, ``benchmarks/bench_inputs.py``): each restart begins
-    again at order 1 with a tiny step.
+    go unseen by steps grown long at rest. Every jump of a hold is a breakpoint
+    (:attr:`breakpoints`): a step across it is wrong to first order in its length whatever
+    the tolerance (the fixed-step RK4 missed by 3e-4 m on ``hub-beam-mass`` with three
+    samples, CVODES by 50 times its tolerance). A line on a near-uniform grid (the shortest
+    interval at least ``1 / UNIFORM_RATIO`` of the mean one) bounds every step by its
+    shortest interval (:attr:`max_step`) and the integration goes straight through its kinks,
+    resolving them by error control; otherwise it restarts at every sample. On the 2001
+    samples of ``hub-beam-mass``'s 20 s push, restarting at every sample made a run 20 to 40
+    times as long for the same error as the bounded step did (2 and 4 modes,
+    ``benchmarks/bench_inputs.py``): each restart begins again at order 1 with a tiny step.
 
     Examples
     --------
@@ -307,8 +309,11 @@ class SampledTorque:
 
     @property
     def max_step(self) -> float | None:
-        """Longest step an integrator may take, s: the shortest sample interval, on a
-        near-uniform grid; None (restart at every sample instead) otherwise."""
+        """Longest step an integrator may take, s: the shortest sample interval, for a line or
+        a spline on a near-uniform grid; None (restart at every sample instead) for a hold,
+        whose jumps no step may straddle, and on an uneven grid."""
+        if self.interpolation == "hold":
+            return None
         shortest = float(np.min(np.diff(self.times)))
         span = float(self.times[-1] - self.times[0])
         return shortest if span <= UNIFORM_RATIO * (self.times.size - 1) * shortest else None
@@ -316,8 +321,8 @@ class SampledTorque:
     @property
     def breakpoints(self) -> tuple:
         """Times (s) at which the integration restarts: the ends of the sampled range (where
-        the clamping starts) and, on a grid too uneven for :attr:`max_step`, every sample of a
-        hold (jumps) or a line (kinks)."""
+        the clamping starts), every sample of a hold (its jumps) and, on a grid too uneven for
+        :attr:`max_step`, every sample of a line (its kinks)."""
         if self.interpolation == "spline" or self.max_step is not None:
             return (float(self.times[0]), float(self.times[-1]))
         return tuple(self.times.tolist())

@@ -485,9 +485,9 @@ class IntegrationPlan:
 
     @property
     def fallback(self) -> str:
-        """The SciPy method that locates a stop: DOP853 behind CVODES and the compiled
-        multistep methods, else the method."""
-        return "DOP853" if self.method in ("cvodes", "Adams") or (
+        """The SciPy method that locates a stop: DOP853 behind CVODES, the compiled
+        fixed-step RK4 and the compiled multistep methods, else the method."""
+        return "DOP853" if self.method in ("cvodes", "Adams", "rk4") or (
             self.method == "BDF" and self.compiled) else self.method
 
     @property

@@ -126,9 +126,12 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         step-doubling pair). An input's own ``max_step`` (a sampled torque's sample
         interval) bounds it too.
     check_accuracy : bool, optional
-        On ``"cvodes"``, ``"Adams"``, compiled ``"RK45"`` and ``"BDF"``: repeat at 10 times the
-        tolerance for ``result.integration_error`` (:func:`flexctl.sim.compiled.verify_accuracy`,
-        :func:`flexctl.sim.strategies.check_embedded_accuracy`). Default True.
+        Repeat the run at 10 times the tolerance for ``result.integration_error``: beside the
+        run for ``"cvodes"``, ``"Adams"``, compiled ``"RK45"`` and ``"BDF"``
+        (:func:`flexctl.sim.compiled.verify_accuracy`,
+        :func:`flexctl.sim.strategies.check_embedded_accuracy`), after it for SciPy's methods
+        (:func:`flexctl.sim.strategies.replay_error`); ``"rk4"`` is its own step-doubling
+        pair. Default True.
     progress : bool or callable, optional
         ``True`` prints the simulated time reached and the time to go to stderr every 5 s
         once the run has taken 5 s; a callable gets a :class:`~flexctl.sim.progress.Progress`

@@ -48,7 +48,7 @@ __all__ = ["Trajectory", "CvodesSegments", "EmbeddedSegments", "BdfSegments", "F
            "strategy_for",
            "check_run_accuracy", "start_accuracy_check", "planned_segments",
            "rk4_accuracy_note", "AccuracyWarning", "FALLBACK_EVALUATIONS",
-           "check_embedded_accuracy", "start_embedded_check"]
+           "check_embedded_accuracy", "start_embedded_check", "replay_error"]
 
 #: Where a compiled segment fails, SciPy locates the stop with at most this many evaluations
 #: of the right-hand side (1 to 5 s of DOP853 steps); a state so stiff that they do not
@@ -213,7 +213,56 @@ class _Segments:
 
 
 class ScipyIVP(_Segments):
-    """``scipy.integrate.solve_ivp`` on the drive's Python right-hand side."""
+    """``scipy.integrate.solve_ivp`` on the drive's Python right-hand side; its accuracy check
+    is the run replayed at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance, as
+    a compiled run's (:func:`replay_error`)."""
+
+    def segment(self, traj, lo, hi, t_eval, y):
+        y_end = super().segment(traj, lo, hi, t_eval, y)
+        if y_end is not None:
+            traj.compiled_segments.append((lo, t_eval))
+        return y_end
+
+    def start_check(self):
+        # the replay needs the run's segments: it runs once the run has reached its end
+        return Beside(lambda: None, beside=False)
+
+    def finish_check(self, traj, check) -> None:
+        self.report(self.request.t_final, "checking accuracy")
+        traj.integration_error, n_check, note = replay_error(self, traj)
+        traj.n_eval += n_check
+        if note:
+            traj.accuracy_note = note
+
+
+def replay_error(strategy, traj) -> tuple:
+    """``(error, evaluations, note)``: the largest tip difference (m) between a SciPy run
+    ``traj`` that reached its end and the same segments integrated again at
+    :data:`~flexctl.sim.compiled.CHECK_FACTOR` times its tolerances (conservative: it is the
+    error of the looser run); ``None`` with the reason where the replay fails."""
+    request, plan, drive = strategy.request, strategy.plan, strategy.drive
+    y, states, evaluations = drive.y_init, [], 0
+    try:
+        with np.errstate(over="raise", invalid="raise"):
+            for lo, t_eval in traj.compiled_segments:
+                hi = float(t_eval[-1])
+                drive.segment_end = np.nextafter(hi, lo)
+                sol = solve_ivp(drive.rhs, (lo, hi), y, method=plan.fallback, t_eval=t_eval,
+                                rtol=min(CHECK_FACTOR * request.rtol, 0.1),
+                                atol=CHECK_FACTOR * np.asarray(plan.atol),
+                                max_step=request.max_step)
+                evaluations += sol.nfev
+                if sol.status != 0 or sol.y.shape[1] != t_eval.size:
+                    raise ArithmeticError(sol.message)
+                states.append(sol.y)
+                y = sol.y[:, -1]
+    except (ArithmeticError, SingularMassMatrixError) as exc:
+        return None, evaluations, f"accuracy check not run: its replay at {CHECK_FACTOR:g} " \
+            f"times the tolerance failed ({exc})"
+    tip_map = tip_rows(request.model, drive.layout)
+    run = np.concatenate(traj.ys[1:], axis=1)
+    replayed = np.concatenate(states, axis=1)
+    return float(np.max(np.abs(tip_map @ (run - replayed)))), evaluations, ""
 
 
 class CvodesSegments(_Segments):
@@ -402,11 +451,10 @@ def check_embedded_accuracy(request, drive, traj: Trajectory, check, reporter=No
     traj.n_eval += n_check
 
 
-class FixedStepRK4:
-    """Compiled fixed-step RK4 over the whole run in one call (:mod:`flexctl.sim.fixed_step`)."""
-
-    def __init__(self, request, plan, drive, stops):
-        self.request, self.plan, self.drive, self.stops = request, plan, drive, stops
+class FixedStepRK4(_Segments):
+    """Compiled fixed-step RK4 over the whole run in one call (:mod:`flexctl.sim.fixed_step`);
+    where an output sample is past a stopping condition, SciPy locates the stop from the
+    sample before it, as behind CVODES."""
 
     def start_check(self):
         """None: the run's step-doubling pair is its own accuracy check."""
@@ -444,14 +492,32 @@ class FixedStepRK4:
         t_fixed, y_fixed = request.grid, fixed.states
         bad = stops.first_bad(y_fixed)
         if bad is not None:
-            t_fixed, y_fixed = t_fixed[:bad + 1], y_fixed[:, :bad + 1]
-            traj.stop(stops.reason_of_sample(y_fixed[:, -1]), found=True)
+            return self._stopped(traj, t_fixed, y_fixed, bad)
         else:
             traj.integration_error = fixed.error
             traj.accuracy_note = rk4_accuracy_note(
                 fixed.error, tip_map @ y_fixed, request.rtol,
                 f" after {MAX_HALVINGS} step halvings (step {fixed.h:.3g} s)", stacklevel=3)
         traj.add(t_fixed, y_fixed)
+        return traj
+
+
+    def _stopped(self, traj, t, y, bad) -> Trajectory:
+        """The run up to its first output sample ``bad`` past a stopping condition, the stop
+        located by SciPy from the sample before it; at that sample where SciPy, on its
+        bounded budget, finds none before it."""
+        traj.add(t[:bad], y[:, :bad])
+        if bad > 0:
+            lo, hi = float(t[bad - 1]), float(t[bad])
+            # the torque of the segment the stop lies in (its end: the first cut from hi on)
+            end = next((c for c in self.plan.cuts if c >= hi), hi)
+            self.drive.segment_end = np.nextafter(end, lo)
+            located = _Budgeted(self.drive.rhs, FALLBACK_EVALUATIONS)
+            if self.solve_ivp(traj, lo, hi, np.array([hi]), y[:, bad - 1], located) is None \
+                    and traj.reason is not StopReason.INTEGRATOR_FAILED:
+                return traj
+        traj.add(t[bad:bad + 1], y[:, bad:bad + 1])
+        traj.stop(self.stops.reason_of_sample(y[:, bad]), found=True)
         return traj
 
 
