@@ -143,7 +143,17 @@ class OpenLoop(StaticLaw):
         return self.law
 
     def torque(self, t, x, z=None) -> float:
-        """``f(t)``, N m."""
+        """``f(t)``, N m.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : array_like, shape (n,)
+            Plant state (not read).
+        z : array_like, shape (0,), optional
+            Internal state (none; not read).
+        """
         return float(self.law(t))
 
     @property
@@ -153,7 +163,15 @@ class OpenLoop(StaticLaw):
             and bool(getattr(self.law, "has_casadi_form", True))
 
     def casadi_torque(self, t, x):
-        """The torque function's CasADi expression of the symbol ``t`` (``x`` unused)."""
+        """The torque function's CasADi expression of the symbol ``t``.
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        x : CasADi column, shape (n, 1)
+            Plant state (not read).
+        """
         return self.law.casadi(t)
 
 

@@ -128,7 +128,15 @@ class Setting:
         return None if value is None else f"{value:g}"
 
     def check(self, kind: str, value):
-        """``value`` when it meets :attr:`rule`; raise :class:`SceneError` naming the key."""
+        """``value`` when it meets :attr:`rule`; raise :class:`SceneError` naming the key.
+
+        Parameters
+        ----------
+        kind : str
+            The controller kind whose table holds the setting (named in the message).
+        value : object
+            The value the ``[controller]`` table gives, as parsed from TOML.
+        """
         if not self._accepts(value):
             raise SceneError(f"controller.{self.name} (kind {kind!r}) must be {self.rule}; "
                              f"got {value!r}")

@@ -157,6 +157,7 @@ def disperse(system, *, youngs_modulus_scale: float = 1.0, point_mass_scale: flo
     Parameters
     ----------
     system : HubBeam
+        The nominal hub-beam-mass system.
     youngs_modulus_scale : float, optional
         Factor on ``beam.youngs_modulus`` (> 0): the bending stiffness.
     point_mass_scale : float, optional

@@ -88,8 +88,24 @@ def _renamed(function, name):
 
 def c_sources(program: ControllerProgram, prefix: str = "flexctl_ctrl",
               plant_states: int | None = None) -> CSources:
-    """The C files of ``program`` (module docstring); ``plant_states``: the plant's state
-    count, written as ``FLEXCTL_NX`` when the law reads readings."""
+    """The C files of ``program`` (module docstring).
+
+    Parameters
+    ----------
+    program : ControllerProgram
+        The law's step functions.
+    prefix : str, optional
+        Prefix of the C names: lower-case letters, digits and ``_``, a letter first, at
+        most 31 characters. Default ``"flexctl_ctrl"``.
+    plant_states : int, optional
+        The plant's state count, written as ``FLEXCTL_NX`` when the law reads readings.
+        Default: the law's input count.
+
+    Raises
+    ------
+    ValueError
+        If ``prefix`` is not such a C identifier.
+    """
     if not re.fullmatch(r"[a-z][a-z0-9_]{0,30}", prefix):
         raise ValueError(f"prefix must be a C identifier of lower-case letters, digits and _; "
                          f"got {prefix!r}")

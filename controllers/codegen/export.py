@@ -96,6 +96,14 @@ class CExport:
     def compile(self, cc: str | None = None, flags=C_FLAGS) -> "CompiledLaw":
         """Compile to a shared library (in :attr:`directory`) and load it.
 
+        Parameters
+        ----------
+        cc : str, optional
+            The C compiler (:func:`find_compiler`). Default ``$CC``, else ``cc``, ``gcc`` or
+            ``clang`` on the path.
+        flags : sequence of str, optional
+            Flags of the compilation of the source. Default :data:`C_FLAGS`.
+
         Raises
         ------
         CompileError
@@ -236,7 +244,21 @@ class CompiledLaw:
             raise RuntimeError(f"flexctl_ctrl_init returned {code}")
 
     def step(self, t: float, v) -> tuple:
-        """``flexctl_ctrl_step``: ``(u, code)`` at time ``t`` (s) for the input ``v``."""
+        """``flexctl_ctrl_step``: ``(u, code)`` at time ``t`` for the input ``v``.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        v : array_like, shape (n_in,)
+            The law's input: the plant state, or the sensor readings of a measurement law
+            (``program.input_names``).
+
+        Raises
+        ------
+        InputValueError
+            If ``v`` has not ``n_in`` entries.
+        """
         v = np.asarray(v, dtype=float).reshape(-1)
         if v.size != self.program.n_in:
             raise InputValueError(f"compiled law input must have {self.program.n_in} entries "
@@ -283,7 +305,17 @@ class CompiledController:
         return np.zeros(0)
 
     def derivative(self, t, x, z=None):
-        """No states the integrator carries."""
+        """No states the integrator carries.
+
+        Parameters
+        ----------
+        t : float
+            Time, s (not read).
+        x : array_like, shape (n,)
+            Plant state (not read).
+        z : array_like, shape (0,), optional
+            Internal state (none; not read).
+        """
         return np.zeros(0)
 
     def _input(self, t, x):
@@ -295,14 +327,42 @@ class CompiledController:
         return program.measurement_matrix @ np.asarray(x, dtype=float)
 
     def torque(self, t, x, z=None) -> float:
-        """The command at ``t`` for plant state ``x`` (a continuous law)."""
+        """The command at ``t`` for plant state ``x`` (a continuous law).
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : array_like, shape (n,)
+            Plant state, in the order of the plant the law was exported for.
+        z : array_like, shape (0,), optional
+            Internal state (none; not read).
+
+        Raises
+        ------
+        RuntimeError
+            If the compiled step returns an error code.
+        """
         u, code = self.law.step(t, self._input(t, x))
         if code not in (0, 1):
             raise RuntimeError(f"compiled law at t = {t:g} s returned {_CODES.get(code, code)}")
         return u
 
     def start(self, model, x0) -> "CompiledSession":
-        """A session: the law's memory reset (``flexctl_ctrl_init``)."""
+        """A session: the law's memory reset (``flexctl_ctrl_init``).
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant of the run (a state law's must have the exported plant's state count).
+        x0 : array_like, shape (n,)
+            Plant state at the start (not read: the memory starts as exported).
+
+        Raises
+        ------
+        InputValueError
+            If a state law's plant has another number of states.
+        """
         if not self.measures and model.n_states != len(self.law.export.plant_names):
             raise InputValueError(f"compiled law was exported for a plant of "
                                   f"{len(self.law.export.plant_names)} states; got "
@@ -319,7 +379,21 @@ class CompiledSession:
         self.cpu_times, self.codes = [], []
 
     def step(self, t, x) -> float:
-        """The command to hold from ``t`` (s) for plant state ``x``."""
+        """The command to hold from ``t`` for plant state ``x``.
+
+        Parameters
+        ----------
+        t : float
+            Sample time, s.
+        x : array_like
+            Plant state, shape (n,); or the sensors' readings, shape (n_in,), for a law
+            that :attr:`~CompiledController.measures`.
+
+        Raises
+        ------
+        RuntimeError
+            If the compiled step returns an error code.
+        """
         v = self.owner._input(t, x)
         started = time.process_time()
         u, code = self.owner.law.step(t, v)

@@ -112,7 +112,15 @@ def _static_kind(controller) -> str | None:
 
 
 def bound(law, plant):
-    """``law`` reading ``plant``'s states (``for_plant``), whatever plant it was bound to."""
+    """``law`` reading ``plant``'s states (``for_plant``), whatever plant it was bound to.
+
+    Parameters
+    ----------
+    law : object
+        A flexctl feedback law; one without ``for_plant`` is returned as it is.
+    plant : flexctl.Model
+        The plant the law reads (its state order, sensors and actuator).
+    """
     return law.for_plant(plant) if callable(getattr(law, "for_plant", None)) else law
 
 

@@ -15,7 +15,24 @@ __all__ = ["lqg_program"]
 
 
 def lqg_program(lqg, plant, sample_time, x0) -> ControllerProgram:
-    """The program of ``lqg`` on ``plant``, its estimator discretised at ``sample_time``."""
+    """The program of ``lqg`` on ``plant``, its estimator discretised at ``sample_time``.
+
+    Parameters
+    ----------
+    lqg : LQG
+        The continuous design (:class:`controllers.feedback.lqg.LQG`).
+    plant : flexctl.Model
+        The plant the law reads (its state order, sensors and actuator).
+    sample_time : float or None
+        Rate the estimator is discretised at, s (> 0); None is refused.
+    x0 : array_like, shape (n,)
+        Plant state at the start (the estimate's initial value is the LQG's own).
+
+    Raises
+    ------
+    ExportRefused
+        Without a ``sample_time``, or for a reference with no CasADi form.
+    """
     import casadi as ca
 
     from controllers.feedback.lqg import measured_outputs

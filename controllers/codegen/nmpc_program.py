@@ -50,8 +50,17 @@ def _all_finite(v):
 
 
 def hermite_rows(t, grid, coef):
-    """``state_at(t)`` of a :class:`~controllers.slew.trajopt.SlewSolution` (its grid, Hermite
-    coefficients (K, 4, n)), shape (n, 1)."""
+    """``state_at(t)`` of a :class:`~controllers.slew.trajopt.SlewSolution`, shape (n, 1).
+
+    Parameters
+    ----------
+    t : CasADi scalar
+        Time, s.
+    grid : ndarray, shape (K+1,)
+        The solution's grid times, s (``SlewSolution.t``).
+    coef : ndarray, shape (K, 4, n)
+        Its Hermite coefficients on each hold (``SlewSolution._hermite``).
+    """
     import casadi as ca
 
     from flexctl.sim.compiled import piecewise_constant
@@ -173,7 +182,25 @@ class _Filter:
 
 
 def nmpc_program(mpc, plant, x0) -> ControllerProgram:
-    """The :class:`~controllers.codegen.program.ControllerProgram` of ``mpc`` on ``plant``."""
+    """The :class:`~controllers.codegen.program.ControllerProgram` of ``mpc`` on ``plant``.
+
+    Parameters
+    ----------
+    mpc : NMPC
+        A real-time iteration with ``qp_solver="qrqp"`` (:class:`controllers.mpc.nmpc.NMPC`).
+    plant : flexctl.Model
+        The plant the law reads, with at least the design model's modes.
+    x0 : array_like, shape (n,)
+        Plant state at the start: where the extended Kalman filter starts (an NMPC with
+        ``noise``).
+
+    Raises
+    ------
+    ExportRefused
+        For an NMPC solved to convergence or with another QP solver.
+    InputValueError
+        If the plant has fewer modes than the design model.
+    """
     import casadi as ca
 
     from controllers.mpc.nmpc import conic_solver, input_index

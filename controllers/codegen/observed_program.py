@@ -46,7 +46,24 @@ def _update(z, p, y, mats, offset):
 
 def observed_program(observed, plant, x0, inner: ControllerProgram) -> ControllerProgram:
     """The program of ``observed`` on ``plant`` started at ``x0``, its law's program
-    ``inner`` (reading the state)."""
+    ``inner`` (reading the state).
+
+    Parameters
+    ----------
+    observed : Observed
+        The law on the sensors' Kalman filter (:class:`controllers.feedback.observer.Observed`).
+    plant : flexctl.Model
+        The plant the filter is built on (its linearisation at rest and its sensors).
+    x0 : array_like, shape (n,)
+        Plant state at the start: the filter's initial estimate.
+    inner : ControllerProgram
+        The program of ``observed.law`` (its ``input_kind`` must be ``"state"``).
+
+    Raises
+    ------
+    ExportRefused
+        If ``inner`` reads sensors rather than the state.
+    """
     import casadi as ca
 
     from controllers.feedback.observer import ObservedSession

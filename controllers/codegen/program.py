@@ -99,7 +99,16 @@ class ProgramSession:
         self.failures = 0
 
     def step(self, t: float, v) -> float:
-        """Command at time ``t`` (s) for the input ``v`` (n_in,)."""
+        """Command at time ``t`` for the input ``v``, in :attr:`ControllerProgram.output_unit`.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        v : array_like, shape (n_in,)
+            The law's input: the plant state, or the sensor readings of a measurement law
+            (:attr:`ControllerProgram.input_names`).
+        """
         args = (float(t), np.asarray(v, dtype=float).reshape(-1), self.memory)
         program = self.program
         try:
@@ -119,7 +128,15 @@ class ProgramSession:
 
 
 def plant_output(plant, voltage: bool = False) -> tuple:
-    """(name, unit) of the command a law gives ``plant``."""
+    """(name, unit) of the command a law gives ``plant``.
+
+    Parameters
+    ----------
+    plant : flexctl.Model
+        The plant (a reaction wheel's command is named ``"torque_command"``).
+    voltage : bool, optional
+        The law gives a DC motor's voltage. Default False.
+    """
     if voltage:
         return "voltage", "V"
     actuator = getattr(plant, "actuator", None)

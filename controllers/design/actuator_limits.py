@@ -68,7 +68,15 @@ SPEED_MARGIN = 0.02
 
 
 def hub_torque_bound(torque_bound: float, actuator) -> float:
-    """The bound on the hub torque, N m: ``torque_bound``, and a wheel's torque limit."""
+    """The bound on the hub torque, N m: ``torque_bound``, and a wheel's torque limit.
+
+    Parameters
+    ----------
+    torque_bound : float
+        The controller's own bound on the hub torque, N m (> 0).
+    actuator : ReactionWheel, DCMotor or None
+        What turns the hub; only a reaction wheel's torque limit lowers the bound.
+    """
     if isinstance(actuator, ReactionWheel):
         return min(torque_bound, actuator.torque_limit)
     return torque_bound
@@ -81,7 +89,22 @@ def speed_bound(wheel: ReactionWheel) -> float:
 
 def check_design_model(model, actuator):
     """``actuator`` checked (:func:`~flexctl.model.actuators.as_actuator`) against the design
-    ``model``: a model with the hub torque as input, a pinned hub for a DC motor."""
+    ``model``: a model with the hub torque as input, a pinned hub for a DC motor.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model, whose input is the hub torque (not an ``ActuatedModel``).
+    actuator : ReactionWheel, DCMotor or None
+        What gives the hub torque; ``None`` for an ideal torque (returned as is).
+
+    Raises
+    ------
+    InputTypeError
+        If ``actuator`` is of another type, or ``model`` is not a flexctl Model.
+    InputValueError
+        If ``model`` is actuated, or a DC motor is asked to turn a free hub.
+    """
     actuator = as_actuator(actuator)
     if actuator is None:
         return None
@@ -130,7 +153,15 @@ def structure_momentum(model):
 
 def wheel_speed_function(model, wheel: ReactionWheel):
     """``Omega(x) = -H(x) / J_w - theta_dot`` (rad/s) as a CasADi ``Function`` ``x -> Omega``
-    of the design state (zero total momentum)."""
+    of the design state (zero total momentum).
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (not actuated), whose state ``x`` (shape (n,)) the function takes.
+    wheel : ReactionWheel
+        The wheel: its inertia ``J_w``, kg m^2.
+    """
     import casadi as ca
 
     x = ca.SX.sym("x", model.n_states)
@@ -140,14 +171,34 @@ def wheel_speed_function(model, wheel: ReactionWheel):
 
 def wheel_speeds(model, wheel: ReactionWheel, states) -> np.ndarray:
     """The wheel speed relative to the hub (rad/s) at design state(s) ``states``, shape () or
-    (P,), from :meth:`flexctl.Model.angular_momentum` (zero total momentum)."""
+    (P,), from :meth:`flexctl.Model.angular_momentum` (zero total momentum).
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (not actuated).
+    wheel : ReactionWheel
+        The wheel: its inertia ``J_w``, kg m^2.
+    states : array_like, shape (n,) or (n, P)
+        Design states, in the order of ``model.layout``.
+    """
     states = np.asarray(states, dtype=float)
     return -model.angular_momentum(states) / wheel.inertia - states[model.layout.theta_dot]
 
 
 def hold_voltages(motor: DCMotor, torque, start_rates, end_rates) -> tuple:
-    """The voltages (V) each hold's torque (N m) needs at the hub rates (rad/s) at its start
-    and at its end: ``(V_start, V_end)`` (numpy or CasADi, linear in every argument)."""
+    """The voltages (V) each hold's torque needs at the hub rates at its start and at its end:
+    ``(V_start, V_end)`` (numpy or CasADi, linear in every argument).
+
+    Parameters
+    ----------
+    motor : DCMotor
+        The geared motor (:meth:`~flexctl.model.actuators.DCMotor.voltage_for`).
+    torque : float, array_like, shape (K,), or CasADi column
+        Each hold's hub torque, N m.
+    start_rates, end_rates : float, array_like, shape (K,), or CasADi column
+        Hub rate at the start and at the end of each hold, rad/s.
+    """
     return motor.voltage_for(torque, start_rates), motor.voltage_for(torque, end_rates)
 
 
@@ -156,7 +207,16 @@ def demand(model, actuator, states, torque):
     (rad/s, shape (K+1,)), or the motor voltage at the start and end of each hold (V, shape
     (2, K)); ``None`` without an actuator.
 
-    ``states`` (n, K+1) are the design states at the hold boundaries, ``torque`` (K,) N m.
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (not actuated).
+    actuator : ReactionWheel, DCMotor or None
+        What gives the hub torque.
+    states : array_like, shape (n, K+1)
+        Design states at the hold boundaries, in the order of ``model.layout``.
+    torque : array_like, shape (K,)
+        Torque of each hold, N m.
     """
     if isinstance(actuator, ReactionWheel):
         return wheel_speeds(model, actuator, states)
@@ -170,7 +230,15 @@ def demand(model, actuator, states, torque):
 # ---------------------------------------------------------------------------- horizons
 def horizon_rows(actuator, horizon: int) -> int:
     """Rows of :func:`horizon_constraints` over ``horizon`` holds: the wheel speed at each
-    state after the first; the voltage at the start, then at the end, of each hold."""
+    state after the first; the voltage at the start, then at the end, of each hold.
+
+    Parameters
+    ----------
+    actuator : ReactionWheel, DCMotor or None
+        What gives the hub torque (no rows without one).
+    horizon : int
+        Number of holds ``N`` of the horizon.
+    """
     if isinstance(actuator, ReactionWheel):
         return horizon
     if isinstance(actuator, DCMotor):
@@ -181,7 +249,19 @@ def horizon_rows(actuator, horizon: int) -> int:
 def horizon_constraints(model, actuator, xs, us) -> tuple:
     """``(g, lower, upper)``: the actuator's limits on the states ``xs`` (``N + 1`` CasADi
     columns) and hold torques ``us`` (``N``) of a horizon, ``lower <= g <= upper``, in the
-    order of :func:`horizon_rows` (empty without an actuator)."""
+    order of :func:`horizon_rows` (empty without an actuator).
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (not actuated).
+    actuator : ReactionWheel, DCMotor or None
+        What gives the hub torque.
+    xs : sequence of CasADi column
+        The ``N + 1`` design states of the horizon, each of shape (n, 1).
+    us : sequence of CasADi scalar
+        The ``N`` hold torques, N m.
+    """
     import casadi as ca
 
     big_n = len(us)
@@ -201,7 +281,24 @@ def horizon_constraints(model, actuator, xs, us) -> tuple:
 def linearised_horizon_constraints(model, actuator, xs, us, e, g_mats) -> tuple:
     """``(A, lower, upper)`` of :func:`horizon_constraints` linearised in the torque steps
     ``du`` (``lower <= A du <= upper``), for state steps ``dx_j = e_j + G_j du`` about the
-    guess ``xs``, ``us`` (a condensed Gauss-Newton step); the voltage is linear, so exact."""
+    guess ``xs``, ``us`` (a condensed Gauss-Newton step); the voltage is linear, so exact.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (not actuated).
+    actuator : ReactionWheel, DCMotor or None
+        What gives the hub torque (no rows without one).
+    xs : sequence of CasADi column
+        The ``N + 1`` guessed design states, each of shape (n, 1).
+    us : CasADi column, shape (N, 1)
+        The guessed hold torques, N m.
+    e : sequence of CasADi column
+        ``e_j`` (``j = 0..N``), each of shape (n, 1): the state steps at ``du = 0``.
+    g_mats : sequence of CasADi matrix
+        ``G_j`` (``j = 0..N``), each of shape (n, N): the state steps per torque step (state
+        units per N m).
+    """
     import casadi as ca
 
     big_n, n = us.numel(), model.n_states
@@ -249,7 +346,17 @@ class RigidLimits:
 
 
 def rigid_limits(model, actuator, torque_bound: float) -> RigidLimits:
-    """The :class:`RigidLimits` of ``actuator`` (or of ``torque_bound`` alone) on ``model``."""
+    """The :class:`RigidLimits` of ``actuator`` (or of ``torque_bound`` alone) on ``model``.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (its :attr:`~flexctl.Model.rigid_inertia`, kg m^2).
+    actuator : ReactionWheel, DCMotor or None
+        What gives the hub torque.
+    torque_bound : float
+        The controller's own bound on the hub torque, N m (> 0).
+    """
     bound = hub_torque_bound(torque_bound, actuator)
     if isinstance(actuator, ReactionWheel):
         inertia = model.rigid_inertia
@@ -262,8 +369,17 @@ def rigid_limits(model, actuator, torque_bound: float) -> RigidLimits:
 
 
 def rigid_slew_time(angle: float, inertia: float, limits: RigidLimits) -> float:
-    """Least time (s) a rigid body of ``inertia`` (kg m^2) takes to turn ``angle`` (rad) from
-    rest to rest within ``limits``: bang-bang, or bang-coast-bang at the rate limit.
+    """Least time (s) a rigid body of ``inertia`` takes to turn ``angle`` from rest to rest
+    within ``limits``: bang-bang, or bang-coast-bang at the rate limit.
+
+    Parameters
+    ----------
+    angle : float
+        Slew angle, rad (its sign does not matter).
+    inertia : float
+        Inertia of the rigid body, kg m^2 (> 0).
+    limits : RigidLimits
+        Largest accelerating and braking torques (N m) and hub rate (rad/s).
 
     Examples
     --------
@@ -280,9 +396,21 @@ def rigid_slew_time(angle: float, inertia: float, limits: RigidLimits) -> float:
 
 
 def minimum_duration(model, actuator, angle: float, torque_bound: float) -> float:
-    """A lower bound on the duration (s) of a rest-to-rest slew of ``angle`` (rad) on
-    ``model`` within ``torque_bound`` (N m) and the limits of ``actuator``: the rigid body's
-    (:func:`rigid_slew_time`)."""
+    """A lower bound on the duration (s) of a rest-to-rest slew of ``angle`` on ``model``
+    within ``torque_bound`` and the limits of ``actuator``: the rigid body's
+    (:func:`rigid_slew_time`).
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (its :attr:`~flexctl.Model.rigid_inertia`, kg m^2).
+    actuator : ReactionWheel, DCMotor or None
+        What gives the hub torque.
+    angle : float
+        Slew angle, rad.
+    torque_bound : float
+        The controller's own bound on the hub torque, N m (> 0).
+    """
     return rigid_slew_time(angle, model.rigid_inertia, rigid_limits(model, actuator,
                                                                      torque_bound))
 
@@ -291,7 +419,21 @@ def minimum_duration(model, actuator, angle: float, torque_bound: float) -> floa
 def refuse_infeasible(model, actuator, angle: float, duration: float,
                       torque_bound: float) -> None:
     """Raise ``InputValueError`` naming the actuator's limit that a rest-to-rest slew of
-    ``angle`` (rad) in ``duration`` (s) cannot meet (module Notes); nothing without one."""
+    ``angle`` in ``duration`` cannot meet (module Notes); nothing without one.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (its :attr:`~flexctl.Model.rigid_inertia`, kg m^2).
+    actuator : ReactionWheel, DCMotor or None
+        What gives the hub torque (nothing is checked without one).
+    angle : float
+        Slew angle, rad.
+    duration : float
+        Slew duration, s (> 0).
+    torque_bound : float
+        The controller's own bound on the hub torque, N m (> 0).
+    """
     if isinstance(actuator, ReactionWheel):
         _refuse_wheel(model, actuator, angle, duration, torque_bound)
     elif isinstance(actuator, DCMotor):

@@ -63,12 +63,28 @@ class ControllablePart:
     note: str
 
     def reduce(self, a, b):
-        """``(P A T, P B)``."""
+        """``(P A T, P B)``.
+
+        Parameters
+        ----------
+        a : array_like, shape (n, n)
+            State matrix ``A`` of the linearised model.
+        b : array_like, shape (n, 1)
+            Input matrix ``B`` (the hub torque).
+        """
         return self.projector @ a @ self.basis, self.projector @ b
 
 
 def controllable_part(model, spin_rate: float = 0.0) -> ControllablePart:
-    """The :class:`ControllablePart` of ``model`` linearised at ``spin_rate`` (rad/s)."""
+    """The :class:`ControllablePart` of ``model`` linearised at ``spin_rate``.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The model to linearise (one beam or a structure, free or pinned hub).
+    spin_rate : float, optional
+        Steady hub rate of the linearisation, rad/s. Default 0.
+    """
     report = model.modal_visibility(spin_rate)
     drop = report.uncontrollable("torque")
     keep = [j for j in range(report.frequencies.size) if j not in drop]
@@ -92,8 +108,32 @@ def controllable_part(model, spin_rate: float = 0.0) -> ControllablePart:
 
 def lqr_on_part(model, spin_rate, q_mat, r_mat, sample_time=None):
     """LQR gain (1, n) and closed-loop poles (n,) designed on the controllable part; with a
-    ``sample_time`` (s), the discrete LQR of the plant held over it (weights ``Q T``,
-    ``R T``: the continuous cost's rectangle rule), for a law run with a zero-order hold."""
+    ``sample_time``, the discrete LQR of the plant held over it (weights ``Q T``,
+    ``R T``: the continuous cost's rectangle rule), for a law run with a zero-order hold.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model.
+    spin_rate : float
+        Steady hub rate of the linearisation, rad/s.
+    q_mat : array_like, shape (n, n)
+        State weight ``Q`` on the model's state (e.g. of
+        :func:`~controllers.feedback.lqr.lqr_weight_matrices`).
+    r_mat : array_like, shape (1, 1)
+        Torque weight ``R``, 1/(N m)^2.
+    sample_time : float, optional
+        Hold of the sampled law, s. Default: the continuous LQR.
+
+    Returns
+    -------
+    gain : ndarray, shape (1, n)
+        ``K`` on the whole state, ``u = -K x`` (zero on the modes left out).
+    poles : ndarray, shape (n,)
+        ``eig(A - B K)`` of the continuous linearisation, 1/s.
+    part : ControllablePart
+        The part designed on (:func:`controllable_part`).
+    """
     a, b = model.linear_matrices(spin_rate)
     part = controllable_part(model, spin_rate)
     if not part.dropped:
@@ -106,7 +146,17 @@ def lqr_on_part(model, spin_rate, q_mat, r_mat, sample_time=None):
 
 
 def held(a, b, sample_time: float) -> tuple:
-    """``(A_d, B_d)``: ``x' = A x + B u`` with ``u`` held over ``sample_time`` (s)."""
+    """``(A_d, B_d)``: ``x' = A x + B u`` with ``u`` held over ``sample_time``.
+
+    Parameters
+    ----------
+    a : array_like, shape (n, n)
+        Continuous state matrix ``A``.
+    b : array_like, shape (n, m)
+        Continuous input matrix ``B``.
+    sample_time : float
+        Length of the zero-order hold, s (> 0).
+    """
     import control
 
     n = a.shape[0]
@@ -117,7 +167,26 @@ def held(a, b, sample_time: float) -> tuple:
 
 def state_gain(a, b, q_mat, r_mat, sample_time=None) -> np.ndarray:
     """The LQR gain of ``(A, B)``, shape (1, n): continuous, or discrete for the plant held
-    over ``sample_time`` (s) with the weights ``Q T`` and ``R T``."""
+    over ``sample_time`` with the weights ``Q T`` and ``R T``.
+
+    Parameters
+    ----------
+    a : array_like, shape (n, n)
+        State matrix ``A``.
+    b : array_like, shape (n, 1)
+        Input matrix ``B`` (the hub torque, or an actuator's command).
+    q_mat : array_like, shape (n, n)
+        State weight ``Q``.
+    r_mat : float or array_like, shape (1, 1)
+        Input weight ``R``.
+    sample_time : float, optional
+        Hold of the sampled law, s. Default: the continuous LQR.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        If the solver returns a gain that is not finite.
+    """
     import control
 
     if sample_time is None:
@@ -133,7 +202,21 @@ def state_gain(a, b, q_mat, r_mat, sample_time=None) -> np.ndarray:
 
 def lqe_on_part(model, spin_rate, c_meas, process, measurement):
     """Kalman gain (n, m) and estimator poles (n,) on the controllable part (the modes the
-    torque cannot move are not excited by its noise either: the estimate leaves them at 0)."""
+    torque cannot move are not excited by its noise either: the estimate leaves them at 0).
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model.
+    spin_rate : float
+        Steady hub rate of the linearisation, rad/s.
+    c_meas : array_like, shape (m, n)
+        Rows of the output matrix that are measured (``y_meas = C_meas x``).
+    process : array_like, shape (1, 1)
+        ``QN``: covariance of the disturbance torque entering like the command, (N m)^2.
+    measurement : array_like, shape (m, m)
+        ``RN``: covariance of the measurement noise, in the squared units of the outputs.
+    """
     import control
 
     a, b = model.linear_matrices(spin_rate)
@@ -159,7 +242,19 @@ def _noise_input(b, process) -> np.ndarray:
 
 def dlqr_on_part(model, sample_time, q_mat, r_mat) -> np.ndarray:
     """Discrete LQR cost matrix (n, n) at rest, held over ``sample_time``, of the
-    controllable part, as a quadratic form on the whole state (zero on the modes left out)."""
+    controllable part, as a quadratic form on the whole state (zero on the modes left out).
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model, linearised at rest.
+    sample_time : float
+        Length of the zero-order hold, s (> 0).
+    q_mat : array_like, shape (n, n)
+        State weight ``Q`` of each sample.
+    r_mat : array_like, shape (1, 1)
+        Torque weight ``R`` of each sample, 1/(N m)^2.
+    """
     import control
 
     a, b = model.linear_matrices(0.0)

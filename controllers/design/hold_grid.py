@@ -98,8 +98,17 @@ def step_error(scheme: str, omega_dt: float, degree: int = 3) -> float:
     """``|R(i omega dt) - exp(i omega dt)|``: one step's error on an undamped oscillator.
 
     ``R`` is the scheme's stability function: RK4's Taylor polynomial, or
-    ``1 + z b^T (I - z A)^-1 1`` of the collocation method (``scheme`` "radau" or
-    "legendre", ``degree`` points). The error is relative to the mode's amplitude.
+    ``1 + z b^T (I - z A)^-1 1`` of the collocation method. The error is relative to the
+    mode's amplitude.
+
+    Parameters
+    ----------
+    scheme : {"rk4", "radau", "legendre"}
+        One RK4 step, or one collocation element on CasADi's points of that name.
+    omega_dt : float
+        The step times the mode's frequency, ``omega dt``, rad.
+    degree : int, optional
+        Collocation points per element (not read for ``"rk4"``). Default 3.
 
     Examples
     --------
@@ -132,6 +141,8 @@ def steps_per_hold(scheme: str, omega, hold: float, duration: float, degree: int
         Hold length ``h``, s.
     duration : float
         Time over which the errors add up (the slew), s.
+    degree : int, optional
+        Collocation points per element (not read for ``"rk4"``). Default 3.
     tolerance : float or array_like, shape (N,)
         Error allowed for each frequency over ``duration``, relative to its amplitude
         (:func:`mode_tolerances`).
@@ -160,6 +171,25 @@ def largest_step(scheme: str, omega: float, duration: float, degree: int = 3,
     """Largest ``omega dt`` of one step that integrates ``omega`` over ``duration`` within
     ``tolerance`` of its amplitude; ``omega duration`` divided by it is the fewest steps a
     slew can take.
+
+    Parameters
+    ----------
+    scheme : {"rk4", "radau", "legendre"}
+        RK4 substeps or collocation elements (``degree`` points each).
+    omega : float
+        The mode's frequency, rad/s (> 0).
+    duration : float
+        Time over which the errors add up (the slew), s (> 0).
+    degree : int, optional
+        Collocation points per element (not read for ``"rk4"``). Default 3.
+    tolerance : float, optional
+        Error allowed over ``duration``, relative to the mode's amplitude. Default
+        :data:`PHASE_TOLERANCE`.
+
+    Raises
+    ------
+    InputValueError
+        If ``scheme`` is not one of the three.
 
     Examples
     --------
@@ -391,8 +421,22 @@ class HoldGrid:
         return np.concatenate((keep, self.n_dof + keep))
 
     def excess(self, n_intervals: int, honoured: int | None = None) -> np.ndarray:
-        """Excess of the holds' least effort for 0 .. N honoured modes (or for ``honoured``
-        modes only, shape (1,))."""
+        """Excess of the holds' least effort for 0 .. N honoured modes, shape (N + 1,) (or for
+        ``honoured`` modes only, shape (1,)).
+
+        Parameters
+        ----------
+        n_intervals : int
+            Number of holds ``K`` over the slew (each ``duration / K`` s).
+        honoured : int, optional
+            Number of flexible modes, from the slowest, that must end at rest with the
+            rigid-body mode. Default: every count from 0 to N.
+
+        Raises
+        ------
+        InputValueError
+            If the hold map cannot be evaluated in floating point.
+        """
         h = self.duration / n_intervals
         counts = range(self.n_dof) if honoured is None else [honoured]
         excess = np.full(len(counts), np.nan)
@@ -451,6 +495,17 @@ def hold_effort_excess(model, duration: float, n_intervals: int,
 
     The least-effort rest-to-rest slew of ``model``'s linearisation at rest, without the
     torque bound (:class:`HoldGrid`).
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (the exact variant is analysed on its first_order twin).
+    duration : float
+        Slew duration ``T``, s.
+    n_intervals : int
+        Number of holds ``K`` (each ``T / K`` s).
+    angle : float, optional
+        Slew angle, rad (the excess does not depend on it). Default 1.
 
     Examples
     --------

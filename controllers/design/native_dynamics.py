@@ -68,10 +68,19 @@ def with_compiled_derivatives(function, max_library: int = MAX_LIBRARY):
     compiled form, whose value, Jacobian and second derivatives run as machine code; or
     ``function`` itself where compiling is off or impossible, it is longer than
     :data:`MAX_INSTRUCTIONS` or not SX, or its library would be longer than ``max_library``
-    instructions (default :data:`MAX_LIBRARY`).
+    instructions.
 
     Its numbers are lifted into an input (:func:`~flexctl.sim.compile_cache.lift_constants`),
     so that one library serves every function of the same structure.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        The function to compile, e.g. ``(x, u) -> xdot`` of :meth:`flexctl.Model.casadi` or
+        an RK4 hold.
+    max_library : int, optional
+        Longest library (the function and its derivatives) to compile, instructions (>= 0).
+        Default :data:`MAX_LIBRARY`.
     """
     import casadi as ca
 

@@ -42,6 +42,13 @@ def mode_count(template: StateLayout, n_states: int) -> int | None:
     """Modes of ``template``'s single appendage that give a state of ``n_states`` entries
     (possibly below 1), or None when no count does.
 
+    Parameters
+    ----------
+    template : StateLayout
+        A layout of one appendage; its hub and first-order blocks are kept as they are.
+    n_states : int
+        Length of the state vector.
+
     Raises
     ------
     ValueError
@@ -59,7 +66,15 @@ def mode_count(template: StateLayout, n_states: int) -> int | None:
 @functools.lru_cache(maxsize=256)
 def resized(template: StateLayout, n_states: int) -> StateLayout | None:
     """``template``'s blocks on the mode count that gives ``n_states`` states (see
-    :func:`mode_count`), or None when no count of at least 1 does."""
+    :func:`mode_count`), or None when no count of at least 1 does.
+
+    Parameters
+    ----------
+    template : StateLayout
+        A layout of one appendage (hashable: the result is cached).
+    n_states : int
+        Length of the state vector.
+    """
     modes = mode_count(template, n_states)
     return None if modes is None or modes < 1 else template.with_modes(modes)
 
@@ -69,6 +84,15 @@ def design_rows(design: StateLayout, n_plant_states: int,
                 owner: str = "truncate_state") -> np.ndarray:
     """Indices of the design state (layout ``design``) in a plant state of
     ``n_plant_states`` entries, read-only, shape (design.n_states,).
+
+    Parameters
+    ----------
+    design : StateLayout
+        Layout of the design model's state (one appendage).
+    n_plant_states : int
+        Length of the plant state vector.
+    owner : str, optional
+        Function named in the error messages. Default ``"truncate_state"``.
 
     Raises
     ------
@@ -107,7 +131,15 @@ def casadi_hub_state(x) -> tuple:
 
 def checked_rigid_inertia(owner: str, model_or_inertia) -> float:
     """``model.rigid_inertia`` of a flexctl Model (``J_0``, about the centre of mass for a
-    free hub), or a given inertia (kg m^2, > 0)."""
+    free hub), or a given inertia (kg m^2, > 0).
+
+    Parameters
+    ----------
+    owner : str
+        Function named in the error message.
+    model_or_inertia : Model or float
+        A flexctl Model, or the rigid inertia itself, kg m^2 (> 0).
+    """
     from flexctl.model import Model
 
     if isinstance(model_or_inertia, Model):

@@ -351,7 +351,20 @@ def loop_stability(plant, matrix, law: str, spin_rate: float = 0.0,
 def least_damped_pole(plant, matrix, spin_rate: float = 0.0,
                       sample_time: float | None = None) -> GrowingPole:
     """The pole of largest real part of a closed-loop matrix on ``plant`` (as in
-    :func:`loop_stability`, hidden modes included), named by its mode."""
+    :func:`loop_stability`, hidden modes included), named by its mode.
+
+    Parameters
+    ----------
+    plant : flexctl.Model
+        The plant whose open-loop modes name the pole.
+    matrix : array_like, shape (m, m)
+        Closed-loop ``A`` (continuous) or ``A_d`` (held over ``sample_time``), of the plant's
+        states and any states of the law.
+    spin_rate : float, optional
+        Steady hub rate of the plant's linearisation, rad/s. Default 0.
+    sample_time : float, optional
+        s, for a discrete ``matrix``. Default: continuous.
+    """
     poles, modes, _ = _poles(np.asarray(matrix, dtype=float), sample_time, plant, spin_rate)
     k = max((k for k, p in enumerate(poles) if p.imag >= 0.0), key=lambda k: poles[k].real)
     return GrowingPole(mode=int(modes[k]), frequency=float(poles[k].imag),
@@ -360,7 +373,21 @@ def least_damped_pole(plant, matrix, spin_rate: float = 0.0,
 
 def warn_if_unstable(check: LoopStability, stacklevel: int = 2) -> LoopStability:
     """Warn (:class:`LoopStabilityWarning`) when ``check`` is unstable or nearly so; return
-    ``check``."""
+    ``check``.
+
+    Parameters
+    ----------
+    check : LoopStability
+        What :func:`check_loop` found.
+    stacklevel : int, optional
+        ``stacklevel`` of the warning as seen from the caller of this function (2: the
+        caller's caller). Default 2.
+
+    Raises
+    ------
+    InputTypeError
+        If ``check`` is not a :class:`LoopStability`.
+    """
     if not isinstance(check, LoopStability):
         raise InputTypeError(f"warn_if_unstable.check must be a LoopStability; got "
                              f"{type(check).__name__}")
@@ -371,7 +398,19 @@ def warn_if_unstable(check: LoopStability, stacklevel: int = 2) -> LoopStability
 
 def checked_on(controller, plant, stacklevel: int = 2):
     """``controller``, its loop checked on ``plant`` (warning when unstable or nearly so);
-    unchecked when ``plant`` is None. For the design functions' ``plant`` argument."""
+    unchecked when ``plant`` is None. For the design functions' ``plant`` argument.
+
+    Parameters
+    ----------
+    controller : object
+        A law :func:`check_loop` takes (PD, LQR, ScheduledLQR, LQG, ..., or one of these
+        behind a hold, an observer or a motor).
+    plant : flexctl.Model or None
+        The plant the law will run on; None skips the check.
+    stacklevel : int, optional
+        ``stacklevel`` of the warning as seen from the caller of this function (2: the
+        caller's caller). Default 2.
+    """
     if plant is not None:
         warn_if_unstable(check_loop(plant, controller), stacklevel=stacklevel + 1)
     return controller

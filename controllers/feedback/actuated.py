@@ -118,20 +118,60 @@ class MotorVoltage:
         return self.law.initial_state(x0)
 
     def derivative(self, t, x, z=None):
-        """The law's ``dz/dt``."""
+        """The law's ``dz/dt``.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : array_like, shape (n,)
+            State of the motor-driven plant, in the order of ``plant.layout``.
+        z : array_like, shape (n_states,), optional
+            The law's internal state.
+        """
         return self.law.derivative(t, x, z)
 
     def casadi_derivative(self, t, x, z):
-        """The law's ``dz/dt`` (CasADi)."""
+        """The law's ``dz/dt`` (CasADi).
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        x : CasADi column, shape (n, 1)
+            State of the motor-driven plant.
+        z : CasADi column, shape (n_states, 1)
+            The law's internal state.
+        """
         return self.law.casadi_derivative(t, x, z)
 
     def torque(self, t, x, z=None) -> float:
-        """Voltage, V, for the law's hub torque at time ``t`` and plant state ``x``."""
+        """Voltage, V, for the law's hub torque at time ``t`` and plant state ``x``.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : array_like, shape (n,)
+            State of the motor-driven plant, in the order of ``plant.layout``.
+        z : array_like, shape (n_states,), optional
+            The law's internal state.
+        """
         return float(self._voltage(self.law.torque(t, x, z), np.asarray(x, dtype=float)))
 
     def casadi_torque(self, t, x, extra=None):
-        """:meth:`torque` as a CasADi expression (``extra``: the law's internal state or
-        parameters, as the law takes them)."""
+        """:meth:`torque` as a CasADi expression.
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        x : CasADi column, shape (n, 1)
+            State of the motor-driven plant.
+        extra : CasADi column, optional
+            The law's internal state or parameters, as the law's ``casadi_torque`` takes
+            them. Default: none passed.
+        """
         args = (t, x) if extra is None else (t, x, extra)
         return self._voltage(self.law.casadi_torque(*args), x)
 
@@ -142,7 +182,15 @@ class MotorVoltage:
         return getattr(self.law, "sample_time", None)
 
     def start(self, model, x0):
-        """A session of the sampled law whose torques become voltages."""
+        """A session of the sampled law whose torques become voltages.
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant of the run.
+        x0 : array_like, shape (n,)
+            Plant state at the start of the run.
+        """
         return _VoltageSession(self.law.start(model, x0), self)
 
     @property
@@ -197,7 +245,15 @@ class LaggedLQR:
 
     def plant_gain(self, plant, spin_rate: float = 0.0) -> np.ndarray:
         """``K`` on the actuated ``plant``'s state: the structure's gain and ``k_a`` on the
-        wheel torque, shape (1, n)."""
+        wheel torque, shape (1, n).
+
+        Parameters
+        ----------
+        plant : ActuatedModel
+            The wheel-driven plant (a state named ``wheel_torque``).
+        spin_rate : float, optional
+            Steady hub rate, rad/s (not read: the gain is fixed). Default 0.
+        """
         gain = np.array(self.lqr.state_gain(plant.layout), dtype=float).reshape(1, -1)
         gain[0, plant.state_names.index("wheel_torque")] += self.actuator_gain
         return gain
@@ -227,11 +283,32 @@ class LaggedLQR:
         return np.zeros(0)
 
     def derivative(self, t, x, z=None):
-        """No internal state."""
+        """No internal state.
+
+        Parameters
+        ----------
+        t : float
+            Time, s (not read).
+        x : array_like, shape (n,)
+            Plant state (not read).
+        z : array_like, shape (0,), optional
+            Internal state (none; not read).
+        """
         return np.zeros(0)
 
     def torque(self, t: float, x, z=None) -> float:
-        """Command, N m, at time ``t`` for plant state ``x``."""
+        """Command, N m.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : array_like, shape (n,)
+            State of the wheel-driven plant (the wheel torque among it), in the order of
+            the bound ``plant_layout``.
+        z : array_like, shape (0,), optional
+            Internal state (none; not read).
+        """
         x = np.asarray(x, dtype=float)
         lqr = self.lqr
         x_ref, acc = reference_state(lqr.reference, t, lqr.layout, lqr.deflection_gain)
@@ -241,7 +318,17 @@ class LaggedLQR:
         return saturate(u, self.torque_limit)
 
     def casadi_torque(self, t, x, z=None):
-        """:meth:`torque` as a CasADi expression."""
+        """:meth:`torque` as a CasADi expression.
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        x : CasADi column, shape (n, 1)
+            State of the wheel-driven plant, in the order of the bound ``plant_layout``.
+        z : CasADi column, optional
+            Internal state (none; not read).
+        """
         import casadi as ca
 
         lqr = self.lqr
@@ -263,10 +350,18 @@ def design_wheel_lqr(design, wheel, weights: LQRWeights, *, reference=None,
     design : flexctl.Model
         The structure's design model (hub-torque input).
     wheel : ReactionWheel
+        The wheel: its motor time constant ``tau`` (s) and torque limit (N m).
     weights : LQRWeights
-    reference, feedforward, torque_limit, flexible_reference
-        As for :func:`controllers.feedback.lqr.design_lqr`; ``torque_limit`` defaults to the
-        wheel's.
+        Weights of the structure's states and the command
+        (:func:`~controllers.feedback.lqr.lqr_weight_matrices`).
+    reference : object, optional
+        Hub reference, as for :func:`controllers.feedback.lqr.design_lqr`.
+    feedforward : bool, optional
+        Add ``J0 acc_ref``, as for :func:`controllers.feedback.lqr.design_lqr`. Default True.
+    torque_limit : float, optional
+        Saturation of the command, N m; at most the wheel's torque limit, its default.
+    flexible_reference : bool, optional
+        As for :func:`controllers.feedback.lqr.design_lqr`. Default True.
     sample_time : float, optional
         For a law run sampled with a zero-order hold (s): the discrete LQR of the augmented
         plant held over ``sample_time`` (weights ``Q T`` and ``R T``, the continuous cost's
@@ -306,7 +401,15 @@ def design_wheel_lqr(design, wheel, weights: LQRWeights, *, reference=None,
 
 def through_actuator(controller, plant):
     """``controller`` (its output a hub torque) as the plant's actuator takes it: unchanged
-    for an ideal torque or a reaction wheel, a :class:`MotorVoltage` for a DC motor."""
+    for an ideal torque or a reaction wheel, a :class:`MotorVoltage` for a DC motor.
+
+    Parameters
+    ----------
+    controller : object
+        A flexctl controller whose output is a hub torque, N m (continuous or sampled).
+    plant : flexctl.Model
+        The plant the controller runs on (an ``ActuatedModel`` carries its actuator).
+    """
     actuator = _actuator(plant)
     if actuator is None or actuator.kind != "dc_motor" or isinstance(controller, MotorVoltage):
         return controller
@@ -319,7 +422,15 @@ _CHECK_POINTS = 801
 
 def actuator_torque_bound(actuator, torque_bound: float | None) -> float | None:
     """The hub-torque bound a design may use: the manoeuvre's, within what the actuator gives
-    (a wheel's torque limit, a motor's stall torque at its voltage limit), N m."""
+    (a wheel's torque limit, a motor's stall torque at its voltage limit), N m.
+
+    Parameters
+    ----------
+    actuator : ReactionWheel, DCMotor or None
+        What gives the hub torque; None: an ideal torque.
+    torque_bound : float or None
+        The manoeuvre's bound on the hub torque, N m; None: the actuator's alone.
+    """
     if actuator is None:
         return torque_bound
     if actuator.kind == "reaction_wheel":
@@ -334,10 +445,21 @@ def actuator_torque_bound(actuator, torque_bound: float | None) -> float | None:
 def check_reference_fits(actuator, inertia: float, reference) -> dict:
     """Refuse a reference slew the actuator cannot follow; return what it needs.
 
-    A rest-to-rest reference of the rigid structure (``inertia``, kg m^2) needs the hub
+    A rest-to-rest reference of the rigid structure (``inertia`` ``J``) needs the hub
     torque ``J acc(t)`` and, on a wheel, the momentum ``J rate(t)`` that the wheel takes up
     (its speed ``J rate / J_w`` relative to the hub, nearly); on a DC motor, the voltage
     ``voltage_for(J acc, rate)`` of its torque-speed line.
+
+    Parameters
+    ----------
+    actuator : ReactionWheel, DCMotor or None
+        What gives the hub torque; None: nothing to check.
+    inertia : float
+        Rigid inertia ``J`` of the structure, kg m^2.
+    reference : object or None
+        A rest-to-rest hub reference starting at 0 s with ``duration`` (s), ``rate(t)``
+        (rad/s) and ``acceleration(t)`` (rad/s^2), e.g. a
+        :class:`~controllers.slew.reference.SlewProfile`; None: nothing to check.
 
     Returns
     -------

@@ -108,6 +108,16 @@ class NoiseLevels(KeywordOnly):
         intensity ``sigma^2 T`` (the encoder's ``sigma^2 = step^2 / 12``). A noiseless reading
         takes the floor of :data:`flexctl.sim.sensors.VARIANCE_FLOOR`.
 
+        Parameters
+        ----------
+        sensors : flexctl.sim.sensors.Sensors
+            The sensors: the encoder's resolution (rad) and the root moment's noise (N m,
+            standard deviation per reading).
+        sample_time : float
+            Time between readings ``T``, s (> 0).
+        torque : float, optional
+            Process noise: disturbance torque on the hub, N m, as :attr:`torque`. Default 0.1.
+
         Examples
         --------
         >>> from flexctl.sim.sensors import Sensors
@@ -140,6 +150,15 @@ class NoiseLevels(KeywordOnly):
 
 def estimator_gain(model, noise: NoiseLevels, spin_rate: float = 0.0) -> tuple:
     """Steady-state Kalman gain of ``model.linearize(spin_rate)`` measuring theta and root moment.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The filter's model (``M`` modes).
+    noise : NoiseLevels
+        Noise the filter is designed for.
+    spin_rate : float, optional
+        Steady hub rate of the linearisation, rad/s. Default 0.
 
     Returns
     -------
@@ -337,7 +356,20 @@ class LQG(ReferenceFeedback):
                        plant_layout=model.layout)
 
     def measure(self, t: float, x) -> np.ndarray:
-        """Sensor readings ``[theta, root_moment]`` (rad, N m) of plant state ``x``."""
+        """Sensor readings ``[theta, root_moment]`` (rad, N m) of plant state ``x``.
+
+        Parameters
+        ----------
+        t : float
+            Time, s (where the measurement noise is evaluated).
+        x : array_like, shape (n,)
+            Plant state, in the order of the plant's layout (the plant of :meth:`for_plant`).
+
+        Raises
+        ------
+        InputValueError
+            If ``x`` is not of the length the sensors are set for.
+        """
         x = np.asarray(x, dtype=float)
         if x.shape != (self.measurement_matrix.shape[1],):
             raise InputValueError(f"lqg: plant state has shape {x.shape} but the sensors are set "
@@ -356,7 +388,17 @@ class LQG(ReferenceFeedback):
         return self.initial_estimate.copy()
 
     def torque(self, t: float, x, z) -> float:
-        """Hub torque, N m, from the estimate ``z`` (the plant state ``x`` is not read)."""
+        """Hub torque, N m, from the estimate ``z``.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : array_like, shape (n,)
+            Plant state (not read).
+        z : array_like, shape (n_d,)
+            The estimate, in the order of :attr:`layout`.
+        """
         x_ref, acc = reference_state(self.reference, t, self.layout, self.deflection_gain)
         z = np.asarray(z, dtype=float)
         u = self._apply(-float(self.gain[0] @ (z - x_ref)), acc)
@@ -371,7 +413,17 @@ class LQG(ReferenceFeedback):
         return self.motor.torque_gain * self.motor.voltage_limit
 
     def derivative(self, t: float, x, z) -> np.ndarray:
-        """``dz/dt = A z + B u + L (y - C z)``, shape (n_d,)."""
+        """``dz/dt = A z + B u + L (y - C z)``, shape (n_d,).
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : array_like, shape (n,)
+            Plant state, read through the sensors (:meth:`measure`).
+        z : array_like, shape (n_d,)
+            The estimate, in the order of :attr:`layout`.
+        """
         z = np.asarray(z, dtype=float)
         u = self.torque(t, x, z)
         innovation = self.measure(t, x) - self.c @ z
@@ -383,7 +435,15 @@ class LQG(ReferenceFeedback):
         return has_casadi(self.reference) and has_casadi(self.measurement_noise, "casadi")
 
     def casadi_measure(self, t, x):
-        """:meth:`measure` of the CasADi symbols ``t`` and ``x``, shape (2, 1)."""
+        """:meth:`measure` of the CasADi symbols ``t`` and ``x``, shape (2, 1).
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        x : CasADi column, shape (n, 1)
+            Plant state, in the order of the plant's layout.
+        """
         import casadi as ca
 
         if x.numel() != self.measurement_matrix.shape[1]:
@@ -396,7 +456,17 @@ class LQG(ReferenceFeedback):
         return y
 
     def casadi_torque(self, t, x, z):
-        """:meth:`torque` as a CasADi expression of the symbols ``t``, ``x`` and ``z``."""
+        """:meth:`torque` as a CasADi expression of the symbols ``t``, ``x`` and ``z``.
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        x : CasADi column, shape (n, 1)
+            Plant state (not read).
+        z : CasADi column, shape (n_d, 1)
+            The estimate.
+        """
         import casadi as ca
 
         x_ref, acc = casadi_reference_state(self.reference, t, self.layout,
@@ -408,7 +478,17 @@ class LQG(ReferenceFeedback):
         return ca.fmin(ca.fmax(u, -reach - drag), reach - drag)
 
     def casadi_derivative(self, t, x, z):
-        """:meth:`derivative` as a CasADi expression, shape (n_d, 1)."""
+        """:meth:`derivative` as a CasADi expression, shape (n_d, 1).
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        x : CasADi column, shape (n, 1)
+            Plant state, read through the sensors.
+        z : CasADi column, shape (n_d, 1)
+            The estimate.
+        """
         import casadi as ca
 
         u = self.casadi_torque(t, x, z)
@@ -429,8 +509,16 @@ class LQG(ReferenceFeedback):
                           inputs=inputs, outputs=["torque"], name="lqg")
 
     def closed_loop_matrix(self, model, spin_rate: float = 0.0) -> np.ndarray:
-        """``A`` of ``model.linearize(spin_rate)`` (``N >= M`` modes) under this compensator,
-        states ``[x, z]``, shape (2 N + 2 + n_d, 2 N + 2 + n_d)."""
+        """``A`` of ``model.linearize(spin_rate)`` under this compensator, states ``[x, z]``,
+        shape (2 N + 2 + n_d, 2 N + 2 + n_d).
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant (``N >= M`` modes).
+        spin_rate : float, optional
+            Steady hub rate of the plant's linearisation, rad/s. Default 0.
+        """
         model = checked_model("lqg.closed_loop_matrix", model)
         meas = self.for_plant(model).measurement_matrix
         a_p, b_p = model.linear_matrices(spin_rate)
@@ -440,7 +528,15 @@ class LQG(ReferenceFeedback):
         return np.vstack((top, bottom))
 
     def closed_loop_poles(self, model, spin_rate: float = 0.0) -> np.ndarray:
-        """Poles of :meth:`closed_loop_matrix`, shape (2 N + 2 + n_d,), 1/s."""
+        """Poles of :meth:`closed_loop_matrix`, shape (2 N + 2 + n_d,), 1/s.
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant (``N >= M`` modes).
+        spin_rate : float, optional
+            Steady hub rate of the plant's linearisation, rad/s. Default 0.
+        """
         return np.linalg.eigvals(self.closed_loop_matrix(model, spin_rate))
 
 
@@ -472,10 +568,16 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
     plant : flexctl.Model, optional
         Model whose sensors the controller reads in simulation (``N >= M`` modes). Default:
         ``model``.
-    reference, feedforward, torque_limit, flexible_reference
-        As in :func:`controllers.feedback.lqr.design_lqr`.
+    reference : object, optional
+        Hub reference, as in :func:`controllers.feedback.lqr.design_lqr`.
+    feedforward : bool, optional
+        Add ``J0 acc_ref``, as in :func:`controllers.feedback.lqr.design_lqr`. Default True.
+    torque_limit : float, optional
+        Saturation, N m, as in :func:`controllers.feedback.lqr.design_lqr`.
     measurement_noise : callable, optional
         ``v(t)`` added to the measurements in simulation, shape (2,).
+    flexible_reference : bool, optional
+        As in :func:`controllers.feedback.lqr.design_lqr`. Default True.
     estimate_plant_modes : bool, optional
         Model every mode of ``plant`` in the filter (default True); False models the design
         model's modes only (cheaper, and unstable on an undamped plant with more modes).

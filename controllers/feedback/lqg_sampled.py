@@ -45,7 +45,15 @@ __all__ = ["SampledLQG", "discretised_estimator"]
 
 def discretised_estimator(lqg: LQG, sample_time: float) -> tuple:
     """``(Phi, Gamma)`` of the module docstring: shapes (n_d, n_d) and (n_d, 1 + m), the
-    columns of ``Gamma`` on ``[u, y_1..y_m]``."""
+    columns of ``Gamma`` on ``[u, y_1..y_m]``.
+
+    Parameters
+    ----------
+    lqg : LQG
+        The continuous design (its ``A``, ``B``, ``C`` and Kalman gain ``L``).
+    sample_time : float
+        ``T``, s (> 0): the torque and the readings are held over it.
+    """
     a_e = lqg.a - lqg.estimator_gain @ lqg.c
     inputs = np.hstack((lqg.b, lqg.estimator_gain))
     n, k = a_e.shape[0], inputs.shape[1]
@@ -92,7 +100,15 @@ class SampledLQG:
         return self.lqg.breakpoints
 
     def start(self, model, x0) -> "SampledLQGSession":
-        """A fresh session for a run of the plant ``model`` from ``x0``."""
+        """A fresh session for a run of the plant ``model`` from ``x0``.
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant, whose sensors the LQG reads (its layout binds the law).
+        x0 : array_like, shape (n,)
+            Plant state at the start of the run (the initial estimate does not read it).
+        """
         return SampledLQGSession(self, bound_to_plant(self.lqg, model), x0)
 
 
@@ -105,13 +121,29 @@ class SampledLQGSession:
         self.samples = 0
 
     def step(self, t: float, x) -> float:
-        """Torque (N m) to hold from ``t`` (s), given the plant state ``x`` (read through the
-        LQG's sensors, ``lqg.measure``)."""
+        """Torque (N m) to hold from ``t``, given the plant state ``x``.
+
+        Parameters
+        ----------
+        t : float
+            Sample time ``t_k``, s.
+        x : array_like, shape (n,)
+            Plant state at ``t``, read through the LQG's sensors (``lqg.measure``).
+        """
         y = self.lqg.measure(t, x)
         return self.step_readings(t, y)
 
     def step_readings(self, t: float, y) -> float:
-        """Torque (N m) to hold from ``t`` (s), given the readings ``y`` (m,)."""
+        """Torque (N m) to hold from ``t``, given the readings ``y``.
+
+        Parameters
+        ----------
+        t : float
+            Sample time ``t_k``, s.
+        y : array_like, shape (m,)
+            Readings ``[theta, root_moment, ...]`` at ``t`` (rad, then N m for each
+            appendage's root moment).
+        """
         u = float(self.lqg.torque(t, None, self.z))
         self.z = self.owner.phi @ self.z + self.owner.gamma @ np.concatenate(([u], y))
         self.samples += 1

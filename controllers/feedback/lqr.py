@@ -61,7 +61,20 @@ __all__ = ["LQRWeights", "LQR", "design_lqr", "lqr_weight_matrices", "truncation
 
 
 def checked_model(owner: str, model) -> Model:
-    """``model`` itself when it is a flexctl :class:`~flexctl.Model`."""
+    """``model`` itself when it is a flexctl :class:`~flexctl.Model`.
+
+    Parameters
+    ----------
+    owner : str
+        The function named in the error message.
+    model : object
+        The object to check.
+
+    Raises
+    ------
+    InputTypeError
+        If ``model`` is not a flexctl Model.
+    """
     return check_instance(owner, "model", model, Model, "flexctl Model")
 
 
@@ -79,7 +92,25 @@ def _layout(owner: str, design) -> StateLayout:
 
 def gain_layout(owner: str, layout, n_states: int) -> StateLayout:
     """The layout of a design state of ``n_states`` entries (a gain's width): ``layout``
-    checked against it, or one appendage on a pinned hub (a gain given without a model)."""
+    checked against it, or one appendage on a pinned hub (a gain given without a model).
+
+    Parameters
+    ----------
+    owner : str
+        The law named in the error messages.
+    layout : StateLayout or None
+        The design model's ``model.layout``, or None for one appendage on a pinned hub.
+    n_states : int
+        Length of the design state (the gain's number of columns).
+
+    Raises
+    ------
+    InputTypeError
+        If ``layout`` is neither None nor a StateLayout.
+    InputValueError
+        If ``layout`` has another number of states, or no one-appendage layout has
+        ``n_states``.
+    """
     if layout is None:
         layout = resized(DEFAULT_LAYOUT, n_states)
         if layout is None:
@@ -161,7 +192,18 @@ def reference_state(reference, t: float, n_modes, deflection_gain=None) -> tuple
     ``deflection_gain=None``) or the quasi-static deflection ``q_ref = -g acc_ref`` and
     ``q_dot_ref = -g jerk_ref`` (``g`` from :func:`static_deflection_gain`): a beam that bends
     as much as the commanded acceleration needs, instead of one held straight against it.
-    ``n_modes`` is ``M`` or the design state's layout.
+
+    Parameters
+    ----------
+    reference : object or None
+        Hub reference with ``angle(t)``, ``rate(t)``, ``acceleration(t)`` (rad, rad/s,
+        rad/s^2), e.g. a :class:`~controllers.slew.reference.SlewProfile`; None: rest at 0.
+    t : float
+        Time, s.
+    n_modes : int or StateLayout
+        ``M``, or the design state's layout (``model.layout`` of the design model).
+    deflection_gain : array_like, shape (M,), optional
+        ``g``, m per rad/s^2. Default: a rigid reference (``q_ref = 0``).
     """
     layout = _layout("reference_state", n_modes)
     angle, rate, acc = evaluate_reference(reference, t)
@@ -176,7 +218,15 @@ def reference_state(reference, t: float, n_modes, deflection_gain=None) -> tuple
 
 
 def casadi_truncate_state(x, n_design_modes):
-    """:func:`truncate_state` of a CasADi plant state vector (shape (2 N + 2, 1))."""
+    """:func:`truncate_state` of a CasADi plant state vector.
+
+    Parameters
+    ----------
+    x : CasADi column, shape (2 N + 2, 1)
+        Plant state with ``N >= M`` modes.
+    n_design_modes : int or StateLayout
+        ``M``, or the design state's layout (``model.layout`` of the design model).
+    """
     design = _layout("truncate_state", n_design_modes)
     return x[design_rows(design, x.numel()).tolist()]
 
@@ -184,7 +234,23 @@ def casadi_truncate_state(x, n_design_modes):
 def casadi_reference_state(reference, t, n_modes, deflection_gain=None,
                            reference_numbers=None) -> tuple:
     """:func:`reference_state` on the CasADi symbol ``t``: ``(x_ref (2 M + 2, 1), acc_ref)``;
-    the reference's numbers are the symbols ``reference_numbers`` where given."""
+    the reference's numbers are the symbols ``reference_numbers`` where given.
+
+    Parameters
+    ----------
+    reference : object or None
+        Hub reference with a ``casadi_reference`` method (e.g. a
+        :class:`~controllers.slew.reference.SlewProfile`); None: rest at 0.
+    t : CasADi scalar
+        Time, s.
+    n_modes : int or StateLayout
+        ``M``, or the design state's layout.
+    deflection_gain : array_like or CasADi column, shape (M,), optional
+        ``g``, m per rad/s^2 (numbers, or parameter symbols). Default: a rigid reference.
+    reference_numbers : CasADi column, optional
+        The reference's numbers as symbols, laid out as
+        :func:`~controllers.slew.reference.reference_parameters`. Default: its own numbers.
+    """
     import casadi as ca
 
     layout = _layout("reference_state", n_modes)
@@ -253,6 +319,13 @@ def lqr_weight_matrices(model, weights: LQRWeights) -> tuple:
 
     ``x^T Q x = (theta/hub_angle)^2 + (theta_dot/hub_rate)^2 + (tip/tip_deflection)^2
     + E(q, q_dot)/modal_energy`` and ``R = 1/torque^2``, with states in the model's order.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (its layout, output matrix and modal matrices).
+    weights : LQRWeights
+        Largest acceptable values of each term.
     """
     model = checked_model("lqr_weight_matrices", model)
     if not isinstance(weights, LQRWeights):
@@ -337,11 +410,30 @@ class LQR(ReferenceFeedback):
         return self.gain @ truncation_matrix(n_modes, self.layout)
 
     def plant_gain(self, plant, spin_rate: float = 0.0) -> np.ndarray:
-        """``K P`` on ``plant``'s state (any spin rate: the gain is fixed), shape (1, n)."""
+        """``K P`` on ``plant``'s state (any spin rate: the gain is fixed), shape (1, n).
+
+        Parameters
+        ----------
+        plant : flexctl.Model
+            The plant, with at least the design's modes in each appendage.
+        spin_rate : float, optional
+            Steady hub rate, rad/s (not read). Default 0.
+        """
         return self.state_gain(plant.layout)
 
     def torque(self, t: float, x, z=None) -> float:
-        """Hub torque, N m, at time ``t`` (s) for plant state ``x`` (shape (2 N + 2,))."""
+        """Hub torque, N m.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : array_like, shape (n,)
+            Plant state (``2 N + 2`` for one beam of ``N >= M`` modes), in the order of the
+            plant's layout.
+        z : array_like, shape (0,), optional
+            Internal state (none; not read).
+        """
         x_design = self._design_state(x)
         x_ref, acc = reference_state(self.reference, t, self.layout, self.deflection_gain)
         return self._apply(-float(self.gain[0] @ (x_design - x_ref)), acc)
@@ -365,7 +457,18 @@ class LQR(ReferenceFeedback):
 
     def casadi_torque(self, t, x, parameters=None):
         """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``; the numbers
-        are symbols too when ``parameters`` (the values of :attr:`casadi_parameters`) is given."""
+        are symbols too when ``parameters`` is given.
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        x : CasADi column, shape (n, 1)
+            Plant state, in the order of the plant's layout.
+        parameters : CasADi column, optional
+            Symbols laid out as the values of :attr:`casadi_parameters`. Default: this
+            law's numbers.
+        """
         import casadi as ca
 
         gain, inertia, limit = ca.DM(self.gain[0]), None, None
@@ -388,14 +491,42 @@ class LQR(ReferenceFeedback):
 def lqr_gain(model, weights, spin_rate, sample_time=None):
     """Gain and closed-loop poles on the modes the torque moves
     (:mod:`controllers.design.controllable`:
-    all of them for one beam, where this is ``control.lqr`` of the linearisation)."""
+    all of them for one beam, where this is ``control.lqr`` of the linearisation).
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model.
+    weights : LQRWeights
+        Largest acceptable values (:func:`lqr_weight_matrices`).
+    spin_rate : float
+        Steady hub rate of the linearisation, rad/s.
+    sample_time : float, optional
+        Hold of a sampled law, s: the discrete LQR of the plant held over it. Default: the
+        continuous LQR.
+
+    Returns
+    -------
+    gain : ndarray, shape (1, n)
+        ``K``, ``u = -K x``.
+    poles : ndarray, shape (n,)
+        ``eig(A - B K)`` of the continuous linearisation, 1/s.
+    """
     q_mat, r_mat = lqr_weight_matrices(model, weights)
     gain, poles, _ = lqr_on_part(model, spin_rate, q_mat, r_mat, sample_time)
     return gain, poles
 
 
 def checked_on(controller, plant):
-    """:func:`controllers.design.stability.checked_on` (imported when called: it imports this)."""
+    """:func:`controllers.design.stability.checked_on` (imported when called: it imports this).
+
+    Parameters
+    ----------
+    controller : object
+        The designed law (or the law behind a hold).
+    plant : flexctl.Model or None
+        The plant the law will run on; None skips the check.
+    """
     from ..design.stability import checked_on as check
 
     return check(controller, plant, stacklevel=3)
@@ -412,6 +543,7 @@ def design_lqr(model, weights: LQRWeights, spin_rate: float = 0.0, *, reference=
     model : flexctl.Model
         Design model (``M`` modes); the plant it later runs on may have more.
     weights : LQRWeights
+        Largest acceptable values of each term of the cost.
     spin_rate : float, optional
         Steady hub rate of the linearisation, rad/s. Default 0.
     reference : object, optional

@@ -81,8 +81,22 @@ def kalman_update(x_pred, p_pred, y, C, R, offset=0.0) -> tuple:
     """Measurement update of a Kalman filter (Joseph form, so ``P`` stays symmetric).
 
     Returns ``x_plus`` (n_f,), ``p_plus`` (n_f, n_f), the innovation ``y - C x_pred - offset``
-    (m,) and its covariance ``S = C P C^T + R`` (m, m). ``offset`` is the input's part of the
-    readings, ``D u``.
+    (m,) and its covariance ``S = C P C^T + R`` (m, m).
+
+    Parameters
+    ----------
+    x_pred : ndarray, shape (n_f,)
+        The predicted filter state at the reading.
+    p_pred : ndarray, shape (n_f, n_f)
+        Its covariance.
+    y : ndarray, shape (m,)
+        The readings, in their sensors' units.
+    C : ndarray, shape (m, n_f)
+        Readings per filter state.
+    R : ndarray, shape (m, m)
+        Covariance of the readings' noise.
+    offset : float or ndarray, shape (m,), optional
+        The input's part of the readings, ``D u``. Default 0.
     """
     innovation = y - C @ x_pred - offset
     s = C @ p_pred @ C.T + R
@@ -95,7 +109,23 @@ def kalman_update(x_pred, p_pred, y, C, R, offset=0.0) -> tuple:
 
 
 def kalman_predict(x, p, u, Ad, Bd, Q) -> tuple:
-    """Time update over one hold: ``Ad x + Bd u`` and ``Ad P Ad^T + Q``."""
+    """Time update over one hold: ``Ad x + Bd u`` and ``Ad P Ad^T + Q``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n_f,)
+        The filter state at the start of the hold.
+    p : ndarray, shape (n_f, n_f)
+        Its covariance.
+    u : float
+        The command held: the model's input (N m for a hub torque, V for a DC motor).
+    Ad : ndarray, shape (n_f, n_f)
+        ``Phi``: the state over the hold.
+    Bd : ndarray, shape (n_f, 1)
+        ``Gamma``: the held command's effect over the hold.
+    Q : ndarray, shape (n_f, n_f)
+        Process noise covariance added over the hold.
+    """
     p_pred = Ad @ p @ Ad.T + Q
     return Ad @ x + Bd[:, 0] * u, 0.5 * (p_pred + p_pred.T)
 
@@ -103,11 +133,27 @@ def kalman_predict(x, p, u, Ad, Bd, Q) -> tuple:
 def kalman_step(x_hat, p, y, u, Ad, Bd, C, D, Q, R, *, u_held=None) -> tuple:
     """One sample of a discrete Kalman filter: update with ``y``, then predict with ``u``.
 
-    ``x_hat`` (n_f,) and ``p`` (n_f, n_f) are the prediction at the reading and its
-    covariance, ``y`` (m,) the readings, ``u`` the command held from this sample to the next
-    (N m) and ``u_held`` the one held when ``y`` was read (the ``D`` term; default ``u``).
-    ``Ad`` (n_f, n_f), ``Bd`` (n_f, 1), ``Q`` (n_f, n_f): the hold over one sample and its
-    process noise; ``C`` (m, n_f), ``D`` (m, 1), ``R`` (m, m): ``y = C x + D u_held + v``.
+    Parameters
+    ----------
+    x_hat : array_like, shape (n_f,)
+        The prediction at the reading.
+    p : array_like, shape (n_f, n_f)
+        Its covariance.
+    y : array_like, shape (m,)
+        The readings: ``y = C x + D u_held + v``.
+    u : float
+        The command held from this sample to the next, N m (the model's input).
+    Ad, Bd : array_like, shapes (n_f, n_f) and (n_f, 1)
+        The hold over one sample: ``x' = Ad x + Bd u``.
+    C, D : array_like, shapes (m, n_f) and (m, 1)
+        Readings per filter state and per held command.
+    Q : array_like, shape (n_f, n_f)
+        Process noise covariance over one sample.
+    R : array_like, shape (m, m)
+        Covariance of the readings' noise ``v``.
+    u_held : float, optional
+        The command held when ``y`` was read (the ``D`` term), in ``u``'s unit. Default
+        ``u``.
 
     Returns
     -------
@@ -230,7 +276,16 @@ class Observed:
                                  f"callable law(t, x); got {type(law).__name__}")
 
     def start(self, model, x0) -> "ObservedSession":
-        """A fresh session for a run of ``model`` from the plant state ``x0`` (n,)."""
+        """A fresh session for a run of ``model`` from the plant state ``x0``.
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant the filter is built on (its linearisation at rest and its outputs).
+        x0 : array_like, shape (n,)
+            Plant state at the start, in the order of ``model.layout``: the filter's initial
+            estimate.
+        """
         return ObservedSession(self, model, x0)
 
     def __repr__(self):
@@ -331,8 +386,17 @@ class ObservedSession:
 
     # ------------------------------------------------------------------ the sample
     def step(self, t: float, y) -> float:
-        """Command (N m) to hold from sample time ``t`` (s), given the readings ``y`` (m,) of
-        :attr:`names` taken at ``t`` (of the plant ``sensors.delay`` s earlier)."""
+        """Command (N m) to hold from sample time ``t``, given the readings ``y`` taken at
+        ``t``.
+
+        Parameters
+        ----------
+        t : float
+            Sample time, s.
+        y : array_like, shape (m,)
+            Readings of :attr:`names` taken at ``t`` (of the plant ``sensors.delay`` s
+            earlier), in their sensors' units.
+        """
         t = check_real("observed.step", "t", t)
         y = check_array("observed.step", "y", y, shape=(len(self.names),))
         epoch = t - self.controller.sensors.delay

@@ -90,8 +90,23 @@ class PD(ReferenceFeedback):
 
     def plant_gain(self, plant, spin_rate: float = 0.0, sensor: str = "theta") -> np.ndarray:
         """``K`` with ``u = -K x`` on ``plant``'s linearisation at ``spin_rate``: ``kp c +
-        kd c A`` for the output ``c x`` the law reads (:data:`SENSORS`; ``c B = 0`` for
-        them), shape (1, n)."""
+        kd c A`` for the output ``c x`` the law reads (``c B = 0`` for them), shape (1, n).
+
+        Parameters
+        ----------
+        plant : flexctl.Model
+            The plant (its linearisation, output matrix and output names).
+        spin_rate : float, optional
+            Steady hub rate of the linearisation, rad/s. Default 0.
+        sensor : {"theta", "tip_angle", "tip_deflection"}, optional
+            The output the law reads in place of the hub angle (:data:`SENSORS`), with its
+            rate. Default ``"theta"``.
+
+        Raises
+        ------
+        InputValueError
+            If ``sensor`` is not one of :data:`SENSORS`.
+        """
         if sensor not in SENSORS:
             raise InputValueError(f"pd.sensor must be one of {', '.join(SENSORS)}; got "
                                   f"{sensor!r}")
@@ -100,7 +115,18 @@ class PD(ReferenceFeedback):
         return (self.kp * row + self.kd * (row @ a))[None, :]
 
     def torque(self, t: float, x, z=None) -> float:
-        """Hub torque, N m, at time ``t`` (s) for plant state ``x``."""
+        """Hub torque, N m.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : array_like, shape (n,)
+            Plant state of any mode count, in the order of the plant's layout; only the hub
+            angle and rate are read.
+        z : array_like, shape (0,), optional
+            Internal state (none; not read).
+        """
         theta, rate = self._hub_state(x)
         angle_ref, rate_ref, acc_ref = evaluate_reference(self.reference, t)
         return self._apply(self.kp * (angle_ref - theta) + self.kd * (rate_ref - rate), acc_ref)
@@ -118,7 +144,18 @@ class PD(ReferenceFeedback):
 
     def casadi_torque(self, t, x, parameters=None):
         """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``; the numbers
-        are symbols too when ``parameters`` (the values of :attr:`casadi_parameters`) is given."""
+        are symbols too when ``parameters`` is given.
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        x : CasADi column, shape (n, 1)
+            Plant state, in the order of the plant's layout.
+        parameters : CasADi column, optional
+            Symbols laid out as the values of :attr:`casadi_parameters`. Default: this
+            law's numbers.
+        """
         kp, kd, inertia, limit, numbers = self.kp, self.kd, None, None, None
         if parameters is not None:
             kp, kd, inertia, limit = parameters[0], parameters[1], parameters[2], parameters[3]

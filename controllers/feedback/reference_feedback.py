@@ -172,7 +172,17 @@ class ReferenceFeedback:
         return np.zeros(0)
 
     def derivative(self, t: float, x, z=None) -> np.ndarray:
-        """No internal state: shape (0,)."""
+        """No internal state: shape (0,).
+
+        Parameters
+        ----------
+        t : float
+            Time, s (not read).
+        x : array_like, shape (n,)
+            Plant state (not read).
+        z : array_like, shape (0,), optional
+            Internal state (none; not read).
+        """
         return np.zeros(0)
 
     def _apply(self, feedback: float, acceleration: float) -> float:

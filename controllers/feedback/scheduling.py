@@ -108,15 +108,41 @@ class ScheduledLQR(ReferenceFeedback):
 
     def state_gain(self, n_modes, spin_rate: float = 0.0) -> np.ndarray:
         """Gain at ``spin_rate`` on a plant state with ``n_modes`` modes (or of that layout),
-        shape (1, 2N+2)."""
+        shape (1, 2N+2).
+
+        Parameters
+        ----------
+        n_modes : int or StateLayout
+            ``N >= M``, the plant's modes, or the plant state's layout.
+        spin_rate : float, optional
+            Hub rate the gain is interpolated at, rad/s (either sign). Default 0.
+        """
         return self.gain_at(spin_rate) @ truncation_matrix(n_modes, self.layout)
 
     def plant_gain(self, plant, spin_rate: float = 0.0) -> np.ndarray:
-        """The gain at ``spin_rate`` on ``plant``'s state, shape (1, n)."""
+        """The gain at ``spin_rate`` on ``plant``'s state, shape (1, n).
+
+        Parameters
+        ----------
+        plant : flexctl.Model
+            The plant, with at least the design's modes in each appendage.
+        spin_rate : float, optional
+            Hub rate the gain is interpolated at, rad/s (either sign). Default 0.
+        """
         return self.state_gain(plant.layout, spin_rate)
 
     def torque(self, t: float, x, z=None) -> float:
-        """Hub torque, N m, with the gain at the measured ``|theta_dot|``."""
+        """Hub torque, N m, with the gain at the measured ``|theta_dot|``.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : array_like, shape (n,)
+            Plant state (``N >= M`` modes), in the order of the plant's layout.
+        z : array_like, shape (0,), optional
+            Internal state (none; not read).
+        """
         x_design = self._design_state(x)
         x_ref, acc = reference_state(self.reference, t, self.layout, self.deflection_gain)
         gain = self.gain_at(self.layout.hub_rate(x_design))
@@ -136,7 +162,15 @@ class ScheduledLQR(ReferenceFeedback):
         return ca.if_else(w <= rates[0], ca.DM(gains[0]), gain)
 
     def casadi_torque(self, t, x):
-        """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``."""
+        """:meth:`torque` as a CasADi expression of the symbols ``t`` and ``x``.
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        x : CasADi column, shape (n, 1)
+            Plant state, in the order of the plant's layout.
+        """
         import casadi as ca
 
         x_design = self._casadi_design_state(x)
@@ -167,8 +201,14 @@ def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=No
     spin_rates : array_like, shape (S,)
         rad/s, ``>= 0``, strictly increasing; the gain at each equals
         ``design_lqr(model, weights, spin_rate).gain``.
-    reference, feedforward, torque_limit, flexible_reference
-        As in :func:`controllers.feedback.lqr.design_lqr`.
+    reference : object, optional
+        Hub reference, as in :func:`controllers.feedback.lqr.design_lqr`.
+    feedforward : bool, optional
+        Add ``J0 acc_ref``, as in :func:`controllers.feedback.lqr.design_lqr`. Default True.
+    torque_limit : float, optional
+        Saturation, N m, as in :func:`controllers.feedback.lqr.design_lqr`.
+    flexible_reference : bool, optional
+        As in :func:`controllers.feedback.lqr.design_lqr`. Default True.
     plant : flexctl.Model, optional
         The plant the law will run on (its own modes and variant): the loop is checked on
         its linearisation at rest (:func:`controllers.design.stability.check_loop`) and an unstable

@@ -125,7 +125,15 @@ class TrajectoryTracker:
         return plant.projection(design)
 
     def plant_gain(self, plant, spin_rate: float = 0.0) -> np.ndarray:
-        """The feedback gain on ``plant``'s state, shape (1, n)."""
+        """The feedback gain on ``plant``'s state, shape (1, n).
+
+        Parameters
+        ----------
+        plant : flexctl.Model
+            The plant, with at least the design model's modes in each appendage.
+        spin_rate : float, optional
+            Steady hub rate, rad/s (not read: the gain is fixed). Default 0.
+        """
         return self.gain.reshape(1, -1) @ truncation_matrix(plant.layout,
                                                             self.solution.model.layout)
 
@@ -141,7 +149,18 @@ class TrajectoryTracker:
         return np.zeros(0)
 
     def torque(self, t, x, z=None) -> float:
-        """Hub torque at time ``t`` (s) for plant state ``x``, N m."""
+        """Hub torque, N m.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : array_like, shape (n,)
+            Plant state (at least the design model's modes), in the order of the plant's
+            layout.
+        z : array_like, shape (0,), optional
+            Internal state (none; not read).
+        """
         error = self.design_state(x) - self.solution.state_at(float(t))
         u = self._feedforward(t) - float(self.gain @ error)
         if self.torque_limit is not None:
@@ -154,6 +173,13 @@ class TrajectoryTracker:
         ``K x_opt(t)`` is the Hermite cubic of :meth:`SlewSolution.state_at` with its
         coefficients projected on the gain beforehand: one scalar per coefficient and hold,
         selected with the held feedforward by one chain of comparisons on ``t``.
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        x : CasADi column, shape (n, 1)
+            Plant state, in the order of the plant's layout.
         """
         import casadi as ca
 
@@ -176,6 +202,17 @@ class TrajectoryTracker:
         return u
 
     def derivative(self, t, x, z=None) -> np.ndarray:  # noqa: D102
+        """No internal states: shape (0,).
+
+        Parameters
+        ----------
+        t : float
+            Time, s (not read).
+        x : array_like, shape (n,)
+            Plant state (not read).
+        z : array_like, shape (0,), optional
+            Internal state (none; not read).
+        """
         return np.zeros(0)
 
     def __repr__(self):

@@ -90,8 +90,18 @@ def _positive(name, value, optional=False):
 
 
 def hold_function(model: Model, sample_time: float, substeps: int):
-    """CasADi ``F(x, u)``: the state after one hold of torque ``u`` (N m) over ``sample_time``
-    (s), by ``substeps`` RK4 steps of the model's dynamics."""
+    """CasADi ``F(x, u)``: the state after one hold of torque ``u`` (N m) over ``sample_time``,
+    by ``substeps`` RK4 steps of the model's dynamics.
+
+    Parameters
+    ----------
+    model : Model
+        The design model, whose state ``x`` (shape (n,)) ``F`` takes and returns.
+    sample_time : float
+        Length of the hold ``T``, s.
+    substeps : int
+        RK4 steps per hold (>= 1).
+    """
     import casadi as ca
 
     # one beam's exact model has a vectorized form: the same function, a few thousand times
@@ -118,7 +128,19 @@ TIP_FRACTION = 0.003
 
 
 def conic_solver(name: str, solver: str, h_sparsity, a_sparsity):
-    """A quiet CasADi QP solver that reports failure in its stats rather than raising."""
+    """A quiet CasADi QP solver that reports failure in its stats rather than raising.
+
+    Parameters
+    ----------
+    name : str
+        Name of the CasADi function.
+    solver : str
+        CasADi conic plugin, e.g. ``"qrqp"``, ``"osqp"`` or ``"qpoases"`` (:data:`QP_SOLVERS`).
+    h_sparsity : casadi.Sparsity
+        Sparsity of the QP's Hessian, shape (N, N) for ``N`` torque steps.
+    a_sparsity : casadi.Sparsity
+        Sparsity of its constraint matrix, shape (rows, N).
+    """
     import casadi as ca
 
     opts = {"error_on_fail": False}
@@ -149,12 +171,28 @@ def _default_weights(model: Model, angle: float, torque_limit: float):
 
 def state_slice(n: int, j: int) -> slice:
     """``x_j`` in a vector of stages ``[x_0, u_0, x_1, u_1, ..., x_N]`` (``n`` states each):
-    the decision variables, and the references ``[r_0, v_0, ..., r_N]``."""
+    the decision variables, and the references ``[r_0, v_0, ..., r_N]``.
+
+    Parameters
+    ----------
+    n : int
+        States per stage.
+    j : int
+        Stage, ``0 .. N``.
+    """
     return slice(j * (n + 1), j * (n + 1) + n)
 
 
 def input_index(n: int, j: int) -> int:
-    """``u_j`` in a vector of stages (see :func:`state_slice`)."""
+    """``u_j`` in a vector of stages (see :func:`state_slice`).
+
+    Parameters
+    ----------
+    n : int
+        States per stage.
+    j : int
+        Stage, ``0 .. N - 1``.
+    """
     return j * (n + 1) + n
 
 
@@ -688,7 +726,23 @@ class NMPC:
         return self
 
     def start(self, model, x0) -> "NMPCSession":
-        """A fresh session for a run of the plant ``model`` from ``x0``."""
+        """A fresh session for a run of the plant ``model`` from ``x0``.
+
+        Parameters
+        ----------
+        model : Model
+            The plant, with at least the design model's modes
+            (``model.layout.projection(self.model.layout)`` picks the design state).
+        x0 : array_like, shape (n,)
+            Plant state at the start of the run, in the order of ``model.layout``.
+
+        Raises
+        ------
+        InputTypeError
+            If ``model`` is not a flexctl Model.
+        InputValueError
+            If the plant has fewer modes than the design model.
+        """
         if not isinstance(model, Model):
             raise InputTypeError(f"nmpc.plant must be a flexctl Model; got "
                                  f"{type(model).__name__}")
@@ -799,7 +853,16 @@ class NMPCSession:
         return shifted
 
     def step(self, t, x) -> float:
-        """Torque (N m) to hold from ``t`` (s), given the plant state ``x``."""
+        """Torque (N m) to hold from ``t``, given the plant state ``x``.
+
+        Parameters
+        ----------
+        t : float
+            Sample time, s.
+        x : array_like, shape (n,)
+            Plant state at ``t``, in the order of the plant's layout (its design rows are
+            read, or its hub angle and root moments by the extended Kalman filter).
+        """
         started = time.perf_counter()
         mpc, built = self.mpc, self.built
         if self.filter is not None:

@@ -51,7 +51,22 @@ _PEAK_RATE = {"poly7": 35.0 / 16.0, "cycloidal": 2.0}
 
 
 def optional_positive(owner: str, name: str, value) -> float | None:
-    """``None`` or a finite number > 0."""
+    """``None`` or a finite number > 0.
+
+    Parameters
+    ----------
+    owner : str
+        The class or function named in the error message.
+    name : str
+        The argument named in the error message.
+    value : float or None
+        The value to check.
+
+    Raises
+    ------
+    InputTypeError, InputValueError
+        If ``value`` is not None and not a finite number > 0.
+    """
     return _real(owner, name, value, minimum=0.0, strict=True, optional=True)
 
 
@@ -133,7 +148,16 @@ class SlewProfile(KeywordOnly):
     def casadi_reference(self, t, parameters=None):
         """Angle, rate and acceleration as CasADi expressions of the symbol ``t`` (the
         formulas of :meth:`angle`, :meth:`rate`, :meth:`acceleration`); the numbers are symbols
-        too when ``parameters`` (laid out as :attr:`casadi_parameters`) is given."""
+        too when ``parameters`` is given.
+
+        Parameters
+        ----------
+        t : CasADi scalar
+            Time, s.
+        parameters : CasADi column, shape (3, 1), optional
+            ``[slew_angle, duration, start_time]`` (rad, s, s), laid out as
+            :attr:`casadi_parameters`. Default: this profile's numbers.
+        """
         import casadi as ca
 
         angle, duration, start = self.slew_angle, self.duration, self.start_time
@@ -188,6 +212,7 @@ def minimum_slew_duration(slew_angle: float, inertia: float, torque_limit: float
     torque_limit : float
         N m (> 0).
     shape : {"poly7", "cycloidal"}, optional
+        Profile shape (module table). Default ``"poly7"``.
 
     Returns
     -------
@@ -212,7 +237,21 @@ def minimum_slew_duration(slew_angle: float, inertia: float, torque_limit: float
 
 
 def check_reference(owner: str, reference):
-    """``reference`` must be ``None`` or have callable ``angle``, ``rate``, ``acceleration``."""
+    """``reference`` must be ``None`` or have callable ``angle``, ``rate``, ``acceleration``.
+
+    Parameters
+    ----------
+    owner : str
+        The class or function named in the error message.
+    reference : object or None
+        Hub reference with methods ``angle(t)``, ``rate(t)``, ``acceleration(t)`` (rad, rad/s,
+        rad/s^2 at time ``t``, s), e.g. a :class:`SlewProfile`.
+
+    Raises
+    ------
+    InputTypeError
+        If one of the three methods is missing.
+    """
     if reference is None:
         return None
     for attr in ("angle", "rate", "acceleration"):
@@ -223,7 +262,16 @@ def check_reference(owner: str, reference):
 
 
 def evaluate_reference(reference, t: float):
-    """Reference angle (rad), rate (rad/s) and acceleration (rad/s^2) at ``t``; 0 for None."""
+    """Reference angle (rad), rate (rad/s) and acceleration (rad/s^2) at ``t``; 0 for None.
+
+    Parameters
+    ----------
+    reference : object or None
+        Hub reference with methods ``angle``, ``rate`` and ``acceleration`` of time
+        (:func:`check_reference`), e.g. a :class:`SlewProfile`.
+    t : float
+        Time, s.
+    """
     if reference is None:
         return 0.0, 0.0, 0.0
     if isinstance(reference, SlewProfile) and isinstance(t, (float, int, np.floating)):
@@ -233,13 +281,30 @@ def evaluate_reference(reference, t: float):
 
 
 def saturate(torque: float, limit: float | None) -> float:
-    """Clip ``torque`` to ``[-limit, limit]`` (no clipping for ``limit=None``)."""
+    """Clip ``torque`` to ``[-limit, limit]`` (no clipping for ``limit=None``).
+
+    Parameters
+    ----------
+    torque : float
+        Hub torque, N m.
+    limit : float or None
+        Saturation, N m (> 0).
+    """
     return torque if limit is None else min(max(torque, -limit), limit)
 
 
 # ---- CasADi forms of the helpers above, for the compiled simulation path ----------------
 def has_casadi(source, method: str = "casadi_reference") -> bool:
-    """``source`` is absent or offers a CasADi form ``method`` (and does not disown it)."""
+    """``source`` is absent or offers a CasADi form ``method`` (and does not disown it).
+
+    Parameters
+    ----------
+    source : object or None
+        A reference, a noise source or another part of a law; it disowns its CasADi form
+        with a false ``has_casadi_form`` attribute.
+    method : str, optional
+        Name of the CasADi method looked for. Default ``"casadi_reference"``.
+    """
     return source is None or (callable(getattr(source, method, None))
                               and bool(getattr(source, "has_casadi_form", True)))
 
@@ -266,8 +331,19 @@ def reference_parameters(reference) -> tuple:
 
 def casadi_evaluate(reference, t, parameters=None):
     """:func:`evaluate_reference` on the CasADi symbol ``t``; the reference's numbers are the
-    symbols
-    ``parameters`` where given (laid out as :func:`reference_parameters`)."""
+    symbols ``parameters`` where given.
+
+    Parameters
+    ----------
+    reference : object or None
+        Hub reference with a ``casadi_reference(t[, parameters])`` method (e.g. a
+        :class:`SlewProfile`); None gives zeros.
+    t : CasADi scalar
+        Time, s.
+    parameters : CasADi column, optional
+        The reference's numbers, laid out as :func:`reference_parameters`; empty or None:
+        the reference's own numbers.
+    """
     if reference is None:
         return 0.0, 0.0, 0.0
     if parameters is not None and parameters.numel() > 0:
@@ -276,7 +352,15 @@ def casadi_evaluate(reference, t, parameters=None):
 
 
 def casadi_saturate(torque, limit: float | None):
-    """:func:`saturate` of a CasADi expression."""
+    """:func:`saturate` of a CasADi expression.
+
+    Parameters
+    ----------
+    torque : CasADi scalar
+        Hub torque, N m.
+    limit : float, CasADi scalar or None
+        Saturation, N m (> 0); None: no clipping.
+    """
     import casadi as ca
 
     return torque if limit is None else ca.fmin(ca.fmax(torque, -limit), limit)

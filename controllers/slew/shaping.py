@@ -216,13 +216,29 @@ def _shaper_terms(owner, frequency, damping_ratio):
 
 
 def zv_shaper(frequency: float, damping_ratio: float = 0.0) -> Shaper:
-    """Zero-vibration shaper for a mode of ``frequency`` (rad/s) and ``damping_ratio``."""
+    """Zero-vibration shaper for a mode of ``frequency`` and ``damping_ratio``.
+
+    Parameters
+    ----------
+    frequency : float
+        Undamped natural frequency ``omega`` of the mode, rad/s (> 0).
+    damping_ratio : float, optional
+        Modal damping ratio ``zeta`` (0 <= zeta < 1). Default 0.
+    """
     k, half = _shaper_terms("zv_shaper", frequency, damping_ratio)
     return Shaper(times=(0.0, half), amplitudes=(1.0 / (1.0 + k), k / (1.0 + k)))
 
 
 def zvd_shaper(frequency: float, damping_ratio: float = 0.0) -> Shaper:
-    """Zero-vibration-derivative shaper for a mode of ``frequency`` (rad/s)."""
+    """Zero-vibration-derivative shaper for a mode of ``frequency``.
+
+    Parameters
+    ----------
+    frequency : float
+        Undamped natural frequency ``omega`` of the mode, rad/s (> 0).
+    damping_ratio : float, optional
+        Modal damping ratio ``zeta`` (0 <= zeta < 1). Default 0.
+    """
     k, half = _shaper_terms("zvd_shaper", frequency, damping_ratio)
     s = (1.0 + k) ** 2
     return Shaper(times=(0.0, half, 2.0 * half), amplitudes=(1.0 / s, 2.0 * k / s, k * k / s))
@@ -230,7 +246,13 @@ def zvd_shaper(frequency: float, damping_ratio: float = 0.0) -> Shaper:
 
 def convolve(first: Shaper, second: Shaper) -> Shaper:
     """The shaper whose impulse train is ``first`` convolved with ``second``: it cancels the
-    vibration each of them cancels (times that coincide merge)."""
+    vibration each of them cancels (times that coincide merge).
+
+    Parameters
+    ----------
+    first, second : Shaper
+        The two impulse trains (their delays add).
+    """
     impulses = {}
     for t1, a1 in zip(first.times, first.amplitudes):
         for t2, a2 in zip(second.times, second.amplitudes):
@@ -246,7 +268,21 @@ def shaper_frequencies(model, spin_rate: float = 0.0) -> tuple:
     """``(frequency, damping ratio)`` of the modes a shaper of ``model`` cancels: the first
     hub-free flexible mode for one beam; for several appendages the lowest mode the torque
     moves in which each appendage bends most (its fundamental in the coupled structure),
-    each once."""
+    each once.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The model whose modes are cancelled (one beam or a structure).
+    spin_rate : float, optional
+        Steady hub rate of the linearisation, rad/s. Default 0.
+
+    Returns
+    -------
+    tuple of (float, float)
+        Each mode's natural frequency (rad/s) and its beam's modal damping ratio, by
+        ascending frequency.
+    """
     apps = model.structure.appendages
     if len(apps) == 1:
         return ((float(model.natural_frequencies(spin_rate, hub="free")[0]),
@@ -276,6 +312,15 @@ def design_shaper(model, kind: str = "zv", spin_rate: float = 0.0) -> Shaper:
     damping ratio. Several appendages: one ZV or ZVD shaper per frequency of
     :func:`shaper_frequencies` (each appendage's fundamental among the modes the torque moves),
     convolved: the multi-mode shaper of unequal appendages.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The model whose fundamental modes are cancelled.
+    kind : {"zv", "zvd"}, optional
+        :func:`zv_shaper` or :func:`zvd_shaper` for each frequency. Default ``"zv"``.
+    spin_rate : float, optional
+        Steady hub rate of the linearisation, rad/s. Default 0.
     """
     makers = {"zv": zv_shaper, "zvd": zvd_shaper}
     if kind not in makers:
@@ -380,6 +425,7 @@ def shape(command, shaper: Shaper):
         :class:`~controllers.slew.reference.SlewProfile`). A :class:`BangBang` is shaped as a
         torque.
     shaper : Shaper
+        The impulse train to convolve with.
 
     Returns
     -------

@@ -33,7 +33,17 @@ MAX_EXACT_WORK = 3.5e6
 
 
 def exact_work(problem, disc: Discretisation, n_states: int) -> float:
-    """Dynamics evaluations per IPOPT iteration times ``n_states ** 3`` (0 for CVODES)."""
+    """Dynamics evaluations per IPOPT iteration times ``n_states ** 3`` (0 for CVODES).
+
+    Parameters
+    ----------
+    problem : SlewProblem
+        The slew (:class:`~controllers.slew.trajopt.SlewProblem`).
+    disc : Discretisation
+        How each hold is integrated (its method and steps per hold).
+    n_states : int
+        Length of the design model's state.
+    """
     if disc.method == "cvodes":
         return 0.0
     per_step = 4 if disc.method == "rk4" else problem.degree
@@ -148,7 +158,9 @@ def refuse_unsolvable(model, problem, t_rigid: float, longest: float) -> None:
     Parameters
     ----------
     model : flexctl.Model
+        The design model.
     problem : SlewProblem
+        The slew (:class:`~controllers.slew.trajopt.SlewProblem`).
     t_rigid, longest : float
         Rigid-body minimum time and longest free duration, s.
 

@@ -58,7 +58,15 @@ TIME_SIZING = 1.5
 
 
 def transcription_for(problem, model) -> str:
-    """The problem's transcription, or the design model's default when it names none."""
+    """The problem's transcription, or the design model's default when it names none.
+
+    Parameters
+    ----------
+    problem : SlewProblem
+        The slew (:class:`~controllers.slew.trajopt.SlewProblem`).
+    model : flexctl.Model
+        The design model: collocation for the exact variant, multiple shooting otherwise.
+    """
     if problem.transcription is not None:
         return problem.transcription
     return "collocation" if model.variant == "exact" else "multiple_shooting"
@@ -67,9 +75,18 @@ def transcription_for(problem, model) -> str:
 def rk4_substeps(model, hold: float, duration: float | None = None) -> int:
     """RK4 substeps per hold of ``hold`` seconds for the design modes of ``model``.
 
-    As many as integrate each mode over ``duration`` (s; default one hold) within its
-    tolerance (:func:`controllers.design.hold_grid.mode_tolerances`,
+    As many as integrate each mode over ``duration`` within its tolerance
+    (:func:`controllers.design.hold_grid.mode_tolerances`,
     :func:`controllers.design.hold_grid.steps_per_hold`).
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model.
+    hold : float
+        Hold length ``h``, s (> 0).
+    duration : float, optional
+        Time over which the errors add up (the slew), s. Default one hold.
 
     Raises
     ------
@@ -110,7 +127,22 @@ def _resolution_remedies(model, omega, tolerance, hold, duration, n_intervals) -
 
 def refuse_fast_modes(model, sized: float, t_rigid: float) -> None:
     """Raise if the fastest design mode turns more than :data:`MAX_MODE_PHASE` over ``sized``
-    seconds: no grid of holds within the limits integrates it."""
+    seconds: no grid of holds within the limits integrates it.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model.
+    sized : float
+        Duration the discretisation is sized for, s.
+    t_rigid : float
+        Rigid-body minimum time of the slew, s (named in the remedies).
+
+    Raises
+    ------
+    InputValueError
+        If the fastest design mode turns too far, naming the settings that pass.
+    """
     omega, _ = mode_tolerances(model)
     phase = float(omega[-1]) * sized
     if phase <= MAX_MODE_PHASE:
@@ -158,8 +190,25 @@ class Discretisation:
 def discretisation(problem, model, t_rigid: float, longest: float,
                    duration: float | None = None, check: bool = True) -> Discretisation:
     """:func:`controllers.slew.trajopt.slew_discretisation`, given the rigid-body minimum time and
-    the longest free duration (s). ``check=False`` returns the steps even beyond the limits
-    (:func:`resolution_reason` says why they are refused)."""
+    the longest free duration.
+
+    Parameters
+    ----------
+    problem : SlewProblem
+        The slew (:class:`~controllers.slew.trajopt.SlewProblem`).
+    model : flexctl.Model
+        The design model, whose fastest mode sets the steps.
+    t_rigid : float
+        Rigid-body minimum time of the slew, s.
+    longest : float
+        Longest free duration, s.
+    duration : float, optional
+        Duration a free-time collocation is sized for, s. Default ``TIME_SIZING`` rigid-body
+        minimum times (at most ``longest``).
+    check : bool, optional
+        Refuse steps beyond the limits (``InputValueError``). False returns them
+        (:func:`resolution_reason` says why they are refused). Default True.
+    """
     transcription = transcription_for(problem, model)
     if transcription == "collocation":
         sized = problem.duration or duration or min(TIME_SIZING * t_rigid, longest)
@@ -187,7 +236,17 @@ def discretisation(problem, model, t_rigid: float, longest: float,
 
 
 def resolution_reason(problem, model, disc: Discretisation) -> str | None:
-    """Why ``disc`` takes more steps than the limits allow, or None."""
+    """Why ``disc`` takes more steps than the limits allow, or None.
+
+    Parameters
+    ----------
+    problem : SlewProblem
+        The slew (:class:`~controllers.slew.trajopt.SlewProblem`).
+    model : flexctl.Model
+        The design model (its fastest mode is named).
+    disc : Discretisation
+        The discretisation to judge.
+    """
     K, omega_max = problem.n_intervals, float(mode_tolerances(model)[0][-1])
     hold = disc.sized_for / K
     if disc.method == "rk4" and problem.substeps is None and disc.steps_per_hold > MAX_SUBSTEPS:
@@ -278,14 +337,39 @@ def _collocation_blocks(scheme: str, degree: int, elements: int) -> tuple:
 def torque_scale(model, problem, duration: float) -> float:
     """Size of the torque, N m: the bound (:attr:`SlewProblem.hub_torque_bound`), unless it
     is over 1000 times the rigid bang-bang torque ``4 J0 |angle| / T^2`` of the slew (a bound
-    of 1e300 N m would scale the torque and the modal deflections far out of IPOPT's reach)."""
+    of 1e300 N m would scale the torque and the modal deflections far out of IPOPT's reach).
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (its :attr:`~flexctl.Model.rigid_inertia` ``J0``, kg m^2).
+    problem : SlewProblem
+        The slew (:class:`~controllers.slew.trajopt.SlewProblem`).
+    duration : float
+        Slew duration ``T`` (fixed, or the guess of a free one), s.
+    """
     bound = problem.hub_torque_bound
     needed = 4.0 * model.rigid_inertia * abs(problem.angle) / duration ** 2
     return min(bound, 1e3 * needed) if needed > 0.0 else bound
 
 
 def state_scale(model, problem, duration: float) -> np.ndarray:
-    """Physical size of each state: angle, mean rate, quasi-static modal deflections."""
+    """Physical size of each state: angle, mean rate, quasi-static modal deflections.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model.
+    problem : SlewProblem
+        The slew (:class:`~controllers.slew.trajopt.SlewProblem`).
+    duration : float
+        Slew duration ``T`` (fixed, or the guess of a free one), s.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        In the order of ``model.layout``, in the states' units (rad, m, rad/s, m/s).
+    """
     mat = model.matrices
     w = np.sqrt(np.diag(mat.K_ff) / np.diag(mat.M_ff))
     q = (np.abs(model.quasi_static_gain()) * torque_scale(model, problem, duration)
@@ -331,6 +415,13 @@ def terminal_constraints(model, target) -> np.ndarray:
     in the rates (``beta``: the input's column and an actuator's states' columns). On a
     pinned single beam every mode is controllable and ``R`` is square. Other states (an
     actuator's) keep a row each.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model.
+    target : array_like, shape (n,)
+        The rest state at the slew's end, in the order of ``model.layout``.
     """
     from flexctl.model.checks import check_array
     from flexctl.model.exports import dynamics_jacobians
@@ -373,7 +464,25 @@ def _equal_groups(values) -> list:
 
 
 def transcribe(model, problem, disc, guess: tuple, t_rigid: float, t_max: float) -> Transcribed:
-    """Variables, constraints and objective in the order of the module Notes."""
+    """Variables, constraints and objective in the order of the module Notes.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model.
+    problem : SlewProblem
+        The slew (:class:`~controllers.slew.trajopt.SlewProblem`).
+    disc : Discretisation
+        How each hold is integrated (:func:`discretisation`).
+    guess : tuple
+        ``(duration, states, torque)`` to start from: s, shape (n, K+1) at the hold
+        boundaries, and shape (K,) N m.
+    t_rigid : float
+        Rigid-body minimum time, s: the free duration's lower bound is
+        ``MIN_TIME_FLOOR`` times it.
+    t_max : float
+        Upper bound on the free duration, s.
+    """
     import casadi as ca
 
     (t_guess, x_guess, u_guess) = guess
@@ -455,7 +564,23 @@ def _actuator_constraints(opti, model, actuator, grid, Xc, held) -> None:
 
 
 def set_initial(opti, grid, Xc, problem, m: int, x_guess: np.ndarray):
-    """The guess, given at the hold boundaries, interpolated to the elements and points."""
+    """The guess, given at the hold boundaries, interpolated to the elements and points.
+
+    Parameters
+    ----------
+    opti : casadi.Opti
+        The problem whose initial values are set.
+    grid : casadi.MX
+        Its states at the element boundaries, shape (n, m K + 1).
+    Xc : casadi.MX or None
+        Its states at the collocation points, shape (n, d m K); None for multiple shooting.
+    problem : SlewProblem
+        The slew (:class:`~controllers.slew.trajopt.SlewProblem`).
+    m : int
+        Collocation elements per hold (1 for multiple shooting).
+    x_guess : ndarray, shape (n, K+1)
+        Guessed states at the hold boundaries.
+    """
     import casadi as ca
 
     K = problem.n_intervals

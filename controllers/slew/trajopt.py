@@ -105,6 +105,20 @@ class TrajectoryOptimizationError(RuntimeError):
 
 
 def checked_number(name, value, *, positive=True, optional=False):
+    """``value`` as a finite float (:func:`~flexctl.model.checks.check_real`), errors naming
+    ``name`` alone.
+
+    Parameters
+    ----------
+    name : str
+        The argument named in the error message.
+    value : float or None
+        The number to check.
+    positive : bool, optional
+        Require ``value > 0``. Default True.
+    optional : bool, optional
+        Let ``None`` pass (returned as is). Default False.
+    """
     return check_real("", name, value, minimum=0.0 if positive else None, strict=positive,
                       optional=optional)
 
@@ -122,6 +136,15 @@ def rigid_minimum_time(angle: float, inertia: float, torque_bound: float) -> flo
 
     A lower bound for any rest-to-rest slew of the flexible first_order model too: its total
     angular momentum obeys ``d/dt (J_0 theta_dot + m_tf^T q_dot) = torque``.
+
+    Parameters
+    ----------
+    angle : float
+        Slew angle, rad.
+    inertia : float
+        Rigid inertia ``J``, kg m^2 (> 0).
+    torque_bound : float
+        Bound ``u_max`` on ``|torque|``, N m (> 0).
     """
     return rigid_slew_duration(angle, inertia, torque_bound)
 
@@ -449,8 +472,17 @@ def slew_discretisation(problem: SlewProblem, model: Model,
 
     RK4 substeps and collocation elements are chosen from the design model's fastest mode
     (:func:`controllers.design.hold_grid.steps_per_hold`): every scheme integrates it over the slew
-    within :data:`~controllers.design.hold_grid.PHASE_TOLERANCE` of its amplitude. ``duration`` (s)
-    overrides the duration a free-time problem is sized for.
+    within :data:`~controllers.design.hold_grid.PHASE_TOLERANCE` of its amplitude.
+
+    Parameters
+    ----------
+    problem : SlewProblem
+        The slew.
+    model : flexctl.Model
+        The design model, whose fastest mode sets the steps.
+    duration : float, optional
+        Duration a free-time problem is sized for, s (overrides the default; collocation
+        only: multiple shooting is sized for the longest free duration).
 
     Examples
     --------
@@ -651,6 +683,7 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
         Design model; its dynamics enter through :meth:`flexctl.Model.casadi`, for the exact
         variant compiled with their derivatives (:mod:`controllers.design.native_dynamics`).
     problem : SlewProblem
+        The slew: angle, duration or minimum time, bounds, holds and discretisation.
     initial_guess : SlewSolution or tuple (t, states, torque), optional
         Warm start: a previous solution (any grid; resampled in normalised time) or arrays
         ``t`` (M+1,) s, ``states`` (n, M+1), ``torque`` (M,) N m. A solution of the same
