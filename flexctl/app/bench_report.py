@@ -49,7 +49,22 @@ _RUN_COLUMNS = [  # (heading, cell, right-aligned)
 
 
 def fastest_within(bench, level: float, variant: str | None = None):
-    """Fastest finished run with ``error <= level`` (of ``variant``, default the scene's)."""
+    """Fastest finished run with ``error <= level`` (of ``variant``, default the scene's).
+
+    Parameters
+    ----------
+    bench : SceneBench
+        What :func:`flexctl.app.bench.bench_scene` measured on one scene.
+    level : float
+        Largest error allowed, relative tip error (:attr:`BenchRow.error`).
+    variant : str, optional
+        Model variant of the runs; default the scene's.
+
+    Returns
+    -------
+    BenchRow or None
+        None when no run on the variant's Pareto front is within ``level``.
+    """
     variant = variant or bench.scene.variant
     runs = [r for r in bench.front(variant) if r.error <= level]
     return runs[0] if runs else None
@@ -61,7 +76,15 @@ def _fastest_text(bench, level) -> str:
 
 
 def write_scene(bench, out_dir) -> dict:
-    """Write ``<scene>.csv``, ``<scene>.md`` and ``<scene>-pareto.png``; return their paths."""
+    """Write ``<scene>.csv``, ``<scene>.md`` and ``<scene>-pareto.png``; return their paths.
+
+    Parameters
+    ----------
+    bench : SceneBench
+        What :func:`flexctl.app.bench.bench_scene` measured on one scene.
+    out_dir : str or path-like
+        Directory, created if missing.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     name, cfg, choice = bench.scene.name, bench.config, bench.choice
@@ -114,7 +137,15 @@ def write_scene(bench, out_dir) -> dict:
 
 
 def write_index(out: Path, benches: list) -> Path:
-    """Write ``report.md``: one line per scene bench, linking its page."""
+    """Write ``report.md``: one line per scene bench, linking its page.
+
+    Parameters
+    ----------
+    out : Path
+        Directory of the scene pages (:func:`write_scene`); ``report.md`` is written there.
+    benches : list of SceneBench
+        One per scene, in the report's order.
+    """
     lines = ["# flexctl bench", "", "Modes picked by `flexctl.sim.fidelity.choose_modes` with "
              "the estimated and actual truncation error; the fastest finished run of the "
              "scene's variant within each error level.", ""]

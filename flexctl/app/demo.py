@@ -77,7 +77,16 @@ def _percent(value: float, reference: float) -> str:
 
 
 def kane_spinup(out: Path, executor=None) -> Section:
-    """Paper 001 Fig. 4: the Kane spin-up, first_order against zero_order."""
+    """Paper 001 Fig. 4: the Kane spin-up, first_order against zero_order.
+
+    Parameters
+    ----------
+    out : Path
+        Demo directory: ``paper001-fig4.png`` and ``paper001-fig4.csv`` are written there.
+    executor : concurrent.futures.Executor-like or callable, optional
+        Runs the sweep's points (:func:`flexctl.app.sweep.sweep`); default None: here, in
+        order.
+    """
     from matplotlib.figure import Figure
 
     from .plotting import plot_tip_deflections
@@ -159,7 +168,19 @@ def spacecraft_torque(out: Path) -> Section:
 
 
 def hub_beam_mass(out: Path, executor=None, points: int = SWEEP_POINTS) -> Section:
-    """Paper 000 Figs. 5 to 8: the point mass, and sweeps of its position and mass ratios."""
+    """Paper 000 Figs. 5 to 8: the point mass, and sweeps of its position and mass ratios.
+
+    Parameters
+    ----------
+    out : Path
+        Demo directory: ``paper000-figs5-8.png``, ``paper000-fig6.csv`` and
+        ``paper000-fig8.csv`` are written there.
+    executor : concurrent.futures.Executor-like or callable, optional
+        Runs the sweep's points (:func:`flexctl.app.sweep.sweep`); default None: here, in
+        order.
+    points : int, optional
+        Points of each sweep, evenly spaced on ``[0, 1]``. Default :data:`SWEEP_POINTS`.
+    """
     task = PointMassAmplitudes.from_scene("hub-beam-mass")
     ratios = np.round(np.linspace(0.0, 1.0, points), 4)
     by_position = sweep(task, {"mass_position_ratio": ratios}, executor=executor,
@@ -298,7 +319,22 @@ def _point_mass_sweep_text(by_position, by_mass, bare, points: int) -> str:
 def slew_comparison(out: Path, executor=None, kinds=None,
                     scene_name: str = "slew-90") -> Section:
     """Every controller kind on a slew scene (``slew-90``, or ``two-array-slew``), in closed
-    loop on the nonlinear plant."""
+    loop on the nonlinear plant.
+
+    Parameters
+    ----------
+    out : Path
+        Demo directory: ``controller-comparison.png`` and ``controller-comparison.csv`` are
+        written there (``controller-comparison-<scene_name>.*`` for another scene).
+    executor : concurrent.futures.Executor-like or callable, optional
+        Runs the sweep's points (:func:`flexctl.app.sweep.sweep`); default None: here, in
+        order.
+    kinds : sequence of str, optional
+        Controller kinds compared (among :data:`controllers.spec.CONTROLLER_KEYS`); default
+        every kind.
+    scene_name : str, optional
+        The slew scene. Default ``"slew-90"``.
+    """
     from controllers import from_spec
 
     from .plotting import plot_controller_comparison
@@ -357,7 +393,18 @@ def _which_kinds(kinds) -> str:
 def model_error(out: Path, executor=None, kinds=("trajopt+lqr", "nmpc")) -> Section:
     """Controllers designed on a model that is off (``slew-90-model-error``), run against the
     true plant (the same controllers on the nominal ``slew-90`` are in
-    :func:`slew_comparison`)."""
+    :func:`slew_comparison`).
+
+    Parameters
+    ----------
+    out : Path
+        Demo directory: ``model-error.csv`` is written there.
+    executor : concurrent.futures.Executor-like or callable, optional
+        Runs the sweep's points (:func:`flexctl.app.sweep.sweep`); default None: here, in
+        order.
+    kinds : sequence of str, optional
+        Controller kinds compared. Default ``("trajopt+lqr", "nmpc")``.
+    """
     from controllers import from_spec
 
     base = load_scene("slew-90-model-error")
@@ -403,7 +450,16 @@ def model_error(out: Path, executor=None, kinds=("trajopt+lqr", "nmpc")) -> Sect
 
 def large_deflection(out: Path, executor=None) -> Section:
     """What exact geometry changes on ``slew-90``: the optimal slew designed on first_order and
-    on exact (few modes each), each judged on first_order and exact plants."""
+    on exact (few modes each), each judged on first_order and exact plants.
+
+    Parameters
+    ----------
+    out : Path
+        Demo directory: ``large-deflection.csv`` is written there.
+    executor : concurrent.futures.Executor-like or callable, optional
+        Not used (the runs share one optimisation per design model, in this process); taken as
+        the other sections take it.
+    """
     from controllers import from_spec
 
     base = load_scene("slew-90")
@@ -486,7 +542,15 @@ DEMO_FREQUENCY_NOTE = (
 
 def frequency_plot(out: Path, source: str = "kane-spinup") -> Path:
     """Clamped natural frequencies of a scene's beam against the spin rate, every variant;
-    written to ``out / "frequencies-vs-spin.png"``."""
+    written to ``out / "frequencies-vs-spin.png"``.
+
+    Parameters
+    ----------
+    out : Path
+        Demo directory.
+    source : str, optional
+        Built-in scene name or TOML file path of the system drawn. Default ``"kane-spinup"``.
+    """
     from ..model import VARIANTS
     from .plotting import plot_frequencies_vs_spin
 
@@ -538,7 +602,27 @@ def sections(out: Path, workers: int, surprises: list, progress=print, *,
              executor=None) -> list:
     """Every section of :data:`SECTIONS`, each whole on ``executor`` or else a pool of
     ``workers`` processes, the longest first; a section that fails on bad input or in a sweep
-    is listed in ``surprises`` (a genuine bug keeps its traceback)."""
+    is listed in ``surprises`` (a genuine bug keeps its traceback).
+
+    Parameters
+    ----------
+    out : Path
+        Demo directory, created if missing.
+    workers : int
+        Processes of the pool made when no ``executor`` is given, 1 to 1024 (1: every section
+        in this process).
+    surprises : list of str
+        Appended to: one line per section that failed.
+    progress : callable, optional
+        Called with one line per finished section. Default :func:`print`.
+    executor : concurrent.futures.Executor, optional
+        Runs each section (its ``submit``) instead of a pool of ``workers``.
+
+    Returns
+    -------
+    list of Section
+        The sections made, in the order of :data:`SECTIONS`.
+    """
     Path(out).mkdir(parents=True, exist_ok=True)
     with _pool(workers, executor) as pool:
         pending = _submit_sections(pool, out)

@@ -36,7 +36,17 @@ SETUPS = ("ideal torque, exact state", "actuator, exact state", "actuator and se
 
 def hardware_run(scene_name: str, table: dict, setup: str) -> dict:
     """One slew of ``scene_name`` with the ``[controller]`` ``table`` in one of
-    :data:`SETUPS`: its metrics, the actuator's peak demand and the tip history."""
+    :data:`SETUPS`: its metrics, the actuator's peak demand and the tip history.
+
+    Parameters
+    ----------
+    scene_name : str
+        A slew scene with an actuator and sensors (those of :data:`HARDWARE_CASES`).
+    table : dict
+        The scene's ``[controller]`` table, e.g. ``{"kind": "lqr"}``.
+    setup : str
+        One of :data:`SETUPS`: what the scene keeps of its actuator and sensors.
+    """
     from controllers import from_spec
 
     scene = load_scene(scene_name, {"controller": dict(table)})
@@ -71,8 +81,15 @@ def _cells(run: dict) -> tuple:
 
 
 def hardware(out: Path, executor=None) -> Section:
-    """The :class:`~flexctl.app.section.Section` of the hardware comparison (runs on
-    ``executor``, e.g. a process pool, when given)."""
+    """The :class:`~flexctl.app.section.Section` of the hardware comparison.
+
+    Parameters
+    ----------
+    out : Path
+        Demo directory: ``hardware.png`` is written there.
+    executor : concurrent.futures.Executor, optional
+        Runs the slews (its ``map``), e.g. a process pool; default None: here, in order.
+    """
     jobs = [(name, table, setup) for name, tables in HARDWARE_CASES for table in tables
             for setup in SETUPS]
     mapper = map if executor is None else executor.map

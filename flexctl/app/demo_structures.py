@@ -57,7 +57,16 @@ def _row(label, model, result, push):
 
 
 def structures(out: Path, scene_name: str = "two-array-free"):
-    """The :class:`~flexctl.app.section.Section` comparing the four structures."""
+    """The :class:`~flexctl.app.section.Section` comparing the four structures.
+
+    Parameters
+    ----------
+    out : Path
+        Demo directory: ``structures.png`` is written there.
+    scene_name : str, optional
+        A two-appendage scene on a free hub under a sine torque, whose panel and torque the
+        four structures share (:func:`structure_cases`). Default ``"two-array-free"``.
+    """
     from .plotting import new_figure
 
     scene = load_scene(scene_name)

@@ -13,6 +13,15 @@ __all__ = ["new_figure", "figure_for"]
 def new_figure(figsize, nrows=1, sharex=False):
     """A figure of ``nrows`` stacked axes; returns ``(figure, list of axes)``.
 
+    Parameters
+    ----------
+    figsize : tuple of float
+        ``(width, height)``, inches.
+    nrows : int, optional
+        Number of axes, stacked in one column. Default 1.
+    sharex : bool, optional
+        The axes share their x axis. Default False.
+
     Examples
     --------
     >>> fig, axes = new_figure((4.0, 3.0), nrows=2)
@@ -28,7 +37,15 @@ def new_figure(figsize, nrows=1, sharex=False):
 
 def figure_for(ax, figsize):
     """``(figure, ax)``: the figure of the given axes, or a new one-axes figure when ``ax`` is
-    None."""
+    None.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes or None
+        Axes to draw on.
+    figsize : tuple of float
+        ``(width, height)`` of a new figure, inches.
+    """
     if ax is None:
         fig, (ax,) = new_figure(figsize)
         return fig, ax

@@ -230,6 +230,9 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         The run of ``scene``.
     overrides : dict, optional
         The overrides the scene was loaded with, ``{"dotted.key": value}``.
+    extra : dict, optional
+        More entries for the summary, e.g. the ``slew`` metrics and ``controller_report`` of
+        a controlled slew (:func:`flexctl.app.runner.execute`).
 
     Returns
     -------
@@ -241,7 +244,7 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         s), ``method`` and ``rtol`` of the integrator, ``overrides``, ``clamped_frequencies``
         (rad/s, at rest, hub clamped) and, for a spin-up, ``spin_rate`` (rad/s) with
         ``clamped_frequencies_at_spin`` at that rate; ``units`` names the units; the
-        entries of ``extra`` (e.g. ``slew`` metrics of a controlled slew) are added as given.
+        entries of ``extra`` are added as given.
         A scene with ``modes = "auto"`` adds ``mode_choice``: the number of modes chosen, the
         estimated relative tip error against the tolerance, the error estimated for each number
         of modes, the stiffening verdict and why (:meth:`flexctl.sim.fidelity.ModeChoice.to_dict`).

@@ -64,8 +64,23 @@ def write_complete(scene, result, out, overrides: dict, extra: dict,
                    reference=None) -> dict:
     """:func:`~flexctl.app.report.write_run` into a temporary directory next to ``out``; the
     files are moved into ``out`` only once every one is written, so a failure leaves ``out``
-    as it was. ``reference`` is the hub-angle reference drawn on ``response.png`` (as
-    :func:`execute` returns it).
+    as it was.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene run.
+    result : SimulationResult
+        The run of ``scene``.
+    out : str or path-like
+        Output directory, created (with its parents) if missing.
+    overrides : dict
+        The overrides the scene was loaded with, ``{"dotted.key": value}``.
+    extra : dict
+        More entries for ``summary.json`` (as :func:`execute` returns them).
+    reference : callable, optional
+        The hub-angle reference ``angle(t)`` (rad) drawn on ``response.png`` (as
+        :func:`execute` returns it).
 
     Returns
     -------

@@ -20,8 +20,20 @@ __all__ = ["construct", "parameter_doc"]
 
 
 def construct(cls, key: str, kwargs: dict, rename: str | None = None):
-    """``cls(**kwargs)``, its error a :class:`SceneError` under the scene key ``key``; with
-    ``rename``, every ``key.`` in the message becomes ``rename.`` (an appendage's beam)."""
+    """``cls(**kwargs)``, its error a :class:`SceneError` under the scene key ``key``.
+
+    Parameters
+    ----------
+    cls : type or callable
+        The table's dataclass (``Hub``, ``Beam``, ...); a required key it lacks is reported
+        with its meaning (:func:`parameter_doc`). Any other callable is called as it is.
+    key : str
+        The table's scene key (``"hub"``, ``"masses.0"``), prefixing every message.
+    kwargs : dict
+        The table's entries, passed as keywords.
+    rename : str, optional
+        Key that every ``key.`` in a message becomes (an appendage's beam).
+    """
     if dataclasses.is_dataclass(cls):
         for f in dataclasses.fields(cls):
             if f.init and f.name not in kwargs and f.default is dataclasses.MISSING \

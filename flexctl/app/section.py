@@ -37,6 +37,14 @@ class Section:
 
 
 def save_figure(fig, path: Path) -> Path:
-    """Save ``fig`` as a PNG of the demo's resolution at ``path``; return ``path``."""
+    """Save ``fig`` as a PNG of the demo's resolution at ``path``; return ``path``.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure to save.
+    path : Path
+        File written.
+    """
     fig.savefig(path, dpi=90)
     return path

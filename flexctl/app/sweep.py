@@ -491,7 +491,14 @@ class PointMassAmplitudes:
     def from_scene(cls, name: str = "hub-beam-mass", **kwargs) -> "PointMassAmplitudes":
         """The task of a sine-torque scene (default paper 000's ``hub-beam-mass``).
 
-        ``kwargs`` override the scene's settings (``t_final``, ``n_modes``, ...).
+        Parameters
+        ----------
+        name : str, optional
+            A scene whose maneuver is a sine torque: built-in name or TOML file path. Default
+            ``"hub-beam-mass"``.
+        **kwargs : object
+            Fields of the task that override the scene's settings (``t_final``, ``n_modes``,
+            ``output_step``, ...).
         """
         from .scenes import load_scene
 

@@ -53,8 +53,20 @@ def _portable(exc: Exception):
 def evaluate(task, point: dict, seed: int | None = None, attempt: int = 1) -> TaskOutcome:
     """Run ``task(**point)`` (with ``seed=seed`` when given); return its outcome.
 
-    Module level so that it pickles. ``attempt`` is not used: it makes a retry a new call,
-    which Dask (that keys a pure call by its arguments) would otherwise take for the old one.
+    Module level so that it pickles.
+
+    Parameters
+    ----------
+    task : callable
+        The sweep's task.
+    point : dict
+        ``{parameter: value}`` of one point of the grid.
+    seed : int, optional
+        The task's own seed (:func:`~flexctl.app.sweep_store.task_seed`), passed as ``seed=``;
+        default none.
+    attempt : int, optional
+        Submissions of this task so far, from 1. Not used: it makes a retry a new call, which
+        Dask (that keys a pure call by its arguments) would otherwise take for the old one.
     """
     kwargs = dict(point) if seed is None else {**point, "seed": seed}
     try:
@@ -124,8 +136,34 @@ class Recorder:
 def outcomes(task, index: dict, executor, name: str, *, store, resume: bool, seed: int,
              progress: bool, on_error: str, retries: int) -> tuple:
     """``({key: TaskOutcome} taken from the store, {key: TaskOutcome} run now)`` for the
-    tasks ``index`` = ``{key: (grid index, point)}``; the options are those of
-    :func:`flexctl.app.sweep.sweep`."""
+    tasks of ``index``; the options are those of :func:`flexctl.app.sweep.sweep`.
+
+    Parameters
+    ----------
+    task : callable
+        The sweep's task.
+    index : dict
+        ``{key: (grid index, point)}`` of every task of the sweep, keyed by
+        :func:`~flexctl.app.sweep_store.task_key`.
+    executor : concurrent.futures.Executor-like, callable or None
+        An executor or a factory of them (:func:`run_on`); None: run here, in order
+        (:func:`run_here`).
+    name : str
+        The task's name: the progress bar's label, and named in errors.
+    store : str, path-like or None
+        SQLite file each outcome is committed to (:class:`~flexctl.app.sweep_store.SweepStore`);
+        None: none.
+    resume : bool
+        Take the tasks the store already holds and run only the others.
+    seed : int
+        The sweep's seed, from which a task with a ``seed`` parameter gets its own.
+    progress : bool
+        Show the progress bar.
+    on_error : {"record", "raise"}
+        ``"raise"``: :class:`SweepError` at the first failure, after recording it.
+    retries : int
+        Times a task lost with its worker is submitted again, >= 0.
+    """
     from tqdm import tqdm
 
     seeded = _takes_seed(task)
@@ -163,16 +201,43 @@ def _task_name(task) -> str:
 
 
 def run_here(task, todo: dict, record: Recorder) -> None:
-    """Run ``todo`` (``{key: (point, seed)}``) in this process, in order."""
+    """Run ``todo`` in this process, in order.
+
+    Parameters
+    ----------
+    task : callable
+        The sweep's task.
+    todo : dict
+        ``{key: (point, seed)}`` of the tasks to run, ``seed`` None for a task without one.
+    record : Recorder
+        Called with each task's key and outcome as it arrives.
+    """
     for key, (point, seed) in todo.items():
         record(key, evaluate(task, point, seed))
 
 
 def run_on(executor, task, todo: dict, record: Recorder, retries: int) -> None:
-    """Run ``todo`` (``{key: (point, seed)}``) on ``executor``, submitting lost tasks again.
+    """Run ``todo`` on ``executor``, submitting lost tasks again.
 
-    ``executor`` is an executor (the caller owns it) or a factory of executors (the sweep
-    owns what it builds, shuts it down at the end and builds a fresh one after lost tasks).
+    Parameters
+    ----------
+    executor : concurrent.futures.Executor-like or callable
+        An executor (the caller owns it) or a factory of executors (the sweep owns what it
+        builds, shuts it down at the end and builds a fresh one after lost tasks).
+    task : callable
+        The sweep's task.
+    todo : dict
+        ``{key: (point, seed)}`` of the tasks to run, ``seed`` None for a task without one.
+    record : Recorder
+        Called with each task's key and outcome as it arrives.
+    retries : int
+        Times a task lost with its worker is submitted again, >= 0; past that it is recorded
+        as failed.
+
+    Raises
+    ------
+    SweepError
+        When an executor given (not a factory) breaks with tasks unfinished.
     """
     factory = None if is_executor(executor) else executor
     pool = executor if factory is None else _built(factory)

@@ -249,7 +249,15 @@ class SweepStore:
         return f"SweepStore({str(self.path)!r}, {len(self)} tasks)"
 
     def record(self, key: str, outcome: TaskOutcome) -> None:
-        """Commit one task's outcome (replacing one stored under the same key)."""
+        """Commit one task's outcome (replacing one stored under the same key).
+
+        Parameters
+        ----------
+        key : str
+            The task's key (:func:`task_key`).
+        outcome : TaskOutcome
+            What the task gave; its outputs must pickle.
+        """
         try:
             blob = pickle.dumps(outcome.outputs, protocol=pickle.HIGHEST_PROTOCOL)
         except Exception as exc:

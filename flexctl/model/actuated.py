@@ -93,14 +93,32 @@ class ActuatedModel(StructureModel):
 
     def applied_torque(self, x, u) -> np.ndarray:
         """Torque the actuator puts on the structure at state(s) ``x`` under command(s)
-        ``u``, N m, shape () or (P,)."""
+        ``u``, N m, shape () or (P,).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            Plant state(s) in :attr:`layout` order, the actuator's states included.
+        u : float or array_like, shape (P,)
+            Actuator command(s): ``torque_command`` (N m) of a reaction wheel or ``voltage`` (V) of
+            a DC motor; one per state of a batch.
+        """
         x = self._check_state(x)
         u = np.broadcast_to(np.asarray(u, dtype=float), x.shape[1:])
         return self._evaluate(self.functions.hub_torque, x.ndim > 1, x, u)[0]
 
     def actuator_signals(self, x, u) -> dict:
         """The actuator's signals (``wheel_speed``, ``wheel_torque``; or ``motor_voltage``,
-        ``motor_current``) at state(s) ``x`` under command(s) ``u``, ``{name: () or (P,)}``."""
+        ``motor_current``) at state(s) ``x`` under command(s) ``u``, ``{name: () or (P,)}``.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            Plant state(s) in :attr:`layout` order, the actuator's states included.
+        u : float or array_like, shape (P,)
+            Actuator command(s): ``torque_command`` (N m) of a reaction wheel or ``voltage`` (V) of
+            a DC motor; one per state of a batch.
+        """
         x = self._check_state(x)
         u = np.broadcast_to(np.asarray(u, dtype=float), x.shape[1:])
         values = self._evaluate(self.functions.signals, x.ndim > 1, x, u)
@@ -175,7 +193,21 @@ def _actuated_functions(model) -> StructureFunctions:
 
 
 def actuated_model(system, n_modes, variant, actuator) -> ActuatedModel:
-    """The :class:`ActuatedModel` of ``system`` (a Structure or HubBeam) under ``actuator``."""
+    """The :class:`ActuatedModel` of ``system`` under ``actuator``.
+
+    Parameters
+    ----------
+    system : HubBeam or Structure
+        The structure turned, before the actuator changes its hub (kept, as a Structure, in
+        :attr:`ActuatedModel.source`); a DC motor needs a pinned hub.
+    n_modes : int, dict or sequence of int
+        Modes of each appendage: one int for all, ``{name: int}``, or one per appendage in order
+        (:func:`~flexctl.model.structure_matrices.modes_per_appendage`).
+    variant : {"first_order", "zero_order", "consistent", "exact"}
+        Model variant.
+    actuator : ReactionWheel or DCMotor
+        What turns the hub; a DC motor's reflected rotor inertia is added to the hub.
+    """
     from .structure import as_structure
     from .structure_matrices import assemble_structure, modes_per_appendage
 

@@ -155,12 +155,37 @@ class ReactionWheel(KeywordOnly):
                 + self.coulomb_friction * tanh(speed / self.friction_smoothing))
 
     def hub_torque(self, states, rate, u):
-        """Torque on the structure ``T_hub`` (CasADi), N m."""
+        """Torque on the structure ``T_hub`` (CasADi), N m.
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (2,)
+            The wheel's states ``[wheel_speed Omega (rad/s), wheel_torque T_m (N m)]``.
+        rate : casadi.SX
+            Hub rate ``theta_dot``, rad/s (not read).
+        u : casadi.SX
+            Torque command, N m (not read: it reaches the hub through the motor lag,
+            :meth:`derivative`).
+        """
         speed, motor = states[0], states[1]
         return self._gate(speed, motor) * motor + self.friction(speed)
 
     def derivative(self, states, rate, theta_tt, u, hub_torque):
-        """``d[Omega, T_m]/dt`` (CasADi) given the hub acceleration and the hub torque."""
+        """``d[Omega, T_m]/dt`` (CasADi) given the hub acceleration and the hub torque.
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (2,)
+            The wheel's states ``[wheel_speed Omega (rad/s), wheel_torque T_m (N m)]``.
+        rate : casadi.SX
+            Hub rate ``theta_dot``, rad/s (not read).
+        theta_tt : casadi.SX
+            Hub angular acceleration, rad/s^2.
+        u : casadi.SX
+            Torque command, N m; saturated at the torque limit ``T_max``.
+        hub_torque : casadi.SX
+            Torque on the structure ``T_hub`` (:meth:`hub_torque`), N m.
+        """
         import casadi as ca
 
         command = ca.fmin(ca.fmax(u, -self.torque_limit), self.torque_limit)
@@ -169,7 +194,17 @@ class ReactionWheel(KeywordOnly):
 
     def signals(self, states, rate, u):
         """``[wheel_speed, wheel_torque]`` (CasADi): the wheel's speed and the motor torque
-        on the hub after the speed limit, rad/s and N m."""
+        on the hub after the speed limit, rad/s and N m.
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (2,)
+            The wheel's states ``[wheel_speed Omega (rad/s), wheel_torque T_m (N m)]``.
+        rate : casadi.SX
+            Hub rate ``theta_dot``, rad/s (not read).
+        u : casadi.SX
+            Torque command, N m (not read).
+        """
         import casadi as ca
 
         return ca.vertcat(states[0], self._gate(states[0], states[1]) * states[1])
@@ -181,11 +216,27 @@ class ReactionWheel(KeywordOnly):
         return ca.vertcat(states[0], states[1])
 
     def energy(self, states, rate):
-        """Kinetic energy of the rotor's spin, J (CasADi)."""
+        """Kinetic energy of the rotor's spin, J (CasADi).
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (2,)
+            The wheel's states ``[wheel_speed Omega (rad/s), wheel_torque T_m (N m)]``.
+        rate : casadi.SX
+            Hub rate ``theta_dot``, rad/s: the rotor spins at ``theta_dot + Omega``.
+        """
         return 0.5 * self.inertia * (rate + states[0]) ** 2
 
     def momentum(self, states, rate):
-        """Axial angular momentum of the rotor, kg m^2/s (CasADi)."""
+        """Axial angular momentum of the rotor, kg m^2/s (CasADi).
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (2,)
+            The wheel's states ``[wheel_speed Omega (rad/s), wheel_torque T_m (N m)]``.
+        rate : casadi.SX
+            Hub rate ``theta_dot``, rad/s: the rotor spins at ``theta_dot + Omega``.
+        """
         return self.inertia * (rate + states[0])
 
     def torque_bounds(self):
@@ -306,22 +357,64 @@ class DCMotor(KeywordOnly):
         return ca.fmin(ca.fmax(u, -self.voltage_limit), self.voltage_limit)
 
     def current(self, u, rate):
-        """Motor current, A."""
+        """Motor current, A.
+
+        Parameters
+        ----------
+        u : float, ndarray or casadi.SX
+            Voltage command, V; saturated at the voltage limit ``V_max`` (:meth:`voltage`).
+        rate : float, ndarray or casadi.SX
+            Hub rate ``theta_dot``, rad/s (the back-EMF).
+        """
         return (self.voltage(u) - self.back_emf_constant * self.gear_ratio * rate) \
             / self.resistance
 
     def hub_torque(self, states, rate, u):
-        """Torque on the hub, N m."""
+        """Torque on the hub, N m.
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (0,)
+            The motor's states: none (not read).
+        rate : float, ndarray or casadi.SX
+            Hub rate ``theta_dot``, rad/s.
+        u : float, ndarray or casadi.SX
+            Voltage command, V; saturated at the voltage limit ``V_max``.
+        """
         return (self.efficiency * self.gear_ratio * self.torque_constant
                 * self.current(u, rate) - self.viscous_friction * rate)
 
     def derivative(self, states, rate, theta_tt, u, hub_torque):
-        """No states."""
+        """No states.
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (0,)
+            The motor's states: none (not read).
+        rate : casadi.SX
+            Hub rate ``theta_dot``, rad/s (not read).
+        theta_tt : casadi.SX
+            Hub angular acceleration, rad/s^2 (not read).
+        u : casadi.SX
+            Voltage command, V (not read).
+        hub_torque : casadi.SX
+            Torque on the hub, N m (not read).
+        """
         import casadi as ca
         return ca.DM.zeros(0)
 
     def signals(self, states, rate, u):
-        """``[motor_voltage, motor_current]`` (V, A)."""
+        """``[motor_voltage, motor_current]`` (V, A).
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (0,)
+            The motor's states: none (not read).
+        rate : casadi.SX
+            Hub rate ``theta_dot``, rad/s.
+        u : casadi.SX
+            Voltage command, V; saturated at the voltage limit ``V_max``.
+        """
         import casadi as ca
         return ca.vertcat(self.voltage(u), self.current(u, rate))
 
@@ -331,16 +424,40 @@ class DCMotor(KeywordOnly):
         return ca.DM.zeros(0)
 
     def energy(self, states, rate):
-        """The rotor's energy is in the hub's (reflected inertia)."""
+        """The rotor's energy is in the hub's (reflected inertia).
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (0,)
+            The motor's states: none (not read).
+        rate : casadi.SX
+            Hub rate ``theta_dot``, rad/s (not read).
+        """
         return 0.0
 
     def momentum(self, states, rate):
-        """The rotor's momentum is in the hub's (reflected inertia)."""
+        """The rotor's momentum is in the hub's (reflected inertia).
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (0,)
+            The motor's states: none (not read).
+        rate : casadi.SX
+            Hub rate ``theta_dot``, rad/s (not read).
+        """
         return 0.0
 
     def voltage_for(self, torque, rate):
-        """The voltage that gives the hub ``torque`` (N m) at hub ``rate`` (rad/s), V
-        (unsaturated: the inverse of :meth:`hub_torque`)."""
+        """The voltage that gives the hub ``torque`` at hub ``rate``, V (unsaturated: the
+        inverse of :meth:`hub_torque`).
+
+        Parameters
+        ----------
+        torque : float or ndarray
+            Torque on the hub, N m.
+        rate : float or ndarray
+            Hub rate ``theta_dot``, rad/s; broadcast against ``torque``.
+        """
         return ((torque + self.viscous_friction * rate) / self.torque_gain
                 + self.back_emf_constant * self.gear_ratio * rate)
 

@@ -125,7 +125,21 @@ def _build(system, n_modes, variant, actuator) -> Model:
 
 def rebuild(model: Model, n_modes=None, variant: str | None = None, *, system=None) -> Model:
     """The same plant as ``model`` (its actuator included) on other modes, another variant or
-    another ``system`` of the same kind (default: the model's own)."""
+    another system of the same kind.
+
+    Parameters
+    ----------
+    model : Model
+        A model of :func:`build_model` (a StructureModel or an ActuatedModel included).
+    n_modes : int, dict or sequence of int, optional
+        Modes of each appendage, as for :func:`build_model`; default the model's own
+        (:attr:`~flexctl.model.variants.Model.mode_spec`).
+    variant : {"first_order", "zero_order", "consistent", "exact"}, optional
+        Default the model's own.
+    system : HubBeam or Structure, optional
+        Another system of the same kind (for an actuated model, the structure before the
+        actuator changed its hub); default the model's own.
+    """
     if n_modes is None and variant is None and system is not None:
         return model._rebuilt(system)
     n_modes = model.mode_spec if n_modes is None else n_modes

@@ -33,7 +33,15 @@ __all__ = ["label", "check_real", "check_integer", "check_choice", "check_instan
 
 
 def label(owner: str, name: str) -> str:
-    """``owner.name``, or ``name`` alone for an empty owner."""
+    """``owner.name``, or ``name`` alone for an empty owner.
+
+    Parameters
+    ----------
+    owner : str
+        Who takes the input (``"lqr"``, a scene table's key), or ``""``.
+    name : str
+        The input's name.
+    """
     return f"{owner}.{name}" if owner else name
 
 
@@ -44,8 +52,27 @@ def check_real(owner: str, name: str, value, *, minimum: float | None = None,
     an infinity within the bounds when ``infinite``).
 
     Raises ``TypeError`` for a non-number (bool included) and ``ValueError`` naming
-    ``owner.name``, the rule and the value for NaN, infinity or a value out of bounds
-    (``minimum`` exclusive when ``strict``).
+    ``owner.name``, the rule and the value for NaN, infinity or a value out of bounds.
+
+    Parameters
+    ----------
+    owner : str
+        Who takes the input (``"lqr"``, a scene table's key), or ``""``: the messages name the
+        input ``owner.name``.
+    name : str
+        The input's name.
+    value : object
+        The value to check.
+    minimum : float, optional
+        Lower bound, inclusive unless ``strict``; default none.
+    strict : bool, optional
+        Make ``minimum`` exclusive. Default False.
+    maximum : float, optional
+        Upper bound, inclusive; default none.
+    optional : bool, optional
+        Let ``None`` pass (returned as ``None``). Default False.
+    infinite : bool, optional
+        Let an infinity within the bounds pass. Default False.
     """
     if value is None and optional:
         return None
@@ -76,7 +103,20 @@ def check_real(owner: str, name: str, value, *, minimum: float | None = None,
 
 def check_integer(owner: str, name: str, value, *, minimum: int | None = None,
                   maximum: int | None = None) -> int:
-    """An integer (not a bool, not a float) within ``[minimum, maximum]``, as int."""
+    """An integer (not a bool, not a float) within ``[minimum, maximum]``, as int.
+
+    Parameters
+    ----------
+    owner : str
+        Who takes the input (``"lqr"``, a scene table's key), or ``""``: the messages name the
+        input ``owner.name``.
+    name : str
+        The input's name.
+    value : object
+        The value to check.
+    minimum, maximum : int, optional
+        Inclusive bounds; default none.
+    """
     where = label(owner, name)
     rule = "an integer"
     if minimum is not None and maximum is not None:
@@ -97,7 +137,20 @@ def check_integer(owner: str, name: str, value, *, minimum: int | None = None,
 
 
 def check_choice(owner: str, name: str, value, choices) -> str:
-    """One of the strings ``choices``."""
+    """One of the strings ``choices``.
+
+    Parameters
+    ----------
+    owner : str
+        Who takes the input (``"lqr"``, a scene table's key), or ``""``: the messages name the
+        input ``owner.name``.
+    name : str
+        The input's name.
+    value : object
+        The value to check.
+    choices : sequence of str
+        The strings allowed.
+    """
     where, listed = label(owner, name), ", ".join(map(repr, choices))
     if not isinstance(value, str):
         raise InputTypeError(f"{where} must be one of {listed}; got {value!r} of type "
@@ -108,7 +161,22 @@ def check_choice(owner: str, name: str, value, choices) -> str:
 
 
 def check_instance(owner: str, name: str, value, kind, what: str | None = None):
-    """``value`` itself when it is an instance of ``kind`` (a type or tuple of types)."""
+    """``value`` itself when it is an instance of ``kind``.
+
+    Parameters
+    ----------
+    owner : str
+        Who takes the input (``"lqr"``, a scene table's key), or ``""``: the messages name the
+        input ``owner.name``.
+    name : str
+        The input's name.
+    value : object
+        The value to check.
+    kind : type or tuple of type
+        The types allowed.
+    what : str, optional
+        What the message calls the expected type; default the type names joined by ``or``.
+    """
     if not isinstance(value, kind):
         what = what or (kind.__name__ if isinstance(kind, type)
                         else " or ".join(k.__name__ for k in kind))
@@ -119,11 +187,27 @@ def check_instance(owner: str, name: str, value, kind, what: str | None = None):
 
 def check_array(owner: str, name: str, value, *, shape: tuple | None = None,
                 finite: bool = True, minimum: float | None = None) -> np.ndarray:
-    """A read-only float array of the given ``shape`` (``None`` entries match any size).
+    """A read-only float array of the given ``shape``.
 
     Raises ``TypeError`` when ``value`` is not numbers (strings, objects, ragged lists) and
     ``ValueError`` for a wrong shape, a NaN or infinity (when ``finite``) or an entry below
     ``minimum``.
+
+    Parameters
+    ----------
+    owner : str
+        Who takes the input (``"lqr"``, a scene table's key), or ``""``: the messages name the
+        input ``owner.name``.
+    name : str
+        The input's name.
+    value : array_like
+        The value to check.
+    shape : tuple of (int or None), optional
+        Shape required; a ``None`` entry matches any size. Default: any shape.
+    finite : bool, optional
+        Refuse NaN and infinities. Default True.
+    minimum : float, optional
+        Smallest entry allowed; default none.
     """
     where = label(owner, name)
     try:

@@ -52,8 +52,19 @@ MAX_SUBSTEPS = 1000
 
 def rk4_function(f, n: int, substeps: int, symbol=None):
     """CasADi ``(x, u, h) -> x(h)``: ``substeps`` RK4 steps of ``f(x, u)`` over ``h`` s with
-    ``u`` held (``symbol``: ``casadi.SX`` (default) or ``casadi.MX``); for ``f(x, u, p)``,
-    ``(x, u, h, p) -> x(h)`` with ``p`` held too."""
+    ``u`` held; for ``f(x, u, p)``, ``(x, u, h, p) -> x(h)`` with ``p`` held too.
+
+    Parameters
+    ----------
+    f : casadi.Function
+        ``f(x, u) -> xdot`` or ``f(x, u, p) -> xdot`` (e.g. :meth:`flexctl.Model.casadi`).
+    n : int
+        Number of states, the size of ``x``.
+    substeps : int
+        RK4 steps over ``h``, >= 1.
+    symbol : {casadi.SX, casadi.MX}, optional
+        Symbol type of the function built. Default ``casadi.SX``.
+    """
     import casadi as ca
 
     symbol = symbol or ca.SX
@@ -114,7 +125,15 @@ class DiscreteStep:
         return getattr(self.function, name)
 
     def map(self, *args, **kwargs):
-        """:meth:`casadi.Function.map` of :attr:`function`."""
+        """:meth:`casadi.Function.map` of :attr:`function`.
+
+        Parameters
+        ----------
+        *args, **kwargs : int, str, list or dict
+            As :meth:`casadi.Function.map` takes them, e.g. ``map(10)`` or
+            ``map(10, "thread", 2)``: the number of evaluations, the parallelization and its
+            options.
+        """
         return self.function.map(*args, **kwargs)
 
     def __repr__(self):

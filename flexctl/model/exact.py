@@ -86,8 +86,16 @@ class Quadrature(NamedTuple):
 
     @classmethod
     def checked(cls, owner: str, value) -> "Quadrature":
-        """``value`` (a pair of positive integers) as a Quadrature, or a clear error naming
-        ``owner``."""
+        """``value`` as a Quadrature, or a clear error naming ``owner``.
+
+        Parameters
+        ----------
+        owner : str
+            Who takes the rule: the messages name ``owner.quadrature``.
+        value : tuple of (int, int)
+            ``(points, panels)``: Gauss points per panel (1 to :data:`MAX_POINTS`) and equal panels
+            (1 to :data:`MAX_PANELS`).
+        """
         if not isinstance(value, tuple) or len(value) != 2:
             raise InputTypeError(f"{owner}.quadrature must be a Quadrature(points, panels); "
                                  f"got {value!r} of type {type(value).__name__}"[:300])
@@ -167,9 +175,18 @@ class PanelRule:
 
     @classmethod
     def build(cls, n_panels: int, length: float, points: int) -> "PanelRule":
-        """The rule of ``n_panels`` equal panels (1 to :data:`MAX_PANELS`) of ``points``
-        Gauss points (1 to :data:`MAX_POINTS`) on ``[0, length]`` (m, positive), built once
-        per size (cached)."""
+        """The rule of ``n_panels`` equal panels of ``points`` Gauss points on
+        ``[0, length]``, built once per size (cached).
+
+        Parameters
+        ----------
+        n_panels : int
+            Number of equal panels, 1 to :data:`MAX_PANELS`.
+        length : float
+            Beam length, m (> 0).
+        points : int
+            Gauss points per panel, 1 to :data:`MAX_POINTS`.
+        """
         owner = "PanelRule.build"
         return cls._build(check_integer(owner, "n_panels", n_panels, minimum=1,
                                         maximum=MAX_PANELS),
@@ -391,13 +408,25 @@ class ExactGeometry:
 def appendage_terms(system, n_modes, quadrature, q, q_dot, rate) -> dict:
     """One beam's share of the exact equations in its own frame, as CasADi expressions.
 
-    ``system`` is a :class:`~flexctl.model.parameters.HubBeam` (its hub's inertia is left
-    out: the caller adds it); ``quadrature`` a :class:`Quadrature` (:func:`choose_rule`). The
-    frame is the beam's: its root at ``(b, 0)``, its axis along ``x``. Keys: ``m_tt``
+    The frame is the beam's: its root at ``(b, 0)``, its axis along ``x``. Keys: ``m_tt``
     (scalar), ``m_tq`` (1, N), ``m_qq`` (N, N), ``b_t``, ``b_q`` (N,): the mass-matrix blocks
     and velocity terms of the pinned-hub equations; ``first`` (2,): the first moment
     ``int p dm``; ``first_q`` (2, N): its Jacobian ``int J dm``; ``first_acc`` (2,):
     ``int (p_tt at q_tt = 0) dm``; ``tip`` (2,): the tip position.
+
+    Parameters
+    ----------
+    system : HubBeam
+        The beam, its point masses and its root radius ``b`` (the hub's radius); the hub's
+        inertia is left out: the caller adds it.
+    n_modes : int
+        Number of modes ``N``.
+    quadrature : Quadrature
+        Gauss points per panel and panels (:func:`choose_rule`).
+    q, q_dot : casadi.SX, casadi.MX or casadi.DM, shape (N,)
+        Modal coordinates (m) and their rates (m/s).
+    rate : casadi.SX, casadi.MX or casadi.DM
+        Hub rate ``theta_dot``, rad/s.
     """
     import casadi as ca
 
@@ -470,9 +499,20 @@ def _gram(jx, wjx, jy, wjy):
 
 
 def symmetric_solve(matrix, rhs):
-    """``matrix^-1 rhs`` for a symmetric positive definite SX ``matrix`` (n, n) by an
-    ``L D L^T`` factorisation written out (about a third of the operations of CasADi's
-    general symbolic solve); only its upper triangle is read."""
+    """``matrix^-1 rhs`` by an ``L D L^T`` factorisation written out (about a third of the
+    operations of CasADi's general symbolic solve).
+
+    Parameters
+    ----------
+    matrix : casadi.SX, shape (n, n)
+        Symmetric positive definite; only its upper triangle is read.
+    rhs : casadi.SX, shape (n, 1)
+        Right-hand side.
+
+    Returns
+    -------
+    casadi.SX, shape (n, 1)
+    """
     import casadi as ca
 
     n = matrix.shape[0]
@@ -556,7 +596,19 @@ def vectorized_rhs(system: HubBeam, n_modes: int, quadrature, matrices):
     integrals as products with the constant (sparse) quadrature matrices, the mass-matrix
     blocks as matrix products. Its operation count, and so its generated code, does not depend
     on the number of quadrature nodes (only the constant tables grow with them).
-    ``quadrature`` is a :class:`Quadrature`."""
+
+    Parameters
+    ----------
+    system : HubBeam
+        The hub, beam and point masses.
+    n_modes : int
+        Number of modes ``N``.
+    quadrature : Quadrature
+        Gauss points per panel and panels (:func:`choose_rule`).
+    matrices : ModalMatrices
+        The system's matrices on ``n_modes`` modes (:func:`~flexctl.model.matrices.assemble`),
+        whose modal stiffness ``K_ff`` and damping ``C_ff`` the equations take.
+    """
     quadrature = Quadrature.checked("vectorized_rhs", quadrature)
     return _rhs(system, n_modes, quadrature, matrices, vectorized=True)[0]
 

@@ -35,16 +35,22 @@ def to_nonlinear_iosystem(model, outputs: str = "named", params=None):
     """The model as a python-control ``NonlinearIOSystem``.
 
     States :attr:`Model.state_names`, input :attr:`Model.input_names` (``torque``, N m, or an
-    actuator's command), outputs :attr:`Model.output_names` (``outputs="named"``) or the
-    states themselves (``outputs="states"``), an appendage's dot as an underscore
-    (:func:`signal_names`). A state at which the mass matrix is singular raises
-    :class:`~flexctl.model.SingularMassMatrixError`.
+    actuator's command), an appendage's dot as an underscore (:func:`signal_names`). A state at
+    which the mass matrix is singular raises :class:`~flexctl.model.SingularMassMatrixError`.
 
-    ``params``: physical parameters by scene key (a list of keys, their nominal values the
-    defaults, or a dict of their values), the python-control way: ``updfcn`` and ``outfcn``
-    read them from ``params``, so ``control.input_output_response(sys, ..., params={...})``
-    runs the plant at other values (:mod:`flexctl.model.parametric`: exact at the nominal
-    values, first order in the change).
+    Parameters
+    ----------
+    model : Model
+        Any flexctl model (a StructureModel or an ActuatedModel included).
+    outputs : {"named", "states"}, optional
+        The system's outputs: :attr:`Model.output_names` (``"named"``, default) or the states
+        themselves (``"states"``).
+    params : list of str or dict, optional
+        Physical parameters by scene key (a list of keys, their nominal values the defaults, or
+        a dict of their values), the python-control way: ``updfcn`` and ``outfcn`` read them
+        from ``params``, so ``control.input_output_response(sys, ..., params={...})`` runs the
+        plant at other values (:mod:`flexctl.model.parametric`: exact at the nominal values,
+        first order in the change). Default none.
 
     Examples
     --------
@@ -122,7 +128,17 @@ def _parametric_outputs(model, keys):
 
 
 def symbolic_dynamics(model, x, u):
-    """CasADi expression of ``dx/dt`` in the symbols ``x`` (n,) and ``u`` (1,)."""
+    """CasADi expression of ``dx/dt`` in the symbols ``x`` and ``u``.
+
+    Parameters
+    ----------
+    model : Model
+        Any flexctl model.
+    x : casadi.SX or casadi.MX, shape (n,)
+        State symbols, in :attr:`Model.layout` order.
+    u : casadi.SX or casadi.MX, shape (1,)
+        Input symbol: the hub torque, N m (an actuated model's command).
+    """
     import casadi as ca
 
     if model.variant == "exact" or hasattr(model, "functions"):
@@ -145,7 +161,19 @@ def symbolic_dynamics(model, x, u):
 
 
 def symbolic_beam_dynamics(model, y, rate, acceleration):
-    """CasADi ``d[q, q_dot]/dt`` under prescribed hub ``rate`` and ``acceleration``."""
+    """CasADi ``d[q, q_dot]/dt`` under prescribed hub ``rate`` and ``acceleration``.
+
+    Parameters
+    ----------
+    model : Model
+        A model on a pinned hub.
+    y : casadi.SX or casadi.MX, shape (2 N,)
+        Beam states ``[q, q_dot]`` (m, m/s), in :meth:`StateLayout.without_rotation` order.
+    rate : casadi.SX or casadi.MX
+        Hub rate ``theta_dot``, rad/s.
+    acceleration : casadi.SX or casadi.MX
+        Hub acceleration ``theta_tt``, rad/s^2.
+    """
     import casadi as ca
 
     mat, beam = model.matrices, model.layout.without_rotation()
@@ -199,8 +227,17 @@ def to_casadi(model, sx: bool = True):
 
 def dynamics_jacobians(model, x0, u0=0.0) -> tuple:
     """``f(x0, u0)`` (n,), ``A = df/dx`` (n, n) and ``B = df/du`` (n, 1) of
-    :meth:`Model.casadi` at state ``x0`` (n,) and torque ``u0`` (N m); the CasADi function is
-    built once per model."""
+    :meth:`Model.casadi`; the CasADi function is built once per model.
+
+    Parameters
+    ----------
+    model : Model
+        Any flexctl model.
+    x0 : array_like, shape (n,)
+        State, finite, in :attr:`Model.layout` order.
+    u0 : float, optional
+        Input: the hub torque, N m (an actuated model's command). Default 0.
+    """
     import casadi as ca
 
     from .checks import check_array, check_real
@@ -224,6 +261,15 @@ def linearize_at(model, x0, u0=0.0):
     CasADi right-hand side and outputs (:meth:`Model.casadi`). Where ``x0`` is not an
     equilibrium, the plant's attribute ``drift`` holds ``f(x0, u0)``, shape (n,), and
     ``operating_point`` holds ``(x0, u0)``.
+
+    Parameters
+    ----------
+    model : Model
+        Any flexctl model.
+    x0 : array_like, shape (n,)
+        State, finite, in :attr:`Model.layout` order.
+    u0 : float, optional
+        Input: the hub torque, N m (an actuated model's command). Default 0.
 
     Raises
     ------
@@ -258,7 +304,15 @@ def linearize_at(model, x0, u0=0.0):
 
 
 def to_casadi_outputs(model, sx: bool = True):
-    """The outputs as a CasADi ``Function`` ``h(x) -> y`` (y in :attr:`Model.output_names`)."""
+    """The outputs as a CasADi ``Function`` ``h(x) -> y`` (y in :attr:`Model.output_names`).
+
+    Parameters
+    ----------
+    model : Model
+        Any flexctl model.
+    sx : bool, optional
+        Build on ``SX`` scalar symbols (default) or ``MX``.
+    """
     import casadi as ca
 
     sym = ca.SX.sym if sx else ca.MX.sym

@@ -175,7 +175,15 @@ class StateLayout:
         return index
 
     def with_block(self, name: str, labels) -> "StateLayout":
-        """This layout with a first-order block ``name`` of states ``labels`` appended."""
+        """This layout with a first-order block ``name`` of states ``labels`` appended.
+
+        Parameters
+        ----------
+        name : str
+            Name of the block (:meth:`block`), not yet among the layout's blocks.
+        labels : sequence of str
+            Names of its states, in order, unique among the layout's state names.
+        """
         return StateLayout(appendages=self.appendages, free_hub=self.free_hub,
                            rotation=self.rotation,
                            extra=self.extra + ((name, tuple(labels)),))
@@ -353,11 +361,27 @@ class StateLayout:
         return x[self.theta_dot]
 
     def modal(self, x, appendage: str | None = None):
-        """Modal coordinates (of every appendage, or of one), m."""
+        """Modal coordinates (of every appendage, or of one), m.
+
+        Parameters
+        ----------
+        x : ndarray, shape (n,) or (n, P), or CasADi column
+            State(s) in this layout.
+        appendage : str, optional
+            An appendage's name (``""`` for a single unnamed one); default every appendage.
+        """
         return x[self.q if appendage is None else self.modal_slice(appendage)]
 
     def modal_rates(self, x, appendage: str | None = None):
-        """Modal rates (of every appendage, or of one), m/s."""
+        """Modal rates (of every appendage, or of one), m/s.
+
+        Parameters
+        ----------
+        x : ndarray, shape (n,) or (n, P), or CasADi column
+            State(s) in this layout.
+        appendage : str, optional
+            An appendage's name (``""`` for a single unnamed one); default every appendage.
+        """
         return x[self.q_dot if appendage is None else self.modal_rate_slice(appendage)]
 
     def split(self, x):
@@ -365,10 +389,20 @@ class StateLayout:
         return x[self.theta], x[self.q], x[self.theta_dot], x[self.q_dot]
 
     def embed(self, row, block: str = "q", size: int | None = None) -> np.ndarray:
-        """A row vector of length ``size`` (default :attr:`n_states`) that reads ``row``
-        against one block (``"q"``, ``"q_dot"``, ``"theta"``, ``"theta_dot"``, or an
-        appendage's ``"<name>.q"``): e.g. the tip deflection ``phi(l)^T q`` as a map of the
-        whole state."""
+        """A row vector that reads ``row`` against one block of the state: e.g. the tip
+        deflection ``phi(l)^T q`` as a map of the whole state.
+
+        Parameters
+        ----------
+        row : float or array_like, shape (k,)
+            Entries for the block's ``k`` states; a single number fills every one.
+        block : str, optional
+            ``"q"`` (default), ``"q_dot"``, ``"theta"``, ``"theta_dot"``, ``"coordinates"``,
+            ``"velocities"``, an appendage's ``"<name>.q"`` or ``"<name>.q_dot"``, or the name of
+            a first-order block (:meth:`with_block`).
+        size : int, optional
+            Length of the row; default :attr:`n_states`.
+        """
         out = np.zeros(self.n_states if size is None else int(size))
         target = self._named_slice(block)
         row = np.asarray(row, dtype=float)
@@ -389,11 +423,28 @@ class StateLayout:
 
     def join(self, *, theta=None, q=None, theta_dot=None, q_dot=None, hub_position=None,
              hub_velocity=None, **blocks):
-        """A state from its blocks (missing mechanical blocks are zero).
+        """A state from its blocks (missing blocks are zero).
 
         Each block is a number or an array whose first axis has the block's size; with arrays
         of shape ``(k, P)`` the result has shape ``(n, P)``. CasADi symbols give a CasADi
         column (``vertcat``).
+
+        Parameters
+        ----------
+        theta : float or array_like, shape (P,), optional
+            Hub angle, rad (read when the layout has the hub rotation).
+        q : array_like, shape (N,) or (N, P), optional
+            Modal coordinates of every appendage, m.
+        theta_dot : float or array_like, shape (P,), optional
+            Hub rate, rad/s (read when the layout has the hub rotation).
+        q_dot : array_like, shape (N,) or (N, P), optional
+            Modal rates of every appendage, m/s.
+        hub_position : array_like, shape (2,) or (2, P), optional
+            ``hub_x, hub_y`` of a free hub, m (read for a free hub only).
+        hub_velocity : array_like, shape (2,) or (2, P), optional
+            ``hub_x_dot, hub_y_dot`` of a free hub, m/s (read for a free hub only).
+        **blocks : array_like, each shape (k,) or (k, P)
+            The first-order blocks (:meth:`with_block`) by name.
         """
         parts = {"theta": theta, "hub_position": hub_position, "q": q,
                  "theta_dot": theta_dot, "hub_velocity": hub_velocity, "q_dot": q_dot}
@@ -424,8 +475,23 @@ class StateLayout:
                                for a, size in arrays], axis=0)
 
     def from_beam(self, beam_states, theta=0.0, theta_dot=0.0):
-        """The full state from the states of :meth:`without_rotation` (shape (m,) or (m, P))
-        and a prescribed hub angle and rate (numbers or arrays of shape (P,))."""
+        """The full state from the states of :meth:`without_rotation` and a prescribed hub angle
+        and rate.
+
+        Parameters
+        ----------
+        beam_states : array_like, shape (m,) or (m, P)
+            States of :meth:`without_rotation`, in its order (``m = n_mechanical - 2``).
+        theta : float or array_like, shape (P,), optional
+            Hub angle, rad. Default 0.
+        theta_dot : float or array_like, shape (P,), optional
+            Hub rate, rad/s. Default 0.
+
+        Returns
+        -------
+        ndarray, shape (n_mechanical,) or (n_mechanical, P)
+            The mechanical states; first-order blocks are not included.
+        """
         beam_states = np.asarray(beam_states, dtype=float)
         if beam_states.shape[:1] != (self.beam.size,) or beam_states.ndim > 2:
             raise InputValueError(f"beam states must have shape ({self.beam.size},) or "

@@ -57,7 +57,15 @@ def tension(system: HubBeam, x) -> np.ndarray:
 
 
 def beam_quadrature(system: HubBeam, n_modes: int):
-    """Gauss-Legendre nodes (m) and weights over the beam, cut at every mass position."""
+    """Gauss-Legendre nodes (m) and weights over the beam, cut at every mass position.
+
+    Parameters
+    ----------
+    system : HubBeam
+        The beam and its point masses.
+    n_modes : int
+        Number of modes ``N``: each piece's rule has enough points for products of two of them.
+    """
     l = system.beam.length
     cuts = sorted({0.0, l, *(m.position for m in system.masses)})
     z_max = cantilever_roots(n_modes)[-1]

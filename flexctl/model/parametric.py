@@ -73,7 +73,16 @@ def _step_into(owner, name, index, key):
 
 
 def parameter_value(system, key: str) -> float:
-    """The nominal value of parameter ``key`` of ``system`` (its scene key's unit)."""
+    """The nominal value of parameter ``key`` of ``system`` (its scene key's unit).
+
+    Parameters
+    ----------
+    system : HubBeam or Structure
+        The system whose number is read.
+    key : str
+        Scene key of the parameter, e.g. ``"beam.youngs_modulus"``, ``"masses[0].position"``
+        or ``"appendages[1].beam.second_moment"`` (module docstring).
+    """
     value = system
     for name, index in _parts(system, key):
         value = _step_into(value, name, index, key)
@@ -85,7 +94,18 @@ def parameter_value(system, key: str) -> float:
 
 
 def with_parameter(system, key: str, value: float):
-    """``system`` with parameter ``key`` set to ``value`` (validated as the system is)."""
+    """``system`` with parameter ``key`` set to ``value`` (validated as the system is).
+
+    Parameters
+    ----------
+    system : HubBeam or Structure
+        The system to change (it is not modified: a changed copy is returned).
+    key : str
+        Scene key of the parameter, e.g. ``"beam.youngs_modulus"``, ``"masses[0].position"``
+        or ``"appendages[1].beam.second_moment"`` (module docstring).
+    value : float
+        The new value, in the unit of the scene key.
+    """
     parts = _parts(system, key)
     parameter_value(system, key)
 
@@ -108,7 +128,16 @@ def _system_of(model):
 
 
 def parameter_values(model, parameters) -> np.ndarray:
-    """The nominal values of ``parameters`` (scene keys) of ``model``'s system, shape (P,)."""
+    """The nominal values of ``parameters`` of ``model``'s system, shape (P,).
+
+    Parameters
+    ----------
+    model : Model
+        Any flexctl model; for an actuated model, the system before the actuator changed its
+        hub (:attr:`~flexctl.model.actuated.ActuatedModel.source`).
+    parameters : list or tuple of str
+        Scene keys of the parameters, in order (module docstring).
+    """
     if isinstance(parameters, str) or not isinstance(parameters, (list, tuple)):
         raise InputTypeError("parameters must be a list of scene keys, e.g. "
                              f"['beam.youngs_modulus', 'hub.inertia']; got {parameters!r}")
@@ -120,6 +149,15 @@ def parametric_casadi(model, parameters, outputs: bool = False) -> object:
     """``f(x, u, p) -> xdot`` (module docstring), named inputs ``x``, ``u``, ``p``; with
     ``outputs``, ``h(x, u, p) -> y`` (the model's named outputs, e.g. the root moment, which
     scales with the bending stiffness) expanded the same way.
+
+    Parameters
+    ----------
+    model : Model
+        Any flexctl model.
+    parameters : list or tuple of str
+        Scene keys of the parameters ``p``, in order, each named once.
+    outputs : bool, optional
+        Expand the outputs ``h`` instead of the dynamics ``f``. Default False.
 
     Raises
     ------

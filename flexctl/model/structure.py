@@ -148,7 +148,15 @@ class Structure(KeywordOnly):
 
     @classmethod
     def from_hub_beam(cls, system: HubBeam, name: str = "") -> "Structure":
-        """The one-appendage structure of a :class:`~flexctl.model.HubBeam` (angle 0)."""
+        """The one-appendage structure of a :class:`~flexctl.model.HubBeam` (angle 0).
+
+        Parameters
+        ----------
+        system : HubBeam
+            The hub, beam and point masses.
+        name : str, optional
+            Name of the one appendage; default ``""`` (unprefixed state and output names).
+        """
         if not isinstance(system, HubBeam):
             raise InputTypeError(f"system must be a HubBeam; got {type(system).__name__}")
         return cls(hub=system.hub, appendages=(Appendage(name=name, beam=system.beam,

@@ -46,6 +46,17 @@ __all__ = ["StructureMatrices", "assemble_structure", "modes_per_appendage"]
 def modes_per_appendage(structure: Structure, n_modes, variant: str = "first_order") -> tuple:
     """Modes of each appendage from an int (each), a dict ``{name: int}`` or a sequence.
 
+    Parameters
+    ----------
+    structure : Structure
+        The structure whose appendages are counted.
+    n_modes : int, dict or sequence of int
+        One count for every appendage, ``{name: int}`` for each appendage by name, or one count
+        per appendage in order; each from 1 to 200.
+    variant : str, optional
+        Model variant: ``"exact"`` takes at most :data:`~flexctl.model.exact.EXACT_MAX_MODES`
+        modes per appendage. Default ``"first_order"``.
+
     Raises
     ------
     InputTypeError, InputValueError
@@ -139,7 +150,15 @@ def _rigid_first_moment(part: ModalMatrices) -> float:
 
 
 def assemble_structure(structure: Structure, modes: tuple) -> StructureMatrices:
-    """Assemble the matrices of ``structure`` with ``modes[k]`` modes on appendage ``k``."""
+    """Assemble the matrices of ``structure`` with ``modes[k]`` modes on appendage ``k``.
+
+    Parameters
+    ----------
+    structure : Structure
+        The hub and its appendages.
+    modes : tuple of int
+        Modes of each appendage, in order (:func:`modes_per_appendage`).
+    """
     if not isinstance(structure, Structure):
         raise InputTypeError(f"structure must be a Structure; got {type(structure).__name__}")
     parts = tuple(assemble(structure.appendage_system(k), n) for k, n in enumerate(modes))

@@ -117,7 +117,23 @@ class StructureModel(Model):
 
     # ------------------------------------------------------------------ dynamics
     def dynamics(self, t, x, u) -> np.ndarray:
-        """State derivative ``dx/dt`` at state(s) ``x`` (n,) or (n, P), torque ``u`` (N m)."""
+        """State derivative ``dx/dt`` at state(s) ``x`` under input ``u`` (python-control
+        argument order, ``params`` omitted).
+
+        Parameters
+        ----------
+        t : float
+            Time, s (the model is time-invariant).
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        u : float or array_like, shape (1,) or (P,)
+            Hub torque, N m (an :class:`~flexctl.model.actuated.ActuatedModel`'s command, in its
+            unit).
+
+        Returns
+        -------
+        ndarray, same shape as ``x``
+        """
         x = self._check_state(x)
         u = np.asarray(u, dtype=float)
         torque = u.reshape(()) if u.size == 1 and x.ndim == 1 else u
@@ -130,7 +146,16 @@ class StructureModel(Model):
         return xdot
 
     def accelerations(self, x, torque):
-        """Hub and modal accelerations ``theta_tt`` (rad/s^2) and ``q_tt`` (m/s^2)."""
+        """Hub and modal accelerations ``theta_tt`` (rad/s^2) and ``q_tt`` (m/s^2).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        torque : float or array_like, shape (P,)
+            Hub torque, N m (an :class:`~flexctl.model.actuated.ActuatedModel`'s command, in its
+            unit).
+        """
         xdot = self.dynamics(0.0, x, torque)
         return self.layout.hub_rate(xdot), self.layout.modal_rates(xdot)
 
@@ -179,13 +204,33 @@ class StructureModel(Model):
         return np.array(out) if x.ndim > 1 else np.float64(out[0])
 
     def beam_accelerations(self, q, q_dot, theta_dot, theta_tt):
-        """Modal accelerations under a prescribed hub rotation (pinned hub), m/s^2."""
+        """Modal accelerations under a prescribed hub rotation (pinned hub), m/s^2.
+
+        Parameters
+        ----------
+        q, q_dot : array_like, shape (N,) or (N, P)
+            Modal coordinates (m) and rates (m/s) of every appendage.
+        theta_dot : float or array_like, shape (P,)
+            Hub rate, rad/s.
+        theta_tt : float or array_like, shape (P,)
+            Hub acceleration, rad/s^2.
+        """
         self._pinned_only("a prescribed hub motion")
         return self._evaluate(self.functions.beam, np.ndim(q) > 1, q, q_dot, theta_dot,
                               theta_tt)
 
     def hub_torque(self, x, theta_tt, q_tt):
-        """Torque that produces the given accelerations at state ``x`` (pinned hub), N m."""
+        """Torque that produces the given accelerations at state ``x`` (pinned hub), N m.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        theta_tt : float or array_like, shape (P,)
+            Hub acceleration, rad/s^2.
+        q_tt : array_like, shape (N,) or (N, P)
+            Modal accelerations, m/s^2.
+        """
         self._pinned_only("the hub torque of a prescribed motion")
         return self._batch(self.functions.torque, x, theta_tt, q_tt)[0]
 
@@ -220,7 +265,15 @@ class StructureModel(Model):
         return self._batch(self.functions.outputs, x)
 
     def output(self, x, name: str) -> np.ndarray:
-        """One named output at state(s) ``x``."""
+        """One named output at state(s) ``x``.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        name : str
+            One of :attr:`output_names`.
+        """
         if name not in self.output_names:
             raise InputValueError(f"output must be one of {', '.join(self.output_names)}; "
                                   f"got {name!r}")
@@ -268,6 +321,16 @@ class StructureModel(Model):
                                   "tip_deflections or the named outputs")
 
     def deflection(self, x, position: float):
+        """Not available: a structure has several appendages (raises ``NotImplementedError``);
+        use the named outputs.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        position : float
+            Distance from the beam root, m.
+        """
         raise NotImplementedError("StructureModel has several appendages: use the named "
                                   "outputs")
 
@@ -313,9 +376,14 @@ class StructureModel(Model):
     def natural_frequencies(self, spin_rate: float = 0.0, hub: str = "clamped") -> np.ndarray:
         """Undamped natural frequencies, rad/s, ascending, shape (N,).
 
-        ``hub="clamped"``: the hub held (rotation and translation), at any spin; ``"free"``:
-        the hub free to rotate, and to translate when it floats free (then at spin 0 only);
-        its rigid-body modes are left out.
+        Parameters
+        ----------
+        spin_rate : float, optional
+            Steady hub rate, rad/s; must be 0 for ``hub="free"`` on a free-floating hub. Default 0.
+        hub : {"clamped", "free"}, optional
+            ``"clamped"`` (default): the hub held (rotation and translation), at any spin;
+            ``"free"``: the hub free to rotate, and to translate when it floats free; its rigid-body
+            modes are left out.
         """
         if not isinstance(hub, str) or hub not in ("clamped", "free"):
             raise InputValueError(f"hub must be 'clamped' or 'free'; got {hub!r}")
@@ -338,8 +406,21 @@ class StructureModel(Model):
         :func:`~flexctl.model.exports.signal_names`); its attribute
         ``modal_visibility`` (:class:`~flexctl.model.visibility.ModalVisibility`) says which
         modes the torque cannot move (symmetric appendages bending against each other) and
-        which outputs cannot see them. ``x0`` (and ``u0``) linearise about any operating
-        point instead (:func:`~flexctl.model.exports.linearize_at`)."""
+        which outputs cannot see them.
+
+        Parameters
+        ----------
+        spin_rate : float, optional
+            Steady hub rate, rad/s, about which the model is linearised with ``q = 0``; 0 for a
+            free hub and with ``x0`` or ``u0``. Default 0.
+        x0 : array_like, shape (n,), optional
+            Any operating point instead (:func:`~flexctl.model.exports.linearize_at`; the plant then
+            carries ``drift`` and ``operating_point`` rather than ``modal_visibility``). Default
+            the zero state when only ``u0`` is given.
+        u0 : float, optional
+            Input at the operating point: the hub torque, N m (an actuated model's command).
+            Default 0.
+        """
         import control
 
         if x0 is not None or u0 is not None:
@@ -358,7 +439,18 @@ class StructureModel(Model):
 
 def structure_model(system, n_modes, variant: str) -> StructureModel:
     """The :class:`StructureModel` of a Structure, or of a HubBeam on a free hub (its one
-    appendage unnamed), on ``n_modes`` (an int, a dict by name or one per appendage)."""
+    appendage unnamed).
+
+    Parameters
+    ----------
+    system : Structure or HubBeam
+        The hub and its appendages.
+    n_modes : int, dict or sequence of int
+        Modes of each appendage: one int for all, ``{name: int}``, or one per appendage in order
+        (:func:`~flexctl.model.structure_matrices.modes_per_appendage`).
+    variant : {"first_order", "zero_order", "consistent", "exact"}
+        Model variant.
+    """
     from .structure import as_structure
     from .structure_matrices import assemble_structure, modes_per_appendage
 

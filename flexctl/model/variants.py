@@ -431,6 +431,15 @@ class Model:
 
         ``M_ff q_tt + C_ff q_t + (K_ff - theta_t^2 D) q = -m_tf theta_tt`` (for the exact
         variant, the beam rows of ``M(q)`` with its velocity terms).
+
+        Parameters
+        ----------
+        q, q_dot : array_like, shape (N,) or (N, P)
+            Modal coordinates (m) and rates (m/s).
+        theta_dot : float or array_like, shape (P,)
+            Hub rate ``theta_t``, rad/s.
+        theta_tt : float or array_like, shape (P,)
+            Hub acceleration, rad/s^2.
         """
         if self.variant == "exact":
             return self._evaluate(self.geometry.beam, np.ndim(q) > 1, q, q_dot, theta_dot,
@@ -440,7 +449,17 @@ class Model:
         return c["m_inv"] @ (f_beam - np.multiply.outer(mat.m_tf, theta_tt))
 
     def hub_torque(self, x, theta_tt, q_tt):
-        """Torque that produces the given accelerations at state ``x`` (the hub equation), N m."""
+        """Torque that produces the given accelerations at state ``x`` (the hub equation), N m.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        theta_tt : float or array_like, shape (P,)
+            Hub acceleration, rad/s^2.
+        q_tt : array_like, shape (N,) or (N, P)
+            Modal accelerations, m/s^2.
+        """
         x = self._check_state(x)
         if self.variant == "exact":
             out = self._evaluate(self.geometry.torque, x.ndim > 1, x, theta_tt, q_tt)
@@ -503,7 +522,15 @@ class Model:
         return y
 
     def deflection(self, x, position: float) -> np.ndarray:
-        """Beam deflection ``y(position)`` in the hub frame, m, at state(s) ``x``."""
+        """Beam deflection ``y(position)`` in the hub frame, m, at state(s) ``x``.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        position : float
+            Distance from the beam root, m, in ``[0, l]``.
+        """
         x = self._check_state(x)
         return self.matrices.deflection_vector(position) @ self.layout.modal(x)
 
@@ -670,11 +697,18 @@ class Model:
 
     # ------------------------------------------------------------------ exports
     def nonlinear(self, outputs: str = "named", params=None):
-        """Nonlinear plant as a python-control ``NonlinearIOSystem`` (:mod:`flexctl.model.exports`):
-        its outputs the model's named outputs (``"named"``), or its states (``"states"``, for
-        a state-feedback law's :func:`controllers.feedback.iosys.to_iosys` to connect to by name);
-        ``params`` (scene keys, or a dict of their values) makes physical parameters
-        python-control ``params``."""
+        """Nonlinear plant as a python-control ``NonlinearIOSystem`` (:mod:`flexctl.model.exports`).
+
+        Parameters
+        ----------
+        outputs : {"named", "states"}, optional
+            Its outputs: the model's named outputs (``"named"``, default), or its states
+            (``"states"``, for a state-feedback law's :func:`controllers.feedback.iosys.to_iosys`
+            to connect to by name).
+        params : list of str or dict, optional
+            Physical parameters (scene keys, or a dict of their values) made python-control
+            ``params`` (:func:`~flexctl.model.exports.to_nonlinear_iosystem`). Default none.
+        """
         from .exports import to_nonlinear_iosystem
         return to_nonlinear_iosystem(self, outputs, params)
 
@@ -708,7 +742,21 @@ class Model:
         """The model over one sample of ``dt`` s with the input held: a
         :class:`~flexctl.model.discrete.DiscreteStep` around the CasADi Function
         ``(x, u[, p]) -> x_next``, by RK4 substeps or CVODES, with its stated accuracy (see
-        :func:`flexctl.model.discrete.discretize`)."""
+        :func:`flexctl.model.discrete.discretize`).
+
+        Parameters
+        ----------
+        dt : float
+            Sample time, s (> 0).
+        method : {"rk4", "cvodes"}, optional
+            RK4 substeps (default) or SUNDIALS CVODES.
+        substeps : int, optional
+            RK4 steps per sample (1 to 1000); default the fewest with ``omega_max h <= 0.5``.
+        rtol : float, optional
+            CVODES relative tolerance (1e-14 to 1e-2). Default 1e-8.
+        parameters : list of str, optional
+            Physical parameters (scene keys) as a third input ``p``: ``(x, u, p) -> x_next``.
+        """
         from .discrete import discretize
         return discretize(self, dt, method, substeps, rtol, parameters)
 
@@ -735,7 +783,24 @@ class Model:
 
 
 def at_operating_point(model, spin_rate, x0, u0):
-    """:func:`~flexctl.model.exports.linearize_at`, the operating point given once."""
+    """:func:`~flexctl.model.exports.linearize_at`, the operating point given once.
+
+    Parameters
+    ----------
+    model : Model
+        Any flexctl model.
+    spin_rate : float
+        Must be 0: the operating point replaces the steady spin.
+    x0 : array_like, shape (n,), or None
+        State; None for the zero state (at rest, hub angle 0).
+    u0 : float or None
+        Input: the hub torque, N m (an actuated model's command); None for 0.
+
+    Raises
+    ------
+    InputValueError
+        If ``spin_rate`` is not 0.
+    """
     from .exports import linearize_at
 
     if spin_rate:

@@ -120,7 +120,15 @@ def _separate(shapes, frequencies, load):
 
 
 def modal_visibility(model, spin_rate: float = 0.0) -> ModalVisibility:
-    """The :class:`ModalVisibility` of ``model`` linearised at ``spin_rate`` (rad/s)."""
+    """The :class:`ModalVisibility` of ``model`` linearised at ``spin_rate``.
+
+    Parameters
+    ----------
+    model : Model
+        Any flexctl model.
+    spin_rate : float, optional
+        Steady hub rate of the linearisation, rad/s (0 for a free hub). Default 0.
+    """
     mass, stiffness, _, load = model.second_order_form(spin_rate)
     mass = 0.5 * (mass + mass.T)
     lam, shapes = scipy.linalg.eigh(0.5 * (stiffness + stiffness.T), mass)
