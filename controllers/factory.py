@@ -7,7 +7,7 @@ a model of ``design_modes`` modes of the scene's design variant (exact on an exa
 first_order otherwise) and returns it ready for :func:`flexctl.simulate`.
 
 Settings (all optional) per ``kind``, from the registry :data:`controllers.spec.CONTROLLER_KINDS`
-(``tests/test_controller_registry.py`` checks that this table is
+(``tests/controllers/test_controller_registry.py`` checks that this table is
 :func:`controllers.spec.settings_table`):
 
 ===========  ===============================================================================

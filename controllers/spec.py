@@ -8,7 +8,7 @@ unit, one-line doc). :class:`ControllerSpec` validates a table against it, the f
 
 A setting takes the name of the argument it sets (``hub_angle`` sets
 ``LQRWeights.hub_angle``, ``n_intervals`` sets ``SlewProblem.n_intervals``; the exceptions and
-their reasons are in ``tests/test_scene_keys.py``). A renamed setting keeps its former name in
+their reasons are in ``tests/app/test_scene_keys.py``). A renamed setting keeps its former name in
 ``Setting.former_names`` for one release: :func:`current_names` turns it into the new one with
 a ``FutureWarning`` (shown by default, since scene authors, not programmers, read it).
 

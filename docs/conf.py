@@ -3,7 +3,7 @@
 Built offline and strictly: ``python -m sphinx -W --keep-going -b html docs docs/_build/html``.
 No extension downloads anything at build time (no intersphinx), MathJax is served from the
 site itself (``sphinx-mathjax-offline``), and the example notebooks are rendered, never
-executed: the executed copies that ``tests/test_examples.py`` writes to ``examples/_executed``
+executed: the executed copies that ``tests/app/test_examples.py`` writes to ``examples/_executed``
 are used when present, the notebooks without outputs otherwise.
 """
 

@@ -25,7 +25,7 @@ Two models
     the eigenproblem is solved in the inverse form ``M v = K v / omega^2`` for accuracy of the
     lowest modes. Frequencies converge as ``h^4`` (round-off floor about 1e-9 relative): with
     40 elements per beam a bare cantilever's first three modes are within 3.2e-9, 1.3e-7 and
-    1.0e-6 of the exact roots, and on the structures of ``tests/test_structure_fe.py`` the lowest
+    1.0e-6 of the exact roots, and on the structures of ``tests/model/test_structure_fe.py`` the lowest
     two modes per beam change by at most 1.2e-7 from 40 to 80 elements (hub held or free).
     The rigid-element chain of :func:`simulate_multibody`, linearised at rest
     (:func:`chain_linear_frequencies`, 64 and 128 elements, Richardson) agrees with it to
@@ -72,7 +72,7 @@ Two models
     3e-5 of the tip peak with the default 1000 steps per first period, but the jumps of a
     bang-bang torque excite the chain's stiff modes and need about 4000 (1000 leave 3e-4).
 
-Both models are checked in ``tests/test_structure_fe.py``: one beam on a pinned hub reproduces
+Both models are checked in ``tests/model/test_structure_fe.py``: one beam on a pinned hub reproduces
 ``fe_reference`` to round-off (1e-12), at any mounting angle; energy and momenta are conserved
 unforced; the angular momentum about the inertial origin equals the torque impulse; a free
 hub's centre of mass stays at rest; a symmetric twin's tips move alike; the chain linearised
@@ -286,7 +286,7 @@ def linear_frequencies(system: MultiSystem, n_elements: int = 40, hub: str = "fr
         ``h^4`` down to a round-off floor of about 1e-9 relative. Measured on a bare cantilever
         against its exact roots with 40 elements: relative errors 3.2e-9, 1.3e-7 and 1.0e-6 for
         the first three modes (20 elements: 5.4e-8, 2.1e-6, 1.6e-5); 40 against 80 elements on
-        the structures of ``tests/test_structure_fe.py``: the lowest two modes per beam change
+        the structures of ``tests/model/test_structure_fe.py``: the lowest two modes per beam change
         by at most 1.2e-7, hub held or free.
     hub : {"clamped", "free"}
         ``"clamped"``: the hub is held (no rotation, no translation); the frequencies of each
@@ -634,7 +634,7 @@ def simulate_multibody(system: MultiSystem, t_final: float, *, torque=None, dt=N
     n_elements : int
         Elements per beam (point masses on nodes). Errors fall as ``1 / n^2``; extrapolate two
         meshes (``fine + (fine - coarse) / 3`` for ``n`` and ``2n``) for a converged history.
-        Measured on the 3 s manoeuvres of ``tests/test_structure_fe.py`` (tips bent 6-13 % of
+        Measured on the 3 s manoeuvres of ``tests/model/test_structure_fe.py`` (tips bent 6-13 % of
         their length): 32 against 64 elements differ by 0.5e-3 to 1.5e-3 of each tip's peak;
         the extrapolations from (16, 32) and from (32, 64) differ by at most 1e-4 of the peak
         (0.25e-3 from 64 elements alone to the extrapolation).

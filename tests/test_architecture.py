@@ -168,16 +168,27 @@ def test_checks_catch_an_upward_import_and_a_cycle():
                                     ["flexctl.model.variants", "flexctl.sim.simulation"]]
 
 
-#: Longest function (``def`` to its last line, docstring included) in flexctl/ and controllers/.
+#: Longest function (``def`` to its last line, its docstring left out: every parameter is
+#: documented there) in flexctl/ and controllers/.
 MAX_FUNCTION_LINES = 80
+
+
+def _code_lines(node) -> int:
+    """Lines of a function from its ``def`` to its end, less its docstring's."""
+    lines = node.end_lineno - node.lineno + 1
+    first = node.body[0]
+    if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) \
+            and isinstance(first.value.value, str):
+        lines -= first.end_lineno - first.lineno + 1
+    return lines
 
 
 def long_functions(path: Path) -> list:
     """``(name, lines)`` of every function in ``path`` longer than :data:`MAX_FUNCTION_LINES`."""
     tree = ast.parse(path.read_text(), filename=str(path))
-    return [(node.name, node.end_lineno - node.lineno + 1) for node in ast.walk(tree)
+    return [(node.name, _code_lines(node)) for node in ast.walk(tree)
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
-            and node.end_lineno - node.lineno + 1 > MAX_FUNCTION_LINES]
+            and _code_lines(node) > MAX_FUNCTION_LINES]
 
 
 @pytest.mark.parametrize("module", sorted(module_files()), ids=sorted(module_files()))
@@ -190,6 +201,8 @@ def test_long_function_check_catches_one(tmp_path):
     source = tmp_path / "mod.py"
     source.write_text("def f():\n" + "    x = 1\n" * MAX_FUNCTION_LINES)
     assert long_functions(source) == [("f", MAX_FUNCTION_LINES + 1)]
+    source.write_text('def f():\n    """Doc.\n\n    More.\n    """\n' + "    x = 1\n" * 10)
+    assert long_functions(source) == []
 
 
 @pytest.mark.parametrize("lower", ["flexctl.model", "flexctl.sim", "flexctl"])

@@ -141,11 +141,11 @@ def structure_momentum(model):
     else:
         layout, mat = model.layout, model.matrices
         _, q, rate, q_dot = layout.split(x)
-        if model.variant == "exact":
+        if model.variant.exact:
             h = ca.mtimes(model.geometry.mass(q)[0, :], x[layout.velocities])
         else:
             inertia = mat.J0
-            if model.variant == "consistent":
+            if model.variant.quadratic_inertia:
                 inertia = inertia + ca.bilin(ca.DM(mat.D), q, q)
             h = inertia * rate + ca.dot(ca.DM(mat.m_tf), q_dot)
     return ca.Function("structure_momentum", [x], [h], ["x"], ["H"])

@@ -523,7 +523,7 @@ def hold_effort_excess(model, duration: float, n_intervals: int,
 def _linearisation_model(model):
     """A model with ``model``'s linearisation at rest that is cheap to build: the exact
     variant's equals first_order's there, and building its geometry takes seconds."""
-    if model.variant != "exact":
+    if not model.variant.exact:
         return model
     from flexctl.model import build_model
 

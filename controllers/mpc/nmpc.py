@@ -107,7 +107,7 @@ def hold_function(model: Model, sample_time: float, substeps: int):
     # one beam's exact model has a vectorized form: the same function, a few thousand times
     # fewer operations written out, so the hold compiles in about a second
     vectorized = (getattr(getattr(model, "geometry", None), "rhs_vectorized", None)
-                  if model.variant == "exact" else None)
+                  if model.variant.exact else None)
     if vectorized is not None:
         sym, f = ca.MX, vectorized
     else:
@@ -485,7 +485,7 @@ class NMPC:
         import casadi as ca
 
         model, big_n, n = self.model, self.horizon, self.model.n_states
-        sym = ca.MX if model.variant == "exact" else ca.SX
+        sym = ca.MX if model.variant.exact else ca.SX
         hold = hold_function(model, self.sample_time, self.substeps)
         p_mat = self._terminal_weight()
         # decision variables [x_0, u_0, ..., x_{N-1}, u_{N-1}, x_N]; parameters: measured x,
@@ -710,7 +710,7 @@ class NMPC:
         gaps, cost and constraints stay those of the exact model, so the iterations still aim
         at the exact model's optimum (an inexact-Jacobian SQP step).
         """
-        if self.model.variant != "exact":
+        if not self.model.variant.exact:
             return self.model
         if "linearisation_model" not in self._built:
             from flexctl.model import build_model

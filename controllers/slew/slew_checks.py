@@ -69,7 +69,7 @@ class _Checks:
 
     def least_work(self) -> float:
         """The work of the fewest steps any interval count can take (0 but for exact)."""
-        if self.model.variant != "exact":
+        if not self.model.variant.exact:
             return 0.0
         try:
             disc = discretisation(self.problem, self.model, *self.bounds)
@@ -90,7 +90,7 @@ class _Checks:
             problem, self.model, *self.bounds, check=False))
 
     def work_reason(self, n_intervals: int) -> str | None:
-        if self.model.variant != "exact":
+        if not self.model.variant.exact:
             return None
         problem = dataclasses.replace(self.problem, n_intervals=n_intervals)
         disc = discretisation(problem, self.model, *self.bounds, check=False)
@@ -193,7 +193,7 @@ the converged slew (limit 1 %); use n_intervals = 45 or at most 3 design modes \
     fewer = _fewer_modes(checks, K)
     if fewer is not None:
         remedies.append(f"at most {fewer} design modes (model.design_modes)")
-    if model.variant == "exact" and checks.work_reason(K) is not None:
+    if model.variant.exact and checks.work_reason(K) is not None:
         remedies.append("model.design_variant 'first_order' (small deflection, solved in "
                         "seconds)")
     if not remedies and checks.holds is not None:

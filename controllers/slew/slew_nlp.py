@@ -69,7 +69,7 @@ def transcription_for(problem, model) -> str:
     """
     if problem.transcription is not None:
         return problem.transcription
-    return "collocation" if model.variant == "exact" else "multiple_shooting"
+    return "collocation" if model.variant.exact else "multiple_shooting"
 
 
 def rk4_substeps(model, hold: float, duration: float | None = None) -> int:

@@ -1036,7 +1036,7 @@ def _metric_errors(scene: Scene, plant: Model, built, result):
     if reference.status != "ok" or reference.t.shape != result.t.shape:
         return None
     geometry = 0.0
-    if reference_plant.variant != "exact":     # the screen's bound, as the validity states it
+    if not reference_plant.variant.exact:     # the screen's bound, as the validity states it
         geometry = result.validity.geometric_error * result.peak_tip_deflection
     return metric_errors(result, reference, scene.maneuver.angle, built.maneuver_end,
                          geometry=geometry)

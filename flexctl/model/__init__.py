@@ -10,6 +10,7 @@ module           contents
 ``layout``       ``StateLayout``: names and slices of every block of the state vector
 ``modes``        cantilever roots and mode shapes at quadrature points
 ``matrices``     the modal matrices, assembled once and cached
+``variant``      ``Variant``: a variant's name and the terms it contributes
 ``variants``     ``Model``: the variants of one beam on a pinned hub, built on one assembly
 ``structure*``   ``StructureModel``: several appendages on a pinned or free hub
                  (``structure_matrices``, ``structure_dynamics``, ``structure_model``)
@@ -53,7 +54,8 @@ from .structure import Appendage, Structure, as_structure
 from .layout import StateLayout
 from .modes import cantilever_roots, mode_shapes
 from .matrices import ModalMatrices, assemble, tension
-from .variants import VARIANTS, Model, SingularMassMatrixError
+from .variant import VARIANTS, Variant
+from .variants import Model, SingularMassMatrixError
 from .structure_model import StructureModel
 from .actuators import DCMotor, ReactionWheel
 from .actuated import ActuatedModel
@@ -65,7 +67,7 @@ __all__ = [
     "Structure", "as_structure",
     "cantilever_roots", "mode_shapes",
     "ModalMatrices", "assemble", "tension",
-    "VARIANTS", "Model", "StructureModel", "SingularMassMatrixError", "build_model",
+    "VARIANTS", "Variant", "Model", "StructureModel", "SingularMassMatrixError", "build_model",
     "ReactionWheel", "DCMotor", "ActuatedModel",
     "Reduction", "modal_truncation", "balanced_truncation", "hinf_norm",
 ]

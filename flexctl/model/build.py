@@ -19,7 +19,8 @@ from .matrices import assemble
 from .parameters import HubBeam
 from .structure import Structure
 from .structure_model import structure_model
-from .variants import VARIANTS, Model
+from .variant import MAX_MODES, VARIANTS, Variant
+from .variants import Model
 
 __all__ = ["build_model", "rebuild"]
 
@@ -100,7 +101,7 @@ def _memory_key(system, n_modes, variant, actuator):
 
 
 def _build(system, n_modes, variant, actuator) -> Model:
-    variant = check_choice("", "variant", variant, VARIANTS)
+    variant = Variant(check_choice("", "variant", variant, VARIANTS))
     actuator = as_actuator(actuator)
     if actuator is not None:
         if not isinstance(system, (HubBeam, Structure)):
@@ -109,8 +110,8 @@ def _build(system, n_modes, variant, actuator) -> Model:
         return actuated_model(system, n_modes, variant, actuator)
     if isinstance(system, Structure) or (isinstance(system, HubBeam) and system.hub.free):
         return _build_structure_model(system, n_modes, variant)
-    n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=200)
-    if variant == "exact" and n_modes > EXACT_MAX_MODES:
+    n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=MAX_MODES)
+    if variant.exact and n_modes > EXACT_MAX_MODES:
         raise InputValueError(
             f"n_modes must be at most {EXACT_MAX_MODES} for the exact variant (its geometry "
             "grows as the square of the modes times the quadrature points, and large "

@@ -141,7 +141,7 @@ def symbolic_dynamics(model, x, u):
     """
     import casadi as ca
 
-    if model.variant == "exact" or hasattr(model, "functions"):
+    if model.variant.exact or hasattr(model, "functions"):
         return model.geometry.rhs(x, u)
     mat, c = model.matrices, model._c
     _, q, w, qd = model.layout.split(x)
@@ -150,7 +150,7 @@ def symbolic_dynamics(model, x, u):
               + w ** 2 * ca.mtimes(dm(c["stiff_d"]), q))
     f_hub = u[0] - model.system.hub.friction * w
     j_eff = c["j_rigid_eff"]
-    if model.variant == "consistent":
+    if model.variant.quadratic_inertia:
         d = dm(mat.D)
         f_hub = f_hub - 2.0 * w * ca.dot(q, ca.mtimes(d, qd))
         j_eff = j_eff + ca.dot(q, ca.mtimes(d, q))
@@ -182,7 +182,7 @@ def symbolic_beam_dynamics(model, y, rate, acceleration):
         if model.system.free:
             model._pinned_only("a prescribed hub motion")
         return ca.vertcat(qd, model.functions.beam(q, qd, rate, acceleration))
-    if model.variant == "exact":
+    if model.variant.exact:
         return ca.vertcat(qd, model.geometry.beam(q, qd, rate, acceleration))
     dm = ca.DM
     f_beam = (-ca.mtimes(dm(mat.C_ff), qd) - ca.mtimes(dm(mat.K_ff), q)
@@ -321,7 +321,7 @@ def to_casadi_outputs(model, sx: bool = True):
         return ca.Function(f"flexctl_outputs_{model.variant}", [x], [model.functions.outputs(x)],
                            ["x"], ["y"])
     y = ca.mtimes(ca.DM(model.output_matrix), x)
-    if model.variant == "exact":
+    if model.variant.exact:
         tip = model.geometry.tip(model.layout.modal(x))
         y = ca.vertcat(y[:2], tip[1], y[3], model.layout.hub_angle(x) + ca.atan2(tip[1], tip[0]))
     return ca.Function(f"flexctl_outputs_N{model.n_modes}", [x], [y], ["x"], ["y"])

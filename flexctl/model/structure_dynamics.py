@@ -83,10 +83,10 @@ def _small_blocks(mat, variant, q, q_dot, rate, for_energy=False):
     dm = ca.DM
     d = dm(mat.D)
     j = mat.J0
-    if variant == "consistent" or for_energy:
+    if variant.quadratic_inertia or for_energy:
         j = j + ca.dot(q, ca.mtimes(d, q))
-    stiff_d = dm(mat.M_ff if variant == "zero_order" else mat.D)
-    b_t = 2.0 * rate * ca.dot(q, ca.mtimes(d, q_dot)) if variant == "consistent" else 0.0
+    stiff_d = dm(variant.spin_matrix(mat))
+    b_t = 2.0 * rate * ca.dot(q, ca.mtimes(d, q_dot)) if variant.quadratic_inertia else 0.0
     tips = []
     for k, app in enumerate(mat.system.appendages):
         block = mat.slices[k]
@@ -174,12 +174,12 @@ def structure_functions(model) -> StructureFunctions:
 
     mat, variant, layout = model.matrices, model.variant, model.layout
     free = mat.system.free
-    rules = _rules(mat) if variant == "exact" else ()
+    rules = _rules(mat) if variant.exact else ()
     x, u = ca.SX.sym("x", layout.n_states), ca.SX.sym("u")
     theta, q, rate, q_dot = layout.split(x)
 
     def blocks(for_energy=False, qq=q, qd=q_dot, w=rate):
-        if variant == "exact":
+        if variant.exact:
             return _exact_blocks(mat, rules, qq, qd, w)
         return _small_blocks(mat, variant, qq, qd, w, for_energy)
 
@@ -199,7 +199,7 @@ def structure_functions(model) -> StructureFunctions:
                       ["x", "u"], ["xdot"], {"cse": True})
 
     velocity = ca.vertcat(rate, v_hub, q_dot) if free else ca.vertcat(rate, q_dot)
-    e_mass = mass if variant == "exact" else _assemble(blocks(True), mat, free, q_dot, rate)[0]
+    e_mass = mass if variant.exact else _assemble(blocks(True), mat, free, q_dot, rate)[0]
     energy = (0.5 * ca.dot(velocity, ca.mtimes(e_mass, velocity))
               + 0.5 * ca.dot(q, ca.mtimes(ca.DM(mat.K_ff), q)))
     generalized = ca.mtimes(mass, velocity)
@@ -248,7 +248,7 @@ def _outputs(model, x, tips):
     for k, tip in enumerate(tips):
         block = mat.slices[k]
         root = ca.dot(ca.DM(mat.root[k, block]), q[block])
-        if model.variant == "exact":
+        if model.variant.exact:
             angle = theta + ca.atan2(tip[1], tip[0])
         else:
             angle = theta + tip[1] / tip[0]

@@ -39,6 +39,7 @@ from .exact import EXACT_MAX_MODES
 from .matrices import ModalMatrices, beam_quadrature, assemble, condensed_hub_inertia
 from .modes import mode_shapes
 from .structure import Structure
+from .variant import MAX_MODES, Variant
 
 __all__ = ["StructureMatrices", "assemble_structure", "modes_per_appendage"]
 
@@ -63,7 +64,7 @@ def modes_per_appendage(structure: Structure, n_modes, variant: str = "first_ord
         Naming ``n_modes`` (or ``n_modes[name]``), the rule and the value.
     """
     names = structure.names
-    top = EXACT_MAX_MODES if variant == "exact" else 200
+    top = Variant(variant).max_modes
     if isinstance(n_modes, dict):
         unknown = [k for k in n_modes if k not in names]
         if unknown:
@@ -81,8 +82,8 @@ def modes_per_appendage(structure: Structure, n_modes, variant: str = "first_ord
         values = [(f"n_modes[{k}]", v) for k, v in enumerate(n_modes)]
     else:
         values = [("n_modes", n_modes)] * len(names)
-    modes = tuple(check_integer("", where, v, minimum=1, maximum=200) for where, v in values)
-    if variant == "exact" and max(modes) > top:
+    modes = tuple(check_integer("", where, v, minimum=1, maximum=MAX_MODES) for where, v in values)
+    if Variant(variant).exact and max(modes) > top:
         raise InputValueError(
             f"n_modes must be at most {EXACT_MAX_MODES} per appendage for the exact variant (its "
             "geometry grows as the square of the modes; converge the higher ones on "

@@ -35,6 +35,7 @@ from .errors import InputValueError
 from .exports import signal_names
 from .layout import StateLayout
 from .structure_dynamics import structure_functions
+from .variant import Variant
 from .variants import Model, SingularMassMatrixError, at_operating_point, checked_spin, system_name
 
 __all__ = ["StructureModel", "output_names"]
@@ -58,13 +59,14 @@ class StructureModel(Model):
     """
 
     def __post_init__(self):
+        object.__setattr__(self, "variant", Variant(self.variant))
         mat = self.matrices
         layout = StateLayout(appendages=tuple(zip(mat.system.names, mat.modes)),
                              free_hub=mat.system.free)
         object.__setattr__(self, "layout", layout)
         object.__setattr__(self, "state_names", layout.names)
         object.__setattr__(self, "output_names", output_names(mat.system))
-        stiff_d = mat.M_ff if self.variant == "zero_order" else mat.D
+        stiff_d = self.variant.spin_matrix(mat)
         object.__setattr__(self, "_c", {"stiff_d": stiff_d, "j_rigid_eff": mat.condensed_inertia})
 
     # ------------------------------------------------------------------ basics
@@ -192,7 +194,7 @@ class StructureModel(Model):
     def effective_hub_inertia(self, x) -> np.ndarray:
         """Schur complement of the hub rotation in the mass matrix, kg m^2, shape () or (P,)."""
         x = self._check_state(x)
-        if self.variant in ("first_order", "zero_order") and not self.system.free:
+        if not (self.variant.exact or self.variant.quadratic_inertia) and not self.system.free:
             j = self._c["j_rigid_eff"]
             return np.full(x.shape[1:], j) if x.ndim > 1 else np.float64(j)
         columns = np.atleast_2d(x.T).T
@@ -238,7 +240,7 @@ class StructureModel(Model):
         """The dynamics for implicit integrators (:meth:`Model.integration_rhs`): the same as
         :meth:`casadi`, or ``evaluate(x, u)`` (MX in, MX out; e.g. a call of a compiled
         :meth:`casadi`) with the first_order structure's Jacobian for Newton's method."""
-        if evaluate is None or self.variant != "exact":
+        if evaluate is None or not self.variant.exact:
             return self.casadi()
         import casadi as ca
 

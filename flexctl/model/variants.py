@@ -1,15 +1,10 @@
 """Finite-dimensional hub-beam-mass models: first_order, zero_order, consistent and exact.
 
-The variants share one assembly (:func:`flexctl.model.matrices.assemble`). The first three
-differ in a few terms (MODEL.md section 4):
-
-============  ===========================  ==========================================
-variant       beam stiffness at spin         hub equation
-============  ===========================  ==========================================
-first_order   ``K_ff - theta_t^2 (M_ff-K_g)``  ``J_0 theta_tt + m_tf^T q_tt``
-zero_order    ``K_ff - theta_t^2 M_ff``        same as first_order
-consistent    same as first_order            adds ``q^T D q theta_tt + 2 theta_t q^T D q_t``
-============  ===========================  ==========================================
+The variants share one assembly (:func:`flexctl.model.matrices.assemble`); each is a
+:class:`~flexctl.model.variant.Variant` that says which terms it contributes (MODEL.md
+section 4): the spin softens the beam by ``D = M_ff - K_g`` with dynamic stiffening and by
+``M_ff`` without (zero_order), and consistent adds ``q^T D q theta_tt + 2 theta_t q^T D q_t``
+to the hub equation ``J_0 theta_tt + m_tf^T q_tt``.
 
 ``exact`` is geometrically exact (MODEL.md section 7, :mod:`flexctl.model.exact`): the same
 modes describe the slope angle of an inextensible beam, positions and velocities are exact, and
@@ -49,10 +44,10 @@ from .exports import signal_names
 from .layout import StateLayout
 from .matrices import ModalMatrices, assemble, condensed_hub_inertia
 from .parameters import HubBeam
+from .variant import VARIANTS, Variant
 
 __all__ = ["Model", "VARIANTS", "SingularMassMatrixError", "EXACT_MAX_MODES"]
 
-VARIANTS = ("first_order", "zero_order", "consistent", "exact")
 #: Largest steady spin rate the linear analysis takes, rad/s: its square multiplies the modal
 #: matrices, and must stay far from overflow.
 MAX_SPIN_RATE = 1e100
@@ -75,8 +70,9 @@ class Model:
     ----------
     system : HubBeam
     n_modes : int
-    variant : str
-        ``"first_order"``, ``"zero_order"``, ``"consistent"`` or ``"exact"``.
+    variant : Variant
+        ``"first_order"``, ``"zero_order"``, ``"consistent"`` or ``"exact"``, a ``str``
+        whose properties are the terms it contributes (:class:`~flexctl.model.variant.Variant`).
     matrices : ModalMatrices
     layout : StateLayout
         Names and slices of the state's blocks (:mod:`flexctl.model.layout`).
@@ -93,11 +89,12 @@ class Model:
     output_names: tuple = field(init=False, repr=False, default=OUTPUT_NAMES)
 
     def __post_init__(self):
+        object.__setattr__(self, "variant", Variant(self.variant))
         mat = self.matrices
         layout = StateLayout.single(self.n_modes)
         object.__setattr__(self, "layout", layout)
         object.__setattr__(self, "state_names", layout.names)
-        stiff_d = mat.M_ff if self.variant == "zero_order" else mat.D
+        stiff_d = self.variant.spin_matrix(mat)
         cho = scipy.linalg.cho_factor(mat.M_ff)
         m_inv = scipy.linalg.cho_solve(cho, np.eye(self.n_modes))
         m_inv = 0.5 * (m_inv + m_inv.T)
@@ -229,11 +226,11 @@ class Model:
         """
         x = self._check_state(x)
         j = self._c["j_rigid_eff"]
-        if self.variant == "exact":
+        if self.variant.exact:
             mass = self._exact_mass(x)
             schur = [m[0, 0] - m[0, 1:] @ np.linalg.solve(m[1:, 1:], m[1:, 0]) for m in mass]
             return np.array(schur) if x.ndim > 1 else np.float64(schur[0])
-        if self.variant != "consistent":
+        if not self.variant.quadratic_inertia:
             return np.full(x.shape[1:], j) if x.ndim > 1 else np.float64(j)
         q = self.layout.modal(x)
         return j + np.einsum("i...,ij,j...->...", q, self.matrices.D, q)
@@ -242,7 +239,7 @@ class Model:
     def geometry(self):
         """The exact variant's CasADi functions (:class:`~flexctl.model.exact.ExactGeometry`),
         built on first use and cached; ``None`` for the other variants."""
-        if self.variant != "exact":
+        if not self.variant.exact:
             return None
         if "geometry" not in self._c:
             self._c["geometry"] = exact_geometry(self.matrices)
@@ -260,7 +257,7 @@ class Model:
         ``evaluate(x, u)`` (MX symbols in, MX expression out) when given, e.g. a call of a
         compiled :meth:`casadi`. The same as :meth:`casadi` otherwise.
         """
-        if self.variant != "exact":
+        if not self.variant.exact:
             return self.casadi()
         if evaluate is None and "integration_rhs" in self._c:
             return self._c["integration_rhs"]
@@ -290,7 +287,7 @@ class Model:
 
         n = self.n_modes
         ym, rate, acc = ca.MX.sym("y", 2 * n), ca.MX.sym("rate"), ca.MX.sym("acceleration")
-        if self.variant != "exact":
+        if not self.variant.exact:
             return ca.Function("flexctl_beam", [ym, rate, acc],
                                [symbolic_beam_dynamics(self, ym, rate, acc)],
                                ["y", "rate", "acceleration"], ["ydot"])
@@ -345,11 +342,11 @@ class Model:
         :mod:`flexctl.model.exact`.
         """
         x = self._check_state(x)
-        if self.variant == "exact":
+        if self.variant.exact:
             return self._exact_mass(x)[0]
         mat = self.matrices
         j = mat.J0
-        if self.variant == "consistent":
+        if self.variant.quadratic_inertia:
             q = self.layout.modal(x)
             j = j + q @ mat.D @ q
         top = np.concatenate(([j], mat.m_tf))
@@ -361,7 +358,7 @@ class Model:
         _, q, w, qd = self.split(x)
         f_beam = -(mat.C_ff @ qd) - mat.K_ff @ q + w ** 2 * (c["stiff_d"] @ q)
         f_hub = torque - self.system.hub.friction * w
-        if self.variant == "consistent":
+        if self.variant.quadratic_inertia:
             f_hub = f_hub - 2.0 * w * np.einsum("i...,ij,j...->...", q, mat.D, qd)
         return f_hub, f_beam
 
@@ -380,7 +377,7 @@ class Model:
             If the effective hub inertia is not positive (consistent variant, light hub).
         """
         x = self._check_state(x)
-        if self.variant == "exact":
+        if self.variant.exact:
             u = np.broadcast_to(np.asarray(torque, dtype=float), x.shape[1:])
             xdot = self._evaluate(self.geometry.rhs, x.ndim > 1, x, u)
             return self.layout.hub_rate(xdot), self.layout.modal_rates(xdot)
@@ -441,7 +438,7 @@ class Model:
         theta_tt : float or array_like, shape (P,)
             Hub acceleration, rad/s^2.
         """
-        if self.variant == "exact":
+        if self.variant.exact:
             return self._evaluate(self.geometry.beam, np.ndim(q) > 1, q, q_dot, theta_dot,
                                   theta_tt)
         mat, c = self.matrices, self._c
@@ -461,14 +458,14 @@ class Model:
             Modal accelerations, m/s^2.
         """
         x = self._check_state(x)
-        if self.variant == "exact":
+        if self.variant.exact:
             out = self._evaluate(self.geometry.torque, x.ndim > 1, x, theta_tt, q_tt)
             return out[0]
         mat = self.matrices
         _, q, w, qd = self.split(x)
         j = mat.J0
         torque = j * theta_tt + mat.m_tf @ q_tt + self.system.hub.friction * w
-        if self.variant == "consistent":
+        if self.variant.quadratic_inertia:
             qdq = np.einsum("i...,ij,j...->...", q, mat.D, q)
             torque = torque + qdq * theta_tt + 2.0 * w * np.einsum(
                 "i...,ij,j...->...", q, mat.D, qd)
@@ -498,7 +495,7 @@ class Model:
         """
         x = self._check_state(x)
         q = self.layout.modal(x)
-        if self.variant == "exact":
+        if self.variant.exact:
             return self.geometry.tip_positions(q)
         tip_y = self.matrices.tip @ q
         return np.stack((np.full_like(tip_y, self.system.hub.radius
@@ -506,7 +503,7 @@ class Model:
 
     def tip_deflection(self, x) -> np.ndarray:
         """Lateral tip deflection in the hub frame, m, shape () or (P,)."""
-        if self.variant == "exact":
+        if self.variant.exact:
             x = self._check_state(x)
             return self.geometry.tip_deflections(self.layout.modal(x))
         return self.tip_position(x)[1]
@@ -515,7 +512,7 @@ class Model:
         """Outputs at state(s) ``x`` (shape (n,) or (n, P)); shape (5,) or (5, P)."""
         x = self._check_state(x)
         y = self.output_matrix @ x
-        if self.variant == "exact":
+        if self.variant.exact:
             tip = self.tip_position(x)
             y[2] = tip[1]
             y[4] = self.layout.hub_angle(x) + np.arctan2(tip[1], tip[0])
@@ -543,7 +540,7 @@ class Model:
         + 1/2 q^T K_ff q``. Each is conserved by its variant when unforced and undamped.
         """
         x = self._check_state(x)
-        if self.variant == "exact":
+        if self.variant.exact:
             out = self._evaluate(self.geometry.energy, x.ndim > 1, x)
             return out[0]
         mat = self.matrices
@@ -561,7 +558,7 @@ class Model:
         others (``J(q) = J_0 + q^T D q`` for consistent, ``J_0`` otherwise).
         """
         x = self._check_state(x)
-        if self.variant == "exact":
+        if self.variant.exact:
             mass = self._exact_mass(x)
             v = np.atleast_2d(x[self.layout.velocities].T).T
             h = np.array([m[0] @ v[:, k] for k, m in enumerate(mass)])
@@ -569,7 +566,7 @@ class Model:
         mat = self.matrices
         _, q, w, qd = self.split(x)
         inertia = mat.J0
-        if self.variant == "consistent":
+        if self.variant.quadratic_inertia:
             inertia = inertia + np.einsum("i...,ij,j...->...", q, mat.D, q)
         return w * inertia + mat.m_tf @ qd
 

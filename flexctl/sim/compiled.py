@@ -210,7 +210,7 @@ def _calls_model(model, hub_motion) -> bool:
     """The model enters the right-hand side through a call (:mod:`flexctl.sim.native_rhs`:
     compiled, with first_order's cheap Newton Jacobian) rather than inlined: the one-beam
     exact model, and an exact structure under a torque."""
-    return model.variant == "exact" and (hub_motion is None or compiles_prescribed(model))
+    return model.variant.exact and (hub_motion is None or compiles_prescribed(model))
 
 
 #: Modes above which a one-beam small-deflection model enters the integrators in matrix form
@@ -225,7 +225,7 @@ MATRIX_FORM_MODES = 12
 
 def _matrix_form(model) -> bool:
     """Whether ``model`` enters the integrators in matrix form (:data:`MATRIX_FORM_MODES`)."""
-    return (model.variant != "exact" and not hasattr(model, "functions")
+    return (not model.variant.exact and not hasattr(model, "functions")
             and model.n_modes > MATRIX_FORM_MODES)
 
 

@@ -188,7 +188,7 @@ def _built(model, inputs, family: str = "bdf"):
     there is no compiler, the model is the consistent variant or the drive has no form."""
     if family not in FAMILIES:
         raise InputValueError(f"family must be one of {sorted(FAMILIES)}; got {family!r}"[:300])
-    if not compiling_enabled() or compiler() is None or model.variant == "consistent":
+    if not compiling_enabled() or compiler() is None or model.variant.quadratic_inertia:
         return None
     numbers = input_numbers(inputs)
     key = input_key(model, inputs, np.array([1.0]))

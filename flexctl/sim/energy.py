@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model import Model
+from ..model.variant import Variant
 
 __all__ = ["EnergyBalance", "energy_balance", "ModelValidityWarning", "ENERGY_TOLERANCE"]
 
@@ -123,7 +124,7 @@ class EnergyBalance:
         masses = (f" (point masses {self.mass_ratio:.3g} times the beam mass)"
                   if self.mass_ratio > 0 else "")
         stiffening = (" and its beam equation the dynamic stiffening K_g"
-                      if self.variant == "zero_order" else "")
+                      if not Variant(self.variant).dynamic_stiffening else "")
         return (text + f"; its hub equation leaves out the second-order inertia q^T D q, which "
                 f"reached {self.inertia_change:.3g} kg m^2 against the effective hub inertia "
                 f"{self.hub_inertia:.3g} kg m^2{masses}{stiffening}, terms that create "
@@ -135,10 +136,10 @@ def _neglected_energy(model: Model, rate, q, inertia) -> np.ndarray:
     """Energy created by the terms a small-deflection variant leaves out, J, shape (P,):
     ``int theta_t d(theta_t q^T D q)`` (and ``int theta_t^2 d(q^T K_g q / 2)`` for zero_order)
     as sums over the output samples."""
-    if model.variant == "consistent":
+    if model.variant.quadratic_inertia:
         return np.zeros(rate.size)
     steps = 0.5 * (rate[1:] + rate[:-1]) * np.diff(rate * inertia)
-    if model.variant == "zero_order":
+    if not model.variant.dynamic_stiffening:
         stiffening = 0.5 * np.einsum("ip,ij,jp->p", q, model.matrices.K_g, q)
         steps = steps + 0.5 * (rate[1:] ** 2 + rate[:-1] ** 2) * np.diff(stiffening)
     return np.concatenate(([0.0], np.cumsum(steps)))
@@ -169,7 +170,7 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     EnergyBalance or None
         ``None`` for the exact variant, which conserves its own energy by construction.
     """
-    if model.variant == "exact":
+    if model.variant.exact:
         return None
     t, x = np.asarray(t, dtype=float), np.asarray(states, dtype=float)
     mat = model.matrices

@@ -78,7 +78,7 @@ def drive_symbols(model, torque, hub_motion, controller, n_numbers: int) -> dict
     states, or ``[q, q_dot]`` under a prescribed hub motion) on them."""
     import casadi as ca
 
-    sym = ca.MX if model.variant == "exact" else ca.SX
+    sym = ca.MX if model.variant.exact else ca.SX
     ny = drive_size(model, hub_motion, controller)
     c = sym.sym("c", n_numbers)
     lifted = lifted_core(model, hub_motion)
@@ -145,7 +145,7 @@ def _exact_core(model, hub_motion):
     hub motion (one beam), its right-hand side under a torque (one beam or a structure);
     None for the other variants (written out in the step) and a structure's prescribed
     motion (inlined as the other variants)."""
-    if model.variant != "exact":
+    if not model.variant.exact:
         return None
     if hub_motion is not None:
         return None if hasattr(model, "functions") else model.geometry.beam
@@ -247,7 +247,7 @@ def jit_compiled(function, model, any_variant: bool = False):
     """``function`` compiled to machine code where allowed and possible, else itself (the
     exact variant's only with ``any_variant``: for functions built on its vectorized
     right-hand side, which compile in about a second)."""
-    if not USE_JIT or (model.variant == "exact" and not any_variant):
+    if not USE_JIT or (model.variant.exact and not any_variant):
         return function
     return compiled(function)
 

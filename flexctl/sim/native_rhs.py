@@ -77,13 +77,13 @@ def _built(model, form: str):
 def compiles_prescribed(model) -> bool:
     """Whether a prescribed hub motion of ``model`` runs its compiled beam and hub torque:
     the one-beam exact model (a structure's prescribed motion stays inlined)."""
-    return model.variant == "exact" and not hasattr(model, "functions")
+    return model.variant.exact and not hasattr(model, "functions")
 
 
 def integration_rhs(model):
     """``(x, u) -> xdot`` for implicit integrators: compiled for an exact model (one beam or
     a structure), :meth:`flexctl.Model.integration_rhs` otherwise."""
-    if model.variant != "exact":
+    if not model.variant.exact:
         return model.integration_rhs()
     return _built(model, "rhs")
 

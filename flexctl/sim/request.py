@@ -19,7 +19,8 @@ import numpy as np
 
 from .compiled import CHECK_FACTOR, is_symbolic
 from .digital import is_sampled
-from .embedded_rk import PAIR_OMEGA_H
+from .embedded_rk import PAIR_OMEGA_H, choose_hold
+from .fixed_step import RK4_OMEGA_H
 from .drives import as_controller, bound_to_plant
 from .inputs import (as_vector, check_method, check_rtol, check_time, jacobian_frequency,
                      output_grid, time_function)
@@ -33,6 +34,7 @@ from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["RunRequest", "IntegrationPlan", "run_request", "plan_integration", "state_scale",
            "StiffnessWarning", "ManyModesWarning", "MANY_MODES", "METHODS", "SAMPLED_METHODS",
+           "plan_sampled",
            "choose_continuous", "choose_multistep", "ADAMS_DAMPING", "ADAMS_PHASE", "BDF_REPLACES",
            "ADAMS_TOLERANCE", "ATOL_LIMIT"]
 
@@ -657,7 +659,7 @@ def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
     steps = omega_max * t_final / PAIR_OMEGA_H
     # the consistent variant's mass matrix can turn singular on the way: CVODES stops there
     # and the stop is located and named, where explicit steps could step across it
-    if model.variant == "consistent" or not math.isfinite(steps):
+    if model.variant.quadratic_inertia or not math.isfinite(steps):
         return "cvodes"
     instructions = rhs_instructions(model)
     cheap = instructions <= PAIR_INSTRUCTIONS and steps * instructions <= PAIR_WORK
@@ -731,6 +733,38 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
         cvodes_step=request.max_step if np.isfinite(request.max_step) else None,
         stiffness_note=note, compiled=compiled,
         cvodes_multistep=multistep)
+
+
+def plan_sampled(request: RunRequest) -> tuple:
+    """``(integrator, h_max)`` of a sampled loop's holds, beside :func:`plan_integration`'s
+    choice for a continuous run: the named method, or for ``"auto"`` the compiled
+    Dormand-Prince pair or CVODES (:func:`~flexctl.sim.embedded_rk.choose_hold`).
+
+    Parameters
+    ----------
+    request : RunRequest
+        A run under a sampled controller.
+
+    Returns
+    -------
+    integrator : {"cvodes", "RK45", "rk4"}
+    h_max : float or None
+        The fixed-step RK4's coarse step (:data:`~flexctl.sim.fixed_step.RK4_OMEGA_H` over the
+        fastest mode, at the initial spin too), or the pair's first step (a radian of the
+        held plant's fastest pole, at most a sample), s; None for CVODES.
+    """
+    model, integrator = request.model, request.method
+    if integrator == "rk4":
+        omega_max = max(float(model.natural_frequencies(0.0, hub="free")[-1]),
+                        request.spin_frequency)
+        return integrator, RK4_OMEGA_H / omega_max
+    if integrator in ("auto", "RK45"):
+        chosen, omega = choose_hold(model, request.controller.sample_time,
+                                    request.spin_frequency)
+        h_first = min(request.controller.sample_time,
+                      1.0 / omega if 0.0 < omega < np.inf else np.inf)
+        return (chosen if integrator == "auto" else integrator), h_first
+    return integrator, None
 
 
 def _compiled_bdf(request: RunRequest, family: str = "bdf") -> bool:

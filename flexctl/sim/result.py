@@ -236,7 +236,7 @@ def audit_energy(model: Model, result_arrays, reason: StopReason, message: str,
         return balance, message
     message = message.rstrip(".")
     if reason is not StopReason.REACHED_END and reason is not StopReason.TIP_PAST_LENGTH \
-            and model.variant != "consistent" and balance.violated:
+            and not model.variant.quadratic_inertia and balance.violated:
         spin = float(model.layout.hub_rate(result_arrays[1][:, -1]))
         if softened(model, spin):
             message = f"{message}: {stiffness_reason(model, spin)}"

@@ -14,9 +14,7 @@ import numpy as np
 
 from .digital import run_sampled
 from .drives import PrescribedDrive, TorqueDrive
-from .fixed_step import RK4_OMEGA_H
-from .embedded_rk import choose_hold
-from .request import check_atol, plan_integration, run_request, state_scale
+from .request import check_atol, plan_integration, plan_sampled, run_request, state_scale
 from .result import SimulationResult, output_samples, assemble_result, audit_energy
 from .stops import StopConditions, StopReason, tip_rows
 from .strategies import rk4_accuracy_note, strategy_for
@@ -62,7 +60,7 @@ def _integrate(request) -> tuple:
     model, hub_motion = request.model, request.hub_motion
     drive = (PrescribedDrive(model, hub_motion, request.x_init) if request.prescribed
              else TorqueDrive(model, request.torque, request.controller, request.x_init))
-    singular = model.variant == "consistent" and not request.prescribed
+    singular = model.variant.quadratic_inertia and not request.prescribed
     stops, plan = StopConditions(model, drive.layout, singular), plan_integration(request, drive)
     drive.check_inputs()
     symbolic = request.symbolic and (plan.method != "BDF" or plan.compiled)
@@ -97,21 +95,7 @@ def _simulate_sampled(request) -> SimulationResult:
         scale = check_atol(request.atol, scale, model.layout.names) / rtol
     stops = StopConditions(model, model.layout, singular=False)
     start = time.perf_counter()
-    integrator = request.method
-    if integrator == "rk4":
-        # the coarse rk4 step: RK4_OMEGA_H over the fastest mode, at the initial spin too
-        omega_max = max(float(model.natural_frequencies(0.0, hub="free")[-1]),
-                        request.spin_frequency)
-        h_max = RK4_OMEGA_H / omega_max
-    elif integrator in ("auto", "RK45"):
-        chosen, omega = choose_hold(model, request.controller.sample_time,
-                                    request.spin_frequency)
-        integrator = chosen if integrator == "auto" else integrator
-        # the first step of the embedded pair: a radian of the fastest pole
-        h_max = min(request.controller.sample_time,
-                    1.0 / omega if 0.0 < omega < np.inf else np.inf)
-    else:
-        h_max = None
+    integrator, h_max = plan_sampled(request)
     run = run_sampled(model, request.t_final, request.controller, request.x_init,
                       torque=request.torque, output_step=request.step, scale=scale, rtol=rtol,
                       bad_sample=stops.first_bad, check_accuracy=request.check_accuracy,

@@ -33,7 +33,7 @@ def model_reach(model: Model) -> np.ndarray:
     beam length for the small-deflection variants, which leave their range there;
     :data:`EXACT_CURL` lengths for the exact beam, which cannot, and stops only when its mean
     slope passes ``EXACT_CURL`` rad."""
-    return model.lengths * (EXACT_CURL if model.variant == "exact" else 1.0)
+    return model.lengths * (EXACT_CURL if model.variant.exact else 1.0)
 
 
 def reach_ratio(model: Model, q) -> np.ndarray:
@@ -89,7 +89,7 @@ def stiffness_reason(model: Model, spin: float) -> str:
         return (f"the hub rate reached {abs(spin):.4g} rad/s, whose square overflows the beam "
                 f"stiffness (first clamped frequency {w1:.4g} rad/s)")
     if lowest < 0.0:
-        if model.variant == "zero_order":
+        if not model.variant.dynamic_stiffening:
             term = "M_ff"
             extra = " (the zero_order model drops dynamic stiffening; use first_order)"
         else:
@@ -167,7 +167,7 @@ class StopConditions:
         # to J_0, which heavy point masses dominate: with 3e4 kg at the tip a J_0-based floor
         # stopped runs at 1e-4 kg m^2 of a true 1.16
         self.j_floor = (SINGULAR_FRACTION * float(model.effective_hub_inertia(
-            model.layout.zeros())) if model.variant == "consistent" else 0.0)
+            model.layout.zeros())) if model.variant.quadratic_inertia else 0.0)
         self._plant = slice(0, model.n_states)
         # each appendage's tip over the integrated states, divided by its reach: (K, n)
         self._scaled_tips = tip_rows(model, layout) / self.reach[:, None]
@@ -197,7 +197,7 @@ class StopConditions:
 
     def geometric(self) -> StopReason:
         """The stop of a run whose tip left the range of the model."""
-        return (StopReason.BEAM_CURLED if self.model.variant == "exact"
+        return (StopReason.BEAM_CURLED if self.model.variant.exact
                 else StopReason.TIP_PAST_LENGTH)
 
     def first_bad(self, y_seg) -> int | None:

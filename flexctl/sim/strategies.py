@@ -273,7 +273,7 @@ class CvodesSegments(_Segments):
         self._compiled_rhs = None
         # consistent keeps the Python right-hand side to locate a stop, which names a
         # singular mass matrix
-        if request.model.variant != "consistent":
+        if not request.model.variant.quadratic_inertia:
             self.fallback_rhs = self._compiled_fallback
 
     def _compiled_fallback(self, t, y):

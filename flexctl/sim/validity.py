@@ -9,7 +9,7 @@ every mode:
   :data:`ESTIMATE_MODES` modes, under the run's own inputs (torque, hub motion or controller)
   from the run's initial state, and returns their largest tip difference relative to the
   exact peak. The geometric nonlinearity lives in the low modes that carry the deflection, so
-  the few-mode difference tracks the difference of the full models (``tests/test_validity.py``
+  the few-mode difference tracks the difference of the full models (``tests/sim/test_validity.py``
   checks it on the papers' manoeuvres and slews, within a factor of 2).
 * :func:`assess` adds the deflection ratio, the run's own energy balance
   (:class:`~flexctl.sim.energy.EnergyBalance`, measured by :func:`flexctl.simulate` from
@@ -38,6 +38,7 @@ import numpy as np
 from ..model import build_model
 from ..model.build import rebuild
 from ..model.errors import InputValueError
+from ..model.variant import Variant
 from .fidelity import DEFAULT_TOLERANCE, maneuver_input, check_tolerance, is_prescribed
 from .energy import ENERGY_TOLERANCE, ModelValidityWarning
 from .inputs import as_vector
@@ -88,7 +89,7 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         ``max_t |tip_variant - tip_exact| / max_t |tip_exact|`` on ``n_modes`` modes; 0 for the
         exact variant; ``inf`` when one of the two runs stops early.
     """
-    if model.variant == "exact":
+    if model.variant.exact:
         return 0.0
     x0 = _checked_initial_state(model, x0)
     # a controller reads at least the modes it was designed on
@@ -202,7 +203,7 @@ class ModelValidity:
         how = "bounded (small deflection)" if self.screened else "estimated"
         text = (f"peak tip deflection {100 * self.deflection_ratio:.3g} % of the beam length; "
                 f"{how} geometric model error {self.geometric_error:.2g} of the peak")
-        if self.variant == "exact":
+        if Variant(self.variant).exact:
             return (f"peak tip deflection {100 * self.deflection_ratio:.3g} % of the beam "
                     "length; exact geometry")
         if self.t_end is not None and self.t_end <= 0.0:
@@ -242,16 +243,16 @@ def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors
     check_tolerance(tolerance)
     model = result.model
     ratio = float(result.deflection_ratio) if np.isfinite(result.deflection_ratio) else np.inf
-    if model.variant != "exact" and ratio > SCREEN_DEFLECTION:
+    if not model.variant.exact and ratio > SCREEN_DEFLECTION:
         return assess(result, torque=torque, hub_motion=hub_motion, controller=controller,
                       sensors=sensors, tolerance=tolerance, warn=warn)
     t_end = float(result.t[-1]) if result.t.size else 0.0
     validity = ModelValidity(variant=model.variant, deflection_ratio=ratio,
-                             geometric_error=0.0 if model.variant == "exact"
+                             geometric_error=0.0 if model.variant.exact
                              else SCREEN_FACTOR * ratio ** 2,
                              tolerance=float(tolerance),
                              energy_balance=getattr(result, "energy_balance", None),
-                             t_end=t_end, screened=model.variant != "exact")
+                             t_end=t_end, screened=not model.variant.exact)
     if warn and not validity.valid:
         warnings.warn(validity.message, ModelValidityWarning, stacklevel=3)
     return validity

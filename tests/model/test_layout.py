@@ -12,7 +12,7 @@ from flexctl import build_model, load_scene
 from flexctl.model.errors import InputValueError
 from flexctl.model.layout import StateLayout
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 #: Index arithmetic on a state vector: a subscript or ``np.r_`` that offsets a mode count by
 #: the hub's one or two entries (``x[1:n + 1]``, ``x[n + 2:]``, ``np.r_[0:m + 1, ...]``), a

@@ -10,7 +10,7 @@ import pytest
 
 import flexctl
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_nmpc.py"
+BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_nmpc.py"
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,7 @@ pytest.importorskip("myst_nb")
 pytest.importorskip("numpydoc")
 from sphinx.util.inventory import InventoryFile  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
 EXAMPLES = ROOT / "examples"
 EXECUTED = EXAMPLES / "_executed"
@@ -35,7 +35,7 @@ DOCUMENTED_AS_IS = ("flexctl", "controllers", "controllers.codegen")
 #: ``import flexctl`` gives the same object.
 LAYERS = ("flexctl.model", "flexctl.sim")
 
-#: After the notebooks, on their worker under pytest-xdist (tests/test_examples.py).
+#: After the notebooks, on their worker under pytest-xdist (tests/app/test_examples.py).
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("notebooks")]
 
 
@@ -181,7 +181,7 @@ def test_notebooks_are_rendered_with_their_outputs(html):
     executed = [n for n in notebooks if (EXECUTED / n.name).is_file()
                 and (EXECUTED / n.name).stat().st_mtime >= n.stat().st_mtime]
     if not executed:
-        pytest.skip("no executed notebooks (run tests/test_examples.py first): "
+        pytest.skip("no executed notebooks (run tests/app/test_examples.py first): "
                     "the site shows the notebooks without outputs")
     without_plots = [n.stem for n in executed
                      if not _page(html / "examples" / "notebooks" / f"{n.stem}.html").images]

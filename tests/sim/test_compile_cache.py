@@ -16,7 +16,7 @@ from flexctl.app.cli import main
 from flexctl.sim import compile_cache
 from flexctl.sim.compile_cache import CompileCacheWarning, compiled
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 needs_compiler = pytest.mark.skipif(compile_cache.compiler() is None,
                                     reason="no C compiler")

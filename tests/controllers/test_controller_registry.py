@@ -106,7 +106,7 @@ def test_cli_help_lists_every_kind_and_setting(capsys):
 def test_user_guide_names_every_kind_of_the_registry():
     from pathlib import Path
 
-    guide = Path(__file__).resolve().parents[1] / "docs" / "guide" / "controllers.md"
+    guide = Path(__file__).resolve().parents[2] / "docs" / "guide" / "controllers.md"
     text = guide.read_text()
     listed = text.split("--set controller.kind=", 1)[1].split("`", 1)[0].split("|")
     assert listed == list(CONTROLLER_KINDS)

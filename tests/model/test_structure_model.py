@@ -1,5 +1,5 @@
 """Contracts of the structure model (several appendages, pinned or free hub) that the
-independent reference (tests/test_structure_fe.py) does not cover: the one-appendage structure
+independent reference (tests/model/test_structure_fe.py) does not cover: the one-appendage structure
 is the one-beam model, the symmetric modes the torque cannot move, designs on the rest, and
 the refusals of what a free hub does not have."""
 

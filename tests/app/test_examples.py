@@ -16,14 +16,14 @@ jupytext = pytest.importorskip("jupytext")
 nbclient = pytest.importorskip("nbclient")
 nbformat = pytest.importorskip("nbformat")
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
 SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
 #: Where each executed notebook is saved with its outputs (git-ignored): the documentation site
 #: renders these copies, so it shows the plots without executing anything itself.
 EXECUTED = EXAMPLES / "_executed"
 #: With pytest-xdist, the notebooks run on one worker, before the site that renders them
-#: (``--dist loadgroup``; tests/test_site.py is in the same group).
+#: (``--dist loadgroup``; tests/app/test_site.py is in the same group).
 pytestmark = pytest.mark.xdist_group("notebooks")
 #: Seconds a notebook may run (they take 3 to 20 s alone on 2 cores).
 CELL_TIMEOUT = 240

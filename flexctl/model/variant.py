@@ -1,0 +1,118 @@
+"""The model variants as small objects: each says which terms it contributes (MODEL.md
+sections 4 and 7), and code asks it about those terms instead of comparing its name.
+
+============  ===============================  ==================  ============================
+variant       beam stiffness at spin rate w    hub inertia         geometry
+============  ===============================  ==================  ============================
+first_order   ``K_ff - w^2 (M_ff - K_g)``      ``J_0``             small deflection
+zero_order    ``K_ff - w^2 M_ff``              ``J_0``             small deflection
+consistent    ``K_ff - w^2 (M_ff - K_g)``      ``J_0 + q^T D q``   small deflection
+exact         first_order's, linearised        ``M(q)``            exact (slope-angle beam)
+============  ===============================  ==================  ============================
+
+A :class:`Variant` is a ``str`` (``"first_order"``, ...), so it is written, compared, printed
+and stored as its name; its properties are the terms it contributes.
+
+Examples
+--------
+>>> from flexctl.model.variant import Variant
+>>> Variant("consistent").quadratic_inertia, Variant("consistent") == "consistent"
+(True, True)
+>>> Variant("zero_order").dynamic_stiffening
+False
+"""
+
+from __future__ import annotations
+
+from .errors import InputTypeError, InputValueError
+from .exact import EXACT_MAX_MODES
+
+__all__ = ["Variant", "VARIANTS", "MAX_MODES"]
+
+#: The variants, from the usual design model to the most faithful one.
+VARIANTS = ("first_order", "zero_order", "consistent", "exact")
+#: Most cantilever modes per appendage of the small-deflection variants.
+MAX_MODES = 200
+
+# name: (dynamic stiffening, quadratic hub inertia, exact geometry)
+_TERMS = {
+    "first_order": (True, False, False),
+    "zero_order": (False, False, False),
+    "consistent": (True, True, False),
+    "exact": (True, False, True),
+}
+
+
+class Variant(str):
+    """A model variant: its name, and the terms it contributes.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`VARIANTS`.
+
+    Raises
+    ------
+    InputValueError, InputTypeError
+        For a name that is not one of :data:`VARIANTS`.
+    """
+
+    __slots__ = ()
+
+    def __new__(cls, name):
+        if isinstance(name, Variant):
+            return name
+        if not isinstance(name, str):
+            raise InputTypeError(f"variant must be one of {', '.join(VARIANTS)}; got "
+                                 f"{name!r}"[:300])
+        if name not in _TERMS:
+            raise InputValueError(f"variant must be one of {', '.join(VARIANTS)}; got "
+                                  f"{name!r}"[:300])
+        return super().__new__(cls, name)
+
+    def __reduce__(self):
+        return Variant, (str(self),)
+
+    @property
+    def dynamic_stiffening(self) -> bool:
+        """Whether the spin stiffens the beam (the geometric stiffness ``K_g``): the beam's
+        stiffness at spin rate ``w`` is ``K_ff - w^2 D``, ``D = M_ff - K_g``; without it
+        (zero_order) ``K_ff - w^2 M_ff``, which loses its stiffness above the first clamped
+        frequency."""
+        return _TERMS[self][0]
+
+    @property
+    def quadratic_inertia(self) -> bool:
+        """Whether the hub inertia grows with the deflection, ``J(q) = J_0 + q^T D q``, with its
+        Coriolis term ``2 w q^T D q_t`` (consistent): energy-consistent, and the effective hub
+        inertia may reach zero (a singular mass matrix) on a light hub."""
+        return _TERMS[self][1]
+
+    @property
+    def exact(self) -> bool:
+        """Whether positions and velocities are geometrically exact (the slope-angle beam of
+        MODEL.md section 7, its mass matrix ``M(q)`` by quadrature): the variant for large
+        deflection, with a regular mass matrix for a massless hub."""
+        return _TERMS[self][2]
+
+    @property
+    def max_modes(self) -> int:
+        """Most modes per appendage this variant takes (the exact geometry grows as the square
+        of the modes times the quadrature points)."""
+        return EXACT_MAX_MODES if self.exact else MAX_MODES
+
+    def spin_matrix(self, matrices):
+        """The matrix that the square of the spin rate takes from the beam's stiffness:
+        ``D = M_ff - K_g`` with dynamic stiffening, ``M_ff`` without.
+
+        Parameters
+        ----------
+        matrices : ModalMatrices or StructureMatrices
+            The model's modal matrices.
+
+        Returns
+        -------
+        ndarray, shape (N, N)
+            kg.
+        """
+        return matrices.D if self.dynamic_stiffening else matrices.M_ff
