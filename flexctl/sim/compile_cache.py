@@ -577,6 +577,18 @@ def jacobian_companion(function, fixed=()):
     compiled function whose callers take first derivatives only (an integrator's Newton
     iterations).
 
+    Parameters
+    ----------
+    function : casadi.Function
+        An SX function with dense inputs.
+    fixed : sequence of int, optional
+        Inputs held constant: their Jacobian blocks are structurally zero. Default none.
+
+    Returns
+    -------
+    casadi.Function
+        ``jac_<name>``, with CasADi's ``jacobian()`` signature.
+
     Examples
     --------
     >>> import casadi as ca

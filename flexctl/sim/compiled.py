@@ -57,6 +57,11 @@ def is_symbolic(torque=None, hub_motion=None, controller=None) -> bool:
     and ``casadi_derivative(t, x, z)`` (with internal states ``z``). An object whose form
     depends on what it wraps (a shaped command, a reference) says whether it has one with a
     ``has_casadi_form`` attribute (default True).
+
+    Parameters
+    ----------
+    torque, hub_motion, controller : object or None, optional
+        The run's inputs, as :func:`flexctl.simulate` takes them; None is not looked at.
     """
     if torque is not None and not _has_form(torque, "casadi"):
         return False
@@ -129,7 +134,21 @@ def input_numbers(inputs) -> np.ndarray:
 
 def split_numbers(inputs, c) -> list:
     """``c`` (a CasADi symbol laid out as :func:`input_numbers`) cut into each input's part
-    (None for an input without parameters)."""
+    (None for an input without parameters).
+
+    Parameters
+    ----------
+    inputs : tuple
+        ``(torque, hub_motion, controller)``, each None or an input as
+        :func:`flexctl.simulate` takes it.
+    c : casadi.SX or casadi.MX, shape (C, 1)
+        The numbers of the parametric inputs, in the order of :func:`input_numbers`.
+
+    Returns
+    -------
+    list
+        Three entries: each input's slice of ``c``, or None.
+    """
     parts, start = [], 0
     for source in inputs:
         size = _parameter_values(source).size
@@ -161,7 +180,24 @@ def _applied_torque(t, x, z, torque, controller, parameters=(None, None)):
 
 def hub_motion_casadi(hub_motion, t, parameters=None) -> tuple:
     """Rate and acceleration of a hub motion on the symbol ``t`` (its numbers the symbols
-    ``parameters`` where given)."""
+    ``parameters`` where given).
+
+    Parameters
+    ----------
+    hub_motion : object
+        A hub motion with a CasADi form: ``casadi(t)``, or ``casadi(t, parameters)`` when it is
+        parametric.
+    t : casadi.SX or casadi.MX
+        Scalar time, s.
+    parameters : casadi.SX or casadi.MX, optional
+        The hub motion's numbers as symbols (its part of :func:`split_numbers`); None: its
+        numbers are constants.
+
+    Returns
+    -------
+    tuple
+        ``(rate, acceleration)``, CasADi expressions in rad/s and rad/s^2.
+    """
     if parameters is not None:
         return hub_motion.casadi(t, parameters)
     return hub_motion.casadi(t)
@@ -169,7 +205,16 @@ def hub_motion_casadi(hub_motion, t, parameters=None) -> tuple:
 
 def drive_size(model, hub_motion=None, controller=None) -> int:
     """Length of the state a run integrates: the beam's alone under a prescribed hub motion,
-    else the plant's and the controller's."""
+    else the plant's and the controller's.
+
+    Parameters
+    ----------
+    model : Model
+    hub_motion : object, optional
+        The prescribed hub motion, if any.
+    controller : object, optional
+        The controller; its ``n_states`` internal states are integrated with the plant.
+    """
     if hub_motion is not None:
         return model.layout.without_rotation().n_states
     return model.n_states + int(getattr(controller, "n_states", 0) or 0)
@@ -177,11 +222,30 @@ def drive_size(model, hub_motion=None, controller=None) -> int:
 
 def closed_loop_dynamics(model, t, y, torque, controller, parameters=None, rhs=None):
     """CasADi ``d[x, z]/dt`` of the plant ``x`` under ``torque`` and ``controller``, whose
-    internal states ``z`` (if any) follow ``casadi_derivative``; ``parameters`` the symbol of
-    their numbers (:func:`input_numbers` of ``(torque, None, controller)``). On SX symbols the
-    model is inlined; on MX (the exact model's fixed-step step) it enters through ``rhs``
-    (``(x, u) -> xdot``: a call of its scalar form, its numbers an input), by default
-    :meth:`flexctl.Model.integration_rhs`, whose code does not grow with the quadrature."""
+    internal states ``z`` (if any) follow ``casadi_derivative``. On SX symbols the model is
+    inlined; on MX (the exact model's fixed-step step) it enters through ``rhs``, whose code
+    does not grow with the quadrature.
+
+    Parameters
+    ----------
+    model : Model
+    t : casadi.SX or casadi.MX
+        Scalar time, s.
+    y : casadi.SX or casadi.MX, shape (m, 1)
+        The drive's state ``[x, z]``: the plant's ``n`` states, then the controller's.
+    torque, controller : object or None
+        The run's inputs, with CasADi forms (:func:`is_symbolic`).
+    parameters : casadi.SX or casadi.MX, optional
+        The symbol of their numbers (:func:`input_numbers` of ``(torque, None, controller)``);
+        None: their numbers are constants.
+    rhs : casadi.Function, optional
+        ``(x, u) -> xdot``, used on MX only: a call of the model's scalar form, its numbers an
+        input. Default :meth:`flexctl.Model.integration_rhs`.
+
+    Returns
+    -------
+    casadi.SX or casadi.MX, shape (m, 1)
+    """
     import casadi as ca
 
     u, dz = drive_terms(model, t, y, torque, controller, parameters)
@@ -195,7 +259,27 @@ def closed_loop_dynamics(model, t, y, torque, controller, parameters=None, rhs=N
 
 def drive_terms(model, t, y, torque, controller, parameters=None) -> tuple:
     """The hub torque ``u`` and the controller's ``dz/dt`` (None without internal states) at
-    ``y = [x, z]``, as CasADi expressions."""
+    ``y = [x, z]``, as CasADi expressions.
+
+    Parameters
+    ----------
+    model : Model
+    t : casadi.SX or casadi.MX
+        Scalar time, s.
+    y : casadi.SX or casadi.MX, shape (m, 1)
+        The drive's state ``[x, z]``: the plant's ``n`` states, then the controller's.
+    torque, controller : object or None
+        The run's inputs, with CasADi forms (:func:`is_symbolic`).
+    parameters : casadi.SX or casadi.MX, optional
+        The symbol of their numbers (:func:`input_numbers` of ``(torque, None, controller)``);
+        None: their numbers are constants.
+
+    Returns
+    -------
+    tuple
+        ``(u, dz)``: the plant's input (the hub torque, N m, or an actuator's command) and
+        ``dz/dt`` (shape (n_z, 1)) or None.
+    """
     x, z = y[:model.n_states], y[model.n_states:]
     numbers = (None, None)
     if parameters is not None:
@@ -280,6 +364,17 @@ def input_key(model, inputs, scale):
     Inputs count by identity, except parametric ones (:func:`_parametric`), which count by
     their class and structure: inputs that differ only in numbers share one right-hand side
     and its integrators.
+
+    Parameters
+    ----------
+    model : Model
+        Counts by identity.
+    inputs : tuple
+        ``(torque, hub_motion, controller)``, each None or an input; all must be immutable (None
+        or a frozen dataclass) for a key.
+    scale : ndarray
+        Each integrated state's physical size (its bytes are part of the key); callers whose
+        function does not depend on it pass a tag of their own (e.g. ``np.array([1.0])``).
     """
     if not all(_immutable(source) for source in inputs):
         return None
@@ -290,7 +385,21 @@ def input_key(model, inputs, scale):
 
 def cached_build(cache, size, key, keep_alive, build):
     """``build()``, remembered under ``key`` (None: not remembered). ``keep_alive`` holds the
-    objects whose ``id`` is in the key, so that no other object can take their ids."""
+    objects whose ``id`` is in the key, so that no other object can take their ids.
+
+    Parameters
+    ----------
+    cache : collections.OrderedDict
+        Entries ``key -> (keep_alive, value)``, least recently used first.
+    size : int
+        Most entries kept; the least recently used are dropped beyond it.
+    key : hashable or None
+        E.g. from :func:`input_key`.
+    keep_alive : object
+        Stored with the value (e.g. ``(model, torque, hub_motion, controller)``).
+    build : callable
+        ``build()`` makes the value; called only when ``key`` is new or None.
+    """
     if key is None:
         return build()
     if key in cache:
@@ -341,6 +450,12 @@ def numeric_rhs(model, torque=None, hub_motion=None, controller=None):
     inputs are evaluated (the end of the current smooth segment). SciPy's integrators call
     it where a compiled segment failed: a few microseconds a call, against a few hundred for
     the Python model.
+
+    Parameters
+    ----------
+    model : Model
+    torque, hub_motion, controller : object or None, optional
+        As in :func:`flexctl.simulate`; each must pass :func:`is_symbolic`.
     """
     n_y = drive_size(model, hub_motion, controller)
     scale = np.ones(n_y)
@@ -414,7 +529,15 @@ def min_step_fraction(t_end: float, length: float) -> float:
     """CVODES's shortest step over a segment of ``length`` s ending at ``t_end`` s, as a
     fraction of the segment: a step this small means a singularity, not accuracy, so the run
     fails fast and the caller locates it (a power of ten, so that segments share
-    integrators)."""
+    integrators).
+
+    Parameters
+    ----------
+    t_end : float
+        End of the segment, s.
+    length : float
+        Length of the segment, s (> 0).
+    """
     return 10.0 ** np.floor(np.log10(1e-12 * max(1.0, t_end) / length))
 
 
@@ -500,7 +623,23 @@ class SegmentIntegrator:
     def moved(self, t_start: float, t_end: float, numbers) -> "SegmentIntegrator":
         """This integrator on another segment of the same shape: from ``t_start`` to
         ``t_end`` (s), with the output times at the same offsets, the same
-        :func:`min_step_fraction` and the inputs' ``numbers`` (:func:`input_numbers`)."""
+        :func:`min_step_fraction` and the inputs' ``numbers`` (:func:`input_numbers`).
+
+        Parameters
+        ----------
+        t_start : float
+            Start of the new segment, s (finite).
+        t_end : float
+            End of the new segment, s (finite, > ``t_start``).
+        numbers : sequence of float
+            The inputs' numbers (:func:`input_numbers`), as many as this integrator's and all
+            finite.
+
+        Returns
+        -------
+        SegmentIntegrator
+            A copy; this one is unchanged.
+        """
         t_start, t_end = float(t_start), float(t_end)
         numbers = [float(v) for v in numbers]
         if not (np.isfinite(t_start) and np.isfinite(t_end) and t_end > t_start):
@@ -562,6 +701,19 @@ def segment_integrators(model, segments, scale, rtol, **options) -> list:
 
     Building them is CasADi symbolic work, which must stay in one thread; calling them
     (:func:`run_segments`) is numeric and may run on another.
+
+    Parameters
+    ----------
+    model : Model
+    segments : list of (float, ndarray)
+        ``(t_start, t_out)`` per segment, as for :class:`SegmentIntegrator`.
+    scale : ndarray, shape (m,)
+        Physical size of each integrated state.
+    rtol : float
+        Relative tolerance; the absolute tolerance is ``rtol * scale``.
+    **options
+        The other arguments of :class:`SegmentIntegrator` (``torque``, ``hub_motion``,
+        ``controller``, ``max_steps``, ``solver``, ``max_order``, ``max_step``, ``multistep``).
     """
     return [SegmentIntegrator(model, t_start, t_out, scale, rtol, **options)
             for t_start, t_out in segments]
@@ -570,7 +722,17 @@ def segment_integrators(model, segments, scale, rtol, **options) -> list:
 def run_segments(integrators, y0, cancelled=None) -> tuple:
     """``(states, n_evaluations)`` of ``integrators`` chained from ``y0`` (see
     :func:`integrate_segments`); ``cancelled``, a ``threading.Event``, is looked at before
-    each segment and stops the run with a ``RuntimeError`` once set."""
+    each segment and stops the run with a ``RuntimeError`` once set.
+
+    Parameters
+    ----------
+    integrators : sequence of SegmentIntegrator
+        Consecutive segments, each starting where the previous one's outputs end.
+    y0 : array_like, shape (m,)
+        State at the first segment's start.
+    cancelled : threading.Event, optional
+        Default: never cancelled.
+    """
     blocks, n_eval, y = [], 0, np.asarray(y0, dtype=float)
     for integ in integrators:
         if cancelled is not None and cancelled.is_set():
@@ -626,6 +788,20 @@ def check_run(model, segments, y0, scale, rtol, **options):
     ``(states, n_evaluations)``, or None if it failed.
 
     It needs only the run's plan, not its result: :func:`start_check` runs it beside the run.
+
+    Parameters
+    ----------
+    model : Model
+    segments : list of (float, ndarray)
+        ``(t_start, t_out)`` per segment, as for :func:`integrate_segments`.
+    y0 : ndarray, shape (m,)
+        State at the first segment's start.
+    scale : ndarray, shape (m,)
+        Physical size of each integrated state.
+    rtol : float
+        The run's relative tolerance (the check's is ``CHECK_FACTOR`` times it).
+    **options
+        As for :func:`integrate_segments`.
     """
     return start_check(model, segments, y0, scale, rtol, beside=False, **options).result()
 
@@ -641,6 +817,28 @@ def start_check(model, segments, y0, scale, rtol, beside=True, **options):
     budget ``max_steps`` (between output times, as the run's) grows with the check's wider
     output spacing: a check abandoned by a run that stopped early (a diverging one, say)
     then gives up when the run would have, rather than integrating on for minutes.
+
+    Parameters
+    ----------
+    model : Model
+    segments : list of (float, ndarray)
+        ``(t_start, t_out)`` per segment, as for :func:`integrate_segments`.
+    y0 : ndarray, shape (m,)
+        State at the first segment's start.
+    scale : ndarray, shape (m,)
+        Physical size of each integrated state.
+    rtol : float
+        The run's relative tolerance (the check's is ``CHECK_FACTOR`` times it).
+    beside : bool, optional
+        Run on a spare core now (default True), else in the caller's thread when the result is
+        asked for.
+    **options
+        As for :func:`integrate_segments`; ``max_steps`` is scaled as above.
+
+    Returns
+    -------
+    Beside
+        Its ``result()`` is ``(states, n_evaluations)`` or None, as :func:`check_run`'s.
     """
     import threading
 

@@ -177,7 +177,17 @@ def bdf_available(model, torque=None, hub_motion=None, controller=None,
                   family: str = "bdf") -> bool:
     """Whether :class:`BdfRun` can integrate this drive with ``family``: every input with a
     CasADi form, compiling on, a C compiler, and a drive whose right-hand side and Jacobian
-    are small enough to compile (built, and compiled, here if not yet)."""
+    are small enough to compile (built, and compiled, here if not yet).
+
+    Parameters
+    ----------
+    model : Model
+        The plant; the consistent variant never has a compiled integrator.
+    torque, hub_motion, controller : object or None, optional
+        The run's inputs, as :func:`flexctl.simulate` takes them.
+    family : {"bdf", "adams"}, optional
+        The formulas (:data:`FAMILIES`). Default ``"bdf"``.
+    """
     if not is_symbolic(torque=torque, hub_motion=hub_motion, controller=controller):
         return False
     return _built(model, (torque, hub_motion, controller), family) is not None

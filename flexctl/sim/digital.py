@@ -61,7 +61,17 @@ class ControllerSession(Protocol):
 
     def step(self, t: float, x: np.ndarray) -> float:
         """Torque (N m) to hold from sample time ``t`` (s) to the next, given the plant state
-        ``x`` measured at ``t``, shape (n,)."""
+        ``x`` measured at ``t``, shape (n,).
+
+        Parameters
+        ----------
+        t : float
+            Sample time, s.
+        x : ndarray, shape (n,) or (m,)
+            The plant state at ``t``, in the order of ``model.layout``; for a controller that
+            reads sensors (``measures = True``), their ``m`` readings instead
+            (:func:`flexctl.sim.sensors.sensor_names`).
+        """
 
     def report(self) -> dict:
         """What the run did (JSON-serialisable): solve times, iterations, failures..."""
@@ -80,7 +90,19 @@ class SampledController(Protocol):
     sample_time: float
 
     def start(self, model, x0: np.ndarray) -> ControllerSession:
-        """A fresh session for a run of ``model`` from the plant state ``x0``."""
+        """A fresh session for a run of ``model`` from the plant state ``x0``.
+
+        Parameters
+        ----------
+        model : Model
+            The plant of the run.
+        x0 : ndarray, shape (n,)
+            Initial plant state, in the order of ``model.layout``.
+
+        Returns
+        -------
+        ControllerSession
+        """
 
 
 def is_sampled(controller) -> bool:
@@ -90,6 +112,27 @@ def is_sampled(controller) -> bool:
 
 
 def check_sample_time(owner: str, value) -> float:
+    """A sample time checked: a positive, finite number of seconds, as a float.
+
+    Parameters
+    ----------
+    owner : str
+        What to name in an error (e.g. ``"ZeroOrderHold"``).
+    value : int or float
+        The sample time, s.
+
+    Returns
+    -------
+    float
+        ``value``, s.
+
+    Raises
+    ------
+    InputTypeError
+        If ``value`` is not a number (a bool is not).
+    InputValueError
+        If it is not positive and finite.
+    """
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise InputTypeError(f"{owner} sample_time must be a number of seconds; got "
                              f"{type(value).__name__} {value!r}")
@@ -157,7 +200,19 @@ class ZeroOrderHold:
 
     def start(self, model, x0) -> ControllerSession:
         """A session evaluating the law at each sample (a law that reads the plant by its
-        layout bound to ``model``'s, as :func:`flexctl.simulate` binds continuous ones)."""
+        layout bound to ``model``'s, as :func:`flexctl.simulate` binds continuous ones).
+
+        Parameters
+        ----------
+        model : Model
+            The plant of the run.
+        x0 : ndarray, shape (n,)
+            Initial plant state; not used (the law has no state of its own).
+
+        Returns
+        -------
+        ControllerSession
+        """
         law = bound_to_plant(self.law, model)
         if callable(getattr(law, "torque", None)) and hasattr(law, "n_states"):
             z = np.zeros(0)
@@ -382,11 +437,16 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
         stopping condition, or None.
     check_accuracy : bool
         Estimate the integration error (see :class:`SampledRun`).
+    max_steps : int, optional
+        Step budget of one sample: CVODES's ``max_num_steps``, or the pair's step attempts
+        (accepted or not) per output time; unused by ``"rk4"``. Default 100 000.
     integrator : {"cvodes", "RK45", "rk4"}
         Error-controlled CVODES from sample to sample; error-controlled Dormand-Prince 5(4)
-        steps whose size carries over from sample to sample, the first ``h_max`` (s)
-        (:class:`~flexctl.sim.embedded_rk.EmbeddedHold`); or compiled fixed-step RK4 with
-        steps of at most ``h_max``.
+        steps whose size carries over from sample to sample
+        (:class:`~flexctl.sim.embedded_rk.EmbeddedHold`); or compiled fixed-step RK4.
+    h_max : float or None
+        For ``"RK45"`` the first step tried, s; for ``"rk4"`` the longest step, s (required);
+        unused by ``"cvodes"``.
     sensors : Sensors, optional
         The controller's session gets their readings (:mod:`flexctl.sim.sensors`) instead of
         the state; they are recorded in ``measurements``.

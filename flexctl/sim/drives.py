@@ -40,10 +40,30 @@ class Controller(Protocol):
         """Internal state at ``t = 0`` given the plant's initial state, shape (n_states,)."""
 
     def torque(self, t: float, x: np.ndarray, z: np.ndarray) -> float:
-        """Hub torque (N m) at time ``t`` for plant state ``x`` and internal state ``z``."""
+        """Hub torque (N m) at time ``t`` for plant state ``x`` and internal state ``z``.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : ndarray, shape (n,)
+            Plant state, in the order of ``model.layout``.
+        z : ndarray, shape (n_states,)
+            Internal state.
+        """
 
     def derivative(self, t: float, x: np.ndarray, z: np.ndarray) -> np.ndarray:
-        """``dz/dt``, shape (n_states,)."""
+        """``dz/dt``, shape (n_states,).
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : ndarray, shape (n,)
+            Plant state, in the order of ``model.layout``.
+        z : ndarray, shape (n_states,)
+            Internal state.
+        """
 
 
 @dataclass(frozen=True, eq=False)
@@ -79,18 +99,47 @@ class StaticLaw:
         return np.zeros(0)
 
     def torque(self, t, x, z=None) -> float:
-        """Hub torque, N m."""
+        """Hub torque, N m.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : ndarray, shape (n,)
+            Plant state, in the order of ``model.layout``.
+        z : ndarray, shape (0,), optional
+            Ignored (no internal state).
+        """
         return self.law(t, x)
 
     def derivative(self, t, x, z=None) -> np.ndarray:
-        """No internal state: shape (0,)."""
+        """No internal state: shape (0,).
+
+        Parameters
+        ----------
+        t : float
+            Time, s. Ignored.
+        x : ndarray, shape (n,)
+            Plant state. Ignored.
+        z : ndarray, shape (0,), optional
+            Ignored.
+        """
         return np.zeros(0)
 
 
 def bound_to_plant(law, model):
     """``law`` reading the states of plant ``model``: a law that reads the plant by its
     layout (``for_plant``, ``plant_layout`` still None) bound to ``model``'s, since a bare state
-    does not tell its blocks (several appendages, an actuator's states); else ``law``."""
+    does not tell its blocks (several appendages, an actuator's states); else ``law``.
+
+    Parameters
+    ----------
+    law : object
+        A feedback law or controller; bound only when it has a callable ``for_plant`` and its
+        ``plant_layout`` is None.
+    model : Model
+        The plant whose states the law reads.
+    """
     if callable(getattr(law, "for_plant", None)) and getattr(law, "plant_layout", 0) is None:
         return law.for_plant(model)
     return law
@@ -98,7 +147,16 @@ def bound_to_plant(law, model):
 
 def as_controller(controller, x_init):
     """``controller`` as a :class:`Controller`: a callable ``(t, x)`` becomes a
-    :class:`StaticLaw` whose errors name it with the time; anything else is refused by name."""
+    :class:`StaticLaw` whose errors name it with the time; anything else is refused by name.
+
+    Parameters
+    ----------
+    controller : callable, Controller or None
+        The ``controller`` argument of :func:`flexctl.simulate`; None and a :class:`Controller`
+        are returned as they are.
+    x_init : ndarray, shape (n,)
+        Initial plant state, used to check that a callable takes ``(t, x)``.
+    """
     if controller is None or isinstance(controller, Controller):
         return controller
     if not callable(controller):
@@ -161,7 +219,16 @@ class PrescribedDrive(_Drive):
         self.y_init = x_init[model.layout.beam]
 
     def rhs(self, t, y):
-        """``d[q, q_dot]/dt`` under the prescribed rate and acceleration."""
+        """``d[q, q_dot]/dt`` under the prescribed rate and acceleration.
+
+        Parameters
+        ----------
+        t : float
+            Time, s; held to the end of the current segment for the inputs.
+        y : ndarray, shape (m,)
+            Integrated state ``[q, q_dot]`` (the beam's modal coordinates and rates), in the order
+            of ``self.layout``.
+        """
         beam, motion = self.layout, self.hub_motion
         t = self.inside(t)
         qdd = self.model.beam_accelerations(
@@ -175,12 +242,37 @@ class PrescribedDrive(_Drive):
         self.rhs(0.0, self.y_init)
 
     def plant_state(self, t, y):
-        """The plant states at times ``t`` (shape (P,)) from the integrated ``y`` (m, P)."""
+        """The plant states at times ``t`` (shape (P,)) from the integrated ``y`` (m, P).
+
+        Parameters
+        ----------
+        t : array_like, shape (P,)
+            Times, s, at which the hub motion gives the angle and rate.
+        y : ndarray, shape (m, P)
+            Integrated ``[q, q_dot]`` at those times.
+
+        Returns
+        -------
+        ndarray, shape (n, P)
+            Plant states in the order of ``model.layout``.
+        """
         t = np.asarray(t)
         return self.model.layout.from_beam(y, self.hub_motion.angle(t), self.hub_motion.rate(t))
 
     def torque_output(self, t_all, states, z_all, symbolic):
-        """The torque the motion needs, N m, shape (P,)."""
+        """The torque the motion needs, N m, shape (P,).
+
+        Parameters
+        ----------
+        t_all : ndarray, shape (P,)
+            Output times, s.
+        states : ndarray, shape (n, P)
+            Plant states at those times.
+        z_all : ndarray, shape (0, P)
+            Controller states; ignored (a prescribed motion has no controller).
+        symbolic : bool
+            Whether every input has a CasADi form; ignored here.
+        """
         model = self.model
         acc = self.hub_motion.acceleration(t_all)
         native = prescribed_torque(model, states, acc)
@@ -214,14 +306,32 @@ class TorqueDrive(_Drive):
         return y[self.layout.block("controller")] if self.nz else y[:0]
 
     def applied_torque(self, t, x, z):
-        """The hub torque, N m: the torque input plus the controller's."""
+        """The hub torque, N m: the torque input plus the controller's.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        x : ndarray, shape (n,)
+            Plant state, in the order of ``model.layout``.
+        z : ndarray, shape (n_z,)
+            The controller's internal state.
+        """
         u = self.torque_fn(t, x) if self.torque_fn is not None else 0.0
         if self.controller is not None:
             u += input_value("controller", self.controller.torque(t, x, z), t)
         return u
 
     def rhs(self, t, y):
-        """``d[x, z]/dt``."""
+        """``d[x, z]/dt``.
+
+        Parameters
+        ----------
+        t : float
+            Time, s; the inputs are evaluated at it held to the end of the current segment.
+        y : ndarray, shape (m,)
+            Integrated state ``[x, z]``: the plant's ``n`` states, then the controller's ``n_z``.
+        """
         x, z = y[self.plant], self._z(y)
         dx = self.model.dynamics(t, x, self.applied_torque(self.inside(t), x, z))
         if not self.nz:
@@ -237,14 +347,40 @@ class TorqueDrive(_Drive):
         self.applied_torque(0.0, self.y_init[self.plant], self._z(self.y_init))
 
     def plant_state(self, t, y):
-        """The plant states from the integrated ``y``."""
+        """The plant states from the integrated ``y``.
+
+        Parameters
+        ----------
+        t : array_like
+            Times, s; ignored (the plant states are integrated).
+        y : ndarray, shape (m,) or (m, P)
+            Integrated ``[x, z]``.
+
+        Returns
+        -------
+        ndarray, shape (n,) or (n, P)
+            The first ``n`` rows of ``y``.
+        """
         return y[self.plant]
 
     def controller_states(self, y_all) -> np.ndarray:
         return self._z(y_all)
 
     def torque_output(self, t_all, states, z_all, symbolic):
-        """The hub torque over the run, N m, shape (P,)."""
+        """The hub torque over the run, N m, shape (P,).
+
+        Parameters
+        ----------
+        t_all : ndarray, shape (P,)
+            Output times, s.
+        states : ndarray, shape (n, P)
+            Plant states at those times.
+        z_all : ndarray, shape (n_z, P)
+            The controller's internal states at those times.
+        symbolic : bool
+            Every input has a CasADi form (``RunRequest.symbolic``): the torque is then evaluated
+            from that form over the whole run at once.
+        """
         torque, controller = self.torque, self.controller
         out = None
         if controller is None and (torque is None or symbolic) \

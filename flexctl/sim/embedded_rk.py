@@ -102,6 +102,17 @@ class HeldTorque:
     n_states = 0
 
     def torque(self, t, x, z=None):
+        """The held torque, N m, whatever the time and state.
+
+        Parameters
+        ----------
+        t : float
+            Time, s; not used.
+        x : ndarray, shape (n,)
+            Plant state; not used.
+        z : ndarray, optional
+            Internal state; not used (there is none).
+        """
         return self.value
 
     @property
@@ -109,6 +120,18 @@ class HeldTorque:
         return ("held",), (self.value,)
 
     def casadi_torque(self, t, x, parameters=None):
+        """The held torque as a CasADi expression: its number, taken as a symbol.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s; not used.
+        x : casadi.SX or casadi.MX
+            Plant state; not used.
+        parameters : casadi.SX or casadi.MX, shape (1, 1)
+            The held torque's number as a symbol (its part of
+            :func:`~flexctl.sim.compiled.split_numbers`), N m. Required despite its default.
+        """
         return parameters[0]
 
 
@@ -192,7 +215,18 @@ def choose_hold(model, sample_time: float, spin_frequency: float = 0.0) -> tuple
     :class:`EmbeddedHold`) when the fastest pole ``omega`` (1/s) of the plant under a held
     torque (the largest eigenvalue of its linearisation at rest, its actuator's included),
     or the spin frequency, times ``sample_time`` is at most :data:`STIFF_SAMPLE`; else
-    ``"cvodes"``."""
+    ``"cvodes"``.
+
+    Parameters
+    ----------
+    model : Model
+        The plant, its actuator included.
+    sample_time : float
+        The controller's sample interval, s (> 0).
+    spin_frequency : float, optional
+        Fastest beam frequency at the initial hub rate, rad/s (its magnitude is taken).
+        Default 0.
+    """
     from ..model import Model
 
     check_instance("choose_hold", "model", model, Model)
@@ -293,7 +327,26 @@ def checked_run_arguments(owner: str, model, inputs, scale, rtol, max_steps, h_f
     """The arguments of a continuous run's compiled steps (:class:`EmbeddedRun`,
     :class:`~flexctl.sim.compiled_bdf.BdfRun`) checked, each refused by name:
     ``(m, scale, rtol, max_steps, h_first, max_step)``, ``m`` the drive's size and
-    ``max_step`` ``inf`` when None."""
+    ``max_step`` ``inf`` when None.
+
+    Parameters
+    ----------
+    owner : str
+        The class to name in an error.
+    model : Model
+    inputs : tuple
+        ``(torque, hub_motion, controller)``, each None or an input with a CasADi form.
+    scale : array_like, shape (m,)
+        Physical size of each integrated state (> 0).
+    rtol : float
+        Relative tolerance, in (0, 1].
+    max_steps : int
+        Most step attempts between two output times (>= 1).
+    h_first : float
+        The first step tried, s (> 0).
+    max_step : float or None
+        Longest step, s (> 0); None or ``inf``: none.
+    """
     from ..model import Model
 
     check_instance(owner, "model", model, Model)

@@ -167,6 +167,18 @@ def rigid_slew_torque(system: HubBeam, slew: Slew) -> SineTorque:
     ``theta = A (t/T - sin(2 pi t/T) / (2 pi))`` gives ``J_0 theta_tt = (2 pi J_0 A / T^2)
     sin(2 pi t / T)``. A free duration takes the shortest ``T`` whose peak torque is the bound.
 
+    Parameters
+    ----------
+    system : HubBeam
+        Gives the rigid inertia ``J_0``, kg m^2.
+    slew : Slew
+        The slew angle ``A`` (rad), and its duration ``T`` (s) or torque bound (N m).
+
+    Returns
+    -------
+    SineTorque
+        Peak torque ``2 pi J_0 A / T^2``, N m, over the duration ``T``, s.
+
     Raises
     ------
     ValueError
@@ -183,6 +195,16 @@ def rigid_slew_torque(system: HubBeam, slew: Slew) -> SineTorque:
 
 
 def maneuver_input(system: HubBeam, maneuver):
+    """What drives the hub in a manoeuvre: a slew's rigid cycloidal torque
+    (:func:`rigid_slew_torque`), any other manoeuvre as it is.
+
+    Parameters
+    ----------
+    system : HubBeam
+        Gives the rigid inertia of a slew's torque.
+    maneuver : SpinUp, SineTorque, Slew or similar
+        A prescribed hub motion, a torque ``f(t)`` (N m) or a :class:`~flexctl.sim.maneuvers.Slew`.
+    """
     return rigid_slew_torque(system, maneuver) if isinstance(maneuver, Slew) else maneuver
 
 
@@ -212,6 +234,16 @@ def largest_spin_rate(system: HubBeam, maneuver, t) -> float:
 
     The prescribed rate for a hub motion; for a torque, the rigid-body rate
     ``integral_0^t T dt / J_0`` (the beam taken rigid).
+
+    Parameters
+    ----------
+    system : HubBeam
+        Gives the rigid inertia ``J_0``, kg m^2.
+    maneuver : SpinUp, SineTorque, Slew or similar
+        A prescribed hub motion, a torque ``f(t)`` (N m) or a slew (its
+        :func:`rigid_slew_torque`).
+    t : array_like, shape (P,)
+        Ascending times from 0, s; the torque's integral is the trapezoidal rule over them.
     """
     t = np.asarray(t, dtype=float)
     maneuver = maneuver_input(system, maneuver)

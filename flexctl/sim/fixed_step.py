@@ -75,7 +75,18 @@ def drive_symbols(model, torque, hub_motion, controller, n_numbers: int) -> dict
     (the drive's state size), ``c`` (the inputs' numbers, ``n_numbers`` rows), ``numbers``
     (the exact model's lifted numbers as a symbol, else None) with their values
     ``lifted_values``, and ``f(time, state)``, the drive's derivative (plant and controller
-    states, or ``[q, q_dot]`` under a prescribed hub motion) on them."""
+    states, or ``[q, q_dot]`` under a prescribed hub motion) on them.
+
+    Parameters
+    ----------
+    model : Model
+    torque, hub_motion, controller : object or None
+        The run's inputs, each with a CasADi form (:func:`~flexctl.sim.compiled.is_symbolic`).
+    n_numbers : int
+        Rows of ``c``: the size of the inputs' numbers
+        (:func:`~flexctl.sim.compiled.input_numbers`), plus any the caller appends (a sampled
+        hold's torque).
+    """
     import casadi as ca
 
     sym = ca.MX if model.variant.exact else ca.SX
@@ -106,7 +117,20 @@ def step_function(model, torque, hub_motion, controller, n_numbers: int):
     carried with the state, and the derivative at the step's start for dense output; and
     ``rate(y, t, c) -> f`` alone. The exact model's step is compiled on its own
     (:func:`_exact_step`). The last stage sees a held input from inside the step (at
-    ``t + h (1 - END_INSIDE)``), never the value it jumps to at the step's end."""
+    ``t + h (1 - END_INSIDE)``), never the value it jumps to at the step's end.
+
+    Parameters
+    ----------
+    model : Model
+    torque, hub_motion, controller : object or None
+        The run's inputs, each with a CasADi form (:func:`~flexctl.sim.compiled.is_symbolic`).
+    n_numbers : int
+        Rows of ``c``, as for :func:`drive_symbols`.
+
+    Returns
+    -------
+    step, rate : casadi.Function
+    """
     import casadi as ca
 
     drive = drive_symbols(model, torque, hub_motion, controller, n_numbers)
@@ -131,7 +155,15 @@ def lifted_core(model, hub_motion):
     """:func:`_exact_core` with its numbers lifted (``(function, numbers)``,
     :func:`~flexctl.sim.compile_cache.lift_constants`), kept with the model: a sampled loop
     builds a step for each count of steps per sample. None where there is no core or it is
-    too long to compile."""
+    too long to compile.
+
+    Parameters
+    ----------
+    model : Model
+    hub_motion : object or None
+        Only whether there is one matters: the beam's function under a prescribed hub motion,
+        the right-hand side under a torque.
+    """
     kind = "prescribed" if hub_motion is not None else "torque"
     kept = _LIFTED.setdefault(model, {})
     if kind not in kept:
@@ -198,7 +230,21 @@ def _chunk_runs(step, model) -> dict:
 
 def run_steps(runs: dict, yt, h: float, count: int, numbers) -> tuple:
     """``count`` RK4 steps of length ``h`` from ``yt = [y; t]`` by the loops of
-    :func:`_chunk_runs`: ``(Y, F)`` of shapes (m + 1, count) and (m, count)."""
+    :func:`_chunk_runs`: ``(Y, F)`` of shapes (m + 1, count) and (m, count).
+
+    Parameters
+    ----------
+    runs : dict
+        The compiled loops of :func:`_chunk_runs`, by number of steps (:data:`CHUNKS`).
+    yt : ndarray, shape (m + 1,)
+        The drive's state, then the time, s.
+    h : float
+        Step length, s.
+    count : int
+        Number of steps (>= 1).
+    numbers : ndarray, shape (C,)
+        The inputs' numbers ``c`` (:func:`~flexctl.sim.compiled.input_numbers`).
+    """
     ys, fs, done = [], [], 0
     while done < count:
         left = count - done
@@ -246,7 +292,17 @@ def hermite(t, starts, sizes, y, f) -> np.ndarray:
 def jit_compiled(function, model, any_variant: bool = False):
     """``function`` compiled to machine code where allowed and possible, else itself (the
     exact variant's only with ``any_variant``: for functions built on its vectorized
-    right-hand side, which compile in about a second)."""
+    right-hand side, which compile in about a second).
+
+    Parameters
+    ----------
+    function : casadi.Function
+    model : Model
+        Its variant decides: the exact model's functions stay uncompiled unless
+        ``any_variant``.
+    any_variant : bool, optional
+        Compile the exact model's too. Default False.
+    """
     if not USE_JIT or (model.variant.exact and not any_variant):
         return function
     return compiled(function)

@@ -50,7 +50,17 @@ def _type_error(name, value, what):
 
 
 def check_time(name: str, value, *, allow_inf: bool = False) -> float:
-    """``value`` as a positive time in s (finite unless ``allow_inf``)."""
+    """``value`` as a positive time in s (finite unless ``allow_inf``).
+
+    Parameters
+    ----------
+    name : str
+        The argument's name, for an error.
+    value : float
+        The time, s (a bool is refused).
+    allow_inf : bool, optional
+        Accept ``inf``. Default False.
+    """
     if isinstance(value, bool) or not isinstance(value, Real):
         raise _type_error(name, value, "a real number (s)")
     value = float(value)
@@ -71,7 +81,15 @@ def check_rtol(value) -> float:
 
 
 def check_method(value, methods) -> str:
-    """One of ``methods``."""
+    """One of ``methods``.
+
+    Parameters
+    ----------
+    value : str
+        The method asked for.
+    methods : sequence of str
+        The methods allowed (e.g. :data:`flexctl.sim.request.METHODS`).
+    """
     if not isinstance(value, str):
         raise _type_error("method", value, f"one of {', '.join(methods)}")
     if value not in methods:
@@ -80,7 +98,17 @@ def check_method(value, methods) -> str:
 
 
 def as_vector(name: str, value, what: str) -> np.ndarray:
-    """``value`` as a float array (any shape); a ``TypeError`` naming it if it is not numbers."""
+    """``value`` as a float array (any shape); a ``TypeError`` naming it if it is not numbers.
+
+    Parameters
+    ----------
+    name : str
+        The argument's name, for an error.
+    value : array_like
+        Real numbers (not strings, not complex, not ragged).
+    what : str
+        What the argument must be, for an error (e.g. ``"an array of sample times (s)"``).
+    """
     if isinstance(value, (str, bytes)):
         raise _type_error(name, value, what)
     try:
@@ -97,7 +125,19 @@ def as_vector(name: str, value, what: str) -> np.ndarray:
 
 def output_grid(t_final: float, step: float) -> np.ndarray:
     """Output times ``0, step, 2 step, ... , t_final``, s; refused before allocating when
-    there would be more than :data:`MAX_OUTPUT_SAMPLES`."""
+    there would be more than :data:`MAX_OUTPUT_SAMPLES`.
+
+    Parameters
+    ----------
+    t_final : float
+        End time, s (> 0); always the last output time.
+    step : float
+        Spacing of the output times, s (> 0).
+
+    Returns
+    -------
+    ndarray, shape (P,)
+    """
     with np.errstate(divide="ignore", over="ignore"):
         n_samples = np.float64(t_final) / np.float64(step) + 1.0 if step > 0.0 else np.inf
     if not n_samples <= MAX_OUTPUT_SAMPLES:     # inf for a subnormal step
@@ -111,7 +151,19 @@ def output_grid(t_final: float, step: float) -> np.ndarray:
 
 
 def input_value(name: str, value, t: float, unit: str = "N m") -> float:
-    """The value an input function returned, as one finite float; else an error naming it."""
+    """The value an input function returned, as one finite float; else an error naming it.
+
+    Parameters
+    ----------
+    name : str
+        The input, for an error (e.g. ``"torque"``, ``"hub_motion.rate"``).
+    value : object
+        What it returned: a real number or an array of one.
+    t : float
+        The time at which it was evaluated, s, for an error.
+    unit : str, optional
+        The value's unit, for an error. Default ``"N m"``.
+    """
     if type(value) is not float:
         if value is None or isinstance(value, (bool, np.bool_, str, bytes)):
             raise InputTypeError(f"{name} must return a real number ({unit}); got {value!r} "
@@ -148,7 +200,17 @@ def required_positional(func) -> int | None:
 
 def time_function(func, name: str):
     """Wrap ``func(t)`` or ``func(t, x)`` as ``g(t, x)`` whose value is checked
-    (:func:`input_value`)."""
+    (:func:`input_value`).
+
+    Parameters
+    ----------
+    func : callable
+        ``func(t)`` or ``func(t, x)``: ``t`` in s, ``x`` the plant state, shape (n,); it returns
+        a number in N m. Its exceptions are raised as an ``InputValueError`` naming it and the
+        time.
+    name : str
+        The input's name, for an error (e.g. ``"torque"``).
+    """
     if not callable(func):
         raise InputTypeError(f"{name} must be callable as {name}(t) or {name}(t, x); "
                              f"got {type(func).__name__}")
@@ -193,6 +255,22 @@ def jacobian_frequency(rhs, t: float, y: np.ndarray, scale: np.ndarray) -> float
 
     For a closed loop this is the fastest pole a controller's gains make, which bounds the
     step of an explicit method as the plant's fastest mode does.
+
+    Parameters
+    ----------
+    rhs : callable
+        ``rhs(t, y) -> dy/dt``, shape (m,): a drive's right-hand side.
+    t : float
+        Time, s.
+    y : ndarray, shape (m,)
+        State at which the Jacobian is taken.
+    scale : ndarray, shape (m,)
+        Each state's physical size: state ``k`` is perturbed by ``1e-6 scale[k]``.
+
+    Returns
+    -------
+    float
+        ``inf`` where the Jacobian is not finite; 0 for an empty state.
     """
     y = np.asarray(y, dtype=float)
     f0 = np.asarray(rhs(t, y), dtype=float)
@@ -441,6 +519,13 @@ def sampled_torque(torque, t_final: float) -> SampledTorque:
     a :class:`SampledTorque` covering ``[0, t_final]``; else an error naming the rule broken.
 
     A pair equal, sample for sample, to one seen before gives the same object.
+
+    Parameters
+    ----------
+    torque : (times, values) or SampledTorque
+        Sample times, s, and torques, N m, shape (K,) each.
+    t_final : float
+        End of the run, s: the samples must reach it (within ``1e-9 t_final``).
     """
     if not isinstance(torque, SampledTorque):
         if len(torque) != 2:

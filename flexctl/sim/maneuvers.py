@@ -157,7 +157,20 @@ class SpinUp(KeywordOnly):
 
     def casadi(self, t, parameters=None):
         """Rate and acceleration as CasADi expressions of the symbol ``t``; the numbers are
-        symbols too when ``parameters`` (laid out as :attr:`casadi_parameters`) is given."""
+        symbols too when ``parameters`` (laid out as :attr:`casadi_parameters`) is given.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        parameters : casadi.SX or casadi.MX, shape (2, 1), optional
+            ``[spin_rate, ramp_time]`` (rad/s, s) as symbols; None: this spin-up's numbers.
+
+        Returns
+        -------
+        rate, acceleration : casadi.SX or casadi.MX
+            rad/s and rad/s^2.
+        """
         import casadi as ca
 
         ws, ts = self.spin_rate, self.ramp_time
@@ -209,7 +222,20 @@ class SineTorque(KeywordOnly):
 
     def casadi(self, t, parameters=None):
         """The torque as a CasADi expression of the symbol ``t``; the numbers are symbols too
-        when ``parameters`` (laid out as :attr:`casadi_parameters`) is given."""
+        when ``parameters`` (laid out as :attr:`casadi_parameters`) is given.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        parameters : casadi.SX or casadi.MX, shape (2, 1), optional
+            ``[peak_torque, duration]`` (N m, s) as symbols; None: this torque's numbers.
+
+        Returns
+        -------
+        casadi.SX or casadi.MX
+            N m.
+        """
         import casadi as ca
 
         peak, duration = self.peak_torque, self.duration

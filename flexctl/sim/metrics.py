@@ -32,6 +32,18 @@ def settling_time(t, signal, target: float, band: float = 0.02) -> float:
     """First time after which ``signal`` stays within ``band * |target|`` of ``target``, s.
 
     Returns ``inf`` when the signal is outside the band at the last sample.
+
+    Parameters
+    ----------
+    t : array_like, shape (P,)
+        Sample times, s, ascending (at least one).
+    signal : array_like, shape (P,)
+        The signal at those times (e.g. the hub angle, rad).
+    target : float
+        Its final value, in the signal's unit.
+    band : float, optional
+        Half-width of the band as a fraction of ``|target|`` (>= 0); for ``target = 0`` an
+        absolute half-width, in the signal's unit. Default 0.02.
     """
     t = check_array("settling_time", "t", t, shape=(None,))
     signal = check_array("settling_time", "signal", signal, shape=(t.size,))
@@ -216,6 +228,15 @@ def format_metric(value: float, error: float | None, unit: str) -> str:
     smaller than ``error`` (the value is then no better known than its bound).
 
     Lengths are shown in mm, angles in mrad, times in s.
+
+    Parameters
+    ----------
+    value : float or None
+        In ``unit``; None, NaN or inf: ``"not reached"`` for a time, else ``"n/a"``.
+    error : float or None
+        Its error bound, in ``unit`` (>= 0); None: not shown; NaN or inf: shown as unknown.
+    unit : {"m", "rad", "s"}
+        The SI unit of ``value`` and ``error``.
 
     Examples
     --------

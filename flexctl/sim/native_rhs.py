@@ -98,10 +98,19 @@ def integration_beam(model):
 
 
 def prescribed_torque(model, states, acceleration):
-    """The hub torque a prescribed motion needs, N m, shape (P,), at ``states`` (n, P) with
-    hub ``acceleration`` (P,): the beam's accelerations, then the hub equation, both
-    compiled for a one-beam exact model; None where they are not (the caller then uses the
-    model's own :meth:`~flexctl.Model.beam_accelerations` and :meth:`~flexctl.Model.hub_torque`)."""
+    """The hub torque a prescribed motion needs, N m, shape (P,): the beam's accelerations,
+    then the hub equation, both compiled for a one-beam exact model; None where they are not
+    (the caller then uses the model's own :meth:`~flexctl.Model.beam_accelerations` and
+    :meth:`~flexctl.Model.hub_torque`).
+
+    Parameters
+    ----------
+    model : Model
+    states : ndarray, shape (n, P)
+        Plant states, in the order of ``model.layout``.
+    acceleration : array_like, shape (P,)
+        The prescribed hub acceleration at those states, rad/s^2.
+    """
     import numpy as np
 
     if not compiles_prescribed(model):

@@ -130,8 +130,23 @@ def check_progress(progress):
 
 
 def progress_cuts(cuts, t_final: float, chunks: int = PROGRESS_CHUNKS) -> list:
-    """``cuts`` (segment boundaries, s, from 0 to ``t_final``) with a boundary added every
-    ``t_final / chunks`` inside the longer segments, sorted."""
+    """``cuts`` with a boundary added every ``t_final / chunks`` inside the longer segments,
+    sorted.
+
+    Parameters
+    ----------
+    cuts : list of float
+        Segment boundaries, s, ascending from 0 to ``t_final`` (the inputs' breakpoints).
+    t_final : float
+        End of the run, s (> 0).
+    chunks : int, optional
+        Pieces of the run between reports. Default :data:`PROGRESS_CHUNKS`.
+
+    Returns
+    -------
+    list of float
+        s.
+    """
     step = t_final / chunks
     out = [cuts[0]]
     for lo, hi in zip(cuts[:-1], cuts[1:]):

@@ -223,7 +223,20 @@ class RunRequest:
 def state_scale(model: Model, layout) -> np.ndarray:
     """Each state's physical size in ``layout`` (the model's, with a controller block, or
     without the hub rotation): 1e-3 rad, 1e-3 of the length, rates at the first clamped
-    frequency, 1e-3 for a controller's state. Times ``rtol``, the default ``atol``."""
+    frequency, 1e-3 for a controller's state. Times ``rtol``, the default ``atol``.
+
+    Parameters
+    ----------
+    model : Model
+    layout : StateLayout
+        The integrated states' layout: ``model.layout``, with a ``"controller"`` block, or
+        without the hub rotation (a prescribed hub motion).
+
+    Returns
+    -------
+    ndarray, shape (layout.n_states,)
+        In each state's unit (m, rad, m/s, rad/s; the actuator's own sizes).
+    """
     rate = max(model.first_clamped_frequency, 1.0)
     length = 1e-3 * float(np.min(model.lengths))
     scale = np.full(layout.n_states, 1e-3)
@@ -378,7 +391,40 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
                 rtol=None, atol=None, method="auto", output_step=None, max_step=np.inf,
                 check_accuracy=True, progress=None, sensors=None) -> RunRequest:
     """Check the arguments of :func:`flexctl.simulate` (the same signature) and give the run
-    they ask for."""
+    they ask for.
+
+    Each argument is described in full by :func:`flexctl.simulate`.
+
+    Parameters
+    ----------
+    model : Model
+    t_final : float
+        End time, s (at least :data:`MIN_T_FINAL`).
+    torque : callable, (times, values) or SampledTorque, optional
+        Hub torque, N m; traced into CasADi where the run is compiled.
+    hub_motion : object, optional
+        Prescribed hub motion (``angle``, ``rate``, ``acceleration``: rad, rad/s, rad/s^2).
+    controller : callable, Controller or SampledController, optional
+        Feedback; a callable ``(t, x)`` becomes a :class:`~flexctl.sim.drives.StaticLaw`.
+    x0 : array_like, shape (n,), optional
+        Initial plant state; default rest at zero.
+    rtol : float, optional
+        Relative tolerance; default :data:`DEFAULT_RTOL` (:data:`RK4_RTOL` for ``"rk4"``).
+    atol : float or array_like, optional
+        Absolute tolerance, one or one per state; kept as given (checked by the plan).
+    method : str, optional
+        One of :data:`METHODS`. Default ``"auto"``.
+    output_step : float, optional
+        Spacing of the output times, s. Default ``t_final / DEFAULT_OUTPUT_POINTS``.
+    max_step : float, optional
+        Largest step, s. Default ``inf``.
+    check_accuracy : bool, optional
+        Estimate the integration error. Default True.
+    progress : bool or callable, optional
+        Progress reports (:func:`~flexctl.sim.progress.check_progress`). Default none.
+    sensors : Sensors, optional
+        Read by a sampled controller that measures.
+    """
     t_final, method, rtol, output_step, max_step, report = _check_arguments(
         model, t_final, hub_motion, torque, controller, method, rtol, output_step, max_step,
         progress)
@@ -416,11 +462,20 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
 def check_atol(atol, scale: np.ndarray, names=None) -> np.ndarray:
     """A user's ``atol``: one positive finite number or one per state, as shape (n,).
 
-    ``scale`` (n,) is each state's physical size (:func:`state_scale`), ``names`` the states'
-    names for the errors. An ``atol`` above :data:`ATOL_LIMIT` times a state's size is
-    refused: the error control would accept errors as large as the motion itself, and a run
-    and its accuracy check can then agree on a wrong answer (the exact 4-mode model at
-    ``atol=1e3`` ended "ok", estimated at 1e-14, 0.29 m from the true tip deflection)."""
+    An ``atol`` above :data:`ATOL_LIMIT` times a state's size is refused: the error control
+    would accept errors as large as the motion itself, and a run and its accuracy check can
+    then agree on a wrong answer (the exact 4-mode model at ``atol=1e3`` ended "ok", estimated
+    at 1e-14, 0.29 m from the true tip deflection).
+
+    Parameters
+    ----------
+    atol : float or array_like
+        The user's absolute tolerance, in each state's unit.
+    scale : ndarray, shape (n,)
+        Each integrated state's physical size (:func:`state_scale`).
+    names : sequence of str, optional
+        The states' names, for an error. Default ``"state <k>"``.
+    """
     scale = np.asarray(scale, dtype=float)
     size = scale.size
     atol_vec = as_vector("atol", atol, "a positive number or one per state")
@@ -531,11 +586,31 @@ def stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
     spacecraft and hub-beam-mass scenes, 12 and 16 modes, rtol 1e-5 and 1e-8, with and
     without beam damping).
 
-    ``loop_frequency`` (rad/s) is the fastest pole of the closed loop (:func:`jacobian_frequency`
-    at the start): a controller's gains can make it far faster than any mode of the plant.
-    When they do, the fast poles are damped ones that an implicit method steps over, so a run
-    with Python inputs moves to LSODA (implicit BDF where the problem is stiff) rather than
-    crawl for minutes.
+    A controller's gains can make the fastest pole of the closed loop (``loop_frequency``) far
+    faster than any mode of the plant. When they do, the fast poles are damped ones that an
+    implicit method steps over, so a run with Python inputs moves to LSODA (implicit BDF where
+    the problem is stiff) rather than crawl for minutes.
+
+    Parameters
+    ----------
+    model : Model
+    t_final : float
+        End time, s.
+    method : str
+        The method asked for.
+    symbolic : bool
+        Every input has a CasADi form (the run can move to CVODES).
+    prescribed : bool
+        The hub follows a prescribed motion (the fastest mode is the clamped beam's).
+    loop_frequency : float, optional
+        Fastest pole of the closed loop at the start, rad/s (:func:`jacobian_frequency`).
+        Default 0 (no controller).
+
+    Raises
+    ------
+    InputValueError
+        If Python inputs would keep an explicit method beyond :data:`EXPLICIT_REFUSE_LIMIT`
+        steps.
     """
     limit = EXPLICIT_STABILITY_LIMITS.get(method)
     if limit is None:
@@ -596,6 +671,16 @@ def choose_multistep(model: Model, omega_plant: float, loop_frequency: float = 0
     under BDF and carries tolerance-sized vibration under Adams). A plant behind an actuator
     keeps BDF too: a wheel's torque lag, a motor's back-EMF damping and a smoothed friction
     knee are fast decays of their own.
+
+    Parameters
+    ----------
+    model : Model
+    omega_plant : float
+        Fastest mode of the plant at rest, rad/s (>= 0; ``inf`` allowed).
+    loop_frequency : float, optional
+        Fastest pole of the closed loop, rad/s (>= 0). Default 0.
+    t_final : float, optional
+        Length of the run, s (>= 0). Default 0.
     """
     check_instance("choose_multistep", "model", model, Model, "flexctl Model")
     # a rate of inf (a model beyond floating point) is allowed: it goes to BDF
@@ -651,6 +736,15 @@ def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
     modes 24 / 13, exact 2 modes 12 / 12, exact 4 and 6 modes 26 and 52 / 46 and 148;
     hub-beam-mass 6 modes over 20 s 28 / 21, 20 modes over 2 s 118 / 107; spacecraft-torque
     222 / 66. The rule's choices stand.
+
+    Parameters
+    ----------
+    model : Model
+    t_final : float
+        Length of the run, s (>= 0).
+    omega_max : float
+        Fastest pole of the run, rad/s (>= 0; ``inf`` allowed): of the plant, the closed loop
+        or the initial spin.
     """
     check_instance("choose_continuous", "model", model, Model, "flexctl Model")
     t_final = check_real("choose_continuous", "t_final", t_final, minimum=0.0)
@@ -682,7 +776,22 @@ def _breakpoints(*sources) -> list:
 
 def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> IntegrationPlan:
     """The integration of ``drive`` under ``request``; warns (:class:`StiffnessWarning`) when
-    the stiffness guard changes or keeps an explicit method on a stiff run."""
+    the stiffness guard changes or keeps an explicit method on a stiff run.
+
+    Parameters
+    ----------
+    request : RunRequest
+        The checked run (:func:`run_request`).
+    drive : PrescribedDrive or TorqueDrive
+        What is integrated (:mod:`flexctl.sim.drives`): its layout, initial state, right-hand
+        side and inputs.
+    stacklevel : int, optional
+        ``stacklevel`` of the warning. Default 3.
+
+    Returns
+    -------
+    IntegrationPlan
+    """
     model, rtol, t_final = request.model, request.rtol, request.t_final
     sizes = state_scale(model, drive.layout)
     atol = rtol * sizes if request.atol is None else check_atol(request.atol, sizes,

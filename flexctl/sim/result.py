@@ -98,7 +98,21 @@ class SimulationResult:
     def from_states(cls, model: Model, t, states, torque, **fields) -> "SimulationResult":
         """A result whose tip deflection and root moment are computed from ``states``; for a
         model with an actuator ``torque`` is the plant's input, kept as :attr:`command`, and
-        the torque on the hub is computed from it."""
+        the torque on the hub is computed from it.
+
+        Parameters
+        ----------
+        model : Model
+        t : ndarray, shape (P,)
+            Output times, s.
+        states : ndarray, shape (n, P)
+            Plant states, in the order of ``model.layout``.
+        torque : ndarray, shape (P,)
+            Hub torque, N m; for a model with an actuator, its command (N m or V).
+        **fields
+            The other fields of :class:`SimulationResult` (``status``, ``message``, ``wall_time``,
+            ``n_evaluations``, ``method``, ``rtol``, ...).
+        """
         if getattr(model, "actuator", None) is not None and "command" not in fields:
             fields["command"] = np.asarray(torque, dtype=float)
             torque = np.asarray(model.applied_torque(states, torque), dtype=float).reshape(-1)
@@ -222,10 +236,22 @@ def audit_energy(model: Model, result_arrays, reason: StopReason, message: str,
                  stacklevel: int):
     """``(EnergyBalance or None, message)`` of a run, the message naming a broken balance.
 
-    ``result_arrays`` is ``(t, states, torque)``. A run that reached its end with a broken
-    balance warns (:class:`ModelValidityWarning`); a stopped one gets the balance as its
-    physical reason, and zero_order or first_order the loss of beam stiffness when the hub
-    rate has passed it. A singular stop has its own reason.
+    A run that reached its end with a broken balance warns (:class:`ModelValidityWarning`); a
+    stopped one gets the balance as its physical reason, and zero_order or first_order the
+    loss of beam stiffness when the hub rate has passed it. A singular stop has its own reason.
+
+    Parameters
+    ----------
+    model : Model
+    result_arrays : tuple
+        ``(t, states, torque)``: output times, s, shape (P,); plant states, shape (n, P); the
+        plant's input, shape (P,) (hub torque, N m, or an actuator's command).
+    reason : StopReason
+        Why the run ended.
+    message : str
+        The run's message so far.
+    stacklevel : int
+        ``stacklevel`` of the warning.
     """
     if reason is StopReason.SINGULAR_MASS:
         # the hub rate outruns the output samples near the singularity: a balance would
@@ -252,7 +278,18 @@ def audit_energy(model: Model, result_arrays, reason: StopReason, message: str,
 def mechanical_arrays(model, t, states, inputs):
     """``(model, t, states, torque)`` of the structure alone: for a model with an actuator,
     its mechanical model and states and the torque the actuator puts on the hub (whose work
-    the structure's energy balances); the arguments as they are otherwise."""
+    the structure's energy balances); the arguments as they are otherwise.
+
+    Parameters
+    ----------
+    model : Model
+    t : ndarray, shape (P,)
+        Output times, s.
+    states : ndarray, shape (n, P)
+        Plant states, in the order of ``model.layout``.
+    inputs : ndarray, shape (P,)
+        The plant's input: hub torque, N m, or an actuator's command (N m or V).
+    """
     if getattr(model, "actuator", None) is None:
         return model, t, states, inputs
     torque = np.asarray(model.applied_torque(states, inputs), dtype=float).reshape(-1)
@@ -261,7 +298,24 @@ def mechanical_arrays(model, t, states, inputs):
 
 def output_samples(grid, traj):
     """The trajectory's samples on the output grid and at its last time, cut before the first
-    non-finite one: ``(t, y)``."""
+    non-finite one: ``(t, y)``.
+
+    A non-finite sample stops ``traj`` (``StopReason.NON_FINITE_STATE``).
+
+    Parameters
+    ----------
+    grid : array_like, shape (P,)
+        Output times, s.
+    traj : Trajectory
+        What the integration handed back: samples ``y`` of shape (m, K) per piece.
+
+    Returns
+    -------
+    t : ndarray, shape (P',)
+        s.
+    y : ndarray, shape (m, P')
+        The integrated state at those times.
+    """
     t_all = np.concatenate(traj.ts)
     y_all = np.concatenate(traj.ys, axis=1)
     # segment ends at breakpoints off the grid were integration restarts, not outputs
@@ -298,7 +352,23 @@ def _finite_torque(t_all, states, z_all, torque, traj):
 
 def assemble_result(request, plan, drive, stops, traj, wall: float) -> SimulationResult:
     """The :class:`SimulationResult` of an integrated run: outputs, torque, stop message,
-    energy audit and the notes of the stiffness guard and the accuracy check."""
+    energy audit and the notes of the stiffness guard and the accuracy check.
+
+    Parameters
+    ----------
+    request : RunRequest
+        The checked run.
+    plan : IntegrationPlan
+        How it was integrated (its method and the stiffness guard's note).
+    drive : PrescribedDrive or TorqueDrive
+        What was integrated: turns ``y`` into plant states and torque.
+    stops : StopConditions
+        Names the physical reason of a stop.
+    traj : Trajectory
+        What the integration handed back.
+    wall : float
+        Integration wall time, s.
+    """
     model = request.model
     t_all, y_all = output_samples(request.grid, traj)
     states = np.asarray(drive.plant_state(t_all, y_all))

@@ -24,7 +24,27 @@ __all__ = ["run_once", "run_states"]
 
 def run_once(model, t_final: float, torque=None, hub_motion=None, controller=None, x0=None,
              **options) -> SimulationResult:
-    """:func:`flexctl.simulate` without ``check_validity`` (``options``: its keywords)."""
+    """:func:`flexctl.simulate` without ``check_validity`` (``options``: its keywords).
+
+    Parameters
+    ----------
+    model : Model
+    t_final : float
+        End time, s.
+    torque, hub_motion, controller : object, optional
+        The run's inputs, as :func:`flexctl.simulate` takes them.
+    x0 : array_like, shape (n,), optional
+        Initial plant state; default rest at zero.
+    **options
+        The keywords of :func:`flexctl.simulate` (``rtol``, ``atol``, ``method``,
+        ``output_step``, ``max_step``, ``check_accuracy``, ``progress``, ``sensors``), but
+        ``check_validity``.
+
+    Returns
+    -------
+    SimulationResult
+        With ``validity`` None (:func:`flexctl.simulate` adds it).
+    """
     request = run_request(model, t_final, torque, hub_motion, controller, x0, **options)
     return _simulate_sampled(request) if request.sampled else _simulate_continuous(request)
 
@@ -34,7 +54,25 @@ def run_states(model, t_final: float, torque=None, hub_motion=None, controller=N
     """``(ok, states)``: whether :func:`run_once` reaches ``t_final``, and its plant states
     on its output grid, without the result's outputs, torque history and energy audit (for
     runs whose states alone are wanted: the validity estimate's). ``states`` is None when
-    the run stops early."""
+    the run stops early.
+
+    Parameters
+    ----------
+    model : Model
+    t_final : float
+        End time, s.
+    torque, hub_motion, controller : object, optional
+        The run's inputs, as :func:`flexctl.simulate` takes them.
+    x0 : array_like, shape (n,), optional
+        Initial plant state; default rest at zero.
+    **options
+        As for :func:`run_once`.
+
+    Returns
+    -------
+    ok : bool
+    states : ndarray, shape (n, P), or None
+    """
     request = run_request(model, t_final, torque, hub_motion, controller, x0, **options)
     if request.sampled:
         run = _simulate_sampled(request)

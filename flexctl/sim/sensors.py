@@ -155,7 +155,15 @@ class Sensors(KeywordOnly):
             tip_acceleration_noise=None if self.tip_acceleration_noise is None else 0.0)
 
     def start(self, model, sample_time: float) -> "SensorSession":
-        """A fresh :class:`SensorSession` reading ``model`` every ``sample_time`` s (> 0)."""
+        """A fresh :class:`SensorSession` reading ``model`` every ``sample_time`` s (> 0).
+
+        Parameters
+        ----------
+        model : Model
+            The plant read.
+        sample_time : float
+            Sample interval of the readings, s (> 0).
+        """
         return SensorSession(self, model, sample_time)
 
     def __repr__(self):
@@ -188,7 +196,20 @@ def _root_rows(model) -> np.ndarray:
 
 
 def sensor_names(model, sensors: Sensors) -> tuple:
-    """Names of the readings of ``sensors`` on ``model``, in reading order (module Notes)."""
+    """Names of the readings of ``sensors`` on ``model``, in reading order (module Notes).
+
+    Parameters
+    ----------
+    model : Model
+        Tells the root moments' and the appendages' names.
+    sensors : Sensors
+        Tells whether the tips carry accelerometers.
+
+    Returns
+    -------
+    tuple of str
+        ``m`` names.
+    """
     names = ("theta", "theta_dot") + tuple(model.output_names[k] for k in _root_outputs(model))
     if sensors.has_accelerometers:
         names += tuple(f"{name}.tip_acceleration" if name else "tip_acceleration"
@@ -313,8 +334,13 @@ class SensorSession:
     def true_values(self, x, xdot=None) -> np.ndarray:
         """The noiseless, unquantised readings of state ``x`` (n,), shape (m,).
 
-        ``xdot`` (n,), the state derivative under the held command, is needed when the tips
-        carry accelerometers.
+        Parameters
+        ----------
+        x : array_like, shape (n,)
+            The plant's true state, in the order of ``model.layout``.
+        xdot : array_like, shape (n,), optional
+            The state derivative under the held command; needed when the tips carry
+            accelerometers.
         """
         x = self._state(x)
         layout = self.model.layout
@@ -332,12 +358,30 @@ class SensorSession:
 
     def read(self, x, xdot=None) -> np.ndarray:
         """One reading of every sensor from the (already delayed) true state ``x`` (n,),
-        advancing the noise by one sample; shape (m,), in :attr:`names` order."""
+        advancing the noise by one sample; shape (m,), in :attr:`names` order.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,)
+            The plant's true state, in the order of ``model.layout``.
+        xdot : array_like, shape (n,), optional
+            The state derivative under the held command; needed when the tips carry
+            accelerometers.
+        """
         return self.measure(x, xdot)[0]
 
     def measure(self, x, xdot=None) -> tuple:
         """:meth:`read` and :meth:`true_values` of one sample together: ``(readings,
-        values)``, each shape (m,)."""
+        values)``, each shape (m,).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,)
+            The plant's true state, in the order of ``model.layout``.
+        xdot : array_like, shape (n,), optional
+            The state derivative under the held command; needed when the tips carry
+            accelerometers.
+        """
         values = self.true_values(x, xdot)
         draws = self._rng.standard_normal(values.size + 1)
         if self.samples:

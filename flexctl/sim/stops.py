@@ -38,7 +38,19 @@ def model_reach(model: Model) -> np.ndarray:
 
 def reach_ratio(model: Model, q) -> np.ndarray:
     """Largest ``|phi_k(l_k)^T q_k| / reach_k`` over the appendages for modal coordinates
-    ``q`` (N,) or (N, P): 1 where the model leaves its range."""
+    ``q`` (N,) or (N, P): 1 where the model leaves its range.
+
+    Parameters
+    ----------
+    model : Model
+        Gives the tip rows ``phi_k(l_k)`` and the reach (:func:`model_reach`), m.
+    q : ndarray, shape (N,) or (N, P)
+        Modal coordinates, m, in the order of ``model.layout.modal``.
+
+    Returns
+    -------
+    float or ndarray, shape (P,)
+    """
     tips = model.tip_matrix @ q
     reach = model_reach(model).reshape((-1,) + (1,) * (np.ndim(tips) - 1))
     return np.max(np.abs(tips) / reach, axis=0)
@@ -46,7 +58,15 @@ def reach_ratio(model: Model, q) -> np.ndarray:
 
 def tip_rows(model: Model, layout) -> np.ndarray:
     """The linear tip deflection of each appendage as rows over the states of ``layout``,
-    shape (K, n): ``tips = tip_rows @ y``."""
+    shape (K, n): ``tips = tip_rows @ y``.
+
+    Parameters
+    ----------
+    model : Model
+    layout : StateLayout
+        The layout of the states ``y`` (the model's, with a controller block, or without the
+        hub rotation); ``n`` its number of states.
+    """
     return np.vstack([layout.embed(row) for row in model.tip_matrix])
 
 
@@ -80,7 +100,14 @@ class StopReason(Enum):
 
 
 def stiffness_reason(model: Model, spin: float) -> str:
-    """Why the beam of ``model`` may have left its range at hub rate ``spin`` (rad/s)."""
+    """Why the beam of ``model`` may have left its range at hub rate ``spin`` (rad/s).
+
+    Parameters
+    ----------
+    model : Model
+    spin : float
+        Hub rate, rad/s (its magnitude is reported).
+    """
     w1 = model.first_clamped_frequency
     try:
         lowest = np.linalg.eigvalsh(model.stiffness_matrix(spin))[0]
@@ -103,7 +130,14 @@ def stiffness_reason(model: Model, spin: float) -> str:
 
 def softened(model: Model, spin: float) -> bool:
     """True when the beam stiffness at hub rate ``spin`` has lost positive definiteness (or
-    the rate's square overflows)."""
+    the rate's square overflows).
+
+    Parameters
+    ----------
+    model : Model
+    spin : float
+        Hub rate, rad/s.
+    """
     if not np.isfinite(spin ** 2):
         return True
     with np.errstate(all="ignore"):
@@ -116,6 +150,15 @@ def singular_message(model: Model, t_end: float, state) -> str:
     Its Schur complement is the effective hub inertia at rest (computed without cancellation,
     :func:`flexctl.model.matrices.condensed_hub_inertia`) plus ``q^T D q``: a real
     singularity of the model, reached when the second-order inertia cancels the first.
+
+    Parameters
+    ----------
+    model : Model
+        The consistent variant.
+    t_end : float
+        Time of the stop, s.
+    state : array_like, shape (n,)
+        Plant state there, in the order of ``model.layout``.
     """
     structure, layout = model.structure, model.layout
     j_eff = float(model.effective_hub_inertia(state))
@@ -218,7 +261,18 @@ class StopConditions:
         return self.geometric()
 
     def message(self, reason: StopReason, t_end: float, state) -> str:
-        """The physical reason of a stop at ``t_end`` (s) in plant state ``state``."""
+        """The physical reason of a stop at ``t_end`` (s) in plant state ``state``.
+
+        Parameters
+        ----------
+        reason : StopReason
+            The stop; a reason other than the tip's, the beam's or the mass matrix's is named by
+            its value.
+        t_end : float
+            Time of the stop, s.
+        state : array_like, shape (n,)
+            Plant state there, in the order of ``model.layout``.
+        """
         model = self.model
         if reason is StopReason.BEAM_CURLED:
             where = _worst_appendage(model, model.layout.modal(np.asarray(state)))

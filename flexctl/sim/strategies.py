@@ -80,12 +80,31 @@ class Trajectory:
     accuracy_note: str = ""
 
     def add(self, t, y):
-        """Append samples ``t`` (K,) and ``y`` (m, K)."""
+        """Append samples ``t`` (K,) and ``y`` (m, K).
+
+        Parameters
+        ----------
+        t : ndarray, shape (K,)
+            Times, s.
+        y : ndarray, shape (m, K)
+            The integrated state at those times.
+        """
         self.ts.append(t)
         self.ys.append(y)
 
     def stop(self, reason: StopReason, message: str = "", found: bool = False):
-        """End the run for ``reason``."""
+        """End the run for ``reason``.
+
+        Parameters
+        ----------
+        reason : StopReason
+        message : str, optional
+            What happened, with the time. Default "" (a ``found`` stop is named later from the
+            last state, :meth:`StopConditions.message`).
+        found : bool, optional
+            A stopping condition ended the run and its physical reason is still to be named from
+            the last state. Default False.
+        """
         self.reason, self.message, self.found = reason, message, found
 
 
@@ -218,6 +237,20 @@ class ScipyIVP(_Segments):
     a compiled run's (:func:`replay_error`)."""
 
     def segment(self, traj, lo, hi, t_eval, y):
+        """Integrate ``[lo, hi]`` from ``y``: the state at ``hi``, or None after a stop; a segment
+        that reaches its end is kept for the replay (:func:`replay_error`).
+
+        Parameters
+        ----------
+        traj : Trajectory
+            Gets the segment's samples, or the stop.
+        lo, hi : float
+            Start and end of the segment, s.
+        t_eval : ndarray, shape (K,)
+            Output times in ``(lo, hi]``, s, the last ``hi``.
+        y : ndarray, shape (m,)
+            The integrated state at ``lo``.
+        """
         y_end = super().segment(traj, lo, hi, t_eval, y)
         if y_end is not None:
             traj.compiled_segments.append((lo, t_eval))
@@ -228,6 +261,17 @@ class ScipyIVP(_Segments):
         return Beside(lambda: None, beside=False)
 
     def finish_check(self, traj, check) -> None:
+        """Complete ``traj`` (reached its end) with its replay at
+        :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance (:func:`replay_error`),
+        made now: it needs the run's segments.
+
+        Parameters
+        ----------
+        traj : Trajectory
+            The run; gets ``integration_error``, the replay's evaluations and any note.
+        check : Beside
+            The placeholder of :meth:`start_check`; not used.
+        """
         self.report(self.request.t_final, "checking accuracy")
         traj.integration_error, n_check, note = replay_error(self, traj)
         traj.n_eval += n_check
@@ -239,7 +283,15 @@ def replay_error(strategy, traj) -> tuple:
     """``(error, evaluations, note)``: the largest tip difference (m) between a SciPy run
     ``traj`` that reached its end and the same segments integrated again at
     :data:`~flexctl.sim.compiled.CHECK_FACTOR` times its tolerances (conservative: it is the
-    error of the looser run); ``None`` with the reason where the replay fails."""
+    error of the looser run); ``None`` with the reason where the replay fails.
+
+    Parameters
+    ----------
+    strategy : ScipyIVP
+        The strategy that made the run: its request, plan and drive.
+    traj : Trajectory
+        The run, with its ``compiled_segments`` (``(t_start, t_out)`` of each segment).
+    """
     request, plan, drive = strategy.request, strategy.plan, strategy.drive
     y, states, evaluations = drive.y_init, [], 0
     try:
@@ -291,12 +343,38 @@ class CvodesSegments(_Segments):
         return start_accuracy_check(self.request, self.plan, self.drive)
 
     def finish_check(self, traj, check) -> None:
+        """Complete ``traj`` (reached its end) with the result of :meth:`start_check`
+        (:func:`check_run_accuracy`).
+
+        Parameters
+        ----------
+        traj : Trajectory
+            The run; gets ``integration_error`` and any note, and its states are replaced where
+            the check redoes the run.
+        check : Beside
+            The check run started by :meth:`start_check`.
+        """
         check_run_accuracy(self.request, self.plan, self.drive, traj, reporter=self,
                            check=check)
 
     def integrate(self, lo, t_eval, y) -> tuple:
         """``(states at t_eval, evaluations)`` of one segment from ``y`` at ``lo``;
-        ``RuntimeError`` where the integrator fails."""
+        ``RuntimeError`` where the integrator fails.
+
+        Parameters
+        ----------
+        lo : float
+            Start of the segment, s.
+        t_eval : ndarray, shape (K,)
+            Output times after ``lo``, s, ascending; the last is the segment's end.
+        y : ndarray, shape (m,)
+            The integrated state at ``lo``.
+
+        Returns
+        -------
+        states : ndarray, shape (m, K)
+        evaluations : int
+        """
         request, plan = self.request, self.plan
         integ = SegmentIntegrator(request.model, lo, t_eval, plan.scale, request.rtol,
                                   torque=request.torque, hub_motion=request.hub_motion,
@@ -306,6 +384,21 @@ class CvodesSegments(_Segments):
         return integ(y), integ.n_evaluations
 
     def segment(self, traj, lo, hi, t_eval, y):
+        """Integrate ``[lo, hi]`` from ``y`` by CVODES: the state at ``hi``, or None after a stop.
+        Where the segment fails or passes a stopping condition, SciPy locates the stop from the
+        last good sample, on a budget of :data:`FALLBACK_EVALUATIONS` evaluations.
+
+        Parameters
+        ----------
+        traj : Trajectory
+            Gets the segment's samples, or the stop.
+        lo, hi : float
+            Start and end of the segment, s.
+        t_eval : ndarray, shape (K,)
+            Output times in ``(lo, hi]``, s, the last ``hi``.
+        y : ndarray, shape (m,)
+            The integrated state at ``lo``.
+        """
         try:
             y_seg, n_eval = self.integrate(lo, t_eval, y)
             traj.n_eval += n_eval
@@ -371,10 +464,38 @@ class EmbeddedSegments(CvodesSegments):
         return start_embedded_check(self.request, self.plan, self.drive, self.stops)
 
     def finish_check(self, traj, check) -> None:
+        """Complete ``traj`` (reached its end) with the replay started by :meth:`start_check`
+        (:func:`check_embedded_accuracy`).
+
+        Parameters
+        ----------
+        traj : Trajectory
+            The run; gets ``integration_error`` or a note.
+        check : Beside
+            The replay started by :meth:`start_check`.
+        """
         check_embedded_accuracy(self.request, self.drive, traj, check, reporter=self)
 
     def integrate(self, lo, t_eval, y) -> tuple:
         # a run that passes a stop ends there, not at the segment's end
+        """``(states at t_eval, evaluations)`` of one segment from ``y`` at ``lo`` by the compiled
+        steps; a run that passes a stopping condition ends there, with fewer states than
+        ``t_eval``; ``RuntimeError`` where a step cannot be taken.
+
+        Parameters
+        ----------
+        lo : float
+            Start of the segment, s.
+        t_eval : ndarray, shape (K,)
+            Output times after ``lo``, s, ascending; the last is the segment's end.
+        y : ndarray, shape (m,)
+            The integrated state at ``lo``.
+
+        Returns
+        -------
+        states : ndarray, shape (m, K) or (m, K') with K' < K
+        evaluations : int
+        """
         return self._steps(lo, t_eval, y, stop=self.stops.first_bad)
 
 
@@ -426,7 +547,25 @@ def start_embedded_check(request, plan, drive, stops):
     its tolerance and twice its longest step, with a step size of its own, started beside the
     run on a spare core (its compiled steps let go of Python's lock): give it to
     :func:`check_embedded_accuracy`, or ``abandon()`` it if the run stops early, which ends it
-    within a compiled call. A replay that passes one of the run's ``stops`` ends there."""
+    within a compiled call. A replay that passes one of the run's ``stops`` ends there.
+
+    Parameters
+    ----------
+    request : RunRequest
+        The checked run: model, inputs, tolerance, output grid.
+    plan : IntegrationPlan
+        Its segments, tolerances per state and step bounds.
+    drive : PrescribedDrive or TorqueDrive
+        Gives the initial state.
+    stops : StopConditions
+        The run's stopping conditions.
+
+    Returns
+    -------
+    Beside
+        Its ``result()`` is ``(states (m, K), evaluations)``, or None where the replay failed
+        or stopped.
+    """
     import threading
 
     steps = _embedded_run(request, plan, min(CHECK_FACTOR * request.rtol, 1.0), looser=True)
@@ -437,7 +576,22 @@ def start_embedded_check(request, plan, drive, stops):
 def check_embedded_accuracy(request, drive, traj: Trajectory, check, reporter=None):
     """``traj.integration_error`` of a Dormand-Prince run that reached its end: the largest
     tip difference from its replay at 10 times the tolerance (conservative: the error of the
-    looser run), at every output time."""
+    looser run), at every output time.
+
+    Parameters
+    ----------
+    request : RunRequest
+        The checked run.
+    drive : PrescribedDrive or TorqueDrive
+        Gives the layout of the integrated state (for the tip rows).
+    traj : Trajectory
+        The run; gets ``integration_error`` and the replay's evaluations, or a note where the
+        replay failed.
+    check : Beside
+        The replay (:func:`start_embedded_check`, or the compiled BDF's own).
+    reporter : object, optional
+        A strategy whose ``report(t, note)`` says that the check runs. Default none.
+    """
     if reporter is not None:
         reporter.report(request.t_final, "checking accuracy")
     found = check.result()
@@ -523,7 +677,21 @@ class FixedStepRK4(_Segments):
 
 def rk4_accuracy_note(error, tip, rtol: float, detail: str = "", stacklevel: int = 2) -> str:
     """The note, and an :class:`AccuracyWarning`, of an rk4 run whose step-doubling estimate
-    ``error`` (m) stays above ``rtol`` of the peak of ``tip`` (m); "" otherwise."""
+    ``error`` (m) stays above ``rtol`` of the peak of ``tip`` (m); "" otherwise.
+
+    Parameters
+    ----------
+    error : float or None
+        The step-doubling estimate of the largest tip error, m; None: no note.
+    tip : ndarray, shape (K, P)
+        Each appendage's tip deflection over the run, m.
+    rtol : float
+        The run's tolerance, relative to the peak tip deflection.
+    detail : str, optional
+        Appended to the note's first clause (e.g. the halvings made and the step). Default "".
+    stacklevel : int, optional
+        ``stacklevel`` of the warning, counted from the caller. Default 2.
+    """
     peak = float(np.max(np.abs(tip))) if np.size(tip) else 0.0
     if error is None or error <= rtol * max(peak, 1e-12):
         return ""
@@ -535,7 +703,21 @@ def rk4_accuracy_note(error, tip, rtol: float, detail: str = "", stacklevel: int
 
 def planned_segments(plan, grid) -> list:
     """``(t_start, t_out)`` of every segment between two of ``plan.drive_cuts``: the output
-    times of ``grid`` inside it, and its end."""
+    times of ``grid`` inside it, and its end.
+
+    Parameters
+    ----------
+    plan : IntegrationPlan
+        Gives the segment boundaries ``drive_cuts``, s.
+    grid : ndarray, shape (P,)
+        Output times, s.
+
+    Returns
+    -------
+    list of (float, ndarray)
+        Each segment's start, s, and its output times in ``(t_start, t_end]``, s, the last
+        ``t_end``.
+    """
     segments, cuts = [], plan.drive_cuts
     for lo, hi in zip(cuts[:-1], cuts[1:]):
         t_eval = grid[(grid > lo) & (grid <= hi)]
@@ -556,14 +738,37 @@ def _check_options(request, plan) -> dict:
 def start_accuracy_check(request, plan, drive):
     """The accuracy check of a CVODES run (:func:`~flexctl.sim.compiled.check_run`), started
     beside the run on a spare core before the run starts: it needs only the plan. Hand it
-    to :func:`check_run_accuracy`, or ``abandon()`` it if the run stops early."""
+    to :func:`check_run_accuracy`, or ``abandon()`` it if the run stops early.
+
+    Parameters
+    ----------
+    request : RunRequest
+        The checked run: model, inputs, tolerance, output grid.
+    plan : IntegrationPlan
+        Its segments, tolerances per state, step bounds and multistep family.
+    drive : PrescribedDrive or TorqueDrive
+        Gives the initial state.
+
+    Returns
+    -------
+    Beside
+    """
     return start_check(request.model, planned_segments(plan, request.grid), drive.y_init,
                        plan.scale, request.rtol, **_check_options(request, plan))
 
 
 def strategy_for(method: str, symbolic: bool = False):
     """The strategy class of an integration method (``RK45``: the compiled pair when the
-    inputs have a CasADi form, SciPy's otherwise)."""
+    inputs have a CasADi form, SciPy's otherwise).
+
+    Parameters
+    ----------
+    method : str
+        The plan's method (:attr:`IntegrationPlan.method`).
+    symbolic : bool, optional
+        The run is compiled: every input has a CasADi form (and ``"BDF"`` has its compiled
+        integrator). Default False.
+    """
     if method == "RK45" and symbolic:
         return EmbeddedSegments
     if method == "Adams" or (method == "BDF" and symbolic):
@@ -575,7 +780,23 @@ def check_run_accuracy(request, plan, drive, traj: Trajectory, reporter=None, ch
     """Repeat a compiled run that reached its end at 10 times the tolerance
     (:func:`flexctl.sim.compiled.verify_accuracy`): ``traj.integration_error``, and the run
     redone with BDF2 where the two disagree grossly (with an :class:`AccuracyWarning`).
-    ``check``: the check run already started (:func:`start_accuracy_check`)."""
+
+    Parameters
+    ----------
+    request : RunRequest
+        The checked run.
+    plan : IntegrationPlan
+        Its tolerances per state, step bounds and multistep family.
+    drive : PrescribedDrive or TorqueDrive
+        Gives the initial state and the layout of the integrated state.
+    traj : Trajectory
+        The run, with its ``compiled_segments``; gets ``integration_error``, any note and the
+        check's evaluations, and its states are replaced where the run is redone.
+    reporter : object, optional
+        A strategy whose ``report(t, note)`` says that the check runs. Default none.
+    check : Beside, optional
+        The check run already started (:func:`start_accuracy_check`); default: run it now.
+    """
     if reporter is not None:
         reporter.report(request.t_final, "checking accuracy")
     tip_map = tip_rows(request.model, drive.layout)

@@ -127,7 +127,15 @@ class TracedStateTorque(TracedTorque):
     state_dependent: ClassVar[bool] = True
 
     def casadi(self, t, x):
-        """The torque as a CasADi expression of the time ``t`` and plant state ``x``, N m."""
+        """The torque as a CasADi expression of the time ``t`` and plant state ``x``, N m.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        x : casadi.SX or casadi.MX, shape (n, 1)
+            Plant state, in the order of ``model.layout``.
+        """
         return self.form(t, x)
 
     def __call__(self, t, x):
@@ -283,6 +291,25 @@ def torque_input(torque, *, t_final: float, trace: bool, n_states: int, state_sc
     become a :class:`~flexctl.sim.inputs.SampledTorque` covering the run; a Python function
     without a CasADi form is traced when ``trace`` (:func:`trace_torque`); anything else is
     returned as given. The reason is empty unless a function was left untraced.
+
+    Parameters
+    ----------
+    torque : callable, (times, values), SampledTorque or None
+        The ``torque`` argument of :func:`flexctl.simulate`, N m.
+    t_final : float
+        End of the run, s: samples must cover ``[0, t_final]``, a trace is checked inside it.
+    trace : bool
+        Trace a Python function (the rest of the run is compiled).
+    n_states : int
+        Plant state size ``n``, for a function ``torque(t, x)``.
+    state_scale : array_like, shape (n,), optional
+        Physical size of each plant state: a trace is checked at states of this size
+        (:func:`trace_torque`).
+
+    Returns
+    -------
+    torque : object or None
+    reason : str
     """
     if torque is None:
         return None, ""

@@ -239,6 +239,22 @@ def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors
     bounded by :data:`SCREEN_FACTOR` times its squared deflection ratio (``screened``); the
     exact variant has no geometric error; every other run is assessed by :func:`assess`.
     Used by :func:`flexctl.simulate` for every run (``check_validity``).
+
+    Parameters
+    ----------
+    result : SimulationResult
+        The finished run.
+    torque, hub_motion, controller, sensors : object, optional
+        The inputs the run was made with, as :func:`flexctl.simulate` takes them.
+    tolerance : float, optional
+        Relative tip error accepted, in (0, 1). Default 1e-2.
+    warn : bool, optional
+        Issue a :class:`ModelValidityWarning` when the estimate is above ``tolerance`` or the
+        run's energy balance is violated. Default True.
+
+    Returns
+    -------
+    ModelValidity
     """
     check_tolerance(tolerance)
     model = result.model
@@ -325,6 +341,22 @@ def choose_variant(system, maneuver, tolerance: float = DEFAULT_TOLERANCE, *,
 
     first_order when :func:`geometric_error` of first_order on the manoeuvre (a slew by its
     rigid rest-to-rest torque) is within ``tolerance``; exact otherwise.
+
+    Parameters
+    ----------
+    system : HubBeam or Structure
+        The structure the models are built on.
+    maneuver : SpinUp, SineTorque, Slew or similar
+        A prescribed hub motion, a torque ``f(t)`` (N m) or a slew (judged by its rigid
+        rest-to-rest torque, :func:`~flexctl.sim.fidelity.rigid_slew_torque`).
+    tolerance : float, optional
+        Relative tip error accepted, in (0, 1). Default 1e-2.
+    t_final : float
+        Horizon of the estimate's runs, s.
+
+    Returns
+    -------
+    VariantChoice
     """
     check_tolerance(tolerance)
     return _choose(system, maneuver, float(tolerance), float(t_final))
