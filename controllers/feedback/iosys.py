@@ -80,6 +80,12 @@ def to_iosys(law, plant, *, name: str | None = None):
                              f"{type(law).__name__}")
     if callable(getattr(law, "for_plant", None)):
         law = law.for_plant(plant)
+    if name is not None and not isinstance(name, str):
+        raise InputTypeError(f"to_iosys name must be a str; got {name!r}"[:300])
+    if name is not None and (not name.strip() or "." in name):
+        # python-control joins it to its signals' names ("name.torque")
+        raise InputValueError(f"to_iosys name must be a non-blank str without dots; got "
+                              f"{name!r}"[:300])
     name = name or type(law).__name__.lower()
     output = list(plant.input_names)
     if isinstance(law, LQG):

@@ -363,8 +363,10 @@ def _check_reach(model, x_init, x0):
                               f"{model.lengths[k]:g} m); got x0 = {x0!r}")
 
 
-def _check_sensors(sensors, controller):
-    """Sensors are read by a sampled controller that takes readings, and only by one."""
+def _check_sensors(sensors, controller, t_final: float):
+    """Sensors are read by a sampled controller that takes readings, and only by one, and
+    give it readings within the run: a delay and a reading interval shorter than ``t_final``
+    (s)."""
     reads = bool(getattr(controller, "measures", False))
     if sensors is None:
         if reads:
@@ -384,6 +386,15 @@ def _check_sensors(sensors, controller):
         raise InputValueError(f"sensors.sample_time {sensors.sample_time:g} s must be the "
                               f"controller's sample_time {controller.sample_time:g} s (the "
                               "controller reads them at its own samples)")
+    if sensors.delay >= t_final:
+        raise InputValueError(f"sensors.delay {sensors.delay:g} s must be shorter than the run "
+                              f"(t_final = {t_final:g} s): no reading of the moving plant would "
+                              "reach the controller")
+    interval = sensors.interval(controller.sample_time)
+    if interval >= t_final:
+        raise InputValueError(f"the sensors' sample time {interval:g} s must be shorter than the "
+                              f"run (t_final = {t_final:g} s): the controller would read them "
+                              "once, at the start, and never see the plant move")
     return sensors
 
 
@@ -449,7 +460,7 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
     if not is_sampled(controller):
         controller = bound_to_plant(as_controller(controller, x_init), model)
     _check_reach(model, x_init, x0)
-    sensors = _check_sensors(sensors, controller)
+    sensors = _check_sensors(sensors, controller, t_final)
     _warn_many_modes(model)
     return RunRequest(model=model, t_final=float(t_final), method=method, rtol=float(rtol),
                       atol=atol, grid=grid, step=float(step), max_step=max_step,

@@ -68,11 +68,14 @@ from ..model.checks import (KeywordOnly, check_array, check_instance, check_inte
 from ..model.errors import InputValueError
 
 __all__ = ["Sensors", "SensorSession", "sensor_names", "measurement_matrix",
-           "noise_covariance", "MAX_DELAY", "DEFAULT_SAMPLE_TIME", "VARIANCE_FLOOR"]
+           "noise_covariance", "MAX_DELAY", "MAX_NOISE", "DEFAULT_SAMPLE_TIME", "VARIANCE_FLOOR"]
 
 #: Sample time of a loop that reads sensors when neither they nor the controller give one, s
 #: (100 Hz, a common attitude-control and lab-servo rate).
 DEFAULT_SAMPLE_TIME = 0.01
+#: Largest noise level (in its reading's SI unit): the filter squares it into a variance and
+#: divides that by the sample interval, which must stay finite (1e300 overflowed to inf).
+MAX_NOISE = 1e100
 #: Longest transport delay, s: a longer one is a typing slip (ms written as s).
 MAX_DELAY = 10.0
 #: Smallest variance :func:`noise_covariance` gives a reading, in its SI unit squared (rad^2,
@@ -123,11 +126,11 @@ class Sensors(KeywordOnly):
         if self.seed is not None:
             object.__setattr__(self, "seed", check_integer("sensors", "seed", self.seed,
                                                            minimum=0))
-        for name in ("encoder_resolution", "gyro_noise", "gyro_bias_instability",
-                     "root_moment_noise"):
-            self._set(name, minimum=0.0)
+        self._set("encoder_resolution", minimum=0.0)
+        for name in ("gyro_noise", "gyro_bias_instability", "root_moment_noise"):
+            self._set(name, minimum=0.0, maximum=MAX_NOISE)
         self._set("gyro_bias_time", minimum=0.0, strict=True)
-        self._set("tip_acceleration_noise", minimum=0.0, optional=True)
+        self._set("tip_acceleration_noise", minimum=0.0, optional=True, maximum=MAX_NOISE)
         self._set("delay", minimum=0.0, maximum=MAX_DELAY)
         self._set("sample_time", minimum=0.0, strict=True, optional=True)
 

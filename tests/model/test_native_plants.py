@@ -123,6 +123,12 @@ def test_to_iosys_names_and_refusals(plant):
     assert system.nstates == law.n_states and system.state_labels[0] == "xhat_theta"
     with pytest.raises(InputTypeError, match="Model"):
         to_iosys(law, "plant")
+    # a name is joined to the signals' names by python-control: a number failed inside re
+    with pytest.raises(InputTypeError, match="name must be a str; got 5"):
+        to_iosys(law, model, name=5)
+    with pytest.raises(InputValueError, match="without dots; got 'a.b'"):
+        to_iosys(law, model, name="a.b")
+    assert to_iosys(law, model, name="estimator").name == "estimator"
     with pytest.raises(InputTypeError, match="feedback law"):
         to_iosys(lambda t, x: 0.0, model)
     from flexctl.sim.digital import ZeroOrderHold

@@ -245,6 +245,9 @@ def test_same_seed_same_readings_other_seed_other_readings(model):
     ("seed", True, InputTypeError, r"sensors\.seed must be an integer >= 0; got True"),
     ("seed", -1, InputValueError, r"sensors\.seed must be an integer >= 0; got -1"),
     ("seed", 1.5, InputTypeError, r"sensors\.seed must be an integer"),
+    # the filter squares a noise level into a variance: 1e300 overflowed it
+    ("gyro_noise", 1e300, InputValueError, r"sensors\.gyro_noise must be .*<= 1e\+100"),
+    ("tip_acceleration_noise", 1e200, InputValueError, r"sensors\.tip_acceleration_noise"),
 ], ids=lambda v: str(v)[:24])
 def test_bad_sensor_settings_raise_naming_the_field(field, value, error, match):
     with pytest.raises(error, match=match):
@@ -410,3 +413,17 @@ def test_bad_observed_settings_raise(kwargs, error, match):
     settings = dict(law=_open_loop, sensors=Sensors(), sample_time=SAMPLE_TIME) | kwargs
     with pytest.raises(error, match=match):
         Observed(**settings)
+
+
+@pytest.mark.parametrize("sensors, t_final, match", [
+    (Sensors(delay=9.0), 4.0, r"sensors\.delay 9 s must be shorter than the run"),
+    (Sensors(sample_time=5.0), 4.0, r"sample time 5 s must be shorter than the run"),
+], ids=["delay-past-the-end", "one-reading"])
+def test_sensors_that_cannot_see_the_run_are_refused_before_it(model, sensors, t_final, match):
+    # a 9 s delay in a 4 s run, or one reading in the whole run, ended "ok" with the hub unmoved
+    observed = Observed(PD(kp=9.0, kd=8.0), sensors,
+                        sensors.sample_time or SAMPLE_TIME)
+    with pytest.raises(InputValueError, match=match):
+        flexctl.simulate(model, t_final, controller=observed, sensors=sensors,
+                         x0=model.layout.join(theta=0.1))
+
