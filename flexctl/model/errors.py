@@ -16,7 +16,7 @@ Examples
 
 from __future__ import annotations
 
-__all__ = ["InputError", "InputValueError", "InputTypeError"]
+__all__ = ["InputError", "InputValueError", "InputTypeError", "SingularMassMatrixError"]
 
 
 class InputError(Exception):
@@ -29,3 +29,9 @@ class InputValueError(InputError, ValueError):
 
 class InputTypeError(InputError, TypeError):
     """An input of the wrong type (a string where a number belongs, a non-callable, ...)."""
+
+
+class SingularMassMatrixError(ArithmeticError):
+    """The mass matrix of the model is singular at the given state (not bad input: a state
+    the model cannot take)."""
+

@@ -286,6 +286,17 @@ def linearize_at(model, x0, u0=0.0):
     n = model.n_states
     x0 = check_array("linearize", "x0", x0, shape=(n,))
     u0 = check_real("linearize", "u0", u0)
+    # the states simulate takes, and a mass matrix that can be inverted there
+    from .errors import SingularMassMatrixError
+    from .variant import check_reach
+
+    check_reach(model, x0, "linearize: ")
+    inertia = float(np.min(model.effective_hub_inertia(x0)))
+    if not inertia > 0.0:
+        raise SingularMassMatrixError(
+            f"linearize: the mass matrix is singular at x0: the effective hub inertia "
+            f"{inertia:.3g} kg m^2 is not positive (the {model.variant} model of a light hub, "
+            "deflected)")
     drift, a, b = dynamics_jacobians(model, x0, u0)
     if "output_jacobian" not in model._c:           # built once per model
         x = ca.SX.sym("x", n)

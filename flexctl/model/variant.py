@@ -24,15 +24,21 @@ False
 
 from __future__ import annotations
 
+import numpy as np
+
 from .errors import InputTypeError, InputValueError
 from .exact import EXACT_MAX_MODES
 
-__all__ = ["Variant", "VARIANTS", "MAX_MODES"]
+__all__ = ["Variant", "VARIANTS", "MAX_MODES", "EXACT_CURL", "check_reach"]
 
 #: The variants, from the usual design model to the most faithful one.
 VARIANTS = ("first_order", "zero_order", "consistent", "exact")
 #: Most cantilever modes per appendage of the small-deflection variants.
 MAX_MODES = 200
+#: The exact variant's reach: its modal tip ``phi(l)^T q``, the integral of the slope angle over
+#: the beam, may pass this many beam lengths before the run stops as "diverged": a mean slope of
+#: 2 rad is a beam curled back on itself, beyond what a few modes describe.
+EXACT_CURL = 2.0
 
 # name: (dynamic stiffening, quadratic hub inertia, exact geometry)
 _TERMS = {
@@ -96,6 +102,13 @@ class Variant(str):
         return _TERMS[self][2]
 
     @property
+    def reach(self) -> float:
+        """How far a modal tip ``phi(l)^T q`` may go, in beam lengths: 1 for the
+        small-deflection variants, which leave their range there; :data:`EXACT_CURL` for the
+        exact beam, which cannot, and stops when its mean slope passes that many radians."""
+        return EXACT_CURL if self.exact else 1.0
+
+    @property
     def max_modes(self) -> int:
         """Most modes per appendage this variant takes (the exact geometry grows as the square
         of the modes times the quadrature points)."""
@@ -116,3 +129,35 @@ class Variant(str):
             kg.
         """
         return matrices.D if self.dynamic_stiffening else matrices.M_ff
+
+
+def check_reach(model, x, owner: str = "", name: str = "x0") -> None:
+    """Refuse a state whose modal tip is already beyond the range of the model's variant
+    (:attr:`~flexctl.model.variant.Variant.reach` beam lengths): :func:`flexctl.simulate` and
+    :meth:`Model.linearize` take the same states.
+
+    Parameters
+    ----------
+    model : Model
+    x : ndarray, shape (n,)
+        The state, in :attr:`Model.layout` order.
+    owner : str, optional
+        What the message starts with (e.g. ``"linearize: "``).
+    name : str, optional
+        The argument's name in the message. Default ``"x0"``.
+
+    Raises
+    ------
+    InputValueError
+        Naming the appendage, its modal tip (m) and the reach (m).
+    """
+    reach = np.asarray(model.lengths, dtype=float) * model.variant.reach
+    tips = model.tip_matrix @ model.layout.modal(x)
+    k = int(np.argmax(np.abs(tips) / reach))
+    if not abs(tips[k]) < reach[k]:
+        label = model.structure.names[k]
+        where = f" of appendage {label!r}" if label else ""
+        raise InputValueError(f"{owner}{name} puts the modal tip{where} at {tips[k]:.4g} m, beyond "
+                              f"the {reach[k]:g} m the {model.variant} model covers (beam length "
+                              f"{model.lengths[k]:g} m); got {name} = {x!r}"[:600])
+

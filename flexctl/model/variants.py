@@ -38,7 +38,7 @@ import numpy as np
 import scipy.linalg
 
 from .checks import check_real
-from .errors import InputValueError
+from .errors import InputValueError, SingularMassMatrixError
 from .exact import EXACT_MAX_MODES, exact_geometry
 from .exports import signal_names
 from .layout import StateLayout
@@ -54,10 +54,6 @@ MAX_SPIN_RATE = 1e100
 #: Spin rates whose natural frequencies a model keeps (the last ones asked for).
 KEPT_SPINS = 16
 OUTPUT_NAMES = ("theta", "theta_dot", "tip_deflection", "root_moment", "tip_angle")
-
-
-class SingularMassMatrixError(ArithmeticError):
-    """The mass matrix of the model is singular at the given state."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -819,3 +815,4 @@ def checked_spin(spin_rate) -> float:
         raise InputValueError(f"spin_rate must be finite and at most {MAX_SPIN_RATE:g} rad/s in "
                               f"magnitude (its square scales the stiffness); got {spin_rate!r}")
     return spin_rate
+

@@ -26,9 +26,9 @@ from .inputs import (as_vector, check_method, check_rtol, check_time, jacobian_f
                      output_grid, time_function)
 from .progress import check_progress, progress_cuts
 from .sensors import Sensors
-from .stops import model_reach
 from .tracing import torque_input
 from ..model import Model, SingularMassMatrixError
+from ..model.variant import check_reach
 from ..model.checks import check_instance, check_real
 from ..model.errors import InputTypeError, InputValueError
 
@@ -351,16 +351,6 @@ def _spin_frequency(model, x_init, x0, t_final, prescribed) -> float:
     return w_spin
 
 
-def _check_reach(model, x_init, x0):
-    """Refuse an initial state whose modal tip is already beyond the model's range."""
-    reach = model_reach(model)
-    tips = model.tip_matrix @ model.layout.modal(x_init)
-    k = int(np.argmax(np.abs(tips) / reach))
-    if abs(tips[k]) >= reach[k]:
-        where = f" of appendage {model.structure.names[k]!r}" if model.structure.names[k] else ""
-        raise InputValueError(f"x0 puts the modal tip{where} at {tips[k]:.4g} m, beyond the "
-                              f"{reach[k]:g} m the {model.variant} model covers (beam length "
-                              f"{model.lengths[k]:g} m); got x0 = {x0!r}")
 
 
 def _check_sensors(sensors, controller, t_final: float):
@@ -459,7 +449,7 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
     torque_fn = time_function(torque, "torque") if torque is not None else None
     if not is_sampled(controller):
         controller = bound_to_plant(as_controller(controller, x_init), model)
-    _check_reach(model, x_init, x0)
+    check_reach(model, x_init)
     sensors = _check_sensors(sensors, controller, t_final)
     _warn_many_modes(model)
     return RunRequest(model=model, t_final=float(t_final), method=method, rtol=float(rtol),

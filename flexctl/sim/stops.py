@@ -15,6 +15,7 @@ from enum import Enum
 import numpy as np
 
 from ..model import Model
+from ..model.variant import EXACT_CURL
 
 __all__ = ["tip_rows", "reach_ratio", "StopReason", "StopConditions", "stiffness_reason", "model_reach",
            "SINGULAR_FRACTION", "EXACT_CURL"]
@@ -22,10 +23,6 @@ __all__ = ["tip_rows", "reach_ratio", "StopReason", "StopConditions", "stiffness
 #: Integration stops as "singular" when the effective hub inertia falls below this fraction
 #: of its value at rest (the exact singularity cannot be integrated up to).
 SINGULAR_FRACTION = 1e-9
-#: The exact variant stops as "diverged" when its modal tip ``phi(l)^T q``, the integral of the
-#: slope angle over the beam, passes this many beam lengths: a mean slope of 2 rad is a beam
-#: curled back on itself, beyond what a few modes describe.
-EXACT_CURL = 2.0
 
 
 def model_reach(model: Model) -> np.ndarray:
@@ -33,7 +30,7 @@ def model_reach(model: Model) -> np.ndarray:
     beam length for the small-deflection variants, which leave their range there;
     :data:`EXACT_CURL` lengths for the exact beam, which cannot, and stops only when its mean
     slope passes ``EXACT_CURL`` rad."""
-    return model.lengths * (EXACT_CURL if model.variant.exact else 1.0)
+    return model.lengths * model.variant.reach
 
 
 def reach_ratio(model: Model, q) -> np.ndarray:

@@ -182,3 +182,28 @@ def test_dynamics_jacobians_are_the_linearisation():
     np.testing.assert_allclose(a, plant.A, rtol=1e-12, atol=1e-12 * np.max(np.abs(a)))
     np.testing.assert_allclose(b, plant.B, rtol=1e-12, atol=1e-14)
     np.testing.assert_array_equal(drift, 0.0)
+
+
+@pytest.mark.parametrize("variant", ["first_order", "exact"])
+def test_linearize_refuses_the_states_simulate_refuses(hub_beam_mass_system, variant):
+    # a modal tip five beam lengths out: simulate refused it, linearize returned finite matrices
+    model = flexctl.build_model(hub_beam_mass_system, n_modes=2, variant=variant)
+    far = model.rest_state()
+    far[model.layout.q.start] = 2.5 * hub_beam_mass_system.beam.length
+    messages = []
+    for call in (lambda: model.linearize(x0=far), lambda: flexctl.simulate(model, 1.0, x0=far)):
+        with pytest.raises(InputValueError, match="x0 puts the modal tip at") as refused:
+            call()
+        messages.append(str(refused.value).removeprefix("linearize: "))
+    assert messages[0] == messages[1]
+
+
+def test_linearize_refuses_a_singular_mass_matrix(spacecraft_system):
+    # the consistent model of a massless hub, deflected: its effective hub inertia is negative
+    model = flexctl.build_model(spacecraft_system, n_modes=2, variant="consistent")
+    bent = model.rest_state()
+    bent[model.layout.q.start] = 0.2 * spacecraft_system.beam.length
+    assert model.effective_hub_inertia(bent) < 0.0
+    with pytest.raises(flexctl.SingularMassMatrixError, match="effective hub inertia .* not "
+                                                              "positive"):
+        model.linearize(x0=bent)
