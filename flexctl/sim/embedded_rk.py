@@ -8,16 +8,12 @@ no history to rebuild: the Dormand-Prince pair (the scheme of SciPy's ``RK45``) 
 step size from one sample to the next, so a sample of a smooth, non-stiff plant takes the few
 steps its accuracy needs.
 
-The pair's steps are one compiled chain of :data:`ATTEMPTS` step attempts, each accepted or
-rejected inside the call by the weighted RMS norm of the difference between the fifth-order
-solution and the embedded fourth-order one, ``e = ||(y5 - y4) / (atol + rtol max(|y|,
-|y5|))||``, with the weights of CVODES (``atol = rtol * scale``). A step with ``e <= 1`` is
-accepted (local extrapolation, as in SciPy and Hairer's DOPRI5); the next is
-``h * min(5, max(0.2, 0.9 e^(-1/5)))``. The same chain serves a continuous run
-(:class:`EmbeddedRun`, between the inputs' breakpoints) and a sample of a sampled loop
-(:class:`EmbeddedHold`, the held torque one of its numbers): the last step ends on the
-segment's or the sample's end, and the output times inside it are read from the pair's
-continuous extension (:data:`DENSE_OUTPUT`).
+Each step is one compiled call, ``([y; t], h, [c; u], atol, rtol) -> ([y5; t + h], e)``: the
+fifth-order solution and the weighted RMS norm of its difference from the embedded
+fourth-order one, ``e = ||(y5 - y4) / (atol + rtol max(|y|, |y5|))||``, with the weights of
+CVODES (``atol = rtol * scale``). A step with ``e <= 1`` is accepted (local extrapolation, as in
+SciPy and Hairer's DOPRI5); the next is ``h * min(5, max(0.2, 0.9 e^(-1/5)))``. Steps end
+exactly at the output times inside a sample (an output grid point, a sensor's read time).
 
 :func:`choose_hold` picks this pair or CVODES for ``method="auto"``: the pair when the fastest
 pole of the held plant (the largest eigenvalue of its linearisation at rest) allows a sample
@@ -37,7 +33,8 @@ from .compiled import (CHECK_FACTOR, cached_build, input_key, drive_size, input_
 from .compile_cache import compiled, lift_constants
 from .buffers import InPlace
 from . import fixed_step
-from .fixed_step import END_INSIDE, STEP_CACHE, STEP_CACHE_SIZE, drive_symbols
+from .fixed_step import (END_INSIDE, STEP_CACHE, STEP_CACHE_SIZE, drive_symbols, jit_compiled,
+                         step_function)
 from .native_rhs import MAX_INSTRUCTIONS
 from ..model.checks import check_array, check_instance, check_integer, check_real
 from ..model.errors import InputValueError
@@ -156,6 +153,20 @@ def _dopri5_step(f, t, y, h, atol, rtol) -> tuple:
     return ks, y5, ca.sqrt(ca.sumsqr(error / weight) / y.numel())
 
 
+class _DormandPrince:
+    """The scheme for :func:`~flexctl.sim.fixed_step.step_function`: one Dormand-Prince step
+    and the weighted norm of its error estimate."""
+
+    name, label = "dopri5", "Dormand-Prince"
+
+    def __init__(self, ny: int):
+        self.inputs = (("atol", ny), ("rtol", 1))
+
+    def __call__(self, f, t, y, h, extra):
+        _, y5, norm = _dopri5_step(f, t, y, h, *extra)
+        return y5, norm
+
+
 class EmbeddedHold:
     """One sample under a held torque by Dormand-Prince 5(4) steps with error control, the
     step size carried from sample to sample.
@@ -171,15 +182,13 @@ class EmbeddedHold:
     rtol : float
         Relative tolerance of each step's local error (weighted RMS norm, as CVODES).
     max_steps : int
-        Most step attempts (accepted or not) per output time of one sample; more raise
-        ``RuntimeError``.
+        Most steps (accepted or not) of one sample; more raise ``RuntimeError``.
     h_first : float
         The first step tried, s (the error control shortens it as it must).
 
     Notes
     -----
-    Two :class:`EmbeddedRun` s of the held plant, one at the run's tolerance and one at
-    :data:`~flexctl.sim.compiled.CHECK_FACTOR` times it. Called as the other holds of :func:`flexctl.sim.digital.run_sampled`:
+    Called as the other holds of :func:`flexctl.sim.digital.run_sampled`:
     ``hold(lo, t_out, y, u, loose=False) -> (states (n, K), evaluations)``; ``loose`` runs at
     :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance (the replay that estimates
     the run's integration error), with a step size of its own.
@@ -189,25 +198,89 @@ class EmbeddedHold:
     error_divisor = 1.0
 
     def __init__(self, model, torque, scale, rtol: float, max_steps: int, h_first: float):
+        from ..model import Model
+
+        check_instance("EmbeddedHold", "model", model, Model)
         if torque is not None and not is_symbolic(torque=torque):
             raise InputValueError("EmbeddedHold torque must have a CasADi form (casadi(t)) or "
                                   f"be None; got {type(torque).__name__}")
-        # the held torque is the last of the run's numbers: one compiled chain of attempts
-        # serves every sample, and the looser replay has a run (and a step size) of its own
-        self._runs = {loose: EmbeddedRun(model, torque, None, HeldTorque(0.0), scale=scale,
-                                         rtol=rtol * (CHECK_FACTOR if loose else 1.0),
-                                         max_steps=max_steps, h_first=h_first)
-                      for loose in (False, True)}
+        n = model.layout.n_states
+        self.scale = check_array("EmbeddedHold", "scale", scale, shape=(n,))
+        if np.any(self.scale <= 0.0):
+            raise InputValueError(f"EmbeddedHold scale must be positive (the states' sizes); "
+                                  f"got a smallest entry of {float(np.min(self.scale))!r}")
+        self.rtol = check_real("EmbeddedHold", "rtol", rtol, minimum=0.0, strict=True,
+                               maximum=1.0)
+        self.max_steps = check_integer("EmbeddedHold", "max_steps", max_steps, minimum=1)
+        h_first = check_real("EmbeddedHold", "h_first", h_first, minimum=0.0, strict=True)
+        self.model, self.torque = model, torque
+        self.torque_numbers = input_numbers((torque, None, None))
+        n_numbers = self.torque_numbers.size + 1
+        key = input_key(model, (torque, None, None), np.array([1.0]))
+        ny = self.scale.size
+
+        def build():
+            step = step_function(model, torque, None, HeldTorque(0.0), n_numbers,
+                                  scheme=_DormandPrince(ny))[0]
+            return jit_compiled(step, model)
+
+        step = cached_build(STEP_CACHE, STEP_CACHE_SIZE,
+                       None if key is None else ("dopri5", key), (model, torque), build)
+        self._runs, self._h = {}, {}
+        for loose in (False, True):
+            tol = self.rtol * (CHECK_FACTOR if loose else 1.0)
+            run = InPlace(step)
+            # the tolerances stay in the buffers: calls pass [y; t], h and [c; u] only
+            run.args[3][:] = tol * self.scale
+            run.args[4][:] = tol
+            self._runs[loose] = run
+            self._h[loose] = float(h_first)
 
     def __call__(self, lo, t_out, y, u, loose=False):
         """States at ``t_out`` (ascending, after ``lo``, s) from ``y`` (n,) at ``lo`` under the
         held torque ``u`` (N m): ``(states (n, K), evaluations)``; ``RuntimeError`` when a step
         cannot be taken (a non-finite state, the step budget, a step too short)."""
         run = self._runs[bool(loose)]
-        with run._run._lock:
-            run._run.args[3][-1] = u
-            return run._segment(run._run, float(lo), np.asarray(t_out, dtype=float),
-                                np.asarray(y, dtype=float), None)
+        with run._lock:       # its buffers are this hold's: written and read here directly
+            return self._sample(run, lo, t_out, y, u, loose)
+
+    def _sample(self, run, lo, t_out, y, u, loose):
+        state, length, numbers = run.args[0], run.args[1], run.args[2]
+        stepped, error = run.results[0], run.results[1]
+        numbers[:-1], numbers[-1] = self.torque_numbers, u
+        state[:-1], state[-1] = y, lo
+        t, h, attempts = float(lo), self._h[loose], 0
+        out = np.empty((state.size - 1, len(t_out)))
+        for j, end in enumerate(np.asarray(t_out, dtype=float)):
+            while t < end:
+                left = end - t
+                # the last step of an output interval ends on it (and is not left a sliver)
+                last = left <= 1.1 * h
+                step = left if last else h
+                length[0] = step
+                run.evaluate()
+                norm = float(error[0])
+                attempts += 1
+                if attempts > self.max_steps:
+                    raise RuntimeError(f"more than {self.max_steps} steps in a sample")
+                if norm <= 1.0:                          # accepted (NaN never is)
+                    t = end if last else t + step
+                    state[:] = stepped
+                    state[-1] = t
+                    grow = GROWTH if norm == 0.0 else min(GROWTH, SAFETY * norm ** -0.2)
+                    # a step cut short to end on an output time does not shorten the next
+                    h = max(h, step * grow) if last else step * grow
+                else:
+                    shrink = (max(SHRINK, SAFETY * norm ** -0.2) if math.isfinite(norm)
+                              else SHRINK)
+                    h = step * shrink
+                    if h < MIN_STEP * max(1.0, abs(t)):
+                        raise RuntimeError(f"step size {h:.3g} s at t = {t:.6g} s")
+            out[:, j] = state[:-1]
+        self._h[loose] = h
+        if not np.all(np.isfinite(out)):
+            raise RuntimeError("non-finite state")
+        return out, 7 * attempts
 
 
 def choose_hold(model, sample_time: float, spin_frequency: float = 0.0) -> tuple:

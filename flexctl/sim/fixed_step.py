@@ -111,7 +111,7 @@ def drive_symbols(model, torque, hub_motion, controller, n_numbers: int) -> dict
             "lifted_values": None if lifted is None else lifted[1]}
 
 
-def step_function(model, torque, hub_motion, controller, n_numbers: int):
+def step_function(model, torque, hub_motion, controller, n_numbers: int, scheme=None):
     """CasADi ``step([y; t], h, c) -> ([y_next; t + h], f(t, y))``: one RK4 step of the drive
     (plant and controller states, or ``[q, q_dot]`` under a prescribed hub motion), time
     carried with the state, and the derivative at the step's start for dense output; and
@@ -126,6 +126,11 @@ def step_function(model, torque, hub_motion, controller, n_numbers: int):
         The run's inputs, each with a CasADi form (:func:`~flexctl.sim.compiled.is_symbolic`).
     n_numbers : int
         Rows of ``c``, as for :func:`drive_symbols`.
+    scheme : callable, optional
+        ``scheme(f, t, y, h, extra)`` in place of RK4: it returns the step's outputs after
+        ``[y_next; t + h]``, given the drive's ``f(time, state)``; ``extra`` are the step's
+        further inputs (``scheme.inputs``: ``(name, rows)`` pairs) as symbols (the sampled
+        loop's Dormand-Prince steps, :class:`~flexctl.sim.embedded_rk.EmbeddedHold`).
 
     Returns
     -------
@@ -139,16 +144,24 @@ def step_function(model, torque, hub_motion, controller, n_numbers: int):
     y, t = yt[:ny], yt[ny]
     ys, ts = sym.sym("y", ny), sym.sym("t")
     rate = ca.Function("flexctl_rate", [ys, ts, c], [f(ts, ys, None)])
-    k1 = f(t, y)
-    k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
-    k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
-    k4 = f(t + h * (1.0 - END_INSIDE), y + h * k3)
-    y_next = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-    outputs = [ca.vertcat(y_next, t + h), k1]
+    extra = [] if scheme is None else [sym.sym(name, rows) for name, rows in scheme.inputs]
+    if scheme is None:
+        k1 = f(t, y)
+        k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
+        k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
+        k4 = f(t + h * (1.0 - END_INSIDE), y + h * k3)
+        y_next, outputs, name = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4), [k1], "rk4"
+    else:
+        y_next, *outputs = scheme(f, t, y, h, extra)
+        name = scheme.name
+    args = [yt, h, c, *extra]
     if numbers is None:
-        return ca.Function("flexctl_rk4_step", [yt, h, c], outputs), rate
-    step = ca.Function("flexctl_exact_rk4_step", [yt, h, c, numbers], outputs)
-    return _exact_step(step, drive["lifted_values"]), rate
+        return (ca.Function(f"flexctl_{name}_step", args,
+                            [ca.vertcat(y_next, t + h), *outputs]), rate)
+    step = ca.Function(f"flexctl_exact_{name}_step", args + [numbers],
+                       [ca.vertcat(y_next, t + h), *outputs])
+    return (_exact_step(step, drive["lifted_values"],
+                        "RK4" if scheme is None else scheme.label), rate)
 
 
 def lifted_core(model, hub_motion):

@@ -477,7 +477,6 @@ class EmbeddedSegments(CvodesSegments):
         check_embedded_accuracy(self.request, self.drive, traj, check, reporter=self)
 
     def integrate(self, lo, t_eval, y) -> tuple:
-        # a run that passes a stop ends there, not at the segment's end
         """``(states at t_eval, evaluations)`` of one segment from ``y`` at ``lo`` by the compiled
         steps; a run that passes a stopping condition ends there, with fewer states than
         ``t_eval``; ``RuntimeError`` where a step cannot be taken.
