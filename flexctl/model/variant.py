@@ -151,6 +151,9 @@ def check_reach(model, x, owner: str = "", name: str = "x0") -> None:
     InputValueError
         Naming the appendage, its modal tip (m) and the reach (m).
     """
+    from .checks import check_array
+
+    x = check_array(owner.rstrip(": ") or "check_reach", name, x, shape=(model.n_states,))
     reach = np.asarray(model.lengths, dtype=float) * model.variant.reach
     tips = model.tip_matrix @ model.layout.modal(x)
     k = int(np.argmax(np.abs(tips) / reach))

@@ -55,3 +55,15 @@ def test_only_the_quadratic_and_exact_variants_change_the_hub_inertia(hub_beam_m
     varies = model.variant.quadratic_inertia or model.variant.exact
     assert (abs(change) > 1e-6 * float(model.effective_hub_inertia(rest))) == varies
     assert model.variant.max_modes == (EXACT_MAX_MODES if name == "exact" else MAX_MODES)
+
+
+@pytest.mark.parametrize("bad", ["abc", [1.0, 2.0], np.full(6, np.nan), None],
+                         ids=["str", "short", "nan", "none"])
+def test_the_reach_check_refuses_what_is_not_a_state(hub_beam_mass_system, bad):
+    from flexctl.model.errors import InputError
+    from flexctl.model.variant import check_reach
+
+    model = build_model(hub_beam_mass_system, n_modes=2)
+    with pytest.raises(InputError, match="x0"):
+        check_reach(model, bad)
+    check_reach(model, model.rest_state())
