@@ -26,9 +26,13 @@ _SOURCES = {
                      "run_slew"), "flexctl.app.scenes"),
 }
 __all__ = list(_SOURCES)
+#: The layers, also loaded on first use (``flexctl.sim.simulate`` after ``import flexctl``).
+_LAYERS = ("model", "sim", "app")
 
 
 def __getattr__(name):
+    if name in _LAYERS:
+        return importlib.import_module(f"{__name__}.{name}")
     if name not in _SOURCES:
         raise AttributeError(f"module 'flexctl' has no attribute {name!r}")
     value = getattr(importlib.import_module(_SOURCES[name]), name)
@@ -37,7 +41,7 @@ def __getattr__(name):
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_SOURCES))
+    return sorted(set(globals()) | set(_SOURCES) | set(_LAYERS))
 
 
 __version__ = "0.1.0"

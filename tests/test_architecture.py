@@ -224,6 +224,7 @@ def test_top_level_names_load_on_first_use():
 
     assert set(flexctl.__all__) <= set(dir(flexctl))
     assert flexctl.load_scene.__module__ == "flexctl.app.scenes"
+    assert flexctl.sim.simulate is flexctl.simulate and "sim" in dir(flexctl)
     with pytest.raises(AttributeError, match="no attribute 'nothing'"):
         flexctl.nothing
 
