@@ -29,7 +29,8 @@ import numpy as np
 from .errors import InputTypeError, InputValueError
 from .exact import EXACT_MAX_MODES
 
-__all__ = ["Variant", "VARIANTS", "MAX_MODES", "EXACT_CURL", "check_reach"]
+__all__ = ["Variant", "VARIANTS", "MAX_MODES", "EXACT_CURL", "check_reach",
+           "model_reach"]
 
 #: The variants, from the usual design model to the most faithful one.
 VARIANTS = ("first_order", "zero_order", "consistent", "exact")
@@ -131,6 +132,14 @@ class Variant(str):
         return matrices.D if self.dynamic_stiffening else matrices.M_ff
 
 
+def model_reach(model) -> np.ndarray:
+    """Largest ``|phi_k(l_k)^T q_k|`` the model covers for each appendage, m, shape (K,): the
+    beam length for the small-deflection variants, which leave their range there;
+    :data:`EXACT_CURL` lengths for the exact beam, which cannot, and stops only when its mean
+    slope passes ``EXACT_CURL`` rad."""
+    return np.asarray(model.lengths, dtype=float) * model.variant.reach
+
+
 def check_reach(model, x, owner: str = "", name: str = "x0") -> None:
     """Refuse a state whose modal tip is already beyond the range of the model's variant
     (:attr:`~flexctl.model.variant.Variant.reach` beam lengths): :func:`flexctl.simulate` and
@@ -154,7 +163,7 @@ def check_reach(model, x, owner: str = "", name: str = "x0") -> None:
     from .checks import check_array
 
     x = check_array(owner.rstrip(": ") or "check_reach", name, x, shape=(model.n_states,))
-    reach = np.asarray(model.lengths, dtype=float) * model.variant.reach
+    reach = model_reach(model)
     tips = model.tip_matrix @ model.layout.modal(x)
     k = int(np.argmax(np.abs(tips) / reach))
     if not abs(tips[k]) < reach[k]:

@@ -15,7 +15,7 @@ from enum import Enum
 import numpy as np
 
 from ..model import Model
-from ..model.variant import EXACT_CURL
+from ..model.variant import EXACT_CURL, model_reach
 
 __all__ = ["tip_rows", "reach_ratio", "StopReason", "StopConditions", "stiffness_reason", "model_reach",
            "SINGULAR_FRACTION", "EXACT_CURL"]
@@ -23,14 +23,6 @@ __all__ = ["tip_rows", "reach_ratio", "StopReason", "StopConditions", "stiffness
 #: Integration stops as "singular" when the effective hub inertia falls below this fraction
 #: of its value at rest (the exact singularity cannot be integrated up to).
 SINGULAR_FRACTION = 1e-9
-
-
-def model_reach(model: Model) -> np.ndarray:
-    """Largest ``|phi_k(l_k)^T q_k|`` the model covers for each appendage, m, shape (K,): the
-    beam length for the small-deflection variants, which leave their range there;
-    :data:`EXACT_CURL` lengths for the exact beam, which cannot, and stops only when its mean
-    slope passes ``EXACT_CURL`` rad."""
-    return model.lengths * model.variant.reach
 
 
 def reach_ratio(model: Model, q) -> np.ndarray:
