@@ -6,9 +6,9 @@ point of every iteration. For the exact variant these dominate: on CasADi's virt
 they took 93 % of a two-array slew's 17 s solve. :func:`design_dynamics` returns the model's
 ``(x, u) -> xdot`` whose value, first derivatives and second derivatives run as machine code
 from the persistent cache (:mod:`flexctl.sim.compile_cache`): one library per structure (its
-numbers are lifted into an input, :func:`~flexctl.sim.compile_cache.lift_constants`) holding
+numbers are lifted into an input, :func:`~flexctl.sim.lifted_constants.lift_constants`) holding
 the function and the derivative functions CasADi's algorithmic differentiation asks for
-(:func:`~flexctl.sim.compile_cache.with_derivatives`). The other variants' dynamics, a few
+(:func:`~flexctl.sim.compiled_derivatives.with_derivatives`). The other variants' dynamics, a few
 hundred operations, are compiled the same way: on CasADi's virtual machine the calls and the
 derivative graphs around them cost more than the arithmetic. A multiple-shooting hold (RK4
 substeps of the dynamics) is compiled as one function (:func:`with_compiled_derivatives`).
@@ -22,7 +22,9 @@ from __future__ import annotations
 import weakref
 
 from flexctl.model.checks import check_integer
-from flexctl.sim.compile_cache import compiled, lift_constants, with_derivatives
+from flexctl.sim.compile_cache import compiled
+from flexctl.sim.compiled_derivatives import with_derivatives
+from flexctl.sim.lifted_constants import lift_constants
 
 __all__ = ["design_dynamics", "with_compiled_derivatives", "MAX_INSTRUCTIONS", "MAX_LIBRARY",
            "MAX_HOLD_LIBRARY"]
@@ -70,7 +72,7 @@ def with_compiled_derivatives(function, max_library: int = MAX_LIBRARY):
     :data:`MAX_INSTRUCTIONS` or not SX, or its library would be longer than ``max_library``
     instructions.
 
-    Its numbers are lifted into an input (:func:`~flexctl.sim.compile_cache.lift_constants`),
+    Its numbers are lifted into an input (:func:`~flexctl.sim.lifted_constants.lift_constants`),
     so that one library serves every function of the same structure.
 
     Parameters

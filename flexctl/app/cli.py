@@ -474,7 +474,12 @@ def _cmd_cache(args) -> int:
     from ..sim.compile_cache import cache_dir, cache_info, clear_cache
     try:
         if args.action == "clear":
-            print(f"removed {clear_cache()} compiled functions from {cache_dir()}")
+            report = clear_cache()
+            print(report)
+            if report.failed:
+                return _error(f"could not remove {len(report.failed)} files from the cache "
+                              f"{report.folder} (first: {report.failed[0][0]}: "
+                              f"{report.failed[0][1]})")
         else:
             print(cache_info())
     except OSError as exc:

@@ -25,7 +25,7 @@ rtol 1e-8, 6 s: 4 394 steps against 7 120), at one evaluation a step too.
   with it against 7 189 on the Dormand-Prince pair. Evaluated at a segment's start and where
   Newton's iterations fail to converge, and carried from call to call.
 - **Library.** The model's numbers (and first_order's, for the Jacobian) are inputs
-  (:func:`~flexctl.sim.compile_cache.lift_constants`): one library per structure and
+  (:func:`~flexctl.sim.lifted_constants.lift_constants`): one library per structure and
   inputs' form, kept in the persistent cache (:func:`~flexctl.sim.compile_cache.compiled_source`).
   The exact model's right-hand side is not in it: the library holds the drive's own part
   (torque and controller, or the hub's motion) and calls the model's compiled right-hand side,
@@ -49,7 +49,8 @@ from pathlib import Path
 import numpy as np
 
 from .compiled import cached_build, input_key, input_numbers, is_symbolic
-from .compile_cache import compiled_source, compiling_enabled, compiler, lift_constants
+from .compile_cache import compiled_source, compiling_enabled, compiler
+from .lifted_constants import lift_constants
 from .embedded_rk import CompiledRun, checked_run_arguments
 from .fixed_step import STEP_CACHE, STEP_CACHE_SIZE, drive_symbols
 from .native_rhs import MAX_DAE_INSTRUCTIONS, MAX_INSTRUCTIONS

@@ -30,7 +30,8 @@ import numpy as np
 
 from .compiled import (CHECK_FACTOR, cached_build, input_key, drive_size, input_numbers,
                        is_symbolic)
-from .compile_cache import compiled, lift_constants
+from .compile_cache import compiled
+from .lifted_constants import lift_constants
 from .buffers import InPlace
 from . import fixed_step
 from .fixed_step import (END_INSIDE, STEP_CACHE, STEP_CACHE_SIZE, drive_symbols, jit_compiled,
@@ -317,7 +318,7 @@ def choose_hold(model, sample_time: float, spin_frequency: float = 0.0) -> tuple
 def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
     """``(run, lifted numbers or None)``: the compiled ``run(s, t_end, h_max, c, atol, rtol[,
     numbers]) -> (s_end, info, dense)`` (``numbers``: the model's numbers, lifted out of its
-    code, :func:`~flexctl.sim.compile_cache.lift_constants`) of ``attempts`` Dormand-Prince
+    code, :func:`~flexctl.sim.lifted_constants.lift_constants`) of ``attempts`` Dormand-Prince
     step attempts of the drive of ``inputs = (torque, hub_motion, controller)`` from
     ``s = [t; h; y]`` towards ``t_end``, each accepted or rejected by the error control
     inside the call.

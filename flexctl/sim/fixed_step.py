@@ -26,7 +26,8 @@ import numpy as np
 from .compiled import (cached_build, closed_loop_dynamics, input_key, split_numbers,
                        drive_size, hub_motion_casadi, input_numbers)
 from .buffers import InPlace
-from .compile_cache import compiled, lift_constants
+from .compile_cache import compiled
+from .lifted_constants import lift_constants
 from .native_rhs import MAX_INSTRUCTIONS
 from ..model.exports import symbolic_beam_dynamics
 
@@ -166,7 +167,7 @@ def step_function(model, torque, hub_motion, controller, n_numbers: int, scheme=
 
 def lifted_core(model, hub_motion):
     """:func:`_exact_core` with its numbers lifted (``(function, numbers)``,
-    :func:`~flexctl.sim.compile_cache.lift_constants`), kept with the model: a sampled loop
+    :func:`~flexctl.sim.lifted_constants.lift_constants`), kept with the model: a sampled loop
     builds a step for each count of steps per sample. None where there is no core or it is
     too long to compile.
 

@@ -5,7 +5,7 @@ variant that evaluation dominates on CasADi's virtual machine (11 us at 4 modes 
 for first_order). Here its scalar form (:attr:`~flexctl.model.exact.ExactGeometry.rhs`,
 every quadrature node written out) is compiled through the persistent cache
 (:mod:`flexctl.sim.compile_cache`) with its numbers lifted into an input
-(:func:`~flexctl.sim.compile_cache.lift_constants`): one library per structure (modes,
+(:func:`~flexctl.sim.lifted_constants.lift_constants`): one library per structure (modes,
 panels, point masses), whatever the beam's numbers, so that a Monte Carlo over the structure
 compiles once. It is wrapped with first_order's Jacobian for Newton's method
 (:meth:`flexctl.Model.integration_rhs`), as on the virtual machine. A structure's exact
@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import weakref
 
-from .compile_cache import compiled, compiling_enabled, jacobian_companion, lift_constants
+from .compile_cache import compiled, compiling_enabled
+from .compiled_derivatives import jacobian_companion
+from .lifted_constants import lift_constants
 
 __all__ = ["integration_rhs", "integration_beam", "prescribed_torque", "compiles_prescribed",
            "native_dae", "MAX_INSTRUCTIONS", "MAX_DAE_INSTRUCTIONS"]
@@ -160,7 +162,7 @@ def native_dae(dae):
     -------
     casadi.Function or None
         The same signature and values, computed by a compiled library (numbers lifted into an
-        input, :func:`~flexctl.sim.compile_cache.lift_constants`, so that one library serves
+        input, :func:`~flexctl.sim.lifted_constants.lift_constants`, so that one library serves
         every model and input of the same structure) that also holds the Jacobian of the ODE
         in ``t``, ``x`` and ``p``: CVODES's Newton iterations call it in one piece. None where
         compiling is off or impossible, or ``dae`` is not such a function or it and its

@@ -29,6 +29,7 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 from dataclasses import dataclass
 from functools import lru_cache
@@ -40,6 +41,7 @@ from ..model.build import rebuild
 from ..model.errors import InputValueError
 from ..model.variant import Variant
 from .fidelity import DEFAULT_TOLERANCE, maneuver_input, check_tolerance, is_prescribed
+from .compile_cache import CompileCacheWarning
 from .energy import ENERGY_TOLERANCE, ModelValidityWarning
 from .inputs import as_vector
 from .runs import run_once, run_states
@@ -62,6 +64,18 @@ SCREEN_DEFLECTION = 0.02
 #: torques of 0.2 to 4 N m it is 0.27 to 0.28 times it (a ratio of 1.5 % to 29 %); four times
 #: that is the bound, 1.6e-4 at the screen.
 SCREEN_FACTOR = 0.4
+
+
+
+@contextlib.contextmanager
+def quiet_estimate():
+    """Silence the estimate's own runs (their accuracy and validity warnings are about a model
+    the user did not ask for), but not a damaged compile cache: that is said once, whatever
+    run meets it."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        warnings.simplefilter("default", CompileCacheWarning)
+        yield
 
 
 def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, controller=None,
@@ -105,8 +119,7 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         drive = {"torque": torque, "hub_motion": hub_motion, "controller": on_small,
                  "sensors": None if sensors is None else sensors.noiseless(),
                  "x0": _initial_state_of(small, model, x0)}
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with quiet_estimate():
             ok, states = run_states(small, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False,
                                     **drive)
         if not ok:
@@ -367,8 +380,7 @@ def _choose(system, maneuver, tolerance, t_final) -> VariantChoice:
     drive = maneuver_input(system, maneuver)
     key = "hub_motion" if is_prescribed(drive) else "torque"
     model = build_model(system, n_modes=ESTIMATE_MODES, variant="exact")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+    with quiet_estimate():
         run = run_once(model, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False,
                        **{key: drive})
     ratio = run.deflection_ratio

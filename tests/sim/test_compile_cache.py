@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from flexctl.app.cli import main
-from flexctl.sim import compile_cache
+from flexctl.sim import compile_cache, lifted_constants
 from flexctl.sim.compile_cache import CompileCacheWarning, compiled
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -63,7 +63,8 @@ def fresh(monkeypatch, tmp_path):
     monkeypatch.setenv("FLEXCTL_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv("FLEXCTL_COMPILE", raising=False)
     monkeypatch.setattr(compile_cache, "_LOADED", {})
-    monkeypatch.setattr(compile_cache, "_LIFTED", {})
+    monkeypatch.setattr(lifted_constants, "_LIFTED", {})
+    monkeypatch.setattr(lifted_constants, "_STRUCTURES", {})
     monkeypatch.setattr(compile_cache, "_WARNED", set())
     monkeypatch.setattr(compile_cache, "_COMPILER", {})
     return tmp_path / "cache"
@@ -150,15 +151,15 @@ def test_an_index_naming_a_missing_library_compiles_through(fresh, monkeypatch):
 
 @needs_compiler
 def test_lifted_functions_are_read_back_from_the_cache(fresh, monkeypatch):
-    from flexctl.sim.compile_cache import lift_constants
+    from flexctl.sim.lifted_constants import lift_constants
 
     model, _ = _exact_pair()
     lifted, constants = lift_constants(model.geometry.rhs)
     (stored,) = (fresh / "compiled").glob("lifted-*.constants")
     assert len(list((fresh / "compiled").glob("lifted-*.casadi"))) == 1
-    lift = compile_cache._lift
-    monkeypatch.setattr(compile_cache, "_LIFTED", {})          # as in another process
-    monkeypatch.setattr(compile_cache, "_lift", _no_c_generation)
+    lift = lifted_constants._lift
+    monkeypatch.setattr(lifted_constants, "_LIFTED", {})          # as in another process
+    monkeypatch.setattr(lifted_constants, "_lift", _no_c_generation)
     read, read_constants = lift_constants(model.geometry.rhs)
     np.testing.assert_array_equal(read_constants, constants)
     x = 0.1 * np.arange(1, model.n_states + 1)
@@ -166,14 +167,14 @@ def test_lifted_functions_are_read_back_from_the_cache(fresh, monkeypatch):
                                   np.array(model.geometry.rhs(x, 0.7)))
     # a damaged entry is lifted again
     # another beam's numbers: a constants file of its own, the same lifted function
-    monkeypatch.setattr(compile_cache, "_lift", lift)
+    monkeypatch.setattr(lifted_constants, "_lift", lift)
     _, stiffer = _exact_pair()
     lift_constants(stiffer.geometry.rhs)
     assert len(list((fresh / "compiled").glob("lifted-*.constants"))) == 2
     assert len(list((fresh / "compiled").glob("lifted-*.casadi"))) == 1
     # a damaged entry is lifted again
     stored.write_bytes(b"damaged")
-    monkeypatch.setattr(compile_cache, "_LIFTED", {})
+    monkeypatch.setattr(lifted_constants, "_LIFTED", {})
     again, again_constants = lift_constants(model.geometry.rhs)
     np.testing.assert_array_equal(again_constants, constants)
     assert stored.read_bytes() != b"damaged"
@@ -182,7 +183,7 @@ def test_lifted_functions_are_read_back_from_the_cache(fresh, monkeypatch):
 def test_lifting_writes_nothing_with_compiling_off(fresh, monkeypatch):
     import casadi as ca
 
-    from flexctl.sim.compile_cache import lift_constants
+    from flexctl.sim.lifted_constants import lift_constants
 
     monkeypatch.setenv("FLEXCTL_COMPILE", "0")
     x = ca.SX.sym("x")
@@ -352,7 +353,7 @@ def _exact_pair():
 
 
 def test_lifted_constants_compute_the_same_numbers():
-    from flexctl.sim.compile_cache import lift_constants
+    from flexctl.sim.lifted_constants import lift_constants
 
     model, _ = _exact_pair()
     lifted, constants = lift_constants(model.geometry.rhs)
@@ -420,7 +421,7 @@ def test_lift_constants_refuses_a_bad_size_by_name(bad):
     import casadi as ca
 
     from flexctl.model.errors import InputTypeError, InputValueError
-    from flexctl.sim.compile_cache import lift_constants
+    from flexctl.sim.lifted_constants import lift_constants
 
     x = ca.SX.sym("x")
     with pytest.raises((InputTypeError, InputValueError), match="max_instructions"):
@@ -443,7 +444,7 @@ def _second_order(function, n: int, points: int = 7):
 def test_with_derivatives_holds_the_fixed_input_constant():
     import casadi as ca
 
-    from flexctl.sim.compile_cache import with_derivatives
+    from flexctl.sim.compiled_derivatives import with_derivatives
 
     x, c = ca.SX.sym("x", 2), ca.SX.sym("c", 2)
     f = ca.Function("t_f", [x, c], [ca.vertcat(c[0] * ca.sin(x[0]) * x[1], c[1] * x[1] ** 3)],
@@ -539,7 +540,7 @@ def test_exact_structure_runs_compiled_and_agrees(fresh, monkeypatch):
 def test_with_derivatives_refuses_a_bad_fixed_input_by_name(fixed):
     import casadi as ca
 
-    from flexctl.sim.compile_cache import jacobian_companion, with_derivatives
+    from flexctl.sim.compiled_derivatives import jacobian_companion, with_derivatives
 
     x, c = ca.SX.sym("x", 2), ca.SX.sym("c")
     f = ca.Function("t_bad", [x, c], [c * x[0] * x[1]])
@@ -552,7 +553,7 @@ def test_with_derivatives_refuses_a_bad_fixed_input_by_name(fixed):
 def test_jacobian_companion_refuses_what_is_not_an_sx_function(function):
     import casadi as ca
 
-    from flexctl.sim.compile_cache import jacobian_companion
+    from flexctl.sim.compiled_derivatives import jacobian_companion
 
     if function == "mx":
         x = ca.MX.sym("x", 2)
@@ -566,7 +567,7 @@ def test_jacobian_companion_gives_the_jacobian_in_the_free_inputs():
     in the fixed ones."""
     import casadi as ca
 
-    from flexctl.sim.compile_cache import jacobian_companion
+    from flexctl.sim.compiled_derivatives import jacobian_companion
 
     x, c = ca.SX.sym("x", 2), ca.SX.sym("c")
     f = ca.Function("t_jac", [x, c], [ca.vertcat(c * x[0] * x[1], ca.sin(x[0]))], ["x", "c"],
@@ -734,7 +735,7 @@ def test_an_index_naming_another_functions_library_is_not_trusted(fresh, monkeyp
 def test_a_stored_lifted_function_of_another_shape_is_lifted_again(fresh, monkeypatch):
     import casadi as ca
 
-    from flexctl.sim.compile_cache import lift_constants
+    from flexctl.sim.lifted_constants import lift_constants
 
     x, y = ca.SX.sym("x"), ca.SX.sym("y", 2)
     one = ca.Function("cc_lift_swap", [x], [3.0 * x])
@@ -742,7 +743,7 @@ def test_a_stored_lifted_function_of_another_shape_is_lifted_again(fresh, monkey
     lift_constants(one)
     lift_constants(other)
     _swap_files(fresh, "lifted-*.constants")                 # each names the other's function
-    monkeypatch.setattr(compile_cache, "_LIFTED", {})
+    monkeypatch.setattr(lifted_constants, "_LIFTED", {})
     lifted, constants = lift_constants(one)
     assert constants.tolist() == [3.0] and float(lifted(2.0, constants)) == 6.0
     lifted, constants = lift_constants(other)
@@ -753,9 +754,9 @@ def test_a_stored_lifted_function_of_another_shape_is_lifted_again(fresh, monkey
 def test_lifted_constants_beyond_the_limit_are_pruned(fresh, monkeypatch):
     import casadi as ca
 
-    from flexctl.sim.compile_cache import lift_constants
+    from flexctl.sim.lifted_constants import lift_constants
 
-    monkeypatch.setattr(compile_cache, "LIFTED_KEEP", 2)
+    monkeypatch.setattr(lifted_constants, "LIFTED_KEEP", 2)
     x = ca.SX.sym("x")
     for k in range(4):                  # one structure, four models' numbers
         lift_constants(ca.Function("cc_prune", [x], [(k + 1.5) * x]))
