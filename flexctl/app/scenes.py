@@ -715,6 +715,7 @@ def _structure(hub: Hub, items) -> Structure:
         for k, a in enumerate(appendages):
             if a.radius is None:        # its root is at the hub radius
                 msg = msg.replace(f"appendage {a.name!r}.radius", "hub.radius")
+            msg = msg.replace(f"appendage {a.name!r}.beam.", f"appendages.{k}.")
             msg = msg.replace(f"appendage {a.name!r}", f"appendages.{k}")
         raise SceneError(msg) from None
 

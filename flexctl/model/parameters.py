@@ -210,17 +210,18 @@ def carried_masses(owner: str, beam, masses, radius: float) -> tuple:
     except TypeError:
         raise InputTypeError(f"{owner}.masses must be an iterable of PointMass; got "
                              f"{type(masses).__name__}") from None
+    length_key = "beam.length" if owner == "system" else f"{owner}.beam.length"
     for k, m in enumerate(masses):
         if not isinstance(m, PointMass):
             raise InputTypeError(f"{owner}.masses[{k}] must be a PointMass; got "
                                  f"{type(m).__name__}")
         if m.position > beam.length:
-            raise InputValueError(f"{owner}.masses[{k}].position must lie in [0, beam.length = "
+            raise InputValueError(f"{owner}.masses[{k}].position must lie in [0, {length_key} = "
                                   f"{beam.length:g}]; got {m.position!r}")
     if radius > RADIUS_RATIO_LIMIT * beam.length:
         raise InputValueError(
             f"{'hub.radius' if owner == 'system' else owner + '.radius'} must be at most "
-            f"{RADIUS_RATIO_LIMIT:g} times beam.length = {beam.length:g} m: beyond it the "
+            f"{RADIUS_RATIO_LIMIT:g} times {length_key} = {beam.length:g} m: beyond it the "
             "free-hub mass matrix is too ill conditioned for the model to keep its accuracy; "
             f"got {radius!r}")
     ratio = sum(m.mass for m in masses) / beam.mass
