@@ -405,7 +405,11 @@ def _cmd_run(args) -> int:
         summary = _load_and_run(args.scene, overrides, args.out)
     except (_InputError, InputError) as exc:
         return _error(exc)
-    print(format_summary(summary))
+    if summary.get("spatial"):
+        from .spatial_report import format_spatial_summary
+        print(format_spatial_summary(summary))
+    else:
+        print(format_summary(summary))
     return EXIT_OK if summary["status"] == "ok" else EXIT_STOPPED
 
 

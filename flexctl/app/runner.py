@@ -55,6 +55,10 @@ def execute(scene, progress=None) -> tuple:
         The hub-angle reference ``angle(t)`` (rad) the controller tracked
         (:attr:`controllers.factory.BuiltController.reference_angle`); None without one.
     """
+    from .spatial_scene import SpatialScene
+    if isinstance(scene, SpatialScene):
+        from .spatial_report import run_spatial_scene
+        return run_spatial_scene(scene), {}, None
     if scene.controller is None:
         return run_scene(scene, progress=progress), {}, None
     return _run_controlled(scene, progress)
@@ -99,8 +103,13 @@ def write_complete(scene, result, out, overrides: dict, extra: dict,
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}-", suffix=".partial",
                                     dir=out.parent))
     try:
-        summary = write_run(scene, result, staging, overrides=overrides, extra=extra,
-                            reference=reference)
+        from .spatial_scene import SpatialScene
+        if isinstance(scene, SpatialScene):
+            from .spatial_report import write_spatial_run
+            summary = write_spatial_run(scene, result, staging, overrides=overrides)
+        else:
+            summary = write_run(scene, result, staging, overrides=overrides, extra=extra,
+                                reference=reference)
         out.mkdir(exist_ok=True)
         for path in sorted(staging.iterdir()):
             os.replace(path, out / path.name)

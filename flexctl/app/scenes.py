@@ -866,6 +866,9 @@ def load_scene(source, overrides: dict | None = None) -> Scene:
     _check_setting_once(overrides or {})
     for key, value in (overrides or {}).items():
         _set_dotted(data, key, value)
+    from .spatial_scene import is_spatial, parse_spatial_scene
+    if is_spatial(data):            # a 3 x 3 hub inertia: a structure turning about any axis
+        return parse_spatial_scene(data, name=name, base_dir=base_dir)
     return parse_scene(data, name=name, base_dir=base_dir)
 
 

@@ -1,0 +1,363 @@
+"""Scenes of structures that turn about any axis (a ``[hub]`` whose inertia is a 3 x 3 matrix).
+
+A scene is spatial when ``hub.inertia`` is a 3 x 3 array; :func:`parse_spatial_scene` reads it
+into a :class:`SpatialScene`. The tables (every key is checked, every error names it):
+
+- ``[hub]``: ``inertia`` (3 x 3, kg m^2, hub frame, about the centre), ``radius`` (m),
+  ``mass`` (kg; needed when ``support = "free"``), ``support`` (``"pinned"`` or ``"free"``).
+- ``[[appendages]]``: ``name``, ``direction`` and ``normal`` (3-vectors, hub frame), ``root``
+  (optional 3-vector, m; default ``radius * direction``), ``length``, ``density``, ``area``,
+  ``youngs_modulus``, ``second_moment`` (bending along the normal), ``second_moment_lateral``,
+  ``shear_modulus``, ``torsion_constant``, optional ``polar_moment`` and ``damping_ratio``;
+  ``[[appendages.masses]]`` with ``mass`` and ``position``.
+- ``[model]``: ``variant = "exact"`` (the default: the spatial model is the geometrically
+  exact rod) and ``modes``, per field (bending along the normal, along the lateral direction,
+  torsion) and appendage, an integer.
+- ``[initial]``: ``angular_velocity`` (rad/s, hub frame) and ``quaternion`` (hub to inertial,
+  scalar first); the structure starts straight and at rest relative to its hub.
+- ``[maneuver]``: ``kind = "torque_samples"`` with ``times`` and ``values`` (rows ``tx, ty,
+  tz``, N m, hub frame) or ``file`` (a CSV with the header ``t, tx, ty, tz``), and
+  ``interpolation`` (``"linear"``, the default, or ``"hold"``); ``kind = "sine_torque"`` with
+  ``peak_torque`` (a 3-vector) and ``duration`` (one period of ``sin(2 pi t / duration)``,
+  then none); ``kind = "none"`` (a free motion from the initial state).
+- ``[simulation]``: ``t_final`` (s), ``output_step`` (s), ``rtol``.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from controllers.spec import SceneError
+from ..model.checks import check_real
+from ..model.parameters import PointMass
+from ..model.spatial_structure import SpatialAppendage, SpatialHub, SpatialStructure
+from ..sim.spatial_run import DEFAULT_RTOL, VectorTorque
+from .scene_tables import construct
+
+__all__ = ["SpatialScene", "SpatialSine", "is_spatial", "parse_spatial_scene",
+           "SPATIAL_TORQUE_COLUMNS", "MAX_SPATIAL_MODES"]
+
+#: Header of a spatial torque file.
+SPATIAL_TORQUE_COLUMNS = ("t", "tx", "ty", "tz")
+#: Most modes per field of a spatial scene.
+MAX_SPATIAL_MODES = 12
+#: Largest torque file read, bytes.
+MAX_FILE_BYTES = 64 * 2 ** 20
+
+_KEYS = {
+    "description": None,
+    "hub": {"inertia", "radius", "mass", "support"},
+    "appendages": None,
+    "model": {"variant", "modes"},
+    "initial": {"angular_velocity", "quaternion"},
+    "maneuver": {"kind", "times", "values", "interpolation", "file", "peak_torque",
+                 "duration"},
+    "simulation": {"t_final", "output_step", "rtol"},
+}
+_APPENDAGE_KEYS = {"name", "direction", "normal", "root", "length", "density", "area",
+                   "youngs_modulus", "second_moment", "second_moment_lateral",
+                   "shear_modulus", "torsion_constant", "polar_moment", "damping_ratio",
+                   "masses"}
+_MANEUVER_KEYS = {"torque_samples": {"times", "values", "interpolation", "file"},
+                  "sine_torque": {"peak_torque", "duration"}, "none": set()}
+
+
+@dataclass(frozen=True)
+class SpatialSine:
+    """One period of a sine torque about a fixed axis of the hub frame, then none.
+
+    Parameters
+    ----------
+    peak_torque : array_like, shape (3,)
+        Peak of each component, N m, hub frame.
+    duration : float
+        The period, s (> 0).
+    """
+
+    peak_torque: np.ndarray
+    duration: float
+
+    def __post_init__(self):
+        from ..model.checks import check_array
+
+        peak = check_array("maneuver", "peak_torque", self.peak_torque, shape=(3,))
+        if np.max(np.abs(peak)) > 1e150:
+            raise SceneError("maneuver.peak_torque must be at most 1e150 N m in magnitude")
+        object.__setattr__(self, "peak_torque", peak)
+        object.__setattr__(self, "duration", check_real("maneuver", "duration", self.duration,
+                                                        minimum=0.0, strict=True))
+
+    def __call__(self, t) -> np.ndarray:
+        """The torque at ``t`` (s), N m, shape (3,).
+
+        Parameters
+        ----------
+        t : float
+        """
+        t = float(t)
+        if not 0.0 <= t <= self.duration:
+            return np.zeros(3)
+        return np.asarray(self.peak_torque) * math.sin(2 * math.pi * t / self.duration)
+
+    @property
+    def breakpoints(self) -> np.ndarray:
+        """The end of the period, s."""
+        return np.array([self.duration])
+
+
+@dataclass(frozen=True)
+class SpatialScene:
+    """A validated spatial scene.
+
+    Attributes
+    ----------
+    name : str
+    structure : SpatialStructure
+    n_modes : int
+        Modes per field and appendage.
+    angular_velocity, quaternion : ndarray
+        Initial hub angular velocity (rad/s, hub frame) and attitude.
+    maneuver : VectorTorque, SpatialSine or None
+    t_final, output_step, rtol : float
+    description : str
+    data : dict
+        The scene's tables as read (a torque file's samples inline).
+    """
+
+    name: str
+    structure: SpatialStructure
+    n_modes: int
+    angular_velocity: np.ndarray
+    quaternion: np.ndarray
+    maneuver: object
+    t_final: float
+    output_step: float
+    rtol: float
+    description: str = ""
+    data: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def variant(self) -> str:
+        """Always ``"exact"``: the spatial model is the geometrically exact rod."""
+        return "exact"
+
+
+def is_spatial(data: dict) -> bool:
+    """Whether the scene tables ``data`` describe a spatial structure (a 3 x 3 hub inertia).
+
+    Parameters
+    ----------
+    data : dict
+    """
+    hub = data.get("hub")
+    return isinstance(hub, dict) and isinstance(hub.get("inertia"), (list, tuple))
+
+
+def _table(data: dict, name: str, required: bool = True) -> dict:
+    if name not in data:
+        if required:
+            raise SceneError(f"scene is missing the [{name}] table")
+        return {}
+    table = data[name]
+    if not isinstance(table, dict):
+        raise SceneError(f"{name} must be a table; got {type(table).__name__}")
+    return table
+
+
+def _check_keys(where: str, table: dict, allowed) -> None:
+    for key in table:
+        if key not in allowed:
+            raise SceneError(f"{where}.{key} is not a key of a spatial scene's [{where}] "
+                             f"table (allowed: {', '.join(sorted(allowed))})")
+
+
+def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> SpatialScene:
+    """Validate a spatial scene given as nested dictionaries (the TOML tables).
+
+    Parameters
+    ----------
+    data : dict
+        The scene's tables.
+    name : str, optional
+        The scene's name.
+    base_dir : str or path-like, optional
+        Directory a relative ``maneuver.file`` is read from.
+
+    Returns
+    -------
+    SpatialScene
+
+    Raises
+    ------
+    SceneError
+        On an unknown key, a missing table or key, or a bad value; the message names the key.
+    """
+    data = copy.deepcopy(data)
+    _check_keys("scene", data, _KEYS)
+    for key, allowed in _KEYS.items():
+        if allowed is not None and key in data:
+            _check_keys(key, _table(data, key), allowed)
+    hub = construct(SpatialHub, "hub", _table(data, "hub"))
+    structure = _structure(hub, data.get("appendages"))
+    n_modes = _modes(_table(data, "model", required=False))
+    initial = _table(data, "initial", required=False)
+    from ..model.checks import check_array
+    try:
+        spin = check_array("initial", "angular_velocity",
+                           initial.get("angular_velocity", [0.0, 0.0, 0.0]), shape=(3,))
+        quaternion = np.array(check_array("initial", "quaternion",
+                                          initial.get("quaternion", [1.0, 0.0, 0.0, 0.0]),
+                                          shape=(4,)))
+    except (ValueError, TypeError) as exc:
+        raise SceneError(str(exc)) from None
+    if not np.linalg.norm(quaternion) > 0:
+        raise SceneError("initial.quaternion must be non-zero")
+    if np.max(np.abs(spin)) > 1e4:
+        raise SceneError(f"initial.angular_velocity must be at most 1e4 rad/s in magnitude; "
+                         f"got {spin.tolist()}")
+    maneuver = _maneuver(data, base_dir)
+    t_final, output_step, rtol = _simulation(_table(data, "simulation"))
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise SceneError(f"description must be a string; got {description!r:.80}")
+    return SpatialScene(name=name, structure=structure, n_modes=n_modes,
+                        angular_velocity=spin, quaternion=quaternion / np.linalg.norm(quaternion),
+                        maneuver=maneuver, t_final=t_final, output_step=output_step, rtol=rtol,
+                        description=description, data=data)
+
+
+def _structure(hub: SpatialHub, items) -> SpatialStructure:
+    if not isinstance(items, list) or not items:
+        raise SceneError("a spatial scene needs [[appendages]] tables (one per appendage)")
+    appendages = []
+    for k, table in enumerate(items):
+        where = f"appendages.{k}"
+        if not isinstance(table, dict):
+            raise SceneError(f"{where} must be a table; got {type(table).__name__}")
+        _check_keys(where, table, _APPENDAGE_KEYS)
+        fields = {key: value for key, value in table.items() if key != "masses"}
+        masses = table.get("masses", [])
+        if not isinstance(masses, list):
+            raise SceneError(f"{where}.masses must be an array of tables; got "
+                             f"{type(masses).__name__}")
+        points = []
+        for j, m in enumerate(masses):
+            if not isinstance(m, dict):
+                raise SceneError(f"{where}.masses.{j} must be a table")
+            _check_keys(f"{where}.masses.{j}", m, {"mass", "position"})
+            points.append(construct(PointMass, f"{where}.masses.{j}", m))
+        fields["masses"] = tuple(points)
+        if "name" not in fields:
+            fields["name"] = f"appendage{k}"
+        appendage = construct(SpatialAppendage, where, fields)
+        appendages.append(appendage)
+    try:
+        return SpatialStructure(hub=hub, appendages=tuple(appendages))
+    except (ValueError, TypeError) as exc:
+        message = str(exc)
+        for k, a in enumerate(appendages):
+            message = message.replace(f"appendage {a.name!r}", f"appendages.{k}")
+        raise SceneError(message) from None
+
+
+def _modes(table: dict) -> int:
+    variant = table.get("variant", "exact")
+    if variant != "exact":
+        raise SceneError(f"model.variant must be 'exact' for a spatial scene (the spatial model "
+                         f"is the geometrically exact rod); got {variant!r:.80}")
+    modes = table.get("modes", 4)
+    if isinstance(modes, bool) or not isinstance(modes, int) or not \
+            1 <= modes <= MAX_SPATIAL_MODES:
+        raise SceneError(f"model.modes must be an integer from 1 to {MAX_SPATIAL_MODES} (modes "
+                         f"per field: each bending plane and torsion); got {modes!r:.80}")
+    return modes
+
+
+def _maneuver(data: dict, base_dir):
+    table = dict(_table(data, "maneuver", required=False)) or {"kind": "none"}
+    kind = table.pop("kind", None)
+    if kind not in _MANEUVER_KEYS:
+        raise SceneError(f"maneuver.kind must be one of {', '.join(sorted(_MANEUVER_KEYS))} "
+                         f"for a spatial scene; got {kind!r:.80}")
+    _check_keys("maneuver", table, _MANEUVER_KEYS[kind])
+    if kind == "none":
+        return None
+    if kind == "sine_torque":
+        return construct(SpatialSine, "maneuver", table)
+    if "file" in table:
+        if "times" in table or "values" in table:
+            raise SceneError("maneuver.file and maneuver.times/values exclude each other")
+        times, values = _read_file(table.pop("file"), base_dir)
+        data["maneuver"].pop("file", None)
+        data["maneuver"].update(times=times.tolist(), values=values.tolist())
+        table.update(times=times, values=values)
+    for key in ("times", "values"):
+        if key not in table:
+            raise SceneError(f"maneuver.{key} is required for kind 'torque_samples' (or "
+                             "maneuver.file, a CSV file of columns t, tx, ty, tz)")
+    return construct(VectorTorque, "maneuver", table)
+
+
+def _read_file(file, base_dir) -> tuple:
+    """``(times (K,), values (K, 3))`` of a spatial torque file."""
+    if not isinstance(file, str) or not file.strip() or "\0" in file:
+        raise SceneError("maneuver.file must be the path of a CSV file (columns t, tx, ty, tz); "
+                         f"got {file!r:.80}")
+    path = Path(file) if Path(file).is_absolute() else Path(base_dir or ".") / file
+    where = f"maneuver.file {file!r}"
+    try:
+        if not path.is_file():
+            raise SceneError(f"{where} does not exist (a relative path is read from the scene "
+                             f"file's directory: {str(path)!r})")
+        if path.stat().st_size > MAX_FILE_BYTES:
+            raise SceneError(f"{where} must be at most {MAX_FILE_BYTES} bytes")
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
+    except OSError as exc:
+        raise SceneError(f"{where} cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise SceneError(f"{where} must be UTF-8 text (CSV)") from None
+    header = tuple(c.strip().lower() for c in lines[0].split(",")) if lines else ()
+    if header != SPATIAL_TORQUE_COLUMNS:
+        raise SceneError(f"{where} must start with the header line 't, tx, ty, tz'; got "
+                         f"{(lines[0] if lines else '')[:80]!r}")
+    rows = []
+    for number, line in enumerate(lines[1:], start=2):
+        if not line.strip():
+            continue
+        try:
+            row = [float(c) for c in line.split(",")]
+        except ValueError:
+            row = []
+        if len(row) != 4 or not all(math.isfinite(v) for v in row):
+            raise SceneError(f"{where} line {number} must hold four finite numbers t, tx, ty, "
+                             f"tz; got {line[:80]!r}")
+        rows.append(row)
+    if not rows:
+        raise SceneError(f"{where} holds no samples")
+    table = np.array(rows)
+    return table[:, 0], table[:, 1:]
+
+
+def _simulation(table: dict) -> tuple:
+    if "t_final" not in table:
+        raise SceneError("simulation.t_final is required")
+    try:
+        t_final = check_real("simulation", "t_final", table["t_final"], minimum=0.0,
+                             strict=True, maximum=1e6)
+        step = check_real("simulation", "output_step",
+                          table.get("output_step", t_final / 1000), minimum=0.0, strict=True)
+        rtol = check_real("simulation", "rtol", table.get("rtol", DEFAULT_RTOL),
+                          minimum=1e-13, maximum=1e-2)
+    except (ValueError, TypeError) as exc:
+        raise SceneError(str(exc)) from None
+    if step > t_final:
+        raise SceneError(f"simulation.output_step must be at most t_final = {t_final:g} s; "
+                         f"got {step:g}")
+    if t_final / step > 1_000_000:
+        raise SceneError(f"simulation.output_step {step:g} s gives more than 10^6 samples")
+    return t_final, step, rtol

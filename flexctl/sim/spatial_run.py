@@ -1,0 +1,391 @@
+"""Simulation of a spatial structure: a hub turning about any axis (MODEL.md section 8).
+
+:func:`simulate_spatial` integrates the exact spatial model
+(:func:`~flexctl.model.spatial_dynamics.spatial_equations`) under a hub torque given in the hub
+frame: none, a constant 3-vector, a function of time, or samples (:class:`VectorTorque`, as a
+scene's ``torque_samples`` gives them). The right-hand side runs as machine code from the
+persistent compile cache where a compiler is found.
+
+- **Integration.** SciPy's ``DOP853`` (error per step below ``rtol`` relative and ``atol``
+  absolute) from breakpoint to breakpoint: every sample of a :class:`VectorTorque` is one (a
+  kink of a line, a jump of a hold), so no step crosses it.
+- **Its error.** With ``check_accuracy`` (default) the run is repeated at a tenth of the
+  tolerances and :attr:`SpatialResult.integration_error` is the largest difference of any tip
+  component, relative to that component's peak (the largest over the appendages).
+- **The attitude** is a unit quaternion; its kinematics keep ``|q| = 1`` attracting, the
+  largest departure over the run is :attr:`SpatialResult.quaternion_drift` (the run fails if
+  it exceeds :data:`MAX_QUATERNION_DRIFT`), and the quaternions returned are normalised.
+- **Divergence.** A state that leaves the finite numbers, or a failed integration, ends the
+  run with ``status = "diverged"`` or ``"failed"`` and the message says why; nothing is
+  silently returned as NaN.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..model.checks import check_array, check_choice, check_integer, check_real
+from ..model.errors import InputTypeError, InputValueError
+from ..model.spatial_dynamics import SpatialEquations, spatial_equations
+from ..model.spatial_structure import SpatialStructure
+
+__all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
+           "MAX_QUATERNION_DRIFT", "DEFAULT_RTOL"]
+
+#: Largest ``| |q| - 1 |`` accepted over a run.
+MAX_QUATERNION_DRIFT = 1e-6
+#: Default relative tolerance.
+DEFAULT_RTOL = 1e-8
+#: Most output samples of one run.
+MAX_SAMPLES = 2_000_000
+
+
+@dataclass(frozen=True)
+class VectorTorque:
+    """A hub torque in the hub frame from samples.
+
+    Parameters
+    ----------
+    times : array_like, shape (K,)
+        Sample times, s: finite and strictly increasing, ``K >= 1``.
+    values : array_like, shape (K, 3)
+        Torque ``(tx, ty, tz)`` at each sample, N m: finite.
+    interpolation : {"linear", "hold"}, optional
+        Straight lines between samples, or each value held until the next sample. Outside
+        the samples the first or last value. Default ``"linear"``.
+
+    Examples
+    --------
+    >>> push = VectorTorque([0.0, 1.0], [[0.0, 0.0, 0.0], [2.0, 0.0, -1.0]])
+    >>> push(0.5).tolist()
+    [1.0, 0.0, -0.5]
+    """
+
+    times: np.ndarray
+    values: np.ndarray
+    interpolation: str = "linear"
+
+    def __post_init__(self):
+        times = np.array(check_array("torque samples", "times", self.times, shape=(None,)))
+        if times.size < 1:
+            raise InputValueError("torque samples: times must hold at least one sample")
+        values = np.array(check_array("torque samples", "values", self.values,
+                                      shape=(times.size, 3)))
+        steps = np.diff(times)
+        if np.any(steps <= 0):
+            k = int(np.argmax(steps <= 0)) + 1
+            raise InputValueError(f"torque samples: times must be strictly increasing (s); got "
+                                  f"times[{k}] = {times[k]!r} after times[{k - 1}] = "
+                                  f"{times[k - 1]!r}")
+        if np.max(np.abs(values), initial=0.0) > 1e150:
+            raise InputValueError("torque samples: values must be at most 1e150 N m in "
+                                  "magnitude")
+        check_choice("torque samples", "interpolation", self.interpolation, ("linear", "hold"))
+        times.setflags(write=False)
+        values.setflags(write=False)
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "values", values)
+
+    def __call__(self, t) -> np.ndarray:
+        """The torque at time ``t`` (s), N m, shape (3,).
+
+        Parameters
+        ----------
+        t : float
+        """
+        t = float(t)
+        if self.interpolation == "hold" or self.times.size == 1:
+            k = int(np.searchsorted(self.times, t, side="right")) - 1
+            return np.array(self.values[max(k, 0)])
+        return np.array([np.interp(t, self.times, self.values[:, j]) for j in range(3)])
+
+    @property
+    def breakpoints(self) -> np.ndarray:
+        """Every sample time, s: the integration restarts there."""
+        return self.times
+
+
+@dataclass(frozen=True, eq=False)
+class SpatialResult:
+    """A spatial run's time histories.
+
+    Attributes
+    ----------
+    structure : SpatialStructure
+    n_modes : int
+        Modes per field.
+    t : ndarray, shape (P,)
+        Output times, s.
+    states : ndarray, shape (n, P)
+        States, in the order of ``layout.state_names`` (quaternions normalised).
+    torque : ndarray, shape (3, P)
+        Hub torque, hub frame, N m.
+    status : str
+        ``"ok"``, ``"diverged"`` or ``"failed"``.
+    message : str
+    integration_error : float or None
+        Estimated error of the tips, relative to each component's peak (the largest).
+    quaternion_drift : float
+        Largest ``| |q| - 1 |`` before normalising.
+    wall_time : float
+        Seconds.
+    rtol : float
+    """
+
+    structure: SpatialStructure
+    n_modes: int
+    t: np.ndarray
+    states: np.ndarray
+    torque: np.ndarray
+    status: str
+    message: str
+    integration_error: float | None
+    quaternion_drift: float
+    wall_time: float
+    rtol: float
+    equations: SpatialEquations = field(repr=False, default=None)
+
+    @property
+    def layout(self):
+        """The state layout (:class:`~flexctl.model.spatial_dynamics.SpatialLayout`)."""
+        return self.equations.layout
+
+    @property
+    def quaternion(self) -> np.ndarray:
+        """Hub attitude, hub to inertial, scalar first, shape (4, P)."""
+        return self.states[0:4]
+
+    @property
+    def angular_velocity(self) -> np.ndarray:
+        """Hub angular velocity in the hub frame, rad/s, shape (3, P)."""
+        c = self.layout.n_coordinates
+        return self.states[c:c + 3]
+
+    @property
+    def hub_position(self) -> np.ndarray | None:
+        """A free hub's centre in the inertial frame, m, shape (3, P); None when pinned."""
+        return self.states[4:7] if self.layout.free else None
+
+    @property
+    def tips(self) -> dict:
+        """Each appendage's tip displacement from where the rigidly moving undeformed tip
+        would be, hub frame, m: ``{name: (3, P)}``."""
+        tips = self.equations.tips.map(self.t.size)(self.states).full().reshape(
+            3, -1, self.t.size, order="F") if self.t.size else np.zeros((3, 0, 0))
+        return {name: tips[:, k, :] for k, name in enumerate(self.structure.names)}
+
+    def euler_angles(self) -> np.ndarray:
+        """Hub attitude as 3-2-1 (yaw, pitch, roll) Euler angles, rad, shape (3, P)."""
+        w, x, y, z = self.quaternion
+        yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+        pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+        roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+        return np.vstack([yaw, pitch, roll])
+
+    def energy(self) -> np.ndarray:
+        """Kinetic plus elastic energy at every sample, J, shape (P,)."""
+        kinetic, elastic = self.equations.energy.map(self.t.size)(self.states)
+        return kinetic.full().ravel() + elastic.full().ravel()
+
+    def momentum(self) -> tuple:
+        """``(angular (3, P), linear (3, P))`` momentum in the inertial frame: about the hub's
+        centre (pinned) or the centre of mass (free), N m s, and N s."""
+        angular, linear = self.equations.momentum.map(self.t.size)(self.states)
+        return angular.full(), linear.full()
+
+
+def initial_state(equations: SpatialEquations, angular_velocity=(0.0, 0.0, 0.0),
+                  quaternion=(1.0, 0.0, 0.0, 0.0)) -> np.ndarray:
+    """The state of a straight structure at rest relative to its hub.
+
+    Parameters
+    ----------
+    equations : SpatialEquations
+    angular_velocity : array_like, shape (3,)
+        Hub angular velocity, hub frame, rad/s.
+    quaternion : array_like, shape (4,)
+        Attitude, scalar first (normalised here).
+
+    Returns
+    -------
+    ndarray, shape (n_states,)
+    """
+    layout = equations.layout
+    w = check_array("initial", "angular_velocity", angular_velocity, shape=(3,))
+    q = np.array(check_array("initial", "quaternion", quaternion, shape=(4,)))
+    norm = float(np.linalg.norm(q))
+    if not norm > 0:
+        raise InputValueError("initial.quaternion must be non-zero")
+    if np.max(np.abs(w)) > 1e6:
+        raise InputValueError(f"initial.angular_velocity must be at most 1e6 rad/s in "
+                              f"magnitude; got {w.tolist()}")
+    x = np.zeros(layout.n_states)
+    x[0:4] = q / norm
+    c = layout.n_coordinates
+    x[c:c + 3] = w
+    return x
+
+
+def _torque_function(torque):
+    """``(callable t -> (3,), breakpoints)`` of a torque argument."""
+    if torque is None:
+        return (lambda t: np.zeros(3)), np.zeros(0)
+    if isinstance(torque, VectorTorque):
+        return torque, torque.breakpoints
+    if callable(torque) and hasattr(torque, "breakpoints"):    # a scene's manoeuvre
+        return torque, np.asarray(torque.breakpoints, dtype=float)
+    if callable(torque):
+        def checked(t):
+            value = np.asarray(torque(t), dtype=float).reshape(-1)
+            if value.shape != (3,) or not np.all(np.isfinite(value)):
+                raise InputValueError(f"torque(t) must return 3 finite numbers (N m, hub "
+                                      f"frame); at t = {t:g} s it returned {value!r:.80}")
+            return value
+        return checked, np.zeros(0)
+    constant = np.array(check_array("", "torque", torque, shape=(3,)))
+    return (lambda t: constant), np.zeros(0)
+
+
+def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *,
+                     n_modes: int = 4, angular_velocity=(0.0, 0.0, 0.0),
+                     quaternion=(1.0, 0.0, 0.0, 0.0), x0=None,
+                     rtol: float = DEFAULT_RTOL, atol: float | None = None,
+                     output_step: float | None = None,
+                     check_accuracy: bool = True) -> SpatialResult:
+    """Simulate a spatial structure (exact rod model) from ``0`` to ``t_final``.
+
+    Parameters
+    ----------
+    structure : SpatialStructure
+    t_final : float
+        End time, s (> 0).
+    torque : None, array_like (3,), callable or VectorTorque, optional
+        Hub torque in the hub frame, N m: none (default), constant, ``torque(t) -> (3,)``, or
+        samples.
+    n_modes : int, optional
+        Modes per field of every appendage (1 to 12). Default 4.
+    angular_velocity : array_like, shape (3,), optional
+        Initial hub angular velocity, hub frame, rad/s (the structure starts straight and at
+        rest relative to the hub). Default zero.
+    quaternion : array_like, shape (4,), optional
+        Initial attitude, hub to inertial, scalar first. Default the identity.
+    x0 : array_like, shape (n_states,), optional
+        The whole initial state instead (overrides ``angular_velocity``).
+    rtol : float, optional
+        Relative tolerance, in ``[1e-13, 1e-2]``. Default :data:`DEFAULT_RTOL`.
+    atol : float, optional
+        Absolute tolerance. Default ``rtol * 1e-3``.
+    output_step : float, optional
+        Spacing of the output samples, s. Default ``t_final / 1000``.
+    check_accuracy : bool, optional
+        Repeat at a tenth of the tolerances to estimate the integration error. Default True.
+
+    Returns
+    -------
+    SpatialResult
+    """
+    if not isinstance(structure, SpatialStructure):
+        raise InputTypeError(f"structure must be a SpatialStructure; got "
+                             f"{type(structure).__name__}")
+    t_final = check_real("", "t_final", t_final, minimum=0.0, strict=True)
+    n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=12)
+    rtol = check_real("", "rtol", rtol, minimum=1e-13, maximum=1e-2)
+    atol = rtol * 1e-3 if atol is None else check_real("", "atol", atol, minimum=0.0,
+                                                       strict=True)
+    step = t_final / 1000 if output_step is None else check_real(
+        "", "output_step", output_step, minimum=0.0, strict=True)
+    if t_final / step > MAX_SAMPLES:
+        raise InputValueError(f"output_step {step:g} s gives more than {MAX_SAMPLES} samples "
+                              f"over t_final = {t_final:g} s")
+    if not isinstance(check_accuracy, bool):
+        raise InputTypeError(f"check_accuracy must be True or False; got {check_accuracy!r}")
+    equations = spatial_equations(structure, n_modes)
+    if x0 is None:
+        x_start = initial_state(equations, angular_velocity, quaternion)
+    else:
+        x_start = np.array(check_array("", "x0", x0, shape=(equations.layout.n_states,)))
+    drive, breakpoints = _torque_function(torque)
+    times = np.unique(np.concatenate([np.arange(0.0, t_final, step), [t_final]]))
+    start = time.perf_counter()
+    run = _integrate(equations, x_start, times, drive, breakpoints, rtol, atol)
+    error = None
+    if check_accuracy and run[0] == "ok":
+        fine = _integrate(equations, x_start, times, drive, breakpoints, rtol / 10, atol / 10)
+        if fine[0] == "ok":
+            error = _tip_error(equations, run[1], fine[1])
+    status, states, message, drift = run
+    torque_history = np.column_stack([drive(t) for t in times[:states.shape[1]]]) \
+        if states.shape[1] else np.zeros((3, 0))
+    if states.shape[1]:
+        states = states.copy()
+        states[0:4] /= np.linalg.norm(states[0:4], axis=0)
+    return SpatialResult(structure=structure, n_modes=n_modes, t=times[:states.shape[1]],
+                         states=states, torque=torque_history, status=status, message=message,
+                         integration_error=error, quaternion_drift=drift,
+                         wall_time=time.perf_counter() - start, rtol=rtol,
+                         equations=equations)
+
+
+def _integrate(equations: SpatialEquations, x0, times, drive, breakpoints, rtol, atol):
+    """``(status, states (n, P'), message, drift)`` of one integration over ``times``."""
+    from scipy.integrate import solve_ivp
+
+    from .compile_cache import compiled
+
+    rhs = compiled(equations.rhs)
+
+    def rate(t, x):
+        return rhs(x, drive(t)).full().ravel()
+
+    t_final = times[-1]
+    edges = np.unique(np.concatenate([[0.0], breakpoints[(breakpoints > 0)
+                                                         & (breakpoints < t_final)], [t_final]]))
+    states = np.zeros((x0.size, times.size))
+    states[:, 0] = x0
+    x, done = np.array(x0, dtype=float), 1
+    for a, b in zip(edges[:-1], edges[1:]):
+        inside = times[(times > a) & (times <= b)]
+        wanted = inside if inside.size and inside[-1] == b else np.append(inside, b)
+        try:
+            solution = solve_ivp(rate, (a, b), x, method="DOP853", t_eval=wanted, rtol=rtol,
+                                 atol=atol)
+        except (ValueError, ArithmeticError) as exc:
+            return "failed", states[:, :done], f"the integration failed at t = {a:g} s: {exc}", \
+                _drift(states[:, :done])
+        if solution.status != 0 or not np.all(np.isfinite(solution.y)) \
+                or solution.y.shape[1] != wanted.size:
+            reached = solution.t[-1] if solution.t.size else a
+            states = states[:, :done]
+            why = ("the state left the finite numbers" if not np.all(np.isfinite(solution.y))
+                   else solution.message)
+            return "diverged", states, f"the run diverged at t = {reached:g} s: {why}", \
+                _drift(states)
+        states[:, done:done + inside.size] = solution.y[:, :inside.size]
+        done += inside.size
+        x = solution.y[:, -1]
+    drift = _drift(states)
+    if drift > MAX_QUATERNION_DRIFT:
+        return "failed", states, (f"the attitude quaternion's norm drifted by {drift:.3g} "
+                                  f"(more than {MAX_QUATERNION_DRIFT:g})"), drift
+    return "ok", states, "reached t_final", drift
+
+
+def _drift(states) -> float:
+    if not states.shape[1]:
+        return 0.0
+    return float(np.max(np.abs(np.linalg.norm(states[0:4], axis=0) - 1.0)))
+
+
+def _tip_error(equations: SpatialEquations, coarse, fine) -> float:
+    """Largest tip difference, relative to each component's peak (at least 1e-12 m)."""
+    count = min(coarse.shape[1], fine.shape[1])
+    tips = equations.tips.map(count)
+    a = tips(coarse[:, :count]).full()
+    b = tips(fine[:, :count]).full()
+    peaks = np.maximum(np.max(np.abs(b.reshape(3, -1, count, order="F")), axis=2), 1e-12)
+    diff = np.max(np.abs((a - b).reshape(3, -1, count, order="F")), axis=2)
+    return float(np.max(diff / peaks)) if math.isfinite(float(np.max(diff))) else math.inf
