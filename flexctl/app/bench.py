@@ -48,7 +48,8 @@ from .bench_report import (CSV_COLUMNS, SUMMARY_LEVELS, fastest_within, summary_
                            write_index, write_scene)
 from .scenes import builtin_scenes, load_scene
 from .sweep import pareto_front
-from .sweep_store import OK, SweepStore, TaskOutcome, task_key
+from .sweep_store import OK, StoreError, SweepStore, TaskOutcome, task_key
+from .task_fingerprint import task_fingerprint
 
 __all__ = ["BenchConfig", "BenchRow", "SceneBench", "bench_scene", "run_bench", "finished_runs",
            "runs_on_front", "plot_speed_error", "write_scene", "summary_line", "BENCH_KINDS"]
@@ -396,7 +397,7 @@ def _sweep_rows(scene, config: BenchConfig, t_final: float, references, tight_ru
         key = task_key({"scene": scene.name, "variant": variant, "n_modes": n,
                         "method": method, "rtol": rtol})
         if key in done:
-            row = BenchRow(**done[key].outputs)
+            row = _stored_row(store, key, done[key])
         else:
             row = _bench_row(scene, config, t_final, references[variant],
                              tight_runs[variant, n], (variant, n, method, rtol),
@@ -408,6 +409,17 @@ def _sweep_rows(scene, config: BenchConfig, t_final: float, references, tight_ru
                                 f"{method} at rtol {rtol:g}: {row.status} on {n} modes")
         rows.append(row)
     return rows
+
+
+def _stored_row(store: SweepStore, key: str, outcome: TaskOutcome) -> BenchRow:
+    """The :class:`BenchRow` ``store`` holds under ``key``; a row that is not one is refused
+    by name."""
+    try:
+        return BenchRow(**outcome.outputs)
+    except TypeError as exc:
+        raise StoreError(f"sweep store {str(store.path)!r} holds under task {key} a row that is "
+                         f"not a bench row ({exc}); forget that task (SweepStore.forget) to run "
+                         "it again, or use a new store") from None
 
 
 def _bench_row(scene, config: BenchConfig, t_final: float, reference, base, run: tuple,
@@ -457,10 +469,12 @@ def run_bench(config: BenchConfig, out_dir, progress: bool = True, *, store=None
     store : str or path-like, optional
         SQLite file that every run is committed to as it finishes
         (:class:`~flexctl.app.sweep_store.SweepStore`, one key per scene, variant, modes,
-        method and rtol), so that a bench stopped by a crash or a Ctrl-C can resume.
+        method and rtol), so that a bench stopped by a crash or a Ctrl-C can resume. The store
+        records the reference settings and horizon, and the fingerprint of the bench's code
+        (:func:`bench_scene` and the helpers of this module it calls).
     resume : bool, optional
-        Take the runs the store already holds (from a bench with the same reference settings
-        and horizon); False (default) refuses a store that holds runs.
+        Take the runs the store already holds (from a bench with the same reference settings,
+        horizon and code); False (default) refuses a store that holds runs.
 
     Returns
     -------
@@ -474,7 +488,8 @@ def run_bench(config: BenchConfig, out_dir, progress: bool = True, *, store=None
     benches = []
     with contextlib.ExitStack() as stack:
         kept = None if store is None else stack.enter_context(SweepStore(
-            store, task=_store_task(config), seed=None, resume=resume))
+            store, task=_store_task(config), seed=None, resume=resume,
+            fingerprint=task_fingerprint(bench_scene, _store_task(config))))
         for scene in scenes:
             benches.append(bench_scene(scene, config, progress=progress, store=kept))
             write_scene(benches[-1], out_dir)

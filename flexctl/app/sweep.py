@@ -306,10 +306,14 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
     store : str or path-like, optional
         SQLite file that every finished task is committed to as it arrives
         (:class:`~flexctl.app.sweep_store.SweepStore`); a crash, a lost worker or a Ctrl-C
-        loses only the tasks running. Default none (the table lives in memory only).
+        loses only the tasks running. The store records the task's name and fingerprint, its
+        code and inputs (:func:`~flexctl.app.task_fingerprint.task_fingerprint`), and the
+        seed. Default none (the table lives in memory only).
     resume : bool, optional
         Take the tasks the store already holds (``ok`` or ``failed``) and run only the
-        others. False (default) refuses a store that holds tasks.
+        others; the store must hold the same task (same fingerprint: not another lambda, nor
+        a function redefined under the same name) and seed. False (default) refuses a store
+        that holds tasks.
     seed : int, optional
         The sweep's seed, >= 0 (default 0). A task with a ``seed`` parameter gets its own,
         :func:`~flexctl.app.sweep_store.task_seed` of this seed and the point's key, so its
@@ -333,6 +337,11 @@ def sweep(task: Callable, parameter_grid, executor=None, progress=True, *,
     SweepError
         With ``on_error="raise"``, when the task raises at a point (named; the exception is
         the ``__cause__``); when an executor given (not a factory) breaks.
+    StoreError
+        When ``store`` is not a sweep store, is damaged, holds another task's or seed's
+        results, or holds tasks and ``resume`` is False
+        (:class:`~flexctl.app.sweep_store.StoreError`, a ``ValueError``; the message names
+        the file).
     KeyboardInterrupt
         After cancelling the points not started; the finished ones are in the store.
 

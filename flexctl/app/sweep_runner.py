@@ -26,6 +26,7 @@ import pickle
 from collections.abc import Mapping
 
 from .sweep_store import FAILED, OK, SweepStore, TaskOutcome, task_seed
+from .task_fingerprint import task_fingerprint
 
 __all__ = ["SweepError", "outcomes", "evaluate", "run_here", "run_on", "Recorder",
            "is_executor"]
@@ -151,8 +152,9 @@ def outcomes(task, index: dict, executor, name: str, *, store, resume: bool, see
     name : str
         The task's name: the progress bar's label, and named in errors.
     store : str, path-like or None
-        SQLite file each outcome is committed to (:class:`~flexctl.app.sweep_store.SweepStore`);
-        None: none.
+        SQLite file each outcome is committed to (:class:`~flexctl.app.sweep_store.SweepStore`,
+        which records the task's name and
+        :func:`~flexctl.app.task_fingerprint.task_fingerprint`); None: none.
     resume : bool
         Take the tasks the store already holds and run only the others.
     seed : int
@@ -169,7 +171,8 @@ def outcomes(task, index: dict, executor, name: str, *, store, resume: bool, see
     seeded = _takes_seed(task)
     with contextlib.ExitStack() as stack:
         kept = None if store is None else stack.enter_context(SweepStore(
-            store, task=_task_name(task), seed=seed if seeded else None, resume=resume))
+            store, task=_task_name(task), fingerprint=task_fingerprint(task),
+            seed=seed if seeded else None, resume=resume))
         done = {} if kept is None else kept.outcomes(index)
         todo = {key: (point, task_seed(seed, key) if seeded and "seed" not in point else None)
                 for key, (_, point) in index.items() if key not in done}
@@ -195,7 +198,8 @@ def _takes_seed(task) -> bool:
 
 
 def _task_name(task) -> str:
-    """The task's qualified name, which a resumed store must match."""
+    """The task's qualified name, which a resumed store must match (with its fingerprint:
+    two lambdas share a name)."""
     kind = task if inspect.isfunction(task) else type(task)
     return f"{kind.__module__}.{kind.__qualname__}"
 

@@ -3,7 +3,12 @@
 :func:`flexctl.app.sweep.sweep` with ``store=path`` writes every finished task to an SQLite
 file, one transaction per task, so a worker that dies, a Ctrl-C or a crash of the whole
 process loses at most the tasks still running; ``resume=True`` then runs only the tasks the
-store does not hold. The pieces, usable on their own (the bench keeps its runs here too):
+store does not hold. A store knows what it holds: the task's name and fingerprint
+(:func:`~flexctl.app.task_fingerprint.task_fingerprint`, its code and inputs) and the sweep's
+seed, and it is resumed only by the same task with the same seed. A file that is not a store,
+a damaged one, another task's or one of an older format is refused by a :class:`StoreError`
+that names the file and what is wrong with it. The pieces, usable on their own (the bench
+keeps its runs here too):
 
 - :func:`task_key`: a point's identity, the canonical JSON of its parameters;
 - :func:`task_seed`: a task's own seed, from the sweep's seed and the task's key, so that a
@@ -17,10 +22,32 @@ The file holds two tables. ``runs``: ``key`` (TEXT, primary key), ``status`` (``
 ``"failed"``), ``error`` (TEXT, ``"Type: message"`` of a failure), ``seed`` (INTEGER, the
 task's seed, NULL for a task without one), ``attempts`` (INTEGER, submissions it took),
 ``outputs`` (BLOB, the outputs dict pickled: floats bit for bit, any type a task returns),
-``outputs_json`` (TEXT, the same for people and other tools, objects as their repr) and
-``finished_at`` (REAL, Unix time, s). ``meta``: ``name``, ``value`` pairs; ``format``, ``task``
-and ``seed`` make sure a resume continues the same sweep. Loading a store unpickles it: open
-only stores you wrote.
+``outputs_json`` (TEXT, the same for people and other tools, objects as their repr),
+``finished_at`` (REAL, Unix time, s) and ``checksum`` (TEXT, the SHA-256 of the row's other
+columns, so that a damaged row is refused by its key rather than unpickled or returned
+changed). ``meta``: ``name``, ``value`` pairs, exactly these four:
+
+- ``format``: the file layout's version, :data:`STORE_FORMAT` (``"2"``; format ``"1"`` had
+  neither fingerprints nor checksums, and is refused);
+- ``task``: the task's name (its module and qualified name; for the bench, its settings);
+- ``fingerprint``: the SHA-256 of the task's code and inputs;
+- ``seed``: the sweep's seed as JSON (``null`` for a task without one).
+
+``resume=True`` requires all four to match. ``resume=False`` refuses a store that holds tasks
+(hours of results are not overwritten by mistake) and takes over an empty one, its meta
+rewritten for the new sweep.
+
+Opening a store checks it before anything is written: SQLite's ``quick_check`` of the whole
+file, then its tables against the ones this module creates, then the meta table. The journal
+is SQLite's write-ahead log (WAL) with ``synchronous=NORMAL``: a commit appends the row's pages
+and a commit record to the ``-wal`` file, readers (a progress check from another process) never
+block the writer, and a transaction cut off by a crash lacks its commit record (or its frames'
+checksums), so the next open ignores it and finds every committed row intact. A crash of the
+process loses no committed row; a power cut may lose the last commits, never the file's
+consistency. (SQLite's default rollback journal would keep the file readable too, copying
+every page a commit changes to the journal first and syncing twice per commit; WAL needs a
+local file system, not a network share.) Loading a store unpickles it: open only stores you
+wrote.
 
 Examples
 --------
@@ -34,6 +61,8 @@ True
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import hashlib
 import json
 import pickle
@@ -47,13 +76,18 @@ import numpy as np
 
 from ..model.errors import InputTypeError, InputValueError
 
-__all__ = ["task_key", "task_seed", "TaskOutcome", "SweepStore", "OK", "FAILED"]
+__all__ = ["task_key", "task_seed", "TaskOutcome", "SweepStore", "StoreError", "OK", "FAILED",
+           "STORE_FORMAT"]
 
 OK, FAILED = "ok", "failed"
 #: Version of the file layout (the ``meta`` table's ``format``).
-STORE_FORMAT = "1"
+STORE_FORMAT = "2"
 #: Seeds are kept below 2**63: an SQLite INTEGER is a signed 64-bit number.
 SEED_BITS = 63
+#: The names of the ``meta`` table, in the order they are written.
+META_NAMES = ("format", "task", "fingerprint", "seed")
+#: Hexadecimal digits of a fingerprint shown in messages.
+SHOWN_DIGITS = 12
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (name TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -65,9 +99,17 @@ CREATE TABLE IF NOT EXISTS runs (
     attempts INTEGER NOT NULL,
     outputs BLOB,
     outputs_json TEXT,
-    finished_at REAL NOT NULL
+    finished_at REAL NOT NULL,
+    checksum TEXT NOT NULL
 );
 """
+_COLUMNS = "key, status, error, seed, attempts, outputs, outputs_json, finished_at, checksum"
+
+
+class StoreError(InputValueError):
+    """A sweep store that cannot be used as asked: not a store, damaged, another sweep's, of
+    an older format, or holding tasks a fresh sweep would overwrite; the message names the
+    file and what is wrong."""
 
 
 def _key_value(value):
@@ -130,6 +172,10 @@ def task_seed(seed: int, key: str) -> int:
     return int(state[0]) >> (64 - SEED_BITS)
 
 
+def _is_integer(value) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
 @dataclass(frozen=True, kw_only=True)
 class TaskOutcome:
     """What one task of a sweep gave.
@@ -143,7 +189,7 @@ class TaskOutcome:
         ``"Type: message"`` of the exception a failed task raised, or why it was lost; ``""``
         when ok.
     seed : int or None
-        The seed the task was given (None: it takes none).
+        The seed the task was given, in ``[0, 2**63)`` (None: it takes none).
     attempts : int
         Submissions it took (> 1 when a worker was lost under it), >= 1.
     exception : BaseException or None
@@ -164,10 +210,55 @@ class TaskOutcome:
         if not isinstance(self.outputs, dict):
             raise InputTypeError(f"task_outcome.outputs must be a dict; got "
                                  f"{type(self.outputs).__name__}")
+        if not isinstance(self.error, str):
+            raise InputTypeError(f"task_outcome.error must be a str; got "
+                                 f"{type(self.error).__name__}")
+        if self.seed is not None and not (_is_integer(self.seed)
+                                          and 0 <= self.seed < 2**SEED_BITS):
+            raise InputValueError(f"task_outcome.seed must be None or an integer in "
+                                  f"[0, 2**{SEED_BITS}); got {self.seed!r}")
+        if not (_is_integer(self.attempts) and self.attempts >= 1):
+            raise InputValueError(f"task_outcome.attempts must be an integer >= 1; got "
+                                  f"{self.attempts!r}")
 
     @property
     def ok(self) -> bool:
         return self.status == OK
+
+
+def _checksum(values) -> str:
+    """SHA-256 of a row's columns as SQLite gives them back (each with its type and length,
+    floats as their hexadecimal form: bit for bit)."""
+    digest = hashlib.sha256()
+    for value in values:
+        if isinstance(value, bytes):
+            data = value
+        else:
+            text = value.hex() if isinstance(value, float) else str(value)
+            data = text.encode("utf-8", "surrogatepass")
+        digest.update(f"{type(value).__name__}:{len(data)}:".encode())
+        digest.update(data)
+    return digest.hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def _schema_objects() -> dict:
+    """``{(type, name): sql}`` of the tables and indexes :data:`_SCHEMA` creates."""
+    with contextlib.closing(sqlite3.connect(":memory:")) as db:
+        db.executescript(_SCHEMA)
+        return _objects(db)
+
+
+def _objects(db: sqlite3.Connection) -> dict:
+    """``{(type, name): sql}`` of a database's schema (the statistics tables of ANALYZE
+    left out)."""
+    return {(kind, name): sql for kind, name, sql in db.execute(
+                "SELECT type, name, sql FROM sqlite_master")
+            if not str(name).startswith("sqlite_stat")}
+
+
+def _short(fingerprint) -> str:
+    return f"{str(fingerprint)[:SHOWN_DIGITS]}..."
 
 
 class SweepStore:
@@ -179,58 +270,172 @@ class SweepStore:
         The file; created with its folder when missing.
     task : str
         What the sweep runs (a name); a resume must give the same.
+    fingerprint : str
+        What the task computes, its code and inputs
+        (:func:`~flexctl.app.task_fingerprint.task_fingerprint`); a resume must give the
+        same.
     seed : int or None
         The sweep's seed (None: its tasks take none); a resume must give the same.
     resume : bool
         Keep and use the tasks already stored. False refuses a store that holds tasks (hours
-        of results are not overwritten by mistake: remove the file to start again).
+        of results are not overwritten by mistake: remove the file to start again) and takes
+        over an empty one.
+
+    Raises
+    ------
+    StoreError
+        When the file is not a sweep store, is damaged, is of another format, belongs to
+        another task or seed, or holds tasks and ``resume`` is False; the message names the
+        file.
 
     Examples
     --------
     >>> import os, tempfile
+    >>> from flexctl.app.task_fingerprint import task_fingerprint
+    >>> def square(x):
+    ...     return {"y": x * x}
     >>> path = os.path.join(tempfile.mkdtemp(), "runs.sqlite")
-    >>> with SweepStore(path, task="square", seed=0) as store:
-    ...     store.record('{"x":2}', TaskOutcome(status="ok", outputs={"y": 4.0}))
-    >>> with SweepStore(path, task="square", seed=0, resume=True) as store:
+    >>> mark = task_fingerprint(square)
+    >>> with SweepStore(path, task="square", fingerprint=mark, seed=None) as store:
+    ...     store.record('{"x":2}', TaskOutcome(status="ok", outputs=square(2.0)))
+    >>> with SweepStore(path, task="square", fingerprint=mark, seed=None, resume=True) as store:
     ...     store.outcomes()['{"x":2}'].outputs
     {'y': 4.0}
     """
 
-    def __init__(self, path, *, task: str, seed: int | None, resume: bool = False):
+    def __init__(self, path, *, task: str, fingerprint: str, seed: int | None,
+                 resume: bool = False):
         if not isinstance(path, (str, Path)) or not str(path).strip():
             raise InputTypeError(f"sweep store must be a file path; got {path!r}")
+        for name, value in (("task", task), ("fingerprint", fingerprint)):
+            if not isinstance(value, str) or not value:
+                raise InputTypeError(f"sweep store {name} must be a non-empty str; got "
+                                     f"{value!r}")
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._db = self._connect()
         try:
-            self._db = sqlite3.connect(self.path)
-            # WAL: each commit is one append, and a reader (a progress check) never blocks it
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=NORMAL")
-            with self._db:
-                self._db.executescript(_SCHEMA)
-        except sqlite3.DatabaseError as exc:
-            raise InputValueError(f"sweep store must be an SQLite file flexctl can write; "
-                                  f"{str(self.path)!r} is not: {exc}") from None
-        try:
-            self._check_meta(task, seed, resume)
+            with self._guard("opened"):
+                self._check_file()
+                self._check_schema()
+                self._db.execute("PRAGMA journal_mode=WAL")
+                self._db.execute("PRAGMA synchronous=NORMAL")
+                self._check_meta({"format": STORE_FORMAT, "task": task,
+                                  "fingerprint": fingerprint, "seed": json.dumps(seed)},
+                                 resume)
         except BaseException:
             self._db.close()
             raise
 
-    def _check_meta(self, task: str, seed, resume: bool) -> None:
+    def _refused(self, what: str) -> StoreError:
+        return StoreError(f"sweep store {str(self.path)!r} {what}")
+
+    def _connect(self) -> sqlite3.Connection:
+        """The connection to the file (its folder created); a folder or a path that cannot
+        be opened is refused."""
+        if self.path.is_dir():
+            raise self._refused("is a folder; give the path of a file")
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            db = sqlite3.connect(self.path)
+        except (OSError, sqlite3.Error) as exc:
+            raise self._refused(f"cannot be opened ({type(exc).__name__}: {exc})") from None
+        # damaged text (a key, SQLite's own report) decodes, to fail a checksum or be shown
+        db.text_factory = functools.partial(str, encoding="utf-8", errors="replace")
+        return db
+
+    @contextlib.contextmanager
+    def _guard(self, doing: str):
+        """Turn an SQLite error while ``doing`` into a :class:`StoreError` naming the file."""
+        try:
+            yield
+        except sqlite3.Error as exc:
+            reason = ("it is not an SQLite database, or it is damaged; "
+                      if type(exc) in (sqlite3.DatabaseError, sqlite3.DataError) else "")
+            raise self._refused(f"cannot be {doing}: {reason}SQLite says "
+                                f"{type(exc).__name__}: {exc}") from None
+        except UnicodeDecodeError:       # SQLite's message quotes damaged bytes of the file
+            raise self._refused(f"cannot be {doing}: it is damaged (SQLite's report of the "
+                                "error quotes bytes that are not text)") from None
+
+    def _check_file(self) -> None:
+        """SQLite's ``quick_check`` of the whole file (pages, records, free list)."""
+        problems = [row[0] for row in self._db.execute("PRAGMA quick_check")]
+        if problems != ["ok"]:
+            said = "; ".join(" ".join(str(p).split()) for p in problems[:3])
+            raise self._refused(f"is damaged: SQLite's quick_check says {said}")
+
+    def _check_schema(self) -> None:
+        """Create the tables in an empty file; refuse a file whose tables are not a store's
+        (checked before anything is written to it)."""
+        found = _objects(self._db)
+        if not found:
+            self._db.executescript(_SCHEMA)
+            return
+        if found == _schema_objects():
+            return
+        stored = self._stored_format()
+        if stored is not None and stored != STORE_FORMAT:
+            raise self._format_refusal(stored)
+        tables = sorted(str(name) for kind, name in found if kind == "table")
+        what = ("its meta and runs tables are not laid out as flexctl writes them"
+                if tables == ["meta", "runs"] else
+                f"it holds the tables {', '.join(tables) or '(none)'}, not meta and runs")
+        raise self._refused(f"is not a sweep store of format {STORE_FORMAT}: {what} "
+                            "(another program's file, or a damaged one); give another file")
+
+    def _stored_format(self):
+        """The ``format`` of a foreign-looking file's meta table, or None when unreadable."""
+        try:
+            row = self._db.execute("SELECT value FROM meta WHERE name = 'format'").fetchone()
+        except sqlite3.Error:
+            return None
+        return None if row is None else row[0]
+
+    def _format_refusal(self, stored) -> StoreError:
+        why = (" (format '1' kept neither the task's fingerprint nor row checksums, so what "
+               "it holds cannot be checked)" if stored == "1" else "")
+        return self._refused(f"was written in store format {stored!r}, and this flexctl reads "
+                             f"format {STORE_FORMAT!r}{why}: run the sweep again into a new "
+                             "store file")
+
+    def _check_meta(self, want: dict, resume: bool) -> None:
+        """Refuse a store of another format, task, fingerprint or seed (see the Notes); write
+        ``want`` into a new or taken-over one."""
         meta = dict(self._db.execute("SELECT name, value FROM meta"))
-        want = {"format": STORE_FORMAT, "task": str(task), "seed": json.dumps(seed)}
-        if len(self) and not resume:
-            raise InputValueError(f"sweep store {str(self.path)!r} already holds {len(self)} "
-                                  "tasks: pass resume=True to continue that sweep, or remove "
-                                  "the file to start again")
-        for name, value in want.items():
-            if name in meta and meta[name] != value:
-                raise InputValueError(f"sweep store {str(self.path)!r} belongs to a sweep with "
-                                      f"{name} {meta[name]}; this one has {name} {value}: a "
-                                      "resume must run the same task with the same seed")
+        held = len(self)
+        if not meta and held:
+            raise self._refused(f"is damaged: it holds {held} tasks but no record of the sweep "
+                                "they belong to (its meta table is empty)")
+        if meta and set(meta) != set(META_NAMES):
+            raise self._refused(f"is damaged: its meta table holds {sorted(map(str, meta))}, "
+                                f"not {list(META_NAMES)}")
+        if meta and meta["format"] != STORE_FORMAT:
+            raise self._format_refusal(meta["format"])
+        if held and not resume:
+            raise self._refused(f"already holds {held} tasks: pass resume=True to continue "
+                                "that sweep, or remove the file to start again")
+        if meta and resume:
+            self._check_same_sweep(meta, want)
+        if meta == want:
+            return
         with self._db:
-            self._db.executemany("INSERT OR IGNORE INTO meta VALUES (?, ?)", want.items())
+            self._db.executemany("INSERT OR REPLACE INTO meta VALUES (?, ?)",
+                                 [(name, want[name]) for name in META_NAMES])
+
+    def _check_same_sweep(self, meta: dict, want: dict) -> None:
+        """Refuse to resume ``meta``'s sweep with another task or seed."""
+        if (meta["task"], meta["fingerprint"]) != (want["task"], want["fingerprint"]):
+            why = ("its code or inputs differ" if meta["task"] == want["task"]
+                   else "another task")
+            raise self._refused(
+                f"holds results of task {meta['task']!r} with fingerprint "
+                f"{_short(meta['fingerprint'])} but this sweep runs {want['task']!r} with "
+                f"fingerprint {_short(want['fingerprint'])} ({why}): a resume must run the "
+                "same task; use another store file, or remove this one to start again")
+        if meta["seed"] != want["seed"]:
+            raise self._refused(f"belongs to a sweep with seed {meta['seed']}; this one has "
+                                f"seed {want['seed']}: a resume must run the same task with "
+                                "the same seed")
 
     def __enter__(self):
         return self
@@ -243,10 +448,15 @@ class SweepStore:
         self._db.close()
 
     def __len__(self) -> int:
-        return self._db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
+        with self._guard("read"):
+            return self._db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
 
     def __repr__(self):
-        return f"SweepStore({str(self.path)!r}, {len(self)} tasks)"
+        try:
+            held = f"{len(self)} tasks"
+        except StoreError:
+            held = "unreadable"
+        return f"SweepStore({str(self.path)!r}, {held})"
 
     def record(self, key: str, outcome: TaskOutcome) -> None:
         """Commit one task's outcome (replacing one stored under the same key).
@@ -258,36 +468,87 @@ class SweepStore:
         outcome : TaskOutcome
             What the task gave; its outputs must pickle.
         """
+        if not isinstance(key, str):
+            raise InputTypeError(f"sweep store key must be a str (task_key); got "
+                                 f"{type(key).__name__}")
         try:
             blob = pickle.dumps(outcome.outputs, protocol=pickle.HIGHEST_PROTOCOL)
         except Exception as exc:
             raise InputTypeError(f"sweep store: the outputs of task {key} must be picklable "
                                  f"to be stored; {type(exc).__name__}: {exc}") from None
         text = json.dumps(outcome.outputs, default=repr, allow_nan=True)
-        with self._db:
-            self._db.execute("INSERT OR REPLACE INTO runs VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                             (key, outcome.status, outcome.error, outcome.seed,
-                              outcome.attempts, blob, text, time.time()))
+        seed = None if outcome.seed is None else int(outcome.seed)
+        values = (key, outcome.status, outcome.error, seed, int(outcome.attempts), blob, text,
+                  time.time())
+        with self._guard(f"written (task {key})"), self._db:
+            self._db.execute(f"INSERT OR REPLACE INTO runs ({_COLUMNS}) VALUES "
+                             "(?, ?, ?, ?, ?, ?, ?, ?, ?)", values + (_checksum(values),))
 
     def outcomes(self, keys=None) -> dict:
-        """``{key: TaskOutcome}`` of the stored tasks (of those among ``keys`` if given)."""
+        """The stored tasks' outcomes.
+
+        Parameters
+        ----------
+        keys : iterable of str, optional
+            Only these tasks; default all.
+
+        Returns
+        -------
+        dict
+            ``{key: TaskOutcome}``.
+
+        Raises
+        ------
+        StoreError
+            When a row is damaged (named by its key: :meth:`forget` it to run that task
+            again) or the file cannot be read.
+        """
         wanted = None if keys is None else set(keys)
-        found = {}
-        for key, status, error, seed, attempts, blob in self._db.execute(
-                "SELECT key, status, error, seed, attempts, outputs FROM runs"):
-            if wanted is None or key in wanted:
-                found[key] = TaskOutcome(status=status, outputs=pickle.loads(blob),
-                                         error=error or "", seed=seed, attempts=attempts)
-        return found
+        with self._guard("read"):
+            rows = self._db.execute(f"SELECT {_COLUMNS} FROM runs").fetchall()
+        return {row[0]: self._outcome(row) for row in rows
+                if wanted is None or row[0] in wanted}
+
+    def _outcome(self, row: tuple) -> TaskOutcome:
+        """The outcome of one row, its checksum checked first."""
+        key, status, error, seed, attempts, blob, _, _, checksum = row
+        if checksum != _checksum(row[:-1]):
+            raise self._damaged(key, "fails its checksum (a changed or damaged row)")
+        try:
+            outputs = pickle.loads(blob)
+        except Exception as exc:
+            raise self._damaged(key, f"cannot be unpickled ({type(exc).__name__}: {exc}; the "
+                                "outputs may hold objects of classes this code no longer "
+                                "has)") from None
+        try:
+            return TaskOutcome(status=status, outputs=outputs, error=error or "", seed=seed,
+                               attempts=attempts)
+        except (TypeError, ValueError) as exc:
+            raise self._damaged(key, f"is not a task's outcome ({exc})") from None
+
+    def _damaged(self, key, what: str) -> StoreError:
+        return self._refused(f"is damaged: the row of task {key} {what}; forget that task "
+                             "(SweepStore.forget) to run it again, or use a new store")
 
     def forget(self, keys) -> int:
-        """Remove tasks from the store (to run them again on resume); return how many."""
-        with self._db:
+        """Remove tasks from the store (to run them again on resume).
+
+        Parameters
+        ----------
+        keys : iterable of str
+            The tasks' keys (:func:`task_key`); keys the store lacks are skipped.
+
+        Returns
+        -------
+        int
+            How many were removed.
+        """
+        with self._guard("written"), self._db:
             return sum(self._db.execute("DELETE FROM runs WHERE key = ?", (k,)).rowcount
                        for k in keys)
 
     def failed_keys(self) -> list:
         """Keys of the stored failures (``forget`` them to try again on resume)."""
-        return [k for (k,) in self._db.execute("SELECT key FROM runs WHERE status = ?",
-                                               (FAILED,))]
-
+        with self._guard("read"):
+            return [k for (k,) in self._db.execute("SELECT key FROM runs WHERE status = ?",
+                                                   (FAILED,))]

@@ -20,7 +20,8 @@ import pytest
 
 import flexctl
 from flexctl.app.sweep import PointMassAmplitudes, SweepError, sweep
-from flexctl.app.sweep_store import SweepStore, TaskOutcome, task_key, task_seed
+from flexctl.app.sweep_store import StoreError, SweepStore, TaskOutcome, task_key, task_seed
+from flexctl.app.task_fingerprint import task_fingerprint
 
 GRID = {"x": list(range(12))}
 SEED = 5
@@ -159,13 +160,14 @@ def test_resume_runs_only_the_missing_tasks_and_equals_one_run(tmp_path, uninter
 
 @pytest.mark.parametrize("call, error, match", [
     pytest.param(lambda s: sweep(noisy, GRID, seed=SEED, store=s, progress=False),
-                 ValueError, "already holds 12 tasks: pass resume=True", id="no-resume"),
+                 StoreError, "already holds 12 tasks: pass resume=True", id="no-resume"),
     pytest.param(lambda s: sweep(noisy, GRID, seed=SEED + 1, store=s, resume=True,
                                  progress=False),
-                 ValueError, "with seed 5; this one has seed 6", id="other-seed"),
+                 StoreError, "with seed 5; this one has seed 6", id="other-seed"),
     pytest.param(lambda s: sweep(slow_noisy, GRID, seed=SEED, store=s, resume=True,
                                  progress=False),
-                 ValueError, "belongs to a sweep with task .*noisy", id="other-task"),
+                 StoreError, "holds results of task .*noisy.* but this sweep runs .*slow_noisy",
+                 id="other-task"),
     pytest.param(lambda s: sweep(noisy, GRID, resume=True, progress=False),
                  ValueError, "resume=True needs a store", id="resume-no-store"),
     pytest.param(lambda s: sweep(noisy, GRID, on_error="skip", progress=False),
@@ -186,7 +188,7 @@ def test_a_store_is_resumed_only_by_the_same_sweep(tmp_path, call, error, match)
 def test_a_file_that_is_not_a_store_is_refused_by_name(tmp_path):
     garbage = tmp_path / "notes.txt"
     garbage.write_text("not a database, but long enough to have a header page\n" * 40)
-    with pytest.raises(ValueError, match="sweep store must be an SQLite file .*notes.txt"):
+    with pytest.raises(StoreError, match="sweep store .*notes.txt.* is not an SQLite database"):
         sweep(noisy, GRID, store=garbage, progress=False)
 
 
@@ -207,9 +209,11 @@ def test_failures_are_stored_with_their_error_and_can_be_run_again(tmp_path):
     assert "4 rows, 1 failed" in repr(table)
     assert table.where(x="two").failed == (0,) and table.where(x=3).failed == ()
     assert [r["x"] for r in table.without_failures()] == [0, 1, 3]
-    with pytest.raises(ValueError, match="belongs to a sweep with task"):
-        SweepStore(store, task="other", seed=SEED, resume=True)
-    with SweepStore(store, task=kept_task_name(task), seed=SEED, resume=True) as kept:
+    with pytest.raises(StoreError, match="holds results of task .*InterruptOnce"):
+        SweepStore(store, task="other", fingerprint=task_fingerprint(task), seed=SEED,
+                   resume=True)
+    with SweepStore(store, task=kept_task_name(task), fingerprint=task_fingerprint(task),
+                    seed=SEED, resume=True) as kept:
         assert kept.failed_keys() == [task_key({"x": "two"})]
         outcome = kept.outcomes()[task_key({"x": "two"})]
         assert outcome.status == "failed" and outcome.error == table.rows[2]["failure"]
@@ -347,7 +351,7 @@ def test_outcomes_round_trip_through_the_store_bit_for_bit(tmp_path):
     outputs = {"tiny": 5e-324, "third": 1.0 / 3.0, "nan": float("nan"), "neg0": -0.0,
                "inf": float("inf"), "flag": True, "count": 3, "text": "ok",
                "array": np.linspace(0.0, 1.0, 7)}
-    with SweepStore(tmp_path / "runs.sqlite", task="t", seed=None) as store:
+    with SweepStore(tmp_path / "runs.sqlite", task="t", fingerprint="f", seed=None) as store:
         store.record("k", TaskOutcome(status="ok", outputs=outputs))
         back = store.outcomes()["k"].outputs
     assert bits({k: v for k, v in back.items() if k != "array"}) == \
@@ -437,6 +441,17 @@ def test_a_resumed_bench_equals_one_run(tmp_path):
             "--store", str(store)]
     assert main(args) == EXIT_BAD_INPUT                # it holds runs: --resume or remove it
     assert main(args + ["--resume"]) == EXIT_OK
+    with sqlite3.connect(store) as db:                 # the store's own record of its task
+        meta = dict(db.execute("SELECT name, value FROM meta"))
+    db.close()
+    key = task_key({"scene": "kane-spinup", "variant": "first_order", "n_modes": 1,
+                    "method": "cvodes", "rtol": 1e-6})
+    with SweepStore(store, task=meta["task"], fingerprint=meta["fingerprint"], seed=None,
+                    resume=True) as kept:              # a row of an older BenchRow
+        kept.record(key, TaskOutcome(status="ok", outputs={"scene": "kane-spinup"}))
+    with pytest.raises(StoreError, match=f"sweep store '{store}' holds under task "
+                       r'\{"method":"cvodes".* a row that is not a bench row \(.*missing'):
+        run_bench(config, tmp_path / "three", progress=False, store=store, resume=True)
 
 
 calls = []
