@@ -218,9 +218,8 @@ class _Rod:
     n_modes: int
     root: np.ndarray
 
-    def kinematics(self, qn, ql, qt):
-        """``(positions (3, n) in the hub frame, tangents (3, n), rotations, tip, masses
-        (3, K))`` for the modal coordinates (CasADi)."""
+    def rotations(self, qn, ql, qt) -> list:
+        """The section rotation ``R(s)`` at every node, relative to the root frame (CasADi)."""
         import casadi as ca
 
         rule, a = self.rule, self.appendage
@@ -241,21 +240,66 @@ class _Rod:
                 curvature[:, j - 1], curvature[:, j])
             rotation = ca.mtimes(rotation, _exp(step))
             rotations.append(rotation)
-        frame = ca.DM(a.frame)
-        tangents = ca.horzcat(*[ca.mtimes(frame, r[:, 0]) for r in rotations])  # (3, n)
-        integrand = tangents.T                                                   # (n, 3)
-        sums = ca.mtimes(ca.DM(rule.panel_sums), integrand)
-        along = ca.mtimes(ca.DM(rule.local), integrand) + ca.mtimes(ca.DM(rule.before), sums)
+        return rotations
+
+    @property
+    def along(self) -> np.ndarray:
+        """``(n + K, n)``: the integrals from the root to every node and then every point
+        mass, of a function's values at the nodes."""
+        rule = self.rule
+        to_nodes = rule.local + rule.before @ rule.panel_sums
+        if not self.appendage.masses:
+            return to_nodes
+        local, before = rule.at([m.position for m in self.appendage.masses])
+        return np.vstack([to_nodes, local + before @ rule.panel_sums])
+
+    def motion(self, eta, eta_t) -> dict:
+        """Positions and their derivatives of every node and point mass, and the sections'
+        rotations with theirs, for the appendage's modal coordinates ``eta`` ``[qn; ql; qt]``
+        and rates ``eta_t`` (CasADi).
+
+        Returns
+        -------
+        dict
+            ``points`` (3, M): positions in the hub frame (the nodes, then the point masses);
+            ``jac`` (list of 3 (M, N)): each component's Jacobian in ``eta``; ``rel`` and
+            ``conv`` (3, M): ``P eta_t`` and ``(P_t) eta_t``; ``rotations`` (list of 3 x 3),
+            ``jac_rot`` (9n, N), ``rot_t`` and ``rot_tt`` (9n): every node's ``vec(R)``
+            derivatives; ``tangents`` (3, n), hub frame; ``tip`` (3,).
+        """
+        import casadi as ca
+
+        n_modes = self.n_modes
+        rotations = self.rotations(eta[0:n_modes], eta[n_modes:2 * n_modes],
+                                   eta[2 * n_modes:])
+        n = len(rotations)
+        stacked = ca.vertcat(*[ca.vec(r) for r in rotations])             # (9n,)
+        jac_rot = ca.jacobian(stacked, eta)                               # (9n, N)
+        rot_t = ca.mtimes(jac_rot, eta_t)
+        rot_tt = ca.jtimes(ca.jtimes(stacked, eta, eta_t), eta, eta_t)    # at u_t = 0
+        first = [9 * j + c for j in range(n) for c in range(3)]           # R e1, node-major
+        frame = ca.DM(self.appendage.frame)
+
+        def hub_columns(values):
+            """(3n,) node-major root-frame vectors -> (n, 3) hub-frame rows."""
+            return ca.mtimes(ca.reshape(values, 3, n).T, frame.T)
+
+        along = ca.DM(self.along)
+        tangents = hub_columns(stacked[first])                            # (n, 3)
         root = ca.DM(self.root)
-        positions = along.T + ca.repmat(root, 1, along.shape[0])
-        tip = root + ca.sum1(sums).T
-        if a.masses:
-            local, before = rule.at([m.position for m in a.masses])
-            at = ca.mtimes(ca.DM(local), integrand) + ca.mtimes(ca.DM(before), sums)
-            masses = at.T + ca.repmat(root, 1, len(a.masses))
-        else:
-            masses = ca.SX(3, 0)
-        return positions, tangents, rotations, tip, masses
+        points = (ca.mtimes(along, tangents) + ca.repmat(root.T, along.shape[0], 1)).T
+        jac_t = jac_rot[first, :]                                          # (3n, N)
+        jac = []
+        for c in range(3):      # hub-frame component c of the tangent's Jacobian, (n, N)
+            part = sum(float(self.appendage.frame[c, d]) * jac_t[d::3, :] for d in range(3))
+            jac.append(ca.mtimes(along, part))
+        rel = ca.mtimes(along, hub_columns(rot_t[first])).T
+        conv = ca.mtimes(along, hub_columns(rot_tt[first])).T
+        weights = ca.DM(self.rule.weights).T
+        tip = root + ca.mtimes(weights, tangents).T
+        return {"points": points, "jac": jac, "rel": rel, "conv": conv,
+                "rotations": rotations, "jac_rot": jac_rot, "rot_t": rot_t, "rot_tt": rot_tt,
+                "tangents": tangents.T, "tip": tip}
 
 
 @dataclass(frozen=True, eq=False)
@@ -379,20 +423,18 @@ def _built(structure: SpatialStructure, n_modes: int) -> SpatialEquations:
     for k, appendage in enumerate(structure.appendages):
         rod = _Rod(appendage, _rule(appendage, hub, n_modes), n_modes, appendage.root_point(hub))
         block = slice(3 * k * n_modes, 3 * (k + 1) * n_modes)
-        qn, ql, qt = (eta[layout.modal(k, f)] for f in FAMILIES)
-        positions, tangents, rotations, tip, at_masses = rod.kinematics(qn, ql, qt)
-        tips.append(tip - ca.DM(rod.root + appendage.length * appendage.direction))
-        weights = appendage.linear_density * np.asarray(rod.rule.weights)
-        points = ca.horzcat(positions, at_masses)
-        point_mass = np.concatenate([weights, [m.mass for m in appendage.masses]])
-        kinetic = _particles(points, point_mass, eta, eta_t, w, velocity_h, layout, block)
+        motion = rod.motion(eta[block], eta_t[block])
+        tips.append(motion["tip"] - ca.DM(rod.root + appendage.length * appendage.direction))
+        point_mass = np.concatenate([appendage.linear_density * np.asarray(rod.rule.weights),
+                                     [m.mass for m in appendage.masses]])
+        kinetic = _particles(motion, point_mass, w, velocity_h, layout.free)
         cols = list(range(0, 6 if layout.free else 3)) + list(range(e + block.start,
                                                                       e + block.stop))
         mass, bias = _place(mass, bias, kinetic[0], kinetic[1], cols)
         linear += kinetic[2]
         angular += kinetic[3]
         moment += kinetic[4]
-        polar = _sections(rotations, tangents, appendage, rod.rule, eta[block], eta_t[block], w)
+        polar = _sections(motion, appendage, rod.rule, w)
         mass, bias = _place(mass, bias, polar[0], polar[1],
                             [0, 1, 2] + list(range(e + block.start, e + block.stop)))
         angular += polar[2]
@@ -437,33 +479,36 @@ def _place(mass, bias, local_mass, local_bias, cols: list) -> tuple:
             bias + ca.mtimes(pick.T, local_bias))
 
 
-def _particles(points, masses, eta, eta_t, w, v, layout: SpatialLayout, block: slice) -> tuple:
+def _particles(motion: dict, masses, w, v, free: bool) -> tuple:
     """Mass matrix and velocity terms on the appendage's speeds (``[w; v (free); eta_t of
     the appendage]``), linear and angular momentum (hub frame, about the centre) and first
-    moment of mass of the particles at ``points`` (3, n) with ``masses`` (n,)."""
+    moment of mass of its nodes and point masses (``masses`` (M,), kg)."""
     import casadi as ca
 
+    points, rel = motion["points"], motion["rel"]
     n = points.shape[1]
     m = ca.DM(np.asarray(masses, dtype=float))
-    flat = ca.vec(points)                                  # (3n,), point by point
-    jac = ca.jacobian(flat, eta[block])                    # (3n, N)
-    rel = ca.mtimes(jac, eta_t[block])                     # P q_t, stacked
-    convective = ca.jtimes(rel, eta[block], eta_t[block])  # (P_t) q_t
-    rel3 = ca.reshape(rel, 3, n)
     wide_w = ca.repmat(w, 1, n)
-    velocity = ca.repmat(v, 1, n) + _cross_columns(wide_w, points) + rel3
-    accel = ca.repmat(ca.cross(w, v), 1, n) + 2 * _cross_columns(wide_w, rel3) \
-        + ca.reshape(convective, 3, n) + _cross_columns(wide_w, _cross_columns(wide_w, points))
-    # partial velocities of every point, stacked (3n, speeds): -[p]x, I (free), P
-    rows = [ca.vertcat(*[-skew(points[:, j]) for j in range(n)])]
-    if layout.free:
-        rows.append(ca.repmat(ca.DM.eye(3), n, 1))
-    rows.append(jac)
-    partial = ca.horzcat(*rows)
-    weight = ca.vec(ca.repmat(m.T, 3, 1))                  # each point's mass, 3 times
-    weighted = partial * ca.repmat(weight, 1, partial.shape[1])
-    local_mass = ca.mtimes(partial.T, weighted)
-    local_bias = ca.mtimes(weighted.T, ca.vec(accel))
+    velocity = ca.repmat(v, 1, n) + _cross_columns(wide_w, points) + rel
+    accel = ca.repmat(ca.cross(w, v), 1, n) + 2 * _cross_columns(wide_w, rel) \
+        + motion["conv"] + _cross_columns(wide_w, _cross_columns(wide_w, points))
+    zero = ca.SX.zeros(n, 1)
+    px, py, pz = points[0, :].T, points[1, :].T, points[2, :].T
+    # partial velocities, component by component: -[p]x, I (free), P
+    spin_rows = [ca.horzcat(zero, pz, -py), ca.horzcat(-pz, zero, px),
+                 ca.horzcat(py, -px, zero)]
+    local_mass, local_bias = 0, 0
+    for c in range(3):
+        parts = [spin_rows[c]]
+        if free:
+            unit = np.zeros((n, 3))
+            unit[:, c] = 1.0
+            parts.append(ca.DM(unit))
+        parts.append(motion["jac"][c])
+        partial = ca.horzcat(*parts)                                  # (M, speeds)
+        weighted = partial * ca.repmat(m, 1, partial.shape[1])
+        local_mass = local_mass + ca.mtimes(partial.T, weighted)
+        local_bias = local_bias + ca.mtimes(weighted.T, accel[c, :].T)
     linear = ca.mtimes(velocity, m)
     angular = ca.mtimes(_cross_columns(points, velocity), m)
     moment = ca.mtimes(points, m)
@@ -479,38 +524,42 @@ def _cross_columns(a, b):
                       a[0, :] * b[1, :] - a[1, :] * b[0, :])
 
 
-def _sections(rotations, tangents, appendage, rule, eta, eta_t, w) -> tuple:
+def _sections(motion: dict, appendage, rule, w) -> tuple:
     """Mass matrix and velocity terms on ``[w; eta_t of the appendage]`` and angular
-    momentum of the sections' polar inertia: every node's derivatives in one sweep."""
+    momentum of the sections' polar inertia. The section's angular velocity relative to the
+    hub is ``vee(R_t R^T)`` (turned into the hub frame), linear in the rates with the
+    coefficients ``vee(dR/deta_a R^T)``; its rate at ``u_t = 0`` is ``vee(R_tt R^T)`` (the
+    other term, ``R_t R_t^T``, is symmetric)."""
     import casadi as ca
 
+    rotations, jac_rot = motion["rotations"], motion["jac_rot"]
     n = len(rotations)
     frame = ca.DM(appendage.frame)
-    stacked = ca.vertcat(*[ca.vec(r) for r in rotations])            # (9n,)
-    stacked_t = ca.jtimes(stacked, eta, eta_t)                       # R_t of every node
-    spins = []
+    tangents = motion["tangents"]
+    spin_cols, rate_cols, partial_rows, gyro_rows = [], [], [], []
     for j, r in enumerate(rotations):
-        r_t = ca.reshape(stacked_t[9 * j:9 * j + 9], 3, 3)
-        spins.append(_vee(ca.mtimes(r_t, r.T)))
-    spin_root = ca.horzcat(*spins)                                   # (3, n), root frame
-    spin = ca.mtimes(frame, spin_root)                               # hub frame
-    spin_jac = ca.jacobian(ca.vec(spin), eta_t)                      # (3n, N)
-    spin_rate = ca.mtimes(frame, ca.reshape(ca.jtimes(ca.vec(spin_root), eta, eta_t), 3, n))
+        rows = slice(9 * j, 9 * j + 9)
+        coefficients = ca.horzcat(*[
+            _vee(ca.mtimes(ca.reshape(jac_rot[rows, a], 3, 3), r.T))
+            for a in range(jac_rot.shape[1])])                             # (3, N), root frame
+        coefficients = ca.mtimes(frame, coefficients)
+        spin_cols.append(ca.mtimes(frame, _vee(ca.mtimes(ca.reshape(motion["rot_t"][rows],
+                                                                   3, 3), r.T))))
+        rate_cols.append(ca.mtimes(frame, _vee(ca.mtimes(ca.reshape(motion["rot_tt"][rows],
+                                                                   3, 3), r.T))))
+        t = tangents[:, j]
+        partial_rows.append(ca.horzcat(t.T, ca.mtimes(t.T, coefficients)))
+        omega = w + spin_cols[-1]
+        gyro = ca.cross(omega, t)
+        gyro_rows.append(ca.horzcat(gyro.T, ca.mtimes(gyro.T, coefficients)))
+    spin = ca.horzcat(*spin_cols)
     omega = ca.repmat(w, 1, n) + spin
-    alpha_bias = spin_rate + _cross_columns(ca.repmat(w, 1, n), omega)
-    j_s = appendage.polar_density * np.asarray(rule.weights)
-    # the partial polar rates t . Omega_r of every section: rows (n, 3 + N)
-    along_w = tangents.T                                             # (n, 3)
-    along_e = ca.vertcat(*[ca.mtimes(tangents[:, j].T, spin_jac[3 * j:3 * j + 3, :])
-                           for j in range(n)])                       # (n, N)
-    along = ca.horzcat(along_w, along_e)
+    alpha_bias = ca.horzcat(*rate_cols) + _cross_columns(ca.repmat(w, 1, n), omega)
+    along = ca.vertcat(*partial_rows)                                # (n, 3 + N)
+    partial_gyro = ca.vertcat(*gyro_rows)
+    js = ca.DM(appendage.polar_density * np.asarray(rule.weights))
     polar_rate = ca.sum1(tangents * omega).T                         # t . w_s, (n,)
     polar_accel = ca.sum1(tangents * alpha_bias).T                   # t . alpha_b, (n,)
-    gyro = _cross_columns(omega, tangents)                           # w_s x t, (3, n)
-    partial_gyro = ca.horzcat(gyro.T, ca.vertcat(*[ca.mtimes(gyro[:, j].T,
-                                                             spin_jac[3 * j:3 * j + 3, :])
-                                                   for j in range(n)]))   # (n, 3 + N)
-    js = ca.DM(j_s)
     local_mass = ca.mtimes(along.T, along * ca.repmat(js, 1, along.shape[1]))
     local_bias = ca.mtimes(along.T, js * polar_accel) \
         + ca.mtimes(partial_gyro.T, js * polar_rate)
