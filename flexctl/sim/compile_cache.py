@@ -298,16 +298,16 @@ def _write_index(name: str, fingerprint: str, key: str) -> None:
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file in its directory."""
+    """Write ``data`` to ``path`` through a temporary file in its directory
+    (:func:`~flexctl.sim.atomic_files.atomic_file`; a folder in the way is an ``OSError``
+    here, as the cache's other failures are)."""
+    from .atomic_files import atomic_file
+
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, temporary = tempfile.mkstemp(prefix=".write-", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-        os.replace(temporary, path)
-    finally:
-        with contextlib.suppress(OSError):
-            os.unlink(temporary)
+    if path.is_dir():
+        raise IsADirectoryError(21, "a folder stands at a cache entry's name", str(path))
+    with atomic_file(path) as partial:
+        partial.write_bytes(data)
 
 
 def lift_constants(function, max_instructions: int | None = None):
