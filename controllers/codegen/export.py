@@ -1,11 +1,13 @@
 """Export a designed law as C files, compile them, and run the compiled law from Python.
 
 :func:`export_c` writes ``flexctl_ctrl.h``, ``flexctl_ctrl.c``, ``main.c`` and a ``Makefile``
-for a law bound to its plant (:func:`~controllers.codegen.laws.program_for`).
-:meth:`CExport.compile` builds them with the system C compiler at
-``-std=c99 -Wall -Wextra -Werror`` into a shared library and loads it through :mod:`ctypes`
-(:class:`CompiledLaw`); :meth:`CompiledLaw.controller` is the compiled law as a flexctl
-controller, to close the loop on a plant with it.
+for a law bound to its plant (:func:`~controllers.codegen.laws.program_for`), all four or none
+(:func:`flexctl.sim.atomic_files.staged_folder`). :meth:`CExport.compile` builds them with the
+system C compiler at ``-std=c99 -Wall -Wextra -Werror`` into a shared library, in a temporary
+folder removed once the library is loaded (the export folder gets no objects), and loads it
+through :mod:`ctypes` (:class:`CompiledLaw`); a compiler that refuses the code raises
+:class:`CompileError` with the compiler's messages. :meth:`CompiledLaw.controller` is the
+compiled law as a flexctl controller, to close the loop on a plant with it.
 
 Examples
 --------
@@ -23,6 +25,7 @@ True
 
 from __future__ import annotations
 
+import atexit
 import ctypes
 import os
 import shutil
@@ -35,17 +38,23 @@ from pathlib import Path
 import numpy as np
 
 from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.sim.atomic_files import staged_folder
 
 from .c_source import RETURN_CODES, c_sources
 from .laws import program_for
 from .program import ControllerProgram
 
 __all__ = ["export_c", "CExport", "CompiledLaw", "CompiledController", "CompileError",
-           "C_FLAGS", "find_compiler"]
+           "C_FLAGS", "C_FILES", "find_compiler", "MESSAGE_LINES"]
 
 #: Flags every export is checked with.
 C_FLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-Werror")
 PREFIX = "flexctl_ctrl"
+#: The files :func:`export_c` writes, in the order of :attr:`CExport.files`.
+C_FILES = (f"{PREFIX}.h", f"{PREFIX}.c", "main.c", "Makefile")
+#: Lines of the compiler's messages a :class:`CompileError` shows whole; of longer messages it
+#: shows the first tenth of these and the last 40 (the first error and the last).
+MESSAGE_LINES = 60
 _CODES = {value: name for name, value, _ in RETURN_CODES}
 
 
@@ -54,10 +63,21 @@ class CompileError(RuntimeError):
 
 
 def find_compiler(cc: str | None = None) -> str:
-    """The C compiler: ``cc``, else ``$CC``, else ``cc``/``gcc``/``clang`` on the path."""
+    """The C compiler's path: ``cc``, else ``$CC``, else ``cc``/``gcc``/``clang`` on the path.
+
+    Raises
+    ------
+    CompileError
+        If none of them is found.
+    """
+    return _compiler(cc)[1]
+
+
+def _compiler(cc: str | None = None) -> tuple:
+    """``(name, path)`` of the C compiler :func:`find_compiler` finds: the name as given."""
     for name in ([cc] if cc else []) + [os.environ.get("CC")] + ["cc", "gcc", "clang"]:
         if name and shutil.which(name):
-            return shutil.which(name)
+            return name, shutil.which(name)
     raise CompileError("no C compiler found (set CC, or install cc, gcc or clang)")
 
 
@@ -94,7 +114,10 @@ class CExport:
         return self.directory / f"{PREFIX}.h"
 
     def compile(self, cc: str | None = None, flags=C_FLAGS) -> "CompiledLaw":
-        """Compile to a shared library (in :attr:`directory`) and load it.
+        """Compile to a shared library and load it.
+
+        The object is built in a temporary folder, removed at once, and the library in a
+        folder of this process's, removed when it exits: :attr:`directory` is only read.
 
         Parameters
         ----------
@@ -107,16 +130,24 @@ class CExport:
         Raises
         ------
         CompileError
-            No compiler, or it refused the code (its messages in the error).
+            No compiler, or it failed: its name, exit status and messages are in the error
+            (the first and last lines of long messages, :data:`MESSAGE_LINES`).
         """
-        compiler = find_compiler(cc)
-        library = self.directory / f"lib{PREFIX}_{os.getpid()}_{id(self):x}.so"
-        obj = self.directory / f"{PREFIX}.o"
-        started = time.perf_counter()
-        _run([compiler, *flags, "-fPIC", "-c", str(self.source), "-o", str(obj)])
-        _run([compiler, "-shared", str(obj), "-o", str(library), "-lm"])
-        elapsed = time.perf_counter() - started
-        return CompiledLaw(self, library, compile_time_s=elapsed, code_bytes=_text_size(obj))
+        name, compiler = _compiler(cc)
+        flags = [str(flag) for flag in flags]
+        library = _library_folder() / f"lib{PREFIX}-{os.urandom(6).hex()}.so"
+        with tempfile.TemporaryDirectory(prefix="flexctl-build-") as build:
+            obj = Path(build, f"{PREFIX}.o")
+            started = time.perf_counter()
+            # run in the export folder on the source's own name: the messages name the file
+            # as the user knows it, not a path of the build
+            _run(name, [compiler, *flags, "-fPIC", "-c", self.source.name, "-o", str(obj)],
+                 f"compiling {self.source.name} with {' '.join(flags)}", self.directory)
+            _run(name, [compiler, "-shared", str(obj), "-o", str(library), "-lm"],
+                 "linking the shared library", build)
+            elapsed = time.perf_counter() - started
+            code_bytes = _text_size(obj)
+        return CompiledLaw(self, library, compile_time_s=elapsed, code_bytes=code_bytes)
 
     def describe(self) -> dict:
         """What was written: the law, its input, sample time and the struct's sizes."""
@@ -129,10 +160,85 @@ class CExport:
                 "files": [str(f) for f in self.files]}
 
 
-def _run(command):
-    done = subprocess.run(command, capture_output=True, text=True)
+_LIBRARIES: dict = {}
+
+
+def _library_folder() -> Path:
+    """This process's folder of compiled laws, removed when it exits.
+
+    A loaded library's file is kept as long as the process runs: the dynamic loader knows a
+    library by its file's device and inode, and a new library given the inode of a removed
+    one would be taken for the one already loaded.
+    """
+    pid = os.getpid()
+    if pid not in _LIBRARIES:
+        folder = Path(tempfile.mkdtemp(prefix="flexctl-laws-"))
+        _LIBRARIES[pid] = folder
+        atexit.register(_remove_library_folder, pid, folder)
+    return _LIBRARIES[pid]
+
+
+def _remove_library_folder(pid: int, folder: Path) -> None:
+    if os.getpid() == pid:      # not in a forked child that inherited the hook
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _run(name: str, command: list, doing: str, cwd) -> None:
+    """Run the compiler ``name`` (``command[0]`` is its path) in ``cwd``; a failure raises a
+    :class:`CompileError` saying what it was ``doing``, with its messages."""
+    try:
+        done = subprocess.run(command, capture_output=True, text=True, cwd=cwd)
+    except OSError as exc:
+        raise CompileError(f"the C compiler {name!r} could not be run ({doing}): "
+                           f"{exc.strerror or exc}") from None
     if done.returncode != 0:
-        raise CompileError(f"{' '.join(command)} failed:\n{done.stderr.strip()[:4000]}")
+        raise CompileError(_failure_message(name, done.returncode, done.stderr, done.stdout,
+                                            doing))
+
+
+def _failure_message(name: str, status: int, stderr: str, stdout: str = "",
+                     doing: str = "") -> str:
+    """The message of a compiler that failed: its name, exit status and what it printed.
+
+    Parameters
+    ----------
+    name : str
+        The compiler as given (``$CC``, ``cc``, ...).
+    status : int
+        Its exit status (negative: the signal that stopped it).
+    stderr, stdout : str
+        What it printed (both shown, error stream first; of more than
+        :data:`MESSAGE_LINES` lines, the first few and the last 40).
+    doing : str, optional
+        What it was asked to do (``"compiling flexctl_ctrl.c with ..."``).
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> _failure_message("false", 1, "")
+    "the C compiler 'false' exited with status 1 and printed nothing"
+    >>> print(_failure_message("cc", 1, "a.c:1: error: x\\n", doing="compiling a.c"))
+    the C compiler 'cc' exited with status 1 compiling a.c:
+    a.c:1: error: x
+    """
+    ended = f"exited with status {status}" if status >= 0 else f"was stopped by signal {-status}"
+    lines = [line.rstrip() for text in (stderr, stdout) for line in (text or "").splitlines()]
+    while lines and not lines[-1]:
+        lines.pop()
+    while lines and not lines[0]:
+        lines.pop(0)
+    what = f" {doing}" if doing else ""
+    if not lines:
+        return f"the C compiler {name!r} {ended} and printed nothing" + (
+            f" ({doing})" if doing else "")
+    if len(lines) > MESSAGE_LINES:
+        head = MESSAGE_LINES // 10
+        lines = lines[:head] + [f"[... {len(lines) - head - 40} lines left out ...]"] \
+            + lines[-40:]
+    return f"the C compiler {name!r} {ended}{what}:\n" + "\n".join(lines)
 
 
 def _text_size(obj: Path) -> int | None:
@@ -159,7 +265,9 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     plant : flexctl.Model
         The plant the law runs on (its state order, sensors and actuator).
     directory : str or pathlib.Path
-        Created if missing; the four files are written there (replacing earlier ones).
+        Created if missing; the four files (:data:`C_FILES`) are written there, replacing
+        earlier ones and keeping files of other names. All four are written or none: they go
+        into a temporary folder first, moved into place once complete.
     sample_time : float, optional
         s: to discretise an LQG's estimator at, or to sample a static law at.
     initial_state : array_like, optional
@@ -168,6 +276,12 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     Returns
     -------
     CExport
+
+    Raises
+    ------
+    flexctl.model.errors.InputValueError
+        If ``directory`` is a file, or a folder stands at one of the files' names (the
+        folder is left as it was).
     """
     if isinstance(directory, bool) or not isinstance(directory, (str, os.PathLike)):
         raise InputTypeError(f"export directory must be a path; got {type(directory).__name__}")
@@ -180,22 +294,13 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     directory = Path(directory)
     if directory.exists() and not directory.is_dir():
         raise InputValueError(f"export directory {str(directory)!r} is a file")
-    directory.mkdir(parents=True, exist_ok=True)
     sources = c_sources(program, PREFIX, plant_states=plant.n_states)
-    files = []
-    for name, text in ((f"{PREFIX}.h", sources.header), (f"{PREFIX}.c", sources.source),
-                       ("main.c", sources.main), ("Makefile", sources.makefile)):
-        path = directory / name
-        _write_atomic(path, text)
-        files.append(path)
-    return CExport(directory, program, sources.sizes, tuple(files), tuple(plant.state_names))
-
-
-def _write_atomic(path: Path, text: str):
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(handle, "w") as stream:
-        stream.write(text)
-    os.replace(temporary, path)
+    texts = (sources.header, sources.source, sources.main, sources.makefile)
+    with staged_folder(directory, names=C_FILES) as stage:
+        for name, text in zip(C_FILES, texts):
+            (stage / name).write_text(text, encoding="utf-8")
+    return CExport(directory, program, sources.sizes,
+                   tuple(directory / name for name in C_FILES), tuple(plant.state_names))
 
 
 class CompiledLaw:
@@ -204,6 +309,9 @@ class CompiledLaw:
     Attributes
     ----------
     export : CExport
+    library : pathlib.Path
+        The shared library loaded (by :meth:`CExport.compile`: in a temporary folder of the
+        process, removed when it exits).
     struct_bytes : int
         ``flexctl_ctrl_size()``: the caller's memory for one controller, bytes.
     code_bytes : int or None

@@ -2,7 +2,8 @@
 
 Writes what :func:`flexctl.app.bench.bench_scene` measured (a
 :class:`flexctl.app.bench.SceneBench`); the Markdown tables go through
-:func:`flexctl.app.markdown.markdown_table`.
+:func:`flexctl.app.markdown.markdown_table`. Every file is written whole or not at all
+(:mod:`flexctl.sim.atomic_files`): a scene's three files together, ``report.md`` alone.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import math
 from dataclasses import asdict
 from pathlib import Path
 
+from ..sim.atomic_files import staged_folder, write_atomic
 from .bench_plot import plot_speed_error
 from .markdown import markdown_table
 
@@ -83,21 +85,27 @@ def write_scene(bench, out_dir) -> dict:
     bench : SceneBench
         What :func:`flexctl.app.bench.bench_scene` measured on one scene.
     out_dir : str or path-like
-        Directory, created if missing.
+        Directory, created if missing; the three files are moved in together once all are
+        written (:func:`flexctl.sim.atomic_files.staged_folder`), files of other names kept.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    name, cfg, choice = bench.scene.name, bench.config, bench.choice
-    paths = {"csv": out / f"{name}.csv", "markdown": out / f"{name}.md",
-             "plot": out / f"{name}-pareto.png"}
-    with open(paths["csv"], "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=CSV_COLUMNS)
-        writer.writeheader()
-        for r in bench.rows:
-            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v)
-                             for k, v in asdict(r).items()})
-    plot_speed_error(bench).savefig(paths["plot"], dpi=100)
+    name = bench.scene.name
+    names = {"csv": f"{name}.csv", "markdown": f"{name}.md", "plot": f"{name}-pareto.png"}
+    with staged_folder(out, names=tuple(names.values())) as stage:
+        with open(stage / names["csv"], "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=CSV_COLUMNS)
+            writer.writeheader()
+            for r in bench.rows:
+                writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v)
+                                 for k, v in asdict(r).items()})
+        plot_speed_error(bench).savefig(stage / names["plot"], dpi=100)
+        (stage / names["markdown"]).write_text(_scene_page(bench, names["plot"]))
+    return {k: str(out / v) for k, v in names.items()}
 
+
+def _scene_page(bench, plot: str) -> str:
+    """The Markdown page of a scene's bench; ``plot`` names its speed-against-error plot."""
+    name, cfg, choice = bench.scene.name, bench.config, bench.choice
     lines = [f"# Bench: {name}", "", bench.scene.description, "",
              f"Horizon {bench.t_final:g} s. Errors are relative tip errors, max |tip - tip_ref| "
              "/ max |tip_ref|: *truncation* is the N-mode model at the reference tolerance "
@@ -118,7 +126,7 @@ def write_scene(bench, out_dir) -> dict:
         ("estimated error", lambda kv: _g(choice.error_by_modes[kv[0] - 1])
          if kv[0] <= len(choice.error_by_modes) else "-", True),
         ("actual truncation error", lambda kv: _g(kv[1]), True)])
-    lines += ["", "## Pareto front", "", f"![speed against error]({paths['plot'].name})", "",
+    lines += ["", "## Pareto front", "", f"![speed against error]({plot})", "",
               "Runs that no other run of the variant beats on both wall time and error, "
               "fastest first.", ""]
     for variant in cfg.variants:
@@ -132,8 +140,7 @@ def write_scene(bench, out_dir) -> dict:
                                                    ("note", lambda r: r.note[:160], False)])
               if stopped else ["None."])
     lines += ["", f"Every run: [{name}.csv]({name}.csv)", ""]
-    paths["markdown"].write_text("\n".join(lines))
-    return {k: str(v) for k, v in paths.items()}
+    return "\n".join(lines)
 
 
 def write_index(out: Path, benches: list) -> Path:
@@ -157,9 +164,7 @@ def write_index(out: Path, benches: list) -> Path:
         ("stiffening", lambda b: "matters" if b.choice.stiffening_matters else "negligible",
          False)] + [(f"fastest within {lv:g}", lambda b, lv=lv: _fastest_text(b, lv) or "-",
                      False) for lv in SUMMARY_LEVELS])
-    path = out / "report.md"
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return write_atomic(Path(out) / "report.md", "\n".join(lines) + "\n")
 
 
 def summary_line(bench) -> str:

@@ -1,8 +1,10 @@
-"""Command line: ``flexctl run``, ``flexctl scenes``, ``flexctl demo``, ``flexctl bench``.
+"""Command line: ``flexctl run``, ``flexctl export``, ``flexctl scenes``, ``flexctl demo``,
+``flexctl bench``.
 
 ::
 
     flexctl run SCENE [--set key=value ...] [--out DIR]
+    flexctl export SCENE [--set key=value ...] [--out DIR] [--sample-time S] [--no-compile]
     flexctl scenes
     flexctl demo [--out DIR] [--workers N]
     flexctl bench [--quick] [--scene SCENE ...] [--modes 1-12] [--out DIR]
@@ -19,8 +21,12 @@ expected), 3 when a run stopped early (diverged or singular; its files are still
 bad input (one line on stderr starting ``flexctl: error:`` naming the key, the rule and the
 value, and nothing else on stderr), 1 for a bug (with its traceback).
 
-A run's files are written into a temporary directory next to ``DIR`` and moved into ``DIR``
-only once all of them are complete: a run that fails leaves ``DIR`` as it was.
+Every output is written whole or not at all (:mod:`flexctl.sim.atomic_files`): a run's files,
+an export, a bench scene's pages and the demo folder are written into a temporary folder and
+moved into ``DIR`` only once all of them are complete; a command that fails leaves ``DIR`` as
+it was, and files of other names in ``DIR`` are kept. ``flexctl export`` holds what the design
+and the compiler print, like a run: when it fails (a compiler that refuses the code is named
+with its exit status and messages), its error line is alone on stderr.
 
 Examples
 --------
@@ -135,8 +141,10 @@ def _parser() -> argparse.ArgumentParser:
             "Design the scene's controller and write it as self-contained C99 "
             "(flexctl_ctrl.h, flexctl_ctrl.c, an example main.c and a Makefile) in DIR; "
             "where a C compiler is present, compile it at -std=c99 -Wall -Wextra -Werror and "
-            "check it against the law's CasADi form. Exit 0 on success, 2 on bad input or "
-            "a law that has no C form (the reason is printed).", width=80))
+            "check it against the law's CasADi form. The files are written whole or not at "
+            "all: a failure leaves DIR as it was, files of other names in it are kept. Exit 0 "
+            "on success, 2 on bad input, a compiler that fails or a law that has no C form "
+            "(the reason is printed).", width=80))
     export.add_argument("scene", metavar="SCENE", help="TOML file or built-in scene name")
     export.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a scene value, as for 'flexctl run' (repeatable)")
@@ -392,11 +400,10 @@ def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
     out = out_dir if out_dir is not None else DEFAULT_RUN_DIR / scene.name
     try:
         return write_complete(scene, result, out, overrides, extra, reference)
+    except InputError as exc:           # a folder where a file goes
+        raise _InputError(str(exc)) from None
     except OSError as exc:
-        reason = exc.strerror or str(exc)
-        where = f" ({exc.filename})" if exc.filename else ""
-        raise _InputError(f"cannot write the files of {scene.name} to {out}: "
-                          f"{reason}{where}") from None
+        raise _InputError(_cannot_write(f"the files of {scene.name}", out, exc)) from None
 
 
 def _cmd_run(args) -> int:
@@ -414,20 +421,34 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_export(args) -> int:
+    """``flexctl export``: the design, the compile cache and IPOPT are held like a run's
+    (:class:`_HeldOutput`), so that a failure leaves its one error line alone on stderr."""
     from controllers.codegen import CompileError
 
     from .export import export_scene, format_export
+    held, out = _HeldOutput(), args.out
     try:
-        scene = load_scene(args.scene, overrides=parse_overrides(args.set))
-        out = args.out if args.out is not None else DEFAULT_RUN_DIR / scene.name / "c"
-        summary = export_scene(scene, out, sample_time=args.sample_time,
-                               compile=not args.no_compile)
+        with held:
+            scene = load_scene(args.scene, overrides=parse_overrides(args.set))
+            out = out if out is not None else DEFAULT_RUN_DIR / scene.name / "c"
+            summary = export_scene(scene, out, sample_time=args.sample_time,
+                                   compile=not args.no_compile)
     except (InputError, CompileError) as exc:
         return _error(exc)
     except OSError as exc:
-        return _error(f"cannot write the export to {args.out}: {exc.strerror or exc}")
+        return _error(_cannot_write("the export", out, exc))
+    except BaseException:
+        held.replay()
+        raise
+    held.replay()
     print(format_export(summary))
     return EXIT_OK
+
+
+def _cannot_write(what: str, out, exc: OSError) -> str:
+    """The one line of an output that could not be written: where, why, and which file."""
+    where = f" ({exc.filename})" if exc.filename else ""
+    return f"cannot write {what} to {out}: {exc.strerror or exc}{where}"
 
 
 def _cmd_scenes(args) -> int:
@@ -452,7 +473,7 @@ def _cmd_bench(args) -> int:
     except (SceneError, ValueError, TypeError) as exc:
         return _error(exc)
     except OSError as exc:
-        return _error(f"cannot write the bench files to {args.out}: {exc.strerror or exc}")
+        return _error(_cannot_write("the bench files", args.out, exc))
     for b in benches:
         print(summary_line(b))
     print(f"report: {Path(args.out) / 'report.md'} ({time.perf_counter() - start:.1f} s)")
@@ -466,8 +487,10 @@ def _cmd_demo(args) -> int:
                                      progress=lambda line: print(line, flush=True))
     except _InputError as exc:
         return _error(exc)
+    except InputError as exc:           # a folder where a file goes
+        return _error(exc)
     except OSError as exc:
-        return _error(f"cannot write the demo report to {args.out}: {exc.strerror or exc}")
+        return _error(_cannot_write("the demo report", args.out, exc))
     print(f"report: {report} ({time.perf_counter() - start:.1f} s)")
     for text in surprises:
         print(f"{PROG}: unexpected: {text}", file=sys.stderr)

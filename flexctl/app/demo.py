@@ -42,6 +42,7 @@ import numpy as np
 from controllers.spec import CONTROLLER_KEYS
 
 from ..model.errors import InputError
+from ..sim.atomic_files import atomic_file, staged_folder, write_atomic
 from ..sim.validity import ModelValidityWarning
 from .report import write_demo_report
 from .demo_hardware import hardware
@@ -118,7 +119,7 @@ def kane_spinup(out: Path, executor=None) -> Section:
     fig.suptitle(f"Paper 001 Fig. 4: Kane spin-up, T_s = {ramp:g} s")
     image = _save(fig, out / "paper001-fig4.png")
     csv = out / "paper001-fig4.csv"
-    table.to_csv(csv)
+    write_atomic(csv, table.to_csv())
     w_1 = scene.build_model().first_clamped_frequency
     return Section(
         title="Paper 001 Fig. 4: Kane spin-up, first_order against zero_order",
@@ -187,8 +188,8 @@ def hub_beam_mass(out: Path, executor=None, points: int = SWEEP_POINTS) -> Secti
                         progress=False, description="d/l", on_error="raise")
     by_mass = sweep(task, {"mass_ratio": ratios}, executor=executor, progress=False,
                     description="R_M", on_error="raise")
-    by_position.to_csv(out / "paper000-fig6.csv")
-    by_mass.to_csv(out / "paper000-fig8.csv")
+    write_atomic(out / "paper000-fig6.csv", by_position.to_csv())
+    write_atomic(out / "paper000-fig8.csv", by_mass.to_csv())
 
     # Figs. 5 and 7: time histories (four short runs, here).
     fig5, fig7 = _point_mass_histories(task)
@@ -346,8 +347,7 @@ def slew_comparison(out: Path, executor=None, kinds=None,
                   {"controller.kind": kinds}, executor=executor, progress=False,
                   on_error="raise")
     stem = "controller-comparison" + ("" if scene_name == "slew-90" else f"-{scene_name}")
-    csv = out / f"{stem}.csv"
-    table.to_csv(csv)
+    csv = write_atomic(out / f"{stem}.csv", table.to_csv())
     rows_by_kind = {r["controller.kind"]: r for r in table}
     n_plant = next(iter(rows_by_kind.values()))["result"].model.n_modes
     fig = plot_controller_comparison(
@@ -428,8 +428,7 @@ def model_error(out: Path, executor=None, kinds=("trajopt+lqr", "nmpc")) -> Sect
             ms = ["" if v is None else f"{1e3 * v:.6g}" for v in (median, p99)]
             csv_rows.append(f"{name},{r['controller.kind']},{r['residual_vibration']:.6g},"
                             f"{r['final_error']:.6g},{settle:.6g},{ms[0]},{ms[1]}")
-    csv = out / "model-error.csv"
-    csv.write_text("\n".join(csv_rows) + "\n")
+    csv = write_atomic(out / "model-error.csv", "\n".join(csv_rows) + "\n")
     model = base.model
     return Section(
         title="Design-model error: trajopt+lqr against NMPC",
@@ -486,8 +485,7 @@ def large_deflection(out: Path, executor=None) -> Section:
             csv_rows.append(f"{design},{plant},{metrics.residual_vibration:.6g},"
                             f"{metrics.final_error:.6g},{metrics.peak_tip_deflection:.6g},"
                             f"{error:.6g}")
-    csv = out / "large-deflection.csv"
-    csv.write_text("\n".join(csv_rows) + "\n")
+    csv = write_atomic(out / "large-deflection.csv", "\n".join(csv_rows) + "\n")
     bend = max(runs[d, "exact"].peak_tip_deflection for d in ("first_order", "exact")) \
         / base.system.beam.length
 
@@ -560,7 +558,8 @@ def frequency_plot(out: Path, source: str = "kane-spinup") -> Path:
                                    n_modes=scene.build_model().n_modes, n_frequencies=2)
     fig.axes[0].set_title(f"{source}: clamped natural frequencies against spin rate")
     path = out / "frequencies-vs-spin.png"
-    fig.savefig(path, dpi=100)
+    with atomic_file(path) as partial:
+        fig.savefig(partial, dpi=100)
     return path
 
 
@@ -745,15 +744,28 @@ def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print)
     report : Path
     surprises : list of str
         Runs that did not end as expected and sections that failed.
+
+    Notes
+    -----
+    The demo is written whole or not at all: every file goes into a temporary folder beside
+    (or inside) ``out`` and is moved into ``out`` once ``report.md`` is written
+    (:func:`flexctl.sim.atomic_files.staged_folder`); a demo that fails or is interrupted
+    leaves ``out`` as it was. Files of other names in ``out`` are kept.
     """
+    workers = _checked_workers(workers)
+    with staged_folder(out, names=("report.md",)) as stage:
+        surprises = _demo_into(stage, run_one, workers, progress)
+    return Path(out) / "report.md", surprises
+
+
+def _demo_into(out: Path, run_one, workers: int, progress) -> list:
+    """:func:`run_demo`'s work, every file written into ``out``; return the surprises."""
     plan = [(name, name, {}, "ok") for name in builtin_scenes()]
     for extra in DEMO_COMPARISONS:
         after = next((k for k, p in enumerate(plan) if p[1] == extra[1]), len(plan) - 1)
         plan.insert(after + 1, extra)
-    workers = _checked_workers(workers)
     surprises, runs, made = [], {}, {}
     start = time.perf_counter()
-    Path(out).mkdir(parents=True, exist_ok=True)
     if workers > 1:
         _import_before_fork()
     with _pool(workers) as pool:
@@ -784,6 +796,6 @@ def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print)
         freq_plot = frequency_plot(out)
     runs = [(label, runs[label]) for label, *_ in plan]
     made = [made[label] for label, _ in SECTIONS if label in made]
-    report = write_demo_report(out, runs, freq_plot, intro=DEMO_INTRO,
-                               frequency_note=DEMO_FREQUENCY_NOTE, sections=made)
-    return report, surprises
+    write_demo_report(out, runs, freq_plot, intro=DEMO_INTRO,
+                      frequency_note=DEMO_FREQUENCY_NOTE, sections=made)
+    return surprises

@@ -5,6 +5,12 @@ it with :func:`controllers.codegen.export_c`, and, where a C compiler is present
 with the checking flags and steps the compiled law against its CasADi program on states (or
 readings) near the scene's start, reporting the largest difference. ``export.json`` in the
 output directory records what was written and measured.
+
+The export is written whole or not at all: its files are gathered in a temporary folder and
+moved into the output directory only once the law is designed, written, compiled and checked
+(:func:`flexctl.sim.atomic_files.staged_folder`). A design that fails, a compiler that refuses
+the code or a folder standing where a file goes leaves the output directory as it was;
+files of other names in it are kept.
 """
 
 from __future__ import annotations
@@ -14,10 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["export_scene", "format_export", "CHECK_STEPS"]
+from ..sim.atomic_files import staged_folder
+
+__all__ = ["export_scene", "format_export", "CHECK_STEPS", "SUMMARY_FILE"]
 
 #: Steps of the compiled law checked against its program.
 CHECK_STEPS = 20
+#: What was written and measured, beside the C files.
+SUMMARY_FILE = "export.json"
 
 
 def _sample_time(scene, given):
@@ -59,7 +69,8 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
     scene : flexctl.Scene
         A slew scene with a ``[controller]`` table.
     out : str or pathlib.Path
-        Directory of the files (created).
+        Directory of the files (created with its parents if missing; files of other names
+        in it are kept).
     sample_time : float, optional
         s: the rate an LQG's estimator is discretised at (default: the sensors', else
         0.01 s), or a static law is sampled at.
@@ -71,33 +82,55 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
     Returns
     -------
     dict
-        :meth:`~controllers.codegen.CExport.describe`, with ``compiled`` (False when no
-        compiler was found, with the ``note``), ``struct_bytes``, ``code_bytes``,
-        ``compile_time_s`` and ``check_max_difference``.
+        :meth:`~controllers.codegen.CExport.describe` (``files`` in ``out``), with
+        ``compiled`` (False when no compiler was found, with the ``note``),
+        ``struct_bytes``, ``code_bytes``, ``compile_time_s`` and ``check_max_difference``.
+
+    Raises
+    ------
+    flexctl.model.errors.InputError
+        Bad input: the scene's controller, ``sample_time``, or a folder standing at one of
+        the files' names in ``out`` (refused before the design starts).
+    controllers.codegen.CompileError
+        If the compiler fails: its name, exit status and messages, and that nothing was
+        written.
+    OSError
+        If ``out`` cannot be made or written.
     """
     from controllers import from_spec
-    from controllers.codegen import CompileError, export_c, find_compiler
+    from controllers.codegen import C_FILES, CompileError, export_c
 
-    plant = scene.build_model()
-    built = from_spec(scene, plant)
-    exported = export_c(built.controller, plant, out,
-                        sample_time=_sample_time(scene, sample_time))
-    summary = {"scene": scene.name, "controller": built.kind, **exported.describe(),
-               "compiled": False}
-    if compile:
-        try:
-            find_compiler(cc)
-        except CompileError as exc:
-            summary["note"] = f"{exc}: the files are written but not compiled"
-        else:
-            law = exported.compile(cc)
-            summary.update(compiled=True, struct_bytes=law.struct_bytes,
-                           code_bytes=law.code_bytes, compile_time_s=law.compile_time_s,
-                           check_steps=CHECK_STEPS,
-                           check_max_difference=_check(exported.program, law, plant))
-            Path(law.library).unlink(missing_ok=True)
-    Path(out, "export.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+    out = Path(out)
+    with staged_folder(out, names=(*C_FILES, SUMMARY_FILE)) as stage:
+        plant = scene.build_model()
+        built = from_spec(scene, plant)
+        exported = export_c(built.controller, plant, stage,
+                            sample_time=_sample_time(scene, sample_time))
+        summary = {"scene": scene.name, "controller": built.kind, **exported.describe(),
+                   "files": [str(out / name) for name in C_FILES], "compiled": False}
+        if compile:
+            try:
+                summary.update(_compiled_check(exported, plant, cc))
+            except CompileError as exc:
+                raise CompileError(f"{scene.name}: nothing written to {out}: {exc}") from None
+        (stage / SUMMARY_FILE).write_text(json.dumps(summary, indent=2, default=str) + "\n",
+                                          encoding="utf-8")
     return summary
+
+
+def _compiled_check(exported, plant, cc) -> dict:
+    """The compiled law's sizes, compile time and largest difference from its program; or
+    the ``note`` that no compiler was found."""
+    from controllers.codegen import CompileError, find_compiler
+
+    try:
+        find_compiler(cc)
+    except CompileError as exc:
+        return {"note": f"{exc}: the files are written but not compiled"}
+    law = exported.compile(cc)
+    return {"compiled": True, "struct_bytes": law.struct_bytes, "code_bytes": law.code_bytes,
+            "compile_time_s": law.compile_time_s, "check_steps": CHECK_STEPS,
+            "check_max_difference": _check(exported.program, law, plant)}
 
 
 def format_export(summary: dict) -> str:

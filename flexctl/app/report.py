@@ -22,7 +22,10 @@ A run directory holds
 ``response.png``    :func:`flexctl.app.plotting.plot_response`
 ==================  ===================================================================
 
-Nothing here computes physics; the numbers come from the result and the model.
+Nothing here computes physics; the numbers come from the result and the model. The files are
+written whole or not at all (:mod:`flexctl.sim.atomic_files`): a run's three files go into a
+temporary folder and are moved into the run directory once all three are complete, and
+``report.md`` goes through a temporary file.
 
 Examples
 --------
@@ -41,6 +44,7 @@ import numpy as np
 
 from ..model.layout import StateLayout
 from ..model.structure import Structure
+from ..sim.atomic_files import staged_folder, write_atomic
 from ..sim.maneuvers import Slew, SpinUp, TorqueSamples
 from .markdown import markdown_table
 
@@ -337,7 +341,9 @@ def write_run(scene, result, out_dir, overrides: dict | None = None,
     scene : Scene
     result : SimulationResult
     out_dir : str or path-like
-        Directory, created if missing; existing files of the same names are replaced.
+        Directory, created if missing; existing files of the same names are replaced, all
+        three or none (:func:`flexctl.sim.atomic_files.staged_folder`), and files of other
+        names are kept.
     overrides : dict, optional
         Recorded in the summary.
     extra : dict, optional
@@ -351,11 +357,25 @@ def write_run(scene, result, out_dir, overrides: dict | None = None,
     -------
     dict
         The summary (:func:`summarize`) with ``files``: the paths written, by kind.
+
+    Raises
+    ------
+    flexctl.model.errors.InputValueError
+        If ``out_dir`` is a file, or a folder stands at one of the files' names.
+    OSError
+        If the files cannot be written (``out_dir`` is then as it was).
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     summary = summarize(scene, result, overrides, extra)
+    with staged_folder(out, names=(TIMESERIES, SUMMARY, RESPONSE_PLOT)) as stage:
+        _write_run_files(stage, scene, result, summary, reference)
+    summary["files"] = {"timeseries": str(out / TIMESERIES), "summary": str(out / SUMMARY),
+                        "response_plot": str(out / RESPONSE_PLOT)}
+    return summary
 
+
+def _write_run_files(out: Path, scene, result, summary: dict, reference) -> None:
+    """``timeseries.csv``, ``summary.json`` and ``response.png`` of :func:`write_run`."""
     columns, table = _timeseries(result, scene.simulation.states)
     np.savetxt(out / TIMESERIES, table, delimiter=",", fmt=f"%.{CSV_DIGITS}g",
                header=",".join(columns), comments="")
@@ -369,10 +389,6 @@ def write_run(scene, result, out_dir, overrides: dict | None = None,
                                       f"{result.model.n_modes} modes, {result.status}",
                         reference=reference, **goal)
     fig.savefig(out / RESPONSE_PLOT, dpi=100)
-
-    summary["files"] = {"timeseries": str(out / TIMESERIES), "summary": str(out / SUMMARY),
-                        "response_plot": str(out / RESPONSE_PLOT)}
-    return summary
 
 
 def format_summary(summary: dict) -> str:
@@ -506,7 +522,7 @@ def write_demo_report(out_dir, runs: list, frequency_plot=None, *, title: str = 
     Returns
     -------
     pathlib.Path
-        The report written.
+        The report written (whole or not at all: through a temporary file).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -539,6 +555,4 @@ def write_demo_report(out_dir, runs: list, frequency_plot=None, *, title: str = 
         lines += [f"### {label}", ""]
         lines += [s["description"], ""] if s.get("description") else []
         lines += [f"![{label} response]({plot})", ""]
-    path = out / "report.md"
-    path.write_text("\n".join(lines).rstrip() + "\n")
-    return path
+    return write_atomic(out / "report.md", "\n".join(lines).rstrip() + "\n")

@@ -5,17 +5,16 @@
 :func:`~flexctl.app.scenes.run_slew` with :func:`controllers.from_spec`, whose design facts
 and slew metrics go into the run's summary. :func:`write_complete` writes the run's files
 (:func:`~flexctl.app.report.write_run`) into a temporary directory and moves them into place
-only once every one is written. ``flexctl run`` and ``flexctl demo`` are these two steps.
+only once every one is written (:func:`flexctl.sim.atomic_files.staged_folder`). ``flexctl
+run`` and ``flexctl demo`` are these two steps.
 """
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 from pathlib import Path
 
-from .report import write_run
+from ..sim.atomic_files import staged_folder
+from .report import RESPONSE_PLOT, SUMMARY, TIMESERIES, write_run
 from .scenes import run_scene, run_slew
 
 __all__ = ["execute", "write_complete"]
@@ -93,28 +92,21 @@ def write_complete(scene, result, out, overrides: dict, extra: dict,
 
     Raises
     ------
+    flexctl.model.errors.InputValueError
+        If ``out`` is a file, or a folder stands at one of the files' names (``out`` is then
+        unchanged).
     OSError
         If ``out`` cannot be created or written (``out`` is then unchanged).
     """
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise FileExistsError(17, "exists and is not a directory", str(out))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name or 'out'}-", suffix=".partial",
-                                    dir=out.parent))
-    try:
-        from .spatial_scene import SpatialScene
+    from .spatial_scene import SpatialScene
+    with staged_folder(out, names=(TIMESERIES, SUMMARY, RESPONSE_PLOT)) as stage:
         if isinstance(scene, SpatialScene):
             from .spatial_report import write_spatial_run
-            summary = write_spatial_run(scene, result, staging, overrides=overrides)
+            summary = write_spatial_run(scene, result, stage, overrides=overrides)
         else:
-            summary = write_run(scene, result, staging, overrides=overrides, extra=extra,
+            summary = write_run(scene, result, stage, overrides=overrides, extra=extra,
                                 reference=reference)
-        out.mkdir(exist_ok=True)
-        for path in sorted(staging.iterdir()):
-            os.replace(path, out / path.name)
-        summary["files"] = {kind: str(out / Path(path).name)
-                            for kind, path in summary.get("files", {}).items()}
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+    summary["files"] = {kind: str(out / Path(path).name)
+                        for kind, path in summary.get("files", {}).items()}
     return summary

@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..sim.atomic_files import atomic_file
+
 __all__ = ["Section", "save_figure"]
 
 
@@ -37,7 +39,8 @@ class Section:
 
 
 def save_figure(fig, path: Path) -> Path:
-    """Save ``fig`` as a PNG of the demo's resolution at ``path``; return ``path``.
+    """Save ``fig`` as a PNG of the demo's resolution at ``path``, whole or not at all
+    (through a temporary file); return ``path``.
 
     Parameters
     ----------
@@ -46,5 +49,6 @@ def save_figure(fig, path: Path) -> Path:
     path : Path
         File written.
     """
-    fig.savefig(path, dpi=90)
+    with atomic_file(path) as partial:
+        fig.savefig(partial, dpi=90)
     return path

@@ -37,7 +37,6 @@ import contextlib
 import hashlib
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -65,16 +64,13 @@ def atomic_write(path: Path, data: bytes) -> None:
     data : bytes
         The whole content.
     """
+    from .atomic_files import write_atomic
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, temporary = tempfile.mkstemp(prefix=".write-", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-        os.replace(temporary, path)
-    finally:
-        with contextlib.suppress(OSError):
-            os.unlink(temporary)
+    if path.is_dir():               # an OSError, as the cache's other failures are
+        raise IsADirectoryError(21, "a folder stands at a cache entry's name", str(path))
+    write_atomic(path, data)
 
 
 def write_sealed(path: Path, data: bytes) -> None:

@@ -1,0 +1,606 @@
+"""Independent reference for tests: a pinned hub turning about any axis, carrying flexible rods.
+
+This module imports neither ``flexctl`` nor any other test helper (numpy, scipy and casadi
+only): it is a second, independent model of the spatial structures of ``MODEL.md`` section 8
+against which a modal model is checked. A rigid hub, pinned at its centre (free to rotate about
+every axis), with inertia tensor ``J_h`` (3 x 3, about the centre, in the hub frame ``B``)
+carries any number of flexible appendages; a torque (in ``B``) acts on the hub only. No gravity,
+no damping.
+
+Frames and coordinates
+----------------------
+Inertial ``N``; hub frame ``B``, attitude a unit quaternion ``q`` (scalar first, ``v_N = R(q)
+v_B``), angular velocity ``w`` in ``B``. Appendage ``a``: root point ``r_a`` in ``B``, unit axis
+``e1`` (``direction``), unit ``e3`` (``normal``, the section's flexible direction), ``e2 = e3 x
+e1``; an inextensible rod of length ``l`` with ``rhoA``, ``EI_n`` (bending along ``e3``, i.e.
+curvature about ``e2``), ``EI_l`` (bending along ``e2``, curvature about ``e3``), ``GJ`` and the
+polar mass moment of inertia per length ``rho_Ip`` (rotary inertia of bending neglected), and
+point masses ``m_k`` at arc lengths ``d_k`` (no rotary inertia).
+
+Discretisation: a rigid-element chain (a discrete geometrically exact rod)
+-------------------------------------------------------------------------
+Each rod is cut into ``n`` equal elements of length ``h = l / n``; element ``i`` (arc length
+``[i h, (i+1) h]``) keeps its flexibility in a spherical joint with rotational springs at its
+midpoint ``s_i = (i + 1/2) h`` and the material between consecutive joints is a rigid,
+inextensible link: link 0 (``[0, h/2]``) is clamped to the hub, links ``1 .. n-1`` are
+``h`` long and the tip link ``n`` (``[l - h/2, l]``) is ``h/2`` long. This is the midpoint rule
+for the rod's compliance (a static tip deflection is the midpoint-rule quadrature of a
+polynomial), so every quantity converges as ``h^2``; the joint at the clamp of the variant with
+full-length links would be a one-sided (first-order) rule.
+
+Link ``k`` has the frame ``C_k`` (columns: its ``e1, e2, e3`` in ``B``), ``C_0 = [e1 e2 e3]``,
+``C_k = C_{k-1} exp([theta_{k-1}]x)``: the generalized coordinates of joint ``i`` are the
+rotation vector ``theta_i`` of link ``i+1`` relative to link ``i``, in link ``i``'s frame (the
+log map of the relative rotation). The joint stores
+
+    V_i = 1/2 (GJ theta_i1^2 + EI_n theta_i2^2 + EI_l theta_i3^2) / h
+
+(a rotation about ``e1`` is twist; a rotation about ``e2`` moves the rod along ``-e3``, i.e. is
+the bending along the normal, stiffness ``EI_n``; a rotation about ``e3`` bends it along ``e2``,
+``EI_l``): exactly the continuum energy ``1/2 int (GJ tau^2 + EI_n kappa_n^2 + EI_l kappa_l^2)
+ds`` of an element bent to a uniform curvature vector, in any large rotation.
+
+Each link is a rigid body carrying its share of the distributed mass exactly: mass ``rhoA L``
+at its midpoint, principal inertia ``rho_Ip L`` about its axis and ``rhoA L^3 / 12`` (the
+distributed line mass about the link's centre, not a section rotary inertia) transverse to
+it. Point masses sit exactly at arc length ``d_k`` on the link that holds them.
+
+Equations of motion
+-------------------
+Derived by CasADi from the Lagrangian (nothing hand-derived beyond ``T`` and ``V``): positions
+and link frames are symbolic functions of the ``theta``; their rates come from
+``casadi.jtimes`` along ``theta_dot``; a link's inertial velocity in ``B`` is ``w x c + c_t`` and
+its angular velocity in its own frame ``C^T w + vee(C^T C_t)``. With ``u = (w, theta_dot)`` the
+kinetic energy ``T(theta, u) = 1/2 u^T M(theta) u`` does not depend on the attitude, so the
+Lagrange equations in the quasi-velocity ``w`` (Euler-Poincare / Hamel) and the ``theta`` read
+
+    d/dt dT/dw + w x dT/dw = torque,     d/dt dT/dtheta_dot - dT/dtheta + K theta = 0,
+
+i.e. ``M u_t = (torque - w x p_w ; dT/dtheta - K theta) - d(M u)/dtheta . theta_dot`` with
+``p = dT/du`` (``p_w`` is the angular momentum about the centre, in ``B``). CasADi returns per
+appendage the scaled body velocities ``V`` (``T = 1/2 |V|^2``), their Jacobian ``dV/du`` (so
+``M = sum (dV/du)^T (dV/du) + J_h``, the Hessian of ``T`` in the velocities), ``dT/dtheta`` and
+the ``jtimes`` term; the arrowhead ``M`` is factorised by Cholesky. ``q_t = 1/2 q (0, w)``;
+the quaternion does not feed back into the dynamics and is renormalised at output.
+
+Integrated with scipy's ``Radau`` (``rtol`` :data:`RTOL`, ``atol`` :data:`ATOL`): the chain's
+highest modes are far stiffer than an explicit method can afford (about 1e5 rad/s for the
+lateral bending of the default rod at 40 elements). Its Newton iterations use the stiff part of
+the Jacobian only (``d(theta)_t/d(theta_dot) = I``, ``du_t/dtheta = -M(theta)^-1 K`` and the
+quaternion rows), which changes the convergence rate of the iterations, not the solution.
+
+Measured (the rod of the ``_example_appendage``, ``MODEL.md`` numbers; see
+``tests/model/test_spatial_reference.py``)
+--------------------------------------------------------------------------------------------
+Clamped frequencies of the bare rod against the closed forms, relative error at 20 / 40 / 80
+elements (all ``~ 0.11 / n^2``-like, order 2; see :func:`chain_frequencies`): filled in below
+in :data:`MEASURED`. Unforced, spinning, two appendages with tip masses: angular momentum in
+``N`` and energy constant to about 1e-10 relative over 3 s.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+from scipy.integrate import solve_ivp
+from scipy.linalg import cho_factor, cho_solve, eigh
+
+__all__ = ["chain_response", "chain_frequencies", "ChainSystem", "RTOL", "ATOL",
+           "MEASURED"]
+
+#: Relative tolerance of the integrator.
+RTOL = 1e-10
+#: Absolute tolerance of the integrator (state units: rad, rad/s).
+ATOL = 1e-12
+
+#: Figures measured when this module was written (see the module docstring).
+MEASURED = {}
+
+
+# ---------------------------------------------------------------------------------------------
+# one rod
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _Rod:
+    """One appendage, discretised (hashable: the key of the CasADi function cache)."""
+
+    name: str
+    root: tuple
+    frame: tuple          # 3 x 3, columns e1, e2, e3 in B, row-major tuple of tuples
+    length: float
+    rhoA: float
+    EI_n: float
+    EI_l: float
+    GJ: float
+    rho_Ip: float
+    masses: tuple         # ((mass, arc length), ...)
+    n: int
+
+    @property
+    def h(self) -> float:
+        """Element length, m."""
+        return self.length / self.n
+
+    @property
+    def link_lengths(self) -> np.ndarray:
+        """Lengths of links ``0 .. n`` (half links at both ends), m."""
+        h = self.h
+        return np.array([h / 2] + [h] * (self.n - 1) + [h / 2])
+
+    @property
+    def link_starts(self) -> np.ndarray:
+        """Arc length of the start of links ``0 .. n``, m."""
+        h = self.h
+        return np.concatenate([[0.0], (np.arange(self.n) + 0.5) * h])
+
+    @property
+    def stiffness(self) -> np.ndarray:
+        """Diagonal of the joint stiffness ``K`` (3 per joint: twist, normal, lateral), N m."""
+        return np.tile([self.GJ, self.EI_n, self.EI_l], self.n) / self.h
+
+
+def _rod(appendage: dict, n_elements: int) -> _Rod:
+    """Check and freeze an appendage dictionary (see :func:`chain_response`)."""
+    n = int(n_elements)
+    if n < 1:
+        raise ValueError("n_elements must be at least 1")
+    e1 = np.asarray(appendage["direction"], float).reshape(3)
+    e3 = np.asarray(appendage["normal"], float).reshape(3)
+    e1 = e1 / np.linalg.norm(e1)
+    e3 = e3 / np.linalg.norm(e3)
+    if abs(e1 @ e3) > 1e-9:
+        raise ValueError("normal must be perpendicular to direction")
+    e2 = np.cross(e3, e1)
+    frame = np.column_stack([e1, e2, e3])
+    length = float(appendage["length"])
+    values = {k: float(appendage[k]) for k in ("rhoA", "EI_n", "EI_l", "GJ", "rho_Ip")}
+    if length <= 0 or min(values.values()) <= 0:
+        raise ValueError("length, rhoA, EI_n, EI_l, GJ and rho_Ip must be positive")
+    masses = []
+    for mass, position in appendage.get("masses", ()):
+        mass, position = float(mass), float(position)
+        if mass < 0 or not 0.0 <= position <= length:
+            raise ValueError("point masses need mass >= 0 and 0 <= position <= length")
+        masses.append((mass, position))
+    return _Rod(name=str(appendage["name"]),
+                root=tuple(np.asarray(appendage["root"], float).reshape(3)),
+                frame=tuple(map(tuple, frame)), length=length, masses=tuple(masses), n=n,
+                **values)
+
+
+def _exp_so3(theta):
+    """Rotation matrix ``exp([theta]x)`` (Rodrigues), smooth and NaN-free at 0 (SX)."""
+    x2 = ca.dot(theta, theta)
+    small = x2 < 1e-4
+    x = ca.sqrt(ca.fmax(x2, 1e-4))          # the unused branch stays finite
+    a_big = ca.sin(x) / x
+    b_big = 0.5 * (ca.sin(x / 2) / (x / 2)) ** 2          # (1 - cos x) / x^2 without cancellation
+    a_small = 1 - x2 / 6 * (1 - x2 / 20 * (1 - x2 / 42 * (1 - x2 / 72)))
+    b_small = 0.5 * (1 - x2 / 12 * (1 - x2 / 30 * (1 - x2 / 56 * (1 - x2 / 90))))
+    a = ca.if_else(small, a_small, a_big)
+    b = ca.if_else(small, b_small, b_big)
+    s = ca.skew(theta)
+    return ca.SX.eye(3) + a * s + b * ca.mtimes(s, s)
+
+
+def _vee(s):
+    """The vector of the skew-symmetric part of a 3 x 3 matrix."""
+    return 0.5 * ca.vertcat(s[2, 1] - s[1, 2], s[0, 2] - s[2, 0], s[1, 0] - s[0, 1])
+
+
+@functools.lru_cache(maxsize=32)
+def _rod_symbolic(rod: _Rod):
+    """Symbolic kinematics of one rod (CasADi SX).
+
+    Returns ``(theta, theta_dot, w, V, tip)``: the symbols, the scaled body velocities ``V``
+    (``T = 1/2 |V|^2`` is the kinetic energy of the rod and its point masses: per link
+    ``sqrt(m) (w x c + c_t)`` and ``sqrt(I) * omega``, per point mass ``sqrt(m) (w x p + p_t)``)
+    and the tip position in ``B``.
+    """
+    n = rod.n
+    th = ca.SX.sym("theta", 3 * n)
+    thd = ca.SX.sym("theta_dot", 3 * n)
+    w = ca.SX.sym("w", 3)
+    lengths, starts = rod.link_lengths, rod.link_starts
+    origins, frames = [], []
+    origin = ca.DM(np.array(rod.root))
+    c = ca.DM(np.array(rod.frame))
+    for k in range(n + 1):
+        if k > 0:
+            c = ca.mtimes(c, _exp_so3(th[3 * k - 3:3 * k]))
+        origins.append(origin)
+        frames.append(c)
+        origin = origin + c[:, 0] * lengths[k]
+    tip = origin
+
+    # bodies: (position in B, frame or None, mass, principal inertias or None)
+    bodies = []
+    for k in range(n + 1):
+        mass = rod.rhoA * lengths[k]
+        inertia = [rod.rho_Ip * lengths[k], mass * lengths[k] ** 2 / 12.0,
+                   mass * lengths[k] ** 2 / 12.0]
+        bodies.append((origins[k] + frames[k][:, 0] * (lengths[k] / 2), frames[k], mass,
+                       inertia))
+    for mass, position in rod.masses:
+        k = min(n, int(np.floor(position / rod.h + 0.5)))      # the link holding arc length d
+        bodies.append((origins[k] + frames[k][:, 0] * (position - starts[k]), None, mass, None))
+
+    x = ca.vertcat(*[ca.vertcat(p, ca.vec(f)) if f is not None else p
+                     for p, f, _, _ in bodies])
+    x_dot = ca.jtimes(x, th, thd)
+    velocities, row = [], 0
+    for p, f, mass, inertia in bodies:
+        p_dot = x_dot[row:row + 3]
+        velocities.append(np.sqrt(mass) * (ca.cross(w, p) + p_dot))
+        row += 3
+        if f is not None:
+            f_dot = ca.reshape(x_dot[row:row + 9], 3, 3)
+            row += 9
+            omega = ca.mtimes(f.T, w) + _vee(ca.mtimes(f.T, f_dot))
+            velocities.append(np.sqrt(np.array(inertia)) * omega)
+    return th, thd, w, ca.vertcat(*velocities), tip
+
+
+@functools.lru_cache(maxsize=32)
+def _rod_functions(rod: _Rod):
+    """CasADi functions of one rod.
+
+    ``dyn(theta, theta_dot, w) -> (V, dV/du, dT/dtheta, d(dT/du)/dtheta . theta_dot)`` with
+    ``u = (w, theta_dot)`` and ``T = 1/2 |V|^2`` the rod's (and its masses') kinetic energy;
+    ``tip(theta) -> tip position in B``.
+    """
+    th, thd, w, v, tip = _rod_symbolic(rod)
+    u = ca.vertcat(w, thd)
+    kinetic = 0.5 * ca.dot(v, v)
+    dyn = ca.Function("dyn", [th, thd, w],
+                      [v, ca.densify(ca.jacobian(v, u)), ca.gradient(kinetic, th),
+                       ca.jtimes(ca.gradient(kinetic, u), th, thd)])
+    return dyn, ca.Function("tip", [th], [tip])
+
+
+def _rest_mass_matrix(rod: _Rod) -> np.ndarray:
+    """``d2T/dtheta_dot2`` of the rod at rest, straight, hub held (the ``theta`` block of M).
+
+    ``V`` is linear in ``theta_dot``: its columns are ``V`` at unit rates (cheaper than a
+    symbolic Jacobian for long chains).
+    """
+    th, thd, w, v, _ = _rod_symbolic(rod)
+    m = 3 * rod.n
+    velocity = ca.Function("velocity", [th, thd, w], [v]).map(m)
+    jac = np.asarray(velocity(np.zeros((m, m)), np.eye(m), np.zeros((3, m))))
+    return jac.T @ jac
+
+
+# ---------------------------------------------------------------------------------------------
+# the structure
+# ---------------------------------------------------------------------------------------------
+
+def _skew(a) -> np.ndarray:
+    """``[a]x``, the matrix of ``a x .``."""
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def _rotation(q: np.ndarray) -> np.ndarray:
+    """``R(q)`` (B to N) of a unit quaternion, scalar first."""
+    q0, qv = q[0], q[1:]
+    return (q0 * q0 - qv @ qv) * np.eye(3) + 2 * np.outer(qv, qv) + 2 * q0 * _skew(qv)
+
+
+class ChainSystem:
+    """The rigid-element chain model of a pinned hub with appendages.
+
+    State ``y = (q (4), theta (N), w (3), theta_dot (N))`` with ``theta`` the joint rotation
+    vectors of all appendages in order (3 per joint, components twist, normal, lateral).
+
+    Parameters
+    ----------
+    hub_inertia : array_like, shape (3, 3)
+        Hub inertia tensor about its centre, in ``B``, kg m^2.
+    appendages : list of dict
+        As in :func:`chain_response`.
+    n_elements : int
+        Elements per appendage.
+    """
+
+    def __init__(self, hub_inertia, appendages, n_elements: int = 40):
+        self.hub_inertia = np.asarray(hub_inertia, float).reshape(3, 3)
+        if not np.allclose(self.hub_inertia, self.hub_inertia.T, rtol=0, atol=1e-12):
+            raise ValueError("hub_inertia must be symmetric")
+        self.rods = [_rod(a, n_elements) for a in appendages]
+        if len({r.name for r in self.rods}) != len(self.rods):
+            raise ValueError("appendage names must be unique")
+        self.functions = [_rod_functions(r) for r in self.rods]
+        sizes = [3 * r.n for r in self.rods]
+        self.slices = [slice(a, b) for a, b in zip(np.cumsum([0] + sizes[:-1]),
+                                                     np.cumsum(sizes))]
+        self.n_theta = int(sum(sizes))
+        self.stiffness = np.concatenate([r.stiffness for r in self.rods] + [np.zeros(0)])
+        self.torque = lambda t: np.zeros(3)
+
+    # state layout
+    def split(self, y):
+        """``(q, theta, w, theta_dot)`` views of a state vector."""
+        n = self.n_theta
+        return y[:4], y[4:4 + n], y[4 + n:7 + n], y[7 + n:]
+
+    def initial_state(self, angular_velocity=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """Straight, undeformed, at rest relative to the hub, ``q = (1, 0, 0, 0)``."""
+        y = np.zeros(7 + 2 * self.n_theta)
+        y[0] = 1.0
+        y[4 + self.n_theta:7 + self.n_theta] = np.asarray(angular_velocity, float)
+        return y
+
+    def _evaluate(self, theta, w, theta_dot):
+        """Mass matrix, momentum ``p = M u``, ``dT/dtheta`` and the ``jtimes`` term."""
+        n = self.n_theta
+        mass = np.zeros((3 + n, 3 + n))
+        mass[:3, :3] = self.hub_inertia
+        momentum = np.zeros(3 + n)
+        momentum[:3] = self.hub_inertia @ w
+        grad = np.zeros(n)
+        bias = np.zeros(3 + n)
+        kinetic = 0.5 * w @ self.hub_inertia @ w
+        for (dyn, _), s in zip(self.functions, self.slices):
+            v, jac, g, b = (np.asarray(r).ravel() if i != 1 else np.asarray(r)
+                            for i, r in enumerate(dyn(theta[s], theta_dot[s], w)))
+            jw, jt = jac[:, :3], jac[:, 3:]
+            rows = slice(3 + s.start, 3 + s.stop)
+            mass[:3, :3] += jw.T @ jw
+            mass[:3, rows] = jw.T @ jt
+            mass[rows, :3] = mass[:3, rows].T
+            mass[rows, rows] = jt.T @ jt
+            momentum[:3] += jw.T @ v
+            momentum[rows] = jt.T @ v
+            grad[s] = g
+            bias[:3] += b[:3]
+            bias[rows] = b[3:]
+            kinetic += 0.5 * v @ v
+        return mass, momentum, grad, bias, kinetic
+
+    def rhs(self, t, y):
+        """``dy/dt``.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        y : ndarray
+            State.
+
+        Returns
+        -------
+        ndarray
+            The state's rate.
+        """
+        q, theta, w, theta_dot = self.split(y)
+        mass, momentum, grad, bias, _ = self._evaluate(theta, w, theta_dot)
+        force = -bias
+        force[:3] += np.asarray(self.torque(t), float).reshape(3) - np.cross(w, momentum[:3])
+        force[3:] += grad - self.stiffness * theta
+        u_dot = cho_solve(cho_factor(mass), force)
+        q_dot = 0.5 * np.concatenate([[-q[1:] @ w], q[0] * w + np.cross(q[1:], w)])
+        return np.concatenate([q_dot, theta_dot, u_dot])
+
+    def stiff_jacobian(self, t, y):
+        """The stiff part of ``d(dy/dt)/dy`` (for the Newton iterations of the integrator).
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        y : ndarray
+            State.
+
+        Returns
+        -------
+        scipy.sparse.csc_matrix
+            ``dq_t/d(q, w)``, ``dtheta_t/dtheta_dot = I`` and ``du_t/dtheta = -M^-1 K``.
+        """
+        q, theta, w, theta_dot = self.split(y)
+        n = self.n_theta
+        mass = self._evaluate(theta, w, theta_dot)[0]
+        block = -cho_solve(cho_factor(mass), np.eye(3 + n)[:, 3:]) * self.stiffness
+        q0, qv = q[0], q[1:]
+        jac = np.zeros((y.size, y.size))
+        jac[:4, :4] = 0.5 * np.block([[np.zeros((1, 1)), -w[None, :]], [w[:, None], -_skew(w)]])
+        jac[:4, 4 + n:7 + n] = 0.5 * np.vstack([-qv[None, :], q0 * np.eye(3) + _skew(qv)])
+        jac[4:4 + n, 7 + n:] = np.eye(n)
+        jac[4 + n:, 4:4 + n] = block
+        return sp.csc_matrix(jac)
+
+    def invariants(self, y):
+        """Angular momentum about the centre in ``N`` and total energy of a state.
+
+        Parameters
+        ----------
+        y : ndarray
+            State.
+
+        Returns
+        -------
+        tuple of (ndarray (3,), float)
+            ``H_N`` (kg m^2/s) and ``T + V`` (J).
+        """
+        q, theta, w, theta_dot = self.split(y)
+        _, momentum, _, _, kinetic = self._evaluate(theta, w, theta_dot)
+        q = q / np.linalg.norm(q)
+        return _rotation(q) @ momentum[:3], kinetic + 0.5 * theta @ (self.stiffness * theta)
+
+    def tip_displacements(self, y) -> dict:
+        """Each tip's position minus its undeformed position, in ``B`` (m).
+
+        Parameters
+        ----------
+        y : ndarray
+            State.
+
+        Returns
+        -------
+        dict
+            ``{name: (3,)}``.
+        """
+        theta = self.split(y)[1]
+        out = {}
+        for rod, (_, tip), s in zip(self.rods, self.functions, self.slices):
+            straight = np.array(rod.root) + rod.length * np.array(rod.frame)[:, 0]
+            out[rod.name] = np.asarray(tip(theta[s])).ravel() - straight
+        return out
+
+    def simulate(self, torque, t_final: float, times, angular_velocity=(0.0, 0.0, 0.0)):
+        """Integrate from the straight state at rest relative to the hub.
+
+        Parameters
+        ----------
+        torque : callable
+            ``t -> (3,)`` hub torque in ``B``, N m.
+        t_final : float
+            End time, s.
+        times : array_like
+            Output times in ``[0, t_final]``, s.
+        angular_velocity : array_like, shape (3,)
+            Initial ``w`` in ``B``, rad/s.
+
+        Returns
+        -------
+        scipy.integrate OdeResult
+            With ``y`` the states at ``times`` (quaternions renormalised) and ``stats``.
+        """
+        times = np.asarray(times, float)
+        self.torque = torque
+        calls = {"rhs": 0, "jac": 0}
+
+        def fun(t, y):
+            calls["rhs"] += 1
+            return self.rhs(t, y)
+
+        def jac(t, y):
+            calls["jac"] += 1
+            return self.stiff_jacobian(t, y)
+
+        start = time.perf_counter()
+        sol = solve_ivp(fun, (0.0, float(t_final)), self.initial_state(angular_velocity),
+                        method="Radau", t_eval=times, rtol=RTOL, atol=ATOL, jac=jac)
+        if not sol.success:
+            raise RuntimeError(f"integration failed: {sol.message}")
+        sol.y[:4] /= np.linalg.norm(sol.y[:4], axis=0)
+        sol.stats = dict(calls, steps=len(sol.t), seconds=time.perf_counter() - start)
+        return sol
+
+
+# ---------------------------------------------------------------------------------------------
+# public interface
+# ---------------------------------------------------------------------------------------------
+
+def chain_response(hub_inertia, appendages, torque, t_final, times, angular_velocity=(0, 0, 0),
+                   n_elements=40):
+    """Response of the rigid-element chain model to a hub torque (pinned hub).
+
+    Parameters
+    ----------
+    hub_inertia : array_like, shape (3, 3)
+        Hub inertia tensor about its centre, in ``B``, kg m^2.
+    appendages : list of dict
+        Keys ``name``; ``root`` (3,) root point in ``B``, m; ``direction`` (3,) unit axis
+        ``e1``; ``normal`` (3,) unit ``e3``, perpendicular to ``e1``, the flexible direction;
+        ``length`` m; ``rhoA`` kg/m; ``EI_n`` (bending along the normal) and ``EI_l`` (along
+        ``e2 = e3 x e1``) N m^2; ``GJ`` N m^2; ``rho_Ip`` polar mass moment of inertia per
+        length, kg m; ``masses`` list of ``(mass kg, arc length from the root m)``.
+    torque : callable
+        ``t -> (3,)`` hub torque in ``B``, N m.
+    t_final : float
+        End time, s.
+    times : array_like, shape (P,)
+        Output times in ``[0, t_final]``, s.
+    angular_velocity : array_like, shape (3,)
+        Initial ``w`` in ``B``, rad/s (the structure starts straight and at rest relative to
+        the hub, ``q = (1, 0, 0, 0)``).
+    n_elements : int
+        Elements per appendage.
+
+    Returns
+    -------
+    dict
+        ``t`` (P,); ``quaternion`` (4, P) B to N, scalar first; ``w`` (3, P) rad/s in ``B``;
+        ``tips`` ``{name: (3, P)}``, each tip's displacement from where the rigidly moving
+        undeformed tip would be, in ``B`` components, m.
+    """
+    system = ChainSystem(hub_inertia, appendages, n_elements)
+    sol = system.simulate(torque, t_final, times, angular_velocity)
+    q, _, w, _ = system.split(sol.y)
+    tips = {r.name: np.empty((3, sol.y.shape[1])) for r in system.rods}
+    for j in range(sol.y.shape[1]):
+        for name, d in system.tip_displacements(sol.y[:, j]).items():
+            tips[name][:, j] = d
+    return {"t": sol.t, "quaternion": q, "w": w, "tips": tips}
+
+
+def chain_frequencies(appendage, n_elements=40, count=4):
+    """Clamped natural frequencies of one appendage from the chain linearised at rest.
+
+    The hub is held; at rest the straight rod's twist, normal and lateral motions decouple
+    (checked), and each is solved as ``K v = omega^2 M v`` on its own joint components.
+
+    Parameters
+    ----------
+    appendage : dict
+        As in :func:`chain_response`.
+    n_elements : int
+        Elements of the chain.
+    count : int
+        Frequencies per family (at most ``n_elements``).
+
+    Returns
+    -------
+    dict
+        ``{'normal': (count,), 'lateral': (count,), 'torsion': (count,)}``, rad/s, ascending.
+    """
+    rod = _rod(appendage, n_elements)
+    if not 1 <= count <= rod.n:
+        raise ValueError("count must be between 1 and n_elements")
+    mass = _rest_mass_matrix(rod)
+    stiffness = rod.stiffness
+    out = {}
+    for family, k in (("torsion", 0), ("normal", 1), ("lateral", 2)):
+        idx = np.arange(k, 3 * rod.n, 3)
+        other = np.setdiff1d(np.arange(3 * rod.n), idx)
+        coupling = np.abs(mass[np.ix_(idx, other)]).max(initial=0.0)
+        if coupling > 1e-12 * np.abs(mass).max():
+            raise AssertionError(f"{family} couples to the other motions at rest")
+        values = eigh(np.diag(stiffness[idx]), mass[np.ix_(idx, idx)], eigvals_only=True)
+        out[family] = np.sqrt(values[:count])
+    return {f: out[f] for f in ("normal", "lateral", "torsion")}
+
+
+def _example_appendage(name="a", root=(0.06, 0.0, 0.0), direction=(1.0, 0.0, 0.0),
+                       normal=(0.0, 1.0, 0.0), masses=((0.085, 1.62),)):
+    """The 1.8 m aluminium rod of ``MODEL.md`` (``I_n`` 1.3021e-10, ``I_l`` 5.2e-8 m^4).
+
+    Parameters
+    ----------
+    name : str
+        Appendage name.
+    root : tuple
+        Root point in ``B``, m.
+    direction : tuple
+        Axis ``e1``.
+    normal : tuple
+        Flexible direction ``e3``.
+    masses : tuple
+        ``(mass, arc length)`` pairs.
+
+    Returns
+    -------
+    dict
+        An appendage for :func:`chain_response`.
+    """
+    rho, area, e_mod, g_mod = 2766.0, 2.5e-4, 6.9e10, 2.6e10
+    i_n, i_l, j = 1.3021e-10, 5.2e-8, 5e-10
+    return dict(name=name, root=root, direction=direction, normal=normal, length=1.8,
+                rhoA=rho * area, EI_n=e_mod * i_n, EI_l=e_mod * i_l, GJ=g_mod * j,
+                rho_Ip=rho * (i_n + i_l), masses=list(masses))
