@@ -109,6 +109,20 @@ class SpatialSine:
         """The end of the period, s."""
         return np.array([self.duration])
 
+    def segment_form(self, a: float, b: float) -> np.ndarray:
+        """The torque on ``[a, b]`` as the 11 numbers of
+        ``p[0:3] + p[3:6] t + p[6:9] sin(p[9] (p[10] + t))`` (see
+        :mod:`flexctl.sim.spatial_run`).
+
+        Parameters
+        ----------
+        a, b : float
+            The segment, s: inside the period or after it.
+        """
+        inside = b <= self.duration + 1e-12 * max(1.0, self.duration)
+        peak = np.asarray(self.peak_torque) if inside else np.zeros(3)
+        return np.concatenate([np.zeros(6), peak, [2 * math.pi / self.duration, a]])
+
 
 @dataclass(frozen=True)
 class SpatialScene:

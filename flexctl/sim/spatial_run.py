@@ -103,6 +103,22 @@ class VectorTorque:
             return np.array(self.values[max(k, 0)])
         return np.array([np.interp(t, self.times, self.values[:, j]) for j in range(3)])
 
+    def segment_form(self, a: float, b: float) -> np.ndarray:
+        """The torque on ``[a, b]`` (no sample inside), as the 11 numbers of
+        ``p[0:3] + p[3:6] t + p[6:9] sin(p[9] (p[10] + t))`` in the segment's time ``t``.
+
+        Parameters
+        ----------
+        a, b : float
+            The segment, s.
+        """
+        start = self(a)
+        slope = np.zeros(3) if self.interpolation == "hold" or self.times.size == 1 \
+            else (self(b) - start) / (b - a)
+        if self.interpolation == "hold":
+            start = self(a + 0.5 * (b - a))         # the value held on the whole segment
+        return np.concatenate([start, slope, np.zeros(5)])
+
     @property
     def breakpoints(self) -> np.ndarray:
         """Every sample time, s: the integration restarts there."""
@@ -233,21 +249,33 @@ def initial_state(equations: SpatialEquations, angular_velocity=(0.0, 0.0, 0.0),
 def _torque_function(torque):
     """``(callable t -> (3,), breakpoints)`` of a torque argument."""
     if torque is None:
-        return (lambda t: np.zeros(3)), np.zeros(0)
+        return _Constant(np.zeros(3)), np.zeros(0)
     if isinstance(torque, VectorTorque):
         return torque, torque.breakpoints
     if callable(torque) and hasattr(torque, "breakpoints"):    # a scene's manoeuvre
         return torque, np.asarray(torque.breakpoints, dtype=float)
     if callable(torque):
-        def checked(t):
+        def checked(t):          # a Python function: no segment form, SciPy's DOP853
             value = np.asarray(torque(t), dtype=float).reshape(-1)
             if value.shape != (3,) or not np.all(np.isfinite(value)):
                 raise InputValueError(f"torque(t) must return 3 finite numbers (N m, hub "
                                       f"frame); at t = {t:g} s it returned {value!r:.80}")
             return value
         return checked, np.zeros(0)
-    constant = np.array(check_array("", "torque", torque, shape=(3,)))
-    return (lambda t: constant), np.zeros(0)
+    return _Constant(np.array(check_array("", "torque", torque, shape=(3,)))), np.zeros(0)
+
+
+class _Constant:
+    """A constant torque, N m, hub frame."""
+
+    def __init__(self, value):
+        self.value = value
+
+    def __call__(self, t):
+        return self.value
+
+    def segment_form(self, a, b):
+        return np.concatenate([self.value, np.zeros(8)])
 
 
 def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *,
@@ -332,15 +360,12 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
 
 def _integrate(equations: SpatialEquations, x0, times, drive, breakpoints, rtol, atol):
     """``(status, states (n, P'), message, drift)`` of one integration over ``times``."""
-    from scipy.integrate import solve_ivp
-
     from .compile_cache import compiled
 
-    rhs = compiled(equations.rhs)
-
-    def rate(t, x):
-        return rhs(x, drive(t)).full().ravel()
-
+    # finite differences only stand in for derivatives CasADi asks for when it builds an
+    # integrator; CVODES's functional iteration (Adams) never evaluates them
+    rhs = compiled(equations.rhs, options={"enable_fd": True})
+    segment = _Segments(rhs, equations.layout.n_states, drive, rtol, atol)
     t_final = times[-1]
     edges = np.unique(np.concatenate([[0.0], breakpoints[(breakpoints > 0)
                                                          & (breakpoints < t_final)], [t_final]]))
@@ -351,27 +376,81 @@ def _integrate(equations: SpatialEquations, x0, times, drive, breakpoints, rtol,
         inside = times[(times > a) & (times <= b)]
         wanted = inside if inside.size and inside[-1] == b else np.append(inside, b)
         try:
-            solution = solve_ivp(rate, (a, b), x, method="DOP853", t_eval=wanted, rtol=rtol,
-                                 atol=atol)
-        except (ValueError, ArithmeticError) as exc:
-            return "failed", states[:, :done], f"the integration failed at t = {a:g} s: {exc}", \
-                _drift(states[:, :done])
-        if solution.status != 0 or not np.all(np.isfinite(solution.y)) \
-                or solution.y.shape[1] != wanted.size:
-            reached = solution.t[-1] if solution.t.size else a
+            values = segment.advance(a, b, x, wanted)
+        except _Failed as exc:
+            return "failed", states[:, :done], f"the integration failed at t = {a:g} s: " \
+                f"{exc}", _drift(states[:, :done])
+        if not np.all(np.isfinite(values)):
             states = states[:, :done]
-            why = ("the state left the finite numbers" if not np.all(np.isfinite(solution.y))
-                   else solution.message)
-            return "diverged", states, f"the run diverged at t = {reached:g} s: {why}", \
-                _drift(states)
-        states[:, done:done + inside.size] = solution.y[:, :inside.size]
+            return "diverged", states, (f"the run diverged between t = {a:g} and {b:g} s: the "
+                                        "state left the finite numbers"), _drift(states)
+        states[:, done:done + inside.size] = values[:, :inside.size]
         done += inside.size
-        x = solution.y[:, -1]
+        x = values[:, -1]
     drift = _drift(states)
     if drift > MAX_QUATERNION_DRIFT:
         return "failed", states, (f"the attitude quaternion's norm drifted by {drift:.3g} "
                                   f"(more than {MAX_QUATERNION_DRIFT:g})"), drift
     return "ok", states, "reached t_final", drift
+
+
+class _Failed(Exception):
+    """An integration that could not continue."""
+
+
+class _Segments:
+    """CVODES (Adams, functional iteration: no Jacobian) from breakpoint to breakpoint, the
+    torque on a segment ``a + b t + c sin(omega (t0 + t))`` in the segment's own time; one
+    integrator per distinct output grid, kept. A torque of another form (a Python function)
+    runs on SciPy's ``DOP853`` instead."""
+
+    def __init__(self, rhs, n_states: int, drive, rtol: float, atol: float):
+        self.rhs, self.n_states, self.drive = rhs, n_states, drive
+        self.rtol, self.atol = rtol, atol
+        self.integrators: dict = {}
+        self.form = getattr(drive, "segment_form", None)
+
+    def advance(self, a: float, b: float, x, wanted) -> np.ndarray:
+        """The states at ``wanted`` (s, ascending, ending at ``b``), from ``x`` at ``a``."""
+        if self.form is None:
+            return self._scipy(a, b, x, wanted)
+        import casadi as ca
+
+        grid = tuple(np.round(np.asarray(wanted) - a, 15))
+        key = (round(b - a, 15), grid)
+        if key not in self.integrators:
+            if len(self.integrators) > 256:
+                self.integrators.clear()
+            state, t, p = ca.MX.sym("x", self.n_states), ca.MX.sym("t"), ca.MX.sym("p", 11)
+            torque = p[0:3] + p[3:6] * t + p[6:9] * ca.sin(p[9] * (p[10] + t))
+            self.integrators[key] = ca.integrator(
+                "spatial", "cvodes", {"x": state, "t": t, "p": p, "ode": self.rhs(state, torque)},
+                0.0, list(grid), {"linear_multistep_method": "adams",
+                                  "nonlinear_solver_iteration": "functional",
+                                  "abstol": self.atol, "reltol": self.rtol,
+                                  "max_num_steps": 10 ** 7})
+        try:
+            result = self.integrators[key](x0=x, p=self.form(a, b))
+        except RuntimeError as exc:
+            raise _Failed(" ".join(str(exc).split())[-300:]) from None
+        return result["xf"].full()
+
+    def _scipy(self, a, b, x, wanted) -> np.ndarray:
+        from scipy.integrate import solve_ivp
+
+        def rate(t, y):
+            return self.rhs(y, self.drive(t)).full().ravel()
+
+        try:
+            solution = solve_ivp(rate, (a, b), x, method="DOP853", t_eval=wanted,
+                                 rtol=self.rtol, atol=self.atol)
+        except (ValueError, ArithmeticError) as exc:
+            raise _Failed(str(exc)) from None
+        if solution.status != 0 or solution.y.shape[1] != len(wanted):
+            if solution.y.size and not np.all(np.isfinite(solution.y)):
+                return np.full((self.n_states, len(wanted)), np.nan)
+            raise _Failed(solution.message)
+        return solution.y
 
 
 def _drift(states) -> float:
