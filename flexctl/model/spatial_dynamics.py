@@ -179,6 +179,34 @@ def _exp(omega):
     return ca.SX.eye(3) + a * k + b * ca.mtimes(k, k)
 
 
+def _right_jacobian(omega):
+    """``T(omega)`` with ``exp([omega]x)^-1 d exp([omega]x) = [T(omega) d omega]x``:
+    ``I - b [omega]x + c [omega]x^2``, ``b = (1 - cos t) / t^2``, ``c = (t - sin t) / t^3``
+    (Taylor forms below ``|omega| = 1e-4``)."""
+    import casadi as ca
+
+    t2 = ca.dot(omega, omega)
+    small = t2 < 1e-8
+    t = ca.sqrt(ca.if_else(small, 1.0, t2))
+    half = 0.5 * t
+    b = ca.if_else(small, 0.5 - t2 / 24 + t2 * t2 / 720, 0.5 * (ca.sin(half) / half) ** 2)
+    c = ca.if_else(small, 1.0 / 6 - t2 / 120 + t2 * t2 / 5040, (t - ca.sin(t)) / (t * t2))
+    k = skew(omega)
+    return ca.SX.eye(3) - b * k + c * ca.mtimes(k, k)
+
+
+@lru_cache(maxsize=1)
+def _right_jacobian_and_rate():
+    """``(omega, omega_t) -> (T(omega), dT/dt)`` as an SX function (its calls on SX
+    arguments are written out inline)."""
+    import casadi as ca
+
+    omega, omega_t = ca.SX.sym("omega", 3), ca.SX.sym("omega_t", 3)
+    right = _right_jacobian(omega)
+    return ca.Function("right_jacobian", [omega, omega_t],
+                       [right, ca.jtimes(right, omega, omega_t)])
+
+
 @lru_cache(maxsize=64)
 def rod_shapes(length: float, n_modes: int, nodes: tuple) -> dict:
     """The three fields' shapes at ``nodes`` (m, ascending, the root ``0`` first).
@@ -218,13 +246,24 @@ class _Rod:
     n_modes: int
     root: np.ndarray
 
-    def rotations(self, qn, ql, qt) -> list:
-        """The section rotation ``R(s)`` at every node, relative to the root frame (CasADi)."""
+    def chain(self, eta, eta_t):
+        """The section rotations ``R_j`` (relative to the root frame) at every node, with
+        their variations in the body form ``R_j^-1 dR_j / deta_a = [delta_j,a]x``: the
+        recursion ``delta_j = E_j^T delta_(j-1) + T(Omega_j) dOmega_j / deta`` of the product
+        ``R_j = R_(j-1) E_j``, ``E_j = exp([Omega_j]x)`` (CasADi).
+
+        Returns
+        -------
+        tuple
+            ``(rotations, deltas, rates, accelerations)``: lists of 3 x 3, 3 x N and
+            3-vectors: ``d_j = delta_j eta_t`` and its rate at ``u_t = 0``.
+        """
         import casadi as ca
 
-        rule, a = self.rule, self.appendage
+        rule, a, n_modes = self.rule, self.appendage, self.n_modes
+        qn, ql, qt = eta[0:n_modes], eta[n_modes:2 * n_modes], eta[2 * n_modes:]
         nodes = (0.0, *map(float, rule.nodes))
-        shapes = rod_shapes(a.length, self.n_modes, nodes)
+        shapes = rod_shapes(a.length, n_modes, nodes)
         # the integrated curvature (exact) and the curvature at every node, root first
         angle = ca.horzcat(ca.mtimes(ca.DM(shapes["twist"]), qt),
                            -ca.mtimes(ca.DM(shapes["slope"]), qn),
@@ -232,15 +271,41 @@ class _Rod:
         curvature = ca.horzcat(ca.mtimes(ca.DM(shapes["twist_rate"]), qt),
                                -ca.mtimes(ca.DM(shapes["curvature"]), qn),
                                ca.mtimes(ca.DM(shapes["curvature"]), ql)).T
+        # the same fields at the rates: the curvature's rate, for the steps' rates
+        angle_t = ca.horzcat(ca.mtimes(ca.DM(shapes["twist"]), eta_t[2 * n_modes:]),
+                             -ca.mtimes(ca.DM(shapes["slope"]), eta_t[0:n_modes]),
+                             ca.mtimes(ca.DM(shapes["slope"]), eta_t[n_modes:2 * n_modes])).T
+        curvature_t = ca.horzcat(
+            ca.mtimes(ca.DM(shapes["twist_rate"]), eta_t[2 * n_modes:]),
+            -ca.mtimes(ca.DM(shapes["curvature"]), eta_t[0:n_modes]),
+            ca.mtimes(ca.DM(shapes["curvature"]), eta_t[n_modes:2 * n_modes])).T
         rotation = ca.SX.eye(3)
-        rotations = []
+        delta = ca.SX.zeros(3, eta.shape[0])
+        rate, accel = ca.SX.zeros(3, 1), ca.SX.zeros(3, 1)
+        rotations, deltas, rates, accels = [], [], [], []
         for j in range(1, len(nodes)):
-            h = nodes[j] - nodes[j - 1]
-            step = angle[:, j] - angle[:, j - 1] + (h * h / 12.0) * ca.cross(
-                curvature[:, j - 1], curvature[:, j])
-            rotation = ca.mtimes(rotation, _exp(step))
+            h2 = (nodes[j] - nodes[j - 1]) ** 2 / 12.0
+            step = angle[:, j] - angle[:, j - 1] + h2 * ca.cross(curvature[:, j - 1],
+                                                                  curvature[:, j])
+            step_t = angle_t[:, j] - angle_t[:, j - 1] + h2 * (
+                ca.cross(curvature_t[:, j - 1], curvature[:, j])
+                + ca.cross(curvature[:, j - 1], curvature_t[:, j]))
+            step_tt = 2 * h2 * ca.cross(curvature_t[:, j - 1], curvature_t[:, j])
+            factor = _exp(step)
+            right, right_t = _right_jacobian_and_rate()(step, step_t)
+            turn = ca.mtimes(right, step_t)                # E^-1 E_t = [turn]x
+            rotation = ca.mtimes(rotation, factor)
+            delta = ca.mtimes(factor.T, delta) + ca.mtimes(right, ca.jacobian(step, eta))
+            # d_j = E^T d_(j-1) + T step_t and its rate at u_t = 0 (E_t^T = -[turn]x E^T)
+            carried = ca.mtimes(factor.T, rate)
+            accel = -ca.cross(turn, carried) + ca.mtimes(factor.T, accel) \
+                + ca.mtimes(right_t, step_t) + ca.mtimes(right, step_tt)
+            rate = carried + turn
             rotations.append(rotation)
-        return rotations
+            deltas.append(delta)
+            rates.append(rate)
+            accels.append(accel)
+        return rotations, deltas, rates, accels
 
     @property
     def along(self) -> np.ndarray:
@@ -258,48 +323,54 @@ class _Rod:
         rotations with theirs, for the appendage's modal coordinates ``eta`` ``[qn; ql; qt]``
         and rates ``eta_t`` (CasADi).
 
+        With ``R^-1 dR = [delta]x``: the tangent ``R e1`` varies by ``R (delta x e1)``, its
+        rate is ``R (d x e1)`` with ``d = delta eta_t``, its acceleration at ``u_t = 0``
+        ``R (d x (d x e1) + d_t x e1)``; the section's angular velocity relative to the root
+        frame is ``R d`` and its rate ``R d_t`` (``d_t``: the rate of ``d`` at ``u_t = 0``,
+        one forward sweep).
+
         Returns
         -------
         dict
             ``points`` (3, M): positions in the hub frame (the nodes, then the point masses);
             ``jac`` (list of 3 (M, N)): each component's Jacobian in ``eta``; ``rel`` and
-            ``conv`` (3, M): ``P eta_t`` and ``(P_t) eta_t``; ``rotations`` (list of 3 x 3),
-            ``jac_rot`` (9n, N), ``rot_t`` and ``rot_tt`` (9n): every node's ``vec(R)``
-            derivatives; ``tangents`` (3, n), hub frame; ``tip`` (3,).
+            ``conv`` (3, M): ``P eta_t`` and ``(P_t) eta_t``; ``tangents`` (3, n);
+            ``spin_jac`` (list of n (3, N)), ``spin`` and ``spin_rate`` (3, n): the sections'
+            angular velocity relative to the hub, its coefficients and rate, all in the hub
+            frame; ``tip`` (3,).
         """
         import casadi as ca
 
-        n_modes = self.n_modes
-        rotations = self.rotations(eta[0:n_modes], eta[n_modes:2 * n_modes],
-                                   eta[2 * n_modes:])
-        n = len(rotations)
-        stacked = ca.vertcat(*[ca.vec(r) for r in rotations])             # (9n,)
-        jac_rot = ca.jacobian(stacked, eta)                               # (9n, N)
-        rot_t = ca.mtimes(jac_rot, eta_t)
-        rot_tt = ca.jtimes(ca.jtimes(stacked, eta, eta_t), eta, eta_t)    # at u_t = 0
-        first = [9 * j + c for j in range(n) for c in range(3)]           # R e1, node-major
+        rotations, deltas, rates, accelerations = self.chain(eta, eta_t)
         frame = ca.DM(self.appendage.frame)
-
-        def hub_columns(values):
-            """(3n,) node-major root-frame vectors -> (n, 3) hub-frame rows."""
-            return ca.mtimes(ca.reshape(values, 3, n).T, frame.T)
-
+        tangent, tangent_jac, tangent_rate, tangent_accel = [], [], [], []
+        spin_jac, spin, spin_rate = [], [], []
+        for j, (r, delta, d) in enumerate(zip(rotations, deltas, rates)):
+            d_t = accelerations[j]
+            hub_r = ca.mtimes(frame, r)                                  # section in hub frame
+            tangent.append(hub_r[:, 0])
+            # delta x e1 = (0, delta_3, -delta_2)
+            tangent_jac.append(ca.mtimes(hub_r[:, 1], delta[2, :])
+                               - ca.mtimes(hub_r[:, 2], delta[1, :]))     # (3, N)
+            tangent_rate.append(hub_r[:, 1] * d[2] - hub_r[:, 2] * d[1])
+            local = ca.cross(d, ca.vertcat(0, d[2], -d[1])) + ca.vertcat(0, d_t[2], -d_t[1])
+            tangent_accel.append(ca.mtimes(hub_r, local))
+            spin_jac.append(ca.mtimes(hub_r, delta))
+            spin.append(ca.mtimes(hub_r, d))
+            spin_rate.append(ca.mtimes(hub_r, d_t))
         along = ca.DM(self.along)
-        tangents = hub_columns(stacked[first])                            # (n, 3)
+        tangents = ca.horzcat(*tangent)                                  # (3, n)
         root = ca.DM(self.root)
-        points = (ca.mtimes(along, tangents) + ca.repmat(root.T, along.shape[0], 1)).T
-        jac_t = jac_rot[first, :]                                          # (3n, N)
-        jac = []
-        for c in range(3):      # hub-frame component c of the tangent's Jacobian, (n, N)
-            part = sum(float(self.appendage.frame[c, d]) * jac_t[d::3, :] for d in range(3))
-            jac.append(ca.mtimes(along, part))
-        rel = ca.mtimes(along, hub_columns(rot_t[first])).T
-        conv = ca.mtimes(along, hub_columns(rot_tt[first])).T
-        weights = ca.DM(self.rule.weights).T
-        tip = root + ca.mtimes(weights, tangents).T
+        points = ca.mtimes(tangents, along.T) + ca.repmat(root, 1, along.shape[0])
+        jac = [ca.mtimes(along, ca.vertcat(*[t[c, :] for t in tangent_jac]))
+               for c in range(3)]
+        rel = ca.mtimes(ca.horzcat(*tangent_rate), along.T)
+        conv = ca.mtimes(ca.horzcat(*tangent_accel), along.T)
+        weights = ca.DM(self.rule.weights)
+        tip = root + ca.mtimes(tangents, weights)
         return {"points": points, "jac": jac, "rel": rel, "conv": conv,
-                "rotations": rotations, "jac_rot": jac_rot, "rot_t": rot_t, "rot_tt": rot_tt,
-                "tangents": tangents.T, "tip": tip}
+                "tangents": tangents, "spin_jac": spin_jac, "spin": ca.horzcat(*spin),
+                "spin_rate": ca.horzcat(*spin_rate), "tip": tip}
 
 
 @dataclass(frozen=True, eq=False)
@@ -526,37 +597,20 @@ def _cross_columns(a, b):
 
 def _sections(motion: dict, appendage, rule, w) -> tuple:
     """Mass matrix and velocity terms on ``[w; eta_t of the appendage]`` and angular
-    momentum of the sections' polar inertia. The section's angular velocity relative to the
-    hub is ``vee(R_t R^T)`` (turned into the hub frame), linear in the rates with the
-    coefficients ``vee(dR/deta_a R^T)``; its rate at ``u_t = 0`` is ``vee(R_tt R^T)`` (the
-    other term, ``R_t R_t^T``, is symmetric)."""
+    momentum of the sections' polar inertia ``rho I_p`` about their tangents ``t``: angular
+    velocity ``w_s = w + spin``, inertia force ``J t (t . alpha) + J (t . w_s) (w_s x t)``
+    with ``alpha = spin_rate + w x w_s`` at ``u_t = 0``."""
     import casadi as ca
 
-    rotations, jac_rot = motion["rotations"], motion["jac_rot"]
-    n = len(rotations)
-    frame = ca.DM(appendage.frame)
-    tangents = motion["tangents"]
-    spin_cols, rate_cols, partial_rows, gyro_rows = [], [], [], []
-    for j, r in enumerate(rotations):
-        rows = slice(9 * j, 9 * j + 9)
-        coefficients = ca.horzcat(*[
-            _vee(ca.mtimes(ca.reshape(jac_rot[rows, a], 3, 3), r.T))
-            for a in range(jac_rot.shape[1])])                             # (3, N), root frame
-        coefficients = ca.mtimes(frame, coefficients)
-        spin_cols.append(ca.mtimes(frame, _vee(ca.mtimes(ca.reshape(motion["rot_t"][rows],
-                                                                   3, 3), r.T))))
-        rate_cols.append(ca.mtimes(frame, _vee(ca.mtimes(ca.reshape(motion["rot_tt"][rows],
-                                                                   3, 3), r.T))))
-        t = tangents[:, j]
-        partial_rows.append(ca.horzcat(t.T, ca.mtimes(t.T, coefficients)))
-        omega = w + spin_cols[-1]
-        gyro = ca.cross(omega, t)
-        gyro_rows.append(ca.horzcat(gyro.T, ca.mtimes(gyro.T, coefficients)))
-    spin = ca.horzcat(*spin_cols)
-    omega = ca.repmat(w, 1, n) + spin
-    alpha_bias = ca.horzcat(*rate_cols) + _cross_columns(ca.repmat(w, 1, n), omega)
-    along = ca.vertcat(*partial_rows)                                # (n, 3 + N)
-    partial_gyro = ca.vertcat(*gyro_rows)
+    tangents, spin_jac = motion["tangents"], motion["spin_jac"]
+    n = tangents.shape[1]
+    omega = ca.repmat(w, 1, n) + motion["spin"]
+    alpha_bias = motion["spin_rate"] + _cross_columns(ca.repmat(w, 1, n), omega)
+    gyro = _cross_columns(omega, tangents)                           # w_s x t, (3, n)
+    along = ca.vertcat(*[ca.horzcat(tangents[:, j].T, ca.mtimes(tangents[:, j].T, spin_jac[j]))
+                         for j in range(n)])                         # (n, 3 + N)
+    partial_gyro = ca.vertcat(*[ca.horzcat(gyro[:, j].T, ca.mtimes(gyro[:, j].T, spin_jac[j]))
+                                for j in range(n)])
     js = ca.DM(appendage.polar_density * np.asarray(rule.weights))
     polar_rate = ca.sum1(tangents * omega).T                         # t . w_s, (n,)
     polar_accel = ca.sum1(tangents * alpha_bias).T                   # t . alpha_b, (n,)
