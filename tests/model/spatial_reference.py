@@ -259,8 +259,9 @@ def _rod_functions(rod: _Rod):
     u = ca.vertcat(w, thd)
     kinetic = 0.5 * ca.dot(v, v)
     dyn = ca.Function("dyn", [th, thd, w],
-                      [v, ca.densify(ca.jacobian(v, u)), ca.gradient(kinetic, th),
-                       ca.jtimes(ca.gradient(kinetic, u), th, thd)])
+                      [ca.densify(v), ca.densify(ca.jacobian(v, u)),
+                       ca.densify(ca.gradient(kinetic, th)),
+                       ca.densify(ca.jtimes(ca.gradient(kinetic, u), th, thd))])
     return dyn, ca.Function("tip", [th], [tip])
 
 
@@ -292,6 +293,32 @@ def _rotation(q: np.ndarray) -> np.ndarray:
     return (q0 * q0 - qv @ qv) * np.eye(3) + 2 * np.outer(qv, qv) + 2 * q0 * _skew(qv)
 
 
+class _BufferedCall:
+    """Evaluates a CasADi function into preallocated numpy arrays (no conversions)."""
+
+    def __init__(self, function):
+        self.buffer, self.trigger = function.buffer()
+        self.args = [np.zeros(function.nnz_in(i)) for i in range(function.n_in())]
+        self.results = []
+        for i in range(function.n_out()):
+            shape = function.size_out(i)
+            if function.nnz_out(i) != shape[0] * shape[1]:
+                raise ValueError("outputs must be dense")
+            out = np.zeros(shape, order="F")
+            flat = out.reshape(-1, order="F")
+            assert np.shares_memory(out, flat)
+            self.results.append(out[:, 0] if shape[1] == 1 else out)
+            self.buffer.set_res(i, flat)
+        for i, a in enumerate(self.args):
+            self.buffer.set_arg(i, a)
+
+    def __call__(self, *args):
+        for a, x in zip(self.args, args):
+            a[:] = x
+        self.trigger()
+        return self.results
+
+
 class ChainSystem:
     """The rigid-element chain model of a pinned hub with appendages.
 
@@ -316,6 +343,7 @@ class ChainSystem:
         if len({r.name for r in self.rods}) != len(self.rods):
             raise ValueError("appendage names must be unique")
         self.functions = [_rod_functions(r) for r in self.rods]
+        self.calls = [_BufferedCall(dyn) for dyn, _ in self.functions]
         sizes = [3 * r.n for r in self.rods]
         self.slices = [slice(a, b) for a, b in zip(np.cumsum([0] + sizes[:-1]),
                                                      np.cumsum(sizes))]
@@ -337,7 +365,7 @@ class ChainSystem:
         return y
 
     def _evaluate(self, theta, w, theta_dot):
-        """Mass matrix, momentum ``p = M u``, ``dT/dtheta`` and the ``jtimes`` term."""
+        """Mass matrix, momentum ``p = M u``, ``dT/dtheta``, the ``jtimes`` term and ``T``."""
         n = self.n_theta
         mass = np.zeros((3 + n, 3 + n))
         mass[:3, :3] = self.hub_inertia
@@ -346,9 +374,8 @@ class ChainSystem:
         grad = np.zeros(n)
         bias = np.zeros(3 + n)
         kinetic = 0.5 * w @ self.hub_inertia @ w
-        for (dyn, _), s in zip(self.functions, self.slices):
-            v, jac, g, b = (np.asarray(r).ravel() if i != 1 else np.asarray(r)
-                            for i, r in enumerate(dyn(theta[s], theta_dot[s], w)))
+        for call, s in zip(self.calls, self.slices):
+            v, jac, g, b = call(theta[s], theta_dot[s], w)
             jw, jt = jac[:, :3], jac[:, 3:]
             rows = slice(3 + s.start, 3 + s.stop)
             mass[:3, :3] += jw.T @ jw
