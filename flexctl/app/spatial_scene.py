@@ -63,6 +63,8 @@ _APPENDAGE_KEYS = {"name", "direction", "normal", "root", "length", "density", "
                    "youngs_modulus", "second_moment", "second_moment_lateral",
                    "shear_modulus", "torsion_constant", "polar_moment", "damping_ratio",
                    "masses"}
+_REQUIRED = ("direction", "normal", "length", "density", "area", "youngs_modulus",
+             "second_moment", "second_moment_lateral", "shear_modulus", "torsion_constant")
 _MANEUVER_KEYS = {"torque_samples": {"times", "values", "interpolation", "file"},
                   "sine_torque": {"peak_torque", "duration"}, "none": set()}
 
@@ -268,7 +270,16 @@ def _structure(hub: SpatialHub, items) -> SpatialStructure:
         fields["masses"] = tuple(points)
         if "name" not in fields:
             fields["name"] = f"appendage{k}"
-        appendage = construct(SpatialAppendage, where, fields)
+        missing = [f for f in _REQUIRED if f not in fields]
+        if missing:
+            raise SceneError(f"{where}.{missing[0]} is required for a spatial appendage")
+        try:
+            appendage = SpatialAppendage(**fields)
+        except (ValueError, TypeError) as exc:
+            name = fields["name"]
+            message = str(exc).replace(f"appendage {name!r}", where)
+            raise SceneError(message if message.startswith(where) else f"{where}: {message}") \
+                from None
         appendages.append(appendage)
     try:
         return SpatialStructure(hub=hub, appendages=tuple(appendages))
