@@ -40,6 +40,8 @@ __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
 MAX_QUATERNION_DRIFT = 1e-6
 #: Default relative tolerance.
 DEFAULT_RTOL = 1e-8
+#: A line through more samples than this runs in one integration with bounded steps.
+THROUGH_SAMPLES = 16
 #: Most output samples of one run.
 MAX_SAMPLES = 2_000_000
 
@@ -367,6 +369,8 @@ def _integrate(equations: SpatialEquations, x0, times, drive, breakpoints, rtol,
     rhs = compiled(equations.rhs, options={"enable_fd": True})
     segment = _Segments(rhs, equations.layout.n_states, drive, rtol, atol)
     t_final = times[-1]
+    if segment.through(breakpoints):    # a line through many samples: one run, bounded steps
+        breakpoints = np.zeros(0)
     edges = np.unique(np.concatenate([[0.0], breakpoints[(breakpoints > 0)
                                                          & (breakpoints < t_final)], [t_final]]))
     states = np.zeros((x0.size, times.size))
@@ -410,11 +414,49 @@ class _Segments:
         self.integrators: dict = {}
         self.form = getattr(drive, "segment_form", None)
 
+    def through(self, breakpoints) -> bool:
+        """Whether the torque is a line through more than :data:`THROUGH_SAMPLES` samples: it
+        is then integrated in one run, the torque interpolated inside the right-hand side and
+        every step bounded by the shortest sample interval (so that no sample is stepped
+        over), rather than restarted at every sample (each restart begins again at order 1
+        with a tiny step)."""
+        drive = self.drive
+        self.line = (isinstance(drive, VectorTorque) and drive.interpolation == "linear"
+                     and drive.times.size > THROUGH_SAMPLES)
+        return self.line
+
+    def _line_integrator(self, grid: tuple):
+        import casadi as ca
+
+        drive = self.drive
+        times = np.concatenate([[min(0.0, drive.times[0] - 1.0)], drive.times,
+                                [drive.times[-1] + 1.0]])
+        values = np.vstack([drive.values[:1], drive.values, drive.values[-1:]])
+        table = ca.interpolant("torque", "linear", [times], values.T.ravel(order="F"))
+        state, t = ca.MX.sym("x", self.n_states), ca.MX.sym("t")
+        p = ca.MX.sym("p", 1)                      # the segment's start time
+        return ca.integrator(
+            "spatial_line", "cvodes", {"x": state, "t": t, "p": p,
+                                       "ode": self.rhs(state, table(p + t))},
+            0.0, list(grid), {**self._options(), "max_step_size": float(np.min(np.diff(
+                drive.times)))})
+
+    def _options(self) -> dict:
+        return {"linear_multistep_method": "adams", "nonlinear_solver_iteration": "functional",
+                "abstol": self.atol, "reltol": self.rtol, "max_num_steps": 10 ** 7}
+
     def advance(self, a: float, b: float, x, wanted) -> np.ndarray:
         """The states at ``wanted`` (s, ascending, ending at ``b``), from ``x`` at ``a``."""
         if self.form is None:
             return self._scipy(a, b, x, wanted)
         import casadi as ca
+
+        if getattr(self, "line", False):
+            grid = tuple(np.asarray(wanted) - a)
+            try:
+                return self._line_integrator(grid)(x0=x, p=a)["xf"].full()
+            except RuntimeError as exc:
+                raise _Failed(" ".join(str(exc).split())[-300:]) from None
 
         grid = tuple(np.round(np.asarray(wanted) - a, 15))
         key = (round(b - a, 15), grid)
@@ -425,10 +467,7 @@ class _Segments:
             torque = p[0:3] + p[3:6] * t + p[6:9] * ca.sin(p[9] * (p[10] + t))
             self.integrators[key] = ca.integrator(
                 "spatial", "cvodes", {"x": state, "t": t, "p": p, "ode": self.rhs(state, torque)},
-                0.0, list(grid), {"linear_multistep_method": "adams",
-                                  "nonlinear_solver_iteration": "functional",
-                                  "abstol": self.atol, "reltol": self.rtol,
-                                  "max_num_steps": 10 ** 7})
+                0.0, list(grid), self._options())
         try:
             result = self.integrators[key](x0=x, p=self.form(a, b))
         except RuntimeError as exc:
