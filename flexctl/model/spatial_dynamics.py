@@ -307,16 +307,21 @@ class _Rod:
             accels.append(accel)
         return rotations, deltas, rates, accels
 
-    @property
-    def along(self) -> np.ndarray:
-        """``(n + K, n)``: the integrals from the root to every node and then every point
-        mass, of a function's values at the nodes."""
+    def integrate(self, values):
+        """The integrals from the root to every node and then every point mass of ``values``
+        (n, c) at the nodes, (n + K, c): the Gauss-Legendre panels' cumulative form, within
+        the panel and over the whole panels before (sparse: a third of the dense product's
+        operations on 2 panels)."""
+        import casadi as ca
+
         rule = self.rule
-        to_nodes = rule.local + rule.before @ rule.panel_sums
-        if not self.appendage.masses:
-            return to_nodes
-        local, before = rule.at([m.position for m in self.appendage.masses])
-        return np.vstack([to_nodes, local + before @ rule.panel_sums])
+        local, before = rule.local, rule.before
+        if self.appendage.masses:
+            at_local, at_before = rule.at([m.position for m in self.appendage.masses])
+            local, before = np.vstack([local, at_local]), np.vstack([before, at_before])
+        sums = ca.mtimes(ca.sparsify(ca.DM(rule.panel_sums)), values)
+        return ca.mtimes(ca.sparsify(ca.DM(local)), values) \
+            + ca.mtimes(ca.sparsify(ca.DM(before)), sums)
 
     def motion(self, eta, eta_t) -> dict:
         """Positions and their derivatives of every node and point mass, and the sections'
@@ -358,14 +363,13 @@ class _Rod:
             spin_jac.append(ca.mtimes(hub_r, delta))
             spin.append(ca.mtimes(hub_r, d))
             spin_rate.append(ca.mtimes(hub_r, d_t))
-        along = ca.DM(self.along)
         tangents = ca.horzcat(*tangent)                                  # (3, n)
         root = ca.DM(self.root)
-        points = ca.mtimes(tangents, along.T) + ca.repmat(root, 1, along.shape[0])
-        jac = [ca.mtimes(along, ca.vertcat(*[t[c, :] for t in tangent_jac]))
-               for c in range(3)]
-        rel = ca.mtimes(ca.horzcat(*tangent_rate), along.T)
-        conv = ca.mtimes(ca.horzcat(*tangent_accel), along.T)
+        points = self.integrate(tangents.T).T
+        points = points + ca.repmat(root, 1, points.shape[1])
+        jac = [self.integrate(ca.vertcat(*[t[c, :] for t in tangent_jac])) for c in range(3)]
+        rel = self.integrate(ca.horzcat(*tangent_rate).T).T
+        conv = self.integrate(ca.horzcat(*tangent_accel).T).T
         weights = ca.DM(self.rule.weights)
         tip = root + ca.mtimes(tangents, weights)
         return {"points": points, "jac": jac, "rel": rel, "conv": conv,
@@ -568,7 +572,7 @@ def _particles(motion: dict, masses, w, v, free: bool) -> tuple:
     # partial velocities, component by component: -[p]x, I (free), P
     spin_rows = [ca.horzcat(zero, pz, -py), ca.horzcat(-pz, zero, px),
                  ca.horzcat(py, -px, zero)]
-    local_mass, local_bias = 0, 0
+    partials, weighted = [], []
     for c in range(3):
         parts = [spin_rows[c]]
         if free:
@@ -576,14 +580,26 @@ def _particles(motion: dict, masses, w, v, free: bool) -> tuple:
             unit[:, c] = 1.0
             parts.append(ca.DM(unit))
         parts.append(motion["jac"][c])
-        partial = ca.horzcat(*parts)                                  # (M, speeds)
-        weighted = partial * ca.repmat(m, 1, partial.shape[1])
-        local_mass = local_mass + ca.mtimes(partial.T, weighted)
-        local_bias = local_bias + ca.mtimes(weighted.T, accel[c, :].T)
+        partials.append(ca.horzcat(*parts))                           # (M, speeds)
+        weighted.append(partials[-1] * ca.repmat(m, 1, partials[-1].shape[1]))
+    partial, weighted = ca.vertcat(*partials), ca.vertcat(*weighted)
+    local_mass = _gram(partial, weighted)
+    local_bias = ca.mtimes(weighted.T, ca.vec(accel.T))
     linear = ca.mtimes(velocity, m)
     angular = ca.mtimes(_cross_columns(points, velocity), m)
     moment = ca.mtimes(points, m)
     return local_mass, local_bias, linear, angular, moment
+
+
+def _gram(partial, weighted):
+    """``partial^T weighted``, symmetric: each pair of columns once (half the products of
+    the full product)."""
+    import casadi as ca
+
+    n = partial.shape[1]
+    entries = {(i, j): ca.dot(partial[:, i], weighted[:, j])
+               for i in range(n) for j in range(i, n)}
+    return ca.blockcat([[entries[min(i, j), max(i, j)] for j in range(n)] for i in range(n)])
 
 
 def _cross_columns(a, b):
@@ -614,7 +630,7 @@ def _sections(motion: dict, appendage, rule, w) -> tuple:
     js = ca.DM(appendage.polar_density * np.asarray(rule.weights))
     polar_rate = ca.sum1(tangents * omega).T                         # t . w_s, (n,)
     polar_accel = ca.sum1(tangents * alpha_bias).T                   # t . alpha_b, (n,)
-    local_mass = ca.mtimes(along.T, along * ca.repmat(js, 1, along.shape[1]))
+    local_mass = _gram(along, along * ca.repmat(js, 1, along.shape[1]))
     local_bias = ca.mtimes(along.T, js * polar_accel) \
         + ca.mtimes(partial_gyro.T, js * polar_rate)
     angular = ca.mtimes(tangents, js * polar_rate)
