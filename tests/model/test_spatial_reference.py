@@ -2,7 +2,7 @@
 
 The reference imports nothing from flexctl; these checks judge it against closed forms, the
 conservation laws, planar symmetry and the independent planar chain of
-``tests/fe_multibody.py``. Fast (about 10 s in all); run with ``-s`` to see the numbers.
+``tests/fe_multibody.py``. Fast (about 15 s in all); run with ``-s`` to see the numbers.
 """
 
 import os
@@ -14,8 +14,12 @@ import pytest
 sys.path.insert(0, os.path.dirname(__file__))
 sys.path.insert(0, os.path.dirname(os.path.dirname(__file__)))
 
-from spatial_reference import (ChainSystem, _example_appendage, chain_frequencies,  # noqa: E402
-                               chain_response)
+from spatial_reference import (
+    ChainSystem,
+    _example_appendage,
+    chain_frequencies,
+    chain_response,
+)
 
 #: Cantilever roots ``z_i`` (``omega_i = z_i^2 sqrt(EI / (rhoA l^4))``).
 ROOTS = np.array([1.8751040687, 4.6940911330, 7.8547574382])
@@ -64,11 +68,12 @@ def soft_structure():
     n2 = np.cross(d2, [0.0, 0.0, 1.0])
     n2 /= np.linalg.norm(n2)
     appendages = [
-        dict(name="s1", root=(0.1, 0.05, -0.02), direction=(1, 0, 0), normal=(0, 0.6, 0.8),
-             length=1.0, rhoA=1.0, EI_n=2.0, EI_l=5.0, GJ=3.0, rho_Ip=0.02,
-             masses=[(0.3, 1.0), (0.1, 0.5)]),
-        dict(name="s2", root=(-0.05, 0.1, 0.03), direction=d2, normal=n2, length=0.8,
-             rhoA=0.7, EI_n=1.5, EI_l=3.0, GJ=2.0, rho_Ip=0.01, masses=[(0.2, 0.8)]),
+        {"name": "s1", "root": (0.1, 0.05, -0.02), "direction": (1, 0, 0),
+         "normal": (0, 0.6, 0.8), "length": 1.0, "rhoA": 1.0, "EI_n": 2.0, "EI_l": 5.0,
+         "GJ": 3.0, "rho_Ip": 0.02, "masses": [(0.3, 1.0), (0.1, 0.5)]},
+        {"name": "s2", "root": (-0.05, 0.1, 0.03), "direction": d2, "normal": n2,
+         "length": 0.8, "rhoA": 0.7, "EI_n": 1.5, "EI_l": 3.0, "GJ": 2.0, "rho_Ip": 0.01,
+         "masses": [(0.2, 0.8)]},
     ]
     hub = np.array([[1.2, 0.05, -0.03], [0.05, 1.0, 0.04], [-0.03, 0.04, 0.9]])
     return hub, appendages
@@ -98,7 +103,7 @@ def test_spin_conserves_angular_momentum_and_energy():
 def planar_run():
     """MODEL.md's rod (normal along y) on a pinned hub, a one-period sine torque about z
     (10 elements: the planar chain meshes uniformly too, with the mass at 0.9 l on a node)."""
-    amplitude, period, t_final, n = 0.5, 1.0, 1.5, 10 
+    amplitude, period, t_final, n = 0.5, 1.0, 1.5, 10
 
     def torque(t):
         return np.array([0.0, 0.0, amplitude * np.sin(2 * np.pi * t / period)
@@ -107,8 +112,7 @@ def planar_run():
     times = np.linspace(0.0, t_final, 31)
     hub = np.array([[1.16, 0.01, 0.0], [0.01, 1.17, 0.0], [0.0, 0.0, 1.16]])
     out = chain_response(hub, [_example_appendage()], torque, t_final, times, n_elements=n)
-    return dict(out=out, hub=hub, torque=torque, times=times, n=n, amplitude=amplitude,
-                period=period)
+    return {"out": out, "hub": hub, "torque": torque, "times": times, "n": n}
 
 
 def test_planar_motion_stays_planar(planar_run):
