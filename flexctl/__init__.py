@@ -22,6 +22,10 @@ _SOURCES = {
                      "build_model"), "flexctl.model"),
     **dict.fromkeys(("SineTorque", "SpinUp", "Controller", "SimulationResult", "simulate"),
                     "flexctl.sim"),
+    **dict.fromkeys(("SpatialHub", "SpatialAppendage", "SpatialStructure"),
+                    "flexctl.model.spatial_structure"),
+    **dict.fromkeys(("simulate_spatial", "SpatialResult", "VectorTorque"),
+                    "flexctl.sim.spatial_run"),
     **dict.fromkeys(("Scene", "SceneError", "builtin_scenes", "load_scene", "run_scene",
                      "run_slew"), "flexctl.app.scenes"),
 }
