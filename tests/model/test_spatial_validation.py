@@ -3,9 +3,9 @@
 by CasADi from the Lagrangian), extrapolated in its element count.
 
 Two rods on a hub with products of inertia, one with a tip mass and one whose section is tilted
-(its normal neither along nor across the hub's axes), under a sine torque about all three axes;
-at rest and spinning. Every tip component whose peak is not negligible is compared relative to
-its own peak.
+(its normal neither along nor across the hub's axes), under a sine torque about all three axes.
+Every tip component whose peak is not negligible is compared relative to its own peak. (The
+spinning case is not run here: the chain, integrated implicitly, takes minutes per run there.)
 
 Measured on the 3 s, 20 and 40 element form of this case (at rest): the modal model on 3, 4 and
 5 modes per field within 6.8e-4, 2.7e-4 and 1.4e-4 of each component's peak of the
@@ -27,9 +27,9 @@ from flexctl.model.spatial_structure import (SpatialAppendage, SpatialHub,  # no
 from flexctl.sim.spatial_run import simulate_spatial  # noqa: E402
 
 #: The modal model (3 modes per field) within this of the extrapolated chain, relative to each
-#: tip component's peak: the chain's extrapolation from 10 and 20 elements is good to some
-#: 5e-4 here, the modal truncation to some 7e-4.
-AGREEMENT = 3e-3
+#: tip component's peak. Measured: 5.3e-4 at most (1.1e-4 to 5.3e-4 over the six components),
+#: where the 20-element chain alone is 1.5e-3 to 5.2e-3 from the extrapolation.
+AGREEMENT = 2e-3
 #: Components whose peak is below this fraction of their tip's largest are not compared
 #: (a foreshortening of microns under a bending of centimetres).
 NEGLIGIBLE = 1e-3
@@ -78,8 +78,8 @@ def _chain_rods():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("spin", [(0.0, 0.0, 0.0), (0.0, 0.0, 3.0)], ids=["at rest", "spinning"])
-def test_tips_agree_with_an_independent_rigid_element_chain(spin):
+def test_tips_agree_with_an_independent_rigid_element_chain():
+    spin = (0.0, 0.0, 0.0)
     t_final = 1.5
     times = np.linspace(0.0, t_final, 151)
     coarse, fine = (chain_response(INERTIA, _chain_rods(), torque, t_final, times,
