@@ -13,10 +13,11 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import re
+from pathlib import Path
 
 from controllers.spec import SceneError
 
-__all__ = ["construct", "parameter_doc"]
+__all__ = ["construct", "parameter_doc", "read_table_file"]
 
 
 def construct(cls, key: str, kwargs: dict, rename: str | None = None):
@@ -78,3 +79,57 @@ def parameter_doc(cls, name: str) -> str:
     if first.replace("-", "").isalpha() and first[0].isupper() and first[1:].islower():
         sentence = f"{first.lower()} {rest}".rstrip()
     return sentence
+
+
+def read_table_file(file, base_dir, columns: tuple, max_bytes: int) -> tuple:
+    """``(where, lines)``: the data lines of a CSV file named by a scene's ``maneuver.file``,
+    after its header ``columns``, each with its line number.
+
+    Parameters
+    ----------
+    file : str
+        The path as the scene gives it; a relative one is read from ``base_dir``.
+    base_dir : str or path-like or None
+        The scene file's directory (default the working directory).
+    columns : tuple of str
+        The header's cells, lower case (``("t", "torque")``).
+    max_bytes : int
+        The largest file read, bytes.
+
+    Returns
+    -------
+    where : str
+        How messages name the file (``maneuver.file 'torque.csv'``).
+    lines : list of (int, str)
+        The non-blank lines after the header, with their line numbers.
+
+    Raises
+    ------
+    SceneError
+        For a missing, unreadable, too large or non-UTF-8 file, or another header.
+    """
+    wanted = ", ".join(columns)
+    if not isinstance(file, str) or not file.strip() or "\0" in file:
+        raise SceneError(f"maneuver.file must be the path of a CSV file (columns {wanted}); "
+                         f"got {file!r:.80}")
+    path = Path(file) if Path(file).is_absolute() else Path(base_dir or ".") / file
+    where = f"maneuver.file {file!r}"
+    try:
+        if not path.is_file():
+            raise SceneError(f"{where} does not exist (a relative path is read from the scene "
+                             f"file's directory: {str(path)!r})")
+        if path.stat().st_size > max_bytes:
+            raise SceneError(f"{where} must be at most {max_bytes} bytes; got "
+                             f"{path.stat().st_size}")
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
+    except OSError as exc:
+        raise SceneError(f"{where} cannot be read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise SceneError(f"{where} must be UTF-8 text (CSV); byte {exc.object[exc.start]:#04x} "
+                         f"at offset {exc.start} is not UTF-8") from None
+    header = tuple(cell.strip().lower() for cell in lines[0].split(",")) if lines else ()
+    if header != tuple(columns):
+        raise SceneError(f"{where} must start with the header line '{wanted}'; got "
+                         f"{(lines[0] if lines else '')[:80]!r}")
+    return where, [(number, line) for number, line in enumerate(lines[1:], start=2)
+                   if line.strip()]

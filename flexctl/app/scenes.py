@@ -110,6 +110,7 @@ from ..sim.simulation import METHODS, MIN_T_FINAL, SimulationResult, simulate
 from ..sim.validity import VariantChoice, assess_run, choose_variant
 from .scene_hardware import parse_actuator, parse_sensors
 from .scene_tables import construct as _construct
+from .scene_tables import read_table_file
 
 __all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene",
            "parse_scene",
@@ -152,32 +153,10 @@ TORQUE_FILE_COLUMNS = ("t", "torque")
 def _read_torque_file(file, base_dir) -> tuple:
     """``(times, values)`` of a torque file: a header line ``t, torque``, then one line
     ``t, torque`` per sample (s, N m), times strictly increasing from 0 or later."""
-    if not isinstance(file, str) or not file.strip() or "\0" in file:
-        raise SceneError("maneuver.file must be the path of a CSV file (columns t, torque); "
-                         f"got {file!r}")
-    path = Path(file) if Path(file).is_absolute() else Path(base_dir or ".") / file
-    where = f"maneuver.file {file!r}"
-    try:
-        if not path.is_file():
-            raise SceneError(f"{where} does not exist (a relative path is read from the scene "
-                             f"file's directory: {str(path)!r})")
-        if path.stat().st_size > MAX_TORQUE_FILE_BYTES:
-            raise SceneError(f"{where} must be at most {MAX_TORQUE_FILE_BYTES} bytes; got "
-                             f"{path.stat().st_size}")
-        lines = path.read_text(encoding="utf-8-sig").splitlines()
-    except OSError as exc:
-        raise SceneError(f"{where} cannot be read: {exc.strerror or exc}") from None
-    except UnicodeDecodeError as exc:
-        raise SceneError(f"{where} must be UTF-8 text (CSV); byte {exc.object[exc.start]:#04x} "
-                         f"at offset {exc.start} is not UTF-8") from None
-    header = tuple(cell.strip().lower() for cell in lines[0].split(",")) if lines else ()
-    if header != TORQUE_FILE_COLUMNS:
-        raise SceneError(f"{where} must start with the header line 't, torque'; got "
-                         f"{(lines[0] if lines else '')[:80]!r}")
+    where, lines = read_table_file(file, base_dir, TORQUE_FILE_COLUMNS, MAX_TORQUE_FILE_BYTES)
     times, values = [], []
-    for number, line in enumerate(lines[1:], start=2):
-        if line.strip():
-            _read_sample(f"{where} line {number}", line, times, values)
+    for number, line in lines:
+        _read_sample(f"{where} line {number}", line, times, values)
     if not times:
         raise SceneError(f"{where} holds no samples: after the header, one line t, torque per "
                          "sample")

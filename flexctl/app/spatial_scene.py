@@ -28,7 +28,6 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -37,7 +36,7 @@ from ..model.checks import check_real
 from ..model.parameters import PointMass
 from ..model.spatial_structure import SpatialAppendage, SpatialHub, SpatialStructure
 from ..sim.spatial_run import DEFAULT_RTOL, VectorTorque
-from .scene_tables import construct
+from .scene_tables import construct, read_table_file
 
 __all__ = ["SpatialScene", "SpatialSine", "is_spatial", "parse_spatial_scene",
            "SPATIAL_TORQUE_COLUMNS", "MAX_SPATIAL_MODES"]
@@ -330,30 +329,9 @@ def _maneuver(data: dict, base_dir):
 
 def _read_file(file, base_dir) -> tuple:
     """``(times (K,), values (K, 3))`` of a spatial torque file."""
-    if not isinstance(file, str) or not file.strip() or "\0" in file:
-        raise SceneError("maneuver.file must be the path of a CSV file (columns t, tx, ty, tz); "
-                         f"got {file!r:.80}")
-    path = Path(file) if Path(file).is_absolute() else Path(base_dir or ".") / file
-    where = f"maneuver.file {file!r}"
-    try:
-        if not path.is_file():
-            raise SceneError(f"{where} does not exist (a relative path is read from the scene "
-                             f"file's directory: {str(path)!r})")
-        if path.stat().st_size > MAX_FILE_BYTES:
-            raise SceneError(f"{where} must be at most {MAX_FILE_BYTES} bytes")
-        lines = path.read_text(encoding="utf-8-sig").splitlines()
-    except OSError as exc:
-        raise SceneError(f"{where} cannot be read: {exc.strerror or exc}") from None
-    except UnicodeDecodeError:
-        raise SceneError(f"{where} must be UTF-8 text (CSV)") from None
-    header = tuple(c.strip().lower() for c in lines[0].split(",")) if lines else ()
-    if header != SPATIAL_TORQUE_COLUMNS:
-        raise SceneError(f"{where} must start with the header line 't, tx, ty, tz'; got "
-                         f"{(lines[0] if lines else '')[:80]!r}")
+    where, lines = read_table_file(file, base_dir, SPATIAL_TORQUE_COLUMNS, MAX_FILE_BYTES)
     rows = []
-    for number, line in enumerate(lines[1:], start=2):
-        if not line.strip():
-            continue
+    for number, line in lines:
         try:
             row = [float(c) for c in line.split(",")]
         except ValueError:
