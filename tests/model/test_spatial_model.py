@@ -231,3 +231,64 @@ def test_a_massless_hub_has_a_positive_definite_mass_matrix():
     x[0] = 1.0
     x[4:4 + equations.layout.n_elastic] = 0.05 * rng.normal(size=equations.layout.n_elastic)
     assert np.min(np.linalg.eigvalsh(equations.mass_matrix(x).full())) > 0
+
+
+@pytest.mark.parametrize("spin", [0.0, 3.0], ids=["at rest", "spinning"])
+def test_linear_plant_in_one_plane_is_the_planar_plant(spin):
+    """About rest or a steady spin about z, the in-plane block of the spatial plant (attitude
+    error about z, the normal bending modes, their rates) is decoupled from the rest and has
+    the planar plant's poles."""
+    from flexctl.model.spatial_plant import linearize_spatial
+
+    system = PLANAR_CASES["one beam with a tip mass"]
+    planar = flexctl.build_model(system, n_modes=3, variant="exact").linearize(spin_rate=spin)
+    plant = linearize_spatial(SpatialStructure.from_planar(system), 3, (0.0, 0.0, spin))
+    names = plant.state_labels
+    block = [names.index(n) for n in ("ez", "beam0_qn1", "beam0_qn2", "beam0_qn3", "wz",
+                                      "beam0_qn1_dot", "beam0_qn2_dot", "beam0_qn3_dot")]
+    rest = [k for k in range(plant.nstates) if k not in block]
+    assert np.max(np.abs(plant.A[np.ix_(block, rest)])) == 0.0
+    assert np.max(np.abs(plant.A[np.ix_(rest, block)])) == 0.0
+
+    def frequencies(a):
+        return np.sort(np.abs(np.linalg.eigvals(a).imag))
+
+    # the planar plant's matrices integrate exactly, the spatial one on the exact model's
+    # quadrature (FREQUENCY_TOLERANCE)
+    np.testing.assert_allclose(frequencies(plant.A[np.ix_(block, block)]),
+                               frequencies(planar.A), rtol=FREQUENCY_TOLERANCE, atol=1e-9)
+    assert plant.input_labels == ["tx", "ty", "tz"]
+    assert plant.output_labels[:6] == ["ex", "ey", "ez", "wx", "wy", "wz"]
+
+
+def test_linear_plant_predicts_a_small_response():
+    """A small torque about all three axes: the linear plant's tips and attitude follow the
+    nonlinear model's to the second order of the amplitude."""
+    import control
+
+    from flexctl.model.spatial_plant import linearize_spatial
+    from flexctl.sim.spatial_run import VectorTorque, simulate_spatial
+
+    structure = _tumbling()
+    plant = linearize_spatial(structure, 2)
+    times = np.linspace(0.0, 1.0, 101)
+    push = np.outer(np.sin(np.pi * times), [1e-3, -2e-3, 1.5e-3])
+    result = simulate_spatial(structure, 1.0, VectorTorque(times, push), n_modes=2,
+                              output_step=0.01, rtol=1e-10, check_accuracy=False)
+    response = control.forced_response(plant, times, push.T)
+    labels = plant.output_labels
+    for name in structure.names:
+        for k, axis in enumerate(("dx", "dy", "dz")):
+            linear = response.outputs[labels.index(f"{name}_tip_{axis}")]
+            nonlinear = result.tips[name][k]
+            scale = np.max(np.abs(result.tips[name]))
+            assert np.max(np.abs(linear - nonlinear)) <= 1e-3 * scale, (name, axis)
+
+
+def test_a_turn_that_is_no_equilibrium_is_refused():
+    from flexctl.model.spatial_plant import linearize_spatial
+
+    oblique = SpatialStructure(hub=SpatialHub(inertia=np.eye(3), radius=0.06), appendages=(
+        wing("a", direction=(1.0, 0.0, 1.0), normal=(-1.0, 0.0, 1.0)),))
+    with pytest.raises(InputError, match="no steady turn"):
+        linearize_spatial(oblique, 2, (0.0, 0.0, 2.0))
