@@ -24,7 +24,7 @@ _SOURCES = {
                     "flexctl.sim"),
     **dict.fromkeys(("SpatialHub", "SpatialAppendage", "SpatialStructure"),
                     "flexctl.model.spatial_structure"),
-    "linearize_spatial": "flexctl.model.spatial_plant",
+    **dict.fromkeys(("linearize_spatial", "nonlinear_spatial"), "flexctl.model.spatial_plant"),
     **dict.fromkeys(("simulate_spatial", "SpatialResult", "VectorTorque"),
                     "flexctl.sim.spatial_run"),
     **dict.fromkeys(("Scene", "SceneError", "builtin_scenes", "load_scene", "run_scene",

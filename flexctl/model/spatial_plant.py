@@ -29,7 +29,7 @@ from .exports import signal_names
 from .spatial_dynamics import spatial_equations
 from .spatial_structure import SpatialStructure
 
-__all__ = ["linearize_spatial", "EQUILIBRIUM_TOLERANCE"]
+__all__ = ["linearize_spatial", "nonlinear_spatial", "EQUILIBRIUM_TOLERANCE"]
 
 #: Largest modal acceleration of the straight, steadily turning structure, relative to its
 #: centrifugal scale ``|w|^2 l``, for it to be an operating point.
@@ -144,3 +144,47 @@ def _check_equilibrium(structure, equations, x0, w0) -> None:
 
 def _skew(a) -> np.ndarray:
     return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def nonlinear_spatial(structure: SpatialStructure, n_modes: int = 4):
+    """The exact spatial model as a python-control ``NonlinearIOSystem``.
+
+    Its right-hand side is the CasADi function
+    :attr:`~flexctl.model.spatial_dynamics.SpatialEquations.rhs` (``(x, torque) -> x_dot``,
+    itself the model's CasADi form), called on numbers.
+
+    Parameters
+    ----------
+    structure : SpatialStructure
+    n_modes : int, optional
+        Modes per field of every appendage (1 to 12). Default 4.
+
+    Returns
+    -------
+    control.NonlinearIOSystem
+        States :attr:`~flexctl.model.spatial_dynamics.SpatialLayout.state_names` (dots as
+        ``_``), inputs ``tx, ty, tz`` (N m, hub frame), outputs the quaternion
+        ``qw, qx, qy, qz``, the angular velocity ``wx, wy, wz`` and every tip's displacement
+        (``<name>_tip_dx``, ...; hub frame, m).
+    """
+    import control
+
+    check_instance("nonlinear_spatial", "structure", structure, SpatialStructure)
+    n_modes = check_integer("nonlinear_spatial", "n_modes", n_modes, minimum=1, maximum=12)
+    equations = spatial_equations(structure, n_modes)
+    layout = equations.layout
+    c = layout.n_coordinates
+
+    def update(t, x, u, params):
+        return equations.rhs(x, u).full().ravel()
+
+    def output(t, x, u, params):
+        tips = equations.tips(x).full().ravel(order="F")
+        return np.concatenate([x[0:4], x[c:c + 3], tips])
+
+    tips = [f"{name}.tip_{axis}" for name in structure.names for axis in ("dx", "dy", "dz")]
+    return control.nlsys(update, output, states=signal_names(layout.state_names),
+                         inputs=["tx", "ty", "tz"],
+                         outputs=signal_names(["qw", "qx", "qy", "qz", "wx", "wy", "wz",
+                                               *tips]),
+                         name=f"spatial_nonlinear_N{n_modes}")

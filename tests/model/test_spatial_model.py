@@ -292,3 +292,28 @@ def test_a_turn_that_is_no_equilibrium_is_refused():
         wing("a", direction=(1.0, 0.0, 1.0), normal=(-1.0, 0.0, 1.0)),))
     with pytest.raises(InputError, match="no steady turn"):
         linearize_spatial(oblique, 2, (0.0, 0.0, 2.0))
+
+
+def test_nonlinear_plant_is_the_simulated_model():
+    """python-control's response of the nonlinear plant follows simulate_spatial's."""
+    import control
+
+    from flexctl.model.spatial_plant import nonlinear_spatial
+    from flexctl.sim.spatial_run import VectorTorque, initial_state, simulate_spatial
+
+    structure = _tumbling()
+    system = nonlinear_spatial(structure, 1)
+    times = np.linspace(0.0, 0.5, 51)
+    push = np.outer(np.sin(2 * np.pi * times), [0.2, -0.1, 0.3])
+    result = simulate_spatial(structure, 0.5, VectorTorque(times, push), n_modes=1,
+                              output_step=0.01, rtol=1e-10, check_accuracy=False)
+    x0 = initial_state(result.equations)
+    response = control.input_output_response(system, times, push.T, x0,
+                                             solve_ivp_kwargs={"rtol": 1e-10, "atol": 1e-13})
+    labels = system.output_labels
+    for name in structure.names:
+        for k, axis in enumerate(("dx", "dy", "dz")):
+            scale = np.max(np.abs(result.tips[name]))
+            got = response.outputs[labels.index(f"{name}_tip_{axis}")]
+            assert np.max(np.abs(got - result.tips[name][k])) <= 1e-6 * scale, (name, axis)
+    np.testing.assert_allclose(response.outputs[0:4], result.quaternion, atol=1e-9)
