@@ -165,3 +165,18 @@ def test_a_held_table_holds_each_value_until_the_next_sample(tmp_path):
     np.testing.assert_array_equal(torque(0.2), [0.4, -0.2, 0.6])
     np.testing.assert_array_equal(torque(0.79), [0.4, -0.2, 0.6])
     np.testing.assert_array_equal(torque(5.0), [0.0, 0.0, 0.0])
+
+
+EXAMPLE_SCENES = sorted((Path(__file__).resolve().parents[2] / "examples" / "scenes")
+                        .glob("spatial-*.toml"))
+
+
+@pytest.mark.parametrize("path", EXAMPLE_SCENES, ids=lambda p: p.stem)
+def test_the_example_spatial_scenes_load(path):
+    scene = load_scene(path)
+    assert isinstance(scene, SpatialScene) and scene.t_final > 0
+    assert len(scene.structure.appendages) >= 2
+
+
+def test_there_are_example_spatial_scenes():
+    assert len(EXAMPLE_SCENES) >= 2
