@@ -295,6 +295,10 @@ def _modes(table: dict) -> int:
         raise SceneError(f"model.variant must be 'exact' for a spatial scene (the spatial model "
                          f"is the geometrically exact rod); got {variant!r:.80}")
     modes = table.get("modes", 4)
+    if isinstance(modes, (str, dict)):
+        raise SceneError(f"model.modes must be an integer for a spatial scene (the same count "
+                         f"for every field of every appendage; 'auto' and per-appendage tables "
+                         f"are for planar scenes); got {modes!r:.80}")
     if isinstance(modes, bool) or not isinstance(modes, int) or not \
             1 <= modes <= MAX_SPATIAL_MODES:
         raise SceneError(f"model.modes must be an integer from 1 to {MAX_SPATIAL_MODES} (modes "
