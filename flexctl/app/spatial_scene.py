@@ -45,6 +45,8 @@ __all__ = ["SpatialScene", "SpatialSine", "is_spatial", "parse_spatial_scene",
 SPATIAL_TORQUE_COLUMNS = ("t", "tx", "ty", "tz")
 #: Most modes per field of a spatial scene.
 MAX_SPATIAL_MODES = 12
+#: Largest initial hub rate, rad/s (a run's steps follow the turn: faster ones take hours).
+MAX_SPIN = 1e3
 #: Largest torque file read, bytes.
 MAX_FILE_BYTES = 64 * 2 ** 20
 
@@ -232,9 +234,9 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
         raise SceneError(str(exc)) from None
     if not np.linalg.norm(quaternion) > 0:
         raise SceneError("initial.quaternion must be non-zero")
-    if np.max(np.abs(spin)) > 1e4:
-        raise SceneError(f"initial.angular_velocity must be at most 1e4 rad/s in magnitude; "
-                         f"got {spin.tolist()}")
+    if np.max(np.abs(spin)) > MAX_SPIN:
+        raise SceneError(f"initial.angular_velocity must be at most {MAX_SPIN:g} rad/s in "
+                         f"magnitude; got {spin.tolist()}")
     maneuver = _maneuver(data, base_dir)
     t_final, output_step, rtol = _simulation(_table(data, "simulation"))
     description = data.get("description", "")
@@ -286,6 +288,7 @@ def _structure(hub: SpatialHub, items) -> SpatialStructure:
         message = str(exc)
         for k, a in enumerate(appendages):
             message = message.replace(f"appendage {a.name!r}", f"appendages.{k}")
+            message = message.replace(f"appendages[{k}]", f"appendages.{k}")
         raise SceneError(message) from None
 
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from .checks import KeywordOnly, check_array, check_real
 from .errors import InputTypeError, InputValueError
-from .parameters import SUPPORTS, Beam, carried_masses
+from .parameters import RADIUS_RATIO_LIMIT, SUPPORTS, Beam, carried_masses
 
 __all__ = ["SpatialHub", "SpatialAppendage", "SpatialStructure", "PERPENDICULAR_TOLERANCE",
            "MAX_SPATIAL_APPENDAGES"]
@@ -41,6 +41,9 @@ __all__ = ["SpatialHub", "SpatialAppendage", "SpatialStructure", "PERPENDICULAR_
 PERPENDICULAR_TOLERANCE = 1e-9
 #: Most appendages one spatial hub carries.
 MAX_SPATIAL_APPENDAGES = 16
+#: Largest entry of a hub inertia tensor, kg m^2, and largest hub mass, kg: beyond them the
+#: mass matrix's products leave the floating-point range.
+MAX_HUB_INERTIA = 1e15
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
 
@@ -82,6 +85,9 @@ class SpatialHub(KeywordOnly):
 
     def __post_init__(self):
         inertia = np.array(check_array("hub", "inertia", self.inertia, shape=(3, 3)))
+        if np.max(np.abs(inertia)) > MAX_HUB_INERTIA:
+            raise InputValueError(f"hub.inertia entries must be at most {MAX_HUB_INERTIA:g} "
+                                  f"kg m^2 in magnitude; got {inertia.tolist()}")
         scale = max(float(np.max(np.abs(inertia))), 1e-300)
         if np.max(np.abs(inertia - inertia.T)) > 1e-9 * scale:
             raise InputValueError(f"hub.inertia must be symmetric; got {inertia.tolist()}")
@@ -99,7 +105,7 @@ class SpatialHub(KeywordOnly):
         object.__setattr__(self, "inertia", inertia)
         for name in ("radius", "mass"):
             object.__setattr__(self, name, check_real("hub", name, getattr(self, name),
-                                                      minimum=0.0))
+                                                      minimum=0.0, maximum=MAX_HUB_INERTIA))
         if not isinstance(self.support, str) or self.support not in SUPPORTS:
             raise (InputValueError if isinstance(self.support, str) else InputTypeError)(
                 f"hub.support must be one of {', '.join(SUPPORTS)}; got {self.support!r}")
@@ -326,6 +332,17 @@ class SpatialStructure(KeywordOnly):
                 raise InputValueError(f"structure.appendages[{k}].name must be unique; "
                                       f"{name!r} is already taken")
         object.__setattr__(self, "appendages", appendages)
+        for k, a in enumerate(appendages):
+            root = a.root_point(self.hub)
+            largest = float(np.max(np.abs(root)))
+            distance = largest * float(np.linalg.norm(root / largest)) if largest > 0 else 0.0
+            if distance > RADIUS_RATIO_LIMIT * a.length:
+                where = f"appendages[{k}].root" if a.root is not None else "hub.radius"
+                raise InputValueError(
+                    f"{where} must put the root at most {RADIUS_RATIO_LIMIT:g} times "
+                    f"appendages[{k}].length = {a.length:g} m from the centre: beyond it the mass "
+                    f"matrix is too ill conditioned to keep the model's accuracy; got "
+                    f"{distance:g} m")
         if self.hub.free and self.total_mass <= 0:
             raise InputValueError("a free hub needs mass: hub.mass plus the appendages' must "
                                   "be > 0")

@@ -38,6 +38,11 @@ __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
 
 #: Largest ``| |q| - 1 |`` accepted over a run.
 MAX_QUATERNION_DRIFT = 1e-6
+#: Largest initial hub rate, rad/s: a run's steps follow the turn, and faster ones take hours.
+MAX_SPIN = 1e3
+#: Most steps of one integration from breakpoint to breakpoint (CVODES's budget): a run that
+#: needs more ends "failed" and says so rather than running for hours.
+MAX_STEPS = 2_000_000
 #: Default relative tolerance.
 DEFAULT_RTOL = 1e-8
 #: A line through more samples than this runs in one integration with bounded steps.
@@ -238,8 +243,8 @@ def initial_state(equations: SpatialEquations, angular_velocity=(0.0, 0.0, 0.0),
     norm = float(np.linalg.norm(q))
     if not norm > 0:
         raise InputValueError("initial.quaternion must be non-zero")
-    if np.max(np.abs(w)) > 1e6:
-        raise InputValueError(f"initial.angular_velocity must be at most 1e6 rad/s in "
+    if np.max(np.abs(w)) > MAX_SPIN:
+        raise InputValueError(f"initial.angular_velocity must be at most {MAX_SPIN:g} rad/s in "
                               f"magnitude; got {w.tolist()}")
     x = np.zeros(layout.n_states)
     x[0:4] = q / norm
@@ -338,6 +343,14 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
         x_start = initial_state(equations, angular_velocity, quaternion)
     else:
         x_start = np.array(check_array("", "x0", x0, shape=(equations.layout.n_states,)))
+        norm = float(np.linalg.norm(x_start[0:4]))
+        if not 1e-6 < norm < 1e6:
+            raise InputValueError(f"x0[0:4] is the attitude quaternion and must be non-zero "
+                                  f"(it is normalised); got {x_start[0:4].tolist()}")
+        x_start[0:4] /= norm
+        if np.max(np.abs(x_start[4:])) > 1e12:
+            raise InputValueError("x0 entries must be at most 1e12 in magnitude (m, rad, "
+                                  "m/s, rad/s)")
     drive, breakpoints = _torque_function(torque)
     times = np.unique(np.concatenate([np.arange(0.0, t_final, step), [t_final]]))
     start = time.perf_counter()
@@ -443,7 +456,7 @@ class _Segments:
 
     def _options(self) -> dict:
         return {"linear_multistep_method": "adams", "nonlinear_solver_iteration": "functional",
-                "abstol": self.atol, "reltol": self.rtol, "max_num_steps": 10 ** 7}
+                "abstol": self.atol, "reltol": self.rtol, "max_num_steps": MAX_STEPS}
 
     def advance(self, a: float, b: float, x, wanted) -> np.ndarray:
         """The states at ``wanted`` (s, ascending, ending at ``b``), from ``x`` at ``a``."""
