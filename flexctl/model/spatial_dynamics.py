@@ -41,10 +41,11 @@ from functools import lru_cache
 
 import numpy as np
 
-from .spatial_structure import SpatialAppendage, SpatialStructure
+from .spatial_rod import Rod, elastic_matrices, rod_rule, skew
+from .spatial_structure import SpatialStructure
 
-__all__ = ["SpatialLayout", "SpatialEquations", "spatial_equations", "rod_shapes",
-           "QUATERNION_GAIN", "FAMILIES", "skew"]
+__all__ = ["SpatialLayout", "SpatialEquations", "spatial_equations",
+           "QUATERNION_GAIN", "FAMILIES"]
 
 #: Rate at which the quaternion's norm returns to 1, 1/s (zero effect on a unit quaternion).
 QUATERNION_GAIN = 1.0
@@ -137,246 +138,6 @@ class SpatialLayout:
         return x[0:4], position, eta, w, v, x[c:c + self.n_elastic]
 
 
-def skew(a):
-    """``[a]x``, the cross-product matrix of a 3-vector (CasADi).
-
-    Parameters
-    ----------
-    a : casadi.SX, shape (3, 1)
-
-    Returns
-    -------
-    casadi.SX, shape (3, 3)
-    """
-    import casadi as ca
-
-    return ca.vertcat(ca.horzcat(0, -a[2], a[1]), ca.horzcat(a[2], 0, -a[0]),
-                      ca.horzcat(-a[1], a[0], 0))
-
-
-def _vee(m):
-    """The vector of the skew part of a 3 x 3 matrix."""
-    import casadi as ca
-
-    return 0.5 * ca.vertcat(m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1])
-
-
-def _exp(omega):
-    """Rodrigues' rotation ``exp([omega]x)``, regular at ``omega = 0`` (a Taylor form below
-    ``|omega| = 1e-4``, where the closed form loses digits)."""
-    import casadi as ca
-
-    t2 = ca.dot(omega, omega)
-    small = t2 < 1e-8
-    # the closed form evaluated away from 0 where the Taylor form is taken: both branches of
-    # an if_else and their derivatives are computed, and 0 * NaN would leak into the sum
-    t = ca.sqrt(ca.if_else(small, 1.0, t2))
-    a = ca.if_else(small, 1 - t2 / 6 + t2 * t2 / 120, ca.sin(t) / t)
-    half = 0.5 * t
-    b = ca.if_else(small, 0.5 - t2 / 24 + t2 * t2 / 720,
-                   0.5 * (ca.sin(half) / half) ** 2)
-    k = skew(omega)
-    return ca.SX.eye(3) + a * k + b * ca.mtimes(k, k)
-
-
-def _right_jacobian(omega):
-    """``T(omega)`` with ``exp([omega]x)^-1 d exp([omega]x) = [T(omega) d omega]x``:
-    ``I - b [omega]x + c [omega]x^2``, ``b = (1 - cos t) / t^2``, ``c = (t - sin t) / t^3``
-    (Taylor forms below ``|omega| = 1e-4``)."""
-    import casadi as ca
-
-    t2 = ca.dot(omega, omega)
-    small = t2 < 1e-8
-    t = ca.sqrt(ca.if_else(small, 1.0, t2))
-    half = 0.5 * t
-    b = ca.if_else(small, 0.5 - t2 / 24 + t2 * t2 / 720, 0.5 * (ca.sin(half) / half) ** 2)
-    c = ca.if_else(small, 1.0 / 6 - t2 / 120 + t2 * t2 / 5040, (t - ca.sin(t)) / (t * t2))
-    k = skew(omega)
-    return ca.SX.eye(3) - b * k + c * ca.mtimes(k, k)
-
-
-@lru_cache(maxsize=1)
-def _right_jacobian_and_rate():
-    """``(omega, omega_t) -> (T(omega), dT/dt)`` as an SX function (its calls on SX
-    arguments are written out inline)."""
-    import casadi as ca
-
-    omega, omega_t = ca.SX.sym("omega", 3), ca.SX.sym("omega_t", 3)
-    right = _right_jacobian(omega)
-    return ca.Function("right_jacobian", [omega, omega_t],
-                       [right, ca.jtimes(right, omega, omega_t)])
-
-
-@lru_cache(maxsize=64)
-def rod_shapes(length: float, n_modes: int, nodes: tuple) -> dict:
-    """The three fields' shapes at ``nodes`` (m, ascending, the root ``0`` first).
-
-    Parameters
-    ----------
-    length : float
-        Rod length, m.
-    n_modes : int
-        Modes per field.
-    nodes : tuple of float
-        Arc lengths, m.
-
-    Returns
-    -------
-    dict
-        ``slope`` and ``curvature`` (P, N): ``phi_i'`` and ``phi_i''`` of the cantilever modes
-        (1/m, 1/m^2); ``twist`` and ``twist_rate`` (P, N): ``chi_k`` and ``chi_k'`` (1, 1/m).
-    """
-    from .modes import mode_shapes
-
-    s = np.asarray(nodes, dtype=float)
-    xi = np.clip(s / length, 0.0, 1.0)
-    beta = (2 * np.arange(1, n_modes + 1) - 1) * np.pi / (2 * length)
-    return {"slope": mode_shapes(n_modes, xi, derivative=1, length=length).T,
-            "curvature": mode_shapes(n_modes, xi, derivative=2, length=length).T,
-            "twist": np.sqrt(2.0) * np.sin(np.outer(s, beta)),
-            "twist_rate": np.sqrt(2.0) * np.cos(np.outer(s, beta)) * beta}
-
-
-@dataclass(frozen=True, eq=False)
-class _Rod:
-    """One appendage's exact kinematics on its quadrature: node rotations, positions."""
-
-    appendage: SpatialAppendage
-    rule: object
-    n_modes: int
-    root: np.ndarray
-
-    def chain(self, eta, eta_t):
-        """The section rotations ``R_j`` (relative to the root frame) at every node, with
-        their variations in the body form ``R_j^-1 dR_j / deta_a = [delta_j,a]x``: the
-        recursion ``delta_j = E_j^T delta_(j-1) + T(Omega_j) dOmega_j / deta`` of the product
-        ``R_j = R_(j-1) E_j``, ``E_j = exp([Omega_j]x)`` (CasADi).
-
-        Returns
-        -------
-        tuple
-            ``(rotations, deltas, rates, accelerations)``: lists of 3 x 3, 3 x N and
-            3-vectors: ``d_j = delta_j eta_t`` and its rate at ``u_t = 0``.
-        """
-        import casadi as ca
-
-        rule, a, n_modes = self.rule, self.appendage, self.n_modes
-        qn, ql, qt = eta[0:n_modes], eta[n_modes:2 * n_modes], eta[2 * n_modes:]
-        nodes = (0.0, *map(float, rule.nodes))
-        shapes = rod_shapes(a.length, n_modes, nodes)
-        # the integrated curvature (exact) and the curvature at every node, root first
-        angle = ca.horzcat(ca.mtimes(ca.DM(shapes["twist"]), qt),
-                           -ca.mtimes(ca.DM(shapes["slope"]), qn),
-                           ca.mtimes(ca.DM(shapes["slope"]), ql)).T        # (3, n + 1)
-        curvature = ca.horzcat(ca.mtimes(ca.DM(shapes["twist_rate"]), qt),
-                               -ca.mtimes(ca.DM(shapes["curvature"]), qn),
-                               ca.mtimes(ca.DM(shapes["curvature"]), ql)).T
-        # the same fields at the rates: the curvature's rate, for the steps' rates
-        angle_t = ca.horzcat(ca.mtimes(ca.DM(shapes["twist"]), eta_t[2 * n_modes:]),
-                             -ca.mtimes(ca.DM(shapes["slope"]), eta_t[0:n_modes]),
-                             ca.mtimes(ca.DM(shapes["slope"]), eta_t[n_modes:2 * n_modes])).T
-        curvature_t = ca.horzcat(
-            ca.mtimes(ca.DM(shapes["twist_rate"]), eta_t[2 * n_modes:]),
-            -ca.mtimes(ca.DM(shapes["curvature"]), eta_t[0:n_modes]),
-            ca.mtimes(ca.DM(shapes["curvature"]), eta_t[n_modes:2 * n_modes])).T
-        rotation = ca.SX.eye(3)
-        delta = ca.SX.zeros(3, eta.shape[0])
-        rate, accel = ca.SX.zeros(3, 1), ca.SX.zeros(3, 1)
-        rotations, deltas, rates, accels = [], [], [], []
-        for j in range(1, len(nodes)):
-            h2 = (nodes[j] - nodes[j - 1]) ** 2 / 12.0
-            step = angle[:, j] - angle[:, j - 1] + h2 * ca.cross(curvature[:, j - 1],
-                                                                  curvature[:, j])
-            step_t = angle_t[:, j] - angle_t[:, j - 1] + h2 * (
-                ca.cross(curvature_t[:, j - 1], curvature[:, j])
-                + ca.cross(curvature[:, j - 1], curvature_t[:, j]))
-            step_tt = 2 * h2 * ca.cross(curvature_t[:, j - 1], curvature_t[:, j])
-            factor = _exp(step)
-            right, right_t = _right_jacobian_and_rate()(step, step_t)
-            turn = ca.mtimes(right, step_t)                # E^-1 E_t = [turn]x
-            rotation = ca.mtimes(rotation, factor)
-            delta = ca.mtimes(factor.T, delta) + ca.mtimes(right, ca.jacobian(step, eta))
-            # d_j = E^T d_(j-1) + T step_t and its rate at u_t = 0 (E_t^T = -[turn]x E^T)
-            carried = ca.mtimes(factor.T, rate)
-            accel = -ca.cross(turn, carried) + ca.mtimes(factor.T, accel) \
-                + ca.mtimes(right_t, step_t) + ca.mtimes(right, step_tt)
-            rate = carried + turn
-            rotations.append(rotation)
-            deltas.append(delta)
-            rates.append(rate)
-            accels.append(accel)
-        return rotations, deltas, rates, accels
-
-    def integrate(self, values):
-        """The integrals from the root to every node and then every point mass of ``values``
-        (n, c) at the nodes, (n + K, c): the Gauss-Legendre panels' cumulative form, within
-        the panel and over the whole panels before (sparse: a third of the dense product's
-        operations on 2 panels)."""
-        import casadi as ca
-
-        rule = self.rule
-        local, before = rule.local, rule.before
-        if self.appendage.masses:
-            at_local, at_before = rule.at([m.position for m in self.appendage.masses])
-            local, before = np.vstack([local, at_local]), np.vstack([before, at_before])
-        sums = ca.mtimes(ca.sparsify(ca.DM(rule.panel_sums)), values)
-        return ca.mtimes(ca.sparsify(ca.DM(local)), values) \
-            + ca.mtimes(ca.sparsify(ca.DM(before)), sums)
-
-    def motion(self, eta, eta_t) -> dict:
-        """Positions and their derivatives of every node and point mass, and the sections'
-        rotations with theirs, for the appendage's modal coordinates ``eta`` ``[qn; ql; qt]``
-        and rates ``eta_t`` (CasADi).
-
-        With ``R^-1 dR = [delta]x``: the tangent ``R e1`` varies by ``R (delta x e1)``, its
-        rate is ``R (d x e1)`` with ``d = delta eta_t``, its acceleration at ``u_t = 0``
-        ``R (d x (d x e1) + d_t x e1)``; the section's angular velocity relative to the root
-        frame is ``R d`` and its rate ``R d_t`` (``d_t``: the rate of ``d`` at ``u_t = 0``,
-        one forward sweep).
-
-        Returns
-        -------
-        dict
-            ``points`` (3, M): positions in the hub frame (the nodes, then the point masses);
-            ``jac`` (list of 3 (M, N)): each component's Jacobian in ``eta``; ``rel`` and
-            ``conv`` (3, M): ``P eta_t`` and ``(P_t) eta_t``; ``tangents`` (3, n);
-            ``spin_jac`` (list of n (3, N)), ``spin`` and ``spin_rate`` (3, n): the sections'
-            angular velocity relative to the hub, its coefficients and rate, all in the hub
-            frame; ``tip`` (3,).
-        """
-        import casadi as ca
-
-        rotations, deltas, rates, accelerations = self.chain(eta, eta_t)
-        frame = ca.DM(self.appendage.frame)
-        tangent, tangent_jac, tangent_rate, tangent_accel = [], [], [], []
-        spin_jac, spin, spin_rate = [], [], []
-        for j, (r, delta, d) in enumerate(zip(rotations, deltas, rates)):
-            d_t = accelerations[j]
-            hub_r = ca.mtimes(frame, r)                                  # section in hub frame
-            tangent.append(hub_r[:, 0])
-            # delta x e1 = (0, delta_3, -delta_2)
-            tangent_jac.append(ca.mtimes(hub_r[:, 1], delta[2, :])
-                               - ca.mtimes(hub_r[:, 2], delta[1, :]))     # (3, N)
-            tangent_rate.append(hub_r[:, 1] * d[2] - hub_r[:, 2] * d[1])
-            local = ca.cross(d, ca.vertcat(0, d[2], -d[1])) + ca.vertcat(0, d_t[2], -d_t[1])
-            tangent_accel.append(ca.mtimes(hub_r, local))
-            spin_jac.append(ca.mtimes(hub_r, delta))
-            spin.append(ca.mtimes(hub_r, d))
-            spin_rate.append(ca.mtimes(hub_r, d_t))
-        tangents = ca.horzcat(*tangent)                                  # (3, n)
-        root = ca.DM(self.root)
-        points = self.integrate(tangents.T).T
-        points = points + ca.repmat(root, 1, points.shape[1])
-        jac = [self.integrate(ca.vertcat(*[t[c, :] for t in tangent_jac])) for c in range(3)]
-        rel = self.integrate(ca.horzcat(*tangent_rate).T).T
-        conv = self.integrate(ca.horzcat(*tangent_accel).T).T
-        weights = ca.DM(self.rule.weights)
-        tip = root + ca.mtimes(tangents, weights)
-        return {"points": points, "jac": jac, "rel": rel, "conv": conv,
-                "tangents": tangents, "spin_jac": spin_jac, "spin": ca.horzcat(*spin),
-                "spin_rate": ca.horzcat(*spin_rate), "tip": tip}
-
-
 @dataclass(frozen=True, eq=False)
 class SpatialEquations:
     """The spatial model's CasADi functions.
@@ -405,47 +166,6 @@ class SpatialEquations:
     energy: object
     momentum: object
     mass_matrix: object
-
-
-def _rule(appendage: SpatialAppendage, hub, n_modes: int):
-    """The planar exact model's quadrature for the rod bending along its softer plane."""
-    from .exact import PanelRule, choose_rule
-    from .matrices import assemble
-    from .parameters import Hub, HubBeam
-
-    # the softer plane, about its bending axis (e2 for bending along the normal, e3 for the
-    # lateral): a planar structure's rod gets exactly the planar model's rule
-    beam, axis = min(((appendage.beam_normal, appendage.lateral),
-                      (appendage.beam_lateral, appendage.normal)),
-                     key=lambda pair: pair[0].bending_stiffness)
-    system = HubBeam(hub=Hub(inertia=float(axis @ hub.inertia @ axis),
-                             radius=float(np.linalg.norm(appendage.root_point(hub)))),
-                     beam=beam, masses=appendage.masses)
-    rule = choose_rule(system, assemble(system, n_modes))
-    return PanelRule.build(rule.panels, appendage.length, rule.points)
-
-
-def _elastic(appendage: SpatialAppendage, n_modes: int) -> tuple:
-    """``(K, C)`` of one appendage's ``[qn; ql; qt]`` (3N, 3N): bending stiffness and modal
-    damping of each plane as the planar model's (masses included), torsion's on the
-    clamped-free shapes."""
-    from .matrices import assemble
-    from .parameters import Hub, HubBeam
-
-    hub = Hub(inertia=1.0, radius=0.0)
-    blocks_k, blocks_c = [], []
-    for beam in (appendage.beam_normal, appendage.beam_lateral):
-        m = assemble(HubBeam(hub=hub, beam=beam, masses=appendage.masses), n_modes)
-        blocks_k.append(m.K_ff)
-        blocks_c.append(m.C_ff)
-    k = np.arange(1, n_modes + 1)
-    beta = (2 * k - 1) * np.pi / (2 * appendage.length)
-    blocks_k.append(np.diag(appendage.torsional_stiffness * beta ** 2 * appendage.length))
-    omega_t = np.array([appendage.torsion_frequency(int(i)) for i in k])
-    blocks_c.append(np.diag(2 * appendage.damping_ratio * omega_t * appendage.polar_density
-                            * appendage.length))
-    from scipy.linalg import block_diag
-    return block_diag(*blocks_k), block_diag(*blocks_c)
 
 
 def spatial_equations(structure: SpatialStructure, n_modes: int) -> SpatialEquations:
@@ -496,7 +216,7 @@ def _built(structure: SpatialStructure, n_modes: int) -> SpatialEquations:
     moment = ca.SX.zeros(3, 1)
     angular = ca.mtimes(ca.DM(hub.inertia), w)
     for k, appendage in enumerate(structure.appendages):
-        rod = _Rod(appendage, _rule(appendage, hub, n_modes), n_modes, appendage.root_point(hub))
+        rod = Rod(appendage, rod_rule(appendage, hub, n_modes), n_modes, appendage.root_point(hub))
         block = slice(3 * k * n_modes, 3 * (k + 1) * n_modes)
         motion = rod.motion(eta[block], eta_t[block])
         tips.append(motion["tip"] - ca.DM(rod.root + appendage.length * appendage.direction))
@@ -513,7 +233,7 @@ def _built(structure: SpatialStructure, n_modes: int) -> SpatialEquations:
         mass, bias = _place(mass, bias, polar[0], polar[1],
                             [0, 1, 2] + list(range(e + block.start, e + block.stop)))
         angular += polar[2]
-        stiffness, damping = _elastic(appendage, n_modes)
+        stiffness, damping = elastic_matrices(appendage, n_modes)
         local, local_t = eta[block], eta_t[block]
         forces[e + block.start:e + block.stop] -= ca.mtimes(ca.DM(stiffness), local) \
             + ca.mtimes(ca.DM(damping), local_t)

@@ -170,8 +170,8 @@ def test_clamped_frequencies_are_the_planar_ones_and_torsion_closed_form(masses)
     x = np.zeros(equations.layout.n_states)
     x[0] = 1.0
     mass = equations.mass_matrix(x).full()[3:, 3:]
-    from flexctl.model.spatial_dynamics import _elastic
-    stiffness = _elastic(rod, n_modes)[0]
+    from flexctl.model.spatial_rod import elastic_matrices
+    stiffness = elastic_matrices(rod, n_modes)[0]
     for family, beam in (("qn", rod.beam_normal), ("ql", rod.beam_lateral)):
         block = equations.layout.modal(0, family)
         omega = np.sqrt(np.sort(np.linalg.eigvals(np.linalg.solve(
