@@ -17,7 +17,7 @@ from pathlib import Path
 
 from controllers.spec import SceneError
 
-__all__ = ["construct", "parameter_doc", "read_table_file"]
+__all__ = ["construct", "parameter_doc", "read_table_file", "table_of"]
 
 
 def construct(cls, key: str, kwargs: dict, rename: str | None = None):
@@ -133,3 +133,30 @@ def read_table_file(file, base_dir, columns: tuple, max_bytes: int) -> tuple:
                          f"{(lines[0] if lines else '')[:80]!r}")
     return where, [(number, line) for number, line in enumerate(lines[1:], start=2)
                    if line.strip()]
+
+
+def table_of(data: dict, name: str, required: bool = True) -> dict:
+    """The scene's table ``name`` (``{}`` when absent and not ``required``).
+
+    Parameters
+    ----------
+    data : dict
+        The scene's tables.
+    name : str
+        The table's key.
+    required : bool, optional
+        Refuse a scene without it. Default True.
+
+    Raises
+    ------
+    SceneError
+        For a missing required table, or a key that is not a table.
+    """
+    table = data.get(name)
+    if table is None:
+        if required:
+            raise SceneError(f"scene is missing the [{name}] table")
+        return {}
+    if not isinstance(table, dict):
+        raise SceneError(f"scene key {name!r} must be a table; got {type(table).__name__}")
+    return table

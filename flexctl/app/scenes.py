@@ -111,6 +111,7 @@ from ..sim.validity import VariantChoice, assess_run, choose_variant
 from .scene_hardware import parse_actuator, parse_sensors
 from .scene_tables import construct as _construct
 from .scene_tables import read_table_file
+from .scene_tables import table_of as _table
 
 __all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene",
            "parse_scene",
@@ -531,17 +532,6 @@ def _spread_modes(data: dict, parts: list) -> None:
     names = [a.get("name") if isinstance(a, dict) else None for a in appendages]
     if names and all(isinstance(n, str) for n in names):
         data["model"] = {**model, "modes": dict.fromkeys(names, modes)}
-
-
-def _table(data: dict, name: str, required: bool = True) -> dict:
-    table = data.get(name)
-    if table is None:
-        if required:
-            raise SceneError(f"scene is missing the [{name}] table")
-        return {}
-    if not isinstance(table, dict):
-        raise SceneError(f"scene key {name!r} must be a table; got {type(table).__name__}")
-    return table
 
 
 def parse_scene(data: dict, name: str = "scene", base_dir=None) -> Scene:

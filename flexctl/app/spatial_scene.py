@@ -37,6 +37,7 @@ from ..model.parameters import PointMass
 from ..model.spatial_structure import SpatialAppendage, SpatialHub, SpatialStructure
 from ..sim.spatial_run import DEFAULT_RTOL, VectorTorque
 from .scene_tables import construct, read_table_file
+from .scene_tables import table_of as _table
 
 __all__ = ["SpatialScene", "SpatialSine", "is_spatial", "parse_spatial_scene",
            "SPATIAL_TORQUE_COLUMNS", "MAX_SPATIAL_MODES"]
@@ -173,17 +174,6 @@ def is_spatial(data: dict) -> bool:
     """
     hub = data.get("hub")
     return isinstance(hub, dict) and isinstance(hub.get("inertia"), (list, tuple))
-
-
-def _table(data: dict, name: str, required: bool = True) -> dict:
-    if name not in data:
-        if required:
-            raise SceneError(f"scene is missing the [{name}] table")
-        return {}
-    table = data[name]
-    if not isinstance(table, dict):
-        raise SceneError(f"{name} must be a table; got {type(table).__name__}")
-    return table
 
 
 def _check_keys(where: str, table: dict, allowed) -> None:
