@@ -110,6 +110,9 @@ def test_a_spatial_scene_runs_and_writes_the_named_columns(tmp_path, support, ca
             assert np.max(np.abs(column[f"{name}.tip_{c}"])) > 0, (name, c)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "ok" and summary["spatial"] is True
+    assert summary["peak_tip_deflection"] == pytest.approx(max(
+        np.max(np.abs(column[f"{a}.tip_{c}"])) for a in ("wing_a", "boom")
+        for c in ("dx", "dy", "dz")), rel=1e-9)
     assert summary["integration_error"] < 1e-4
     # the run's summary is a scene that runs again, to the same numbers
     again = tmp_path / "again"
