@@ -17,7 +17,7 @@ from pathlib import Path
 
 from controllers.spec import SceneError
 
-__all__ = ["construct", "parameter_doc", "read_table_file", "table_of"]
+__all__ = ["construct", "parameter_doc", "read_table_file", "table_of", "check_table_keys"]
 
 
 def construct(cls, key: str, kwargs: dict, rename: str | None = None):
@@ -160,3 +160,28 @@ def table_of(data: dict, name: str, required: bool = True) -> dict:
     if not isinstance(table, dict):
         raise SceneError(f"scene key {name!r} must be a table; got {type(table).__name__}")
     return table
+
+
+def check_table_keys(where: str, table, allowed) -> None:
+    """Refuse a scene table ``where`` that is not a table or holds a key not in ``allowed``.
+
+    Parameters
+    ----------
+    where : str
+        The table's scene key (``"hub"``, ``"appendages.0"``).
+    table : object
+        The table as read.
+    allowed : collection of str
+        Its keys.
+
+    Raises
+    ------
+    SceneError
+        Naming the unknown key and the allowed ones.
+    """
+    if not isinstance(table, dict):
+        raise SceneError(f"scene key {where!r} must be a table")
+    for sub in table:
+        if sub not in allowed:
+            raise SceneError(f"unknown scene key '{where}.{sub}'; expected one of "
+                             f"{', '.join(sorted(allowed))}")

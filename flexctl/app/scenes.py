@@ -112,6 +112,7 @@ from .scene_hardware import parse_actuator, parse_sensors
 from .scene_tables import construct as _construct
 from .scene_tables import read_table_file
 from .scene_tables import table_of as _table
+from .scene_tables import check_table_keys as _check_table_keys
 
 __all__ = ["Scene", "SceneError", "ModelSpec", "SimulationSpec", "ControllerSpec", "load_scene",
            "parse_scene",
@@ -623,15 +624,6 @@ def _array_of_tables(items, where: str) -> list:
     if not isinstance(items, list):
         raise SceneError(f"scene key {where!r} must be an array of tables [[{where}]]")
     return [(f"{where}.{k}", t) for k, t in enumerate(items)]
-
-
-def _check_table_keys(where: str, table, allowed) -> None:
-    if not isinstance(table, dict):
-        raise SceneError(f"scene key {where!r} must be a table")
-    for sub in table:
-        if sub not in allowed:
-            raise SceneError(f"unknown scene key '{where}.{sub}'; expected one of "
-                             f"{', '.join(sorted(allowed))}")
 
 
 def _system(data: dict) -> HubBeam | Structure:

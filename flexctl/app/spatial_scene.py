@@ -35,19 +35,16 @@ from controllers.spec import SceneError
 from ..model.checks import check_real
 from ..model.parameters import PointMass
 from ..model.spatial_structure import SpatialAppendage, SpatialHub, SpatialStructure
-from ..sim.spatial_run import DEFAULT_RTOL, VectorTorque
-from .scene_tables import construct, read_table_file
+from ..model.spatial_dynamics import MAX_SPATIAL_MODES
+from ..sim.spatial_run import DEFAULT_RTOL, MAX_SPIN, VectorTorque
+from .scene_tables import check_table_keys, construct, read_table_file
 from .scene_tables import table_of as _table
 
 __all__ = ["SpatialScene", "SpatialSine", "is_spatial", "parse_spatial_scene",
-           "SPATIAL_TORQUE_COLUMNS", "MAX_SPATIAL_MODES"]
+           "SPATIAL_TORQUE_COLUMNS"]
 
 #: Header of a spatial torque file.
 SPATIAL_TORQUE_COLUMNS = ("t", "tx", "ty", "tz")
-#: Most modes per field of a spatial scene.
-MAX_SPATIAL_MODES = 12
-#: Largest initial hub rate, rad/s (a run's steps follow the turn: faster ones take hours).
-MAX_SPIN = 1e3
 #: Largest torque file read, bytes.
 MAX_FILE_BYTES = 64 * 2 ** 20
 
@@ -176,13 +173,6 @@ def is_spatial(data: dict) -> bool:
     return isinstance(hub, dict) and isinstance(hub.get("inertia"), (list, tuple))
 
 
-def _check_keys(where: str, table: dict, allowed) -> None:
-    for key in table:
-        if key not in allowed:
-            raise SceneError(f"{where}.{key} is not a key of a spatial scene's [{where}] "
-                             f"table (allowed: {', '.join(sorted(allowed))})")
-
-
 def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> SpatialScene:
     """Validate a spatial scene given as nested dictionaries (the TOML tables).
 
@@ -205,10 +195,13 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
         On an unknown key, a missing table or key, or a bad value; the message names the key.
     """
     data = copy.deepcopy(data)
-    _check_keys("scene", data, _KEYS)
+    for key in data:
+        if key not in _KEYS:
+            raise SceneError(f"unknown scene key {key!r} of a spatial scene; expected one of "
+                             f"{', '.join(sorted(_KEYS))}")
     for key, allowed in _KEYS.items():
         if allowed is not None and key in data:
-            _check_keys(key, _table(data, key), allowed)
+            check_table_keys(key, _table(data, key), allowed)
     hub = construct(SpatialHub, "hub", _table(data, "hub"))
     structure = _structure(hub, data.get("appendages"))
     n_modes = _modes(_table(data, "model", required=False))
@@ -246,7 +239,7 @@ def _structure(hub: SpatialHub, items) -> SpatialStructure:
         where = f"appendages.{k}"
         if not isinstance(table, dict):
             raise SceneError(f"{where} must be a table; got {type(table).__name__}")
-        _check_keys(where, table, _APPENDAGE_KEYS)
+        check_table_keys(where, table, _APPENDAGE_KEYS)
         fields = {key: value for key, value in table.items() if key != "masses"}
         masses = table.get("masses", [])
         if not isinstance(masses, list):
@@ -256,7 +249,7 @@ def _structure(hub: SpatialHub, items) -> SpatialStructure:
         for j, m in enumerate(masses):
             if not isinstance(m, dict):
                 raise SceneError(f"{where}.masses.{j} must be a table")
-            _check_keys(f"{where}.masses.{j}", m, {"mass", "position"})
+            check_table_keys(f"{where}.masses.{j}", m, {"mass", "position"})
             points.append(construct(PointMass, f"{where}.masses.{j}", m))
         fields["masses"] = tuple(points)
         if "name" not in fields:
@@ -305,7 +298,7 @@ def _maneuver(data: dict, base_dir):
     if kind not in _MANEUVER_KEYS:
         raise SceneError(f"maneuver.kind must be one of {', '.join(sorted(_MANEUVER_KEYS))} "
                          f"for a spatial scene; got {kind!r:.80}")
-    _check_keys("maneuver", table, _MANEUVER_KEYS[kind])
+    check_table_keys("maneuver", table, _MANEUVER_KEYS[kind])
     if kind == "none":
         return None
     if kind == "sine_torque":

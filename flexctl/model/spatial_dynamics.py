@@ -41,14 +41,16 @@ from functools import lru_cache
 
 import numpy as np
 
-from .spatial_rod import Rod, elastic_matrices, rod_rule, skew
+from .spatial_rod import Rod, elastic_matrices, rod_rule
 from .spatial_structure import SpatialStructure
 
 __all__ = ["SpatialLayout", "SpatialEquations", "spatial_equations",
-           "QUATERNION_GAIN", "FAMILIES"]
+           "QUATERNION_GAIN", "FAMILIES", "MAX_SPATIAL_MODES"]
 
 #: Rate at which the quaternion's norm returns to 1, 1/s (zero effect on a unit quaternion).
 QUATERNION_GAIN = 1.0
+#: Most modes per field of a spatial model.
+MAX_SPATIAL_MODES = 12
 #: The modal fields of an appendage, in the order of its coordinates.
 FAMILIES = ("qn", "ql", "qt")
 
@@ -184,7 +186,8 @@ def spatial_equations(structure: SpatialStructure, n_modes: int) -> SpatialEquat
     from .checks import check_instance, check_integer
 
     check_instance("spatial_equations", "structure", structure, SpatialStructure)
-    n_modes = check_integer("spatial_equations", "n_modes", n_modes, minimum=1, maximum=12)
+    n_modes = check_integer("spatial_equations", "n_modes", n_modes, minimum=1,
+                            maximum=MAX_SPATIAL_MODES)
     return _built(structure, n_modes)
 
 

@@ -26,7 +26,7 @@ import numpy as np
 from .checks import check_array, check_instance, check_integer
 from .errors import InputValueError
 from .exports import signal_names
-from .spatial_dynamics import spatial_equations
+from .spatial_dynamics import MAX_SPATIAL_MODES, spatial_equations
 from .spatial_structure import SpatialStructure
 
 __all__ = ["linearize_spatial", "nonlinear_spatial", "EQUILIBRIUM_TOLERANCE"]
@@ -75,7 +75,8 @@ def linearize_spatial(structure: SpatialStructure, n_modes: int = 4,
     import control
 
     check_instance("linearize_spatial", "structure", structure, SpatialStructure)
-    n_modes = check_integer("linearize_spatial", "n_modes", n_modes, minimum=1, maximum=12)
+    n_modes = check_integer("linearize_spatial", "n_modes", n_modes, minimum=1,
+                            maximum=MAX_SPATIAL_MODES)
     w0 = np.array(check_array("linearize_spatial", "angular_velocity", angular_velocity,
                               shape=(3,)))
     if np.max(np.abs(w0)) > 1e4:
@@ -170,7 +171,8 @@ def nonlinear_spatial(structure: SpatialStructure, n_modes: int = 4):
     import control
 
     check_instance("nonlinear_spatial", "structure", structure, SpatialStructure)
-    n_modes = check_integer("nonlinear_spatial", "n_modes", n_modes, minimum=1, maximum=12)
+    n_modes = check_integer("nonlinear_spatial", "n_modes", n_modes, minimum=1,
+                            maximum=MAX_SPATIAL_MODES)
     equations = spatial_equations(structure, n_modes)
     layout = equations.layout
     c = layout.n_coordinates

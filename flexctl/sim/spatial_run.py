@@ -25,12 +25,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from ..model.checks import check_array, check_choice, check_integer, check_real
 from ..model.errors import InputTypeError, InputValueError
-from ..model.spatial_dynamics import SpatialEquations, spatial_equations
+from ..model.spatial_dynamics import MAX_SPATIAL_MODES, SpatialEquations, spatial_equations
 from ..model.spatial_structure import SpatialStructure
 
 __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
@@ -193,7 +194,7 @@ class SpatialResult:
         """A free hub's centre in the inertial frame, m, shape (3, P); None when pinned."""
         return self.states[4:7] if self.layout.free else None
 
-    @property
+    @cached_property
     def tips(self) -> dict:
         """Each appendage's tip displacement from where the rigidly moving undeformed tip
         would be, hub frame, m: ``{name: (3, P)}``."""
@@ -327,7 +328,7 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
         raise InputTypeError(f"structure must be a SpatialStructure; got "
                              f"{type(structure).__name__}")
     t_final = check_real("", "t_final", t_final, minimum=0.0, strict=True)
-    n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=12)
+    n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=MAX_SPATIAL_MODES)
     rtol = check_real("", "rtol", rtol, minimum=1e-13, maximum=1e-2)
     atol = rtol * 1e-3 if atol is None else check_real("", "atol", atol, minimum=0.0,
                                                        strict=True)
@@ -382,7 +383,7 @@ def _integrate(equations: SpatialEquations, x0, times, drive, breakpoints, rtol,
     rhs = compiled(equations.rhs, options={"enable_fd": True})
     segment = _Segments(rhs, equations.layout.n_states, drive, rtol, atol)
     t_final = times[-1]
-    if segment.through(breakpoints):    # a line through many samples: one run, bounded steps
+    if segment.through():    # a line through many samples: one run, bounded steps
         breakpoints = np.zeros(0)
     edges = np.unique(np.concatenate([[0.0], breakpoints[(breakpoints > 0)
                                                          & (breakpoints < t_final)], [t_final]]))
@@ -426,16 +427,15 @@ class _Segments:
         self.rtol, self.atol = rtol, atol
         self.integrators: dict = {}
         self.form = getattr(drive, "segment_form", None)
+        self.line = (isinstance(drive, VectorTorque) and drive.interpolation == "linear"
+                     and drive.times.size > THROUGH_SAMPLES)
 
-    def through(self, breakpoints) -> bool:
+    def through(self) -> bool:
         """Whether the torque is a line through more than :data:`THROUGH_SAMPLES` samples: it
         is then integrated in one run, the torque interpolated inside the right-hand side and
         every step bounded by the shortest sample interval (so that no sample is stepped
         over), rather than restarted at every sample (each restart begins again at order 1
         with a tiny step)."""
-        drive = self.drive
-        self.line = (isinstance(drive, VectorTorque) and drive.interpolation == "linear"
-                     and drive.times.size > THROUGH_SAMPLES)
         return self.line
 
     def _line_integrator(self, grid: tuple):
@@ -464,7 +464,7 @@ class _Segments:
             return self._scipy(a, b, x, wanted)
         import casadi as ca
 
-        if getattr(self, "line", False):
+        if self.line:
             grid = tuple(np.asarray(wanted) - a)
             try:
                 return self._line_integrator(grid)(x0=x, p=a)["xf"].full()
