@@ -36,7 +36,7 @@ from ..model.checks import check_real
 from ..model.parameters import PointMass
 from ..model.spatial_structure import SpatialAppendage, SpatialHub, SpatialStructure
 from ..model.spatial_dynamics import MAX_SPATIAL_MODES
-from ..sim.spatial_run import DEFAULT_RTOL, MAX_SPIN, VectorTorque
+from ..sim.spatial_run import DEFAULT_RTOL, MAX_SPIN, MAX_T_FINAL, VectorTorque
 from .scene_tables import check_table_keys, construct, read_table_file
 from .scene_tables import table_of as _table
 
@@ -341,7 +341,7 @@ def _simulation(table: dict) -> tuple:
         raise SceneError("simulation.t_final is required")
     try:
         t_final = check_real("simulation", "t_final", table["t_final"], minimum=0.0,
-                             strict=True, maximum=1e6)
+                             strict=True, maximum=MAX_T_FINAL)
         step = check_real("simulation", "output_step",
                           table.get("output_step", t_final / 1000), minimum=0.0, strict=True)
         rtol = check_real("simulation", "rtol", table.get("rtol", DEFAULT_RTOL),

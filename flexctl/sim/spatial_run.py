@@ -48,6 +48,8 @@ MAX_STEPS = 2_000_000
 DEFAULT_RTOL = 1e-8
 #: A line through more samples than this runs in one integration with bounded steps.
 THROUGH_SAMPLES = 16
+#: Longest run, s (as a scene's ``simulation.t_final``).
+MAX_T_FINAL = 1e6
 #: Most output samples of one run.
 MAX_SAMPLES = 2_000_000
 
@@ -298,7 +300,7 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
     ----------
     structure : SpatialStructure
     t_final : float
-        End time, s (> 0).
+        End time, s (> 0, at most :data:`MAX_T_FINAL`).
     torque : None, array_like (3,), callable or VectorTorque, optional
         Hub torque in the hub frame, N m: none (default), constant, ``torque(t) -> (3,)``, or
         samples.
@@ -327,7 +329,7 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
     if not isinstance(structure, SpatialStructure):
         raise InputTypeError(f"structure must be a SpatialStructure; got "
                              f"{type(structure).__name__}")
-    t_final = check_real("", "t_final", t_final, minimum=0.0, strict=True)
+    t_final = check_real("", "t_final", t_final, minimum=0.0, strict=True, maximum=MAX_T_FINAL)
     n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=MAX_SPATIAL_MODES)
     rtol = check_real("", "rtol", rtol, minimum=1e-13, maximum=1e-2)
     atol = rtol * 1e-3 if atol is None else check_real("", "atol", atol, minimum=0.0,
