@@ -22,17 +22,20 @@
  *                              J (N x N)]
  *          1 y0 (N)           the state at t when the carry is not started
  *          2 t_out (K)        output times, ascending, after t
- *          3 settings (9)     [outputs used, rtol, first step, longest step, step budget,
- *                              t_bound (no step passes it), Newton tolerance, t0, the
- *                              address of the model's compiled right-hand side (BDF_CORE)]
+ *          3 settings (8)     [outputs used, rtol, first step, longest step, step budget,
+ *                              t_bound (no step passes it), Newton tolerance, t0]
  *          4 atol (N)
  *          5 c, 6 F's numbers, 7 J's numbers
  * Outputs: 0 carry (BDF_NC), 1 states (N x K), 2 info (8) [status, outputs done, steps,
  *          evaluations of F, of J, LU factorisations, t reached, rejected steps]
  * Status:  0 every output reached, 1 step budget spent, 2 step too short, 3 a state or
- *          derivative not finite that no shorter step avoids.
+ *          derivative not finite that no shorter step avoids, 5 no model right-hand side
+ *          (a BDF_CORE library called without it).
+ *
+ * Entries: BDF_NAME, CasADi's signature (a drive without BDF_CORE), and BDF_NAME_with_core,
+ * the same call with the model's compiled right-hand side (CasADi's signature) as a function
+ * pointer first; a drive without BDF_CORE takes a null pointer there.
  */
-#include <stdint.h>
 #define BDF_CAT2(a, b) a##b
 #define BDF_CAT(a, b) BDF_CAT2(a, b)
 #ifndef BDF_ADAMS
@@ -57,7 +60,6 @@ static const casadi_int bdf_s_carry[3] = {BDF_NC, 1, 1};
 static const casadi_int bdf_s_n[3] = {BDF_N, 1, 1};
 static const casadi_int bdf_s_k[3] = {BDF_K, 1, 1};
 static const casadi_int bdf_s_8[3] = {8, 1, 1};
-static const casadi_int bdf_s_9[3] = {9, 1, 1};
 static const casadi_int bdf_s_c[3] = {BDF_NCIN, 1, 1};
 static const casadi_int bdf_s_fn[3] = {BDF_NFNUM, 1, 1};
 static const casadi_int bdf_s_jn[3] = {BDF_NJNUM, 1, 1};
@@ -84,6 +86,10 @@ static const casadi_int bdf_s_states[3] = {BDF_N, BDF_K, 1};
 /* own work: 13 vectors of N and the LU factors (N x N) */
 #define BDF_OWN_W (13 * BDF_N + BDF_N * BDF_N)
 
+/* a function of CasADi's signature: the model's compiled right-hand side */
+typedef int (*bdf_core_fn)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *,
+                           int);
+
 typedef struct {
   const casadi_real **arg;
   casadi_real **res;
@@ -92,7 +98,7 @@ typedef struct {
   const casadi_real *c, *fnum, *jnum;
   casadi_real tt;
   double n_f, n_j;
-  int (*core)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int);
+  bdf_core_fn core;
   double *tmp, *size;
   casadi_real pre[BDF_NPRE];
 } bdf_ctx;
@@ -218,14 +224,10 @@ static void bdf_solve(const double *lu, const casadi_int *piv, double *b) {
 /* the evaluation context of a call: CasADi's work arrays past the integrator's own, the
  * numbers, the model's compiled right-hand side (BDF_CORE), the counters at 0 */
 static void bdf_start(bdf_ctx *x, const casadi_real **arg, casadi_real **res, casadi_int *iw,
-                      casadi_real *w) {
+                      casadi_real *w, bdf_core_fn core) {
   x->arg = arg + 8; x->res = res + 3; x->iw = iw + BDF_N; x->w = w + BDF_OWN_W;
   x->c = arg[5]; x->fnum = arg[6]; x->jnum = arg[7]; x->n_f = 0.0; x->n_j = 0.0;
-  x->core = 0;
-#ifdef BDF_CORE
-  x->core = (int (*)(const casadi_real **, casadi_real **, casadi_int *, casadi_real *, int))
-    (uintptr_t) arg[3][8];
-#endif
+  x->core = core;
 }
 
 /* lu <- the LU factors of I - c J (Newton's iteration matrix); 0 when singular */
@@ -307,8 +309,8 @@ static void bdf_dense(const double *d, int order, double h, double t, double to,
   }
 }
 
-CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, casadi_int *iw,
-                                  casadi_real *w, int mem) {
+static int bdf_integrate(const casadi_real **arg, casadi_real **res, casadi_int *iw,
+                         casadi_real *w, bdf_core_fn core) {
   static const double kappa[BDF_MAX + 2] = {0.0, -0.1850, -1.0 / 9.0, -0.0823, -0.0415, 0.0,
                                             0.0};
   double gam[BDF_MAX + 2], alpha[BDF_MAX + 2], errc[BDF_MAX + 2];
@@ -322,7 +324,7 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
   int jac_now = 0;
   int fails = 0;
   bdf_ctx x;
-  bdf_start(&x, arg, res, iw, w);
+  bdf_start(&x, arg, res, iw, w, core);
   yp = w; psi = yp + BDF_N; dd = psi + BDF_N; f = dd + BDF_N; dy = f + BDF_N;
   scale = dy + BDF_N; ynew = scale + BDF_N; err = ynew + BDF_N; lu = err + 2 * BDF_N;
   x.tmp = lu + BDF_N * BDF_N; x.size = x.tmp + 3 * BDF_N;
@@ -585,8 +587,8 @@ static void adams_dense(const double *z, int q, double h, double t, double to, d
     for (i = 0; i < BDF_N; ++i) out[i] = out[i] * s + z[j * BDF_N + i];
 }
 
-CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, casadi_int *iw,
-                                  casadi_real *w, int mem) {
+static int bdf_integrate(const casadi_real **arg, casadi_real **res, casadi_int *iw,
+                         casadi_real *w, bdf_core_fn core) {
   double el[BDF_MAX + 1][BDF_MAX + 2], tesco[BDF_MAX + 2][3];
   const double *set = arg[3], *atol = arg[4], *t_out = arg[2];
   double *carry = res[0], *states = res[1], *info = res[2];
@@ -597,7 +599,7 @@ CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, ca
   int n_out = (int) set[0], done = 0, nq = 1, ialth = 2, i, status = 0, lu_ok = 0, j;
   int jac_now = 0, kflag = 0, ncf = 0;
   bdf_ctx x;
-  bdf_start(&x, arg, res, iw, w);
+  bdf_start(&x, arg, res, iw, w, core);
   y = w; savf = y + BDF_N; acor = savf + BDF_N; dy = acor + BDF_N; ewt = dy + BDF_N;
   lu = ewt + 2 * BDF_N;
   x.tmp = lu + BDF_N * BDF_N; x.size = x.tmp + 3 * BDF_N; ymag = x.size + BDF_N;
@@ -780,6 +782,25 @@ finish:
 }
 #endif
 
+CASADI_SYMBOL_EXPORT int BDF_CAT(BDF_NAME, _with_core)(bdf_core_fn core,
+                                                       const casadi_real **arg,
+                                                       casadi_real **res, casadi_int *iw,
+                                                       casadi_real *w) {
+#ifdef BDF_CORE
+  if (!core) {
+    if (res[2]) res[2][0] = 5.0;
+    return 1;
+  }
+#endif
+  return bdf_integrate(arg, res, iw, w, core);
+}
+
+CASADI_SYMBOL_EXPORT int BDF_NAME(const casadi_real **arg, casadi_real **res, casadi_int *iw,
+                                  casadi_real *w, int mem) {
+  (void) mem;
+  return BDF_CAT(BDF_NAME, _with_core)(0, arg, res, iw, w);
+}
+
 CASADI_SYMBOL_EXPORT casadi_int BDF_CAT(BDF_NAME, _n_in)(void) { return 8; }
 CASADI_SYMBOL_EXPORT casadi_int BDF_CAT(BDF_NAME, _n_out)(void) { return 3; }
 
@@ -788,7 +809,7 @@ CASADI_SYMBOL_EXPORT const casadi_int *BDF_CAT(BDF_NAME, _sparsity_in)(casadi_in
     case 0: return bdf_s_carry;
     case 1: return bdf_s_n;
     case 2: return bdf_s_k;
-    case 3: return bdf_s_9;
+    case 3: return bdf_s_8;
     case 4: return bdf_s_n;
     case 5: return bdf_s_c;
     case 6: return bdf_s_fn;

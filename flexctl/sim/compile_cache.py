@@ -435,19 +435,33 @@ def _try_load(name: str, library: Path, options: dict | None = None):
     return function
 
 
-def entry_point(function):
-    """``(address, keep)`` of a function loaded from the cache (:func:`compiled`): the
-    address of its C entry point (CasADi's signature ``int f(const double **arg, double
-    **res, casadi_int *iw, double *w, int mem)``) and an object to keep alive as long as
-    the address is used; None for a function not loaded from the cache."""
+def entry_point(function, symbol: str | None = None):
+    """``(address, keep)`` of a C function in the library of a function loaded from the cache
+    (:func:`compiled`, :func:`compiled_source`), or None for a function not loaded from it.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        A function this module loaded.
+    symbol : str, optional
+        The C name; default the function's own entry point (CasADi's signature ``int
+        f(const double **arg, double **res, casadi_int *iw, double *w, int mem)``).
+
+    Returns
+    -------
+    tuple or None
+        ``(address, keep)``: the address (an int) and an object to keep alive as long as the
+        address is used (the library, as CasADi has it open: the same copy).
+    """
     import ctypes
 
     origin = _ORIGIN.get(id(function))
     if origin is None or origin[0] is not function:
         return None
-    try:                # the library CasADi has open: the same copy
+    try:
         library = ctypes.CDLL(str(origin[1]))
-        return ctypes.cast(getattr(library, origin[2]), ctypes.c_void_p).value, library
+        return (ctypes.cast(getattr(library, symbol or origin[2]), ctypes.c_void_p).value,
+                library)
     except (OSError, AttributeError):
         return None
 

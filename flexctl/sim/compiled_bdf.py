@@ -29,8 +29,8 @@ rtol 1e-8, 6 s: 4 394 steps against 7 120), at one evaluation a step too.
   inputs' form, kept in the persistent cache (:func:`~flexctl.sim.compile_cache.compiled_source`).
   The exact model's right-hand side is not in it: the library holds the drive's own part
   (torque and controller, or the hub's motion) and calls the model's compiled right-hand side,
-  one library per structure shared with CVODES's, through its address
-  (:func:`~flexctl.sim.compile_cache.entry_point`). Its libraries are then some 40 kB of C,
+  one library per structure shared with CVODES's, whose entry point is handed to the
+  integrator's as a C function pointer (:func:`~flexctl.sim.compile_cache.entry_point`). Its libraries are then some 40 kB of C,
   compiled in a fraction of a second, where one holding the model took 400 to 800 kB and 2 to
   4 s for each controller.
 - **Calls.** One call integrates onto at most :data:`OUTPUTS` output times and hands back
@@ -48,6 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .buffers import InPlace
 from .compiled import cached_build, input_key, input_numbers, is_symbolic
 from .compile_cache import compiled_source, compiling_enabled, compiler
 from .lifted_constants import lift_constants
@@ -71,7 +72,7 @@ CALL_STEPS = 2000
 NEWTON_TOLERANCE = 0.03
 #: What the library's status codes mean.
 STATUS = {1: "step budget spent", 2: "step too short", 3: "state or derivative not finite",
-          4: "output count out of range"}
+          4: "output count out of range", 5: "no model right-hand side"}
 _TEMPLATE = Path(__file__).with_name("bdf.c")
 #: The families of formulas the template holds, by the name a run gives them.
 FAMILIES = {"bdf": "BDF", "adams": "Adams"}
@@ -95,7 +96,7 @@ def _functions(model, inputs, n_numbers: int) -> dict | None:
     drive = drive_symbols(model, torque, hub_motion, controller, n_numbers)
     ny, c = drive["ny"], drive["c"]
     ts, ys = ca.SX.sym("t"), ca.SX.sym("y", ny)
-    out = {"defines": {}, "address": 0.0, "keep": None}
+    out = {"defines": {}, "address": None, "keep": None}
     if drive["sym"] is ca.SX:
         rate = ca.Function("flexctl_bdf_rate", [ts, ys, c], [drive["f"](ts, ys)])
         lifted = lift_constants(rate, MAX_INSTRUCTIONS)
@@ -117,7 +118,7 @@ def _functions(model, inputs, n_numbers: int) -> dict | None:
             u, dz = drive_terms(model, ts, ys, torque, controller, cs)
             own = ca.vertcat(u, *(() if dz is None else (dz,)))
         f_function, f_values = ca.Function("flexctl_bdf_own", [ts, ys, cs], [own]), lifted[1]
-        out.update(address=float(point[0]), keep=(core, point[1]))
+        out.update(address=point[0], keep=(core, point[1]))
         out["defines"] = {"BDF_CORE": 1, "BDF_MOTION": int(hub_motion is not None),
                           "BDF_NX": model.n_states, "BDF_NQ": ny // 2,
                           "BDF_NPRE": own.numel(), "BDF_CORE_ARG": core.sz_arg(),
@@ -207,6 +208,36 @@ def _built(model, inputs, family: str = "bdf"):
                    (model, *inputs), lambda: _library(model, inputs, numbers.size, family))
 
 
+class _Entry(InPlace):
+    """The integrator library's ``flexctl_bdf_with_core`` on the buffers of an
+    :class:`~flexctl.sim.buffers.InPlace` and CasADi's work arrays: the model's compiled
+    right-hand side, where the drive calls one, is passed as a C function pointer (``core``,
+    an address; None: a null pointer). ``evaluate()`` makes the call (without Python's lock,
+    as ctypes calls C); a status other than 0 is in ``results[2]``."""
+
+    def __init__(self, external, core: int | None):
+        import ctypes
+
+        from .compile_cache import entry_point
+
+        super().__init__(external)
+        point = entry_point(external, "flexctl_bdf_with_core")
+        if point is None:
+            raise InputValueError("BdfRun: the integrator's library has no entry "
+                                  "flexctl_bdf_with_core")
+        pointer = ctypes.c_void_p
+        function = ctypes.CFUNCTYPE(ctypes.c_int, pointer, pointer, pointer, pointer,
+                                    pointer)(point[0])
+        iw = np.zeros(external.sz_iw(), dtype=np.int64)    # casadi_int: long long
+        w = np.zeros(external.sz_w())
+        arg = (pointer * external.sz_arg())(*(a.ctypes.data for a in self.args))
+        res = (pointer * external.sz_res())(*(r.ctypes.data for r in self.results))
+        self._keep = (point[1], iw, w, arg, res)
+        call = (core, ctypes.addressof(arg), ctypes.addressof(res), iw.ctypes.data,
+                w.ctypes.data)
+        self.evaluate = lambda: function(*call)
+
+
 class BdfRun(CompiledRun):
     """A continuous run's segments by compiled variable-order BDF or Adams-Moulton steps with
     error control, each segment from order 1 and the step size carried from the segment
@@ -251,11 +282,9 @@ class BdfRun(CompiledRun):
             raise InputValueError("BdfRun: this drive has no compiled integrator (compiling "
                                   "off, no C compiler, the consistent variant, or a drive too "
                                   "large to compile); use CVODES")
-        from .buffers import InPlace
-
         external, pieces = built
-        self._run, self._size = InPlace(external), m
-        self._keep, self._address = pieces["keep"], pieces["address"]
+        self._run, self._size = _Entry(external, pieces["address"]), m
+        self._keep = pieces["keep"]
         numbers = input_numbers(inputs)
         args = self._run.args
         args[4][:] = self.rtol * scale
@@ -281,7 +310,7 @@ class BdfRun(CompiledRun):
             times[:chunk.size] = chunk
             times[chunk.size:] = chunk[-1]
             settings[:] = (chunk.size, self.rtol, self.h, self.max_step,
-                           min(CALL_STEPS, left), end, NEWTON_TOLERANCE, lo, self._address)
+                           min(CALL_STEPS, left), end, NEWTON_TOLERANCE, lo)
             run.evaluate()
             carry[:] = run.results[0]
             info = run.results[2]

@@ -339,3 +339,25 @@ def test_an_unknown_family_is_refused_by_name(exact):
     with pytest.raises(InputError, match="family must be one of.*'rk'"):
         BdfRun(model, TORQUE, scale=state_scale(model, model.layout), rtol=1e-6,
                max_steps=10, h_first=1e-3, family="rk")
+
+
+@pytest.mark.parametrize("family", ["bdf", "adams"])
+def test_the_model_right_hand_side_reaches_c_as_a_function_pointer(exact, family):
+    """The exact model's library calls the model's compiled right-hand side through a C
+    function pointer given with each call: a call without one is refused with its status (5),
+    not a jump to address 0, and the same library then integrates with it."""
+    from flexctl.sim.compiled_bdf import STATUS, _built, _Entry
+
+    model = exact[0]
+    external, pieces = _built(model, (TORQUE, None, None), family)
+    assert isinstance(pieces["address"], int) and pieces["address"] > 0
+    bare = _Entry(external, None)
+    bare.evaluate()
+    assert bare.results[2][0] == 5.0 and STATUS[5] == "no model right-hand side"
+    run = BdfRun(model, TORQUE, scale=np.ones(model.n_states), rtol=1e-8, max_steps=10**5,
+                 h_first=1e-4, family=family)
+    states, evaluations = run(0.0, np.array([0.5, 1.0]), np.zeros(model.n_states))
+    assert evaluations > 0 and np.all(np.isfinite(states))
+    tight = exact[1]
+    expected = [np.interp(1.0, tight.t, row) for row in tight.states]
+    assert np.allclose(states[:, -1], expected, rtol=0, atol=1e-5)
