@@ -41,13 +41,38 @@ import numpy as np
 from .checks import check_integer, check_real
 from .errors import InputValueError
 
-__all__ = ["DiscreteStep", "discretize", "rk4_function", "METHODS", "OMEGA_H"]
+__all__ = ["DiscreteStep", "discretize", "rk4_function", "rk4_step", "METHODS", "OMEGA_H"]
 
 METHODS = ("rk4", "cvodes")
 #: Largest ``omega_max h`` of the default RK4 substeps.
 OMEGA_H = 0.5
 #: Most RK4 substeps (the expression grows with them).
 MAX_SUBSTEPS = 1000
+
+
+def rk4_step(f, t, y, h, end: float = 1.0) -> tuple:
+    """One classical RK4 step of ``y' = f(t, y)`` as expressions: ``(y_next, k1)``, the state
+    after ``h`` and the first stage's derivative (the rate at the step's start).
+
+    Parameters
+    ----------
+    f : callable
+        ``f(t, y)``, the derivative (CasADi or numpy expressions).
+    t : float or casadi.SX or casadi.MX
+        The step's start, s.
+    y : casadi.SX or casadi.MX or ndarray, shape (n,)
+        The state at ``t``.
+    h : float or casadi.SX or casadi.MX
+        The step, s.
+    end : float, optional
+        Where in the step the last stage is evaluated, as a fraction of ``h``: 1 (default), or
+        just below it for a held input seen from the left.
+    """
+    k1 = f(t, y)
+    k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
+    k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
+    k4 = f(t + h * end, y + h * k3)
+    return y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4), k1
 
 
 def rk4_function(f, n: int, substeps: int, symbol=None):
@@ -72,11 +97,7 @@ def rk4_function(f, n: int, substeps: int, symbol=None):
     extra = [symbol.sym("p", f.size1_in(2))] if f.n_in() > 2 else []
     xk, dt = x, h / substeps
     for _ in range(substeps):
-        k1 = f(xk, u, *extra)
-        k2 = f(xk + 0.5 * dt * k1, u, *extra)
-        k3 = f(xk + 0.5 * dt * k2, u, *extra)
-        k4 = f(xk + dt * k3, u, *extra)
-        xk = xk + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        xk = rk4_step(lambda _, state: f(state, u, *extra), 0.0, xk, dt)[0]
     return ca.Function("rk4_hold", [x, u, h, *extra], [xk], ["x", "u", "h"]
                        + ["p"] * len(extra), ["xf"])
 

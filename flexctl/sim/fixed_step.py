@@ -30,6 +30,7 @@ from .compile_cache import compiled
 from .lifted_constants import lift_constants
 from .native_rhs import MAX_INSTRUCTIONS
 from ..model.exports import symbolic_beam_dynamics
+from ..model.discrete import rk4_step
 
 __all__ = ["RK4_OMEGA_H", "RK4_FIRST_OMEGA_H", "RK4_STABILITY", "MAX_HALVINGS", "step_times",
            "FixedStepRun", "integrate_fixed_step"]
@@ -147,11 +148,8 @@ def step_function(model, torque, hub_motion, controller, n_numbers: int, scheme=
     rate = ca.Function("flexctl_rate", [ys, ts, c], [f(ts, ys, None)])
     extra = [] if scheme is None else [sym.sym(name, rows) for name, rows in scheme.inputs]
     if scheme is None:
-        k1 = f(t, y)
-        k2 = f(t + 0.5 * h, y + 0.5 * h * k1)
-        k3 = f(t + 0.5 * h, y + 0.5 * h * k2)
-        k4 = f(t + h * (1.0 - END_INSIDE), y + h * k3)
-        y_next, outputs, name = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4), [k1], "rk4"
+        y_next, k1 = rk4_step(f, t, y, h, end=1.0 - END_INSIDE)
+        outputs, name = [k1], "rk4"
     else:
         y_next, *outputs = scheme(f, t, y, h, extra)
         name = scheme.name
