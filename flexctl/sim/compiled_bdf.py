@@ -57,7 +57,7 @@ from .fixed_step import STEP_CACHE, STEP_CACHE_SIZE, drive_symbols
 from .native_rhs import MAX_DAE_INSTRUCTIONS, MAX_INSTRUCTIONS
 from ..model.errors import InputValueError
 
-__all__ = ["BdfRun", "bdf_available", "OUTPUTS", "CALL_STEPS", "NEWTON_TOLERANCE", "STATUS",
+__all__ = ["BdfRun", "bdf_available", "bdf_possible", "NoCompiledIntegrator", "OUTPUTS", "CALL_STEPS", "NEWTON_TOLERANCE", "STATUS",
            "FAMILIES"]
 
 #: Output times per compiled call (the states handed back after each, for a run's stops).
@@ -175,6 +175,29 @@ def _library(model, inputs, n_numbers: int, family: str = "bdf"):
     return external, pieces
 
 
+class NoCompiledIntegrator(InputValueError):
+    """The drive's compiled integrator cannot be built (compiling off, no C compiler, the
+    consistent variant, or a drive too large to compile)."""
+
+
+def bdf_possible(model, torque=None, hub_motion=None, controller=None) -> bool:
+    """Whether :class:`BdfRun` may integrate this drive, decided without building anything:
+    every input with a CasADi form, compiling on, a C compiler, not the consistent variant.
+    A drive too large to compile is found only when it is built (:class:`BdfRun` then raises
+    :class:`NoCompiledIntegrator`).
+
+    Parameters
+    ----------
+    model : Model
+        The plant.
+    torque, hub_motion, controller : object or None, optional
+        The run's inputs, as :func:`flexctl.simulate` takes them.
+    """
+    return (is_symbolic(torque=torque, hub_motion=hub_motion, controller=controller)
+            and compiling_enabled() and compiler() is not None
+            and not model.variant.quadratic_inertia)
+
+
 def bdf_available(model, torque=None, hub_motion=None, controller=None,
                   family: str = "bdf") -> bool:
     """Whether :class:`BdfRun` can integrate this drive with ``family``: every input with a
@@ -279,7 +302,7 @@ class BdfRun(CompiledRun):
         built = _built(model, inputs, family)
         self.family = family
         if built is None:
-            raise InputValueError("BdfRun: this drive has no compiled integrator (compiling "
+            raise NoCompiledIntegrator("BdfRun: this drive has no compiled integrator (compiling "
                                   "off, no C compiler, the consistent variant, or a drive too "
                                   "large to compile); use CVODES")
         external, pieces = built

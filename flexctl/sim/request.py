@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from numbers import Real
 
 import numpy as np
@@ -524,8 +524,11 @@ class IntegrationPlan:
     stiffness_note : str
         What the stiffness guard did ("" when nothing).
     compiled : bool
-        ``method="BDF"`` runs compiled (:mod:`flexctl.sim.compiled_bdf`), not SciPy's
-        (``"Adams"`` is always compiled).
+        ``method="BDF"`` or ``"Adams"`` runs compiled (:mod:`flexctl.sim.compiled_bdf`), not
+        SciPy's BDF; the plan is made without compiling, and where the library cannot be
+        built when the run starts the run takes ``uncompiled`` instead.
+    uncompiled : str
+        The method without the compiled integrator (the plan's own choice without it).
     """
 
     method: str
@@ -540,6 +543,12 @@ class IntegrationPlan:
     stiffness_note: str
     cvodes_multistep: str = "bdf"
     compiled: bool = False
+    uncompiled: str = "cvodes"
+
+    def without_compiled(self) -> "IntegrationPlan":
+        """The plan with :attr:`uncompiled` in place of a compiled method that cannot be built
+        (CVODES keeps the multistep family chosen)."""
+        return replace(self, method=self.uncompiled, compiled=False)
 
     @property
     def fallback(self) -> str:
@@ -803,24 +812,25 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
     fastest = max(omega_plant, loop, request.spin_frequency)
     # a Jacobian beyond floating point: no rate to trust, CVODES's BDF takes the run
     fastest, loop = (v if v == v else math.inf for v in (fastest, loop))
-    compiled = False
+    compiled, possible = False, _compiled_bdf(request)
     multistep = choose_multistep(model, omega_plant, loop, t_final)
     # Adams-Moulton only where the error control sees the modes (ADAMS_TOLERANCE), in the
     # run and in its accuracy check at CHECK_FACTOR times the tolerance
     seen = ADAMS_TOLERANCE / CHECK_FACTOR
     adams_seen = rtol <= seen and bool(np.all(atol <= seen * sizes))
+    uncompiled = "cvodes"
     if request.method == "auto":
         method, note = choose_continuous(model, t_final, fastest), ""
-        if method in BDF_REPLACES.get(model.variant, ()):
+        uncompiled = method
+        if method in BDF_REPLACES.get(model.variant, ()) and possible:
             family = "adams" if multistep == "adams" and adams_seen else "bdf"
-            if _compiled_bdf(request, family):
-                method, compiled = ("Adams" if family == "adams" else "BDF"), True
-    elif request.method == "BDF" and request.symbolic and _compiled_bdf(request):
-        method, note, compiled = "BDF", "", True
+            method, compiled = ("Adams" if family == "adams" else "BDF"), True
+    elif request.method == "BDF" and possible:
+        method, note, compiled, uncompiled = "BDF", "", True, "BDF"
     elif request.method == "Adams":
         # compiled, or CVODES's Adams-Moulton where it cannot be (no compiler, compiling off)
-        compiled = _compiled_bdf(request, "adams")
-        method, multistep = ("Adams" if compiled else "cvodes"), "adams"
+        compiled, multistep = possible, "adams"
+        method = "Adams" if compiled else "cvodes"
         note = "" if adams_seen else (
             f"method 'Adams' at rtol {rtol:g} or an atol beyond {seen:g} of the states' sizes: "
             "its error control (and its check's, at 10 times the tolerance) may not see an "
@@ -841,7 +851,7 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
         drive_cuts=cuts if request.report is None else progress_cuts(cuts, t_final),
         omega_plant=omega_plant, loop_frequency=loop, cvodes_steps=steps,
         cvodes_step=request.max_step if np.isfinite(request.max_step) else None,
-        stiffness_note=note, compiled=compiled,
+        stiffness_note=note, compiled=compiled, uncompiled=uncompiled,
         cvodes_multistep=multistep)
 
 
@@ -877,10 +887,9 @@ def plan_sampled(request: RunRequest) -> tuple:
     return integrator, None
 
 
-def _compiled_bdf(request: RunRequest, family: str = "bdf") -> bool:
-    """Whether ``request`` can run on the compiled multistep ``family`` (``"bdf"``,
-    ``"adams"``; built and compiled here if not yet)."""
-    from .compiled_bdf import bdf_available
+def _compiled_bdf(request: RunRequest) -> bool:
+    """Whether ``request`` may run on the compiled multistep methods
+    (:func:`~flexctl.sim.compiled_bdf.bdf_possible`: nothing is built here)."""
+    from .compiled_bdf import bdf_possible
 
-    return bdf_available(request.model, request.torque, request.hub_motion,
-                         request.controller, family)
+    return bdf_possible(request.model, request.torque, request.hub_motion, request.controller)

@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from .compiled_bdf import NoCompiledIntegrator
 from .digital import run_sampled
 from .drives import PrescribedDrive, TorqueDrive
 from .request import check_atol, plan_integration, plan_sampled, run_request, state_scale
@@ -101,8 +102,13 @@ def _integrate(request) -> tuple:
     singular = model.variant.quadratic_inertia and not request.prescribed
     stops, plan = StopConditions(model, drive.layout, singular), plan_integration(request, drive)
     drive.check_inputs()
-    symbolic = request.symbolic and (plan.method != "BDF" or plan.compiled)
-    strategy = strategy_for(plan.method, symbolic)(request, plan, drive, stops)
+    try:
+        strategy = strategy_for(plan, request.symbolic)(request, plan, drive, stops)
+    except NoCompiledIntegrator:
+        # the plan's compiled multistep method is built here, when the run starts: a drive
+        # too large to compile takes the plan's method without it
+        plan = plan.without_compiled()
+        strategy = strategy_for(plan, request.symbolic)(request, plan, drive, stops)
     start = time.perf_counter()
     # the check needs only the plan: it runs beside the run, on a spare core if there is one
     check = strategy.start_check() if request.check_accuracy else None

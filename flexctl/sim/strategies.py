@@ -756,21 +756,23 @@ def start_accuracy_check(request, plan, drive):
                        plan.scale, request.rtol, **_check_options(request, plan))
 
 
-def strategy_for(method: str, symbolic: bool = False):
-    """The strategy class of an integration method (``RK45``: the compiled pair when the
-    inputs have a CasADi form, SciPy's otherwise).
+def strategy_for(plan, symbolic: bool = False):
+    """The strategy class of a plan's method: ``RK45`` the compiled pair when the inputs have
+    a CasADi form, SciPy's otherwise; ``BDF`` and ``Adams`` the compiled multistep methods
+    where the plan compiles them (:attr:`~flexctl.sim.request.IntegrationPlan.compiled`),
+    ``BDF`` SciPy's otherwise.
 
     Parameters
     ----------
-    method : str
-        The plan's method (:attr:`IntegrationPlan.method`).
+    plan : IntegrationPlan
+        The run's plan (:func:`~flexctl.sim.request.plan_integration`).
     symbolic : bool, optional
-        The run is compiled: every input has a CasADi form (and ``"BDF"`` has its compiled
-        integrator). Default False.
+        Every input has a CasADi form. Default False.
     """
+    method = plan.method
     if method == "RK45" and symbolic:
         return EmbeddedSegments
-    if method == "Adams" or (method == "BDF" and symbolic):
+    if method in ("Adams", "BDF") and plan.compiled:
         return BdfSegments
     return {"cvodes": CvodesSegments, "rk4": FixedStepRK4}.get(method, ScipyIVP)
 

@@ -361,3 +361,33 @@ def test_the_model_right_hand_side_reaches_c_as_a_function_pointer(exact, family
     tight = exact[1]
     expected = [np.interp(1.0, tight.t, row) for row in tight.states]
     assert np.allclose(states[:, -1], expected, rtol=0, atol=1e-5)
+
+
+@pytest.mark.parametrize("method, uncompiled", [("auto", "RK45"), ("Adams", "cvodes"),
+                                                ("BDF", "BDF")])
+def test_the_plan_compiles_nothing_and_a_library_that_cannot_be_built_is_replaced(
+        exact, monkeypatch, method, uncompiled):
+    """The method is chosen without building a library; a compiled multistep method whose
+    library cannot be built when the run starts (a drive too large to compile) gives way to
+    the plan's method without it, named in the result, with its accuracy checked."""
+    from flexctl.sim import compile_cache, compiled_bdf
+    from flexctl.sim.drives import TorqueDrive
+    from flexctl.sim.request import plan_integration, run_request
+
+    model, tight = exact
+    built = []
+    monkeypatch.setattr(compiled_bdf, "_built", lambda *a, **k: built.append(a) or None)
+    monkeypatch.setattr(compile_cache, "compiled_source",
+                        lambda *a, **k: pytest.fail("the plan compiled a library"))
+    request = run_request(model, 2.0, TORQUE, method=method, check_accuracy=False)
+    plan = plan_integration(request, TorqueDrive(model, TORQUE, None, request.x_init))
+    assert plan.compiled and plan.method in ("Adams", "BDF") and plan.uncompiled == uncompiled
+    assert built == []
+    run = flexctl.simulate(model, 2.0, TORQUE, method=method, rtol=1e-8, check_validity=False,
+                           output_step=float(tight.t[1] - tight.t[0]))
+    assert built and run.ok and run.method == uncompiled
+    assert run.integration_error is not None and np.isfinite(run.integration_error)
+    # the replacement run is as accurate as it says (on the tight run's own output times)
+    np.testing.assert_allclose(run.t, tight.t[:run.t.size], rtol=0, atol=1e-12)
+    error = np.max(np.abs(run.tip_deflection - tight.tip_deflection[:run.t.size]))
+    assert error <= max(run.integration_error, 1e-8 * tight.peak_tip_deflection)
