@@ -25,6 +25,7 @@ _SOURCES = {
     **dict.fromkeys(("SpatialHub", "SpatialAppendage", "SpatialStructure"),
                     "flexctl.model.spatial_structure"),
     **dict.fromkeys(("linearize_spatial", "nonlinear_spatial"), "flexctl.model.spatial_plant"),
+    "spatial_modal_visibility": "flexctl.model.spatial_visibility",
     **dict.fromkeys(("simulate_spatial", "SpatialResult", "VectorTorque"),
                     "flexctl.sim.spatial_run"),
     **dict.fromkeys(("Scene", "SceneError", "builtin_scenes", "load_scene", "run_scene",

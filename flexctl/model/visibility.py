@@ -34,7 +34,7 @@ import scipy.linalg
 
 from .errors import InputValueError
 
-__all__ = ["ModalVisibility", "modal_visibility", "VISIBILITY_TOLERANCE"]
+__all__ = ["ModalVisibility", "modal_visibility", "visibility_of", "VISIBILITY_TOLERANCE"]
 
 #: Relative share below which an input does not move, or an output does not see, a mode.
 VISIBILITY_TOLERANCE = 1e-8
@@ -101,7 +101,8 @@ class ModalVisibility:
 
 
 def _separate(shapes, frequencies, load):
-    """Rotate each group of equal frequencies so that ``load`` moves at most one mode."""
+    """Rotate each group of equal frequencies so that the inputs (the columns of ``load``)
+    move as few of its modes as they span: one input, at most one mode."""
     shapes = shapes.copy()
     j = 0
     while j < len(frequencies):
@@ -130,6 +131,30 @@ def modal_visibility(model, spin_rate: float = 0.0) -> ModalVisibility:
         Steady hub rate of the linearisation, rad/s (0 for a free hub). Default 0.
     """
     mass, stiffness, _, load = model.second_order_form(spin_rate)
+    layout, c = model.layout, model.output_matrix
+    return visibility_of(mass, stiffness, load[:, None], c[:, layout.coordinates],
+                         c[:, layout.velocities],
+                         coordinates=tuple(layout.names[layout.coordinates]),
+                         inputs=tuple(model.input_names), outputs=tuple(model.output_names))
+
+
+def visibility_of(mass, stiffness, load, c_position, c_rate, *, coordinates, inputs,
+                  outputs) -> ModalVisibility:
+    """The :class:`ModalVisibility` of the undamped second-order system ``M c_tt + K c = F u``
+    observed by ``y = C_p c + C_v c_t``.
+
+    Parameters
+    ----------
+    mass, stiffness : ndarray, shape (n_c, n_c)
+        ``M`` (positive definite) and ``K`` (symmetric; rigid-body modes at 0), SI units of
+        the coordinates.
+    load : ndarray, shape (n_c, n_inputs)
+        ``F``: each input's generalized forces.
+    c_position, c_rate : ndarray, shape (n_outputs, n_c)
+        The outputs' position and rate parts.
+    coordinates, inputs, outputs : tuple of str
+        Names of the coordinates, inputs and outputs.
+    """
     mass = 0.5 * (mass + mass.T)
     lam, shapes = scipy.linalg.eigh(0.5 * (stiffness + stiffness.T), mass)
     frequencies = np.sign(lam) * np.sqrt(np.abs(lam))
@@ -137,18 +162,16 @@ def modal_visibility(model, spin_rate: float = 0.0) -> ModalVisibility:
     order = np.argsort(frequencies, kind="stable")
     frequencies, shapes = frequencies[order], shapes[:, order]
     shapes = _separate(shapes, frequencies, load)
-    reach = np.sqrt(load @ np.linalg.solve(mass, load))
-    input_share = np.abs(shapes.T @ load)[:, None] / reach
-    layout, c = model.layout, model.output_matrix
+    reach = np.sqrt(np.einsum("ij,ij->j", load, np.linalg.solve(mass, load)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        input_share = np.where(reach > 0.0, np.abs(shapes.T @ load) / reach, 0.0)
     norms = np.linalg.norm(shapes, axis=0)
     parts = []
-    for block in (layout.coordinates, layout.velocities):
-        rows = c[:, block]
+    for rows in (c_position, c_rate):
         scale = np.linalg.norm(rows, axis=1)[:, None] * norms[None, :]
         with np.errstate(invalid="ignore", divide="ignore"):
             parts.append(np.where(scale > 0.0, np.abs(rows @ shapes) / scale, 0.0))
     return ModalVisibility(
-        frequencies=frequencies, shapes=shapes,
-        coordinates=tuple(layout.names[layout.coordinates]), inputs=tuple(model.input_names),
-        outputs=tuple(model.output_names), input_share=np.minimum(input_share, 1.0),
+        frequencies=frequencies, shapes=shapes, coordinates=tuple(coordinates),
+        inputs=tuple(inputs), outputs=tuple(outputs), input_share=np.minimum(input_share, 1.0),
         output_share=np.minimum(np.maximum(*parts), 1.0))

@@ -30,7 +30,8 @@ rtol 1e-8, 6 s: 4 394 steps against 7 120), at one evaluation a step too.
   The exact model's right-hand side is not in it: the library holds the drive's own part
   (torque and controller, or the hub's motion) and calls the model's compiled right-hand side,
   one library per structure shared with CVODES's, whose entry point is handed to the
-  integrator's as a C function pointer (:func:`~flexctl.sim.compile_cache.entry_point`). Its libraries are then some 40 kB of C,
+  integrator's with each call as a C function pointer
+  (:func:`~flexctl.sim.compile_cache.entry_point`). Its libraries are then some 40 kB of C,
   compiled in a fraction of a second, where one holding the model took 400 to 800 kB and 2 to
   4 s for each controller.
 - **Calls.** One call integrates onto at most :data:`OUTPUTS` output times and hands back
@@ -57,8 +58,8 @@ from .fixed_step import STEP_CACHE, STEP_CACHE_SIZE, drive_symbols
 from .native_rhs import MAX_DAE_INSTRUCTIONS, MAX_INSTRUCTIONS
 from ..model.errors import InputValueError
 
-__all__ = ["BdfRun", "bdf_available", "bdf_possible", "NoCompiledIntegrator", "OUTPUTS", "CALL_STEPS", "NEWTON_TOLERANCE", "STATUS",
-           "FAMILIES"]
+__all__ = ["BdfRun", "bdf_available", "bdf_possible", "NoCompiledIntegrator", "OUTPUTS",
+           "CALL_STEPS", "NEWTON_TOLERANCE", "STATUS", "FAMILIES"]
 
 #: Output times per compiled call (the states handed back after each, for a run's stops).
 OUTPUTS = 128
