@@ -61,6 +61,7 @@ from ..sim.blas_threads import DEFAULT_THREADS, threads_from_environment
 from ..sim.progress import progress_printer
 from .runner import execute, write_complete
 from .scenes import SceneError, builtin_scenes, load_scene
+from .spatial_scene import SpatialScene
 
 __all__ = ["main", "parse_overrides", "EXIT_OK", "EXIT_BUG", "EXIT_BAD_INPUT", "EXIT_STOPPED"]
 
@@ -133,6 +134,9 @@ def _parser() -> argparse.ArgumentParser:
                      "e.g. --set model.variant=zero_order (repeatable)")
     run.add_argument("--out", metavar="DIR", type=_out_dir,
                      help=f"output directory (default {DEFAULT_RUN_DIR}/<scene name>)")
+    run.add_argument("--animate", action="store_true",
+                     help="also write animation.gif: the structure turning and bending "
+                     "(spatial scenes)")
     run.set_defaults(func=_cmd_run)
 
     export = commands.add_parser(
@@ -379,7 +383,8 @@ def _worker_count(text: str) -> int:
     return value
 
 
-def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
+def _load_and_run(source, overrides: dict, out_dir: Path | None,
+                  animate: bool = False) -> dict:
     """Load, simulate and write one scene: the shared step of ``run`` and ``demo``.
 
     Returns the summary of :func:`flexctl.app.report.write_run`; raises :class:`_InputError`
@@ -389,6 +394,9 @@ def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
     try:
         with held:
             scene = load_scene(source, overrides=overrides)
+            if animate and not isinstance(scene, SpatialScene):
+                raise InputValueError(f"--animate draws spatial scenes (a 3 x 3 hub.inertia); "
+                                      f"{scene.name} is planar")
             progress = progress_printer(lambda line: held.write_through(f"{PROG}: {line}"))
             result, extra, reference = execute(scene, progress=progress)
     except INPUT_ERRORS as exc:
@@ -399,7 +407,8 @@ def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
     held.replay()
     out = out_dir if out_dir is not None else DEFAULT_RUN_DIR / scene.name
     try:
-        return write_complete(scene, result, out, overrides, extra, reference)
+        return write_complete(scene, result, out, overrides, extra, reference,
+                              animate=animate)
     except InputError as exc:           # a folder where a file goes
         raise _InputError(str(exc)) from None
     except OSError as exc:
@@ -409,7 +418,7 @@ def _load_and_run(source, overrides: dict, out_dir: Path | None) -> dict:
 def _cmd_run(args) -> int:
     try:
         overrides = parse_overrides(args.set)
-        summary = _load_and_run(args.scene, overrides, args.out)
+        summary = _load_and_run(args.scene, overrides, args.out, animate=args.animate)
     except (_InputError, InputError) as exc:
         return _error(exc)
     if summary.get("spatial"):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..model.errors import InputValueError
 from ..sim.atomic_files import staged_folder
 from .report import RESPONSE_PLOT, SUMMARY, TIMESERIES, write_run
 from .scenes import run_scene, run_slew
@@ -64,7 +65,7 @@ def execute(scene, progress=None) -> tuple:
 
 
 def write_complete(scene, result, out, overrides: dict, extra: dict,
-                   reference=None) -> dict:
+                   reference=None, animate: bool = False) -> dict:
     """:func:`~flexctl.app.report.write_run` into a temporary directory next to ``out``; the
     files are moved into ``out`` only once every one is written, so a failure leaves ``out``
     as it was.
@@ -84,6 +85,9 @@ def write_complete(scene, result, out, overrides: dict, extra: dict,
     reference : callable, optional
         The hub-angle reference ``angle(t)`` (rad) drawn on ``response.png`` (as
         :func:`execute` returns it).
+    animate : bool, optional
+        Also write ``animation.gif`` (:func:`flexctl.app.spatial_animation.animate_spatial`;
+        spatial scenes only). Default False.
 
     Returns
     -------
@@ -100,10 +104,18 @@ def write_complete(scene, result, out, overrides: dict, extra: dict,
     """
     out = Path(out)
     from .spatial_scene import SpatialScene
-    with staged_folder(out, names=(TIMESERIES, SUMMARY, RESPONSE_PLOT)) as stage:
-        if isinstance(scene, SpatialScene):
+    spatial = isinstance(scene, SpatialScene)
+    if animate and not spatial:
+        raise InputValueError(f"animate draws spatial scenes (a 3 x 3 hub.inertia); "
+                              f"{scene.name} is planar")
+    if animate:
+        from .spatial_animation import ANIMATION
+    names = (TIMESERIES, SUMMARY, RESPONSE_PLOT) + ((ANIMATION,) if animate else ())
+    with staged_folder(out, names=names) as stage:
+        if spatial:
             from .spatial_report import write_spatial_run
-            summary = write_spatial_run(scene, result, stage, overrides=overrides)
+            summary = write_spatial_run(scene, result, stage, overrides=overrides,
+                                        animate=animate)
         else:
             summary = write_run(scene, result, stage, overrides=overrides, extra=extra,
                                 reference=reference)

@@ -106,17 +106,23 @@ def spatial_summary(scene: SpatialScene, result: SpatialResult,
 
 
 def write_spatial_run(scene: SpatialScene, result: SpatialResult, out_dir,
-                      overrides: dict | None = None) -> dict:
-    """Write ``timeseries.csv``, ``summary.json`` and ``response.png`` of a spatial run.
+                      overrides: dict | None = None, animate: bool = False) -> dict:
+    """Write ``timeseries.csv``, ``summary.json`` and ``response.png`` of a spatial run
+    (and ``animation.gif``).
 
     Parameters
     ----------
     scene : SpatialScene
+        The scene run.
     result : SpatialResult
+        Its run.
     out_dir : str or path-like
         Directory, created if missing.
     overrides : dict, optional
         Recorded in the summary.
+    animate : bool, optional
+        Also write ``animation.gif`` (:func:`~flexctl.app.spatial_animation.animate_spatial`,
+        when the run has two output times or more). Default False.
 
     Returns
     -------
@@ -137,6 +143,10 @@ def write_spatial_run(scene: SpatialScene, result: SpatialResult, out_dir,
     plt.close(figure)
     summary["files"] = {"timeseries": str(out / TIMESERIES), "summary": str(out / SUMMARY),
                         "response_plot": str(out / RESPONSE_PLOT)}
+    if animate and result.t.size >= 2:
+        from .spatial_animation import ANIMATION, animate_spatial
+        animate_spatial(result, out / ANIMATION, title=scene.name)
+        summary["files"]["animation"] = str(out / ANIMATION)
     return summary
 
 
