@@ -439,7 +439,13 @@ def entry_point(function):
     """``(address, keep)`` of a function loaded from the cache (:func:`compiled`): the
     address of its C entry point (CasADi's signature ``int f(const double **arg, double
     **res, casadi_int *iw, double *w, int mem)``) and an object to keep alive as long as
-    the address is used; None for a function not loaded from the cache."""
+    the address is used; None for a function not loaded from the cache.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        A function :func:`compiled` returned.
+    """
     import ctypes
 
     origin = _ORIGIN.get(id(function))
