@@ -135,6 +135,11 @@ class OpenLoop(StaticLaw):
     ``OpenLoop(f)`` gives ``torque(t, x) = f(t)``; ``f``'s ``breakpoints`` are kept so that
     :func:`flexctl.simulate` restarts there, and its ``casadi(t)`` form, if any, runs it
     compiled.
+
+    Parameters
+    ----------
+    law : callable
+        ``f(t)``: the hub torque, N m, at time ``t`` (s).
     """
 
     @property

@@ -83,6 +83,8 @@ class Setting:
         Allowed strings (``type`` str).
     minimum, maximum : float, optional
         Bounds of a number (inclusive unless ``strict``, which makes ``minimum`` exclusive).
+    strict : bool
+        Whether ``minimum`` is exclusive (a number must exceed it). Default False.
     former_names : tuple of str
         Names the setting had before it took the name of the constructor argument it sets;
         still accepted for one release, with a ``FutureWarning`` (:func:`current_names`).
@@ -161,14 +163,30 @@ class Setting:
 
 @dataclass(frozen=True, kw_only=True)
 class ControllerKind:
-    """A controller kind: its name, one line on what it does, and its settings."""
+    """A controller kind: its name, one line on what it does, and its settings.
+
+    Parameters
+    ----------
+    name : str
+        The kind, as a scene's ``controller.kind`` names it (``"pd"``, ``"lqr"``, ...).
+    doc : str
+        One line on what the controller does.
+    settings : tuple of Setting
+        The settings its ``[controller]`` table may hold, in the order they are listed.
+    """
 
     name: str
     doc: str
     settings: tuple
 
     def setting(self, name: str) -> Setting:
-        """The setting called ``name``."""
+        """The setting called ``name``; ``KeyError`` when the kind has none by that name.
+
+        Parameters
+        ----------
+        name : str
+            The setting's current name (a key of the ``[controller]`` table).
+        """
         for item in self.settings:
             if item.name == name:
                 return item
@@ -290,6 +308,11 @@ def current_name(key: str) -> str:
 
     A ``FutureWarning`` rather than a ``DeprecationWarning``, because the people who write
     scene files and ``--set`` overrides see it: Python shows it by default.
+
+    Parameters
+    ----------
+    key : str
+        A key of a ``[controller]`` table.
     """
     new = FORMER_NAMES.get(key)
     if new is None:
@@ -303,6 +326,11 @@ def current_names(table: dict) -> dict:
     """``table`` (a ``[controller]`` table) with each former setting name replaced by its
     current one (:func:`current_name`, in the same place); a table that gives a setting
     under both names is refused.
+
+    Parameters
+    ----------
+    table : dict
+        A ``[controller]`` table, ``{key: value}`` as parsed from TOML.
 
     Examples
     --------
@@ -329,6 +357,14 @@ class ControllerSpec:
     Names and values are checked against :data:`CONTROLLER_KINDS`; :meth:`get` gives a
     setting or its default. The :mod:`controllers` package turns it into a controller
     (``controllers.from_spec``).
+
+    Parameters
+    ----------
+    kind : str
+        A key of :data:`CONTROLLER_KINDS` (``"pd"``, ``"lqr"``, ...).
+    settings : dict, optional
+        The table's other keys, ``{setting name: value}``; former names are turned into the
+        current ones (:func:`current_names`). Default: every setting at its default.
     """
 
     kind: str
@@ -348,7 +384,14 @@ class ControllerSpec:
             kind.setting(key).check(self.kind, value)
 
     def get(self, name: str):
-        """The value of setting ``name``: the table's, else the registry's default."""
+        """The value of setting ``name``: the table's, else the registry's default.
+
+        Parameters
+        ----------
+        name : str
+            A setting of the spec's kind (its current name); its value is in the setting's
+            :attr:`Setting.unit`.
+        """
         return self.settings.get(name, CONTROLLER_KINDS[self.kind].setting(name).default)
 
 
@@ -360,7 +403,13 @@ def _describe(item: Setting) -> str:
 
 
 def settings_table(width: int = 92) -> str:
-    """The kinds and their settings as a reStructuredText simple table, ``width`` wide."""
+    """The kinds and their settings as a reStructuredText simple table, ``width`` wide.
+
+    Parameters
+    ----------
+    width : int, optional
+        Width of the table in characters; the settings column wraps to fit. Default 92.
+    """
     left = max(len(name) for name in CONTROLLER_KINDS) + 2
     rule = "=" * (left - 2) + "  " + "=" * (width - left)
     lines = [rule, f"{'kind':<{left}}settings", rule]

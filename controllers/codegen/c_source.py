@@ -34,11 +34,20 @@ _MAGIC = 0x666C6578      # "flex"
 
 
 class CSources:
-    """The four files of an export, as text.
+    """The four files of an export, as text; made by :func:`c_sources`.
 
-    Attributes
+    Parameters
     ----------
-    header, source, main, makefile : str
+    header : str
+        The header ``<prefix>.h``: the struct and the functions' declarations.
+    source : str
+        The law ``<prefix>.c``: its generated step functions and their wrappers.
+    main : str
+        ``main.c``: an example program that runs the law on a state read from the command
+        line and prints its command for ten samples.
+    makefile : str
+        The ``Makefile`` that builds the law as an object, a static library and the example
+        program.
     sizes : dict
         ``memory_doubles``, ``work_doubles``, ``work_ints``, ``arg_pointers``,
         ``res_pointers``: the arrays of the struct, in entries.
@@ -122,7 +131,14 @@ def c_sources(program: ControllerProgram, prefix: str = "flexctl_ctrl",
 
 
 def unit_of(name: str) -> str:
-    """The unit of a state or reading by its name (``wing_a.q1_dot`` -> ``m/s``)."""
+    """The unit of a state or reading by its name (``wing_a.q1_dot`` -> ``m/s``).
+
+    Parameters
+    ----------
+    name : str
+        A state or reading name, with or without an appendage prefix; ``""`` is returned
+        for a name whose unit is not known.
+    """
     base = name.rsplit(".", 1)[-1]
     rate = base.endswith("_dot")
     base = base[:-4] if rate else base

@@ -65,6 +65,11 @@ class CompileError(RuntimeError):
 def find_compiler(cc: str | None = None) -> str:
     """The C compiler's path: ``cc``, else ``$CC``, else ``cc``/``gcc``/``clang`` on the path.
 
+    Parameters
+    ----------
+    cc : str, optional
+        A compiler's name or path, tried first. Default: none given.
+
     Raises
     ------
     CompileError
@@ -269,7 +274,7 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
         earlier ones and keeping files of other names. All four are written or none: they go
         into a temporary folder first, moved into place once complete.
     sample_time : float, optional
-        s: to discretise an LQG's estimator at, or to sample a static law at.
+        Sample time, s: to discretise an LQG's estimator at, or to sample a static law at.
     initial_state : array_like, optional
         Plant state where an estimator starts, shape (n,); default zero.
 
@@ -304,19 +309,26 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
 
 
 class CompiledLaw:
-    """An exported law compiled and loaded through :mod:`ctypes`.
+    """An exported law compiled and loaded through :mod:`ctypes`; made by
+    :meth:`CExport.compile`.
 
-    Attributes
+    Parameters
     ----------
     export : CExport
+        The exported files and the law's program.
     library : pathlib.Path
         The shared library loaded (by :meth:`CExport.compile`: in a temporary folder of the
         process, removed when it exits).
+    compile_time_s : float
+        Wall time the compilation took, s.
+    code_bytes : int or None
+        Code and constant data of the compiled object, bytes (``size``'s text column); None
+        where ``size`` is not available.
+
+    Attributes
+    ----------
     struct_bytes : int
         ``flexctl_ctrl_size()``: the caller's memory for one controller, bytes.
-    code_bytes : int or None
-        Code and constant data of the compiled object, bytes (``size``'s text column).
-    compile_time_s : float
     """
 
     def __init__(self, export: CExport, library: Path, compile_time_s: float,
@@ -380,15 +392,30 @@ class CompiledLaw:
     def controller(self, measure=None) -> "CompiledController":
         """This compiled law as a flexctl controller for :func:`flexctl.simulate`.
 
-        ``measure(t, x) -> y``: the readings of a measurement law (default
-        ``program.measurement_matrix @ x``)."""
+        Parameters
+        ----------
+        measure : callable, optional
+            ``measure(t, x) -> y``: the readings of a measurement law from time (s) and
+            plant state. Default ``program.measurement_matrix @ x``.
+        """
         return CompiledController(self, measure)
 
 
 @dataclass(frozen=True, eq=False)
 class CompiledController:
     """A :class:`CompiledLaw` as a flexctl controller: sampled at the law's sample time (a
-    continuous static law, sample time 0, is evaluated whenever the integrator asks)."""
+    continuous static law, sample time 0, is evaluated whenever the integrator asks).
+
+    Parameters
+    ----------
+    law : CompiledLaw
+        The compiled law.
+    measure : callable, optional
+        ``measure(t, x) -> y``: the readings of a measurement law from time (s) and plant
+        state. Default None: ``program.measurement_matrix @ x``.
+    breakpoints : tuple of float, optional
+        Times (s) where the integration restarts. Default none.
+    """
 
     law: CompiledLaw
     measure: object = None
@@ -409,7 +436,13 @@ class CompiledController:
         return program.input_kind == "measurement" and program.measurement_matrix is None
 
     def initial_state(self, x0):
-        """No states the integrator carries."""
+        """No states the integrator carries: shape (0,).
+
+        Parameters
+        ----------
+        x0 : array_like, shape (n,)
+            Initial plant state (not read).
+        """
         return np.zeros(0)
 
     def derivative(self, t, x, z=None):
@@ -480,7 +513,13 @@ class CompiledController:
 
 
 class CompiledSession:
-    """A closed-loop run of a :class:`CompiledController`: per-step CPU times and codes."""
+    """A closed-loop run of a :class:`CompiledController`: per-step CPU times and codes.
+
+    Parameters
+    ----------
+    owner : CompiledController
+        The controller run (:meth:`CompiledController.start` resets its law's memory).
+    """
 
     def __init__(self, owner: CompiledController):
         self.owner = owner

@@ -35,8 +35,8 @@ def program_for(controller, plant, *, sample_time: float | None = None,
     plant : flexctl.Model
         The plant the law reads (its state order, sensors and actuator).
     sample_time : float, optional
-        s: the rate a continuous estimator (LQG) is discretised at, or a static law sampled
-        at. A law that samples itself keeps its own and refuses another.
+        Sample time, s: the rate a continuous estimator (LQG) is discretised at, or a static
+        law sampled at. A law that samples itself keeps its own and refuses another.
     initial_state : array_like, optional
         Plant state at the start, shape (n,): where an estimator's estimate starts (default:
         at rest, zero).

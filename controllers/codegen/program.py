@@ -92,7 +92,13 @@ class ControllerProgram:
 
 
 class ProgramSession:
-    """The program stepped in Python, with the C code's failure handling."""
+    """The program stepped in Python, with the C code's failure handling.
+
+    Parameters
+    ----------
+    program : ControllerProgram
+        The law's program; its memory starts at ``program.memory_init``.
+    """
 
     def __init__(self, program: ControllerProgram):
         self.program, self.memory = program, program.memory_init.copy()

@@ -83,7 +83,13 @@ def hub_torque_bound(torque_bound: float, actuator) -> float:
 
 
 def speed_bound(wheel: ReactionWheel) -> float:
-    """The bound a plan keeps the wheel speed within, ``(1 - SPEED_MARGIN) Omega_max``, rad/s."""
+    """The bound a plan keeps the wheel speed within, ``(1 - SPEED_MARGIN) Omega_max``, rad/s.
+
+    Parameters
+    ----------
+    wheel : ReactionWheel
+        The wheel; its speed limit ``Omega_max`` (rad/s) is read.
+    """
     return (1.0 - SPEED_MARGIN) * wheel.speed_limit
 
 
@@ -129,6 +135,12 @@ def structure_momentum(model):
     ``J(q) theta_dot + m_tf^T q_dot`` for the one-beam small-deflection variants (``J(q) = J_0
     + q^T D q`` for consistent, ``J_0`` otherwise); the first row of the exact mass matrix
     times the velocities for exact; a structure model's own momentum function.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (hub-torque input; not an ``ActuatedModel``, whose momentum
+        includes the actuator's).
     """
     import casadi as ca
 

@@ -228,6 +228,11 @@ def mode_tolerances(model):
     of the larger motion of either kind, ``w_i``, sets its tolerance
     ``min(PHASE_TOLERANCE, END_STATE_TOLERANCE / w_i)``.
 
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model; computed once per model and kept while it lives.
+
     Returns
     -------
     omega, tolerance : ndarray, shape (N,)
@@ -310,12 +315,26 @@ class HoldEffort:
 
     def culprit(self, tolerance: float) -> int:
         """The first design mode (1-based) whose honouring takes the excess above
-        ``tolerance`` (0: the rigid-body slew alone; N + 1: none)."""
+        ``tolerance`` (0: the rigid-body slew alone; N + 1: none).
+
+        Parameters
+        ----------
+        tolerance : float
+            Largest relative excess of effort accepted (e.g.
+            :data:`HOLD_EFFORT_TOLERANCE`).
+        """
         above = np.flatnonzero(self.excess > tolerance)
         return int(above[0]) if above.size else self.excess.size
 
     def modes_within(self, tolerance: float) -> int:
-        """Most design modes, counted from the slowest, whose excess is within ``tolerance``."""
+        """Most design modes, counted from the slowest, whose excess is within ``tolerance``.
+
+        Parameters
+        ----------
+        tolerance : float
+            Largest relative excess of effort accepted (e.g.
+            :data:`HOLD_EFFORT_TOLERANCE`).
+        """
         return max(self.culprit(tolerance) - 1, 0)
 
 
@@ -369,10 +388,11 @@ class HoldGrid:
     Parameters
     ----------
     model : flexctl.Model
+        The design model (the exact variant is analysed on its first_order twin).
     duration : float
         Slew duration ``T``, s.
     angle : float, optional
-        Slew angle, rad (the excess does not depend on it).
+        Slew angle, rad (the excess does not depend on it). Default 1.
     """
 
     def __init__(self, model, duration: float, angle: float = 1.0):
@@ -459,15 +479,33 @@ class HoldGrid:
         return excess
 
     def effort(self, n_intervals: int) -> HoldEffort:
-        """The excess of ``n_intervals`` holds for every honoured-mode count."""
+        """The excess of ``n_intervals`` holds for every honoured-mode count.
+
+        Parameters
+        ----------
+        n_intervals : int
+            Number of holds ``K`` over the slew (each ``duration / K`` s).
+        """
         return HoldEffort(n_intervals, self.excess(n_intervals), self.frequencies)
 
     def passes(self, n_intervals: int) -> bool:
-        """Whether ``n_intervals`` holds keep the excess within :data:`HOLD_EFFORT_TOLERANCE`."""
+        """Whether ``n_intervals`` holds keep the excess within :data:`HOLD_EFFORT_TOLERANCE`
+        with every design mode honoured.
+
+        Parameters
+        ----------
+        n_intervals : int
+            Number of holds ``K`` over the slew (each ``duration / K`` s).
+        """
         return bool(self.excess(n_intervals, self.n_dof - 1)[0] <= HOLD_EFFORT_TOLERANCE)
 
     def reason(self, n_intervals: int) -> str | None:
         """Why ``n_intervals`` holds are too coarse for the design modes, or None.
+
+        Parameters
+        ----------
+        n_intervals : int
+            Number of holds ``K`` over the slew (each ``duration / K`` s).
 
         Examples
         --------

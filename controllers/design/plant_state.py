@@ -113,7 +113,13 @@ def design_rows(design: StateLayout, n_plant_states: int,
 
 
 def hub_state(x) -> tuple:
-    """Hub angle (rad) and rate (rad/s) of a plant state of any mode count."""
+    """Hub angle (rad) and rate (rad/s) of a plant state of any mode count.
+
+    Parameters
+    ----------
+    x : array_like, shape (2 N + 2,)
+        One beam's plant state ``[theta, q_1..q_N, theta_dot, q_1_dot..q_N_dot]``, N >= 1.
+    """
     x = np.asarray(x, dtype=float)
     layout = resized(DEFAULT_LAYOUT, x.size) if x.ndim == 1 else None
     if layout is None:
@@ -122,7 +128,13 @@ def hub_state(x) -> tuple:
 
 
 def casadi_hub_state(x) -> tuple:
-    """:func:`hub_state` of a CasADi state vector."""
+    """:func:`hub_state` of a CasADi state vector.
+
+    Parameters
+    ----------
+    x : casadi.SX or casadi.MX, shape (2 N + 2, 1)
+        One beam's plant state ``[theta, q_1..q_N, theta_dot, q_1_dot..q_N_dot]``, N >= 1.
+    """
     layout = resized(DEFAULT_LAYOUT, x.numel())
     if layout is None:
         raise InputValueError(f"{_HUB_STATE_RULE}; got shape {x.shape}")

@@ -106,9 +106,9 @@ class LoopStability:
     plant_modes : int
         The plant's mode count (all appendages).
     spin_rate : float
-        rad/s.
+        Steady hub rate of the plant's linearisation, rad/s.
     sample_time : float or None
-        s, for a loop closed in discrete time.
+        Sample time, s, for a loop closed in discrete time; None for a continuous one.
     spectral_abscissa : float
         Largest real part of the closed-loop poles (hidden modes left out), 1/s.
     stable : bool
@@ -323,9 +323,9 @@ def loop_stability(plant, matrix, law: str, spin_rate: float = 0.0,
     law : str
         The law's name in the message.
     spin_rate : float, optional
-        rad/s.
+        Steady hub rate of the plant's linearisation, rad/s. Default 0.
     sample_time : float, optional
-        s, for a discrete ``matrix``.
+        Sample time, s, for a discrete ``matrix``. Default: continuous.
     """
     matrix = np.asarray(matrix, dtype=float)
     poles, modes, _ = _poles(matrix, sample_time, plant, spin_rate)
@@ -363,7 +363,7 @@ def least_damped_pole(plant, matrix, spin_rate: float = 0.0,
     spin_rate : float, optional
         Steady hub rate of the plant's linearisation, rad/s. Default 0.
     sample_time : float, optional
-        s, for a discrete ``matrix``. Default: continuous.
+        Sample time, s, for a discrete ``matrix``. Default: continuous.
     """
     poles, modes, _ = _poles(np.asarray(matrix, dtype=float), sample_time, plant, spin_rate)
     k = max((k for k, p in enumerate(poles) if p.imag >= 0.0), key=lambda k: poles[k].real)

@@ -109,12 +109,24 @@ class MotorVoltage:
         return getattr(self.law, "plant_layout", self.plant.layout)
 
     def for_plant(self, model):
-        """The law bound to ``model`` (the plant)."""
+        """The law bound to ``model`` (the plant).
+
+        Parameters
+        ----------
+        model : ActuatedModel
+            The motor-driven plant the law runs on.
+        """
         law = self.law.for_plant(model) if hasattr(self.law, "for_plant") else self.law
         return replace(self, law=law, plant=model)
 
     def initial_state(self, x0):
-        """The law's internal state at ``t = 0``."""
+        """The law's internal state at ``t = 0``.
+
+        Parameters
+        ----------
+        x0 : array_like, shape (n,)
+            Initial state of the motor-driven plant.
+        """
         return self.law.initial_state(x0)
 
     def derivative(self, t, x, z=None):
@@ -223,7 +235,10 @@ class LaggedLQR:
     actuator_gain : float
         ``k_a``, on the wheel's motor torque (dimensionless).
     torque_limit : float, optional
-        Saturation of the command, N m.
+        Saturation of the command, N m. Default: none.
+    plant_layout : StateLayout, optional
+        The plant state's layout, set by :meth:`for_plant` (the wheel torque is read through
+        it). Default None.
     """
 
     lqr: LQR
@@ -237,7 +252,13 @@ class LaggedLQR:
     reads_actuator = True
 
     def for_plant(self, model):
-        """The law reading ``model``'s states (the wheel torque among them)."""
+        """The law reading ``model``'s states (the wheel torque among them).
+
+        Parameters
+        ----------
+        model : ActuatedModel
+            A plant turned by a reaction wheel (a state named ``wheel_torque``).
+        """
         if _actuator(model) is None or "wheel_torque" not in model.state_names:
             raise InputValueError("LaggedLQR needs a plant turned by a reaction wheel; got "
                                   f"states {model.state_names}")
@@ -279,7 +300,13 @@ class LaggedLQR:
         return 0.0 if inertia is None else inertia * acceleration
 
     def initial_state(self, x0):
-        """No internal state."""
+        """No internal state: shape (0,).
+
+        Parameters
+        ----------
+        x0 : array_like, shape (n,)
+            Initial plant state (not read).
+        """
         return np.zeros(0)
 
     def derivative(self, t, x, z=None):

@@ -57,11 +57,30 @@ MEASURED_OUTPUTS = ("theta", "root_moment")
 
 
 def measured_outputs(model) -> tuple:
-    """The outputs the filter reads: ``theta`` and each appendage's root moment."""
+    """The outputs the filter reads: ``theta`` and each appendage's root moment.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The filter's model or the plant; its :attr:`~flexctl.Model.output_names` are read.
+    """
     return ("theta",) + tuple(n for n in model.output_names if n.endswith("root_moment"))
 
 
 def measurement_rows(model) -> np.ndarray:
+    """The rows of ``model``'s output matrix that the filter's sensors read
+    (:func:`measured_outputs`): ``y_meas = C_meas x``.
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The filter's model or the plant.
+
+    Returns
+    -------
+    ndarray, shape (1 + K, n)
+        Hub angle (rad) and each of the K appendages' root moments (N m) per state.
+    """
     rows = [model.output_names.index(name) for name in measured_outputs(model)]
     return np.array(model.output_matrix[rows], dtype=float)
 
@@ -188,10 +207,12 @@ class SumOfSines:
     Parameters
     ----------
     amplitudes : array_like, shape (C, K)
+        Amplitude of each of the K sines of each of the C channels, in the channel's unit
+        (e.g. rad, N m).
     frequencies : array_like, shape (C, K)
-        rad/s.
+        Their frequencies, rad/s.
     phases : array_like, shape (C, K)
-        rad.
+        Their phases at ``t = 0``, rad.
     """
 
     amplitudes: np.ndarray
@@ -241,7 +262,13 @@ class SumOfSines:
                       axis=1)
 
     def casadi(self, t):
-        """The noise as a CasADi expression of the symbol ``t``, shape (C, 1)."""
+        """The noise as a CasADi expression of the symbol ``t``, shape (C, 1).
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        """
         import casadi as ca
 
         terms = ca.DM(self.amplitudes) * ca.sin(ca.DM(self.frequencies) * t
@@ -280,6 +307,8 @@ class LQG(ReferenceFeedback):
         :class:`~controllers.feedback.actuated.MotorVoltage`): the torque is kept on the motor's
         voltage line at the estimated hub rate, ``|T + d w_hat| <= g V_max``, so that the
         filter integrates the torque the motor can give (anti-windup), not the one asked.
+    plant_layout : StateLayout, optional
+        The plant state's layout, set by :meth:`for_plant`; default None.
     """
 
     gain: np.ndarray
@@ -347,7 +376,13 @@ class LQG(ReferenceFeedback):
         return self.layout.n_modes
 
     def for_plant(self, model) -> "LQG":
-        """The same controller reading the sensors of ``model`` (``N >= M`` modes)."""
+        """The same controller reading the sensors of ``model`` (``N >= M`` modes).
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant the controller runs on.
+        """
         model = checked_model("lqg.for_plant", model)
         if model.n_modes < self.n_modes:
             raise InputValueError(f"lqg.for_plant plant must have at least the design's "
@@ -382,7 +417,14 @@ class LQG(ReferenceFeedback):
         return y
 
     def initial_state(self, x0) -> np.ndarray:
-        """Initial estimate ``z(0)``, shape (n_d,)."""
+        """Initial estimate ``z(0)``, shape (n_d,).
+
+        Parameters
+        ----------
+        x0 : array_like, shape (n,)
+            Initial plant state (not read: the filter starts from :attr:`initial_estimate`,
+            zeros by default).
+        """
         if self.initial_estimate is None:
             return np.zeros(self.n_states)
         return self.initial_estimate.copy()
@@ -564,7 +606,7 @@ def design_lqg(model, weights: LQRWeights, noise: NoiseLevels, spin_rate: float 
     noise : NoiseLevels
         Noise the filter is designed for.
     spin_rate : float, optional
-        rad/s. Default 0.
+        Steady hub rate of the design linearisation, rad/s. Default 0.
     plant : flexctl.Model, optional
         Model whose sensors the controller reads in simulation (``N >= M`` modes). Default:
         ``model``.

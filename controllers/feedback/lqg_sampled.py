@@ -72,7 +72,7 @@ class SampledLQG:
     lqg : LQG
         The continuous design (gains, reference, saturation, motor line).
     sample_time : float
-        s (> 0).
+        Sample time the estimator is discretised at, s (> 0).
 
     Attributes
     ----------
@@ -113,7 +113,19 @@ class SampledLQG:
 
 
 class SampledLQGSession:
-    """One run of a :class:`SampledLQG`: the estimate ``z`` between samples."""
+    """One run of a :class:`SampledLQG`: the estimate ``z`` between samples.
+
+    Parameters
+    ----------
+    owner : SampledLQG
+        The sampled controller run (its discretised estimator and sample time).
+    lqg : LQG
+        Its continuous design, bound to the run's plant (:meth:`LQG.for_plant
+        <controllers.feedback.lqg.LQG.for_plant>`).
+    x0 : array_like, shape (n,)
+        Plant state at the start (not read by the estimate, which starts from the LQG's
+        initial estimate).
+    """
 
     def __init__(self, owner: SampledLQG, lqg: LQG, x0):
         self.owner, self.lqg = owner, lqg

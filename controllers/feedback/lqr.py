@@ -181,6 +181,11 @@ def static_deflection_gain(model) -> np.ndarray:
 
     Under a slow hub acceleration ``theta_tt`` the beam equation ``M_ff q_tt + K_ff q =
     -m_tf theta_tt`` leaves ``q = -K_ff^-1 m_tf theta_tt``, m per rad/s^2, shape (M,).
+
+    Parameters
+    ----------
+    model : flexctl.Model
+        The design model (``M`` modes).
     """
     return checked_model("static_deflection_gain", model).quasi_static_gain()
 
@@ -356,8 +361,6 @@ class LQR(ReferenceFeedback):
 
     Parameters
     ----------
-    gain : array_like, shape (1, 2 M + 2)
-        ``K`` on the design state, N m per state unit.
     reference : object, optional
         Hub reference with ``angle``, ``rate``, ``acceleration`` (e.g. a
         :class:`~controllers.slew.reference.SlewProfile`). Default: regulate to 0.
@@ -365,6 +368,11 @@ class LQR(ReferenceFeedback):
         ``J`` of the feedforward term, kg m^2 (> 0). Default none.
     torque_limit : float, optional
         Saturation, N m (> 0). Default none.
+    plant_layout : StateLayout, optional
+        The plant state's layout, set by :meth:`for_plant` (:func:`flexctl.simulate` binds
+        every law to its plant). Default None: a bare state read with the design's blocks.
+    gain : array_like, shape (1, 2 M + 2)
+        ``K`` on the design state, N m per state unit.
     spin_rate : float, optional
         Spin rate of the design linearisation, rad/s (for the record).
     poles : ndarray, optional
@@ -406,7 +414,13 @@ class LQR(ReferenceFeedback):
 
     def state_gain(self, n_modes) -> np.ndarray:
         """``K P``: the gain on a plant state with ``n_modes >= M`` modes (or of that
-        layout), shape (1, 2N+2)."""
+        layout), shape (1, 2N+2).
+
+        Parameters
+        ----------
+        n_modes : int or StateLayout
+            ``N >= M``, the plant's modes, or the plant state's layout.
+        """
         return self.gain @ truncation_matrix(n_modes, self.layout)
 
     def plant_gain(self, plant, spin_rate: float = 0.0) -> np.ndarray:
@@ -603,7 +617,7 @@ def closed_loop_poles(model, gain, spin_rate: float = 0.0) -> np.ndarray:
         E.g. ``controller.state_gain(N)`` of a controller designed on fewer modes: the
         spillover check.
     spin_rate : float, optional
-        rad/s.
+        Steady hub rate of the plant's linearisation, rad/s. Default 0.
 
     Returns
     -------

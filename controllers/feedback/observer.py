@@ -177,8 +177,23 @@ def kalman_step(x_hat, p, y, u, Ad, Bd, C, D, Q, R, *, u_held=None) -> tuple:
 
 @dataclass(frozen=True, eq=False)
 class FilterMatrices:
-    """The filter's model over one sample interval (module Notes): ``Ad`` (n_f, n_f), ``Bd``
-    (n_f, 1), ``C`` (m, n_f), ``D`` (m, 1), ``Q`` (n_f, n_f), ``R`` (m, m)."""
+    """The filter's model over one sample interval (module Notes).
+
+    Attributes
+    ----------
+    Ad : ndarray, shape (n_f, n_f)
+        ``Phi(h)``: the filter state's transition over one sample interval ``h``.
+    Bd : ndarray, shape (n_f, 1)
+        ``Gamma(h)``: the state reached from rest per unit of command held over ``h``.
+    C : ndarray, shape (m, n_f)
+        The readings per filter state.
+    D : ndarray, shape (m, 1)
+        The readings per unit of command: zero but for the tip accelerations.
+    Q : ndarray, shape (n_f, n_f)
+        Process noise covariance over ``h``, in the squared units of the filter states.
+    R : ndarray, shape (m, m)
+        Reading noise covariance, in the squared units of the readings.
+    """
 
     Ad: np.ndarray
     Bd: np.ndarray
@@ -230,7 +245,7 @@ class Observed:
     sensors : Sensors
         What is read; ``sensors.sample_time`` must be ``None`` or equal ``sample_time``.
     sample_time : float
-        s (> 0).
+        Sample time of the filter and the law, s (> 0).
     process_noise : float
         Standard deviation of a white disturbance torque held over each sample, entering
         like the command, N m (>= 0). Default 0.01.
@@ -316,7 +331,17 @@ def _command_limit(model) -> float | None:
 
 
 class ObservedSession:
-    """One run of :class:`Observed` (module Notes).
+    """One run of :class:`Observed` (module Notes); made by :meth:`Observed.start`.
+
+    Parameters
+    ----------
+    controller : Observed
+        The controller run: its law, sensors, sample time and noise settings.
+    model : flexctl.Model
+        The plant the filter is built on (its linearisation at rest and its outputs).
+    x0 : array_like, shape (n,)
+        Plant state at the start, in the order of ``model.layout``: the filter's initial
+        estimate.
 
     Attributes
     ----------

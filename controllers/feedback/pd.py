@@ -49,10 +49,6 @@ class PD(ReferenceFeedback):
 
     Parameters
     ----------
-    kp : float
-        Angle gain, N m/rad (> 0).
-    kd : float
-        Rate gain, N m s/rad (> 0; with ``kd = 0`` the undamped beam would never settle).
     reference : object, optional
         Hub reference with ``angle(t)``, ``rate(t)``, ``acceleration(t)`` (rad, rad/s, rad/s^2),
         e.g. :class:`~controllers.slew.reference.SlewProfile`. Default: regulate to 0.
@@ -61,6 +57,13 @@ class PD(ReferenceFeedback):
         Default: no feedforward.
     torque_limit : float, optional
         Saturation, N m (> 0). Default: none.
+    plant_layout : StateLayout, optional
+        The plant state's layout, set by :meth:`for_plant` (:func:`flexctl.simulate` binds
+        every law to its plant). Default None: the hub read from a bare state.
+    kp : float
+        Angle gain, N m/rad (> 0).
+    kd : float
+        Rate gain, N m s/rad (> 0; with ``kd = 0`` the undamped beam would never settle).
 
     Notes
     -----
@@ -81,7 +84,14 @@ class PD(ReferenceFeedback):
     def state_gain(self, n_modes) -> np.ndarray:
         """``K`` with ``torque = -K x`` for a plant with ``n_modes`` modes, or of that
         :class:`~flexctl.model.layout.StateLayout` (no reference, no saturation), shape
-        (1, 2 n_modes + 2)."""
+        (1, n).
+
+        Parameters
+        ----------
+        n_modes : int or StateLayout
+            The plant's modes ``N`` (one beam, ``n = 2 N + 2`` states), or the plant state's
+            layout.
+        """
         layout = n_modes if isinstance(n_modes, StateLayout) else StateLayout.single(
             check_integer("pd.state_gain", "n_modes", n_modes, minimum=1))
         gain = np.zeros((1, layout.n_states))

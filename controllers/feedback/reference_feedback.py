@@ -87,6 +87,9 @@ class ReferenceFeedback:
         ``J`` of the feedforward term ``J acc_ref``, kg m^2 (> 0). Default: no feedforward.
     torque_limit : float, optional
         Saturation of the total torque, N m (> 0). Default: none.
+    plant_layout : StateLayout, optional
+        The plant state's layout, set by :meth:`for_plant` (:func:`flexctl.simulate` binds
+        every law to its plant). Default None: a bare state read with the design's blocks.
     """
 
     reference: object = None
@@ -112,7 +115,13 @@ class ReferenceFeedback:
 
     def for_plant(self, model):
         """The same law reading the states of plant ``model`` (its ``model.layout``): needed
-        for a plant of several appendages, whose mode counts a bare state does not tell."""
+        for a plant of several appendages, whose mode counts a bare state does not tell.
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant the law runs on (any number of modes, an actuated one included).
+        """
         from dataclasses import replace
         return replace(self, plant_layout=model.layout)
 
@@ -168,7 +177,13 @@ class ReferenceFeedback:
         return has_casadi(self.reference)
 
     def initial_state(self, x0) -> np.ndarray:
-        """No internal state: shape (0,)."""
+        """No internal state: shape (0,).
+
+        Parameters
+        ----------
+        x0 : array_like, shape (n,)
+            Initial plant state (not read).
+        """
         return np.zeros(0)
 
     def derivative(self, t: float, x, z=None) -> np.ndarray:

@@ -60,12 +60,24 @@ class ScheduledLQR(ReferenceFeedback):
 
     Parameters
     ----------
+    reference : object, optional
+        Hub reference with ``angle``, ``rate``, ``acceleration`` (e.g. a
+        :class:`~controllers.slew.reference.SlewProfile`). Default: regulate to 0.
+    feedforward_inertia : float, optional
+        ``J`` of the feedforward term, kg m^2 (> 0). Default none.
+    torque_limit : float, optional
+        Saturation, N m (> 0). Default none.
+    plant_layout : StateLayout, optional
+        The plant state's layout, set by :meth:`for_plant`. Default None.
     spin_rates : array_like, shape (S,)
         Design spin rates, rad/s, ``>= 0`` and strictly increasing.
     gains : array_like, shape (S, 2 M + 2)
         LQR gain at each design spin rate.
-    reference, feedforward_inertia, torque_limit, deflection_gain, layout
-        As in :class:`~controllers.feedback.lqr.LQR`.
+    deflection_gain : ndarray, shape (M,), optional
+        Track the quasi-static beam deflection of the reference
+        (:func:`~controllers.feedback.lqr.reference_state`); default a rigid reference.
+    layout : StateLayout, optional
+        The design state's layout; default one appendage of ``M`` modes on a pinned hub.
     """
 
     spin_rates: np.ndarray
@@ -95,7 +107,14 @@ class ScheduledLQR(ReferenceFeedback):
         return self.layout.n_modes
 
     def gain_at(self, spin_rate: float) -> np.ndarray:
-        """Interpolated gain at hub rate ``spin_rate`` (rad/s, either sign), shape (1, 2M+2)."""
+        """Interpolated gain at hub rate ``spin_rate``, shape (1, 2M+2): linear in
+        ``|spin_rate|`` between the design spin rates, the end gains held beyond them.
+
+        Parameters
+        ----------
+        spin_rate : float
+            Hub rate, rad/s (either sign).
+        """
         w = abs(check_real("scheduled_lqr", "spin_rate", spin_rate))
         rates = self.spin_rates
         if rates.size == 1 or w <= rates[0]:
@@ -149,7 +168,13 @@ class ScheduledLQR(ReferenceFeedback):
         return self._apply(-float(gain[0] @ (x_design - x_ref)), acc)
 
     def casadi_gain_at(self, spin_rate):
-        """:meth:`gain_at` of a CasADi hub rate: the gains as a list of 2 M + 2 expressions."""
+        """:meth:`gain_at` of a CasADi hub rate: the gains as a list of 2 M + 2 expressions.
+
+        Parameters
+        ----------
+        spin_rate : casadi.SX or casadi.MX
+            Hub rate, rad/s (either sign).
+        """
         import casadi as ca
 
         w, rates, gains = ca.fabs(spin_rate), self.spin_rates, self.gains
@@ -199,7 +224,7 @@ def design_scheduled_lqr(model, weights: LQRWeights, spin_rates, *, reference=No
     weights : LQRWeights
         The same weights at every spin rate.
     spin_rates : array_like, shape (S,)
-        rad/s, ``>= 0``, strictly increasing; the gain at each equals
+        Design spin rates, rad/s, ``>= 0``, strictly increasing; the gain at each equals
         ``design_lqr(model, weights, spin_rate).gain``.
     reference : object, optional
         Hub reference, as in :func:`controllers.feedback.lqr.design_lqr`.

@@ -51,6 +51,7 @@ class TrajectoryTracker:
     Parameters
     ----------
     solution : SlewSolution
+        The optimal slew tracked, with its design model.
     state_weights : array_like, shape (n,), optional
         Diagonal of ``Q`` (design states). Default Bryson's rule: 5 % of the angle, 3 % of
         the beam length at the tip, rates from the flexible frequencies.
@@ -58,6 +59,9 @@ class TrajectoryTracker:
         ``R``, 1/(N m)^2. Default ``1 / torque_bound^2``.
     torque_limit : float, optional
         Saturate the total torque at this magnitude, N m. Default none.
+    plant_layout : StateLayout, optional
+        The plant state's layout, set by :meth:`for_plant` (:func:`flexctl.simulate` binds
+        it). Default None: a bare state read with the design's blocks.
 
     Attributes
     ----------
@@ -115,7 +119,13 @@ class TrajectoryTracker:
         object.__setattr__(self, "_feedforward", self.solution.torque_function())
 
     def for_plant(self, model) -> "TrajectoryTracker":
-        """The same law reading the states of plant ``model`` (its layout)."""
+        """The same law reading the states of plant ``model`` (its layout).
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant the law runs on, with at least the design model's modes.
+        """
         return dataclasses.replace(self, plant_layout=model.layout)
 
     def _rows(self, size: int):
@@ -138,14 +148,26 @@ class TrajectoryTracker:
                                                             self.solution.model.layout)
 
     def design_state(self, x) -> np.ndarray:
-        """The design model's states picked out of a plant state ``x`` (shape (2 M + 2,))."""
+        """The design model's states picked out of a plant state ``x`` (shape (2 M + 2,)).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,)
+            Plant state, in the order of the bound plant's layout (or one beam's, unbound).
+        """
         rows = self._rows(np.size(x))
         if rows is None:
             return truncate_state(x, self.solution.model.layout)
         return np.asarray(x, dtype=float)[rows]
 
     def initial_state(self, x0) -> np.ndarray:
-        """No internal states: an empty array (also :meth:`derivative`)."""
+        """No internal states: an empty array (also :meth:`derivative`).
+
+        Parameters
+        ----------
+        x0 : array_like, shape (n,)
+            Initial plant state (not read).
+        """
         return np.zeros(0)
 
     def torque(self, t, x, z=None) -> float:

@@ -290,20 +290,22 @@ class NMPC:
         ``d_max``, m (> 0), on the modal tip deflection of the design model. Default none.
     terminal : {"lqr", "rest"}
         Terminal cost ``P`` (default) or terminal equality to the reference.
-    mode : {"rti", "converged"}
+    mode : {"rti", "converged"}, optional
+        Per sample one real-time iteration (one SQP step from the warm start, default) or
+        the problem solved to convergence by IPOPT.
     qp_solver : str
         QP solver of the real-time iteration (:data:`QP_SOLVERS`). Default ``"qrqp"``.
     state_weights : array_like, shape (n,), optional
         Diagonal of ``Q``. Default Bryson's rule (:func:`_default_weights`).
     torque_weight : float, optional
         ``R``, 1/(N m)^2. Default ``1 / torque_limit^2``.
+    substeps : int, optional
+        RK4 substeps per hold; default the fewest with ``omega_max h <= OMEGA_H``.
     noise : NoiseLevels, optional
         Output feedback: the state is estimated by an extended Kalman filter on the design
         model from the hub angle and the root bending moment of the plant (as LQG measures),
         designed for these noise levels. Default: full state feedback (the plant state
         truncated to the design modes).
-    substeps : int, optional
-        RK4 substeps per hold; default the fewest with ``omega_max h <= OMEGA_H``.
     actuator : ReactionWheel or DCMotor, optional
         What gives the hub torque (:mod:`controllers.design.actuator_limits`): the torque also
         within
@@ -434,6 +436,11 @@ class NMPC:
         """Reference states ``r`` (n, P) at times ``t`` (s) and torques ``v`` (P,): the mean
         of the reference torque over each hold ``[t, t + sample_time)``, N m (what a hold
         must apply to follow a reference whose own holds need not line up with the samples).
+
+        Parameters
+        ----------
+        t : float or array_like, shape (P,)
+            Sample times, s.
         """
         t = np.atleast_1d(np.asarray(t, dtype=float))
         layout = self.model.layout
@@ -804,9 +811,21 @@ class _ExtendedKalman:
 class NMPCSession:
     """One closed-loop run of an :class:`NMPC`: warm start, last torque and statistics.
 
-    ``rows`` are the indices of the design state in the plant state
-    (``plant.layout.projection(mpc.model.layout)``); by default those of a plant of the design
-    model's blocks with ``x0``'s length (:func:`controllers.design.plant_state.design_rows`).
+    Made by :meth:`NMPC.start`.
+
+    Parameters
+    ----------
+    mpc : NMPC
+        The controller run.
+    built : dict
+        Its transcribed problem and solver (built once per controller).
+    x0 : array_like, shape (n,)
+        Plant state at the start: the warm start's states without a reference.
+    rows : array_like of int, optional
+        Indices of the design state in the plant state
+        (``plant.layout.projection(mpc.model.layout)``); default those of a plant of the
+        design model's blocks with ``x0``'s length
+        (:func:`controllers.design.plant_state.design_rows`).
     """
 
     def __init__(self, mpc: NMPC, built: dict, x0, rows=None):

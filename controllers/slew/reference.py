@@ -174,7 +174,13 @@ class SlewProfile(KeywordOnly):
     def at(self, t: float) -> tuple:
         """Angle (rad), rate (rad/s) and acceleration (rad/s^2) at one time ``t`` (s), as
         floats: the formulas of :meth:`angle`, :meth:`rate` and :meth:`acceleration` on a
-        scalar, as a sampled law reads them at every sample."""
+        scalar, as a sampled law reads them at every sample.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        """
         t = _real("slew.at", "t", t)
         tau = min(max((t - self.start_time) / self.duration, 0.0), 1.0)
         s, ds, dds = _shape_terms(self.shape, tau, math.sin, math.cos)
@@ -186,15 +192,33 @@ class SlewProfile(KeywordOnly):
         return _shape_terms(self.shape, self._tau(t), np.sin, np.cos)
 
     def angle(self, t):
-        """Reference hub angle, rad."""
+        """Reference hub angle, rad, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         return self.slew_angle * self._terms(t)[0]
 
     def rate(self, t):
-        """Reference hub rate, rad/s."""
+        """Reference hub rate, rad/s, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         return self.slew_angle / self.duration * self._terms(t)[1]
 
     def acceleration(self, t):
-        """Reference hub acceleration, rad/s^2."""
+        """Reference hub acceleration, rad/s^2, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         return self.slew_angle / self.duration ** 2 * self._terms(t)[2]
 
 
@@ -206,7 +230,7 @@ def minimum_slew_duration(slew_angle: float, inertia: float, torque_limit: float
     Parameters
     ----------
     slew_angle : float
-        rad (finite, nonzero).
+        Hub angle to turn through, rad (finite, nonzero).
     inertia : float
         Rigid inertia, kg m^2 (> 0), e.g. ``model.matrices.J0``.
     torque_limit : float
@@ -322,7 +346,13 @@ def _structure_key(source):
 def reference_parameters(reference) -> tuple:
     """``(structure, values)`` of a reference inside a compiled law: its own
     ``casadi_parameters`` where it offers them (its numbers then enter as parameters), else
-    the reference itself as structure (:func:`_structure_key`) and no numbers."""
+    the reference itself as structure (:func:`_structure_key`) and no numbers.
+
+    Parameters
+    ----------
+    reference : object or None
+        A hub reference (``angle``, ``rate``, ``acceleration``), or None.
+    """
     own = getattr(reference, "casadi_parameters", None) if reference is not None else None
     if own is None:
         return _structure_key(reference), np.zeros(0)

@@ -59,13 +59,13 @@ class BangBang:
     Parameters
     ----------
     slew_angle : float
-        rad (finite, nonzero).
+        Hub angle to turn through, rad (finite, nonzero; its sign is the direction).
     inertia : float
         Rigid inertia ``J0``, kg m^2 (> 0).
     peak_torque : float
-        N m (> 0).
+        Torque magnitude of both halves, N m (> 0).
     start_time : float, optional
-        s (>= 0). Default 0.
+        Time the slew starts, s (>= 0). Default 0.
 
     Notes
     -----
@@ -103,7 +103,13 @@ class BangBang:
         return (t0, t0 + half, t0 + 2.0 * half)
 
     def acceleration(self, t):
-        """Rigid acceleration ``torque / inertia``, rad/s^2."""
+        """Rigid acceleration ``torque / inertia``, rad/s^2, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         t = np.asarray(t, dtype=float) - self.start_time
         half, a = 0.5 * self.duration, math.copysign(self.peak_torque / self.inertia,
                                                     self.slew_angle)
@@ -115,7 +121,13 @@ class BangBang:
         return self.inertia * self.acceleration(t)
 
     def casadi(self, t):
-        """The torque as a CasADi expression of the symbol ``t``, N m."""
+        """The torque as a CasADi expression of the symbol ``t``, N m.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        """
         import casadi as ca
 
         t = t - self.start_time
@@ -126,14 +138,26 @@ class BangBang:
         return self.inertia * acc
 
     def rate(self, t):
-        """Rigid hub rate, rad/s."""
+        """Rigid hub rate, rad/s, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         t = np.clip(np.asarray(t, dtype=float) - self.start_time, 0.0, self.duration)
         half, a = 0.5 * self.duration, math.copysign(self.peak_torque / self.inertia,
                                                     self.slew_angle)
         return np.where(t < half, a * t, a * (2 * half - t))
 
     def angle(self, t):
-        """Rigid hub angle, rad."""
+        """Rigid hub angle from the start, rad, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         t = np.clip(np.asarray(t, dtype=float) - self.start_time, 0.0, self.duration)
         half, a = 0.5 * self.duration, math.copysign(self.peak_torque / self.inertia,
                                                     self.slew_angle)
@@ -150,13 +174,14 @@ def bang_bang(model_or_inertia, slew_angle: float, *, torque_limit: float | None
     model_or_inertia : flexctl.Model or float
         Model (its ``rigid_inertia`` is used) or rigid inertia, kg m^2.
     slew_angle : float
-        rad.
+        Hub angle to turn through, rad (nonzero).
     torque_limit : float, optional
-        N m; the slew takes the shortest time this torque allows.
+        Peak torque, N m; the slew takes the shortest time this torque allows.
     duration : float, optional
-        s; the torque is the one that slews in this time. Give exactly one of the two.
+        Slew time, s; the torque is the one that slews in this time. Give exactly one of the
+        two.
     start_time : float, optional
-        s.
+        Time the slew starts, s (>= 0). Default 0.
     """
     inertia = checked_rigid_inertia("bang_bang", model_or_inertia)
     if (torque_limit is None) == (duration is None):
@@ -339,7 +364,18 @@ def _shifted_breakpoints(base, shaper):
 
 @dataclass(frozen=True, kw_only=True, eq=False)
 class ShapedTorque:
-    """Torque ``sum_i A_i base(t - t_i)``, N m; ``base`` is a torque function of time."""
+    """Torque ``sum_i A_i base(t - t_i)``, N m; ``base`` is a torque function of time.
+
+    Made by :func:`shape`.
+
+    Parameters
+    ----------
+    base : callable
+        The command shaped: torque (N m) as a function of time (s), with ``breakpoints``
+        and ``casadi(t)`` when it has them.
+    shaper : Shaper
+        The impulse train it is convolved with.
+    """
 
     base: object
     shaper: Shaper
@@ -362,7 +398,13 @@ class ShapedTorque:
             and bool(getattr(self.base, "has_casadi_form", True))
 
     def casadi(self, t):
-        """The torque as a CasADi expression of the symbol ``t``, N m."""
+        """The torque as a CasADi expression of the symbol ``t``, N m.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        """
         return sum(a * self.base.casadi(t - ti)
                    for ti, a in zip(self.shaper.times, self.shaper.amplitudes))
 
@@ -372,7 +414,16 @@ class ShapedReference:
     """Reference ``sum_i A_i base(t - t_i)`` for angle, rate and acceleration.
 
     ``base`` must rest at its initial value before its start (as
-    :class:`~controllers.slew.reference.SlewProfile` does).
+    :class:`~controllers.slew.reference.SlewProfile` does). Made by :func:`shape`.
+
+    Parameters
+    ----------
+    base : object
+        The reference shaped: ``angle(t)`` (rad), ``rate(t)`` (rad/s) and
+        ``acceleration(t)`` (rad/s^2) of time (s), with ``breakpoints`` and
+        ``casadi_reference(t)`` when it has them.
+    shaper : Shaper
+        The impulse train it is convolved with.
     """
 
     base: object
@@ -390,15 +441,33 @@ class ShapedReference:
                    for ti, a in zip(self.shaper.times, self.shaper.amplitudes))
 
     def angle(self, t):
-        """rad."""
+        """Reference hub angle, rad, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         return self._sum("angle", t)
 
     def rate(self, t):
-        """rad/s."""
+        """Reference hub rate, rad/s, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         return self._sum("rate", t)
 
     def acceleration(self, t):
-        """rad/s^2."""
+        """Reference hub acceleration, rad/s^2, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         return self._sum("acceleration", t)
 
     @property
@@ -408,7 +477,14 @@ class ShapedReference:
             and bool(getattr(self.base, "has_casadi_form", True))
 
     def casadi_reference(self, t):
-        """Angle, rate and acceleration as CasADi expressions of the symbol ``t``."""
+        """Angle (rad), rate (rad/s) and acceleration (rad/s^2) as CasADi expressions of the
+        symbol ``t``.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        """
         parts = [self.base.casadi_reference(t - ti) for ti in self.shaper.times]
         return tuple(sum(a * part[j] for a, part in zip(self.shaper.amplitudes, parts))
                      for j in range(3))

@@ -391,7 +391,19 @@ def state_scale(model, problem, duration: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Transcribed:
-    """The Opti problem of a slew and the expressions of its results."""
+    """The Opti problem of a slew and the expressions of its results.
+
+    Attributes
+    ----------
+    opti : casadi.Opti
+        The problem: its variables, constraints, objective and solver.
+    X : casadi.MX, shape (n, K+1)
+        The states at the hold boundaries.
+    U : casadi.MX, shape (1, K)
+        The held torques, N m.
+    T : casadi.MX or float
+        The duration, s: a variable (free time) or the fixed number.
+    """
 
     opti: object
     X: object             # states at the hold boundaries (n, K+1)

@@ -96,7 +96,17 @@ _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
 
 class TrajectoryOptimizationError(RuntimeError):
-    """IPOPT failed to solve a slew problem; :attr:`return_status` holds its status."""
+    """IPOPT failed to solve a slew problem; :attr:`return_status` holds its status.
+
+    Parameters
+    ----------
+    message : str
+        What failed, for the reader.
+    return_status : str
+        IPOPT's return status (e.g. ``"Infeasible_Problem_Detected"``).
+    iterations : int
+        Iterations IPOPT took before it stopped.
+    """
 
     def __init__(self, message: str, return_status: str, iterations: int):
         super().__init__(message)
@@ -268,7 +278,14 @@ class SlewProblem(KeywordOnly):
         """Final state ``x_f = [angle, 0 .. 0]``, shape (n_states,), of ``layout``: the design
         model's :class:`~flexctl.model.layout.StateLayout`, or a number of states (one
         appendage on a pinned hub); for a design model, its rest state at the angle (a free
-        hub's centre where the turn about the centre of mass puts it)."""
+        hub's centre where the turn about the centre of mass puts it).
+
+        Parameters
+        ----------
+        layout : flexctl.Model, StateLayout or int
+            A design model, the layout of its state, or the number of states ``2 N + 2`` of
+            one appendage on a pinned hub.
+        """
         if isinstance(layout, Model):
             return layout.rest_state(self.angle)
         if not isinstance(layout, StateLayout):
@@ -287,6 +304,13 @@ class HoldTorque:
     ``values[k]`` acts on ``[t[k], t[k+1])``; the torque is 0 before ``t[0]`` and from
     ``t[K]`` on. :attr:`breakpoints` (the hold boundaries ``t[1:]``) make
     :func:`flexctl.simulate` restart its integrator at every jump.
+
+    Parameters
+    ----------
+    t : ndarray, shape (K+1,)
+        The hold boundaries, s, ascending.
+    values : ndarray, shape (K,)
+        The torque held on each interval, N m.
     """
 
     t: np.ndarray
@@ -306,7 +330,13 @@ class HoldTorque:
         return np.where(inside, self.values[np.clip(k, 0, self.values.size - 1)], 0.0)
 
     def casadi(self, t):
-        """The torque as a CasADi expression of the symbol ``t`` (exactly the held values)."""
+        """The torque as a CasADi expression of the symbol ``t`` (exactly the held values).
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        """
         import casadi as ca
 
         from flexctl.sim.compiled import piecewise_constant
@@ -405,6 +435,11 @@ class SlewSolution:
         Cubic Hermite interpolation on each hold, with the slopes ``f(x, u_k)`` of that hold
         at both ends (fourth order in ``h``). Before 0 the start state, after
         :attr:`duration` the final state.
+
+        Parameters
+        ----------
+        t : float or array_like, shape (P,)
+            Time(s), s.
         """
         if np.isscalar(t):               # the tracker's call: keep it cheap
             k = min(max(bisect.bisect_right(self.t, t) - 1, 0), self.torque.size - 1)

@@ -137,7 +137,13 @@ class BenchConfig:
     @classmethod
     def quick(cls, **changes) -> "BenchConfig":
         """A small sweep (about two minutes for the built-in scenes): 1, 2, 4, 8 modes,
-        first_order, cvodes, rk4 and DOP853 at 1e-5 and 1e-8, a 12-mode reference at 1e-9."""
+        first_order, cvodes, rk4 and DOP853 at 1e-5 and 1e-8, a 12-mode reference at 1e-9.
+
+        Parameters
+        ----------
+        **changes
+            Fields of :class:`BenchConfig` to set otherwise (e.g. ``scenes``, ``t_final``).
+        """
         return replace(cls(modes=(1, 2, 4, 8), variants=("first_order",), rtols=(1e-5, 1e-8),
                            methods=("cvodes", "rk4", "DOP853"), reference_modes=12,
                            reference_rtol=1e-9, time_limit=10.0), **changes)
@@ -145,7 +151,41 @@ class BenchConfig:
 
 @dataclass(frozen=True)
 class BenchRow:
-    """One run of the sweep; errors are relative tip errors (see the module docstring)."""
+    """One run of the sweep; errors are relative tip errors (see the module docstring).
+
+    Attributes
+    ----------
+    scene : str
+        The scene's name.
+    variant : str
+        The model variant.
+    n_modes : int
+        Modes of the model, ``N`` (of each appendage).
+    method : str
+        The integrator asked for.
+    method_used : str
+        The integrator that ran (:func:`flexctl.simulate` may move an explicit method to
+        cvodes for stiffness).
+    rtol : float
+        Relative tolerance asked for.
+    status : str
+        ``"ok"``, the run's own status when it stopped early, ``"timeout"``, ``"error"``, or
+        ``"skipped"`` (not tried after a timeout on fewer modes).
+    t_end : float
+        Time the run reached, s.
+    wall_time_s : float
+        Wall time of the run, s.
+    n_evaluations : int
+        Right-hand-side evaluations.
+    error : float
+        Relative tip error against the reference (NaN when not measured).
+    truncation_error : float
+        Relative tip error of the ``N``-mode model at the reference tolerance.
+    integration_error : float
+        Relative tip error of the run against that tight ``N``-mode run.
+    note : str
+        What happened to a run that did not simply finish; empty otherwise.
+    """
 
     scene: str
     variant: str
@@ -165,13 +205,26 @@ class BenchRow:
 
 @dataclass(frozen=True, eq=False)
 class SceneBench:
-    """Everything measured on one ``scene`` (a Scene) over ``t_final`` (s).
+    """Everything measured on one ``scene`` over ``t_final`` (s); made by :func:`bench_scene`.
 
-    ``rows`` holds a :class:`BenchRow` per run; ``references`` per variant its ``status``,
-    ``t_end`` (s), ``wall_time_s``, ``message`` and ``difference_from_first_order`` (relative
-    tip difference of the references); ``choice`` is :func:`~flexctl.sim.fidelity.choose_modes` for
-    the scene's variant, and ``truncation`` ``{N: actual truncation error}`` of that variant for
-    the modes swept and the mode choice.
+    Attributes
+    ----------
+    scene : Scene
+        The scene benched.
+    config : BenchConfig
+        The sweep run on it.
+    t_final : float
+        Horizon of every run, s.
+    rows : tuple of BenchRow
+        One per run.
+    references : dict
+        Per variant the reference's ``status``, ``t_end`` (s), ``wall_time_s``, ``message``
+        and ``difference_from_first_order`` (relative tip difference of the references).
+    choice : ModeChoice
+        :func:`~flexctl.sim.fidelity.choose_modes` for the scene's variant.
+    truncation : dict
+        ``{N: actual truncation error}`` of that variant for the modes swept and the mode
+        choice (relative tip errors).
     """
 
     scene: object
@@ -192,14 +245,26 @@ class SceneBench:
         return finished_runs(self.rows)
 
     def front(self, variant: str) -> list:
-        """Pareto front of a variant's finished runs (:func:`runs_on_front`)."""
+        """Pareto front of a variant's finished runs (:func:`runs_on_front`).
+
+        Parameters
+        ----------
+        variant : str
+            A model variant among the config's ``variants``.
+        """
         return runs_on_front([r for r in self.rows if r.variant == variant])
 
 
 def finished_runs(rows) -> list:
     """Runs that reached their end with a finite error, fastest first; runs with the same
     variant, modes, integrator used and rtol count once (an explicit method moved to cvodes
-    repeats the cvodes run)."""
+    repeats the cvodes run).
+
+    Parameters
+    ----------
+    rows : iterable of BenchRow
+        The runs of a sweep.
+    """
     unique = {}
     for r in sorted((r for r in rows if r.status == "ok" and math.isfinite(r.error)),
                     key=lambda r: (r.wall_time_s, r.error)):
@@ -209,7 +274,13 @@ def finished_runs(rows) -> list:
 
 def runs_on_front(rows) -> list:
     """The :func:`finished_runs` that no other beats on both wall time and error (the
-    dominance of :func:`flexctl.app.sweep.pareto_front`), fastest first."""
+    dominance of :func:`flexctl.app.sweep.pareto_front`), fastest first.
+
+    Parameters
+    ----------
+    rows : iterable of BenchRow
+        The runs of a sweep (of one variant, for a front of that variant).
+    """
     done = finished_runs(rows)
     if not done:
         return []
@@ -298,8 +369,9 @@ def bench_scene(scene, config: BenchConfig, progress: bool = True, *,
     scene : Scene
         Driven by a spin-up or a torque (:data:`BENCH_KINDS`).
     config : BenchConfig
+        The sweep: modes, variants, integrators, tolerances and the reference's settings.
     progress : bool, optional
-        Show a tqdm progress bar on stderr.
+        Show a tqdm progress bar on stderr. Default True.
     store : SweepStore, optional
         Where each run's row is committed as it finishes, and taken from when it is there
         already (a resumed bench runs the references and the tight runs again, the yardsticks
@@ -463,9 +535,12 @@ def run_bench(config: BenchConfig, out_dir, progress: bool = True, *, store=None
     Parameters
     ----------
     config : BenchConfig
+        The sweep, its ``scenes`` included (empty: every built-in scene the bench can drive).
     out_dir : str or path-like
+        Folder the scenes' ``.csv``, ``.md`` and ``-pareto.png`` files and ``report.md`` are
+        written to.
     progress : bool, optional
-        Show a tqdm progress bar per scene on stderr.
+        Show a tqdm progress bar per scene on stderr. Default True.
     store : str or path-like, optional
         SQLite file that every run is committed to as it finishes
         (:class:`~flexctl.app.sweep_store.SweepStore`, one key per scene, variant, modes,

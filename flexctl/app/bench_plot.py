@@ -25,6 +25,7 @@ def plot_speed_error(bench):
     Parameters
     ----------
     bench : SceneBench
+        The runs of one scene (:func:`~flexctl.app.bench.bench_scene`).
 
     Returns
     -------

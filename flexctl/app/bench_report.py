@@ -168,7 +168,14 @@ def write_index(out: Path, benches: list) -> Path:
 
 
 def summary_line(bench) -> str:
-    """One line per scene: the modes chosen, their errors, and the fastest run per level."""
+    """One line per scene: the modes chosen, their errors, and the fastest run per level.
+
+    Parameters
+    ----------
+    bench : SceneBench
+        The runs of one scene (:func:`~flexctl.app.bench.bench_scene`); the levels are
+        :data:`SUMMARY_LEVELS` of relative tip error.
+    """
     text = ", ".join(f"within {lv:g}: {_fastest_text(bench, lv) or 'none'}"
                      for lv in SUMMARY_LEVELS)
     return (f"{bench.scene.name}: {bench.choice.n_modes} modes chosen (estimated error "

@@ -95,6 +95,12 @@ def _error(message) -> int:
 def parse_overrides(settings) -> dict:
     """``["a.b=1", ...]`` from ``--set`` to ``{"a.b": "1"}`` (values stay text for load_scene).
 
+    Parameters
+    ----------
+    settings : sequence of str or None
+        The ``--set`` values, each ``key=value`` (spaces around either are dropped); None
+        for none.
+
     Raises
     ------
     flexctl.model.errors.InputValueError
@@ -527,6 +533,11 @@ def main(argv=None) -> int:
     """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit status.
 
     A bug (any exception that is not bad input) prints its traceback and returns 1.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after the program name. Default None: ``sys.argv[1:]``.
     """
     parser = _parser()
     try:

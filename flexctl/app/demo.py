@@ -135,7 +135,13 @@ def kane_spinup(out: Path, executor=None) -> Section:
 
 
 def spacecraft_torque(out: Path) -> Section:
-    """Paper 001 Fig. 5: the spacecraft under one period of 50 N m sine torque."""
+    """Paper 001 Fig. 5: the spacecraft under one period of 50 N m sine torque.
+
+    Parameters
+    ----------
+    out : pathlib.Path
+        Folder the figure ``paper001-fig5.png`` is written to.
+    """
     from .plotting import plot_response
     from .scenes import run_scene
 

@@ -25,7 +25,14 @@ __all__ = ["structures", "structure_cases"]
 
 def structure_cases(scene) -> dict:
     """``{label: system}``: the four structures of :func:`structures` from ``scene`` (a
-    two-appendage scene on a free hub)."""
+    two-appendage scene on a free hub).
+
+    Parameters
+    ----------
+    scene : Scene
+        A scene whose system is a two-appendage structure on a free hub; its first
+        appendage is the single wing.
+    """
     craft = scene.system
     wing = craft.appendages[0]
     pinned_hub = dataclasses.replace(craft.hub, support="pinned")

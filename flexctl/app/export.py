@@ -72,7 +72,7 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
         Directory of the files (created with its parents if missing; files of other names
         in it are kept).
     sample_time : float, optional
-        s: the rate an LQG's estimator is discretised at (default: the sensors', else
+        Sample time, s: the rate an LQG's estimator is discretised at (default: the sensors', else
         0.01 s), or a static law is sampled at.
     compile : bool
         Compile with :data:`controllers.codegen.C_FLAGS` and check against the program.
@@ -134,7 +134,14 @@ def _compiled_check(exported, plant, cc) -> dict:
 
 
 def format_export(summary: dict) -> str:
-    """The console lines of an export."""
+    """The console lines of an export.
+
+    Parameters
+    ----------
+    summary : dict
+        What :func:`export_scene` returns: the scene, the law's sizes and files, and the
+        compiled check or the note why there is none.
+    """
     lines = [f"{summary['scene']}: {summary['description']}",
              f"  input: {summary['input']} ({len(summary['input_names'])} entries), output: "
              f"{summary['output']}, sample time: {summary['sample_time_s']:g} s",

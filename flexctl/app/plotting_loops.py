@@ -61,8 +61,10 @@ def mark_modes(ax, natural_frequencies, *, axis: str = "x", label: bool = True) 
     Parameters
     ----------
     ax : matplotlib.axes.Axes
+        Axes to draw into.
     natural_frequencies : array_like, shape (N,)
-        rad/s; non-positive ones (a mode that has lost its stiffness) are skipped.
+        The frequencies, rad/s; non-positive ones (a mode that has lost its stiffness) are
+        skipped.
     axis : {"x", "y"}, optional
         ``"x"``: vertical lines at ``w_i`` (a Bode plot); ``"y"``: horizontal lines at
         ``+-w_i`` (the imaginary axis of a pole-zero plot).
@@ -103,6 +105,7 @@ def plot_bode(systems, *, natural_frequencies=None, omega_limits=None, omega_num
     axes : sequence of two matplotlib Axes, optional
         Magnitude and phase axes to draw into; default a new figure.
     title : str, optional
+        Figure title. Default none.
 
     Returns
     -------
@@ -135,12 +138,15 @@ def plot_pole_zero(systems, *, natural_frequencies=None, ax=None, xlim=None, yli
     Parameters
     ----------
     systems : control.LTI or dict of {str: control.LTI}
+        The systems, each drawn in its colour (labelled by its key).
     natural_frequencies : array_like, optional
-        rad/s, marked at ``+-j w_i``.
+        Flexible frequencies to mark at ``+-j w_i``, rad/s. Default none.
     ax : matplotlib.axes.Axes, optional
+        Axes to draw into; default a new figure.
     xlim, ylim : (float, float), optional
         Axis limits, 1/s (high modes lie far up the imaginary axis).
     title : str, optional
+        Axes title. Default none.
 
     Returns
     -------
@@ -166,13 +172,16 @@ def plot_poles_vs_spin(table, *, which: str = "closed_loop", ax=None, cmap: str 
     Parameters
     ----------
     table : controllers.analysis.loops.PolesVsSpin
+        Poles and zeros at each spin rate (:func:`~controllers.analysis.loops.poles_vs_spin`).
     which : {"closed_loop", "plant"}, optional
         The closed-loop poles (default), or the plant's poles (crosses) with the hub-angle
         zeros (dots).
     ax : matplotlib.axes.Axes, optional
+        Axes to draw into; default a new figure.
     cmap : str, optional
-        Colour map of the spin rate.
+        Colour map of the spin rate. Default ``"viridis"``.
     title : str, optional
+        Axes title. Default none.
 
     Returns
     -------
@@ -224,8 +233,11 @@ def plot_frequencies_vs_spin(table, *, ax=None, title: str | None = None):
     Parameters
     ----------
     table : controllers.analysis.loops.PolesVsSpin
+        Poles and zeros at each spin rate (:func:`~controllers.analysis.loops.poles_vs_spin`).
     ax : matplotlib.axes.Axes, optional
+        Axes to draw into; default a new figure.
     title : str, optional
+        Axes title. Default none.
 
     Returns
     -------
@@ -264,7 +276,9 @@ def plot_robustness(table, x: str = "youngs_modulus_scale", y: str = "phase_marg
     x, y : str, optional
         Column names. Defaults ``youngs_modulus_scale`` and ``phase_margin``.
     ax : matplotlib.axes.Axes, optional
+        Axes to draw into; default a new figure.
     title : str, optional
+        Axes title. Default none.
 
     Returns
     -------

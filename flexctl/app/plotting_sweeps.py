@@ -33,7 +33,9 @@ def table_column(table, name: str) -> np.ndarray:
     Parameters
     ----------
     table : SweepResult, dict of {str: sequence} or sequence of dict
+        A sweep's result, its columns by name, or its rows.
     name : str
+        The column.
 
     Raises
     ------
@@ -79,6 +81,7 @@ def plot_sweep(table, x: str, y, *, by: str | None = None, ax=None, labels=None,
     Parameters
     ----------
     table : SweepResult, dict of columns or sequence of row dicts
+        The sweep's table (:func:`table_column` reads it).
     x : str
         Parameter column on the horizontal axis (rows are drawn sorted by it).
     y : str or list of str
@@ -160,6 +163,7 @@ def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | No
     Parameters
     ----------
     table : SweepResult, dict of columns or sequence of row dicts
+        The runs' table (:func:`table_column` reads it).
     x, y : str
         The two cost columns, e.g. wall time (s) and error (m).
     label : str, optional
@@ -182,6 +186,7 @@ def plot_pareto(table, x: str, y: str, *, label: str | None = None, by: str | No
         Logarithmic axes (default both: costs usually span decades). Points with a cost
         <= 0 are left out of a logarithmic axis.
     xlabel, ylabel, title : str, optional
+        Axis labels and title. Default ``x``, ``y`` and none.
 
     Returns
     -------

@@ -84,7 +84,13 @@ _UNITS = {"integration_error": "m (estimated largest tip error of the integratio
 
 
 def timeseries_columns(n_modes: int) -> list:
-    """Column names of ``timeseries.csv`` for ``n_modes`` modal coordinates."""
+    """Column names of ``timeseries.csv`` for ``n_modes`` modal coordinates.
+
+    Parameters
+    ----------
+    n_modes : int
+        Modes of a one-beam model, ``N``: columns ``q1`` to ``qN`` after the hub's.
+    """
     return _columns(StateLayout.single(n_modes))
 
 
@@ -101,6 +107,11 @@ def structure_columns(structure: Structure) -> list:
     angle, rate and torque, its position for a free hub, each appendage's tip deflection
     (named as the model's outputs are: ``<name>.tip_deflection``, ``tip_deflection`` for an
     unnamed one).
+
+    Parameters
+    ----------
+    structure : Structure
+        The hub and its appendages.
 
     Examples
     --------
@@ -195,6 +206,11 @@ def json_safe(value):
     """``value`` with JSON types only: a NaN or infinite number becomes null (strict JSON has
     neither), numpy scalars and arrays become numbers and lists, anything else its text.
 
+    Parameters
+    ----------
+    value : object
+        A summary value: dicts, lists and tuples are converted entry by entry.
+
     Examples
     --------
     >>> json_safe({"a": float("inf"), "b": (1, np.float64(2.5)), "c": np.arange(2)})
@@ -230,6 +246,7 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
     Parameters
     ----------
     scene : Scene
+        The scene run.
     result : SimulationResult
         The run of ``scene``.
     overrides : dict, optional
@@ -339,7 +356,9 @@ def write_run(scene, result, out_dir, overrides: dict | None = None,
     Parameters
     ----------
     scene : Scene
+        The scene run.
     result : SimulationResult
+        The run of ``scene``.
     out_dir : str or path-like
         Directory, created if missing; existing files of the same names are replaced, all
         three or none (:func:`flexctl.sim.atomic_files.staged_folder`), and files of other
@@ -392,7 +411,13 @@ def _write_run_files(out: Path, scene, result, summary: dict, reference) -> None
 
 
 def format_summary(summary: dict) -> str:
-    """A few lines for people: status, stop reason, peak tip deflection, first frequency."""
+    """A few lines for people: status, stop reason, peak tip deflection, first frequency.
+
+    Parameters
+    ----------
+    summary : dict
+        A run's summary, as :func:`summarize` gives it.
+    """
     status = summary["status"]
     head = (f"{summary['scene']} ({summary['variant']}, {summary['n_modes']} modes): {status}, "
             f"t = {summary['t_end']:.4g} of {summary['t_final']:.4g} s")

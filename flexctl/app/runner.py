@@ -41,8 +41,9 @@ def execute(scene, progress=None) -> tuple:
     Parameters
     ----------
     scene : Scene
+        The scene: its model, manoeuvre, controller, actuator, sensors and integrator.
     progress : bool or callable, optional
-        As for :func:`flexctl.simulate`.
+        As for :func:`flexctl.simulate`. Default none.
 
     Returns
     -------

@@ -50,7 +50,14 @@ SENSOR_KEYS = tuple(f.name for f in dataclasses.fields(Sensors))
 
 
 def parse_actuator(table) -> object:
-    """The actuator of an ``[actuator]`` table (:mod:`flexctl.model.actuators`)."""
+    """The actuator of an ``[actuator]`` table (:mod:`flexctl.model.actuators`).
+
+    Parameters
+    ----------
+    table : dict
+        The table as parsed from TOML: ``kind`` (``"reaction_wheel"`` or ``"dc_motor"``)
+        and the fields of that actuator (:data:`ACTUATOR_KEYS`), in SI units.
+    """
     if not isinstance(table, dict):
         raise SceneError(f"scene key 'actuator' must be a table; got {type(table).__name__}")
     table = dict(table)
@@ -67,7 +74,14 @@ def parse_actuator(table) -> object:
 
 
 def parse_sensors(table) -> Sensors:
-    """The :class:`~flexctl.sim.sensors.Sensors` of a ``[sensors]`` table."""
+    """The :class:`~flexctl.sim.sensors.Sensors` of a ``[sensors]`` table.
+
+    Parameters
+    ----------
+    table : dict
+        The table as parsed from TOML: fields of ``Sensors`` (:data:`SENSOR_KEYS`), in SI
+        units.
+    """
     if not isinstance(table, dict):
         raise SceneError(f"scene key 'sensors' must be a table; got {type(table).__name__}")
     for key in table:

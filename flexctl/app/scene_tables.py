@@ -61,6 +61,13 @@ def parameter_doc(cls, name: str) -> str:
     """The first sentence of parameter ``name`` in ``cls``'s numpydoc Parameters, as plain
     text (no reST markup; a capitalised first word in lower case); ``""`` when undocumented.
 
+    Parameters
+    ----------
+    cls : type
+        A class with a numpydoc docstring (a scene table's dataclass).
+    name : str
+        The parameter.
+
     Examples
     --------
     >>> from flexctl.model.parameters import Beam

@@ -219,21 +219,35 @@ _MANEUVER_OPTIONAL = {"slew": {"duration", "torque_bound"},
 
 @dataclass(frozen=True, kw_only=True)
 class ModelSpec:
-    """Which model a scene uses: ``variant`` and number of modes ``modes``.
+    """Which model a scene uses: ``variant`` and number of modes ``modes`` (the ``[model]``
+    table).
 
-    ``modes`` is per appendage; a dict ``{name: modes}`` gives each appendage of a
-    ``[[appendages]]`` scene its own (every one named, :func:`parse_scene` checks the names).
-    ``modes`` may be ``"auto"``: as few modes as the scene's manoeuvre needs for a relative tip
-    error ``tolerance`` in (0, 1) (default 1e-2; :func:`flexctl.sim.fidelity.choose_modes`).
-    ``variant`` may be ``"auto"``: first_order where its estimated geometric error meets
-    ``tolerance``, exact otherwise (:func:`flexctl.sim.validity.choose_variant`). The same
-    ``tolerance`` decides when a run warns that its model was used out of range.
+    The design model is the one a controller is designed on (used by slew scenes); its
+    factors make a controller designed on a model that is off, run against the true plant.
 
-    ``design_modes`` and ``design_variant`` describe the model a controller is designed on
-    (default 2 modes; the exact variant on an exact plant, first_order otherwise; used by slew
-    scenes). ``design_stiffness_factor`` and ``design_mass_factor`` (default 1, in [0.1, 10])
-    scale the beam's bending stiffness ``EI`` and every point mass of the design model only:
-    a controller designed on a model that is off, run against the true plant.
+    Parameters
+    ----------
+    variant : str, optional
+        ``"first_order"`` (default), ``"zero_order"``, ``"consistent"``, ``"exact"``, or
+        ``"auto"``: first_order where its estimated geometric error meets ``tolerance``,
+        exact otherwise (:func:`flexctl.sim.validity.choose_variant`).
+    modes : int, dict or str, optional
+        Modes per appendage (default 4); a dict ``{name: modes}`` gives each appendage of a
+        ``[[appendages]]`` scene its own (every one named, :func:`parse_scene` checks the
+        names); ``"auto"``: as few modes as the scene's manoeuvre needs for a relative tip
+        error ``tolerance`` (:func:`flexctl.sim.fidelity.choose_modes`).
+    design_modes : int, optional
+        Modes of the design model (1 to 200). Default 2.
+    design_variant : str, optional
+        Variant of the design model. Default None: the exact variant on an exact plant,
+        first_order otherwise.
+    tolerance : float, optional
+        Relative tip error in (0, 1) that ``"auto"`` modes and variant aim at; it also decides
+        when a run warns that its model was used out of range. Default None: 1e-2.
+    design_stiffness_factor : float, optional
+        Scale of the design model's beam bending stiffness ``EI``, in [0.1, 10]. Default 1.
+    design_mass_factor : float, optional
+        Scale of every point mass of the design model, in [0.1, 10]. Default 1.
     """
 
     variant: str = "first_order"
@@ -307,7 +321,23 @@ def _check_exact_modes(n_modes) -> None:
 
 @dataclass(frozen=True, kw_only=True)
 class SimulationSpec:
-    """Simulation settings of a scene (see :func:`flexctl.simulate`)."""
+    """Simulation settings of a scene (the ``[simulation]`` table; see
+    :func:`flexctl.simulate`).
+
+    Parameters
+    ----------
+    t_final : float
+        End time, s (at least ``MIN_T_FINAL``).
+    output_step : float, optional
+        Spacing of the output times, s (> 0). Default: the run's own.
+    rtol : float, optional
+        Relative tolerance, in [1e-14, 1). Default 1e-8.
+    method : str, optional
+        Integrator, one of :data:`flexctl.sim.simulation.METHODS`. Default ``"auto"``.
+    states : bool, optional
+        ``timeseries.csv`` also carries every state (modal coordinates and rates, a free
+        hub's velocity, an actuator's states), not only the named outputs. Default False.
+    """
 
     t_final: float
     output_step: float | None = None
@@ -543,6 +573,7 @@ def parse_scene(data: dict, name: str = "scene", base_dir=None) -> Scene:
     data : dict
         The scene's tables.
     name : str, optional
+        The scene's name, used in messages and output names. Default ``"scene"``.
     base_dir : str or path-like, optional
         Directory a relative ``maneuver.file`` is read from (the scene file's); default the
         working directory. The samples read replace ``file`` in :attr:`Scene.data`, so that
@@ -872,7 +903,8 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None, *,
     Parameters
     ----------
     scene : Scene
-    controller : optional
+        The scene: system, manoeuvre and simulation settings.
+    controller : object, optional
         The controller built from ``scene.controller`` (``controllers.from_spec``); required
         for a slew scene, which is a goal for a controller rather than an input.
     model : Model, optional

@@ -29,6 +29,7 @@ def run_spatial_scene(scene: SpatialScene, progress=None) -> SpatialResult:
     Parameters
     ----------
     scene : SpatialScene
+        The spatial scene: structure, manoeuvre, initial attitude and integrator settings.
     progress : object, optional
         Accepted for the same call as a planar scene's run; not used.
 
@@ -48,6 +49,7 @@ def spatial_columns(result: SpatialResult) -> list:
     Parameters
     ----------
     result : SpatialResult
+        A spatial run; a free hub adds its position columns.
     """
     columns = ["t", "qw", "qx", "qy", "qz", "wx", "wy", "wz"]
     if result.layout.free:
@@ -75,7 +77,9 @@ def spatial_summary(scene: SpatialScene, result: SpatialResult,
     Parameters
     ----------
     scene : SpatialScene
+        The scene run.
     result : SpatialResult
+        The run of scene.
     overrides : dict, optional
         The overrides the scene was loaded with.
 
@@ -156,7 +160,9 @@ def plot_spatial_response(result: SpatialResult, title: str = ""):
     Parameters
     ----------
     result : SpatialResult
+        The run drawn.
     title : str, optional
+        Figure title. Default none.
 
     Returns
     -------

@@ -168,6 +168,7 @@ def is_spatial(data: dict) -> bool:
     Parameters
     ----------
     data : dict
+        The scene's tables as read from TOML.
     """
     hub = data.get("hub")
     return isinstance(hub, dict) and isinstance(hub.get("inertia"), (list, tuple))

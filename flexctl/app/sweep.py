@@ -171,6 +171,11 @@ class SweepResult:
         """The values of one column, shape (rows,): float when all are numbers, else object.
 
         A row without the column (a task that returned fewer outputs there) gives NaN.
+
+        Parameters
+        ----------
+        name : str
+            One of :attr:`columns`.
         """
         if name not in self.columns:
             raise KeyError(f"column must be one of {', '.join(self.columns)}; got {name!r}")
@@ -181,7 +186,14 @@ class SweepResult:
         return np.array(values, dtype=object)
 
     def where(self, **equal) -> "SweepResult":
-        """The rows whose columns equal the given values, e.g. ``where(variant="zero_order")``."""
+        """The rows whose columns equal the given values, e.g. ``where(variant="zero_order")``.
+
+        Parameters
+        ----------
+        **equal
+            ``column=value`` for each column to match; every column must be one of
+            :attr:`columns`.
+        """
         for name in equal:
             if name not in self.columns:
                 raise KeyError(f"where: column must be one of {', '.join(self.columns)}; "
@@ -427,6 +439,7 @@ def response_amplitudes(result, torque_end: float) -> tuple:
     Parameters
     ----------
     result : SimulationResult
+        The run, its tip deflection over time.
     torque_end : float
         Time the torque stops, s (``T_m`` of a one-period sine torque).
 

@@ -38,7 +38,13 @@ class SweepError(RuntimeError):
 
 
 def describe(exc: BaseException) -> str:
-    """``"Type: message"`` of an exception."""
+    """``"Type: message"`` of an exception.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The exception described.
+    """
     return f"{type(exc).__name__}: {exc}"
 
 
@@ -80,7 +86,13 @@ def evaluate(task, point: dict, seed: int | None = None, attempt: int = 1) -> Ta
 
 
 def is_executor(obj) -> bool:
-    """True for an executor instance (it has ``submit``); a class is a factory."""
+    """True for an executor instance (it has ``submit``); a class is a factory.
+
+    Parameters
+    ----------
+    obj : object
+        The sweep's ``executor`` argument: an executor, or a class that makes one.
+    """
     return not isinstance(obj, type) and callable(getattr(obj, "submit", None))
 
 
@@ -90,6 +102,7 @@ class Recorder:
     Parameters
     ----------
     store : SweepStore or None
+        Where each outcome is committed as it arrives; None: kept in memory only.
     bar : tqdm.tqdm
         Its postfix shows done, failed and remaining.
     name : str
@@ -107,7 +120,13 @@ class Recorder:
         self.failed = 0
 
     def resumed(self, outcomes: dict) -> None:
-        """Count the outcomes a store already held (raising for a failure when asked)."""
+        """Count the outcomes a store already held (raising for a failure when asked).
+
+        Parameters
+        ----------
+        outcomes : dict
+            ``{key: TaskOutcome}`` read from the store.
+        """
         self.failed += sum(not o.ok for o in outcomes.values())
         self._show(len(outcomes))
         for key, outcome in outcomes.items():

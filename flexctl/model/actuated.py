@@ -40,8 +40,25 @@ BLOCK = "actuator"
 class ActuatedModel(StructureModel):
     """A structure model driven through an actuator (see the module Notes).
 
-    Attributes beyond :class:`~flexctl.model.structure_model.StructureModel`'s: ``actuator``
-    and :attr:`mechanical` (the structure's model, input the hub torque).
+    Build with :func:`flexctl.build_model` (its ``actuator``). Besides
+    :class:`~flexctl.model.structure_model.StructureModel`'s attributes, :attr:`mechanical`
+    (the structure's model, input the hub torque).
+
+    Attributes
+    ----------
+    system : Structure
+        The structure the equations integrate: the one given, with a DC motor's reflected
+        rotor inertia added to its hub.
+    n_modes : int
+        Modes of all the appendages together, ``N``.
+    variant : Variant
+        ``"first_order"``, ``"zero_order"``, ``"consistent"`` or ``"exact"``.
+    matrices : StructureMatrices
+        The modal matrices of :attr:`system` at rest.
+    actuator : ReactionWheel or DCMotor
+        What turns the hub (:mod:`flexctl.model.actuators`).
+    source : Structure
+        The structure as given, before the actuator changed its hub.
     """
 
     actuator: object = field(default=None, kw_only=True)
@@ -83,12 +100,24 @@ class ActuatedModel(StructureModel):
         return self._c["functions"]
 
     def actuator_states(self, x) -> np.ndarray:
-        """The actuator's states of state(s) ``x``, shape (k,) or (k, P)."""
+        """The actuator's states of state(s) ``x``, shape (k,) or (k, P).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            Plant state(s) in :attr:`layout` order, the actuator's states included.
+        """
         x = self._check_state(x)
         return x[self.layout.block(BLOCK)] if self.actuator.state_names else x[:0]
 
     def mechanical_states(self, x) -> np.ndarray:
-        """The structure's states of state(s) ``x``."""
+        """The structure's states of state(s) ``x``, shape (n_m,) or (n_m, P).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            Plant state(s) in :attr:`layout` order, the actuator's states included.
+        """
         return self._check_state(x)[self.layout.mechanical]
 
     def applied_torque(self, x, u) -> np.ndarray:
@@ -125,21 +154,51 @@ class ActuatedModel(StructureModel):
         return dict(zip(self.actuator.signal_names, values))
 
     def total_angular_momentum(self, x) -> np.ndarray:
-        """Angular momentum of hub, beams and actuator about the inertial origin, kg m^2/s
-        (the same as :meth:`angular_momentum`)."""
+        """Angular momentum of hub, beams and actuator about the inertial origin, kg m^2/s,
+        shape () or (P,) (the same as :meth:`angular_momentum`).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            Plant state(s) in :attr:`layout` order, the actuator's states included.
+        """
         return self.angular_momentum(x)
 
     def beam_accelerations(self, *args):
+        """Not available: a prescribed hub motion does not go through an actuator (raises
+        ``InputValueError``); use ``model.mechanical.beam_accelerations``.
+
+        Parameters
+        ----------
+        *args
+            Those of :meth:`StructureModel.beam_accelerations
+            <flexctl.model.structure_model.StructureModel.beam_accelerations>`; not read.
+        """
         raise InputValueError("a prescribed hub motion does not go through an actuator: "
                               "simulate the structure's own model (model.mechanical)")
 
     def hub_torque(self, *args):
+        """Not available: the torque of a prescribed hub motion is the structure's (raises
+        ``InputValueError``); use ``model.mechanical.hub_torque``.
+
+        Parameters
+        ----------
+        *args
+            Those of :meth:`StructureModel.hub_torque
+            <flexctl.model.structure_model.StructureModel.hub_torque>`; not read.
+        """
         raise InputValueError("the torque of a prescribed hub motion is the structure's: use "
                               "model.mechanical.hub_torque")
 
     def linear_matrices(self, spin_rate: float = 0.0):
         """``A`` (n, n) and ``B`` (n, 1) of the plant (actuator included) linearised about
-        rest (or a steady spin of a pinned hub, the actuator at rest and commanded 0)."""
+        rest (or a steady spin of a pinned hub, the actuator at rest and commanded 0).
+
+        Parameters
+        ----------
+        spin_rate : float, optional
+            Steady hub rate, rad/s; must be 0 for a free hub. Default 0.
+        """
         import casadi as ca
 
         spin_rate = self._spin_for(spin_rate, "linearisation")
@@ -152,12 +211,24 @@ class ActuatedModel(StructureModel):
         return a, b.reshape(-1, 1)
 
     def second_order_form(self, spin_rate: float = 0.0):
-        """The structure's second-order form (its coordinates only)."""
+        """The structure's second-order form (its coordinates only).
+
+        Parameters
+        ----------
+        spin_rate : float, optional
+            Steady hub rate, rad/s; must be 0 for a free hub. Default 0.
+        """
         return self.mechanical.second_order_form(spin_rate)
 
     def modal_visibility(self, spin_rate: float = 0.0):
         """Which of the structure's modes its hub torque moves (the actuator passes the
-        torque on: its own modes are not flexible ones)."""
+        torque on: its own modes are not flexible ones).
+
+        Parameters
+        ----------
+        spin_rate : float, optional
+            Steady hub rate, rad/s, of the linearisation. Default 0.
+        """
         return self.mechanical.modal_visibility(spin_rate)
 
 

@@ -132,7 +132,13 @@ class ReactionWheel(KeywordOnly):
         return self.inertia * self.speed_limit
 
     def mechanical_hub(self, hub):
-        """The hub the structure's equations carry: unchanged (the rotor spins by itself)."""
+        """The hub the structure's equations carry: unchanged (the rotor spins by itself).
+
+        Parameters
+        ----------
+        hub : Hub
+            The structure's hub.
+        """
         return hub
 
     def state_scale(self) -> np.ndarray:
@@ -149,7 +155,13 @@ class ReactionWheel(KeywordOnly):
         return ca.if_else(motor * speed < 0.0, room, 1.0)
 
     def friction(self, speed):
-        """Bearing friction on the rotor ``f(Omega)``, N m (CasADi or numpy)."""
+        """Bearing friction on the rotor ``f(Omega)``, N m (CasADi or numpy).
+
+        Parameters
+        ----------
+        speed : float, ndarray or casadi.SX
+            Wheel speed relative to the hub ``Omega``, rad/s.
+        """
         tanh = np.tanh if isinstance(speed, (float, np.ndarray)) else __import__("casadi").tanh
         return (self.viscous_friction * speed
                 + self.coulomb_friction * tanh(speed / self.friction_smoothing))
@@ -210,7 +222,13 @@ class ReactionWheel(KeywordOnly):
         return ca.vertcat(states[0], self._gate(states[0], states[1]) * states[1])
 
     def outputs(self, states):
-        """Outputs that are states: ``[wheel_speed, wheel_torque]`` (CasADi)."""
+        """Outputs that are states: ``[wheel_speed, wheel_torque]`` (CasADi).
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (2,)
+            The wheel's states ``[wheel_speed Omega (rad/s), wheel_torque T_m (N m)]``.
+        """
         import casadi as ca
 
         return ca.vertcat(states[0], states[1])
@@ -258,6 +276,8 @@ class DCMotor(KeywordOnly):
         ``k_b``, V s / rad (> 0).
     gear_ratio : float
         ``N``, motor turns per hub turn (> 0; 1 for a direct drive).
+    voltage_limit : float
+        ``V_max``, V (> 0).
     gear_efficiency : float
         ``eta_g`` in (0, 1]. Default 1.
     motor_efficiency : float
@@ -267,8 +287,6 @@ class DCMotor(KeywordOnly):
         ``J_m`` at the motor shaft, kg m^2 (>= 0). Default 0.
     viscous_friction : float
         ``b`` at the output shaft, N m s (>= 0). Default 0.
-    voltage_limit : float
-        ``V_max``, V (> 0).
     """
 
     resistance: float
@@ -342,7 +360,13 @@ class DCMotor(KeywordOnly):
         return self.torque_gain * self.voltage_limit / self.damping
 
     def mechanical_hub(self, hub):
-        """The hub with the rotor's reflected inertia added."""
+        """The hub with the rotor's reflected inertia added.
+
+        Parameters
+        ----------
+        hub : Hub
+            The structure's hub; its ``inertia`` grows by :attr:`reflected_inertia`.
+        """
         return dataclasses.replace(hub, inertia=hub.inertia + self.reflected_inertia)
 
     def state_scale(self) -> np.ndarray:
@@ -350,7 +374,13 @@ class DCMotor(KeywordOnly):
         return np.zeros(0)
 
     def voltage(self, u):
-        """The voltage applied, ``sat(u)`` (CasADi or numpy), V."""
+        """The voltage applied, ``sat(u)`` (CasADi or numpy), V.
+
+        Parameters
+        ----------
+        u : float, ndarray or casadi.SX
+            Voltage command, V; clipped to ``[-V_max, V_max]``.
+        """
         if isinstance(u, (float, int, np.ndarray, np.floating)):
             return np.clip(u, -self.voltage_limit, self.voltage_limit)
         import casadi as ca
@@ -419,7 +449,13 @@ class DCMotor(KeywordOnly):
         return ca.vertcat(self.voltage(u), self.current(u, rate))
 
     def outputs(self, states):
-        """No outputs that are states."""
+        """No outputs that are states: an empty CasADi column.
+
+        Parameters
+        ----------
+        states : casadi.SX, shape (0,)
+            The motor's states: none (not read).
+        """
         import casadi as ca
         return ca.DM.zeros(0)
 
@@ -467,7 +503,13 @@ ACTUATOR_KINDS = {"reaction_wheel": ReactionWheel, "dc_motor": DCMotor}
 
 def as_actuator(actuator):
     """``actuator`` checked: ``None`` (ideal torque), a :class:`ReactionWheel` or a
-    :class:`DCMotor`."""
+    :class:`DCMotor`.
+
+    Parameters
+    ----------
+    actuator : ReactionWheel, DCMotor or None
+        What turns the hub; anything else raises ``InputTypeError``.
+    """
     if actuator is None or isinstance(actuator, tuple(ACTUATOR_KINDS.values())):
         return actuator
     raise InputTypeError("actuator must be a ReactionWheel, a DCMotor or None (an ideal "

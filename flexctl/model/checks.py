@@ -237,6 +237,13 @@ class KeywordOnly:
     place for every subclass and leaves the dataclass machinery (``dataclasses.replace``,
     copying, pickling, which call by keyword or with no arguments) as it is.
 
+    Parameters
+    ----------
+    *args
+        Positional arguments: refused (any one raises the ``InputTypeError``).
+    **kwargs
+        The subclass's fields by name, passed on to its dataclass ``__init__``.
+
     Examples
     --------
     >>> from flexctl import Hub
@@ -266,7 +273,13 @@ def _short_repr(value) -> str:
 
 def keyword_form(cls) -> str:
     """``Name(required=..., optional=default, ...)``: how to call the dataclass ``cls``
-    (a default made by a factory shows as ``...`` too)."""
+    (a default made by a factory shows as ``...`` too).
+
+    Parameters
+    ----------
+    cls : type
+        A dataclass; its ``init`` fields without a leading underscore are shown, in order.
+    """
     fields = [f for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
     return f"{cls.__name__}(" + ", ".join(
         f"{f.name}={'...' if f.default is dataclasses.MISSING else _short_repr(f.default)}"

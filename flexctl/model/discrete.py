@@ -207,13 +207,16 @@ def discretize(model, dt, method: str = "rk4", substeps=None, rtol: float = 1e-8
     Parameters
     ----------
     model : flexctl.Model
+        The model stepped (any variant; an actuated model's input is its command).
     dt : float
         Sample time, s (> 0).
-    method : {"rk4", "cvodes"}
+    method : {"rk4", "cvodes"}, optional
+        RK4 substeps (default) or SUNDIALS CVODES.
     substeps : int, optional
         RK4 steps per sample (1 to 1000); default the fewest with ``omega_max h <= 0.5``.
-    rtol : float
+    rtol : float, optional
         CVODES relative tolerance (1e-14 to 1e-2); absolute tolerance ``1e-3 rtol``.
+        Default 1e-8.
     parameters : list of str, optional
         Physical parameters (scene keys) as a third input ``p``: ``(x, u, p) -> x_next``
         (:meth:`flexctl.Model.casadi` with ``parameters``).

@@ -79,7 +79,15 @@ TEST_DEFLECTION = 0.4
 
 
 class Quadrature(NamedTuple):
-    """Size of a :class:`PanelRule`: Gauss points per panel and equal panels along the beam."""
+    """Size of a :class:`PanelRule`: Gauss points per panel and equal panels along the beam.
+
+    Parameters
+    ----------
+    points : int
+        Gauss-Legendre points per panel (1 to :data:`MAX_POINTS`).
+    panels : int
+        Equal panels along the beam (1 to :data:`MAX_PANELS`).
+    """
 
     points: int
     panels: int
@@ -113,7 +121,13 @@ REFERENCE_POINTS = 12
 def reference_rule(n_modes: int) -> Quadrature:
     """The rule the candidates on ``n_modes`` modes are compared with: some 36 points per half
     wave of the fastest mode's slope (``3 N`` panels of :data:`REFERENCE_POINTS`, at least 4
-    and at most 64), converged far below :data:`PANEL_TOLERANCE`."""
+    and at most 64), converged far below :data:`PANEL_TOLERANCE`.
+
+    Parameters
+    ----------
+    n_modes : int
+        Cantilever modes of the beam, ``N``.
+    """
     return Quadrature(REFERENCE_POINTS, min(64, max(4, 3 * n_modes)))
 
 
@@ -229,7 +243,14 @@ class PanelRule:
 
     def integrate(self, f):
         """``(F, S)``: ``F`` (n, c) the integrals from the root to every node of the columns
-        of ``f`` (n, c; CasADi or numpy), ``S`` (n_panels, c) their whole-panel sums."""
+        of ``f`` (n, c; CasADi or numpy), ``S`` (n_panels, c) their whole-panel sums.
+
+        Parameters
+        ----------
+        f : casadi.SX, casadi.MX or ndarray, shape (n, c)
+            Values of ``c`` integrands at the :attr:`nodes`, in their own unit; the integrals
+            are in that unit times m. An MX ``f`` takes the whole-matrix form.
+        """
         import casadi as ca
 
         if isinstance(f, ca.MX):
@@ -251,7 +272,15 @@ class PanelRule:
         return ca.vertcat(first, second)[list(map(int, self.order)), :], sums
 
     def sparse(self, name: str):
-        """The matrix attribute ``name`` as a sparse CasADi ``DM`` (converted once)."""
+        """The matrix attribute ``name`` as a sparse CasADi ``DM`` (converted once).
+
+        Parameters
+        ----------
+        name : str
+            A matrix attribute or property of the rule: ``"even"``, ``"odd"``, ``"sums"``,
+            ``"before_half"``, ``"upto_right"``, ``"local"``, ``"panel_sums"`` or
+            ``"before"``.
+        """
         key = ("sparse", name)
         if key not in self._converted:
             self._converted[key] = _sparse(getattr(self, name))
@@ -259,7 +288,13 @@ class PanelRule:
 
     def slopes(self, n_modes: int):
         """``phi_i'(s)`` of the first ``n_modes`` cantilever modes at the nodes, a CasADi
-        ``DM`` (n, n_modes), 1/m (computed once)."""
+        ``DM`` (n, n_modes), 1/m (computed once).
+
+        Parameters
+        ----------
+        n_modes : int
+            Cantilever modes, ``N``, of a beam of the rule's length.
+        """
         import casadi as ca
 
         key = ("slopes", n_modes)
@@ -295,7 +330,13 @@ class PanelRule:
         """``(local, before)``: ``local @ f + before @ S`` (``S`` from :meth:`integrate`)
         integrates ``f`` from the root to each position (m); ``local`` (P, n) holds the
         position's own panel only, ``before`` (P, n_panels) is 1 on the whole panels before
-        it."""
+        it.
+
+        Parameters
+        ----------
+        positions : sequence of float, length P
+            Distances from the root, m, in ``[0, length]``.
+        """
         leg = np.polynomial.legendre
         h = self.length / self.n_panels
         local = np.zeros((len(positions), self.nodes.size))
@@ -394,14 +435,26 @@ class ExactGeometry:
     def tip_positions(self, q) -> np.ndarray:
         """:attr:`tip` on numbers, in NumPy: ``[b + int_0^l cos psi, int_0^l sin psi]`` on the
         same nodes and weights, m, shape (2,) for ``q`` (N,) or (2, P) for ``q`` (N, P) (a
-        run's output times: no CasADi call per column)."""
+        run's output times: no CasADi call per column).
+
+        Parameters
+        ----------
+        q : array_like, shape (N,) or (N, P)
+            Modal coordinates, m.
+        """
         psi = self.slopes @ np.asarray(q, dtype=float)
         return np.stack((self.system.hub.radius + self.weights @ np.cos(psi),
                          self.weights @ np.sin(psi)))
 
     def tip_deflections(self, q) -> np.ndarray:
         """The second row of :meth:`tip_positions` alone, ``int_0^l sin psi``, m, shape ()
-        or (P,)."""
+        or (P,).
+
+        Parameters
+        ----------
+        q : array_like, shape (N,) or (N, P)
+            Modal coordinates, m.
+        """
         return self.weights @ np.sin(self.slopes @ np.asarray(q, dtype=float))
 
 
@@ -684,6 +737,7 @@ def choose_rule(system: HubBeam, matrices) -> Quadrature:
     Parameters
     ----------
     system : HubBeam
+        The hub, beam and point masses modelled.
     matrices : ModalMatrices
         The system's assembled matrices (:func:`~flexctl.model.matrices.assemble`).
     """
@@ -757,5 +811,12 @@ def _cached(system: HubBeam, n_modes: int, matrices) -> ExactGeometry:
 
 
 def exact_geometry(matrices) -> ExactGeometry:
-    """The exact model's CasADi functions for assembled ``matrices`` (built once, cached)."""
+    """The exact model's CasADi functions for assembled ``matrices`` (built once, cached).
+
+    Parameters
+    ----------
+    matrices : ModalMatrices
+        A one-beam system's assembled matrices (:func:`~flexctl.model.matrices.assemble`):
+        the system and its mode count.
+    """
     return _cached(matrices.system, matrices.n_modes, matrices)

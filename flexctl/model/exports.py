@@ -16,6 +16,11 @@ def signal_names(names) -> list:
     """Names as python-control signals: python-control keeps the dot for ``system.signal``,
     so an appendage's ``wing_a.q1`` becomes ``wing_a_q1`` (one-beam names are unchanged).
 
+    Parameters
+    ----------
+    names : sequence of str
+        State, input or output names of a model.
+
     Raises
     ------
     InputValueError
@@ -196,6 +201,7 @@ def to_casadi(model, sx: bool = True):
     Parameters
     ----------
     model : Model
+        The model (any variant).
     sx : bool, optional
         Build on ``SX`` scalar symbols (default, fastest to evaluate for small models) or ``MX``.
 

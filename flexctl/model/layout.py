@@ -150,7 +150,13 @@ class StateLayout:
 
     @classmethod
     def single(cls, n_modes: int) -> "StateLayout":
-        """The layout of one unnamed appendage of ``n_modes`` modes on a pinned hub."""
+        """The layout of one unnamed appendage of ``n_modes`` modes on a pinned hub.
+
+        Parameters
+        ----------
+        n_modes : int
+            Modes of the beam, ``N`` (>= 1): the state has ``2 N + 2`` entries.
+        """
         return cls(appendages=(("", n_modes),))
 
     # ------------------------------------------------------------------ construction
@@ -193,8 +199,13 @@ class StateLayout:
         return StateLayout(appendages=self.appendages, free_hub=self.free_hub, rotation=False)
 
     def with_modes(self, n_modes) -> "StateLayout":
-        """The same blocks on other mode counts: one number for every appendage, or one per
-        appendage in order (a design model on fewer modes)."""
+        """The same blocks on other mode counts (a design model on fewer modes).
+
+        Parameters
+        ----------
+        n_modes : int or sequence of int
+            Modes of every appendage, or of each appendage in state order.
+        """
         counts = (n_modes,) * len(self.appendages) if np.ndim(n_modes) == 0 else tuple(n_modes)
         if len(counts) != len(self.appendages):
             raise InputValueError(f"n_modes must be one count or {len(self.appendages)}; got "
@@ -294,19 +305,37 @@ class StateLayout:
         return slice(q.start + self.n_coordinates, q.stop + self.n_coordinates)
 
     def modal_slice(self, appendage: str = "") -> slice:
-        """Modal coordinates of one appendage (by name; ``""`` for a single unnamed one)."""
+        """Modal coordinates of one appendage, as a slice of the state.
+
+        Parameters
+        ----------
+        appendage : str, optional
+            The appendage's name; ``""`` (default) for a single unnamed one.
+        """
         if not isinstance(appendage, str) or appendage not in self._index["modal"]:
             raise InputValueError(f"appendage must be one of {list(self.appendage_names)}; "
                                   f"got {appendage!r}")
         return slice(*self._index["modal"][appendage])
 
     def modal_rate_slice(self, appendage: str = "") -> slice:
-        """Modal rates of one appendage."""
+        """Modal rates of one appendage, as a slice of the state.
+
+        Parameters
+        ----------
+        appendage : str, optional
+            The appendage's name; ``""`` (default) for a single unnamed one.
+        """
         s = self.modal_slice(appendage)
         return slice(s.start + self.n_coordinates, s.stop + self.n_coordinates)
 
     def block(self, name: str) -> slice:
-        """A first-order block appended by :meth:`with_block`."""
+        """A first-order block appended by :meth:`with_block`, as a slice of the state.
+
+        Parameters
+        ----------
+        name : str
+            The block's name (e.g. ``"actuator"``, ``"controller"``).
+        """
         blocks = self._index.get("extra", {})
         if not isinstance(name, str) or name not in blocks:
             raise InputValueError(f"state block must be one of {list(blocks)}; got {name!r}")
@@ -324,7 +353,19 @@ class StateLayout:
     def projection(self, other: "StateLayout") -> np.ndarray:
         """Indices of this layout's states that form the state of ``other`` (a layout of the
         same blocks on fewer modes, e.g. a design model): each appendage's first modes.
-        Read-only (kept for the next call: a sampled law asks at every sample)."""
+        Read-only (kept for the next call: a sampled law asks at every sample).
+
+        Parameters
+        ----------
+        other : StateLayout
+            A layout of the same appendages and hub, with at most this one's modes on each
+            appendage.
+
+        Returns
+        -------
+        ndarray of int, shape (other.n_mechanical,)
+            ``x[indices]`` is the state of ``other`` (its mechanical states).
+        """
         if not isinstance(other, StateLayout):
             raise InputTypeError(f"other must be a StateLayout; got {type(other).__name__}")
         return _projection(self, other)
@@ -353,11 +394,23 @@ class StateLayout:
 
     # ------------------------------------------------------------------ accessors
     def hub_angle(self, x):
-        """Hub angle(s), rad."""
+        """Hub angle(s), rad.
+
+        Parameters
+        ----------
+        x : ndarray, shape (n,) or (n, P), or CasADi column
+            State(s) in this layout (with the hub rotation).
+        """
         return x[self.theta]
 
     def hub_rate(self, x):
-        """Hub rate(s), rad/s."""
+        """Hub rate(s), rad/s.
+
+        Parameters
+        ----------
+        x : ndarray, shape (n,) or (n, P), or CasADi column
+            State(s) in this layout (with the hub rotation).
+        """
         return x[self.theta_dot]
 
     def modal(self, x, appendage: str | None = None):
@@ -385,7 +438,13 @@ class StateLayout:
         return x[self.q_dot if appendage is None else self.modal_rate_slice(appendage)]
 
     def split(self, x):
-        """``theta, q, theta_dot, q_dot`` of a state (pinned hub, rotation included)."""
+        """``theta, q, theta_dot, q_dot`` of a state (pinned hub, rotation included).
+
+        Parameters
+        ----------
+        x : ndarray, shape (n,) or (n, P), or CasADi column
+            State(s) in this layout.
+        """
         return x[self.theta], x[self.q], x[self.theta_dot], x[self.q_dot]
 
     def embed(self, row, block: str = "q", size: int | None = None) -> np.ndarray:

@@ -44,6 +44,7 @@ def tension(system: HubBeam, x) -> np.ndarray:
     Parameters
     ----------
     system : HubBeam
+        The beam, its point masses and the hub radius ``b``.
     x : array_like
         Positions along the beam, m. At a mass position the tension just outboard of the
         mass is returned (the mass pulls on the part inboard of it).
@@ -96,7 +97,9 @@ def condensed_hub_inertia(system: HubBeam, n_modes: int) -> float:
     Parameters
     ----------
     system : HubBeam
+        The hub, beam and point masses.
     n_modes : int
+        Number of cantilever modes ``N`` (>= 1).
 
     Returns
     -------
@@ -121,6 +124,33 @@ class ModalMatrices:
     """Assembled modal matrices of a :class:`~flexctl.model.parameters.HubBeam` (read-only arrays).
 
     Build with :func:`assemble`; see the module Notes for the symbols and shapes.
+
+    Attributes
+    ----------
+    system : HubBeam
+        The system assembled.
+    n_modes : int
+        Number of cantilever modes ``N``.
+    roots : ndarray, shape (N,)
+        Cantilever eigenvalues ``z_i`` (``cos z cosh z = -1``), dimensionless.
+    beam_frequencies : ndarray, shape (N,)
+        Clamped frequencies of the bare beam, ``z_i^2 sqrt(EI / (rhoA l^4))``, rad/s.
+    J0 : float
+        Inertia of the undeformed system about O, kg m^2.
+    M_ff : ndarray, shape (N, N)
+        Modal mass, kg.
+    K_ff : ndarray, shape (N, N)
+        Modal bending stiffness, N/m.
+    K_g : ndarray, shape (N, N)
+        Geometric stiffness per unit ``theta_t^2``, kg.
+    m_tf : ndarray, shape (N,)
+        Rigid-flexible inertia coupling, kg m.
+    C_ff : ndarray, shape (N, N)
+        Modal damping, N s/m.
+    tip : ndarray, shape (N,)
+        ``phi_i(l)``, tip deflection per modal coordinate.
+    root : ndarray, shape (N,)
+        ``EI phi_i''(0)``, root bending moment per modal coordinate, N.
     """
 
     system: HubBeam
@@ -142,7 +172,13 @@ class ModalMatrices:
         return self.M_ff - self.K_g
 
     def deflection_vector(self, position: float) -> np.ndarray:
-        """``phi_i(x)`` at ``position`` (m), so that ``y(x) = phi(x) @ q``. Shape (N,)."""
+        """``phi_i(x)`` at ``position`` (m), so that ``y(x) = phi(x) @ q``. Shape (N,).
+
+        Parameters
+        ----------
+        position : float
+            Distance from the beam root, m, in ``[0, l]``.
+        """
         l = self.system.beam.length
         if not 0.0 <= position <= l:
             raise InputValueError(f"position must lie in [0, beam.length = {l:g}]; "
@@ -161,6 +197,7 @@ def assemble(system: HubBeam, n_modes: int) -> ModalMatrices:
     Parameters
     ----------
     system : HubBeam
+        The hub, beam and point masses.
     n_modes : int
         Number of cantilever modes ``N`` (>= 1).
 

@@ -192,7 +192,9 @@ def carried_masses(owner: str, beam, masses, radius: float) -> tuple:
     owner : str
         Name of the holder in messages (``system``, ``appendages[1]``).
     beam : Beam
+        The cantilever the masses sit on.
     masses : iterable of PointMass
+        Its point masses, each at a position in ``[0, beam.length]``.
     radius : float
         Radius of the beam's root from the hub centre, m.
 
@@ -240,7 +242,9 @@ class HubBeam(KeywordOnly):
     Parameters
     ----------
     hub : Hub
+        The rigid hub, pinned or free, at whose rim the beam is clamped.
     beam : Beam
+        The cantilever.
     masses : tuple of PointMass, optional
         Point masses on the beam, each at a position in ``[0, beam.length]``. Any iterable is
         accepted and stored as a tuple sorted by position.

@@ -127,6 +127,7 @@ class SpatialLayout:
         Parameters
         ----------
         x : casadi.SX or ndarray, shape (n_states,) or (n_states, P)
+            State(s) in this layout's order.
         """
         c = 4
         position = x[c:c + 3] if self.free else None
@@ -146,7 +147,10 @@ class SpatialEquations:
 
     Attributes
     ----------
+    structure : SpatialStructure
+        The structure modelled.
     layout : SpatialLayout
+        Where each coordinate and speed lies in the state.
     rhs : casadi.Function
         ``(x (n_states), torque (3)) -> x_t``: the state's rate, torque in the hub frame, N m.
     tips : casadi.Function
@@ -176,6 +180,7 @@ def spatial_equations(structure: SpatialStructure, n_modes: int) -> SpatialEquat
     Parameters
     ----------
     structure : SpatialStructure
+        The hub and its appendages.
     n_modes : int
         Modes per field of every appendage (1 to 12).
 

@@ -43,6 +43,7 @@ def linearize_spatial(structure: SpatialStructure, n_modes: int = 4,
     Parameters
     ----------
     structure : SpatialStructure
+        The hub and its appendages.
     n_modes : int, optional
         Modes per field of every appendage (1 to 12). Default 4.
     angular_velocity : array_like, shape (3,), optional
@@ -157,6 +158,7 @@ def nonlinear_spatial(structure: SpatialStructure, n_modes: int = 4):
     Parameters
     ----------
     structure : SpatialStructure
+        The hub and its appendages.
     n_modes : int, optional
         Modes per field of every appendage (1 to 12). Default 4.
 

@@ -26,6 +26,7 @@ def skew(a):
     Parameters
     ----------
     a : casadi.SX, shape (3, 1)
+        The vector ``a``: ``[a]x b = a x b``.
 
     Returns
     -------
@@ -115,7 +116,19 @@ def rod_shapes(length: float, n_modes: int, nodes: tuple) -> dict:
 
 @dataclass(frozen=True, eq=False)
 class Rod:
-    """One appendage's exact kinematics on its quadrature: node rotations, positions."""
+    """One appendage's exact kinematics on its quadrature: node rotations, positions.
+
+    Parameters
+    ----------
+    appendage : SpatialAppendage
+        The rod, its masses and its mounting.
+    rule : PanelRule
+        The quadrature along the rod (:func:`rod_rule`).
+    n_modes : int
+        Modes per field ``N``.
+    root : ndarray, shape (3,)
+        The rod's root point in the hub frame, m.
+    """
 
     appendage: SpatialAppendage
     rule: object
@@ -284,6 +297,7 @@ def rod_rule(appendage: SpatialAppendage, hub, n_modes: int):
     Parameters
     ----------
     appendage : SpatialAppendage
+        The rod: its two bending planes' beams and its mounting.
     hub : SpatialHub
         Its hub (the planar model's hub inertia about the bending axis and root radius).
     n_modes : int
@@ -317,6 +331,7 @@ def elastic_matrices(appendage: SpatialAppendage, n_modes: int) -> tuple:
     Parameters
     ----------
     appendage : SpatialAppendage
+        The rod: its two bending planes' beams, its torsion and its point masses.
     n_modes : int
         Modes per field.
 

@@ -302,6 +302,7 @@ class SpatialStructure(KeywordOnly):
     Parameters
     ----------
     hub : SpatialHub
+        The rigid hub: its inertia tensor, pinned or free.
     appendages : tuple of SpatialAppendage
         At least one, at most :data:`MAX_SPATIAL_APPENDAGES`, with unique names; their order
         is the order of their states.
@@ -368,6 +369,7 @@ class SpatialStructure(KeywordOnly):
         Parameters
         ----------
         structure : Structure or HubBeam
+            The planar structure: its hub, beams, masses and mounting angles.
         lateral_ratio : float, optional
             ``I_l / I_n`` of the rods (the planar model has no lateral bending). Default 100.
         torsion_ratio : float, optional

@@ -51,6 +51,7 @@ class Appendage(KeywordOnly):
         ``wing_a.tip_deflection``). The empty name is kept for the single appendage of a
         :class:`~flexctl.model.HubBeam`.
     beam : Beam
+        The cantilever.
     masses : tuple of PointMass, optional
         Point masses on the beam, positions from its root in ``[0, beam.length]``; stored
         sorted by position.
@@ -163,12 +164,24 @@ class Structure(KeywordOnly):
                                                          masses=system.masses),))
 
     def root_radius(self, appendage: Appendage) -> float:
-        """Radius of an appendage's root from the hub centre, m."""
+        """Radius of an appendage's root from the hub centre, m.
+
+        Parameters
+        ----------
+        appendage : Appendage
+            One of :attr:`appendages`: its own ``radius``, else the hub's.
+        """
         return self.hub.radius if appendage.radius is None else appendage.radius
 
     def appendage_system(self, index: int) -> HubBeam:
         """Appendage ``index`` alone on a pinned, massless hub at its root radius: the
-        one-beam system whose modal matrices are its blocks of the structure's."""
+        one-beam system whose modal matrices are its blocks of the structure's.
+
+        Parameters
+        ----------
+        index : int
+            Position of the appendage in :attr:`appendages`.
+        """
         app = self.appendages[index]
         return HubBeam(hub=Hub(inertia=0.0, radius=self.root_radius(app)), beam=app.beam,
                        masses=app.masses)
@@ -202,7 +215,13 @@ class Structure(KeywordOnly):
 
 def as_structure(system) -> Structure:
     """A :class:`Structure` as it is; a :class:`~flexctl.model.HubBeam` as its one-appendage
-    structure."""
+    structure.
+
+    Parameters
+    ----------
+    system : Structure or HubBeam
+        The system; anything else raises ``InputTypeError``.
+    """
     if isinstance(system, Structure):
         return system
     if isinstance(system, HubBeam):

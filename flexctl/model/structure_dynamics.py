@@ -169,7 +169,13 @@ def _solve(mass, rhs, variables):
 
 
 def structure_functions(model) -> StructureFunctions:
-    """Build the CasADi functions of a structure ``model`` (see the module docstring)."""
+    """Build the CasADi functions of a structure ``model`` (see the module docstring).
+
+    Parameters
+    ----------
+    model : StructureModel
+        The structure's model: its matrices, variant and state layout.
+    """
     import casadi as ca
 
     mat, variant, layout = model.matrices, model.variant, model.layout

@@ -98,12 +98,37 @@ class StructureMatrices:
     Attributes
     ----------
     system : Structure
+        The structure assembled.
     modes : tuple of int
         Modes of each appendage.
     parts : tuple of ModalMatrices
         Each appendage's own matrices (:meth:`Structure.appendage_system`).
     slices : tuple of slice
         Each appendage's modal coordinates within ``q``.
+    n_modes : int
+        Modes of all the appendages, ``N``.
+    beam_frequencies : ndarray, shape (N,)
+        Clamped frequencies of each appendage's bare beam, rad/s, appendage by appendage.
+    J0 : float
+        Inertia of the undeformed structure about the hub centre, kg m^2.
+    M_ff, K_ff, K_g, C_ff : ndarray, shape (N, N)
+        Block diagonal: each appendage's modal mass (kg), bending stiffness (N/m),
+        geometric stiffness per unit ``theta_t^2`` (kg) and damping (N s/m).
+    m_tf : ndarray, shape (N,)
+        Rigid-flexible inertia coupling, kg m.
+    tip, root : ndarray, shape (K, N)
+        Tip deflection (m) and root bending moment (N m) of each of the K appendages per
+        modal coordinate.
+    mass : float
+        Hub, beams and point masses, kg.
+    first : ndarray, shape (2,)
+        ``S_0``, first moment of the undeformed structure about the hub centre in the hub
+        frame, kg m.
+    first_q : ndarray, shape (2, N)
+        First moment per modal coordinate, kg.
+    condensed_inertia : float
+        Effective hub inertia at rest of a pinned hub, ``J_0 - m_tf^T M_ff^-1 m_tf``
+        computed without cancellation, kg m^2.
     """
 
     system: Structure

@@ -42,7 +42,14 @@ __all__ = ["StructureModel", "output_names"]
 
 
 def output_names(structure) -> tuple:
-    """The outputs of a structure model, in order (see the module Notes)."""
+    """The outputs of a structure model, in order (see the module Notes).
+
+    Parameters
+    ----------
+    structure : Structure
+        The hub and its appendages: a free hub adds ``hub_x, hub_y``, each appendage its
+        three outputs prefixed by its name.
+    """
     names = ["theta", "theta_dot"] + (["hub_x", "hub_y"] if structure.free else [])
     for name in structure.names:
         prefix = f"{name}." if name else ""
@@ -54,8 +61,20 @@ def output_names(structure) -> tuple:
 class StructureModel(Model):
     """A model of a :class:`~flexctl.model.structure.Structure` (see the module Notes).
 
-    Attributes beyond :class:`~flexctl.model.variants.Model`'s: ``modes`` (tuple of int, the
-    modes of each appendage) and :attr:`functions` (the CasADi functions, built on first use).
+    Build with :func:`flexctl.build_model`. Besides :class:`~flexctl.model.variants.Model`'s
+    attributes, ``modes`` (tuple of int, the modes of each appendage) and :attr:`functions`
+    (the CasADi functions, built on first use).
+
+    Attributes
+    ----------
+    system : Structure
+        The hub and its appendages.
+    n_modes : int
+        Modes of all the appendages together, ``N``.
+    variant : Variant
+        ``"first_order"``, ``"zero_order"``, ``"consistent"`` or ``"exact"``.
+    matrices : StructureMatrices
+        The structure's modal matrices at rest (:mod:`flexctl.model.structure_matrices`).
     """
 
     def __post_init__(self):
@@ -162,14 +181,28 @@ class StructureModel(Model):
         return self.layout.hub_rate(xdot), self.layout.modal_rates(xdot)
 
     def mass_matrix(self, x) -> np.ndarray:
-        """Mass matrix in the accelerations ``(theta_tt, [a], q_tt)`` at state ``x`` (n,)."""
+        """Mass matrix in the accelerations ``(theta_tt, [a], q_tt)`` at state ``x``.
+
+        ``a`` is a free hub's acceleration ``(hub_x_tt, hub_y_tt)``, absent on a pinned hub.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,)
+            State in :attr:`layout` order.
+        """
         x = self._check_state(x)
         return np.array(self.functions.mass(x))
 
     def rest_state(self, theta: float = 0.0) -> np.ndarray:
         """The undeformed structure at rest at hub angle ``theta`` (rad), shape (n,): a free
         hub's centre at ``(S_0 - R(theta) S_0) / m``, so that the centre of mass stays where
-        it is at ``theta = 0`` with the hub centre at the origin."""
+        it is at ``theta = 0`` with the hub centre at the origin.
+
+        Parameters
+        ----------
+        theta : float, optional
+            Hub angle, rad. Default 0.
+        """
         theta = float(theta)
         if not self.system.free:
             return self.layout.join(theta=theta)
@@ -192,7 +225,13 @@ class StructureModel(Model):
                          [mat.m_tf[:, None], mat.first_q.T, mat.M_ff]])
 
     def effective_hub_inertia(self, x) -> np.ndarray:
-        """Schur complement of the hub rotation in the mass matrix, kg m^2, shape () or (P,)."""
+        """Schur complement of the hub rotation in the mass matrix, kg m^2, shape () or (P,).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        """
         x = self._check_state(x)
         if not (self.variant.exact or self.variant.quadratic_inertia) and not self.system.free:
             j = self._c["j_rigid_eff"]
@@ -239,7 +278,14 @@ class StructureModel(Model):
     def integration_rhs(self, evaluate=None):
         """The dynamics for implicit integrators (:meth:`Model.integration_rhs`): the same as
         :meth:`casadi`, or ``evaluate(x, u)`` (MX in, MX out; e.g. a call of a compiled
-        :meth:`casadi`) with the first_order structure's Jacobian for Newton's method."""
+        :meth:`casadi`) with the first_order structure's Jacobian for Newton's method.
+
+        Parameters
+        ----------
+        evaluate : callable, optional
+            ``evaluate(x, u) -> xdot`` on CasADi MX symbols (``x`` (n x 1), ``u`` (1 x 1)),
+            used by the exact variant only. Default None: :meth:`casadi`.
+        """
         if evaluate is None or not self.variant.exact:
             return self.casadi()
         import casadi as ca
@@ -263,7 +309,13 @@ class StructureModel(Model):
         return self._c["c_out"]
 
     def outputs(self, x) -> np.ndarray:
-        """Outputs (:attr:`output_names`) at state(s) ``x``; shape (n_out,) or (n_out, P)."""
+        """Outputs (:attr:`output_names`) at state(s) ``x``; shape (n_out,) or (n_out, P).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        """
         return self._batch(self.functions.outputs, x)
 
     def output(self, x, name: str) -> np.ndarray:
@@ -306,19 +358,40 @@ class StructureModel(Model):
         return np.linalg.solve(self.matrices.K_ff, coupling)
 
     def tip_deflections(self, x) -> np.ndarray:
-        """Each appendage's tip deflection in its own frame, m, shape (K,) or (K, P)."""
+        """Each appendage's tip deflection in its own frame, m, shape (K,) or (K, P).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        """
         y = self.outputs(x)
         rows = [self.output_names.index(n) for n in self.output_names
                 if n.endswith("tip_deflection")]
         return y[rows]
 
     def tip_deflection(self, x) -> np.ndarray:
-        """The tip deflection of largest magnitude over the appendages, m (signed)."""
+        """The tip deflection of largest magnitude over the appendages, m (signed), shape ()
+        or (P,).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        """
         tips = np.atleast_1d(self.tip_deflections(x))
         pick = np.argmax(np.abs(tips), axis=0)
         return np.take_along_axis(tips, np.expand_dims(pick, 0), 0)[0]
 
     def tip_position(self, x):
+        """Not available: a structure has one tip per appendage (raises
+        ``NotImplementedError``); use :meth:`tip_deflections` or the named outputs.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        """
         raise NotImplementedError("StructureModel has one tip per appendage: use "
                                   "tip_deflections or the named outputs")
 
@@ -338,20 +411,45 @@ class StructureModel(Model):
 
     # ------------------------------------------------------------------ balances
     def energy(self, x) -> np.ndarray:
-        """Mechanical energy, J (the consistent energy for the small-deflection variants)."""
+        """Mechanical energy, J, shape () or (P,) (the consistent energy for the
+        small-deflection variants).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        """
         return self._batch(self.functions.energy, x)[0]
 
     def angular_momentum(self, x) -> np.ndarray:
-        """Angular momentum about the inertial origin, kg m^2/s, shape () or (P,)."""
+        """Angular momentum about the inertial origin, kg m^2/s, shape () or (P,).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        """
         return self._batch(self.functions.momentum, x)[0]
 
     def linear_momentum(self, x) -> np.ndarray:
         """Linear momentum of the whole structure (free hub; zero on a pinned one, whose pin
-        carries it), kg m/s, shape (2,) or (2, P)."""
+        carries it), kg m/s, shape (2,) or (2, P).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        """
         return self._batch(self.functions.momentum, x)[1:]
 
     def center_of_mass(self, x) -> np.ndarray:
-        """Centre of mass of the whole structure in inertial axes, m, shape (2,) or (2, P)."""
+        """Centre of mass of the whole structure in inertial axes, m, shape (2,) or (2, P).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State(s) in :attr:`layout` order.
+        """
         return self._batch(self.functions.center, x)
 
     # ------------------------------------------------------------------ linear analysis
@@ -366,12 +464,25 @@ class StructureModel(Model):
 
     def stiffness_matrix(self, spin_rate: float = 0.0) -> np.ndarray:
         """Beam stiffness at a steady spin, ``K_ff - spin_rate^2 D``, N/m, shape (N, N)
-        (for a free hub: its beams' stiffness while the hub is held spinning)."""
+        (for a free hub: its beams' stiffness while the hub is held spinning).
+
+        Parameters
+        ----------
+        spin_rate : float, optional
+            Steady hub rate, rad/s (at most ``1e100`` in magnitude). Default 0.
+        """
         spin_rate = checked_spin(spin_rate)
         return self.matrices.K_ff - spin_rate ** 2 * self._c["stiff_d"]
 
     def second_order_form(self, spin_rate: float = 0.0):
-        """``M``, ``K``, ``C``, ``f`` of the linearisation in the generalized coordinates."""
+        """``M``, ``K``, ``C``, ``f`` of the linearisation in the generalized coordinates
+        (:meth:`Model.second_order_form <flexctl.model.variants.Model.second_order_form>`).
+
+        Parameters
+        ----------
+        spin_rate : float, optional
+            Steady hub rate, rad/s; must be 0 for a free hub. Default 0.
+        """
         spin_rate = self._spin_for(spin_rate, "linearisation")
         return super().second_order_form(spin_rate)
 

@@ -136,7 +136,13 @@ def model_reach(model) -> np.ndarray:
     """Largest ``|phi_k(l_k)^T q_k|`` the model covers for each appendage, m, shape (K,): the
     beam length for the small-deflection variants, which leave their range there;
     :data:`EXACT_CURL` lengths for the exact beam, which cannot, and stops only when its mean
-    slope passes ``EXACT_CURL`` rad."""
+    slope passes ``EXACT_CURL`` rad.
+
+    Parameters
+    ----------
+    model : Model
+        Any flexctl model: its beam lengths and variant.
+    """
     return np.asarray(model.lengths, dtype=float) * model.variant.reach
 
 
@@ -148,6 +154,7 @@ def check_reach(model, x, owner: str = "", name: str = "x0") -> None:
     Parameters
     ----------
     model : Model
+        The model the state is for.
     x : ndarray, shape (n,)
         The state, in :attr:`Model.layout` order.
     owner : str, optional

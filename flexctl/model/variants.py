@@ -137,7 +137,13 @@ class Model:
     def rest_state(self, theta: float = 0.0) -> np.ndarray:
         """The undeformed structure at rest at hub angle ``theta`` (rad), shape (n,): a free
         hub's centre placed so that the centre of mass is where it is at ``theta = 0`` with
-        the hub centre at the origin (a rigid turn about the centre of mass)."""
+        the hub centre at the origin (a rigid turn about the centre of mass).
+
+        Parameters
+        ----------
+        theta : float, optional
+            Hub angle, rad. Default 0.
+        """
         return self.layout.join(theta=float(theta))
 
     @property
@@ -168,12 +174,24 @@ class Model:
         return np.array([a.beam.length for a in self.structure.appendages])
 
     def tip_deflections(self, x) -> np.ndarray:
-        """Each appendage's tip deflection, m, shape (1,) or (1, P) for one beam."""
+        """Each appendage's tip deflection, m, shape (1,) or (1, P) for one beam.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State, or P states as columns, in :attr:`layout` order.
+        """
         return np.asarray(self.tip_deflection(x))[None]
 
     def center_of_mass(self, x) -> np.ndarray:
         """Centre of mass in inertial axes (the pinned hub's centre at the origin), m,
-        shape (2,) or (2, P); small-deflection first moments for every variant."""
+        shape (2,) or (2, P); small-deflection first moments for every variant.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State, or P states as columns, in :attr:`layout` order.
+        """
         from .structure_matrices import assemble_structure
 
         x = self._check_state(x)
@@ -201,7 +219,24 @@ class Model:
         return self._c["w1"]
 
     def split(self, x):
-        """Split a state (shape (n,) or (n, P)) into ``theta, q, theta_dot, q_dot``."""
+        """Split a state into ``theta, q, theta_dot, q_dot``.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State, or P states as columns, in :attr:`layout` order.
+
+        Returns
+        -------
+        theta : float or ndarray, shape (P,)
+            Hub angle, rad.
+        q : ndarray, shape (N,) or (N, P)
+            Modal coordinates, m.
+        theta_dot : float or ndarray, shape (P,)
+            Hub rate, rad/s.
+        q_dot : ndarray, shape (N,) or (N, P)
+            Modal rates, m/s.
+        """
         return self.layout.split(np.asarray(x, dtype=float))
 
     def _check_state(self, x) -> np.ndarray:
@@ -217,8 +252,17 @@ class Model:
 
         The mass matrix is singular where it reaches 0. Constant for first_order and
         zero_order; ``J(q) = J_0 + q^T D q`` for consistent; for exact, the Schur complement
-        ``M_tt - M_tq M_qq^-1 M_qt`` of ``M(q)``, positive for any deflection. Accepts shape
-        (n,) or (n, P).
+        ``M_tt - M_tq M_qq^-1 M_qt`` of ``M(q)``, positive for any deflection.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State, or P states as columns, in :attr:`layout` order.
+
+        Returns
+        -------
+        float or ndarray, shape (P,)
+            The effective inertia at each state, kg m^2.
         """
         x = self._check_state(x)
         j = self._c["j_rigid_eff"]
@@ -252,6 +296,13 @@ class Model:
         two to four times faster on CasADi's virtual machine, and quick to compile), or
         ``evaluate(x, u)`` (MX symbols in, MX expression out) when given, e.g. a call of a
         compiled :meth:`casadi`. The same as :meth:`casadi` otherwise.
+
+        Parameters
+        ----------
+        evaluate : callable, optional
+            ``evaluate(x, u) -> xdot`` on CasADi MX symbols (``x`` (n x 1), ``u`` (1 x 1)),
+            used as the exact variant's right-hand side. Default: the vectorized form, built
+            once and cached. Not read by the other variants.
         """
         if not self.variant.exact:
             return self.casadi()
@@ -276,6 +327,14 @@ class Model:
         For the exact variant, as :meth:`integration_rhs`: the exact beam
         (:attr:`~flexctl.model.exact.ExactGeometry.beam`, or ``evaluate(q, q_dot, rate,
         acceleration)`` returning ``q_tt``) with first_order's Jacobian for Newton's method.
+
+        Parameters
+        ----------
+        evaluate : callable, optional
+            ``evaluate(q, q_dot, rate, acceleration) -> q_tt`` on CasADi MX symbols (``q``,
+            ``q_dot`` (N x 1), m and m/s; hub rate rad/s, hub acceleration rad/s^2), used as
+            the exact variant's beam. Default: :attr:`ExactGeometry.beam
+            <flexctl.model.exact.ExactGeometry.beam>`. Not read by the other variants.
         """
         import casadi as ca
 
@@ -296,7 +355,19 @@ class Model:
     def newton_jacobian(self, form: str = "rhs"):
         """first_order's Jacobian in the form CasADi's ``custom_jacobian`` takes: of
         ``(x, u) -> xdot`` (``form="rhs"``) or of ``(y, rate, acceleration) -> dy/dt``
-        (``form="beam"``), with the nominal output as its last input."""
+        (``form="beam"``), with the nominal output as its last input.
+
+        Parameters
+        ----------
+        form : {"rhs", "beam"}, optional
+            The function differentiated: the whole model's right-hand side (default) or the
+            beam under a prescribed hub motion (:meth:`integration_beam`).
+
+        Returns
+        -------
+        casadi.Function
+            Built once per form and cached.
+        """
         key = ("newton_jacobian", form)
         if key not in self._c:
             import casadi as ca
@@ -336,6 +407,16 @@ class Model:
 
         For the exact variant, the configuration-dependent ``M(q)`` of
         :mod:`flexctl.model.exact`.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,)
+            State in :attr:`layout` order (only its modal coordinates are read).
+
+        Returns
+        -------
+        ndarray, shape (N+1, N+1)
+            Rows and columns in the order ``theta, q_1 .. q_N``; kg m^2, kg m and kg.
         """
         x = self._check_state(x)
         if self.variant.exact:
@@ -364,8 +445,16 @@ class Model:
         Parameters
         ----------
         x : array_like, shape (n,) or (n, P)
+            State, or P states as columns, in :attr:`layout` order.
         torque : float or array_like, shape (P,)
             Hub torque, N m.
+
+        Returns
+        -------
+        theta_tt : float or ndarray, shape (P,)
+            Hub acceleration, rad/s^2.
+        q_tt : ndarray, shape (N,) or (N, P)
+            Modal accelerations, m/s^2.
 
         Raises
         ------
@@ -395,6 +484,7 @@ class Model:
         t : float
             Time, s (the model is time-invariant).
         x : array_like, shape (n,) or (n, P)
+            State, or P states as columns, in :attr:`layout` order.
         u : float or array_like, shape (1,) or (P,)
             Hub torque, N m.
 
@@ -488,6 +578,11 @@ class Model:
 
         Exact geometry for the exact variant; ``[b + l, phi(l)^T q]`` (no foreshortening) for
         the small-deflection variants.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State, or P states as columns, in :attr:`layout` order.
         """
         x = self._check_state(x)
         q = self.layout.modal(x)
@@ -498,14 +593,26 @@ class Model:
                                       + self.system.beam.length), tip_y))
 
     def tip_deflection(self, x) -> np.ndarray:
-        """Lateral tip deflection in the hub frame, m, shape () or (P,)."""
+        """Lateral tip deflection in the hub frame, m, shape () or (P,).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State, or P states as columns, in :attr:`layout` order.
+        """
         if self.variant.exact:
             x = self._check_state(x)
             return self.geometry.tip_deflections(self.layout.modal(x))
         return self.tip_position(x)[1]
 
     def outputs(self, x) -> np.ndarray:
-        """Outputs at state(s) ``x`` (shape (n,) or (n, P)); shape (5,) or (5, P)."""
+        """Outputs :attr:`output_names` at state(s) ``x``, shape (5,) or (5, P).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State, or P states as columns, in :attr:`layout` order.
+        """
         x = self._check_state(x)
         y = self.output_matrix @ x
         if self.variant.exact:
@@ -534,6 +641,16 @@ class Model:
         others that of the consistent model (MODEL.md section 4),
         ``E = 1/2 theta_t^2 (J_0 + q^T D q) + theta_t m_tf^T q_t + 1/2 q_t^T M_ff q_t
         + 1/2 q^T K_ff q``. Each is conserved by its variant when unforced and undamped.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State, or P states as columns, in :attr:`layout` order.
+
+        Returns
+        -------
+        float or ndarray, shape (P,)
+            The energy at each state, J.
         """
         x = self._check_state(x)
         if self.variant.exact:
@@ -552,6 +669,11 @@ class Model:
         Conserved by each variant when no torque acts and the hub has no friction: the first
         row of ``M(q)`` times the velocities for exact, ``J(q) theta_t + m_tf^T q_t`` for the
         others (``J(q) = J_0 + q^T D q`` for consistent, ``J_0`` otherwise).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, P)
+            State, or P states as columns, in :attr:`layout` order.
         """
         x = self._check_state(x)
         if self.variant.exact:
@@ -569,7 +691,13 @@ class Model:
     def stiffness_matrix(self, spin_rate: float = 0.0) -> np.ndarray:
         """Beam stiffness at a steady spin, ``K_ff - spin_rate^2 D``, N/m, shape (N, N).
 
-        The exact variant's linearisation has the stiffness of first_order."""
+        The exact variant's linearisation has the stiffness of first_order.
+
+        Parameters
+        ----------
+        spin_rate : float, optional
+            Steady hub rate ``Omega``, rad/s (at most ``1e100`` in magnitude). Default 0.
+        """
         spin_rate = checked_spin(spin_rate)
         return self.matrices.K_ff - spin_rate ** 2 * self._c["stiff_d"]
 
@@ -577,6 +705,11 @@ class Model:
         """``M``, ``K``, ``C`` and the torque's load vector ``f`` of the linearisation about a
         steady spin, ``M c_tt + C c_t + K c = f T_h`` in the generalized coordinates ``c``
         (the state's coordinate block, :attr:`StateLayout.coordinates`).
+
+        Parameters
+        ----------
+        spin_rate : float, optional
+            Steady hub rate ``Omega``, rad/s (at most ``1e100`` in magnitude). Default 0.
 
         Returns
         -------
@@ -595,7 +728,13 @@ class Model:
         return self.mass_matrix(layout.zeros()), stiff, damp, load
 
     def linear_matrices(self, spin_rate: float = 0.0):
-        """``A`` (n, n) and ``B`` (n, 1) of the linearisation about a steady spin (``q = 0``)."""
+        """``A`` (n, n) and ``B`` (n, 1) of the linearisation about a steady spin (``q = 0``).
+
+        Parameters
+        ----------
+        spin_rate : float, optional
+            Steady hub rate ``Omega``, rad/s (at most ``1e100`` in magnitude). Default 0.
+        """
         layout = self.layout
         mass, stiff, damp, load = self.second_order_form(spin_rate)
         n_c = layout.n_coordinates
@@ -684,7 +823,13 @@ class Model:
 
     def modal_visibility(self, spin_rate: float = 0.0):
         """Which modes of the linearisation at ``spin_rate`` the torque can move and each
-        output can see (:func:`flexctl.model.visibility.modal_visibility`)."""
+        output can see (:func:`flexctl.model.visibility.modal_visibility`).
+
+        Parameters
+        ----------
+        spin_rate : float, optional
+            Steady hub rate ``Omega``, rad/s, of the linearisation. Default 0.
+        """
         from .visibility import modal_visibility
         return modal_visibility(self, spin_rate)
 
@@ -726,7 +871,14 @@ class Model:
                      matrices=assemble(system, self.n_modes))
 
     def parameter_values(self, parameters) -> np.ndarray:
-        """Nominal values of the listed physical parameters (scene keys), shape (P,)."""
+        """Nominal values of the listed physical parameters, shape (P,).
+
+        Parameters
+        ----------
+        parameters : list of str
+            P scene keys of physical parameters (``"beam.youngs_modulus"``,
+            ``"hub.inertia"``, ``"masses[0].mass"``, ...); each value in the key's unit.
+        """
         from .parametric import parameter_values
         return parameter_values(self, parameters)
 
@@ -761,6 +913,12 @@ class Model:
         ``p`` (:mod:`flexctl.model.parametric`).
 
         Built once per model (and parameter list) and cached.
+
+        Parameters
+        ----------
+        parameters : list of str, optional
+            Scene keys of the physical parameters that make the input ``p``, in its order.
+            Default None: the function ``(x, u) -> dx/dt`` of the nominal model.
         """
         if parameters is not None:
             from .parametric import parameter_values, parametric_casadi
@@ -804,11 +962,32 @@ def at_operating_point(model, spin_rate, x0, u0):
 
 
 def system_name(text: str) -> str:
-    """A python-control system name (no dots allowed): ``1.5`` -> ``1p5``, ``-2`` -> ``m2``."""
+    """A python-control system name (no dots allowed): ``1.5`` -> ``1p5``, ``-2`` -> ``m2``.
+
+    Parameters
+    ----------
+    text : str
+        The name wanted, with any dots and minus signs.
+    """
     return text.replace(".", "p").replace("-", "m")
 
 
 def checked_spin(spin_rate) -> float:
+    """A steady spin rate as a float, refused when it is not a real number of at most
+    :data:`MAX_SPIN_RATE` in magnitude.
+
+    Parameters
+    ----------
+    spin_rate : float
+        Steady hub rate, rad/s.
+
+    Raises
+    ------
+    InputTypeError
+        If ``spin_rate`` is not a real number.
+    InputValueError
+        If ``spin_rate`` is not finite or larger than :data:`MAX_SPIN_RATE` in magnitude.
+    """
     spin_rate = check_real("", "spin_rate", spin_rate)
     if abs(spin_rate) > MAX_SPIN_RATE:
         # spin_rate^2 times the modal matrices overflowed (OverflowError at 1e300 rad/s)

@@ -73,12 +73,24 @@ class ModalVisibility:
         return tuple(int(j) for j in np.flatnonzero(mask))
 
     def uncontrollable(self, input: str = "torque") -> tuple:
-        """Indices of the modes that ``input`` cannot move."""
+        """Indices of the modes that ``input`` cannot move.
+
+        Parameters
+        ----------
+        input : str, optional
+            One of :attr:`inputs`. Default ``"torque"``.
+        """
         return self._mode_list(self.input_share[:, self._index(self.inputs, input, "input")]
                                <= VISIBILITY_TOLERANCE)
 
     def unobservable(self, output: str) -> tuple:
-        """Indices of the modes that ``output`` cannot see."""
+        """Indices of the modes that ``output`` cannot see.
+
+        Parameters
+        ----------
+        output : str
+            One of :attr:`outputs`.
+        """
         return self._mode_list(self.output_share[self._index(self.outputs, output, "output")]
                                <= VISIBILITY_TOLERANCE)
 
@@ -90,7 +102,13 @@ class ModalVisibility:
 
     def describe(self, input: str = "torque") -> str:
         """One line per mode that ``input`` cannot move, with its frequency and the outputs
-        that see it (empty when every mode is controllable)."""
+        that see it (empty when every mode is controllable).
+
+        Parameters
+        ----------
+        input : str, optional
+            One of :attr:`inputs`. Default ``"torque"``.
+        """
         lines = []
         for j in self.uncontrollable(input):
             seen = [o for k, o in enumerate(self.outputs)

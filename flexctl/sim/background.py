@@ -92,6 +92,20 @@ class Beside:
     :meth:`abandon` says the result will not be asked for: a call not started never runs,
     and a running call that takes a keyword ``cancelled`` (a ``threading.Event``) finds it
     set, to look at between pieces of its work.
+
+    Parameters
+    ----------
+    function : callable
+        The work; it must be safe to run on another thread (numeric, not CasADi's symbolic
+        work).
+    *args
+        Its positional arguments.
+    beside : bool, optional
+        Start it on a spare core now (default True); False: run it in the caller's thread
+        when :meth:`result` asks.
+    **kwargs
+        Its keyword arguments; a ``cancelled`` among them is the event :meth:`abandon`
+        sets.
     """
 
     def __init__(self, function, *args, beside: bool = True, **kwargs):

@@ -69,6 +69,11 @@ def limit_blas_threads(count: int = DEFAULT_THREADS) -> dict:
     """Put the OpenBLAS of numpy, SciPy, CasADi and slycot on ``count`` threads (1 to
     :data:`MAX_THREADS`).
 
+    Parameters
+    ----------
+    count : int, optional
+        Threads per library, 1 to :data:`MAX_THREADS`. Default :data:`DEFAULT_THREADS`.
+
     Returns
     -------
     dict
@@ -95,7 +100,19 @@ def threads_from_environment(default: int | None = None) -> dict:
     """Apply ``FLEXCTL_BLAS_THREADS`` (a count; ``0``: leave the libraries alone), else
     ``default`` (None: leave them alone). A value that is not an integer from 0 to
     :data:`MAX_THREADS` is ignored (``default`` applies): importing flexctl never fails on
-    it."""
+    it.
+
+    Parameters
+    ----------
+    default : int, optional
+        Threads to set when the variable is unset or invalid. Default None: leave the
+        libraries alone.
+
+    Returns
+    -------
+    dict
+        As :func:`limit_blas_threads` returns; empty when the libraries are left alone.
+    """
     text = os.environ.get("FLEXCTL_BLAS_THREADS", "").strip()
     try:
         count = int(text) if text else default

@@ -35,7 +35,14 @@ class InPlace:
     """A CasADi function evaluated on numpy buffers of its own: a call copies the arguments
     in and the results out, with none of the conversion to and from ``DM`` that costs some
     20 us per thousand numbers. Calls from several threads take turns (the buffers are
-    shared)."""
+    shared).
+
+    Parameters
+    ----------
+    function : casadi.Function
+        The function evaluated; its inputs are dense (each buffer holds an input's nonzeros
+        in column-major order).
+    """
 
     def __init__(self, function):
         self.function = function
@@ -57,7 +64,13 @@ class InPlace:
 
     def call_with_stats(self, *args) -> tuple:
         """``(results, stats)``: :meth:`__call__` and the function's statistics of that call
-        (an integrator's steps and evaluations)."""
+        (an integrator's steps and evaluations).
+
+        Parameters
+        ----------
+        *args : array_like
+            Values of the function's first inputs, in order; the rest keep their last values.
+        """
         return self._evaluate(args, True)
 
     def _evaluate(self, args, with_stats: bool) -> tuple:

@@ -87,6 +87,8 @@ def piecewise_constant(t, edges, values):
         Ascending interior boundaries, s; hold ``k`` is ``edges[k-1] <= t < edges[k]``
         (``bisect.bisect_right(edges, t)``), the first and last holds extend to infinity.
     values : array_like, shape (K,) or (K, m)
+        The value held in each of the K holds (a row of m numbers per hold), in the unit of
+        the quantity held.
 
     Returns
     -------
@@ -128,7 +130,20 @@ def _parameter_values(source) -> np.ndarray:
 
 def input_numbers(inputs) -> np.ndarray:
     """The numbers of ``inputs = (torque, hub_motion, controller)``, in that order: the
-    parameter vector ``c`` of their compiled functions."""
+    parameter vector ``c`` of their compiled functions.
+
+    Parameters
+    ----------
+    inputs : tuple
+        ``(torque, hub_motion, controller)``, each None or an input as
+        :func:`flexctl.simulate` takes it; only the parametric ones (with
+        ``casadi_parameters``) have numbers.
+
+    Returns
+    -------
+    ndarray, shape (C,)
+        Their numbers concatenated; empty when none is parametric.
+    """
     return np.concatenate([_parameter_values(source) for source in inputs])
 
 
@@ -210,6 +225,7 @@ def drive_size(model, hub_motion=None, controller=None) -> int:
     Parameters
     ----------
     model : Model
+        The model of the run.
     hub_motion : object, optional
         The prescribed hub motion, if any.
     controller : object, optional
@@ -229,6 +245,7 @@ def closed_loop_dynamics(model, t, y, torque, controller, parameters=None, rhs=N
     Parameters
     ----------
     model : Model
+        The model of the plant, with ``n`` states.
     t : casadi.SX or casadi.MX
         Scalar time, s.
     y : casadi.SX or casadi.MX, shape (m, 1)
@@ -264,6 +281,7 @@ def drive_terms(model, t, y, torque, controller, parameters=None) -> tuple:
     Parameters
     ----------
     model : Model
+        The model of the plant, with ``n`` states.
     t : casadi.SX or casadi.MX
         Scalar time, s.
     y : casadi.SX or casadi.MX, shape (m, 1)
@@ -454,6 +472,7 @@ def numeric_rhs(model, torque=None, hub_motion=None, controller=None):
     Parameters
     ----------
     model : Model
+        The model of the run.
     torque, hub_motion, controller : object or None, optional
         As in :func:`flexctl.simulate`; each must pass :func:`is_symbolic`.
     """
@@ -486,18 +505,21 @@ def torque_history(model, t, states, controller_states, torque=None, controller=
     Parameters
     ----------
     model : Model
+        The model of the run's plant.
     t : ndarray, shape (P,)
-        s.
+        Sample times, s.
     states : ndarray, shape (n, P)
-        Plant states.
+        Plant states at those times, in the model's state order.
     controller_states : ndarray, shape (n_z, P)
-    torque, controller :
+        The controller's internal states at those times (``n_z = 0`` for a static law or
+        none).
+    torque, controller : object or None, optional
         As in :func:`flexctl.simulate`; each must pass :func:`is_symbolic`.
 
     Returns
     -------
     ndarray, shape (P,)
-        N m.
+        The hub torque, N m (an actuated model's command, in its unit).
     """
     import casadi as ca
 
@@ -547,6 +569,7 @@ class SegmentIntegrator:
     Parameters
     ----------
     model : Model
+        The model integrated.
     t_start : float
         Segment start, s.
     t_out : ndarray, shape (K,)
@@ -557,17 +580,20 @@ class SegmentIntegrator:
         motion: ``[q, q_dot]``).
     rtol : float
         Relative tolerance; the absolute tolerance is ``rtol * scale``.
-    torque, hub_motion, controller :
+    torque, hub_motion, controller : object or None, optional
         As in :func:`flexctl.simulate`; each must pass :func:`is_symbolic`.
-    solver : {"cvodes", "idas"}
-        SUNDIALS solver; both are variable-order BDF.
+    max_steps : int, optional
+        Most solver steps between two output times before the solver fails. Default
+        1 000 000.
+    solver : {"cvodes", "idas"}, optional
+        SUNDIALS solver; both are variable-order BDF. Default ``"cvodes"``.
     max_order : int, optional
         Highest BDF order (honoured by IDAS). Order 2 is A-stable: it never amplifies an
         undamped oscillation, where orders 3 to 5 can for steps near the oscillation period.
     max_step : float, optional
         Longest step, s (e.g. a sampled torque's sample interval, so that no sample is
         stepped over). Default: unbounded.
-    multistep : {"bdf", "adams"}
+    multistep : {"bdf", "adams"}, optional
         CVODES's linear multistep family (ignored by IDAS, which is BDF): ``"adams"``
         (Adams-Moulton, orders 1 to 12) for lightly damped oscillations, which BDF's orders 3
         to 5 follow with short steps; ``"bdf"`` (default) where fast poles are damped
@@ -655,7 +681,13 @@ class SegmentIntegrator:
         return moved
 
     def __call__(self, y0) -> np.ndarray:
-        """States at the output times, shape (m, K); raises ``RuntimeError`` if CVODES fails."""
+        """States at the output times, shape (m, K); raises ``RuntimeError`` if CVODES fails.
+
+        Parameters
+        ----------
+        y0 : array_like, shape (m,)
+            State at the segment's start, unscaled.
+        """
         results, self._stats = self._run.call_with_stats(
             np.asarray(y0, dtype=float) / self._scale, (), self._parameters)
         return results[0] * self._scale[:, None]
@@ -673,20 +705,27 @@ def integrate_segments(model, segments, y0, scale, rtol, **options):
     Parameters
     ----------
     model : Model
+        The model integrated.
     segments : list of (float, ndarray)
         ``(t_start, t_out)`` per segment, as for :class:`SegmentIntegrator`; each segment starts
         where the previous one's outputs end.
     y0 : ndarray, shape (m,)
         State at the first segment's start.
-    scale, rtol, **options :
-        As for :class:`SegmentIntegrator` (``torque``, ``hub_motion``, ``controller``,
-        ``solver``, ``max_order``, ``max_step``).
+    scale : ndarray, shape (m,)
+        Physical size of each integrated state, in its unit.
+    rtol : float
+        Relative tolerance; the absolute tolerance is ``rtol * scale``.
+    **options
+        The other arguments of :class:`SegmentIntegrator` (``torque``, ``hub_motion``,
+        ``controller``, ``max_steps``, ``solver``, ``max_order``, ``max_step``,
+        ``multistep``).
 
     Returns
     -------
     states : ndarray, shape (m, K)
         At every output time of every segment, in order.
     n_evaluations : int
+        Right-hand-side evaluations of all the segments.
 
     Raises
     ------
@@ -705,6 +744,7 @@ def segment_integrators(model, segments, scale, rtol, **options) -> list:
     Parameters
     ----------
     model : Model
+        The model integrated.
     segments : list of (float, ndarray)
         ``(t_start, t_out)`` per segment, as for :class:`SegmentIntegrator`.
     scale : ndarray, shape (m,)
@@ -792,6 +832,7 @@ def check_run(model, segments, y0, scale, rtol, **options):
     Parameters
     ----------
     model : Model
+        The model integrated.
     segments : list of (float, ndarray)
         ``(t_start, t_out)`` per segment, as for :func:`integrate_segments`.
     y0 : ndarray, shape (m,)
@@ -821,6 +862,7 @@ def start_check(model, segments, y0, scale, rtol, beside=True, **options):
     Parameters
     ----------
     model : Model
+        The model integrated.
     segments : list of (float, ndarray)
         ``(t_start, t_out)`` per segment, as for :func:`integrate_segments`.
     y0 : ndarray, shape (m,)
@@ -877,17 +919,27 @@ def verify_accuracy(model, segments, y0, scale, rtol, y_main, tip_map, n_main, c
 
     Parameters
     ----------
-    model, segments, y0, scale, rtol, **options :
-        As for :func:`integrate_segments`.
+    model : Model
+        The model integrated, as for :func:`integrate_segments`.
+    segments : list of (float, ndarray)
+        ``(t_start, t_out)`` per segment, as for :func:`integrate_segments`.
+    y0 : ndarray, shape (m,)
+        State at the first segment's start.
+    scale : ndarray, shape (m,)
+        Physical size of each integrated state.
+    rtol : float
+        The run's relative tolerance (the check's is ``CHECK_FACTOR`` times it).
     y_main : ndarray, shape (m, K)
         The run to check, at the segments' output times.
-    tip_map : ndarray, shape (K, m)
-        ``tips = tip_map @ y``, one row per appendage.
+    tip_map : ndarray, shape (A, m)
+        ``tips = tip_map @ y`` (m), one row per appendage.
     n_main : int
         Right-hand-side evaluations of the run to check.
     check : Beside, optional
         The check run already started (:func:`start_check` with the same arguments);
         default: run it now.
+    **options
+        The run's other arguments, as for :func:`integrate_segments`.
 
     Returns
     -------
@@ -898,6 +950,7 @@ def verify_accuracy(model, segments, y0, scale, rtol, y_main, tip_map, n_main, c
     note : str
         Empty, or what was found and done.
     n_evaluations : int
+        Right-hand-side evaluations of the check and of any re-run.
     """
     tip_main = tip_map @ y_main
     picks = _subsample(segments)[1]

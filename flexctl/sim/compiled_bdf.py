@@ -270,7 +270,8 @@ class BdfRun(CompiledRun):
     Parameters
     ----------
     model : Model
-    torque, hub_motion, controller :
+        The model integrated.
+    torque, hub_motion, controller : object or None, optional
         The run's inputs, each with a CasADi form.
     scale : ndarray, shape (m,)
         Physical size of each integrated state: the absolute tolerance is ``rtol * scale``.

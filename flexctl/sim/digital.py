@@ -84,7 +84,7 @@ class SampledController(Protocol):
     Attributes
     ----------
     sample_time : float
-        s (> 0).
+        Sample time, s (> 0).
     """
 
     sample_time: float
@@ -106,7 +106,14 @@ class SampledController(Protocol):
 
 
 def is_sampled(controller) -> bool:
-    """True for an object following :class:`SampledController`."""
+    """True for an object following :class:`SampledController`.
+
+    Parameters
+    ----------
+    controller : object
+        Any controller (or None): a ``sample_time`` that is not None and a ``start`` method
+        make it sampled.
+    """
     return (getattr(controller, "sample_time", None) is not None
             and callable(getattr(controller, "start", None)))
 
@@ -164,7 +171,7 @@ class ZeroOrderHold:
         A static :class:`flexctl.Controller` (``n_states == 0``: PD, LQR, a tracker, an open-loop
         torque) or a callable ``law(t, x)`` returning N m.
     sample_time : float
-        s (> 0).
+        Sample time, s (> 0): the law is evaluated at its multiples.
 
     Notes
     -----
@@ -248,6 +255,10 @@ class SampledRun:
         The session's report plus ``samples`` and ``sample_time``.
     controller_time : float
         Wall time spent in the controller, s.
+    measurements : dict or None
+        The sensors' readings at each sample when the controller read sensors: ``{"t": (K,),
+        name: (K,) ..., "true": {name: (K,)}}`` (the sample times, each reading, and the
+        noiseless values); None otherwise.
     """
 
     t: np.ndarray
@@ -421,10 +432,13 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
     Parameters
     ----------
     model : Model
+        The plant integrated.
     t_final : float
-        s.
+        End time, s.
     controller : SampledController
+        The sampled controller; its session is started at ``t = 0``.
     x0 : ndarray, shape (n,)
+        Initial plant state, in the order of ``model.layout``.
     torque : object, optional
         An additional torque with a CasADi form (``casadi(t)``), applied continuously.
     output_step : float
@@ -432,6 +446,7 @@ def run_sampled(model, t_final: float, controller, x0, *, torque=None, output_st
     scale : ndarray, shape (n,)
         Physical size of each state (absolute tolerance ``rtol * scale``).
     rtol : float
+        Relative tolerance of CVODES and of the pair; unused by ``"rk4"``.
     bad_sample : callable
         ``bad_sample(y)`` for states ``y`` of shape (n, K): index of the first output past a
         stopping condition, or None.

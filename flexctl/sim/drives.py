@@ -37,7 +37,13 @@ class Controller(Protocol):
     n_states: int
 
     def initial_state(self, x0: np.ndarray) -> np.ndarray:
-        """Internal state at ``t = 0`` given the plant's initial state, shape (n_states,)."""
+        """Internal state at ``t = 0`` given the plant's initial state, shape (n_states,).
+
+        Parameters
+        ----------
+        x0 : ndarray, shape (n,)
+            Initial plant state, in the order of ``model.layout``.
+        """
 
     def torque(self, t: float, x: np.ndarray, z: np.ndarray) -> float:
         """Hub torque (N m) at time ``t`` for plant state ``x`` and internal state ``z``.
@@ -95,7 +101,13 @@ class StaticLaw:
         return tuple(getattr(self.law, "breakpoints", ()) or ())
 
     def initial_state(self, x0) -> np.ndarray:
-        """No internal state: shape (0,)."""
+        """No internal state: shape (0,).
+
+        Parameters
+        ----------
+        x0 : ndarray, shape (n,)
+            Initial plant state (not read).
+        """
         return np.zeros(0)
 
     def torque(self, t, x, z=None) -> float:
@@ -208,7 +220,18 @@ class _Drive:
 
 class PrescribedDrive(_Drive):
     """The hub follows ``hub_motion``; only the beam is integrated
-    (state :meth:`~flexctl.model.layout.StateLayout.without_rotation`)."""
+    (state :meth:`~flexctl.model.layout.StateLayout.without_rotation`).
+
+    Parameters
+    ----------
+    model : Model
+        The model of the run (a pinned hub).
+    hub_motion : object
+        The prescribed motion: ``angle(t)``, ``rate(t)`` and ``acceleration(t)`` (rad,
+        rad/s, rad/s^2).
+    x_init : ndarray, shape (n,)
+        Initial plant state; its beam states start the integration.
+    """
 
     prescribed = True
 
@@ -285,7 +308,20 @@ class PrescribedDrive(_Drive):
 
 class TorqueDrive(_Drive):
     """A hub torque (a function of time or of time and state) plus a continuous controller
-    with internal states ``z``; integrated state ``[x, z]``."""
+    with internal states ``z``; integrated state ``[x, z]``.
+
+    Parameters
+    ----------
+    model : Model
+        The model of the run.
+    torque : object or None
+        The hub torque input, N m (a function of time, of time and state, or samples), or
+        None.
+    controller : Controller or None
+        The continuous controller, or None; its ``initial_state(x_init)`` starts ``z``.
+    x_init : ndarray, shape (n,)
+        Initial plant state.
+    """
 
     def __init__(self, model: Model, torque, controller, x_init):
         super().__init__(model)
@@ -364,6 +400,13 @@ class TorqueDrive(_Drive):
         return y[self.plant]
 
     def controller_states(self, y_all) -> np.ndarray:
+        """The controller's states over the run, shape (n_z, P).
+
+        Parameters
+        ----------
+        y_all : ndarray, shape (m, P)
+            Integrated states ``[x, z]`` at the output times.
+        """
         return self._z(y_all)
 
     def torque_output(self, t_all, states, z_all, symbolic):

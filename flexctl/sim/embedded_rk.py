@@ -94,7 +94,13 @@ MIN_STEP = 1e-12
 class HeldTorque:
     """The held torque as a parametric static controller: one compiled right-hand side and
     one integrator (or step) serve every sample of every hold, the torque entering as a
-    number."""
+    number.
+
+    Parameters
+    ----------
+    value : float
+        The torque held, N m (an actuated model's command, in its unit).
+    """
 
     value: float
     n_states = 0
@@ -408,6 +414,7 @@ def checked_run_arguments(owner: str, model, inputs, scale, rtol, max_steps, h_f
     owner : str
         The class to name in an error.
     model : Model
+        The model integrated (any :class:`~flexctl.model.variants.Model`).
     inputs : tuple
         ``(torque, hub_motion, controller)``, each None or an input with a CasADi form.
     scale : array_like, shape (m,)
@@ -468,7 +475,8 @@ class EmbeddedRun(CompiledRun):
     Parameters
     ----------
     model : Model
-    torque, hub_motion, controller :
+        The model integrated.
+    torque, hub_motion, controller : object or None, optional
         The run's inputs, each with a CasADi form (:func:`~flexctl.sim.compiled.is_symbolic`).
     scale : ndarray, shape (m,)
         Physical size of each integrated state (the drive's: plant and controller states, or

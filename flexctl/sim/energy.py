@@ -158,6 +158,7 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     Parameters
     ----------
     model : Model
+        The model of the run (a small-deflection variant).
     t : array_like, shape (P,)
         Output times, s.
     states : array_like, shape (n, P)

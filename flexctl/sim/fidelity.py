@@ -156,6 +156,13 @@ class ModeChoice:
 
 
 def check_tolerance(tolerance):
+    """Refuse a tolerance that is not a relative error in (0, 1) (``InputValueError``).
+
+    Parameters
+    ----------
+    tolerance : float
+        A relative tip error, e.g. of :func:`choose_modes`.
+    """
     if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float, np.floating)) \
             or not 0.0 < tolerance < 1.0:
         raise InputValueError(f"tolerance must be a relative error in (0, 1); got {tolerance!r}")
@@ -209,6 +216,14 @@ def maneuver_input(system: HubBeam, maneuver):
 
 
 def is_prescribed(maneuver) -> bool:
+    """True for a prescribed hub motion (``angle``, ``rate``, ``acceleration``), False for a
+    torque ``f(t)``; ``InputTypeError`` for anything else.
+
+    Parameters
+    ----------
+    maneuver : object
+        A manoeuvre as :func:`choose_modes` takes it.
+    """
     if all(callable(getattr(maneuver, a, None)) for a in ("angle", "rate", "acceleration")):
         return True
     if callable(maneuver):
@@ -306,6 +321,7 @@ def linear_tip_responses(system: HubBeam, maneuver, mode_counts, *, t_final: flo
     Parameters
     ----------
     system : HubBeam
+        The hub, beam and point masses.
     maneuver : SpinUp, SineTorque or similar
         A prescribed hub motion (``angle``, ``rate``, ``acceleration``) or a torque ``f(t)``.
     mode_counts : iterable of int
@@ -314,7 +330,7 @@ def linear_tip_responses(system: HubBeam, maneuver, mode_counts, *, t_final: flo
         Horizon, s.
     variant : str, optional
         Whose stiffness ``K_ff - spin^2 D`` the linearisation takes (first_order and consistent
-        share it).
+        share it). Default ``"first_order"``.
     spin_rate : float, optional
         Spin rate of the linearisation, rad/s; default :func:`largest_spin_rate`.
 
@@ -387,6 +403,7 @@ def choose_modes(system: HubBeam, maneuver, tolerance: float = DEFAULT_TOLERANCE
         Relative tip error in (0, 1): largest tip deflection error over the horizon divided by
         the largest tip deflection. Default 1e-2.
     variant : {"first_order", "zero_order", "consistent"}, optional
+        The variant whose modes are counted. Default ``"first_order"``.
     max_modes : int, optional
         Largest number of modes considered (1 to 100). Default 12.
     reference_modes : int, optional

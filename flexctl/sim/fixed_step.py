@@ -82,6 +82,7 @@ def drive_symbols(model, torque, hub_motion, controller, n_numbers: int) -> dict
     Parameters
     ----------
     model : Model
+        The model of the run.
     torque, hub_motion, controller : object or None
         The run's inputs, each with a CasADi form (:func:`~flexctl.sim.compiled.is_symbolic`).
     n_numbers : int
@@ -124,6 +125,7 @@ def step_function(model, torque, hub_motion, controller, n_numbers: int, scheme=
     Parameters
     ----------
     model : Model
+        The model of the run.
     torque, hub_motion, controller : object or None
         The run's inputs, each with a CasADi form (:func:`~flexctl.sim.compiled.is_symbolic`).
     n_numbers : int
@@ -172,6 +174,7 @@ def lifted_core(model, hub_motion):
     Parameters
     ----------
     model : Model
+        The model of the run (only the exact variant has a core).
     hub_motion : object or None
         Only whether there is one matters: the beam's function under a prescribed hub motion,
         the right-hand side under a torque.
@@ -309,6 +312,7 @@ def jit_compiled(function, model, any_variant: bool = False):
     Parameters
     ----------
     function : casadi.Function
+        The function to compile.
     model : Model
         Its variant decides: the exact model's functions stay uncompiled unless
         ``any_variant``.
@@ -352,7 +356,7 @@ def step_times(edges, h_max: float, refine: int = 1) -> tuple:
 class FixedStepRun:
     """Outcome of :func:`integrate_fixed_step`.
 
-    Attributes
+    Parameters
     ----------
     states : ndarray, shape (m, E - 1)
         Integrated states at ``edges[1:]``.
@@ -379,23 +383,27 @@ def integrate_fixed_step(model, edges, t_out, y0, tip_map, h_max: float, rtol: f
     Parameters
     ----------
     model : Model
+        The model integrated.
     edges : array_like, shape (E,)
         Start time, breakpoints of the inputs and end time, ascending, s: step boundaries.
     t_out : array_like, shape (P,)
         Output times within ``[edges[0], edges[-1]]``, s (cubic Hermite dense output).
     y0 : ndarray, shape (m,)
+        The drive's state at ``edges[0]`` (plant and controller states, or ``[q, q_dot]``
+        under a prescribed hub motion).
     tip_map : ndarray, shape (K, m)
-        ``tips = tip_map @ y``, one row per appendage.
+        ``tips = tip_map @ y`` (m), one row per appendage.
     h_max : float
         Largest step of the returned run before any halving, s (the first, coarser run of
         the pair takes twice as long steps).
     rtol : float
         Target error relative to the peak tip deflection.
-    torque, hub_motion, controller :
+    torque, hub_motion, controller : object or None, optional
         As for :func:`flexctl.simulate`, each with a CasADi form.
-    h_resolved : float
+    h_resolved : float, optional
         A run whose states are not finite is refined, not returned, while its step is
         longer than this, s: it may be the integrator's instability, not the model's.
+        Default 0.
 
     Returns
     -------

@@ -71,7 +71,13 @@ def check_time(name: str, value, *, allow_inf: bool = False) -> float:
 
 
 def check_rtol(value) -> float:
-    """A relative tolerance in [1e-14, 1)."""
+    """A relative tolerance in [1e-14, 1).
+
+    Parameters
+    ----------
+    value : float
+        The ``rtol`` given.
+    """
     if isinstance(value, bool) or not isinstance(value, Real):
         raise _type_error("rtol", value, "a real number")
     value = float(value)
@@ -187,7 +193,14 @@ def input_value(name: str, value, t: float, unit: str = "N m") -> float:
 
 
 def required_positional(func) -> int | None:
-    """Number of arguments ``func`` needs, or None when its signature cannot be read."""
+    """Number of arguments ``func`` needs, or None when its signature cannot be read (-1
+    when it needs a keyword-only argument).
+
+    Parameters
+    ----------
+    func : callable
+        A torque, hub motion or controller function.
+    """
     try:
         params = inspect.signature(func).parameters.values()
     except (TypeError, ValueError):
@@ -447,7 +460,13 @@ class SampledTorque:
         return by_index(ca.floor(which + 0.5))
 
     def casadi(self, t):
-        """The torque as a CasADi expression of the time symbol ``t`` (SX or MX), N m."""
+        """The torque as a CasADi expression of the time symbol ``t`` (SX or MX), N m.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        """
         return self._function(t)
 
     def __call__(self, t):

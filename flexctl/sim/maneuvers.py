@@ -58,8 +58,9 @@ def rigid_slew_duration(angle: float, inertia: float, torque_bound: float,
     inertia : float
         Rigid inertia, kg m^2 (> 0).
     torque_bound : float
-        N m (> 0).
-    shape : {"bang_bang", "cycloidal", "poly7"}
+        Largest torque magnitude, N m (> 0).
+    shape : {"bang_bang", "cycloidal", "poly7"}, optional
+        Acceleration profile of the slew. Default ``"bang_bang"``.
 
     Returns
     -------
@@ -129,7 +130,13 @@ class SpinUp(KeywordOnly):
         return (self.ramp_time,)
 
     def angle(self, t):
-        """Hub angle ``theta(t)``, rad."""
+        """Hub angle ``theta(t)``, rad, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         t = np.asarray(t, dtype=float)
         ws, ts = self.spin_rate, self.ramp_time
         k = 2.0 * np.pi / ts
@@ -137,14 +144,26 @@ class SpinUp(KeywordOnly):
         return np.where(t < ts, ramp, ws * (t - 0.5 * ts))
 
     def rate(self, t):
-        """Hub rate ``theta_t(t)``, rad/s."""
+        """Hub rate ``theta_t(t)``, rad/s, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         t = np.asarray(t, dtype=float)
         ws, ts = self.spin_rate, self.ramp_time
         k = 2.0 * np.pi / ts
         return np.where(t < ts, ws / ts * (t - np.sin(k * t) / k), ws)
 
     def acceleration(self, t):
-        """Hub acceleration ``theta_tt(t)``, rad/s^2."""
+        """Hub acceleration ``theta_tt(t)``, rad/s^2, shaped as ``t``.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s), s.
+        """
         t = np.asarray(t, dtype=float)
         ws, ts = self.spin_rate, self.ramp_time
         return np.where(t < ts, ws / ts * (1.0 - np.cos(2.0 * np.pi * t / ts)), 0.0)
@@ -398,7 +417,13 @@ class TorqueSamples(KeywordOnly):
         return np.where(t < self.times[0], 0.0, inside)
 
     def casadi(self, t):
-        """The torque as a CasADi expression of the time symbol ``t`` (SX or MX), N m."""
+        """The torque as a CasADi expression of the time symbol ``t`` (SX or MX), N m.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        """
         import casadi as ca
 
         inside = float(self.values[0]) if self._sampled is None else self._sampled.casadi(t)

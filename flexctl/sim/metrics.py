@@ -79,6 +79,8 @@ class SlewMetrics:
         Largest ``|tip deflection|``, m.
     residual_vibration : float
         Largest ``|tip deflection|`` after the manoeuvre's nominal duration, m.
+    errors : MetricErrors or None
+        Error estimates of the metrics (:func:`metric_errors`); None without a reference run.
     """
 
     settling_time: float
@@ -102,7 +104,13 @@ class SlewMetrics:
         return out
 
     def error(self, name: str) -> float | None:
-        """The error estimate of metric ``name`` (its unit), or None without estimates."""
+        """The error estimate of metric ``name`` (its unit), or None without estimates.
+
+        Parameters
+        ----------
+        name : str
+            One of :data:`ERROR_METRICS`.
+        """
         if name not in _ERROR_UNITS:
             raise InputValueError(f"SlewMetrics.error name must be one of "
                                   f"{', '.join(_ERROR_UNITS)}; got {name!r}")
@@ -111,7 +119,13 @@ class SlewMetrics:
     def shown(self, name: str) -> str:
         """Metric ``name`` as a person should read it: ``"0.219 ± 0.03 mm"``, or an upper
         bound ``"< 0.6 mm"`` when the metric is smaller than its error
-        (:func:`format_metric`)."""
+        (:func:`format_metric`).
+
+        Parameters
+        ----------
+        name : str
+            One of :data:`ERROR_METRICS`.
+        """
         value = getattr(self, name) if name in _ERROR_UNITS else None
         if value is None:
             raise InputValueError(f"SlewMetrics.shown name must be one of "
@@ -183,8 +197,12 @@ def metric_errors(result, reference, angle: float, duration: float,
     reference : SimulationResult
         The same closed loop on a more faithful plant (more modes, exact geometry), at the
         same output times.
-    angle, duration, band
-        As for :func:`slew_metrics`.
+    angle : float
+        Commanded slew angle, rad (non-zero), as for :func:`slew_metrics`.
+    duration : float
+        Nominal manoeuvre time, s, as for :func:`slew_metrics`.
+    band : float, optional
+        Settling band as a fraction of ``angle``, as for :func:`slew_metrics`. Default 0.02.
     geometry : float, optional
         A bound on the tip's geometric model error not in ``reference`` (a reference of the
         run's own small-deflection variant), m; added to the tip metrics. Default 0.
@@ -274,12 +292,13 @@ def slew_metrics(result, angle: float, duration: float, band: float = 0.02) -> S
     Parameters
     ----------
     result : SimulationResult
+        The run of the slew.
     angle : float
         Commanded slew angle, rad (non-zero).
     duration : float
         Nominal manoeuvre time, s: residual vibration is measured after it.
-    band : float
-        Settling band as a fraction of ``angle``.
+    band : float, optional
+        Settling band as a fraction of ``angle``. Default 0.02.
     """
     angle = check_real("slew_metrics", "angle", angle)
     if not angle:

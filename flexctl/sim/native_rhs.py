@@ -78,13 +78,25 @@ def _built(model, form: str):
 
 def compiles_prescribed(model) -> bool:
     """Whether a prescribed hub motion of ``model`` runs its compiled beam and hub torque:
-    the one-beam exact model (a structure's prescribed motion stays inlined)."""
+    the one-beam exact model (a structure's prescribed motion stays inlined).
+
+    Parameters
+    ----------
+    model : Model
+        The model of the run.
+    """
     return model.variant.exact and not hasattr(model, "functions")
 
 
 def integration_rhs(model):
     """``(x, u) -> xdot`` for implicit integrators: compiled for an exact model (one beam or
-    a structure), :meth:`flexctl.Model.integration_rhs` otherwise."""
+    a structure), :meth:`flexctl.Model.integration_rhs` otherwise.
+
+    Parameters
+    ----------
+    model : Model
+        The model of the run.
+    """
     if not model.variant.exact:
         return model.integration_rhs()
     return _built(model, "rhs")
@@ -93,7 +105,13 @@ def integration_rhs(model):
 def integration_beam(model):
     """``(y, rate, acceleration) -> dy/dt`` under a prescribed hub motion, ``y = [q,
     q_dot]``: compiled for a one-beam exact model, :meth:`flexctl.Model.integration_beam`
-    otherwise."""
+    otherwise.
+
+    Parameters
+    ----------
+    model : Model
+        The model of the run (a pinned hub).
+    """
     if not compiles_prescribed(model):
         return model.integration_beam()
     return _built(model, "beam")
@@ -108,6 +126,7 @@ def prescribed_torque(model, states, acceleration):
     Parameters
     ----------
     model : Model
+        The model of the run.
     states : ndarray, shape (n, P)
         Plant states, in the order of ``model.layout``.
     acceleration : array_like, shape (P,)

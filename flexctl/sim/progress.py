@@ -89,8 +89,8 @@ def progress_printer(write=None, interval: float = REPORT_INTERVAL):
     ----------
     write : callable, optional
         ``write(line)``; default: to ``sys.stderr``, flushed.
-    interval : float
-        s.
+    interval : float, optional
+        Least time between two lines, s. Default :data:`REPORT_INTERVAL`.
     """
     if write is None:
         def write(line):
@@ -111,6 +111,12 @@ def check_progress(progress):
 
     ``None`` or ``False``: no reports; ``True``: :func:`progress_printer` to stderr; a
     callable: itself, called with a :class:`Progress`.
+
+    Parameters
+    ----------
+    progress : bool, callable or None
+        The argument as given; an exception the callable raises is reported as an
+        ``InputValueError`` naming the time.
     """
     if progress is None or progress is False:
         return None

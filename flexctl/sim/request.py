@@ -162,19 +162,25 @@ class RunRequest:
     Attributes
     ----------
     model : Model
+        The model simulated.
     t_final : float
-        s.
+        End time, s.
     method : str
         The method asked for, ``"auto"`` resolved (the stiffness guard may still change it);
         a sampled controller's ``"auto"`` is resolved by its run
         (:func:`~flexctl.sim.embedded_rk.choose_hold`), which knows the plant's fastest pole.
     rtol : float
+        Relative tolerance.
     atol : object
         As given (``None``: each state's physical scale times ``rtol``).
     grid : ndarray, shape (P,)
-        Output times, s; ``step`` their spacing.
+        Output times, s.
+    step : float
+        Spacing of the output times, s.
     max_step : float
         Largest step, s (``inf``: none), the inputs' own bounds included.
+    check_accuracy : bool
+        Estimate the integration error.
     torque, hub_motion, controller : object
         The inputs in the form the integrators take (``controller`` a
         :class:`~flexctl.sim.drives.Controller` or a sampled controller).
@@ -188,6 +194,8 @@ class RunRequest:
         Fastest beam frequency at the initial hub rate, rad/s (0 at rest).
     report : callable or None
         Progress reporter.
+    sensors : Sensors or None
+        What a sampled controller measures, checked against it. Default None.
     """
 
     model: Model
@@ -228,6 +236,8 @@ def state_scale(model: Model, layout) -> np.ndarray:
     Parameters
     ----------
     model : Model
+        The model whose states are scaled: its beam lengths and first clamped
+        frequency set the sizes.
     layout : StateLayout
         The integrated states' layout: ``model.layout``, with a ``"controller"`` block, or
         without the hub rotation (a prescribed hub motion).
@@ -399,6 +409,7 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
     Parameters
     ----------
     model : Model
+        The model to simulate.
     t_final : float
         End time, s (at least :data:`MIN_T_FINAL`).
     torque : callable, (times, values) or SampledTorque, optional
@@ -510,9 +521,13 @@ class IntegrationPlan:
         locates a stop.
     atol : ndarray
         Absolute tolerance per integrated state; ``scale = atol / rtol``.
+    rtol : float
+        Relative tolerance.
     cuts : list of float
-        Segment boundaries (the inputs' breakpoints), s; ``drive_cuts`` the ones the segment
-        loop steps through (more where progress is reported).
+        Segment boundaries (the inputs' breakpoints), s.
+    drive_cuts : list of float
+        The boundaries the segment loop steps through, s: ``cuts``, and more where progress
+        is reported.
     omega_plant, loop_frequency : float
         Fastest mode of the plant at rest and fastest pole of the closed loop, rad/s.
     cvodes_steps : int
@@ -604,6 +619,8 @@ def stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
     Parameters
     ----------
     model : Model
+        The model of the run; its highest natural frequency bounds an explicit
+        method's step.
     t_final : float
         End time, s.
     method : str
@@ -685,6 +702,7 @@ def choose_multistep(model: Model, omega_plant: float, loop_frequency: float = 0
     Parameters
     ----------
     model : Model
+        The model of the run: its beam damping and hub friction.
     omega_plant : float
         Fastest mode of the plant at rest, rad/s (>= 0; ``inf`` allowed).
     loop_frequency : float, optional
@@ -750,6 +768,7 @@ def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
     Parameters
     ----------
     model : Model
+        The model of the run.
     t_final : float
         Length of the run, s (>= 0).
     omega_max : float
@@ -772,7 +791,13 @@ def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
 
 def rhs_instructions(model: Model) -> float:
     """Instructions of one evaluation of ``model``'s right-hand side in scalar form
-    (``model.casadi()``; ``inf`` where it has none)."""
+    (``model.casadi()``; ``inf`` where it has none).
+
+    Parameters
+    ----------
+    model : Model
+        The model whose compiled right-hand side is measured.
+    """
     function = model.casadi()
     return float(function.n_instructions()) if function.is_a("SXFunction") else math.inf
 

@@ -27,6 +27,7 @@ class SimulationResult:
     Attributes
     ----------
     model : Model
+        The model simulated.
     t : ndarray, shape (P,)
         Output times, s.
     states : ndarray, shape (n, P)
@@ -44,7 +45,13 @@ class SimulationResult:
         Integration wall time, s.
     n_evaluations : int
         Number of right-hand-side evaluations.
+    method : str
+        The integrator that ran (after the stiffness guard;
+        :data:`~flexctl.sim.simulation.METHODS`).
+    rtol : float
+        The relative tolerance it ran at.
     controller_states : ndarray, shape (n_z, P)
+        The controller's internal states at the output times (``n_z = 0`` without any).
     integration_error : float or None
         Estimated largest integration error of the tip deflection, m: the difference from a
         check run at 10 times the tolerance (conservative). ``None`` where no check ran (SciPy
@@ -103,6 +110,7 @@ class SimulationResult:
         Parameters
         ----------
         model : Model
+            The model simulated.
         t : ndarray, shape (P,)
             Output times, s.
         states : ndarray, shape (n, P)
@@ -187,6 +195,11 @@ class SimulationResult:
         outputs, the actuator's signals and, with ``states``, every state, under the model's
         names (an appendage's ``wing_a.q1``). pandas is an optional dependency.
 
+        Parameters
+        ----------
+        states : bool, optional
+            Add every state as a column. Default True.
+
         Raises
         ------
         ImportError
@@ -243,6 +256,7 @@ def audit_energy(model: Model, result_arrays, reason: StopReason, message: str,
     Parameters
     ----------
     model : Model
+        The model simulated (a small-deflection variant has an energy balance).
     result_arrays : tuple
         ``(t, states, torque)``: output times, s, shape (P,); plant states, shape (n, P); the
         plant's input, shape (P,) (hub torque, N m, or an actuator's command).
@@ -283,6 +297,7 @@ def mechanical_arrays(model, t, states, inputs):
     Parameters
     ----------
     model : Model
+        The model simulated; an actuated model's structure is its ``mechanical`` model.
     t : ndarray, shape (P,)
         Output times, s.
     states : ndarray, shape (n, P)

@@ -30,6 +30,7 @@ def run_once(model, t_final: float, torque=None, hub_motion=None, controller=Non
     Parameters
     ----------
     model : Model
+        The model to simulate.
     t_final : float
         End time, s.
     torque, hub_motion, controller : object, optional
@@ -60,6 +61,7 @@ def run_states(model, t_final: float, torque=None, hub_motion=None, controller=N
     Parameters
     ----------
     model : Model
+        The model to simulate.
     t_final : float
         End time, s.
     torque, hub_motion, controller : object, optional

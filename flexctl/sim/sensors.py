@@ -144,7 +144,14 @@ class Sensors(KeywordOnly):
 
     def interval(self, controller_sample_time: float) -> float:
         """The sample interval of the readings, s: :attr:`sample_time`, or the controller's
-        when that is ``None``."""
+        when that is ``None``.
+
+        Parameters
+        ----------
+        controller_sample_time : float
+            The controller's sample time, s (> 0); read only when :attr:`sample_time` is
+            None.
+        """
         if self.sample_time is not None:
             return self.sample_time
         return check_real("sensors", "sample_time", controller_sample_time, minimum=0.0,
@@ -241,7 +248,9 @@ def measurement_matrix(model, sensors: Sensors) -> tuple:
     Parameters
     ----------
     model : flexctl.Model
+        The plant read (its linearisation at rest and its outputs).
     sensors : Sensors
+        What is read: the tip accelerations only when the sensors have accelerometers.
 
     Returns
     -------
@@ -284,11 +293,12 @@ def noise_covariance(model, sensors: Sensors, sample_time: float, *,
     model : flexctl.Model
         Tells how many root moments and tips there are.
     sensors : Sensors
+        The sensors' noise levels, quantisation and gyro bias.
     sample_time : float
         Sample interval ``T``, s (> 0).
-    with_bias : bool
+    with_bias : bool, optional
         True when the filter estimates the gyro bias as a state: the gyro's variance is then
-        its white part ``gyro_noise^2 / T`` alone; False adds the bias variance
+        its white part ``gyro_noise^2 / T`` alone; False (default) adds the bias variance
         ``gyro_bias_instability^2`` as if it were white.
 
     Returns
@@ -311,6 +321,15 @@ class SensorSession:
     Made by :meth:`Sensors.start`. Attributes: ``sensors``, ``model``, ``sample_time`` (s),
     ``names`` (:func:`sensor_names`), ``samples`` (readings taken) and ``bias``, the gyro bias
     of the latest reading (before the first one: of the first one), rad/s.
+
+    Parameters
+    ----------
+    sensors : Sensors
+        The sensors read; their ``seed`` starts the random state.
+    model : Model
+        The plant read.
+    sample_time : float
+        Sample interval of the readings, s (> 0).
     """
 
     def __init__(self, sensors: Sensors, model, sample_time: float):

@@ -93,6 +93,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     Parameters
     ----------
     model : Model
+        The model to simulate: any variant, a structure or an actuated model
+        (:func:`flexctl.build_model`).
     t_final : float
         End time, s (> 0).
     torque : callable, (times, values) or SampledTorque, optional

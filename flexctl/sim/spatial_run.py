@@ -160,6 +160,8 @@ class SpatialResult:
     wall_time : float
         Seconds.
     rtol : float
+    equations : SpatialEquations
+        The model's CasADi functions the run integrated.
     """
 
     structure: SpatialStructure
@@ -231,6 +233,7 @@ def initial_state(equations: SpatialEquations, angular_velocity=(0.0, 0.0, 0.0),
     Parameters
     ----------
     equations : SpatialEquations
+        The model's functions (:func:`~flexctl.model.spatial_dynamics.spatial_equations`).
     angular_velocity : array_like, shape (3,)
         Hub angular velocity, hub frame, rad/s.
     quaternion : array_like, shape (4,)
@@ -299,6 +302,7 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
     Parameters
     ----------
     structure : SpatialStructure
+        The hub and its appendages.
     t_final : float
         End time, s (> 0, at most :data:`MAX_T_FINAL`).
     torque : None, array_like (3,), callable or VectorTorque, optional

@@ -52,6 +52,7 @@ def tip_rows(model: Model, layout) -> np.ndarray:
     Parameters
     ----------
     model : Model
+        The model of the run: one tip row phi_k(l_k) per appendage.
     layout : StateLayout
         The layout of the states ``y`` (the model's, with a controller block, or without the
         hub rotation); ``n`` its number of states.
@@ -94,6 +95,7 @@ def stiffness_reason(model: Model, spin: float) -> str:
     Parameters
     ----------
     model : Model
+        The model of the run, its beam stiffness and first clamped frequency.
     spin : float
         Hub rate, rad/s (its magnitude is reported).
     """
@@ -124,6 +126,7 @@ def softened(model: Model, spin: float) -> bool:
     Parameters
     ----------
     model : Model
+        The model of the run.
     spin : float
         Hub rate, rad/s.
     """
@@ -176,6 +179,7 @@ class StopConditions:
     Parameters
     ----------
     model : Model
+        The model of the run: its tips, reach and variant.
     layout : StateLayout
         Layout of the integrated state: the model's own, with a controller block, or
         :meth:`~flexctl.model.layout.StateLayout.without_rotation` for a prescribed hub.
@@ -205,7 +209,18 @@ class StopConditions:
         self._scaled_tips = tip_rows(model, layout) / self.reach[:, None]
 
     def reach_ratio(self, y):
-        """Largest ``|phi_k(l_k)^T q_k| / reach_k`` of integrated state(s) ``y``."""
+        """Largest ``|phi_k(l_k)^T q_k| / reach_k`` of integrated state(s) ``y``: 1 where
+        the model leaves its range.
+
+        Parameters
+        ----------
+        y : ndarray, shape (n,) or (n, P)
+            Integrated state(s), in the order of :attr:`layout`.
+
+        Returns
+        -------
+        float or ndarray, shape (P,)
+        """
         return np.max(np.abs(self._scaled_tips @ y), axis=0)
 
     def events(self) -> list:
@@ -224,7 +239,13 @@ class StopConditions:
         return events
 
     def reason_of_event(self, index: int) -> StopReason:
-        """The stop of the ``index``-th event of :meth:`events`."""
+        """The stop of the ``index``-th event of :meth:`events`.
+
+        Parameters
+        ----------
+        index : int
+            0 for the tip event, 1 for the singular mass.
+        """
         return self.geometric() if index == 0 else StopReason.SINGULAR_MASS
 
     def geometric(self) -> StopReason:
@@ -233,7 +254,13 @@ class StopConditions:
                 else StopReason.TIP_PAST_LENGTH)
 
     def first_bad(self, y_seg) -> int | None:
-        """Index of the first output sample (columns of ``y_seg``) past a condition, or None."""
+        """Index of the first output sample (columns of ``y_seg``) past a condition, or None.
+
+        Parameters
+        ----------
+        y_seg : ndarray, shape (n, K)
+            Integrated states at a segment's output times, in the order of :attr:`layout`.
+        """
         bad = ~np.all(np.isfinite(y_seg), axis=0) | (self.reach_ratio(y_seg) >= 1.0)
         if self.singular:
             bad |= np.asarray(self.model.effective_hub_inertia(y_seg[self._plant])) \
@@ -241,7 +268,13 @@ class StopConditions:
         return int(np.argmax(bad)) if bad.any() else None
 
     def reason_of_sample(self, y) -> StopReason:
-        """Which condition the first bad sample ``y`` met."""
+        """Which condition the first bad sample ``y`` met.
+
+        Parameters
+        ----------
+        y : ndarray, shape (n,)
+            The integrated state at that sample, in the order of :attr:`layout`.
+        """
         if not np.all(np.isfinite(y)):
             return StopReason.NON_FINITE_STATE
         if self.singular and float(self.model.effective_hub_inertia(y[self._plant])) \

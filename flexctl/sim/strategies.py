@@ -65,8 +65,28 @@ class AccuracyWarning(RuntimeWarning):
 class Trajectory:
     """What an integration hands back: samples, effort, and why it stopped.
 
-    ``found`` is True when a stopping condition ended the run and its physical reason is
-    still to be named from the last state (:meth:`StopConditions.message`).
+    Attributes
+    ----------
+    ts : list of ndarray
+        Sample times of each piece of the run, s, in order.
+    ys : list of ndarray
+        The integrated states at those times, shape (m, K) per piece.
+    reason : StopReason
+        Why the run ended. Default: it reached its end.
+    message : str
+        What happened, with the time; empty for a run that reached its end.
+    found : bool
+        True when a stopping condition ended the run and its physical reason is still to be
+        named from the last state (:meth:`StopConditions.message`).
+    n_eval : int
+        Right-hand-side evaluations so far.
+    compiled_segments : list of tuple
+        ``(t_start, t_out)`` of each segment a compiled strategy integrated, for its accuracy
+        check.
+    integration_error : float or None
+        Estimated largest tip-deflection error, m; None where no check ran.
+    accuracy_note : str
+        What the accuracy check found and did; empty when nothing.
     """
 
     ts: list
@@ -98,6 +118,7 @@ class Trajectory:
         Parameters
         ----------
         reason : StopReason
+            Why the run ended.
         message : str, optional
             What happened, with the time. Default "" (a ``found`` stop is named later from the
             last state, :meth:`StopConditions.message`).
@@ -234,7 +255,19 @@ class _Segments:
 class ScipyIVP(_Segments):
     """``scipy.integrate.solve_ivp`` on the drive's Python right-hand side; its accuracy check
     is the run replayed at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance, as
-    a compiled run's (:func:`replay_error`)."""
+    a compiled run's (:func:`replay_error`).
+
+    Parameters
+    ----------
+    request : RunRequest
+        The checked arguments of the run.
+    plan : IntegrationPlan
+        How it is integrated: the method, the tolerances and the segment cuts.
+    drive : PrescribedDrive or TorqueDrive
+        What is integrated: its right-hand side and initial state.
+    stops : StopConditions
+        The run's stopping conditions.
+    """
 
     def segment(self, traj, lo, hi, t_eval, y):
         """Integrate ``[lo, hi]`` from ``y``: the state at ``hi``, or None after a stop; a segment
@@ -318,7 +351,19 @@ def replay_error(strategy, traj) -> tuple:
 
 
 class CvodesSegments(_Segments):
-    """CVODES on the compiled right-hand side; SciPy locates a stop within a segment."""
+    """CVODES on the compiled right-hand side; SciPy locates a stop within a segment.
+
+    Parameters
+    ----------
+    request : RunRequest
+        The checked arguments of the run.
+    plan : IntegrationPlan
+        How it is integrated: the method, the tolerances and the segment cuts.
+    drive : PrescribedDrive or TorqueDrive
+        What is integrated: its right-hand side and initial state.
+    stops : StopConditions
+        The run's stopping conditions.
+    """
 
     def __init__(self, request, plan, drive, stops):
         super().__init__(request, plan, drive, stops)
@@ -454,7 +499,19 @@ def _bdf_run(request, plan, rtol: float) -> BdfRun:
 class EmbeddedSegments(CvodesSegments):
     """The segments by compiled Dormand-Prince 5(4) steps with error control
     (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), the step size carried from one segment
-    to the next; SciPy locates a stop within a segment, as behind CVODES."""
+    to the next; SciPy locates a stop within a segment, as behind CVODES.
+
+    Parameters
+    ----------
+    request : RunRequest
+        The checked arguments of the run.
+    plan : IntegrationPlan
+        How it is integrated: the method, the tolerances and the segment cuts.
+    drive : PrescribedDrive or TorqueDrive
+        What is integrated: its right-hand side and initial state.
+    stops : StopConditions
+        The run's stopping conditions.
+    """
 
     def __init__(self, request, plan, drive, stops):
         super().__init__(request, plan, drive, stops)
@@ -502,7 +559,19 @@ class BdfSegments(EmbeddedSegments):
     """The segments by compiled variable-order BDF or Adams-Moulton steps
     (:class:`~flexctl.sim.compiled_bdf.BdfRun`), each segment from order 1; the accuracy
     check replays them at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance
-    beside the run; SciPy locates a stop within a segment, as behind CVODES."""
+    beside the run; SciPy locates a stop within a segment, as behind CVODES.
+
+    Parameters
+    ----------
+    request : RunRequest
+        The checked arguments of the run.
+    plan : IntegrationPlan
+        How it is integrated: the method, the tolerances and the segment cuts.
+    drive : PrescribedDrive or TorqueDrive
+        What is integrated: its right-hand side and initial state.
+    stops : StopConditions
+        The run's stopping conditions.
+    """
 
     def __init__(self, request, plan, drive, stops):
         CvodesSegments.__init__(self, request, plan, drive, stops)
@@ -607,7 +676,19 @@ def check_embedded_accuracy(request, drive, traj: Trajectory, check, reporter=No
 class FixedStepRK4(_Segments):
     """Compiled fixed-step RK4 over the whole run in one call (:mod:`flexctl.sim.fixed_step`);
     where an output sample is past a stopping condition, SciPy locates the stop from the
-    sample before it, as behind CVODES."""
+    sample before it, as behind CVODES.
+
+    Parameters
+    ----------
+    request : RunRequest
+        The checked arguments of the run.
+    plan : IntegrationPlan
+        How it is integrated: the method, the tolerances and the segment cuts.
+    drive : PrescribedDrive or TorqueDrive
+        What is integrated: its right-hand side and initial state.
+    stops : StopConditions
+        The run's stopping conditions.
+    """
 
     def start_check(self):
         """None: the run's step-doubling pair is its own accuracy check."""

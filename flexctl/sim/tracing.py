@@ -107,7 +107,13 @@ class TracedTorque:
         return tuple(getattr(self.function, "breakpoints", ()) or ())
 
     def casadi(self, t):
-        """The torque as a CasADi expression of the time symbol ``t``, N m."""
+        """The torque as a CasADi expression of the time symbol ``t``, N m.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        """
         return self.form(t)
 
     def __call__(self, t):
@@ -122,7 +128,15 @@ class TracedTorque:
 @dataclass(frozen=True, eq=False, repr=False)
 class TracedStateTorque(TracedTorque):
     """A traced Python torque function of time and plant state, ``function(t, x)``; its
-    ``form`` is ``(t, x) -> torque``."""
+    ``form`` is ``(t, x) -> torque``.
+
+    Attributes
+    ----------
+    function : callable
+        The Python function ``function(t, x)``, N m.
+    form : casadi.Function
+        ``(t, x) -> torque`` (SX), equal to ``function`` at the checks.
+    """
 
     state_dependent: ClassVar[bool] = True
 
@@ -244,6 +258,8 @@ def trace_torque(function, *, t_final: float, n_states: int | None = None, state
         Physical size of each state: the checked states are drawn at this scale around
         ``x0`` (default zeros).
     x0 : array_like, shape (n_states,), optional
+        The state the checked states are drawn around (the run's initial state). Default
+        zeros.
 
     Returns
     -------

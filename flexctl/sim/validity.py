@@ -88,10 +88,14 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         Gives the system and the variant; its own number of modes is not used.
     t_final : float
         Horizon, s.
-    torque, hub_motion, controller, sensors :
+    torque, hub_motion, controller : object or None, optional
         The run's inputs, as for :func:`flexctl.simulate`.
-    n_modes : int
-        Modes of the two compared models.
+    n_modes : int, optional
+        Modes of the two compared models (at least those a controller was designed on).
+        Default :data:`ESTIMATE_MODES`.
+    sensors : Sensors, optional
+        What a sampled controller reads, as for :func:`flexctl.simulate` (read noiseless
+        here, so that the two runs differ only by their models).
     x0 : array_like, shape (n,), optional
         The run's initial plant state (``model``'s layout; default rest): each compared
         model starts from its states of the same names (the modes beyond ``n_modes`` left
@@ -294,13 +298,16 @@ def assess(result, *, torque=None, hub_motion=None, controller=None, sensors=Non
     Parameters
     ----------
     result : SimulationResult
-    torque, hub_motion, controller, sensors :
+        The finished run: its model, states and energy balance.
+    torque, hub_motion, controller : object or None, optional
         The inputs the run was made with.
-    tolerance : float
-        Relative tip error accepted, in (0, 1).
-    warn : bool
+    sensors : Sensors, optional
+        What its sampled controller read, if any.
+    tolerance : float, optional
+        Relative tip error accepted, in (0, 1). Default 1e-2.
+    warn : bool, optional
         Issue a :class:`ModelValidityWarning` when the estimate is above ``tolerance`` or the
-        run's energy balance is violated.
+        run's energy balance is violated. Default True.
     """
     check_tolerance(tolerance)
     model = result.model
