@@ -32,7 +32,7 @@ import numpy as np
 
 from .checks import KeywordOnly, check_array, check_real
 from .errors import InputTypeError, InputValueError
-from .parameters import RADIUS_RATIO_LIMIT, SUPPORTS, Beam, carried_masses
+from .parameters import RADIUS_RATIO_LIMIT, SUPPORTS, Beam, Hub, carried_masses
 
 __all__ = ["SpatialHub", "SpatialAppendage", "SpatialStructure", "PERPENDICULAR_TOLERANCE",
            "MAX_SPATIAL_APPENDAGES"]
@@ -357,6 +357,56 @@ class SpatialStructure(KeywordOnly):
     def total_mass(self) -> float:
         """Hub plus appendages, kg."""
         return self.hub.mass + sum(a.mass for a in self.appendages)
+
+    def to_planar(self):
+        """The planar structure that turns about the hub's ``z`` axis as this one would if it
+        moved only in the ``x-y`` plane: the hub's ``J_zz`` (and mass), each rod at its
+        mounting angle with the bending stiffness of that plane (``E I_n`` where the normal
+        lies in it, ``E I_l`` where the normal is along ``z``) and its masses.
+
+        Returns
+        -------
+        Structure
+
+        Raises
+        ------
+        InputValueError
+            When an appendage does not lie in the ``x-y`` plane (its direction, its root off
+            the plane or off its own axis through the centre, its normal neither along ``z``
+            nor in the plane), or the hub's ``z`` axis is not principal.
+        """
+        from .structure import Appendage, Structure
+
+        tol = 1e-12
+        hub = self.hub
+        if abs(hub.inertia[0, 2]) > tol * np.max(np.abs(hub.inertia)) or \
+                abs(hub.inertia[1, 2]) > tol * np.max(np.abs(hub.inertia)):
+            raise InputValueError("SpatialStructure.to_planar: the hub's z axis must be "
+                                  f"principal (J_xz = J_yz = 0); got {hub.inertia[0:2, 2]}")
+        appendages = []
+        for a in self.appendages:
+            root = a.root_point(hub)
+            radius = float(root @ a.direction)
+            if abs(a.direction[2]) > tol or np.linalg.norm(root - radius * a.direction) > \
+                    tol * max(1.0, a.length) or radius < 0.0:
+                raise InputValueError(f"SpatialStructure.to_planar: appendage {a.name!r} must "
+                                      "lie in the x-y plane with its root on its own axis "
+                                      f"through the centre; got direction {a.direction}, "
+                                      f"root {root}")
+            if abs(a.normal[2]) > 1.0 - tol:
+                beam = a.beam_lateral
+            elif abs(a.normal[2]) <= tol:
+                beam = a.beam_normal
+            else:
+                raise InputValueError(f"SpatialStructure.to_planar: appendage {a.name!r} has a "
+                                      f"tilted section (normal {a.normal}): neither bending "
+                                      "plane is the x-y plane")
+            appendages.append(Appendage(
+                name=a.name, beam=beam, masses=a.masses, radius=radius,
+                angle=float(np.arctan2(a.direction[1], a.direction[0]))))
+        return Structure(hub=Hub(inertia=float(hub.inertia[2, 2]), radius=hub.radius,
+                                 mass=hub.mass, support=hub.support),
+                         appendages=tuple(appendages))
 
     @classmethod
     def from_planar(cls, structure, *, lateral_ratio: float = 100.0,

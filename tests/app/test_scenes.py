@@ -11,6 +11,8 @@ from flexctl.sim.maneuvers import SineTorque, SpinUp
 BUILTINS = ("hub-beam-mass", "kane-spinup", "slew-90", "slew-90-model-error", "spacecraft-torque",
             "two-array-free", "single-wing-free", "two-array-slew", "wheel-slew",
             "flexible-link")
+#: The built-in spatial scenes (a 3 x 3 hub inertia).
+SPATIAL_BUILTINS = ("spatial-tilted-slew", "spatial-spin")
 
 #: MODEL.md section 6, written out independently of the scene files.
 KANE_BEAM = Beam(length=8.0, youngs_modulus=6.8952e10, area=7.2968e-5,
@@ -63,7 +65,7 @@ output_step = 0.05
 
 def test_builtin_scenes_are_listed_with_descriptions():
     scenes = builtin_scenes()
-    assert set(scenes) == set(BUILTINS)
+    assert set(scenes) == set(BUILTINS) | set(SPATIAL_BUILTINS)
     for name, description in scenes.items():
         assert isinstance(description, str) and description, name
 
@@ -77,6 +79,17 @@ def test_builtin_scenes_load(name):
     assert scene.model.variant in flexctl.VARIANTS
     model = scene.build_model()
     assert set(model.modes) == {scene.model.modes} and model.variant == scene.model.variant
+
+
+@pytest.mark.parametrize("name", SPATIAL_BUILTINS)
+def test_builtin_spatial_scenes_load_and_lie_in_the_plane_of_their_planar_counterpart(name):
+    from flexctl.app.spatial_scene import SpatialScene
+
+    scene = load_scene(name)
+    assert isinstance(scene, SpatialScene) and scene.name == name
+    planar = scene.structure.to_planar()
+    assert planar.names == scene.structure.names
+    assert planar.hub.inertia == scene.structure.hub.inertia[2, 2]
 
 
 def test_kane_scene_is_the_kane_case():
