@@ -19,6 +19,8 @@ section                     content
 :func:`hub_beam_mass`       paper 000 Figs. 5 to 8: the point mass, sweeps of d/l and R_M
 :func:`slew_comparison`     every controller kind on ``slew-90`` and on ``two-array-slew``
 :func:`structures`          one beam against two arrays, pinned and free hub (its own module)
+:func:`three_axes`          the built-in spatial scenes against their planar counterparts, an
+                            animation (its own module)
 :func:`model_error`         trajopt+lqr against NMPC when the design model is 20 % off
 :func:`large_deflection`    the optimal slew designed on first_order and on exact geometry
 :func:`hardware`            a reaction wheel and a DC motor, exact state and noisy sensors
@@ -46,6 +48,7 @@ from ..sim.atomic_files import atomic_file, staged_folder, write_atomic
 from ..sim.validity import ModelValidityWarning
 from .report import write_demo_report
 from .demo_hardware import hardware
+from .demo_spatial import SPATIAL_SCENES, three_axes
 from .demo_structures import structures
 from .section import Section, save_figure as _save
 from .scenes import builtin_scenes, load_scene, run_slew
@@ -580,6 +583,7 @@ SECTIONS = (("paper 001 Fig. 4", kane_spinup),
             ("paper 000 Figs. 5-8", hub_beam_mass),
             ("controller comparison", slew_comparison),
             ("structures", structures),
+            ("three axes", three_axes),
             ("controller comparison, two arrays", _two_array_comparison),
             ("design-model error", model_error),
             ("large deflection", large_deflection),
@@ -587,7 +591,8 @@ SECTIONS = (("paper 001 Fig. 4", kane_spinup),
 #: The order in which the sections go to the pool: longest first (CPU seconds of each, measured
 #: one after the other in one process on this project's 2-core machine, in the comments), so
 #: that the short ones and the scenes fill the processes' ends.
-SECTION_ORDER = ("actuators and sensors",                # 11.4
+SECTION_ORDER = ("three axes",                           # 60 (two spatial runs)
+                 "actuators and sensors",                # 11.4
                  "controller comparison, two arrays",    # 9.3
                  "controller comparison",                # 9.0
                  "design-model error",                   # 4.5
@@ -766,7 +771,8 @@ def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print)
 
 def _demo_into(out: Path, run_one, workers: int, progress) -> list:
     """:func:`run_demo`'s work, every file written into ``out``; return the surprises."""
-    plan = [(name, name, {}, "ok") for name in builtin_scenes()]
+    # the spatial scenes run in their section, beside their planar counterparts
+    plan = [(name, name, {}, "ok") for name in builtin_scenes() if name not in SPATIAL_SCENES]
     for extra in DEMO_COMPARISONS:
         after = next((k for k, p in enumerate(plan) if p[1] == extra[1]), len(plan) - 1)
         plan.insert(after + 1, extra)

@@ -282,6 +282,10 @@ def test_demo_writes_report_and_plots(tmp_path, capsys):
         assert rows[name][4] == "ok"
         assert json.loads((out / name / "summary.json").read_text())["status"] == "ok"
     _assert_hardware_rows(report)
+    # the three-axis section: its table, figure and animation
+    assert "## Three axes: what a planar model misses" in report
+    assert (out / "spatial-tilted-slew.gif").read_bytes()[:6] == b"GIF89a"
+    assert "three_axes.png" in links
     zero = [cells for cells in rows.values() if cells[2] == "zero_order"]
     assert len(zero) == 1 and zero[0][1] == "kane-spinup" and zero[0][4] == "diverged"
     zero_summary = json.loads((out / zero[0][0] / "summary.json").read_text())
