@@ -183,6 +183,11 @@ class SpatialResult:
         return self.equations.layout
 
     @property
+    def ok(self) -> bool:
+        """True when the run reached its final time."""
+        return self.status == "ok"
+
+    @property
     def quaternion(self) -> np.ndarray:
         """Hub attitude, hub to inertial, scalar first, shape (4, P)."""
         return self.states[0:4]

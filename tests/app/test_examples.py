@@ -28,7 +28,8 @@ pytestmark = pytest.mark.xdist_group("notebooks")
 #: Seconds a notebook may run (they take 3 to 20 s alone on 2 cores).
 CELL_TIMEOUT = 240
 #: Notebooks that take more than about 10 s (marked slow; CI still runs them).
-SLOW = {"06_slew_controllers", "07_speed_vs_error", "08_large_deflection", "12_c_export"}
+SLOW = {"06_slew_controllers", "07_speed_vs_error", "08_large_deflection", "12_c_export",
+        "13_three_axes"}
 
 
 def _cells(notebook):
