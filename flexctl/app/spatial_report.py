@@ -40,7 +40,7 @@ def run_spatial_scene(scene: SpatialScene, progress=None) -> SpatialResult:
     return simulate_spatial(scene.structure, scene.t_final, scene.maneuver,
                             n_modes=scene.n_modes, angular_velocity=scene.angular_velocity,
                             quaternion=scene.quaternion, rtol=scene.rtol,
-                            output_step=scene.output_step)
+                            output_step=scene.output_step, variant=scene.variant)
 
 
 def spatial_columns(result: SpatialResult) -> list:
@@ -93,7 +93,7 @@ def spatial_summary(scene: SpatialScene, result: SpatialResult,
     energy = result.energy() if result.t.size else np.zeros(0)
     angular, _ = result.momentum() if result.t.size else (np.zeros((3, 0)), None)
     return {
-        "scene": scene.name, "spatial": True, "variant": scene.variant,
+        "scene": scene.name, "spatial": True, "variant": result.variant,
         "n_modes": scene.n_modes, "support": scene.structure.hub.support,
         "status": result.status, "message": result.message,
         "t_final": scene.t_final, "t_end": float(result.t[-1]) if result.t.size else 0.0,
@@ -140,8 +140,9 @@ def write_spatial_run(scene: SpatialScene, result: SpatialResult, out_dir,
                header=",".join(spatial_columns(result)), comments="")
     (out / SUMMARY).write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False)
                                + "\n")
-    figure = plot_spatial_response(result, title=f"{scene.name}: exact, {scene.n_modes} modes "
-                                                 f"per field, {result.status}")
+    figure = plot_spatial_response(result, title=f"{scene.name}: {scene.variant}, "
+                                                 f"{scene.n_modes} modes per field, "
+                                                 f"{result.status}")
     figure.savefig(out / RESPONSE_PLOT, dpi=100)
     import matplotlib.pyplot as plt
     plt.close(figure)
@@ -203,7 +204,8 @@ def format_spatial_summary(summary: dict) -> str:
     -------
     str
     """
-    lines = [f"{summary['scene']} (spatial, exact, {summary['n_modes']} modes per field): "
+    lines = [f"{summary['scene']} (spatial, {summary['variant']}, {summary['n_modes']} modes "
+             "per field): "
              f"{summary['status']}, t = {summary['t_end']:.4g} of {summary['t_final']:.4g} s",
              f"  {summary['message']}"]
     error = summary.get("integration_error")

@@ -10,9 +10,11 @@ into a :class:`SpatialScene`. The tables (every key is checked, every error name
   ``youngs_modulus``, ``second_moment`` (bending along the normal), ``second_moment_lateral``,
   ``shear_modulus``, ``torsion_constant``, optional ``polar_moment`` and ``damping_ratio``;
   ``[[appendages.masses]]`` with ``mass`` and ``position``.
-- ``[model]``: ``variant = "exact"`` (the default: the spatial model is the geometrically
-  exact rod) and ``modes``, per field (bending along the normal, along the lateral direction,
-  torsion) and appendage, an integer.
+- ``[model]``: ``variant``, ``"exact"`` (the default: the geometrically exact rod),
+  ``"first_order"`` or ``"zero_order"`` (its equations to first order in the deflections, with
+  or without the centrifugal stiffening; :data:`~flexctl.model.spatial_dynamics.SPATIAL_VARIANTS`),
+  and ``modes``, per field (bending along the normal, along the lateral direction, torsion) and
+  appendage, an integer.
 - ``[initial]``: ``angular_velocity`` (rad/s, hub frame) and ``quaternion`` (hub to inertial,
   scalar first); the structure starts straight and at rest relative to its hub.
 - ``[maneuver]``: ``kind = "torque_samples"`` with ``times`` and ``values`` (rows ``tx, ty,
@@ -35,7 +37,7 @@ from controllers.spec import SceneError
 from ..model.checks import check_real
 from ..model.parameters import PointMass
 from ..model.spatial_structure import SpatialAppendage, SpatialHub, SpatialStructure
-from ..model.spatial_dynamics import MAX_SPATIAL_MODES
+from ..model.spatial_dynamics import MAX_SPATIAL_MODES, SPATIAL_VARIANTS
 from ..sim.spatial_run import DEFAULT_RTOL, MAX_SPIN, MAX_T_FINAL, VectorTorque
 from .scene_tables import check_table_keys, construct, read_table_file
 from .scene_tables import table_of as _table
@@ -135,6 +137,8 @@ class SpatialScene:
     structure : SpatialStructure
     n_modes : int
         Modes per field and appendage.
+    variant : str
+        The model: one of :data:`~flexctl.model.spatial_dynamics.SPATIAL_VARIANTS`.
     angular_velocity, quaternion : ndarray
         Initial hub angular velocity (rad/s, hub frame) and attitude.
     maneuver : VectorTorque, SpatialSine or None
@@ -153,13 +157,9 @@ class SpatialScene:
     t_final: float
     output_step: float
     rtol: float
+    variant: str = "exact"
     description: str = ""
     data: dict = field(default_factory=dict, repr=False)
-
-    @property
-    def variant(self) -> str:
-        """Always ``"exact"``: the spatial model is the geometrically exact rod."""
-        return "exact"
 
 
 def is_spatial(data: dict) -> bool:
@@ -205,7 +205,7 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
             check_table_keys(key, _table(data, key), allowed)
     hub = construct(SpatialHub, "hub", _table(data, "hub"))
     structure = _structure(hub, data.get("appendages"))
-    n_modes = _modes(_table(data, "model", required=False))
+    n_modes, variant = _model(_table(data, "model", required=False))
     initial = _table(data, "initial", required=False)
     from ..model.checks import check_array
     try:
@@ -229,7 +229,7 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
     return SpatialScene(name=name, structure=structure, n_modes=n_modes,
                         angular_velocity=spin, quaternion=quaternion / np.linalg.norm(quaternion),
                         maneuver=maneuver, t_final=t_final, output_step=output_step, rtol=rtol,
-                        description=description, data=data)
+                        variant=variant, description=description, data=data)
 
 
 def _structure(hub: SpatialHub, items) -> SpatialStructure:
@@ -276,11 +276,13 @@ def _structure(hub: SpatialHub, items) -> SpatialStructure:
         raise SceneError(message) from None
 
 
-def _modes(table: dict) -> int:
+def _model(table: dict) -> tuple:
+    """``(modes, variant)`` of a spatial scene's ``[model]`` table."""
     variant = table.get("variant", "exact")
-    if variant != "exact":
-        raise SceneError(f"model.variant must be 'exact' for a spatial scene (the spatial model "
-                         f"is the geometrically exact rod); got {variant!r:.80}")
+    if not isinstance(variant, str) or variant not in SPATIAL_VARIANTS:
+        raise SceneError(f"model.variant must be one of {', '.join(map(repr, SPATIAL_VARIANTS))} "
+                         f"for a spatial scene (the planar 'consistent' has no spatial form); "
+                         f"got {variant!r:.80}")
     modes = table.get("modes", 4)
     if isinstance(modes, (str, dict)):
         raise SceneError(f"model.modes must be an integer for a spatial scene (the same count "
@@ -290,7 +292,7 @@ def _modes(table: dict) -> int:
             1 <= modes <= MAX_SPATIAL_MODES:
         raise SceneError(f"model.modes must be an integer from 1 to {MAX_SPATIAL_MODES} (modes "
                          f"per field: each bending plane and torsion); got {modes!r:.80}")
-    return modes
+    return modes, variant
 
 
 def _maneuver(data: dict, base_dir):

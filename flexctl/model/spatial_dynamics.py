@@ -30,6 +30,25 @@ its mass. Then ``M u_t = F - b`` with ``F`` the hub torque (hub frame) on ``w``,
 and damping forces ``-K q - C q_t`` on the modes. ``M`` is the kinetic-energy metric of the
 whole structure: positive definite for any hub inertia, a massless hub included.
 
+**First order** (the variants ``first_order`` and ``zero_order``). The same equations, written
+as the residual ``r = M u_t - (F - b)``, expanded to first order in the deflections: the modal
+coordinates, rates and accelerations are scaled together by ``eps`` and
+``r1 = r(0) + dr/deps(0)``, while the hub's motion (``w``, ``w_t``, ``v``, ``v_t``) and the
+torque stay exact. ``r1`` is linear in the accelerations, ``M1 u_t = f1``: ``M1``'s modal
+columns are the straight structure's mass matrix, its hub columns gain the terms linear in the
+deflections (the inertia of the deformed structure about the hub: products of inertia), and
+the products of two deflections (``q q_tt``, ``q_t^2``) drop. ``first_order`` keeps the rods'
+kinematics to second order (exactly what ``r1`` needs: the foreshortening whose tension,
+driven by the whole angular velocity and acceleration and a free hub's acceleration, stiffens
+both bending planes), ``zero_order`` truncates positions and section rotations to first order
+(no foreshortening: the centrifugal softening stays, the stiffening goes, MODEL.md section 4).
+For a structure moving in one plane they are MODEL.md section 4's first_order and zero_order
+(on the exact model's quadrature); linearised about the straight structure in a steady turn,
+first_order is the exact model. Where the hub accelerates, the modal accelerations of the
+straight structure are not small, and the dropped ``q q_tt`` products are first order in
+``q`` there: the twist of a bent rod, whose inertia is small, feels them most. Their tips,
+energy and momentum are those of their kinematics (the tips to second and to first order).
+
 Quaternion kinematics ``q_t = 1/2 q (0, w) + QUATERNION_GAIN (1 - |q|^2) q`` keep ``|q| = 1``
 an attracting invariant (the added term is zero on it), so that the norm does not drift.
 """
@@ -44,8 +63,9 @@ import numpy as np
 from .spatial_rod import Rod, elastic_matrices, rod_rule
 from .spatial_structure import SpatialStructure
 
-__all__ = ["SpatialLayout", "SpatialEquations", "spatial_equations",
-           "QUATERNION_GAIN", "FAMILIES", "MAX_SPATIAL_MODES"]
+__all__ = ["SpatialLayout", "SpatialEquations", "spatial_equations", "truncated_motion",
+           "taylor", "QUATERNION_GAIN", "FAMILIES", "MAX_SPATIAL_MODES", "SPATIAL_VARIANTS",
+           "KINEMATIC_ORDER"]
 
 #: Rate at which the quaternion's norm returns to 1, 1/s (zero effect on a unit quaternion).
 QUATERNION_GAIN = 1.0
@@ -53,6 +73,16 @@ QUATERNION_GAIN = 1.0
 MAX_SPATIAL_MODES = 12
 #: The modal fields of an appendage, in the order of its coordinates.
 FAMILIES = ("qn", "ql", "qt")
+#: The spatial model's variants: the geometrically exact rod, and its equations to first order
+#: in the deflections with dynamic stiffening (first_order) or without (zero_order).
+SPATIAL_VARIANTS = ("exact", "first_order", "zero_order")
+#: Degree in the deflections to which each variant keeps its rods' kinematics (positions and
+#: section rotations): exact (None); to second order, the foreshortening that carries the
+#: centrifugal stiffening; to first order, none.
+KINEMATIC_ORDER = {"exact": None, "first_order": 2, "zero_order": 1}
+#: The entries of :meth:`Rod.motion` that are Jacobians in the modal coordinates (one degree
+#: less than the positions they differentiate).
+_JACOBIANS = ("jac", "spin_jac")
 
 
 @dataclass(frozen=True)
@@ -151,6 +181,8 @@ class SpatialEquations:
         The structure modelled.
     layout : SpatialLayout
         Where each coordinate and speed lies in the state.
+    variant : str
+        One of :data:`SPATIAL_VARIANTS`.
     rhs : casadi.Function
         ``(x (n_states), torque (3)) -> x_t``: the state's rate, torque in the hub frame, N m.
     tips : casadi.Function
@@ -162,11 +194,13 @@ class SpatialEquations:
         the hub's centre (pinned) or the structure's centre of mass (free), N m s; the linear
         momentum, N s.
     mass_matrix : casadi.Function
-        ``x -> M`` (n_speeds, n_speeds).
+        ``x -> M`` (n_speeds, n_speeds): the matrix the accelerations are solved with
+        (``M1`` of a first-order variant, not symmetric).
     """
 
     structure: SpatialStructure
     layout: SpatialLayout
+    variant: str
     rhs: object
     tips: object
     energy: object
@@ -174,8 +208,9 @@ class SpatialEquations:
     mass_matrix: object
 
 
-def spatial_equations(structure: SpatialStructure, n_modes: int) -> SpatialEquations:
-    """Build the exact spatial model's functions (cached per structure and mode count).
+def spatial_equations(structure: SpatialStructure, n_modes: int,
+                      variant: str = "exact") -> SpatialEquations:
+    """Build a spatial model's functions (cached per structure, mode count and variant).
 
     Parameters
     ----------
@@ -183,21 +218,41 @@ def spatial_equations(structure: SpatialStructure, n_modes: int) -> SpatialEquat
         The hub and its appendages.
     n_modes : int
         Modes per field of every appendage (1 to 12).
+    variant : {"exact", "first_order", "zero_order"}, optional
+        The geometrically exact rod (default), or its equations expanded to first order in the
+        deflections with the rod's kinematics kept to second order (``first_order``: dynamic
+        stiffening) or to first order (``zero_order``: none); see the module's description.
 
     Returns
     -------
     SpatialEquations
     """
-    from .checks import check_instance, check_integer
+    from .checks import check_choice, check_instance, check_integer
 
     check_instance("spatial_equations", "structure", structure, SpatialStructure)
     n_modes = check_integer("spatial_equations", "n_modes", n_modes, minimum=1,
                             maximum=MAX_SPATIAL_MODES)
-    return _built(structure, n_modes)
+    variant = check_choice("spatial_equations", "variant", variant, SPATIAL_VARIANTS)
+    return _built(structure, n_modes, variant)
+
+
+@dataclass(frozen=True, eq=False)
+class _Terms:
+    """Kane's equations ``mass u_t = forces - bias`` of a whole structure, with the outputs
+    of its kinematics (CasADi expressions of the state and the torque)."""
+
+    mass: object
+    bias: object
+    forces: object
+    tips: object
+    elastic_energy: object
+    linear: object
+    angular: object
+    moment: object
 
 
 @lru_cache(maxsize=16)
-def _built(structure: SpatialStructure, n_modes: int) -> SpatialEquations:
+def _built(structure: SpatialStructure, n_modes: int, variant: str) -> SpatialEquations:
     import casadi as ca
 
     from .exact import symmetric_solve
@@ -205,7 +260,41 @@ def _built(structure: SpatialStructure, n_modes: int) -> SpatialEquations:
     layout = SpatialLayout(names=structure.names, n_modes=n_modes, free=structure.hub.free)
     x = ca.SX.sym("x", layout.n_states)
     torque = ca.SX.sym("torque", 3)
-    quaternion, position, eta, w, v, eta_t = layout.split(x)
+    quaternion, _, _, w, v, eta_t = layout.split(x)
+    terms = _kane(structure, layout, x, torque, KINEMATIC_ORDER[variant])
+    if variant == "exact":
+        mass = terms.mass
+        accelerations = symmetric_solve(mass, terms.forces - terms.bias)
+    else:
+        mass, accelerations = _first_order(layout, x, terms)
+    speeds = x[layout.n_coordinates:]
+    rate = ca.vertcat(_quaternion_rate(quaternion, w),
+                      *([ca.mtimes(_rotation(quaternion), v)] if layout.free else []),
+                      eta_t, accelerations)
+    rotation = _rotation(quaternion)
+    kinetic_energy = 0.5 * ca.dot(speeds, ca.mtimes(terms.mass, speeds))
+    angular = terms.angular
+    if layout.free:     # about the centre of mass: H_O - r_c x L (all in the hub frame)
+        angular = angular - ca.cross(terms.moment / structure.total_mass, terms.linear)
+    return SpatialEquations(
+        structure=structure, layout=layout, variant=variant,
+        rhs=ca.Function("spatial_rhs", [x, torque], [rate], ["x", "torque"], ["x_dot"],
+                        {"cse": True}),
+        tips=ca.Function("spatial_tips", [x], [terms.tips], ["x"], ["tips"]),
+        energy=ca.Function("spatial_energy", [x], [kinetic_energy, terms.elastic_energy],
+                           ["x"], ["kinetic", "elastic"]),
+        momentum=ca.Function("spatial_momentum", [x], [ca.mtimes(rotation, angular),
+                                                       ca.mtimes(rotation, terms.linear)],
+                             ["x"], ["angular", "linear"]),
+        mass_matrix=ca.Function("spatial_mass", [x], [mass], ["x"], ["M"]))
+
+
+def _kane(structure: SpatialStructure, layout: SpatialLayout, x, torque, order) -> _Terms:
+    """Kane's equations of the whole structure at state ``x``, its rods' kinematics kept to
+    ``order`` in the deflections (None: exact)."""
+    import casadi as ca
+
+    _, _, eta, w, v, eta_t = layout.split(x)
     hub = structure.hub
     n_u = layout.n_speeds
     mass = ca.SX.zeros(n_u, n_u)
@@ -224,15 +313,15 @@ def _built(structure: SpatialStructure, n_modes: int) -> SpatialEquations:
     moment = ca.SX.zeros(3, 1)
     angular = ca.mtimes(ca.DM(hub.inertia), w)
     for k, appendage in enumerate(structure.appendages):
-        rod = Rod(appendage, rod_rule(appendage, hub, n_modes), n_modes, appendage.root_point(hub))
-        block = slice(3 * k * n_modes, 3 * (k + 1) * n_modes)
-        motion = rod.motion(eta[block], eta_t[block])
+        rod = Rod(appendage, rod_rule(appendage, hub, layout.n_modes), layout.n_modes,
+                  appendage.root_point(hub))
+        block = slice(3 * k * layout.n_modes, 3 * (k + 1) * layout.n_modes)
+        motion = truncated_motion(rod, eta[block], eta_t[block], order)
         tips.append(motion["tip"] - ca.DM(rod.root + appendage.length * appendage.direction))
         point_mass = np.concatenate([appendage.linear_density * np.asarray(rod.rule.weights),
                                      [m.mass for m in appendage.masses]])
         kinetic = _particles(motion, point_mass, w, velocity_h, layout.free)
-        cols = list(range(0, 6 if layout.free else 3)) + list(range(e + block.start,
-                                                                      e + block.stop))
+        cols = list(range(0, e)) + list(range(e + block.start, e + block.stop))
         mass, bias = _place(mass, bias, kinetic[0], kinetic[1], cols)
         linear += kinetic[2]
         angular += kinetic[3]
@@ -241,31 +330,129 @@ def _built(structure: SpatialStructure, n_modes: int) -> SpatialEquations:
         mass, bias = _place(mass, bias, polar[0], polar[1],
                             [0, 1, 2] + list(range(e + block.start, e + block.stop)))
         angular += polar[2]
-        stiffness, damping = elastic_matrices(appendage, n_modes)
+        stiffness, damping = elastic_matrices(appendage, layout.n_modes)
         local, local_t = eta[block], eta_t[block]
         forces[e + block.start:e + block.stop] -= ca.mtimes(ca.DM(stiffness), local) \
             + ca.mtimes(ca.DM(damping), local_t)
         elastic_energy += 0.5 * ca.dot(local, ca.mtimes(ca.DM(stiffness), local))
-    speeds = x[layout.n_coordinates:]
-    accelerations = symmetric_solve(mass, forces - bias)
-    rate = ca.vertcat(_quaternion_rate(quaternion, w),
-                      *([ca.mtimes(_rotation(quaternion), v)] if layout.free else []),
-                      eta_t, accelerations)
-    rotation = _rotation(quaternion)
-    kinetic_energy = 0.5 * ca.dot(speeds, ca.mtimes(mass, speeds))
-    if layout.free:     # about the centre of mass: H_O - r_c x L (all in the hub frame)
-        angular = angular - ca.cross(moment / structure.total_mass, linear)
-    return SpatialEquations(
-        structure=structure, layout=layout,
-        rhs=ca.Function("spatial_rhs", [x, torque], [rate], ["x", "torque"], ["x_dot"],
-                        {"cse": True}),
-        tips=ca.Function("spatial_tips", [x], [ca.horzcat(*tips)], ["x"], ["tips"]),
-        energy=ca.Function("spatial_energy", [x], [kinetic_energy, elastic_energy], ["x"],
-                           ["kinetic", "elastic"]),
-        momentum=ca.Function("spatial_momentum", [x], [ca.mtimes(rotation, angular),
-                                                       ca.mtimes(rotation, linear)],
-                             ["x"], ["angular", "linear"]),
-        mass_matrix=ca.Function("spatial_mass", [x], [mass], ["x"], ["M"]))
+    return _Terms(mass=mass, bias=bias, forces=forces, tips=ca.horzcat(*tips),
+                  elastic_energy=elastic_energy, linear=linear, angular=angular,
+                  moment=moment)
+
+
+def truncated_motion(rod: Rod, eta, eta_t, order=None) -> dict:
+    """:meth:`Rod.motion` with the rod's kinematics kept to ``order`` in its deflections.
+
+    Positions, tangents and section rotations are Taylor polynomials of degree ``order`` in
+    ``(eta, eta_t)`` (the modal coordinates and their rates, scaled together by ``eps``);
+    their Jacobians in ``eta`` (``jac``, ``spin_jac``) of degree ``order - 1``; the
+    velocities and the convective accelerations are the same truncations of the exact ones
+    (the rates of the truncated positions, to that degree).
+
+    Parameters
+    ----------
+    rod : Rod
+    eta, eta_t : casadi.SX, shape (3N,)
+        The appendage's modal coordinates and rates.
+    order : int or None, optional
+        Degree kept (1 or 2); None (default) for the exact kinematics.
+
+    Returns
+    -------
+    dict
+        As :meth:`Rod.motion`.
+    """
+    import casadi as ca
+
+    motion = rod.motion(eta, eta_t)
+    if order is None:
+        return motion
+    eps, both = ca.SX.sym("eps"), ca.vertcat(eta, eta_t)
+    result = {}
+    for degree, keys in ((order - 1, _JACOBIANS),
+                         (order, [k for k in motion if k not in _JACOBIANS])):
+        parts = [v for k in keys for v in (motion[k] if isinstance(motion[k], list)
+                                            else [motion[k]])]
+        flat = taylor(ca.substitute(ca.vertcat(*[ca.vec(p) for p in parts]), both, eps * both),
+                      eps, degree)
+        pieces = iter(ca.vertsplit(flat, np.cumsum([0] + [p.numel() for p in parts]).tolist()))
+        for k in keys:
+            shaped = [ca.reshape(next(pieces), p.shape) for p in (
+                motion[k] if isinstance(motion[k], list) else [motion[k]])]
+            result[k] = shaped if isinstance(motion[k], list) else shaped[0]
+    return result
+
+
+def taylor(expression, eps, order: int):
+    """The Taylor polynomial of degree ``order`` of ``expression`` in ``eps`` about 0,
+    evaluated at ``eps = 1`` (CasADi).
+
+    Parameters
+    ----------
+    expression : casadi.SX
+        Any shape.
+    eps : casadi.SX
+        A scalar symbol.
+    order : int
+        Degree (>= 0).
+
+    Returns
+    -------
+    casadi.SX
+        Same shape as ``expression``.
+    """
+    import casadi as ca
+
+    total = ca.substitute(expression, eps, 0)
+    term, factorial = expression, 1.0
+    for k in range(1, order + 1):
+        term = ca.reshape(ca.jacobian(ca.vec(term), eps), term.shape)
+        factorial *= k
+        total += ca.substitute(term, eps, 0) / factorial
+    return total
+
+
+def _first_order(layout: SpatialLayout, x, terms: _Terms) -> tuple:
+    """``(M1, u_t)``: the residual ``mass u_t - (forces - bias)`` expanded to first order in
+    the deflections (modal coordinates, rates and accelerations scaled together by ``eps``;
+    the hub's motion and the torque exact), ``M1 u_t = f1``, solved.
+
+    ``M1``'s modal columns are the straight structure's mass matrix (numbers): its hub
+    columns gain the terms linear in the deflections (the deformed structure's inertia about
+    the hub), the products of two deflections (``q q_tt``) drop. The solve eliminates the
+    constant modal block (:func:`_hub_schur_solve`)."""
+    import casadi as ca
+
+    n_u, h = layout.n_speeds, layout.n_speeds - layout.n_elastic
+    eps = ca.SX.sym("eps")
+    accel = ca.SX.sym("u_t", n_u)
+    c, m = layout.n_coordinates, layout.n_elastic
+    scaled_x = ca.vertcat(x[:c - m], eps * x[c - m:c], x[c:c + h], eps * x[c + h:])
+    scaled_a = ca.vertcat(accel[:h], eps * accel[h:])
+    residual = ca.mtimes(terms.mass, accel) - terms.forces + terms.bias
+    residual = taylor(ca.substitute(residual, ca.vertcat(x, accel),
+                                    ca.vertcat(scaled_x, scaled_a)), eps, 1)
+    matrix = ca.jacobian(residual, accel)
+    rest = -ca.substitute(residual, accel, ca.DM.zeros(n_u))
+    modal = ca.evalf(matrix[:, h:]).full()         # numbers: the straight structure's
+    return matrix, _hub_schur_solve(matrix[:h, :h], matrix[h:, :h], modal, rest, h,
+                                    3 * layout.n_modes)
+
+
+def _hub_schur_solve(a, c, modal: np.ndarray, rhs, h: int, size: int):
+    """``[[a, b], [c, d]]^-1 rhs`` with the modal columns ``[b; d]`` (numbers) constant and
+    ``d`` block diagonal (blocks of ``size``, one per appendage): ``d^-1`` once, block by
+    block, the Schur complement ``a - b d^-1 c`` (h x h) solved symbolically."""
+    import casadi as ca
+    from scipy.linalg import block_diag
+
+    b, d = modal[:h], modal[h:]
+    d_inv = block_diag(*[np.linalg.inv(d[k:k + size, k:k + size])
+                         for k in range(0, d.shape[0], size)])
+    through = ca.mtimes(ca.sparsify(ca.DM(d_inv)), ca.horzcat(c, rhs[h:]))   # d^-1 [c, f_e]
+    hub = ca.solve(a - ca.mtimes(ca.DM(b), through[:, :h]),
+                   rhs[:h] - ca.mtimes(ca.DM(b), through[:, h]))
+    return ca.vertcat(hub, through[:, h] - ca.mtimes(through[:, :h], hub))
 
 
 def _place(mass, bias, local_mass, local_bias, cols: list) -> tuple:

@@ -1,12 +1,16 @@
 """A spatial structure as a linear plant for control design (python-control ``StateSpace``).
 
-:func:`linearize_spatial` linearises the exact spatial model
-(:func:`~flexctl.model.spatial_dynamics.spatial_equations`) about a straight structure turning
-steadily at ``angular_velocity`` (hub frame) from any attitude. The attitude is a
-three-parameter error: the rotation vector ``e`` of ``q = q_ref (x) exp(e / 2)`` from the
-reference attitude that turns at the same rate, whose rate is ``e_t = w - w_0 - w_0 x e`` to
-first order. A free hub's position is left out (it moves nothing else); its velocity, in the
-hub frame, stays.
+:func:`linearize_spatial` linearises a spatial model
+(:func:`~flexctl.model.spatial_dynamics.spatial_equations`: the exact rod by default, or its
+first_order or zero_order expansion) about a straight structure turning steadily at
+``angular_velocity`` (hub frame) from any attitude. The attitude is a three-parameter error:
+the rotation vector ``e`` of ``q = q_ref (x) exp(e / 2)`` from the reference attitude that
+turns at the same rate, whose rate is ``e_t = w - w_0 - w_0 x e`` to first order. A free hub's
+position is left out (it moves nothing else); its velocity, in the hub frame, stays.
+
+About the straight structure the exact and first_order plants are the same (first_order is the
+exact equations to first order in the deflections, and a plant is first order); zero_order's
+lacks the centrifugal stiffening, so that it equals theirs at rest only.
 
 States ``ex, ey, ez``, the modal coordinates (``<name>.qn1``, ...), ``wx, wy, wz``, for a free
 hub ``hub_vx, hub_vy, hub_vz``, and the modal rates; inputs ``tx, ty, tz`` (N m, hub frame);
@@ -23,10 +27,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .checks import check_array, check_instance, check_integer
+from .checks import check_array, check_choice, check_instance, check_integer
 from .errors import InputValueError
 from .exports import signal_names
-from .spatial_dynamics import MAX_SPATIAL_MODES, spatial_equations
+from .spatial_dynamics import MAX_SPATIAL_MODES, SPATIAL_VARIANTS, spatial_equations
 from .spatial_structure import SpatialStructure
 
 __all__ = ["linearize_spatial", "nonlinear_spatial", "EQUILIBRIUM_TOLERANCE"]
@@ -37,7 +41,7 @@ EQUILIBRIUM_TOLERANCE = 1e-9
 
 
 def linearize_spatial(structure: SpatialStructure, n_modes: int = 4,
-                      angular_velocity=(0.0, 0.0, 0.0)):
+                      angular_velocity=(0.0, 0.0, 0.0), variant: str = "exact"):
     """The linear plant of a spatial structure about a steady turn.
 
     Parameters
@@ -48,6 +52,9 @@ def linearize_spatial(structure: SpatialStructure, n_modes: int = 4,
         Modes per field of every appendage (1 to 12). Default 4.
     angular_velocity : array_like, shape (3,), optional
         The steady hub rate ``w_0`` in the hub frame, rad/s. Default zero (at rest).
+    variant : {"exact", "first_order", "zero_order"}, optional
+        The model linearised (:data:`~flexctl.model.spatial_dynamics.SPATIAL_VARIANTS`).
+        Default ``"exact"``.
 
     Returns
     -------
@@ -83,7 +90,8 @@ def linearize_spatial(structure: SpatialStructure, n_modes: int = 4,
     if np.max(np.abs(w0)) > 1e4:
         raise InputValueError("linearize_spatial.angular_velocity must be at most 1e4 rad/s "
                               f"in magnitude; got {w0.tolist()}")
-    equations = spatial_equations(structure, n_modes)
+    variant = check_choice("linearize_spatial", "variant", variant, SPATIAL_VARIANTS)
+    equations = spatial_equations(structure, n_modes, variant)
     layout = equations.layout
     x0 = np.zeros(layout.n_states)
     x0[0] = 1.0
@@ -118,7 +126,7 @@ def linearize_spatial(structure: SpatialStructure, n_modes: int = 4,
     return control.ss(a, b, output, np.zeros((output.shape[0], 3)),
                       states=signal_names(names), inputs=["tx", "ty", "tz"],
                       outputs=signal_names(outputs),
-                      name=f"spatial_N{n_modes}_w{label}")
+                      name=f"spatial_{variant}_N{n_modes}_w{label}")
 
 
 def _kept(layout) -> list:
@@ -148,8 +156,8 @@ def _skew(a) -> np.ndarray:
     return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
-def nonlinear_spatial(structure: SpatialStructure, n_modes: int = 4):
-    """The exact spatial model as a python-control ``NonlinearIOSystem``.
+def nonlinear_spatial(structure: SpatialStructure, n_modes: int = 4, variant: str = "exact"):
+    """A spatial model as a python-control ``NonlinearIOSystem``.
 
     Its right-hand side is the CasADi function
     :attr:`~flexctl.model.spatial_dynamics.SpatialEquations.rhs` (``(x, torque) -> x_dot``,
@@ -161,6 +169,9 @@ def nonlinear_spatial(structure: SpatialStructure, n_modes: int = 4):
         The hub and its appendages.
     n_modes : int, optional
         Modes per field of every appendage (1 to 12). Default 4.
+    variant : {"exact", "first_order", "zero_order"}, optional
+        The model (:data:`~flexctl.model.spatial_dynamics.SPATIAL_VARIANTS`). Default
+        ``"exact"``.
 
     Returns
     -------
@@ -175,7 +186,8 @@ def nonlinear_spatial(structure: SpatialStructure, n_modes: int = 4):
     check_instance("nonlinear_spatial", "structure", structure, SpatialStructure)
     n_modes = check_integer("nonlinear_spatial", "n_modes", n_modes, minimum=1,
                             maximum=MAX_SPATIAL_MODES)
-    equations = spatial_equations(structure, n_modes)
+    variant = check_choice("nonlinear_spatial", "variant", variant, SPATIAL_VARIANTS)
+    equations = spatial_equations(structure, n_modes, variant)
     layout = equations.layout
     c = layout.n_coordinates
 
@@ -191,4 +203,4 @@ def nonlinear_spatial(structure: SpatialStructure, n_modes: int = 4):
                          inputs=["tx", "ty", "tz"],
                          outputs=signal_names(["qw", "qx", "qy", "qz", "wx", "wy", "wz",
                                                *tips]),
-                         name=f"spatial_nonlinear_N{n_modes}")
+                         name=f"spatial_nonlinear_{variant}_N{n_modes}")

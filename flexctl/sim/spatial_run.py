@@ -1,7 +1,8 @@
 """Simulation of a spatial structure: a hub turning about any axis (MODEL.md section 8).
 
-:func:`simulate_spatial` integrates the exact spatial model
-(:func:`~flexctl.model.spatial_dynamics.spatial_equations`) under a hub torque given in the hub
+:func:`simulate_spatial` integrates a spatial model
+(:func:`~flexctl.model.spatial_dynamics.spatial_equations`: the exact rod by default, or its
+first_order or zero_order expansion) under a hub torque given in the hub
 frame: none, a constant 3-vector, a function of time, or samples (:class:`VectorTorque`, as a
 scene's ``torque_samples`` gives them). The right-hand side runs as machine code from the
 persistent compile cache where a compiler is found.
@@ -31,7 +32,8 @@ import numpy as np
 
 from ..model.checks import check_array, check_choice, check_integer, check_real
 from ..model.errors import InputTypeError, InputValueError
-from ..model.spatial_dynamics import MAX_SPATIAL_MODES, SpatialEquations, spatial_equations
+from ..model.spatial_dynamics import (MAX_SPATIAL_MODES, SPATIAL_VARIANTS, SpatialEquations,
+                                      spatial_equations)
 from ..model.spatial_structure import SpatialStructure
 
 __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
@@ -188,6 +190,11 @@ class SpatialResult:
         return self.status == "ok"
 
     @property
+    def variant(self) -> str:
+        """The model simulated: ``"exact"``, ``"first_order"`` or ``"zero_order"``."""
+        return self.equations.variant
+
+    @property
     def quaternion(self) -> np.ndarray:
         """Hub attitude, hub to inertial, scalar first, shape (4, P)."""
         return self.states[0:4]
@@ -301,8 +308,8 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
                      quaternion=(1.0, 0.0, 0.0, 0.0), x0=None,
                      rtol: float = DEFAULT_RTOL, atol: float | None = None,
                      output_step: float | None = None,
-                     check_accuracy: bool = True) -> SpatialResult:
-    """Simulate a spatial structure (exact rod model) from ``0`` to ``t_final``.
+                     check_accuracy: bool = True, variant: str = "exact") -> SpatialResult:
+    """Simulate a spatial structure from ``0`` to ``t_final``.
 
     Parameters
     ----------
@@ -330,6 +337,10 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
         Spacing of the output samples, s. Default ``t_final / 1000``.
     check_accuracy : bool, optional
         Repeat at a tenth of the tolerances to estimate the integration error. Default True.
+    variant : {"exact", "first_order", "zero_order"}, optional
+        The model (:data:`~flexctl.model.spatial_dynamics.SPATIAL_VARIANTS`): the
+        geometrically exact rod (default) or its equations to first order in the deflections,
+        with or without the centrifugal stiffening.
 
     Returns
     -------
@@ -350,7 +361,8 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
                               f"over t_final = {t_final:g} s")
     if not isinstance(check_accuracy, bool):
         raise InputTypeError(f"check_accuracy must be True or False; got {check_accuracy!r}")
-    equations = spatial_equations(structure, n_modes)
+    equations = spatial_equations(structure, n_modes,
+                                  check_choice("", "variant", variant, SPATIAL_VARIANTS))
     if x0 is None:
         x_start = initial_state(equations, angular_velocity, quaternion)
     else:

@@ -120,10 +120,27 @@ def test_a_spatial_scene_runs_and_writes_the_named_columns(tmp_path, support, ca
     assert (again / "timeseries.csv").read_text() == (out / "timeseries.csv").read_text()
 
 
+@pytest.mark.slow
+def test_a_spatial_scene_runs_the_variant_it_names(tmp_path, capsys):
+    """``model.variant = "zero_order"`` runs the zero_order model, and says so."""
+    path = write_scene(tmp_path)
+    path.write_text(path.read_text().replace('variant = "exact"', 'variant = "zero_order"')
+                    .replace("t_final = 1.0", "t_final = 0.3"))
+    scene = load_scene(path)
+    assert scene.variant == "zero_order"
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out)]) == 0
+    assert "spatial, zero_order" in capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "ok" and summary["variant"] == "zero_order"
+    assert summary["scene_table"]["model"]["variant"] == "zero_order"
+
+
 @pytest.mark.parametrize("old, new, pattern", [
     ("normal = [0.0, 0.0, 1.0]", "normal = [0.0, 0.5, 1.0]", r"appendages\.0\.normal"),
     ("modes = 2", "modes = 0", r"model\.modes"),
-    ('variant = "exact"', 'variant = "first_order"', r"model\.variant"),
+    ('variant = "exact"', 'variant = "consistent"',
+     r"model\.variant must be one of 'exact', 'first_order', 'zero_order'.*'consistent'"),
     ("radius = 0.06", "radius = 0.06\nspin = 1", r"hub\.spin"),
     ("length = 1.0", "length = -1.0", r"appendages\.1\.length"),
     ("angular_velocity = [0.0, 0.0, 0.5]", "angular_velocity = [0.0, 0.5]",
