@@ -352,6 +352,7 @@ def truncated_motion(rod: Rod, eta, eta_t, order=None) -> dict:
     Parameters
     ----------
     rod : Rod
+        The appendage's exact kinematics on its quadrature.
     eta, eta_t : casadi.SX, shape (3N,)
         The appendage's modal coordinates and rates.
     order : int or None, optional
