@@ -160,6 +160,11 @@ class SpatialResult:
     wall_time : float
         Seconds.
     rtol : float
+    n_steps : int
+        Integration steps of the run (its accuracy check's not counted; 0 on SciPy's path,
+        which does not report them).
+    n_evaluations : int
+        Right-hand-side evaluations of the run (its accuracy check's not counted).
     """
 
     structure: SpatialStructure
@@ -174,6 +179,8 @@ class SpatialResult:
     wall_time: float
     rtol: float
     equations: SpatialEquations = field(repr=False, default=None)
+    n_steps: int = 0
+    n_evaluations: int = 0
 
     @property
     def layout(self):
@@ -363,7 +370,7 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
         fine = _integrate(equations, x_start, times, drive, breakpoints, rtol / 10, atol / 10)
         if fine[0] == "ok":
             error = _tip_error(equations, run[1], fine[1])
-    status, states, message, drift = run
+    status, states, message, drift = run[:4]
     torque_history = np.column_stack([drive(t) for t in times[:states.shape[1]]]) \
         if states.shape[1] else np.zeros((3, 0))
     if states.shape[1]:
@@ -373,11 +380,12 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
                          states=states, torque=torque_history, status=status, message=message,
                          integration_error=error, quaternion_drift=drift,
                          wall_time=time.perf_counter() - start, rtol=rtol,
-                         equations=equations)
+                         equations=equations, n_steps=run[4], n_evaluations=run[5])
 
 
 def _integrate(equations: SpatialEquations, x0, times, drive, breakpoints, rtol, atol):
-    """``(status, states (n, P'), message, drift)`` of one integration over ``times``."""
+    """``(status, states (n, P'), message, drift, steps, evaluations)`` of one integration
+    over ``times``."""
     from .compile_cache import compiled
 
     # finite differences only stand in for derivatives CasADi asks for when it builds an
@@ -399,19 +407,21 @@ def _integrate(equations: SpatialEquations, x0, times, drive, breakpoints, rtol,
             values = segment.advance(a, b, x, wanted)
         except _Failed as exc:
             return "failed", states[:, :done], f"the integration failed at t = {a:g} s: " \
-                f"{exc}", _drift(states[:, :done])
+                f"{exc}", _drift(states[:, :done]), segment.steps, segment.evaluations
         if not np.all(np.isfinite(values)):
             states = states[:, :done]
             return "diverged", states, (f"the run diverged between t = {a:g} and {b:g} s: the "
-                                        "state left the finite numbers"), _drift(states)
+                                        "state left the finite numbers"), _drift(states), \
+                segment.steps, segment.evaluations
         states[:, done:done + inside.size] = values[:, :inside.size]
         done += inside.size
         x = values[:, -1]
     drift = _drift(states)
     if drift > MAX_QUATERNION_DRIFT:
         return "failed", states, (f"the attitude quaternion's norm drifted by {drift:.3g} "
-                                  f"(more than {MAX_QUATERNION_DRIFT:g})"), drift
-    return "ok", states, "reached t_final", drift
+                                  f"(more than {MAX_QUATERNION_DRIFT:g})"), drift, \
+            segment.steps, segment.evaluations
+    return "ok", states, "reached t_final", drift, segment.steps, segment.evaluations
 
 
 class _Failed(Exception):
@@ -428,6 +438,7 @@ class _Segments:
         self.rhs, self.n_states, self.drive = rhs, n_states, drive
         self.rtol, self.atol = rtol, atol
         self.integrators: dict = {}
+        self.steps = self.evaluations = 0
         self.form = getattr(drive, "segment_form", None)
         self.line = (isinstance(drive, VectorTorque) and drive.interpolation == "linear"
                      and drive.times.size > THROUGH_SAMPLES)
@@ -467,11 +478,8 @@ class _Segments:
         import casadi as ca
 
         if self.line:
-            grid = tuple(np.asarray(wanted) - a)
-            try:
-                return self._line_integrator(grid)(x0=x, p=a)["xf"].full()
-            except RuntimeError as exc:
-                raise _Failed(" ".join(str(exc).split())[-300:]) from None
+            integrator = self._line_integrator(tuple(np.asarray(wanted) - a))
+            return self._call(integrator, x, a)
 
         grid = tuple(np.round(np.asarray(wanted) - a, 15))
         key = (round(b - a, 15), grid)
@@ -483,11 +491,20 @@ class _Segments:
             self.integrators[key] = ca.integrator(
                 "spatial", "cvodes", {"x": state, "t": t, "p": p, "ode": self.rhs(state, torque)},
                 0.0, list(grid), self._options())
+        return self._call(self.integrators[key], x, self.form(a, b))
+
+    def _call(self, integrator, x, p) -> np.ndarray:
+        """``integrator`` from ``x`` with parameters ``p``, its steps and evaluations
+        counted."""
         try:
-            result = self.integrators[key](x0=x, p=self.form(a, b))
+            result = integrator(x0=x, p=p)["xf"].full()
         except RuntimeError as exc:
             raise _Failed(" ".join(str(exc).split())[-300:]) from None
-        return result["xf"].full()
+        finally:
+            stats = integrator.stats()
+            self.steps += int(stats.get("nsteps", 0))
+            self.evaluations += int(stats.get("nfevals", 0))
+        return result
 
     def _scipy(self, a, b, x, wanted) -> np.ndarray:
         from scipy.integrate import solve_ivp
@@ -500,6 +517,7 @@ class _Segments:
                                  rtol=self.rtol, atol=self.atol)
         except (ValueError, ArithmeticError) as exc:
             raise _Failed(str(exc)) from None
+        self.evaluations += int(solution.nfev)
         if solution.status != 0 or solution.y.shape[1] != len(wanted):
             if solution.y.size and not np.all(np.isfinite(solution.y)):
                 return np.full((self.n_states, len(wanted)), np.nan)
