@@ -71,11 +71,11 @@ def planar_rows():
         model = build_model(planar, n_modes, "exact")
         model.geometry                                # quadrature chosen before timing
 
-        def run_planar():
+        def run_planar(model=model):
             return simulate(model, T_FINAL, torque=SineTorque(peak_torque=0.5, duration=6.0),
                             rtol=RTOL, output_step=STEP)
 
-        def run_spatial():
+        def run_spatial(n_modes=n_modes):
             return simulate_spatial(spatial, T_FINAL, SpatialSine([0.0, 0.0, 0.5], 6.0),
                                     n_modes=n_modes, rtol=RTOL, output_step=STEP)
 
@@ -92,7 +92,7 @@ def planar_rows():
 
 
 def slew_torque() -> VectorTorque:
-    times = np.linspace(0.0, T_FINAL, int(round(T_FINAL / STEP)) + 1)
+    times = np.linspace(0.0, T_FINAL, round(T_FINAL / STEP) + 1)
     magnitude = np.where(times < 6.0, 0.5 * np.sin(2.0 * np.pi * times / 6.0), 0.0)
     return VectorTorque(times, np.outer(magnitude, AXIS / np.linalg.norm(AXIS)))
 

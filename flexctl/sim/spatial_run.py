@@ -6,12 +6,22 @@ frame: none, a constant 3-vector, a function of time, or samples (:class:`Vector
 scene's ``torque_samples`` gives them). The right-hand side runs as machine code from the
 persistent compile cache where a compiler is found.
 
-- **Integration.** SciPy's ``DOP853`` (error per step below ``rtol`` relative and ``atol``
-  absolute) from breakpoint to breakpoint: every sample of a :class:`VectorTorque` is one (a
-  kink of a line, a jump of a hold), so no step crosses it.
+- **Integration.** CVODES's Adams-Moulton methods with functional iteration (no Jacobian)
+  on the compiled right-hand side, from breakpoint to breakpoint: every sample of a
+  :class:`VectorTorque` is one (a kink of a line, a jump of a hold), so no step crosses it; a
+  line through more than :data:`THROUGH_SAMPLES` samples runs in one integration, its steps
+  bounded by the sample interval. A torque given as a Python function runs on SciPy's
+  ``DOP853``. The error per step is below ``rtol`` relative and ``atol`` absolute.
+- **Motion in one plane.** A run that cannot leave a plane (:mod:`flexctl.sim.spatial_plane`:
+  appendages in the plane, the hub turning about its normal, a principal axis of extreme
+  inertia, under a torque along it) integrates the equations restricted to the plane, some
+  8 times cheaper to evaluate; its states are the whole model's, the out-of-plane ones zero.
+  :data:`PLANE_MOTION` False integrates the whole model instead.
 - **Its error.** With ``check_accuracy`` (default) the run is repeated at a tenth of the
   tolerances and :attr:`SpatialResult.integration_error` is the largest difference of any tip
-  component, relative to that component's peak (the largest over the appendages).
+  component, relative to that component's peak (the largest over the appendages). The
+  repeat runs beside the run on a spare core where there is one
+  (:class:`~flexctl.sim.background.Beside`), else after it.
 - **The attitude** is a unit quaternion; its kinematics keep ``|q| = 1`` attracting, the
   largest departure over the run is :attr:`SpatialResult.quaternion_drift` (the run fails if
   it exceeds :data:`MAX_QUATERNION_DRIFT`), and the quaternions returned are normalised.
@@ -23,9 +33,10 @@ persistent compile cache where a compiler is found.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -33,6 +44,8 @@ from ..model.checks import check_array, check_choice, check_integer, check_real
 from ..model.errors import InputTypeError, InputValueError
 from ..model.spatial_dynamics import MAX_SPATIAL_MODES, SpatialEquations, spatial_equations
 from ..model.spatial_structure import SpatialStructure
+from .background import Beside
+from .spatial_plane import motion_plane, plane_motion
 
 __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
            "MAX_QUATERNION_DRIFT", "DEFAULT_RTOL"]
@@ -52,6 +65,9 @@ THROUGH_SAMPLES = 16
 MAX_T_FINAL = 1e6
 #: Most output samples of one run.
 MAX_SAMPLES = 2_000_000
+#: Integrate a motion that stays in one plane on the equations restricted to that plane
+#: (:mod:`flexctl.sim.spatial_plane`); False integrates the whole model (to compare).
+PLANE_MOTION = True
 
 
 @dataclass(frozen=True)
@@ -364,13 +380,23 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
     drive, breakpoints = _torque_function(torque)
     times = np.unique(np.concatenate([np.arange(0.0, t_final, step), [t_final]]))
     start = time.perf_counter()
-    run = _integrate(equations, x_start, times, drive, breakpoints, rtol, atol)
+    # the run and its accuracy check are planned here, in the caller's thread (CasADi's
+    # symbolic work is not thread-safe), and the check then runs beside the run
+    plan = _Plan(equations, x_start, times, drive, breakpoints)
+    run = plan.integration(rtol, atol)
+    check = None
+    if check_accuracy:
+        fine = plan.integration(rtol / 10, atol / 10)
+        check = Beside(fine, beside=fine.ready, cancelled=threading.Event())
+    status, states, message, drift = run()
     error = None
-    if check_accuracy and run[0] == "ok":
-        fine = _integrate(equations, x_start, times, drive, breakpoints, rtol / 10, atol / 10)
-        if fine[0] == "ok":
-            error = _tip_error(equations, run[1], fine[1])
-    status, states, message, drift = run[:4]
+    if check is not None:
+        if status == "ok":
+            fine_run = check.result()
+            if fine_run is not None and fine_run[0] == "ok":
+                error = _tip_error(equations, states, fine_run[1])
+        else:
+            check.abandon()
     torque_history = np.column_stack([drive(t) for t in times[:states.shape[1]]]) \
         if states.shape[1] else np.zeros((3, 0))
     if states.shape[1]:
@@ -380,48 +406,115 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
                          states=states, torque=torque_history, status=status, message=message,
                          integration_error=error, quaternion_drift=drift,
                          wall_time=time.perf_counter() - start, rtol=rtol,
-                         equations=equations, n_steps=run[4], n_evaluations=run[5])
+                         equations=equations, n_steps=run.steps,
+                         n_evaluations=run.evaluations)
 
 
-def _integrate(equations: SpatialEquations, x0, times, drive, breakpoints, rtol, atol):
-    """``(status, states (n, P'), message, drift, steps, evaluations)`` of one integration
-    over ``times``."""
+@lru_cache(maxsize=32)
+def _machine_rhs(function):
+    """``function`` (a right-hand side) from the compile cache, kept: the cache finds it by
+    its serialisation, which takes longer than many runs on the plane (0.5 s on the
+    two-array model)."""
     from .compile_cache import compiled
 
     # finite differences only stand in for derivatives CasADi asks for when it builds an
     # integrator; CVODES's functional iteration (Adams) never evaluates them
-    rhs = compiled(equations.rhs, options={"enable_fd": True})
-    segment = _Segments(rhs, equations.layout.n_states, drive, rtol, atol)
-    t_final = times[-1]
-    if segment.through():    # a line through many samples: one run, bounded steps
-        breakpoints = np.zeros(0)
-    edges = np.unique(np.concatenate([[0.0], breakpoints[(breakpoints > 0)
-                                                         & (breakpoints < t_final)], [t_final]]))
-    states = np.zeros((x0.size, times.size))
-    states[:, 0] = x0
-    x, done = np.array(x0, dtype=float), 1
-    for a, b in zip(edges[:-1], edges[1:]):
-        inside = times[(times > a) & (times <= b)]
-        wanted = inside if inside.size and inside[-1] == b else np.append(inside, b)
-        try:
-            values = segment.advance(a, b, x, wanted)
-        except _Failed as exc:
-            return "failed", states[:, :done], f"the integration failed at t = {a:g} s: " \
-                f"{exc}", _drift(states[:, :done]), segment.steps, segment.evaluations
-        if not np.all(np.isfinite(values)):
-            states = states[:, :done]
-            return "diverged", states, (f"the run diverged between t = {a:g} and {b:g} s: the "
-                                        "state left the finite numbers"), _drift(states), \
-                segment.steps, segment.evaluations
-        states[:, done:done + inside.size] = values[:, :inside.size]
-        done += inside.size
-        x = values[:, -1]
-    drift = _drift(states)
-    if drift > MAX_QUATERNION_DRIFT:
-        return "failed", states, (f"the attitude quaternion's norm drifted by {drift:.3g} "
-                                  f"(more than {MAX_QUATERNION_DRIFT:g})"), drift, \
-            segment.steps, segment.evaluations
-    return "ok", states, "reached t_final", drift, segment.steps, segment.evaluations
+    return compiled(function, options={"enable_fd": True})
+
+
+class _Plan:
+    """What a run and its accuracy check share: the right-hand side they integrate (the
+    whole model's, or its restriction to the plane the motion stays in,
+    :mod:`flexctl.sim.spatial_plane`), the initial state and the segments."""
+
+    def __init__(self, equations: SpatialEquations, x0, times, drive, breakpoints):
+        self.times, self.drive = times, drive
+        t_final = times[-1]
+        self.line = (isinstance(drive, VectorTorque) and drive.interpolation == "linear"
+                     and drive.times.size > THROUGH_SAMPLES)
+        if self.line:    # a line through many samples: one run, bounded steps
+            breakpoints = np.zeros(0)
+        self.edges = np.unique(np.concatenate([[0.0], breakpoints[(breakpoints > 0)
+                                                                  & (breakpoints < t_final)],
+                                               [t_final]]))
+        axis = motion_plane(equations, x0, drive, self.edges) if PLANE_MOTION else None
+        self.plane = None if axis is None else plane_motion(equations, axis)
+        self.rhs = _machine_rhs(equations.rhs if self.plane is None else self.plane.rhs)
+        self.x0 = np.asarray(x0, dtype=float) if self.plane is None \
+            else self.plane.restrict(x0)
+
+    def integration(self, rtol: float, atol: float) -> "_Integration":
+        """The integration at tolerances ``rtol``, ``atol``, its integrators built."""
+        return _Integration(self, _Segments(self.rhs, self.x0.size, self.drive, rtol, atol,
+                                            self.line))
+
+
+#: Integrators built ahead of a run at most (more distinct segments are built as they come,
+#: and the accuracy check then runs after the run).
+MAX_INTEGRATORS = 256
+
+
+class _Integration:
+    """One integration over the plan's output times; called (in any thread), it gives
+    ``(status, states (n, P'), message, drift)`` (whole states) or, cancelled, None."""
+
+    def __init__(self, plan: _Plan, segments: "_Segments"):
+        self.plan, self.segments = plan, segments
+        self.pieces = []
+        times = plan.times
+        for a, b in zip(plan.edges[:-1], plan.edges[1:]):
+            inside = times[(times > a) & (times <= b)]
+            wanted = inside if inside.size and inside[-1] == b else np.append(inside, b)
+            self.pieces.append((a, b, inside.size, wanted))
+        # every integrator built now, in the caller's thread: a run may then go beside it
+        self.ready = segments.form is not None and \
+            segments.count([(a, b, wanted) for a, b, _, wanted in self.pieces]) \
+            <= MAX_INTEGRATORS
+        if self.ready:
+            for a, b, _, wanted in self.pieces:
+                segments.build(a, b, wanted)
+
+    @property
+    def steps(self) -> int:
+        """Steps taken (0 on SciPy's path)."""
+        return self.segments.steps
+
+    @property
+    def evaluations(self) -> int:
+        """Right-hand-side evaluations."""
+        return self.segments.evaluations
+
+    def __call__(self, cancelled=None):
+        plan = self.plan
+        x = plan.x0.copy()
+        states = np.zeros((x.size, plan.times.size))
+        states[:, 0] = x
+        done = 1
+        for a, b, count, wanted in self.pieces:
+            if cancelled is not None and cancelled.is_set():
+                return None
+            try:
+                values = self.segments.advance(a, b, x, wanted)
+            except _Failed as exc:
+                whole = self._whole(states[:, :done])
+                return "failed", whole, f"the integration failed at t = {a:g} s: {exc}", \
+                    _drift(whole)
+            if not np.all(np.isfinite(values)):
+                whole = self._whole(states[:, :done])
+                return "diverged", whole, (f"the run diverged between t = {a:g} and {b:g} s: "
+                                           "the state left the finite numbers"), _drift(whole)
+            states[:, done:done + count] = values[:, :count]
+            done += count
+            x = values[:, -1]
+        whole = self._whole(states)
+        drift = _drift(whole)
+        if drift > MAX_QUATERNION_DRIFT:
+            return "failed", whole, (f"the attitude quaternion's norm drifted by {drift:.3g} "
+                                     f"(more than {MAX_QUATERNION_DRIFT:g})"), drift
+        return "ok", whole, "reached t_final", drift
+
+    def _whole(self, states) -> np.ndarray:
+        return states if self.plan.plane is None else self.plan.plane.embed(states)
 
 
 class _Failed(Exception):
@@ -432,24 +525,37 @@ class _Segments:
     """CVODES (Adams, functional iteration: no Jacobian) from breakpoint to breakpoint, the
     torque on a segment ``a + b t + c sin(omega (t0 + t))`` in the segment's own time; one
     integrator per distinct output grid, kept. A torque of another form (a Python function)
-    runs on SciPy's ``DOP853`` instead."""
+    runs on SciPy's ``DOP853`` instead. A line through more than :data:`THROUGH_SAMPLES`
+    samples (``line``) is integrated in one run, the torque interpolated inside the
+    right-hand side and every step bounded by the shortest sample interval (so that no
+    sample is stepped over), rather than restarted at every sample (each restart begins
+    again at order 1 with a tiny step)."""
 
-    def __init__(self, rhs, n_states: int, drive, rtol: float, atol: float):
+    def __init__(self, rhs, n_states: int, drive, rtol: float, atol: float, line: bool):
         self.rhs, self.n_states, self.drive = rhs, n_states, drive
-        self.rtol, self.atol = rtol, atol
+        self.rtol, self.atol, self.line = rtol, atol, line
         self.integrators: dict = {}
         self.steps = self.evaluations = 0
         self.form = getattr(drive, "segment_form", None)
-        self.line = (isinstance(drive, VectorTorque) and drive.interpolation == "linear"
-                     and drive.times.size > THROUGH_SAMPLES)
 
-    def through(self) -> bool:
-        """Whether the torque is a line through more than :data:`THROUGH_SAMPLES` samples: it
-        is then integrated in one run, the torque interpolated inside the right-hand side and
-        every step bounded by the shortest sample interval (so that no sample is stepped
-        over), rather than restarted at every sample (each restart begins again at order 1
-        with a tiny step)."""
-        return self.line
+    def _key(self, a: float, b: float, wanted) -> tuple:
+        if self.line:
+            return ("line", tuple(np.asarray(wanted) - a))
+        return (round(b - a, 15), tuple(np.round(np.asarray(wanted) - a, 15)))
+
+    def count(self, pieces) -> int:
+        """Distinct integrators of ``pieces`` (``(a, b, wanted)`` each)."""
+        return len({self._key(a, b, wanted) for a, b, wanted in pieces})
+
+    def build(self, a: float, b: float, wanted):
+        """The integrator of the segment ``[a, b]`` onto ``wanted``, built once."""
+        key = self._key(a, b, wanted)
+        if key not in self.integrators:
+            if len(self.integrators) > MAX_INTEGRATORS:
+                self.integrators.clear()
+            self.integrators[key] = self._line_integrator(key[1]) if self.line \
+                else self._segment_integrator(key[1])
+        return self.integrators[key]
 
     def _line_integrator(self, grid: tuple):
         import casadi as ca
@@ -467,6 +573,15 @@ class _Segments:
             0.0, list(grid), {**self._options(), "max_step_size": float(np.min(np.diff(
                 drive.times)))})
 
+    def _segment_integrator(self, grid: tuple):
+        import casadi as ca
+
+        state, t, p = ca.MX.sym("x", self.n_states), ca.MX.sym("t"), ca.MX.sym("p", 11)
+        torque = p[0:3] + p[3:6] * t + p[6:9] * ca.sin(p[9] * (p[10] + t))
+        return ca.integrator(
+            "spatial", "cvodes", {"x": state, "t": t, "p": p, "ode": self.rhs(state, torque)},
+            0.0, list(grid), self._options())
+
     def _options(self) -> dict:
         return {"linear_multistep_method": "adams", "nonlinear_solver_iteration": "functional",
                 "abstol": self.atol, "reltol": self.rtol, "max_num_steps": MAX_STEPS}
@@ -475,23 +590,7 @@ class _Segments:
         """The states at ``wanted`` (s, ascending, ending at ``b``), from ``x`` at ``a``."""
         if self.form is None:
             return self._scipy(a, b, x, wanted)
-        import casadi as ca
-
-        if self.line:
-            integrator = self._line_integrator(tuple(np.asarray(wanted) - a))
-            return self._call(integrator, x, a)
-
-        grid = tuple(np.round(np.asarray(wanted) - a, 15))
-        key = (round(b - a, 15), grid)
-        if key not in self.integrators:
-            if len(self.integrators) > 256:
-                self.integrators.clear()
-            state, t, p = ca.MX.sym("x", self.n_states), ca.MX.sym("t"), ca.MX.sym("p", 11)
-            torque = p[0:3] + p[3:6] * t + p[6:9] * ca.sin(p[9] * (p[10] + t))
-            self.integrators[key] = ca.integrator(
-                "spatial", "cvodes", {"x": state, "t": t, "p": p, "ode": self.rhs(state, torque)},
-                0.0, list(grid), self._options())
-        return self._call(self.integrators[key], x, self.form(a, b))
+        return self._call(self.build(a, b, wanted), x, a if self.line else self.form(a, b))
 
     def _call(self, integrator, x, p) -> np.ndarray:
         """``integrator`` from ``x`` with parameters ``p``, its steps and evaluations
