@@ -11,11 +11,13 @@ the angular velocity across ``a`` and a free hub's velocity along ``a`` stay zer
 equations restricted to the plane: the whole model's right-hand side evaluated at the
 in-plane states (the attitude quaternion, a free hub's position, the normal bending ``qn``
 of every appendage, the rate ``omega`` about ``a``, a free hub's two in-plane velocities and
-the ``qn`` rates), whose symbolic zeros CasADi's expressions drop. On the two-array panels
-of ``benchmarks/bench_spatial.py`` at 4 modes per field its C is 355 kB instead of 3 MB
-and it evaluates some 8 times faster (17 141 operations against 134 082); its steps are
-the whole model's (the out-of-plane modes, at zero, never limit them), and the states it
-returns are the whole model's with those fields zero.
+the ``qn`` rates), whose symbolic zeros CasADi's expressions drop. On the two panels of
+``benchmarks/bench_spatial.py`` (a) at 4 modes per field its C is 355 kB instead of 3 MB
+and it takes 17 141 operations against 134 082; integrated with Newton's iterations
+(:func:`~flexctl.sim.spatial_run.simulate_spatial`), 6 265 evaluations against the whole
+model's 13 336, a run with its check took 3.5 times the planar exact model's time on 2 and
+4 modes, where the whole model took 10 and 34 times. The states it returns are the whole
+model's with the out-of-plane fields zero, as the whole model keeps them.
 
 Only a motion that cannot leave the plane by its own dynamics is restricted: ``a`` must be
 the axis of largest or smallest moment of inertia of the structure as it starts (about the
