@@ -84,12 +84,15 @@ def test_a_motion_that_may_leave_the_plane_is_not_restricted():
     assert motion_plane(lopsided, initial_state(lopsided), _sine(), EDGES) is None
 
 
-def test_a_run_in_the_plane_is_the_whole_models(monkeypatch):
+@pytest.mark.parametrize("form", ["line", "segments"])
+def test_a_run_in_the_plane_is_the_whole_models(monkeypatch, form):
     """The same run on the restriction and on the whole model (whose out-of-plane states
-    stay zero), within their integration errors."""
+    stay zero), within their integration errors: a line through many samples (one
+    integration) and a sine then nothing (two segments, each with its own Jacobian)."""
     structure = SpatialStructure.from_planar(_planar())
     torque = VectorTorque(np.linspace(0.0, 1.0, 41), np.outer(np.sin(np.linspace(0, 3, 41)),
-                                                                [0.0, 0.0, 0.8]))
+                                                                [0.0, 0.0, 0.8])) \
+        if form == "line" else SpatialSine(np.array([0.0, 0.0, -0.8]), 1.0)
     runs = {}
     for restricted in (True, False):
         monkeypatch.setattr(spatial_run, "PLANE_MOTION", restricted)
