@@ -1,0 +1,199 @@
+"""Cost of the spatial (3-axis) exact model: a motion in one plane against the planar exact
+model on the same modes, and a two-array structure slewed about a tilted axis.
+
+(a) Two panels (the two-array scene's, as planar beams at +-90 degrees on a 1.45 kg m^2
+    hub) under one period of a 0.5 N m sine torque over 6 s, 10 s simulated: the planar exact
+    model (``flexctl.simulate``) and the same structure as a spatial one
+    (``SpatialStructure.from_planar``, torque about the hub's z axis) at the same modes per
+    field, tolerance and output grid, both with their accuracy checks. Printed: the wall
+    times and their ratio (target: the spatial run within 2 times the planar one).
+(b) The two arrays of ``examples/scenes/spatial-two-arrays.toml`` (its hub, with products of
+    inertia; 4 modes per field: 27 speeds, torsion and lateral modes up to 3.6e3 rad/s)
+    slewed about the tilted axis (0.6, 0, 0.8) by one period of a 0.5 N m sine over 6 s given
+    as 1001 torque samples (0.01 s apart, interpolated linearly, as a scene's
+    ``torque_samples``), 10 s simulated. Printed: the wall time of the run with and without
+    its accuracy check, its integration steps and right-hand-side evaluations, its error
+    estimate, and its tip error against a reference run at rtol 1e-11 (each tip component
+    relative to its own peak, the largest: the definition of ``integration_error``).
+    Target: under 1 s.
+
+Every wall time excludes the one-time work: the spatial equations' construction and the
+compiling of their right-hand side (some 25 s for (b), kept in the compile cache) happen in
+a first run before timing. rtol 1e-8, ``atol`` each model's default.
+
+Measured on two cores shared with other work (load 4 to 6: wall times are noisy, so the
+processor times are printed too; ratios repeat within some 20 %):
+
+- Before (Adams-Moulton with functional iteration on the whole model for every run, the
+  check after the run): (a) ratio 18.5 on 2 modes, 37.9 on 4 (13 336 evaluations, the
+  planar model's compiled Adams-Moulton some 3 500); (b) 18.9 s alone, 33.7 s with the
+  check (1.78 times), 110 357 steps, 207 597 evaluations, estimate 7.1e-7, error 6.6e-7.
+- After: (a) ratio 3.5 on 2 and on 4 modes, wall and processor alike (2 073 and 6 265
+  evaluations: the equations restricted to the plane, ``flexctl.sim.spatial_plane``, with
+  Newton's iterations); the whole model on the same motion (``PLANE_MOTION = False``) 10.4
+  and 34, the cache's lookup of the compiled right-hand side (0.5 s a run) no longer
+  repeated. (b) unchanged: 110 357 steps, 207 597 evaluations, 19.8 s of processor time
+  alone, 1.96 times that with the check (it runs beside the run only on a free core, which
+  this machine did not have), estimate 7.1e-7, error 6.6e-7. The target of (a) is missed by
+  1.75 times, that of (b) by some 20 times.
+
+Why (b) costs what it does: Adams-Moulton with functional iteration is held to
+``h omega = 0.33`` on the fastest mode (3 609 rad/s, the fourth torsion mode) by the
+iteration's convergence: the same 108 000 to 113 000 steps at rtol 1e-4, 1e-6, 1e-8 and
+1e-11, at 66 to 117 us an evaluation (134 000 operations). What was measured and not kept:
+
+- CVODES's BDF with Newton's iterations on CasADi's Jacobian (finite differences of the
+  compiled right-hand side): 69 301 steps, 84 304 evaluations and 7 771 Jacobians, 2 to 4
+  times slower, error 6.6e-7; the out-of-plane tolerances loosened 1e4 times: still 54 000 to
+  73 000 steps (its orders 3 to 5 amplify the undamped modes they step over), error up to
+  5.1e-6; with a Jacobian held over the run: 70 335 steps, 1.6 times less processor time.
+- Adams-Moulton with Newton's iterations: 42 178 steps, 50 801 evaluations, but 4 402
+  Jacobians of 56 evaluations (slower); with a Jacobian held over the run 39 000 to 44 000
+  steps, 2.7 to 3.3 times less processor time, but an error of 1.2e-6 to 1.55e-6 (the steps,
+  2.6 times longer, are then set by accuracy).
+- A check at 10 times the tolerance: no fewer steps (stability-bound).
+- ``-O1`` or ``-O2`` for the right-hand side: 67.8 and 68.9 us an evaluation against 66.2 at
+  ``-Og`` (best of 6), compiled in 48 and 79 s against 36 s.
+- Fewer quadrature nodes per rod: 2 panels of 7 or 6 points instead of 9 take 24 % and 35 %
+  fewer operations, tips 1.7e-8 and 8.2e-8 of their peaks from 4 panels of 9 (the rule used:
+  1.7e-8), but the rule is the planar exact model's, so that a motion in one plane is that
+  model's to round-off (``tests/model/test_spatial_model.py``): kept.
+
+Run: ``python benchmarks/bench_spatial.py`` (prints measured wall times and ratios; the best
+of ``REPEATS`` runs, of 2 for the long runs of (b)).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from bench_exact import REPEATS
+import flexctl
+from flexctl import Appendage, Beam, Hub, SineTorque, Structure, build_model, simulate
+from flexctl.app.spatial_scene import SpatialSine
+from flexctl.model.spatial_structure import SpatialStructure
+from flexctl.sim import spatial_run
+from flexctl.sim.spatial_run import VectorTorque, simulate_spatial
+
+RTOL = 1e-8
+T_FINAL = 10.0
+STEP = 0.01
+PANEL = Beam(length=1.8, density=2766.0, area=2.5e-4, second_moment=5.2083e-10,
+             youngs_modulus=6.9e10)
+AXIS = np.array([0.6, 0.0, 0.8])
+SCENE = Path(__file__).resolve().parent.parent / "examples" / "scenes" / "spatial-two-arrays.toml"
+REFERENCE_RTOL = 1e-11
+
+
+def timed(func, repeats=REPEATS):
+    """``(wall, cpu, value)``: the least wall and processor times (s) of ``repeats`` calls
+    (processor time counts every thread of the process: an accuracy check beside the run
+    included) and the last call's value."""
+    walls, cpus, value = [], [], None
+    for _ in range(repeats):
+        wall, cpu = time.perf_counter(), time.process_time()
+        value = func()
+        walls.append(time.perf_counter() - wall)
+        cpus.append(time.process_time() - cpu)
+    return min(walls), min(cpus), value
+
+
+def planar_rows():
+    planar = Structure(hub=Hub(inertia=1.45, radius=0.06), appendages=(
+        Appendage(name="wing_a", beam=PANEL, angle=math.pi / 2),
+        Appendage(name="wing_b", beam=PANEL, angle=-math.pi / 2)))
+    spatial = SpatialStructure.from_planar(planar)
+    print(f"(a) motion in one plane, {T_FINAL:g} s, rtol {RTOL:g}, with accuracy checks "
+          f"(best of {REPEATS}; wall and processor time, s):")
+    print(f"{'':5s} {'planar':>13s} | {'spatial (in its plane)':>37s} | "
+          f"{'spatial (whole model)':>37s} |")
+    print(f"{'modes':>5s} {'wall':>6s} {'cpu':>6s} | {'wall':>6s} {'cpu':>6s} {'ratio':>6s} "
+          f"{'ratio':>5s} {'evals':>6s} | {'wall':>6s} {'cpu':>6s} {'ratio':>6s} {'ratio':>5s} "
+          f"{'evals':>6s} | {'tip diff':>9s}")
+    for n_modes in (2, 4):
+        model = build_model(planar, n_modes, "exact")
+        model.geometry                                # quadrature chosen before timing
+
+        def run_planar(model=model):
+            return simulate(model, T_FINAL, torque=SineTorque(peak_torque=0.5, duration=6.0),
+                            rtol=RTOL, output_step=STEP)
+
+        def run_spatial(n_modes=n_modes):
+            return simulate_spatial(spatial, T_FINAL, SpatialSine([0.0, 0.0, 0.5], 6.0),
+                                    n_modes=n_modes, rtol=RTOL, output_step=STEP)
+
+        run_planar()                                  # build and compile before timing
+        times = {"planar": timed(run_planar)}
+        for restricted in (True, False):
+            spatial_run.PLANE_MOTION = restricted
+            run_spatial()
+            times[restricted] = timed(run_spatial)
+        spatial_run.PLANE_MOTION = True
+        planar_result, spatial_result = times["planar"][2], times[True][2]
+        # wing_a's tip deflection along its normal, the hub's -x
+        tip_s = -spatial_result.tips["wing_a"][0]
+        tip_p = planar_result.tip_deflections["wing_a"]
+        assert np.allclose(spatial_result.t, planar_result.t, rtol=0.0, atol=1e-12)
+        difference = float(np.max(np.abs(tip_s - tip_p)) / np.max(np.abs(tip_p)))
+        row = f"{n_modes:5d} {times['planar'][0]:6.3f} {times['planar'][1]:6.3f} |"
+        for restricted in (True, False):
+            wall, cpu, result = times[restricted]
+            row += (f" {wall:6.3f} {cpu:6.3f} {wall / times['planar'][0]:6.1f} "
+                    f"{cpu / times['planar'][1]:5.1f} {result.n_evaluations:6d} |")
+        print(row + f" {difference:9.2e}")
+    print("  (ratio: to the planar run's wall / processor time; tip diff: wing_a's deflection "
+          "in the plane from the planar model's, relative to its peak)")
+
+
+def slew_torque() -> VectorTorque:
+    times = np.linspace(0.0, T_FINAL, round(T_FINAL / STEP) + 1)
+    magnitude = np.where(times < 6.0, 0.5 * np.sin(2.0 * np.pi * times / 6.0), 0.0)
+    return VectorTorque(times, np.outer(magnitude, AXIS / np.linalg.norm(AXIS)))
+
+
+def relative_tip_error(result, reference) -> float:
+    """Largest tip difference, each component relative to its own peak."""
+    worst = 0.0
+    for name, tips in reference.tips.items():
+        peaks = np.maximum(np.max(np.abs(tips), axis=1), 1e-12)
+        worst = max(worst, float(np.max(np.max(np.abs(result.tips[name] - tips), axis=1)
+                                        / peaks)))
+    return worst
+
+
+def slew_rows():
+    scene = flexctl.load_scene(SCENE)
+    arrays = SpatialStructure(hub=scene.structure.hub, appendages=scene.structure.appendages[:2])
+    torque = slew_torque()
+
+    def run(check, rtol=RTOL):
+        return simulate_spatial(arrays, T_FINAL, torque, n_modes=4, rtol=rtol,
+                                output_step=STEP, check_accuracy=check)
+
+    run(False)                                        # build and compile before timing
+    reference = run(False, REFERENCE_RTOL)
+    wall_bare, cpu_bare, bare = timed(lambda: run(False), 2)
+    wall_check, cpu_check, checked = timed(lambda: run(True), 2)
+    print(f"\n(b) two arrays, 4 modes per field, {T_FINAL:g} s tilted slew from "
+          f"{torque.times.size} torque samples, rtol {RTOL:g} (best of 2):")
+    print(f"  run alone            {wall_bare:7.2f} s wall {cpu_bare:7.2f} s processor   "
+          f"steps {bare.n_steps:7d}   evaluations {bare.n_evaluations:7d}")
+    print(f"  with accuracy check  {wall_check:7.2f} s wall {cpu_check:7.2f} s processor   "
+          f"(ratio {wall_check / wall_bare:.2f} wall, {cpu_check / cpu_bare:.2f} processor, to "
+          f"the run alone)")
+    print(f"  error estimate {checked.integration_error:.2e}, error against rtol "
+          f"{REFERENCE_RTOL:g}: {relative_tip_error(bare, reference):.2e} of each component's "
+          f"peak")
+
+
+if __name__ == "__main__":
+    warnings.simplefilter("ignore")
+    start = time.perf_counter()
+    planar_rows()
+    slew_rows()
+    print(f"\n(benchmark took {time.perf_counter() - start:.0f} s)")
