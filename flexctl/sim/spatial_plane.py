@@ -69,11 +69,23 @@ class PlaneMotion:
         return self.embedding.shape[1]
 
     def restrict(self, x) -> np.ndarray:
-        """The in-plane state of a whole one, shape (n_plane,)."""
+        """The in-plane state of a whole one, shape (n_plane,).
+
+        Parameters
+        ----------
+        x : array_like, shape (n_states,)
+            A state of the spatial model (:class:`~flexctl.model.spatial_dynamics.SpatialLayout`).
+        """
         return self.embedding.T @ np.asarray(x, dtype=float)
 
     def embed(self, states) -> np.ndarray:
-        """Whole states (n_states, P) of in-plane ones (n_plane, P)."""
+        """Whole states (n_states, P) of in-plane ones (n_plane, P).
+
+        Parameters
+        ----------
+        states : ndarray, shape (n_plane, P)
+            In-plane states, one column per sample.
+        """
         return self.embedding @ states
 
 
@@ -96,6 +108,7 @@ def motion_plane(equations: SpatialEquations, x0, drive, edges) -> np.ndarray | 
     Parameters
     ----------
     equations : SpatialEquations
+        The spatial model.
     x0 : ndarray, shape (n_states,)
         The initial state.
     drive : callable
@@ -219,6 +232,7 @@ def plane_motion(equations: SpatialEquations, axis) -> PlaneMotion:
     Parameters
     ----------
     equations : SpatialEquations
+        The spatial model.
     axis : array_like, shape (3,)
         The plane's unit normal, hub frame (:func:`motion_plane`).
 
