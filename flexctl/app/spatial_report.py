@@ -5,7 +5,10 @@
 wz`` (rad/s, hub frame), ``hub_x, hub_y, hub_z`` (m, inertial frame) for a free hub, the torque
 ``tx, ty, tz`` (N m, hub frame) and for each appendage ``<name>.tip_dx, <name>.tip_dy,
 <name>.tip_dz``: the tip's displacement from where the rigidly moving, undeformed tip would be,
-in the hub frame (m).
+in the hub frame (m). With a wheel cluster (``[actuator] kind = "wheels"``) the torque is the
+one commanded of the wheels and ``wheel<k>.speed`` (rad/s, relative to the hub),
+``wheel<k>.torque`` (N m, the motor torque on the rotor about its spin axis; the hub feels its
+opposite) for ``k`` from 1, and ``wheels.power`` (W, drawn by the motors) follow.
 """
 
 from __future__ import annotations
@@ -40,7 +43,8 @@ def run_spatial_scene(scene: SpatialScene, progress=None) -> SpatialResult:
     return simulate_spatial(scene.structure, scene.t_final, scene.maneuver,
                             n_modes=scene.n_modes, angular_velocity=scene.angular_velocity,
                             quaternion=scene.quaternion, rtol=scene.rtol,
-                            output_step=scene.output_step, variant=scene.variant)
+                            output_step=scene.output_step, variant=scene.variant,
+                            wheels=scene.wheels, wheel_speeds=scene.wheel_speeds)
 
 
 def spatial_columns(result: SpatialResult) -> list:
@@ -57,6 +61,11 @@ def spatial_columns(result: SpatialResult) -> list:
     columns += ["tx", "ty", "tz"]
     for name in result.structure.names:
         columns += [f"{name}.tip_dx", f"{name}.tip_dy", f"{name}.tip_dz"]
+    cluster = result.equations.cluster
+    if cluster is not None:
+        columns += [f"{n}.speed" for n in cluster.names]
+        columns += [f"{n}.torque" for n in cluster.names]
+        columns.append("wheels.power")
     return columns
 
 
@@ -67,6 +76,8 @@ def _table(result: SpatialResult) -> np.ndarray:
     parts.append(result.torque)
     tips = result.tips
     parts += [tips[name] for name in result.structure.names]
+    if result.equations.cluster is not None:
+        parts += [result.wheel_speeds, result.wheel_torques, result.wheel_power[None, :]]
     return np.vstack(parts).T
 
 
@@ -104,9 +115,23 @@ def spatial_summary(scene: SpatialScene, result: SpatialResult,
         "peak_tip_deflection": max((max(p) for p in peaks.values()), default=0.0),
         "final_angular_momentum": angular[:, -1].tolist() if angular.size else None,
         "final_energy": float(energy[-1]) if energy.size else None,
+        **_wheel_summary(result),
         "overrides": dict(overrides or {}), "description": scene.description,
         "scene_table": scene.data,
     }
+
+
+def _wheel_summary(result: SpatialResult) -> dict:
+    """A wheel cluster's peaks (none without one)."""
+    if result.equations.cluster is None:
+        return {}
+    if not result.t.size:
+        return {"wheels": result.equations.cluster.count}
+    return {"wheels": result.equations.cluster.count,
+            "peak_wheel_speed": np.max(np.abs(result.wheel_speeds), axis=1).tolist(),
+            "peak_wheel_torque": np.max(np.abs(result.wheel_torques), axis=1).tolist(),
+            "peak_wheel_power": float(np.max(result.wheel_power)),
+            "final_wheel_speed": result.wheel_speeds[:, -1].tolist()}
 
 
 def write_spatial_run(scene: SpatialScene, result: SpatialResult, out_dir,

@@ -23,13 +23,24 @@ into a :class:`SpatialScene`. The tables (every key is checked, every error name
   ``peak_torque`` (a 3-vector) and ``duration`` (one period of ``sin(2 pi t / duration)``,
   then none); ``kind = "none"`` (a free motion from the initial state).
 - ``[simulation]``: ``t_final`` (s), ``output_step`` (s), ``rtol``.
+- ``[actuator]`` (optional): ``kind = "wheels"``, a cluster of reaction wheels
+  (:mod:`flexctl.model.wheel_cluster`) that the manoeuvre's torque is commanded of, distributed
+  by ``distribution`` (``"pseudo_inverse"``, the default, or ``"null_motion"`` with
+  ``null_gain`` 1/s and ``bias_speed`` rad/s). The wheels are ``[[actuator.wheels]]`` tables
+  (``axis``, ``inertia``, ``torque_limit``, ``speed_limit``, and optional ``time_constant``,
+  ``coulomb_friction``, ``viscous_friction``, ``static_friction``, ``stribeck_speed``,
+  ``friction_smoothing``, ``dead_band``, ``power_limit``: the fields of
+  :class:`~flexctl.model.wheel_cluster.Wheel`), or ``arrangement = "orthogonal"`` (three
+  wheels along ``x``, ``y``, ``z``) or ``"pyramid"`` (four, ``pyramid_angle`` degrees from
+  ``pyramid_axis``, default ``z``) with one ``[actuator.wheel]`` table of the fields they
+  share. ``[initial] wheel_speeds`` gives their initial speeds (rad/s, relative to the hub).
 """
 
 from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -38,6 +49,7 @@ from ..model.checks import check_real
 from ..model.parameters import PointMass
 from ..model.spatial_structure import SpatialAppendage, SpatialHub, SpatialStructure
 from ..model.spatial_dynamics import MAX_SPATIAL_MODES, SPATIAL_VARIANTS
+from ..model.wheel_cluster import Wheel, WheelCluster
 from ..sim.spatial_run import DEFAULT_RTOL, MAX_SPIN, MAX_T_FINAL, VectorTorque
 from .scene_tables import check_table_keys, construct, read_table_file
 from .scene_tables import table_of as _table
@@ -55,7 +67,9 @@ _KEYS = {
     "hub": {"inertia", "radius", "mass", "support"},
     "appendages": None,
     "model": {"variant", "modes"},
-    "initial": {"angular_velocity", "quaternion"},
+    "initial": {"angular_velocity", "quaternion", "wheel_speeds"},
+    "actuator": {"kind", "distribution", "null_gain", "bias_speed", "wheels", "arrangement",
+                 "pyramid_angle", "pyramid_axis", "wheel"},
     "maneuver": {"kind", "times", "values", "interpolation", "file", "peak_torque",
                  "duration"},
     "simulation": {"t_final", "output_step", "rtol"},
@@ -146,6 +160,10 @@ class SpatialScene:
     description : str
     data : dict
         The scene's tables as read (a torque file's samples inline).
+    wheels : WheelCluster or None
+        The reaction wheels the manoeuvre's torque is commanded of (``[actuator]``).
+    wheel_speeds : ndarray or None
+        Their initial speeds relative to the hub, rad/s.
     """
 
     name: str
@@ -160,6 +178,8 @@ class SpatialScene:
     variant: str = "exact"
     description: str = ""
     data: dict = field(default_factory=dict, repr=False)
+    wheels: WheelCluster | None = None
+    wheel_speeds: np.ndarray | None = None
 
 
 def is_spatial(data: dict) -> bool:
@@ -222,6 +242,20 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
         raise SceneError(f"initial.angular_velocity must be at most {MAX_SPIN:g} rad/s in "
                          f"magnitude; got {spin.tolist()}")
     maneuver = _maneuver(data, base_dir)
+    wheels = _wheels(_table(data, "actuator", required=False))
+    wheel_speeds = None
+    if "wheel_speeds" in initial:
+        if wheels is None:
+            raise SceneError("initial.wheel_speeds needs an [actuator] of kind 'wheels'")
+        try:
+            wheel_speeds = check_array("initial", "wheel_speeds", initial["wheel_speeds"],
+                                       shape=(wheels.count,))
+        except (ValueError, TypeError) as exc:
+            raise SceneError(str(exc)) from None
+        for k, (speed, wheel) in enumerate(zip(wheel_speeds, wheels.wheels)):
+            if abs(speed) > wheel.speed_limit:
+                raise SceneError(f"initial.wheel_speeds[{k}] must be within wheel {k + 1}'s "
+                                 f"speed_limit ({wheel.speed_limit:g} rad/s); got {speed!r}")
     t_final, output_step, rtol = _simulation(_table(data, "simulation"))
     description = data.get("description", "")
     if not isinstance(description, str):
@@ -229,7 +263,72 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
     return SpatialScene(name=name, structure=structure, n_modes=n_modes,
                         angular_velocity=spin, quaternion=quaternion / np.linalg.norm(quaternion),
                         maneuver=maneuver, t_final=t_final, output_step=output_step, rtol=rtol,
-                        variant=variant, description=description, data=data)
+                        variant=variant, description=description, data=data, wheels=wheels,
+                        wheel_speeds=wheel_speeds)
+
+
+_WHEEL_KEYS = {f.name for f in fields(Wheel)}
+
+
+def _wheels(table: dict) -> WheelCluster | None:
+    """The ``[actuator]`` table's wheel cluster (None without the table)."""
+    if not table:
+        return None
+    if table.get("kind") != "wheels":
+        raise SceneError(f"actuator.kind must be 'wheels' for a spatial scene (a cluster of "
+                         f"reaction wheels); got {table.get('kind')!r:.80}")
+    law = {key: table[key] for key in ("distribution", "null_gain", "bias_speed")
+           if key in table}
+    arrangement = table.get("arrangement")
+    if ("wheels" in table) == (arrangement is not None):
+        raise SceneError("actuator needs either [[actuator.wheels]] tables (one per wheel) or "
+                         "an arrangement ('orthogonal' or 'pyramid') with one [actuator.wheel] "
+                         "table, not both")
+    if arrangement is None:
+        items = table["wheels"]
+        if not isinstance(items, list) or not items:
+            raise SceneError("actuator.wheels must be an array of tables, one per wheel")
+        wheels = []
+        for k, item in enumerate(items):
+            where = f"actuator.wheels.{k}"
+            if not isinstance(item, dict):
+                raise SceneError(f"{where} must be a table; got {type(item).__name__}")
+            check_table_keys(where, item, _WHEEL_KEYS)
+            wheels.append(construct(Wheel, "wheel", item, rename=where))
+        for key in ("pyramid_angle", "pyramid_axis", "wheel"):
+            if key in table:
+                raise SceneError(f"actuator.{key} belongs to an arrangement; these wheels are "
+                                 "listed one by one")
+        return construct(WheelCluster, "wheels", {"wheels": tuple(wheels), **law},
+                         rename="actuator")
+    shared = table.get("wheel")
+    if not isinstance(shared, dict):
+        raise SceneError("actuator.wheel must be a table of the fields the arrangement's "
+                         "wheels share (inertia, torque_limit, speed_limit, ...)")
+    check_table_keys("actuator.wheel", shared, _WHEEL_KEYS - {"axis"})
+    if arrangement == "orthogonal":
+        for key in ("pyramid_angle", "pyramid_axis"):
+            if key in table:
+                raise SceneError(f"actuator.{key} belongs to arrangement 'pyramid'")
+        construct(Wheel, "wheel", {"axis": (0.0, 0.0, 1.0), **shared},
+                  rename="actuator.wheel")
+        return construct(WheelCluster, "wheels", {"wheels": tuple(
+            Wheel(axis=axis, **shared) for axis in np.eye(3)), **law}, rename="actuator")
+    if arrangement == "pyramid":
+        if "pyramid_angle" not in table:
+            raise SceneError("actuator.pyramid_angle is required for arrangement 'pyramid': "
+                             "the angle between each spin axis and the pyramid's axis, degrees")
+        construct(Wheel, "wheel", {"axis": (0.0, 0.0, 1.0), **shared},
+                  rename="actuator.wheel")
+        pyramid = {"angle": table["pyramid_angle"], **law, **shared}
+        if "pyramid_axis" in table:
+            pyramid["pyramid_axis"] = table["pyramid_axis"]
+        try:
+            return WheelCluster.pyramid(**pyramid)
+        except (ValueError, TypeError) as exc:
+            raise SceneError(str(exc).replace("wheels.", "actuator.")) from None
+    raise SceneError(f"actuator.arrangement must be 'orthogonal' or 'pyramid'; got "
+                     f"{arrangement!r:.80}")
 
 
 def _structure(hub: SpatialHub, items) -> SpatialStructure:

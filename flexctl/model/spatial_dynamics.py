@@ -64,6 +64,7 @@ from .spatial_rod import Rod, elastic_matrices, rod_rule
 from .spatial_structure import SpatialStructure
 
 __all__ = ["SpatialLayout", "SpatialEquations", "spatial_equations", "truncated_motion",
+           "quaternion_rotation",
            "taylor", "QUATERNION_GAIN", "FAMILIES", "MAX_SPATIAL_MODES", "SPATIAL_VARIANTS",
            "KINEMATIC_ORDER"]
 
@@ -100,11 +101,15 @@ class SpatialLayout:
         Modes per field (``N``).
     free : bool
         Whether the hub floats free.
+    wheels : tuple of str
+        Names of the states a wheel cluster appends after the structure's
+        (:mod:`flexctl.model.wheel_cluster`); empty without one.
     """
 
     names: tuple
     n_modes: int
     free: bool
+    wheels: tuple = ()
 
     @property
     def n_elastic(self) -> int:
@@ -124,7 +129,7 @@ class SpatialLayout:
     @property
     def n_states(self) -> int:
         """Length of the state vector."""
-        return self.n_coordinates + self.n_speeds
+        return self.n_coordinates + self.n_speeds + len(self.wheels)
 
     def modal(self, k: int, family: str) -> slice:
         """Slice of appendage ``k``'s field ``family`` (``"qn"``, ``"ql"``, ``"qt"``) in ``eta``.
@@ -149,7 +154,7 @@ class SpatialLayout:
         position = ["hub_x", "hub_y", "hub_z"] if self.free else []
         velocity = ["hub_vx", "hub_vy", "hub_vz"] if self.free else []
         return tuple(["qw", "qx", "qy", "qz", *position, *modal, "wx", "wy", "wz", *velocity,
-                      *[f"{m}_dot" for m in modal]])
+                      *[f"{m}_dot" for m in modal], *self.wheels])
 
     def split(self, x):
         """``(quaternion, position or None, eta, w, v or None, eta_t)`` of a state ``x``.
@@ -196,6 +201,12 @@ class SpatialEquations:
     mass_matrix : casadi.Function
         ``x -> M`` (n_speeds, n_speeds): the matrix the accelerations are solved with
         (``M1`` of a first-order variant, not symmetric).
+    cluster : WheelCluster or None
+        The reaction wheels on the hub (:func:`~flexctl.model.wheel_cluster.with_wheels`);
+        their states follow the structure's, and ``torque`` is the hub torque commanded of
+        them.
+    wheel_outputs : casadi.Function or None
+        With a cluster, ``(x, torque) -> (motor torques (n), N m; power drawn, W)``.
     """
 
     structure: SpatialStructure
@@ -206,6 +217,8 @@ class SpatialEquations:
     energy: object
     momentum: object
     mass_matrix: object
+    cluster: object = None
+    wheel_outputs: object = None
 
 
 def spatial_equations(structure: SpatialStructure, n_modes: int,
@@ -269,9 +282,9 @@ def _built(structure: SpatialStructure, n_modes: int, variant: str) -> SpatialEq
         mass, accelerations = _first_order(layout, x, terms)
     speeds = x[layout.n_coordinates:]
     rate = ca.vertcat(_quaternion_rate(quaternion, w),
-                      *([ca.mtimes(_rotation(quaternion), v)] if layout.free else []),
+                      *([ca.mtimes(quaternion_rotation(quaternion), v)] if layout.free else []),
                       eta_t, accelerations)
-    rotation = _rotation(quaternion)
+    rotation = quaternion_rotation(quaternion)
     kinetic_energy = 0.5 * ca.dot(speeds, ca.mtimes(terms.mass, speeds))
     angular = terms.angular
     if layout.free:     # about the centre of mass: H_O - r_c x L (all in the hub frame)
@@ -562,8 +575,19 @@ def _quaternion_rate(q, w):
     return 0.5 * product + QUATERNION_GAIN * (1 - ca.dot(q, q)) * q
 
 
-def _rotation(q):
-    """The rotation matrix of a unit quaternion (hub to inertial), CasADi."""
+def quaternion_rotation(q):
+    """The rotation matrix of a unit quaternion (hub to inertial), CasADi.
+
+    Parameters
+    ----------
+    q : casadi.SX, shape (4,)
+        Unit quaternion, scalar first.
+
+    Returns
+    -------
+    casadi.SX, shape (3, 3)
+        ``R(q)``: ``v_inertial = R v_hub``.
+    """
     import casadi as ca
 
     qw, qx, qy, qz = q[0], q[1], q[2], q[3]

@@ -170,7 +170,7 @@ class SpatialResult:
     states : ndarray, shape (n, P)
         States, in the order of ``layout.state_names`` (quaternions normalised).
     torque : ndarray, shape (3, P)
-        Hub torque, hub frame, N m.
+        Hub torque, hub frame, N m: with wheels, the torque commanded of them.
     status : str
         ``"ok"``, ``"diverged"`` or ``"failed"``.
     message : str
@@ -243,6 +243,36 @@ class SpatialResult:
         tips = _machine(self.equations.tips).map(self.t.size)(self.states).full().reshape(
             3, -1, self.t.size, order="F") if self.t.size else np.zeros((3, 0, 0))
         return {name: tips[:, k, :] for k, name in enumerate(self.structure.names)}
+
+    @property
+    def wheel_speeds(self) -> np.ndarray | None:
+        """Wheel speeds relative to the hub, rad/s, shape (n_wheels, P); None without
+        wheels."""
+        cluster = self.equations.cluster
+        if cluster is None:
+            return None
+        start = self.layout.n_states - len(self.layout.wheels)
+        return self.states[start:start + cluster.count]
+
+    @cached_property
+    def _wheel_outputs(self) -> tuple:
+        outputs = self.equations.wheel_outputs
+        if outputs is None or not self.t.size:
+            count = 0 if outputs is None else self.equations.cluster.count
+            return np.zeros((count, 0)), np.zeros(0)
+        motor, power = outputs.map(self.t.size)(self.states, self.torque)
+        return motor.full(), power.full().ravel()
+
+    @property
+    def wheel_torques(self) -> np.ndarray | None:
+        """Motor torque on each rotor about its spin axis, N m, shape (n_wheels, P) (the hub
+        feels its opposite); None without wheels."""
+        return None if self.equations.cluster is None else self._wheel_outputs[0]
+
+    @property
+    def wheel_power(self) -> np.ndarray | None:
+        """Power the wheels' motors draw, W, shape (P,); None without wheels."""
+        return None if self.equations.cluster is None else self._wheel_outputs[1]
 
     def euler_angles(self) -> np.ndarray:
         """Hub attitude as 3-2-1 (yaw, pitch, roll) Euler angles, rad, shape (3, P)."""
@@ -334,7 +364,8 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
                      quaternion=(1.0, 0.0, 0.0, 0.0), x0=None,
                      rtol: float = DEFAULT_RTOL, atol: float | None = None,
                      output_step: float | None = None,
-                     check_accuracy: bool = True, variant: str = "exact") -> SpatialResult:
+                     check_accuracy: bool = True, variant: str = "exact",
+                     wheels=None, wheel_speeds=None) -> SpatialResult:
     """Simulate a spatial structure from ``0`` to ``t_final``.
 
     Parameters
@@ -367,6 +398,13 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
         The model (:data:`~flexctl.model.spatial_dynamics.SPATIAL_VARIANTS`): the
         geometrically exact rod (default) or its equations to first order in the deflections,
         with or without the centrifugal stiffening.
+    wheels : WheelCluster, optional
+        Reaction wheels on the hub (:mod:`flexctl.model.wheel_cluster`): ``torque`` is then
+        the hub torque commanded of them, distributed by their law. Default none (``torque``
+        acts on the hub directly).
+    wheel_speeds : array_like, shape (n_wheels,), optional
+        Initial wheel speeds relative to the hub, rad/s (with ``wheels``; default zero;
+        ignored with ``x0``, which holds them).
 
     Returns
     -------
@@ -389,8 +427,21 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
         raise InputTypeError(f"check_accuracy must be True or False; got {check_accuracy!r}")
     equations = spatial_equations(structure, n_modes,
                                   check_choice("", "variant", variant, SPATIAL_VARIANTS))
+    if wheels is not None:
+        equations = _with_wheels(equations, wheels)
+    elif wheel_speeds is not None:
+        raise InputValueError("wheel_speeds needs wheels (a WheelCluster)")
     if x0 is None:
         x_start = initial_state(equations, angular_velocity, quaternion)
+        if wheel_speeds is not None:
+            speeds = check_array("", "wheel_speeds", wheel_speeds, shape=(wheels.count,))
+            for k, (speed, wheel) in enumerate(zip(speeds, wheels.wheels)):
+                if abs(speed) > wheel.speed_limit:
+                    raise InputValueError(
+                        f"wheel_speeds[{k}] must be within the wheel's speed_limit "
+                        f"({wheel.speed_limit:g} rad/s); got {speed!r}")
+            start = equations.layout.n_states - len(equations.layout.wheels)
+            x_start[start:start + wheels.count] = speeds
     else:
         x_start = np.array(check_array("", "x0", x0, shape=(equations.layout.n_states,)))
         norm = float(np.linalg.norm(x_start[0:4]))
@@ -434,6 +485,17 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
                          n_evaluations=run.evaluations)
 
 
+@lru_cache(maxsize=16)
+def _with_wheels(equations: SpatialEquations, wheels) -> SpatialEquations:
+    """The equations with ``wheels`` (kept: a run and its repeats share the compiled
+    right-hand side)."""
+    from ..model.wheel_cluster import WheelCluster, with_wheels
+
+    if not isinstance(wheels, WheelCluster):
+        raise InputTypeError(f"wheels must be a WheelCluster; got {type(wheels).__name__}")
+    return with_wheels(equations, wheels)
+
+
 @lru_cache(maxsize=32)
 def _machine(function):
     """``function`` (a right-hand side, the tips) from the compile cache, kept: the cache
@@ -462,7 +524,8 @@ class _Plan:
         self.edges = np.unique(np.concatenate([[0.0], breakpoints[(breakpoints > 0)
                                                                   & (breakpoints < t_final)],
                                                [t_final]]))
-        axis = motion_plane(equations, x0, drive, self.edges) if PLANE_MOTION else None
+        axis = motion_plane(equations, x0, drive, self.edges) \
+            if PLANE_MOTION and equations.cluster is None else None
         self.plane = None if axis is None else plane_motion(equations, axis)
         self.rhs = _machine(equations.rhs if self.plane is None else self.plane.rhs)
         self.x0 = np.asarray(x0, dtype=float) if self.plane is None \
