@@ -46,10 +46,10 @@ def centrelines(result: SpatialResult) -> list:
     """
     import casadi as ca
 
-    structure, n_modes = result.structure, result.n_modes
-    layout = result.layout
+    structure, layout = result.structure, result.layout
     out = []
     for k, appendage in enumerate(structure.appendages):
+        n_modes = layout.counts[k]
         rod = Rod(appendage, rod_rule(appendage, structure.hub, n_modes), n_modes,
                   appendage.root_point(structure.hub))
         eta = ca.SX.sym("eta", 3 * n_modes)
@@ -57,7 +57,7 @@ def centrelines(result: SpatialResult) -> list:
         nodes = len(rod.rule.weights)
         line = ca.horzcat(ca.DM(rod.root), motion["points"][:, :nodes], motion["tip"])
         function = ca.Function("centreline", [eta], [line]).map(max(result.t.size, 1))
-        first = layout.n_coordinates - layout.n_elastic + 3 * k * n_modes
+        first = layout.n_coordinates - layout.n_elastic + layout.block(k).start
         values = function(result.states[first:first + 3 * n_modes]).full()
         out.append(values.reshape(3, result.t.size, nodes + 2).transpose(1, 0, 2)
                    if result.t.size else np.zeros((0, 3, nodes + 2)))
@@ -75,10 +75,11 @@ def _straight(result: SpatialResult, lines: list) -> list:
     """The undeformed rods at the centrelines' arc lengths (the nodes' distance along each
     rod from its root), hub frame, shape (3, M_k) each."""
     out = []
-    for appendage, line in zip(result.structure.appendages, lines):
+    for appendage, line, n_modes in zip(result.structure.appendages, lines,
+                                        result.layout.counts):
         root = np.asarray(appendage.root_point(result.structure.hub), dtype=float)
         arc = np.concatenate([[0.0], np.asarray(
-            rod_rule(appendage, result.structure.hub, result.n_modes).nodes, dtype=float),
+            rod_rule(appendage, result.structure.hub, n_modes).nodes, dtype=float),
             [appendage.length]])
         out.append(root[:, None] + np.asarray(appendage.direction, dtype=float)[:, None]
                    * arc[None, :])

@@ -60,11 +60,12 @@ from functools import lru_cache
 
 import numpy as np
 
+from .errors import InputValueError
 from .spatial_rod import Rod, elastic_matrices, rod_rule
 from .spatial_structure import SpatialStructure
 
 __all__ = ["SpatialLayout", "SpatialEquations", "spatial_equations", "truncated_motion",
-           "quaternion_rotation",
+           "quaternion_rotation", "spatial_modes",
            "taylor", "QUATERNION_GAIN", "FAMILIES", "MAX_SPATIAL_MODES", "SPATIAL_VARIANTS",
            "KINEMATIC_ORDER"]
 
@@ -91,14 +92,14 @@ class SpatialLayout:
     """Where each coordinate and speed lies in the state of a spatial structure.
 
     State ``x = [q (4); r (3, free hub); eta (M); w (3); v (3, free hub); eta_t (M)]`` with
-    ``eta`` every appendage's ``[qn (N), ql (N), qt (N)]`` in turn (``M = 3 N A``).
+    ``eta`` every appendage's ``[qn (N_k), ql (N_k), qt (N_k)]`` in turn (``M = 3 sum N_k``).
 
     Attributes
     ----------
     names : tuple of str
         The appendages' names.
-    n_modes : int
-        Modes per field (``N``).
+    n_modes : int or tuple of int
+        Modes per field (``N_k``): one count for every appendage, or one per appendage.
     free : bool
         Whether the hub floats free.
     wheels : tuple of str
@@ -107,14 +108,32 @@ class SpatialLayout:
     """
 
     names: tuple
-    n_modes: int
+    n_modes: int | tuple
     free: bool
     wheels: tuple = ()
 
     @property
+    def counts(self) -> tuple:
+        """Modes per field of each appendage, ``(N_1, ...)``."""
+        if isinstance(self.n_modes, tuple):
+            return self.n_modes
+        return (self.n_modes,) * len(self.names)
+
+    def block(self, k: int) -> slice:
+        """Slice of appendage ``k``'s coordinates ``[qn, ql, qt]`` in ``eta``.
+
+        Parameters
+        ----------
+        k : int
+            Appendage index.
+        """
+        start = 3 * sum(self.counts[:k])
+        return slice(start, start + 3 * self.counts[k])
+
+    @property
     def n_elastic(self) -> int:
         """``M``: modal coordinates in all."""
-        return 3 * self.n_modes * len(self.names)
+        return 3 * sum(self.counts)
 
     @property
     def n_coordinates(self) -> int:
@@ -141,16 +160,17 @@ class SpatialLayout:
         family : str
             One of :data:`FAMILIES`.
         """
-        start = (3 * k + FAMILIES.index(family)) * self.n_modes
-        return slice(start, start + self.n_modes)
+        n = self.counts[k]
+        start = self.block(k).start + FAMILIES.index(family) * n
+        return slice(start, start + n)
 
     @property
     def state_names(self) -> tuple:
         """Name of every state: ``qw qx qy qz``, ``hub_x hub_y hub_z`` (free),
         ``<name>.qn1 ...``, ``wx wy wz``, ``hub_vx hub_vy hub_vz`` (free, hub frame),
         ``<name>.qn1_dot ...``."""
-        modal = [f"{a}.{f}{i + 1}" for a in self.names for f in FAMILIES
-                 for i in range(self.n_modes)]
+        modal = [f"{a}.{f}{i + 1}" for a, n in zip(self.names, self.counts) for f in FAMILIES
+                 for i in range(n)]
         position = ["hub_x", "hub_y", "hub_z"] if self.free else []
         velocity = ["hub_vx", "hub_vy", "hub_vz"] if self.free else []
         return tuple(["qw", "qx", "qy", "qz", *position, *modal, "wx", "wy", "wz", *velocity,
@@ -221,7 +241,48 @@ class SpatialEquations:
     wheel_outputs: object = None
 
 
-def spatial_equations(structure: SpatialStructure, n_modes: int,
+def spatial_modes(owner: str, structure: SpatialStructure, n_modes) -> int | tuple:
+    """A checked mode count of a spatial structure: one integer, or one per appendage (a
+    sequence in the appendages' order, or a mapping from their names).
+
+    Parameters
+    ----------
+    owner : str
+        Who takes it (named in errors).
+    structure : SpatialStructure
+        The structure whose appendages the counts are for.
+    n_modes : int, sequence of int or mapping of str to int
+        Modes per field, 1 to :data:`MAX_SPATIAL_MODES`.
+
+    Returns
+    -------
+    int or tuple of int
+        An integer when every appendage has the same count, else the tuple of counts.
+    """
+    from .checks import check_integer
+
+    names = structure.names
+    if isinstance(n_modes, dict):
+        unknown = sorted(set(n_modes) - set(names), key=str)
+        if unknown:
+            raise InputValueError(f"{owner}.n_modes names no appendage {unknown[0]!r}; the "
+                                  f"appendages are {', '.join(names)}")
+        missing = [name for name in names if name not in n_modes]
+        if missing:
+            raise InputValueError(f"{owner}.n_modes gives no count for appendage "
+                                  f"{missing[0]!r}")
+        n_modes = [n_modes[name] for name in names]
+    if isinstance(n_modes, (list, tuple)):
+        if len(n_modes) != len(names):
+            raise InputValueError(f"{owner}.n_modes must give one count per appendage "
+                                  f"({len(names)}); got {len(n_modes)}")
+        counts = tuple(check_integer(owner, f"n_modes[{name}]", n, minimum=1,
+                                     maximum=MAX_SPATIAL_MODES) for name, n in zip(names, n_modes))
+        return counts[0] if len(set(counts)) == 1 else counts
+    return check_integer(owner, "n_modes", n_modes, minimum=1, maximum=MAX_SPATIAL_MODES)
+
+
+def spatial_equations(structure: SpatialStructure, n_modes,
                       variant: str = "exact") -> SpatialEquations:
     """Build a spatial model's functions (cached per structure, mode count and variant).
 
@@ -229,8 +290,9 @@ def spatial_equations(structure: SpatialStructure, n_modes: int,
     ----------
     structure : SpatialStructure
         The hub and its appendages.
-    n_modes : int
-        Modes per field of every appendage (1 to 12).
+    n_modes : int, sequence of int or mapping of str to int
+        Modes per field (1 to 12) of every appendage, or of each
+        (:func:`spatial_modes`).
     variant : {"exact", "first_order", "zero_order"}, optional
         The geometrically exact rod (default), or its equations expanded to first order in the
         deflections with the rod's kinematics kept to second order (``first_order``: dynamic
@@ -240,11 +302,10 @@ def spatial_equations(structure: SpatialStructure, n_modes: int,
     -------
     SpatialEquations
     """
-    from .checks import check_choice, check_instance, check_integer
+    from .checks import check_choice, check_instance
 
     check_instance("spatial_equations", "structure", structure, SpatialStructure)
-    n_modes = check_integer("spatial_equations", "n_modes", n_modes, minimum=1,
-                            maximum=MAX_SPATIAL_MODES)
+    n_modes = spatial_modes("spatial_equations", structure, n_modes)
     variant = check_choice("spatial_equations", "variant", variant, SPATIAL_VARIANTS)
     return _built(structure, n_modes, variant)
 
@@ -326,9 +387,10 @@ def _kane(structure: SpatialStructure, layout: SpatialLayout, x, torque, order) 
     moment = ca.SX.zeros(3, 1)
     angular = ca.mtimes(ca.DM(hub.inertia), w)
     for k, appendage in enumerate(structure.appendages):
-        rod = Rod(appendage, rod_rule(appendage, hub, layout.n_modes), layout.n_modes,
+        n = layout.counts[k]
+        rod = Rod(appendage, rod_rule(appendage, hub, n), n,
                   appendage.root_point(hub))
-        block = slice(3 * k * layout.n_modes, 3 * (k + 1) * layout.n_modes)
+        block = layout.block(k)
         motion = truncated_motion(rod, eta[block], eta_t[block], order)
         tips.append(motion["tip"] - ca.DM(rod.root + appendage.length * appendage.direction))
         point_mass = np.concatenate([appendage.linear_density * np.asarray(rod.rule.weights),
@@ -343,7 +405,7 @@ def _kane(structure: SpatialStructure, layout: SpatialLayout, x, torque, order) 
         mass, bias = _place(mass, bias, polar[0], polar[1],
                             [0, 1, 2] + list(range(e + block.start, e + block.stop)))
         angular += polar[2]
-        stiffness, damping = elastic_matrices(appendage, layout.n_modes)
+        stiffness, damping = elastic_matrices(appendage, n)
         local, local_t = eta[block], eta_t[block]
         forces[e + block.start:e + block.stop] -= ca.mtimes(ca.DM(stiffness), local) \
             + ca.mtimes(ca.DM(damping), local_t)
@@ -450,19 +512,18 @@ def _first_order(layout: SpatialLayout, x, terms: _Terms) -> tuple:
     rest = -ca.substitute(residual, accel, ca.DM.zeros(n_u))
     modal = ca.evalf(matrix[:, h:]).full()         # numbers: the straight structure's
     return matrix, _hub_schur_solve(matrix[:h, :h], matrix[h:, :h], modal, rest, h,
-                                    3 * layout.n_modes)
+                                    [layout.block(k) for k in range(len(layout.names))])
 
 
-def _hub_schur_solve(a, c, modal: np.ndarray, rhs, h: int, size: int):
+def _hub_schur_solve(a, c, modal: np.ndarray, rhs, h: int, blocks: list):
     """``[[a, b], [c, d]]^-1 rhs`` with the modal columns ``[b; d]`` (numbers) constant and
-    ``d`` block diagonal (blocks of ``size``, one per appendage): ``d^-1`` once, block by
+    ``d`` block diagonal (``blocks``: one slice per appendage): ``d^-1`` once, block by
     block, the Schur complement ``a - b d^-1 c`` (h x h) solved symbolically."""
     import casadi as ca
     from scipy.linalg import block_diag
 
     b, d = modal[:h], modal[h:]
-    d_inv = block_diag(*[np.linalg.inv(d[k:k + size, k:k + size])
-                         for k in range(0, d.shape[0], size)])
+    d_inv = block_diag(*[np.linalg.inv(d[k, k]) for k in blocks])
     through = ca.mtimes(ca.sparsify(ca.DM(d_inv)), ca.horzcat(c, rhs[h:]))   # d^-1 [c, f_e]
     hub = ca.solve(a - ca.mtimes(ca.DM(b), through[:, :h]),
                    rhs[:h] - ca.mtimes(ca.DM(b), through[:, h]))

@@ -27,10 +27,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .checks import check_array, check_choice, check_instance, check_integer
+from .checks import check_array, check_choice, check_instance
 from .errors import InputValueError
 from .exports import signal_names
-from .spatial_dynamics import MAX_SPATIAL_MODES, SPATIAL_VARIANTS, spatial_equations
+from .spatial_dynamics import SPATIAL_VARIANTS, spatial_equations, spatial_modes
 from .spatial_structure import SpatialStructure
 
 __all__ = ["linearize_spatial", "nonlinear_spatial", "EQUILIBRIUM_TOLERANCE"]
@@ -83,8 +83,7 @@ def linearize_spatial(structure: SpatialStructure, n_modes: int = 4,
     import control
 
     check_instance("linearize_spatial", "structure", structure, SpatialStructure)
-    n_modes = check_integer("linearize_spatial", "n_modes", n_modes, minimum=1,
-                            maximum=MAX_SPATIAL_MODES)
+    n_modes = spatial_modes("linearize_spatial", structure, n_modes)
     w0 = np.array(check_array("linearize_spatial", "angular_velocity", angular_velocity,
                               shape=(3,)))
     if np.max(np.abs(w0)) > 1e4:
@@ -184,8 +183,7 @@ def nonlinear_spatial(structure: SpatialStructure, n_modes: int = 4, variant: st
     import control
 
     check_instance("nonlinear_spatial", "structure", structure, SpatialStructure)
-    n_modes = check_integer("nonlinear_spatial", "n_modes", n_modes, minimum=1,
-                            maximum=MAX_SPATIAL_MODES)
+    n_modes = spatial_modes("nonlinear_spatial", structure, n_modes)
     variant = check_choice("nonlinear_spatial", "variant", variant, SPATIAL_VARIANTS)
     equations = spatial_equations(structure, n_modes, variant)
     layout = equations.layout

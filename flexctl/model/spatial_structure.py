@@ -358,6 +358,38 @@ class SpatialStructure(KeywordOnly):
         """Hub plus appendages, kg."""
         return self.hub.mass + sum(a.mass for a in self.appendages)
 
+    def appendage_inertia(self, k: int) -> np.ndarray:
+        """Inertia tensor of appendage ``k`` straight and rigid (its line mass and point
+        masses; the section's polar inertia about its axis), about the hub's centre, in the hub
+        frame, kg m^2.
+
+        Parameters
+        ----------
+        k : int
+            Appendage index.
+
+        Returns
+        -------
+        ndarray, shape (3, 3)
+        """
+        a = self.appendages[k]
+        root, e1, length = a.root_point(self.hub), a.direction, a.length
+        # the second moment sum m p p^T: the rod's p = root + s e1 integrated over [0, l]
+        second = a.linear_density * (length * np.outer(root, root) + length ** 2 / 2 * (
+            np.outer(root, e1) + np.outer(e1, root)) + length ** 3 / 3 * np.outer(e1, e1))
+        for point in a.masses:
+            p = root + point.position * e1
+            second = second + point.mass * np.outer(p, p)
+        inertia = np.trace(second) * np.eye(3) - second
+        return inertia + a.polar_density * a.length * np.outer(e1, e1)
+
+    @property
+    def rigid_inertia(self) -> np.ndarray:
+        """Inertia tensor of the whole structure straight and rigid about the hub's centre,
+        hub frame, kg m^2, shape (3, 3)."""
+        return self.hub.inertia + sum(self.appendage_inertia(k)
+                                      for k in range(len(self.appendages)))
+
     def to_planar(self):
         """The planar structure that turns about the hub's ``z`` axis as this one would if it
         moved only in the ``x-y`` plane: the hub's ``J_zz`` (and mass), each rod at its

@@ -39,8 +39,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .checks import check_instance, check_integer
-from .spatial_dynamics import MAX_SPATIAL_MODES, spatial_equations
+from .checks import check_instance
+from .spatial_dynamics import spatial_equations, spatial_modes
 from .spatial_structure import SpatialStructure
 from .visibility import ModalVisibility, visibility_of
 
@@ -68,8 +68,7 @@ def spatial_modal_visibility(structure: SpatialStructure, n_modes: int = 4) -> M
     import casadi as ca
 
     check_instance("spatial_modal_visibility", "structure", structure, SpatialStructure)
-    n_modes = check_integer("spatial_modal_visibility", "n_modes", n_modes, minimum=1,
-                            maximum=MAX_SPATIAL_MODES)
+    n_modes = spatial_modes("spatial_modal_visibility", structure, n_modes)
     equations = spatial_equations(structure, n_modes)
     layout = equations.layout
     rest = np.zeros(layout.n_states)

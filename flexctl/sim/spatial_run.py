@@ -44,10 +44,10 @@ from functools import cached_property, lru_cache
 
 import numpy as np
 
-from ..model.checks import check_array, check_choice, check_integer, check_real
+from ..model.checks import check_array, check_choice, check_real
 from ..model.errors import InputTypeError, InputValueError
-from ..model.spatial_dynamics import (MAX_SPATIAL_MODES, SPATIAL_VARIANTS, SpatialEquations,
-                                      spatial_equations)
+from ..model.spatial_dynamics import (SPATIAL_VARIANTS, SpatialEquations, spatial_equations,
+                                      spatial_modes)
 from ..model.spatial_structure import SpatialStructure
 from .background import Beside
 from .spatial_plane import motion_plane, plane_motion
@@ -163,8 +163,8 @@ class SpatialResult:
     Attributes
     ----------
     structure : SpatialStructure
-    n_modes : int
-        Modes per field.
+    n_modes : int or tuple of int
+        Modes per field: of every appendage, or of each.
     t : ndarray, shape (P,)
         Output times, s.
     states : ndarray, shape (n, P)
@@ -377,8 +377,10 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
     torque : None, array_like (3,), callable or VectorTorque, optional
         Hub torque in the hub frame, N m: none (default), constant, ``torque(t) -> (3,)``, or
         samples.
-    n_modes : int, optional
-        Modes per field of every appendage (1 to 12). Default 4.
+    n_modes : int, sequence of int or mapping of str to int, optional
+        Modes per field (1 to 12) of every appendage, or of each: a count per appendage in
+        their order or by name (:func:`~flexctl.model.spatial_dynamics.spatial_modes`).
+        Default 4.
     angular_velocity : array_like, shape (3,), optional
         Initial hub angular velocity, hub frame, rad/s (the structure starts straight and at
         rest relative to the hub). Default zero.
@@ -414,7 +416,7 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
         raise InputTypeError(f"structure must be a SpatialStructure; got "
                              f"{type(structure).__name__}")
     t_final = check_real("", "t_final", t_final, minimum=0.0, strict=True, maximum=MAX_T_FINAL)
-    n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=MAX_SPATIAL_MODES)
+    n_modes = spatial_modes("", structure, n_modes)
     rtol = check_real("", "rtol", rtol, minimum=1e-13, maximum=1e-2)
     atol = rtol * 1e-3 if atol is None else check_real("", "atol", atol, minimum=0.0,
                                                        strict=True)
