@@ -25,8 +25,8 @@ the extrapolation removes it only to first order: 1 % of that component's peak l
 10/20 extrapolation at 1.5 s, 0.1 % by 20/40 (the bang-bang case, whose 20/40 errors are in
 its test's docstring: 44 s of processor time, not repeated in the suite). The assertions rest
 on the 10/20 extrapolation.
-The chain runs with a joint-rate tolerance of 1e-6 rad/s (its default 1e-8 costs two to seven
-times as long): measured at 10 elements, it moves the compared components by at most 2.9e-4
+The chain runs with a joint-rate tolerance of 1e-6 rad/s (cheaper than its default 1e-8):
+measured at 10 elements, it moves the compared components by at most 2.9e-4
 of their peaks.
 """
 
