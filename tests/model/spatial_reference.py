@@ -1,16 +1,17 @@
-"""Independent reference for tests: a pinned hub turning about any axis, carrying flexible rods.
+"""Independent reference for tests: a hub turning about any axis, carrying flexible rods.
 
 This module imports neither ``flexctl`` nor any other test helper (numpy, scipy and casadi
 only): it is a second, independent model of the spatial structures of ``MODEL.md`` section 8
 against which a modal model is checked. A rigid hub, pinned at its centre (free to rotate about
-every axis), with inertia tensor ``J_h`` (3 x 3, about the centre, in the hub frame ``B``)
-carries any number of flexible appendages; a torque (in ``B``) acts on the hub only. No gravity,
-no damping.
+every axis) or floating free (six degrees of freedom, mass ``m_h`` at its centre), with inertia
+tensor ``J_h`` (3 x 3, about the centre, in the hub frame ``B``) carries any number of flexible
+appendages; a torque (in ``B``, a pure couple) acts on the hub only. No gravity, no damping.
 
 Frames and coordinates
 ----------------------
 Inertial ``N``; hub frame ``B``, attitude a unit quaternion ``q`` (scalar first, ``v_N = R(q)
-v_B``), angular velocity ``w`` in ``B``. Appendage ``a``: root point ``r_a`` in ``B``, unit axis
+v_B``), angular velocity ``w`` in ``B``; a free hub's centre at ``r`` in ``N`` with velocity ``v``
+in ``B``. Appendage ``a``: root point ``r_a`` in ``B``, unit axis
 ``e1`` (``direction``), unit ``e3`` (``normal``, the section's flexible direction), ``e2 = e3 x
 e1``; an inextensible rod of length ``l`` with ``rhoA``, ``EI_n`` (bending along ``e3``, i.e.
 curvature about ``e2``), ``EI_l`` (bending along ``e2``, curvature about ``e3``), ``GJ`` and the
@@ -49,19 +50,27 @@ Equations of motion
 -------------------
 Derived by CasADi from the Lagrangian (nothing hand-derived beyond ``T`` and ``V``): positions
 and link frames are symbolic functions of the ``theta``; their rates come from
-``casadi.jtimes`` along ``theta_dot``; a link's inertial velocity in ``B`` is ``w x c + c_t`` and
-its angular velocity in its own frame ``C^T w + vee(C^T C_t)``. With ``u = (w, theta_dot)`` the
-kinetic energy ``T(theta, u) = 1/2 u^T M(theta) u`` does not depend on the attitude, so the
-Lagrange equations in the quasi-velocity ``w`` (Euler-Poincare / Hamel) and the ``theta`` read
+``casadi.jtimes`` along ``theta_dot``; a link's inertial velocity in ``B`` is ``w x c + c_t``
+(``v + w x c + c_t`` on a free hub) and its angular velocity in its own frame
+``C^T w + vee(C^T C_t)``. With ``u = (w, theta_dot)`` (pinned) or ``u = (w, v, theta_dot)``
+(free) the kinetic energy ``T(theta, u) = 1/2 u^T M(theta) u`` (plus ``1/2 m_h |v|^2`` free)
+depends on neither the attitude nor the position, so the Lagrange equations in the
+quasi-velocities ``w`` and ``v`` (Euler-Poincare / Hamel) and the ``theta`` read
 
-    d/dt dT/dw + w x dT/dw = torque,     d/dt dT/dtheta_dot - dT/dtheta + K theta = 0,
+    d/dt dT/dw + w x dT/dw + v x dT/dv = torque,     d/dt dT/dv + w x dT/dv = 0 (free hub),
+    d/dt dT/dtheta_dot - dT/dtheta + K theta = 0,
 
-i.e. ``M u_t = (torque - w x p_w ; dT/dtheta - K theta) - d(M u)/dtheta . theta_dot`` with
-``p = dT/du`` (``p_w`` is the angular momentum about the centre, in ``B``). CasADi returns per
-appendage the scaled body velocities ``V`` (``T = 1/2 |V|^2``), their Jacobian ``dV/du`` (so
-``M = sum (dV/du)^T (dV/du) + J_h``, the Hessian of ``T`` in the velocities), ``dT/dtheta`` and
-the ``jtimes`` term; the arrowhead ``M`` is factorised by Cholesky. ``q_t = 1/2 q (0, w)``;
-the quaternion does not feed back into the dynamics and is renormalised at output.
+i.e. ``M u_t = (torque - w x p_w - v x p_v ; - w x p_v ; dT/dtheta - K theta) - d(M u)/dtheta .
+theta_dot`` with ``p = dT/du`` (``p_w`` is the angular momentum about the hub centre, ``p_v``
+the linear momentum, both in ``B``; pinned, the ``v`` terms and rows are absent). CasADi
+returns per appendage the scaled body velocities ``V`` (``T = 1/2 |V|^2``), their Jacobian
+``dV/du`` (so ``M = sum (dV/du)^T (dV/du) + diag(J_h, m_h I)``, the Hessian of ``T`` in the
+velocities), ``dT/dtheta`` and the ``jtimes`` term; the arrowhead ``M`` is factorised by
+Cholesky. ``q_t = 1/2 q (0, w)`` and ``r_t = R(q) v``; neither the quaternion nor the position
+feeds back into the dynamics; the quaternion is renormalised at output. A free structure's
+invariants are its linear momentum ``R p_v``, its angular momentum about the centre of mass
+``R (p_w - c x p_v)`` (``c = sum m c_k / m`` the centre of mass from the hub centre, in ``B``)
+and the uniform motion of the centre of mass ``r + R c``.
 
 Integration
 -----------
@@ -75,12 +84,19 @@ the Jacobian only (``dtheta_t/dtheta_dot = I``, ``du_t/dtheta = -M(theta)^-1 K``
 quaternion rows), which sets their convergence rate, not the solution. Tighter absolute
 tolerances resolve the spurious high modes and cost much more for nothing; looser ones cost
 accuracy (a rate tolerance of 1e-7 instead of 1e-8 leaves up to 6e-7 of the tip peak).
+The rate tolerance sets the smallest tip component that is resolved, not a fraction of the
+peak: a torque whose jumps or kinks excite the stiff lateral plane (``EI_l`` 100 times
+``EI_n``) leaves a lateral vibration of a few 1e-7 m that Radau damps away unless the joint
+rates are resolved (a 1 m boom bending laterally by 5e-6 m: 2.5 % of that component lost with
+a rate tolerance of 1e-6, 3e-4 with 1e-8 and 2e-4 with 1e-10, against the modal model). A
+jump of the torque (``breakpoints``) restarts the integration; otherwise a step across it
+would be rejected until it is tiny.
 Keep each OpenBLAS on one thread (the test suite does, through ``tests/conftest.py``): with
 their default threads on a busy two-core machine one Cholesky factorisation of the mass
 matrix took 80 ms instead of 0.5 ms.
 
-Measured (``tests/model/test_spatial_reference.py`` checks the first three)
---------------------------------------------------------------------------
+Measured (``tests/model/test_spatial_reference.py`` checks the first three and the free hub)
+---------------------------------------------------------------------------------------------
 - Clamped frequencies of the bare ``MODEL.md`` rod against the closed forms, relative error
   of modes 1, 2, 3 at 20 / 40 / 80 elements: bending (either plane) +5.7e-4, +2.0e-3,
   +3.3e-3 / +1.4e-4, +5.0e-4, +8.2e-4 / +3.6e-5, +1.2e-4, +2.0e-4; torsion -2.6e-4, -2.3e-3,
@@ -102,6 +118,12 @@ Measured (``tests/model/test_spatial_reference.py`` checks the first three)
   1e-4 of it (3e-6 to 8e-6 on the large components). Wall time of :func:`chain_response`
   for that run (2 s, two appendages, one BLAS thread, a shared two-core machine): 9 s at 10
   elements, 19 s at 20, 33 s at 40, 126 s at 80.
+- A free hub: unforced, the soft structure spinning and drifting keeps its energy, its linear
+  momentum and its angular momentum about the centre of mass to 1e-12 over 1 s while the hub
+  centre moves by 7 to 18 cm; under a torque the angular momentum about the centre of mass
+  changes by the torque's impulse (to 1e-8, the quadrature of the check). In a plane, against
+  the free-hub planar chain of ``tests/fe_multibody.py``: tip deflection, hub angle and hub
+  centre within 4e-8 of the tip peak.
 - Integration error with the default tolerances: about 1e-8 of the tip peak (the planar
   check above, 10 elements, 2 s: 8e-9 with the defaults, 7e-9 with every tolerance 100 times
   tighter, the rest being the planar chain's own error).
@@ -110,6 +132,7 @@ Measured (``tests/model/test_spatial_reference.py`` checks the first three)
 from __future__ import annotations
 
 import functools
+import itertools
 import time
 from dataclasses import dataclass
 
@@ -223,18 +246,21 @@ def _vee(s):
 
 
 @functools.lru_cache(maxsize=32)
-def _rod_symbolic(rod: _Rod):
+def _rod_symbolic(rod: _Rod, free: bool = False):
     """Symbolic kinematics of one rod (CasADi SX).
 
-    Returns ``(theta, theta_dot, w, V, tip)``: the symbols, the scaled body velocities ``V``
+    Returns ``(theta, theta_dot, w, v, V, tip, moment)``: the symbols (``v``, the hub centre's
+    velocity in ``B``, only on a free hub, else None), the scaled body velocities ``V``
     (``T = 1/2 |V|^2`` is the kinetic energy of the rod and its point masses: per link
-    ``sqrt(m) (w x c + c_t)`` and ``sqrt(I) * omega``, per point mass ``sqrt(m) (w x p + p_t)``)
-    and the tip position in ``B``.
+    ``sqrt(m) (v + w x c + c_t)`` and ``sqrt(I) * omega``, per point mass
+    ``sqrt(m) (v + w x p + p_t)``), the tip position in ``B`` (m) and the first moment of mass
+    ``sum m c`` of the links and point masses about the hub centre, in ``B`` (kg m).
     """
     n = rod.n
     th = ca.SX.sym("theta", 3 * n)
     thd = ca.SX.sym("theta_dot", 3 * n)
     w = ca.SX.sym("w", 3)
+    v = ca.SX.sym("v", 3) if free else None
     lengths, starts = rod.link_lengths, rod.link_starts
     origins, frames = [], []
     origin = ca.DM(np.array(rod.root))
@@ -263,34 +289,38 @@ def _rod_symbolic(rod: _Rod):
                      for p, f, _, _ in bodies])
     x_dot = ca.jtimes(x, th, thd)
     velocities, row = [], 0
+    moment = sum(mass * p for p, _, mass, _ in bodies)
     for p, f, mass, inertia in bodies:
         p_dot = x_dot[row:row + 3]
-        velocities.append(np.sqrt(mass) * (ca.cross(w, p) + p_dot))
+        velocity = ca.cross(w, p) + p_dot
+        velocities.append(np.sqrt(mass) * (velocity + v if free else velocity))
         row += 3
         if f is not None:
             f_dot = ca.reshape(x_dot[row:row + 9], 3, 3)
             row += 9
             omega = ca.mtimes(f.T, w) + _vee(ca.mtimes(f.T, f_dot))
             velocities.append(np.sqrt(np.array(inertia)) * omega)
-    return th, thd, w, ca.vertcat(*velocities), tip
+    return th, thd, w, v, ca.vertcat(*velocities), tip, moment
 
 
 @functools.lru_cache(maxsize=32)
-def _rod_functions(rod: _Rod):
+def _rod_functions(rod: _Rod, free: bool = False):
     """CasADi functions of one rod.
 
-    ``dyn(theta, theta_dot, w) -> (V, dV/du, dT/dtheta, d(dT/du)/dtheta . theta_dot)`` with
-    ``u = (w, theta_dot)`` and ``T = 1/2 |V|^2`` the rod's (and its masses') kinetic energy;
-    ``tip(theta) -> tip position in B``.
+    ``dyn(theta, theta_dot, w[, v]) -> (V, dV/du, dT/dtheta, d(dT/du)/dtheta . theta_dot)``
+    with ``u = (w, theta_dot)`` on a pinned hub, ``u = (w, v, theta_dot)`` on a free one, and
+    ``T = 1/2 |V|^2`` the rod's (and its masses') kinetic energy; ``tip(theta) -> tip
+    position in B`` (m); ``moment(theta) -> sum m c`` in ``B`` (kg m).
     """
-    th, thd, w, v, tip = _rod_symbolic(rod)
-    u = ca.vertcat(w, thd)
-    kinetic = 0.5 * ca.dot(v, v)
-    dyn = ca.Function("dyn", [th, thd, w],
-                      [ca.densify(v), ca.densify(ca.jacobian(v, u)),
+    th, thd, w, v, velocities, tip, moment = _rod_symbolic(rod, free)
+    hub = [w, v] if free else [w]
+    u = ca.vertcat(*hub, thd)
+    kinetic = 0.5 * ca.dot(velocities, velocities)
+    dyn = ca.Function("dyn", [th, thd, *hub],
+                      [ca.densify(velocities), ca.densify(ca.jacobian(velocities, u)),
                        ca.densify(ca.gradient(kinetic, th)),
                        ca.densify(ca.jtimes(ca.gradient(kinetic, u), th, thd))])
-    return dyn, ca.Function("tip", [th], [tip])
+    return dyn, ca.Function("tip", [th], [tip]), ca.Function("moment", [th], [moment])
 
 
 def _rest_mass_matrix(rod: _Rod) -> np.ndarray:
@@ -299,7 +329,7 @@ def _rest_mass_matrix(rod: _Rod) -> np.ndarray:
     ``V`` is linear in ``theta_dot``: its columns are ``V`` at unit rates (cheaper than a
     symbolic Jacobian for long chains).
     """
-    th, thd, w, v, _ = _rod_symbolic(rod)
+    th, thd, w, _, v, _, _ = _rod_symbolic(rod)
     m = 3 * rod.n
     velocity = ca.Function("velocity", [th, thd, w], [v]).map(m)
     jac = np.asarray(velocity(np.zeros((m, m)), np.eye(m), np.zeros((3, m))))
@@ -348,10 +378,12 @@ class _BufferedCall:
 
 
 class ChainSystem:
-    """The rigid-element chain model of a pinned hub with appendages.
+    """The rigid-element chain model of a hub, pinned or free, with appendages.
 
-    State ``y = (q (4), theta (N), w (3), theta_dot (N))`` with ``theta`` the joint rotation
-    vectors of all appendages in order (3 per joint, components twist, normal, lateral).
+    State ``y = (q (4), r (3, free hub), theta (N), w (3), v (3, free hub), theta_dot (N))``
+    with ``r`` the hub centre in ``N`` (m), ``v`` its velocity in ``B`` (m/s) and ``theta`` the
+    joint rotation vectors of all appendages in order (3 per joint, components twist, normal,
+    lateral).
 
     Parameters
     ----------
@@ -361,64 +393,118 @@ class ChainSystem:
         As in :func:`chain_response`.
     n_elements : int
         Elements per appendage.
+    hub_mass : float or None
+        None: the hub's centre is pinned; a number (kg, >= 0): the hub floats free with this
+        mass at its centre.
     """
 
-    def __init__(self, hub_inertia, appendages, n_elements: int = 40):
+    def __init__(self, hub_inertia, appendages, n_elements: int = 40, hub_mass=None):
         self.hub_inertia = np.asarray(hub_inertia, float).reshape(3, 3)
         if not np.allclose(self.hub_inertia, self.hub_inertia.T, rtol=0, atol=1e-12):
             raise ValueError("hub_inertia must be symmetric")
+        self.free = hub_mass is not None
+        self.hub_mass = float(hub_mass) if self.free else 0.0
+        if self.hub_mass < 0:
+            raise ValueError("hub_mass must be >= 0")
         self.rods = [_rod(a, n_elements) for a in appendages]
         if len({r.name for r in self.rods}) != len(self.rods):
             raise ValueError("appendage names must be unique")
-        self.functions = [_rod_functions(r) for r in self.rods]
-        self.calls = [_BufferedCall(dyn) for dyn, _ in self.functions]
+        self.functions = [_rod_functions(r, self.free) for r in self.rods]
+        self.calls = [_BufferedCall(dyn) for dyn, _, _ in self.functions]
         sizes = [3 * r.n for r in self.rods]
         self.slices = [slice(a, b) for a, b in zip(np.cumsum([0] + sizes[:-1]),
                                                      np.cumsum(sizes))]
         self.n_theta = int(sum(sizes))
+        #: Hub speeds: ``w`` (and ``v`` for a free hub).
+        self.n_hub = 6 if self.free else 3
         self.stiffness = np.concatenate([r.stiffness for r in self.rods] + [np.zeros(0)])
+        #: Total mass, kg: hub (free) plus rods and point masses.
+        self.total_mass = self.hub_mass + sum(r.rhoA * r.length + sum(m for m, _ in r.masses)
+                                              for r in self.rods)
 
     # state layout
-    def split(self, y):
-        """``(q, theta, w, theta_dot)`` views of a state vector."""
-        n = self.n_theta
-        return y[:4], y[4:4 + n], y[4 + n:7 + n], y[7 + n:]
+    @property
+    def n_coordinates(self) -> int:
+        """Coordinates: quaternion, hub position (free), joint angles."""
+        return 4 + (3 if self.free else 0) + self.n_theta
 
-    def initial_state(self, angular_velocity=(0.0, 0.0, 0.0)) -> np.ndarray:
-        """Straight, undeformed, at rest relative to the hub, ``q = (1, 0, 0, 0)``."""
-        y = np.zeros(7 + 2 * self.n_theta)
+    def split(self, y):
+        """``(q, theta, w, theta_dot)`` views of a state vector (see :meth:`split_free`)."""
+        q, _, theta, w, _, theta_dot = self.split_free(y)
+        return q, theta, w, theta_dot
+
+    def split_free(self, y):
+        """``(q, r, theta, w, v, theta_dot)`` views of a state vector (``r``, ``v`` None on
+        a pinned hub)."""
+        c, n = self.n_coordinates, self.n_theta
+        r = y[4:7] if self.free else None
+        v = y[c + 3:c + 6] if self.free else None
+        return y[:4], r, y[c - n:c], y[c:c + 3], v, y[c + self.n_hub:]
+
+    def initial_state(self, angular_velocity=(0.0, 0.0, 0.0),
+                      velocity=(0.0, 0.0, 0.0)) -> np.ndarray:
+        """Straight, undeformed, at rest relative to the hub, ``q = (1, 0, 0, 0)``, a free
+        hub's centre at the origin.
+
+        Parameters
+        ----------
+        angular_velocity : array_like, shape (3,)
+            ``w`` in ``B``, rad/s.
+        velocity : array_like, shape (3,)
+            A free hub centre's velocity ``v`` in ``B``, m/s (ignored when pinned).
+
+        Returns
+        -------
+        ndarray
+            The state.
+        """
+        y = np.zeros(self.n_coordinates + self.n_hub + self.n_theta)
         y[0] = 1.0
-        y[4 + self.n_theta:7 + self.n_theta] = np.asarray(angular_velocity, float)
+        c = self.n_coordinates
+        y[c:c + 3] = np.asarray(angular_velocity, float)
+        if self.free:
+            y[c + 3:c + 6] = np.asarray(velocity, float)
         return y
 
-    def _evaluate(self, theta, w, theta_dot):
-        """Mass matrix, momentum ``p = M u``, ``dT/dtheta``, the ``jtimes`` term and ``T``."""
-        n = self.n_theta
-        mass = np.zeros((3 + n, 3 + n))
+    def _evaluate(self, theta, w, v, theta_dot):
+        """Mass matrix, momentum ``p = M u``, ``dT/dtheta``, the ``jtimes`` term and ``T``
+        (``u = (w, v (free), theta_dot)``)."""
+        n, k = self.n_theta, self.n_hub
+        mass = np.zeros((k + n, k + n))
         mass[:3, :3] = self.hub_inertia
-        momentum = np.zeros(3 + n)
+        momentum = np.zeros(k + n)
         momentum[:3] = self.hub_inertia @ w
-        grad = np.zeros(n)
-        bias = np.zeros(3 + n)
         kinetic = 0.5 * w @ self.hub_inertia @ w
+        hub_speeds = (w,)
+        if self.free:
+            mass[3:6, 3:6] = self.hub_mass * np.eye(3)
+            momentum[3:6] = self.hub_mass * v
+            kinetic += 0.5 * self.hub_mass * v @ v
+            hub_speeds = (w, v)
+        grad = np.zeros(n)
+        bias = np.zeros(k + n)
         for call, s in zip(self.calls, self.slices):
-            v, jac, g, b = call(theta[s], theta_dot[s], w)
-            jw, jt = jac[:, :3], jac[:, 3:]
-            rows = slice(3 + s.start, 3 + s.stop)
-            mass[:3, :3] += jw.T @ jw
-            mass[:3, rows] = jw.T @ jt
-            mass[rows, :3] = mass[:3, rows].T
+            vel, jac, g, b = call(theta[s], theta_dot[s], *hub_speeds)
+            jh, jt = jac[:, :k], jac[:, k:]
+            rows = slice(k + s.start, k + s.stop)
+            mass[:k, :k] += jh.T @ jh
+            mass[:k, rows] = jh.T @ jt
+            mass[rows, :k] = mass[:k, rows].T
             mass[rows, rows] = jt.T @ jt
-            momentum[:3] += jw.T @ v
-            momentum[rows] = jt.T @ v
+            momentum[:k] += jh.T @ vel
+            momentum[rows] = jt.T @ vel
             grad[s] = g
-            bias[:3] += b[:3]
-            bias[rows] = b[3:]
-            kinetic += 0.5 * v @ v
+            bias[:k] += b[:k]
+            bias[rows] = b[k:]
+            kinetic += 0.5 * vel @ vel
         return mass, momentum, grad, bias, kinetic
 
     def rhs(self, t, y, torque=None):
         """``dy/dt``.
+
+        The hub rows are the Euler-Poincare (Hamel) equations in the quasi-velocities ``w``
+        and ``v``: ``d/dt dT/dw + w x dT/dw + v x dT/dv = torque`` and
+        ``d/dt dT/dv + w x dT/dv = 0`` (no force), ``r_t = R(q) v``.
 
         Parameters
         ----------
@@ -434,16 +520,21 @@ class ChainSystem:
         ndarray
             The state's rate.
         """
-        q, theta, w, theta_dot = self.split(y)
-        mass, momentum, grad, bias, _ = self._evaluate(theta, w, theta_dot)
+        q, _, theta, w, v, theta_dot = self.split_free(y)
+        k = self.n_hub
+        mass, momentum, grad, bias, _ = self._evaluate(theta, w, v, theta_dot)
         force = -bias
         force[:3] -= np.cross(w, momentum[:3])
+        if self.free:
+            force[:3] -= np.cross(v, momentum[3:6])
+            force[3:6] -= np.cross(w, momentum[3:6])
         if torque is not None:
             force[:3] += np.asarray(torque(t), float).reshape(3)
-        force[3:] += grad - self.stiffness * theta
+        force[k:] += grad - self.stiffness * theta
         u_dot = cho_solve(cho_factor(mass), force)
         q_dot = 0.5 * np.concatenate([[-q[1:] @ w], q[0] * w + np.cross(q[1:], w)])
-        return np.concatenate([q_dot, theta_dot, u_dot])
+        r_dot = [_rotation(q) @ v] if self.free else []
+        return np.concatenate([q_dot, *r_dot, theta_dot, u_dot])
 
     def stiff_jacobian(self, t, y, torque=None):
         """The stiff part of ``d(dy/dt)/dy`` (for the Newton iterations of the integrator).
@@ -460,22 +551,26 @@ class ChainSystem:
         Returns
         -------
         scipy.sparse.csc_matrix
-            ``dq_t/d(q, w)``, ``dtheta_t/dtheta_dot = I`` and ``du_t/dtheta = -M^-1 K``.
+            ``dq_t/d(q, w)``, ``dr_t/dv = R(q)`` (free hub), ``dtheta_t/dtheta_dot = I`` and
+            ``du_t/dtheta = -M^-1 K``.
         """
-        q, theta, w, theta_dot = self.split(y)
-        n = self.n_theta
-        mass = self._evaluate(theta, w, theta_dot)[0]
-        block = -cho_solve(cho_factor(mass), np.eye(3 + n)[:, 3:]) * self.stiffness
+        q, _, theta, w, v, theta_dot = self.split_free(y)
+        n, k, c = self.n_theta, self.n_hub, self.n_coordinates
+        mass = self._evaluate(theta, w, v, theta_dot)[0]
+        block = -cho_solve(cho_factor(mass), np.eye(k + n)[:, k:]) * self.stiffness
         q0, qv = q[0], q[1:]
         jac = np.zeros((y.size, y.size))
         jac[:4, :4] = 0.5 * np.block([[np.zeros((1, 1)), -w[None, :]], [w[:, None], -_skew(w)]])
-        jac[:4, 4 + n:7 + n] = 0.5 * np.vstack([-qv[None, :], q0 * np.eye(3) + _skew(qv)])
-        jac[4:4 + n, 7 + n:] = np.eye(n)
-        jac[4 + n:, 4:4 + n] = block
+        jac[:4, c:c + 3] = 0.5 * np.vstack([-qv[None, :], q0 * np.eye(3) + _skew(qv)])
+        if self.free:
+            jac[4:7, c + 3:c + 6] = _rotation(q)
+        jac[c - n:c, c + k:] = np.eye(n)
+        jac[c:, c - n:c] = block
         return sp.csc_matrix(jac)
 
-    def invariants(self, y):
-        """Angular momentum about the centre in ``N`` and total energy of a state.
+    def first_moment(self, y) -> np.ndarray:
+        """``sum m c`` of the rods and point masses about the hub centre, in ``B``, kg m (the
+        hub's own mass sits at the centre).
 
         Parameters
         ----------
@@ -484,13 +579,40 @@ class ChainSystem:
 
         Returns
         -------
-        tuple of (ndarray (3,), float)
-            ``H_N`` (kg m^2/s) and ``T + V`` (J).
+        ndarray, shape (3,)
         """
-        q, theta, w, theta_dot = self.split(y)
-        _, momentum, _, _, kinetic = self._evaluate(theta, w, theta_dot)
-        q = q / np.linalg.norm(q)
-        return _rotation(q) @ momentum[:3], kinetic + 0.5 * theta @ (self.stiffness * theta)
+        theta = self.split(y)[1]
+        return sum(np.asarray(moment(theta[s])).ravel()
+                   for (_, _, moment), s in zip(self.functions, self.slices))
+
+    def invariants(self, y) -> dict:
+        """Momenta, energy and centre of mass of a state.
+
+        Parameters
+        ----------
+        y : ndarray
+            State.
+
+        Returns
+        -------
+        dict
+            ``angular`` (3,): the angular momentum in ``N`` about the hub centre (pinned) or
+            about the centre of mass (free), kg m^2/s; ``energy``: ``T + V``, J; for a free
+            hub also ``linear`` (3,): the linear momentum in ``N``, kg m/s, and
+            ``centre_of_mass`` (3,): in ``N``, m.
+        """
+        q, r, theta, w, v, theta_dot = self.split_free(y)
+        _, momentum, _, _, kinetic = self._evaluate(theta, w, v, theta_dot)
+        rotation = _rotation(q / np.linalg.norm(q))
+        out = {"energy": kinetic + 0.5 * theta @ (self.stiffness * theta)}
+        if not self.free:
+            out["angular"] = rotation @ momentum[:3]
+            return out
+        offset = self.first_moment(y) / self.total_mass         # centre of mass from r, in B
+        out["angular"] = rotation @ (momentum[:3] - np.cross(offset, momentum[3:6]))
+        out["linear"] = rotation @ momentum[3:6]
+        out["centre_of_mass"] = r + rotation @ offset
+        return out
 
     def tip_displacements(self, y) -> dict:
         """Each tip's position minus its undeformed position, in ``B`` (m).
@@ -507,14 +629,14 @@ class ChainSystem:
         """
         theta = self.split(y)[1]
         out = {}
-        for rod, (_, tip), s in zip(self.rods, self.functions, self.slices):
+        for rod, (_, tip, _), s in zip(self.rods, self.functions, self.slices):
             straight = np.array(rod.root) + rod.length * np.array(rod.frame)[:, 0]
             out[rod.name] = np.asarray(tip(theta[s])).ravel() - straight
         return out
 
-    def simulate(self, torque, t_final: float, times, angular_velocity=(0.0, 0.0, 0.0), *,
-                 rtol: float = RTOL, atol_angle: float = ATOL_ANGLE,
-                 atol_rate: float = ATOL_RATE):
+    def simulate(self, torque, t_final: float, times, angular_velocity=(0.0, 0.0, 0.0),
+                 velocity=(0.0, 0.0, 0.0), *, breakpoints=(), rtol: float = RTOL,
+                 atol_angle: float = ATOL_ANGLE, atol_rate: float = ATOL_RATE):
         """Integrate from the straight state at rest relative to the hub.
 
         Parameters
@@ -527,12 +649,19 @@ class ChainSystem:
             Output times in ``[0, t_final]``, s.
         angular_velocity : array_like, shape (3,)
             Initial ``w`` in ``B``, rad/s.
+        velocity : array_like, shape (3,)
+            Initial ``v`` of a free hub's centre in ``B``, m/s (ignored when pinned).
+        breakpoints : array_like
+            Times, s, where the torque jumps or kinks: the integration stops and restarts
+            there, so that no step crosses one.
         rtol : float
             Relative tolerance of ``Radau``.
         atol_angle : float
-            Absolute tolerance on the quaternion and the joint angles, rad.
+            Absolute tolerance on the quaternion, the joint angles (rad) and a free hub's
+            position (m).
         atol_rate : float
-            Absolute tolerance on ``w`` and the joint rates, rad/s.
+            Absolute tolerance on ``w``, the joint rates (rad/s) and a free hub's velocity
+            (m/s).
 
         Returns
         -------
@@ -543,15 +672,28 @@ class ChainSystem:
         times = np.asarray(times, float)
         if times.size and (times.min() < 0.0 or times.max() > t_final):
             raise ValueError("times must lie in [0, t_final]")
-        n = self.n_theta
-        atol = np.concatenate([np.full(4 + n, float(atol_angle)), np.full(3 + n, float(atol_rate))])
+        atol = np.concatenate([np.full(self.n_coordinates, float(atol_angle)),
+                               np.full(self.n_hub + self.n_theta, float(atol_rate))])
+        t_final = float(t_final)
+        edges = np.unique(np.concatenate([[0.0], [b for b in np.asarray(breakpoints, float)
+                                                  if 0.0 < b < t_final], [t_final]]))
         start = time.perf_counter()
-        sol = solve_ivp(self.rhs, (0.0, float(t_final)), self.initial_state(angular_velocity),
-                        method="Radau", t_eval=times, rtol=rtol, atol=atol,
-                        jac=self.stiff_jacobian, args=(torque,))
-        if not sol.success:
-            raise RuntimeError(f"integration failed: {sol.message}")
+        y = self.initial_state(angular_velocity, velocity)
+        states, counts = [], np.zeros(3, int)
+        for a, b in itertools.pairwise(edges):
+            inside = times[(times >= a) & ((times < b) | (b == t_final))]
+            sol = solve_ivp(self.rhs, (a, b), y, method="Radau",
+                            t_eval=np.unique(np.append(inside, b)), rtol=rtol, atol=atol,
+                            jac=self.stiff_jacobian, args=(torque,))
+            if not sol.success:
+                raise RuntimeError(f"integration failed: {sol.message}")
+            states.append(sol.y[:, :inside.size])
+            counts += (sol.nfev, sol.njev, sol.nlu)
+            y = sol.y[:, -1]
+        sol.t = times
+        sol.y = np.hstack(states)
         sol.y[:4] /= np.linalg.norm(sol.y[:4], axis=0)
+        sol.nfev, sol.njev, sol.nlu = map(int, counts)
         sol.stats = {"nfev": sol.nfev, "njev": sol.njev, "nlu": sol.nlu,
                      "seconds": time.perf_counter() - start}
         return sol
@@ -562,8 +704,9 @@ class ChainSystem:
 # ---------------------------------------------------------------------------------------------
 
 def chain_response(hub_inertia, appendages, torque, t_final, times, angular_velocity=(0, 0, 0),
-                   n_elements=40):
-    """Response of the rigid-element chain model to a hub torque (pinned hub).
+                   n_elements=40, hub_mass=None, breakpoints=(), rtol=RTOL,
+                   atol_angle=ATOL_ANGLE, atol_rate=ATOL_RATE):
+    """Response of the rigid-element chain model to a hub torque (pinned or free hub).
 
     Parameters
     ----------
@@ -583,25 +726,38 @@ def chain_response(hub_inertia, appendages, torque, t_final, times, angular_velo
         Output times in ``[0, t_final]``, s.
     angular_velocity : array_like, shape (3,)
         Initial ``w`` in ``B``, rad/s (the structure starts straight and at rest relative to
-        the hub, ``q = (1, 0, 0, 0)``).
+        the hub, ``q = (1, 0, 0, 0)``, a free hub's centre at the origin and at rest).
     n_elements : int
         Elements per appendage.
+    hub_mass : float or None
+        None: the hub's centre is pinned; a number: the hub floats free with this mass, kg.
+    breakpoints : array_like
+        Times, s, of the torque's jumps and kinks (the integration restarts there).
+    rtol, atol_angle, atol_rate : float
+        Tolerances of the integration (see :meth:`ChainSystem.simulate`).
 
     Returns
     -------
     dict
         ``t`` (P,); ``quaternion`` (4, P) B to N, scalar first; ``w`` (3, P) rad/s in ``B``;
         ``tips`` ``{name: (3, P)}``, each tip's displacement from where the rigidly moving
-        undeformed tip would be, in ``B`` components, m.
+        undeformed tip would be, in ``B`` components, m; for a free hub also ``position``
+        (3, P), the hub centre in ``N``, m, and ``centre_of_mass`` (3, P), in ``N``, m.
     """
-    system = ChainSystem(hub_inertia, appendages, n_elements)
-    sol = system.simulate(torque, t_final, times, angular_velocity)
-    q, _, w, _ = system.split(sol.y)
-    tips = {r.name: np.empty((3, sol.y.shape[1])) for r in system.rods}
+    system = ChainSystem(hub_inertia, appendages, n_elements, hub_mass=hub_mass)
+    sol = system.simulate(torque, t_final, times, angular_velocity, breakpoints=breakpoints,
+                          rtol=rtol, atol_angle=atol_angle, atol_rate=atol_rate)
+    q, r, _, w, _, _ = system.split_free(sol.y)
+    tips = {r_.name: np.empty((3, sol.y.shape[1])) for r_ in system.rods}
     for j in range(sol.y.shape[1]):
         for name, d in system.tip_displacements(sol.y[:, j]).items():
             tips[name][:, j] = d
-    return {"t": sol.t, "quaternion": q, "w": w, "tips": tips}
+    out = {"t": sol.t, "quaternion": q, "w": w, "tips": tips}
+    if system.free:
+        out["position"] = r
+        out["centre_of_mass"] = np.column_stack(
+            [system.invariants(sol.y[:, j])["centre_of_mass"] for j in range(sol.y.shape[1])])
+    return out
 
 
 def chain_frequencies(appendage, n_elements=40, count=4):
