@@ -13,8 +13,10 @@ into a :class:`SpatialScene`. The tables (every key is checked, every error name
 - ``[model]``: ``variant``, ``"exact"`` (the default: the geometrically exact rod),
   ``"first_order"`` or ``"zero_order"`` (its equations to first order in the deflections, with
   or without the centrifugal stiffening; :data:`~flexctl.model.spatial_dynamics.SPATIAL_VARIANTS`),
-  and ``modes``, per field (bending along the normal, along the lateral direction, torsion) and
-  appendage, an integer.
+  and ``modes``, per field (bending along the normal, along the lateral direction, torsion):
+  an integer for every appendage, a table of one integer per appendage by name, or
+  ``"auto"`` (:func:`~flexctl.sim.spatial_fidelity.choose_spatial_modes`: as few as the
+  manoeuvre needs for the relative tip error ``tolerance``, default 1e-2).
 - ``[initial]``: ``angular_velocity`` (rad/s, hub frame) and ``quaternion`` (hub to inertial,
   scalar first); the structure starts straight and at rest relative to its hub.
 - ``[maneuver]``: ``kind = "torque_samples"`` with ``times`` and ``values`` (rows ``tx, ty,
@@ -48,7 +50,7 @@ from controllers.spec import SceneError
 from ..model.checks import check_real
 from ..model.parameters import PointMass
 from ..model.spatial_structure import SpatialAppendage, SpatialHub, SpatialStructure
-from ..model.spatial_dynamics import MAX_SPATIAL_MODES, SPATIAL_VARIANTS
+from ..model.spatial_dynamics import MAX_SPATIAL_MODES, SPATIAL_VARIANTS, spatial_modes
 from ..model.wheel_cluster import Wheel, WheelCluster
 from ..sim.spatial_run import DEFAULT_RTOL, MAX_SPIN, MAX_T_FINAL, VectorTorque
 from .scene_tables import check_table_keys, construct, read_table_file
@@ -66,7 +68,7 @@ _KEYS = {
     "description": None,
     "hub": {"inertia", "radius", "mass", "support"},
     "appendages": None,
-    "model": {"variant", "modes"},
+    "model": {"variant", "modes", "tolerance"},
     "initial": {"angular_velocity", "quaternion", "wheel_speeds"},
     "actuator": {"kind", "distribution", "null_gain", "bias_speed", "wheels", "arrangement",
                  "pyramid_angle", "pyramid_axis", "wheel"},
@@ -149,8 +151,8 @@ class SpatialScene:
     ----------
     name : str
     structure : SpatialStructure
-    n_modes : int
-        Modes per field and appendage.
+    n_modes : int or tuple of int
+        Modes per field: of every appendage, or of each.
     variant : str
         The model: one of :data:`~flexctl.model.spatial_dynamics.SPATIAL_VARIANTS`.
     angular_velocity, quaternion : ndarray
@@ -164,6 +166,8 @@ class SpatialScene:
         The reaction wheels the manoeuvre's torque is commanded of (``[actuator]``).
     wheel_speeds : ndarray or None
         Their initial speeds relative to the hub, rad/s.
+    mode_choice : SpatialModeChoice or None
+        With ``modes = "auto"``, how the counts were chosen.
     """
 
     name: str
@@ -180,6 +184,7 @@ class SpatialScene:
     data: dict = field(default_factory=dict, repr=False)
     wheels: WheelCluster | None = None
     wheel_speeds: np.ndarray | None = None
+    mode_choice: object = None
 
 
 def is_spatial(data: dict) -> bool:
@@ -225,7 +230,7 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
             check_table_keys(key, _table(data, key), allowed)
     hub = construct(SpatialHub, "hub", _table(data, "hub"))
     structure = _structure(hub, data.get("appendages"))
-    n_modes, variant = _model(_table(data, "model", required=False))
+    model = _table(data, "model", required=False)
     initial = _table(data, "initial", required=False)
     from ..model.checks import check_array
     try:
@@ -257,6 +262,7 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
                 raise SceneError(f"initial.wheel_speeds[{k}] must be within wheel {k + 1}'s "
                                  f"speed_limit ({wheel.speed_limit:g} rad/s); got {speed!r}")
     t_final, output_step, rtol = _simulation(_table(data, "simulation"))
+    n_modes, variant, choice = _model(model, structure, maneuver, t_final, spin)
     description = data.get("description", "")
     if not isinstance(description, str):
         raise SceneError(f"description must be a string; got {description!r:.80}")
@@ -264,7 +270,7 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
                         angular_velocity=spin, quaternion=quaternion / np.linalg.norm(quaternion),
                         maneuver=maneuver, t_final=t_final, output_step=output_step, rtol=rtol,
                         variant=variant, description=description, data=data, wheels=wheels,
-                        wheel_speeds=wheel_speeds)
+                        wheel_speeds=wheel_speeds, mode_choice=choice)
 
 
 _WHEEL_KEYS = {f.name for f in fields(Wheel)}
@@ -375,23 +381,47 @@ def _structure(hub: SpatialHub, items) -> SpatialStructure:
         raise SceneError(message) from None
 
 
-def _model(table: dict) -> tuple:
-    """``(modes, variant)`` of a spatial scene's ``[model]`` table."""
+def _model(table: dict, structure: SpatialStructure, maneuver, t_final: float,
+           spin) -> tuple:
+    """``(modes, variant, choice)`` of a spatial scene's ``[model]`` table (``choice``: the
+    :class:`~flexctl.sim.spatial_fidelity.SpatialModeChoice` of ``modes = "auto"``)."""
     variant = table.get("variant", "exact")
     if not isinstance(variant, str) or variant not in SPATIAL_VARIANTS:
         raise SceneError(f"model.variant must be one of {', '.join(map(repr, SPATIAL_VARIANTS))} "
                          f"for a spatial scene (the planar 'consistent' has no spatial form); "
                          f"got {variant!r:.80}")
     modes = table.get("modes", 4)
-    if isinstance(modes, (str, dict)):
-        raise SceneError(f"model.modes must be an integer for a spatial scene (the same count "
-                         f"for every field of every appendage; 'auto' and per-appendage tables "
-                         f"are for planar scenes); got {modes!r:.80}")
+    tolerance = table.get("tolerance")
+    if tolerance is not None and modes != "auto":
+        raise SceneError("model.tolerance is the relative tip error of modes = 'auto'; these "
+                         f"modes are given ({modes!r:.80})")
+    if modes == "auto":
+        from ..sim.fidelity import DEFAULT_TOLERANCE, check_tolerance
+        from ..sim.spatial_fidelity import choose_spatial_modes
+
+        tolerance = DEFAULT_TOLERANCE if tolerance is None else tolerance
+        try:
+            check_tolerance(tolerance)
+        except (ValueError, TypeError) as exc:
+            raise SceneError(f"model.tolerance: {exc}") from None
+        choice = choose_spatial_modes(structure, maneuver, t_final, tolerance, spin)
+        return choice.n_modes, variant, choice
+    if isinstance(modes, dict):
+        bad = next((name for name, n in modes.items() if isinstance(n, bool)
+                    or not isinstance(n, int) or not 1 <= n <= MAX_SPATIAL_MODES), None)
+        if bad is not None:
+            raise SceneError(f"model.modes.{bad} must be an integer from 1 to "
+                             f"{MAX_SPATIAL_MODES} (modes per field); got {modes[bad]!r:.80}")
+        try:
+            return spatial_modes("model", structure, modes), variant, None
+        except (ValueError, TypeError) as exc:
+            raise SceneError(str(exc).replace("model.n_modes", "model.modes")) from None
     if isinstance(modes, bool) or not isinstance(modes, int) or not \
             1 <= modes <= MAX_SPATIAL_MODES:
         raise SceneError(f"model.modes must be an integer from 1 to {MAX_SPATIAL_MODES} (modes "
-                         f"per field: each bending plane and torsion); got {modes!r:.80}")
-    return modes, variant
+                         f"per field: each bending plane and torsion), a table of one per "
+                         f"appendage, or 'auto'; got {modes!r:.80}")
+    return modes, variant, None
 
 
 def _maneuver(data: dict, base_dir):
