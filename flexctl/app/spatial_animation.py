@@ -18,6 +18,7 @@ from ..model.checks import check_integer, check_real
 from ..model.errors import InputValueError
 from ..model.spatial_rod import Rod, rod_rule
 from ..sim.atomic_files import atomic_file
+from ..sim.quaternions import rotation_matrix
 from ..sim.spatial_run import SpatialResult
 
 __all__ = ["centrelines", "animate_spatial", "ANIMATION", "MAX_FRAMES"]
@@ -62,13 +63,6 @@ def centrelines(result: SpatialResult) -> list:
         out.append(values.reshape(3, result.t.size, nodes + 2).transpose(1, 0, 2)
                    if result.t.size else np.zeros((0, 3, nodes + 2)))
     return out
-
-
-def _rotation(q) -> np.ndarray:
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 def _straight(result: SpatialResult, lines: list) -> list:
@@ -155,7 +149,7 @@ def animate_spatial(result: SpatialResult, path, *, frames: int = 120, fps: floa
     heading = fig.suptitle("", fontsize=9)
 
     def draw(k: int):
-        rotation = _rotation(result.quaternion[:, k])
+        rotation = rotation_matrix(result.quaternion[:, k])
         centre = np.zeros(3) if positions is None else positions[:, k]
         hub.set_data_3d([centre[0]], [centre[1]], [centre[2]])
         for artist, axis in zip(triad, np.eye(3)):
