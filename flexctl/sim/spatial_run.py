@@ -53,6 +53,8 @@ from .background import Beside
 from .spatial_plane import motion_plane, plane_motion
 
 __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
+           "simulate_spatial_setup", "SpatialSegments", "SegmentFailed", "machine_function",
+           "quaternion_drift",
            "MAX_QUATERNION_DRIFT", "DEFAULT_RTOL"]
 
 #: Largest ``| |q| - 1 |`` accepted over a run.
@@ -240,7 +242,7 @@ class SpatialResult:
     def tips(self) -> dict:
         """Each appendage's tip displacement from where the rigidly moving undeformed tip
         would be, hub frame, m: ``{name: (3, P)}``."""
-        tips = _machine(self.equations.tips).map(self.t.size)(self.states).full().reshape(
+        tips = machine_function(self.equations.tips).map(self.t.size)(self.states).full().reshape(
             3, -1, self.t.size, order="F") if self.t.size else np.zeros((3, 0, 0))
         return {name: tips[:, k, :] for k, name in enumerate(self.structure.names)}
 
@@ -412,11 +414,7 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
     -------
     SpatialResult
     """
-    if not isinstance(structure, SpatialStructure):
-        raise InputTypeError(f"structure must be a SpatialStructure; got "
-                             f"{type(structure).__name__}")
     t_final = check_real("", "t_final", t_final, minimum=0.0, strict=True, maximum=MAX_T_FINAL)
-    n_modes = spatial_modes("", structure, n_modes)
     rtol = check_real("", "rtol", rtol, minimum=1e-13, maximum=1e-2)
     atol = rtol * 1e-3 if atol is None else check_real("", "atol", atol, minimum=0.0,
                                                        strict=True)
@@ -427,33 +425,9 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
                               f"over t_final = {t_final:g} s")
     if not isinstance(check_accuracy, bool):
         raise InputTypeError(f"check_accuracy must be True or False; got {check_accuracy!r}")
-    equations = spatial_equations(structure, n_modes,
-                                  check_choice("", "variant", variant, SPATIAL_VARIANTS))
-    if wheels is not None:
-        equations = _with_wheels(equations, wheels)
-    elif wheel_speeds is not None:
-        raise InputValueError("wheel_speeds needs wheels (a WheelCluster)")
-    if x0 is None:
-        x_start = initial_state(equations, angular_velocity, quaternion)
-        if wheel_speeds is not None:
-            speeds = check_array("", "wheel_speeds", wheel_speeds, shape=(wheels.count,))
-            for k, (speed, wheel) in enumerate(zip(speeds, wheels.wheels)):
-                if abs(speed) > wheel.speed_limit:
-                    raise InputValueError(
-                        f"wheel_speeds[{k}] must be within the wheel's speed_limit "
-                        f"({wheel.speed_limit:g} rad/s); got {speed!r}")
-            start = equations.layout.n_states - len(equations.layout.wheels)
-            x_start[start:start + wheels.count] = speeds
-    else:
-        x_start = np.array(check_array("", "x0", x0, shape=(equations.layout.n_states,)))
-        norm = float(np.linalg.norm(x_start[0:4]))
-        if not 1e-6 < norm < 1e6:
-            raise InputValueError(f"x0[0:4] is the attitude quaternion and must be non-zero "
-                                  f"(it is normalised); got {x_start[0:4].tolist()}")
-        x_start[0:4] /= norm
-        if np.max(np.abs(x_start[4:])) > 1e12:
-            raise InputValueError("x0 entries must be at most 1e12 in magnitude (m, rad, "
-                                  "m/s, rad/s)")
+    equations, x_start = simulate_spatial_setup(structure, n_modes, variant, wheels,
+                                                wheel_speeds, angular_velocity, quaternion, x0)
+    n_modes = equations.layout.n_modes
     drive, breakpoints = _torque_function(torque)
     times = np.unique(np.concatenate([np.arange(0.0, t_final, step), [t_final]]))
     start = time.perf_counter()
@@ -487,6 +461,69 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
                          n_evaluations=run.evaluations)
 
 
+def simulate_spatial_setup(structure: SpatialStructure, n_modes, variant: str, wheels,
+                           wheel_speeds, angular_velocity, quaternion, x0=None) -> tuple:
+    """The checked model and initial state of a spatial run (:func:`simulate_spatial`'s
+    arguments of the same names).
+
+    Parameters
+    ----------
+    structure : SpatialStructure
+        The hub and its appendages.
+    n_modes : int, sequence of int or mapping of str to int
+        Modes per field.
+    variant : str
+        One of :data:`~flexctl.model.spatial_dynamics.SPATIAL_VARIANTS`.
+    wheels : WheelCluster or None
+        Reaction wheels on the hub.
+    wheel_speeds : array_like or None
+        Their initial speeds, rad/s.
+    angular_velocity : array_like, shape (3,)
+        Initial hub rate, hub frame, rad/s.
+    quaternion : array_like, shape (4,)
+        Initial attitude, scalar first.
+    x0 : array_like, optional
+        The whole initial state instead.
+
+    Returns
+    -------
+    tuple
+        ``(equations, x0)``: the :class:`SpatialEquations` and the initial state.
+    """
+    if not isinstance(structure, SpatialStructure):
+        raise InputTypeError(f"structure must be a SpatialStructure; got "
+                             f"{type(structure).__name__}")
+    n_modes = spatial_modes("", structure, n_modes)
+    equations = spatial_equations(structure, n_modes,
+                                  check_choice("", "variant", variant, SPATIAL_VARIANTS))
+    if wheels is not None:
+        equations = _with_wheels(equations, wheels)
+    elif wheel_speeds is not None:
+        raise InputValueError("wheel_speeds needs wheels (a WheelCluster)")
+    if x0 is None:
+        x_start = initial_state(equations, angular_velocity, quaternion)
+        if wheel_speeds is not None:
+            speeds = check_array("", "wheel_speeds", wheel_speeds, shape=(wheels.count,))
+            for k, (speed, wheel) in enumerate(zip(speeds, wheels.wheels)):
+                if abs(speed) > wheel.speed_limit:
+                    raise InputValueError(
+                        f"wheel_speeds[{k}] must be within the wheel's speed_limit "
+                        f"({wheel.speed_limit:g} rad/s); got {speed!r}")
+            start = equations.layout.n_states - len(equations.layout.wheels)
+            x_start[start:start + wheels.count] = speeds
+    else:
+        x_start = np.array(check_array("", "x0", x0, shape=(equations.layout.n_states,)))
+        norm = float(np.linalg.norm(x_start[0:4]))
+        if not 1e-6 < norm < 1e6:
+            raise InputValueError(f"x0[0:4] is the attitude quaternion and must be non-zero "
+                                  f"(it is normalised); got {x_start[0:4].tolist()}")
+        x_start[0:4] /= norm
+        if np.max(np.abs(x_start[4:])) > 1e12:
+            raise InputValueError("x0 entries must be at most 1e12 in magnitude (m, rad, "
+                                  "m/s, rad/s)")
+    return equations, x_start
+
+
 @lru_cache(maxsize=16)
 def _with_wheels(equations: SpatialEquations, wheels) -> SpatialEquations:
     """The equations with ``wheels`` (kept: a run and its repeats share the compiled
@@ -499,11 +536,22 @@ def _with_wheels(equations: SpatialEquations, wheels) -> SpatialEquations:
 
 
 @lru_cache(maxsize=32)
-def _machine(function):
+def machine_function(function):
     """``function`` (a right-hand side, the tips) from the compile cache, kept: the cache
     finds it by its serialisation, which takes longer than many runs on the plane (0.5 s for
     the two-array model's right-hand side); the tips of a run and its check take 0.15 s on
-    CasADi's virtual machine."""
+    CasADi's virtual machine.
+
+    Parameters
+    ----------
+    function : casadi.Function
+        A spatial model's function.
+
+    Returns
+    -------
+    casadi.Function
+        Its compiled form (CasADi's own where no compiler is found).
+    """
     from .compile_cache import compiled
 
     # finite differences only stand in for derivatives CasADi asks for when it builds an
@@ -529,13 +577,13 @@ class _Plan:
         axis = motion_plane(equations, x0, drive, self.edges) \
             if PLANE_MOTION and equations.cluster is None else None
         self.plane = None if axis is None else plane_motion(equations, axis)
-        self.rhs = _machine(equations.rhs if self.plane is None else self.plane.rhs)
+        self.rhs = machine_function(equations.rhs if self.plane is None else self.plane.rhs)
         self.x0 = np.asarray(x0, dtype=float) if self.plane is None \
             else self.plane.restrict(x0)
 
     def integration(self, rtol: float, atol: float) -> "_Integration":
         """The integration at tolerances ``rtol``, ``atol``, its integrators built."""
-        return _Integration(self, _Segments(self.rhs, self.x0.size, self.drive, rtol, atol,
+        return _Integration(self, SpatialSegments(self.rhs, self.x0.size, self.drive, rtol, atol,
                                             self.line, newton=self.plane is not None))
 
 
@@ -548,7 +596,7 @@ class _Integration:
     """One integration over the plan's output times; called (in any thread), it gives
     ``(status, states (n, P'), message, drift)`` (whole states) or, cancelled, None."""
 
-    def __init__(self, plan: _Plan, segments: "_Segments"):
+    def __init__(self, plan: _Plan, segments: "SpatialSegments"):
         self.plan, self.segments = plan, segments
         self.pieces = []
         times = plan.times
@@ -585,19 +633,19 @@ class _Integration:
                 return None
             try:
                 values = self.segments.advance(a, b, x, wanted)
-            except _Failed as exc:
+            except SegmentFailed as exc:
                 whole = self._whole(states[:, :done])
                 return "failed", whole, f"the integration failed at t = {a:g} s: {exc}", \
-                    _drift(whole)
+                    quaternion_drift(whole)
             if not np.all(np.isfinite(values)):
                 whole = self._whole(states[:, :done])
                 return "diverged", whole, (f"the run diverged between t = {a:g} and {b:g} s: "
-                                           "the state left the finite numbers"), _drift(whole)
+                                           "the state left the finite numbers"), quaternion_drift(whole)
             states[:, done:done + count] = values[:, :count]
             done += count
             x = values[:, -1]
         whole = self._whole(states)
-        drift = _drift(whole)
+        drift = quaternion_drift(whole)
         if drift > MAX_QUATERNION_DRIFT:
             return "failed", whole, (f"the attitude quaternion's norm drifted by {drift:.3g} "
                                      f"(more than {MAX_QUATERNION_DRIFT:g})"), drift
@@ -607,11 +655,11 @@ class _Integration:
         return states if self.plan.plane is None else self.plan.plane.embed(states)
 
 
-class _Failed(Exception):
+class SegmentFailed(Exception):
     """An integration that could not continue."""
 
 
-class _Segments:
+class SpatialSegments:
     """CVODES's Adams-Moulton methods from breakpoint to breakpoint, the torque on a segment
     ``a + b t + c sin(omega (t0 + t))`` in the segment's own time; one integrator per
     distinct output grid, kept. A torque of another form (a Python function) runs on SciPy's
@@ -634,7 +682,24 @@ class _Segments:
     (finite differences at each of CVODES's 4 400 linear setups, 56 evaluations each) cost
     more than the steps saved (297 000 evaluations against 207 600); CVODES's BDF took
     69 000 steps on (b) and 461 000 on (a)'s whole model, whose undamped modes its orders 3
-    to 5 amplify."""
+    to 5 amplify.
+
+    Parameters
+    ----------
+    rhs : casadi.Function
+        ``(x, torque) -> x_t``.
+    n_states : int
+        Length of ``x``.
+    drive : callable
+        The torque, ``t -> (3,)``, with ``segment_form(a, b)`` (its 11 parameters on a
+        segment) where it has one.
+    rtol, atol : float
+        CVODES's tolerances.
+    line : bool
+        A :class:`VectorTorque` line through many samples, integrated in one run.
+    newton : bool, optional
+        Newton's iterations on the Jacobian at each segment's start. Default False.
+    """
 
     def __init__(self, rhs, n_states: int, drive, rtol: float, atol: float, line: bool,
                  newton: bool = False):
@@ -652,11 +717,25 @@ class _Segments:
         return (round(b - a, 15), tuple(np.round(np.asarray(wanted) - a, 15)))
 
     def count(self, pieces) -> int:
-        """Distinct integrators of ``pieces`` (``(a, b, wanted)`` each)."""
+        """Distinct integrators of ``pieces``.
+
+        Parameters
+        ----------
+        pieces : list of tuple
+            ``(a, b, wanted)`` each: a segment's ends (s) and its output times.
+        """
         return len({self._key(a, b, wanted) for a, b, wanted in pieces})
 
     def build(self, a: float, b: float, wanted):
-        """The integrator of the segment ``[a, b]`` onto ``wanted``, built once."""
+        """The integrator of the segment ``[a, b]`` onto ``wanted``, built once.
+
+        Parameters
+        ----------
+        a, b : float
+            The segment's ends, s.
+        wanted : array_like
+            Output times in ``(a, b]``, ascending, ending at ``b``, s.
+        """
         key = self._key(a, b, wanted)
         if key not in self.integrators:
             if len(self.integrators) > MAX_INTEGRATORS:
@@ -723,7 +802,26 @@ class _Segments:
         return ((rates[:, :n] - rates[:, n:]) / steps).ravel(order="F")
 
     def advance(self, a: float, b: float, x, wanted) -> np.ndarray:
-        """The states at ``wanted`` (s, ascending, ending at ``b``), from ``x`` at ``a``."""
+        """The states at ``wanted``, from ``x`` at ``a``.
+
+        Parameters
+        ----------
+        a, b : float
+            The segment's ends, s.
+        x : ndarray, shape (n_states,)
+            The state at ``a``.
+        wanted : array_like
+            Output times in ``(a, b]``, ascending, ending at ``b``, s.
+
+        Returns
+        -------
+        ndarray, shape (n_states, len(wanted))
+
+        Raises
+        ------
+        SegmentFailed
+            When the integration cannot go on (the message says why).
+        """
         if self.form is None:
             return self._scipy(a, b, x, wanted)
         p = np.atleast_1d(a if self.line else self.form(a, b))
@@ -737,7 +835,7 @@ class _Segments:
         try:
             result = integrator(x0=x, p=p)["xf"].full()
         except RuntimeError as exc:
-            raise _Failed(" ".join(str(exc).split())[-300:]) from None
+            raise SegmentFailed(" ".join(str(exc).split())[-300:]) from None
         finally:
             stats = integrator.stats()
             self.steps += int(stats.get("nsteps", 0))
@@ -754,16 +852,23 @@ class _Segments:
             solution = solve_ivp(rate, (a, b), x, method="DOP853", t_eval=wanted,
                                  rtol=self.rtol, atol=self.atol)
         except (ValueError, ArithmeticError) as exc:
-            raise _Failed(str(exc)) from None
+            raise SegmentFailed(str(exc)) from None
         self.evaluations += int(solution.nfev)
         if solution.status != 0 or solution.y.shape[1] != len(wanted):
             if solution.y.size and not np.all(np.isfinite(solution.y)):
                 return np.full((self.n_states, len(wanted)), np.nan)
-            raise _Failed(solution.message)
+            raise SegmentFailed(solution.message)
         return solution.y
 
 
-def _drift(states) -> float:
+def quaternion_drift(states) -> float:
+    """Largest ``| |q| - 1 |`` over a run's states.
+
+    Parameters
+    ----------
+    states : ndarray, shape (n, P)
+        States, the quaternion first.
+    """
     if not states.shape[1]:
         return 0.0
     return float(np.max(np.abs(np.linalg.norm(states[0:4], axis=0) - 1.0)))
@@ -772,7 +877,7 @@ def _drift(states) -> float:
 def _tip_error(equations: SpatialEquations, coarse, fine) -> float:
     """Largest tip difference, relative to each component's peak (at least 1e-12 m)."""
     count = min(coarse.shape[1], fine.shape[1])
-    both = _machine(equations.tips).map(2 * count)(
+    both = machine_function(equations.tips).map(2 * count)(
         np.hstack([coarse[:, :count], fine[:, :count]])).full()
     half = both.shape[1] // 2
     a, b = both[:, :half], both[:, half:]
