@@ -29,7 +29,7 @@ import numpy as np
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["label", "check_real", "check_integer", "check_choice", "check_instance",
-           "check_array", "KeywordOnly"]
+           "check_array", "check_direction", "KeywordOnly"]
 
 
 def label(owner: str, name: str) -> str:
@@ -262,6 +262,30 @@ radius=..., friction=0.0, mass=0.0, support='pinned'); got 2 positional: 2.5, 0.
                                  f"{keyword_form(cls)}; got {len(args)} positional: "
                                  f"{', '.join(map(_short_repr, args))}")
         return super().__new__(cls)
+
+
+def check_direction(owner: str, name: str, value) -> np.ndarray:
+    """A read-only unit 3-vector along ``value`` (finite, not zero; scaled by its largest
+    entry first, so that neither 1e308 nor 1e-300 entries lose the direction).
+
+    Parameters
+    ----------
+    owner : str
+        Who takes the input, or ``""``.
+    name : str
+        The input's name.
+    value : array_like, shape (3,)
+        The direction, any length.
+    """
+    vector = np.array(check_array(owner, name, value, shape=(3,)))
+    largest = float(np.max(np.abs(vector)))
+    if not largest > 0:
+        raise InputValueError(f"{label(owner, name)} must be a non-zero 3-vector; got "
+                              f"{vector.tolist()}")
+    vector = vector / largest
+    vector /= np.linalg.norm(vector)
+    vector.setflags(write=False)
+    return vector
 
 
 def _short_repr(value) -> str:

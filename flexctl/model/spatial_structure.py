@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .checks import KeywordOnly, check_array, check_real
+from .checks import KeywordOnly, check_array, check_direction, check_real
 from .errors import InputTypeError, InputValueError
 from .parameters import RADIUS_RATIO_LIMIT, SUPPORTS, Beam, Hub, carried_masses
 
@@ -45,17 +45,6 @@ MAX_SPATIAL_APPENDAGES = 16
 #: mass matrix's products leave the floating-point range.
 MAX_HUB_INERTIA = 1e15
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
-
-
-def _unit(owner: str, name: str, value) -> np.ndarray:
-    vector = np.array(check_array(owner, name, value, shape=(3,)))
-    norm = float(np.linalg.norm(vector))
-    if not norm > 1e-12:
-        raise InputValueError(f"{owner}.{name} must be a non-zero 3-vector; got "
-                              f"{vector.tolist()}")
-    vector /= norm
-    vector.setflags(write=False)
-    return vector
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -181,8 +170,8 @@ class SpatialAppendage(KeywordOnly):
                 "appendage.name must be an identifier (letters, digits and underscores, not "
                 f"starting with a digit); got {self.name[:80]!r}")
         owner = f"appendage {self.name!r}"
-        direction = _unit(owner, "direction", self.direction)
-        normal = _unit(owner, "normal", self.normal)
+        direction = check_direction(owner, "direction", self.direction)
+        normal = check_direction(owner, "normal", self.normal)
         if abs(float(direction @ normal)) > PERPENDICULAR_TOLERANCE:
             raise InputValueError(
                 f"{owner}.normal must be perpendicular to its direction; got direction "

@@ -72,7 +72,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .checks import KeywordOnly, check_array, check_choice, check_real
+from .checks import KeywordOnly, check_choice, check_direction, check_real
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["Wheel", "WheelCluster", "with_wheels", "DISTRIBUTIONS", "SPEED_LIMIT_BAND",
@@ -138,13 +138,7 @@ class Wheel(KeywordOnly):
 
     def __post_init__(self):
         owner = "wheel"
-        axis = np.array(check_array(owner, "axis", self.axis, shape=(3,)))
-        norm = float(np.linalg.norm(axis))
-        if not norm > 1e-12:
-            raise InputValueError(f"wheel.axis must be a non-zero 3-vector; got {axis.tolist()}")
-        axis /= norm
-        axis.setflags(write=False)
-        object.__setattr__(self, "axis", axis)
+        object.__setattr__(self, "axis", check_direction(owner, "axis", self.axis))
         # beyond any wheel built (1e5 rad/s is a million rpm)
         for name, most in (("inertia", 1e6), ("torque_limit", 1e9), ("speed_limit", 1e5)):
             object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
@@ -319,12 +313,7 @@ class WheelCluster(KeywordOnly):
         _no_axis(wheel)
         angle = check_real("wheels", "pyramid_angle", angle, minimum=0.0, strict=True,
                            maximum=90.0)
-        axis = np.array(check_array("wheels", "pyramid_axis", pyramid_axis, shape=(3,)))
-        norm = float(np.linalg.norm(axis))
-        if not norm > 1e-12:
-            raise InputValueError(f"wheels.pyramid_axis must be a non-zero 3-vector; got "
-                                  f"{axis.tolist()}")
-        axis /= norm
+        axis = check_direction("wheels", "pyramid_axis", pyramid_axis)
         reference = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
         first = reference - (reference @ axis) * axis
         first /= np.linalg.norm(first)

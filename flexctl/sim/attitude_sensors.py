@@ -35,7 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..model.checks import KeywordOnly, check_array, check_integer, check_real
+from ..model.checks import (KeywordOnly, check_array, check_direction, check_integer,
+                            check_real)
 from ..model.errors import InputTypeError, InputValueError
 from .quaternions import from_rotation_vector, product
 
@@ -90,13 +91,8 @@ class StarTracker(KeywordOnly):
             owner, "sample_time", self.sample_time, minimum=1e-6, maximum=1e4))
         object.__setattr__(self, "latency", check_real(owner, "latency", self.latency,
                                                        minimum=0.0, maximum=10.0))
-        axis = np.array(check_array(owner, "boresight", self.boresight, shape=(3,)))
-        if not np.linalg.norm(axis) > 1e-12:
-            raise InputValueError(f"star_tracker.boresight must be a non-zero 3-vector; got "
-                                  f"{axis.tolist()}")
-        axis = axis / np.linalg.norm(axis)
-        axis.setflags(write=False)
-        object.__setattr__(self, "boresight", axis)
+        object.__setattr__(self, "boresight", check_direction(owner, "boresight",
+                                                              self.boresight))
         if isinstance(self.outages, (str, bytes)) or not hasattr(self.outages, "__iter__"):
             raise InputTypeError(f"star_tracker.outages must be a sequence of (start, end) "
                                  f"pairs, s; got {type(self.outages).__name__}")

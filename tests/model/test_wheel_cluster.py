@@ -194,3 +194,19 @@ def test_bad_wheels_are_refused_by_name():
             wheels=(Wheel(**good),)), wheel_speeds=[400.0])
     with pytest.raises(InputTypeError, match="WheelCluster"):
         simulate_spatial(craft(), 1.0, None, n_modes=1, wheels=Wheel(**good))
+
+
+def test_directions_of_any_length_keep_their_direction():
+    """An axis of 1e308 entries (whose norm overflows) or of 1e-300 (whose norm underflows)
+    is the same direction, for a wheel, an appendage and a pyramid."""
+    half = np.array([1.0, 1.0, 0.0]) / math.sqrt(2)
+    for scale in (1e308, 1e-300):
+        wheel = Wheel(axis=scale * np.array([1.0, 1.0, 0.0]), inertia=0.01, torque_limit=0.2,
+                      speed_limit=300.0)
+        np.testing.assert_allclose(wheel.axis, half, rtol=1e-15)
+        wing = SpatialAppendage(**{**WING, "direction": (0.0, scale, 0.0),
+                                   "normal": (0.0, 0.0, scale)})
+        np.testing.assert_array_equal(wing.direction, [0.0, 1.0, 0.0])
+        cluster = WheelCluster.pyramid(angle=45.0, pyramid_axis=(0.0, 0.0, scale),
+                                       inertia=0.01, torque_limit=0.2, speed_limit=300.0)
+        np.testing.assert_allclose(cluster.axes[2], math.sqrt(0.5), rtol=1e-15)
