@@ -12,6 +12,7 @@ module                  contents
 ``tracking``            feedforward plus LQR feedback about an optimal slew
 ``observer``            a sampled discrete Kalman filter of noisy sensor readings
 ``mekf``                a multiplicative extended Kalman filter of attitude and gyro bias
+``quaternion``          three-axis quaternion feedback (proportional, rate, integral)
 ``actuated``            laws through an actuator: wheel-lag LQR, DC-motor voltage, limits
 ``iosys``               the laws as python-control I/O systems for ``control.interconnect``
 ======================  ========================================================================

@@ -40,6 +40,15 @@ def run_spatial_scene(scene: SpatialScene, progress=None) -> SpatialResult:
     -------
     SpatialResult
     """
+    if scene.loop is not None:
+        from ..sim.spatial_loop import simulate_spatial_loop
+
+        return simulate_spatial_loop(
+            scene.structure, scene.t_final, scene.loop.law, sample_time=scene.loop.sample_time,
+            n_modes=scene.n_modes, variant=scene.variant, wheels=scene.wheels,
+            wheel_speeds=scene.wheel_speeds, angular_velocity=scene.angular_velocity,
+            quaternion=scene.quaternion, sensors=scene.loop.sensors,
+            estimator=scene.loop.estimator(scene.quaternion), rtol=scene.rtol).result
     return simulate_spatial(scene.structure, scene.t_final, scene.maneuver,
                             n_modes=scene.n_modes, angular_velocity=scene.angular_velocity,
                             quaternion=scene.quaternion, rtol=scene.rtol,

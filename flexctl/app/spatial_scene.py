@@ -36,6 +36,8 @@ into a :class:`SpatialScene`. The tables (every key is checked, every error name
   wheels along ``x``, ``y``, ``z``) or ``"pyramid"`` (four, ``pyramid_angle`` degrees from
   ``pyramid_axis``, default ``z``) with one ``[actuator.wheel]`` table of the fields they
   share. ``[initial] wheel_speeds`` gives their initial speeds (rad/s, relative to the hub).
+- ``[controller]`` and ``[sensors]`` (optional): an attitude loop
+  (:mod:`flexctl.app.spatial_control`).
 """
 
 from __future__ import annotations
@@ -70,6 +72,8 @@ _KEYS = {
     "appendages": None,
     "model": {"variant", "modes", "tolerance"},
     "initial": {"angular_velocity", "quaternion", "wheel_speeds"},
+    "controller": None,
+    "sensors": None,
     "actuator": {"kind", "distribution", "null_gain", "bias_speed", "wheels", "arrangement",
                  "pyramid_angle", "pyramid_axis", "wheel"},
     "maneuver": {"kind", "times", "values", "interpolation", "file", "peak_torque",
@@ -168,6 +172,8 @@ class SpatialScene:
         Their initial speeds relative to the hub, rad/s.
     mode_choice : SpatialModeChoice or None
         With ``modes = "auto"``, how the counts were chosen.
+    loop : SpatialLoop or None
+        The attitude loop of ``[controller]`` and ``[sensors]``.
     """
 
     name: str
@@ -185,6 +191,7 @@ class SpatialScene:
     wheels: WheelCluster | None = None
     wheel_speeds: np.ndarray | None = None
     mode_choice: object = None
+    loop: object = None
 
 
 def is_spatial(data: dict) -> bool:
@@ -263,6 +270,14 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
                                  f"speed_limit ({wheel.speed_limit:g} rad/s); got {speed!r}")
     t_final, output_step, rtol = _simulation(_table(data, "simulation"))
     n_modes, variant, choice = _model(model, structure, maneuver, t_final, spin)
+    from .spatial_control import spatial_loop
+
+    loop = spatial_loop(_table(data, "controller", required=False),
+                        _table(data, "sensors", required=False), structure,
+                        quaternion / np.linalg.norm(quaternion))
+    if loop is not None and maneuver is not None:
+        raise SceneError("a spatial scene with a [controller] takes maneuver.kind = 'none' "
+                         "(the law commands the torque)")
     description = data.get("description", "")
     if not isinstance(description, str):
         raise SceneError(f"description must be a string; got {description!r:.80}")
@@ -270,7 +285,7 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
                         angular_velocity=spin, quaternion=quaternion / np.linalg.norm(quaternion),
                         maneuver=maneuver, t_final=t_final, output_step=output_step, rtol=rtol,
                         variant=variant, description=description, data=data, wheels=wheels,
-                        wheel_speeds=wheel_speeds, mode_choice=choice)
+                        wheel_speeds=wheel_speeds, mode_choice=choice, loop=loop)
 
 
 _WHEEL_KEYS = {f.name for f in fields(Wheel)}
