@@ -10,7 +10,7 @@ each gain a 3 x 3 matrix (N m per rad, N m s per rad, N m per rad s), saturated 
 ``torque_limit``. :meth:`QuaternionFeedback.design` sets them from the rigid inertia for a
 bandwidth and damping on each principal axis, ``K_p = J w_n^2``, ``K_d = 2 zeta w_n J`` (and
 ``K_i = K_p / integral_time``); a flexible structure wants ``bandwidth`` well below its first
-mode. The integral runs in a session (:meth:`QuaternionFeedback.start`), which is what
+mode. The integral is held while the command saturates (no wind-up). The integral runs in a session (:meth:`QuaternionFeedback.start`), which is what
 :func:`flexctl.sim.spatial_loop.simulate_spatial_loop` calls.
 """
 
@@ -176,7 +176,7 @@ class QuaternionFeedback(KeywordOnly):
 
 class QuaternionFeedbackSession:
     """A running :class:`QuaternionFeedback` with its integral (rectangle rule between
-    calls).
+    calls), held while the command saturates (conditional integration: no wind-up).
 
     Parameters
     ----------
@@ -208,8 +208,11 @@ class QuaternionFeedbackSession:
         """
         law = self.law
         error = attitude_error(law.target, attitude)
+        feedback = -law.kp @ error - law.kd @ (np.asarray(rate, float) - law.target_rate)
         if self.last is not None:
-            self.integral = self.integral + error * (t - self.last)
+            grown = self.integral + error * (t - self.last)
+            command = feedback - law.ki @ grown
+            if law.torque_limit is None or np.all(np.abs(command) <= law.torque_limit):
+                self.integral = grown
         self.last = t
-        return law._limited(-law.kp @ error - law.kd @ (np.asarray(rate, float) - law.target_rate)
-                            - law.ki @ self.integral)
+        return law._limited(feedback - law.ki @ self.integral)
