@@ -55,6 +55,15 @@ viscous friction beyond a few ``beta``); below ``friction_smoothing`` (Basilisk'
 **Power drawn**: ``sum_k max(u_k Omega_k, 0)`` W (no regeneration, electrical equal to
 mechanical power).
 
+**Imbalance jitter** (optional, Basilisk's ``JitterSimple``): a wheel with a static imbalance
+``U_s`` (kg m) or a dynamic one ``U_d`` (kg m^2) has its spin angle ``theta_k`` as a state
+(``theta_t = Omega``) and puts on the hub the torque ``r_k x F + U_d Omega^2 w2`` with ``F =
+U_s Omega^2 w2``, ``w2 = cos(theta) w2_0 + sin(theta) w3_0`` turning about the spin axis
+(``w2_0``, ``w3_0`` perpendicular to it at ``theta = 0``) and ``r_k`` the wheel's
+``position``. Like Basilisk's simple model this is a disturbance from outside the
+structure's dynamics (the momentum it adds is not taken from anywhere), and on a pinned hub
+only: the force ``F`` itself would move a free hub, which this model's hub torque cannot.
+
 Examples
 --------
 >>> from flexctl.model.wheel_cluster import WheelCluster
@@ -72,7 +81,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .checks import KeywordOnly, check_choice, check_direction, check_real
+from .checks import KeywordOnly, check_array, check_choice, check_direction, check_real
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["Wheel", "WheelCluster", "with_wheels", "DISTRIBUTIONS", "SPEED_LIMIT_BAND",
@@ -121,6 +130,13 @@ class Wheel(KeywordOnly):
         Default 0.
     power_limit : float or None, optional
         Largest mechanical power ``|u Omega|``, W (> 0); None (default): none.
+    static_imbalance : float, optional
+        ``U_s``, kg m (>= 0). Default 0.
+    dynamic_imbalance : float, optional
+        ``U_d``, kg m^2 (>= 0). Default 0.
+    position : array_like, shape (3,), optional
+        The wheel's centre in the hub frame, m (the lever of the static imbalance's force).
+        Default the hub's centre.
     """
 
     axis: np.ndarray
@@ -135,6 +151,9 @@ class Wheel(KeywordOnly):
     friction_smoothing: float = FRICTION_SMOOTHING
     dead_band: float = 0.0
     power_limit: float | None = None
+    static_imbalance: float = 0.0
+    dynamic_imbalance: float = 0.0
+    position: np.ndarray = (0.0, 0.0, 0.0)
 
     def __post_init__(self):
         owner = "wheel"
@@ -171,15 +190,28 @@ class Wheel(KeywordOnly):
             object.__setattr__(self, "power_limit", check_real(
                 owner, "power_limit", self.power_limit, minimum=0.0, strict=True,
                 maximum=1e12))
+        for name in ("static_imbalance", "dynamic_imbalance"):
+            object.__setattr__(self, name, check_real(owner, name, getattr(self, name),
+                                                      minimum=0.0, maximum=1e3))
+        position = check_array(owner, "position", self.position, shape=(3,))
+        if np.max(np.abs(position)) > 1e6:
+            raise InputValueError(f"wheel.position must be within 1e6 m of the hub's centre; "
+                                  f"got {position.tolist()}")
+        object.__setattr__(self, "position", position)
+
+    @property
+    def jitters(self) -> bool:
+        """Whether the wheel has an imbalance (and its spin angle a state)."""
+        return self.static_imbalance > 0 or self.dynamic_imbalance > 0
 
     def __eq__(self, other):
         return isinstance(other, Wheel) and all(
-            np.array_equal(getattr(self, n), getattr(other, n)) if n == "axis"
+            np.array_equal(getattr(self, n), getattr(other, n)) if n in ("axis", "position")
             else getattr(self, n) == getattr(other, n) for n in self.__dataclass_fields__)
 
     def __hash__(self):
-        return hash(tuple(self.axis.tobytes() if n == "axis" else getattr(self, n)
-                          for n in self.__dataclass_fields__))
+        return hash(tuple(getattr(self, n).tobytes() if n in ("axis", "position")
+                          else getattr(self, n) for n in self.__dataclass_fields__))
 
     def friction(self, speed):
         """The friction torque magnitude law ``F(Omega)`` (the rotor feels ``-F``).
@@ -352,9 +384,17 @@ class WheelCluster(KeywordOnly):
     @property
     def state_names(self) -> tuple:
         """The cluster's states: ``wheel<k>.speed`` (rad/s, relative to the hub), then
-        ``wheel<k>.motor_torque`` (N m) of each lagged wheel."""
+        ``wheel<k>.motor_torque`` (N m) of each lagged wheel, then ``wheel<k>.angle`` (rad)
+        of each wheel with an imbalance."""
         return tuple([f"{n}.speed" for n in self.names]
-                     + [f"{self.names[k]}.motor_torque" for k in self.lagged])
+                     + [f"{self.names[k]}.motor_torque" for k in self.lagged]
+                     + [f"{self.names[k]}.angle" for k in self.jittering])
+
+    @property
+    def jittering(self) -> tuple:
+        """Indices of the wheels with an imbalance (each adds its spin angle, rad, as a
+        state)."""
+        return tuple(k for k, w in enumerate(self.wheels) if w.jitters)
 
     @property
     def null_target(self) -> np.ndarray:
@@ -421,6 +461,24 @@ def _delivered(wheel: Wheel, asked, speed, lag_state):
     return ca.if_else(u * speed > 0, room * u, u), rate
 
 
+def _jitter(cluster: WheelCluster, speeds, angles):
+    """The imbalances' torque on the hub (module Notes), CasADi, shape (3,)."""
+    import casadi as ca
+
+    torque = ca.SX.zeros(3, 1)
+    for j, k in enumerate(cluster.jittering):
+        wheel = cluster.wheels[k]
+        g = wheel.axis
+        first = np.cross(g, [1.0, 0.0, 0.0] if abs(g[0]) < 0.9 else [0.0, 1.0, 0.0])
+        first /= np.linalg.norm(first)
+        second = np.cross(g, first)
+        w2 = ca.cos(angles[j]) * ca.DM(first) + ca.sin(angles[j]) * ca.DM(second)
+        square = speeds[k] ** 2
+        torque += ca.cross(ca.DM(wheel.position), wheel.static_imbalance * square * w2) \
+            + wheel.dynamic_imbalance * square * w2
+    return torque
+
+
 def with_wheels(equations, cluster: WheelCluster):
     """A spatial model's equations with a wheel cluster on its hub.
 
@@ -454,8 +512,13 @@ def with_wheels(equations, cluster: WheelCluster):
     n0, n = inner.n_states, cluster.count
     x = ca.SX.sym("x", layout.n_states)
     command = ca.SX.sym("torque", 3)
+    if cluster.jittering and inner.free:
+        raise InputValueError("wheel imbalance jitter is for a pinned hub: its force would "
+                              "move a free hub, which the jitter model does not carry")
     structure, speeds = x[:n0], x[n0:n0 + n]
-    lag_states = x[n0 + n:]
+    n_lag = len(cluster.lagged)
+    lag_states = x[n0 + n:n0 + n + n_lag]
+    angles = x[n0 + n + n_lag:]
     c = inner.n_coordinates
     w = structure[c:c + 3]
     g = ca.DM(cluster.axes)
@@ -472,11 +535,13 @@ def with_wheels(equations, cluster: WheelCluster):
     friction = -ca.vertcat(*[wheel.friction(speeds[k])
                              for k, wheel in enumerate(cluster.wheels)])
     spin = inertia * (ca.mtimes(g.T, w) + speeds)          # h_k, N m s
-    hub_torque = -ca.mtimes(g, motor + friction) - ca.cross(w, ca.mtimes(g, spin))
+    hub_torque = -ca.mtimes(g, motor + friction) - ca.cross(w, ca.mtimes(g, spin)) \
+        + _jitter(cluster, speeds, angles)
     rate = equations.rhs(structure, hub_torque)
     w_t = rate[c:c + 3]
     speeds_t = (motor + friction) / inertia - ca.mtimes(g.T, w_t)
-    full_rate = ca.vertcat(rate, speeds_t, *lag_rates)
+    full_rate = ca.vertcat(rate, speeds_t, *lag_rates,
+                           *[speeds[k] for k in cluster.jittering])
     kinetic, elastic = equations.energy(structure)
     angular, linear = equations.momentum(structure)
     quaternion = structure[0:4]
