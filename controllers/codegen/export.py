@@ -42,6 +42,7 @@ from flexctl.sim.atomic_files import staged_folder
 
 from .c_source import RETURN_CODES, c_sources
 from .laws import program_for
+from .precision import PRECISION_FLAGS, check_precision
 from .program import ControllerProgram
 
 __all__ = ["export_c", "CExport", "CompiledLaw", "CompiledController", "CompileError",
@@ -100,6 +101,8 @@ class CExport:
         Header, source, example main, Makefile.
     plant_names : tuple of str
         The plant's state names (what a state law reads).
+    precision : {"double", "float"}
+        The C type of every real of the law.
     """
 
     directory: Path
@@ -107,6 +110,7 @@ class CExport:
     sizes: dict
     files: tuple
     plant_names: tuple = ()
+    precision: str = "double"
 
     @property
     def source(self) -> Path:
@@ -130,7 +134,9 @@ class CExport:
             The C compiler (:func:`find_compiler`). Default ``$CC``, else ``cc``, ``gcc`` or
             ``clang`` on the path.
         flags : sequence of str, optional
-            Flags of the compilation of the source. Default :data:`C_FLAGS`.
+            Flags of the compilation of the source. Default :data:`C_FLAGS`, and in float
+            :data:`~controllers.codegen.precision.PRECISION_FLAGS` (a promotion to double
+            is an error).
 
         Raises
         ------
@@ -140,6 +146,7 @@ class CExport:
         """
         name, compiler = _compiler(cc)
         flags = [str(flag) for flag in flags]
+        flags += [f for f in PRECISION_FLAGS[self.precision] if f not in flags]
         library = _library_folder() / f"lib{PREFIX}-{os.urandom(6).hex()}.so"
         with tempfile.TemporaryDirectory(prefix="flexctl-build-") as build:
             obj = Path(build, f"{PREFIX}.o")
@@ -160,7 +167,8 @@ class CExport:
         return {"kind": program.kind, "description": program.description,
                 "input": program.input_kind, "input_names": list(program.input_names),
                 "output": f"{program.output_name} ({program.output_unit})",
-                "sample_time_s": program.sample_time, "memory_doubles": program.n_memory,
+                "precision": self.precision,
+                "sample_time_s": program.sample_time,
                 **{k: int(v) for k, v in self.sizes.items()}, **program.info,
                 "files": [str(f) for f in self.files]}
 
@@ -259,7 +267,7 @@ def _text_size(obj: Path) -> int | None:
 
 
 def export_c(controller, plant, directory, *, sample_time: float | None = None,
-             initial_state=None) -> CExport:
+             initial_state=None, precision: str = "double") -> CExport:
     """Write ``controller`` (bound to ``plant``) as C files in ``directory``.
 
     Parameters
@@ -277,6 +285,14 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
         Sample time, s: to discretise an LQG's estimator at, or to sample a static law at.
     initial_state : array_like, optional
         Plant state where an estimator starts, shape (n,); default zero.
+    precision : {"double", "float"}, optional
+        The C type of every real: the interface, the memory, the constants and the
+        arithmetic, the QP's included (:mod:`~controllers.codegen.precision`). In float the
+        law's conditioning is checked first (:func:`~controllers.codegen.conditioning.
+        check_float`): refused where single precision breaks it, a
+        :class:`~controllers.codegen.conditioning.PrecisionWarning` where it loses much of
+        its accuracy. A ``ControllerProgram`` given as ``controller`` keeps the QP
+        tolerances it was built with. Default ``"double"``.
 
     Returns
     -------
@@ -286,7 +302,9 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     ------
     flexctl.model.errors.InputValueError
         If ``directory`` is a file, or a folder stands at one of the files' names (the
-        folder is left as it was).
+        folder is left as it was), or ``precision`` is not a precision.
+    ExportRefused
+        If the law has no C form, or single precision breaks it.
     """
     if isinstance(directory, bool) or not isinstance(directory, (str, os.PathLike)):
         raise InputTypeError(f"export directory must be a path; got {type(directory).__name__}")
@@ -294,18 +312,24 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
 
     if not isinstance(plant, Model):
         raise InputTypeError(f"export plant must be a flexctl Model; got {type(plant).__name__}")
+    precision = check_precision(precision)
     program = controller if isinstance(controller, ControllerProgram) else program_for(
-        controller, plant, sample_time=sample_time, initial_state=initial_state)
+        controller, plant, sample_time=sample_time, initial_state=initial_state,
+        precision=precision)
     directory = Path(directory)
     if directory.exists() and not directory.is_dir():
         raise InputValueError(f"export directory {str(directory)!r} is a file")
-    sources = c_sources(program, PREFIX, plant_states=plant.n_states)
+    if precision == "float":
+        from .conditioning import check_float
+        check_float(program)
+    sources = c_sources(program, PREFIX, plant_states=plant.n_states, precision=precision)
     texts = (sources.header, sources.source, sources.main, sources.makefile)
     with staged_folder(directory, names=C_FILES) as stage:
         for name, text in zip(C_FILES, texts):
             (stage / name).write_text(text, encoding="utf-8")
     return CExport(directory, program, sources.sizes,
-                   tuple(directory / name for name in C_FILES), tuple(plant.state_names))
+                   tuple(directory / name for name in C_FILES), tuple(plant.state_names),
+                   precision)
 
 
 class CompiledLaw:
@@ -336,20 +360,21 @@ class CompiledLaw:
         self.export, self.library = export, library
         self.compile_time_s, self.code_bytes = compile_time_s, code_bytes
         lib = ctypes.CDLL(str(library))
+        real, dtype = ((ctypes.c_float, np.float32) if export.precision == "float"
+                       else (ctypes.c_double, np.float64))
         lib.flexctl_ctrl_size.restype = ctypes.c_size_t
         lib.flexctl_ctrl_size.argtypes = []
         lib.flexctl_ctrl_init.restype = ctypes.c_int
         lib.flexctl_ctrl_init.argtypes = [ctypes.c_void_p]
         lib.flexctl_ctrl_step.restype = ctypes.c_int
-        lib.flexctl_ctrl_step.argtypes = [ctypes.c_void_p, ctypes.c_double,
-                                          ctypes.POINTER(ctypes.c_double),
-                                          ctypes.POINTER(ctypes.c_double)]
-        self._lib = lib
+        lib.flexctl_ctrl_step.argtypes = [ctypes.c_void_p, real, ctypes.POINTER(real),
+                                          ctypes.POINTER(real)]
+        self._lib, self._real = lib, real
         self.struct_bytes = int(lib.flexctl_ctrl_size())
         # doubles: aligned for every member of the struct
         self._memory = np.zeros(-(-self.struct_bytes // 8) + 1)
-        self._input = np.zeros(max(export.program.n_in, 1))
-        self._u = ctypes.c_double(0.0)
+        self._input = np.zeros(max(export.program.n_in, 1), dtype=dtype)
+        self._u = real(0.0)
         self.init()
 
     @property
@@ -385,8 +410,8 @@ class CompiledLaw:
                                   f"({self.program.input_kind}); got {v.size}")
         self._input[:v.size] = v
         code = self._lib.flexctl_ctrl_step(
-            self._memory.ctypes.data, ctypes.c_double(float(t)),
-            self._input.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), ctypes.byref(self._u))
+            self._memory.ctypes.data, self._real(float(t)),
+            self._input.ctypes.data_as(ctypes.POINTER(self._real)), ctypes.byref(self._u))
         return float(self._u.value), int(code)
 
     def controller(self, measure=None) -> "CompiledController":

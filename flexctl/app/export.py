@@ -145,8 +145,8 @@ def format_export(summary: dict) -> str:
     lines = [f"{summary['scene']}: {summary['description']}",
              f"  input: {summary['input']} ({len(summary['input_names'])} entries), output: "
              f"{summary['output']}, sample time: {summary['sample_time_s']:g} s",
-             f"  memory: {summary['memory_doubles']} doubles; work: "
-             f"{summary['work_doubles']} doubles, {summary['work_ints']} integers"]
+             f"  precision: {summary['precision']}; memory: {summary['memory_reals']} reals; "
+             f"work: {summary['work_reals']} reals, {summary['work_ints']} integers"]
     if summary.get("compiled"):
         lines.append(f"  compiled: struct {summary['struct_bytes']} bytes, code "
                      f"{summary['code_bytes']} bytes, {summary['compile_time_s']:.2f} s; "
