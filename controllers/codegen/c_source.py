@@ -390,7 +390,21 @@ int main(int argc, char **argv) {{
 
 
 def _makefile(prefix, real) -> str:
+    from .targets import TARGETS, target_flags
+
     extra = "".join(" " + flag for flag in PRECISION_FLAGS[real])
+    embedded = [target for target in TARGETS.values() if target.embedded]
+    rules = "".join(
+        f"\n# {t.name}: the law as a static library for a {t.name}, built freestanding at "
+        f"the flags\n# flexctl checks it with (each function's stack use in "
+        f"{prefix}_{t.name}.su)\n"
+        f"{t.name}: lib{prefix}_{t.name}.a\n\n"
+        f"lib{prefix}_{t.name}.a: {prefix}.c {prefix}.h\n"
+        f"\t{t.compiler} {' '.join(target_flags(t, real))} -c {prefix}.c "
+        f"-o {prefix}_{t.name}.o\n"
+        f"\t{t.tools}ar rcs $@ {prefix}_{t.name}.o\n" for t in embedded)
+    names = " ".join(t.name for t in embedded)
+    cleaned = " ".join(f"{prefix}_{t.name}.o lib{prefix}_{t.name}.a" for t in embedded)
     return textwrap.dedent(f"""\
         # Builds the exported law as an object, a static library and the example program.
         CC ?= cc
@@ -409,7 +423,7 @@ def _makefile(prefix, real) -> str:
         \t$(CC) $(CFLAGS) main.c lib{prefix}.a $(LDLIBS) -o $@
 
         clean:
-        \trm -f {prefix}.o lib{prefix}.a {prefix}_demo
+        \trm -f {prefix}.o lib{prefix}.a {prefix}_demo {cleaned} *.su *.ci
 
-        .PHONY: all clean
-        """)
+        .PHONY: all clean {names}
+        """) + rules

@@ -171,6 +171,11 @@ def _parser() -> argparse.ArgumentParser:
     export.add_argument("--loop-check", action="store_true",
                         help="also fly the slew with the law compiled in double and in float "
                         "and report what single precision changed")
+    export.add_argument("--target", choices=("host", "cortex-m4", "cortex-m7"),
+                        default="host",
+                        help="also build the law freestanding for this processor with "
+                        "Debian's arm-none-eabi-gcc (hard float, -Werror) and report its code, "
+                        "constant, RAM and stack sizes (default host: the host build only)")
     export.add_argument("--no-compile", action="store_true",
                         help="write the files only")
     export.set_defaults(func=_cmd_export)
@@ -456,7 +461,7 @@ def _cmd_export(args) -> int:
             out = out if out is not None else DEFAULT_RUN_DIR / scene.name / "c"
             summary = export_scene(scene, out, sample_time=args.sample_time,
                                    compile=not args.no_compile, precision=args.precision,
-                                   loop_check=args.loop_check)
+                                   loop_check=args.loop_check, target=args.target)
     except (InputError, CompileError) as exc:
         return _error(exc)
     except OSError as exc:

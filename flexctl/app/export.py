@@ -62,7 +62,7 @@ def _check(program, law, plant, seed: int = 0) -> float:
 
 def export_scene(scene, out, *, sample_time: float | None = None, compile: bool = True,
                  cc: str | None = None, precision: str = "double",
-                 loop_check: bool = False) -> dict:
+                 loop_check: bool = False, target: str = "host") -> dict:
     """Design ``scene``'s controller, write it as C in ``out``, compile and check it.
 
     Parameters
@@ -87,6 +87,10 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
         Also fly the slew with the law compiled in double and in float and record the
         differences (``precision_in_the_loop``, :func:`~flexctl.app.export_precision.
         compare_precisions`). Default False.
+    target : {"host", "cortex-m4", "cortex-m7"}, optional
+        Also build the law for this processor (:func:`controllers.codegen.targets.
+        build_for_target`) and record its sizes and stack (``target_build``); the host's
+        compiler still checks it against the program. Default ``"host"``.
 
     Returns
     -------
@@ -108,8 +112,13 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
     """
     from controllers import from_spec
     from controllers.codegen import C_FILES, CompileError, export_c
+    from controllers.codegen.targets import build_for_target, check_target, \
+        find_target_compiler
 
     out = Path(out)
+    chosen = check_target(target)
+    if compile and chosen.embedded:
+        find_target_compiler(chosen)            # missing cross tools: before the design
     with staged_folder(out, names=(*C_FILES, SUMMARY_FILE)) as stage:
         plant = scene.build_model()
         built = from_spec(scene, plant)
@@ -125,6 +134,8 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
         if compile:
             try:
                 summary.update(_compiled_check(exported, plant, cc))
+                if chosen.embedded:
+                    summary["target_build"] = build_for_target(exported, chosen).as_dict()
                 if loop_check and summary["compiled"]:
                     from .export_precision import compare_precisions
                     summary["precision_in_the_loop"] = compare_precisions(
@@ -174,6 +185,14 @@ def format_export(summary: dict) -> str:
         lines.append(f"  {summary['note']}")
     for finding in summary.get("float_conditioning", ()):
         lines.append(f"  float: {finding['reason']} ({finding['verdict']})")
+    if "target_build" in summary:
+        build = summary["target_build"]
+        lines.append(f"  {build['target']} ({build['precision']}): code {build['code_bytes']} "
+                     f"bytes, constants {build['constant_bytes']} bytes, static RAM "
+                     f"{build['static_ram_bytes']} bytes, struct {build['struct_bytes']} "
+                     f"bytes, stack {build['stack_bytes']} bytes per step"
+                     + ("; double arithmetic in software" if build["software_double"]
+                        else ""))
     if "precision_in_the_loop" in summary:
         from .export_precision import format_comparison
         lines.append(format_comparison(summary["precision_in_the_loop"]))
