@@ -41,50 +41,19 @@ from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.atomic_files import staged_folder
 
 from .c_source import RETURN_CODES, c_sources
+from .compiler import (C_FLAGS, MESSAGE_LINES, CompileError, compiler_of, find_compiler,
+                       run_compiler)
 from .laws import program_for
 from .precision import PRECISION_FLAGS, check_precision
 from .program import ControllerProgram
 
 __all__ = ["export_c", "CExport", "CompiledLaw", "CompiledController", "CompileError",
-           "C_FLAGS", "C_FILES", "find_compiler", "MESSAGE_LINES"]
+           "C_FLAGS", "C_FILES", "find_compiler", "MESSAGE_LINES"]     # the compiler's: re-exported
 
-#: Flags every export is checked with.
-C_FLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-Werror")
 PREFIX = "flexctl_ctrl"
 #: The files :func:`export_c` writes, in the order of :attr:`CExport.files`.
 C_FILES = (f"{PREFIX}.h", f"{PREFIX}.c", "main.c", "Makefile")
-#: Lines of the compiler's messages a :class:`CompileError` shows whole; of longer messages it
-#: shows the first tenth of these and the last 40 (the first error and the last).
-MESSAGE_LINES = 60
 _CODES = {value: name for name, value, _ in RETURN_CODES}
-
-
-class CompileError(RuntimeError):
-    """The C compiler refused an export (its messages attached), or there is none."""
-
-
-def find_compiler(cc: str | None = None) -> str:
-    """The C compiler's path: ``cc``, else ``$CC``, else ``cc``/``gcc``/``clang`` on the path.
-
-    Parameters
-    ----------
-    cc : str, optional
-        A compiler's name or path, tried first. Default: none given.
-
-    Raises
-    ------
-    CompileError
-        If none of them is found.
-    """
-    return _compiler(cc)[1]
-
-
-def _compiler(cc: str | None = None) -> tuple:
-    """``(name, path)`` of the C compiler :func:`find_compiler` finds: the name as given."""
-    for name in ([cc] if cc else []) + [os.environ.get("CC")] + ["cc", "gcc", "clang"]:
-        if name and shutil.which(name):
-            return name, shutil.which(name)
-    raise CompileError("no C compiler found (set CC, or install cc, gcc or clang)")
 
 
 @dataclass(frozen=True, eq=False)
@@ -144,7 +113,7 @@ class CExport:
             No compiler, or it failed: its name, exit status and messages are in the error
             (the first and last lines of long messages, :data:`MESSAGE_LINES`).
         """
-        name, compiler = _compiler(cc)
+        name, compiler = compiler_of(cc)
         flags = [str(flag) for flag in flags]
         flags += [f for f in PRECISION_FLAGS[self.precision] if f not in flags]
         library = _library_folder() / f"lib{PREFIX}-{os.urandom(6).hex()}.so"
@@ -153,9 +122,10 @@ class CExport:
             started = time.perf_counter()
             # run in the export folder on the source's own name: the messages name the file
             # as the user knows it, not a path of the build
-            _run(name, [compiler, *flags, "-fPIC", "-c", self.source.name, "-o", str(obj)],
-                 f"compiling {self.source.name} with {' '.join(flags)}", self.directory)
-            _run(name, [compiler, "-shared", str(obj), "-o", str(library), "-lm"],
+            run_compiler(name, [compiler, *flags, "-fPIC", "-c", self.source.name, "-o",
+                                str(obj)],
+                         f"compiling {self.source.name} with {' '.join(flags)}", self.directory)
+            run_compiler(name, [compiler, "-shared", str(obj), "-o", str(library), "-lm"],
                  "linking the shared library", build)
             elapsed = time.perf_counter() - started
             code_bytes = _text_size(obj)
@@ -194,64 +164,6 @@ def _library_folder() -> Path:
 def _remove_library_folder(pid: int, folder: Path) -> None:
     if os.getpid() == pid:      # not in a forked child that inherited the hook
         shutil.rmtree(folder, ignore_errors=True)
-
-
-def _run(name: str, command: list, doing: str, cwd) -> None:
-    """Run the compiler ``name`` (``command[0]`` is its path) in ``cwd``; a failure raises a
-    :class:`CompileError` saying what it was ``doing``, with its messages."""
-    try:
-        done = subprocess.run(command, capture_output=True, text=True, cwd=cwd)
-    except OSError as exc:
-        raise CompileError(f"the C compiler {name!r} could not be run ({doing}): "
-                           f"{exc.strerror or exc}") from None
-    if done.returncode != 0:
-        raise CompileError(_failure_message(name, done.returncode, done.stderr, done.stdout,
-                                            doing))
-
-
-def _failure_message(name: str, status: int, stderr: str, stdout: str = "",
-                     doing: str = "") -> str:
-    """The message of a compiler that failed: its name, exit status and what it printed.
-
-    Parameters
-    ----------
-    name : str
-        The compiler as given (``$CC``, ``cc``, ...).
-    status : int
-        Its exit status (negative: the signal that stopped it).
-    stderr, stdout : str
-        What it printed (both shown, error stream first; of more than
-        :data:`MESSAGE_LINES` lines, the first few and the last 40).
-    doing : str, optional
-        What it was asked to do (``"compiling flexctl_ctrl.c with ..."``).
-
-    Returns
-    -------
-    str
-
-    Examples
-    --------
-    >>> _failure_message("false", 1, "")
-    "the C compiler 'false' exited with status 1 and printed nothing"
-    >>> print(_failure_message("cc", 1, "a.c:1: error: x\\n", doing="compiling a.c"))
-    the C compiler 'cc' exited with status 1 compiling a.c:
-    a.c:1: error: x
-    """
-    ended = f"exited with status {status}" if status >= 0 else f"was stopped by signal {-status}"
-    lines = [line.rstrip() for text in (stderr, stdout) for line in (text or "").splitlines()]
-    while lines and not lines[-1]:
-        lines.pop()
-    while lines and not lines[0]:
-        lines.pop(0)
-    what = f" {doing}" if doing else ""
-    if not lines:
-        return f"the C compiler {name!r} {ended} and printed nothing" + (
-            f" ({doing})" if doing else "")
-    if len(lines) > MESSAGE_LINES:
-        head = MESSAGE_LINES // 10
-        lines = lines[:head] + [f"[... {len(lines) - head - 40} lines left out ...]"] \
-            + lines[-40:]
-    return f"the C compiler {name!r} {ended}{what}:\n" + "\n".join(lines)
 
 
 def _text_size(obj: Path) -> int | None:

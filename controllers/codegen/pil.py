@@ -140,7 +140,7 @@ def run_on_target(export, times, inputs, target: str = "cortex-m4",
     """
     from flexctl.model.errors import InputValueError
 
-    from .targets import check_target, find_target_compiler, target_flags
+    from .targets import check_target, find_target_compiler, run_tool, target_flags
 
     chosen = check_target(target)
     if not chosen.embedded:
@@ -160,10 +160,9 @@ def run_on_target(export, times, inputs, target: str = "cortex-m4",
         (folder / "pil.ld").write_text(_LINKER_SCRIPT, encoding="utf-8")
         (folder / "pil_main.c").write_text(_program(export, times, inputs), encoding="utf-8")
         elf = folder / "pil.elf"
-        from .targets import _run
-        _run([compiler, *flags, f"-I{export.directory}", "pil_main.c", "-nostartfiles",
-              "-T", "pil.ld", "--specs=nano.specs", "--specs=nosys.specs", "-lm", "-o", elf],
-             build)
+        run_tool([compiler, *flags, f"-I{export.directory}", "pil_main.c", "-nostartfiles",
+                  "-T", "pil.ld", "--specs=nano.specs", "--specs=nosys.specs", "-lm", "-o",
+                  elf], build)
         output = _emulate(qemu, chosen.board, elf)
     return _parse(output, chosen, export.precision, times.size,
                   clock_hz or CLOCKS[chosen.name])

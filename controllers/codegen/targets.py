@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import re
 import shutil
-import subprocess
 import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -37,7 +36,7 @@ from pathlib import Path
 from flexctl.model.errors import InputTypeError, InputValueError
 
 __all__ = ["Target", "TARGETS", "FREESTANDING_FLAGS", "TargetBuild", "check_target",
-           "find_target_compiler", "build_for_target", "target_flags"]
+           "find_target_compiler", "build_for_target", "target_flags", "run_tool"]
 
 #: Debian's packages of the cross tools (named in the message when they are missing).
 CROSS_PACKAGES = "gcc-arm-none-eabi libnewlib-arm-none-eabi"
@@ -127,7 +126,7 @@ def target_flags(target: Target, precision: str) -> tuple:
     precision : {"double", "float"}
         The export's real type.
     """
-    from .export import C_FLAGS
+    from .compiler import C_FLAGS
     from .precision import PRECISION_FLAGS
 
     return (*C_FLAGS, *PRECISION_FLAGS[precision], *target.flags,
@@ -149,7 +148,7 @@ def find_target_compiler(target: Target, cc: str | None = None) -> str:
     controllers.codegen.CompileError
         If it is not installed (naming the Debian packages that provide it).
     """
-    from .export import CompileError, find_compiler
+    from .compiler import CompileError, find_compiler
 
     if not target.embedded:
         return find_compiler(cc)
@@ -212,7 +211,7 @@ class TargetBuild:
 
 
 def _tool(target: Target, name: str) -> str:
-    from .export import CompileError
+    from .compiler import CompileError
 
     path = shutil.which(target.tools + name)
     if path is None:
@@ -220,15 +219,21 @@ def _tool(target: Target, name: str) -> str:
     return path
 
 
-def _run(command, cwd) -> str:
-    from .export import CompileError, _failure_message
+def run_tool(command, cwd) -> str:
+    """Run a compiler or binutil; its standard output, or a ``CompileError`` with its
+    messages.
 
-    done = subprocess.run([str(c) for c in command], capture_output=True, text=True, cwd=cwd)
-    if done.returncode != 0:
-        raise CompileError(_failure_message(Path(command[0]).name, done.returncode,
-                                            done.stderr, done.stdout,
-                                            " ".join(str(c) for c in command[1:])))
-    return done.stdout
+    Parameters
+    ----------
+    command : list
+        The command line (``command[0]`` the tool's path), entries made strings.
+    cwd : str or pathlib.Path
+        Folder it runs in.
+    """
+    from .compiler import run_compiler
+
+    command = [str(c) for c in command]
+    return run_compiler(Path(command[0]).name, command, " ".join(command[1:]), cwd)
 
 
 def build_for_target(export, target="cortex-m4", cc: str | None = None) -> TargetBuild:
@@ -255,9 +260,9 @@ def build_for_target(export, target="cortex-m4", cc: str | None = None) -> Targe
     flags = target_flags(target, export.precision)
     with tempfile.TemporaryDirectory(prefix="flexctl-target-") as build:
         obj = Path(build, "law.o")
-        _run([compiler, *flags, "-c", export.source, "-o", obj], build)
-        sections = _sections(_run([_tool(target, "size"), "-A", obj], build))
-        external = tuple(sorted(line.split()[-1] for line in _run(
+        run_tool([compiler, *flags, "-c", export.source, "-o", obj], build)
+        sections = _sections(run_tool([_tool(target, "size"), "-A", obj], build))
+        external = tuple(sorted(line.split()[-1] for line in run_tool(
             [_tool(target, "nm"), "-u", obj], build).splitlines() if line.strip()))
         stack, path = _deepest_stack(Path(build, "law.ci")) if target.embedded else (None, ())
         struct = _struct_bytes(export, target, compiler, flags, build)
@@ -297,9 +302,9 @@ def _struct_bytes(export, target, compiler, flags, build) -> int:
                      "const char flexctl_struct_probe[sizeof(struct flexctl_ctrl)] = {0};\n",
                      encoding="utf-8")
     obj = Path(build, "probe.o")
-    _run([compiler, *[f for f in flags if not f.startswith(("-fstack", "-fcallgraph"))],
+    run_tool([compiler, *[f for f in flags if not f.startswith(("-fstack", "-fcallgraph"))],
           f"-I{export.directory}", "-c", probe, "-o", obj], build)
-    for line in _run([_tool(target, "nm"), "-S", obj], build).splitlines():
+    for line in run_tool([_tool(target, "nm"), "-S", obj], build).splitlines():
         if line.endswith("flexctl_struct_probe"):
             return int(line.split()[1], 16)
     raise RuntimeError("the struct's probe has no symbol")       # nm always lists it

@@ -165,17 +165,7 @@ def _parser() -> argparse.ArgumentParser:
     export.add_argument("--sample-time", metavar="S", type=_positive_seconds, default=None,
                         help="s: the rate an LQG's estimator is discretised at (default the "
                         "sensors', else 0.01), or a continuous law is sampled at")
-    export.add_argument("--precision", choices=("double", "float"), default="double",
-                        help="the C type of every real of the law (default double); float "
-                        "is refused, with the reason, where single precision breaks the law")
-    export.add_argument("--loop-check", action="store_true",
-                        help="also fly the slew with the law compiled in double and in float "
-                        "and report what single precision changed")
-    export.add_argument("--target", choices=("host", "cortex-m4", "cortex-m7"),
-                        default="host",
-                        help="also build the law freestanding for this processor with "
-                        "Debian's arm-none-eabi-gcc (hard float, -Werror) and report its code, "
-                        "constant, RAM and stack sizes (default host: the host build only)")
+    _flight_options(export)
     export.add_argument("--no-compile", action="store_true",
                         help="write the files only")
     export.set_defaults(func=_cmd_export)
@@ -446,6 +436,23 @@ def _cmd_run(args) -> int:
     else:
         print(format_summary(summary))
     return EXIT_OK if summary["status"] == "ok" else EXIT_STOPPED
+
+
+def _flight_options(export) -> None:
+    """``flexctl export``'s options of the flight computer: precision and target."""
+    from controllers.codegen.precision import PRECISIONS
+    from controllers.codegen.targets import TARGETS
+
+    export.add_argument("--precision", choices=PRECISIONS, default="double",
+                        help="the C type of every real of the law (default double); float "
+                        "is refused, with the reason, where single precision breaks the law")
+    export.add_argument("--loop-check", action="store_true",
+                        help="also fly the slew with the law compiled in double and in float "
+                        "and report what single precision changed")
+    export.add_argument("--target", choices=tuple(TARGETS), default="host",
+                        help="also build the law freestanding for this processor with "
+                        "Debian's arm-none-eabi-gcc (hard float, -Werror) and report its code, "
+                        "constant, RAM and stack sizes (default host: the host build only)")
 
 
 def _cmd_export(args) -> int:
