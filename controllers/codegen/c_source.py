@@ -192,9 +192,9 @@ def _header(program, upper, prefix, nx, measured, real) -> str:
  *
  * Every real is a flexctl_real ({real}). Usage: provide flexctl_ctrl_size() bytes aligned for
  * double (malloc, or a static array of double), call flexctl_ctrl_init once, then
- * flexctl_ctrl_step at every sample time t (t_0, t_0 + FLEXCTL_SAMPLE_TIME, ...), or whenever a command is needed when
- * FLEXCTL_SAMPLE_TIME is 0. The struct holds the law's memory: one struct per loop, no
- * global state, no allocation.
+ * flexctl_ctrl_step at every sample time t (t_0, t_0 + FLEXCTL_SAMPLE_TIME, ...), or
+ * whenever a command is needed when FLEXCTL_SAMPLE_TIME is 0. The struct holds the law's
+ * memory: one struct per loop, no global state, no allocation.
  */
 #ifndef {guard}
 #define {guard}
