@@ -154,3 +154,29 @@ def test_processor_in_the_loop_refuses_bad_input(sampled_lqr, tmp_path):
         run_on_target(exported, times, states, "host")
     with pytest.raises(InputValueError, match=f"must have {plant.n_states} columns"):
         run_on_target(exported, times[:3], states[:3, :-1], "cortex-m4")
+
+
+@needs_host
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_the_guides_flight_loop_compiles(sampled_lqr, precision, tmp_path):
+    """The sample main.c of docs/guide/c_export.md builds against an export at the checking
+    flags (for the Cortex-M4 too where the cross compiler is installed)."""
+    import re
+    from pathlib import Path
+
+    from controllers.codegen import C_FLAGS, find_compiler
+    from controllers.codegen.precision import PRECISION_FLAGS
+
+    guide = Path(__file__).resolve().parents[2] / "docs" / "guide" / "c_export.md"
+    blocks = re.findall(r"```c\n(.*?)```", guide.read_text(encoding="utf-8"), re.S)
+    loop = next(block for block in blocks if "int main(void)" in block)
+    _, plant, law, _, _ = sampled_lqr
+    export_c(law, plant, tmp_path, precision=precision)
+    (tmp_path / "flight.c").write_text(loop, encoding="utf-8")
+    compilers = [(find_compiler(), ())]
+    if shutil.which(CROSS):
+        compilers.append((CROSS, TARGETS["cortex-m4"].flags))
+    for compiler, flags in compilers:
+        subprocess.run([compiler, *C_FLAGS, *PRECISION_FLAGS[precision], *flags, "-c",
+                        "flight.c", "-o", "flight.o"], cwd=tmp_path, check=True,
+                       capture_output=True)
