@@ -264,7 +264,7 @@ def _source(program, prefix, upper, code, names, sizes, real) -> str:
  */
 #include "{prefix}.h"
 
-#include <{'tgmath.h' if real == 'float' else 'math.h'}>
+#include <math.h>
 #include <string.h>
 
 /* ----------------------------------------------------------------------------------------

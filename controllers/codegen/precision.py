@@ -4,8 +4,9 @@ An export's precision is the type of every real in its C: the step's interface
 (``flexctl_real`` in the header), the law's memory, the work arrays, the constants and the
 arithmetic of CasADi's code, the QP's included. In ``float`` no operation may fall back to
 double precision (which a Cortex-M4's FPU does not have, so it would run in software): every
-floating literal of the generated code gets the ``f`` suffix, the math functions are C99's
-type-generic ones (``<tgmath.h>``: ``sqrt`` of a float is ``sqrtf``), and the build adds
+floating literal of the generated code gets the ``f`` suffix, every call of a math function its
+float form (``sqrt`` becomes ``sqrtf``; not ``<tgmath.h>``, whose ``sin`` and ``cos`` name the
+``long double complex`` functions newlib lacks), and the build adds
 ``-Wdouble-promotion`` at ``-Werror`` (:data:`PRECISION_FLAGS`), so that a promotion left over
 fails the build rather than slowing the step.
 
@@ -50,6 +51,13 @@ _DOUBLE_ZEROS = ("1e-12", "1e-14")
 _LITERAL = re.compile(r"(?<![\w.])((?:\d+\.\d*|\.\d+)(?:[eE][-+]?\d+)?|\d+[eE][-+]?\d+)"
                       r"(?![\w.])")
 _STRING = re.compile(r'"(?:[^"\\\n]|\\.)*"')
+#: C99's math functions of one double that CasADi's code may call; in float each becomes its
+#: ``f`` form.
+MATH_FUNCTIONS = ("sqrt", "cbrt", "fabs", "fmin", "fmax", "floor", "ceil", "round", "trunc",
+                  "fmod", "remainder", "copysign", "sin", "cos", "tan", "asin", "acos", "atan",
+                  "atan2", "sinh", "cosh", "tanh", "asinh", "acosh", "atanh", "exp", "expm1",
+                  "exp2", "log", "log1p", "log2", "log10", "pow", "hypot", "erf", "erfc")
+_CALL = re.compile(r"(?<![\w.>])(" + "|".join(MATH_FUNCTIONS) + r")(?=\s*\()")
 
 
 def check_precision(value, owner: str = "export") -> str:
@@ -94,8 +102,9 @@ def qp_options(precision: str) -> dict:
 def single_precision_code(code: str) -> str:
     """CasADi's C (written with ``casadi_real`` float) with no double left in it.
 
-    Every floating literal outside string literals gets the ``f`` suffix, and qrqp's double
-    zero thresholds (``1e-12``, ``1e-14``) become :data:`FLOAT_QP_ZERO`.
+    Every floating literal outside string literals gets the ``f`` suffix, every call of one
+    of :data:`MATH_FUNCTIONS` its float form, and qrqp's double zero thresholds (``1e-12``,
+    ``1e-14``) become :data:`FLOAT_QP_ZERO`.
 
     Parameters
     ----------
@@ -104,8 +113,8 @@ def single_precision_code(code: str) -> str:
 
     Examples
     --------
-    >>> single_precision_code('w[0]=2.5e-01*x; if (d<1e-12) s="1.5";')
-    'w[0]=2.5e-01f*x; if (d<1e-06f) s="1.5";'
+    >>> single_precision_code('w[0]=2.5e-01*sin(x); if (d<1e-12) s="1.5";')
+    'w[0]=2.5e-01f*sinf(x); if (d<1e-06f) s="1.5";'
     """
     zero = f"{FLOAT_QP_ZERO:.0e}"
     pieces, start = [], 0
@@ -122,4 +131,4 @@ def _suffixed(text: str, zero: str) -> str:
         literal = match.group(1)
         return (zero if literal in _DOUBLE_ZEROS else literal) + "f"
 
-    return _LITERAL.sub(suffix, text)
+    return _CALL.sub(r"\1f", _LITERAL.sub(suffix, text))
