@@ -9,10 +9,13 @@ at every sample are checked:
   state read then, the reference and the first plan), which bounds the relative error of the
   plan qrqp returns;
 - a Kalman filter's covariance (the sensors' filter of an ``Observed`` law, an NMPC's
-  extended Kalman filter): its condition number once settled (the program stepped
-  :data:`SETTLE_STEPS` samples on readings at rest). Where ``kappa(P) * eps`` nears one, the
-  rounding of the largest variances swamps the smallest and the update may make ``P``
-  indefinite: the filter then diverges.
+  extended Kalman filter) once settled (the program stepped :data:`SETTLE_STEPS` samples on
+  readings at rest): the condition number of its correlation matrix
+  ``D^-1 P D^-1`` (``D`` the standard deviations). Float rounds each entry relative to itself,
+  so the states' units (rad against m against rad/s) cost nothing; what float cannot carry is
+  a correlation so close to one that the rounding makes ``P`` indefinite, and the filter then
+  diverges. (flexible-link's filter: ``kappa(P)`` 9.9e7 from its units alone, its correlation
+  matrix's 17; in the loop float changes its slew's residual vibration by 0.09 %.)
 
 A loss ``kappa * eps`` of :data:`FLOAT_REFUSE_LOSS` or more (at most one correct digit) is
 refused (:class:`~controllers.codegen.program.ExportRefused`, the reason in its message); of
@@ -53,7 +56,7 @@ class ConditionFinding:
     Attributes
     ----------
     quantity : str
-        What was measured (``"QP Hessian"``, ``"filter covariance"``).
+        What was measured (``"QP Hessian"``, ``"filter covariance's correlation"``).
     condition : float
         Its 2-norm condition number.
     loss : float
@@ -87,16 +90,18 @@ def _finding(quantity: str, condition: float) -> ConditionFinding:
     return ConditionFinding(quantity, float(condition), loss, verdict)
 
 
-def _settled_covariance(program: ControllerProgram, start: int, n: int) -> np.ndarray:
-    """The covariance block ``m[start:start + n*n]`` (column-major) after
-    :data:`SETTLE_STEPS` samples of readings at rest."""
+def _settled_correlation(program: ControllerProgram, start: int, n: int) -> np.ndarray:
+    """The correlation matrix of the covariance block ``m[start:start + n*n]``
+    (column-major) after :data:`SETTLE_STEPS` samples of readings at rest."""
     session = program.session()
     period = program.sample_time or 0.01
     v = np.zeros(program.n_in)
     for k in range(SETTLE_STEPS):
         session.step(k * period, v)
     block = session.memory[start:start + n * n].reshape(n, n, order="F")
-    return 0.5 * (block + block.T)
+    block = 0.5 * (block + block.T)
+    deviation = np.sqrt(np.clip(np.diag(block), np.finfo(float).tiny, None))
+    return block / np.outer(deviation, deviation)
 
 
 def float_findings(program: ControllerProgram) -> tuple:
@@ -119,12 +124,12 @@ def float_findings(program: ControllerProgram) -> tuple:
         found.append(_finding("QP Hessian", info["qp_hessian_condition"]))
     if "filter_states" in info:
         n = int(info["filter_states"])
-        found.append(_finding("filter covariance", np.linalg.cond(
-            _settled_covariance(program, n, n))))
+        found.append(_finding("filter covariance's correlation", np.linalg.cond(
+            _settled_correlation(program, n, n))))
     if "ekf_states" in info:
         n, start = int(info["ekf_states"]), int(info["ekf_offset"]) + int(info["ekf_states"])
-        found.append(_finding("extended Kalman filter covariance", np.linalg.cond(
-            _settled_covariance(program, start, n))))
+        found.append(_finding("extended Kalman filter covariance's correlation",
+                              np.linalg.cond(_settled_correlation(program, start, n))))
     return tuple(found)
 
 

@@ -171,3 +171,23 @@ def test_cli_exports_in_float(tmp_path, capsys):
     assert 1e-12 < summary["check_max_difference"] < STEP_FRACTION * 10
     assert "typedef float flexctl_real;" in (out / "flexctl_ctrl.h").read_text()
     assert "precision: float" in capsys.readouterr().out
+
+
+def test_a_filter_is_judged_by_its_correlations_not_its_units():
+    """flexible-link's Kalman filter mixes states in rad, m and rad/s: its covariance's condition
+    number is float's limit many times over from the units alone; float rounds each entry
+    relative to itself, so the check reads the correlation matrix, and passes it."""
+    from controllers.codegen.conditioning import SETTLE_STEPS
+
+    scene = flexctl.load_scene("flexible-link")
+    plant = scene.build_model()
+    program = program_for(from_spec(scene, plant).controller, plant)
+    n = program.info["filter_states"]
+    session = program.session()
+    for k in range(SETTLE_STEPS):
+        session.step(k * program.sample_time, np.zeros(program.n_in))
+    p = session.memory[n:n + n * n].reshape(n, n, order="F")
+    assert np.linalg.cond(p) * EPSILON["float"] >= FLOAT_REFUSE_LOSS      # units alone
+    finding, = float_findings(program)
+    assert finding.quantity == "filter covariance's correlation"
+    assert finding.verdict == "ok" and finding.condition < 1e3
