@@ -248,7 +248,7 @@ def _program(export, times, inputs) -> str:
         """)
 
 
-_PROGRAM_HEAD = r"""/* pil_main.c: the exported step on recorded inputs, for QEMU's MPS2 boards (semihosting). */
+_PROGRAM_HEAD = r"""/* pil_main.c: the exported step on recorded inputs, for QEMU's MPS2 boards. */
 #include <stdint.h>
 #include <string.h>
 

@@ -86,9 +86,9 @@ def test_allocation_and_recursion_are_refused(sampled_lqr, tmp_path):
     recursive = ("static int flexctl_depth(int n) { return n < 2 ? n : flexctl_depth(n - 1) "
                  "+ flexctl_depth(n - 2); }\n")
     step = "int flexctl_ctrl_step(flexctl_ctrl *c,"
+    guard = "  if (!c || !x || !u"
     body = text.replace(step, recursive + step, 1).replace(
-        "  if (!c || !x || !u", "  if (flexctl_depth((int)x[0]) > 3) return 9;\n  if (!c || !x || !u",
-        1)
+        guard, "  if (flexctl_depth((int)x[0]) > 3) return 9;\n" + guard, 1)
     exported.source.write_text(body)
     with pytest.raises(ExportRefused, match="recurses"):
         build_for_target(exported, "cortex-m4")
@@ -168,7 +168,7 @@ def test_the_guides_flight_loop_compiles(sampled_lqr, precision, tmp_path):
     from controllers.codegen.precision import PRECISION_FLAGS
 
     guide = Path(__file__).resolve().parents[2] / "docs" / "guide" / "c_export.md"
-    blocks = re.findall(r"```c\n(.*?)```", guide.read_text(encoding="utf-8"), re.S)
+    blocks = re.findall(r"```c\n(.*?)```", guide.read_text(encoding="utf-8"), re.DOTALL)
     loop = next(block for block in blocks if "int main(void)" in block)
     _, plant, law, _, _ = sampled_lqr
     export_c(law, plant, tmp_path, precision=precision)
