@@ -17,6 +17,11 @@ at every sample are checked:
   diverges. (flexible-link's filter: ``kappa(P)`` 9.9e7 from its units alone, its correlation
   matrix's 17; in the loop float changes its slew's residual vibration by 0.09 %.)
 
+A sampled law whose command jumps at given times (the trajectory tracker's held feedforward)
+meets a third limit: where a jump falls on a sample instant, float's rounding of the time
+``k T`` decides which side of the jump the sample sees, and that sample applies the
+neighbouring hold, a step of up to the full torque (:class:`SwitchFinding`, a warning).
+
 A loss ``kappa * eps`` of :data:`FLOAT_REFUSE_LOSS` or more (at most one correct digit) is
 refused (:class:`~controllers.codegen.program.ExportRefused`, the reason in its message); of
 :data:`FLOAT_WARN_LOSS` or more (three digits or fewer), a :class:`PrecisionWarning`. The static
@@ -34,7 +39,8 @@ import numpy as np
 from .precision import EPSILON
 from .program import ControllerProgram, ExportRefused
 
-__all__ = ["PrecisionWarning", "ConditionFinding", "float_findings", "check_float",
+__all__ = ["PrecisionWarning", "ConditionFinding", "SwitchFinding", "float_findings",
+           "check_float",
            "FLOAT_WARN_LOSS", "FLOAT_REFUSE_LOSS", "SETTLE_STEPS"]
 
 #: ``kappa * eps`` of float at and above which an export warns (three digits or fewer left).
@@ -83,6 +89,49 @@ class ConditionFinding:
                 "verdict": self.verdict, "reason": self.reason}
 
 
+@dataclass(frozen=True)
+class SwitchFinding:
+    """Jumps of a sampled law's command that fall on sample instants, within float's
+    rounding of the time.
+
+    Attributes
+    ----------
+    count : int
+        Jumps within ``4 eps t`` of a multiple of the sample time.
+    first : float
+        The first of them, s.
+    sample_time : float
+        The law's sample time, s.
+    """
+
+    count: int
+    first: float
+    sample_time: float
+    quantity = "held feedforward"
+    verdict = "warn"
+
+    @property
+    def reason(self) -> str:
+        """The finding in one sentence."""
+        return (f"{self.count} of its feedforward's jumps fall on samples (the first at "
+                f"{self.first:g} s, sampled every {self.sample_time:g} s): float's rounding "
+                "of the sample time decides which hold such a sample applies")
+
+    def as_dict(self) -> dict:
+        """Plain dictionary (JSON-ready), with the :attr:`reason`."""
+        return {"quantity": self.quantity, "count": self.count, "first": self.first,
+                "verdict": self.verdict, "reason": self.reason}
+
+
+def _switches_on_samples(program: ControllerProgram) -> SwitchFinding | None:
+    period, times = program.sample_time, np.asarray(program.info.get("switch_times", ()))
+    if not period or times.size == 0:
+        return None
+    gap = np.abs(times - period * np.round(times / period))
+    tied = times[gap <= 4 * EPSILON["float"] * np.maximum(np.abs(times), period)]
+    return SwitchFinding(int(tied.size), float(tied[0]), period) if tied.size else None
+
+
 def _finding(quantity: str, condition: float) -> ConditionFinding:
     loss = float(condition) * EPSILON["float"]
     verdict = ("refuse" if not np.isfinite(loss) or loss >= FLOAT_REFUSE_LOSS else
@@ -116,10 +165,13 @@ def float_findings(program: ControllerProgram) -> tuple:
 
     Returns
     -------
-    tuple of ConditionFinding
-        Empty for a law that solves nothing at run time.
+    tuple of ConditionFinding or SwitchFinding
+        Empty for a law that solves nothing at run time and has no jump on a sample.
     """
     info, found = program.info, []
+    switches = _switches_on_samples(program)
+    if switches is not None:
+        found.append(switches)
     if "qp_hessian_condition" in info:
         found.append(_finding("QP Hessian", info["qp_hessian_condition"]))
     if "filter_states" in info:
@@ -143,7 +195,7 @@ def check_float(program: ControllerProgram) -> tuple:
 
     Returns
     -------
-    tuple of ConditionFinding
+    tuple of ConditionFinding or SwitchFinding
 
     Raises
     ------
@@ -163,7 +215,8 @@ def check_float(program: ControllerProgram) -> tuple:
                             + f" (refused at {FLOAT_REFUSE_LOSS:g}); export it in double")
     for finding in found:
         if finding.verdict == "warn":
+            limit = (f" (warned at {FLOAT_WARN_LOSS:g})"
+                     if isinstance(finding, ConditionFinding) else "")
             warnings.warn(f"export precision 'float' for the {program.kind} law: "
-                          f"{finding.reason} (warned at {FLOAT_WARN_LOSS:g})",
-                          PrecisionWarning, stacklevel=3)
+                          f"{finding.reason}{limit}", PrecisionWarning, stacklevel=3)
     return found

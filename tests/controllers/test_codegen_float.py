@@ -191,3 +191,17 @@ def test_a_filter_is_judged_by_its_correlations_not_its_units():
     finding, = float_findings(program)
     assert finding.quantity == "filter covariance's correlation"
     assert finding.verdict == "ok" and finding.condition < 1e3
+
+
+def test_float_warns_where_the_feedforward_jumps_on_samples(tmp_path):
+    """The tracker sampled at 0.01 s: its optimised holds end on samples; float's time decides
+    the side of each jump, and the export says so."""
+    scene = _scene("trajopt+lqr", **{"controller.sample_time": 0.01})
+    plant = scene.build_model()
+    law = from_spec(scene, plant).controller
+    with pytest.warns(PrecisionWarning, match="jumps fall on samples"):
+        exported = export_c(law, plant, tmp_path, precision="float")
+    finding = float_findings(exported.program)[0]
+    assert finding.count > 0 and finding.verdict == "warn"
+    holds = np.asarray(exported.program.info["switch_times"])
+    assert np.min(np.abs(holds / 0.01 - np.round(holds / 0.01))) < 1e-6
