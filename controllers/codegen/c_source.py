@@ -15,7 +15,7 @@ import textwrap
 
 import numpy as np
 
-from .precision import PRECISION_FLAGS, check_precision, single_precision_code
+from .precision import FLOAT_MIN, PRECISION_FLAGS, check_precision, single_precision_code
 from .program import ControllerProgram
 
 __all__ = ["CSources", "c_sources", "RETURN_CODES"]
@@ -63,6 +63,8 @@ class CSources:
 def _c_double(value: float, real: str = "double") -> str:
     if not np.isfinite(value):
         raise ValueError(f"cannot write the non-finite number {value!r} as C")
+    if real == "float" and abs(value) < FLOAT_MIN:
+        value = 0.0                      # float holds no such number (precision.FLOAT_MIN)
     return repr(float(value)) + ("f" if real == "float" else "")
 
 

@@ -186,12 +186,13 @@ def _static_program(controller, plant, sample_time) -> ControllerProgram:
         kind=kind, step=step, recover=None, input_names=tuple(plant.state_names),
         input_kind="state", output_name=name, output_unit=unit, memory_init=np.zeros(0),
         sample_time=float(sample_time), description=_describe(law, sample_time),
-        info={"design_modes": _design_modes(law), **_switches(law)})
+        info={"design_modes": _design_modes(law),
+              **(_switches(law) if kind == "tracker" else {})})
 
 
-def _switches(law) -> dict:
-    """``switch_times``: the times (s) a law's command jumps (a held feedforward's edges)."""
-    times = tuple(float(t) for t in getattr(law, "breakpoints", ()) or ())
+def _switches(tracker) -> dict:
+    """``switch_times``: the times (s) the tracker's held feedforward jumps."""
+    times = tuple(float(t) for t in getattr(tracker, "breakpoints", ()) or ())
     return {"switch_times": times} if times else {}
 
 

@@ -26,7 +26,7 @@ import numpy as np
 from flexctl.model.errors import InputTypeError, InputValueError
 
 __all__ = ["PRECISIONS", "EPSILON", "PRECISION_FLAGS", "FLOAT_QP_TOLERANCE", "FLOAT_QP_ZERO",
-           "check_precision", "single_precision_code", "qp_options"]
+           "FLOAT_MIN", "check_precision", "single_precision_code", "qp_options"]
 
 #: The C real types an export can be written in.
 PRECISIONS = ("double", "float")
@@ -41,6 +41,8 @@ PRECISION_FLAGS = {"double": (), "float": ("-Wdouble-promotion",)}
 #: rounding of the residuals stays above the tolerance); at 3e-5, 13; at 1e-4 none, the
 #: commands within 2e-5 N m of the double export's.
 FLOAT_QP_TOLERANCE = 1e-4
+#: Float's smallest normal number: a literal smaller in magnitude is written as zero.
+FLOAT_MIN = float(np.finfo(np.float32).tiny)
 #: The magnitude under which qrqp's code treats a pivot, a step or a multiplier as zero in
 #: float (CasADi writes 1e-12 and 1e-14 for double): about 8 float epsilons.
 FLOAT_QP_ZERO = 1e-6
@@ -102,7 +104,8 @@ def qp_options(precision: str) -> dict:
 def single_precision_code(code: str) -> str:
     """CasADi's C (written with ``casadi_real`` float) with no double left in it.
 
-    Every floating literal outside string literals gets the ``f`` suffix, every call of one
+    Every floating literal outside string literals gets the ``f`` suffix (one below
+    :data:`FLOAT_MIN` in magnitude is written as zero), every call of one
     of :data:`MATH_FUNCTIONS` its float form, and qrqp's double zero thresholds (``1e-12``,
     ``1e-14``) become :data:`FLOAT_QP_ZERO`.
 
@@ -129,6 +132,10 @@ def single_precision_code(code: str) -> str:
 def _suffixed(text: str, zero: str) -> str:
     def suffix(match):
         literal = match.group(1)
-        return (zero if literal in _DOUBLE_ZEROS else literal) + "f"
+        if literal in _DOUBLE_ZEROS:
+            return zero + "f"
+        # below float's smallest normal number (a coupling of 1e-50 in a matrix): zero, as
+        # float would hold it (and as a Cortex-M's flush-to-zero FPU computes it)
+        return ("0.0" if 0.0 < abs(float(literal)) < FLOAT_MIN else literal) + "f"
 
     return _CALL.sub(r"\1f", _LITERAL.sub(suffix, text))

@@ -205,3 +205,21 @@ def test_float_warns_where_the_feedforward_jumps_on_samples(tmp_path):
     assert finding.count > 0 and finding.verdict == "warn"
     holds = np.asarray(exported.program.info["switch_times"])
     assert np.min(np.abs(holds / 0.01 - np.round(holds / 0.01))) < 1e-6
+
+
+def test_float_writes_numbers_below_its_range_as_zero(tmp_path):
+    """wheel-slew's filter holds couplings of 1e-50 and less, under float's smallest normal
+    number: written as zero, the float export builds at -Werror (no truncated constant)."""
+    import re
+
+    from controllers.codegen.precision import FLOAT_MIN
+
+    scene = flexctl.load_scene("wheel-slew")
+    plant = scene.build_model()
+    law = from_spec(scene, plant).controller
+    double = export_c(law, plant, tmp_path / "d").source.read_text()
+    tiny = [v for v in map(float, re.findall(r"\d\.\d+e-\d+", double)) if 0 < v < FLOAT_MIN]
+    assert tiny, "the double export has no number below float's range"
+    exported = export_c(law, plant, tmp_path / "f", precision="float")
+    compiled = exported.compile()
+    assert compiled.step(0.0, np.zeros(exported.program.n_in))[1] == 0
