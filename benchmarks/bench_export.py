@@ -212,9 +212,11 @@ def precision():
     for name, overrides in CASES:
         scene = flexctl.load_scene(name, overrides)
         kind = scene.controller.kind
-        if kind in ("pd", "lqr", "scheduled", "trajopt+lqr"):
+        built = from_spec(scene, scene.build_model())
+        if kind != "lqg" and not getattr(built.controller, "sample_time", None):
             continue        # continuous laws: the loop calls ctypes at every integrator step
-        out = compare_precisions(scene, sample_time=LQG_SAMPLE_TIME if kind == "lqg" else None)
+        out = compare_precisions(scene, sample_time=LQG_SAMPLE_TIME if kind == "lqg" else None,
+                                 built=built)
         d, diff = out["double"], out["difference"]
         label = f"{name} {kind}" + (f" ({overrides['model.design_variant']})"
                                     if "model.design_variant" in overrides else "")
