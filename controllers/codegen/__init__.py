@@ -26,9 +26,10 @@ from .export import (C_FILES, C_FLAGS, CExport, CompileError, CompiledController
 from .precision import PRECISIONS
 from .conditioning import PrecisionWarning, float_findings
 from .targets import TARGETS, TargetBuild, build_for_target
-from .pil import EmulationError, PILRun, run_on_target
+from .pil import EmulatedLaw, EmulationError, PILRun, run_on_target
 
 __all__ = ["ControllerProgram", "ExportRefused", "program_for", "export_c", "CExport",
            "CompiledLaw", "CompiledController", "CompileError", "C_FLAGS", "C_FILES",
            "find_compiler", "PRECISIONS", "PrecisionWarning", "float_findings", "TARGETS",
-           "TargetBuild", "build_for_target", "EmulationError", "PILRun", "run_on_target"]
+           "TargetBuild", "build_for_target", "EmulationError", "PILRun", "run_on_target",
+           "EmulatedLaw"]

@@ -1,5 +1,10 @@
 """Processor in the loop: an export's step cross-compiled and run under QEMU on an MPS2 board.
 
+Two ways: :func:`run_on_target` steps the law on recorded inputs and reads back its commands
+and instruction counts; :class:`EmulatedLaw` keeps the emulated law running and steps it from
+the host, one sample at a time over the board's UART, so that :func:`flexctl.simulate` flies
+the plant on the host with the law on the target.
+
 :func:`run_on_target` links the law (built at :func:`~controllers.codegen.targets.target_flags`)
 with a small freestanding program: a vector table and reset handler that enable the FPU, the
 recorded times and inputs as constant arrays, and a loop that calls ``flexctl_ctrl_step`` on
@@ -29,8 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["run_on_target", "PILRun", "EmulationError", "find_emulator", "ICOUNT_SHIFT",
-           "CALIBRATION_LOOPS", "CLOCKS"]
+__all__ = ["run_on_target", "PILRun", "EmulatedLaw", "EmulationError", "find_emulator",
+           "ICOUNT_SHIFT", "CALIBRATION_LOOPS", "CLOCKS", "BOARD_CLOCK_HZ"]
 
 #: ``-icount shift``: 64 ns of virtual time per instruction, 1.6 ticks of the boards' 25 MHz
 #: timer: the count resolves single instructions.
@@ -40,6 +45,8 @@ CALIBRATION_LOOPS = 10000
 #: Clocks (Hz) the instruction counts are turned into times at: a typical Cortex-M4F (STM32F4)
 #: and Cortex-M7 (STM32H7, as issue 48 states 400 MHz).
 CLOCKS = {"cortex-m4": 168e6, "cortex-m7": 400e6}
+#: The MPS2 boards' system clock, Hz, which drives their timers.
+BOARD_CLOCK_HZ = 25e6
 #: Longest a QEMU run may take, s (wall time).
 TIMEOUT_S = 300.0
 EMULATOR = "qemu-system-arm"
@@ -140,7 +147,7 @@ def run_on_target(export, times, inputs, target: str = "cortex-m4",
     """
     from flexctl.model.errors import InputValueError
 
-    from .targets import check_target, find_target_compiler, run_tool, target_flags
+    from .targets import check_target
 
     chosen = check_target(target)
     if not chosen.embedded:
@@ -152,20 +159,231 @@ def run_on_target(export, times, inputs, target: str = "cortex-m4",
     if inputs.shape[1] != n_in:
         raise InputValueError(f"processor in the loop inputs must have {n_in} columns; got "
                               f"{inputs.shape[1]}")
-    compiler, qemu = find_target_compiler(chosen), find_emulator()
-    flags = [f for f in target_flags(chosen, export.precision)
-             if not f.startswith(("-fstack-usage", "-fcallgraph"))]
+    qemu = find_emulator()
     with tempfile.TemporaryDirectory(prefix="flexctl-pil-") as build:
-        folder = Path(build)
-        (folder / "pil.ld").write_text(_LINKER_SCRIPT, encoding="utf-8")
-        (folder / "pil_main.c").write_text(_program(export, times, inputs), encoding="utf-8")
-        elf = folder / "pil.elf"
-        run_tool([compiler, *flags, f"-I{export.directory}", "pil_main.c", "-nostartfiles",
-                  "-T", "pil.ld", "--specs=nano.specs", "--specs=nosys.specs", "-lm", "-o",
-                  elf], build)
+        elf = _link(export, chosen, _program(export, times, inputs), Path(build))
         output = _emulate(qemu, chosen.board, elf)
     return _parse(output, chosen, export.precision, times.size,
                   clock_hz or CLOCKS[chosen.name])
+
+
+def _link(export, target, main: str, folder: Path) -> Path:
+    """``main`` (which includes the law's source) linked for ``target`` in ``folder``."""
+    from .targets import find_target_compiler, run_tool, target_flags
+
+    flags = [f for f in target_flags(target, export.precision)
+             if not f.startswith(("-fstack-usage", "-fcallgraph"))]
+    (folder / "pil.ld").write_text(_LINKER_SCRIPT, encoding="utf-8")
+    (folder / "pil_main.c").write_text(main, encoding="utf-8")
+    elf = folder / "pil.elf"
+    run_tool([find_target_compiler(target), *flags, f"-I{export.directory}", "pil_main.c",
+              "-nostartfiles", "-T", "pil.ld", "--specs=nano.specs", "--specs=nosys.specs",
+              "-lm", "-o", elf], folder)
+    return elf
+
+
+class EmulatedLaw:
+    """The step running under QEMU, stepped from the host: the plant on the host, the law on
+    the emulated target (a :class:`~controllers.codegen.CompiledLaw`'s interface, so
+    :class:`~controllers.codegen.export.CompiledController` closes the loop with it).
+
+    The program on the target reads each request from the board's UART (CMSDK UART 0,
+    QEMU's ``-serial stdio``): ``I`` (``flexctl_ctrl_init``) or ``S`` with the time and the
+    input as the bits of each real, steps, and answers with the return code, the command's
+    bits and the step's timer ticks (instructions, as in :func:`run_on_target`).
+
+    Parameters
+    ----------
+    export : CExport
+        The written export; its folder is only read.
+    target : {"cortex-m4", "cortex-m7"}, optional
+        The processor. Default ``"cortex-m4"``.
+
+    Attributes
+    ----------
+    instructions : list of int
+        Instructions of each step taken (timer ticks over :data:`ICOUNT_TICKS`).
+    """
+
+    def __init__(self, export, target: str = "cortex-m4"):
+        from flexctl.model.errors import InputValueError
+
+        from .targets import check_target
+
+        chosen = check_target(target)
+        if not chosen.embedded:
+            raise InputValueError(f"processor in the loop target must be embedded, one of "
+                                  f"{tuple(CLOCKS)}; got {target!r}")
+        self.export, self.target, self.instructions = export, chosen, []
+        qemu = find_emulator()
+        self._folder = tempfile.TemporaryDirectory(prefix="flexctl-pil-loop-")
+        elf = _link(export, chosen, _loop_program(export), Path(self._folder.name))
+        self._process = subprocess.Popen(
+            [qemu, "-M", chosen.board, "-display", "none", "-monitor", "none", "-serial",
+             "stdio", "-semihosting-config", "enable=on,target=native",
+             "-icount", f"shift={ICOUNT_SHIFT},align=off,sleep=off", "-kernel", str(elf)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        self._wide = export.precision == "double"
+        self._ticks = 2 ** ICOUNT_SHIFT * BOARD_CLOCK_HZ / 1e9
+        self._answer()                       # "ready"
+
+    @property
+    def program(self):
+        """The law's program."""
+        return self.export.program
+
+    def _answer(self) -> list:
+        line = self._process.stdout.readline().decode("ascii", "replace").split()
+        if not line:
+            self.close()
+            raise EmulationError(f"{EMULATOR} -M {self.target.board} stopped answering: "
+                                 f"{self._process.stderr.read().decode()[-500:]!r}")
+        return line
+
+    def _send(self, text: str) -> list:
+        self._process.stdin.write(text.encode("ascii") + b"\n")
+        self._process.stdin.flush()
+        return self._answer()
+
+    def _bits(self, value: float) -> str:
+        if self._wide:
+            return f"{np.float64(value).view(np.uint64):016x}"
+        return f"{int(np.float32(value).view(np.uint32)):016x}"
+
+    def init(self) -> None:
+        """``flexctl_ctrl_init`` on the target."""
+        self._send("I")
+
+    def step(self, t: float, v) -> tuple:
+        """``flexctl_ctrl_step`` on the target: ``(u, code)``.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        v : array_like, shape (n_in,)
+            The step's input (plant state, or readings of a measurement law).
+        """
+        v = np.asarray(v, dtype=float).reshape(-1)
+        code, high, low, ticks = (int(x, 16) for x in self._send(
+            "S " + " ".join(self._bits(x) for x in (t, *v)))[1:5])
+        self.instructions.append(int(round(ticks / self._ticks)))
+        u = (np.uint64((high << 32) | low).view(np.float64) if self._wide
+             else np.uint32(low).view(np.float32))
+        return float(u), code
+
+    def controller(self, measure=None):
+        """This law as a flexctl controller (:class:`~controllers.codegen.export.
+        CompiledController`).
+
+        Parameters
+        ----------
+        measure : callable, optional
+            ``measure(t, x) -> y`` for a measurement law. Default the program's matrix.
+        """
+        from .export import CompiledController
+
+        return CompiledController(self, measure)
+
+    def close(self) -> None:
+        """Stop QEMU and remove the build."""
+        if self._process.poll() is None:
+            try:
+                self._process.stdin.write(b"Q\n")
+                self._process.stdin.flush()
+                self._process.wait(timeout=10)
+            except (OSError, subprocess.TimeoutExpired):
+                self._process.kill()
+                self._process.wait()
+        self._folder.cleanup()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _loop_program(export) -> str:
+    return _PROGRAM_HEAD + textwrap.dedent(f"""\
+        #include "{export.source.name}"
+
+        #define UART ((volatile uint32_t *)0x40004000u)   /* CMSDK UART 0: DATA, STATE, CTRL */
+        static struct flexctl_ctrl pil_ctrl;
+
+        static void uart_put(char c) {{
+          while (UART[1] & 1u) {{
+          }}
+          UART[0] = (uint32_t)(unsigned char)c;
+        }}
+
+        static int uart_get(void) {{
+          while (!(UART[1] & 2u)) {{
+          }}
+          return (int)(UART[0] & 0xFFu);
+        }}
+
+        static void uart_word(uint32_t v) {{
+          int j;
+          uart_put(' ');
+          for (j = 7; j >= 0; --j) uart_put("0123456789abcdef"[(v >> (4 * j)) & 15u]);
+        }}
+
+        /* one real as 16 hex digits (a float in the low 8) */
+        static flexctl_real read_real(void) {{
+          uint64_t bits = 0u;
+          int j, c;
+          flexctl_real value;
+          while ((c = uart_get()) == ' ') {{
+          }}
+          for (j = 0; j < 16; ++j) {{
+            if (j > 0) c = uart_get();
+            bits = (bits << 4) | (uint64_t)(c <= '9' ? c - '0' : c - 'a' + 10);
+          }}
+          if (sizeof(flexctl_real) == 4) {{
+            uint32_t low = (uint32_t)bits;
+            memcpy(&value, &low, sizeof value);
+          }} else {{
+            memcpy(&value, &bits, sizeof value);
+          }}
+          return value;
+        }}
+
+        int main(void) {{
+          flexctl_real t, v[FLEXCTL_N_INPUT], u = 0;
+          uint32_t start, ticks, bits[2];
+          int c, k, code;
+          UART[4] = 16u;
+          UART[2] = 3u;                       /* transmit and receive on */
+          timer_start();
+          pil_calibrate({CALIBRATION_LOOPS}u);     /* on semihosting's console, not read */
+          uart_put('r');
+          uart_put('\\n');
+          for (;;) {{
+            c = uart_get();
+            if (c == 'Q') return 0;
+            if (c == 'I') {{
+              code = flexctl_ctrl_init(&pil_ctrl);
+              ticks = 0u;
+            }} else {{
+              t = read_real();
+              for (k = 0; k < FLEXCTL_N_INPUT; ++k) v[k] = read_real();
+              start = TIMER_VALUE;
+              code = flexctl_ctrl_step(&pil_ctrl, t, v, &u);
+              ticks = start - TIMER_VALUE;
+            }}
+            while (c != '\\n') c = uart_get();
+            bits[0] = bits[1] = 0u;
+            memcpy(bits, &u, sizeof u);
+            uart_put('R');
+            uart_word((uint32_t)code);
+            uart_word(bits[1]);
+            uart_word(bits[0]);
+            uart_word(ticks);
+            uart_put('\\n');
+          }}
+        }}
+        """)
 
 
 def _emulate(qemu: str, board: str, elf: Path) -> str:

@@ -180,3 +180,30 @@ def test_the_guides_flight_loop_compiles(sampled_lqr, precision, tmp_path):
         subprocess.run([compiler, *C_FLAGS, *PRECISION_FLAGS[precision], *flags, "-c",
                         "flight.c", "-o", "flight.o"], cwd=tmp_path, check=True,
                        capture_output=True)
+
+
+@needs_cross
+@needs_qemu
+@needs_host
+def test_the_emulated_law_flies_the_slew_with_the_plant_on_the_host(sampled_lqr, tmp_path):
+    """The plant integrated on the host, the float law on the emulated Cortex-M4 stepped over
+    its UART each sample: the same commands as the host build of the same C, the same
+    residual vibration, and the double Python law's within LOOP_FRACTION."""
+    from controllers.codegen import EmulatedLaw
+    from flexctl.sim.metrics import slew_metrics
+
+    scene, plant, law, _, _ = sampled_lqr
+    exported = export_c(law, plant, tmp_path, precision="float")
+    with EmulatedLaw(exported, "cortex-m4") as emulated:
+        on_target = flexctl.simulate(plant, 3.0, controller=emulated.controller())
+        assert len(emulated.instructions) == 300 and min(emulated.instructions) > 0
+    on_host = flexctl.simulate(plant, 3.0, controller=exported.compile().controller())
+    python = flexctl.simulate(plant, 3.0, controller=law)
+    assert on_target.status == "ok"
+    np.testing.assert_allclose(on_target.torque, on_host.torque, rtol=0,
+                               atol=8 * EPSILON["float"] * scene.maneuver.torque_bound)
+    end = from_spec(scene, plant).maneuver_end
+    vib = [slew_metrics(r, scene.maneuver.angle, end).residual_vibration
+           for r in (on_target, on_host, python)]
+    assert vib[0] == pytest.approx(vib[1], rel=1e-9)
+    assert vib[0] == pytest.approx(vib[2], rel=1e-3)
