@@ -15,6 +15,7 @@ import textwrap
 
 import numpy as np
 
+from .precision import FLOAT_MIN, PRECISION_FLAGS, check_precision, single_precision_code
 from .program import ControllerProgram
 
 __all__ = ["CSources", "c_sources", "RETURN_CODES"]
@@ -49,8 +50,9 @@ class CSources:
         The ``Makefile`` that builds the law as an object, a static library and the example
         program.
     sizes : dict
-        ``memory_doubles``, ``work_doubles``, ``work_ints``, ``arg_pointers``,
-        ``res_pointers``: the arrays of the struct, in entries.
+        ``memory_reals``, ``work_reals``, ``work_ints``, ``arg_pointers``,
+        ``res_pointers``: the arrays of the struct, in entries (reals of the export's
+        precision).
     """
 
     def __init__(self, header, source, main, makefile, sizes):
@@ -58,24 +60,27 @@ class CSources:
         self.sizes = sizes
 
 
-def _c_double(value: float) -> str:
+def _c_double(value: float, real: str = "double") -> str:
     if not np.isfinite(value):
         raise ValueError(f"cannot write the non-finite number {value!r} as C")
-    return repr(float(value))
+    if real == "float" and abs(value) < FLOAT_MIN:
+        value = 0.0                      # float holds no such number (precision.FLOAT_MIN)
+    return repr(float(value)) + ("f" if real == "float" else "")
 
 
-def _array(values, per_line: int = 4) -> str:
-    items = [_c_double(v) for v in np.asarray(values, dtype=float).reshape(-1)] or ["0.0"]
+def _array(values, real: str, per_line: int = 4) -> str:
+    items = [_c_double(v, real) for v in np.asarray(values, dtype=float).reshape(-1)] or [
+        _c_double(0.0, real)]
     lines = [", ".join(items[i:i + per_line]) for i in range(0, len(items), per_line)]
     return "{\n  " + ",\n  ".join(lines) + "\n}"
 
 
-def _generated(program: ControllerProgram, prefix: str) -> tuple:
+def _generated(program: ControllerProgram, prefix: str, real: str) -> tuple:
     """CasADi's C for the step and recover functions, and the work sizes they need."""
     import casadi as ca
 
     cg = ca.CodeGenerator(f"{prefix}_casadi.c", {
-        "with_header": False, "with_export": False, "verbose": False, "casadi_real": "double",
+        "with_header": False, "with_export": False, "verbose": False, "casadi_real": real,
         "casadi_int": "long long int", "prefix": f"{prefix}_", "avoid_stack": True})
     functions = [program.step] + ([program.recover] if program.recover is not None else [])
     renamed = [_renamed(function, f"{prefix}_{role}")
@@ -83,7 +88,10 @@ def _generated(program: ControllerProgram, prefix: str) -> tuple:
     for function in renamed:
         cg.add(function)
     sizes = np.max([[f.sz_arg(), f.sz_res(), f.sz_iw(), f.sz_w()] for f in renamed], axis=0)
-    return cg.dump(), [f.name() for f in renamed], [int(s) for s in sizes]
+    code = cg.dump()
+    if real == "float":
+        code = single_precision_code(code)
+    return code, [f.name() for f in renamed], [int(s) for s in sizes]
 
 
 def _renamed(function, name):
@@ -96,7 +104,7 @@ def _renamed(function, name):
 
 
 def c_sources(program: ControllerProgram, prefix: str = "flexctl_ctrl",
-              plant_states: int | None = None) -> CSources:
+              plant_states: int | None = None, precision: str = "double") -> CSources:
     """The C files of ``program`` (module docstring).
 
     Parameters
@@ -109,25 +117,30 @@ def c_sources(program: ControllerProgram, prefix: str = "flexctl_ctrl",
     plant_states : int, optional
         The plant's state count, written as ``FLEXCTL_NX`` when the law reads readings.
         Default: the law's input count.
+    precision : {"double", "float"}, optional
+        The C type of every real (:mod:`~controllers.codegen.precision`). Default
+        ``"double"``.
 
     Raises
     ------
     ValueError
-        If ``prefix`` is not such a C identifier.
+        If ``prefix`` is not such a C identifier, or ``precision`` not a precision.
     """
     if not re.fullmatch(r"[a-z][a-z0-9_]{0,30}", prefix):
         raise ValueError(f"prefix must be a C identifier of lower-case letters, digits and _; "
                          f"got {prefix!r}")
-    code, names, (sz_arg, sz_res, sz_iw, sz_w) = _generated(program, "flexctl_law")
+    real = check_precision(precision)
+    code, names, (sz_arg, sz_res, sz_iw, sz_w) = _generated(program, "flexctl_law", real)
     upper = prefix.upper()
     n_in, n_mem = program.n_in, program.n_memory
     measured = program.input_kind == "measurement"
     nx = plant_states if measured and plant_states else n_in
-    sizes = {"memory_doubles": n_mem, "work_doubles": sz_w, "work_ints": sz_iw,
+    sizes = {"memory_reals": n_mem, "work_reals": sz_w, "work_ints": sz_iw,
              "arg_pointers": sz_arg, "res_pointers": sz_res}
-    header = _header(program, upper, prefix, nx, measured)
-    source = _source(program, prefix, upper, code, names, sizes)
-    return CSources(header, source, _main(program, prefix, upper), _makefile(prefix), sizes)
+    header = _header(program, upper, prefix, nx, measured, real)
+    source = _source(program, prefix, upper, code, names, sizes, real)
+    return CSources(header, source, _main(program, prefix, upper), _makefile(prefix, real),
+                    sizes)
 
 
 def unit_of(name: str) -> str:
@@ -165,7 +178,7 @@ def _wrapped(text: str) -> str:
     return "\n".join(" * " + line for line in textwrap.wrap(text, 88))
 
 
-def _header(program, upper, prefix, nx, measured) -> str:
+def _header(program, upper, prefix, nx, measured, real) -> str:
     kind = ("the sensor readings y (FLEXCTL_NY entries, below)" if measured else
             "FLEXCTL_NX plant states, in the plant's state order (below)")
     codes = "\n".join(f"#define {name} {value}   /* {text} */" for name, value, text in
@@ -179,11 +192,11 @@ def _header(program, upper, prefix, nx, measured) -> str:
 {_names_comment(program)}
  * Output u: the {program.output_name} ({program.output_unit}).
  *
- * Usage: provide flexctl_ctrl_size() bytes aligned for double (malloc, or a static array of
- * double), call flexctl_ctrl_init once, then flexctl_ctrl_step at every sample time t
- * (t_0, t_0 + FLEXCTL_SAMPLE_TIME, ...), or whenever a command is needed when
- * FLEXCTL_SAMPLE_TIME is 0. The struct holds the law's memory: one struct per loop, no
- * global state, no allocation.
+ * Every real is a flexctl_real ({real}). Usage: provide flexctl_ctrl_size() bytes aligned for
+ * double (malloc, or a static array of double), call flexctl_ctrl_init once, then
+ * flexctl_ctrl_step at every sample time t (t_0, t_0 + FLEXCTL_SAMPLE_TIME, ...), or
+ * whenever a command is needed when FLEXCTL_SAMPLE_TIME is 0. The struct holds the law's
+ * memory: one struct per loop, no global state, no allocation.
  */
 #ifndef {guard}
 #define {guard}
@@ -198,8 +211,11 @@ extern "C" {{
 #define FLEXCTL_NY {program.n_in if measured else 0}   /* sensor readings an output-feedback law reads (0: it reads the state) */
 #define FLEXCTL_N_INPUT {program.n_in}   /* entries of the step's input (FLEXCTL_NY if nonzero, else FLEXCTL_NX) */
 #define FLEXCTL_NU 1
-#define FLEXCTL_SAMPLE_TIME {_c_double(program.sample_time)}   /* s; 0 for a continuous law evaluated when called */
-#define FLEXCTL_MEMORY_DOUBLES {program.n_memory}   /* the law's memory, inside the struct */
+#define FLEXCTL_SAMPLE_TIME {_c_double(program.sample_time, real)}   /* s; 0 for a continuous law evaluated when called */
+#define FLEXCTL_MEMORY_REALS {program.n_memory}   /* the law's memory, inside the struct */
+#define FLEXCTL_PRECISION "{real}"
+
+typedef {real} flexctl_real;   /* the type of every real of the law */
 
 {codes}
 
@@ -214,7 +230,7 @@ int flexctl_ctrl_init(flexctl_ctrl *c);
 
 /* u[0]: the command to hold from time t (s), given x (FLEXCTL_N_INPUT entries: the plant
  * state, or the readings y of an output-feedback law). Returns one of the codes above. */
-int flexctl_ctrl_step(flexctl_ctrl *c, double t, const double *x, double *u);
+int flexctl_ctrl_step(flexctl_ctrl *c, flexctl_real t, const flexctl_real *x, flexctl_real *u);
 
 /* Names of the step's input entries, in order. */
 extern const char *const flexctl_ctrl_input_names[FLEXCTL_N_INPUT];
@@ -227,7 +243,7 @@ extern const char *const flexctl_ctrl_input_names[FLEXCTL_N_INPUT];
 """
 
 
-def _source(program, prefix, upper, code, names, sizes) -> str:
+def _source(program, prefix, upper, code, names, sizes, real) -> str:
     has_recover = program.recover is not None
     recover_block = ""
     if has_recover:
@@ -240,7 +256,7 @@ def _source(program, prefix, upper, code, names, sizes) -> str:
     c->res[0] = &u_new;
     c->res[1] = c->m_next;
     flag = {names[1]}(c->arg, c->res, c->iw, c->w, 0);
-    ok = flag == 0 && flexctl_finite(&u_new, 1) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_DOUBLES);
+    ok = flag == 0 && flexctl_finite(&u_new, 1) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_REALS);
     status = FLEXCTL_STEP_RECOVERED;
   }}"""
     return f"""\
@@ -267,13 +283,13 @@ def _source(program, prefix, upper, code, names, sizes) -> str:
 #pragma GCC diagnostic pop
 #endif
 
-{_wrapper(program, sizes)}
-int flexctl_ctrl_step(flexctl_ctrl *c, double t, const double *x, double *u) {{
-  double u_new = 0.0;
+{_wrapper(program, sizes, real)}
+int flexctl_ctrl_step(flexctl_ctrl *c, flexctl_real t, const flexctl_real *x, flexctl_real *u) {{
+  flexctl_real u_new = 0;
   int flag, ok, status = FLEXCTL_OK;
   if (!c || !x || !u || c->magic != FLEXCTL_MAGIC) return FLEXCTL_ERR_ARGUMENT;
   if (!isfinite(t) || !flexctl_finite(x, FLEXCTL_N_INPUT)) {{
-    u[0] = 0.0;
+    u[0] = 0;
     return FLEXCTL_ERR_INPUT;
   }}
   c->arg[0] = &t;
@@ -282,9 +298,9 @@ int flexctl_ctrl_step(flexctl_ctrl *c, double t, const double *x, double *u) {{
   c->res[0] = &u_new;
   c->res[1] = c->m_next;
   flag = {names[0]}(c->arg, c->res, c->iw, c->w, 0);
-  ok = flag == 0 && flexctl_finite(&u_new, 1) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_DOUBLES);{recover_block}
+  ok = flag == 0 && flexctl_finite(&u_new, 1) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_REALS);{recover_block}
   if (!ok) {{
-    u[0] = 0.0;
+    u[0] = 0;
     return FLEXCTL_ERR_FAILED;
   }}
   memcpy(c->m, c->m_next, sizeof(c->m));
@@ -294,7 +310,7 @@ int flexctl_ctrl_step(flexctl_ctrl *c, double t, const double *x, double *u) {{
 """
 
 
-def _wrapper(program, sizes) -> str:
+def _wrapper(program, sizes, real) -> str:
     """The struct, its initial memory, the input names, ``size`` and ``init``."""
     n_mem = max(program.n_memory, 1)
     names_list = ",\n  ".join(f'"{name}"' for name in program.input_names)
@@ -303,26 +319,26 @@ def _wrapper(program, sizes) -> str:
 #define FLEXCTL_SZ_ARG {max(sizes['arg_pointers'], 1)}
 #define FLEXCTL_SZ_RES {max(sizes['res_pointers'], 1)}
 #define FLEXCTL_SZ_IW {max(sizes['work_ints'], 1)}
-#define FLEXCTL_SZ_W {max(sizes['work_doubles'], 1)}
+#define FLEXCTL_SZ_W {max(sizes['work_reals'], 1)}
 #define FLEXCTL_MAGIC {_MAGIC}
 
 struct flexctl_ctrl {{
-  double m[{n_mem}];        /* the law's memory */
-  double m_next[{n_mem}];   /* the memory after the step being taken */
-  double w[FLEXCTL_SZ_W];
+  flexctl_real m[{n_mem}];        /* the law's memory */
+  flexctl_real m_next[{n_mem}];   /* the memory after the step being taken */
+  flexctl_real w[FLEXCTL_SZ_W];
   long long int iw[FLEXCTL_SZ_IW];
-  const double *arg[FLEXCTL_SZ_ARG];
-  double *res[FLEXCTL_SZ_RES];
+  const flexctl_real *arg[FLEXCTL_SZ_ARG];
+  flexctl_real *res[FLEXCTL_SZ_RES];
   long magic;
 }};
 
-static const double flexctl_m0[{n_mem}] = {_array(program.memory_init if program.n_memory else [0.0])};
+static const flexctl_real flexctl_m0[{n_mem}] = {_array(program.memory_init if program.n_memory else [0.0], real)};
 
 const char *const flexctl_ctrl_input_names[FLEXCTL_N_INPUT] = {{
   {names_list}
 }};
 
-static int flexctl_finite(const double *v, int n) {{
+static int flexctl_finite(const flexctl_real *v, int n) {{
   int i;
   for (i = 0; i < n; ++i) {{
     if (!isfinite(v[i])) return 0;
@@ -355,17 +371,18 @@ def _main(program, prefix, upper) -> str:
 #include "{prefix}.h"
 
 int main(int argc, char **argv) {{
-  double x[FLEXCTL_N_INPUT] = {{0.0}};
-  double u = 0.0;
+  flexctl_real x[FLEXCTL_N_INPUT] = {{0}};
+  flexctl_real u = 0;
   int i, k, code;
   flexctl_ctrl *c = (flexctl_ctrl *)malloc(flexctl_ctrl_size());   /* once, before the loop */
   if (!c) return 1;
-  for (i = 0; i < FLEXCTL_N_INPUT && i + 1 < argc; ++i) x[i] = atof(argv[i + 1]);
+  for (i = 0; i < FLEXCTL_N_INPUT && i + 1 < argc; ++i) x[i] = (flexctl_real)atof(argv[i + 1]);
   if (flexctl_ctrl_init(c) != FLEXCTL_OK) return 1;
   for (k = 0; k < 10; ++k) {{
-    double t = k * (FLEXCTL_SAMPLE_TIME > 0.0 ? FLEXCTL_SAMPLE_TIME : 0.01);
+    flexctl_real t = (flexctl_real)k * (FLEXCTL_SAMPLE_TIME > 0 ? FLEXCTL_SAMPLE_TIME
+                                                         : (flexctl_real)0.01);
     code = flexctl_ctrl_step(c, t, x, &u);
-    printf("t = %.4f s  u = %.12g  (code %d)\\n", t, u, code);
+    printf("t = %.4f s  u = %.12g  (code %d)\\n", (double)t, (double)u, code);
   }}
   printf("controller struct: %lu bytes\\n", (unsigned long)flexctl_ctrl_size());
   free(c);
@@ -374,11 +391,26 @@ int main(int argc, char **argv) {{
 """
 
 
-def _makefile(prefix) -> str:
+def _makefile(prefix, real) -> str:
+    from .targets import TARGETS, target_flags
+
+    extra = "".join(" " + flag for flag in PRECISION_FLAGS[real])
+    embedded = [target for target in TARGETS.values() if target.embedded]
+    rules = "".join(
+        f"\n# {t.name}: the law as a static library for a {t.name}, built freestanding at "
+        f"the flags\n# flexctl checks it with (each function's stack use in "
+        f"{prefix}_{t.name}.su)\n"
+        f"{t.name}: lib{prefix}_{t.name}.a\n\n"
+        f"lib{prefix}_{t.name}.a: {prefix}.c {prefix}.h\n"
+        f"\t{t.compiler} {' '.join(target_flags(t, real))} -c {prefix}.c "
+        f"-o {prefix}_{t.name}.o\n"
+        f"\t{t.tools}ar rcs $@ {prefix}_{t.name}.o\n" for t in embedded)
+    names = " ".join(t.name for t in embedded)
+    cleaned = " ".join(f"{prefix}_{t.name}.o lib{prefix}_{t.name}.a" for t in embedded)
     return textwrap.dedent(f"""\
         # Builds the exported law as an object, a static library and the example program.
         CC ?= cc
-        CFLAGS ?= -std=c99 -O2 -Wall -Wextra -Werror
+        CFLAGS ?= -std=c99 -O2 -Wall -Wextra -Werror{extra}
         LDLIBS = -lm
 
         all: lib{prefix}.a {prefix}_demo
@@ -393,7 +425,7 @@ def _makefile(prefix) -> str:
         \t$(CC) $(CFLAGS) main.c lib{prefix}.a $(LDLIBS) -o $@
 
         clean:
-        \trm -f {prefix}.o lib{prefix}.a {prefix}_demo
+        \trm -f {prefix}.o lib{prefix}.a {prefix}_demo {cleaned} *.su *.ci
 
-        .PHONY: all clean
-        """)
+        .PHONY: all clean {names}
+        """) + rules

@@ -41,49 +41,19 @@ from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.atomic_files import staged_folder
 
 from .c_source import RETURN_CODES, c_sources
+from .compiler import (C_FLAGS, MESSAGE_LINES, CompileError, compiler_of, find_compiler,
+                       run_compiler)
 from .laws import program_for
+from .precision import PRECISION_FLAGS, check_precision
 from .program import ControllerProgram
 
 __all__ = ["export_c", "CExport", "CompiledLaw", "CompiledController", "CompileError",
-           "C_FLAGS", "C_FILES", "find_compiler", "MESSAGE_LINES"]
+           "C_FLAGS", "C_FILES", "find_compiler", "MESSAGE_LINES"]     # the compiler's: re-exported
 
-#: Flags every export is checked with.
-C_FLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-Werror")
 PREFIX = "flexctl_ctrl"
 #: The files :func:`export_c` writes, in the order of :attr:`CExport.files`.
 C_FILES = (f"{PREFIX}.h", f"{PREFIX}.c", "main.c", "Makefile")
-#: Lines of the compiler's messages a :class:`CompileError` shows whole; of longer messages it
-#: shows the first tenth of these and the last 40 (the first error and the last).
-MESSAGE_LINES = 60
 _CODES = {value: name for name, value, _ in RETURN_CODES}
-
-
-class CompileError(RuntimeError):
-    """The C compiler refused an export (its messages attached), or there is none."""
-
-
-def find_compiler(cc: str | None = None) -> str:
-    """The C compiler's path: ``cc``, else ``$CC``, else ``cc``/``gcc``/``clang`` on the path.
-
-    Parameters
-    ----------
-    cc : str, optional
-        A compiler's name or path, tried first. Default: none given.
-
-    Raises
-    ------
-    CompileError
-        If none of them is found.
-    """
-    return _compiler(cc)[1]
-
-
-def _compiler(cc: str | None = None) -> tuple:
-    """``(name, path)`` of the C compiler :func:`find_compiler` finds: the name as given."""
-    for name in ([cc] if cc else []) + [os.environ.get("CC")] + ["cc", "gcc", "clang"]:
-        if name and shutil.which(name):
-            return name, shutil.which(name)
-    raise CompileError("no C compiler found (set CC, or install cc, gcc or clang)")
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +70,8 @@ class CExport:
         Header, source, example main, Makefile.
     plant_names : tuple of str
         The plant's state names (what a state law reads).
+    precision : {"double", "float"}
+        The C type of every real of the law.
     """
 
     directory: Path
@@ -107,6 +79,7 @@ class CExport:
     sizes: dict
     files: tuple
     plant_names: tuple = ()
+    precision: str = "double"
 
     @property
     def source(self) -> Path:
@@ -130,7 +103,9 @@ class CExport:
             The C compiler (:func:`find_compiler`). Default ``$CC``, else ``cc``, ``gcc`` or
             ``clang`` on the path.
         flags : sequence of str, optional
-            Flags of the compilation of the source. Default :data:`C_FLAGS`.
+            Flags of the compilation of the source. Default :data:`C_FLAGS`, and in float
+            :data:`~controllers.codegen.precision.PRECISION_FLAGS` (a promotion to double
+            is an error).
 
         Raises
         ------
@@ -138,17 +113,19 @@ class CExport:
             No compiler, or it failed: its name, exit status and messages are in the error
             (the first and last lines of long messages, :data:`MESSAGE_LINES`).
         """
-        name, compiler = _compiler(cc)
+        name, compiler = compiler_of(cc)
         flags = [str(flag) for flag in flags]
+        flags += [f for f in PRECISION_FLAGS[self.precision] if f not in flags]
         library = _library_folder() / f"lib{PREFIX}-{os.urandom(6).hex()}.so"
         with tempfile.TemporaryDirectory(prefix="flexctl-build-") as build:
             obj = Path(build, f"{PREFIX}.o")
             started = time.perf_counter()
             # run in the export folder on the source's own name: the messages name the file
             # as the user knows it, not a path of the build
-            _run(name, [compiler, *flags, "-fPIC", "-c", self.source.name, "-o", str(obj)],
-                 f"compiling {self.source.name} with {' '.join(flags)}", self.directory)
-            _run(name, [compiler, "-shared", str(obj), "-o", str(library), "-lm"],
+            run_compiler(name, [compiler, *flags, "-fPIC", "-c", self.source.name, "-o",
+                                str(obj)],
+                         f"compiling {self.source.name} with {' '.join(flags)}", self.directory)
+            run_compiler(name, [compiler, "-shared", str(obj), "-o", str(library), "-lm"],
                  "linking the shared library", build)
             elapsed = time.perf_counter() - started
             code_bytes = _text_size(obj)
@@ -160,7 +137,8 @@ class CExport:
         return {"kind": program.kind, "description": program.description,
                 "input": program.input_kind, "input_names": list(program.input_names),
                 "output": f"{program.output_name} ({program.output_unit})",
-                "sample_time_s": program.sample_time, "memory_doubles": program.n_memory,
+                "precision": self.precision,
+                "sample_time_s": program.sample_time,
                 **{k: int(v) for k, v in self.sizes.items()}, **program.info,
                 "files": [str(f) for f in self.files]}
 
@@ -188,64 +166,6 @@ def _remove_library_folder(pid: int, folder: Path) -> None:
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def _run(name: str, command: list, doing: str, cwd) -> None:
-    """Run the compiler ``name`` (``command[0]`` is its path) in ``cwd``; a failure raises a
-    :class:`CompileError` saying what it was ``doing``, with its messages."""
-    try:
-        done = subprocess.run(command, capture_output=True, text=True, cwd=cwd)
-    except OSError as exc:
-        raise CompileError(f"the C compiler {name!r} could not be run ({doing}): "
-                           f"{exc.strerror or exc}") from None
-    if done.returncode != 0:
-        raise CompileError(_failure_message(name, done.returncode, done.stderr, done.stdout,
-                                            doing))
-
-
-def _failure_message(name: str, status: int, stderr: str, stdout: str = "",
-                     doing: str = "") -> str:
-    """The message of a compiler that failed: its name, exit status and what it printed.
-
-    Parameters
-    ----------
-    name : str
-        The compiler as given (``$CC``, ``cc``, ...).
-    status : int
-        Its exit status (negative: the signal that stopped it).
-    stderr, stdout : str
-        What it printed (both shown, error stream first; of more than
-        :data:`MESSAGE_LINES` lines, the first few and the last 40).
-    doing : str, optional
-        What it was asked to do (``"compiling flexctl_ctrl.c with ..."``).
-
-    Returns
-    -------
-    str
-
-    Examples
-    --------
-    >>> _failure_message("false", 1, "")
-    "the C compiler 'false' exited with status 1 and printed nothing"
-    >>> print(_failure_message("cc", 1, "a.c:1: error: x\\n", doing="compiling a.c"))
-    the C compiler 'cc' exited with status 1 compiling a.c:
-    a.c:1: error: x
-    """
-    ended = f"exited with status {status}" if status >= 0 else f"was stopped by signal {-status}"
-    lines = [line.rstrip() for text in (stderr, stdout) for line in (text or "").splitlines()]
-    while lines and not lines[-1]:
-        lines.pop()
-    while lines and not lines[0]:
-        lines.pop(0)
-    what = f" {doing}" if doing else ""
-    if not lines:
-        return f"the C compiler {name!r} {ended} and printed nothing" + (
-            f" ({doing})" if doing else "")
-    if len(lines) > MESSAGE_LINES:
-        head = MESSAGE_LINES // 10
-        lines = lines[:head] + [f"[... {len(lines) - head - 40} lines left out ...]"] \
-            + lines[-40:]
-    return f"the C compiler {name!r} {ended}{what}:\n" + "\n".join(lines)
-
-
 def _text_size(obj: Path) -> int | None:
     """Bytes of code and constant data in the object (``size``'s text column)."""
     tool = shutil.which("size")
@@ -259,7 +179,7 @@ def _text_size(obj: Path) -> int | None:
 
 
 def export_c(controller, plant, directory, *, sample_time: float | None = None,
-             initial_state=None) -> CExport:
+             initial_state=None, precision: str = "double") -> CExport:
     """Write ``controller`` (bound to ``plant``) as C files in ``directory``.
 
     Parameters
@@ -277,6 +197,14 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
         Sample time, s: to discretise an LQG's estimator at, or to sample a static law at.
     initial_state : array_like, optional
         Plant state where an estimator starts, shape (n,); default zero.
+    precision : {"double", "float"}, optional
+        The C type of every real: the interface, the memory, the constants and the
+        arithmetic, the QP's included (:mod:`~controllers.codegen.precision`). In float the
+        law's conditioning is checked first (:func:`~controllers.codegen.conditioning.
+        check_float`): refused where single precision breaks it, a
+        :class:`~controllers.codegen.conditioning.PrecisionWarning` where it loses much of
+        its accuracy. A ``ControllerProgram`` given as ``controller`` keeps the QP
+        tolerances it was built with. Default ``"double"``.
 
     Returns
     -------
@@ -286,7 +214,9 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     ------
     flexctl.model.errors.InputValueError
         If ``directory`` is a file, or a folder stands at one of the files' names (the
-        folder is left as it was).
+        folder is left as it was), or ``precision`` is not a precision.
+    ExportRefused
+        If the law has no C form, or single precision breaks it.
     """
     if isinstance(directory, bool) or not isinstance(directory, (str, os.PathLike)):
         raise InputTypeError(f"export directory must be a path; got {type(directory).__name__}")
@@ -294,18 +224,24 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
 
     if not isinstance(plant, Model):
         raise InputTypeError(f"export plant must be a flexctl Model; got {type(plant).__name__}")
+    precision = check_precision(precision)
     program = controller if isinstance(controller, ControllerProgram) else program_for(
-        controller, plant, sample_time=sample_time, initial_state=initial_state)
+        controller, plant, sample_time=sample_time, initial_state=initial_state,
+        precision=precision)
     directory = Path(directory)
     if directory.exists() and not directory.is_dir():
         raise InputValueError(f"export directory {str(directory)!r} is a file")
-    sources = c_sources(program, PREFIX, plant_states=plant.n_states)
+    if precision == "float":
+        from .conditioning import check_float
+        check_float(program)
+    sources = c_sources(program, PREFIX, plant_states=plant.n_states, precision=precision)
     texts = (sources.header, sources.source, sources.main, sources.makefile)
     with staged_folder(directory, names=C_FILES) as stage:
         for name, text in zip(C_FILES, texts):
             (stage / name).write_text(text, encoding="utf-8")
     return CExport(directory, program, sources.sizes,
-                   tuple(directory / name for name in C_FILES), tuple(plant.state_names))
+                   tuple(directory / name for name in C_FILES), tuple(plant.state_names),
+                   precision)
 
 
 class CompiledLaw:
@@ -336,20 +272,21 @@ class CompiledLaw:
         self.export, self.library = export, library
         self.compile_time_s, self.code_bytes = compile_time_s, code_bytes
         lib = ctypes.CDLL(str(library))
+        real, dtype = ((ctypes.c_float, np.float32) if export.precision == "float"
+                       else (ctypes.c_double, np.float64))
         lib.flexctl_ctrl_size.restype = ctypes.c_size_t
         lib.flexctl_ctrl_size.argtypes = []
         lib.flexctl_ctrl_init.restype = ctypes.c_int
         lib.flexctl_ctrl_init.argtypes = [ctypes.c_void_p]
         lib.flexctl_ctrl_step.restype = ctypes.c_int
-        lib.flexctl_ctrl_step.argtypes = [ctypes.c_void_p, ctypes.c_double,
-                                          ctypes.POINTER(ctypes.c_double),
-                                          ctypes.POINTER(ctypes.c_double)]
-        self._lib = lib
+        lib.flexctl_ctrl_step.argtypes = [ctypes.c_void_p, real, ctypes.POINTER(real),
+                                          ctypes.POINTER(real)]
+        self._lib, self._real = lib, real
         self.struct_bytes = int(lib.flexctl_ctrl_size())
         # doubles: aligned for every member of the struct
         self._memory = np.zeros(-(-self.struct_bytes // 8) + 1)
-        self._input = np.zeros(max(export.program.n_in, 1))
-        self._u = ctypes.c_double(0.0)
+        self._input = np.zeros(max(export.program.n_in, 1), dtype=dtype)
+        self._u = real(0.0)
         self.init()
 
     @property
@@ -385,8 +322,8 @@ class CompiledLaw:
                                   f"({self.program.input_kind}); got {v.size}")
         self._input[:v.size] = v
         code = self._lib.flexctl_ctrl_step(
-            self._memory.ctypes.data, ctypes.c_double(float(t)),
-            self._input.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), ctypes.byref(self._u))
+            self._memory.ctypes.data, self._real(float(t)),
+            self._input.ctypes.data_as(ctypes.POINTER(self._real)), ctypes.byref(self._u))
         return float(self._u.value), int(code)
 
     def controller(self, measure=None) -> "CompiledController":

@@ -16,13 +16,14 @@ from flexctl.model.checks import check_array
 from flexctl.model.errors import InputTypeError
 from flexctl.sim.digital import ZeroOrderHold, is_sampled
 
+from .precision import check_precision
 from .program import ControllerProgram, ExportRefused, plant_output
 
 __all__ = ["program_for"]
 
 
 def program_for(controller, plant, *, sample_time: float | None = None,
-                initial_state=None) -> ControllerProgram:
+                initial_state=None, precision: str = "double") -> ControllerProgram:
     """The :class:`ControllerProgram` of a designed ``controller`` run on ``plant``.
 
     Parameters
@@ -40,6 +41,9 @@ def program_for(controller, plant, *, sample_time: float | None = None,
     initial_state : array_like, optional
         Plant state at the start, shape (n,): where an estimator's estimate starts (default:
         at rest, zero).
+    precision : {"double", "float"}, optional
+        The precision the program will be written in: it sets an NMPC's QP tolerances
+        (:func:`~controllers.codegen.precision.qp_options`). Default ``"double"``.
 
     Raises
     ------
@@ -55,17 +59,17 @@ def program_for(controller, plant, *, sample_time: float | None = None,
         sample_time = check_sample_time("export", sample_time)
     x0 = np.zeros(plant.n_states) if initial_state is None else check_array(
         "export", "initial_state", initial_state, shape=(plant.n_states,))
-    return _dispatch(controller, plant, sample_time, x0)
+    return _dispatch(controller, plant, sample_time, x0, check_precision(precision))
 
 
-def _dispatch(controller, plant, sample_time, x0):
+def _dispatch(controller, plant, sample_time, x0, precision):
     from controllers.feedback.actuated import MotorVoltage
     from controllers.feedback.lqg import LQG
     from controllers.mpc.nmpc import NMPC
     from controllers.feedback.observer import Observed
 
     if isinstance(controller, MotorVoltage):
-        return _voltage_program(controller, plant, sample_time, x0)
+        return _voltage_program(controller, plant, sample_time, x0, precision)
     if isinstance(controller, ZeroOrderHold):
         own = controller.sample_time
         if sample_time is not None and abs(sample_time - own) > 1e-12 * own:
@@ -75,14 +79,14 @@ def _dispatch(controller, plant, sample_time, x0):
     if isinstance(controller, NMPC):
         _same_rate(controller, sample_time)
         from .nmpc_program import nmpc_program
-        return nmpc_program(controller, plant, x0)
+        return nmpc_program(controller, plant, x0, precision)
     if isinstance(controller, LQG):
         from .lqg_program import lqg_program
         return lqg_program(controller, plant, sample_time, x0)
     if isinstance(controller, Observed):
         _same_rate(controller, sample_time)
         from .observed_program import observed_program
-        inner = program_for(controller.law, plant, initial_state=x0)
+        inner = program_for(controller.law, plant, initial_state=x0, precision=precision)
         return observed_program(controller, plant, x0, inner)
     if is_sampled(controller):
         raise ExportRefused(f"export: the sampled controller {type(controller).__name__} has "
@@ -182,7 +186,14 @@ def _static_program(controller, plant, sample_time) -> ControllerProgram:
         kind=kind, step=step, recover=None, input_names=tuple(plant.state_names),
         input_kind="state", output_name=name, output_unit=unit, memory_init=np.zeros(0),
         sample_time=float(sample_time), description=_describe(law, sample_time),
-        info={"design_modes": _design_modes(law)})
+        info={"design_modes": _design_modes(law),
+              **(_switches(law) if kind == "tracker" else {})})
+
+
+def _switches(tracker) -> dict:
+    """``switch_times``: the times (s) the tracker's held feedforward jumps."""
+    times = tuple(float(t) for t in getattr(tracker, "breakpoints", ()) or ())
+    return {"switch_times": times} if times else {}
 
 
 def _describe(law, sample_time) -> str:
@@ -202,11 +213,12 @@ def _design_modes(law) -> int | None:
     return None
 
 
-def _voltage_program(controller, plant, sample_time, x0) -> ControllerProgram:
+def _voltage_program(controller, plant, sample_time, x0, precision) -> ControllerProgram:
     """A DC motor's voltage for the torque of the inner law's program: ``V(u, hub rate)``."""
     import casadi as ca
 
-    inner = program_for(controller.law, plant, sample_time=sample_time, initial_state=x0)
+    inner = program_for(controller.law, plant, sample_time=sample_time, initial_state=x0,
+                        precision=precision)
     if inner.input_kind != "state":
         raise ExportRefused("export: a DC motor's voltage needs the hub rate; the law inside "
                             f"MotorVoltage ({inner.kind}) reads sensors, not the state")

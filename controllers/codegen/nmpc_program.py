@@ -25,6 +25,7 @@ import numpy as np
 
 from flexctl.model.errors import InputValueError
 
+from .precision import qp_options
 from .program import ControllerProgram, ExportRefused, plant_output
 
 __all__ = ["nmpc_program"]
@@ -181,7 +182,7 @@ class _Filter:
         return x_new, p_new
 
 
-def nmpc_program(mpc, plant, x0) -> ControllerProgram:
+def nmpc_program(mpc, plant, x0, precision: str = "double") -> ControllerProgram:
     """The :class:`~controllers.codegen.program.ControllerProgram` of ``mpc`` on ``plant``.
 
     Parameters
@@ -193,6 +194,9 @@ def nmpc_program(mpc, plant, x0) -> ControllerProgram:
     x0 : array_like, shape (n,)
         Plant state at the start: where the extended Kalman filter starts (an NMPC with
         ``noise``).
+    precision : {"double", "float"}, optional
+        The precision the program will be written in: the QP's tolerances
+        (:func:`~controllers.codegen.precision.qp_options`). Default ``"double"``.
 
     Raises
     ------
@@ -215,7 +219,8 @@ def nmpc_program(mpc, plant, x0) -> ControllerProgram:
     hold = hold_function(model, mpc.sample_time, mpc.substeps)
     pieces = mpc._condensed(hold, mpc.state_weights, mpc.torque_weight,
                             mpc._terminal_weight(), compiled=False)
-    qp = conic_solver("nmpc_qp", "qrqp", pieces["h_sparsity"], pieces["a_sparsity"])
+    qp = conic_solver("nmpc_qp", "qrqp", pieces["h_sparsity"], pieces["a_sparsity"],
+                      options=qp_options(precision))
     nw = built["nw"]
     rows = plant.layout.projection(model.layout)
     ekf = None if mpc.noise is None else _Filter(mpc, plant, np.asarray(x0, dtype=float)[rows])
@@ -252,6 +257,9 @@ def nmpc_program(mpc, plant, x0) -> ControllerProgram:
     memory = np.concatenate((np.zeros(nw), [0.0, 0.0], [] if ekf is None else ekf.init))
     if mpc.reference is not None:
         memory[:nw] = np.array(_first_guess(mpc, built, None)).reshape(-1)
+    first = np.asarray(x0, dtype=float) if ekf is None else ekf.plant_rows @ np.asarray(
+        x0, dtype=float)
+    hessian = np.array(ca.Function("nmpc_hessian", [t, v, m], [h])(0.0, first, memory))
     if ekf is None:
         names, kind, matrix = tuple(plant.state_names), "state", None
     else:
@@ -266,4 +274,6 @@ def nmpc_program(mpc, plant, x0) -> ControllerProgram:
                      f"{model.n_modes} modes, horizon {big_n} x {mpc.sample_time:g} s, qrqp"
                      + (", extended Kalman filter" if ekf is not None else "")),
         info={"design_modes": model.n_modes, "horizon": big_n, "qp_variables": big_n,
-              "qp_constraints": int(pieces["rows"]), "design_variant": model.variant})
+              "qp_constraints": int(pieces["rows"]), "design_variant": model.variant,
+              "qp_hessian_condition": float(np.linalg.cond(hessian)),
+              **({} if ekf is None else {"ekf_states": n, "ekf_offset": nw + 2})})

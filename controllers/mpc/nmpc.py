@@ -127,7 +127,7 @@ ANGLE_FRACTION = 0.05 / np.sqrt(10.0)
 TIP_FRACTION = 0.003
 
 
-def conic_solver(name: str, solver: str, h_sparsity, a_sparsity):
+def conic_solver(name: str, solver: str, h_sparsity, a_sparsity, options: dict | None = None):
     """A quiet CasADi QP solver that reports failure in its stats rather than raising.
 
     Parameters
@@ -140,6 +140,9 @@ def conic_solver(name: str, solver: str, h_sparsity, a_sparsity):
         Sparsity of the QP's Hessian, shape (N, N) for ``N`` torque steps.
     a_sparsity : casadi.Sparsity
         Sparsity of its constraint matrix, shape (rows, N).
+    options : dict, optional
+        Options of the plugin added to these (a C export's tolerances, e.g.
+        ``{"constr_viol_tol": 1e-5}``). Default none.
     """
     import casadi as ca
 
@@ -151,6 +154,7 @@ def conic_solver(name: str, solver: str, h_sparsity, a_sparsity):
                           "max_iter": 4000})
     elif solver == "qpoases":
         opts.update(printLevel="none", sparse=False)
+    opts.update(options or {})
     return ca.conic(name, solver, {"h": h_sparsity, "a": a_sparsity}, opts)
 
 

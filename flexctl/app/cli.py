@@ -5,6 +5,8 @@
 
     flexctl run SCENE [--set key=value ...] [--out DIR]
     flexctl export SCENE [--set key=value ...] [--out DIR] [--sample-time S] [--no-compile]
+                   [--precision double|float] [--loop-check]
+                   [--target host|cortex-m4|cortex-m7]
     flexctl scenes
     flexctl demo [--out DIR] [--workers N]
     flexctl bench [--quick] [--scene SCENE ...] [--modes 1-12] [--out DIR]
@@ -163,6 +165,7 @@ def _parser() -> argparse.ArgumentParser:
     export.add_argument("--sample-time", metavar="S", type=_positive_seconds, default=None,
                         help="s: the rate an LQG's estimator is discretised at (default the "
                         "sensors', else 0.01), or a continuous law is sampled at")
+    _flight_options(export)
     export.add_argument("--no-compile", action="store_true",
                         help="write the files only")
     export.set_defaults(func=_cmd_export)
@@ -435,6 +438,23 @@ def _cmd_run(args) -> int:
     return EXIT_OK if summary["status"] == "ok" else EXIT_STOPPED
 
 
+def _flight_options(export) -> None:
+    """``flexctl export``'s options of the flight computer: precision and target."""
+    from controllers.codegen.precision import PRECISIONS
+    from controllers.codegen.targets import TARGETS
+
+    export.add_argument("--precision", choices=PRECISIONS, default="double",
+                        help="the C type of every real of the law (default double); float "
+                        "is refused, with the reason, where single precision breaks the law")
+    export.add_argument("--loop-check", action="store_true",
+                        help="also fly the slew with the law compiled in double and in float "
+                        "and report what single precision changed")
+    export.add_argument("--target", choices=tuple(TARGETS), default="host",
+                        help="also build the law freestanding for this processor with "
+                        "Debian's arm-none-eabi-gcc (hard float, -Werror) and report its code, "
+                        "constant, RAM and stack sizes (default host: the host build only)")
+
+
 def _cmd_export(args) -> int:
     """``flexctl export``: the design, the compile cache and IPOPT are held like a run's
     (:class:`_HeldOutput`), so that a failure leaves its one error line alone on stderr."""
@@ -447,7 +467,8 @@ def _cmd_export(args) -> int:
             scene = load_scene(args.scene, overrides=parse_overrides(args.set))
             out = out if out is not None else DEFAULT_RUN_DIR / scene.name / "c"
             summary = export_scene(scene, out, sample_time=args.sample_time,
-                                   compile=not args.no_compile)
+                                   compile=not args.no_compile, precision=args.precision,
+                                   loop_check=args.loop_check, target=args.target)
     except (InputError, CompileError) as exc:
         return _error(exc)
     except OSError as exc:

@@ -61,7 +61,8 @@ def _check(program, law, plant, seed: int = 0) -> float:
 
 
 def export_scene(scene, out, *, sample_time: float | None = None, compile: bool = True,
-                 cc: str | None = None) -> dict:
+                 cc: str | None = None, precision: str = "double",
+                 loop_check: bool = False, target: str = "host") -> dict:
     """Design ``scene``'s controller, write it as C in ``out``, compile and check it.
 
     Parameters
@@ -78,6 +79,18 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
         Compile with :data:`controllers.codegen.C_FLAGS` and check against the program.
     cc : str, optional
         The C compiler (default ``$CC``, ``cc``, ``gcc`` or ``clang``).
+    precision : {"double", "float"}, optional
+        The C type of every real of the law (:func:`controllers.codegen.export_c`); in
+        float, ``float_conditioning`` lists the condition numbers checked. Default
+        ``"double"``.
+    loop_check : bool, optional
+        Also fly the slew with the law compiled in double and in float and record the
+        differences (``precision_in_the_loop``, :func:`~flexctl.app.export_precision.
+        compare_precisions`). Default False.
+    target : {"host", "cortex-m4", "cortex-m7"}, optional
+        Also build the law for this processor (:func:`controllers.codegen.targets.
+        build_for_target`) and record its sizes and stack (``target_build``); the host's
+        compiler still checks it against the program. Default ``"host"``.
 
     Returns
     -------
@@ -99,18 +112,34 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
     """
     from controllers import from_spec
     from controllers.codegen import C_FILES, CompileError, export_c
+    from controllers.codegen.targets import build_for_target, check_target, \
+        find_target_compiler
 
     out = Path(out)
+    chosen = check_target(target)
+    if compile and chosen.embedded:
+        find_target_compiler(chosen)            # missing cross tools: before the design
     with staged_folder(out, names=(*C_FILES, SUMMARY_FILE)) as stage:
         plant = scene.build_model()
         built = from_spec(scene, plant)
-        exported = export_c(built.controller, plant, stage,
-                            sample_time=_sample_time(scene, sample_time))
+        rate = _sample_time(scene, sample_time)
+        exported = export_c(built.controller, plant, stage, sample_time=rate,
+                            precision=precision)
         summary = {"scene": scene.name, "controller": built.kind, **exported.describe(),
                    "files": [str(out / name) for name in C_FILES], "compiled": False}
+        if exported.precision == "float":
+            from controllers.codegen.conditioning import float_findings
+            summary["float_conditioning"] = [f.as_dict() for f in
+                                             float_findings(exported.program)]
         if compile:
             try:
                 summary.update(_compiled_check(exported, plant, cc))
+                if chosen.embedded:
+                    summary["target_build"] = build_for_target(exported, chosen).as_dict()
+                if loop_check and summary["compiled"]:
+                    from .export_precision import compare_precisions
+                    summary["precision_in_the_loop"] = compare_precisions(
+                        scene, sample_time=rate, cc=cc, built=built)
             except CompileError as exc:
                 raise CompileError(f"{scene.name}: nothing written to {out}: {exc}") from None
         (stage / SUMMARY_FILE).write_text(json.dumps(summary, indent=2, default=str) + "\n",
@@ -145,8 +174,8 @@ def format_export(summary: dict) -> str:
     lines = [f"{summary['scene']}: {summary['description']}",
              f"  input: {summary['input']} ({len(summary['input_names'])} entries), output: "
              f"{summary['output']}, sample time: {summary['sample_time_s']:g} s",
-             f"  memory: {summary['memory_doubles']} doubles; work: "
-             f"{summary['work_doubles']} doubles, {summary['work_ints']} integers"]
+             f"  precision: {summary['precision']}; memory: {summary['memory_reals']} reals; "
+             f"work: {summary['work_reals']} reals, {summary['work_ints']} integers"]
     if summary.get("compiled"):
         lines.append(f"  compiled: struct {summary['struct_bytes']} bytes, code "
                      f"{summary['code_bytes']} bytes, {summary['compile_time_s']:.2f} s; "
@@ -154,6 +183,19 @@ def format_export(summary: dict) -> str:
                      f"difference {summary['check_max_difference']:.2e}")
     elif summary.get("note"):
         lines.append(f"  {summary['note']}")
+    for finding in summary.get("float_conditioning", ()):
+        lines.append(f"  float: {finding['reason']} ({finding['verdict']})")
+    if "target_build" in summary:
+        build = summary["target_build"]
+        lines.append(f"  {build['target']} ({build['precision']}): code {build['code_bytes']} "
+                     f"bytes, constants {build['constant_bytes']} bytes, static RAM "
+                     f"{build['static_ram_bytes']} bytes, struct {build['struct_bytes']} "
+                     f"bytes, stack {build['stack_bytes']} bytes per step"
+                     + ("; double arithmetic in software" if build["software_double"]
+                        else ""))
+    if "precision_in_the_loop" in summary:
+        from .export_precision import format_comparison
+        lines.append(format_comparison(summary["precision_in_the_loop"]))
     lines.append("  files: " + ", ".join(Path(f).name for f in summary["files"])
                  + f" in {Path(summary['files'][0]).parent}")
     return "\n".join(lines)
