@@ -139,13 +139,13 @@ class Gyro(KeywordOnly):
     Parameters
     ----------
     angle_random_walk : float
-        rad/sqrt(s) (>= 0).
+        Angle random walk, rad/sqrt(s) (>= 0).
     bias_instability : float, optional
         Stationary standard deviation of the Gauss-Markov bias, rad/s (>= 0). Default 0.
     bias_time : float, optional
         Its correlation time, s (> 0). Default 300.
     rate_random_walk : float, optional
-        rad/s/sqrt(s) (>= 0). Default 0.
+        Rate random walk, rad/s/sqrt(s) (>= 0). Default 0.
     initial_bias : array_like, shape (3,), optional
         Start of the random-walk part of the bias, rad/s. Default zero.
     misalignment : array_like, shape (3, 3), optional
