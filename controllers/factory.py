@@ -127,7 +127,8 @@ from .design.stability import check_loop, warn_if_unstable
 from .feedback.tracking import TrajectoryTracker
 from .slew.trajopt import SlewProblem, SlewSolution, solve_slew
 
-__all__ = ["BuiltController", "OpenLoop", "from_spec", "DesignChangedWarning"]
+__all__ = ["BuiltController", "OpenLoop", "from_spec", "DesignChangedWarning",
+           "refuse_ignored_settings"]
 
 class OpenLoop(StaticLaw):
     """A torque function of time played open loop, as a static controller.
@@ -291,8 +292,9 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
     if not isinstance(maneuver, Slew) or spec is None:
         raise SceneError(f"scene {scene.name!r} is not a slew with a [controller] table")
     plant = scene.build_model() if plant is None else plant
-    design = _design_model(scene, plant)
     actuator = getattr(plant, "actuator", None)
+    refuse_ignored_settings(spec, sensed=scene.sensors is not None, actuator=actuator)
+    design = _design_model(scene, plant)
     angle, kind = maneuver.angle, spec.kind
     bound = actuator_torque_bound(actuator, maneuver.torque_bound)
     duration = _slew_duration(dataclasses.replace(maneuver, torque_bound=bound), kind, design)
@@ -312,6 +314,51 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
     else:
         built = _optimal(spec, design, angle, duration, bound, actuator)
     return _checked(_hardware(scene, plant, spec, built), plant)
+
+
+#: Settings a design takes from the scene's [sensors] when it has them, with the reason.
+_SENSED_SETTINGS = {
+    "angle_noise": "the Kalman filter of the sensors takes each reading's noise from the "
+                   "[sensors] table",
+    "moment_noise": "the Kalman filter of the sensors takes each reading's noise from the "
+                    "[sensors] table",
+    "estimator": "with [sensors] the law always reads the Kalman estimate of their readings",
+}
+
+
+def refuse_ignored_settings(spec: ControllerSpec, *, sensed: bool, actuator=None) -> None:
+    """Refuse, by name, a setting the scene gives that the design it asks for would not use.
+
+    Parameters
+    ----------
+    spec : ControllerSpec
+        The scene's ``[controller]`` table; only the settings it gives are judged (a default
+        is never refused).
+    sensed : bool
+        True when the scene has ``[sensors]``: the loop then reads a Kalman estimate built
+        from the sensors' own noise models, and the estimator settings of ``lqg`` and
+        ``nmpc`` that describe measurement noise have no part in it.
+    actuator : object, optional
+        The plant's actuator: a reaction wheel's LQR is designed at rest on the structure
+        augmented with its motor lag, so a non-zero ``spin_rate`` would be ignored.
+
+    Raises
+    ------
+    SceneError
+        Naming the setting, the rule and the value given.
+    """
+    given = spec.settings
+    if sensed:
+        for name, reason in _SENSED_SETTINGS.items():
+            if name in given and not (name == "estimator" and given[name] == "kalman"):
+                raise SceneError(f"controller.{name} (kind {spec.kind!r}) is not used when the "
+                                 f"scene has [sensors]: {reason}; remove it (got "
+                                 f"{given[name]!r})")
+    wheel = getattr(actuator, "kind", None) == "reaction_wheel"
+    if wheel and spec.kind in ("lqr", "lqg") and given.get("spin_rate", 0.0) != 0.0:
+        raise SceneError(f"controller.spin_rate (kind {spec.kind!r}) must be 0 with a reaction "
+                         "wheel: the wheel's LQR is designed at rest on the structure with the "
+                         f"motor lag; got {given['spin_rate']!r}")
 
 
 def _checked(built: BuiltController, plant: Model) -> BuiltController:
@@ -335,10 +382,20 @@ def _hardware(scene, plant: Model, spec: ControllerSpec, built) -> BuiltControll
     if scene.sensors is None:
         return _sampled(spec, built)
     period = _loop_sample_time(scene, spec)
-    observed = _wrap(Observed, law=controller, sensors=scene.sensors, sample_time=period)
-    return dataclasses.replace(built, controller=observed,
-                               info={**built.info, "sample_time": period,
-                                     "estimator": "kalman (sensors)"})
+    process = {}
+    if spec.kind == "lqg" or "process_torque" in spec.settings:
+        process = {"process_noise": spec.get("process_torque")}
+    # the filter is built here, once, on the plant the design was given (the nominal one):
+    # flown on a dispersed plant it keeps the nominal model, as a flight computer does
+    observed = _wrap(Observed, law=controller, sensors=scene.sensors, sample_time=period,
+                     model=plant, **process)
+    info = {**built.info, "sample_time": period, "estimator": "kalman (sensors)",
+            "process_noise": observed.process_noise}
+    if spec.kind == "lqg":
+        info["design"] = (f"LQG: {info.get('design', 'LQR')}, on the discrete Kalman "
+                          f"estimate of the sensors' readings (process torque "
+                          f"{observed.process_noise:g} N m)")
+    return dataclasses.replace(built, controller=observed, info=info)
 
 
 def _design_model(scene, plant: Model) -> Model:

@@ -419,7 +419,7 @@ def test_robustness_task_flies_the_slew_on_the_dispersed_plant(system):
     (lambda s, pd: Dispersion().samples(0), "n_samples must be an integer >= 1; got 0"),
     (lambda s, pd: disperse(s, youngs_modulus_scale=0.0),
      "disperse.youngs_modulus_scale must be finite and > 0; got 0.0"),
-    (lambda s, pd: disperse("system"), "disperse.system must be a HubBeam; got str"),
+    (lambda s, pd: disperse("system"), "disperse.system must be a HubBeam or a Structure; got str"),
     (lambda s, pd: RobustnessTask(system=s, controller=pd, n_modes=0),
      "robustness_task.n_modes must be an integer in"),
     (lambda s, pd: RobustnessTask(system=s, controller=pd, variant="exactish"),
