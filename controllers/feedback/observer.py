@@ -73,8 +73,8 @@ from flexctl.sim.inputs import input_value, time_function
 from flexctl.sim.sensors import (VARIANCE_FLOOR, Sensors, measurement_matrix,
                                  noise_covariance, sensor_names)
 
-__all__ = ["Observed", "ObservedSession", "FilterMatrices", "FilterModel", "kalman_update", "kalman_predict",
-           "kalman_step"]
+__all__ = ["Observed", "ObservedSession", "FilterMatrices", "FilterModel", "kalman_update",
+           "kalman_predict", "kalman_step"]
 
 
 # ---------------------------------------------------------------------- pure functions

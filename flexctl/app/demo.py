@@ -47,6 +47,7 @@ from ..model.errors import InputError
 from ..sim.atomic_files import atomic_file, staged_folder, write_atomic
 from ..sim.validity import ModelValidityWarning
 from .report import write_demo_report
+from .verdict import summary_verdict
 from .demo_hardware import hardware
 from .demo_spatial import SPATIAL_SCENES, three_axes
 from .demo_structures import structures
@@ -367,7 +368,7 @@ def slew_comparison(out: Path, executor=None, kinds=None,
     image = _save(fig, out / f"{stem}.png")
     rows = []
     for kind, r in rows_by_kind.items():
-        rows.append((kind, r["status"], r["residual_vibration_shown"],
+        rows.append((kind, r["verdict"], r["residual_vibration_shown"],
                      r["settling_time_shown"], f"{r['peak_torque']:.3g}",
                      r["peak_tip_deflection_shown"], r["final_error_shown"],
                      f"{r['wall_time_s']:.2g}"))
@@ -799,7 +800,7 @@ def _demo_into(out: Path, run_one, workers: int, progress) -> list:
             summary = runs[label] = pending[kind, label].result()
             note = "" if summary["status"] == expected[label] else \
                 f" (expected {expected[label]})"
-            progress(f"{label}: {summary['status']}{note}, peak tip deflection "
+            progress(f"{label}: {summary_verdict(summary)}{note}, peak tip deflection "
                      f"{summary['peak_tip_deflection']:.4g} m, t = {summary['t_end']:.4g} s, "
                      f"{summary['wall_time_s']:.2f} s")
             if note:
