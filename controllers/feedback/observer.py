@@ -448,7 +448,7 @@ class ObservedSession:
         self.controller, self.model, self.names = controller, model, sensor_names(model, sensors)
         self._law, self._inner = _bound_law(controller.law, model, x0)
         self._limit = _command_limit(model)
-        bias = sensors.gyro_bias_instability > 0.0
+        bias = sensors.gyro_bias_instability > 0.0 and "theta_dot" in self.names
         known = _filter_model(controller, model)
         self._holds = _Holds(known.A, known.B, controller.sample_time, controller.process_noise,
                              sensors.gyro_bias_instability if bias else 0.0,
