@@ -84,7 +84,7 @@ FORMER_PATHS = {
     "lqg_sampled": "feedback.lqg_sampled", "scheduling": "feedback.scheduling",
     "tracking": "feedback.tracking", "observer": "feedback.observer",
     "actuated": "feedback.actuated", "iosys": "feedback.iosys", "nmpc": "mpc.nmpc",
-    "robustness": "analysis.robustness", "dispersion": "analysis.dispersion",
+    "robustness": "analysis.robustness",
 }
 
 

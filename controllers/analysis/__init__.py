@@ -3,6 +3,7 @@
 ==================  ============================================================================
 module              contents
 ==================  ============================================================================
+``channels``        the plant's channels from the hub torque
 ``loops``           loop transfer functions, stability margins, poles against spin
 ``dispersion``      dispersed stiffness, point masses, hub inertia, whole or per appendage
 ``robustness``      Monte Carlo of a design flown on dispersed plants, and its spread

@@ -470,6 +470,19 @@ class ObservedSession:
         self._times, self._commands = [], []
         self._estimates, self._filtered, self._worst, self._clipped = [], [], 0.0, 0
 
+    def hold(self, duration: float) -> tuple:
+        """The filter's model over a hold: ``(Phi, Gamma, Q)`` of the filter state over
+        ``duration`` s of a held command (module Notes), shapes (n_f, n_f), (n_f, 1) and
+        (n_f, n_f).
+
+        Parameters
+        ----------
+        duration : float
+            Length of the hold, s (>= 0).
+        """
+        duration = check_real("observed.hold", "duration", duration, minimum=0.0)
+        return self._holds(duration)
+
     # ------------------------------------------------------------------ commands held
     def _pieces(self, t_from: float, t_to: float) -> list:
         """``(duration, command)`` of each hold within ``[t_from, t_to]``, the time before
