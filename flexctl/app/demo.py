@@ -606,7 +606,8 @@ SECTION_ORDER = ("three axes",                           # 60 (two spatial runs)
 
 #: The scenes that take longest (a sampled loop with sensors, an optimised slew), sent to the
 #: pool before the others.
-LONG_SCENES = ("wheel-slew", "flexible-link", "slew-90-model-error", "two-array-slew")
+LONG_SCENES = ("wheel-slew", "flexible-link", "slew-90-model-error", "two-array-slew",
+               "bus-slew")
 
 
 def sections(out: Path, workers: int, surprises: list, progress=print, *,
