@@ -69,6 +69,14 @@ class ModalVisibility:
     input_share: np.ndarray
     output_share: np.ndarray
 
+    def __repr__(self):
+        hidden = self.uncontrollable(self.inputs[0]) if self.inputs else ()
+        return (f"ModalVisibility({self.frequencies.size} modes, {self.frequencies.min():.4g} "
+                f"to {self.frequencies.max():.4g} rad/s; inputs {', '.join(self.inputs)}; "
+                f"{len(self.outputs)} outputs; "
+                + (f"{self.inputs[0]} cannot move modes {', '.join(map(str, hidden))})"
+                   if hidden else "every mode controllable)"))
+
     def _mode_list(self, mask) -> tuple:
         return tuple(int(j) for j in np.flatnonzero(mask))
 
