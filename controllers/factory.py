@@ -95,6 +95,14 @@ nmpc         nonlinear MPC on the design model, run sampled.
 
 ``sample_time`` runs the law with a zero-order hold (:class:`flexctl.sim.digital.ZeroOrderHold`);
 LQG does not take it, since its estimator integrates continuously.
+
+With ``[sensors]`` a feedback law reads the discrete Kalman estimate of their readings
+(:class:`~controllers.feedback.observer.Observed`), its filter built once on the plant the
+design is given: ``lqg`` is then the LQR on that estimate with ``process_torque`` as the
+filter's process noise, the readings' noise being the sensors' own. A setting the design
+would not use is refused by name rather than dropped (:func:`refuse_ignored_settings`):
+``angle_noise`` or ``moment_noise`` with ``[sensors]``, an NMPC's noise settings on the
+exact state, ``[sensors]`` for an open-loop kind, a spin rate for a wheel's LQR.
 """
 
 from __future__ import annotations
@@ -122,7 +130,7 @@ from .feedback.pd import design_pd
 from .slew.reference import SlewProfile, minimum_slew_duration
 from .feedback.scheduling import design_scheduled_lqr
 from .slew.shaping import bang_bang, design_shaper, shape
-from .spec import CONTROLLER_KINDS, ControllerSpec, SceneError
+from .spec import CONTROLLER_KINDS, ControllerSpec, SceneError, refuse_ignored_settings
 from .design.stability import check_loop, warn_if_unstable
 from .feedback.tracking import TrajectoryTracker
 from .slew.trajopt import SlewProblem, SlewSolution, solve_slew
@@ -314,51 +322,6 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
     else:
         built = _optimal(spec, design, angle, duration, bound, actuator)
     return _checked(_hardware(scene, plant, spec, built), plant)
-
-
-#: Settings a design takes from the scene's [sensors] when it has them, with the reason.
-_SENSED_SETTINGS = {
-    "angle_noise": "the Kalman filter of the sensors takes each reading's noise from the "
-                   "[sensors] table",
-    "moment_noise": "the Kalman filter of the sensors takes each reading's noise from the "
-                    "[sensors] table",
-    "estimator": "with [sensors] the law always reads the Kalman estimate of their readings",
-}
-
-
-def refuse_ignored_settings(spec: ControllerSpec, *, sensed: bool, actuator=None) -> None:
-    """Refuse, by name, a setting the scene gives that the design it asks for would not use.
-
-    Parameters
-    ----------
-    spec : ControllerSpec
-        The scene's ``[controller]`` table; only the settings it gives are judged (a default
-        is never refused).
-    sensed : bool
-        True when the scene has ``[sensors]``: the loop then reads a Kalman estimate built
-        from the sensors' own noise models, and the estimator settings of ``lqg`` and
-        ``nmpc`` that describe measurement noise have no part in it.
-    actuator : object, optional
-        The plant's actuator: a reaction wheel's LQR is designed at rest on the structure
-        augmented with its motor lag, so a non-zero ``spin_rate`` would be ignored.
-
-    Raises
-    ------
-    SceneError
-        Naming the setting, the rule and the value given.
-    """
-    given = spec.settings
-    if sensed:
-        for name, reason in _SENSED_SETTINGS.items():
-            if name in given and not (name == "estimator" and given[name] == "kalman"):
-                raise SceneError(f"controller.{name} (kind {spec.kind!r}) is not used when the "
-                                 f"scene has [sensors]: {reason}; remove it (got "
-                                 f"{given[name]!r})")
-    wheel = getattr(actuator, "kind", None) == "reaction_wheel"
-    if wheel and spec.kind in ("lqr", "lqg") and given.get("spin_rate", 0.0) != 0.0:
-        raise SceneError(f"controller.spin_rate (kind {spec.kind!r}) must be 0 with a reaction "
-                         "wheel: the wheel's LQR is designed at rest on the structure with the "
-                         f"motor lag; got {given['spin_rate']!r}")
 
 
 def _checked(built: BuiltController, plant: Model) -> BuiltController:

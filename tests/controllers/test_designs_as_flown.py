@@ -54,6 +54,20 @@ def test_a_setting_the_design_would_ignore_is_refused_by_name(overrides, named):
         from_spec(_wheel_slew(**overrides))
 
 
+def test_sensors_an_open_loop_kind_would_not_read_are_refused():
+    with pytest.raises(SceneError, match="sensors: controller kind 'zv' plays its torque open "
+                                         "loop and reads no sensor"):
+        from_spec(_wheel_slew(**{"controller.kind": "zv"}))
+
+
+def test_noise_settings_of_an_nmpc_on_the_exact_state_are_refused():
+    scene = flexctl.load_scene("slew-90", overrides={"controller.kind": "nmpc",
+                                                     "controller.process_torque": 0.2})
+    with pytest.raises(SceneError, match="controller.process_torque \\(kind 'nmpc'\\) is not "
+                                         "used with estimator = \"state\""):
+        from_spec(scene)
+
+
 def test_lqg_with_sensors_is_an_lqg_with_its_process_noise():
     lqr = _quiet_from_spec(_wheel_slew())
     lqg = _quiet_from_spec(_wheel_slew(**{"controller.kind": "lqg",
