@@ -359,12 +359,13 @@ def slew_comparison(out: Path, executor=None, kinds=None,
     stem = "controller-comparison" + ("" if scene_name == "slew-90" else f"-{scene_name}")
     csv = write_atomic(out / f"{stem}.csv", table.to_csv())
     rows_by_kind = {r["controller.kind"]: r for r in table}
-    n_plant = next(iter(rows_by_kind.values()))["result"].model.n_modes
+    plant = next(iter(rows_by_kind.values()))["result"].model
+    n_plant = plant.n_modes
     fig = plot_controller_comparison(
         {k: r["result"] for k, r in rows_by_kind.items()}, rows_by_kind,
         target_angle=slew.angle, maneuver_end=slew.duration, torque_bound=slew.torque_bound,
         title=f"{scene_name}: {np.degrees(slew.angle):g} deg in {slew.duration:g} s, "
-              f"{slew.torque_bound:g} N m bound, {n_plant}-mode nonlinear plant")
+              f"{slew.torque_bound:g} N m bound, {n_plant}-mode {plant.variant} plant")
     image = _save(fig, out / f"{stem}.png")
     rows = []
     for kind, r in rows_by_kind.items():
