@@ -7,7 +7,7 @@
   drawn from a stream of its own (the gyro reads the same numbers with or without it);
 - the filter's covariance gives the attitude reading its whole error variance;
 - a scene's ``[sensors]`` table takes the same settings, and the Kalman filter built for a
-  scene reads exactly the signals it lists.
+  scene, and the C step exported from it, read exactly the signals it lists.
 """
 
 import math
@@ -91,3 +91,9 @@ def test_a_scene_reads_exactly_the_sensors_it_lists():
     session = from_spec(scene, plant).controller.start(plant, np.zeros(plant.n_states))
     assert session.names == ("theta", "theta_dot")
     assert session.matrices.C.shape[0] == 2
+    # the exported C step reads the same two readings, in the same order
+    from controllers.codegen.laws import program_for
+
+    program = program_for(from_spec(scene, plant).controller, plant)
+    assert program.input_kind == "measurement"
+    assert tuple(program.input_names) == ("theta", "theta_dot")
