@@ -253,6 +253,10 @@ class LoopMargins:
         When False, the two gain margins are the nearest factors at which the number of
         unstable closed-loop poles changes: the loop may regain stability there (tip
         feedback on a lightly damped beam does below its gain-reduction margin) or not.
+    crossings : tuple of tuple
+        Every crossing kept, by frequency: ``("phase", w, g)`` where the phase crosses
+        -180 deg at ``w`` rad/s with the gain factor ``g`` left there, ``("gain", w, p)``
+        where the gain crosses 1 with the phase margin ``p`` deg. Not in :meth:`as_dict`.
     """
 
     gain_margin: float
@@ -264,9 +268,12 @@ class LoopMargins:
     stability_margin_frequency: float
     spectral_abscissa: float
     closed_loop_stable: bool
+    crossings: tuple = ()
 
     def __post_init__(self):
         owner = "loop_margins"
+        object.__setattr__(self, "crossings", tuple(
+            (str(kind), float(w), float(v)) for kind, w, v in self.crossings))
         if self.gain_margin != math.inf:
             object.__setattr__(self, "gain_margin", check_real(
                 owner, "gain_margin", self.gain_margin, minimum=1.0))
@@ -299,8 +306,10 @@ class LoopMargins:
         return 20.0 * math.log10(self.gain_margin)
 
     def as_dict(self) -> dict:
-        """The fields as a plain dict (a sweep row)."""
-        return {name: getattr(self, name) for name in self.__dataclass_fields__}
+        """The scalar fields as a plain dict (a sweep row): every field but
+        :attr:`crossings`."""
+        return {name: getattr(self, name) for name in self.__dataclass_fields__
+                if name != "crossings"}
 
 
 def _axis_frequencies(loop, tolerance: float) -> tuple:
@@ -392,7 +401,10 @@ def loop_margins(loop, *, tolerance: float = AXIS_TOLERANCE) -> LoopMargins:
         phase_crossover_frequency=float(w180[k_up]) if k_up is not None else math.nan,
         gain_crossover_frequency=float(wc[k_pm]) if k_pm is not None else math.nan,
         stability_margin_frequency=float(wms[k_sm]) if k_sm is not None else math.nan,
-        spectral_abscissa=abscissa, closed_loop_stable=stable)
+        spectral_abscissa=abscissa, closed_loop_stable=stable,
+        crossings=tuple(sorted([("phase", w, g) for w, g in zip(w180, gm)]
+                               + [("gain", w, p) for w, p in zip(wc, pm)],
+                               key=lambda item: item[1])))
 
 
 def _margin_data(loop):

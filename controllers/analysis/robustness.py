@@ -224,7 +224,8 @@ class RobustnessTask:
                     "worst_mode_frequency": worst.frequency,
                     "worst_growth_rate": worst.growth_rate}
         check = check_loop(model, self.controller, self.spin_rate)
-        margins = dict.fromkeys((f.name for f in dataclasses.fields(LoopMargins)), math.nan)
+        margins = dict.fromkeys((f.name for f in dataclasses.fields(LoopMargins)
+                                 if f.name != "crossings"), math.nan)
         found = check.as_dict()
         return {**margins, **{key: found[key] for key in (
             "closed_loop_stable", "spectral_abscissa", "worst_mode", "worst_mode_frequency",

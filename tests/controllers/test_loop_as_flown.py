@@ -41,6 +41,14 @@ def wheel_slew():
     return scene, plant, built
 
 
+@pytest.fixture(scope="module")
+def observed(wheel_slew):
+    """The wheel-slew's observed law, its sampled loop and that loop's margins."""
+    _, plant, built = wheel_slew
+    loop = loop_transfer(plant, built.controller)
+    return built.controller, loop, loop_margins(loop)
+
+
 def _largest_rate(loop, gain=1.0):
     """The largest real part of the closed loop's poles off the axis's hidden modes, 1/s."""
     poles = np.asarray(control.poles(control.feedback(gain * loop)), dtype=complex)
@@ -75,10 +83,9 @@ def test_the_wheel_lqr_loop_closes_on_the_plant_with_the_wheel(wheel_slew):
         check_loop(flexctl.build_model(plant.structure, 2), lagged)
 
 
-def test_the_observed_loop_is_the_sampled_loop_as_it_flies(wheel_slew):
-    _, plant, built = wheel_slew
-    observed = built.controller
-    loop = loop_transfer(plant, observed)
+def test_the_observed_loop_is_the_sampled_loop_as_it_flies(wheel_slew, observed):
+    _, plant, _ = wheel_slew
+    observed, loop, margins = observed
     assert loop.dt == observed.sample_time and loop.ninputs == loop.noutputs == 1
     # separation: the state feedback's poles on the held plant are the closed loop's
     a, b = plant.linear_matrices(0.0)
@@ -89,10 +96,23 @@ def test_the_observed_loop_is_the_sampled_loop_as_it_flies(wheel_slew):
     law = np.linalg.eigvals(hold[:n, :n] - hold[:n, n:] @ observed.law.plant_gain(plant))
     closed = control.poles(control.feedback(loop))
     assert np.all([np.min(np.abs(closed - z)) <= 1e-7 for z in law])
-    margins, check = loop_margins(loop), check_loop(plant, observed)
+    check = check_loop(plant, observed)
     assert margins.closed_loop_stable and check.stable
     assert margins.spectral_abscissa == pytest.approx(check.spectral_abscissa, rel=1e-6)
     # the gain margin is where a pole leaves the unit circle
     assert 1.0 < margins.gain_margin < 10.0
     assert _largest_rate(loop, (1.0 - MARGIN_STEP) * margins.gain_margin) < 0.0
     assert _largest_rate(loop, (1.0 + MARGIN_STEP) * margins.gain_margin) > 0.0
+
+
+def test_every_crossing_is_listed_and_the_margins_are_among_them(observed):
+    _, _, margins = observed
+    kinds = {kind for kind, _, _ in margins.crossings}
+    assert kinds <= {"phase", "gain"} and margins.crossings
+    frequencies = [w for _, w, _ in margins.crossings]
+    assert frequencies == sorted(frequencies)
+    assert ("phase", margins.phase_crossover_frequency, margins.gain_margin) \
+        in margins.crossings
+    assert ("gain", margins.gain_crossover_frequency, margins.phase_margin) \
+        in margins.crossings
+    assert "crossings" not in margins.as_dict()
