@@ -479,6 +479,18 @@ def test_loop_figures_mark_the_flexible_modes(system, lqr_weights):
     mode_lines = [line for line in magnitude.lines if line.get_linestyle() == ":"]
     assert sorted(line.get_xdata()[0] for line in mode_lines) == pytest.approx(sorted(free))
     assert len(magnitude.get_legend().get_texts()) == 2
+    # one label per mode, or per group of near-equal modes: no two labels overprint
+    labels = [t for t in magnitude.texts if "mode" in t.get_text()]
+    spots = sorted(t.get_position()[0] for t in labels)
+    assert len(labels) >= 1 and all(b > 1.15 * a for a, b in zip(spots, spots[1:]))
+    import matplotlib.pyplot as plt
+
+    from flexctl.app.plotting_loops import mark_modes
+    fig_twins, ax = plt.subplots()
+    mark_modes(ax, [4.2466, 4.2466, 24.8, 25.4, 68.7])
+    assert [(t.get_position()[0], t.get_text().strip()) for t in ax.texts] == [
+        (4.2466, "modes 1, 2"), (24.8, "modes 3, 4"), (68.7, "mode 5")]
+    plt.close(fig_twins)
     channels = plant_channels(model)
     fig = plot_pole_zero({"hub angle": channels.hub_angle}, natural_frequencies=free)
     assert sum(line.get_linestyle() == ":" for line in fig.axes[0].lines) == 2 * free.size
