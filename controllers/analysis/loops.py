@@ -78,7 +78,7 @@ __all__ = ["SENSORS", "PlantChannels", "plant_channels", "loop_transfer", "LoopM
 _HIDDEN_RELATIVE = 1e-6
 #: Frequencies at which a sampled loop's response is evaluated for its margins (evenly spaced
 #: up to the Nyquist frequency; crossings are interpolated between them).
-SAMPLED_GRID = 20_000
+SAMPLED_GRID = 8_000
 #: Relative distance within which a margin crossing is taken to sit on an undamped pole or
 #: zero of the loop (or, times the loop's largest pole magnitude, on the origin).
 AXIS_TOLERANCE = 1e-6

@@ -69,12 +69,14 @@ def _slew_reference(controller):
 
 
 def _worst_pole(model, loop, spin_rate: float):
-    """The closed loop's least damped pole, named by the plant mode it lies on."""
+    """The closed loop's least damped pole, named by the plant mode it lies on (a sampled
+    loop's as a rate, ``log(z) / T``)."""
     import control
 
     from ..design.stability import least_damped_pole
 
-    return least_damped_pole(model, control.feedback(loop).A, spin_rate)
+    sample_time = None if loop.isctime() else float(loop.dt)
+    return least_damped_pole(model, control.feedback(loop).A, spin_rate, sample_time)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -95,10 +97,11 @@ class RobustnessTask:
     system : HubBeam or Structure
         The nominal system.
     controller : object
-        Any controller :func:`~controllers.analysis.loops.loop_transfer` takes, or any
-        :func:`~controllers.check_loop` takes (an actuated or observed law: its loop is then
-        judged by :func:`~controllers.check_loop`, margins NaN), designed on the nominal
-        system (an LQG reads the dispersed plant's sensors).
+        Any controller :func:`~controllers.analysis.loops.loop_transfer` takes (an observed
+        law's loop as it flies, sampled and through its filter), or else any
+        :func:`~controllers.check_loop` takes (its loop then judged by
+        :func:`~controllers.check_loop`, margins NaN), designed on the nominal system (an
+        LQG reads the dispersed plant's sensors).
     n_modes : int, dict or sequence of int, optional
         Modes of the plant, as :func:`flexctl.build_model` takes them. Default 4.
     variant : str, optional
@@ -162,8 +165,18 @@ class RobustnessTask:
                            check_real("robustness_task", "spin_rate", self.spin_rate))
         # the nominal loop: a controller, sensor or mode count the analysis cannot take
         # fails here, once, rather than at every sample
-        object.__setattr__(self, "_by_transfer", _takes_transfer(self.controller))
-        self._loop_row(self._model(self.system))
+        nominal = self._model(self.system)
+        object.__setattr__(self, "_by_transfer", True)
+        try:
+            self._loop_row(nominal)
+        except InputTypeError as exc:
+            # a law with no linear loop transfer (a DC motor's voltage, an NMPC behind a
+            # filter) is judged by check_loop, when check_loop takes it
+            object.__setattr__(self, "_by_transfer", False)
+            try:
+                self._loop_row(nominal)
+            except InputTypeError:
+                raise exc from None
         if self.slew_time is not None:
             reference = self._slew_reference()
             if reference is None:
@@ -233,7 +246,8 @@ class RobustnessTask:
 
     def __call__(self, youngs_modulus_scale: float | None = None,
                  point_mass_scale: float | None = None, hub_inertia_scale: float | None = None,
-                 *, sample: int | None = None, seed: int | None = None) -> dict:
+                 *, sample: int | None = None, seed: int | None = None,
+                 appendage_scales: dict | None = None) -> dict:
         """One dispersed plant judged (class Notes).
 
         Parameters
@@ -244,9 +258,21 @@ class RobustnessTask:
             The Monte Carlo sample's number (with a dispersion); not read otherwise.
         seed : int, optional
             The seed its factors are drawn from (with a dispersion).
+        appendage_scales : dict, optional
+            Without a dispersion: single appendages' factors, as :func:`disperse` takes
+            them (``{"wing_b": {"youngs_modulus_scale": 0.8}}``); in the row as
+            ``"wing_b.youngs_modulus_scale"``. Default none.
         """
         factors = self._factors(youngs_modulus_scale, point_mass_scale, hub_inertia_scale,
                                 sample, seed)
+        if appendage_scales:
+            if self.dispersion is not None:
+                raise InputValueError("robustness_task appendage_scales are given without a "
+                                      "dispersion (with one, the draw gives them); got "
+                                      f"{appendage_scales!r}")
+            factors.update({f"{app}.{name}": float(value)
+                            for app, scales in appendage_scales.items()
+                            for name, value in scales.items()})
         own = {}
         for name, value in factors.items():
             if name not in SCALES:
@@ -290,15 +316,6 @@ class RobustnessTask:
                                   f"task(sample=k, seed=s); got seed={seed!r}, factors "
                                   f"{given!r}")
         return self.dispersion.draw(seed)
-
-
-def _takes_transfer(controller) -> bool:
-    """Whether :func:`~controllers.analysis.loops.loop_transfer` takes ``controller``'s kind
-    (else its loop is judged by :func:`~controllers.check_loop`)."""
-    from ..feedback.actuated import LaggedLQR, MotorVoltage
-    from ..feedback.observer import Observed
-
-    return not isinstance(controller, (LaggedLQR, MotorVoltage, Observed))
 
 
 @dataclass(frozen=True, kw_only=True)
