@@ -109,11 +109,11 @@ from __future__ import annotations
 
 import dataclasses
 import time
-import warnings
 from dataclasses import dataclass, field
 
 from flexctl.model import Model, build_model
 from flexctl.model.errors import InputTypeError
+from flexctl.model.user_warnings import warn_user
 from flexctl.model.variants import EXACT_MAX_MODES
 from flexctl.sim.digital import ZeroOrderHold
 from flexctl.sim.maneuvers import Slew
@@ -332,7 +332,7 @@ def _checked(built: BuiltController, plant: Model) -> BuiltController:
         check = check_loop(plant, built.controller)
     except InputTypeError:                  # an open-loop torque: nothing feeds back
         return built
-    warn_if_unstable(check, stacklevel=3)
+    warn_if_unstable(check, stacklevel=None)
     return dataclasses.replace(built, info={**built.info, "loop_stability": check.as_dict()})
 
 
@@ -403,7 +403,7 @@ def _reference(spec: ControllerSpec, design: Model, angle, duration, bound) -> t
             info["reference_duration"] = feasible
             info["note"] = (f"the {profile_shape} reference needs {feasible:.3g} s at "
                             f"{bound:g} N m; stretched from {duration:.3g} s")
-            warnings.warn(f"controller: {info['note']}", DesignChangedWarning, stacklevel=4)
+            warn_user(f"controller: {info['note']}", DesignChangedWarning)
             duration = feasible
     profile = _wrap(SlewProfile, slew_angle=angle, duration=duration, shape=profile_shape)
     return profile, duration, info

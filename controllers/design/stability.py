@@ -49,6 +49,7 @@ import numpy as np
 from flexctl.model import Model
 from flexctl.model.checks import check_real
 from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.model.user_warnings import user_stacklevel
 
 __all__ = ["LoopStability", "GrowingPole", "LoopStabilityWarning", "check_loop",
            "warn_if_unstable", "checked_on", "loop_stability", "least_damped_pole",
@@ -417,7 +418,7 @@ def least_damped_pole(plant, matrix, spin_rate: float = 0.0,
                        growth_rate=float(poles[k].real))
 
 
-def warn_if_unstable(check: LoopStability, stacklevel: int = 2) -> LoopStability:
+def warn_if_unstable(check: LoopStability, stacklevel: int | None = 2) -> LoopStability:
     """Warn (:class:`LoopStabilityWarning`) when ``check`` is unstable or nearly so; return
     ``check``.
 
@@ -425,9 +426,10 @@ def warn_if_unstable(check: LoopStability, stacklevel: int = 2) -> LoopStability
     ----------
     check : LoopStability
         What :func:`check_loop` found.
-    stacklevel : int, optional
+    stacklevel : int or None, optional
         ``stacklevel`` of the warning as seen from the caller of this function (2: the
-        caller's caller). Default 2.
+        caller's caller); None: the first line outside flexctl and controllers (the user's,
+        :func:`flexctl.model.user_warnings.user_stacklevel`). Default 2.
 
     Raises
     ------
@@ -438,7 +440,8 @@ def warn_if_unstable(check: LoopStability, stacklevel: int = 2) -> LoopStability
         raise InputTypeError(f"warn_if_unstable.check must be a LoopStability; got "
                              f"{type(check).__name__}")
     if not check.ok:
-        warnings.warn(check.message(), LoopStabilityWarning, stacklevel=stacklevel + 1)
+        warnings.warn(check.message(), LoopStabilityWarning,
+                      stacklevel=user_stacklevel() if stacklevel is None else stacklevel + 1)
     return check
 
 

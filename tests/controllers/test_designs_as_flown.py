@@ -186,3 +186,12 @@ def test_an_asymmetric_plant_is_judged_through_the_nominal_filter():
     plant = flexctl.build_model(disperse(task.system, appendage_scales=soft), task.n_modes,
                                 task.variant, actuator=scene.actuator)
     assert check_loop(plant, task.controller).stable          # the law on the true state
+
+
+def test_a_design_warning_names_the_users_line_not_ours():
+    scene = flexctl.load_scene("slew-90", overrides={"controller.kind": "lqr"})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        from_spec(scene)                                     # the reference is stretched
+    stretched = [w for w in caught if "stretched" in str(w.message)]
+    assert stretched and all(w.filename == __file__ for w in stretched)
