@@ -66,9 +66,9 @@ from ..feedback.scheduling import ScheduledLQR
 from ..design.stability import stability_verdict
 from ..feedback.tracking import TrajectoryTracker
 from ..feedback.actuated import LaggedLQR
+from ..feedback.observed_loop import observed_loop
 from ..feedback.observer import Observed
 from .channels import PlantChannels, plant_channels
-from .sampled_loop import observed_loop
 
 __all__ = ["SENSORS", "PlantChannels", "plant_channels", "loop_transfer", "LoopMargins",
            "loop_margins", "PolesVsSpin", "poles_vs_spin", "hidden_poles"]
@@ -151,7 +151,7 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
           (``model`` built with ``actuator=wheel``), the wheel's lag in the loop;
         - :class:`~controllers.Observed`: the loop as it flies, sampled, held and late,
           through its Kalman filter: a discrete ``L(z)``
-          (:func:`~controllers.analysis.sampled_loop.observed_loop`).
+          (:func:`~controllers.feedback.observed_loop.observed_loop`).
 
         References, feedforward and saturation play no part in the loop.
     spin_rate : float, optional

@@ -287,8 +287,10 @@ def check_loop(plant, controller, spin_rate: float = 0.0) -> LoopStability:
         PD, LQR, ScheduledLQR, TrajectoryTracker, LQG, a gain array, NMPC (its terminal LQR,
         which is also the gain of its unconstrained real-time iteration), or any of these
         behind a zero-order hold, an observer or a DC motor's voltage. Behind an observer
-        (:class:`controllers.Observed`) the law is checked on the true state: the sensors'
-        Kalman filter, sampling and delay are left out.
+        (:class:`controllers.Observed`) the loop is checked as it flies: sampled, with the
+        sensors' delay and the Kalman filter of the law's own model
+        (:meth:`~controllers.feedback.observer.Observed.sampled_loop`); a law with no
+        linear loop there (an NMPC, a motor's voltage) is checked on the true state.
     spin_rate : float, optional
         Steady hub rate of the linearisation, rad/s. Default 0.
 
@@ -305,11 +307,31 @@ def check_loop(plant, controller, spin_rate: float = 0.0) -> LoopStability:
         raise InputTypeError(f"check_loop.plant must be a flexctl Model; got "
                              f"{type(plant).__name__}")
     spin_rate = check_real("check_loop", "spin_rate", spin_rate)
+    flown = _flown_loop(plant, controller, spin_rate)
+    if flown is not None:
+        return flown
     law, sample_time = _unwrap(controller)
     plant = _plant_for(plant, law)
     matrix, sample_time = _closed_loop(plant, law, spin_rate, sample_time)
     name = "NMPC terminal LQR" if type(law).__name__ == "NMPC" else type(law).__name__
     return loop_stability(plant, matrix, name, spin_rate, sample_time)
+
+
+def _flown_loop(plant, controller, spin_rate: float):
+    """The :class:`LoopStability` of a law that reads sensors, by its loop as it flies
+    (``controller.sampled_loop``: sampled, late, through its own Kalman filter); None for
+    another law, or one whose loop has no linear form (an NMPC, a motor's voltage), which
+    is then checked on the true state."""
+    if not (getattr(controller, "measures", False)
+            and callable(getattr(controller, "sampled_loop", None))):
+        return None
+    try:
+        loop = controller.sampled_loop(plant, spin_rate)
+    except (InputTypeError, InputValueError):
+        return None
+    matrix = np.asarray(loop.A) - np.asarray(loop.B) @ np.asarray(loop.C)
+    name = f"{type(controller.law).__name__} on its Kalman filter"
+    return loop_stability(plant, matrix, name, spin_rate, float(loop.dt))
 
 
 def loop_stability(plant, matrix, law: str, spin_rate: float = 0.0,

@@ -366,6 +366,21 @@ class Observed:
         """
         return dataclasses.replace(self, model=model)
 
+    def sampled_loop(self, model, spin_rate: float = 0.0):
+        """The loop as it flies on ``model``: a discrete ``L(z)`` broken at the plant input
+        (:func:`controllers.feedback.observed_loop.observed_loop`).
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant flown, linearised about ``spin_rate``.
+        spin_rate : float, optional
+            Steady hub rate of the linearisation, rad/s. Default 0.
+        """
+        from .observed_loop import observed_loop
+
+        return observed_loop(model, self, spin_rate)
+
     def start(self, model, x0) -> "ObservedSession":
         """A fresh session for a run of ``model`` from the plant state ``x0``.
 

@@ -171,8 +171,8 @@ def test_bad_dispersions_are_refused_naming_them(make, match):
 def test_an_asymmetric_plant_is_judged_through_the_nominal_filter():
     """The nominal twin arrays hide their anti-phase modes from the hub's sensors, and the
     nominal filter leaves them alone. One array 20 % softer couples them to the hub: the law
-    on the true state still holds the loop (check_loop), but the loop as it flies, the
-    nominal filter feeding the law, grows. The study judges the loop that flies."""
+    on the true state still holds the loop, but the loop as it flies, the nominal filter
+    feeding the law, grows; the study and check_loop both judge the loop that flies."""
     from controllers import check_loop
 
     scene = _wheel_slew()
@@ -185,7 +185,10 @@ def test_an_asymmetric_plant_is_judged_through_the_nominal_filter():
     assert not row["closed_loop_stable"] and row["spectral_abscissa"] > 0.0
     plant = flexctl.build_model(disperse(task.system, appendage_scales=soft), task.n_modes,
                                 task.variant, actuator=scene.actuator)
-    assert check_loop(plant, task.controller).stable          # the law on the true state
+    assert check_loop(plant, task.controller.law).stable      # the law on the true state
+    flown = check_loop(plant, task.controller)                # the loop as it flies
+    assert not flown.stable
+    assert flown.spectral_abscissa == pytest.approx(row["spectral_abscissa"], rel=1e-9)
 
 
 def test_a_design_warning_names_the_users_line_not_ours():

@@ -5,8 +5,10 @@
 zero-order hold of the command, read by the sensors ``delay`` seconds late, the filter of the
 law's own model (the nominal one it was built on, whatever the plant) in its steady state,
 the estimate extrapolated over the delay, and the law's state gain.
-:func:`~controllers.analysis.loops.loop_transfer` returns it for an ``Observed`` law, and
-:func:`~controllers.analysis.loops.loop_margins` reads it as it reads a continuous loop.
+:func:`~controllers.analysis.loops.loop_transfer` returns it for an ``Observed`` law,
+:func:`~controllers.analysis.loops.loop_margins` reads it as it reads a continuous loop, and
+:func:`~controllers.check_loop` judges an observed law by it
+(:meth:`~controllers.feedback.observer.Observed.sampled_loop`).
 
 Notes
 -----
@@ -80,12 +82,19 @@ def steady_kalman_gain(ad, c, q, r, p0) -> np.ndarray:
     return gain
 
 
+def _plant_gain(model, law, spin_rate, sensor):
+    """A static law's own gain on the plant state (its ``plant_gain``), or None."""
+    if sensor is not None or not callable(getattr(law, "plant_gain", None)):
+        return None
+    return law.plant_gain(model, spin_rate)
+
+
 def _law_gain(model, observed, spin_rate, state_gain) -> np.ndarray:
     """The law's gain on the plant state, shape (1, n)."""
     law = observed.law
     if callable(getattr(law, "plant_gain", None)) and getattr(law, "reads_actuator", False):
         return np.asarray(law.plant_gain(model, spin_rate), dtype=float).reshape(1, -1)
-    gain = state_gain(model, law, spin_rate, None)
+    gain = (state_gain or _plant_gain)(model, law, spin_rate, None)
     if gain is None:
         raise InputTypeError("loop_transfer.controller: the law inside Observed must be one "
                              "with a state gain (PD, LQR, ScheduledLQR, TrajectoryTracker, "
@@ -93,7 +102,7 @@ def _law_gain(model, observed, spin_rate, state_gain) -> np.ndarray:
     return np.asarray(gain, dtype=float).reshape(1, -1)
 
 
-def observed_loop(model, observed, spin_rate: float = 0.0, *, state_gain):
+def observed_loop(model, observed, spin_rate: float = 0.0, *, state_gain=None):
     """The discrete loop ``L(z)`` of an observed law on ``model`` (module Notes).
 
     Parameters
@@ -105,9 +114,10 @@ def observed_loop(model, observed, spin_rate: float = 0.0, *, state_gain):
         The law on the Kalman filter of the sensors' readings.
     spin_rate : float, optional
         Steady hub rate of the plant's linearisation, rad/s. Default 0.
-    state_gain : callable
+    state_gain : callable, optional
         ``state_gain(model, law, spin_rate, sensor)``: the gain (1, n) of a static law on the
-        plant state, or None (:func:`controllers.analysis.loops.loop_transfer`'s).
+        plant state, or None (:func:`controllers.analysis.loops.loop_transfer` gives its
+        own). Default: the law's ``plant_gain(model, spin_rate)``.
 
     Returns
     -------
@@ -119,6 +129,8 @@ def observed_loop(model, observed, spin_rate: float = 0.0, *, state_gain):
     ------
     InputValueError
         If the sensors' delay is not shorter than the sample time.
+    InputTypeError
+        If the law has no gain on the plant state (an NMPC, a motor's voltage).
     """
     import control
 
