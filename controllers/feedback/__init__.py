@@ -11,9 +11,9 @@ module                  contents
 ``scheduling``          LQR gains scheduled on the spin rate
 ``tracking``            feedforward plus LQR feedback about an optimal slew
 ``observer``            a sampled discrete Kalman filter of noisy sensor readings
-``observed_loop``       an observed law's loop as it flies: sampled, late, through its filter
 ``actuated``            laws through an actuator: wheel-lag LQR, DC-motor voltage, limits
 ``iosys``               the laws as python-control I/O systems for ``control.interconnect``
+``observed_loop``       an observed law's loop as it flies: sampled, late, through its filter
 ======================  ========================================================================
 
 Builds on :mod:`controllers.design` and :mod:`controllers.slew`.
