@@ -48,7 +48,8 @@ from .feedback.observer import Observed, kalman_step
 from .feedback.iosys import to_iosys
 from .feedback.lqg_sampled import SampledLQG
 from .analysis.robustness import (Dispersion, RobustnessSummary, RobustnessTask, disperse,
-                                  robustness_summary)
+                                  robustness_summary, spread_statistics)
+from .feedback.observer import FilterModel
 
 __all__ = [
     "SlewProfile", "minimum_slew_duration",
@@ -69,6 +70,7 @@ __all__ = [
     "LaggedLQR", "MotorVoltage", "check_reference_fits", "design_wheel_lqr",
     "through_actuator", "Observed", "kalman_step", "to_iosys", "SampledLQG",
     "Dispersion", "RobustnessSummary", "RobustnessTask", "disperse", "robustness_summary",
+    "spread_statistics", "FilterModel",
 ]
 
 #: Each module's former path (the flat package of earlier releases) and the module it names now.

@@ -95,17 +95,25 @@ nmpc         nonlinear MPC on the design model, run sampled.
 
 ``sample_time`` runs the law with a zero-order hold (:class:`flexctl.sim.digital.ZeroOrderHold`);
 LQG does not take it, since its estimator integrates continuously.
+
+With ``[sensors]`` a feedback law reads the discrete Kalman estimate of their readings
+(:class:`~controllers.feedback.observer.Observed`), its filter built once on the plant the
+design is given: ``lqg`` is then the LQR on that estimate with ``process_torque`` as the
+filter's process noise, the readings' noise being the sensors' own. A setting the design
+would not use is refused by name rather than dropped (:func:`refuse_ignored_settings`):
+``angle_noise`` or ``moment_noise`` with ``[sensors]``, an NMPC's noise settings on the
+exact state, ``[sensors]`` for an open-loop kind, a spin rate for a wheel's LQR.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
-import warnings
 from dataclasses import dataclass, field
 
 from flexctl.model import Model, build_model
 from flexctl.model.errors import InputTypeError
+from flexctl.model.user_warnings import warn_user
 from flexctl.model.variants import EXACT_MAX_MODES
 from flexctl.sim.digital import ZeroOrderHold
 from flexctl.sim.maneuvers import Slew
@@ -122,12 +130,13 @@ from .feedback.pd import design_pd
 from .slew.reference import SlewProfile, minimum_slew_duration
 from .feedback.scheduling import design_scheduled_lqr
 from .slew.shaping import bang_bang, design_shaper, shape
-from .spec import CONTROLLER_KINDS, ControllerSpec, SceneError
+from .spec import CONTROLLER_KINDS, ControllerSpec, SceneError, refuse_ignored_settings
 from .design.stability import check_loop, warn_if_unstable
 from .feedback.tracking import TrajectoryTracker
 from .slew.trajopt import SlewProblem, SlewSolution, solve_slew
 
-__all__ = ["BuiltController", "OpenLoop", "from_spec", "DesignChangedWarning"]
+__all__ = ["BuiltController", "OpenLoop", "from_spec", "DesignChangedWarning",
+           "refuse_ignored_settings"]
 
 class OpenLoop(StaticLaw):
     """A torque function of time played open loop, as a static controller.
@@ -291,8 +300,9 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
     if not isinstance(maneuver, Slew) or spec is None:
         raise SceneError(f"scene {scene.name!r} is not a slew with a [controller] table")
     plant = scene.build_model() if plant is None else plant
-    design = _design_model(scene, plant)
     actuator = getattr(plant, "actuator", None)
+    refuse_ignored_settings(spec, sensed=scene.sensors is not None, actuator=actuator)
+    design = _design_model(scene, plant)
     angle, kind = maneuver.angle, spec.kind
     bound = actuator_torque_bound(actuator, maneuver.torque_bound)
     duration = _slew_duration(dataclasses.replace(maneuver, torque_bound=bound), kind, design)
@@ -322,7 +332,7 @@ def _checked(built: BuiltController, plant: Model) -> BuiltController:
         check = check_loop(plant, built.controller)
     except InputTypeError:                  # an open-loop torque: nothing feeds back
         return built
-    warn_if_unstable(check, stacklevel=3)
+    warn_if_unstable(check, stacklevel=None)
     return dataclasses.replace(built, info={**built.info, "loop_stability": check.as_dict()})
 
 
@@ -335,10 +345,20 @@ def _hardware(scene, plant: Model, spec: ControllerSpec, built) -> BuiltControll
     if scene.sensors is None:
         return _sampled(spec, built)
     period = _loop_sample_time(scene, spec)
-    observed = _wrap(Observed, law=controller, sensors=scene.sensors, sample_time=period)
-    return dataclasses.replace(built, controller=observed,
-                               info={**built.info, "sample_time": period,
-                                     "estimator": "kalman (sensors)"})
+    process = {}
+    if spec.kind == "lqg" or "process_torque" in spec.settings:
+        process = {"process_noise": spec.get("process_torque")}
+    # the filter is built here, once, on the plant the design was given (the nominal one):
+    # flown on a dispersed plant it keeps the nominal model, as a flight computer does
+    observed = _wrap(Observed, law=controller, sensors=scene.sensors, sample_time=period,
+                     model=plant, **process)
+    info = {**built.info, "sample_time": period, "estimator": "kalman (sensors)",
+            "process_noise": observed.process_noise}
+    if spec.kind == "lqg":
+        info["design"] = (f"LQG: {info.get('design', 'LQR')}, on the discrete Kalman "
+                          f"estimate of the sensors' readings (process torque "
+                          f"{observed.process_noise:g} N m)")
+    return dataclasses.replace(built, controller=observed, info=info)
 
 
 def _design_model(scene, plant: Model) -> Model:
@@ -383,7 +403,7 @@ def _reference(spec: ControllerSpec, design: Model, angle, duration, bound) -> t
             info["reference_duration"] = feasible
             info["note"] = (f"the {profile_shape} reference needs {feasible:.3g} s at "
                             f"{bound:g} N m; stretched from {duration:.3g} s")
-            warnings.warn(f"controller: {info['note']}", DesignChangedWarning, stacklevel=4)
+            warn_user(f"controller: {info['note']}", DesignChangedWarning)
             duration = feasible
     profile = _wrap(SlewProfile, slew_angle=angle, duration=duration, shape=profile_shape)
     return profile, duration, info

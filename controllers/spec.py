@@ -50,7 +50,7 @@ TERMINALS = ("lqr", "rest")
 
 __all__ = ["CONTROLLER_KEYS", "CONTROLLER_KINDS", "ControllerKind", "ControllerSpec",
            "FORMER_NAMES", "SceneError", "Setting", "current_name", "current_names",
-           "settings_table"]
+           "settings_table", "refuse_ignored_settings", "OPEN_LOOP_KINDS"]
 
 
 class SceneError(InputValueError):
@@ -435,3 +435,63 @@ def settings_table(width: int = 92) -> str:
                 first = False
     lines.append(rule)
     return "\n".join(lines)
+
+
+#: Kinds that play a torque open loop: they read no sensor.
+OPEN_LOOP_KINDS = ("bang_bang", "zv", "zvd", "trajopt")
+#: Settings a design takes from the scene's [sensors] when it has them, with the reason.
+_SENSED_SETTINGS = {
+    "angle_noise": "the Kalman filter of the sensors takes each reading's noise from the "
+                   "[sensors] table",
+    "moment_noise": "the Kalman filter of the sensors takes each reading's noise from the "
+                    "[sensors] table",
+    "estimator": "with [sensors] the law always reads the Kalman estimate of their readings",
+}
+
+
+def refuse_ignored_settings(spec: ControllerSpec, *, sensed: bool, actuator=None) -> None:
+    """Refuse, by name, a setting the scene gives that the design it asks for would not use.
+
+    Parameters
+    ----------
+    spec : ControllerSpec
+        The scene's ``[controller]`` table; only the settings it gives are judged (a default
+        is never refused).
+    sensed : bool
+        True when the scene has ``[sensors]``: the loop then reads a Kalman estimate built
+        from the sensors' own noise models, and the estimator settings of ``lqg`` and
+        ``nmpc`` that describe measurement noise have no part in it; an open-loop kind
+        reads no sensor at all. Without sensors an NMPC on the exact state
+        (``estimator = "state"``) has no use for noise settings.
+    actuator : object, optional
+        The plant's actuator: a reaction wheel's LQR is designed at rest on the structure
+        augmented with its motor lag, so a non-zero ``spin_rate`` would be ignored.
+
+    Raises
+    ------
+    SceneError
+        Naming the setting, the rule and the value given.
+    """
+    given = spec.settings
+    if sensed and spec.kind in OPEN_LOOP_KINDS:
+        raise SceneError(f"sensors: controller kind {spec.kind!r} plays its torque open loop "
+                         "and reads no sensor; remove the [sensors] table or choose a feedback "
+                         "kind (pd, lqr, lqg, scheduled, trajopt+lqr, nmpc)")
+    if not sensed and spec.kind == "nmpc" and spec.get("estimator") == "state":
+        for name in ("angle_noise", "moment_noise", "process_torque"):
+            if name in given:
+                raise SceneError(f"controller.{name} (kind 'nmpc') is not used with "
+                                 "estimator = \"state\" (the NMPC reads the exact state): set "
+                                 "estimator = \"kalman\" or remove it (got "
+                                 f"{given[name]!r})")
+    if sensed:
+        for name, reason in _SENSED_SETTINGS.items():
+            if name in given and not (name == "estimator" and given[name] == "kalman"):
+                raise SceneError(f"controller.{name} (kind {spec.kind!r}) is not used when the "
+                                 f"scene has [sensors]: {reason}; remove it (got "
+                                 f"{given[name]!r})")
+    wheel = getattr(actuator, "kind", None) == "reaction_wheel"
+    if wheel and spec.kind in ("lqr", "lqg") and given.get("spin_rate", 0.0) != 0.0:
+        raise SceneError(f"controller.spin_rate (kind {spec.kind!r}) must be 0 with a reaction "
+                         "wheel: the wheel's LQR is designed at rest on the structure with the "
+                         f"motor lag; got {given['spin_rate']!r}")

@@ -3,8 +3,10 @@
 ==================  ============================================================================
 module              contents
 ==================  ============================================================================
+``channels``        the plant's channels from the hub torque
 ``loops``           loop transfer functions, stability margins, poles against spin
-``robustness``      Monte Carlo dispersion of stiffness, point masses, hub inertia
+``dispersion``      dispersed stiffness, point masses, hub inertia, whole or per appendage
+``robustness``      Monte Carlo of a design flown on dispersed plants, and its spread
 ==================  ============================================================================
 
 Builds on the laws (:mod:`controllers.feedback`).

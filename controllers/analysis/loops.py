@@ -63,12 +63,22 @@ from ..feedback.lqr import LQR, checked_model, truncation_matrix
 from ..design.plant_state import resized
 from ..feedback.pd import PD, SENSORS
 from ..feedback.scheduling import ScheduledLQR
-from ..design.stability import STABILITY_TOLERANCE
+from ..design.stability import stability_verdict
 from ..feedback.tracking import TrajectoryTracker
+from ..feedback.actuated import LaggedLQR
+from ..feedback.observed_loop import observed_loop
+from ..feedback.observer import Observed
+from .channels import PlantChannels, plant_channels
 
 __all__ = ["SENSORS", "PlantChannels", "plant_channels", "loop_transfer", "LoopMargins",
-           "loop_margins", "PolesVsSpin", "poles_vs_spin"]
+           "loop_margins", "PolesVsSpin", "poles_vs_spin", "hidden_poles"]
 
+#: A pole of the open loop still a pole, to this fraction of its magnitude (at least 1/s), of
+#: the loop closed at two gains is a hidden mode's (:func:`hidden_poles`).
+_HIDDEN_RELATIVE = 1e-6
+#: Frequencies at which a sampled loop's response is evaluated for its margins (evenly spaced
+#: up to the Nyquist frequency; crossings are interpolated between them).
+SAMPLED_GRID = 8_000
 #: Relative distance within which a margin crossing is taken to sit on an undamped pole or
 #: zero of the loop (or, times the loop's largest pole magnitude, on the origin).
 AXIS_TOLERANCE = 1e-6
@@ -78,115 +88,6 @@ def _readonly(array) -> np.ndarray:
     array = np.array(array)
     array.setflags(write=False)
     return array
-
-
-# --------------------------------------------------------------------------- plant channels
-def _channel(model: Model, plant, output: str):
-    """The SISO channel torque -> ``output`` of the linear plant, names kept."""
-    import control
-
-    row = model.output_names.index(output)
-    return control.ss(plant.A, plant.B, plant.C[row:row + 1], plant.D[row:row + 1],
-                      states=list(model.state_names), inputs=["torque"], outputs=[output],
-                      name=f"{plant.name}_{output}")
-
-
-@dataclass(frozen=True, kw_only=True, eq=False)
-class PlantChannels:
-    """SISO channels of a linear plant from the hub torque (N m).
-
-    Build with :func:`plant_channels`.
-
-    Attributes
-    ----------
-    spin_rate : float
-        Steady hub rate of the linearisation, rad/s.
-    hub_angle : control.StateSpace
-        Torque to hub angle, rad/(N m): collocated. Its zeros are the flexible frequencies
-        with the hub held (``natural_frequencies(spin, hub="clamped")``), interlaced with the
-        poles.
-    tip_deflection : control.StateSpace
-        Torque to tip deflection in the hub frame, m/(N m): non-collocated.
-    tip_angle : control.StateSpace
-        Torque to ``theta + tip_deflection / (b + l)``, rad/(N m): non-collocated, with zeros
-        in the right half-plane.
-    natural_frequencies : ndarray, shape (N,)
-        Flexible frequencies with the hub free, rad/s (the poles ``+-j w_i`` of an undamped
-        plant).
-    clamped_frequencies : ndarray, shape (N,)
-        Flexible frequencies with the hub held, rad/s.
-    """
-
-    spin_rate: float
-    hub_angle: object
-    tip_deflection: object
-    tip_angle: object
-    natural_frequencies: np.ndarray
-    clamped_frequencies: np.ndarray
-
-    def __post_init__(self):
-        import control
-
-        object.__setattr__(self, "spin_rate",
-                           check_real("plant_channels", "spin_rate", self.spin_rate))
-        for name in ("hub_angle", "tip_deflection", "tip_angle"):
-            sys = getattr(self, name)
-            if not isinstance(sys, control.StateSpace) or sys.ninputs != 1 \
-                    or sys.noutputs != 1:
-                raise InputTypeError(f"plant_channels.{name} must be a SISO control.StateSpace;"
-                                     f" got {type(sys).__name__}")
-        for name in ("natural_frequencies", "clamped_frequencies"):
-            value = np.asarray(getattr(self, name), dtype=float)
-            if value.ndim != 1 or not np.all(np.isfinite(value)):
-                raise InputValueError(f"plant_channels.{name} must be a finite vector (rad/s);"
-                                      f" got shape {value.shape}")
-            object.__setattr__(self, name, _readonly(value))
-
-    def __repr__(self):
-        # One line: the matrices of the three channels would print hundreds of lines.
-        outputs = ", ".join(sys.output_labels[0] for sys in
-                            (self.hub_angle, self.tip_deflection, self.tip_angle))
-        frequencies = "".join(
-            f", first {kind} frequency {values[0]:.4g} rad/s"
-            for kind, values in (("natural", self.natural_frequencies),
-                                 ("clamped", self.clamped_frequencies)) if values.size)
-        return (f"PlantChannels(torque -> {outputs}; spin_rate={self.spin_rate:.6g} rad/s, "
-                f"{self.hub_angle.nstates} states, {self.natural_frequencies.size} modes"
-                f"{frequencies})")
-
-
-def plant_channels(model, spin_rate: float = 0.0) -> PlantChannels:
-    """The hub-angle, tip-deflection and tip-angle channels of ``model.linearize(spin_rate)``.
-
-    Parameters
-    ----------
-    model : flexctl.Model
-        Any variant (the exact variant linearises to first_order's stiffness).
-    spin_rate : float, optional
-        Steady hub rate ``Omega`` of the linearisation, rad/s. Default 0.
-
-    Returns
-    -------
-    PlantChannels
-
-    Examples
-    --------
-    >>> import numpy as np, control, flexctl
-    >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
-    >>> channels = plant_channels(model)
-    >>> zeros = np.sort(np.abs(control.zeros(channels.hub_angle).imag))[::2]
-    >>> bool(np.allclose(zeros, channels.clamped_frequencies))
-    True
-    """
-    model = checked_model("plant_channels", model)
-    spin_rate = check_real("plant_channels", "spin_rate", spin_rate)
-    plant = model.linearize(spin_rate)
-    return PlantChannels(spin_rate=spin_rate,
-                         hub_angle=_channel(model, plant, "theta"),
-                         tip_deflection=_channel(model, plant, "tip_deflection"),
-                         tip_angle=_channel(model, plant, "tip_angle"),
-                         natural_frequencies=model.natural_frequencies(spin_rate, hub="free"),
-                         clamped_frequencies=model.natural_frequencies(spin_rate))
 
 
 # --------------------------------------------------------------------------- loops
@@ -222,6 +123,9 @@ def _state_gain(model: Model, controller, spin_rate: float, sensor):
         return _design_gain("loop_transfer", controller, model.layout)
     if isinstance(controller, (LQR, ScheduledLQR, TrajectoryTracker)):
         return controller.plant_gain(model, spin_rate)
+    if isinstance(controller, LaggedLQR):
+        # a gain on the actuated plant's state, the wheel's lag included
+        return controller.plant_gain(model, spin_rate)
     return None
 
 
@@ -233,7 +137,7 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
     model : flexctl.Model
         The plant, linearised about ``spin_rate`` (``N`` modes; the controller may have been
         designed on fewer).
-    controller : PD, LQR, ScheduledLQR, TrajectoryTracker, LQG or ndarray
+    controller : PD, LQR, ScheduledLQR, TrajectoryTracker, LaggedLQR, LQG, Observed or ndarray
         - :class:`~controllers.feedback.pd.PD`: ``u = -kp y - kd y_dot`` on the output ``sensor``;
         - :class:`~controllers.feedback.lqr.LQR`,
           :class:`~controllers.feedback.scheduling.ScheduledLQR` (its
@@ -242,7 +146,12 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
           truncation to the design's ``M`` modes
           (:func:`~controllers.feedback.lqr.truncation_matrix`);
         - :class:`~controllers.feedback.lqg.LQG`: its compensator (:meth:`LQG.compensator`) reading
-          ``[theta, root_moment]`` of this plant.
+          ``[theta, root_moment]`` of this plant;
+        - :class:`~controllers.LaggedLQR`: its gain on the plant with the reaction wheel
+          (``model`` built with ``actuator=wheel``), the wheel's lag in the loop;
+        - :class:`~controllers.Observed`: the loop as it flies, sampled, held and late,
+          through its Kalman filter: a discrete ``L(z)``
+          (:func:`~controllers.feedback.observed_loop.observed_loop`).
 
         References, feedforward and saturation play no part in the loop.
     spin_rate : float, optional
@@ -287,10 +196,12 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
     if gain is not None:
         return control.ss(a, b, gain, np.zeros((1, 1)), states=states, inputs=["torque"],
                           outputs=["return_torque"], name=name)
+    if isinstance(controller, Observed):
+        return observed_loop(model, controller, spin_rate, state_gain=_state_gain)
     if not isinstance(controller, LQG):
         raise InputTypeError("loop_transfer.controller must be a PD, LQR, ScheduledLQR, "
-                             "TrajectoryTracker, LQG or a gain array; got "
-                             f"{type(controller).__name__}")
+                             "TrajectoryTracker, LaggedLQR, LQG, Observed or a gain array; "
+                             f"got {type(controller).__name__}")
     compensator = controller.compensator()
     meas = controller.for_plant(model).measurement_matrix
     sensors = control.ss(a, b, meas, np.zeros((meas.shape[0], 1)), states=states, inputs=["torque"],
@@ -336,10 +247,16 @@ class LoopMargins:
     spectral_abscissa : float
         Largest real part of the closed-loop poles, 1/s.
     closed_loop_stable : bool
-        Every closed-loop pole in the open left half-plane (:data:`STABILITY_TOLERANCE`).
+        No closed-loop pole grows, the loop's hidden poles (:func:`hidden_poles`: a free
+        hub's rigid translation) left out: the verdict :func:`controllers.check_loop` gives
+        (:func:`~controllers.design.stability.stability_verdict`).
         When False, the two gain margins are the nearest factors at which the number of
         unstable closed-loop poles changes: the loop may regain stability there (tip
         feedback on a lightly damped beam does below its gain-reduction margin) or not.
+    crossings : tuple of tuple
+        Every crossing kept, by frequency: ``("phase", w, g)`` where the phase crosses
+        -180 deg at ``w`` rad/s with the gain factor ``g`` left there, ``("gain", w, p)``
+        where the gain crosses 1 with the phase margin ``p`` deg. Not in :meth:`as_dict`.
     """
 
     gain_margin: float
@@ -351,9 +268,12 @@ class LoopMargins:
     stability_margin_frequency: float
     spectral_abscissa: float
     closed_loop_stable: bool
+    crossings: tuple = ()
 
     def __post_init__(self):
         owner = "loop_margins"
+        object.__setattr__(self, "crossings", tuple(
+            (str(kind), float(w), float(v)) for kind, w, v in self.crossings))
         if self.gain_margin != math.inf:
             object.__setattr__(self, "gain_margin", check_real(
                 owner, "gain_margin", self.gain_margin, minimum=1.0))
@@ -386,8 +306,10 @@ class LoopMargins:
         return 20.0 * math.log10(self.gain_margin)
 
     def as_dict(self) -> dict:
-        """The fields as a plain dict (a sweep row)."""
-        return {name: getattr(self, name) for name in self.__dataclass_fields__}
+        """The scalar fields as a plain dict (a sweep row): every field but
+        :attr:`crossings`."""
+        return {name: getattr(self, name) for name in self.__dataclass_fields__
+                if name != "crossings"}
 
 
 def _axis_frequencies(loop, tolerance: float) -> tuple:
@@ -396,6 +318,8 @@ def _axis_frequencies(loop, tolerance: float) -> tuple:
     import control
 
     roots = np.concatenate((control.poles(loop), control.zeros(loop)))
+    roots = roots[np.isfinite(roots) & (roots != 0)] if not loop.isctime() else roots
+    roots = _as_rates(roots, loop)
     roots = roots[np.isfinite(roots)]
     scale = max(1.0, float(np.max(np.abs(roots), initial=0.0)))
     on_axis = np.abs(roots.real) <= tolerance * np.maximum(np.abs(roots), scale * tolerance)
@@ -417,8 +341,9 @@ def loop_margins(loop, *, tolerance: float = AXIS_TOLERANCE) -> LoopMargins:
     Parameters
     ----------
     loop : control.LTI
-        Continuous-time SISO loop transfer function, negative-feedback convention (e.g.
-        :func:`loop_transfer`).
+        SISO loop transfer function, negative-feedback convention (e.g.
+        :func:`loop_transfer`): continuous, or sampled (an observed law's), whose poles are
+        judged as rates ``log(z) / T``.
     tolerance : float, optional
         Relative distance within which a crossing sits on an undamped pole or zero and is
         left out (module Notes). Default :data:`AXIS_TOLERANCE`.
@@ -442,15 +367,17 @@ def loop_margins(loop, *, tolerance: float = AXIS_TOLERANCE) -> LoopMargins:
     if not isinstance(loop, control.LTI):
         raise InputTypeError(f"loop_margins.loop must be a python-control LTI system; got "
                              f"{type(loop).__name__}")
-    if loop.ninputs != 1 or loop.noutputs != 1 or not loop.isctime():
-        raise InputValueError("loop_margins.loop must be a continuous-time SISO system; got "
-                              f"{loop.noutputs} x {loop.ninputs}, dt = {loop.dt!r}")
+    if loop.ninputs != 1 or loop.noutputs != 1 or loop.dt is True:
+        raise InputValueError("loop_margins.loop must be a SISO system, continuous or with a "
+                              f"sample time; got {loop.noutputs} x {loop.ninputs}, dt = "
+                              f"{loop.dt!r}")
     tolerance = check_real("loop_margins", "tolerance", tolerance, minimum=0.0, strict=True,
                            maximum=1e-2)
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         # the response is NaN exactly on an undamped pole: python-control compares it
         warnings.simplefilter("ignore", RuntimeWarning)
-        gm, pm, sm, w180, wc, wms = control.stability_margins(loop, returnall=True)
+        gm, pm, sm, w180, wc, wms = control.stability_margins(_margin_data(loop),
+                                                              returnall=True)
     singular, scale = _axis_frequencies(loop, tolerance)
     keep = _off_axis(w180, singular, scale, tolerance) & np.isfinite(gm)
     gm, w180 = np.asarray(gm)[keep], np.asarray(w180)[keep]
@@ -462,9 +389,10 @@ def loop_margins(loop, *, tolerance: float = AXIS_TOLERANCE) -> LoopMargins:
     k_pm = np.argmin(np.abs(pm)) if pm.size else None
     sm, wms = np.asarray(sm, dtype=float), np.asarray(wms, dtype=float)
     k_sm = np.argmin(sm) if sm.size else None
-    poles = control.poles(control.feedback(loop))
-    abscissa = float(np.max(poles.real))
-    radius = max(1.0, float(np.max(np.abs(poles))))
+    poles = _as_rates(control.poles(control.feedback(loop)), loop)
+    stable, abscissa, _ = stability_verdict(
+        poles, _as_rates(hidden_poles(loop), loop),
+        scale=None if loop.isctime() else math.pi / float(loop.dt))
     return LoopMargins(
         gain_margin=float(gm[k_up]) if k_up is not None else math.inf,
         gain_reduction_margin=float(np.max(gm[down])) if down.any() else 0.0,
@@ -473,8 +401,68 @@ def loop_margins(loop, *, tolerance: float = AXIS_TOLERANCE) -> LoopMargins:
         phase_crossover_frequency=float(w180[k_up]) if k_up is not None else math.nan,
         gain_crossover_frequency=float(wc[k_pm]) if k_pm is not None else math.nan,
         stability_margin_frequency=float(wms[k_sm]) if k_sm is not None else math.nan,
-        spectral_abscissa=abscissa,
-        closed_loop_stable=abscissa < -STABILITY_TOLERANCE * radius)
+        spectral_abscissa=abscissa, closed_loop_stable=stable,
+        crossings=tuple(sorted([("phase", w, g) for w, g in zip(w180, gm)]
+                               + [("gain", w, p) for w, p in zip(wc, pm)],
+                               key=lambda item: item[1])))
+
+
+def _margin_data(loop):
+    """What the margins are read from: a continuous loop itself (python-control's polynomial
+    search), a sampled one's frequency response on :data:`SAMPLED_GRID` frequencies up to
+    its Nyquist frequency (the polynomial search in ``z`` loses its roots at the few tens
+    of states of an observed loop)."""
+    import control
+
+    if loop.isctime():
+        return loop
+    nyquist = math.pi / float(loop.dt)
+    return control.frd(loop, np.linspace(1e-4 * nyquist, (1.0 - 1e-9) * nyquist,
+                                         SAMPLED_GRID))
+
+
+def _as_rates(poles, loop) -> np.ndarray:
+    """Poles as rates, 1/s: themselves for a continuous loop, ``log(z) / T`` for a sampled
+    one."""
+    poles = np.asarray(poles, dtype=complex)
+    if loop.isctime():
+        return poles
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.log(poles) / float(loop.dt)
+
+
+def hidden_poles(loop) -> np.ndarray:
+    """The loop's hidden poles: those of its open loop that no loop gain moves (its modes
+    the input cannot move or the output cannot see, such as a free hub's rigid translation
+    under a hub torque), 1/s.
+
+    A pole of ``L`` that is still a pole of the closed loops ``feedback(L)`` and
+    ``feedback(2 L)`` (within ``1e-6`` of its magnitude, at least 1/s) is hidden: a mode
+    the loop both moves and sees moves with the gain. :func:`loop_margins` leaves them out
+    of its verdict (:func:`~controllers.design.stability.stability_verdict`), as
+    :func:`~controllers.check_loop` leaves out the plant's hidden modes.
+
+    Parameters
+    ----------
+    loop : control.StateSpace
+        SISO loop transfer function (negative-feedback convention), continuous or sampled.
+
+    Returns
+    -------
+    ndarray of complex, shape (k,)
+        In the loop's own variable: ``s`` (1/s), or ``z`` for a sampled loop.
+    """
+    import control
+
+    open_loop = np.linalg.eigvals(np.asarray(loop.A, dtype=float))
+    hidden = []
+    moved = [np.asarray(control.poles(control.feedback(gain * loop)), dtype=complex)
+             for gain in (1.0, 2.0)]
+    for pole in open_loop:
+        tol = _HIDDEN_RELATIVE * max(abs(pole), 1.0)
+        if all(others.size and np.min(np.abs(others - pole)) <= tol for others in moved):
+            hidden.append(pole)
+    return np.array(hidden, dtype=complex)
 
 
 # --------------------------------------------------------------------------- against spin

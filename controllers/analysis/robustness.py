@@ -1,7 +1,8 @@
 """Monte Carlo robustness of a flexible loop: dispersed beam stiffness, point masses, hub inertia.
 
 A controller designed once on the nominal system meets plants whose Young's modulus, point
-masses and hub inertia are off by random factors. :class:`Dispersion` draws the factors,
+masses and hub inertia are off by random factors, for the whole structure or appendage by
+appendage. :class:`Dispersion` (:mod:`.dispersion`) draws the factors,
 :class:`RobustnessTask` judges the loop on one dispersed plant (stability and margins from
 :mod:`controllers.analysis.loops`, optionally the slew it flies on the nonlinear plant), and
 :func:`robustness_summary` condenses the rows. The task is a picklable frozen dataclass, so
@@ -15,6 +16,10 @@ a crash, or grows from 200 to 400 samples, with exactly the rows of one uninterr
     table = sweep(task, {"sample": range(200)}, executor=executor, seed=1,
                   store="robustness.sqlite", resume=True)
     summary = robustness_summary(table)
+
+A slew scene's study (:meth:`RobustnessTask.from_scene`) designs the scene's controller once,
+estimator included, and flies it on each dispersed plant with the scene's actuator and
+sensors; the summary gives the spread of each metric (:func:`spread_statistics`).
 
 Examples
 --------
@@ -38,148 +43,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexctl.model import VARIANTS, HubBeam, build_model
-from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.model import VARIANTS, HubBeam, Structure, build_model
 from flexctl.model.checks import check_real
+from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.metrics import slew_metrics
 from flexctl.sim.simulation import simulate
 
-from .loops import loop_margins, loop_transfer
+from .dispersion import (APPENDAGE_PARAMETERS, DISTRIBUTIONS, NORMAL_CLIP, SCALES, Dispersion,
+                         disperse)
+from .loops import LoopMargins, loop_margins, loop_transfer
+from ..design.stability import check_loop
 from ..feedback.lqg import LQG
 
-__all__ = ["SCALES", "DISTRIBUTIONS", "Dispersion", "disperse", "RobustnessTask",
-           "RobustnessSummary", "robustness_summary"]
-
-#: The parameters of a sample: factors on Young's modulus, every point mass and the hub
-#: inertia (1 is the nominal system).
-SCALES = ("youngs_modulus_scale", "point_mass_scale", "hub_inertia_scale")
-DISTRIBUTIONS = ("uniform", "normal")
-#: Normal draws are clipped at this many standard deviations (a factor must stay positive).
-NORMAL_CLIP = 3.0
-
-
-@dataclass(frozen=True, kw_only=True)
-class Dispersion:
-    """Relative dispersion of the uncertain parameters.
-
-    Parameters
-    ----------
-    youngs_modulus, point_mass, hub_inertia : float, optional
-        Relative spread of each factor: the half-width of a uniform draw on
-        ``[1 - d, 1 + d]``, or the standard deviation of a normal draw about 1 clipped at
-        ``NORMAL_CLIP`` deviations. Defaults 0.1, 0.2 and 0.1. In ``[0, 1)`` for uniform,
-        ``[0, 1/3)`` for normal (a factor must stay positive).
-    distribution : {"uniform", "normal"}, optional
-        Default ``"uniform"``.
-    """
-
-    youngs_modulus: float = 0.1
-    point_mass: float = 0.2
-    hub_inertia: float = 0.1
-    distribution: str = "uniform"
-
-    def __post_init__(self):
-        if self.distribution not in DISTRIBUTIONS:
-            raise InputValueError(f"dispersion.distribution must be one of "
-                                  f"{', '.join(DISTRIBUTIONS)}; got {self.distribution!r}")
-        limit = 1.0 if self.distribution == "uniform" else 1.0 / NORMAL_CLIP
-        for name in ("youngs_modulus", "point_mass", "hub_inertia"):
-            value = check_real("dispersion", name, getattr(self, name), minimum=0.0)
-            if value >= limit:
-                raise InputValueError(f"dispersion.{name} must be < {limit:.4g} for a "
-                                      f"{self.distribution} draw (the factor must stay "
-                                      f"positive); got {value!r}")
-            object.__setattr__(self, name, value)
-
-    def samples(self, n_samples: int, seed: int = 0) -> list:
-        """``n_samples`` draws of the factors :data:`SCALES`, as sweep points.
-
-        Parameters
-        ----------
-        n_samples : int
-            >= 1.
-        seed : int, optional
-            Seed of :func:`numpy.random.default_rng`. Default 0.
-
-        Returns
-        -------
-        list of dict
-            ``{"youngs_modulus_scale": ..., "point_mass_scale": ..., "hub_inertia_scale":
-            ...}`` (Python floats), a point list for :func:`flexctl.app.sweep.sweep`.
-        """
-        if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) \
-                or n_samples < 1:
-            raise InputValueError(f"dispersion.samples n_samples must be an integer >= 1; got "
-                                  f"{n_samples!r}")
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise InputValueError(f"dispersion.samples seed must be an integer >= 0; got "
-                                  f"{seed!r}")
-        return self._factors(np.random.default_rng(int(seed)), int(n_samples))
-
-    def draw(self, seed: int) -> dict:
-        """One draw of the factors :data:`SCALES` from its own seed.
-
-        The draw of a Monte Carlo sample that a sweep seeds by the sample's key
-        (:class:`RobustnessTask` with a ``dispersion``): it depends on ``seed`` alone, not on
-        how many samples there are or in which order they run.
-
-        Parameters
-        ----------
-        seed : int
-            Seed of :func:`numpy.random.default_rng`, >= 0.
-
-        Returns
-        -------
-        dict
-            ``{"youngs_modulus_scale": ..., "point_mass_scale": ..., "hub_inertia_scale":
-            ...}`` (Python floats).
-        """
-        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise InputValueError(f"dispersion.draw seed must be an integer >= 0; got "
-                                  f"{seed!r}")
-        return self._factors(np.random.default_rng(int(seed)), 1)[0]
-
-    def _factors(self, rng, n_samples: int) -> list:
-        """``n_samples`` draws from ``rng``, as dicts of :data:`SCALES`."""
-        spread = np.array([self.youngs_modulus, self.point_mass, self.hub_inertia])
-        if self.distribution == "uniform":
-            unit = rng.uniform(-1.0, 1.0, (n_samples, 3))
-        else:
-            unit = np.clip(rng.standard_normal((n_samples, 3)), -NORMAL_CLIP, NORMAL_CLIP)
-        factors = 1.0 + unit * spread
-        return [dict(zip(SCALES, map(float, row))) for row in factors]
-
-
-def disperse(system, *, youngs_modulus_scale: float = 1.0, point_mass_scale: float = 1.0,
-             hub_inertia_scale: float = 1.0) -> HubBeam:
-    """The system with its Young's modulus, point masses and hub inertia scaled.
-
-    Parameters
-    ----------
-    system : HubBeam
-        The nominal hub-beam-mass system.
-    youngs_modulus_scale : float, optional
-        Factor on ``beam.youngs_modulus`` (> 0): the bending stiffness.
-    point_mass_scale : float, optional
-        Factor on every point mass (>= 0).
-    hub_inertia_scale : float, optional
-        Factor on ``hub.inertia`` (>= 0).
-
-    Returns
-    -------
-    HubBeam
-        Validated like any other (a factor that leaves the physical range raises its error).
-    """
-    if not isinstance(system, HubBeam):
-        raise InputTypeError(f"disperse.system must be a HubBeam; got {type(system).__name__}")
-    e = check_real("disperse", "youngs_modulus_scale", youngs_modulus_scale, minimum=0.0,
-                   strict=True)
-    m = check_real("disperse", "point_mass_scale", point_mass_scale, minimum=0.0)
-    j = check_real("disperse", "hub_inertia_scale", hub_inertia_scale, minimum=0.0)
-    beam = dataclasses.replace(system.beam, youngs_modulus=e * system.beam.youngs_modulus)
-    hub = dataclasses.replace(system.hub, inertia=j * system.hub.inertia)
-    masses = tuple(dataclasses.replace(mass, mass=m * mass.mass) for mass in system.masses)
-    return dataclasses.replace(system, hub=hub, beam=beam, masses=masses)
+__all__ = ["SCALES", "APPENDAGE_PARAMETERS", "DISTRIBUTIONS", "Dispersion", "disperse",
+           "RobustnessTask", "RobustnessSummary", "robustness_summary", "spread_statistics",
+           "SPREAD_COLUMNS", "NORMAL_CLIP"]
 
 
 def _slew_reference(controller):
@@ -191,12 +69,14 @@ def _slew_reference(controller):
 
 
 def _worst_pole(model, loop, spin_rate: float):
-    """The closed loop's least damped pole, named by the plant mode it lies on."""
+    """The closed loop's least damped pole, named by the plant mode it lies on (a sampled
+    loop's as a rate, ``log(z) / T``)."""
     import control
 
     from ..design.stability import least_damped_pole
 
-    return least_damped_pole(model, control.feedback(loop).A, spin_rate)
+    sample_time = None if loop.isctime() else float(loop.dt)
+    return least_damped_pole(model, control.feedback(loop).A, spin_rate, sample_time)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -208,17 +88,22 @@ class RobustnessTask:
     (the factors drawn from ``s``): builds the dispersed plant (:func:`disperse`), its loop
     with the controller (:func:`~controllers.analysis.loops.loop_transfer`) and the margins
     (:func:`~controllers.analysis.loops.loop_margins`); with ``slew_time``, also flies the
-    controller's slew on the nonlinear plant.
+    controller's slew on the nonlinear plant. The controller is the one given, designed
+    once: an observed law (:class:`~controllers.Observed`) built with a ``model`` keeps its
+    nominal Kalman filter on every dispersed plant, as a flight computer would.
 
     Parameters
     ----------
-    system : HubBeam
+    system : HubBeam or Structure
         The nominal system.
     controller : object
-        Any controller :func:`~controllers.analysis.loops.loop_transfer` takes, designed on the
-        nominal system (an LQG reads the dispersed plant's sensors).
-    n_modes : int, optional
-        Modes of the plant. Default 4.
+        Any controller :func:`~controllers.analysis.loops.loop_transfer` takes (an observed
+        law's loop as it flies, sampled and through its filter), or else any
+        :func:`~controllers.check_loop` takes (its loop then judged by
+        :func:`~controllers.check_loop`, margins NaN), designed on the nominal system (an
+        LQG reads the dispersed plant's sensors).
+    n_modes : int, dict or sequence of int, optional
+        Modes of the plant, as :func:`flexctl.build_model` takes them. Default 4.
     variant : str, optional
         Model variant. Default ``"first_order"`` (every variant linearises to its stiffness;
         the variant matters for the slew only).
@@ -228,39 +113,49 @@ class RobustnessTask:
         For a PD law (:data:`~controllers.analysis.loops.SENSORS`).
     slew_time : float, optional
         Simulated time of the slew, s (> the reference's end); needs a controller with a slew
-        reference (:class:`~controllers.slew.reference.SlewProfile`). Default: no simulation.
+        reference (:class:`~controllers.slew.reference.SlewProfile`) or ``slew``. Default: no
+        simulation.
     dispersion : Dispersion, optional
         Draw the factors of each call from its ``seed`` (:meth:`Dispersion.draw`): a Monte
         Carlo study is then a sweep over ``{"sample": range(n)}``, each sample seeded by the
         sweep from its key, so that a resumed or redistributed study gives the same rows.
         Default: the factors are the call's arguments.
+    actuator : ReactionWheel or DCMotor, optional
+        The plant's actuator (:func:`flexctl.build_model`); the controller then commands it.
+        Default: an ideal hub torque.
+    slew : tuple of float, optional
+        ``(angle, end)``: the slew's angle (rad) and the time its residual vibration is
+        measured from (s), for a controller whose reference is not a SlewProfile (a
+        :class:`~controllers.BuiltController`'s ``maneuver_end``). Default: the reference's.
 
     Notes
     -----
-    A call returns a dict: the factors :data:`SCALES`, the
+    A call returns a dict: the factors (:attr:`Dispersion.factor_names`), the
     :class:`~controllers.analysis.loops.LoopMargins` fields,
     ``first_frequency`` (lowest hub-free flexible frequency, rad/s) and, with ``slew_time``,
     ``status`` and the :class:`~flexctl.sim.metrics.SlewMetrics` fields.
     """
 
-    system: HubBeam
+    system: HubBeam | Structure
     controller: object
-    n_modes: int = 4
+    n_modes: object = 4
     variant: str = "first_order"
     spin_rate: float = 0.0
     sensor: str | None = None
     slew_time: float | None = None
     dispersion: Dispersion | None = None
+    actuator: object = None
+    slew: tuple | None = None
 
     def __post_init__(self):
         if self.dispersion is not None and not isinstance(self.dispersion, Dispersion):
             raise InputTypeError(f"robustness_task.dispersion must be a Dispersion; got "
                                  f"{type(self.dispersion).__name__}")
-        if not isinstance(self.system, HubBeam):
-            raise InputTypeError(f"robustness_task.system must be a HubBeam; got "
-                                 f"{type(self.system).__name__}")
-        if isinstance(self.n_modes, bool) or not isinstance(self.n_modes, (int, np.integer)) \
-                or not 1 <= self.n_modes <= 200:
+        if not isinstance(self.system, (HubBeam, Structure)):
+            raise InputTypeError(f"robustness_task.system must be a HubBeam or a Structure; "
+                                 f"got {type(self.system).__name__}")
+        if isinstance(self.n_modes, bool) or (isinstance(self.n_modes, (int, np.integer))
+                                              and not 1 <= self.n_modes <= 200):
             raise InputValueError(f"robustness_task.n_modes must be an integer in [1, 200]; "
                                   f"got {self.n_modes!r}")
         if self.variant not in VARIANTS:
@@ -270,48 +165,143 @@ class RobustnessTask:
                            check_real("robustness_task", "spin_rate", self.spin_rate))
         # the nominal loop: a controller, sensor or mode count the analysis cannot take
         # fails here, once, rather than at every sample
-        loop_transfer(build_model(self.system, self.n_modes), self.controller, self.spin_rate,
-                      sensor=self.sensor)
+        nominal = self._model(self.system)
+        object.__setattr__(self, "_by_transfer", True)
+        try:
+            self._loop_row(nominal)
+        except InputTypeError as exc:
+            # a law with no linear loop transfer (a DC motor's voltage, an NMPC behind a
+            # filter) is judged by check_loop, when check_loop takes it
+            object.__setattr__(self, "_by_transfer", False)
+            try:
+                self._loop_row(nominal)
+            except InputTypeError:
+                raise exc from None
         if self.slew_time is not None:
-            reference = _slew_reference(self.controller)
+            reference = self._slew_reference()
             if reference is None:
                 raise InputValueError("robustness_task.slew_time needs a controller with a "
-                                      "slew reference (a SlewProfile); got "
-                                      f"{type(self.controller).__name__} without one")
+                                      "slew reference (a SlewProfile) or slew=(angle, end); "
+                                      f"got {type(self.controller).__name__} without one")
             object.__setattr__(self, "slew_time", check_real(
                 "robustness_task", "slew_time", self.slew_time, minimum=reference[1],
                 strict=True))
 
+    @classmethod
+    def from_scene(cls, scene, controller_factory,
+                   dispersion: Dispersion | None = None) -> "RobustnessTask":
+        """The Monte Carlo of a slew scene: its controller designed once on the nominal
+        scene (estimator included) and flown, to the scene's final time, on each dispersed
+        plant with the scene's actuator and sensors.
+
+        Parameters
+        ----------
+        scene : flexctl.Scene
+            A slew scene with a ``[controller]`` table (and ``[actuator]``, ``[sensors]`` if
+            it has them).
+        controller_factory : callable
+            ``factory(scene, plant)`` returning a :class:`~controllers.BuiltController`
+            (:func:`controllers.from_spec`). Called once, on the nominal plant.
+        dispersion : Dispersion, optional
+            The factors' spreads; default :class:`Dispersion` ``()``.
+
+        Returns
+        -------
+        RobustnessTask
+            Its ``controller`` is the nominal design; call it as ``task(sample=k, seed=s)``
+            or sweep it over ``{"sample": range(n)}``.
+        """
+        plant = scene.build_model()
+        built = controller_factory(scene, plant)
+        return cls(system=scene.system, controller=built.controller,
+                   n_modes=getattr(plant, "mode_spec", plant.n_modes),
+                   variant=scene.variant, slew_time=scene.simulation.t_final,
+                   dispersion=Dispersion() if dispersion is None else dispersion,
+                   actuator=scene.actuator,
+                   slew=(float(scene.maneuver.angle), float(built.maneuver_end)))
+
+    def _model(self, system):
+        hardware = {} if self.actuator is None else {"actuator": self.actuator}
+        return build_model(system, self.n_modes, self.variant, **hardware)
+
+    def _slew_reference(self):
+        return self.slew if self.slew is not None else _slew_reference(self.controller)
+
+    def _loop_row(self, model) -> dict:
+        """The loop's margins and least damped pole on ``model``: by its transfer function
+        when the analysis takes the law, else by :func:`~controllers.check_loop`."""
+        if self._by_transfer:
+            loop = loop_transfer(model, self.controller, self.spin_rate, sensor=self.sensor)
+            worst = _worst_pole(model, loop, self.spin_rate)
+            return {**loop_margins(loop).as_dict(), "worst_mode": worst.mode,
+                    "worst_mode_frequency": worst.frequency,
+                    "worst_growth_rate": worst.growth_rate}
+        check = check_loop(model, self.controller, self.spin_rate)
+        margins = dict.fromkeys((f.name for f in dataclasses.fields(LoopMargins)
+                                 if f.name != "crossings"), math.nan)
+        found = check.as_dict()
+        return {**margins, **{key: found[key] for key in (
+            "closed_loop_stable", "spectral_abscissa", "worst_mode", "worst_mode_frequency",
+            "worst_growth_rate")}}
+
     def __call__(self, youngs_modulus_scale: float | None = None,
                  point_mass_scale: float | None = None, hub_inertia_scale: float | None = None,
-                 *, sample: int | None = None, seed: int | None = None) -> dict:
-        scales = self._scales(youngs_modulus_scale, point_mass_scale, hub_inertia_scale,
-                              sample, seed)
-        youngs_modulus_scale, point_mass_scale, hub_inertia_scale = scales
-        system = disperse(self.system, youngs_modulus_scale=youngs_modulus_scale,
-                          point_mass_scale=point_mass_scale,
-                          hub_inertia_scale=hub_inertia_scale)
-        model = build_model(system, self.n_modes, self.variant)
-        loop = loop_transfer(model, self.controller, self.spin_rate, sensor=self.sensor)
-        worst = _worst_pole(model, loop, self.spin_rate)
-        row = {"youngs_modulus_scale": float(youngs_modulus_scale),
-               "point_mass_scale": float(point_mass_scale),
-               "hub_inertia_scale": float(hub_inertia_scale), **loop_margins(loop).as_dict(),
-               "worst_mode": worst.mode, "worst_mode_frequency": worst.frequency,
-               "worst_growth_rate": worst.growth_rate}
+                 *, sample: int | None = None, seed: int | None = None,
+                 appendage_scales: dict | None = None) -> dict:
+        """One dispersed plant judged (class Notes).
+
+        Parameters
+        ----------
+        youngs_modulus_scale, point_mass_scale, hub_inertia_scale : float, optional
+            The factors, without a dispersion (default 1 each).
+        sample : int, optional
+            The Monte Carlo sample's number (with a dispersion); not read otherwise.
+        seed : int, optional
+            The seed its factors are drawn from (with a dispersion).
+        appendage_scales : dict, optional
+            Without a dispersion: single appendages' factors, as :func:`disperse` takes
+            them (``{"wing_b": {"youngs_modulus_scale": 0.8}}``); in the row as
+            ``"wing_b.youngs_modulus_scale"``. Default none.
+        """
+        factors = self._factors(youngs_modulus_scale, point_mass_scale, hub_inertia_scale,
+                                sample, seed)
+        if appendage_scales:
+            if self.dispersion is not None:
+                raise InputValueError("robustness_task appendage_scales are given without a "
+                                      "dispersion (with one, the draw gives them); got "
+                                      f"{appendage_scales!r}")
+            factors.update({f"{app}.{name}": float(value)
+                            for app, scales in appendage_scales.items()
+                            for name, value in scales.items()})
+        own = {}
+        for name, value in factors.items():
+            if name not in SCALES:
+                app, scale = name.rsplit(".", 1)
+                own.setdefault(app, {})[scale] = value
+        system = disperse(self.system, **{n: factors[n] for n in SCALES},
+                          appendage_scales=own)
+        model = self._model(system)
+        row = {**factors, **self._loop_row(model)}
         row["first_frequency"] = float(model.natural_frequencies(self.spin_rate, "free")[0])
         if self.slew_time is not None:
-            controller = self.controller
-            if isinstance(controller, LQG):
-                controller = controller.for_plant(model)
-            result = simulate(model, self.slew_time, controller=controller)
-            angle, end = _slew_reference(self.controller)
-            row["status"] = result.status
-            row.update(dataclasses.asdict(slew_metrics(result, angle, end)))
+            row.update(self._flown(model))
         return row
 
-    def _scales(self, youngs_modulus_scale, point_mass_scale, hub_inertia_scale, sample,
-                seed) -> tuple:
+    def _flown(self, model) -> dict:
+        """Status and slew metrics of the controller flown on ``model``."""
+        controller, drive = self.controller, {}
+        if isinstance(controller, LQG):
+            controller = controller.for_plant(model)
+        if getattr(controller, "measures", False):
+            drive["sensors"] = controller.sensors
+        result = simulate(model, self.slew_time, controller=controller, **drive)
+        angle, end = self._slew_reference()
+        metrics = dataclasses.asdict(slew_metrics(result, angle, end))
+        metrics.pop("errors", None)
+        return {"status": result.status, **metrics}
+
+    def _factors(self, youngs_modulus_scale, point_mass_scale, hub_inertia_scale, sample,
+                 seed) -> dict:
         """The factors of a call: given (default 1), or drawn by the dispersion from the
         seed of a Monte Carlo sample."""
         given = (youngs_modulus_scale, point_mass_scale, hub_inertia_scale)
@@ -319,14 +309,13 @@ class RobustnessTask:
             if sample is not None:
                 raise InputValueError(f"robustness_task sample={sample!r} needs a dispersion "
                                       "to draw it from; got dispersion=None")
-            return tuple(1.0 if v is None else v for v in given)
+            return {name: float(1.0 if v is None else v) for name, v in zip(SCALES, given)}
         if seed is None or any(v is not None for v in given):
             raise InputValueError("robustness_task with a dispersion draws its factors from "
                                   "the seed a sweep gives each sample: call it as "
                                   f"task(sample=k, seed=s); got seed={seed!r}, factors "
                                   f"{given!r}")
-        drawn = self.dispersion.draw(seed)
-        return tuple(drawn[name] for name in SCALES)
+        return self.dispersion.draw(seed)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -349,6 +338,10 @@ class RobustnessSummary:
         Smallest ``min |1 + L|`` over the stable samples.
     worst_spectral_abscissa : float
         Largest closed-loop pole real part over all samples, 1/s.
+    spread : dict
+        ``{column: {"n", "mean", "std", "min", "p05", "median", "p95", "max"}}`` over all
+        samples' finite values of each column of :data:`SPREAD_COLUMNS` the rows hold (in
+        the column's unit; ``std`` the sample standard deviation, 0 for one value).
     """
 
     n_samples: int
@@ -358,6 +351,7 @@ class RobustnessSummary:
     worst_phase_margin: float
     worst_stability_margin: float
     worst_spectral_abscissa: float
+    spread: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
         if not 0 <= self.n_stable <= self.n_samples or self.n_samples < 1:
@@ -372,8 +366,7 @@ def _rows(table) -> list:
         raise InputTypeError("robustness_summary.table must be a SweepResult or a sequence "
                              f"of row dicts; got {type(table).__name__}")
     rows = list(rows)
-    needed = ("closed_loop_stable", "gain_margin", "phase_margin", "stability_margin",
-              "spectral_abscissa")
+    needed = ("closed_loop_stable", "spectral_abscissa")
     for k, row in enumerate(rows):
         if isinstance(row, Mapping) and "failure" in row:
             raise InputValueError(f"robustness_summary.table row {k} is a failed sample "
@@ -403,7 +396,8 @@ def robustness_summary(table) -> RobustnessSummary:
     stable = [row for row in rows if row["closed_loop_stable"]]
 
     def worst(name, transform=float):
-        values = [transform(row[name]) for row in stable]
+        values = [transform(row[name]) for row in stable
+                  if not math.isnan(row.get(name, math.nan))]
         return min(values) if values else math.nan
 
     return RobustnessSummary(
@@ -411,4 +405,46 @@ def robustness_summary(table) -> RobustnessSummary:
         worst_gain_margin=worst("gain_margin"),
         worst_phase_margin=worst("phase_margin", lambda v: abs(float(v))),
         worst_stability_margin=worst("stability_margin"),
-        worst_spectral_abscissa=max(float(row["spectral_abscissa"]) for row in rows))
+        worst_spectral_abscissa=max(float(row["spectral_abscissa"]) for row in rows),
+        spread=spread_statistics(rows))
+
+
+#: Columns of a robustness row whose spread :func:`spread_statistics` gives, when present.
+SPREAD_COLUMNS = ("spectral_abscissa", "gain_margin", "phase_margin", "stability_margin",
+                  "first_frequency", "settling_time", "overshoot", "final_error",
+                  "peak_torque", "peak_tip_deflection", "residual_vibration")
+
+
+def spread_statistics(rows, columns=SPREAD_COLUMNS) -> dict:
+    """Spread of each column over the rows: count, mean, standard deviation, extremes and
+    percentiles of its finite values.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        The rows of a study (a :class:`RobustnessTask` sweep's).
+    columns : sequence of str, optional
+        The columns summarised; those no row holds a finite number of are left out.
+        Default :data:`SPREAD_COLUMNS`.
+
+    Returns
+    -------
+    dict
+        ``{column: {"n", "mean", "std", "min", "p05", "median", "p95", "max"}}``, Python
+        numbers in the column's unit (``std`` with one degree of freedom removed; 0 for a
+        single value).
+    """
+    out = {}
+    for name in columns:
+        values = np.array([float(row[name]) for row in rows
+                           if isinstance(row.get(name), (int, float, np.floating))
+                           and not isinstance(row.get(name), bool)], dtype=float)
+        values = values[np.isfinite(values)]
+        if not values.size:
+            continue
+        p05, median, p95 = np.percentile(values, [5.0, 50.0, 95.0])
+        out[name] = {"n": int(values.size), "mean": float(values.mean()),
+                     "std": float(values.std(ddof=1)) if values.size > 1 else 0.0,
+                     "min": float(values.min()), "p05": float(p05), "median": float(median),
+                     "p95": float(p95), "max": float(values.max())}
+    return out

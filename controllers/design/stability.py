@@ -40,6 +40,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 
@@ -48,10 +49,11 @@ import numpy as np
 from flexctl.model import Model
 from flexctl.model.checks import check_real
 from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.model.user_warnings import user_stacklevel
 
 __all__ = ["LoopStability", "GrowingPole", "LoopStabilityWarning", "check_loop",
            "warn_if_unstable", "checked_on", "loop_stability", "least_damped_pole",
-           "NEARLY_UNSTABLE_RATE"]
+           "NEARLY_UNSTABLE_RATE", "stability_verdict"]
 
 #: A pole that decays slower than this (1/s, an e-fold in 1000 s) is reported as nearly
 #: unstable: far longer than any manoeuvre, so the loop does not damp it in practice.
@@ -285,8 +287,10 @@ def check_loop(plant, controller, spin_rate: float = 0.0) -> LoopStability:
         PD, LQR, ScheduledLQR, TrajectoryTracker, LQG, a gain array, NMPC (its terminal LQR,
         which is also the gain of its unconstrained real-time iteration), or any of these
         behind a zero-order hold, an observer or a DC motor's voltage. Behind an observer
-        (:class:`controllers.Observed`) the law is checked on the true state: the sensors'
-        Kalman filter, sampling and delay are left out.
+        (:class:`controllers.Observed`) the loop is checked as it flies: sampled, with the
+        sensors' delay and the Kalman filter of the law's own model
+        (:meth:`~controllers.feedback.observer.Observed.sampled_loop`); a law with no
+        linear loop there (an NMPC, a motor's voltage) is checked on the true state.
     spin_rate : float, optional
         Steady hub rate of the linearisation, rad/s. Default 0.
 
@@ -303,11 +307,31 @@ def check_loop(plant, controller, spin_rate: float = 0.0) -> LoopStability:
         raise InputTypeError(f"check_loop.plant must be a flexctl Model; got "
                              f"{type(plant).__name__}")
     spin_rate = check_real("check_loop", "spin_rate", spin_rate)
+    flown = _flown_loop(plant, controller, spin_rate)
+    if flown is not None:
+        return flown
     law, sample_time = _unwrap(controller)
     plant = _plant_for(plant, law)
     matrix, sample_time = _closed_loop(plant, law, spin_rate, sample_time)
     name = "NMPC terminal LQR" if type(law).__name__ == "NMPC" else type(law).__name__
     return loop_stability(plant, matrix, name, spin_rate, sample_time)
+
+
+def _flown_loop(plant, controller, spin_rate: float):
+    """The :class:`LoopStability` of a law that reads sensors, by its loop as it flies
+    (``controller.sampled_loop``: sampled, late, through its own Kalman filter); None for
+    another law, or one whose loop has no linear form (an NMPC, a motor's voltage), which
+    is then checked on the true state."""
+    if not (getattr(controller, "measures", False)
+            and callable(getattr(controller, "sampled_loop", None))):
+        return None
+    try:
+        loop = controller.sampled_loop(plant, spin_rate)
+    except (InputTypeError, InputValueError):
+        return None
+    matrix = np.asarray(loop.A) - np.asarray(loop.B) @ np.asarray(loop.C)
+    name = f"{type(controller.law).__name__} on its Kalman filter"
+    return loop_stability(plant, matrix, name, spin_rate, float(loop.dt))
 
 
 def loop_stability(plant, matrix, law: str, spin_rate: float = 0.0,
@@ -329,13 +353,10 @@ def loop_stability(plant, matrix, law: str, spin_rate: float = 0.0,
     """
     matrix = np.asarray(matrix, dtype=float)
     poles, modes, _ = _poles(matrix, sample_time, plant, spin_rate)
-    radius = max(1.0, float(np.max(np.abs(poles))))
     hidden = _hidden(plant, spin_rate)
-    keep = np.array([not any(abs(abs(p.imag) - w) <= _HIDDEN_TOLERANCE * max(w, radius)
-                             and abs(p.real) <= _HIDDEN_TOLERANCE * max(w, radius)
-                             for w in hidden) for p in poles], dtype=bool)
+    stable, abscissa, keep = stability_verdict(
+        poles, [complex(0.0, w) for w in hidden] + [complex(0.0, -w) for w in hidden])
     poles, modes = (poles[keep], modes[keep]) if keep.any() else (np.zeros(1, complex), [0])
-    abscissa = float(np.max(poles.real))
     slow = sorted((k for k, p in enumerate(poles)
                    if p.real > -NEARLY_UNSTABLE_RATE and p.imag >= 0.0),
                   key=lambda k: -poles[k].real)
@@ -344,8 +365,56 @@ def loop_stability(plant, matrix, law: str, spin_rate: float = 0.0,
     return LoopStability(law=law, plant_variant=str(plant.variant),
                          plant_modes=int(plant.layout.n_modes), spin_rate=float(spin_rate),
                          sample_time=sample_time, spectral_abscissa=abscissa,
-                         stable=abscissa < STABILITY_TOLERANCE * radius, poles=reported,
+                         stable=stable, poles=reported,
                          hidden_modes=tuple(float(w) for w in hidden))
+
+
+def stability_verdict(poles, hidden=(), scale: float | None = None) -> tuple:
+    """The one stability verdict of a closed loop's poles, shared by :func:`check_loop` and
+    :func:`controllers.analysis.loops.loop_margins`.
+
+    The poles on the imaginary axis that lie on a hidden mode (one the loop can neither move
+    nor see: a free hub's rigid translation, a mode with a node at the sensor and the
+    actuator) are left out: they are the plant's own, neither growing nor decaying whatever
+    the law, and rounding splits their repeated poles by ~1e-8 to either side. A hidden pole
+    off the axis is counted like any other. The loop is stable when the largest real part of
+    the others is below :data:`STABILITY_TOLERANCE` times the largest pole magnitude (at
+    least 1/s): a pole on the axis to rounding (about 1e-13 of it) does not grow.
+
+    Parameters
+    ----------
+    poles : array_like of complex, shape (n,)
+        The closed loop's poles, 1/s (a discrete loop's as ``log(z) / T``).
+    hidden : sequence of complex, optional
+        The hidden modes' poles, 1/s: every closed-loop pole within ``1e-6`` of the largest
+        pole magnitude of one of them, and of the axis, is left out. Default none.
+    scale : float, optional
+        The loop's rate scale, 1/s, in place of the largest finite pole magnitude: a sampled
+        loop's Nyquist rate ``pi / T`` (a pole at ``z = 0`` has no finite rate, and one near
+        it an arbitrary one). Default: the largest finite pole magnitude.
+
+    Returns
+    -------
+    stable : bool
+    spectral_abscissa : float
+        Largest real part of the poles kept, 1/s (of all of them when every one is hidden).
+    kept : ndarray of bool, shape (n,)
+        Which poles were kept.
+    """
+    poles = np.asarray(poles, dtype=complex).reshape(-1)
+    finite = np.abs(poles[np.isfinite(poles)])
+    radius = max(1.0, float(scale) if scale is not None
+                 else float(np.max(finite, initial=0.0)))
+    hidden = np.asarray(list(hidden), dtype=complex).reshape(-1)
+    hidden = hidden[np.isfinite(hidden)]         # a sampled loop's z = 0 decays at once
+    # a repeated hidden pole (a free hub's translation: a double pole at 0 per axis) splits
+    # under rounding, by ~1e-8 of a sampled loop's rate: every pole that near it is its
+    kept = np.array([not any(abs(p - h) <= _HIDDEN_TOLERANCE * max(abs(h), radius)
+                             and abs(p.real) <= _HIDDEN_TOLERANCE * max(abs(h), radius)
+                             for h in hidden) for p in poles], dtype=bool)
+    counted = poles[kept] if kept.any() else poles
+    abscissa = float(np.max(counted.real)) if counted.size else -math.inf
+    return bool(abscissa < STABILITY_TOLERANCE * radius), abscissa, kept
 
 
 def least_damped_pole(plant, matrix, spin_rate: float = 0.0,
@@ -371,7 +440,7 @@ def least_damped_pole(plant, matrix, spin_rate: float = 0.0,
                        growth_rate=float(poles[k].real))
 
 
-def warn_if_unstable(check: LoopStability, stacklevel: int = 2) -> LoopStability:
+def warn_if_unstable(check: LoopStability, stacklevel: int | None = 2) -> LoopStability:
     """Warn (:class:`LoopStabilityWarning`) when ``check`` is unstable or nearly so; return
     ``check``.
 
@@ -379,9 +448,10 @@ def warn_if_unstable(check: LoopStability, stacklevel: int = 2) -> LoopStability
     ----------
     check : LoopStability
         What :func:`check_loop` found.
-    stacklevel : int, optional
+    stacklevel : int or None, optional
         ``stacklevel`` of the warning as seen from the caller of this function (2: the
-        caller's caller). Default 2.
+        caller's caller); None: the first line outside flexctl and controllers (the user's,
+        :func:`flexctl.model.user_warnings.user_stacklevel`). Default 2.
 
     Raises
     ------
@@ -392,7 +462,8 @@ def warn_if_unstable(check: LoopStability, stacklevel: int = 2) -> LoopStability
         raise InputTypeError(f"warn_if_unstable.check must be a LoopStability; got "
                              f"{type(check).__name__}")
     if not check.ok:
-        warnings.warn(check.message(), LoopStabilityWarning, stacklevel=stacklevel + 1)
+        warnings.warn(check.message(), LoopStabilityWarning,
+                      stacklevel=user_stacklevel() if stacklevel is None else stacklevel + 1)
     return check
 
 

@@ -15,6 +15,7 @@ module                  contents
 ``quaternion``          three-axis quaternion feedback (proportional, rate, integral)
 ``actuated``            laws through an actuator: wheel-lag LQR, DC-motor voltage, limits
 ``iosys``               the laws as python-control I/O systems for ``control.interconnect``
+``observed_loop``       an observed law's loop as it flies: sampled, late, through its filter
 ======================  ========================================================================
 
 Builds on :mod:`controllers.design` and :mod:`controllers.slew`.

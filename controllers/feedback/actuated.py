@@ -275,8 +275,15 @@ class LaggedLQR:
         spin_rate : float, optional
             Steady hub rate, rad/s (not read: the gain is fixed). Default 0.
         """
+        names = tuple(getattr(plant, "state_names", ()))
+        if "wheel_torque" not in names:
+            raise InputValueError(
+                "LaggedLQR.plant_gain plant must carry the reaction wheel the law commands (a "
+                "state named 'wheel_torque': flexctl.build_model(..., actuator=wheel)); got "
+                f"a plant without one, states {', '.join(names[:4])}"
+                f"{', ...' if len(names) > 4 else ''}")
         gain = np.array(self.lqr.state_gain(plant.layout), dtype=float).reshape(1, -1)
-        gain[0, plant.state_names.index("wheel_torque")] += self.actuator_gain
+        gain[0, names.index("wheel_torque")] += self.actuator_gain
         return gain
 
     def _lag_index(self, size: int) -> int:

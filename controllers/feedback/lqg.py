@@ -151,8 +151,8 @@ class NoiseLevels(KeywordOnly):
             raise InputTypeError("noise.sensors must be a flexctl.sim.sensors.Sensors; got "
                                  f"{type(sensors).__name__}")
         period = check_real("noise", "sample_time", sample_time, minimum=0.0, strict=True)
-        angle = max(sensors.encoder_resolution ** 2 / 12.0, VARIANCE_FLOOR)
-        moment = max(sensors.root_moment_noise ** 2, VARIANCE_FLOOR)
+        angle = max(sensors.attitude_variance, VARIANCE_FLOOR)
+        moment = max((sensors.root_moment_noise or 0.0) ** 2, VARIANCE_FLOOR)
         return cls(angle=float(np.sqrt(angle * period)),
                    root_moment=float(np.sqrt(moment * period)), torque=torque)
 

@@ -58,6 +58,7 @@ Examples
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -72,8 +73,8 @@ from flexctl.sim.inputs import input_value, time_function
 from flexctl.sim.sensors import (VARIANCE_FLOOR, Sensors, measurement_matrix,
                                  noise_covariance, sensor_names)
 
-__all__ = ["Observed", "ObservedSession", "FilterMatrices", "kalman_update", "kalman_predict",
-           "kalman_step"]
+__all__ = ["Observed", "ObservedSession", "FilterMatrices", "FilterModel", "kalman_update",
+           "kalman_predict", "kalman_step"]
 
 
 # ---------------------------------------------------------------------- pure functions
@@ -203,6 +204,58 @@ class FilterMatrices:
     R: np.ndarray
 
 
+@dataclass(frozen=True, eq=False)
+class FilterModel:
+    """What the filter knows of the plant: its linearisation at rest and the readings' map.
+
+    Built once from a model (:meth:`from_model`), usually the nominal plant a design was made
+    on, and kept: a run on another plant of the same layout (a dispersed one in a Monte
+    Carlo) reads that plant's sensors, while the filter keeps predicting with these matrices,
+    as a flight computer does.
+
+    Attributes
+    ----------
+    A : ndarray, shape (n, n)
+        ``model.linear_matrices(0.0)[0]``, 1/s (per state).
+    B : ndarray, shape (n, 1)
+        ``model.linear_matrices(0.0)[1]``, per unit of the model's input.
+    C : ndarray, shape (m, n)
+        The readings per plant state (:func:`~flexctl.sim.sensors.measurement_matrix`).
+    D : ndarray, shape (m, 1)
+        The readings per unit of input.
+    names : tuple of str
+        The readings, in order (:func:`~flexctl.sim.sensors.sensor_names`).
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    names: tuple
+
+    @classmethod
+    def from_model(cls, model, sensors: Sensors) -> "FilterModel":
+        """The filter's model of ``model`` read by ``sensors``.
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant the filter assumes (its linearisation at rest and its outputs).
+        sensors : Sensors
+            What is read.
+        """
+        a, b = model.linear_matrices(0.0)
+        c, d = measurement_matrix(model, sensors)
+        arrays = [np.array(v, dtype=float) for v in (a, b, c, d)]
+        for array in arrays:
+            array.setflags(write=False)
+        return cls(*arrays, names=tuple(sensor_names(model, sensors)))
+
+    def __repr__(self):
+        return (f"FilterModel({self.A.shape[0]} states, {len(self.names)} readings: "
+                f"{', '.join(self.names)})")
+
+
 class _Holds:
     """``Phi(h)``, ``Gamma(h)``, ``Q(h)`` of the filter state over a hold of ``h`` s, cached
     by ``h`` to a billionth of the sample interval."""
@@ -249,12 +302,18 @@ class Observed:
     process_noise : float
         Standard deviation of a white disturbance torque held over each sample, entering
         like the command, N m (>= 0). Default 0.01.
+    model : flexctl.Model or FilterModel, optional
+        The plant the filter assumes, fixed with the design (kept as its
+        :class:`FilterModel`): a run on another plant of the same state layout and readings
+        (a dispersed one) keeps this filter. Default None: each run builds its filter on
+        the plant it runs.
     """
 
     law: object
     sensors: Sensors
     sample_time: float
     process_noise: float = 1e-2
+    model: object = None
 
     #: Tells the simulation to hand :meth:`ObservedSession.step` the sensors' readings.
     measures = True
@@ -265,6 +324,11 @@ class Observed:
             "observed", "sample_time", self.sample_time, minimum=0.0, strict=True))
         object.__setattr__(self, "process_noise", check_real(
             "observed", "process_noise", self.process_noise, minimum=0.0))
+        if self.model is not None and not isinstance(self.model, FilterModel):
+            if not callable(getattr(self.model, "linear_matrices", None)):
+                raise InputTypeError("observed.model must be a flexctl Model or a FilterModel; "
+                                     f"got {type(self.model).__name__}")
+            object.__setattr__(self, "model", FilterModel.from_model(self.model, self.sensors))
         own = self.sensors.sample_time
         if own is not None and not math.isclose(own, self.sample_time, rel_tol=1e-12):
             raise InputValueError(
@@ -289,6 +353,33 @@ class Observed:
         else:
             raise InputTypeError("observed.law must be a static flexctl Controller or a "
                                  f"callable law(t, x); got {type(law).__name__}")
+
+    def for_plant(self, model) -> "Observed":
+        """The same law and sensors with the filter built on ``model``: for a plant of
+        another layout (more modes: the reference run of an error estimate), where the
+        design's filter cannot run.
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant the new filter assumes and the controller runs on.
+        """
+        return dataclasses.replace(self, model=model)
+
+    def sampled_loop(self, model, spin_rate: float = 0.0):
+        """The loop as it flies on ``model``: a discrete ``L(z)`` broken at the plant input
+        (:func:`controllers.feedback.observed_loop.observed_loop`).
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant flown, linearised about ``spin_rate``.
+        spin_rate : float, optional
+            Steady hub rate of the linearisation, rad/s. Default 0.
+        """
+        from .observed_loop import observed_loop
+
+        return observed_loop(model, self, spin_rate)
 
     def start(self, model, x0) -> "ObservedSession":
         """A fresh session for a run of ``model`` from the plant state ``x0``.
@@ -330,6 +421,21 @@ def _command_limit(model) -> float | None:
     return abs(float(limit))
 
 
+def _filter_model(controller: Observed, model) -> FilterModel:
+    """The controller's fixed filter model, checked against the plant run; or one of that
+    plant when the controller has none."""
+    if controller.model is None:
+        return FilterModel.from_model(model, controller.sensors)
+    known, n = controller.model, model.layout.n_states
+    names = sensor_names(model, controller.sensors)
+    if known.A.shape[0] != n or known.names != names:
+        raise InputValueError(
+            f"observed.model must have the run plant's layout and readings: the filter has "
+            f"{known.A.shape[0]} states reading {', '.join(known.names)}; the plant has {n} "
+            f"states reading {', '.join(names)}")
+    return known
+
+
 class ObservedSession:
     """One run of :class:`Observed` (module Notes); made by :meth:`Observed.start`.
 
@@ -357,13 +463,12 @@ class ObservedSession:
         self.controller, self.model, self.names = controller, model, sensor_names(model, sensors)
         self._law, self._inner = _bound_law(controller.law, model, x0)
         self._limit = _command_limit(model)
-        bias = sensors.gyro_bias_instability > 0.0
-        a, b = model.linear_matrices(0.0)
-        self._holds = _Holds(np.asarray(a, dtype=float), np.asarray(b, dtype=float),
-                             controller.sample_time, controller.process_noise,
+        bias = sensors.gyro_bias_instability > 0.0 and "theta_dot" in self.names
+        known = _filter_model(controller, model)
+        self._holds = _Holds(known.A, known.B, controller.sample_time, controller.process_noise,
                              sensors.gyro_bias_instability if bias else 0.0,
                              sensors.gyro_bias_time)
-        c, d = measurement_matrix(model, sensors)
+        c, d = known.C, known.D
         if bias:
             c = np.column_stack((c, np.zeros(c.shape[0])))
             c[self.names.index("theta_dot"), n] = 1.0
@@ -379,6 +484,19 @@ class ObservedSession:
         self._p, self._epoch, self._start = p0, None, None
         self._times, self._commands = [], []
         self._estimates, self._filtered, self._worst, self._clipped = [], [], 0.0, 0
+
+    def hold(self, duration: float) -> tuple:
+        """The filter's model over a hold: ``(Phi, Gamma, Q)`` of the filter state over
+        ``duration`` s of a held command (module Notes), shapes (n_f, n_f), (n_f, 1) and
+        (n_f, n_f).
+
+        Parameters
+        ----------
+        duration : float
+            Length of the hold, s (>= 0).
+        """
+        duration = check_real("observed.hold", "duration", duration, minimum=0.0)
+        return self._holds(duration)
 
     # ------------------------------------------------------------------ commands held
     def _pieces(self, t_from: float, t_to: float) -> list:

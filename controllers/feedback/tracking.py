@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from flexctl.model.checks import check_array
+from flexctl.model.checks import KeywordOnly, check_array
 from flexctl.model.errors import InputTypeError, InputValueError
 
 from flexctl.model import Model
@@ -38,8 +38,11 @@ def _default_weights(model: Model, angle: float, torque_bound: float):
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
-class TrajectoryTracker:
+class TrajectoryTracker(KeywordOnly):
     """Track a :class:`SlewSolution`: feedforward torque plus LQR state feedback.
+
+    Keyword arguments only: ``TrajectoryTracker(solution=solution)``; a positional call is
+    refused with the keyword form.
 
     ``torque(t, x) = u_ff(t) - K (P x - x_opt(t))`` with ``u_ff`` the optimal hold torque,
     ``x_opt`` the optimal state (:meth:`SlewSolution.state_at`, held at the target after the

@@ -47,6 +47,7 @@ from ..model.errors import InputError
 from ..sim.atomic_files import atomic_file, staged_folder, write_atomic
 from ..sim.validity import ModelValidityWarning
 from .report import write_demo_report
+from .verdict import summary_verdict
 from .demo_hardware import hardware
 from .demo_spatial import SPATIAL_SCENES, three_axes
 from .demo_structures import structures
@@ -358,16 +359,17 @@ def slew_comparison(out: Path, executor=None, kinds=None,
     stem = "controller-comparison" + ("" if scene_name == "slew-90" else f"-{scene_name}")
     csv = write_atomic(out / f"{stem}.csv", table.to_csv())
     rows_by_kind = {r["controller.kind"]: r for r in table}
-    n_plant = next(iter(rows_by_kind.values()))["result"].model.n_modes
+    plant = next(iter(rows_by_kind.values()))["result"].model
+    n_plant = plant.n_modes
     fig = plot_controller_comparison(
         {k: r["result"] for k, r in rows_by_kind.items()}, rows_by_kind,
         target_angle=slew.angle, maneuver_end=slew.duration, torque_bound=slew.torque_bound,
         title=f"{scene_name}: {np.degrees(slew.angle):g} deg in {slew.duration:g} s, "
-              f"{slew.torque_bound:g} N m bound, {n_plant}-mode nonlinear plant")
+              f"{slew.torque_bound:g} N m bound, {n_plant}-mode {plant.variant} plant")
     image = _save(fig, out / f"{stem}.png")
     rows = []
     for kind, r in rows_by_kind.items():
-        rows.append((kind, r["status"], r["residual_vibration_shown"],
+        rows.append((kind, r["verdict"], r["residual_vibration_shown"],
                      r["settling_time_shown"], f"{r['peak_torque']:.3g}",
                      r["peak_tip_deflection_shown"], r["final_error_shown"],
                      f"{r['wall_time_s']:.2g}"))
@@ -605,7 +607,8 @@ SECTION_ORDER = ("three axes",                           # 60 (two spatial runs)
 
 #: The scenes that take longest (a sampled loop with sensors, an optimised slew), sent to the
 #: pool before the others.
-LONG_SCENES = ("wheel-slew", "flexible-link", "slew-90-model-error", "two-array-slew")
+LONG_SCENES = ("wheel-slew", "flexible-link", "slew-90-model-error", "two-array-slew",
+               "bus-slew")
 
 
 def sections(out: Path, workers: int, surprises: list, progress=print, *,
@@ -799,7 +802,7 @@ def _demo_into(out: Path, run_one, workers: int, progress) -> list:
             summary = runs[label] = pending[kind, label].result()
             note = "" if summary["status"] == expected[label] else \
                 f" (expected {expected[label]})"
-            progress(f"{label}: {summary['status']}{note}, peak tip deflection "
+            progress(f"{label}: {summary_verdict(summary)}{note}, peak tip deflection "
                      f"{summary['peak_tip_deflection']:.4g} m, t = {summary['t_end']:.4g} s, "
                      f"{summary['wall_time_s']:.2f} s")
             if note:

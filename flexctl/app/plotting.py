@@ -191,20 +191,33 @@ def _draw_actuator(result, axes) -> None:
     axes[0].set_ylabel(f"{name.replace('_', ' ')} ({unit})")
 
 
+#: Line styles of the appendages' tip traces, in order.
+TRACE_STYLES = ("-", "--", ":", "-.")
+#: A free hub's travel below this fraction of its longest appendage is rounding, drawn as 0.
+ROUNDING_TRAVEL = 1e-9
+
+
 def _draw_structure(result, ax_torque, ax_tip) -> None:
     """One tip trace per appendage; a free hub's centre travel (mm) on a twin of the torque
     axis."""
     tips = result.tip_deflections
-    for name, tip in tips.items():
-        ax_tip.plot(result.t, tip, label=name or None)
+    for k, (name, tip) in enumerate(tips.items()):
+        # a line style each: equal traces (twin arrays) stay visible on top of each other
+        ax_tip.plot(result.t, tip, label=name or None,
+                    linestyle=TRACE_STYLES[k % len(TRACE_STYLES)])
     if len(tips) > 1:
         ax_tip.legend(loc="best", fontsize="small")
     if result.model.layout.hub_position is not None:
         outputs = result.outputs
+        travel = np.hypot(outputs["hub_x"], outputs["hub_y"])
+        scale = max(app.beam.length for app in result.model.structure.appendages)
+        label = "hub centre travel (mm)"
+        if np.max(travel, initial=0.0) <= ROUNDING_TRAVEL * scale:
+            # a symmetric structure's hub stays put: what is left is rounding, not a signal
+            travel, label = np.zeros_like(travel), "hub centre travel (mm): none"
         ax_hub = ax_torque.twinx()
-        ax_hub.plot(result.t, np.hypot(outputs["hub_x"], outputs["hub_y"]) * 1e3,
-                    color="tab:green", linestyle="--")
-        ax_hub.set_ylabel("hub centre travel (mm)", color="tab:green")
+        ax_hub.plot(result.t, travel * 1e3, color="tab:green", linestyle="--")
+        ax_hub.set_ylabel(label, color="tab:green")
         ax_hub.tick_params(axis="y", labelcolor="tab:green")
 
 

@@ -69,23 +69,46 @@ def mark_modes(ax, natural_frequencies, *, axis: str = "x", label: bool = True) 
         ``"x"``: vertical lines at ``w_i`` (a Bode plot); ``"y"``: horizontal lines at
         ``+-w_i`` (the imaginary axis of a pole-zero plot).
     label : bool, optional
-        Write ``mode i`` next to each line. Default True.
+        Write ``mode i`` next to each line, one label for a group of near-equal modes
+        (``modes i, j``: within :data:`LABEL_RATIO`). Default True.
     """
     frequencies = _frequencies(natural_frequencies)
     if axis not in ("x", "y"):
         raise InputValueError(f"axis must be 'x' or 'y'; got {axis!r}")
-    for i, w in enumerate(frequencies, start=1):
+    for w in frequencies:
         if axis == "x":
             ax.axvline(w, **_MODE_STYLE)
-            if label:
-                ax.text(w, 1.0, f" mode {i}", transform=ax.get_xaxis_transform(),
-                        rotation=90, va="top", ha="right", fontsize=7, color="0.4")
         else:
             for sign in (1.0, -1.0):
                 ax.axhline(sign * w, **_MODE_STYLE)
-            if label:
-                ax.text(1.0, w, f"mode {i} ", transform=ax.get_yaxis_transform(),
-                        va="bottom", ha="right", fontsize=7, color="0.4")
+    if not label:
+        return
+    for w, text in _mode_labels(frequencies):
+        if axis == "x":
+            ax.text(w, 1.0, f" {text}", transform=ax.get_xaxis_transform(),
+                    rotation=90, va="top", ha="right", fontsize=7, color="0.4")
+        else:
+            ax.text(1.0, w, f"{text} ", transform=ax.get_yaxis_transform(),
+                    va="bottom", ha="right", fontsize=7, color="0.4")
+
+
+#: Modes whose frequencies lie within this ratio of the first of a group share one label
+#: (a pair of near-equal modes, twin arrays' in-phase and anti-phase, would overprint).
+LABEL_RATIO = 1.15
+
+
+def _mode_labels(frequencies) -> list:
+    """``(w, "mode i")`` or ``(w, "modes i, j")`` per group of modes within
+    :data:`LABEL_RATIO` of each other, at the group's first frequency; modes numbered from 1
+    as everywhere (:meth:`flexctl.model.visibility.ModalVisibility.mode_name`)."""
+    groups = []
+    for i, w in enumerate(frequencies, start=1):
+        if groups and w <= LABEL_RATIO * groups[-1][0]:
+            groups[-1][1].append(i)
+        else:
+            groups.append((w, [i]))
+    return [(w, f"mode {members[0]}" if len(members) == 1 else
+             f"modes {', '.join(map(str, members))}") for w, members in groups]
 
 
 def plot_bode(systems, *, natural_frequencies=None, omega_limits=None, omega_num: int = 3000,

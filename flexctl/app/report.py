@@ -47,6 +47,7 @@ from ..model.structure import Structure
 from ..sim.atomic_files import staged_folder, write_atomic
 from ..sim.maneuvers import Slew, SpinUp, TorqueSamples
 from .markdown import markdown_table
+from .verdict import loop_unstable, summary_verdict
 
 __all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "timeseries_columns", "structure_columns",
            "summarize",
@@ -418,7 +419,7 @@ def format_summary(summary: dict) -> str:
     summary : dict
         A run's summary, as :func:`summarize` gives it.
     """
-    status = summary["status"]
+    status = summary_verdict(summary)
     head = (f"{summary['scene']} ({summary['variant']}, {summary['n_modes']} modes): {status}, "
             f"t = {summary['t_end']:.4g} of {summary['t_final']:.4g} s")
     lines = [head, f"  {summary['message']}",
@@ -555,7 +556,8 @@ def write_demo_report(out_dir, runs: list, frequency_plot=None, *, title: str = 
     lines += markdown_table(
         ["run", "scene", "variant", "modes", "status", "t end (s)", "peak tip deflection (m)",
          "wall time (s)", "plot"],
-        [[label, s["scene"], s["variant"], s["n_modes"], s["status"], f"{s['t_end']:.4g}",
+        [[label, s["scene"], s["variant"], s["n_modes"], summary_verdict(s),
+          f"{s['t_end']:.4g}",
           f"{s['peak_tip_deflection']:.4g}", f"{s['wall_time_s']:.3g}",
           f"[response]({_relative(s['files']['response_plot'], out)})"] for label, s in runs],
         right=[False, False, False, True, False, True, True, True, False])
@@ -567,6 +569,14 @@ def write_demo_report(out_dir, runs: list, frequency_plot=None, *, title: str = 
                          f"{s['message']}")
     else:
         lines.append("None: every run reached its final time.")
+    unstable = [(label, s) for label, s in runs if s["status"] == "ok"
+                and loop_unstable((s.get("slew") or {}).get("loop_stability"))]
+    if unstable:
+        lines += ["", "## Runs whose loop is unstable", "",
+                  "They reached their final time, but the design's own loop check finds the "
+                  "loop unstable on the plant it flew (a growth slower than the run):", ""]
+        lines += [f"- **{label}**: {s['slew']['loop_stability']['message']}"
+                  for label, s in unstable]
     if frequency_plot is not None:
         rel = _relative(frequency_plot, out)
         lines += ["", "## Clamped natural frequencies against spin rate", ""]

@@ -16,7 +16,11 @@ controller reads).
 
     [sensors]
     seed = 1
-    encoder_resolution = 1e-4    # rad
+    signals = ["attitude", "gyro", "root_moment"]  # default: attitude and gyro, and the
+                                 # root gauges or tip accelerometers when their noise is given
+    encoder_resolution = 1e-4    # rad (attitude quantisation)
+    attitude_noise = 0.0         # rad (attitude white noise)
+    attitude_bias = 0.0          # rad (attitude bias, drawn once per run)
     gyro_noise = 1e-4            # rad/sqrt(s)
     gyro_bias_instability = 1e-5 # rad/s
     root_moment_noise = 1e-3     # N m

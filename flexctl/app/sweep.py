@@ -57,6 +57,7 @@ from ..model.parameters import HubBeam, PointMass
 from ..model.errors import InputTypeError, InputValueError
 from .sweep_runner import SweepError, is_executor, outcomes
 from .sweep_store import task_key
+from .verdict import run_verdict
 
 __all__ = ["sweep", "parameter_grid", "SweepResult", "SweepError", "pareto_front",
            "response_amplitudes", "PointMassAmplitudes", "SceneTask"]
@@ -590,7 +591,9 @@ class SceneTask:
 
     Notes
     -----
-    A call returns a dict: ``status``, ``t_end`` (s), ``peak_tip_deflection`` (m),
+    A call returns a dict: ``status``, ``verdict`` (the status, or ``"ok, loop unstable"``
+    when the design's loop check finds the loop unstable on the plant:
+    :func:`flexctl.app.verdict.run_verdict`), ``t_end`` (s), ``peak_tip_deflection`` (m),
     ``wall_time_s`` (s, design and simulation); for slews also the
     :class:`~flexctl.sim.metrics.SlewMetrics` fields and ``maneuver_end`` (s); ``result`` when
     ``keep_result``.
@@ -619,9 +622,11 @@ class SceneTask:
                 out[f"{name}_error"] = math.nan if error is None else error
                 out[f"{name}_shown"] = metrics.shown(name)
             out["maneuver_end"] = float(built.maneuver_end)
+            info = getattr(built, "info", None) or {}
+            out["verdict"] = run_verdict(result.status, info.get("loop_stability"))
         else:
             result = run_scene(scene)
-        out = {"status": result.status, "t_end": float(result.t[-1]),
+        out = {"status": result.status, "verdict": result.status, "t_end": float(result.t[-1]),
                "peak_tip_deflection": result.peak_tip_deflection, **out,
                "wall_time_s": time.perf_counter() - start}
         if self.keep_result:

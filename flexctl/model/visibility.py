@@ -69,11 +69,25 @@ class ModalVisibility:
     input_share: np.ndarray
     output_share: np.ndarray
 
+    def __repr__(self):
+        hidden = self.uncontrollable(self.inputs[0]) if self.inputs else ()
+        rigid = sum(1 for j in hidden if self.frequencies[j] <= 0.0)
+        flexible = [self.mode_name(j).split()[1] for j in hidden if self.frequencies[j] > 0.0]
+        parts = ([f"{rigid} rigid motion{'s' if rigid > 1 else ''}"] if rigid else []) \
+            + ([f"mode{'s' if len(flexible) > 1 else ''} {', '.join(flexible)}"]
+               if flexible else [])
+        return (f"ModalVisibility({self.frequencies.size} modes, {self.frequencies.min():.4g} "
+                f"to {self.frequencies.max():.4g} rad/s; inputs {', '.join(self.inputs)}; "
+                f"{len(self.outputs)} outputs; "
+                + (f"{self.inputs[0]} cannot move {' and '.join(parts)})" if hidden
+                   else "every mode controllable)"))
+
     def _mode_list(self, mask) -> tuple:
         return tuple(int(j) for j in np.flatnonzero(mask))
 
     def uncontrollable(self, input: str = "torque") -> tuple:
-        """Indices of the modes that ``input`` cannot move.
+        """Indices (into :attr:`frequencies`, from 0) of the modes that ``input`` cannot
+        move; :meth:`mode_name` gives each the name the loop checks use.
 
         Parameters
         ----------
@@ -100,9 +114,31 @@ class ModalVisibility:
             raise InputValueError(f"{what} must be one of {', '.join(names)}; got {name!r}")
         return names.index(name)
 
+    def mode_name(self, index: int) -> str:
+        """The mode at ``index`` (of :attr:`frequencies`) as the loop checks name it
+        (:class:`controllers.design.stability.GrowingPole`): ``"mode k"`` for the ``k``-th
+        flexible mode counted from 1 in ascending frequency, ``"a rigid motion"`` for a mode
+        of zero frequency; the index follows in brackets.
+
+        Parameters
+        ----------
+        index : int
+            Index into :attr:`frequencies` and the columns of :attr:`shapes` (from 0), as
+            :meth:`uncontrollable` and :meth:`unobservable` give them.
+        """
+        index = int(index)
+        if not 0 <= index < self.frequencies.size:
+            raise InputValueError(f"mode_name index must lie in [0, {self.frequencies.size}); "
+                                  f"got {index}")
+        flexible = np.flatnonzero(self.frequencies > 0.0)
+        if self.frequencies[index] > 0.0:
+            return f"mode {int(np.searchsorted(flexible, index)) + 1} [index {index}]"
+        return f"a rigid motion [index {index}]"
+
     def describe(self, input: str = "torque") -> str:
-        """One line per mode that ``input`` cannot move, with its frequency and the outputs
-        that see it (empty when every mode is controllable).
+        """One line per mode that ``input`` cannot move, named as the loop checks name modes
+        (:meth:`mode_name`), with its frequency and the outputs that see it (empty when every
+        mode is controllable).
 
         Parameters
         ----------
@@ -113,8 +149,8 @@ class ModalVisibility:
         for j in self.uncontrollable(input):
             seen = [o for k, o in enumerate(self.outputs)
                     if self.output_share[k, j] > VISIBILITY_TOLERANCE]
-            lines.append(f"mode {j} at {self.frequencies[j]:.6g} rad/s: {input} cannot move it;"
-                         f" seen by {', '.join(seen) if seen else 'no output'}")
+            lines.append(f"{self.mode_name(j)} at {self.frequencies[j]:.6g} rad/s: {input} "
+                         f"cannot move it; seen by {', '.join(seen) if seen else 'no output'}")
         return "\n".join(lines)
 
 

@@ -285,7 +285,7 @@ class _SensorFeed:
         self.model, self.x0 = model, np.asarray(x0, dtype=float)
         self.session = sensors.start(model, sample_time)
         self.names = sensor_names(model, sensors)
-        self.rates = sensors.tip_acceleration_noise is not None
+        self.rates = sensors.has_accelerometers
         self.times = edges[:-1] - sensors.delay     # when each sample's state is read
         self.seen = {}                              # sample -> (state, command held then)
         self.readings, self.truth = [], []

@@ -243,7 +243,8 @@ def metric_errors(result, reference, angle: float, duration: float,
 
 def format_metric(value: float, error: float | None, unit: str) -> str:
     """``value`` with its error: ``"0.219 ± 0.03 mm"``, or ``"< 0.6 mm"`` when ``value`` is
-    smaller than ``error`` (the value is then no better known than its bound).
+    smaller than ``error`` (the value is then no better known than its bound), or the value
+    alone when its error is zero.
 
     Lengths are shown in mm, angles in mrad, times in s.
 
@@ -264,6 +265,8 @@ def format_metric(value: float, error: float | None, unit: str) -> str:
     '2.19 ± 0.1 mm'
     >>> format_metric(1.5, None, "s")
     '1.5 s'
+    >>> format_metric(3.23, 0.0, "s")
+    '3.23 s'
     """
     units = {"m": (1e3, "mm"), "rad": (1e3, "mrad"), "s": (1.0, "s")}
     if unit not in units:
@@ -283,6 +286,8 @@ def format_metric(value: float, error: float | None, unit: str) -> str:
     e = scale * float(error)
     if v < e:
         return f"< {v + e:.3g} {shown_unit}"
+    if float(f"{e:.2g}") == 0.0:           # "3.23 ± 0 s" says less than "3.23 s"
+        return f"{v:.3g} {shown_unit}"
     return f"{v:.3g} ± {e:.2g} {shown_unit}"
 
 

@@ -1,24 +1,29 @@
 """Noisy sampled sensors: what a digital controller sees of the plant, late and imperfect.
 
-A hub-angle encoder, a rate gyro, a strain gauge at the root of every appendage and,
-optionally, an accelerometer at every tip, all read once per sample. :class:`Sensors` holds
-their settings (frozen, validated); :meth:`Sensors.start` gives a :class:`SensorSession`, the
+A set the user chooses (``signals``) of: an attitude sensor (a quantised encoder, or a
+sensor with white noise and a bias, or both), a rate gyro, a strain gauge at the root of every
+appendage, an accelerometer at every tip, all read once per sample. By default the attitude
+sensor and the gyro, and the root gauges or the tip accelerometers only when their noise is
+given. :class:`Sensors` holds their settings (frozen, validated); :meth:`Sensors.start` gives a :class:`SensorSession`, the
 random state of one run, whose :meth:`~SensorSession.read` turns the plant's true state into
 one vector of readings. :func:`measurement_matrix` and :func:`noise_covariance` give the same
 readings to a Kalman filter (``controllers.feedback.observer``).
 
 Notes
 -----
-Readings, ``m`` of them, in this order (:func:`sensor_names`)::
+Readings, ``m`` of them, in this order (:func:`sensor_names`), each block present when its
+signal is read (:data:`SIGNALS`, :attr:`Sensors.read_signals`)::
 
     y = [theta, theta_dot, <a>.root_moment .. <b>.root_moment,
-         <a>.tip_acceleration .. <b>.tip_acceleration]        (the last block optional)
+         <a>.tip_acceleration .. <b>.tip_acceleration]
 
 in rad, rad/s, N m and m/s^2 (an unnamed single beam gives ``root_moment`` and
 ``tip_acceleration``). At sample ``k`` each reads the plant's true state at ``t_k - delay``;
 the caller applies the delay and hands that state over. With ``T`` the sample interval:
 
-- encoder: ``step * round(theta / step)`` (exact for ``step = 0``);
+- attitude: ``step * round((theta + c + v_k) / step)``, ``v_k ~ N(0, attitude_noise^2)``,
+  ``c ~ N(0, attitude_bias^2)`` drawn once per run from a stream of its own (so that it
+  leaves every other draw as it was); no rounding for ``step = 0``;
 - gyro: ``theta_dot + b_k + w_k``, ``w_k ~ N(0, gyro_noise^2 / T)`` (the angle random walk
   averaged over one sample), ``b`` a first-order Gauss-Markov bias of stationary standard
   deviation ``gyro_bias_instability`` and correlation time ``gyro_bias_time`` (``tau``),
@@ -68,7 +73,17 @@ from ..model.checks import (KeywordOnly, check_array, check_instance, check_inte
 from ..model.errors import InputValueError
 
 __all__ = ["Sensors", "SensorSession", "sensor_names", "measurement_matrix",
-           "noise_covariance", "MAX_DELAY", "MAX_NOISE", "DEFAULT_SAMPLE_TIME", "VARIANCE_FLOOR"]
+           "noise_covariance", "MAX_DELAY", "MAX_NOISE", "DEFAULT_SAMPLE_TIME", "VARIANCE_FLOOR",
+           "SIGNALS"]
+
+#: The signals a set of sensors may read, in reading order: the hub attitude angle, the hub
+#: rate (gyro), the appendages' root bending moments, the tips' accelerations.
+SIGNALS = ("attitude", "gyro", "root_moment", "tip_acceleration")
+#: The settings of each signal's sensor: given for a signal not read, they are refused.
+SIGNAL_SETTINGS = {"attitude": ("encoder_resolution", "attitude_noise", "attitude_bias"),
+                   "gyro": ("gyro_noise", "gyro_bias_instability"),
+                   "root_moment": ("root_moment_noise",),
+                   "tip_acceleration": ("tip_acceleration_noise",)}
 
 #: Sample time of a loop that reads sensors when neither they nor the controller give one, s
 #: (100 Hz, a common attitude-control and lab-servo rate).
@@ -94,15 +109,22 @@ class Sensors(KeywordOnly):
         Seed of ``numpy.random.default_rng`` (>= 0); the same seed gives the same readings.
         ``None``: fresh entropy at every run. Default 0.
     encoder_resolution : float
-        Quantisation step of the hub-angle encoder, rad (>= 0; 0: exact). Default 0.
+        Quantisation step of the attitude reading, rad (>= 0; 0: not quantised). Default 0.
+    attitude_noise : float
+        Standard deviation of the attitude reading's white noise, rad (>= 0), as of a star
+        tracker or an attitude estimate. Default 0.
+    attitude_bias : float
+        Standard deviation of the attitude reading's constant bias, rad (>= 0), drawn once per
+        run. Default 0.
     gyro_noise : float
         Angle random walk of the rate gyro, rad/sqrt(s) (>= 0). Default 0.
     gyro_bias_instability : float
         Stationary standard deviation of the gyro bias, rad/s (>= 0). Default 0.
     gyro_bias_time : float
         Correlation time of the bias, s (> 0). Default 100.
-    root_moment_noise : float
-        Standard deviation of each root bending moment reading, N m (>= 0). Default 0.
+    root_moment_noise : float or None
+        Standard deviation of each root bending moment reading, N m (>= 0); ``None``: no
+        root gauges, unless ``signals`` lists them (then exact). Default None.
     tip_acceleration_noise : float or None
         Standard deviation of each tip accelerometer reading, m/s^2 (>= 0); ``None``: no tip
         accelerometers. Default None.
@@ -110,29 +132,78 @@ class Sensors(KeywordOnly):
         Transport delay of every reading, s (in [0, :data:`MAX_DELAY`]). Default 0.
     sample_time : float or None
         Sample interval of the readings, s (> 0); ``None``: the controller's. Default None.
+    signals : sequence of str or None
+        The signals read, among :data:`SIGNALS` (read in that order whatever the order
+        given); a setting of a sensor not listed is refused by name. ``None`` (default):
+        attitude and gyro, and the root moments and tip accelerations when their noise is
+        given.
     """
 
     seed: int | None = 0
     encoder_resolution: float = 0.0
+    attitude_noise: float = 0.0
+    attitude_bias: float = 0.0
     gyro_noise: float = 0.0
     gyro_bias_instability: float = 0.0
     gyro_bias_time: float = 100.0
-    root_moment_noise: float = 0.0
+    root_moment_noise: float | None = None
     tip_acceleration_noise: float | None = None
     delay: float = 0.0
     sample_time: float | None = None
+    signals: tuple | None = None
 
     def __post_init__(self):
         if self.seed is not None:
             object.__setattr__(self, "seed", check_integer("sensors", "seed", self.seed,
                                                            minimum=0))
         self._set("encoder_resolution", minimum=0.0)
-        for name in ("gyro_noise", "gyro_bias_instability", "root_moment_noise"):
+        for name in ("attitude_noise", "attitude_bias", "gyro_noise", "gyro_bias_instability"):
             self._set(name, minimum=0.0, maximum=MAX_NOISE)
         self._set("gyro_bias_time", minimum=0.0, strict=True)
-        self._set("tip_acceleration_noise", minimum=0.0, optional=True, maximum=MAX_NOISE)
+        for name in ("root_moment_noise", "tip_acceleration_noise"):
+            self._set(name, minimum=0.0, optional=True, maximum=MAX_NOISE)
         self._set("delay", minimum=0.0, maximum=MAX_DELAY)
         self._set("sample_time", minimum=0.0, strict=True, optional=True)
+        if self.signals is not None:
+            object.__setattr__(self, "signals", self._checked_signals(self.signals))
+
+    def _checked_signals(self, signals) -> tuple:
+        """``signals`` as a tuple in :data:`SIGNALS` order; refused when unknown, repeated,
+        empty, or leaving out a sensor whose setting is given."""
+        if isinstance(signals, str) or not isinstance(signals, (list, tuple)) or not signals:
+            raise InputValueError(f"sensors.signals must be a non-empty list of "
+                                  f"{', '.join(SIGNALS)}; got {signals!r}")
+        for name in signals:
+            if name not in SIGNALS or list(signals).count(name) > 1:
+                raise InputValueError(f"sensors.signals must list each of "
+                                      f"{', '.join(SIGNALS)} at most once; got {signals!r}")
+        for signal, settings in SIGNAL_SETTINGS.items():
+            for name in settings:
+                value = getattr(self, name)
+                if signal not in signals and value not in (None, 0.0):
+                    raise InputValueError(
+                        f"sensors.{name} is a setting of the {signal} sensor, which "
+                        f"sensors.signals does not list ({', '.join(signals)}): add "
+                        f"{signal!r} to the signals or remove it; got {value!r}")
+        return tuple(name for name in SIGNALS if name in signals)
+
+    @property
+    def read_signals(self) -> tuple:
+        """The signals read, in reading order (:data:`SIGNALS`): :attr:`signals`, or by
+        default the attitude and the gyro, with the root moments and the tip accelerations
+        when their noise is given."""
+        if self.signals is not None:
+            return self.signals
+        return ("attitude", "gyro") \
+            + (("root_moment",) if self.root_moment_noise is not None else ()) \
+            + (("tip_acceleration",) if self.tip_acceleration_noise is not None else ())
+
+    @property
+    def attitude_variance(self) -> float:
+        """Variance of the attitude reading's error, rad^2: the quantisation taken as uniform
+        noise (``step^2 / 12``), the white noise and the constant bias's spread."""
+        return (self.encoder_resolution ** 2 / 12.0 + self.attitude_noise ** 2
+                + self.attitude_bias ** 2)
 
     def _set(self, name: str, **rule):
         object.__setattr__(self, name, check_real("sensors", name, getattr(self, name), **rule))
@@ -140,7 +211,7 @@ class Sensors(KeywordOnly):
     @property
     def has_accelerometers(self) -> bool:
         """True when the tips carry accelerometers."""
-        return self.tip_acceleration_noise is not None
+        return "tip_acceleration" in self.read_signals
 
     def interval(self, controller_sample_time: float) -> float:
         """The sample interval of the readings, s: :attr:`sample_time`, or the controller's
@@ -160,8 +231,9 @@ class Sensors(KeywordOnly):
     def noiseless(self) -> "Sensors":
         """The same sampling and delay with exact readings (no quantisation, noise or bias)."""
         return dataclasses.replace(
-            self, encoder_resolution=0.0, gyro_noise=0.0, gyro_bias_instability=0.0,
-            root_moment_noise=0.0,
+            self, encoder_resolution=0.0, attitude_noise=0.0, attitude_bias=0.0,
+            gyro_noise=0.0, gyro_bias_instability=0.0,
+            root_moment_noise=None if self.root_moment_noise is None else 0.0,
             tip_acceleration_noise=None if self.tip_acceleration_noise is None else 0.0)
 
     def start(self, model, sample_time: float) -> "SensorSession":
@@ -177,14 +249,20 @@ class Sensors(KeywordOnly):
         return SensorSession(self, model, sample_time)
 
     def __repr__(self):
-        parts = [f"encoder {self.encoder_resolution:g} rad" if self.encoder_resolution
-                 else "exact encoder",
-                 f"gyro ARW {self.gyro_noise:g} rad/sqrt(s), bias "
-                 f"{self.gyro_bias_instability:g} rad/s over {self.gyro_bias_time:g} s",
-                 f"root moment {self.root_moment_noise:g} N m",
-                 "no tip accelerometers" if not self.has_accelerometers
-                 else f"tip accelerometers {self.tip_acceleration_noise:g} m/s^2",
-                 f"delay {self.delay:g} s",
+        read, parts = self.read_signals, []
+        if "attitude" in read:
+            errors = [f"{what} {value:g} rad" for what, value in (
+                ("step", self.encoder_resolution), ("noise", self.attitude_noise),
+                ("bias", self.attitude_bias)) if value]
+            parts.append("attitude " + (" ".join(errors) if errors else "exact"))
+        if "gyro" in read:
+            parts.append(f"gyro ARW {self.gyro_noise:g} rad/sqrt(s), bias "
+                         f"{self.gyro_bias_instability:g} rad/s over {self.gyro_bias_time:g} s")
+        if "root_moment" in read:
+            parts.append(f"root moment {self.root_moment_noise or 0.0:g} N m")
+        if "tip_acceleration" in read:
+            parts.append(f"tip accelerometers {self.tip_acceleration_noise or 0.0:g} m/s^2")
+        parts += [f"delay {self.delay:g} s",
                  "controller's sample time" if self.sample_time is None
                  else f"sample time {self.sample_time:g} s",
                  f"seed {self.seed}"]
@@ -220,7 +298,11 @@ def sensor_names(model, sensors: Sensors) -> tuple:
     tuple of str
         ``m`` names.
     """
-    names = ("theta", "theta_dot") + tuple(model.output_names[k] for k in _root_outputs(model))
+    read = sensors.read_signals
+    names = (("theta",) if "attitude" in read else ()) \
+        + (("theta_dot",) if "gyro" in read else ())
+    if "root_moment" in read:
+        names += tuple(model.output_names[k] for k in _root_outputs(model))
     if sensors.has_accelerometers:
         names += tuple(f"{name}.tip_acceleration" if name else "tip_acceleration"
                        for name in model.structure.names)
@@ -261,9 +343,13 @@ def measurement_matrix(model, sensors: Sensors) -> tuple:
         Zero but for the tip accelerations, which the torque moves directly (``r_k B``),
         with ``A``, ``B`` from ``model.linear_matrices(0.0)``.
     """
-    layout = model.layout
-    c = np.vstack([layout.embed(1.0, "theta"), layout.embed(1.0, "theta_dot"),
-                   np.asarray(model.output_matrix, dtype=float)[_root_outputs(model)]])
+    layout, read = model.layout, sensors.read_signals
+    rows = [np.zeros((0, layout.n_states))]
+    rows += [layout.embed(1.0, "theta")[None, :]] if "attitude" in read else []
+    rows += [layout.embed(1.0, "theta_dot")[None, :]] if "gyro" in read else []
+    if "root_moment" in read:
+        rows.append(np.asarray(model.output_matrix, dtype=float)[_root_outputs(model)])
+    c = np.vstack(rows)
     d = np.zeros((c.shape[0], 1))
     if sensors.has_accelerometers:
         a, b = model.linear_matrices(0.0)
@@ -274,14 +360,16 @@ def measurement_matrix(model, sensors: Sensors) -> tuple:
 
 def _variances(model, sensors: Sensors, sample_time: float, with_bias: bool) -> np.ndarray:
     """Each reading's noise variance, unfloored (see :func:`noise_covariance`)."""
-    roots = len(_root_outputs(model))
+    read = sensors.read_signals
     gyro = sensors.gyro_noise ** 2 / sample_time
     if not with_bias:
         gyro += sensors.gyro_bias_instability ** 2
+    roots = len(_root_outputs(model)) if "root_moment" in read else 0
     tips = len(model.structure.names) if sensors.has_accelerometers else 0
-    return np.array([sensors.encoder_resolution ** 2 / 12.0, gyro]
-                    + [sensors.root_moment_noise ** 2] * roots
-                    + [(sensors.tip_acceleration_noise or 0.0) ** 2] * tips)
+    return np.array(([sensors.attitude_variance] if "attitude" in read else [])
+                    + ([gyro] if "gyro" in read else [])
+                    + [(sensors.root_moment_noise or 0.0) ** 2] * roots
+                    + [(sensors.tip_acceleration_noise or 0.0) ** 2] * tips, dtype=float)
 
 
 def noise_covariance(model, sensors: Sensors, sample_time: float, *,
@@ -305,7 +393,8 @@ def noise_covariance(model, sensors: Sensors, sample_time: float, *,
     -------
     ndarray, shape (m, m)
         In :func:`sensor_names` order: the encoder's quantisation as uniform noise,
-        ``step^2 / 12``; the gyro's (above); ``root_moment_noise^2`` and
+        ``step^2 / 12``, plus the attitude's white noise and bias variances; the gyro's
+        (above); ``root_moment_noise^2`` and
         ``tip_acceleration_noise^2``. A variance below :data:`VARIANCE_FLOOR` (an exact
         sensor) is raised to it, so that ``R`` stays invertible.
     """
@@ -319,8 +408,9 @@ class SensorSession:
     """The readings of one run: the sensors' random state and their true values.
 
     Made by :meth:`Sensors.start`. Attributes: ``sensors``, ``model``, ``sample_time`` (s),
-    ``names`` (:func:`sensor_names`), ``samples`` (readings taken) and ``bias``, the gyro bias
-    of the latest reading (before the first one: of the first one), rad/s.
+    ``names`` (:func:`sensor_names`), ``samples`` (readings taken), ``bias``, the gyro bias
+    of the latest reading (before the first one: of the first one), rad/s, and
+    ``attitude_offset``, the attitude reading's constant bias of this run, rad.
 
     Parameters
     ----------
@@ -339,11 +429,18 @@ class SensorSession:
                                       minimum=0.0, strict=True)
         self.names = sensor_names(model, sensors)
         self.samples = 0
-        self._roots = _root_rows(model)
-        # white parts only: the encoder quantises, the bias is a state of its own
+        read = sensors.read_signals
+        self._attitude = 0 if "attitude" in read else None
+        self._gyro = int("attitude" in read) if "gyro" in read else None
+        self._roots = _root_rows(model) if "root_moment" in read else None
+        # white parts only: the encoder quantises, the biases are states of their own
         white = np.sqrt(_variances(model, sensors, self.sample_time, with_bias=True))
-        white[0] = 0.0
+        if self._attitude is not None:
+            white[self._attitude] = sensors.attitude_noise
         self._white = white
+        # a stream of its own, so that the attitude bias leaves every other draw as it was
+        offset = np.random.default_rng(None if sensors.seed is None else (sensors.seed, 1))
+        self.attitude_offset = sensors.attitude_bias * float(offset.standard_normal())
         self._decay = math.exp(-self.sample_time / sensors.gyro_bias_time)
         self._innovation = sensors.gyro_bias_instability * math.sqrt(
             -math.expm1(-2.0 * self.sample_time / sensors.gyro_bias_time))
@@ -366,8 +463,9 @@ class SensorSession:
         """
         x = self._state(x)
         layout = self.model.layout
-        values = [x[layout.theta], x[layout.theta_dot]]
-        values += list(self._roots @ x)
+        values = [x[layout.theta]] if self._attitude is not None else []
+        values += [x[layout.theta_dot]] if self._gyro is not None else []
+        values += [] if self._roots is None else list(self._roots @ x)
         if self.sensors.has_accelerometers:
             if xdot is None:
                 raise InputValueError(
@@ -409,10 +507,14 @@ class SensorSession:
         if self.samples:
             self.bias = self._decay * self.bias + self._innovation * float(draws[-1])
         readings = values + self._white * draws[:-1]
-        readings[1] += self.bias
-        step = self.sensors.encoder_resolution
-        if step:
-            readings[0] = step * np.round(values[0] / step)
+        if self._gyro is not None:
+            readings[self._gyro] += self.bias
+        k = self._attitude
+        if k is not None:
+            readings[k] += self.attitude_offset
+            step = self.sensors.encoder_resolution
+            if step:
+                readings[k] = step * np.round(readings[k] / step)
         self.samples += 1
         return readings, values
 

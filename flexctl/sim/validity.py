@@ -39,6 +39,7 @@ import numpy as np
 from ..model import build_model
 from ..model.build import rebuild
 from ..model.errors import InputValueError
+from ..model.user_warnings import warn_user
 from ..model.variant import Variant
 from .fidelity import DEFAULT_TOLERANCE, maneuver_input, check_tolerance, is_prescribed
 from .compile_cache import CompileCacheWarning
@@ -287,7 +288,7 @@ def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors
                              energy_balance=getattr(result, "energy_balance", None),
                              t_end=t_end, screened=not model.variant.exact)
     if warn and not validity.valid:
-        warnings.warn(validity.message, ModelValidityWarning, stacklevel=3)
+        warn_user(validity.message, ModelValidityWarning)
     return validity
 
 
@@ -322,7 +323,7 @@ def assess(result, *, torque=None, hub_motion=None, controller=None, sensors=Non
                              energy_balance=getattr(result, "energy_balance", None),
                              t_end=t_end)
     if warn and not validity.valid:
-        warnings.warn(validity.message, ModelValidityWarning, stacklevel=2)
+        warn_user(validity.message, ModelValidityWarning)
     return validity
 
 

@@ -247,3 +247,29 @@ def test_controller_comparison_residual_axis_is_log_only_across_a_decade(runs, r
     if scale == "linear":
         assert residual.get_xlim()[0] == 0.0
     assert not _tick_labels_overlap(fig, residual)
+
+
+def test_a_response_draws_every_appendage_and_no_rounding_as_hub_travel():
+    """Twin arrays under a hub torque deflect alike and leave a free hub where it was (its
+    travel is rounding, ~1e-16 m): both traces stay visible, the travel is drawn as none.
+    Turned a quarter turn apart, the arrays push the hub about: its travel is drawn."""
+    import dataclasses
+
+    from flexctl.sim.maneuvers import SineTorque
+
+    system = flexctl.load_scene("two-array-free").system
+    torque = SineTorque(peak_torque=1.0, duration=2.0)
+    twin = dataclasses.replace(system.appendages[1], angle=0.5 * np.pi)
+    skew = dataclasses.replace(system, appendages=(system.appendages[0], twin))
+    figures = {}
+    for name, structure in (("twins", system), ("skew", skew)):
+        result = flexctl.simulate(flexctl.build_model(structure, 1), 2.0, torque=torque,
+                                  check_accuracy=False, check_validity=False)
+        figures[name] = {ax.get_ylabel(): ax for ax in plotting.plot_response(result).axes}
+    tips = [line for line in figures["twins"]["tip deflection (m)"].get_lines()
+            if not line.get_label().startswith("_")]
+    assert len({line.get_linestyle() for line in tips}) == len(tips) == 2
+    flat = figures["twins"]["hub centre travel (mm): none"].get_lines()[0].get_ydata()
+    assert np.all(flat == 0.0)
+    moved = figures["skew"]["hub centre travel (mm)"].get_lines()[0].get_ydata()
+    assert np.max(moved) > 0.0

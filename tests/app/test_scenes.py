@@ -10,7 +10,7 @@ from flexctl.sim.maneuvers import SineTorque, SpinUp
 
 BUILTINS = ("hub-beam-mass", "kane-spinup", "slew-90", "slew-90-model-error", "spacecraft-torque",
             "two-array-free", "single-wing-free", "two-array-slew", "wheel-slew",
-            "flexible-link")
+            "flexible-link", "bus-slew")
 #: The built-in spatial scenes (a 3 x 3 hub inertia).
 SPATIAL_BUILTINS = ("spatial-tilted-slew", "spatial-spin")
 

@@ -204,3 +204,4 @@ def test_readme_example_runs():
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines()[0] == "ok 0.42"
     assert done.stdout.splitlines()[1].startswith("ok ")
+    assert "Warning" not in done.stderr          # the example runs where its models hold

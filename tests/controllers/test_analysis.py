@@ -309,9 +309,9 @@ def test_poles_vs_spin_at_rest_are_the_rigid_double_pole_and_hub_free_modes(syst
      "loop_transfer.spin_rate must be a real number; got '1'"),
     (lambda m: plant_channels(m, math.inf), InputValueError, "plant_channels.spin_rate"),
     (lambda m: loop_margins(m.linearize()), InputValueError,
-     "loop_margins.loop must be a continuous-time SISO system; got 5 x 1"),
-    (lambda m: loop_margins(control.ss([[0.5]], [[1]], [[1]], [[0]], dt=0.1)),
-     InputValueError, "continuous-time SISO.*dt = 0.1"),
+     "loop_margins.loop must be a SISO system, continuous or with a sample time; got 5 x 1"),
+    (lambda m: loop_margins(control.ss([[0.5]], [[1]], [[1]], [[0]], dt=True)),
+     InputValueError, "continuous or with a sample time.*dt = True"),
     (lambda m: loop_margins("L"), InputTypeError, "loop_margins.loop must be a python-control"),
     (lambda m: loop_margins(control.tf([1], [1, 1]), tolerance=0.0), InputValueError,
      "loop_margins.tolerance must be finite and > 0"),
@@ -419,7 +419,8 @@ def test_robustness_task_flies_the_slew_on_the_dispersed_plant(system):
     (lambda s, pd: Dispersion().samples(0), "n_samples must be an integer >= 1; got 0"),
     (lambda s, pd: disperse(s, youngs_modulus_scale=0.0),
      "disperse.youngs_modulus_scale must be finite and > 0; got 0.0"),
-    (lambda s, pd: disperse("system"), "disperse.system must be a HubBeam; got str"),
+    (lambda s, pd: disperse("system"),
+     "disperse.system must be a HubBeam or a Structure; got str"),
     (lambda s, pd: RobustnessTask(system=s, controller=pd, n_modes=0),
      "robustness_task.n_modes must be an integer in"),
     (lambda s, pd: RobustnessTask(system=s, controller=pd, variant="exactish"),
@@ -478,6 +479,18 @@ def test_loop_figures_mark_the_flexible_modes(system, lqr_weights):
     mode_lines = [line for line in magnitude.lines if line.get_linestyle() == ":"]
     assert sorted(line.get_xdata()[0] for line in mode_lines) == pytest.approx(sorted(free))
     assert len(magnitude.get_legend().get_texts()) == 2
+    # one label per mode, or per group of near-equal modes: no two labels overprint
+    labels = [t for t in magnitude.texts if "mode" in t.get_text()]
+    spots = sorted(t.get_position()[0] for t in labels)
+    assert len(labels) >= 1 and all(b > 1.15 * a for a, b in zip(spots, spots[1:]))
+    import matplotlib.pyplot as plt
+
+    from flexctl.app.plotting_loops import mark_modes
+    fig_twins, ax = plt.subplots()
+    mark_modes(ax, [4.2466, 4.2466, 24.8, 25.4, 68.7])
+    assert [(t.get_position()[0], t.get_text().strip()) for t in ax.texts] == [
+        (4.2466, "modes 1, 2"), (24.8, "modes 3, 4"), (68.7, "mode 5")]
+    plt.close(fig_twins)
     channels = plant_channels(model)
     fig = plot_pole_zero({"hub angle": channels.hub_angle}, natural_frequencies=free)
     assert sum(line.get_linestyle() == ":" for line in fig.axes[0].lines) == 2 * free.size

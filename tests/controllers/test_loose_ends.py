@@ -16,7 +16,7 @@ import flexctl
 from controllers import LQRWeights, NoiseLevels
 from controllers.design.controllable import design_failure
 from flexctl.app.cli import EXIT_BAD_INPUT, main
-from flexctl.model.errors import InputValueError
+from flexctl.model.errors import InputTypeError, InputValueError
 
 #: A beam length in micrometres read as metres.
 ABSURD_LENGTH = 1.8e6
@@ -126,6 +126,9 @@ def test_zero_tracking_weights_leave_the_tracker_riccati_unsolvable():
                              rf"{MODEL_FACTS} .*state_weights=\[0\. 0\. .*: the LQR Riccati "
                              r"equation has no stabilising solution"):
         TrajectoryTracker(solution=solution, state_weights=np.zeros(model.n_states))
+    with pytest.raises(InputTypeError, match=r"^TrajectoryTracker takes keyword arguments "
+                                             r"only: TrajectoryTracker\(solution=\.\.\."):
+        TrajectoryTracker(solution)
 
 
 def test_design_failure_converts_solver_failures_only():

@@ -70,6 +70,17 @@ def test_twins_bending_against_each_other_are_hidden_from_the_torque(support):
         Appendage(name="wing", beam=PANEL, masses=TIP),
         Appendage(name="boom", beam=BOOM, angle=math.pi))), 2).modal_visibility()
     assert all(mixed.frequencies[j] == 0.0 for j in mixed.uncontrollable("torque"))
+    # modes are named as the loop checks name them: flexible ones counted from 1
+    flexible = np.sort(report.frequencies[report.frequencies > 0.0])
+    for j in hidden:
+        k = int(report.mode_name(j).split()[1])
+        assert flexible[k - 1] == report.frequencies[j]
+        assert f"{report.mode_name(j)} at" in report.describe()
+    # its repr is one line naming what the torque cannot move, not its arrays
+    text = repr(report)
+    assert "\n" not in text and len(text) < 200 and "array(" not in text
+    names = [report.mode_name(j).split()[1] for j in hidden]
+    assert "cannot move" in text and f"modes {', '.join(names)})" in text
 
 
 @pytest.mark.parametrize("support", ["pinned", "free"])

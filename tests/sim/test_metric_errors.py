@@ -197,7 +197,8 @@ def test_without_the_estimate_there_are_no_errors():
     (1.5, None, "s", "1.5 s"),
     (float("inf"), 0.1, "s", "not reached"),
     (1e-3, float("inf"), "m", "1 mm (error unknown)"),
-], ids=["bound", "value", "equal", "no-error", "not-settled", "unknown"])
+    (3.23, 0.0, "s", "3.23 s"),
+], ids=["bound", "value", "equal", "no-error", "not-settled", "unknown", "zero-error"])
 def test_format_metric_shows_a_value_below_its_error_as_a_bound(value, error, unit, shown):
     assert format_metric(value, error, unit) == shown
 

@@ -199,10 +199,16 @@ def test_root_moments_are_read_as_the_models_outputs(scene, variant, rng):
 
 
 def test_sensor_names_follow_the_outputs(two_arrays, model):
-    assert sensor_names(two_arrays, Sensors(tip_acceleration_noise=0.1)) == (
+    assert sensor_names(two_arrays, Sensors(tip_acceleration_noise=0.1,
+                                            root_moment_noise=0.0)) == (
         "theta", "theta_dot", "wing_a.root_moment", "wing_b.root_moment",
         "wing_a.tip_acceleration", "wing_b.tip_acceleration")
-    assert sensor_names(model, Sensors()) == ("theta", "theta_dot", "root_moment")
+    # a gauge exists when asked for: by its noise, or in the signals
+    assert sensor_names(model, Sensors()) == ("theta", "theta_dot")
+    assert sensor_names(two_arrays, Sensors(tip_acceleration_noise=0.1)) == (
+        "theta", "theta_dot", "wing_a.tip_acceleration", "wing_b.tip_acceleration")
+    assert sensor_names(model, Sensors(signals=["root_moment", "attitude"])) == (
+        "theta", "root_moment")
 
 
 def test_noise_covariance_diagonal_and_floor(model):
@@ -256,9 +262,10 @@ def test_bad_sensor_settings_raise_naming_the_field(field, value, error, match):
 
 def test_reprs_are_readable(model):
     sensors = Sensors(encoder_resolution=1e-4, gyro_noise=1e-4, delay=0.002)
-    assert repr(sensors).startswith("Sensors(encoder 0.0001 rad, gyro ARW 0.0001 rad/sqrt(s)")
-    assert "delay 0.002 s" in repr(sensors)
-    assert "3 readings every 0.01 s" in repr(sensors.start(model, SAMPLE_TIME))
+    assert repr(sensors).startswith("Sensors(attitude step 0.0001 rad, gyro ARW 0.0001 "
+                                    "rad/sqrt(s)")
+    assert "delay 0.002 s" in repr(sensors) and "root moment" not in repr(sensors)
+    assert "2 readings every 0.01 s" in repr(sensors.start(model, SAMPLE_TIME))
     assert "sample_time=0.01 s" in repr(Observed(PD(kp=1.0, kd=1.0), sensors, SAMPLE_TIME))
 
 
