@@ -165,8 +165,7 @@ class QuaternionFeedback(KeywordOnly):
         ndarray, shape (3,)
             Torque, N m, hub frame.
         """
-        return self._limited(-self.kp @ attitude_error(self.target, attitude)
-                             - self.kd @ (np.asarray(rate, dtype=float) - self.target_rate))
+        return QuaternionFeedbackSession(self)(t, attitude, rate)    # a fresh integral: none
 
     def _limited(self, torque):
         if self.torque_limit is None:

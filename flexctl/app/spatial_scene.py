@@ -309,13 +309,8 @@ def _wheels(table: dict) -> WheelCluster | None:
         items = table["wheels"]
         if not isinstance(items, list) or not items:
             raise SceneError("actuator.wheels must be an array of tables, one per wheel")
-        wheels = []
-        for k, item in enumerate(items):
-            where = f"actuator.wheels.{k}"
-            if not isinstance(item, dict):
-                raise SceneError(f"{where} must be a table; got {type(item).__name__}")
-            check_table_keys(where, item, _WHEEL_KEYS)
-            wheels.append(construct(Wheel, "wheel", item, rename=where))
+        wheels = [construct(Wheel, "wheel", item, rename=where)
+                  for where, item in _tables("actuator.wheels", items, _WHEEL_KEYS)]
         for key in ("pyramid_angle", "pyramid_axis", "wheel"):
             if key in table:
                 raise SceneError(f"actuator.{key} belongs to an arrangement; these wheels are "
@@ -327,20 +322,18 @@ def _wheels(table: dict) -> WheelCluster | None:
         raise SceneError("actuator.wheel must be a table of the fields the arrangement's "
                          "wheels share (inertia, torque_limit, speed_limit, ...)")
     check_table_keys("actuator.wheel", shared, _WHEEL_KEYS - {"axis"})
+    # the shared fields checked once, on a wheel of any axis
+    construct(Wheel, "wheel", {"axis": (0.0, 0.0, 1.0), **shared}, rename="actuator.wheel")
     if arrangement == "orthogonal":
         for key in ("pyramid_angle", "pyramid_axis"):
             if key in table:
                 raise SceneError(f"actuator.{key} belongs to arrangement 'pyramid'")
-        construct(Wheel, "wheel", {"axis": (0.0, 0.0, 1.0), **shared},
-                  rename="actuator.wheel")
         return construct(WheelCluster, "wheels", {"wheels": tuple(
             Wheel(axis=axis, **shared) for axis in np.eye(3)), **law}, rename="actuator")
     if arrangement == "pyramid":
         if "pyramid_angle" not in table:
             raise SceneError("actuator.pyramid_angle is required for arrangement 'pyramid': "
                              "the angle between each spin axis and the pyramid's axis, degrees")
-        construct(Wheel, "wheel", {"axis": (0.0, 0.0, 1.0), **shared},
-                  rename="actuator.wheel")
         pyramid = {"angle": table["pyramid_angle"], **law, **shared}
         if "pyramid_axis" in table:
             pyramid["pyramid_axis"] = table["pyramid_axis"]
@@ -352,15 +345,23 @@ def _wheels(table: dict) -> WheelCluster | None:
                      f"{arrangement!r:.80}")
 
 
+def _tables(key: str, items: list, allowed) -> list:
+    """``[(where, table)]`` of an array of tables, each a table of ``allowed`` keys."""
+    out = []
+    for k, item in enumerate(items):
+        where = f"{key}.{k}"
+        if not isinstance(item, dict):
+            raise SceneError(f"{where} must be a table; got {type(item).__name__}")
+        check_table_keys(where, item, allowed)
+        out.append((where, item))
+    return out
+
+
 def _structure(hub: SpatialHub, items) -> SpatialStructure:
     if not isinstance(items, list) or not items:
         raise SceneError("a spatial scene needs [[appendages]] tables (one per appendage)")
     appendages = []
-    for k, table in enumerate(items):
-        where = f"appendages.{k}"
-        if not isinstance(table, dict):
-            raise SceneError(f"{where} must be a table; got {type(table).__name__}")
-        check_table_keys(where, table, _APPENDAGE_KEYS)
+    for k, (where, table) in enumerate(_tables("appendages", items, _APPENDAGE_KEYS)):
         fields = {key: value for key, value in table.items() if key != "masses"}
         masses = table.get("masses", [])
         if not isinstance(masses, list):

@@ -7,30 +7,14 @@ import textwrap
 
 import numpy as np
 import pytest
+from spatial_craft import CRAFT_TOML
 
 from flexctl.app.cli import main
 from flexctl.app.scenes import load_scene
 from flexctl.model.errors import InputError
 from flexctl.sim.quaternions import error_angles, from_rotation_vector
 
-SCENE = textwrap.dedent("""\
-    [hub]
-    inertia = [[1.30, 0.05, -0.02], [0.05, 1.16, 0.03], [-0.02, 0.03, 1.45]]
-    radius = 0.06
-
-    [[appendages]]
-    name = "wing_a"
-    direction = [0.0, 1.0, 0.0]
-    normal = [0.0, 0.0, 1.0]
-    length = 1.8
-    density = 2766.0
-    area = 2.5e-4
-    youngs_modulus = 6.9e10
-    second_moment = 5.2083e-10
-    second_moment_lateral = 5.2083e-8
-    shear_modulus = 2.6e10
-    torsion_constant = 1.9531e-9
-
+SCENE = CRAFT_TOML + textwrap.dedent("""\
     [model]
     modes = 1
 

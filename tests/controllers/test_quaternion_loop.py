@@ -4,6 +4,7 @@ and the attitude filter."""
 
 import numpy as np
 import pytest
+from spatial_craft import INERTIA, WING
 
 from controllers.feedback.mekf import AttitudeFilter
 from controllers.feedback.quaternion import QuaternionFeedback
@@ -14,16 +15,12 @@ from flexctl.sim.attitude_sensors import AttitudeSensors, Gyro, StarTracker
 from flexctl.sim.quaternions import error_angles, from_rotation_vector
 from flexctl.sim.spatial_loop import simulate_spatial_loop
 
-INERTIA = [[1.30, 0.05, -0.02], [0.05, 1.16, 0.03], [-0.02, 0.03, 1.45]]
 AXIS = np.array([0.6, 0.0, 0.8])
 
 
 def craft():
-    wing = SpatialAppendage(name="wing_a", direction=(0, 1, 0), normal=(0, 0, 1), length=1.8,
-                            density=2766.0, area=2.5e-4, youngs_modulus=6.9e10,
-                            second_moment=5.2083e-10, second_moment_lateral=5.2083e-8,
-                            shear_modulus=2.6e10, torsion_constant=1.9531e-9)
-    return SpatialStructure(hub=SpatialHub(inertia=INERTIA, radius=0.06), appendages=(wing,))
+    return SpatialStructure(hub=SpatialHub(inertia=INERTIA, radius=0.06),
+                            appendages=(SpatialAppendage(**WING),))
 
 
 def test_a_rest_to_rest_slew_about_a_tilted_axis_settles_on_the_flexible_craft():

@@ -5,16 +5,13 @@ import math
 
 import numpy as np
 import pytest
+from spatial_craft import INERTIA, WING
 
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.model.spatial_structure import SpatialAppendage, SpatialHub, SpatialStructure
 from flexctl.model.wheel_cluster import SPEED_LIMIT_BAND, Wheel, WheelCluster
 from flexctl.sim.spatial_run import VectorTorque, simulate_spatial
 
-INERTIA = [[1.30, 0.05, -0.02], [0.05, 1.16, 0.03], [-0.02, 0.03, 1.45]]
-WING = dict(name="wing_a", direction=(0, 1, 0), normal=(0, 0, 1), length=1.8, density=2766.0,
-            area=2.5e-4, youngs_modulus=6.9e10, second_moment=5.2083e-10,
-            second_moment_lateral=5.2083e-8, shear_modulus=2.6e10, torsion_constant=1.9531e-9)
 #: A hub so heavy that it hardly turns: the wheels' own equations in closed form.
 HEAVY = 1e7
 
