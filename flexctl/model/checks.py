@@ -282,8 +282,9 @@ def check_direction(owner: str, name: str, value) -> np.ndarray:
     if not largest > 0:
         raise InputValueError(f"{label(owner, name)} must be a non-zero 3-vector; got "
                               f"{vector.tolist()}")
-    vector = vector / largest
-    vector /= np.linalg.norm(vector)
+    if not 1e-150 < largest < 1e150:        # its norm would overflow or underflow
+        vector = vector / largest
+    vector = vector / np.linalg.norm(vector)
     vector.setflags(write=False)
     return vector
 
