@@ -53,19 +53,21 @@ def _sphinx(builder, out, doctrees):
     return done
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def site(tmp_path_factory):
+    # session-scoped: the worker that runs the "notebooks" group interleaves this module's
+    # tests with the notebooks', and a module-scoped build was made again each time
     base = tmp_path_factory.mktemp("site")
     _sphinx("html", base / "html", base / "doctrees")
     return base
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def html(site):
     return site / "html"
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def inventory(html):
     with open(html / "objects.inv", "rb") as stream:
         data = InventoryFile.load(stream, "", lambda base, uri: uri)
