@@ -29,7 +29,6 @@ filter). The appendages' modes are not in this filter.
 
 from __future__ import annotations
 
-import math
 from collections import deque
 
 import numpy as np
@@ -37,13 +36,11 @@ import numpy as np
 from flexctl.model.checks import check_array
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.attitude_sensors import AttitudeSensors
-from flexctl.sim.quaternions import error_angles, from_rotation_vector, product
+from flexctl.model.spatial_rod import cross_matrix
+from flexctl.sim.quaternions import (error_angles, from_rotation_vector, product,
+                                     rotation_matrix)
 
 __all__ = ["AttitudeFilter"]
-
-
-def _skew(v) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 class AttitudeFilter:
@@ -139,8 +136,8 @@ class AttitudeFilter:
         self.q = product(self.q, from_rotation_vector(w * t))
         self.q /= np.linalg.norm(self.q)
         phi = np.eye(6)
-        phi[:3, :3] = _rotation_transpose(w * t)
-        phi[:3, 3:] = -t * np.eye(3) + 0.5 * t * t * _skew(w)
+        phi[:3, :3] = rotation_matrix(from_rotation_vector(-w * t))
+        phi[:3, 3:] = -t * np.eye(3) + 0.5 * t * t * cross_matrix(w)
         s_v2, s_u2 = self.sigma_v ** 2, self.sigma_u2
         q = np.zeros((6, 6))
         q[:3, :3] = (s_v2 * t + s_u2 * t ** 3 / 3) * np.eye(3)
@@ -190,13 +187,3 @@ class AttitudeFilter:
             for reading in replay:
                 self.propagate(reading)
         return residual
-
-
-def _rotation_transpose(phi) -> np.ndarray:
-    """``exp(-[phi x])``: the rotation by ``-phi`` (Rodrigues)."""
-    angle = float(np.linalg.norm(phi))
-    k = _skew(phi)
-    if angle < 1e-8:
-        return np.eye(3) - k + 0.5 * k @ k
-    return (np.eye(3) - math.sin(angle) / angle * k
-            + (1 - math.cos(angle)) / angle ** 2 * k @ k)

@@ -10,7 +10,8 @@ each gain a 3 x 3 matrix (N m per rad, N m s per rad, N m per rad s), saturated 
 ``torque_limit``. :meth:`QuaternionFeedback.design` sets them from the rigid inertia for a
 bandwidth and damping on each principal axis, ``K_p = J w_n^2``, ``K_d = 2 zeta w_n J`` (and
 ``K_i = K_p / integral_time``); a flexible structure wants ``bandwidth`` well below its first
-mode. The integral is held while the command saturates (no wind-up). The integral runs in a session (:meth:`QuaternionFeedback.start`), which is what
+mode. The integral is held while the command saturates (no wind-up); it runs in a session
+(:meth:`QuaternionFeedback.start`), which is what
 :func:`flexctl.sim.spatial_loop.simulate_spatial_loop` calls.
 """
 

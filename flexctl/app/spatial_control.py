@@ -73,9 +73,10 @@ class SpatialLoop:
                               attitude_sigma=self.attitude_sigma, bias_sigma=self.bias_sigma)
 
 
-def _real(where, key, value, **limits) -> float:
+def _checked(check, *args, **limits):
+    """``check(*args, **limits)``, its error a :class:`SceneError`."""
     try:
-        return check_real(where, key, value, **limits)
+        return check(*args, **limits)
     except (ValueError, TypeError) as exc:
         raise SceneError(str(exc)) from None
 
@@ -112,8 +113,8 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
     for key in ("sample_time", "bandwidth"):
         if key not in controller:
             raise SceneError(f"controller.{key} is required")
-    step = _real("controller", "sample_time", controller["sample_time"], minimum=1e-4,
-                 maximum=100.0)
+    step = _checked(check_real, "controller", "sample_time", controller["sample_time"],
+                    minimum=1e-4, maximum=100.0)
     target = _target(controller, quaternion)
     try:
         law = QuaternionFeedback.design(
@@ -135,14 +136,11 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
         parts[key] = construct(cls, key, table, rename=f"sensors.{key}")
     setup = construct(AttitudeSensors, "sensors", {**parts, "gyro_sample_time": step,
                                                    "seed": sensors.get("seed", 0)})
-    sigmas = {key: _real("sensors", key, sensors.get(key, default), minimum=0.0, strict=True,
-                         maximum=1.0)
+    sigmas = {key: _checked(check_real, "sensors", key, sensors.get(key, default),
+                            minimum=0.0, strict=True, maximum=1.0)
               for key, default in (("attitude_sigma", 1e-3), ("bias_sigma", 1e-4))}
     loop = SpatialLoop(law=law, sample_time=step, sensors=setup, **sigmas)
-    try:
-        loop.estimator(quaternion)
-    except (ValueError, TypeError) as exc:
-        raise SceneError(str(exc)) from None
+    _checked(loop.estimator, quaternion)
     return loop
 
 
@@ -153,20 +151,15 @@ def _target(controller: dict, quaternion) -> np.ndarray:
         if any(slew):
             raise SceneError("controller.target and controller.slew_axis/slew_angle exclude "
                              "each other")
-        try:
-            target = check_array("controller", "target", controller["target"], shape=(4,))
-        except (ValueError, TypeError) as exc:
-            raise SceneError(str(exc)) from None
+        target = _checked(check_array, "controller", "target", controller["target"],
+                          shape=(4,))
         if not np.max(np.abs(target)) > 0:
             raise SceneError("controller.target must be a non-zero quaternion")
         return target / np.max(np.abs(target))
     if not all(slew):
         raise SceneError("controller needs a target: slew_axis (hub frame) and slew_angle "
                          "(degrees), or target (a quaternion)")
-    try:
-        axis = check_direction("controller", "slew_axis", controller["slew_axis"])
-    except (ValueError, TypeError) as exc:
-        raise SceneError(str(exc)) from None
-    angle = _real("controller", "slew_angle", controller["slew_angle"], minimum=-360.0,
-                  maximum=360.0)
+    axis = _checked(check_direction, "controller", "slew_axis", controller["slew_axis"])
+    angle = _checked(check_real, "controller", "slew_angle", controller["slew_angle"],
+                     minimum=-360.0, maximum=360.0)
     return product(quaternion, from_rotation_vector(np.radians(angle) * axis))

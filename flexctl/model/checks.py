@@ -29,7 +29,7 @@ import numpy as np
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["label", "check_real", "check_integer", "check_choice", "check_instance",
-           "check_array", "check_direction", "KeywordOnly"]
+           "check_array", "check_direction", "check_counts", "KeywordOnly"]
 
 
 def label(owner: str, name: str) -> str:
@@ -262,6 +262,45 @@ radius=..., friction=0.0, mass=0.0, support='pinned'); got 2 positional: 2.5, 0.
                                  f"{keyword_form(cls)}; got {len(args)} positional: "
                                  f"{', '.join(map(_short_repr, args))}")
         return super().__new__(cls)
+
+
+def check_counts(owner: str, names: tuple, value, maximum: int) -> tuple:
+    """One count per appendage from an int (each), a dict ``{name: int}`` or a sequence.
+
+    Parameters
+    ----------
+    owner : str
+        Who takes the counts, or ``""``: the messages name them ``owner.n_modes``.
+    names : tuple of str
+        The appendages' names, in order.
+    value : int, dict or sequence of int
+        One count for every appendage, one per appendage by name, or one per appendage in
+        order.
+    maximum : int
+        The largest count.
+
+    Returns
+    -------
+    tuple of int
+    """
+    where = label(owner, "n_modes")
+    if isinstance(value, dict):
+        unknown = [k for k in value if k not in names]
+        if unknown:
+            raise InputValueError(f"{where} names no appendage {unknown[0]!r}; the appendages "
+                                  f"are {', '.join(map(repr, names))}")
+        missing = [k for k in names if k not in value]
+        if missing:
+            raise InputValueError(f"{where} gives no count for appendage {missing[0]!r}: it "
+                                  "must give the modes of every appendage")
+        value = [value[k] for k in names]
+    if isinstance(value, (list, tuple)):
+        if len(value) != len(names):
+            raise InputValueError(f"{where} must give one count per appendage ({len(names)}); "
+                                  f"got {len(value)}")
+        return tuple(check_integer(owner, f"n_modes[{name}]", v, minimum=1, maximum=maximum)
+                     for name, v in zip(names, value))
+    return (check_integer(owner, "n_modes", value, minimum=1, maximum=maximum),) * len(names)
 
 
 def check_direction(owner: str, name: str, value) -> np.ndarray:

@@ -60,7 +60,6 @@ from functools import lru_cache
 
 import numpy as np
 
-from .errors import InputValueError
 from .spatial_rod import Rod, elastic_matrices, rod_rule
 from .spatial_structure import SpatialStructure
 
@@ -259,27 +258,10 @@ def spatial_modes(owner: str, structure: SpatialStructure, n_modes) -> int | tup
     int or tuple of int
         An integer when every appendage has the same count, else the tuple of counts.
     """
-    from .checks import check_integer
+    from .checks import check_counts
 
-    names = structure.names
-    if isinstance(n_modes, dict):
-        unknown = sorted(set(n_modes) - set(names), key=str)
-        if unknown:
-            raise InputValueError(f"{owner}.n_modes names no appendage {unknown[0]!r}; the "
-                                  f"appendages are {', '.join(names)}")
-        missing = [name for name in names if name not in n_modes]
-        if missing:
-            raise InputValueError(f"{owner}.n_modes gives no count for appendage "
-                                  f"{missing[0]!r}")
-        n_modes = [n_modes[name] for name in names]
-    if isinstance(n_modes, (list, tuple)):
-        if len(n_modes) != len(names):
-            raise InputValueError(f"{owner}.n_modes must give one count per appendage "
-                                  f"({len(names)}); got {len(n_modes)}")
-        counts = tuple(check_integer(owner, f"n_modes[{name}]", n, minimum=1,
-                                     maximum=MAX_SPATIAL_MODES) for name, n in zip(names, n_modes))
-        return counts[0] if len(set(counts)) == 1 else counts
-    return check_integer(owner, "n_modes", n_modes, minimum=1, maximum=MAX_SPATIAL_MODES)
+    counts = check_counts(owner, structure.names, n_modes, MAX_SPATIAL_MODES)
+    return counts[0] if len(set(counts)) == 1 else counts
 
 
 def spatial_equations(structure: SpatialStructure, n_modes,

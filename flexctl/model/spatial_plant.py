@@ -31,6 +31,7 @@ from .checks import check_array, check_choice, check_instance
 from .errors import InputValueError
 from .exports import signal_names
 from .spatial_dynamics import SPATIAL_VARIANTS, spatial_equations, spatial_modes
+from .spatial_rod import cross_matrix
 from .spatial_structure import SpatialStructure
 
 __all__ = ["linearize_spatial", "nonlinear_spatial", "EQUILIBRIUM_TOLERANCE"]
@@ -107,7 +108,7 @@ def linearize_spatial(structure: SpatialStructure, n_modes: int = 4,
     n = 3 + len(kept)
     a, b = np.zeros((n, n)), np.zeros((n, 3))
     # attitude error: e_t = w - w_0 - w_0 x e
-    a[0:3, 0:3] = -_skew(w0)
+    a[0:3, 0:3] = -cross_matrix(w0)
     a[0:3, 3 + kept.index(c):3 + kept.index(c) + 3] = np.eye(3)
     rows = kept
     a[3:, 3:] = full_a[np.ix_(rows, kept)]
@@ -149,10 +150,6 @@ def _check_equilibrium(structure, equations, x0, w0) -> None:
             f"straight structure: its accelerations reach {worst:.3g} (an appendage bent by the "
             "centrifugal load, or a spin about an axis that is not principal); linearize at "
             "rest or about a principal axis perpendicular to every appendage")
-
-
-def _skew(a) -> np.ndarray:
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
 def nonlinear_spatial(structure: SpatialStructure, n_modes: int = 4, variant: str = "exact"):

@@ -17,7 +17,7 @@ import numpy as np
 
 from .spatial_structure import SpatialAppendage
 
-__all__ = ["Rod", "rod_shapes", "rod_rule", "elastic_matrices", "skew"]
+__all__ = ["Rod", "rod_shapes", "rod_rule", "elastic_matrices", "skew", "cross_matrix"]
 
 
 def skew(a):
@@ -36,6 +36,21 @@ def skew(a):
 
     return ca.vertcat(ca.horzcat(0, -a[2], a[1]), ca.horzcat(a[2], 0, -a[0]),
                       ca.horzcat(-a[1], a[0], 0))
+
+
+def cross_matrix(a) -> np.ndarray:
+    """``[a]x``, the cross-product matrix of a 3-vector (numpy form of :func:`skew`).
+
+    Parameters
+    ----------
+    a : array_like, shape (3,)
+        The vector ``a``: ``[a]x b = a x b``.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+    """
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
 def _exp(omega):

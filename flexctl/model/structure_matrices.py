@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from .checks import check_integer
+from .checks import check_counts
 from .errors import InputTypeError, InputValueError
 from .exact import EXACT_MAX_MODES
 from .matrices import ModalMatrices, beam_quadrature, assemble, condensed_hub_inertia
@@ -63,26 +63,8 @@ def modes_per_appendage(structure: Structure, n_modes, variant: str = "first_ord
     InputTypeError, InputValueError
         Naming ``n_modes`` (or ``n_modes[name]``), the rule and the value.
     """
-    names = structure.names
     top = Variant(variant).max_modes
-    if isinstance(n_modes, dict):
-        unknown = [k for k in n_modes if k not in names]
-        if unknown:
-            raise InputValueError(f"n_modes names no appendage {unknown[0]!r}; the appendages "
-                                  f"are {', '.join(map(repr, names))}")
-        missing = [k for k in names if k not in n_modes]
-        if missing:
-            raise InputValueError(f"n_modes must give the modes of every appendage; "
-                                  f"{missing[0]!r} is missing")
-        values = [(f"n_modes[{k!r}]", n_modes[k]) for k in names]
-    elif isinstance(n_modes, (list, tuple)):
-        if len(n_modes) != len(names):
-            raise InputValueError(f"n_modes must give one number per appendage ({len(names)}); "
-                                  f"got {len(n_modes)}")
-        values = [(f"n_modes[{k}]", v) for k, v in enumerate(n_modes)]
-    else:
-        values = [("n_modes", n_modes)] * len(names)
-    modes = tuple(check_integer("", where, v, minimum=1, maximum=MAX_MODES) for where, v in values)
+    modes = check_counts("", structure.names, n_modes, MAX_MODES)
     if Variant(variant).exact and max(modes) > top:
         raise InputValueError(
             f"n_modes must be at most {EXACT_MAX_MODES} per appendage for the exact variant (its "

@@ -346,10 +346,7 @@ class WheelCluster(KeywordOnly):
         angle = check_real("wheels", "pyramid_angle", angle, minimum=0.0, strict=True,
                            maximum=90.0)
         axis = check_direction("wheels", "pyramid_axis", pyramid_axis)
-        reference = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
-        first = reference - (reference @ axis) * axis
-        first /= np.linalg.norm(first)
-        second = np.cross(axis, first)
+        first, second = _across(axis)
         a = math.radians(angle)
         axes = [math.cos(a) * axis + math.sin(a) * (math.cos(p) * first + math.sin(p) * second)
                 for p in np.radians([0.0, 90.0, 180.0, 270.0])]
@@ -435,6 +432,15 @@ class WheelCluster(KeywordOnly):
         return asked
 
 
+def _across(axis) -> tuple:
+    """Two unit vectors across a unit ``axis``, ``(first, axis x first)``: ``first`` the hub's
+    ``x`` projected on the plane across it (its ``y`` when ``axis`` is near ``x``)."""
+    reference = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    first = reference - (reference @ axis) * axis
+    first /= np.linalg.norm(first)
+    return first, np.cross(axis, first)
+
+
 def _no_axis(wheel: dict):
     if "axis" in wheel:
         raise InputTypeError("wheel.axis is set by the arrangement; give the other fields of "
@@ -468,10 +474,7 @@ def _jitter(cluster: WheelCluster, speeds, angles):
     torque = ca.SX.zeros(3, 1)
     for j, k in enumerate(cluster.jittering):
         wheel = cluster.wheels[k]
-        g = wheel.axis
-        first = np.cross(g, [1.0, 0.0, 0.0] if abs(g[0]) < 0.9 else [0.0, 1.0, 0.0])
-        first /= np.linalg.norm(first)
-        second = np.cross(g, first)
+        first, second = _across(wheel.axis)
         w2 = ca.cos(angles[j]) * ca.DM(first) + ca.sin(angles[j]) * ca.DM(second)
         square = speeds[k] ** 2
         torque += ca.cross(ca.DM(wheel.position), wheel.static_imbalance * square * w2) \

@@ -29,7 +29,8 @@ import numpy as np
 from ..model.checks import check_real
 from ..model.errors import InputTypeError, InputValueError
 from .quaternions import conjugate, product, rotation_vector
-from .spatial_run import (DEFAULT_RTOL, MAX_T_FINAL, SegmentFailed, SpatialResult,
+from .spatial_run import (DEFAULT_RTOL, MAX_T_FINAL, ConstantTorque, SegmentFailed,
+                          SpatialResult,
                           SpatialSegments, machine_function, quaternion_drift,
                           simulate_spatial_setup)
 
@@ -64,19 +65,6 @@ class SpatialLoopResult:
     def ok(self) -> bool:
         """True when the loop reached its final time."""
         return self.result.ok
-
-
-class _Held:
-    """The command held over the current sample."""
-
-    def __init__(self):
-        self.value = np.zeros(3)
-
-    def __call__(self, t):
-        return self.value
-
-    def segment_form(self, a, b):
-        return np.concatenate([self.value, np.zeros(8)])
 
 
 def _command(law, t, attitude, rate) -> np.ndarray:
@@ -192,7 +180,7 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
                                           angular_velocity, quaternion)
     layout = equations.layout
     c = layout.n_coordinates
-    held = _Held()
+    held = ConstantTorque(np.zeros(3))
     segments = SpatialSegments(machine_function(equations.rhs), layout.n_states, held, rtol,
                                rtol * 1e-3, line=False)
     sensed = _Sensed(sensors, estimator, seed, count) if sensors is not None else None

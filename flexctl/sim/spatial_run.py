@@ -53,7 +53,8 @@ from .background import Beside
 from .spatial_plane import motion_plane, plane_motion
 
 __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
-           "simulate_spatial_setup", "SpatialSegments", "SegmentFailed", "machine_function",
+           "simulate_spatial_setup", "SpatialSegments", "ConstantTorque", "SegmentFailed",
+           "machine_function",
            "quaternion_drift",
            "MAX_QUATERNION_DRIFT", "DEFAULT_RTOL"]
 
@@ -332,7 +333,7 @@ def initial_state(equations: SpatialEquations, angular_velocity=(0.0, 0.0, 0.0),
 def _torque_function(torque):
     """``(callable t -> (3,), breakpoints)`` of a torque argument."""
     if torque is None:
-        return _Constant(np.zeros(3)), np.zeros(0)
+        return ConstantTorque(np.zeros(3)), np.zeros(0)
     if isinstance(torque, VectorTorque):
         return torque, torque.breakpoints
     if callable(torque) and hasattr(torque, "breakpoints"):    # a scene's manoeuvre
@@ -345,19 +346,40 @@ def _torque_function(torque):
                                       f"frame); at t = {t:g} s it returned {value!r:.80}")
             return value
         return checked, np.zeros(0)
-    return _Constant(np.array(check_array("", "torque", torque, shape=(3,)))), np.zeros(0)
+    return ConstantTorque(np.array(check_array("", "torque", torque, shape=(3,)))), np.zeros(0)
 
 
-class _Constant:
-    """A constant torque, N m, hub frame."""
+class ConstantTorque:
+    """A constant torque, N m, hub frame (``value``, shape (3,); a sampled loop sets it anew
+    for each sample).
+
+    Parameters
+    ----------
+    value : ndarray, shape (3,)
+        The torque.
+    """
 
     def __init__(self, value):
         self.value = value
 
     def __call__(self, t):
+        """The torque at ``t`` (any time), N m.
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        """
         return self.value
 
     def segment_form(self, a, b):
+        """The 11 parameters of the torque on ``[a, b]`` (:class:`SpatialSegments`).
+
+        Parameters
+        ----------
+        a, b : float
+            The segment's ends, s.
+        """
         return np.concatenate([self.value, np.zeros(8)])
 
 
@@ -640,7 +662,8 @@ class _Integration:
             if not np.all(np.isfinite(values)):
                 whole = self._whole(states[:, :done])
                 return "diverged", whole, (f"the run diverged between t = {a:g} and {b:g} s: "
-                                           "the state left the finite numbers"), quaternion_drift(whole)
+                                           "the state left the finite numbers"), \
+                    quaternion_drift(whole)
             states[:, done:done + count] = values[:, :count]
             done += count
             x = values[:, -1]
