@@ -3,9 +3,11 @@
 Issue 9, item 2: a torque given as samples, or as a Python function CasADi can trace, runs on
 the compiled CVODES path; the goal is ``flexctl.simulate`` at least 30 times faster than
 python-control's ``control.input_output_response`` on ``model.nonlinear()`` at equal error.
+Issue 45, item 1: a function CasADi cannot trace is sampled onto the compiled path; the goals
+are 20 times python-control with the checks on and 40 times with them off (case C).
 
 Scene ``hub-beam-mass`` (20 s; the scene's push, one period of a 2 N m sine over 2 s), on
-first_order models of 2 and 4 modes. Two inputs:
+first_order models of 2 and 4 modes. Three inputs:
 
 A. **Samples** ``(T, U)``: the push sampled every 0.01 s (2001 samples), the arrays a
    python-control user hands to ``input_output_response(sys, T, U)``. Both tools integrate the
@@ -17,6 +19,12 @@ B. **A Python function** ``torque(t) = where(t <= 2, 2 sin(pi t), 0)``. flexctl 
    interpolation error (~1e-7 of the peak) stays below the accuracy asked for. flexctl's
    SciPy path (``method="DOP853"``, the function called at every step: the path Python
    functions took before tracing) is timed too.
+
+C. **A Python function with a branch**, ``2 sin(pi t) if t <= 2 else 0``, which CasADi cannot
+   trace: flexctl samples it into a piecewise cubic (:mod:`flexctl.sim.function_samples`)
+   and counts the sampling's error; python-control gets it sampled as in B. Timed at the
+   default settings (the accuracy check and the validity estimate on), with both off, and on
+   SciPy's DOP853 calling the function at every step (the path it took before sampling).
 
 Every tool runs at the largest relative tolerance of ``equal_error.RTOL_GRID`` whose tip
 deflection, on the 0.01 s output grid, is within 1e-6 of the peak of a reference: flexctl's
@@ -76,12 +84,20 @@ def push(t):
 
 
 # ---------------------------------------------------------------------------- the tools
-def flexctl_tip(model, t_final, torque, method="auto", check_accuracy=True):
+def branching_push(t):
+    """The scene's push as a user writes it first: a branch on ``t``, which CasADi cannot
+    trace (flexctl samples it, :mod:`flexctl.sim.function_samples`)."""
+    return 2.0 * np.sin(np.pi * t) if t <= 2.0 else 0.0
+
+
+def flexctl_tip(model, t_final, torque, method="auto", check_accuracy=True,
+                check_validity=True):
     """``rtol -> tip`` of ``simulate``; ``torque`` is a zero-argument factory, so each run
     starts from the user's arrays or function."""
     def run(rtol):
         result = simulate(model, t_final, torque=torque(), rtol=rtol, output_step=OUTPUT_STEP,
-                          method=method, check_accuracy=check_accuracy)
+                          method=method, check_accuracy=check_accuracy,
+                          check_validity=check_validity)
         # "auto" takes a compiled method (CVODES, the Dormand-Prince pair, BDF or Adams)
         compiled = ("cvodes", "RK45", "BDF", "Adams", "rk4")
         assert result.ok and result.method in ((method,) if method != "auto" else compiled), \
@@ -168,11 +184,41 @@ def case_function(model, t_final, methods):
     return report(times, list(tools)[:2], baselines=list(tools)[2:3])
 
 
+def case_branching(model, t_final, methods):
+    start = time.perf_counter()
+    reference = flexctl_tip(model, t_final, lambda: branching_push, "DOP853")(REFERENCE_RTOL)
+    print(f"   C. Python function with a branch (untraceable): reference DOP853 at "
+          f"{REFERENCE_RTOL:g} ({time.perf_counter() - start:.1f} s)")
+    t_in = time_grid(t_final, FINE_INPUT_STEP)
+    fn = branching_push
+
+    def fresh():
+        # a new function object each run: its sampling is made again, not found remembered
+        return lambda t: branching_push(t)
+    tools = {"flexctl.simulate(torque=branch), sampled": (
+                 flexctl_tip(model, t_final, fresh), REPEATS),
+             "flexctl, sampled, no checks": (
+                 flexctl_tip(model, t_final, fresh, check_accuracy=False,
+                             check_validity=False), REPEATS),
+             "flexctl, branch on SciPy DOP853 (default checks)": (
+                 flexctl_tip(model, t_final, lambda: fn, "DOP853"), REPEATS_SLOW)}
+    tools.update(python_control_tools(model, t_final, t_in,
+                                      np.array([fn(t) for t in t_in]), methods))
+    times = measure(tools, reference)
+    print(f"   sampling / SciPy path for the same function: "
+          f"{times[list(tools)[2]] / times[list(tools)[0]]:.1f}x faster")
+    return report(times, list(tools)[:2], baselines=list(tools)[2:3])
+
+
+CASES = {"samples": case_samples, "function": case_function, "branching": case_branching}
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--modes", type=int, nargs="+", default=[2, 4])
     parser.add_argument("--methods", nargs="+", default=list(PYTHON_CONTROL_METHODS),
                         choices=PYTHON_CONTROL_METHODS)
+    parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     args = parser.parse_args(argv)
     scene = load_scene(SCENE)
     t_final = scene.simulation.t_final
@@ -183,9 +229,9 @@ def main(argv=None):
     for n_modes in args.modes:
         model = build_model(scene.system, n_modes=n_modes)
         print(f"\n== {n_modes} modes ({model.variant})")
-        for label, ratio in {**case_samples(model, t_final, args.methods),
-                             **case_function(model, t_final, args.methods)}.items():
-            ratios[(n_modes, label)] = ratio
+        for case in args.cases:
+            for label, ratio in CASES[case](model, t_final, args.methods).items():
+                ratios[(n_modes, label)] = ratio
     print("\nsummary: fastest python-control / flexctl")
     for (n_modes, label), ratio in ratios.items():
         print(f"   {n_modes} modes  {label:<40} {ratio:>7.1f}")

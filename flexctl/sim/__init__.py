@@ -2,29 +2,30 @@
 
 Imports :mod:`flexctl.model` only.
 
-================  =============================================================================
-module            contents
-================  =============================================================================
-``maneuvers``     ``SpinUp``, ``SineTorque``, ``Slew``: what drives the hub
-``simulation``    ``simulate``: a thin driver over the parts below
-``request``       the validated run request and its integration plan (tolerances, stiffness guard)
-``drives``        what drives a run: prescribed hub, torque and continuous ``Controller``
-``strategies``    one integration strategy per method family (CVODES, the pair, rk4, SciPy)
-``stops``         stopping conditions and their physical reasons (``StopReason``)
-``result``        ``SimulationResult`` and its assembly
-``inputs``        argument checks, ``SampledTorque`` (a torque given as samples)
-``tracing``       Python torque functions traced into CasADi (``trace_torque``)
-``compiled``      the CasADi/CVODES integration of a symbolic drive
-``fixed_step``    compiled fixed-step RK4 with a step-doubling error estimate (``method="rk4"``)
-``digital``       sampled controllers: ``ZeroOrderHold``, the ``SampledController`` protocol
-``embedded_rk``   compiled Dormand-Prince steps (``RK45``): sample to sample, and continuous
-                  runs with dense output
-``sensors``       noisy, quantised, late sensor readings (``Sensors``)
-``energy``        energy balance of small-deflection runs (``energy_balance``)
-``validity``      geometric model error of a run, the variant a manoeuvre needs
-``metrics``       slew metrics and settling time
-``fidelity``      how many modes a manoeuvre needs (``choose_modes``)
-================  =============================================================================
+======================  =======================================================================
+module                  contents
+======================  =======================================================================
+``maneuvers``           ``SpinUp``, ``SineTorque``, ``Slew``: what drives the hub
+``simulation``          ``simulate``: a thin driver over the parts below
+``request``             the validated run request and its integration plan (stiffness guard)
+``drives``              what drives a run: prescribed hub, torque and continuous ``Controller``
+``strategies``          one integration strategy per method family (CVODES, the pair, rk4, SciPy)
+``stops``               stopping conditions and their physical reasons (``StopReason``)
+``result``              ``SimulationResult`` and its assembly
+``inputs``              argument checks, ``SampledTorque`` (a torque given as samples)
+``tracing``             Python torque functions traced into CasADi (``trace_torque``)
+``function_samples``    untraceable torque functions of time sampled into a piecewise cubic
+``compiled``            the CasADi/CVODES integration of a symbolic drive
+``fixed_step``          compiled fixed-step RK4 with a step-doubling error estimate (``rk4``)
+``digital``             sampled controllers: ``ZeroOrderHold``, the ``SampledController`` protocol
+``embedded_rk``         compiled Dormand-Prince steps (``RK45``): sample to sample, and continuous
+                        runs with dense output
+``sensors``             noisy, quantised, late sensor readings (``Sensors``)
+``energy``              energy balance of small-deflection runs (``energy_balance``)
+``validity``            geometric model error of a run, the variant a manoeuvre needs
+``metrics``             slew metrics and settling time
+``fidelity``            how many modes a manoeuvre needs (``choose_modes``)
+======================  =======================================================================
 """
 
 from .maneuvers import SineTorque, Slew, SpinUp

@@ -560,7 +560,7 @@ def min_step_fraction(t_end: float, length: float) -> float:
     length : float
         Length of the segment, s (> 0).
     """
-    return 10.0 ** np.floor(np.log10(1e-12 * max(1.0, t_end) / length))
+    return 10.0 ** np.floor(np.log10(1e-14 * max(1.0, t_end) / length))
 
 
 class SegmentIntegrator:

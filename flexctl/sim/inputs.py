@@ -38,7 +38,8 @@ from ..model.errors import InputError, InputTypeError, InputValueError
 
 __all__ = ["MAX_OUTPUT_SAMPLES", "check_time", "check_rtol", "check_method", "as_vector",
            "output_grid", "input_value", "time_function", "jacobian_frequency",
-           "INTERPOLATIONS", "UNIFORM_RATIO", "SampledTorque", "sampled_torque"]
+           "INTERPOLATIONS", "UNIFORM_RATIO", "SampledTorque", "sampled_torque",
+           "interval_index", "lookup_grid"]
 
 #: Most output samples a run may ask for (t_final / output_step + 1): 1e6 samples of a 6-mode
 #: model are 100 MB of states and a 300 MB CSV file; beyond that the grid is a mistake.
@@ -435,29 +436,15 @@ class SampledTorque:
         return ca.Function("sampled_torque", [t], [torque])
 
     def _hold_form(self, inside):
-        """``values[k]`` for ``times[k] <= inside < times[k+1]``, exactly, in O(log K).
-
-        The sample index comes from a linear interpolant that is constant between samples (a
-        grid with each sample time ``t_k`` preceded by its float predecessor ``t_k^-``, no
-        float lying between the two), rounded to the integer it equals up to rounding; the
-        value is a linear interpolant of the values over the indices, which returns
-        ``values[k]`` exactly at the integer ``k``.
-        """
+        """``values[k]`` for ``times[k] <= inside < times[k+1]``, exactly, in O(log K)
+        (:func:`interval_index`): a linear interpolant of the values over the indices returns
+        ``values[k]`` exactly at the integer ``k``."""
         import casadi as ca
 
-        grid, index = [float(self.times[0])], [0.0]
-        for k, t_k in enumerate(self.times[1:].tolist(), start=1):
-            before = float(np.nextafter(t_k, -np.inf))
-            if before > grid[-1]:
-                grid.append(before)
-                index.append(k - 1.0)
-            grid.append(t_k)
-            index.append(float(k))
-        which = ca.interpolant("torque_hold_index", "linear", [grid], index)(inside)
         by_index = ca.interpolant("torque_hold_value", "linear",
                                   [np.arange(self.times.size, dtype=float).tolist()],
                                   self.values.tolist())
-        return by_index(ca.floor(which + 0.5))
+        return by_index(interval_index(self.times, inside))
 
     def casadi(self, t):
         """The torque as a CasADi expression of the time symbol ``t`` (SX or MX), N m.
@@ -489,6 +476,52 @@ class SampledTorque:
             return np.asarray(float(self._function(float(inside))))
         flat = inside.reshape(1, -1)
         return np.array(self._function.map(flat.shape[1])(flat)).reshape(t.shape)
+
+
+def lookup_grid(times) -> tuple:
+    """``(grid, index)`` of a linear interpolant that is constant between ``times``: each time
+    ``t_k`` preceded by its float predecessor ``t_k^-`` (no float lies between the two), the
+    index ``k - 1`` at ``t_k^-`` and ``k`` at ``t_k``. Rounded to the nearest integer, the
+    interpolant at ``t`` is the ``k`` with ``times[k] <= t < times[k+1]``, exactly, in
+    O(log K) (:func:`interval_index`).
+
+    Parameters
+    ----------
+    times : array_like, shape (K,)
+        Strictly increasing times, s.
+
+    Returns
+    -------
+    grid, index : ndarray, shape (G,)
+    """
+    grid, index = [float(times[0])], [0.0]
+    for k, t_k in enumerate(np.asarray(times, dtype=float)[1:].tolist(), start=1):
+        before = float(np.nextafter(t_k, -np.inf))
+        if before > grid[-1]:
+            grid.append(before)
+            index.append(k - 1.0)
+        grid.append(t_k)
+        index.append(float(k))
+    return np.array(grid), np.array(index)
+
+
+def interval_index(times, inside):
+    """The index ``k`` with ``times[k] <= inside < times[k+1]`` as a CasADi expression of
+    ``inside``, exactly, in O(log K) (the last index at and past ``times[-1]``;
+    :func:`lookup_grid`).
+
+    Parameters
+    ----------
+    times : ndarray, shape (K,)
+        Strictly increasing times, s (K >= 2).
+    inside : casadi.SX or casadi.MX
+        Scalar time within ``[times[0], times[-1]]``, s.
+    """
+    import casadi as ca
+
+    grid, index = lookup_grid(times)
+    which = ca.interpolant("interval_index", "linear", [grid.tolist()], index.tolist())(inside)
+    return ca.floor(which + 0.5)
 
 
 def _checked_samples(times, values, interpolation):

@@ -34,8 +34,8 @@ from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["RunRequest", "IntegrationPlan", "run_request", "plan_integration", "state_scale",
            "StiffnessWarning", "ManyModesWarning", "MANY_MODES", "METHODS", "SAMPLED_METHODS",
-           "plan_sampled",
-           "choose_continuous", "choose_multistep", "ADAMS_DAMPING", "ADAMS_PHASE", "BDF_REPLACES",
+           "plan_sampled", "choose_continuous", "choose_multistep", "actuator_frequency",
+           "ADAMS_DAMPING", "ADAMS_PHASE", "BDF_REPLACES",
            "ADAMS_TOLERANCE", "ATOL_LIMIT"]
 
 #: Integration methods: "auto" (resolved by :func:`plan_integration` when every input has a
@@ -196,6 +196,9 @@ class RunRequest:
         Progress reporter.
     sensors : Sensors or None
         What a sampled controller measures, checked against it. Default None.
+    input_note : str
+        What the run says about a torque function: sampled, or called at every step and why
+        (:func:`~flexctl.sim.tracing.torque_input`). Default "".
     """
 
     model: Model
@@ -216,6 +219,7 @@ class RunRequest:
     spin_frequency: float
     report: object
     sensors: object = None
+    input_note: str = ""
 
     @property
     def prescribed(self) -> bool:
@@ -444,11 +448,11 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
     # of the run is compiled (flexctl.sim.tracing)
     compiled_feedback = (controller is None or is_sampled(controller)
                          or is_symbolic(controller=controller))
-    torque, untraced = torque_input(
+    torque, untraced, input_note = torque_input(
         torque, t_final=t_final, n_states=model.n_states,
         trace=(method in ("auto", "cvodes", "rk4", "Adams") and hub_motion is None
                and compiled_feedback),
-        state_scale=state_scale(model, model.layout))
+        state_scale=state_scale(model, model.layout), rtol=rtol)
     max_step = _step_bound(max_step, torque)
     symbolic = is_symbolic(torque, hub_motion, None if is_sampled(controller) else controller)
     method = _resolve_method(method, symbolic, controller, untraced)
@@ -468,7 +472,7 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
                       check_accuracy=bool(check_accuracy), torque=torque,
                       hub_motion=hub_motion, controller=controller, torque_fn=torque_fn,
                       x_init=x_init, symbolic=symbolic, spin_frequency=w_spin, report=report,
-                      sensors=sensors)
+                      sensors=sensors, input_note=input_note)
 
 
 def check_atol(atol, scale: np.ndarray, names=None) -> np.ndarray:
@@ -530,6 +534,9 @@ class IntegrationPlan:
         is reported.
     omega_plant, loop_frequency : float
         Fastest mode of the plant at rest and fastest pole of the closed loop, rad/s.
+    actuator_frequency : float
+        Fastest pole of the plant behind its actuator, linearised at rest (a wheel's torque
+        lag, its friction knee, a motor's back-EMF damping), rad/s; 0 without an actuator.
     cvodes_steps : int
         CVODES's step budget between two output times.
     cvodes_step : float or None
@@ -537,7 +544,8 @@ class IntegrationPlan:
     cvodes_multistep : {"bdf", "adams"}
         CVODES's multistep family (:func:`choose_multistep`).
     stiffness_note : str
-        What the stiffness guard did ("" when nothing).
+        What the stiffness guard did, or how the method met a fast actuator ("" when
+        nothing).
     compiled : bool
         ``method="BDF"`` or ``"Adams"`` runs compiled (:mod:`flexctl.sim.compiled_bdf`), not
         SciPy's BDF; the plan is made without compiling, and where the library cannot be
@@ -559,6 +567,13 @@ class IntegrationPlan:
     cvodes_multistep: str = "bdf"
     compiled: bool = False
     uncompiled: str = "cvodes"
+    actuator_frequency: float = 0.0
+
+    @property
+    def fastest_pole(self) -> float:
+        """The fastest pole the run meets at its start but a spin's, rad/s: the plant's
+        fastest mode, the closed loop's and the actuator's fastest poles."""
+        return max(self.omega_plant, self.loop_frequency, self.actuator_frequency)
 
     def without_compiled(self) -> "IntegrationPlan":
         """The plan with :attr:`uncompiled` in place of a compiled method that cannot be built
@@ -580,7 +595,8 @@ class IntegrationPlan:
 
 def _loop_frequency(request, drive, scale, omega_plant) -> float:
     """Fastest pole of the closed loop at the start, rad/s (0 without a controller); gains
-    beyond :data:`LOOP_LIMIT` times the plant's fastest mode are refused."""
+    beyond :data:`LOOP_LIMIT` times the plant's fastest pole (``omega_plant``, rad/s: its
+    fastest mode or its actuator's fastest pole) are refused."""
     if request.controller is None:
         return 0.0
     try:
@@ -590,15 +606,49 @@ def _loop_frequency(request, drive, scale, omega_plant) -> float:
     if frequency > LOOP_LIMIT * omega_plant:
         raise InputValueError(
             f"controller gains put the fastest closed-loop pole at {frequency:.4g} rad/s, "
-            f"more than {LOOP_LIMIT:g} times the fastest mode of the "
-            f"{request.model.n_modes}-mode model ({omega_plant:.4g} rad/s): the model "
+            f"more than {LOOP_LIMIT:g} times the fastest pole of the "
+            f"{request.model.n_modes}-mode plant ({omega_plant:.4g} rad/s): the model "
             "describes nothing that fast and the run would crawl; lower the gains (e.g. the "
             "bandwidth)")
     return frequency
 
 
+def actuator_frequency(model: Model) -> float:
+    """Fastest pole of ``model``'s plant behind its actuator, linearised at rest, rad/s: the
+    largest ``|eigenvalue|`` of its ``A`` (a wheel's torque lag ``1/tau``, its friction knee,
+    a motor's back-EMF damping, and the structure's modes); 0 without an actuator, ``inf``
+    where the linearisation is not finite.
+
+    Parameters
+    ----------
+    model : Model
+        The model of the run.
+    """
+    check_instance("actuator_frequency", "model", model, Model, "flexctl Model")
+    if getattr(model, "actuator", None) is None:
+        return 0.0
+    a = np.asarray(model.linear_matrices(0.0)[0], dtype=float)
+    if not np.all(np.isfinite(a)):
+        return math.inf
+    return float(np.max(np.abs(np.linalg.eigvals(a)))) if a.size else 0.0
+
+
+def _actuator_note(method: str, actuator: float, omega_plant: float) -> str:
+    """What a run says when its actuator is fast against the structure (more than
+    :data:`LOOP_FACTOR` times its fastest mode): the ratio and the method taken."""
+    if not actuator > LOOP_FACTOR * omega_plant:
+        return ""
+    ratio = actuator / omega_plant if omega_plant > 0.0 else math.inf
+    implicit = method in ("cvodes", "BDF", "LSODA", "Radau")
+    return (f"the actuator's fastest pole, {actuator:.4g} 1/s, is {ratio:.3g} times the "
+            f"structure's fastest mode ({omega_plant:.4g} rad/s): "
+            + (f"{method} steps over it implicitly" if implicit else
+               f"{method} is explicit and resolves it"))
+
+
 def stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
-                    prescribed: bool, loop_frequency: float = 0.0):
+                    prescribed: bool, loop_frequency: float = 0.0,
+                    actuator_frequency: float = 0.0):
     """``(method to use, reason)``: reason is empty when ``method`` is kept silently.
 
     The step of an explicit method on an undamped mode ``omega`` is bounded by
@@ -612,9 +662,10 @@ def stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
     without beam damping).
 
     A controller's gains can make the fastest pole of the closed loop (``loop_frequency``) far
-    faster than any mode of the plant. When they do, the fast poles are damped ones that an
-    implicit method steps over, so a run with Python inputs moves to LSODA (implicit BDF where
-    the problem is stiff) rather than crawl for minutes.
+    faster than any mode of the plant, and so can an actuator (a wheel's torque lag,
+    ``actuator_frequency``). When they do, the fast poles are damped ones that an implicit
+    method steps over, so a run with Python inputs moves to LSODA (implicit BDF where the
+    problem is stiff) rather than crawl for minutes.
 
     Parameters
     ----------
@@ -632,6 +683,9 @@ def stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
     loop_frequency : float, optional
         Fastest pole of the closed loop at the start, rad/s (:func:`jacobian_frequency`).
         Default 0 (no controller).
+    actuator_frequency : float, optional
+        Fastest pole of the plant behind its actuator, rad/s (:func:`actuator_frequency`).
+        Default 0 (no actuator).
 
     Raises
     ------
@@ -644,12 +698,15 @@ def stiffness_guard(model: Model, t_final: float, method: str, symbolic: bool,
         return method, ""
     omega_plant = float(model.natural_frequencies(
         0.0, hub="clamped" if prescribed else "free")[-1])
-    omega_max = max(omega_plant, float(loop_frequency))
+    omega_max = max(omega_plant, float(loop_frequency), float(actuator_frequency))
     steps = omega_max * float(t_final) / limit
     if steps <= EXPLICIT_STEP_LIMIT:
         return method, ""
     by_controller = omega_max > LOOP_FACTOR * omega_plant
-    source = (f"the fastest pole of the closed loop ({omega_max:.4g} rad/s, set by the "
+    by_actuator = by_controller and float(actuator_frequency) >= float(loop_frequency)
+    source = (f"the actuator's fastest pole ({omega_max:.4g} 1/s; the structure's fastest mode "
+              f"is {omega_plant:.4g} rad/s)" if by_actuator else
+              f"the fastest pole of the closed loop ({omega_max:.4g} rad/s, set by the "
               f"controller's gains; the plant's fastest mode is {omega_plant:.4g} rad/s)"
               if by_controller else
               f"the fastest mode of this {model.n_modes}-mode model ({omega_max:.4g} rad/s, hub "
@@ -833,8 +890,9 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
                                                                  drive.layout.names)
     omega_plant = float(model.natural_frequencies(
         0.0, hub="clamped" if request.prescribed else "free")[-1])
-    loop = _loop_frequency(request, drive, atol / rtol, omega_plant)
-    fastest = max(omega_plant, loop, request.spin_frequency)
+    actuator = actuator_frequency(model)
+    loop = _loop_frequency(request, drive, atol / rtol, max(omega_plant, actuator))
+    fastest = max(omega_plant, loop, request.spin_frequency, actuator)
     # a Jacobian beyond floating point: no rate to trust, CVODES's BDF takes the run
     fastest, loop = (v if v == v else math.inf for v in (fastest, loop))
     compiled, possible = False, _compiled_bdf(request)
@@ -846,6 +904,9 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
     uncompiled = "cvodes"
     if request.method == "auto":
         method, note = choose_continuous(model, t_final, fastest), ""
+        if actuator > LOOP_FACTOR * omega_plant:
+            # a fast decay, not an oscillation to follow: an implicit method steps over it
+            method = "cvodes"
         uncompiled = method
         if method in BDF_REPLACES.get(model.variant, ()) and possible:
             family = "adams" if multistep == "adams" and adams_seen else "bdf"
@@ -865,9 +926,11 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
         method, note = "RK45", ""          # the compiled pair, within its work
     else:
         method, note = stiffness_guard(model, t_final, request.method, request.symbolic,
-                                       request.prescribed, loop)
+                                       request.prescribed, loop, actuator)
     if note:
         warnings.warn(note, StiffnessWarning, stacklevel=stacklevel)
+    else:
+        note = _actuator_note(method, actuator, omega_plant)
     cuts = [0.0] + [b for b in _breakpoints(*drive.sources) if 0.0 < b < t_final] + [t_final]
     steps = int(min(1e6, max(CVODES_MIN_STEPS, CVODES_STEPS_PER_RADIAN
                              * max(omega_plant, loop) * request.step)))
@@ -877,7 +940,7 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
         omega_plant=omega_plant, loop_frequency=loop, cvodes_steps=steps,
         cvodes_step=request.max_step if np.isfinite(request.max_step) else None,
         stiffness_note=note, compiled=compiled, uncompiled=uncompiled,
-        cvodes_multistep=multistep)
+        cvodes_multistep=multistep, actuator_frequency=actuator)
 
 
 def plan_sampled(request: RunRequest) -> tuple:

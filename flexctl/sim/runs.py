@@ -9,10 +9,13 @@ continuous drive through its strategy, stops and accuracy check, or a sampled co
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
+from .compiled import CHECK_FACTOR
 from .compiled_bdf import NoCompiledIntegrator
+from .function_samples import SampledFunction, sample_function
 from .digital import run_sampled
 from .drives import PrescribedDrive, TorqueDrive
 from .request import check_atol, plan_integration, plan_sampled, run_request, state_scale
@@ -48,7 +51,39 @@ def run_once(model, t_final: float, torque=None, hub_motion=None, controller=Non
         With ``validity`` None (:func:`flexctl.simulate` adds it).
     """
     request = run_request(model, t_final, torque, hub_motion, controller, x0, **options)
-    return _simulate_sampled(request) if request.sampled else _simulate_continuous(request)
+    result = _simulate_sampled(request) if request.sampled else _simulate_continuous(request)
+    if not request.input_note:
+        return result
+    message = f"{result.message} ({request.input_note})"
+    if isinstance(request.torque, SampledFunction):
+        error, note = _sampling_error(request, result, (model, t_final, hub_motion, controller,
+                                                         x0), options)
+        result = replace(result, integration_error=error)
+        message = f"{message} ({note})" if note else message
+    return replace(result, message=message)
+
+
+def _sampling_error(request, result, arguments, options) -> tuple:
+    """``(integration_error, note)`` of a run on a sampled torque function: the run's own
+    estimate plus the largest tip difference from the same run on the function sampled at
+    :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the run's sampling tolerance (the sampling's error in
+    the response, conservative: the looser sampling's), or None with the reason where that
+    run cannot be compared."""
+    error = result.integration_error
+    if not request.check_accuracy or error is None or result.status != "ok":
+        return error, ""
+    model, t_final, hub_motion, controller, x0 = arguments
+    samples = request.torque
+    looser, _ = sample_function(samples.function, t_final, CHECK_FACTOR * samples.tolerance)
+    rerun = None if looser is None else run_once(
+        model, t_final, looser, hub_motion, controller, x0,
+        **dict(options, check_accuracy=False, progress=None))
+    if rerun is None or rerun.status != "ok" or rerun.t.shape != result.t.shape:
+        return None, ("accuracy check not complete: the run on the torque sampled at "
+                      f"{CHECK_FACTOR:g} times the tolerance did not reach its end")
+    sampling = float(np.max(np.abs(rerun.tip_deflection - result.tip_deflection)))
+    return float(error) + sampling, (f"integration_error includes the sampling's, {sampling:.3g} "
+                                     "m at the tip")
 
 
 def run_states(model, t_final: float, torque=None, hub_motion=None, controller=None,

@@ -469,7 +469,7 @@ def _embedded_run(request, plan, rtol: float, looser: bool = False) -> EmbeddedR
     :data:`~flexctl.sim.embedded_rk.PAIR_OMEGA_H` radians of it and the inputs' own bound.
     ``looser``: the accuracy check's replay, whose longest step is twice the run's, so that a
     run whose steps are all bound is not replayed step for step."""
-    omega = max(plan.omega_plant, plan.loop_frequency, request.spin_frequency)
+    omega = max(plan.fastest_pole, request.spin_frequency)
     bound = min(PAIR_OMEGA_H / omega if omega > 0.0 else math.inf,
                 math.inf if plan.cvodes_step is None else plan.cvodes_step)
     if looser:
@@ -487,7 +487,7 @@ def _bdf_run(request, plan, rtol: float) -> BdfRun:
     radian of the fastest pole it meets (mode, loop, spin; order 1 grows it as the accuracy
     allows) or, with no finite pole, the output step; no longest step but the inputs' own
     bound."""
-    omega = max(plan.omega_plant, plan.loop_frequency, request.spin_frequency)
+    omega = max(plan.fastest_pole, request.spin_frequency)
     return BdfRun(request.model, request.torque, request.hub_motion, request.controller,
                   family="adams" if plan.method == "Adams" else "bdf",
                   scale=plan.scale, rtol=rtol, max_steps=plan.cvodes_steps,
@@ -699,7 +699,7 @@ class FixedStepRK4(_Segments):
         and :data:`RK4_OMEGA_H` over the fastest frequency the run meets (the plant's, the
         loop's, the initial spin's, a prescribed spin's)."""
         request, plan = self.request, self.plan
-        omega_max = max(plan.omega_plant, plan.loop_frequency, request.spin_frequency)
+        omega_max = max(plan.fastest_pole, request.spin_frequency)
         if request.prescribed:
             rates = np.asarray(request.hub_motion.rate(request.grid), dtype=float)
             spin_max = float(np.max(np.abs(rates))) if rates.size else 0.0

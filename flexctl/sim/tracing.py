@@ -4,8 +4,9 @@ A torque function ``f(t)`` or ``f(t, x)`` that only does arithmetic and numpy's 
 functions on its arguments can be called with CasADi symbols instead of numbers: numpy hands
 ``np.sin(t)`` to CasADi's ``sin``, and the call returns the torque as an expression. Such a
 function gets a CasADi form (:class:`TracedTorque`, :class:`TracedStateTorque`) and
-:func:`flexctl.simulate` integrates it with CVODES; any other keeps the SciPy path, as before,
-without a word.
+:func:`flexctl.simulate` integrates it compiled; a function of time that cannot be traced is
+sampled into a piecewise cubic instead (:mod:`flexctl.sim.function_samples`), and a function
+of the state that cannot be traced keeps the SciPy path, the run's message saying why.
 
 The rule, and why tracing never changes a result:
 
@@ -55,6 +56,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..model.errors import InputTypeError
+from .function_samples import sampled_for_run
 from .inputs import (SampledTorque, required_positional, input_value, sampled_torque,
                      time_function)
 
@@ -300,13 +302,16 @@ def _remembered(kind, function, form):
     return traced
 
 
-def torque_input(torque, *, t_final: float, trace: bool, n_states: int, state_scale=None):
-    """The torque :func:`flexctl.simulate` integrates, and why a function was not traced.
+def torque_input(torque, *, t_final: float, trace: bool, n_states: int, state_scale=None,
+                 rtol: float | None = None):
+    """The torque :func:`flexctl.simulate` integrates, why a function was not traced, and
+    what the run says about it.
 
     Samples (a pair ``(times, values)`` or a :class:`~flexctl.sim.inputs.SampledTorque`)
     become a :class:`~flexctl.sim.inputs.SampledTorque` covering the run; a Python function
-    without a CasADi form is traced when ``trace`` (:func:`trace_torque`); anything else is
-    returned as given. The reason is empty unless a function was left untraced.
+    without a CasADi form is traced when ``trace`` (:func:`trace_torque`), and a function of
+    time that cannot be traced is sampled into a piecewise cubic when ``rtol`` is given
+    (:mod:`flexctl.sim.function_samples`); anything else is returned as given.
 
     Parameters
     ----------
@@ -321,22 +326,43 @@ def torque_input(torque, *, t_final: float, trace: bool, n_states: int, state_sc
     state_scale : array_like, shape (n,), optional
         Physical size of each plant state: a trace is checked at states of this size
         (:func:`trace_torque`).
+    rtol : float, optional
+        The run's relative tolerance: an untraced function of time is sampled at it
+        (:func:`~flexctl.sim.function_samples.sampled_for_run`). Default None (not sampled).
 
     Returns
     -------
     torque : object or None
     reason : str
+        Why a function stays a Python function on the run's path (not traced, nor sampled);
+        empty otherwise.
+    note : str
+        What the run says about its torque function: sampled, or called at every step and
+        why; empty for any other torque.
     """
     if torque is None:
-        return None, ""
+        return None, "", ""
     if isinstance(torque, (SampledTorque, tuple, list)):
-        return sampled_torque(torque, t_final), ""
+        return sampled_torque(torque, t_final), "", ""
     if not callable(torque):
         raise InputTypeError(f"torque must be callable as torque(t) or torque(t, x), or "
                              f"samples (times, values); got {type(torque).__name__}")
     time_function(torque, "torque")         # its signature, before any call
     if callable(getattr(torque, "casadi", None)) or not trace:
-        return torque, ""
+        return torque, "", ""
     traced, reason = trace_torque(torque, t_final=t_final, n_states=n_states,
                                   state_scale=state_scale)
-    return (traced, "") if traced is not None else (torque, reason)
+    if traced is not None:
+        return traced, "", ""
+    if rtol is None or required_positional(torque) == 2 or \
+            getattr(torque, "has_casadi_form", True) is False:
+        return torque, reason, (f"the torque function was called at every step: it could not "
+                                f"be traced ({reason})")
+    samples, why = sampled_for_run(torque, t_final, rtol)
+    if samples is None:
+        return torque, reason, (f"the torque function was called at every step: it could not "
+                                f"be traced ({reason}) nor sampled ({why})")
+    return samples, "", (f"the torque function could not be traced ({reason}): sampled into "
+                         f"{samples.coefficients.shape[0]} cubic pieces from "
+                         f"{samples.evaluations} calls, {len(samples.jumps)} jumps located, "
+                         f"within {samples.tolerance:.3g} N m")

@@ -150,9 +150,14 @@ def test_sampled_controller_refuses_other_methods_and_python_torque(plant):
     law = ZeroOrderHold(PD_LAW, 0.01)
     with pytest.raises(InputError, match="sampled controller"):
         flexctl.simulate(plant, 1.0, controller=law, method="DOP853")
-    # (a torque CasADi cannot trace: a branch on t; a traceable one runs compiled)
+    # (a torque of the state CasADi cannot trace: a branch on t; a function of time alone is
+    # traced or sampled and runs compiled)
     with pytest.raises(InputError, match="CasADi form"):
-        flexctl.simulate(plant, 1.0, controller=law, torque=lambda t: 0.1 if t < 0.5 else 0.0)
+        flexctl.simulate(plant, 1.0, controller=law,
+                         torque=lambda t, x: 0.1 if t < 0.5 else 0.0 * x[0])
+    run = flexctl.simulate(plant, 1.0, controller=law, torque=lambda t: 0.1 if t < 0.5 else 0.0,
+                           check_validity=False)
+    assert run.ok and "cubic pieces" in run.message
 
 
 def test_too_many_samples_refused(plant):

@@ -312,11 +312,15 @@ IMPURE = {
 
 
 @pytest.mark.parametrize("name", sorted(UNTRACEABLE))
-def test_an_untraceable_function_keeps_the_scipy_path(model, name):
+def test_an_untraceable_function_is_sampled_unless_it_opts_out(model, name):
     torque = UNTRACEABLE[name]
     assert trace_torque(torque, t_final=T_FINAL)[0] is None
     result = simulate(model, 0.5, torque=torque, rtol=1e-6, check_accuracy=False)
-    assert result.method == "DOP853"
+    if name == "opted-out":
+        assert result.method == "DOP853"
+        assert "the torque function was called at every step" in result.message
+    else:
+        assert result.method != "DOP853" and "cubic pieces" in result.message
 
 
 @pytest.mark.parametrize("name", sorted(IMPURE))
@@ -328,7 +332,8 @@ def test_an_impure_function_is_not_traced(name):
 def test_tracing_says_why_when_cvodes_is_demanded(model):
     with pytest.raises(InputValueError, match=r"method 'cvodes'.*could not be traced: "
                                               r"calling it with a CasADi symbol raised"):
-        simulate(model, 1.0, torque=UNTRACEABLE["branch"], method="cvodes")
+        simulate(model, 1.0, torque=lambda t, x: 0.5 if t < 1.0 else -0.25 + 0.0 * x[0],
+                 method="cvodes")
 
 
 def test_a_scipy_method_calls_the_function_itself(model):

@@ -125,7 +125,7 @@ def test_controller_far_faster_than_the_model_is_refused(model):
         return -1e14 * x[0] - 2e7 * x[n + 1]
     start = time.perf_counter()
     with pytest.raises(InputValueError, match=rf"fastest closed-loop pole .* more than "
-                       rf"{LOOP_LIMIT:g} times the fastest mode"):
+                       rf"{LOOP_LIMIT:g} times the fastest pole"):
         simulate(model, 5.0, controller=stiff_pd)
     assert time.perf_counter() - start < AT_ONCE
 

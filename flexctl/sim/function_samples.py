@@ -1,0 +1,376 @@
+"""Python torque functions that CasADi cannot trace, sampled adaptively onto a compiled form.
+
+A torque function of time that branches on its argument (``2 sin(pi t) if t <= 2 else 0``)
+cannot be traced (:mod:`flexctl.sim.tracing`): a CasADi symbol has no truth value. Instead of
+calling it at every step of a SciPy integration (and again in the accuracy check and the
+validity estimate's runs), :func:`flexctl.simulate` samples it once, before the run, into a
+piecewise cubic (:class:`SampledFunction`) that runs on the compiled path, and counts the
+sampling's error in the run's ``integration_error``.
+
+The sampling (:func:`sample_function`):
+
+- The run ``[0, t_final]`` starts as :data:`START_INTERVALS` equal intervals (and the
+  function's own ``breakpoints`` attribute, if it declares one, as more interval ends).
+- On each interval ``[a, b]`` the cubic through the function at ``a``, ``a + h/3``,
+  ``a + 2h/3`` and ``b`` (``h = b - a``) is compared with the function at ``a + h/6``,
+  ``a + h/2`` and ``a + 5h/6``. It is kept when every difference is within the tolerance,
+  else the interval is halved (the halves reuse the parent's points, so that each half costs
+  three calls).
+- An interval that reaches :data:`JUMP_FRACTION` of the run (at least of a second) and still
+  misses holds a jump: the jump is placed at its start, which becomes a breakpoint of the run
+  (every integrator restarts there), and the interval holds the value at its end.
+- The tolerance is :data:`SAMPLE_FRACTION` of the run's ``rtol`` times the largest torque
+  seen on the start intervals (not below :data:`TOLERANCE_FLOOR` of it, the rounding of the
+  function's own arithmetic).
+
+The error of the sampling in the response is measured, not assumed: the run is repeated on
+the function sampled at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance and
+the largest tip difference is added to the run's ``integration_error``
+(:func:`flexctl.sim.runs.run_once`); the cubic's error falls as the fourth power of the
+interval, so the looser sampling's difference bounds the run's.
+
+The limits, as for tracing: the function must be pure (the torque a function of ``t`` alone;
+it is called some hundreds to thousands of times before the run and never during it), and a
+feature shorter than about a sixth of a start interval (``t_final / 1536``) that lies between
+the points looked at goes unseen, as it would by an integrator whose steps have grown at rest:
+declare such times in a ``breakpoints`` attribute of the function. A function that raises or
+returns anything but a finite number, or that needs more than :data:`MAX_EVALUATIONS` calls
+(noise, a chirp faster than the tolerance can follow), is not sampled: the run calls it at
+every step on SciPy's path, which reports a bad value with its time.
+
+Examples
+--------
+>>> import numpy as np
+>>> from flexctl.sim.function_samples import sample_function
+>>> samples, reason = sample_function(lambda t: 2.0 * np.sin(np.pi * t) if t <= 2.0 else 0.0,
+...                                   t_final=10.0, tolerance=1e-9)
+>>> reason, samples.jumps
+('', ())
+>>> bool(abs(float(samples(0.25)) - 2.0 * np.sin(np.pi * 0.25)) < 1e-9)
+True
+>>> step, _ = sample_function(lambda t: 1.0 if t < 1.0 else -1.0, t_final=3.0, tolerance=1e-9)
+>>> round(step.jumps[0], 9), float(step(0.5)), float(step(1.5))
+(1.0, 1.0, -1.0)
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from dataclasses import dataclass
+from functools import cached_property
+from typing import ClassVar
+
+import numpy as np
+
+from ..model.errors import InputValueError
+from .inputs import input_value, lookup_grid
+
+__all__ = ["SampledFunction", "sample_function", "sampled_for_run", "START_INTERVALS",
+           "SAMPLE_FRACTION", "TOLERANCE_FLOOR", "JUMP_FRACTION", "MAX_EVALUATIONS"]
+
+#: Equal intervals the run starts with.
+START_INTERVALS = 256
+#: The interpolation error allowed, as a fraction of the run's ``rtol`` times the torque's
+#: size: the sampled torque is ten times closer to the function than the integration is to
+#: the exact response.
+SAMPLE_FRACTION = 0.1
+#: Smallest interpolation error asked for, relative to the torque's size: about the rounding
+#: of a function's own arithmetic, below which halving would never end.
+TOLERANCE_FLOOR = 1e-13
+#: Shortest interval, as a fraction of ``max(1, t_final)`` s: a miss on an interval this short
+#: is a jump, located to it.
+JUMP_FRACTION = 1e-12
+#: Most calls of the function a sampling may make.
+MAX_EVALUATIONS = 200_000
+#: Samplings kept, so that the same function at the same tolerance (the accuracy check's and
+#: the validity estimate's runs) is sampled once and its compiled integrators are reused.
+CACHE_SIZE = 16
+_CACHE: OrderedDict = OrderedDict()
+
+_FIT = np.array([0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0])
+_CHECK = np.array([1.0 / 6.0, 0.5, 5.0 / 6.0])
+#: Power-basis coefficients in ``u = (t - a) / h`` from the values at ``_FIT``.
+_FROM_VALUES = np.linalg.inv(np.vander(_FIT, 4, increasing=True))
+
+
+@dataclass(frozen=True, eq=False)
+class SampledFunction:
+    """A torque function of time as a piecewise cubic (:func:`sample_function`).
+
+    Attributes
+    ----------
+    function : callable
+        The Python function ``function(t)``, N m.
+    knots : ndarray, shape (P + 1,)
+        Interval ends, s: ``0`` to ``t_final``.
+    coefficients : ndarray, shape (P, 4)
+        Each interval's cubic ``c0 + c1 u + c2 u^2 + c3 u^3`` in ``u = (t - knots[k]) / h_k``,
+        N m.
+    jumps : tuple of float
+        Located jumps, s: breakpoints of the run.
+    tolerance : float
+        The interpolation error asked for, N m.
+    evaluations : int
+        Calls of the function made.
+    """
+
+    function: object
+    knots: np.ndarray
+    coefficients: np.ndarray
+    jumps: tuple
+    tolerance: float
+    evaluations: int
+    #: :meth:`casadi` takes the time alone (:func:`flexctl.sim.compiled.is_symbolic`)
+    state_dependent: ClassVar[bool] = False
+
+    def __repr__(self):
+        name = getattr(self.function, "__name__", type(self.function).__name__)
+        return (f"SampledFunction({name}: {self.coefficients.shape[0]} cubic pieces over "
+                f"[0, {self.knots[-1]:g}] s, {len(self.jumps)} jumps)")
+
+    @property
+    def breakpoints(self) -> tuple:
+        """The jumps located, s (every integrator restarts there)."""
+        return self.jumps
+
+    @property
+    def table(self) -> np.ndarray:
+        """Each interval's start, inverse length and cubic coefficients, shape (P, 6)."""
+        starts = self.knots[:-1]
+        return np.column_stack([starts, 1.0 / np.diff(self.knots), self.coefficients])
+
+    @property
+    def size_class(self) -> int:
+        """Intervals the compiled form holds: the next power of two (at least
+        :data:`START_INTERVALS`), so that samplings of one size class share a library."""
+        return max(START_INTERVALS, 1 << int(self.coefficients.shape[0] - 1).bit_length())
+
+    @cached_property
+    def casadi_parameters(self) -> tuple:
+        """``(structure, values)``: the size class shapes :meth:`casadi`; the numbers are the
+        run's end, the interval lookup's grid and indices and the padded :attr:`table`
+        (compiled runs of any sampled function of one size class share one function)."""
+        grid, index = lookup_grid(self.knots[:-1])
+        q = self.size_class
+        # padding past the end, never reached (the time is clamped to [0, t_final])
+        extra = 2 * q - 1 - grid.size
+        end = float(self.knots[-1])
+        grid = np.concatenate([grid, end + 1.0 + np.arange(extra)])
+        index = np.concatenate([index, np.full(extra, index[-1])])
+        table = np.vstack([self.table, np.repeat(self.table[-1:], q - self.table.shape[0], 0)])
+        return (q,), np.concatenate([[float(self.knots[0]), end], grid, index, table.ravel()])
+
+    def casadi(self, t, parameters=None):
+        """The torque as a CasADi expression of the time symbol ``t`` (SX or MX), N m; its
+        numbers are symbols when ``parameters`` (laid out as :attr:`casadi_parameters`) is
+        given.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        parameters : casadi.SX or casadi.MX, optional
+            The numbers of :attr:`casadi_parameters` as symbols; None: this sampling's.
+        """
+        import casadi as ca
+
+        q = self.size_class
+        numbers = parameters if parameters is not None else ca.DM(self.casadi_parameters[1])
+        g = 2 * q - 1
+        grid, index = numbers[2:2 + g], numbers[2 + g:2 + 2 * g]
+        table = numbers[2 + 2 * g:2 + 2 * g + 6 * q]
+        inside = ca.fmin(ca.fmax(t, numbers[0]), numbers[1])
+        which = ca.interpolant("sampled_function_index", "linear", [g], 1)(inside, grid, index)
+        piece = ca.interpolant("sampled_function_piece", "linear",
+                               [np.arange(q, dtype=float).tolist()], 6)
+        start, inverse, c0, c1, c2, c3 = ca.vertsplit(piece(ca.floor(which + 0.5), table))
+        u = (inside - start) * inverse
+        return ((c3 * u + c2) * u + c1) * u + c0
+
+    def __call__(self, t):
+        """Torque at time(s) ``t``, N m: an array of the shape of ``t`` (the time clamped into
+        ``[0, t_final]``)."""
+        t = np.asarray(t, dtype=float)
+        inside = np.clip(t, self.knots[0], self.knots[-1])
+        k = np.clip(np.searchsorted(self.knots[:-1], inside, side="right") - 1, 0,
+                    self.coefficients.shape[0] - 1)
+        rows = self.table[k]
+        u = (inside - rows[..., 0]) * rows[..., 1]
+        c0, c1, c2, c3 = (rows[..., j] for j in range(2, 6))
+        return ((c3 * u + c2) * u + c1) * u + c0
+
+
+class _Unsampled(Exception):
+    """Why a function could not be sampled."""
+
+
+class _Values:
+    """The function's values, each time asked once; a bad value or an exception ends the
+    sampling."""
+
+    def __init__(self, function):
+        self.function, self.known = function, {}
+
+    def __call__(self, t: float) -> float:
+        value = self.known.get(t)
+        if value is None:
+            if len(self.known) >= MAX_EVALUATIONS:
+                raise _Unsampled(f"it needed more than {MAX_EVALUATIONS} calls")
+            try:
+                value = input_value("torque", self.function(t), t)
+            except Exception as exc:        # noqa: BLE001 - any failure keeps SciPy's path
+                raise _Unsampled(f"calling it at t = {t:.6g} s raised {type(exc).__name__}: "
+                                 f"{exc}"[:300]) from None
+            self.known[t] = value
+        return value
+
+    def many(self, times: np.ndarray) -> np.ndarray:
+        """The values at ``times`` (any shape), an array of that shape."""
+        flat = times.reshape(-1)
+        return np.array([self(float(t)) for t in flat]).reshape(times.shape)
+
+
+def _start_knots(function, t_final: float) -> np.ndarray:
+    """The start intervals' ends: equal ones and the function's declared breakpoints."""
+    knots = set(np.linspace(0.0, t_final, START_INTERVALS + 1).tolist())
+    declared = getattr(function, "breakpoints", ()) or ()
+    try:
+        knots.update(float(b) for b in declared if 0.0 < float(b) < t_final)
+    except (TypeError, ValueError):
+        raise _Unsampled("its breakpoints attribute is not a sequence of times") from None
+    return np.array(sorted(knots))
+
+
+#: The cubic's values at ``_CHECK`` from its power coefficients.
+_AT_CHECKS = np.vander(_CHECK, 4, increasing=True)
+
+
+def _pieces(values, starts: np.ndarray, ends: np.ndarray):
+    """``(coefficients, miss)`` of the cubics through the function on the intervals
+    ``[starts, ends]``: their power coefficients in ``u``, shape (I, 4), and each one's
+    largest difference from the function at the checks, shape (I,)."""
+    h = (ends - starts)[:, None]
+    fit_times = starts[:, None] + _FIT * h
+    fit_times[:, 0], fit_times[:, -1] = starts, ends
+    fit = values.many(fit_times)
+    coefficients = fit @ _FROM_VALUES.T
+    check = values.many(starts[:, None] + _CHECK * h)
+    return coefficients, np.max(np.abs(coefficients @ _AT_CHECKS.T - check), axis=1)
+
+
+def _refine(values, knots: np.ndarray, tolerance: float, shortest: float):
+    """The accepted intervals' starts and coefficients, left to right, and the jumps: the
+    intervals are halved level by level until their cubics pass."""
+    starts, ends = knots[:-1].copy(), knots[1:].copy()
+    kept_starts, kept, jumps = [], [], []
+    while starts.size:
+        coefficients, miss = _pieces(values, starts, ends)
+        passed = ~(miss > tolerance)
+        kept_starts.append(starts[passed])
+        kept.append(coefficients[passed])
+        starts, ends = starts[~passed], ends[~passed]
+        middles = starts + 0.5 * (ends - starts)
+        # a miss on an interval too short to halve: a jump inside it, placed at its start,
+        # the interval holding the value at its end
+        jump = (ends - starts <= shortest) | ~((starts < middles) & (middles < ends))
+        if np.any(jump):
+            held = np.zeros((int(np.sum(jump)), 4))
+            held[:, 0] = values.many(ends[jump][:, None])[:, 0]
+            kept_starts.append(starts[jump])
+            kept.append(held)
+            jumps.extend(starts[jump].tolist())
+        starts, ends, middles = starts[~jump], ends[~jump], middles[~jump]
+        starts, ends = np.concatenate([starts, middles]), np.concatenate([middles, ends])
+    order = np.argsort(np.concatenate(kept_starts), kind="stable")
+    return (np.concatenate(kept_starts)[order], np.concatenate(kept)[order],
+            tuple(sorted(jumps)))
+
+
+def sample_function(function, t_final: float, tolerance: float):
+    """Sample ``function(t)`` into a :class:`SampledFunction` within ``tolerance``.
+
+    Parameters
+    ----------
+    function : callable
+        ``function(t) -> torque``, N m: pure, of the time alone.
+    t_final : float
+        End of the run, s (> 0, finite).
+    tolerance : float
+        Largest difference between the cubic and the function at the checks, N m (>= 0).
+
+    Returns
+    -------
+    samples : SampledFunction or None
+        None when the function cannot be sampled.
+    reason : str
+        Why not; empty when it was sampled.
+    """
+    t_final, tolerance = float(t_final), float(tolerance)
+    if not (math.isfinite(t_final) and t_final > 0.0):
+        raise InputValueError(f"sample_function t_final must be positive and finite (s); got "
+                              f"{t_final!r}")
+    if not (math.isfinite(tolerance) and tolerance >= 0.0):
+        raise InputValueError(f"sample_function tolerance must be finite and >= 0 (N m); got "
+                              f"{tolerance!r}")
+    values = _Values(function)
+    try:
+        knots = _start_knots(function, t_final)
+        starts, coefficients, jumps = _refine(values, knots, tolerance,
+                                              JUMP_FRACTION * max(1.0, t_final))
+    except _Unsampled as exc:
+        return None, str(exc)
+    return SampledFunction(function=function, knots=np.append(starts, t_final),
+                           coefficients=coefficients, jumps=jumps, tolerance=tolerance,
+                           evaluations=len(values.known)), ""
+
+
+def _torque_size(function, t_final: float):
+    """The largest ``|function|`` on the start intervals' points, N m (None if it fails)."""
+    values = _Values(function)
+    try:
+        knots = _start_knots(function, t_final)
+        points = np.concatenate([knots, knots[:-1] + np.diff(knots) / 6.0])
+        return max(abs(values(float(t))) for t in points), ""
+    except _Unsampled as exc:
+        return None, str(exc)
+
+
+def sampled_for_run(function, t_final: float, rtol: float, factor: float = 1.0):
+    """``function`` sampled for a run at ``rtol`` (and, with ``factor``, at ``factor`` times
+    its tolerance: the accuracy check's), remembered for the same function, run and tolerance.
+
+    Parameters
+    ----------
+    function : callable
+        ``function(t)``, N m.
+    t_final : float
+        End of the run, s.
+    rtol : float
+        The run's relative tolerance.
+    factor : float, optional
+        Multiple of the tolerance :data:`SAMPLE_FRACTION` ``* rtol`` times the torque's size.
+        Default 1.
+
+    Returns
+    -------
+    samples : SampledFunction or None
+    reason : str
+        Why it could not be sampled; empty when it was.
+    """
+    size, reason = _torque_size(function, t_final)
+    if size is None:
+        return None, reason
+    relative = factor * max(SAMPLE_FRACTION * float(rtol), TOLERANCE_FLOOR)
+    key = (id(function), float(t_final), size)
+    for (ident, end, seen, made_at), made in reversed(_CACHE.items()):
+        # one made at this tolerance or a tighter one serves (the validity estimate's runs)
+        if (ident, end, seen) == key and made_at <= relative and made[0] is not None \
+                and made[0].function is function:
+            _CACHE.move_to_end((ident, end, seen, made_at))
+            return made
+    made = sample_function(function, t_final, relative * size)
+    _CACHE[(*key, relative)] = made
+    while len(_CACHE) > CACHE_SIZE:
+        _CACHE.popitem(last=False)
+    return made
