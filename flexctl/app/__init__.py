@@ -23,5 +23,6 @@ module                contents
 ``plotting_loops``    loop-shaping figures: Bode, Nyquist, margins
 ``cli``               the ``flexctl`` command: arguments, exit codes, held output
 ``demo``              ``flexctl demo``: built-in scenes, the papers' figures, comparisons
+``run_cache``         the demo's runs remembered by their inputs and the code's version
 ====================  ========================================================================
 """

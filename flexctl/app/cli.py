@@ -188,11 +188,13 @@ def _parser() -> argparse.ArgumentParser:
 
     _add_bench_command(commands)
     cache = commands.add_parser(
-        "cache", help="list or clear the compiled-function cache",
+        "cache", help="list or clear the compiled-function cache and the remembered runs",
         description="CasADi functions compiled to machine code are kept in a cache directory "
         "($FLEXCTL_CACHE_DIR, else $XDG_CACHE_HOME/flexctl or ~/.cache/flexctl) and reused by "
-        "later runs. 'info' shows the directory, its entries, their size and the compiler; "
-        "'clear' removes the entries.")
+        "later runs; the demo's runs are remembered by their inputs and the code's version "
+        "in its runs/ folder ($FLEXCTL_RUN_CACHE_DIR; FLEXCTL_RUN_CACHE=0 turns it off), so "
+        "that a second 'flexctl demo' replays them. 'info' shows the directory, its entries, "
+        "their size and the compiler, and the remembered runs; 'clear' removes both.")
     cache.add_argument("action", choices=("info", "clear"), help="what to do")
     cache.set_defaults(func=_cmd_cache)
     return parser
@@ -535,16 +537,19 @@ def _cmd_demo(args) -> int:
 
 def _cmd_cache(args) -> int:
     from ..sim.compile_cache import cache_dir, cache_info, clear_cache
+    from .run_cache import clear_run_cache, run_cache_info
     try:
         if args.action == "clear":
-            report = clear_cache()
+            report, runs = clear_cache(), clear_run_cache()
             print(report)
-            if report.failed:
-                return _error(f"could not remove {len(report.failed)} files from the cache "
-                              f"{report.folder} (first: {report.failed[0][0]}: "
-                              f"{report.failed[0][1]})")
+            print(f"removed {runs.files} remembered runs from {runs.folder}")
+            failed = report.failed + runs.failed
+            if failed:
+                return _error(f"could not remove {len(failed)} files from the cache "
+                              f"(first: {failed[0][0]}: {failed[0][1]})")
         else:
             print(cache_info())
+            print(run_cache_info())
     except OSError as exc:
         return _error(f"cannot read the cache {cache_dir()}: {exc.strerror or exc}")
     return EXIT_OK

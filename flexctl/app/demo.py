@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import hashlib
 import time
 import warnings
 from pathlib import Path
@@ -47,6 +48,7 @@ from ..model.errors import InputError
 from ..sim.atomic_files import atomic_file, staged_folder, write_atomic
 from ..sim.validity import ModelValidityWarning
 from .report import write_demo_report
+from .run_cache import remembered
 from .verdict import summary_verdict
 from .demo_hardware import hardware
 from .demo_spatial import SPATIAL_SCENES, three_axes
@@ -648,8 +650,45 @@ def sections(out: Path, workers: int, surprises: list, progress=print, *,
 def _submit_sections(pool, out: Path) -> dict:
     """Every section on ``pool``, longest first (:data:`SECTION_ORDER`): label -> its
     pending result (:func:`_submit`)."""
-    functions = dict(SECTIONS)
-    return {label: _submit(pool, functions[label], out) for label in SECTION_ORDER}
+    return {label: _submit(pool, remembered_section, label, out) for label in SECTION_ORDER}
+
+
+def remembered_section(label: str, out: Path) -> Section:
+    """The section ``label`` of :data:`SECTIONS`, made into ``out`` or replayed from the run
+    cache (:func:`~flexctl.app.run_cache.remembered`).
+
+    Parameters
+    ----------
+    label : str
+        A label of :data:`SECTIONS`.
+    out : Path
+        The demo folder the section writes its figures and data into.
+    """
+    function = dict(SECTIONS)[label]
+    return remembered("section", [label], out, function)
+
+
+def remembered_scene(run_one, source, overrides: dict, out: Path) -> dict:
+    """``run_one(source, overrides, out)``'s summary, made or replayed from the run cache
+    (:func:`~flexctl.app.run_cache.remembered`; a scene file's bytes are part of the key).
+
+    Parameters
+    ----------
+    run_one : callable
+        ``run_one(source, overrides, out_dir) -> summary`` (:func:`run_demo`'s).
+    source : str or Path
+        A built-in scene's name or a scene file.
+    overrides : dict
+        Scene keys set over the file's.
+    out : Path
+        The scene's folder.
+    """
+    inputs = [str(source), overrides, getattr(run_one, "__qualname__", repr(run_one))]
+    path = Path(str(source))
+    if path.is_file():
+        inputs.append(hashlib.sha256(path.read_bytes()).hexdigest())
+    return remembered("scene", inputs, out,
+                      lambda folder: run_one(source, overrides, folder))
 
 
 def _section_outcome(label: str, pending, surprises: list, progress, start=None) -> dict:
@@ -792,7 +831,8 @@ def _demo_into(out: Path, run_one, workers: int, progress) -> list:
         expected = {}
         for label, source, overrides, status in sorted(
                 plan, key=lambda p: p[0] not in LONG_SCENES):
-            pending["scene", label] = _submit(pool, run_one, source, overrides, out / label)
+            pending["scene", label] = _submit(pool, remembered_scene, run_one, source,
+                                              overrides, out / label)
             expected[label] = status
         for kind, label in _finished(pending):
             if kind == "section":

@@ -262,11 +262,22 @@ def _assert_hardware_rows(report: str):
 
 
 @pytest.mark.slow
-def test_demo_writes_report_and_plots(tmp_path, capsys):
+def test_demo_writes_report_and_plots(tmp_path, capsys, monkeypatch):
+    # a run cache of its own: the first demo computes every run, the second replays them
+    monkeypatch.setenv("FLEXCTL_RUN_CACHE_DIR", str(tmp_path / "runs"))
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out)]) == EXIT_OK
     assert str(out / "report.md") in capsys.readouterr().out
     report = (out / "report.md").read_text()
+    remembered = sorted((tmp_path / "runs").iterdir())
+    assert len(remembered) >= len(BUILTINS)
+    again = tmp_path / "again"
+    assert main(["demo", "--out", str(again)]) == EXIT_OK
+    assert sorted((tmp_path / "runs").iterdir()) == remembered
+    assert (again / "report.md").read_text() == report
+    for path in out.rglob("*"):
+        if path.is_file():
+            assert (again / path.relative_to(out)).read_bytes() == path.read_bytes(), path
 
     links = re.findall(r"\]\(([^)]+\.png)\)", report)
     assert "frequencies-vs-spin.png" in links
