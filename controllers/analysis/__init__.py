@@ -7,6 +7,7 @@ module              contents
 ``loops``           loop transfer functions, stability margins, poles against spin
 ``dispersion``      dispersed stiffness, point masses, hub inertia, whole or per appendage
 ``robustness``      Monte Carlo of a design flown on dispersed plants, and its spread
+``spatial_loops``   the three-axis quaternion loop on the flexible spacecraft, its disk margins
 ==================  ============================================================================
 
 Builds on the laws (:mod:`controllers.feedback`).
@@ -15,5 +16,8 @@ Builds on the laws (:mod:`controllers.feedback`).
 from .loops import (SENSORS, LoopMargins, PlantChannels, PolesVsSpin, loop_margins,
                     loop_transfer, plant_channels, poles_vs_spin)
 
+from .spatial_loops import DiskMargins, quaternion_disk_margins, quaternion_loop
+
 __all__ = ["SENSORS", "PlantChannels", "plant_channels", "loop_transfer", "LoopMargins",
-           "loop_margins", "PolesVsSpin", "poles_vs_spin"]
+           "loop_margins", "PolesVsSpin", "poles_vs_spin", "DiskMargins",
+           "quaternion_disk_margins", "quaternion_loop"]

@@ -49,7 +49,7 @@ Examples
 >>> bool(abs(float(samples(0.25)) - 2.0 * np.sin(np.pi * 0.25)) < 1e-9)
 True
 >>> step, _ = sample_function(lambda t: 1.0 if t < 1.0 else -1.0, t_final=3.0, tolerance=1e-9)
->>> round(step.jumps[0], 9), float(step(0.5)), float(step(1.5))
+>>> round(step.jumps[0], 9), round(float(step(0.5)), 12), float(step(1.5))
 (1.0, 1.0, -1.0)
 """
 
@@ -153,11 +153,12 @@ class SampledFunction:
         (compiled runs of any sampled function of one size class share one function)."""
         grid, index = lookup_grid(self.knots[:-1])
         q = self.size_class
-        # padding past the end, never reached (the time is clamped to [0, t_final])
-        extra = 2 * q - 1 - grid.size
         end = float(self.knots[-1])
-        grid = np.concatenate([grid, end + 1.0 + np.arange(extra)])
-        index = np.concatenate([index, np.full(extra, index[-1])])
+        # the end closes the last interval, so that no time of the run is extrapolated to;
+        # padding past it is never reached (the time is clamped to [0, t_final])
+        extra = 2 * q - 1 - grid.size
+        grid = np.concatenate([grid, [end], end + 1.0 + np.arange(extra)])
+        index = np.concatenate([index, np.full(extra + 1, index[-1])])
         table = np.vstack([self.table, np.repeat(self.table[-1:], q - self.table.shape[0], 0)])
         return (q,), np.concatenate([[float(self.knots[0]), end], grid, index, table.ravel()])
 
@@ -177,7 +178,7 @@ class SampledFunction:
 
         q = self.size_class
         numbers = parameters if parameters is not None else ca.DM(self.casadi_parameters[1])
-        g = 2 * q - 1
+        g = 2 * q
         grid, index = numbers[2:2 + g], numbers[2 + g:2 + 2 * g]
         table = numbers[2 + 2 * g:2 + 2 * g + 6 * q]
         inside = ca.fmin(ca.fmax(t, numbers[0]), numbers[1])

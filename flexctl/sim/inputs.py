@@ -39,7 +39,7 @@ from ..model.errors import InputError, InputTypeError, InputValueError
 __all__ = ["MAX_OUTPUT_SAMPLES", "check_time", "check_rtol", "check_method", "as_vector",
            "output_grid", "input_value", "time_function", "jacobian_frequency",
            "INTERPOLATIONS", "UNIFORM_RATIO", "SampledTorque", "sampled_torque",
-           "interval_index", "lookup_grid"]
+           "interval_index", "lookup_grid", "check_breakpoints"]
 
 #: Most output samples a run may ask for (t_final / output_step + 1): 1e6 samples of a 6-mode
 #: model are 100 MB of states and a 300 MB CSV file; beyond that the grid is a mistake.
@@ -476,6 +476,33 @@ class SampledTorque:
             return np.asarray(float(self._function(float(inside))))
         flat = inside.reshape(1, -1)
         return np.array(self._function.map(flat.shape[1])(flat)).reshape(t.shape)
+
+
+def check_breakpoints(func, name: str) -> tuple:
+    """The times an input function declares in its ``breakpoints`` attribute, checked: a
+    sequence of finite numbers (s), or none; else an error naming ``<name>.breakpoints``.
+
+    Parameters
+    ----------
+    func : object
+        The input (a torque function).
+    name : str
+        The input's name, for an error (e.g. ``"torque"``).
+    """
+    declared = getattr(func, "breakpoints", None)
+    if declared is None:
+        return ()
+    if isinstance(declared, (str, bytes)) or not hasattr(declared, "__iter__"):
+        raise InputTypeError(f"{name}.breakpoints must be a sequence of times (s); got "
+                             f"{type(declared).__name__}")
+    times = []
+    for value in declared:
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (Real, np.number)) \
+                or not math.isfinite(float(value)):
+            raise InputValueError(f"{name}.breakpoints must be a sequence of finite times (s); "
+                                  f"got {value!r}")
+        times.append(float(value))
+    return tuple(times)
 
 
 def lookup_grid(times) -> tuple:

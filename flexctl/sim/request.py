@@ -577,8 +577,11 @@ class IntegrationPlan:
 
     def without_compiled(self) -> "IntegrationPlan":
         """The plan with :attr:`uncompiled` in place of a compiled method that cannot be built
-        (CVODES keeps the multistep family chosen)."""
-        return replace(self, method=self.uncompiled, compiled=False)
+        (CVODES keeps the multistep family chosen), its note saying so."""
+        said = (f"the compiled {self.method} could not be built (compiling off, no C "
+                f"compiler, or a drive too large to compile): {self.uncompiled} took the run")
+        note = f"{self.stiffness_note}; {said}" if self.stiffness_note else said
+        return replace(self, method=self.uncompiled, compiled=False, stiffness_note=note)
 
     @property
     def fallback(self) -> str:

@@ -747,9 +747,14 @@ class FixedStepRK4(_Segments):
             end = next((c for c in self.plan.cuts if c >= hi), hi)
             self.drive.segment_end = np.nextafter(end, lo)
             located = _Budgeted(self.drive.rhs, FALLBACK_EVALUATIONS)
-            if self.solve_ivp(traj, lo, hi, np.array([hi]), y[:, bad - 1], located) is None \
-                    and traj.reason is not StopReason.INTEGRATOR_FAILED:
-                return traj
+            if self.solve_ivp(traj, lo, hi, np.array([hi]), y[:, bad - 1], located) is None:
+                if traj.reason is not StopReason.INTEGRATOR_FAILED:
+                    return traj
+            else:
+                # SciPy reached the sample without a stop: the sample it added gives way to
+                # the one past the stopping condition
+                traj.ts.pop()
+                traj.ys.pop()
         traj.add(t[bad:bad + 1], y[:, bad:bad + 1])
         traj.stop(self.stops.reason_of_sample(y[:, bad]), found=True)
         return traj

@@ -57,8 +57,8 @@ import numpy as np
 
 from ..model.errors import InputTypeError
 from .function_samples import sampled_for_run
-from .inputs import (SampledTorque, required_positional, input_value, sampled_torque,
-                     time_function)
+from .inputs import (SampledTorque, check_breakpoints, required_positional, input_value,
+                     sampled_torque, time_function)
 
 __all__ = ["TRACE_RTOL", "CHECK_FRACTIONS", "TracedTorque", "TracedStateTorque", "trace_torque",
            "torque_input"]
@@ -348,6 +348,7 @@ def torque_input(torque, *, t_final: float, trace: bool, n_states: int, state_sc
         raise InputTypeError(f"torque must be callable as torque(t) or torque(t, x), or "
                              f"samples (times, values); got {type(torque).__name__}")
     time_function(torque, "torque")         # its signature, before any call
+    check_breakpoints(torque, "torque")
     if callable(getattr(torque, "casadi", None)) or not trace:
         return torque, "", ""
     traced, reason = trace_torque(torque, t_final=t_final, n_states=n_states,

@@ -386,6 +386,8 @@ def test_the_plan_compiles_nothing_and_a_library_that_cannot_be_built_is_replace
     run = flexctl.simulate(model, 2.0, TORQUE, method=method, rtol=1e-8, check_validity=False,
                            output_step=float(tight.t[1] - tight.t[0]))
     assert built and run.ok and run.method == uncompiled
+    assert f"could not be built (compiling off, no C compiler, or a drive too large to " \
+        f"compile): {uncompiled} took the run" in run.message
     assert run.integration_error is not None and np.isfinite(run.integration_error)
     # the replacement run is as accurate as it says (on the tight run's own output times)
     np.testing.assert_allclose(run.t, tight.t[:run.t.size], rtol=0, atol=1e-12)

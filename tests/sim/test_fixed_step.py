@@ -208,3 +208,14 @@ def test_exact_model_steps_compiled_and_agree_with_cvodes(drive, monkeypatch):
         fixed_step.STEP_CACHE.clear()
     assert np.allclose(machine.tip_deflection, run.tip_deflection, rtol=0.0,
                        atol=1e-12 * run.peak_tip_deflection)
+
+
+def test_a_stop_at_an_output_sample_keeps_the_times_increasing():
+    """rk4 past a stopping condition at its first output sample, where SciPy finds no stop
+    before it: the sample is the stop's, once."""
+    from flexctl.sim.inputs import SampledTorque
+
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, 1)
+    run = flexctl.simulate(model, 1.0, torque=SampledTorque([0.0, 1.0], [1e5, 1e5]),
+                           method="rk4", check_accuracy=False, check_validity=False)
+    assert run.status == "diverged" and np.all(np.diff(run.t) > 0)

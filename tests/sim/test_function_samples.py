@@ -52,16 +52,21 @@ def test_jumps_are_located_and_held_to_the_right():
     assert np.allclose(samples(t), [bang_bang(v) for v in t], rtol=0.0, atol=1e-12)
 
 
-@pytest.mark.parametrize("function", [branching_push, bang_bang])
-def test_the_compiled_form_equals_the_numpy_form(function):
+@pytest.mark.parametrize("function, t_final", [
+    (branching_push, 4.0), (bang_bang, 4.0),
+    # a cubic: exactly the start intervals, a full size class (its last interval once
+    # extrapolated to)
+    (lambda t: 1.0 - 2.0 * t + 0.5 * t ** 3, 1.0)])
+def test_the_compiled_form_equals_the_numpy_form(function, t_final):
     import casadi as ca
 
-    samples, _ = sample_function(function, 4.0, 1e-9)
+    samples, _ = sample_function(function, t_final, 1e-9)
     t = ca.SX.sym("t")
     numbers = ca.SX.sym("c", samples.casadi_parameters[1].size)
     fixed = ca.Function("fixed", [t], [samples.casadi(t)])
     parametric = ca.Function("parametric", [t, numbers], [samples.casadi(t, numbers)])
-    grid = np.concatenate([np.linspace(-1.0, 5.0, 3001), samples.knots])
+    grid = np.concatenate([np.linspace(-1.0, t_final + 1.0, 3001), samples.knots,
+                           samples.knots[-1] - np.logspace(-12, -2, 11)])
     expected = samples(grid)
     assert np.array_equal(np.array(fixed.map(grid.size)(grid[None, :])).ravel(), expected)
     assert np.array_equal(np.array(parametric.map(grid.size)(
