@@ -164,34 +164,35 @@ def case_samples(model, t_final, methods):
     return report(times, list(tools)[:3], baselines=list(tools)[3:4])
 
 
-def case_function(model, t_final, methods):
+def _function_case(model, t_final, methods, function, title, tools, what):
+    """Time ``tools`` (the flexctl runs: the compiled one, it without checks, the SciPy
+    path) and python-control on ``function`` sampled finely, against a DOP853 reference."""
     start = time.perf_counter()
-    reference = flexctl_tip(model, t_final, lambda: push, "DOP853")(REFERENCE_RTOL)
-    print(f"   B. Python function: reference DOP853 at {REFERENCE_RTOL:g} "
+    reference = flexctl_tip(model, t_final, lambda: function, "DOP853")(REFERENCE_RTOL)
+    print(f"   {title}: reference DOP853 at {REFERENCE_RTOL:g} "
           f"({time.perf_counter() - start:.1f} s)")
     t_in = time_grid(t_final, FINE_INPUT_STEP)
+    tools.update(python_control_tools(model, t_final, t_in,
+                                      np.array([float(function(t)) for t in t_in]), methods))
+    times = measure(tools, reference)
+    names = list(tools)
+    print(f"   {what} / SciPy path for the same function: "
+          f"{times[names[2]] / times[names[0]]:.1f}x faster")
+    return report(times, names[:2], baselines=names[2:3])
+
+
+def case_function(model, t_final, methods):
     tools = {"flexctl.simulate(torque=push), traced": (
                  flexctl_tip(model, t_final, lambda: push), REPEATS),
              "flexctl, traced, no accuracy check": (
                  flexctl_tip(model, t_final, lambda: push, check_accuracy=False), REPEATS),
              "flexctl, push on SciPy DOP853 (untraced)": (
                  flexctl_tip(model, t_final, lambda: push, "DOP853"), REPEATS_SLOW)}
-    tools.update(python_control_tools(model, t_final, t_in, np.asarray(push(t_in), float),
-                                      methods))
-    times = measure(tools, reference)
-    print(f"   tracing / SciPy path for the same function: "
-          f"{times[list(tools)[2]] / times[list(tools)[0]]:.1f}x faster")
-    return report(times, list(tools)[:2], baselines=list(tools)[2:3])
+    return _function_case(model, t_final, methods, push, "B. Python function", tools,
+                          "tracing")
 
 
 def case_branching(model, t_final, methods):
-    start = time.perf_counter()
-    reference = flexctl_tip(model, t_final, lambda: branching_push, "DOP853")(REFERENCE_RTOL)
-    print(f"   C. Python function with a branch (untraceable): reference DOP853 at "
-          f"{REFERENCE_RTOL:g} ({time.perf_counter() - start:.1f} s)")
-    t_in = time_grid(t_final, FINE_INPUT_STEP)
-    fn = branching_push
-
     def fresh():
         # a new function object each run: its sampling is made again, not found remembered
         return lambda t: branching_push(t)
@@ -201,13 +202,9 @@ def case_branching(model, t_final, methods):
                  flexctl_tip(model, t_final, fresh, check_accuracy=False,
                              check_validity=False), REPEATS),
              "flexctl, branch on SciPy DOP853 (default checks)": (
-                 flexctl_tip(model, t_final, lambda: fn, "DOP853"), REPEATS_SLOW)}
-    tools.update(python_control_tools(model, t_final, t_in,
-                                      np.array([fn(t) for t in t_in]), methods))
-    times = measure(tools, reference)
-    print(f"   sampling / SciPy path for the same function: "
-          f"{times[list(tools)[2]] / times[list(tools)[0]]:.1f}x faster")
-    return report(times, list(tools)[:2], baselines=list(tools)[2:3])
+                 flexctl_tip(model, t_final, lambda: branching_push, "DOP853"), REPEATS_SLOW)}
+    return _function_case(model, t_final, methods, branching_push,
+                          "C. Python function with a branch (untraceable)", tools, "sampling")
 
 
 CASES = {"samples": case_samples, "function": case_function, "branching": case_branching}

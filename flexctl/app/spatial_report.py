@@ -125,9 +125,32 @@ def spatial_summary(scene: SpatialScene, result: SpatialResult,
         "final_angular_momentum": angular[:, -1].tolist() if angular.size else None,
         "final_energy": float(energy[-1]) if energy.size else None,
         **_wheel_summary(result),
+        **_loop_margins(scene),
         "overrides": dict(overrides or {}), "description": scene.description,
         "scene_table": scene.data,
     }
+
+
+def _loop_margins(scene: SpatialScene) -> dict:
+    """The disk margins of a scene's attitude law, continuous and without delay, about its
+    target at rest on the linear plant with every mode of the run
+    (:func:`controllers.analysis.spatial_loops.quaternion_disk_margins`); none without a
+    loop. (On these undamped structures any delay of a rate feedback eventually destabilises
+    the highest modes of the linear plant; the sampled run is the judge of the loop that
+    flies.)"""
+    if scene.loop is None:
+        return {}
+    from controllers.analysis.spatial_loops import quaternion_disk_margins
+
+    margins = quaternion_disk_margins(scene.loop.law, scene.structure, n_modes=scene.n_modes)
+    multiloop = margins.multiloop
+    return {"loop_margins": {
+        "closed_loop_stable": margins.closed_loop_stable,
+        "spectral_abscissa": margins.spectral_abscissa,
+        "disk_margin": margins.disk_margin.tolist(),
+        "gain_margin_db": margins.gain_margin_db.tolist(),
+        "phase_margin_deg": margins.phase_margin_deg.tolist(),
+        "multiloop": None if multiloop is None else list(multiloop)}}
 
 
 def _wheel_summary(result: SpatialResult) -> dict:
@@ -250,6 +273,20 @@ def format_spatial_summary(summary: dict) -> str:
     for name, peak in summary["peak_tip_displacement"].items():
         lines.append(f"  {name}: peak tip displacement (dx, dy, dz) = "
                      + ", ".join(f"{1e3 * p:.4g}" for p in peak) + " mm")
+    margins = summary.get("loop_margins")
+    if margins:
+        if not margins["closed_loop_stable"]:
+            lines.append(f"  continuous law about the target UNSTABLE on the linear plant "
+                         f"(spectral "
+                         f"abscissa {margins['spectral_abscissa']:.3g} 1/s)")
+        else:
+            lines.append("  disk margins of the continuous law about the target (x, y, z): gain "
+                         + ", ".join(f"{g:.3g}" for g in margins["gain_margin_db"])
+                         + " dB, phase " + ", ".join(f"{p:.3g}" for p in
+                                                    margins["phase_margin_deg"]) + " deg"
+                         + ("" if margins["multiloop"] is None else
+                            f"; all axes at once {margins['multiloop'][1]:.3g} dB, "
+                            f"{margins['multiloop'][2]:.3g} deg"))
     files = summary.get("files")
     if files:
         folder = Path(files["summary"]).parent

@@ -72,6 +72,12 @@ def test_a_scene_flies_its_loop_and_writes_its_run(tmp_path):
     assert "wheel4.speed" in column and np.abs(column["wheel1.speed"]).max() > 1.0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "ok"
+    # the law's disk margins about the target, on the linear plant with the run's modes
+    margins = summary["loop_margins"]
+    assert margins["closed_loop_stable"] and len(margins["gain_margin_db"]) == 3
+    assert all(6.0 < g < 40.0 for g in margins["gain_margin_db"])
+    assert all(30.0 < p <= 90.0 for p in margins["phase_margin_deg"])
+    assert margins["multiloop"][0] <= min(margins["disk_margin"]) * (1 + 1e-6)
 
 
 @pytest.mark.parametrize("old, new, pattern", [
