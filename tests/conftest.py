@@ -4,8 +4,11 @@ The built-in scenes are checked against the numbers of MODEL.md in ``test_scenes
 physics tests take their systems from the scenes so that the two cannot drift apart.
 """
 
+import atexit
 import dataclasses
 import os
+import shutil
+import tempfile
 
 import numpy as np
 import pytest
@@ -13,6 +16,10 @@ import pytest
 os.environ.setdefault("MPLBACKEND", "Agg")
 # one BLAS thread per test worker, as under the command line (flexctl.sim.blas_threads)
 os.environ.setdefault("FLEXCTL_BLAS_THREADS", "1")
+# the demo's remembered runs of a test process in a folder of their own, not the user's cache
+if "FLEXCTL_RUN_CACHE_DIR" not in os.environ:
+    os.environ["FLEXCTL_RUN_CACHE_DIR"] = tempfile.mkdtemp(prefix="flexctl-test-runs-")
+    atexit.register(shutil.rmtree, os.environ["FLEXCTL_RUN_CACHE_DIR"], True)
 
 import flexctl  # noqa: E402
 

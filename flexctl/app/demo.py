@@ -49,6 +49,7 @@ from ..sim.atomic_files import atomic_file, staged_folder, write_atomic
 from ..sim.validity import ModelValidityWarning
 from .report import write_demo_report
 from .run_cache import remembered
+from .task_fingerprint import task_fingerprint
 from .verdict import summary_verdict
 from .demo_hardware import hardware
 from .demo_spatial import SPATIAL_SCENES, three_axes
@@ -665,7 +666,7 @@ def remembered_section(label: str, out: Path) -> Section:
         The demo folder the section writes its figures and data into.
     """
     function = dict(SECTIONS)[label]
-    return remembered("section", [label], out, function)
+    return remembered("section", [label, task_fingerprint(function)], out, function)
 
 
 def remembered_scene(run_one, source, overrides: dict, out: Path) -> dict:
@@ -683,12 +684,12 @@ def remembered_scene(run_one, source, overrides: dict, out: Path) -> dict:
     out : Path
         The scene's folder.
     """
-    inputs = [str(source), overrides, getattr(run_one, "__qualname__", repr(run_one))]
+    inputs = [str(source), overrides, task_fingerprint(run_one)]
     path = Path(str(source))
     if path.is_file():
         inputs.append(hashlib.sha256(path.read_bytes()).hexdigest())
     return remembered("scene", inputs, out,
-                      lambda folder: run_one(source, overrides, folder))
+                      lambda folder: run_one(source, overrides, folder), create=False)
 
 
 def _section_outcome(label: str, pending, surprises: list, progress, start=None) -> dict:

@@ -90,7 +90,7 @@ def job_key(name: str, inputs) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def remembered(name: str, inputs, out: Path, make):
+def remembered(name: str, inputs, out: Path, make, *, create: bool = True):
     """``make(out)``'s value, made once per key (:func:`job_key`) and replayed after.
 
     Parameters
@@ -104,6 +104,8 @@ def remembered(name: str, inputs, out: Path, make):
         a replay.
     make : callable
         ``make(folder) -> value``: runs the job, writing its files into ``folder``.
+    create : bool, optional
+        Hand ``make`` an existing folder (True, default) or a path it creates itself.
 
     Returns
     -------
@@ -111,22 +113,30 @@ def remembered(name: str, inputs, out: Path, make):
         The value, its paths under ``out``.
     """
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     if os.environ.get("FLEXCTL_RUN_CACHE", "1") == "0":
+        if create:
+            out.mkdir(parents=True, exist_ok=True)
         return make(out)
     entry = runs_dir() / job_key(name, inputs)
-    found = _replayed(entry, out)
-    if found is not _MISSING:
-        return found
-    private = Path(tempfile.mkdtemp(prefix=".job-", dir=out))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    # the job's own folder: inside ``out`` when it exists (a demo's stage), else beside it
+    work = Path(tempfile.mkdtemp(prefix=".job-", dir=out if out.is_dir() else out.parent))
+    private = work / out.name
     try:
+        if create:
+            private.mkdir()
+        found = _replayed(entry, out)
+        if found is not _MISSING:
+            return found
         value = make(private)
-        _keep(entry, private, value)
-        for path in private.iterdir():
-            _move_into(path, out / path.name)
+        if private.is_dir():
+            _keep(entry, private, value)
+            out.mkdir(exist_ok=True)
+            for path in private.iterdir():
+                _move_into(path, out / path.name)
         return _reanchored(value, private, out)
     finally:
-        shutil.rmtree(private, ignore_errors=True)
+        shutil.rmtree(work, ignore_errors=True)
 
 
 def runs_dir() -> Path:
@@ -158,6 +168,8 @@ def _replayed(entry: Path, out: Path):
     files = entry / _FILES
     if files.is_dir():
         shutil.copytree(files, out, dirs_exist_ok=True)
+    else:
+        out.mkdir(parents=True, exist_ok=True)
     return _reanchored(value, Path(_ANCHOR), out)
 
 
