@@ -109,3 +109,14 @@ def test_flexctl_cache_lists_and_clears_the_remembered_runs(tmp_path, capsys, mo
     assert main(["cache", "clear"]) == 0
     assert "removed 1 remembered runs" in capsys.readouterr().out
     assert run_cache_info().entries == 0
+
+
+def test_a_cache_that_cannot_be_written_only_costs_the_replay(tmp_path, monkeypatch):
+    blocked = tmp_path / "blocked"
+    blocked.write_text("a file where the cache's folder would be")
+    monkeypatch.setenv("FLEXCTL_RUN_CACHE_DIR", str(blocked / "runs"))
+    job = Job()
+    first = remembered("section", ["one"], tmp_path / "a", job)
+    remembered("section", ["one"], tmp_path / "b", job)
+    assert job.runs == 2 and first.images == (("caption", tmp_path / "a" / "figure.png"),)
+    assert (tmp_path / "b" / "sub" / "data.csv").exists()
