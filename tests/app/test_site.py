@@ -55,10 +55,23 @@ def _sphinx(builder, out, doctrees):
 
 @pytest.fixture(scope="session")
 def site(tmp_path_factory):
-    # session-scoped: the worker that runs the "notebooks" group interleaves this module's
-    # tests with the notebooks', and a module-scoped build was made again each time
-    base = tmp_path_factory.mktemp("site")
-    _sphinx("html", base / "html", base / "doctrees")
+    # built once per test run: session-scoped (the worker that runs the "notebooks" group
+    # interleaves this module's tests with the notebooks', and a module-scoped build was made
+    # again each time), and shared by pytest-xdist's workers through a lock in the run's
+    # common temporary folder (xdist may still hand a test of the group to another worker)
+    shared = os.environ.get("PYTEST_XDIST_WORKER") is not None
+    root = tmp_path_factory.getbasetemp().parent if shared else tmp_path_factory.getbasetemp()
+    base = root / "shared-site"
+    with open(root / "shared-site.lock", "w") as lock:
+        try:
+            import fcntl
+            fcntl.flock(lock, fcntl.LOCK_EX)
+        except ImportError:             # no fcntl: each worker builds its own
+            base = tmp_path_factory.mktemp("site")
+        if not (base / "built").exists():
+            base.mkdir(exist_ok=True)
+            _sphinx("html", base / "html", base / "doctrees")
+            (base / "built").write_text("ok\n")
     return base
 
 
