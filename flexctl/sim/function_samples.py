@@ -55,7 +55,6 @@ True
 
 from __future__ import annotations
 
-import math
 from collections import OrderedDict
 from dataclasses import dataclass
 from functools import cached_property
@@ -63,7 +62,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..model.errors import InputValueError
+from ..model.checks import check_real
+from ..model.errors import InputTypeError
 from .inputs import input_value, lookup_grid
 
 __all__ = ["SampledFunction", "sample_function", "sampled_for_run", "START_INTERVALS",
@@ -307,13 +307,11 @@ def sample_function(function, t_final: float, tolerance: float):
     reason : str
         Why not; empty when it was sampled.
     """
-    t_final, tolerance = float(t_final), float(tolerance)
-    if not (math.isfinite(t_final) and t_final > 0.0):
-        raise InputValueError(f"sample_function t_final must be positive and finite (s); got "
-                              f"{t_final!r}")
-    if not (math.isfinite(tolerance) and tolerance >= 0.0):
-        raise InputValueError(f"sample_function tolerance must be finite and >= 0 (N m); got "
-                              f"{tolerance!r}")
+    if not callable(function):
+        raise InputTypeError(f"sample_function function must be callable as function(t); got "
+                             f"{type(function).__name__}")
+    t_final = check_real("sample_function", "t_final", t_final, minimum=0.0, strict=True)
+    tolerance = check_real("sample_function", "tolerance", tolerance, minimum=0.0)
     values = _Values(function)
     try:
         knots = _start_knots(function, t_final)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from flexctl import build_model, load_scene, simulate
-from flexctl.model.errors import InputValueError
+from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim import function_samples
 from flexctl.sim.function_samples import JUMP_FRACTION, SampledFunction, sample_function
 
@@ -110,11 +110,12 @@ def test_noise_exceeds_the_call_budget(monkeypatch):
 
 
 @pytest.mark.parametrize("argument, value", [("t_final", 0.0), ("t_final", np.inf),
-                                             ("tolerance", -1.0), ("tolerance", np.nan)])
+                                             ("tolerance", -1.0), ("tolerance", np.nan),
+                                             ("t_final", "4"), ("function", 3.0)])
 def test_bad_arguments_are_refused_by_name(argument, value):
-    kwargs = {"t_final": 4.0, "tolerance": 1e-9, argument: value}
-    with pytest.raises(InputValueError, match=f"sample_function {argument}"):
-        sample_function(branching_push, **kwargs)
+    kwargs = {"function": branching_push, "t_final": 4.0, "tolerance": 1e-9, argument: value}
+    with pytest.raises((InputValueError, InputTypeError), match=f"sample_function.{argument}"):
+        sample_function(**kwargs)
 
 
 @pytest.mark.parametrize("function", [branching_push, bang_bang])
