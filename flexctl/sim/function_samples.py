@@ -357,17 +357,18 @@ def sampled_for_run(function, t_final: float, rtol: float, factor: float = 1.0):
     reason : str
         Why it could not be sampled; empty when it was.
     """
+    relative = factor * max(SAMPLE_FRACTION * float(rtol), TOLERANCE_FLOOR)
+    key = (id(function), float(t_final))
+    for (ident, end, made_at), made in reversed(_CACHE.items()):
+        # one made at this tolerance or a tighter one serves (the validity estimate's runs),
+        # found before the function is called again
+        if (ident, end) == key and made_at <= relative and made[0] is not None \
+                and made[0].function is function:
+            _CACHE.move_to_end((ident, end, made_at))
+            return made
     size, reason = _torque_size(function, t_final)
     if size is None:
         return None, reason
-    relative = factor * max(SAMPLE_FRACTION * float(rtol), TOLERANCE_FLOOR)
-    key = (id(function), float(t_final), size)
-    for (ident, end, seen, made_at), made in reversed(_CACHE.items()):
-        # one made at this tolerance or a tighter one serves (the validity estimate's runs)
-        if (ident, end, seen) == key and made_at <= relative and made[0] is not None \
-                and made[0].function is function:
-            _CACHE.move_to_end((ident, end, seen, made_at))
-            return made
     made = sample_function(function, t_final, relative * size)
     _CACHE[(*key, relative)] = made
     while len(_CACHE) > CACHE_SIZE:
