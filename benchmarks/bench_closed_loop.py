@@ -86,7 +86,7 @@ def flexctl_tip(model, x0, step, fresh=True, method="auto", check_accuracy=True)
 def bare_cvodes_tip(model, x0, grid, multistep="bdf"):
     """CVODES on ``model.casadi()`` closed by the saturated PD law, written directly, with its
     default BDF or with Adams (``multistep``)."""
-    n, tip = model.n_modes, model.matrices.tip
+    n, tip = model.n_modes, model.mode_tips
     dynamics = model.casadi()
 
     def run(rtol):

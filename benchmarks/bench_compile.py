@@ -2,7 +2,7 @@
 
 A. Compile time per model and time per right-hand-side evaluation: ``model.casadi()`` of
    ``hub-beam-mass`` (first_order and exact, 2, 4 and 6 modes, and the exact model's
-   vectorized form ``geometry.rhs_vectorized``, which CVODES evaluates) compiled through
+   vectorized form ``model.vectorized_rhs()``, which CVODES evaluates) compiled through
    :func:`flexctl.sim.compile_cache.compiled` with the cache cold (a fresh directory: generate,
    compile, load) and warm (generate, hash, load the library), and one evaluation on CasADi's
    virtual machine against the compiled code (the mean over a ``map`` of 1000 evaluations, best
@@ -95,7 +95,7 @@ def case_a() -> None:
         for variant in ("first_order", "exact", "exact vectorized"):
             model = flexctl.build_model(system, n_modes, variant.split()[0])
             f = model.casadi() if variant != "exact vectorized" \
-                else model.geometry.rhs_vectorized
+                else model.vectorized_rhs()
             many = f.map(MAP, "serial")
             size = len(compile_cache._source(f)) // 1024
             start = time.perf_counter()

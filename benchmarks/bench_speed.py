@@ -112,7 +112,7 @@ def bare_cvodes_tip(model, scene, t_final, multistep="bdf"):
                                                     "linear_multistep_method": multistep})
         xf = np.array(integrator(x0=np.zeros(x.numel()))["xf"])
         q_out = xf[:n] if prescribed else xf[1:n + 1]
-        return np.concatenate(([0.0], mat.tip @ q_out))
+        return np.concatenate(([0.0], model.mode_tips @ q_out))
     return run
 
 

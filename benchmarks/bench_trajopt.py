@@ -101,7 +101,7 @@ def judge(name, torque, design, plant, target):
     after = truth.t >= DURATION
     residual = float(np.max(np.abs(truth.tip_deflection[after])))
     worst = int(np.argmax(np.abs(error)))
-    tip_error = design.matrices.tip @ error[1:design.n_modes + 1]
+    tip_error = design.mode_tips @ error[1:design.n_modes + 1]
     print(f"  {name}: re-simulated on the {design.n_modes}-mode design model, "
           f"|x(T) - x_f| max {np.max(np.abs(error)):.3e} ({design.state_names[worst]}; "
           f"theta {error[0]:+.2e} rad, tip {tip_error:+.2e}"

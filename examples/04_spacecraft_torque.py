@@ -54,7 +54,7 @@ fig
 # %%
 peak, residual = response_amplitudes(result, torque.duration)
 after = result.t > torque.duration
-first_mode = model.matrices.tip[0] * result.q[0]      # tip deflection carried by q_1 alone
+first_mode = model.mode_tips[0] * result.q[0]      # tip deflection carried by q_1 alone
 residual_first_mode = float(np.max(np.abs(first_mode[after])))
 free_frequencies = model.natural_frequencies(0.0, hub="free")
 print(f"peak tip deflection      {peak:.4f} m   (paper 001: 0.42 m)")

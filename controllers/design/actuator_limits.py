@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexctl.model import ActuatedModel, DCMotor, Model, ReactionWheel, StructureModel
+from flexctl.model import ActuatedModel, DCMotor, Model, ReactionWheel
 from flexctl.model.actuators import as_actuator
 from flexctl.model.errors import InputTypeError, InputValueError
 
@@ -148,18 +148,7 @@ def structure_momentum(model):
         raise InputValueError("the structure's momentum is that of its model.mechanical (an "
                               "actuated model's momentum includes the actuator's)")
     x = ca.SX.sym("x", model.n_states)
-    if isinstance(model, StructureModel):
-        h = model.functions.momentum(x)[0]
-    else:
-        layout, mat = model.layout, model.matrices
-        _, q, rate, q_dot = layout.split(x)
-        if model.variant.exact:
-            h = ca.mtimes(model.geometry.mass(q)[0, :], x[layout.velocities])
-        else:
-            inertia = mat.J0
-            if model.variant.quadratic_inertia:
-                inertia = inertia + ca.bilin(ca.DM(mat.D), q, q)
-            h = inertia * rate + ca.dot(ca.DM(mat.m_tf), q_dot)
+    h = model.functions.momentum(x)[0]
     return ca.Function("structure_momentum", [x], [h], ["x"], ["H"])
 
 

@@ -106,8 +106,7 @@ def hold_function(model: Model, sample_time: float, substeps: int):
 
     # one beam's exact model has a vectorized form: the same function, a few thousand times
     # fewer operations written out, so the hold compiles in about a second
-    vectorized = (getattr(getattr(model, "geometry", None), "rhs_vectorized", None)
-                  if model.variant.exact else None)
+    vectorized = model.vectorized_rhs()
     if vectorized is not None:
         sym, f = ca.MX, vectorized
     else:

@@ -157,7 +157,7 @@ def spacecraft_torque(out: Path) -> Section:
     push = scene.maneuver
     peak, residual = response_amplitudes(result, push.duration)
     after = result.t > push.duration
-    q1_part = float(np.max(np.abs(result.model.matrices.tip[0] * result.q[0][after])))
+    q1_part = float(np.max(np.abs(result.model.mode_tips[0] * result.q[0][after])))
     image = _save(plot_response(result, title=f"Paper 001 Fig. 5: spacecraft, "
                                               f"{push.peak_torque:g} N m"),
                   out / "paper001-fig5.png")

@@ -1,6 +1,6 @@
 """A structure turned by an actuator: the plant whose input is the actuator's command.
 
-:class:`ActuatedModel` is a :class:`~flexctl.model.structure_model.StructureModel` whose state
+:class:`ActuatedModel` is a :class:`~flexctl.model.variants.Model` whose state
 carries the actuator's states after the mechanical ones and whose input is the actuator's
 command (:mod:`flexctl.model.actuators`); :func:`flexctl.build_model` builds one when given an
 ``actuator``. Every view of the model (``dynamics``, ``casadi``, ``nonlinear``, ``linearize``,
@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
 from .errors import InputValueError
 from .structure_dynamics import StructureFunctions
-from .structure_model import StructureModel, output_names
+from .variants import Model, output_names
 
 __all__ = ["ActuatedModel", "actuated_model"]
 
@@ -37,11 +38,11 @@ BLOCK = "actuator"
 
 
 @dataclass(frozen=True, eq=False)
-class ActuatedModel(StructureModel):
+class ActuatedModel(Model):
     """A structure model driven through an actuator (see the module Notes).
 
     Build with :func:`flexctl.build_model` (its ``actuator``). Besides
-    :class:`~flexctl.model.structure_model.StructureModel`'s attributes, :attr:`mechanical`
+    :class:`~flexctl.model.variants.Model`'s attributes, :attr:`mechanical`
     (the structure's model, input the hub torque).
 
     Attributes
@@ -61,6 +62,7 @@ class ActuatedModel(StructureModel):
         The structure as given, before the actuator changed its hub.
     """
 
+    HAS_MATRIX_FORM: ClassVar[bool] = False
     actuator: object = field(default=None, kw_only=True)
     #: The structure as given, before the actuator changed its hub (``system``: after).
     source: object = field(default=None, kw_only=True, repr=False)
@@ -71,7 +73,7 @@ class ActuatedModel(StructureModel):
 
     def __post_init__(self):
         super().__post_init__()
-        mechanical = StructureModel(system=self.system, n_modes=self.n_modes,
+        mechanical = Model(system=self.system, n_modes=self.n_modes,
                                     variant=self.variant, matrices=self.matrices)
         layout = mechanical.layout.with_block(BLOCK, self.actuator.state_names) \
             if self.actuator.state_names else mechanical.layout
@@ -83,7 +85,7 @@ class ActuatedModel(StructureModel):
         self._c["mechanical"] = mechanical
 
     @property
-    def mechanical(self) -> StructureModel:
+    def mechanical(self) -> Model:
         """The structure's own model (input the hub torque, no actuator states)."""
         return self._c["mechanical"]
 
@@ -171,8 +173,8 @@ class ActuatedModel(StructureModel):
         Parameters
         ----------
         *args
-            Those of :meth:`StructureModel.beam_accelerations
-            <flexctl.model.structure_model.StructureModel.beam_accelerations>`; not read.
+            Those of :meth:`Model.beam_accelerations
+            <flexctl.model.variants.Model.beam_accelerations>`; not read.
         """
         raise InputValueError("a prescribed hub motion does not go through an actuator: "
                               "simulate the structure's own model (model.mechanical)")
@@ -184,8 +186,8 @@ class ActuatedModel(StructureModel):
         Parameters
         ----------
         *args
-            Those of :meth:`StructureModel.hub_torque
-            <flexctl.model.structure_model.StructureModel.hub_torque>`; not read.
+            Those of :meth:`Model.hub_torque
+            <flexctl.model.variants.Model.hub_torque>`; not read.
         """
         raise InputValueError("the torque of a prescribed hub motion is the structure's: use "
                               "model.mechanical.hub_torque")

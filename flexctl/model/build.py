@@ -1,8 +1,9 @@
 """``build_model``: the model of a system, of one variant, on its cantilever modes.
 
-A :class:`~flexctl.model.parameters.HubBeam` (one beam on a pinned hub) gives a
-:class:`~flexctl.model.variants.Model`; a :class:`~flexctl.model.structure.Structure` (or a
-``HubBeam`` on a free hub) a :class:`~flexctl.model.structure_model.StructureModel`.
+A :class:`~flexctl.model.parameters.HubBeam` (one beam) or a
+:class:`~flexctl.model.structure.Structure` (several appendages), on a pinned or free hub,
+gives a :class:`~flexctl.model.variants.Model`; with an actuator, an
+:class:`~flexctl.model.actuated.ActuatedModel`.
 """
 
 from __future__ import annotations
@@ -12,14 +13,12 @@ from collections import OrderedDict
 
 from .actuated import actuated_model
 from .actuators import as_actuator
-from .checks import check_choice, check_integer
-from .errors import InputTypeError, InputValueError
-from .exact import EXACT_MAX_MODES
-from .matrices import assemble
+from .checks import check_choice
+from .errors import InputTypeError
 from .parameters import HubBeam
 from .structure import Structure
 from .structure_model import structure_model
-from .variant import MAX_MODES, VARIANTS, Variant
+from .variant import VARIANTS, Variant
 from .variants import Model
 
 __all__ = ["build_model", "rebuild"]
@@ -39,9 +38,7 @@ def build_model(system: HubBeam, n_modes: int = 4, variant: str = "first_order",
     Parameters
     ----------
     system : HubBeam or Structure
-        One beam on a pinned hub, or any number of appendages on a pinned or free hub (a
-        :class:`~flexctl.model.structure_model.StructureModel` is returned for a
-        ``Structure`` and for a ``HubBeam`` on a free hub).
+        One beam, or any number of appendages, on a pinned or free hub.
     n_modes : int, dict or sequence of int, optional
         Number of cantilever modes ``N`` (1 to 200) of each appendage: one int for all, or
         ``{name: int}``, or one per appendage in order. Default 4.
@@ -103,25 +100,12 @@ def _memory_key(system, n_modes, variant, actuator):
 def _build(system, n_modes, variant, actuator) -> Model:
     variant = Variant(check_choice("", "variant", variant, VARIANTS))
     actuator = as_actuator(actuator)
-    if actuator is not None:
-        if not isinstance(system, (HubBeam, Structure)):
-            raise InputTypeError(f"system must be a HubBeam or a Structure; got "
-                                 f"{type(system).__name__}")
-        return actuated_model(system, n_modes, variant, actuator)
-    if isinstance(system, Structure) or (isinstance(system, HubBeam) and system.hub.free):
-        return _build_structure_model(system, n_modes, variant)
-    n_modes = check_integer("", "n_modes", n_modes, minimum=1, maximum=MAX_MODES)
-    if variant.exact and n_modes > EXACT_MAX_MODES:
-        raise InputValueError(
-            f"n_modes must be at most {EXACT_MAX_MODES} for the exact variant (its geometry "
-            "grows as the square of the modes times the quadrature points, and large "
-            "deflection lives in the low modes; converge the higher ones on first_order); "
-            f"got {n_modes!r}")
-    if not isinstance(system, HubBeam):
+    if not isinstance(system, (HubBeam, Structure)):
         raise InputTypeError(f"system must be a HubBeam or a Structure; got "
                              f"{type(system).__name__}")
-    return Model(system=system, n_modes=int(n_modes), variant=variant,
-                 matrices=assemble(system, int(n_modes)))
+    if actuator is not None:
+        return actuated_model(system, n_modes, variant, actuator)
+    return structure_model(system, n_modes, variant)
 
 
 def rebuild(model: Model, n_modes=None, variant: str | None = None, *, system=None) -> Model:
@@ -152,8 +136,3 @@ def rebuild(model: Model, n_modes=None, variant: str | None = None, *, system=No
     return build_model(model.system if system is None else system, n_modes=n_modes,
                        variant=variant)
 
-
-def _build_structure_model(system, n_modes, variant: str) -> Model:
-    """A :class:`~flexctl.model.structure_model.StructureModel` of a Structure, or of a
-    HubBeam on a free hub (its one appendage unnamed)."""
-    return structure_model(system, n_modes, variant)

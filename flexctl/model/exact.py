@@ -37,7 +37,7 @@ those of a converged reference rule to :data:`PANEL_TOLERANCE`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property, lru_cache
 from typing import NamedTuple
 
@@ -49,8 +49,8 @@ from .layout import StateLayout
 from .modes import mode_shapes
 from .parameters import HubBeam
 
-__all__ = ["EXACT_MAX_MODES", "ExactGeometry", "PanelRule", "Quadrature", "choose_rule",
-           "exact_geometry", "appendage_terms", "vectorized_rhs", "symmetric_solve",
+__all__ = ["EXACT_MAX_MODES", "PanelRule", "Quadrature", "choose_rule",
+           "appendage_terms", "vectorized_rhs", "symmetric_solve",
            "VELOCITY_FROM_JACOBIAN", "PANEL_TOLERANCE", "POINT_CANDIDATES", "PANEL_CANDIDATES",
            "REFERENCE_POINTS", "reference_rule"]
 
@@ -382,82 +382,6 @@ def _sparse(a):
     return ca.sparsify(ca.DM(a))
 
 
-@dataclass(frozen=True, eq=False)
-class ExactGeometry:
-    """CasADi functions of the geometrically exact model of one system on ``N`` modes.
-
-    Build with :func:`exact_geometry` (cached). ``x`` is the model state
-    ``[theta, q_1..q_N, theta_dot, q_1_dot..q_N_dot]``; see the module docstring for the
-    equations.
-
-    Attributes
-    ----------
-    system : HubBeam
-    n_modes : int
-    quadrature : Quadrature
-        Gauss points per panel and panels of the quadrature (:class:`PanelRule`,
-        :func:`choose_rule`).
-    rhs : casadi.Function
-        ``(x, u) -> xdot``, torque ``u`` in N m (SX: every quadrature node written out).
-    rhs_vectorized : casadi.Function
-        The same as an MX function of whole-vector operations over the quadrature nodes
-        (:func:`vectorized_rhs`): its operations and generated code do not grow with the
-        nodes; several times faster on CasADi's virtual machine and quick to compile.
-    beam : casadi.Function
-        ``(q, q_dot, rate, acceleration) -> q_tt`` under a prescribed hub motion.
-    torque : casadi.Function
-        ``(x, theta_tt, q_tt) -> T_h``, the hub equation, N m.
-    mass : casadi.Function
-        ``q -> M(q)``, shape (N + 1, N + 1).
-    tip : casadi.Function
-        ``q -> [p_x(l), p_y(l)]``, tip position in the hub frame, m.
-    energy : casadi.Function
-        ``x -> E``, kinetic plus bending energy, J.
-    slopes : ndarray, shape (n, N)
-        ``phi_i'`` at the quadrature's nodes, 1/m (read-only).
-    weights : ndarray, shape (n,)
-        The quadrature's weights of ``int_0^l``, m (read-only).
-    """
-
-    system: HubBeam
-    n_modes: int
-    quadrature: Quadrature
-    rhs: object = field(repr=False)
-    rhs_vectorized: object = field(repr=False)
-    beam: object = field(repr=False)
-    torque: object = field(repr=False)
-    mass: object = field(repr=False)
-    tip: object = field(repr=False)
-    energy: object = field(repr=False)
-    slopes: np.ndarray = field(repr=False)
-    weights: np.ndarray = field(repr=False)
-
-    def tip_positions(self, q) -> np.ndarray:
-        """:attr:`tip` on numbers, in NumPy: ``[b + int_0^l cos psi, int_0^l sin psi]`` on the
-        same nodes and weights, m, shape (2,) for ``q`` (N,) or (2, P) for ``q`` (N, P) (a
-        run's output times: no CasADi call per column).
-
-        Parameters
-        ----------
-        q : array_like, shape (N,) or (N, P)
-            Modal coordinates, m.
-        """
-        psi = self.slopes @ np.asarray(q, dtype=float)
-        return np.stack((self.system.hub.radius + self.weights @ np.cos(psi),
-                         self.weights @ np.sin(psi)))
-
-    def tip_deflections(self, q) -> np.ndarray:
-        """The second row of :meth:`tip_positions` alone, ``int_0^l sin psi``, m, shape ()
-        or (P,).
-
-        Parameters
-        ----------
-        q : array_like, shape (N,) or (N, P)
-            Modal coordinates, m.
-        """
-        return self.weights @ np.sin(self.slopes @ np.asarray(q, dtype=float))
-
-
 def appendage_terms(system, n_modes, quadrature, q, q_dot, rate) -> dict:
     """One beam's share of the exact equations in its own frame, as CasADi expressions.
 
@@ -666,46 +590,6 @@ def vectorized_rhs(system: HubBeam, n_modes: int, quadrature, matrices):
     return _rhs(system, n_modes, quadrature, matrices, vectorized=True)[0]
 
 
-def _build(system: HubBeam, n_modes: int, quadrature, matrices) -> ExactGeometry:
-    import casadi as ca
-
-    n, layout = n_modes, StateLayout.single(n_modes)
-    rhs, x, mass, bias, tip = _rhs(system, n, quadrature, matrices)
-    q, rate = layout.modal(x), layout.hub_rate(x)
-    stiffness, damping = ca.DM(matrices.K_ff), ca.DM(matrices.C_ff)
-    friction = system.hub.friction
-    name = f"exact_N{n}"
-
-    theta_tt = ca.SX.sym("theta_tt")
-    q_tt = ca.SX.sym("q_tt", n)
-    hub_row = ca.mtimes(mass[0, :], ca.vertcat(theta_tt, q_tt)) + bias[0] + friction * rate
-    torque = ca.Function(f"{name}_torque", [x, theta_tt, q_tt], [hub_row],
-                         ["x", "theta_tt", "q_tt"], ["torque"])
-
-    qs, qds = ca.SX.sym("q", n), ca.SX.sym("q_dot", n)
-    w, acc_hub = ca.SX.sym("rate"), ca.SX.sym("acceleration")
-    m_b, bias_b, _ = _terms(system, n, quadrature, qs, qds, w)
-    load = (-ca.mtimes(stiffness, qs) - ca.mtimes(damping, qds) - bias_b[1:]
-            - m_b[1:, 0] * acc_hub)
-    beam = ca.Function(f"{name}_beam", [qs, qds, w, acc_hub],
-                       [symmetric_solve(m_b[1:, 1:], load)],
-                       ["q", "q_dot", "rate", "acceleration"], ["q_tt"], {"cse": True})
-
-    mass_fn = ca.Function(f"{name}_mass", [q], [mass], ["q"], ["M"])
-    tip_fn = ca.Function(f"{name}_tip", [q], [tip], ["q"], ["p_tip"])
-    v = x[layout.velocities]
-    kinetic = 0.5 * ca.dot(v, ca.mtimes(mass, v))
-    energy = ca.Function(f"{name}_energy", [x],
-                         [kinetic + 0.5 * ca.dot(q, ca.mtimes(stiffness, q))], ["x"], ["E"])
-    rule = PanelRule.build(quadrature.panels, system.beam.length, quadrature.points)
-    slopes = np.array(rule.slopes(n))
-    slopes.setflags(write=False)
-    return ExactGeometry(system=system, n_modes=n, quadrature=quadrature, rhs=rhs,
-                         rhs_vectorized=vectorized_rhs(system, n, quadrature, matrices), beam=beam,
-                         torque=torque, mass=mass_fn, tip=tip_fn, energy=energy, slopes=slopes,
-                         weights=rule.weights)
-
-
 def _test_states(system: HubBeam, matrices) -> list:
     """Two strongly deflected, fast states: modal amplitudes falling as ``1 / i^4`` (as a
     static load spreads over the modes) with the hub turning at the first beam frequency, and
@@ -803,20 +687,3 @@ def _operations(quadrature: Quadrature, n_modes: int, n_masses: int) -> float:
     integrals = columns * (n * (points + 3 + 0.5 * (panels - 1))
                            + n_masses * (2 * points + panels))
     return integrals + n * (2 * n_modes ** 2 + 16 * n_modes + 30)
-
-
-@lru_cache(maxsize=32)
-def _cached(system: HubBeam, n_modes: int, matrices) -> ExactGeometry:
-    return _build(system, n_modes, choose_rule(system, matrices), matrices)
-
-
-def exact_geometry(matrices) -> ExactGeometry:
-    """The exact model's CasADi functions for assembled ``matrices`` (built once, cached).
-
-    Parameters
-    ----------
-    matrices : ModalMatrices
-        A one-beam system's assembled matrices (:func:`~flexctl.model.matrices.assemble`):
-        the system and its mode count.
-    """
-    return _cached(matrices.system, matrices.n_modes, matrices)

@@ -7,9 +7,10 @@ The state, input and output orders are those of :mod:`flexctl.model`.
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg
 
 __all__ = ["to_nonlinear_iosystem", "to_casadi", "to_casadi_outputs", "signal_names",
-           "linearize_at", "dynamics_jacobians"]
+           "linearize_at", "dynamics_jacobians", "matrix_terms"]
 
 
 def signal_names(names) -> list:
@@ -146,14 +147,15 @@ def symbolic_dynamics(model, x, u):
     """
     import casadi as ca
 
-    if model.variant.exact or hasattr(model, "functions"):
-        return model.geometry.rhs(x, u)
-    mat, c = model.matrices, model._c
+    if not (isinstance(x, ca.MX) and model.matrix_form):
+        return model.functions.rhs(x, u)
+    # products with the dense modal matrices: a Jacobian built at once for many modes
+    mat, c = model.matrices, matrix_terms(model)
     _, q, w, qd = model.layout.split(x)
     dm = ca.DM
     f_beam = (-ca.mtimes(dm(mat.C_ff), qd) - ca.mtimes(dm(mat.K_ff), q)
               + w ** 2 * ca.mtimes(dm(c["stiff_d"]), q))
-    f_hub = u[0] - model.system.hub.friction * w
+    f_hub = u[0] - model.structure.hub.friction * w
     j_eff = c["j_rigid_eff"]
     if model.variant.quadratic_inertia:
         d = dm(mat.D)
@@ -163,6 +165,24 @@ def symbolic_dynamics(model, x, u):
     theta_tt = (f_hub - ca.dot(g, f_beam)) / j_eff
     q_tt = ca.mtimes(dm(c["m_inv"]), f_beam) - g * theta_tt
     return model.layout.join(theta=w, q=qd, theta_dot=theta_tt, q_dot=q_tt)
+
+
+def matrix_terms(model) -> dict:
+    """``M_ff^-1`` (``"m_inv"``), ``g = M_ff^-1 m_tf`` (``"g"``) and the model's spin and hub
+    terms (``"stiff_d"``, ``"j_rigid_eff"``) of a model's :attr:`~Model.matrix_form`, kept with
+    the model.
+
+    Parameters
+    ----------
+    model : Model
+        A model whose ``matrix_form`` is true.
+    """
+    if "m_inv" not in model._c:
+        mat = model.matrices
+        m_inv = scipy.linalg.cho_solve(scipy.linalg.cho_factor(mat.M_ff), np.eye(mat.n_modes))
+        m_inv = 0.5 * (m_inv + m_inv.T)
+        model._c.update(m_inv=m_inv, g=m_inv @ mat.m_tf)
+    return model._c
 
 
 def symbolic_beam_dynamics(model, y, rate, acceleration):
@@ -183,16 +203,14 @@ def symbolic_beam_dynamics(model, y, rate, acceleration):
 
     mat, beam = model.matrices, model.layout.without_rotation()
     q, qd = beam.modal(y), beam.modal_rates(y)
-    if hasattr(model, "functions"):
-        if model.system.free:
-            model._pinned_only("a prescribed hub motion")
+    if model.structure.free:
+        model._pinned_only("a prescribed hub motion")
+    if not (isinstance(y, ca.MX) and model.matrix_form):
         return ca.vertcat(qd, model.functions.beam(q, qd, rate, acceleration))
-    if model.variant.exact:
-        return ca.vertcat(qd, model.geometry.beam(q, qd, rate, acceleration))
-    dm = ca.DM
+    dm, c = ca.DM, matrix_terms(model)
     f_beam = (-ca.mtimes(dm(mat.C_ff), qd) - ca.mtimes(dm(mat.K_ff), q)
-              + rate ** 2 * ca.mtimes(dm(model._c["stiff_d"]), q) - dm(mat.m_tf) * acceleration)
-    return ca.vertcat(qd, ca.mtimes(dm(model._c["m_inv"]), f_beam))
+              + rate ** 2 * ca.mtimes(dm(c["stiff_d"]), q) - dm(mat.m_tf) * acceleration)
+    return ca.vertcat(qd, ca.mtimes(dm(c["m_inv"]), f_beam))
 
 
 def to_casadi(model, sx: bool = True):
@@ -334,11 +352,5 @@ def to_casadi_outputs(model, sx: bool = True):
 
     sym = ca.SX.sym if sx else ca.MX.sym
     x = sym("x", model.n_states)
-    if hasattr(model, "functions"):
-        return ca.Function(f"flexctl_outputs_{model.variant}", [x], [model.functions.outputs(x)],
-                           ["x"], ["y"])
-    y = ca.mtimes(ca.DM(model.output_matrix), x)
-    if model.variant.exact:
-        tip = model.geometry.tip(model.layout.modal(x))
-        y = ca.vertcat(y[:2], tip[1], y[3], model.layout.hub_angle(x) + ca.atan2(tip[1], tip[0]))
-    return ca.Function(f"flexctl_outputs_N{model.n_modes}", [x], [y], ["x"], ["y"])
+    return ca.Function(f"flexctl_outputs_{model.variant}", [x], [model.functions.outputs(x)],
+                       ["x"], ["y"])

@@ -148,10 +148,13 @@ def _constant_inverse(mass):
     return ca.DM(0.5 * (inverse + inverse.T))
 
 
-def _solve(mass, rhs, variables):
+def _solve(mass, rhs, variables, condensed=None):
     """``mass^-1 rhs``: through a numeric inverse where ``mass`` is constant, through the
     Schur complement of the hub rotation where only its row and column vary (the
-    small-deflection variants: ``J(q)`` and ``e_z x S(q)``), else a symbolic solve."""
+    small-deflection variants: ``J(q)`` and ``e_z x S(q)``), else a symbolic solve.
+    ``condensed = (J_0, J_0 - m_tf^T M_ff^-1 m_tf)`` of a pinned hub, the second computed
+    without the cancelling subtraction, gives the Schur complement as it plus the varying
+    part of ``J(q)`` (a heavy tip mass made the subtraction 30 times too large)."""
     import casadi as ca
 
     if not ca.depends_on(mass, variables):
@@ -164,7 +167,9 @@ def _solve(mass, rhs, variables):
     inverse = _constant_inverse(rest)
     column = mass[1:, 0]
     g = ca.mtimes(inverse, column)
-    hub = (rhs[0] - ca.dot(g, rhs[1:])) / (mass[0, 0] - ca.dot(column, g))
+    schur = mass[0, 0] - ca.dot(column, g) if condensed is None \
+        else condensed[1] + (mass[0, 0] - condensed[0])
+    hub = (rhs[0] - ca.dot(g, rhs[1:])) / schur
     return ca.vertcat(hub, ca.mtimes(inverse, rhs[1:]) - g * hub)
 
 
@@ -195,7 +200,8 @@ def structure_functions(model) -> StructureFunctions:
     v_hub = ca.mtimes(rot.T, x[layout.hub_velocity]) if free else None
     forces = ca.vertcat(u - mat.system.hub.friction * rate, ca.SX.zeros(2 if free else 0),
                         -ca.mtimes(ca.DM(mat.K_ff), q) - ca.mtimes(ca.DM(mat.C_ff), q_dot))
-    acc = _solve(mass, forces - bias, x)
+    condensed = None if free or variant.exact else (mat.J0, mat.condensed_inertia)
+    acc = _solve(mass, forces - bias, x, condensed)
     n_q = mat.n_modes
     parts = dict(theta=rate, q=q_dot, theta_dot=acc[0], q_dot=acc[acc.size1() - n_q:])
     if free:

@@ -315,7 +315,7 @@ def _calls_model(model, hub_motion) -> bool:
     return model.variant.exact and (hub_motion is None or compiles_prescribed(model))
 
 
-#: Modes above which a one-beam small-deflection model enters the integrators in matrix form
+#: Modes above which a small-deflection model on a pinned hub enters the integrators in matrix form
 #: (MX: products with its dense modal matrices) rather than written out in scalars (SX, then
 #: compiled). The scalar form's Jacobian, which CVODES's Newton iterations need, is built in
 #: time that grows as the cube of the modes (22 s at 200 modes, for each tolerance) and
@@ -327,8 +327,7 @@ MATRIX_FORM_MODES = 12
 
 def _matrix_form(model) -> bool:
     """Whether ``model`` enters the integrators in matrix form (:data:`MATRIX_FORM_MODES`)."""
-    return (not model.variant.exact and not hasattr(model, "functions")
-            and model.n_modes > MATRIX_FORM_MODES)
+    return model.matrix_form and model.n_modes > MATRIX_FORM_MODES
 
 
 def _drive_symbols(model, scale, inputs, n_numbers) -> tuple:

@@ -274,10 +274,10 @@ def _modal_form(model, spin_rate: float, prescribed: bool):
     mat = model.matrices
     if prescribed:
         mass, stiff, damp = mat.M_ff, model.stiffness_matrix(spin_rate), mat.C_ff
-        load, tip = -mat.m_tf, mat.tip
+        load, tip = -mat.m_tf, model.mode_tips
     else:
         mass, stiff, damp, load = model.second_order_form(spin_rate)
-        tip = model.layout.embed(mat.tip, size=model.layout.n_coordinates)
+        tip = model.layout.embed(model.mode_tips, size=model.layout.n_coordinates)
     w2, vecs = scipy.linalg.eigh(stiff, mass)
     if not prescribed:
         # the rigid-body mode (w = 0) moves the hub only: no tip deflection

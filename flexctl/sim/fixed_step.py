@@ -189,13 +189,12 @@ def lifted_core(model, hub_motion):
 
 def _exact_core(model, hub_motion):
     """The exact model's scalar function that its RK4 step calls: its beam under a prescribed
-    hub motion (one beam), its right-hand side under a torque (one beam or a structure);
-    None for the other variants (written out in the step) and a structure's prescribed
-    motion (inlined as the other variants)."""
+    hub motion (a pinned hub), its right-hand side under a torque; None for the other
+    variants (written out in the step)."""
     if not model.variant.exact:
         return None
     if hub_motion is not None:
-        return None if hasattr(model, "functions") else model.geometry.beam
+        return None if model.structure.free else model.functions.beam
     return model.casadi()
 
 

@@ -2,7 +2,7 @@
 
 CVODES evaluates a model's right-hand side tens of thousands of times a run. For the exact
 variant that evaluation dominates on CasADi's virtual machine (11 us at 4 modes against 1 us
-for first_order). Here its scalar form (:attr:`~flexctl.model.exact.ExactGeometry.rhs`,
+for first_order). Here its scalar form (:attr:`Model.functions <flexctl.model.variants.Model.functions>` ``.rhs``,
 every quadrature node written out) is compiled through the persistent cache
 (:mod:`flexctl.sim.compile_cache`) with its numbers lifted into an input
 (:func:`~flexctl.sim.lifted_constants.lift_constants`): one library per structure (modes,
@@ -78,14 +78,14 @@ def _built(model, form: str):
 
 def compiles_prescribed(model) -> bool:
     """Whether a prescribed hub motion of ``model`` runs its compiled beam and hub torque:
-    the one-beam exact model (a structure's prescribed motion stays inlined).
+    an exact model on a pinned hub.
 
     Parameters
     ----------
     model : Model
         The model of the run.
     """
-    return model.variant.exact and not hasattr(model, "functions")
+    return model.variant.exact and not model.structure.free
 
 
 def integration_rhs(model):
@@ -104,8 +104,8 @@ def integration_rhs(model):
 
 def integration_beam(model):
     """``(y, rate, acceleration) -> dy/dt`` under a prescribed hub motion, ``y = [q,
-    q_dot]``: compiled for a one-beam exact model, :meth:`flexctl.Model.integration_beam`
-    otherwise.
+    q_dot]``: compiled for an exact model on a pinned hub,
+    :meth:`flexctl.Model.integration_beam` otherwise.
 
     Parameters
     ----------
@@ -119,7 +119,7 @@ def integration_beam(model):
 
 def prescribed_torque(model, states, acceleration):
     """The hub torque a prescribed motion needs, N m, shape (P,): the beam's accelerations,
-    then the hub equation, both compiled for a one-beam exact model; None where they are not
+    then the hub equation, both compiled for an exact model on a pinned hub; None where they are not
     (the caller then uses the model's own :meth:`~flexctl.Model.beam_accelerations` and
     :meth:`~flexctl.Model.hub_torque`).
 

@@ -156,7 +156,7 @@ def test_lqr_gain_equals_control_lqr(design, spin_rate):
     weights = LQRWeights(hub_angle=0.05, hub_rate=0.5, tip_deflection=0.02,
                          modal_energy=0.1, torque=3.0)
     n = design.n_modes
-    tip_row = np.concatenate(([0.0], design.matrices.tip, np.zeros(n + 1)))
+    tip_row = np.concatenate(([0.0], design.mode_tips, np.zeros(n + 1)))
     q_mat = np.outer(tip_row, tip_row) / 0.02 ** 2
     q_mat[0, 0] += 1 / 0.05 ** 2
     q_mat[n + 1, n + 1] += 1 / 0.5 ** 2
