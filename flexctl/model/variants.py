@@ -723,6 +723,7 @@ class Model:
         """
         k = self._appendage(appendage)
         x = self._check_state(x)
+        position = check_real("deflection", "position", position)
         part = self.matrices.parts[k]
         return part.deflection_vector(position) @ self.layout.modal(x)[self.matrices.slices[k]]
 
