@@ -7,10 +7,9 @@ The state, input and output orders are those of :mod:`flexctl.model`.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 __all__ = ["to_nonlinear_iosystem", "to_casadi", "to_casadi_outputs", "signal_names",
-           "linearize_at", "dynamics_jacobians", "matrix_terms"]
+           "linearize_at", "dynamics_jacobians"]
 
 
 def signal_names(names) -> list:
@@ -150,7 +149,7 @@ def symbolic_dynamics(model, x, u):
     if not (isinstance(x, ca.MX) and model.matrix_form):
         return model.functions.rhs(x, u)
     # products with the dense modal matrices: a Jacobian built at once for many modes
-    mat, c = model.matrices, matrix_terms(model)
+    mat, c = model.matrices, model.matrix_terms()
     _, q, w, qd = model.layout.split(x)
     dm = ca.DM
     f_beam = (-ca.mtimes(dm(mat.C_ff), qd) - ca.mtimes(dm(mat.K_ff), q)
@@ -165,24 +164,6 @@ def symbolic_dynamics(model, x, u):
     theta_tt = (f_hub - ca.dot(g, f_beam)) / j_eff
     q_tt = ca.mtimes(dm(c["m_inv"]), f_beam) - g * theta_tt
     return model.layout.join(theta=w, q=qd, theta_dot=theta_tt, q_dot=q_tt)
-
-
-def matrix_terms(model) -> dict:
-    """``M_ff^-1`` (``"m_inv"``), ``g = M_ff^-1 m_tf`` (``"g"``) and the model's spin and hub
-    terms (``"stiff_d"``, ``"j_rigid_eff"``) of a model's :attr:`~Model.matrix_form`, kept with
-    the model.
-
-    Parameters
-    ----------
-    model : Model
-        A model whose ``matrix_form`` is true.
-    """
-    if "m_inv" not in model._c:
-        mat = model.matrices
-        m_inv = scipy.linalg.cho_solve(scipy.linalg.cho_factor(mat.M_ff), np.eye(mat.n_modes))
-        m_inv = 0.5 * (m_inv + m_inv.T)
-        model._c.update(m_inv=m_inv, g=m_inv @ mat.m_tf)
-    return model._c
 
 
 def symbolic_beam_dynamics(model, y, rate, acceleration):
@@ -207,7 +188,7 @@ def symbolic_beam_dynamics(model, y, rate, acceleration):
         model._pinned_only("a prescribed hub motion")
     if not (isinstance(y, ca.MX) and model.matrix_form):
         return ca.vertcat(qd, model.functions.beam(q, qd, rate, acceleration))
-    dm, c = ca.DM, matrix_terms(model)
+    dm, c = ca.DM, model.matrix_terms()
     f_beam = (-ca.mtimes(dm(mat.C_ff), qd) - ca.mtimes(dm(mat.K_ff), q)
               + rate ** 2 * ca.mtimes(dm(c["stiff_d"]), q) - dm(mat.m_tf) * acceleration)
     return ca.vertcat(qd, ca.mtimes(dm(c["m_inv"]), f_beam))

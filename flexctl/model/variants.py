@@ -161,6 +161,18 @@ class Model:
         modes (:data:`flexctl.sim.compiled.MATRIX_FORM_MODES`)."""
         return self.HAS_MATRIX_FORM and not self.variant.exact and not self.structure.free
 
+    def matrix_terms(self) -> dict:
+        """The numbers of the :attr:`matrix_form`: ``M_ff^-1`` (``"m_inv"``), ``g = M_ff^-1
+        m_tf`` (``"g"``), the spin term ``D`` (``"stiff_d"``) and the condensed hub inertia
+        (``"j_rigid_eff"``), computed once and kept."""
+        if "m_inv" not in self._c:
+            mat = self.matrices
+            m_inv = scipy.linalg.cho_solve(scipy.linalg.cho_factor(mat.M_ff),
+                                           np.eye(mat.n_modes))
+            m_inv = 0.5 * (m_inv + m_inv.T)
+            self._c.update(m_inv=m_inv, g=m_inv @ mat.m_tf)
+        return self._c
+
     @property
     def functions(self):
         """The CasADi functions (:class:`~flexctl.model.structure_dynamics.StructureFunctions`)."""
@@ -301,9 +313,7 @@ class Model:
     def _matrix_accelerations(self, x, torque):
         """:meth:`accelerations` of a :attr:`matrix_form` model, in numpy (a SciPy run calls
         it at every step: a CasADi call costs more than the arithmetic)."""
-        from .exports import matrix_terms
-
-        mat, c = self.matrices, matrix_terms(self)
+        mat, c = self.matrices, self.matrix_terms()
         _, q, w, qd = self.split(x)
         f_beam = -(mat.C_ff @ qd) - mat.K_ff @ q + w ** 2 * (c["stiff_d"] @ q)
         f_hub = torque - self.structure.hub.friction * w
@@ -417,9 +427,7 @@ class Model:
             return self._evaluate(self.functions.beam, np.ndim(q) > 1, q, q_dot, theta_dot,
                                   theta_tt)
         # M_ff q_tt + C_ff q_t + (K_ff - theta_t^2 D) q = -m_tf theta_tt, in numpy
-        from .exports import matrix_terms
-
-        mat, c = self.matrices, matrix_terms(self)
+        mat, c = self.matrices, self.matrix_terms()
         q, q_dot = np.asarray(q, dtype=float), np.asarray(q_dot, dtype=float)
         f_beam = -(mat.C_ff @ q_dot) - mat.K_ff @ q + np.asarray(theta_dot) ** 2 * (
             c["stiff_d"] @ q)
