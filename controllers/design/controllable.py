@@ -26,6 +26,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -33,12 +34,15 @@ import numpy as np
 
 from flexctl.model.errors import InputError, InputValueError
 
-__all__ = ["ControllablePart", "controllable_part", "lqr_on_part", "lqe_on_part",
-           "dlqr_on_part", "design_failure"]
+__all__ = ["ControllablePart", "controllable_part", "input_part", "lqr_on_part", "lqe_on_part",
+           "dlqr_on_part", "design_failure", "INPUT_TOLERANCE"]
 
 #: Packages whose ``ValueError`` or ``ArithmeticError`` is a numerical failure of a design (a
 #: Riccati equation without a stabilising solution, a singular matrix), not a bug of ours.
 SOLVER_PACKAGES = ("control", "slycot", "scipy", "numpy")
+#: A direction of the state that the inputs cannot move (a left eigenvector ``w`` of ``A``
+#: with ``|w^H B| <= INPUT_TOLERANCE |B|``, ``|w| = 1``): :func:`input_part`.
+INPUT_TOLERANCE = 1e-8
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,6 +108,133 @@ def controllable_part(model, spin_rate: float = 0.0) -> ControllablePart:
                 "each other, or a free hub's translation); the design acts on the others and "
                 "leaves these at their open-loop poles")
     return ControllablePart(basis=basis, projector=projector, dropped=dropped, note=note)
+
+
+def input_part(a, b, *, max_frequency: float = math.inf,
+               tolerance: float = INPUT_TOLERANCE) -> ControllablePart:
+    """The :class:`ControllablePart` of any linear plant ``x' = A x + B u``, from its matrices,
+    without the poles faster than ``max_frequency``.
+
+    - **Fast poles.** An ordered real Schur form of ``A^T`` gives orthonormal rows ``P_1``
+      that span the left-invariant subspace of the poles with ``|lambda| <= max_frequency``
+      (``P_1 A = A_1 P_1``): ``z_1 = P_1 x`` obeys ``z_1' = A_1 z_1 + P_1 B u`` whatever the
+      fast poles do, so a gain on ``z_1`` leaves them at their open-loop values. One of
+      ``A`` gives the right-invariant subspace ``V_1`` of the same poles, and ``T_1 = V_1
+      (P_1 V_1)^-1``: a state of the slow poles is ``x = T_1 z_1`` (an estimator's model of
+      the readings, ``y = C T_1 z_1``, misses only the fast poles' part).
+    - **Directions the inputs cannot move.** In that part, a left eigenvector ``w`` of ``A_1``
+      with ``w^H P_1 B = 0`` (the Popov-Belevitch-Hautus test) evolves on its own; for an
+      eigenvalue of several left eigenvectors (identical appendages) the combinations of them
+      that the inputs miss are taken. At zero, where a rigid body's double integrator makes
+      the matrix defective, its left null space is used instead (a free hub's linear
+      momentum: ``p A = 0``, ``p B = 0``). With ``R`` an orthonormal real basis of those
+      directions and ``S`` one of its complement, ``z = S^T z_1`` obeys ``z' = S^T A_1 S z +
+      S^T P_1 B u + S^T A_1 R (R^T z_1)`` while ``R^T z_1`` moves on its own.
+
+    A design on ``(P A T, P B)`` with ``P = S^T P_1`` and ``T = T_1 S`` (``P T = I``)
+    closes the loop on every pole but those left out, which keep their open-loop values.
+
+    Parameters
+    ----------
+    a : array_like, shape (n, n)
+        State matrix ``A``.
+    b : array_like, shape (n, m)
+        Input matrix ``B``.
+    max_frequency : float, optional
+        Poles faster than this (``|lambda|``, rad/s) are left out. Default: none.
+    tolerance : float, optional
+        ``|w^H B| / |B|`` (``|w| = 1``) below which a direction counts as out of the inputs'
+        reach. Default :data:`INPUT_TOLERANCE`.
+
+    Returns
+    -------
+    ControllablePart
+        ``basis`` ``T`` (n, r), ``projector`` ``P`` (r, n), the left-out poles' frequencies
+        (``|lambda|``, rad/s; 0 for a conserved quantity), and a note saying which.
+
+    Examples
+    --------
+    >>> a = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    >>> part = input_part(a, np.array([[0.0], [1.0], [0.0]]))
+    >>> part.basis.shape, part.dropped
+    ((3, 2), (1.0,))
+    """
+    import scipy.linalg
+
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if not float(np.linalg.norm(b)) > 0:
+        raise InputValueError("input_part: the input matrix B is zero: nothing can be moved")
+    fast = []
+    slow, back = np.eye(a.shape[0]), np.eye(a.shape[0])
+    if np.isfinite(max_frequency):
+        def kept(re, im):
+            return math.hypot(re, im) <= max_frequency
+
+        form, vectors, count = scipy.linalg.schur(a.T, output="real", sort=kept)
+        slow = vectors[:, :count].T
+        right = scipy.linalg.schur(a, output="real", sort=kept)[1][:, :count]
+        back = right @ np.linalg.inv(slow @ right)
+        fast = sorted(float(w) for w in np.abs(np.linalg.eigvals(form[count:, count:])))
+        fast = fast[::2] if all(w > 0 for w in fast) else fast
+    a_1, b_1 = slow @ a @ back, slow @ b
+    missed, dropped = _missed(a_1, b_1, tolerance)
+    if missed is None:
+        complement = np.eye(a_1.shape[0])
+    else:
+        u_r, s_r, _ = np.linalg.svd(np.hstack([missed.real, missed.imag]))
+        complement = u_r[:, int(np.sum(s_r > 1e-8 * s_r[0])):]
+    projector, basis = complement.T @ slow, back @ complement
+    notes = []
+    if dropped:
+        notes.append(f"{len(dropped)} pole{'s' if len(dropped) > 1 else ''} (at "
+                     f"{', '.join(f'{w:.4g}' for w in dropped)} rad/s) cannot be moved by the "
+                     "inputs (appendages bending against each other, or a free hub's "
+                     "conserved momentum)")
+    if fast:
+        notes.append(f"{len(fast)} mode{'s' if len(fast) > 1 else ''} faster than "
+                     f"{max_frequency:.4g} rad/s (up to {fast[-1]:.4g} rad/s) are out of the "
+                     "design")
+    note = ("; ".join(notes) + ": the design acts on the others and leaves these at their "
+            "open-loop poles") if notes else ""
+    return ControllablePart(basis=basis, projector=projector,
+                            dropped=tuple(sorted(dropped + fast)), note=note)
+
+
+def _missed(a, b, tolerance: float) -> tuple:
+    """``(directions, frequencies)``: the left eigen-directions (n, d) of ``A`` that ``B``
+    misses (None when none) and their poles' ``|lambda|`` (:func:`input_part`)."""
+    import scipy.linalg
+
+    size_a, size_b = max(float(np.linalg.norm(a, 2)), 1e-300), float(np.linalg.norm(b, 2))
+    directions, dropped = [], []
+    u_a, s_a, _ = np.linalg.svd(a)                 # zero: the left null space of A
+    null = u_a[:, s_a <= 1e-10 * size_a]
+    free = _left_null(null.T @ b, tolerance * size_b)
+    if free.shape[1]:
+        directions.append(null @ free)
+        dropped += [0.0] * free.shape[1]
+    lam, left = scipy.linalg.eig(a, left=True, right=False)
+    rigid = 100.0 * np.sqrt(np.finfo(float).eps * size_a)
+    seen = np.zeros(lam.size, dtype=bool)
+    for k in np.argsort(-lam.imag):       # each cluster of (nearly) equal poles together
+        if seen[k] or abs(lam[k]) <= rigid or lam[k].imag < 0:
+            continue
+        cluster = np.abs(lam - lam[k]) <= 1e-7 * abs(lam[k])
+        seen |= cluster | (np.abs(lam - lam[k].conjugate()) <= 1e-7 * abs(lam[k]))
+        basis = np.linalg.qr(left[:, cluster])[0]
+        free = _left_null(basis.conj().T @ b, tolerance * size_b)
+        if free.shape[1]:
+            directions.append(basis @ free)
+            dropped += [float(abs(lam[k]))] * free.shape[1]
+    return (np.hstack(directions) if directions else None), dropped
+
+
+def _left_null(m, tolerance: float) -> np.ndarray:
+    """Orthonormal ``c`` (k, d) with ``|c^H M| <= tolerance``: the combinations of the rows
+    of ``M`` (k, m) that vanish."""
+    u, s, _ = np.linalg.svd(m)
+    rank = int(np.sum(s > tolerance))
+    return u[:, rank:]
 
 
 def lqr_on_part(model, spin_rate, q_mat, r_mat, sample_time=None):
@@ -378,5 +509,7 @@ rate 0 rad/s, torque_weight=1): the LQR Riccati equation has no stabilising solu
                   else f"solving {solving} failed ({type(exc).__name__}: {detail})")
         given = ", ".join([f"spin rate {spin_rate:g} rad/s"]
                           + [_input_text(k, v) for k, v in inputs.items() if v is not None])
-        raise InputValueError(f"{law} design ({function}) failed on a model with "
-                              f"{_model_facts(model, spin_rate)} ({given}): {reason}") from exc
+        facts = _model_facts(model, spin_rate)
+        on = f"a model with {facts}" if facts else f"its {type(model).__name__}"
+        raise InputValueError(f"{law} design ({function}) failed on {on} ({given}): "
+                              f"{reason}") from exc

@@ -13,6 +13,7 @@ module                  contents
 ``observer``            a sampled discrete Kalman filter of noisy sensor readings
 ``mekf``                a multiplicative extended Kalman filter of attitude and gyro bias
 ``quaternion``          three-axis quaternion feedback (proportional, rate, integral)
+``spatial_lqr``         three-axis LQR and LQG on the linear flexible spacecraft
 ``actuated``            laws through an actuator: wheel-lag LQR, DC-motor voltage, limits
 ``iosys``               the laws as python-control I/O systems for ``control.interconnect``
 ``observed_loop``       an observed law's loop as it flies: sampled, late, through its filter

@@ -1,12 +1,24 @@
 """A spatial scene's attitude loop: its ``[controller]`` and ``[sensors]`` tables.
 
-- ``[controller]``: ``kind = "quaternion_feedback"``
-  (:class:`controllers.feedback.quaternion.QuaternionFeedback`), ``sample_time`` (s), the
-  target as ``slew_axis`` (hub frame) and ``slew_angle`` (degrees) from the initial attitude
-  or as ``target`` (a quaternion, hub to inertial, scalar first), ``bandwidth`` (rad/s; the
-  gains from the structure's rigid inertia), and optional ``damping`` (0.7),
-  ``integral_time`` (s) and ``torque_limit`` (N m per axis). The scene's manoeuvre is then
-  ``none``: the law commands the hub torque (of the wheels, with an ``[actuator]``).
+- ``[controller]``: ``sample_time`` (s), the target as ``slew_axis`` (hub frame) and
+  ``slew_angle`` (degrees) from the initial attitude or as ``target`` (a quaternion, hub to
+  inertial, scalar first), optional ``torque_limit`` (N m per axis), and by ``kind``:
+
+  - ``"quaternion_feedback"``
+    (:class:`controllers.feedback.quaternion.QuaternionFeedback`): ``bandwidth`` (rad/s; the
+    gains from the structure's rigid inertia), optional ``damping`` (0.7) and
+    ``integral_time`` (s);
+  - ``"lqr"`` (:func:`controllers.feedback.spatial_lqr.design_spatial_lqr`, held over the
+    sample time; it feeds back the plant's whole state, so it takes no ``[sensors]``):
+    the Bryson weights ``hub_angle`` (rad), ``torque`` (N m) and optional ``hub_rate``
+    (rad/s) and ``tip_deflection`` (m), optional ``design_modes`` (per field, default 2) and
+    ``max_frequency`` (rad/s);
+  - ``"lqg"`` (:func:`controllers.feedback.spatial_lqr.design_spatial_lqg`): those and the
+    filter's ``angle_noise`` (rad), ``rate_noise`` (rad/s) and ``process_torque`` (N m); it
+    reads the attitude and rate (the attitude filter's, with ``[sensors]``).
+
+  The scene's manoeuvre is then ``none``: the law commands the hub torque (of the wheels,
+  with an ``[actuator]``).
 - ``[sensors]`` (optional, with a controller): ``[sensors.star_tracker]`` and
   ``[sensors.gyro]`` (the fields of :class:`~flexctl.sim.attitude_sensors.StarTracker` and
   :class:`~flexctl.sim.attitude_sensors.Gyro`), ``seed``, and the attitude filter's initial
@@ -32,8 +44,17 @@ from .scene_tables import check_table_keys, construct
 
 __all__ = ["SpatialLoop", "spatial_loop"]
 
-_CONTROLLER_KEYS = {"kind", "sample_time", "slew_axis", "slew_angle", "target", "bandwidth",
-                    "damping", "integral_time", "torque_limit"}
+_COMMON_KEYS = {"kind", "sample_time", "slew_axis", "slew_angle", "target", "torque_limit"}
+_CONTROLLER_KEYS = {
+    "quaternion_feedback": _COMMON_KEYS | {"bandwidth", "damping", "integral_time"},
+    "lqr": _COMMON_KEYS | {"hub_angle", "hub_rate", "tip_deflection", "torque", "design_modes",
+                           "max_frequency"},
+}
+_CONTROLLER_KEYS["lqg"] = _CONTROLLER_KEYS["lqr"] | {"angle_noise", "rate_noise",
+                                                     "process_torque"}
+_REQUIRED = {"quaternion_feedback": ("sample_time", "bandwidth"),
+             "lqr": ("sample_time", "hub_angle", "torque"),
+             "lqg": ("sample_time", "hub_angle", "torque")}
 _SENSOR_KEYS = {"star_tracker", "gyro", "seed", "attitude_sigma", "bias_sigma"}
 
 
@@ -43,7 +64,7 @@ class SpatialLoop:
 
     Attributes
     ----------
-    law : QuaternionFeedback
+    law : QuaternionFeedback, SpatialLQR or SpatialLQG
     sample_time : float
         s.
     sensors : AttitudeSensors or None
@@ -99,31 +120,34 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
     -------
     SpatialLoop or None
     """
-    from controllers.feedback.quaternion import QuaternionFeedback
-
     if not controller:
         if sensors:
             raise SceneError("[sensors] of a spatial scene are read by a [controller]; this "
                              "scene has none")
         return None
-    check_table_keys("controller", controller, _CONTROLLER_KEYS)
-    if controller.get("kind") != "quaternion_feedback":
-        raise SceneError(f"controller.kind must be 'quaternion_feedback' for a spatial scene; "
-                         f"got {controller.get('kind')!r:.80}")
-    for key in ("sample_time", "bandwidth"):
+    kind = controller.get("kind")
+    if not isinstance(kind, str) or kind not in _CONTROLLER_KEYS:
+        raise SceneError(f"controller.kind must be one of {sorted(_CONTROLLER_KEYS)} for a "
+                         f"spatial scene; got {kind!r:.80}")
+    check_table_keys("controller", controller, _CONTROLLER_KEYS[kind])
+    for key in _REQUIRED[kind]:
         if key not in controller:
-            raise SceneError(f"controller.{key} is required")
+            raise SceneError(f"controller.{key} is required for controller.kind = {kind!r}")
+    if kind == "lqr" and sensors:
+        raise SceneError("controller.kind = 'lqr' feeds back the plant's whole state, which "
+                         "[sensors] do not give; with sensors take kind = 'lqg' (its filter "
+                         "estimates the modes from the attitude and rate)")
     step = _checked(check_real, "controller", "sample_time", controller["sample_time"],
                     minimum=1e-4, maximum=100.0)
     target = _target(controller, quaternion)
     try:
-        law = QuaternionFeedback.design(
-            structure.rigid_inertia, controller["bandwidth"], target,
-            damping=controller.get("damping", 0.7),
-            integral_time=controller.get("integral_time"),
-            torque_limit=controller.get("torque_limit"))
+        law = _design(kind, controller, structure, target, step)
     except (ValueError, TypeError) as exc:
-        raise SceneError(str(exc).replace("quaternion_feedback.", "controller.")) from None
+        message = str(exc)
+        for owner in ("quaternion_feedback.", "design_spatial_lqr.", "design_spatial_lqg.",
+                      "lqr_weights."):
+            message = message.replace(owner, "controller.")
+        raise SceneError(message) from None
     if not sensors:
         return SpatialLoop(law=law, sample_time=step, sensors=None)
     check_table_keys("sensors", sensors, _SENSOR_KEYS)
@@ -142,6 +166,32 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
     loop = SpatialLoop(law=law, sample_time=step, sensors=setup, **sigmas)
     _checked(loop.estimator, quaternion)
     return loop
+
+
+def _design(kind: str, controller: dict, structure, target, step: float):
+    """The law of a ``[controller]`` table of ``kind``."""
+    if kind == "quaternion_feedback":
+        from controllers.feedback.quaternion import QuaternionFeedback
+
+        return QuaternionFeedback.design(
+            structure.rigid_inertia, controller["bandwidth"], target,
+            damping=controller.get("damping", 0.7),
+            integral_time=controller.get("integral_time"),
+            torque_limit=controller.get("torque_limit"))
+    from controllers.feedback.lqr import LQRWeights
+    from controllers.feedback.spatial_lqr import design_spatial_lqg, design_spatial_lqr
+
+    weights = LQRWeights(**{key: controller[key] for key in
+                            ("hub_angle", "hub_rate", "tip_deflection", "torque")
+                            if key in controller})
+    common = {"n_modes": controller.get("design_modes", 2),
+              "torque_limit": controller.get("torque_limit"),
+              "max_frequency": controller.get("max_frequency")}
+    if kind == "lqr":
+        return design_spatial_lqr(structure, weights, target, sample_time=step, **common)
+    noise = {key: controller[key] for key in ("angle_noise", "rate_noise", "process_torque")
+             if key in controller}
+    return design_spatial_lqg(structure, weights, target, step, **noise, **common)
 
 
 def _target(controller: dict, quaternion) -> np.ndarray:

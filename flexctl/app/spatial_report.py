@@ -132,7 +132,8 @@ def spatial_summary(scene: SpatialScene, result: SpatialResult,
 
 
 def _loop_margins(scene: SpatialScene) -> dict:
-    """The disk margins of a scene's attitude law, continuous and without delay, about its
+    """The disk margins of a scene's quaternion law (an LQR's or LQG's loop poles instead:
+    :func:`_loop_poles`), continuous and without delay, about its
     target at rest on the linear plant with every mode of the run
     (:func:`controllers.analysis.spatial_loops.quaternion_disk_margins`); none without a
     loop. (On these undamped structures any delay of a rate feedback eventually destabilises
@@ -140,6 +141,8 @@ def _loop_margins(scene: SpatialScene) -> dict:
     flies.)"""
     if scene.loop is None:
         return {}
+    if hasattr(scene.loop.law, "loop_poles"):
+        return _loop_poles(scene)
     from controllers.analysis.spatial_loops import quaternion_disk_margins
 
     margins = quaternion_disk_margins(scene.loop.law, scene.structure, n_modes=scene.n_modes)
@@ -151,6 +154,24 @@ def _loop_margins(scene: SpatialScene) -> dict:
         "gain_margin_db": margins.gain_margin_db.tolist(),
         "phase_margin_deg": margins.phase_margin_deg.tolist(),
         "multiloop": None if multiloop is None else list(multiloop)}}
+
+
+def _loop_poles(scene: SpatialScene) -> dict:
+    """The verdict on an LQR or LQG loop: its poles held at the scene's sample time around the
+    linear plant at rest with every mode of the run (the design's modes and the others:
+    spillover), their largest real part, 1/s, and whether it is stable."""
+    from controllers.analysis.spatial_loops import GROWTH_TOLERANCE
+    from ..model.spatial_plant import linearize_spatial
+
+    plant = linearize_spatial(scene.structure, scene.n_modes)
+    poles = scene.loop.law.loop_poles(plant)
+    poles = poles[np.isfinite(poles)]
+    abscissa = float(np.max(poles.real))
+    return {"loop_stability": {
+        "closed_loop_stable": bool(abscissa <= GROWTH_TOLERANCE
+                                   * max(1.0, float(np.max(np.abs(poles))))),
+        "spectral_abscissa": abscissa,
+        "design_note": scene.loop.law.note}}
 
 
 def _wheel_summary(result: SpatialResult) -> dict:
@@ -287,6 +308,13 @@ def format_spatial_summary(summary: dict) -> str:
                          + ("" if margins["multiloop"] is None else
                             f"; all axes at once {margins['multiloop'][1]:.3g} dB, "
                             f"{margins['multiloop'][2]:.3g} deg"))
+    held = summary.get("loop_stability")
+    if held:
+        lines.append("  the law held at its sample time on the linear plant with every mode of the "
+                     "run: " + ("stable" if held["closed_loop_stable"] else "UNSTABLE")
+                     + f" (spectral abscissa {held['spectral_abscissa']:.3g} 1/s)")
+        if held["design_note"]:
+            lines.append(f"  design: {held['design_note']}")
     files = summary.get("files")
     if files:
         folder = Path(files["summary"]).parent

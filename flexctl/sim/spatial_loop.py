@@ -16,7 +16,11 @@ then the gyro's.
 
 The law is any callable ``law(t, attitude, rate) -> torque`` (s; scalar-first quaternion, hub
 to inertial; rad/s, hub frame; N m, hub frame); one with a ``start()`` method is started
-first (a law with its own state, integral action for example) and the session called.
+first (a law with its own state, integral action for example) and the session called. A law
+whose ``state_feedback`` is true (:class:`controllers.feedback.spatial_lqr.SpatialLQR`) reads
+the plant's whole state too: it is started with ``start(state_names)`` (the model's
+:attr:`~flexctl.model.spatial_dynamics.SpatialLayout.state_names`) and called as
+``session(t, attitude, rate, state)``; no sensor gives that state, so it flies without them.
 """
 
 from __future__ import annotations
@@ -67,8 +71,9 @@ class SpatialLoopResult:
         return self.result.ok
 
 
-def _command(law, t, attitude, rate) -> np.ndarray:
-    value = np.asarray(law(t, attitude, rate), dtype=float).reshape(-1)
+def _command(law, t, attitude, rate, state=None) -> np.ndarray:
+    value = law(t, attitude, rate) if state is None else law(t, attitude, rate, state)
+    value = np.asarray(value, dtype=float).reshape(-1)
     if value.shape != (3,) or not np.all(np.isfinite(value)):
         raise InputValueError(f"the law must return 3 finite numbers (N m, hub frame); at "
                               f"t = {t:g} s it returned {value!r:.80}")
@@ -141,7 +146,7 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
         End time, s (> 0).
     law : callable
         ``law(t, attitude, rate) -> torque`` (module description), or an object with
-        ``start()`` giving one.
+        ``start()`` giving one, or a state-feedback law.
     sample_time : float, optional
         The loop's sample interval, s; with ``sensors`` their gyro's (and then optional).
     n_modes : int, sequence of int or mapping, optional
@@ -175,10 +180,16 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
     if not callable(law) and not hasattr(law, "start"):
         raise InputTypeError(f"law must be callable law(t, attitude, rate) -> torque; got "
                              f"{type(law).__name__}")
-    session = law.start() if hasattr(law, "start") else law
     equations, x = simulate_spatial_setup(structure, n_modes, variant, wheels, wheel_speeds,
                                           angular_velocity, quaternion)
     layout = equations.layout
+    full_state = bool(getattr(law, "state_feedback", False))
+    if full_state and sensors is not None:
+        raise InputValueError("a state-feedback law reads the plant's whole state, which no "
+                              "sensor gives: fly it without sensors, or an observed law "
+                              "(for example an LQG) with them")
+    session = (law.start(layout.state_names) if full_state
+               else law.start() if hasattr(law, "start") else law)
     c = layout.n_coordinates
     held = ConstantTorque(np.zeros(3))
     segments = SpatialSegments(machine_function(equations.rhs), layout.n_states, held, rtol,
@@ -197,7 +208,7 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
         done = k + 1
         if sensed is not None:
             attitude, rate = sensed.read(k, t, attitude, rate, sample_time)
-        held.value = _command(session, t, attitude, rate)
+        held.value = _command(session, t, attitude, rate, x if full_state else None)
         commands[:, k] = held.value
         if k == count:
             break

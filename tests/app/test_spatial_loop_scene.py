@@ -81,7 +81,7 @@ def test_a_scene_flies_its_loop_and_writes_its_run(tmp_path):
 
 
 @pytest.mark.parametrize("old, new, pattern", [
-    ('kind = "quaternion_feedback"', 'kind = "lqr"', r"controller\.kind"),
+    ('kind = "quaternion_feedback"', 'kind = "h_infinity"', r"controller\.kind"),
     ("bandwidth = 0.5\n", "", r"controller\.bandwidth is required"),
     ("slew_angle = 20.0\n", "", r"controller needs a target"),
     ("bandwidth = 0.5", "bandwidth = -0.5", r"controller\.bandwidth"),

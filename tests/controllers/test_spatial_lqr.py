@@ -1,0 +1,212 @@
+"""Three-axis LQR and LQG on the linear flexible spacecraft (issue 44, item 4), and the part of
+a linear plant its inputs move (controllers.design.controllable.input_part)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controllers.design.controllable import held, input_part
+from controllers.feedback.lqr import LQRWeights
+from controllers.feedback.spatial_lqr import (SpatialLQG, design_spatial_lqg,
+                                              design_spatial_lqr, spatial_weight_matrices)
+from flexctl import SpatialAppendage, SpatialHub, SpatialStructure
+from flexctl.model.errors import InputValueError
+from flexctl.model.spatial_plant import linearize_spatial
+from flexctl.sim.quaternions import conjugate, from_rotation_vector, product, rotation_vector
+from flexctl.sim.spatial_loop import simulate_spatial_loop
+
+WEIGHTS = LQRWeights(hub_angle=0.05, hub_rate=0.05, torque=0.1, tip_deflection=0.005)
+TARGET = from_rotation_vector(np.radians(20.0) * np.array([0.6, 0.0, 0.8]))
+
+
+def _wing(name, direction, damping=0.005):
+    return SpatialAppendage(name=name, direction=direction, normal=(0, 0, 1), length=1.8,
+                            density=2766.0, area=2.5e-4, youngs_modulus=6.9e10,
+                            second_moment=5.2e-10, second_moment_lateral=5.2e-8,
+                            shear_modulus=2.6e10, torsion_constant=1e-9,
+                            damping_ratio=damping)
+
+
+def _craft(support="pinned", damping=0.005):
+    """Two identical arrays on opposite sides: their modes bending against each other are
+    out of the torque's reach."""
+    extra = {"support": "free", "mass": 20.0} if support == "free" else {}
+    hub = SpatialHub(inertia=[[1.3, 0.05, 0.0], [0.05, 1.2, 0.0], [0.0, 0.0, 1.4]],
+                     radius=0.06, **extra)
+    return SpatialStructure(hub=hub, appendages=(_wing("a", (0, 1, 0), damping),
+                                                 _wing("b", (0, -1, 0), damping)))
+
+
+def _pointing(result):
+    q = result.states[0:4]
+    return np.array([np.linalg.norm(rotation_vector(product(conjugate(TARGET), q[:, k])))
+                     for k in range(q.shape[1])])
+
+
+# ------------------------------------------------------------------ the part the inputs move
+def test_input_part_leaves_out_what_the_torque_cannot_move_and_keeps_its_poles():
+    plant = linearize_spatial(_craft(damping=0.0), 1)
+    a, b = plant.A, plant.B
+    part = input_part(a, b)
+    # the arrays bending against each other out of plane, in plane and in torsion: one pole
+    # pair each, at a frequency of one array clamped (the hub does not move)
+    assert len(part.dropped) == 3
+    assert part.basis.shape[1] == a.shape[0] - 6
+    assert np.allclose(part.projector @ part.basis, np.eye(part.basis.shape[1]), atol=1e-10)
+    clamped = linearize_spatial(SpatialStructure(hub=SpatialHub(inertia=np.eye(3) * 1e12,
+                                                                radius=0.06),
+                                                 appendages=(_wing("a", (0, 1, 0), 0.0),)), 1)
+    one_array = np.abs(np.linalg.eigvals(clamped.A).imag)
+    for w in part.dropped:
+        assert np.min(np.abs(one_array - w)) < 1e-6 * w
+    # a gain on the part moves its poles and leaves the others where they were
+    a_r, b_r = part.projector @ a @ part.basis, part.projector @ b
+    rng = np.random.default_rng(1)
+    gain = rng.normal(size=(3, a_r.shape[0])) @ part.projector
+    closed = np.linalg.eigvals(a - b @ gain)
+    expected = np.concatenate([np.linalg.eigvals(a_r - b_r @ (gain @ part.basis)),
+                               1j * np.array(part.dropped), -1j * np.array(part.dropped)])
+    for pole in expected:
+        assert np.min(np.abs(closed - pole)) < 1e-6 * max(1.0, abs(pole))
+
+
+def test_input_part_drops_a_free_hubs_momentum_and_the_fast_modes():
+    plant = linearize_spatial(_craft("free"), 2)
+    part = input_part(plant.A, plant.B, max_frequency=30.0)
+    assert part.dropped.count(0.0) == 3                    # the linear momentum
+    assert max(part.dropped) > 300.0                       # torsion, lateral bending
+    assert "faster than 30 rad/s" in part.note and "conserved momentum" in part.note
+    # what is kept is the right-invariant subspace of the slow poles: a rigid rotation is in it
+    rotation = np.zeros(plant.nstates)
+    rotation[0:3] = (0.1, -0.2, 0.3)
+    assert np.allclose(part.basis @ (part.projector @ rotation), rotation, atol=1e-12)
+
+
+def test_input_part_refuses_a_zero_input():
+    with pytest.raises(InputValueError, match="input matrix B is zero"):
+        input_part(np.eye(2), np.zeros((2, 1)))
+
+
+# ------------------------------------------------------------------ designs
+def test_weights_are_brysons_per_axis():
+    plant = linearize_spatial(_craft(), 1)
+    q_mat, r_mat = spatial_weight_matrices(plant, LQRWeights(hub_angle=0.1, torque=2.0))
+    assert np.allclose(np.diag(q_mat)[0:3], 100.0) and np.allclose(r_mat, np.eye(3) / 4.0)
+    assert np.count_nonzero(q_mat) == 3
+    with pytest.raises(InputValueError, match="modal_energy"):
+        spatial_weight_matrices(plant, LQRWeights(hub_angle=0.1, torque=2.0, modal_energy=1.0))
+
+
+@pytest.mark.parametrize("support", ["pinned", "free"])
+def test_lqr_is_stable_on_a_plant_with_more_modes_than_its_design(support):
+    craft = _craft(support)
+    truth = linearize_spatial(craft, 3)
+    for sample_time in (None, 0.1):
+        law = design_spatial_lqr(craft, WEIGHTS, TARGET, n_modes=1, sample_time=sample_time)
+        poles = law.loop_poles(truth)
+        # damped modes decay; the free hub's momentum stays at zero
+        assert poles.real.max() <= 1e-9 * np.abs(poles).max()
+        assert law.poles.real.max() < -0.05                # the designed part is damped
+
+
+def test_lqr_slews_the_flexible_spacecraft_and_stops_its_vibration():
+    craft = _craft()
+    law = design_spatial_lqr(craft, WEIGHTS, TARGET, n_modes=1, sample_time=0.1,
+                             torque_limit=0.1)
+    run = simulate_spatial_loop(craft, 30.0, law, sample_time=0.1, n_modes=2, rtol=1e-6,
+                                variant="first_order")
+    assert run.ok
+    error = _pointing(run.result)
+    assert error[0] == pytest.approx(np.radians(20.0))
+    assert error[-1] < 1e-6
+    assert np.max(np.abs(run.result.torque)) <= 0.1 + 1e-15
+    tips = np.array(list(run.result.tips.values()))
+    late = run.result.t > 25.0
+    assert np.max(np.abs(tips[..., late])) < 1e-3 * np.max(np.abs(tips))
+
+
+def test_lqg_reads_attitude_and_rate_only_and_settles_as_the_lqr():
+    craft = _craft()
+    law = design_spatial_lqg(craft, WEIGHTS, TARGET, 0.1, n_modes=1, torque_limit=0.1)
+    assert isinstance(law, SpatialLQG) and not law.state_feedback
+    assert law.estimator_poles.real.max() < 0
+    assert law.loop_poles(linearize_spatial(craft, 3)).real.max() < 0
+    run = simulate_spatial_loop(craft, 30.0, law, sample_time=0.1, n_modes=2, rtol=1e-6,
+                                variant="first_order")
+    assert run.ok
+    assert _pointing(run.result)[-1] < 1e-5
+
+
+def test_lqg_sees_spillover_of_undamped_modes_the_lqr_does_not():
+    """Undamped modes outside the design reach the filter through the readings and are
+    driven by the commands: the held LQG loop on the plant with them grows, while the LQR,
+    which reads the design part exactly, leaves them where they were."""
+    craft = _craft(damping=0.0)
+    truth = linearize_spatial(craft, 2)
+    lqg = design_spatial_lqg(craft, WEIGHTS, TARGET, 0.1, n_modes=2, process_torque=1e-2)
+    lqr = lqg.regulator
+    scale = np.abs(lqr.loop_poles(truth)).max()
+    assert lqr.loop_poles(truth).real.max() <= 1e-9 * scale
+    assert lqg.loop_poles(truth).real.max() > 1e-6
+
+
+def test_the_discrete_lqr_is_the_held_plants():
+    craft = _craft()
+    law = design_spatial_lqr(craft, WEIGHTS, TARGET, n_modes=1, sample_time=0.2)
+    part = law.part
+    a_d, b_d = held(part.projector @ law.plant.A @ part.basis, part.projector @ law.plant.B,
+                    0.2)
+    z = np.linalg.eigvals(a_d - b_d @ (law.gain @ part.basis))
+    assert np.allclose(np.sort_complex(np.log(z) / 0.2), np.sort_complex(law.poles))
+
+
+# ------------------------------------------------------------------ refusals
+def test_a_state_feedback_law_is_refused_with_sensors_and_on_a_smaller_plant():
+    from flexctl.sim.attitude_sensors import AttitudeSensors, Gyro, StarTracker
+    from controllers.feedback.mekf import AttitudeFilter
+
+    craft = _craft()
+    law = design_spatial_lqr(craft, WEIGHTS, TARGET, n_modes=2, sample_time=0.1)
+    sensors = AttitudeSensors(star_tracker=StarTracker(cross_noise=1e-5, boresight_noise=1e-4,
+                                                       sample_time=0.5),
+                              gyro=Gyro(angle_random_walk=1e-5), gyro_sample_time=0.1)
+    with pytest.raises(InputValueError, match="whole state"):
+        simulate_spatial_loop(craft, 1.0, law, n_modes=2, sensors=sensors,
+                              estimator=AttitudeFilter(sensors, TARGET, attitude_sigma=1e-3))
+    with pytest.raises(InputValueError, match="at least its modes"):
+        simulate_spatial_loop(craft, 1.0, law, sample_time=0.1, n_modes=1)
+    with pytest.raises(InputValueError, match="at least its modes"):
+        law.loop_poles(linearize_spatial(craft, 1))
+
+
+@pytest.mark.parametrize("change, match", [
+    ({"target": (0, 0, 0, 0)}, "non-zero quaternion"),
+    ({"target": (1, 0, 0)}, "target"),
+    ({"sample_time": -0.1}, "sample_time"),
+    ({"sample_time": float("nan")}, "sample_time"),
+    ({"torque_limit": 0.0}, "torque_limit"),
+    ({"max_frequency": -1.0}, "max_frequency"),
+    ({"n_modes": 0}, "n_modes|modes"),
+])
+def test_design_refuses_bad_inputs_by_name(change, match):
+    args = {"target": TARGET, "n_modes": 1, "sample_time": 0.1}
+    args.update(change)
+    target = args.pop("target")
+    with pytest.raises((InputValueError, TypeError, ValueError), match=match):
+        design_spatial_lqr(_craft(), WEIGHTS, target, **args)
+
+
+@pytest.mark.parametrize("name, value", [("angle_noise", 0.0), ("rate_noise", -1.0),
+                                         ("process_torque", float("inf"))])
+def test_lqg_refuses_bad_noise_by_name(name, value):
+    with pytest.raises(InputValueError, match=name):
+        design_spatial_lqg(_craft(), WEIGHTS, TARGET, 0.1, n_modes=1, **{name: value})
+
+
+def test_lqg_is_refused_a_different_hold():
+    law = design_spatial_lqg(_craft(), WEIGHTS, TARGET, 0.1, n_modes=1)
+    session = law.start()
+    session(0.0, TARGET, np.zeros(3))
+    with pytest.raises(InputValueError, match="0.1 s hold"):
+        session(0.25, TARGET, np.zeros(3))
