@@ -190,7 +190,7 @@ def _header(program, upper, prefix, nx, measured, real) -> str:
 {_wrapped(program.description)}
  * Input of the step: {kind}:
 {_names_comment(program)}
- * Output u: the {program.output_name} ({program.output_unit}).
+ * Output u: the {program.output_name} ({program.output_unit}; FLEXCTL_NU entries).
  *
  * Every real is a flexctl_real ({real}). Usage: provide flexctl_ctrl_size() bytes aligned for
  * double (malloc, or a static array of double), call flexctl_ctrl_init once, then
@@ -210,7 +210,7 @@ extern "C" {{
 #define FLEXCTL_NX {nx}   /* plant states{'' if measured else ' the law reads, in the plant state order'} */
 #define FLEXCTL_NY {program.n_in if measured else 0}   /* sensor readings an output-feedback law reads (0: it reads the state) */
 #define FLEXCTL_N_INPUT {program.n_in}   /* entries of the step's input (FLEXCTL_NY if nonzero, else FLEXCTL_NX) */
-#define FLEXCTL_NU 1
+#define FLEXCTL_NU {program.n_out}   /* entries of the command u */
 #define FLEXCTL_SAMPLE_TIME {_c_double(program.sample_time, real)}   /* s; 0 for a continuous law evaluated when called */
 #define FLEXCTL_MEMORY_REALS {program.n_memory}   /* the law's memory, inside the struct */
 #define FLEXCTL_PRECISION "{real}"
@@ -228,8 +228,9 @@ size_t flexctl_ctrl_size(void);
  * FLEXCTL_ERR_ARGUMENT for a NULL pointer. Call again to restart the law. */
 int flexctl_ctrl_init(flexctl_ctrl *c);
 
-/* u[0]: the command to hold from time t (s), given x (FLEXCTL_N_INPUT entries: the plant
- * state, or the readings y of an output-feedback law). Returns one of the codes above. */
+/* u[0..FLEXCTL_NU-1]: the command to hold from time t (s), given x (FLEXCTL_N_INPUT entries:
+ * the plant state, or the readings y of an output-feedback law). Returns one of the codes
+ * above. */
 int flexctl_ctrl_step(flexctl_ctrl *c, flexctl_real t, const flexctl_real *x, flexctl_real *u);
 
 /* Names of the step's input entries, in order. */
@@ -253,10 +254,10 @@ def _source(program, prefix, upper, code, names, sizes, real) -> str:
     c->arg[0] = &t;
     c->arg[1] = x;
     c->arg[2] = c->m;
-    c->res[0] = &u_new;
+    c->res[0] = u_new;
     c->res[1] = c->m_next;
     flag = {names[1]}(c->arg, c->res, c->iw, c->w, 0);
-    ok = flag == 0 && flexctl_finite(&u_new, 1) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_REALS);
+    ok = flag == 0 && flexctl_finite(u_new, FLEXCTL_NU) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_REALS);
     status = FLEXCTL_STEP_RECOVERED;
   }}"""
     return f"""\
@@ -285,26 +286,26 @@ def _source(program, prefix, upper, code, names, sizes, real) -> str:
 
 {_wrapper(program, sizes, real)}
 int flexctl_ctrl_step(flexctl_ctrl *c, flexctl_real t, const flexctl_real *x, flexctl_real *u) {{
-  flexctl_real u_new = 0;
-  int flag, ok, status = FLEXCTL_OK;
+  flexctl_real u_new[FLEXCTL_NU] = {{0}};
+  int i, flag, ok, status = FLEXCTL_OK;
   if (!c || !x || !u || c->magic != FLEXCTL_MAGIC) return FLEXCTL_ERR_ARGUMENT;
   if (!isfinite(t) || !flexctl_finite(x, FLEXCTL_N_INPUT)) {{
-    u[0] = 0;
+    for (i = 0; i < FLEXCTL_NU; ++i) u[i] = 0;
     return FLEXCTL_ERR_INPUT;
   }}
   c->arg[0] = &t;
   c->arg[1] = x;
   c->arg[2] = c->m;
-  c->res[0] = &u_new;
+  c->res[0] = u_new;
   c->res[1] = c->m_next;
   flag = {names[0]}(c->arg, c->res, c->iw, c->w, 0);
-  ok = flag == 0 && flexctl_finite(&u_new, 1) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_REALS);{recover_block}
+  ok = flag == 0 && flexctl_finite(u_new, FLEXCTL_NU) && flexctl_finite(c->m_next, FLEXCTL_MEMORY_REALS);{recover_block}
   if (!ok) {{
-    u[0] = 0;
+    for (i = 0; i < FLEXCTL_NU; ++i) u[i] = 0;
     return FLEXCTL_ERR_FAILED;
   }}
   memcpy(c->m, c->m_next, sizeof(c->m));
-  u[0] = u_new;
+  for (i = 0; i < FLEXCTL_NU; ++i) u[i] = u_new[i];
   return status;
 }}
 """
@@ -372,7 +373,7 @@ def _main(program, prefix, upper) -> str:
 
 int main(int argc, char **argv) {{
   flexctl_real x[FLEXCTL_N_INPUT] = {{0}};
-  flexctl_real u = 0;
+  flexctl_real u[FLEXCTL_NU] = {{0}};
   int i, k, code;
   flexctl_ctrl *c = (flexctl_ctrl *)malloc(flexctl_ctrl_size());   /* once, before the loop */
   if (!c) return 1;
@@ -381,8 +382,8 @@ int main(int argc, char **argv) {{
   for (k = 0; k < 10; ++k) {{
     flexctl_real t = (flexctl_real)k * (FLEXCTL_SAMPLE_TIME > 0 ? FLEXCTL_SAMPLE_TIME
                                                          : (flexctl_real)0.01);
-    code = flexctl_ctrl_step(c, t, x, &u);
-    printf("t = %.4f s  u = %.12g  (code %d)\\n", (double)t, (double)u, code);
+    code = flexctl_ctrl_step(c, t, x, u);
+    printf("t = %.4f s  u[0] = %.12g  (code %d)\\n", (double)t, (double)u[0], code);
   }}
   printf("controller struct: %lu bytes\\n", (unsigned long)flexctl_ctrl_size());
   free(c);

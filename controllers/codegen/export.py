@@ -185,10 +185,14 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     Parameters
     ----------
     controller : object
-        A designed built-in law (see :func:`~controllers.codegen.laws.program_for`), or a
+        A designed built-in law (see :func:`~controllers.codegen.laws.program_for`), a
+        three-axis :class:`~controllers.feedback.spatial_lqr.SpatialLQR` or
+        :class:`~controllers.feedback.spatial_lqr.SpatialLQG`
+        (:func:`~controllers.codegen.spatial_program.spatial_program`: three torques), or a
         :class:`~controllers.codegen.program.ControllerProgram`.
-    plant : flexctl.Model
-        The plant the law runs on (its state order, sensors and actuator).
+    plant : flexctl.Model or None
+        The plant the law runs on (its state order, sensors and actuator); a three-axis law
+        names the entries it reads itself (None).
     directory : str or pathlib.Path
         Created if missing; the four files (:data:`C_FILES`) are written there, replacing
         earlier ones and keeping files of other names. All four are written or none: they go
@@ -221,27 +225,37 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     if isinstance(directory, bool) or not isinstance(directory, (str, os.PathLike)):
         raise InputTypeError(f"export directory must be a path; got {type(directory).__name__}")
     from flexctl.model import Model
+    from ..feedback.spatial_lqr import SpatialLQG, SpatialLQR
 
-    if not isinstance(plant, Model):
-        raise InputTypeError(f"export plant must be a flexctl Model; got {type(plant).__name__}")
     precision = check_precision(precision)
-    program = controller if isinstance(controller, ControllerProgram) else program_for(
-        controller, plant, sample_time=sample_time, initial_state=initial_state,
-        precision=precision)
+    if isinstance(controller, (SpatialLQR, SpatialLQG)):
+        if sample_time is not None or initial_state is not None:
+            raise InputValueError("export: a three-axis law keeps its own sample time and "
+                                  "starts its filter from the first reading; give neither "
+                                  "sample_time nor initial_state")
+        from .spatial_program import spatial_program
+        program = spatial_program(controller)
+    elif not isinstance(plant, Model):
+        raise InputTypeError(f"export plant must be a flexctl Model; got {type(plant).__name__}")
+    else:
+        program = controller if isinstance(controller, ControllerProgram) else program_for(
+            controller, plant, sample_time=sample_time, initial_state=initial_state,
+            precision=precision)
+    plant_names = (tuple(plant.state_names) if isinstance(plant, Model)
+                   else tuple(program.input_names))
     directory = Path(directory)
     if directory.exists() and not directory.is_dir():
         raise InputValueError(f"export directory {str(directory)!r} is a file")
     if precision == "float":
         from .conditioning import check_float
         check_float(program)
-    sources = c_sources(program, PREFIX, plant_states=plant.n_states, precision=precision)
+    sources = c_sources(program, PREFIX, plant_states=len(plant_names), precision=precision)
     texts = (sources.header, sources.source, sources.main, sources.makefile)
     with staged_folder(directory, names=C_FILES) as stage:
         for name, text in zip(C_FILES, texts):
             (stage / name).write_text(text, encoding="utf-8")
     return CExport(directory, program, sources.sizes,
-                   tuple(directory / name for name in C_FILES), tuple(plant.state_names),
-                   precision)
+                   tuple(directory / name for name in C_FILES), plant_names, precision)
 
 
 class CompiledLaw:
@@ -286,7 +300,7 @@ class CompiledLaw:
         # doubles: aligned for every member of the struct
         self._memory = np.zeros(-(-self.struct_bytes // 8) + 1)
         self._input = np.zeros(max(export.program.n_in, 1), dtype=dtype)
-        self._u = real(0.0)
+        self._u = np.zeros(export.program.n_out, dtype=dtype)
         self.init()
 
     @property
@@ -301,7 +315,8 @@ class CompiledLaw:
             raise RuntimeError(f"flexctl_ctrl_init returned {code}")
 
     def step(self, t: float, v) -> tuple:
-        """``flexctl_ctrl_step``: ``(u, code)`` at time ``t`` for the input ``v``.
+        """``flexctl_ctrl_step``: ``(u, code)`` at time ``t`` for the input ``v`` (``u`` a
+        float, or a new array of ``program.n_out`` entries).
 
         Parameters
         ----------
@@ -323,8 +338,10 @@ class CompiledLaw:
         self._input[:v.size] = v
         code = self._lib.flexctl_ctrl_step(
             self._memory.ctypes.data, self._real(float(t)),
-            self._input.ctypes.data_as(ctypes.POINTER(self._real)), ctypes.byref(self._u))
-        return float(self._u.value), int(code)
+            self._input.ctypes.data_as(ctypes.POINTER(self._real)),
+            self._u.ctypes.data_as(ctypes.POINTER(self._real)))
+        u = float(self._u[0]) if self._u.size == 1 else self._u.astype(float)
+        return u, int(code)
 
     def controller(self, measure=None) -> "CompiledController":
         """This compiled law as a flexctl controller for :func:`flexctl.simulate`.

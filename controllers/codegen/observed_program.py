@@ -71,7 +71,7 @@ def observed_program(observed, plant, x0, inner: ControllerProgram) -> Controlle
     if inner.input_kind != "state":
         raise ExportRefused("export: the law inside Observed must read the state")
     session = ObservedSession(observed, plant, np.asarray(x0, dtype=float))
-    mats, n, bias = session.matrices, plant.n_states, session._bias
+    mats, n = session.matrices, plant.n_states
     n_f, n_y = mats.C.shape[1], mats.C.shape[0]
     period = observed.sample_time
     whole, rest = _pieces(period, observed.sensors.delay)

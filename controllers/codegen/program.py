@@ -40,7 +40,8 @@ class ControllerProgram:
         The law (``"pd"``, ``"lqr"``, ``"scheduled_lqr"``, ``"tracker"``, ``"lqg"``,
         ``"nmpc"``, ...).
     step : casadi.Function
-        ``(t (1), v (n_in), m (n_mem)) -> (u (1), m_next (n_mem))``.
+        ``(t (1), v (n_in), m (n_mem)) -> (u (n_out), m_next (n_mem))``: ``n_out`` 1, or 3
+        for a three-axis law (a torque in the hub frame).
     recover : casadi.Function or None
         Same signature; what a failed ``step`` is replaced by.
     input_names : tuple of str
@@ -81,6 +82,11 @@ class ControllerProgram:
         return len(self.input_names)
 
     @property
+    def n_out(self) -> int:
+        """Entries of the command ``u``: 1, or 3 for a three-axis law."""
+        return int(self.step.size1_out(0))
+
+    @property
     def n_memory(self) -> int:
         """Entries of the memory ``m``."""
         return int(self.memory_init.size)
@@ -104,8 +110,9 @@ class ProgramSession:
         self.program, self.memory = program, program.memory_init.copy()
         self.failures = 0
 
-    def step(self, t: float, v) -> float:
-        """Command at time ``t`` for the input ``v``, in :attr:`ControllerProgram.output_unit`.
+    def step(self, t: float, v):
+        """Command at time ``t`` for the input ``v``, in :attr:`ControllerProgram.output_unit`
+        (a float, or an array of :attr:`ControllerProgram.n_out` entries).
 
         Parameters
         ----------
@@ -123,14 +130,20 @@ class ProgramSession:
         except RuntimeError:        # the QP failed inside the step
             ok = False
         if ok:
-            u, m_next = float(u), np.array(m_next, dtype=float).reshape(-1)
-            ok = np.isfinite(u) and bool(np.all(np.isfinite(m_next)))
+            u, m_next = _command(u, program), np.array(m_next, dtype=float).reshape(-1)
+            ok = bool(np.all(np.isfinite(u))) and bool(np.all(np.isfinite(m_next)))
         if not ok and program.recover is not None:
             self.failures += 1
             u, m_next = program.recover(*args)
-            u, m_next = float(u), np.array(m_next, dtype=float).reshape(-1)
+            u, m_next = _command(u, program), np.array(m_next, dtype=float).reshape(-1)
         self.memory = m_next
         return u
+
+
+def _command(u, program):
+    """A step's command: a float, or an array of :attr:`ControllerProgram.n_out` entries."""
+    u = np.array(u, dtype=float).reshape(-1)
+    return float(u[0]) if program.n_out == 1 else u
 
 
 def plant_output(plant, voltage: bool = False) -> tuple:
