@@ -1,4 +1,4 @@
-"""The three-axis quaternion loop on the linear flexible spacecraft, and its disk margins.
+"""Three-axis loops on the linear flexible spacecraft, and their disk margins.
 
 :func:`quaternion_loop` closes :class:`~controllers.feedback.quaternion.QuaternionFeedback`
 around the linear plant of a spatial structure at rest
@@ -24,6 +24,11 @@ each input.
   grid's frequencies and the :data:`MULTILOOP_PEAKS` where single loops come closest); None
   where slycot is missing.
 
+:func:`lq_loop` is the loop of a three-axis LQR or LQG
+(:mod:`controllers.feedback.spatial_lqr`), continuous or held at its sample time, and
+:func:`loop_disk_margins` reads the same margins of any three-axis loop, a sampled one on the
+unit circle up to its Nyquist frequency.
+
 A closed loop that is not stable has no margins: they are reported as zero, with the spectral
 abscissa that says why.
 """
@@ -41,8 +46,10 @@ from flexctl.model.spatial_plant import linearize_spatial
 from flexctl.model.spatial_structure import SpatialStructure
 
 from ..feedback.quaternion import QuaternionFeedback
+from ..feedback.spatial_lqr import SpatialLQG, SpatialLQR
 
-__all__ = ["quaternion_loop", "quaternion_disk_margins", "DiskMargins", "PADE_ORDER",
+__all__ = ["quaternion_loop", "quaternion_disk_margins", "loop_disk_margins", "lq_loop",
+           "DiskMargins", "PADE_ORDER",
            "GRID_POINTS", "MULTILOOP_POINTS", "MULTILOOP_PEAKS"]
 
 #: Order of the Pade approximation of a command delay.
@@ -176,14 +183,22 @@ def _disk(alpha: float, skew: float) -> tuple:
 
 
 def _grid(loop) -> np.ndarray:
-    """Frequencies that span the loop's poles and zeros, with each one's frequency on it."""
-    poles = np.abs(np.linalg.eigvals(loop.A)) if loop.A.size else np.zeros(0)
+    """Frequencies that span the loop's poles and zeros, with each one's frequency on it (a
+    sampled loop's up to its Nyquist frequency)."""
+    poles = np.linalg.eigvals(loop.A).astype(complex) if loop.A.size else np.zeros(0, complex)
+    nyquist = math.inf
+    if loop.isdtime(strict=True):
+        nyquist = math.pi / loop.dt
+        with np.errstate(divide="ignore"):
+            poles = np.log(poles) / loop.dt
+    poles = np.abs(poles[np.isfinite(poles)])
     marks = poles[poles > 0.0]
     low = max(1e-4, 1e-2 * float(np.min(marks))) if marks.size else 1e-3
-    high = 1e2 * float(np.max(marks)) if marks.size else 1e3
+    high = min(1e2 * float(np.max(marks)) if marks.size else 1e3, nyquist * (1 - 1e-9))
     base = np.logspace(np.log10(low), np.log10(high), GRID_POINTS)
     near = np.concatenate([marks * f for f in (0.999, 0.9999, 1.0, 1.0001, 1.001)])
-    return np.unique(np.concatenate([base, near]))
+    grid = np.unique(np.concatenate([base, near]))
+    return grid[grid < nyquist]
 
 
 def quaternion_disk_margins(law, structure, *, n_modes=4, variant: str = "exact",
@@ -210,12 +225,40 @@ def quaternion_disk_margins(law, structure, *, n_modes=4, variant: str = "exact"
     -------
     DiskMargins
     """
-    import control
-
     skew = check_real("quaternion_disk_margins", "skew", skew, minimum=-1.0, maximum=1.0)
     loop = quaternion_loop(law, structure, n_modes=n_modes, variant=variant, delay=delay)
+    return loop_disk_margins(loop, skew=skew)
+
+
+def loop_disk_margins(loop, *, skew: float = 0.0) -> DiskMargins:
+    """Disk margins of any three-axis loop broken at the plant's torque inputs, continuous or
+    sampled (a discrete python-control system: its frequency response on the unit circle, up
+    to the Nyquist frequency), loop at a time and all loops at once (module description).
+
+    Parameters
+    ----------
+    loop : control.StateSpace
+        ``L``, 3 inputs and 3 outputs, in negative feedback.
+    skew : float, optional
+        The disks' skew, in [-1, 1]. Default 0 (balanced).
+
+    Returns
+    -------
+    DiskMargins
+    """
+    import control
+
+    skew = check_real("loop_disk_margins", "skew", skew, minimum=-1.0, maximum=1.0)
+    if not isinstance(loop, control.StateSpace) or loop.ninputs != 3 or loop.noutputs != 3:
+        raise InputValueError("loop_disk_margins.loop must be a python-control StateSpace of 3 "
+                              "inputs and 3 outputs")
     closed = control.feedback(loop, np.eye(3))
-    poles = np.linalg.eigvals(closed.A)
+    poles = np.linalg.eigvals(closed.A).astype(complex)
+    sampled = loop.isdtime(strict=True)
+    if sampled:
+        with np.errstate(divide="ignore"):
+            poles = np.log(poles) / loop.dt
+        poles = poles[np.isfinite(poles)]
     abscissa = float(np.max(poles.real))
     stable = abscissa <= GROWTH_TOLERANCE * max(1.0, float(np.max(np.abs(poles))))
     omega = _grid(loop)
@@ -223,7 +266,7 @@ def quaternion_disk_margins(law, structure, *, n_modes=4, variant: str = "exact"
         zeros = np.zeros(3)
         return DiskMargins(zeros, zeros, zeros, np.full(3, np.nan), (0.0, 0.0, 0.0)
                            if _has_slycot() else None, False, abscissa, skew)
-    response = loop(1j * omega)                       # (3, 3, F)
+    response = loop(np.exp(1j * omega * loop.dt) if sampled else 1j * omega)   # (3, 3, F)
     sensitivity = np.linalg.inv(np.eye(3)[None] + np.moveaxis(response, -1, 0))
     shifted = np.abs(np.diagonal(sensitivity, axis1=1, axis2=2) - (1.0 - skew) / 2.0)
     worst = np.argmax(shifted, axis=0)
@@ -243,6 +286,58 @@ def quaternion_disk_margins(law, structure, *, n_modes=4, variant: str = "exact"
                        phase_margin_deg=np.array([p for _, p in margins]),
                        frequency=omega[worst], multiloop=multiloop, closed_loop_stable=True,
                        spectral_abscissa=abscissa, skew=skew)
+
+
+def lq_loop(law, plant):
+    """The loop of a three-axis LQR or LQG around a linear plant, broken at the plant's
+    torque inputs: ``L = K Pi (sI - A)^-1 B`` of a continuous LQR, its held form ``(zI -
+    A_d)^-1`` of a sampled one, and for an LQG the plant held, its readings through the
+    filter (which predicts with the command it gave) to the command.
+
+    Parameters
+    ----------
+    law : SpatialLQR or SpatialLQG
+        The designed law (its saturation is not in a linear loop).
+    plant : control.StateSpace
+        A plant of :func:`~flexctl.model.spatial_plant.linearize_spatial` at rest of the
+        law's structure, with at least the design's modes.
+
+    Returns
+    -------
+    control.StateSpace
+        3 inputs (``tx, ty, tz`` perturbations), 3 outputs (the law's torques), negative
+        feedback; discrete (``dt`` the law's sample time) for a sampled law.
+    """
+    import control
+
+    from controllers.design.controllable import held
+
+    if isinstance(law, SpatialLQG):
+        regulator = law.regulator
+        a_d, b_d = held(plant.A, plant.B, law.sample_time)
+        outputs = list(plant.output_labels)
+        c_plant = plant.C[[outputs.index(n) for n in ("ex", "ey", "ez", "wx", "wy", "wz")], :]
+        basis, size = regulator.part.basis, law.a_held.shape[0]
+        from_plant = law.filter_gain @ c_plant
+        from_filter = np.eye(size) - law.filter_gain @ law.measured
+        k_plant = regulator.gain @ basis @ from_plant        # the command is -(these) . state
+        k_filter = regulator.gain @ basis @ from_filter
+        a = np.block([[a_d, np.zeros((a_d.shape[0], size))],
+                      [law.a_held @ from_plant - law.b_held @ k_plant,
+                       law.a_held @ from_filter - law.b_held @ k_filter]])
+        b = np.vstack([b_d, np.zeros((size, 3))])
+        c = np.hstack([k_plant, k_filter])
+        dt = law.sample_time
+    elif isinstance(law, SpatialLQR):
+        c = law.gain @ law.reader(plant)
+        a, b, dt = plant.A, plant.B, 0
+        if law.sample_time is not None:
+            (a, b), dt = held(plant.A, plant.B, law.sample_time), law.sample_time
+    else:
+        raise InputValueError(f"lq_loop.law must be a SpatialLQR or SpatialLQG; got "
+                              f"{type(law).__name__}")
+    return control.ss(a, b, c, np.zeros((3, 3)), dt, inputs=["tx", "ty", "tz"],
+                      outputs=["ux", "uy", "uz"], name="lq_loop")
 
 
 def _has_slycot() -> bool:

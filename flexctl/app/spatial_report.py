@@ -132,20 +132,29 @@ def spatial_summary(scene: SpatialScene, result: SpatialResult,
 
 
 def _loop_margins(scene: SpatialScene) -> dict:
-    """The disk margins of a scene's quaternion law (an LQR's or LQG's loop poles instead:
-    :func:`_loop_poles`), continuous and without delay, about its
-    target at rest on the linear plant with every mode of the run
-    (:func:`controllers.analysis.spatial_loops.quaternion_disk_margins`); none without a
-    loop. (On these undamped structures any delay of a rate feedback eventually destabilises
-    the highest modes of the linear plant; the sampled run is the judge of the loop that
-    flies.)"""
+    """The disk margins of a scene's attitude law about its target at rest, on the linear
+    plant with every mode of the run, loop at a time and all axes at once; none without a
+    loop. Quaternion feedback's are the continuous law's, without delay
+    (:func:`controllers.analysis.spatial_loops.quaternion_disk_margins`: on these undamped
+    structures any delay of a rate feedback eventually destabilises the highest modes of the
+    linear plant; the sampled run is the judge of the loop that flies). An LQR's or LQG's are
+    the loop as it flies, held at its sample time, its filter in it
+    (:func:`~controllers.analysis.spatial_loops.lq_loop`), with what its design left out."""
     if scene.loop is None:
         return {}
-    if hasattr(scene.loop.law, "loop_poles"):
-        return _loop_poles(scene)
-    from controllers.analysis.spatial_loops import quaternion_disk_margins
+    from controllers.analysis.spatial_loops import (loop_disk_margins, lq_loop,
+                                                    quaternion_disk_margins)
 
-    margins = quaternion_disk_margins(scene.loop.law, scene.structure, n_modes=scene.n_modes)
+    law = scene.loop.law
+    if hasattr(law, "loop_poles"):
+        from ..model.spatial_plant import linearize_spatial
+
+        margins = loop_disk_margins(lq_loop(law, linearize_spatial(scene.structure,
+                                                                   scene.n_modes)))
+        extra = {"held_at": law.sample_time, "design_note": law.note}
+    else:
+        margins = quaternion_disk_margins(law, scene.structure, n_modes=scene.n_modes)
+        extra = {"held_at": None}
     multiloop = margins.multiloop
     return {"loop_margins": {
         "closed_loop_stable": margins.closed_loop_stable,
@@ -153,25 +162,7 @@ def _loop_margins(scene: SpatialScene) -> dict:
         "disk_margin": margins.disk_margin.tolist(),
         "gain_margin_db": margins.gain_margin_db.tolist(),
         "phase_margin_deg": margins.phase_margin_deg.tolist(),
-        "multiloop": None if multiloop is None else list(multiloop)}}
-
-
-def _loop_poles(scene: SpatialScene) -> dict:
-    """The verdict on an LQR or LQG loop: its poles held at the scene's sample time around the
-    linear plant at rest with every mode of the run (the design's modes and the others:
-    spillover), their largest real part, 1/s, and whether it is stable."""
-    from controllers.analysis.spatial_loops import GROWTH_TOLERANCE
-    from ..model.spatial_plant import linearize_spatial
-
-    plant = linearize_spatial(scene.structure, scene.n_modes)
-    poles = scene.loop.law.loop_poles(plant)
-    poles = poles[np.isfinite(poles)]
-    abscissa = float(np.max(poles.real))
-    return {"loop_stability": {
-        "closed_loop_stable": bool(abscissa <= GROWTH_TOLERANCE
-                                   * max(1.0, float(np.max(np.abs(poles))))),
-        "spectral_abscissa": abscissa,
-        "design_note": scene.loop.law.note}}
+        "multiloop": None if multiloop is None else list(multiloop), **extra}}
 
 
 def _wheel_summary(result: SpatialResult) -> dict:
@@ -296,25 +287,21 @@ def format_spatial_summary(summary: dict) -> str:
                      + ", ".join(f"{1e3 * p:.4g}" for p in peak) + " mm")
     margins = summary.get("loop_margins")
     if margins:
+        held = margins.get("held_at")
+        law = "continuous law" if held is None else f"law held at {held:g} s"
         if not margins["closed_loop_stable"]:
-            lines.append(f"  continuous law about the target UNSTABLE on the linear plant "
-                         f"(spectral "
+            lines.append(f"  {law} about the target UNSTABLE on the linear plant (spectral "
                          f"abscissa {margins['spectral_abscissa']:.3g} 1/s)")
         else:
-            lines.append("  disk margins of the continuous law about the target (x, y, z): gain "
+            lines.append(f"  disk margins of the {law} about the target (x, y, z): gain "
                          + ", ".join(f"{g:.3g}" for g in margins["gain_margin_db"])
                          + " dB, phase " + ", ".join(f"{p:.3g}" for p in
                                                     margins["phase_margin_deg"]) + " deg"
                          + ("" if margins["multiloop"] is None else
                             f"; all axes at once {margins['multiloop'][1]:.3g} dB, "
                             f"{margins['multiloop'][2]:.3g} deg"))
-    held = summary.get("loop_stability")
-    if held:
-        lines.append("  the law held at its sample time on the linear plant with every mode of the "
-                     "run: " + ("stable" if held["closed_loop_stable"] else "UNSTABLE")
-                     + f" (spectral abscissa {held['spectral_abscissa']:.3g} 1/s)")
-        if held["design_note"]:
-            lines.append(f"  design: {held['design_note']}")
+        if margins.get("design_note"):
+            lines.append(f"  design: {margins['design_note']}")
     files = summary.get("files")
     if files:
         folder = Path(files["summary"]).parent

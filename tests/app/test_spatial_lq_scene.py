@@ -32,9 +32,12 @@ def test_the_lqg_example_slews_through_its_sensors_and_filters(tmp_path):
                  "--set", "model.modes=1"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "ok"
-    verdict = summary["loop_stability"]
+    verdict = summary["loop_margins"]
     assert verdict["closed_loop_stable"] and verdict["spectral_abscissa"] < 0
+    assert verdict["held_at"] == 0.1
     assert "cannot be moved by the inputs" in verdict["design_note"]
+    assert all(6.0 < g for g in verdict["gain_margin_db"])
+    assert verdict["multiloop"][0] <= min(verdict["disk_margin"]) * (1 + 1e-6)
     error = _final_error(out)
     print(f"final pointing error {error:.1e} rad")
     assert error < 1e-3                      # the sensors' noise, not the law, sets the floor
@@ -54,7 +57,7 @@ def test_an_lqr_scene_flies_on_the_whole_state(tmp_path):
     assert main(["run", str(path), "--out", str(out), "--set", "simulation.t_final=20",
                  "--set", "model.modes=1"]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["loop_stability"]["closed_loop_stable"]
+    assert summary["loop_margins"]["closed_loop_stable"]
     assert _final_error(out) < 1e-4
 
 

@@ -210,3 +210,36 @@ def test_lqg_is_refused_a_different_hold():
     session(0.0, TARGET, np.zeros(3))
     with pytest.raises(InputValueError, match="0.1 s hold"):
         session(0.25, TARGET, np.zeros(3))
+
+
+# ------------------------------------------------------------------ loops and margins
+def test_the_continuous_lqr_keeps_kalmans_margins_on_all_axes_at_once():
+    """Kalman's inequality: with ``R`` a multiple of the identity, ``sigma_max(S) <= 1`` at
+    every frequency, so the sensitivity disk (skew 1) of all three inputs at once is at
+    least 1: gains from 1/2 to infinity, 60 degrees of phase."""
+    from controllers.analysis.spatial_loops import loop_disk_margins, lq_loop
+
+    law = design_spatial_lqr(_craft(), WEIGHTS, TARGET, n_modes=2)
+    margins = loop_disk_margins(lq_loop(law, law.plant), skew=1.0)
+    assert margins.closed_loop_stable
+    assert margins.multiloop[0] >= 1.0 - 1e-6
+    assert np.all(margins.disk_margin >= 1.0 - 1e-6)
+
+
+@pytest.mark.parametrize("kind", ["lqr", "lqg"])
+def test_the_held_loop_is_the_one_the_law_closes(kind):
+    from controllers.analysis.spatial_loops import loop_disk_margins, lq_loop
+
+    craft = _craft()
+    law = (design_spatial_lqr(craft, WEIGHTS, TARGET, n_modes=1, sample_time=0.1)
+           if kind == "lqr" else design_spatial_lqg(craft, WEIGHTS, TARGET, 0.1, n_modes=1))
+    truth = linearize_spatial(craft, 3)
+    loop = lq_loop(law, truth)
+    assert loop.dt == 0.1
+    margins = loop_disk_margins(loop)
+    assert margins.spectral_abscissa == pytest.approx(law.loop_poles(truth).real.max(),
+                                                      rel=1e-6)
+    assert margins.closed_loop_stable and np.all(margins.gain_margin_db > 6.0)
+    assert np.all(margins.frequency < np.pi / 0.1)
+    with pytest.raises(InputValueError, match="SpatialLQR or SpatialLQG"):
+        lq_loop(object(), truth)
