@@ -1,11 +1,18 @@
-"""Benchmark: CVODES's multistep families on flexctl's runs (``choose_multistep``).
+"""Benchmark: CVODES's multistep families on flexctl's runs (``choose_multistep``), and the
+place of each integration method on ``method="auto"``'s paths.
 
-Each case runs ``flexctl.simulate(..., method="cvodes", rtol=1e-6, check_validity=False)``
-with the accuracy check, once with the family the rule chooses and once with the other one
-(the rule replaced for that run), and prints the best of 5 wall times and each run's largest
-tip error against a run at rtol 1e-11, relative to the peak.
+1. Each case runs ``flexctl.simulate(..., method="cvodes", rtol=1e-6, check_validity=False)``
+   with the accuracy check, once with the family the rule chooses and once with the other one
+   (the rule replaced for that run), and prints the best of 5 wall times and each run's
+   largest tip error against a run at rtol 1e-11, relative to the peak.
+2. The same cases with ``method="auto"`` (the method it took is printed) against each
+   compiled method asked for by name: ``"cvodes"``, the compiled Dormand-Prince pair
+   (``"RK45"``), the compiled multistep methods (``"Adams"``, ``"BDF"``) and the fixed-step
+   ``"rk4"``, at the same tolerance with the accuracy check, best of 3 (ms), each with its
+   error as above. A method earns its place on a default path where ``auto`` takes it and it
+   is the fastest of those within the tolerance.
 
-Run: ``python benchmarks/bench_multistep.py``. Nothing is asserted.
+Run: ``python benchmarks/bench_multistep.py [--place-only]``. Nothing is asserted.
 """
 
 from __future__ import annotations
@@ -64,8 +71,56 @@ def run(model, t_final, options, rtol, family=None):
         request.choose_multistep = chosen
 
 
+PLACE_METHODS = ("auto", "cvodes", "RK45", "Adams", "BDF", "rk4")
+PLACE_REPEATS = 3
+
+
+def timed(model, t_final, options, method):
+    """``(best wall time s, result)`` of ``method`` at :data:`RTOL` (None where refused)."""
+    best, result = float("inf"), None
+    for _ in range(PLACE_REPEATS + 1):                   # the first compiles
+        start = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                result = simulate(model, t_final, method=method, rtol=RTOL,
+                                  check_validity=False, **options)
+            except (ValueError, TypeError) as exc:
+                return None, str(exc)
+        best = min(best, time.perf_counter() - start)
+    return best, result
+
+
+def place():
+    """Table 2 of the module description."""
+    print(f"\nEach method at rtol {RTOL:g} with its accuracy check, best of {PLACE_REPEATS} (ms), "
+          "and its largest tip error against rtol 1e-11 relative to the peak; 'auto' names "
+          "the method it took\n")
+    print("| run | auto | " + " | ".join(PLACE_METHODS[1:]) + " |")
+    print("|---|---|" + "---|" * (len(PLACE_METHODS) - 1))
+    for label, model, t_final, options in cases():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            tight = simulate(model, t_final, method="cvodes", rtol=1e-11,
+                             check_validity=False, **options)
+        cells = []
+        for method in PLACE_METHODS:
+            best, result = timed(model, t_final, options, method)
+            if best is None or result.status not in ("ok", "stopped"):
+                cells.append("refused" if best is None else result.status)
+                continue
+            error = np.max(np.abs(result.tip_deflection - tight.tip_deflection)) \
+                / tight.peak_tip_deflection
+            name = f"{result.method}: " if method == "auto" else ""
+            cells.append(f"{name}{1e3 * best:.1f} ({error:.1g})")
+        print(f"| {label} | " + " | ".join(cells) + " |", flush=True)
+
+
 def main():
     print(f"load average at start: {os.getloadavg()[0]:.2f} (2 cores)\n")
+    if "--place-only" in sys.argv[1:]:
+        place()
+        return
     print(f"CVODES at rtol {RTOL:g} with its accuracy check: best of {REPEATS} (ms) and the "
           "largest tip error against rtol 1e-11, relative to the peak\n")
     print("| run | the rule's choice | BDF (ms) | error | Adams (ms) | error |")
@@ -87,6 +142,7 @@ def main():
             error = np.max(np.abs(result.tip_deflection - tight.tip_deflection)) / peak
             cells += [f"{1e3 * best:.1f}", f"{error:.2g}"]
         print(f"| {label} | {choice} | " + " | ".join(cells) + " |", flush=True)
+    place()
     print(f"\nload average at end: {os.getloadavg()[0]:.2f}")
 
 

@@ -206,8 +206,15 @@ class _Segments:
             traj.stop(StopReason.SINGULAR_MASS, str(exc), found="effective" in str(exc))
             return None
         except FloatingPointError as exc:
+            hint = ""
+            if plan.fallback in ("BDF", "LSODA"):
+                # orders 3 to 5 are not stable on the imaginary axis: undamped modes grow
+                hint = (f"; SciPy's {plan.fallback} steps at orders 3 to 5, whose formulas "
+                        "amplify undamped oscillations, so this may be the method's growth "
+                        "and not the model's: method 'auto', 'Adams' or 'Radau' keeps them")
             traj.stop(StopReason.STATE_OVERFLOW,
-                      f"the state overflowed between t = {lo:.6g} s and {hi:.6g} s ({exc})")
+                      f"the state overflowed between t = {lo:.6g} s and {hi:.6g} s "
+                      f"({exc}){hint}")
             return None
         traj.n_eval += sol.nfev
         return self._take(traj, sol, y.size)

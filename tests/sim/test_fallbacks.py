@@ -56,3 +56,22 @@ def test_a_torque_function_with_bad_breakpoints_is_refused_by_name(model, declar
     torque.breakpoints = declared
     with pytest.raises(InputError, match="torque.breakpoints must be"):
         simulate(model, 2.0, torque=torque, check_validity=False)
+
+
+def test_scipys_bdf_growing_on_undamped_modes_says_it_may_be_the_method():
+    """SciPy's BDF (taken where the compiled one cannot be built: 30 modes) steps at orders 3
+    to 5, which amplify undamped oscillations: the run's overflow names that, and Radau, an
+    A-stable method, integrates the same run."""
+    from flexctl import SineTorque
+
+    many = build_model(load_scene("hub-beam-mass").system, 30)
+    sine = SineTorque(peak_torque=2.0, duration=2.0)
+    with pytest.warns(Warning):
+        run = simulate(many, 2.0, torque=sine, method="BDF", rtol=1e-6, check_validity=False)
+    if run.status == "ok":
+        pytest.skip("the compiled BDF took this run")
+    assert run.status == "diverged" and "amplify undamped oscillations" in run.message
+    with pytest.warns(Warning):
+        radau = simulate(many, 2.0, torque=sine, method="Radau", rtol=1e-6,
+                         check_validity=False)
+    assert radau.status == "ok"
