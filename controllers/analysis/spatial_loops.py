@@ -312,6 +312,10 @@ def lq_loop(law, plant):
 
     from controllers.design.controllable import held
 
+    if not isinstance(plant, control.StateSpace) or plant.ninputs != 3 or \
+            "ex" not in plant.output_labels:
+        raise InputValueError("lq_loop.plant must be a linear plant of linearize_spatial (a "
+                              f"python-control StateSpace); got {type(plant).__name__}")
     if isinstance(law, SpatialLQG):
         regulator = law.regulator
         a_d, b_d = held(plant.A, plant.B, law.sample_time)

@@ -161,14 +161,28 @@ def input_part(a, b, *, max_frequency: float = math.inf,
     """
     import scipy.linalg
 
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    from flexctl.model.checks import check_array, check_real
+
+    a = np.asarray(check_array("input_part", "a", a), dtype=float)
+    if a.ndim != 2 or a.shape[0] != a.shape[1] or not a.size:
+        raise InputValueError(f"input_part.a must be a square matrix; got shape {a.shape}")
+    b = np.asarray(check_array("input_part", "b", b), dtype=float)
+    if b.ndim != 2 or b.shape[0] != a.shape[0]:
+        raise InputValueError(f"input_part.b must have {a.shape[0]} rows (A's); got shape "
+                              f"{b.shape}")
+    max_frequency = check_real("input_part", "max_frequency", max_frequency, minimum=0.0,
+                               strict=True, infinite=True)
     if not float(np.linalg.norm(b)) > 0:
         raise InputValueError("input_part: the input matrix B is zero: nothing can be moved")
     fast = []
     slow, back = np.eye(a.shape[0]), np.eye(a.shape[0])
     if np.isfinite(max_frequency):
+        # a rigid body's poles sit at zero up to rounding: always kept
+        floor = max(max_frequency, 100.0 * math.sqrt(np.finfo(float).eps
+                                                     * float(np.linalg.norm(a, 2))))
+
         def kept(re, im):
-            return math.hypot(re, im) <= max_frequency
+            return math.hypot(re, im) <= floor
 
         form, vectors, count = scipy.linalg.schur(a.T, output="real", sort=kept)
         slow = vectors[:, :count].T
@@ -184,6 +198,9 @@ def input_part(a, b, *, max_frequency: float = math.inf,
         u_r, s_r, _ = np.linalg.svd(np.hstack([missed.real, missed.imag]))
         complement = u_r[:, int(np.sum(s_r > 1e-8 * s_r[0])):]
     projector, basis = complement.T @ slow, back @ complement
+    if not projector.shape[0]:
+        raise InputValueError(f"input_part: no pole at or below max_frequency "
+                              f"{max_frequency:g} rad/s can be moved by the inputs")
     notes = []
     if dropped:
         notes.append(f"{len(dropped)} pole{'s' if len(dropped) > 1 else ''} (at "

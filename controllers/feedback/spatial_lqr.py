@@ -34,9 +34,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexctl.model.checks import check_array, check_instance, check_real
+from flexctl.model.checks import check_array, check_choice, check_instance, check_real
 from flexctl.model.errors import InputValueError
-from flexctl.model.spatial_dynamics import spatial_equations, spatial_modes
+from flexctl.model.spatial_dynamics import SPATIAL_VARIANTS, spatial_equations, spatial_modes
 from flexctl.model.spatial_plant import linearize_spatial
 from flexctl.model.spatial_structure import SpatialStructure
 from flexctl.sim.quaternions import conjugate, product, rotation_vector
@@ -46,10 +46,13 @@ from ..design.controllable import (ControllablePart, design_failure, held, input
 from .lqr import LQRWeights
 
 __all__ = ["SpatialLQR", "SpatialLQG", "design_spatial_lqr", "design_spatial_lqg",
-           "spatial_weight_matrices", "FREQUENCY_FACTOR"]
+           "spatial_weight_matrices", "FREQUENCY_FACTOR", "NOISE_FLOOR"]
 
 #: Default cut-off of a continuous design's modes, in multiples of the rigid loop's bandwidth.
 FREQUENCY_FACTOR = 100.0
+#: Smallest noise level of an LQG's filter (rad, rad/s, N m): a Riccati equation whose noise
+#: squares underflow has no reliable solution.
+NOISE_FLOOR = 1e-12
 
 
 def spatial_weight_matrices(plant, weights: LQRWeights) -> tuple:
@@ -402,6 +405,7 @@ def _design_plant(structure, n_modes, variant):
     """The design plant at rest and its state names (the spatial model's own)."""
     check_instance("design_spatial_lqr", "structure", structure, SpatialStructure)
     n_modes = spatial_modes("design_spatial_lqr", structure, n_modes)
+    variant = check_choice("design_spatial_lqr", "variant", variant, SPATIAL_VARIANTS)
     plant = linearize_spatial(structure, n_modes, variant=variant)
     layout = spatial_equations(structure, n_modes, variant).layout
     c = layout.n_coordinates
@@ -517,7 +521,8 @@ def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: floa
     sample_time : float
         The loop's hold and the filter's step, s.
     angle_noise : float, optional
-        Standard deviation of each axis of the attitude read, rad. Default 1e-4.
+        Standard deviation of each axis of the attitude read, rad (at least
+        :data:`NOISE_FLOOR`, as the two below). Default 1e-4.
     rate_noise : float, optional
         Standard deviation of each axis of the rate read, rad/s. Default 1e-5.
     process_torque : float, optional
@@ -542,13 +547,15 @@ def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: floa
     if sample_time is None:
         raise InputValueError("design_spatial_lqg.sample_time is required (s): the filter "
                               "is discrete")
-    regulator = design_spatial_lqr(structure, weights, target, n_modes=n_modes,
-                                   variant=variant, sample_time=sample_time,
-                                   torque_limit=torque_limit, max_frequency=max_frequency)
-    noise = {name: check_real("design_spatial_lqg", name, value, minimum=0.0, strict=True,
+    sample_time = check_real("design_spatial_lqg", "sample_time", sample_time, minimum=1e-6,
+                             strict=True, maximum=100.0)
+    noise = {name: check_real("design_spatial_lqg", name, value, minimum=NOISE_FLOOR,
                               maximum=1e6)
              for name, value in (("angle_noise", angle_noise), ("rate_noise", rate_noise),
                                  ("process_torque", process_torque))}
+    regulator = design_spatial_lqr(structure, weights, target, n_modes=n_modes,
+                                   variant=variant, sample_time=sample_time,
+                                   torque_limit=torque_limit, max_frequency=max_frequency)
     plant, part = regulator.plant, regulator.part
     basis = part.basis
     a_d, b_d = held(part.projector @ plant.A @ basis, part.projector @ plant.B, sample_time)
@@ -571,9 +578,10 @@ def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: floa
 
 def _target(target) -> np.ndarray:
     value = np.array(check_array("design_spatial_lqr", "target", target, shape=(4,)))
-    size = float(np.linalg.norm(value))
-    if not size > 0:
+    largest = float(np.max(np.abs(value)))
+    if not largest > 0:
         raise InputValueError("design_spatial_lqr.target must be a non-zero quaternion")
-    value /= size
+    value /= largest                                # no overflow in the norm
+    value /= np.linalg.norm(value)
     value.setflags(write=False)
     return value

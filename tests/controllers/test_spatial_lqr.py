@@ -83,9 +83,25 @@ def test_input_part_drops_a_free_hubs_momentum_and_the_fast_modes():
     assert np.allclose(part.basis @ (part.projector @ rotation), rotation, atol=1e-12)
 
 
-def test_input_part_refuses_a_zero_input():
-    with pytest.raises(InputValueError, match="input matrix B is zero"):
-        input_part(np.eye(2), np.zeros((2, 1)))
+@pytest.mark.parametrize("a, b, match", [
+    (np.eye(2), np.zeros((2, 1)), "input matrix B is zero"),
+    (np.full((2, 2), np.nan), np.ones((2, 1)), "input_part.a must be finite"),
+    (np.eye(3), np.ones((2, 1)), "input_part.b must have 3 rows"),
+    (np.ones(3), np.ones((3, 1)), "input_part.a must be a square matrix"),
+])
+def test_input_part_refuses_what_is_no_plant(a, b, match):
+    with pytest.raises(InputValueError, match=match):
+        input_part(a, b)
+
+
+def test_a_cut_off_below_every_mode_leaves_the_rigid_design():
+    law = design_spatial_lqr(_craft(), WEIGHTS, TARGET, n_modes=1, max_frequency=1e-300)
+    assert law.part.basis.shape[1] == 6 and law.poles.real.max() < 0
+
+
+def test_a_target_of_huge_entries_is_the_same_attitude():
+    law = design_spatial_lqr(_craft(), WEIGHTS, 1e308 * np.asarray(TARGET), n_modes=1)
+    np.testing.assert_allclose(law.target, TARGET, rtol=1e-15)
 
 
 # ------------------------------------------------------------------ designs
@@ -188,6 +204,7 @@ def test_a_state_feedback_law_is_refused_with_sensors_and_on_a_smaller_plant():
     ({"torque_limit": 0.0}, "torque_limit"),
     ({"max_frequency": -1.0}, "max_frequency"),
     ({"n_modes": 0}, "n_modes|modes"),
+    ({"variant": "consistent"}, "design_spatial_lqr.variant"),
 ])
 def test_design_refuses_bad_inputs_by_name(change, match):
     args = {"target": TARGET, "n_modes": 1, "sample_time": 0.1}
