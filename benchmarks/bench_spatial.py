@@ -59,8 +59,19 @@ iteration's convergence: the same 108 000 to 113 000 steps at rtol 1e-4, 1e-6, 1
   1.7e-8), but the rule is the planar exact model's, so that a motion in one plane is that
   model's to round-off (``tests/model/test_spatial_model.py``): kept.
 
-Run: ``python benchmarks/bench_spatial.py`` (prints measured wall times and ratios; the best
-of ``REPEATS`` runs, of 2 for the long runs of (b)).
+(c) Three-axis slews through wheels, sensors and filters at 10 Hz: the 60 s slew of
+    ``examples/scenes/spatial-lqg-slew.toml`` (two damped arrays, exact model on 2 modes per
+    field, three wheels, star tracker, gyro, attitude filter), flown by each controller kind
+    of a spatial scene: quaternion feedback (bandwidth 0.5 rad/s, damping 0.9, with the
+    sensors), the LQR (on the true state: no sensors) and the LQG (with the sensors), all
+    limited to 0.1 N m per axis. Printed per kind: the wall time of the run (target: under
+    5 s), the pointing error at the end, the residual vibration (the largest tip displacement
+    over the last 30 s), the peak wheel speed and power, and the torque used
+    (``int |u|_1 dt``); each metric's error is its change when the run's tolerance is
+    divided by 100.
+
+Run: ``python benchmarks/bench_spatial.py [--loops-only]`` (prints measured wall times and
+ratios; the best of ``REPEATS`` runs, of 2 for the long runs of (b)).
 """
 
 from __future__ import annotations
@@ -191,9 +202,80 @@ def slew_rows():
           f"peak")
 
 
+LOOP_SCENE = SCENE.parent / "spatial-lqg-slew.toml"
+LOOP_KINDS = {
+    "quaternion feedback": {"controller": {"kind": "quaternion_feedback", "sample_time": 0.1,
+                                           "slew_axis": [0.6, 0.0, 0.8], "slew_angle": 20.0,
+                                           "bandwidth": 0.5, "damping": 0.9,
+                                           "torque_limit": 0.1}},
+    "LQR (true state)": {"drop_sensors": True},
+    "LQG": {},
+}
+
+
+def _loop_metrics(result, target) -> dict:
+    from flexctl.sim.quaternions import error_angles
+
+    tips = np.array([np.linalg.norm(v, axis=0) for v in result.tips.values()])
+    late = result.t >= result.t[-1] - 30.0
+    step = np.diff(result.t, prepend=result.t[0])
+    return {"pointing (rad)": float(np.linalg.norm(error_angles(target,
+                                                               result.states[0:4, -1]))),
+            "residual (mm)": 1e3 * float(np.max(tips[:, late])),
+            "wheel speed (rad/s)": float(np.max(np.abs(result.wheel_speeds))),
+            "wheel power (W)": float(np.max(result.wheel_power)),
+            "torque used (N m s)": float(np.sum(np.abs(result.torque) * step))}
+
+
+def _loop_scene(base: dict, label: str, change: dict):
+    import copy
+
+    from flexctl.app.spatial_scene import parse_spatial_scene
+
+    data = copy.deepcopy(base)
+    if change.get("drop_sensors"):
+        data.pop("sensors")
+        data["controller"]["kind"] = "lqr"
+        for key in ("angle_noise", "rate_noise", "process_torque"):
+            data["controller"].pop(key)
+    data.update({k: v for k, v in change.items() if k != "drop_sensors"})
+    return parse_spatial_scene(data, name=label, base_dir=LOOP_SCENE.parent)
+
+
+def loop_rows():
+    import dataclasses
+    import tomllib
+
+    from flexctl.app.spatial_report import run_spatial_scene
+    from flexctl.sim.quaternions import from_rotation_vector, product
+
+    base = tomllib.loads(LOOP_SCENE.read_text())
+    base["simulation"]["t_final"] = 60.0
+    print("\n(c) 60 s three-axis slew (20 deg about (0.6, 0, 0.8)) at 10 Hz through three "
+          "wheels, exact model, 2 modes per field; metric (error: its change at rtol / 100)")
+    for label, change in LOOP_KINDS.items():
+        scene = _loop_scene(base, label, change)
+        target = product(scene.quaternion,
+                         from_rotation_vector(np.radians(20.0) * AXIS / np.linalg.norm(AXIS)))
+        run_spatial_scene(scene)                          # compile before timing
+        wall, _, result = timed(lambda: run_spatial_scene(scene), 2)
+        tight = run_spatial_scene(dataclasses.replace(scene, rtol=scene.rtol / 100))
+        metrics, errors = _loop_metrics(result, target), _loop_metrics(tight, target)
+        cells = ", ".join(f"{k} {v:.3g} (+-{abs(v - errors[k]):.1g})"
+                          for k, v in metrics.items())
+        print(f"  {label:22s} {result.status}, {wall:5.2f} s wall (target 5 s): {cells}",
+              flush=True)
+
+
 if __name__ == "__main__":
+    import sys
+
     warnings.simplefilter("ignore")
     start = time.perf_counter()
+    if "--loops-only" in sys.argv[1:]:
+        loop_rows()
+        raise SystemExit(0)
     planar_rows()
     slew_rows()
+    loop_rows()
     print(f"\n(benchmark took {time.perf_counter() - start:.0f} s)")
