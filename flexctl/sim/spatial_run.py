@@ -574,11 +574,26 @@ def machine_function(function):
     casadi.Function
         Its compiled form (CasADi's own where no compiler is found).
     """
+    import casadi as ca
+
     from .compile_cache import compiled
+    from .lifted_constants import lift_constants
 
     # finite differences only stand in for derivatives CasADi asks for when it builds an
     # integrator; CVODES's functional iteration (Adams) never evaluates them
-    return compiled(function, options={"enable_fd": True})
+    options = {"enable_fd": True}
+    lifted = lift_constants(function)
+    if lifted is not None:
+        # the structure's numbers as an input: one library for every structure of the same
+        # shape (a Monte Carlo's dispersed stiffness, another array length)
+        built = compiled(lifted[0], options=options, label=function.name())
+        if built is not lifted[0]:            # else compiling is off, impossible or failed
+            args = [ca.MX.sym(function.name_in(k), function.sparsity_in(k))
+                    for k in range(function.n_in())]
+            return ca.Function(f"{function.name()}_native", args,
+                               built.call(args + [ca.DM(lifted[1])]), function.name_in(),
+                               function.name_out())
+    return compiled(function, options=options)
 
 
 class _Plan:
