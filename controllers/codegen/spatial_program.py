@@ -24,7 +24,7 @@ import numpy as np
 
 from flexctl.model.errors import InputTypeError, InputValueError
 
-from .program import ControllerProgram
+from .program import ControllerProgram, ExportRefused
 
 __all__ = ["spatial_program", "compiled_spatial_law"]
 
@@ -130,6 +130,11 @@ def spatial_program(law) -> ControllerProgram:
     """
     from ..feedback.spatial_lqr import SpatialLQG, SpatialLQR
 
+    regulator = getattr(law, "regulator", law)
+    if getattr(regulator, "reference", None) is not None:
+        raise ExportRefused("export: a three-axis law that follows a reference slew is not "
+                            "written as C yet; export the regulator (design it without "
+                            "reference) and feed its state the reference's deviation")
     if isinstance(law, SpatialLQR):
         return _lqr_program(law)
     if isinstance(law, SpatialLQG):

@@ -121,6 +121,10 @@ class SpatialLQR:
         :func:`~controllers.design.controllable.input_part`).
     note : str
         What the design left out (``""``: nothing).
+    reference : EigenaxisSlew or None
+        A slew to follow to :attr:`target`: the law regulates ``x - x_ref(t)`` (the
+        reference's attitude error and rate) and adds its feedforward torque. None: a step to
+        the target.
     """
 
     gain: np.ndarray
@@ -132,6 +136,33 @@ class SpatialLQR:
     torque_limit: float | None
     part: ControllablePart
     note: str
+    reference: object = None
+
+    def command(self, t: float, state) -> np.ndarray:
+        """``clip(-K (x - x_ref(t)) + u_ff(t))`` for the design state ``x`` (the attitude
+        error from :attr:`target` first).
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+        state : array_like, shape (n,)
+            The design state (:attr:`state_names`).
+
+        Returns
+        -------
+        ndarray, shape (3,)
+            Torque, N m, hub frame.
+        """
+        state = np.asarray(state, dtype=float)
+        if self.reference is None:
+            return self.limited(-self.gain @ state)
+        error, rate, torque = self.reference.at(t)
+        deviation = state.copy()
+        deviation[0:3] -= error
+        at = self.state_names.index("wx")
+        deviation[at:at + 3] -= rate
+        return self.limited(-self.gain @ deviation + torque)
 
     #: The loop hands this law the plant's whole state.
     state_feedback = True
@@ -240,7 +271,7 @@ class _StateFeedbackSession:
         x = np.asarray(state, dtype=float)
         rest = x[3:] if self.rows is None else x[self.rows]
         design = np.concatenate([_attitude_error(law.target, attitude), rest])
-        return law.limited(-law.gain @ design)
+        return law.command(t, design)
 
 
 @dataclass(frozen=True, eq=False)
@@ -373,7 +404,7 @@ class _ObservedSession:
         estimate = self.predicted + law.filter_gain @ (y - law.measured @ self.predicted)
         part = law.regulator.part
         state = part.basis @ estimate
-        command = law.regulator.limited(-law.regulator.gain @ state)
+        command = law.regulator.command(t, state)
         rate_at = law.regulator.state_names.index("wx")
         turned = _kinematics(state[0:3], state[rate_at:rate_at + 3]) * law.sample_time
         self.predicted = (law.a_held @ estimate + law.b_held @ command
@@ -419,7 +450,7 @@ def _design_plant(structure, n_modes, variant):
 def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
                        variant: str = "exact", sample_time: float | None = None,
                        torque_limit: float | None = None,
-                       max_frequency: float | None = None) -> SpatialLQR:
+                       max_frequency: float | None = None, reference=None) -> SpatialLQR:
     """A three-axis LQR on the linear flexible spacecraft at rest.
 
     Parameters
@@ -428,8 +459,9 @@ def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
         The hub and its appendages.
     weights : LQRWeights
         Bryson weights per axis (:func:`spatial_weight_matrices`).
-    target : array_like, shape (4,)
-        Target attitude, hub to inertial, scalar first (normalised here).
+    target : array_like, shape (4,) or None
+        Target attitude, hub to inertial, scalar first (normalised here); None with a
+        ``reference``: its end.
     n_modes : int, sequence of int or mapping, optional
         The design plant's modes per field (:func:`~flexctl.model.spatial_dynamics.spatial_modes`).
         Default 2.
@@ -446,6 +478,9 @@ def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
         amplify noise). Default: the Nyquist frequency ``pi / sample_time`` of a sampled
         design, else :data:`FREQUENCY_FACTOR` times the rigid loop's bandwidth
         ``sqrt(torque / (hub_angle J_max))`` (``J_max`` the largest principal rigid inertia).
+    reference : EigenaxisSlew, optional
+        A slew about a fixed axis to follow to the target
+        (:class:`~controllers.slew.eigenaxis.EigenaxisSlew`). Default: a step to the target.
 
     Returns
     -------
@@ -467,7 +502,7 @@ def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
     ((3, 12), True)
     """
     check_instance("design_spatial_lqr", "weights", weights, LQRWeights)
-    target = _target(target)
+    target = _target(target, reference)
     if sample_time is not None:
         sample_time = check_real("design_spatial_lqr", "sample_time", sample_time,
                                  minimum=1e-6, strict=True, maximum=100.0)
@@ -499,14 +534,14 @@ def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
         poles = _continuous(np.linalg.eigvals(a_d - b_d @ gain_r), sample_time)
     return SpatialLQR(gain=gain, plant=plant, state_names=names, target=target, poles=poles,
                       sample_time=sample_time, torque_limit=torque_limit, part=part,
-                      note=part.note)
+                      note=part.note, reference=reference)
 
 
 def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: float, *,
                        angle_noise: float = 1e-4, rate_noise: float = 1e-5,
                        process_torque: float = 1e-3, n_modes=2, variant: str = "exact",
                        torque_limit: float | None = None,
-                       max_frequency: float | None = None) -> SpatialLQG:
+                       max_frequency: float | None = None, reference=None) -> SpatialLQG:
     """A three-axis LQG: :func:`design_spatial_lqr` held over ``sample_time`` and a discrete
     Kalman filter of the attitude and rate readings.
 
@@ -516,8 +551,8 @@ def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: floa
         The hub and its appendages.
     weights : LQRWeights
         The regulator's Bryson weights per axis.
-    target : array_like, shape (4,)
-        Target attitude, hub to inertial, scalar first.
+    target : array_like, shape (4,) or None
+        Target attitude, hub to inertial, scalar first (None with a ``reference``).
     sample_time : float
         The loop's hold and the filter's step, s.
     angle_noise : float, optional
@@ -537,6 +572,9 @@ def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: floa
     max_frequency : float, optional
         Modes faster than this are out of the design and of the filter, rad/s; default the
         Nyquist frequency ``pi / sample_time`` (:func:`design_spatial_lqr`).
+    reference : EigenaxisSlew, optional
+        A slew to follow (:func:`design_spatial_lqr`); the filter estimates the state from
+        the final target and predicts with the whole command.
 
     Returns
     -------
@@ -555,7 +593,8 @@ def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: floa
                                  ("process_torque", process_torque))}
     regulator = design_spatial_lqr(structure, weights, target, n_modes=n_modes,
                                    variant=variant, sample_time=sample_time,
-                                   torque_limit=torque_limit, max_frequency=max_frequency)
+                                   torque_limit=torque_limit, max_frequency=max_frequency,
+                                   reference=reference)
     plant, part = regulator.plant, regulator.part
     basis = part.basis
     a_d, b_d = held(part.projector @ plant.A @ basis, part.projector @ plant.B, sample_time)
@@ -576,7 +615,18 @@ def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: floa
                       b_held=b_d, measured=measured, estimator_poles=poles)
 
 
-def _target(target) -> np.ndarray:
+def _target(target, reference=None) -> np.ndarray:
+    if reference is not None:
+        from ..slew.eigenaxis import EigenaxisSlew
+
+        check_instance("design_spatial_lqr", "reference", reference, EigenaxisSlew)
+        end = reference.target
+        if target is None:
+            target = end
+        elif min(np.linalg.norm(_target(target) - end), np.linalg.norm(_target(target) + end)) \
+                > 1e-9:
+            raise InputValueError("design_spatial_lqr.target must be the reference's end "
+                                  "attitude (or None)")
     value = np.array(check_array("design_spatial_lqr", "target", target, shape=(4,)))
     largest = float(np.max(np.abs(value)))
     if not largest > 0:

@@ -12,7 +12,9 @@
     sample time; it feeds back the plant's whole state, so it takes no ``[sensors]``):
     the Bryson weights ``hub_angle`` (rad), ``torque`` (N m) and optional ``hub_rate``
     (rad/s) and ``tip_deflection`` (m), optional ``design_modes`` (per field, default 2) and
-    ``max_frequency`` (rad/s);
+    ``max_frequency`` (rad/s); with ``slew_duration`` (s, and ``slew_shape``, ``"poly7"`` or
+    ``"cycloidal"``) it follows an eigenaxis slew of that length
+    (:class:`controllers.slew.eigenaxis.EigenaxisSlew`) instead of a step to the target;
   - ``"lqg"`` (:func:`controllers.feedback.spatial_lqr.design_spatial_lqg`): those and the
     filter's ``angle_noise`` (rad), ``rate_noise`` (rad/s) and ``process_torque`` (N m); it
     reads the attitude and rate (the attitude filter's, with ``[sensors]``).
@@ -48,7 +50,7 @@ _COMMON_KEYS = {"kind", "sample_time", "slew_axis", "slew_angle", "target", "tor
 _CONTROLLER_KEYS = {
     "quaternion_feedback": _COMMON_KEYS | {"bandwidth", "damping", "integral_time"},
     "lqr": _COMMON_KEYS | {"hub_angle", "hub_rate", "tip_deflection", "torque", "design_modes",
-                           "max_frequency"},
+                           "max_frequency", "slew_duration", "slew_shape"},
 }
 _CONTROLLER_KEYS["lqg"] = _CONTROLLER_KEYS["lqr"] | {"angle_noise", "rate_noise",
                                                      "process_torque"}
@@ -144,8 +146,10 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
         law = _design(kind, controller, structure, target, step)
     except (ValueError, TypeError) as exc:
         message = str(exc)
+        for owner, name in (("slew.duration", "slew_duration"), ("slew.shape", "slew_shape")):
+            message = message.replace(owner, f"controller.{name}")
         for owner in ("quaternion_feedback.", "design_spatial_lqr.", "design_spatial_lqg.",
-                      "lqr_weights."):
+                      "lqr_weights.", "eigenaxis_slew."):
             message = message.replace(owner, "controller.")
         raise SceneError(message) from None
     if not sensors:
@@ -186,12 +190,34 @@ def _design(kind: str, controller: dict, structure, target, step: float):
                             if key in controller})
     common = {"n_modes": controller.get("design_modes", 2),
               "torque_limit": controller.get("torque_limit"),
-              "max_frequency": controller.get("max_frequency")}
+              "max_frequency": controller.get("max_frequency"),
+              "reference": _eigenaxis(controller, structure, target)}
     if kind == "lqr":
         return design_spatial_lqr(structure, weights, target, sample_time=step, **common)
     noise = {key: controller[key] for key in ("angle_noise", "rate_noise", "process_torque")
              if key in controller}
     return design_spatial_lqg(structure, weights, target, step, **noise, **common)
+
+
+def _eigenaxis(controller: dict, structure, target):
+    """The eigenaxis slew of ``slew_duration`` (and ``slew_shape``), or None for a step."""
+    if "slew_duration" not in controller:
+        if "slew_shape" in controller:
+            raise SceneError("controller.slew_shape needs controller.slew_duration (s)")
+        return None
+    if "slew_axis" not in controller:
+        raise SceneError("controller.slew_duration needs the slew as slew_axis and slew_angle "
+                         "(an eigenaxis slew), not a target quaternion")
+    from controllers.slew.eigenaxis import EigenaxisSlew
+    from controllers.slew.reference import SlewProfile
+
+    angle = np.radians(float(controller["slew_angle"]))
+    start = product(target, from_rotation_vector(-angle * check_direction(
+        "controller", "slew_axis", controller["slew_axis"])))
+    profile = SlewProfile(slew_angle=angle, duration=controller["slew_duration"],
+                          shape=controller.get("slew_shape", "poly7"))
+    return EigenaxisSlew(axis=controller["slew_axis"], profile=profile,
+                         inertia=structure.rigid_inertia, start=start)
 
 
 def _target(controller: dict, quaternion) -> np.ndarray:

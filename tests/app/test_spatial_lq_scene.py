@@ -78,12 +78,34 @@ def test_an_lqr_scene_with_sensors_is_refused(tmp_path):
     ("angle_noise = 1e-4", "angle_noise = 1e-4\nbandwidth = 0.5", r"controller"),
     ("slew_angle = 20.0", "slew_angle = 20.0\nmax_frequency = -3.0",
      r"controller\.max_frequency"),
+    ("design_modes = 1", "design_modes = 1\nslew_duration = -2.0", r"controller\.slew_duration"),
+    ("design_modes = 1", 'design_modes = 1\nslew_duration = 9.0\nslew_shape = "sine"',
+     r"controller\.slew_shape"),
+    ("design_modes = 1", 'design_modes = 1\nslew_shape = "poly7"', r"needs controller\.slew_duration"),
 ], ids=["no hub_angle", "no torque", "negative weight", "string weight",
         "zero noise", "no design modes", "unknown key",
-        "negative cut-off"])
+        "negative cut-off", "negative slew duration", "unknown slew shape",
+        "a shape without a duration"])
 def test_a_bad_lq_loop_is_refused_by_its_key(tmp_path, old, new, pattern):
     assert old in SCENE
     path = tmp_path / "loop.toml"
     path.write_text(SCENE.replace(old, new, 1))
     with pytest.raises(InputError, match=pattern):
         load_scene(path)
+
+
+def test_an_lqg_scene_follows_an_eigenaxis_slew(tmp_path):
+    """``slew_duration``: the law follows a 12 s eigenaxis slew instead of a step, and
+    excites the arrays less."""
+    peaks = {}
+    for name, extra in (("step", ""), ("eigenaxis", "\nslew_duration = 12.0")):
+        path = tmp_path / f"{name}.toml"
+        path.write_text(SCENE.replace("design_modes = 1", "design_modes = 1" + extra))
+        out = tmp_path / name
+        assert main(["run", str(path), "--out", str(out), "--set", "simulation.t_final=20",
+                     "--set", "model.modes=1"]) == 0
+        summary = json.loads((out / "summary.json").read_text())
+        peaks[name] = summary["peak_tip_deflection"]
+        assert _final_error(out) < 1e-3
+    print(peaks)
+    assert peaks["eigenaxis"] < 0.5 * peaks["step"]

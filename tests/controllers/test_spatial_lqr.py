@@ -260,3 +260,89 @@ def test_the_held_loop_is_the_one_the_law_closes(kind):
     assert np.all(margins.frequency < np.pi / 0.1)
     with pytest.raises(InputValueError, match="SpatialLQR or SpatialLQG"):
         lq_loop(object(), truth)
+
+
+# ------------------------------------------------------------------ eigenaxis slews
+def _eigenaxis(profile=None):
+    from controllers import SlewProfile
+    from controllers.slew.eigenaxis import EigenaxisSlew
+
+    profile = profile or SlewProfile(slew_angle=np.radians(20.0), duration=12.0)
+    return EigenaxisSlew(axis=(0.6, 0.0, 0.8), profile=profile, inertia=_craft().rigid_inertia)
+
+
+def test_an_eigenaxis_slew_is_a_rotation_about_its_axis_to_the_target():
+    from flexctl.sim.quaternions import from_rotation_vector
+
+    slew = _eigenaxis()
+    np.testing.assert_allclose(slew.target, TARGET, atol=1e-15)
+    axis = np.array([0.6, 0.0, 0.8])
+    for t in (0.0, 3.0, 6.0, 11.0, 12.0, 20.0):
+        error, rate, torque = slew.at(t)
+        angle, speed, acceleration = (float(f(t)) for f in (slew.profile.angle,
+                                                             slew.profile.rate,
+                                                             slew.profile.acceleration))
+        # the attitude error of the reference from the target, exactly, about a fixed axis
+        attitude = from_rotation_vector(angle * axis)
+        np.testing.assert_allclose(rotation_vector(product(conjugate(TARGET), attitude)),
+                                   error, atol=1e-14)
+        np.testing.assert_allclose(rate, speed * axis, atol=1e-15)
+        inertia = _craft().rigid_inertia
+        np.testing.assert_allclose(torque, acceleration * inertia @ axis
+                                   + np.cross(rate, inertia @ rate), atol=1e-15)
+    assert np.allclose(slew.at(0.0)[0], -np.radians(20.0) * axis)
+    assert np.allclose(slew.at(12.0)[0], 0.0) and np.allclose(slew.at(12.0)[1], 0.0)
+
+
+def test_following_an_eigenaxis_slew_excites_the_arrays_less_than_a_step():
+    craft = _craft()
+    runs = {}
+    for name, reference in (("step", None), ("eigenaxis", _eigenaxis())):
+        law = design_spatial_lqr(craft, WEIGHTS, None if reference else TARGET, n_modes=1,
+                                 sample_time=0.1, torque_limit=0.1, reference=reference)
+        runs[name] = simulate_spatial_loop(craft, 30.0, law, sample_time=0.1, n_modes=2,
+                                           rtol=1e-7, variant="first_order").result
+    peak = {k: max(np.max(np.abs(v)) for v in r.tips.values()) for k, r in runs.items()}
+    print(f"peak tip: step {peak['step']:.3g} m, eigenaxis {peak['eigenaxis']:.3g} m")
+    assert peak["eigenaxis"] < 0.5 * peak["step"]
+    assert np.max(np.abs(runs["eigenaxis"].torque)) < 0.1           # never saturated
+    assert _pointing(runs["eigenaxis"])[-1] < 1e-6
+
+
+def test_an_eigenaxis_slew_takes_a_shaped_profile_and_the_lqg_follows_it():
+    from controllers import SlewProfile, shape, zvd_shaper
+
+    profile = shape(SlewProfile(slew_angle=np.radians(20.0), duration=10.0),
+                    zvd_shaper(13.6, 0.005))
+    slew = _eigenaxis(profile)
+    assert slew.end_time == pytest.approx(max(profile.breakpoints))
+    law = design_spatial_lqg(_craft(), WEIGHTS, None, 0.1, n_modes=1, torque_limit=0.1,
+                             reference=slew)
+    run = simulate_spatial_loop(_craft(), 30.0, law, sample_time=0.1, n_modes=2, rtol=1e-7,
+                                variant="first_order")
+    assert run.ok and _pointing(run.result)[-1] < 1e-5
+
+
+def test_an_eigenaxis_slew_refuses_what_is_no_slew(tmp_path):
+    from controllers import SlewProfile
+    from controllers.codegen import ExportRefused, export_c
+    from controllers.slew.eigenaxis import EigenaxisSlew
+    from flexctl.model.errors import InputTypeError
+
+    profile = SlewProfile(slew_angle=0.3, duration=5.0)
+    with pytest.raises(InputValueError, match="axis"):
+        EigenaxisSlew(axis=(0, 0, 0), profile=profile, inertia=np.eye(3))
+    with pytest.raises(InputValueError, match="positive definite"):
+        EigenaxisSlew(axis=(0, 0, 1), profile=profile, inertia=-np.eye(3))
+    with pytest.raises(InputTypeError, match="profile"):
+        EigenaxisSlew(axis=(0, 0, 1), profile=None, inertia=np.eye(3))
+    with pytest.raises(InputTypeError, match="angle"):
+        EigenaxisSlew(axis=(0, 0, 1), profile=object(), inertia=np.eye(3))
+    slew = _eigenaxis()
+    with pytest.raises(InputValueError, match="reference's end"):
+        design_spatial_lqr(_craft(), WEIGHTS, (1.0, 0.0, 0.0, 0.0), reference=slew)
+    with pytest.raises(InputTypeError, match="reference"):
+        design_spatial_lqr(_craft(), WEIGHTS, TARGET, reference="slew")
+    law = design_spatial_lqr(_craft(), WEIGHTS, None, n_modes=1, reference=slew)
+    with pytest.raises(ExportRefused, match="reference"):
+        export_c(law, None, tmp_path)
