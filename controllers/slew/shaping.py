@@ -90,11 +90,14 @@ class BangBang:
                                                  minimum=0.0, strict=True))
         object.__setattr__(self, "start_time", check_real("bang_bang", "start_time",
                                                      self.start_time, minimum=0.0))
+        # once: a SciPy run asks the torque at every step
+        object.__setattr__(self, "_duration", rigid_slew_duration(
+            self.slew_angle, self.inertia, self.peak_torque))
 
     @property
     def duration(self) -> float:
         """Slew time, s."""
-        return rigid_slew_duration(self.slew_angle, self.inertia, self.peak_torque)
+        return self._duration
 
     @property
     def breakpoints(self) -> tuple:

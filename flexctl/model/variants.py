@@ -296,8 +296,8 @@ class Model:
         torque = u.reshape(()) if u.size == 1 and x.ndim == 1 else u
         if self.matrix_form:
             theta_tt, q_tt = self._matrix_accelerations(x, torque)
-            return np.concatenate((x[self.layout.velocities], np.expand_dims(theta_tt, 0), q_tt),
-                                  axis=0)
+            return np.concatenate((x[self.layout.velocities],
+                                   np.asarray(theta_tt)[np.newaxis], q_tt), axis=0)
         torque = np.broadcast_to(torque, x.shape[1:])
         xdot = self._evaluate(self.functions.rhs, x.ndim > 1, x, torque)
         finite = np.all(np.isfinite(xdot))
@@ -314,13 +314,17 @@ class Model:
         """:meth:`accelerations` of a :attr:`matrix_form` model, in numpy (a SciPy run calls
         it at every step: a CasADi call costs more than the arithmetic)."""
         mat, c = self.matrices, self.matrix_terms()
-        _, q, w, qd = self.split(x)
+        _, q, w, qd = self.layout.split(x)
         f_beam = -(mat.C_ff @ qd) - mat.K_ff @ q + w ** 2 * (c["stiff_d"] @ q)
         f_hub = torque - self.structure.hub.friction * w
         if self.variant.quadratic_inertia:
             f_hub = f_hub - 2.0 * w * np.einsum("i...,ij,j...->...", q, mat.D, qd)
-        j_eff = self.effective_hub_inertia(x)
-        if np.any(j_eff <= 0.0):
+            j_eff = self.effective_hub_inertia(x)
+            singular = np.any(j_eff <= 0.0)
+        else:
+            j_eff = c["j_rigid_eff"]           # constant without the quadratic inertia
+            singular = not j_eff > 0.0
+        if singular:
             raise SingularMassMatrixError(
                 "mass matrix is singular at this state: the effective hub inertia "
                 f"{np.min(j_eff):.3g} kg m^2 is not positive")
