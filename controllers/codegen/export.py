@@ -301,6 +301,10 @@ class CompiledLaw:
         self._memory = np.zeros(-(-self.struct_bytes // 8) + 1)
         self._input = np.zeros(max(export.program.n_in, 1), dtype=dtype)
         self._u = np.zeros(export.program.n_out, dtype=dtype)
+        # the buffers live as long as the law: their pointers are made once, not per step
+        self._pointers = (self._memory.ctypes.data,
+                          self._input.ctypes.data_as(ctypes.POINTER(real)),
+                          self._u.ctypes.data_as(ctypes.POINTER(real)))
         self.init()
 
     @property
@@ -336,10 +340,8 @@ class CompiledLaw:
             raise InputValueError(f"compiled law input must have {self.program.n_in} entries "
                                   f"({self.program.input_kind}); got {v.size}")
         self._input[:v.size] = v
-        code = self._lib.flexctl_ctrl_step(
-            self._memory.ctypes.data, self._real(float(t)),
-            self._input.ctypes.data_as(ctypes.POINTER(self._real)),
-            self._u.ctypes.data_as(ctypes.POINTER(self._real)))
+        memory, inputs, command = self._pointers
+        code = self._lib.flexctl_ctrl_step(memory, self._real(float(t)), inputs, command)
         u = float(self._u[0]) if self._u.size == 1 else self._u.astype(float)
         return u, int(code)
 
