@@ -264,6 +264,12 @@ class ScipyIVP(_Segments):
     is the run replayed at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance, as
     a compiled run's (:func:`replay_error`).
 
+    Its place: the runs nothing compiles (a torque function that can be neither traced nor
+    sampled, a controller without a CasADi form, compiling off) and the SciPy methods asked
+    for by name. ``benchmarks/bench_inputs.py`` measures what it costs: a torque function
+    called at every step of DOP853 ran at 0.7 of python-control's fastest method, the same
+    function sampled onto the compiled path at 23 to 29 times it (2026-11-29).
+
     Parameters
     ----------
     request : RunRequest
@@ -359,6 +365,13 @@ def replay_error(strategy, traj) -> tuple:
 
 class CvodesSegments(_Segments):
     """CVODES on the compiled right-hand side; SciPy locates a stop within a segment.
+
+    Its place: ``method="auto"`` on models whose steps times instructions pass the compiled
+    pair's work bound (many modes), behind a fast actuator, and wherever a compiled method
+    cannot be built. ``benchmarks/bench_multistep.py`` (its second table, rtol 1e-6 with the
+    check): hub-beam-mass on 30 first_order modes, auto took CVODES, 71 to 116 ms, error
+    6e-6 (the compiled BDF cannot be built there; the pair 65 ms). Its multistep family is
+    :func:`~flexctl.sim.request.choose_multistep`'s.
 
     Parameters
     ----------
@@ -508,6 +521,13 @@ class EmbeddedSegments(CvodesSegments):
     (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), the step size carried from one segment
     to the next; SciPy locates a stop within a segment, as behind CVODES.
 
+    Its place: ``method="auto"`` on the small-deflection models whose work it bounds
+    (:func:`~flexctl.sim.request.choose_continuous`). ``benchmarks/bench_multistep.py``
+    (second table, rtol 1e-6 with the check, ms): the Kane spin-up on 4 first_order modes
+    14.7 against CVODES's 21.6; hub-beam-mass on 12 modes over 20 s 275 against 484;
+    spacecraft-torque on 6 modes 209 against 341. The compiled Adams-Moulton measured faster
+    still on these three rows (8.1, 159, 86) but is not on auto's path for these variants.
+
     Parameters
     ----------
     request : RunRequest
@@ -567,6 +587,12 @@ class BdfSegments(EmbeddedSegments):
     (:class:`~flexctl.sim.compiled_bdf.BdfRun`), each segment from order 1; the accuracy
     check replays them at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance
     beside the run; SciPy locates a stop within a segment, as behind CVODES.
+
+    Its place: ``method="auto"`` on the exact variant
+    (:data:`~flexctl.sim.request.BDF_REPLACES`). ``benchmarks/bench_multistep.py`` (second
+    table, rtol 1e-6 with the check, ms): slew-90's saturated PD on 4 and 6 exact modes,
+    Adams 20 and 40 against CVODES's 34 and 89 and the pair's 73 and 223; the Kane spin-up
+    on 4 exact modes 47 to 57 against CVODES's 85.
 
     Parameters
     ----------
@@ -684,6 +710,11 @@ class FixedStepRK4(_Segments):
     """Compiled fixed-step RK4 over the whole run in one call (:mod:`flexctl.sim.fixed_step`);
     where an output sample is past a stopping condition, SciPy locates the stop from the
     sample before it, as behind CVODES.
+
+    Its place: no default path; ``method="rk4"`` for sweeps and design loops where a fixed
+    step and about 1 % are enough. ``benchmarks/bench_multistep.py`` (second table): the Kane
+    spin-up on 4 first_order modes in 3.9 ms (error 3e-8) against auto's 14.7 ms;
+    ``benchmarks/bench_fixed_step.py`` case A: 2 modes within 0.38 % in 7 to 11 ms.
 
     Parameters
     ----------
