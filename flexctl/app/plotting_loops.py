@@ -4,7 +4,8 @@ python-control draws the Bode and pole-zero plots (``bode_plot``, ``pole_zero_pl
 axes of a bare :class:`matplotlib.figure.Figure` (:mod:`flexctl.app.figures`: no pyplot, safe
 on the Agg backend); these functions add what a flexible structure needs on top: the flexible
 modes marked at their natural frequencies, the poles against the spin rate, and the margins
-of a Monte Carlo study. They compute nothing physical.
+of a Monte Carlo study, and the Nichols chart with an exclusion zone. They compute nothing
+physical.
 
 Examples
 --------
@@ -27,8 +28,8 @@ import numpy as np
 from ..model.errors import InputTypeError, InputValueError
 from .figures import figure_for, new_figure
 
-__all__ = ["plot_bode", "plot_pole_zero", "plot_poles_vs_spin", "plot_frequencies_vs_spin",
-           "plot_robustness", "mark_modes"]
+__all__ = ["plot_bode", "plot_nichols", "plot_pole_zero", "plot_poles_vs_spin",
+           "plot_frequencies_vs_spin", "plot_robustness", "mark_modes"]
 
 _MODE_STYLE = {"color": "0.55", "linestyle": ":", "linewidth": 0.9}
 
@@ -151,6 +152,99 @@ def plot_bode(systems, *, natural_frequencies=None, omega_limits=None, omega_num
                       title=title or "", wrap_phase=True)
     for ax in axes:
         mark_modes(ax, natural_frequencies, label=ax is axes[0])
+    return fig
+
+
+def plot_nichols(systems, *, natural_frequencies=None, omega_limits=None, omega_num: int = 3000,
+                 margins=None, ax=None, title: str | None = None):
+    """Nichols chart of one or more loops, each flexible mode marked on every curve, with an
+    optional exclusion zone around the critical points.
+
+    Parameters
+    ----------
+    systems : control.LTI or dict of {str: control.LTI}
+        SISO loop transfers (e.g. :func:`~controllers.analysis.loops.loop_transfer`),
+        continuous or sampled.
+    natural_frequencies : array_like, optional
+        Flexible frequencies to mark on each curve, rad/s (``mode i`` where the curve passes
+        it).
+    omega_limits : (float, float), optional
+        Frequency range, rad/s. Default: python-control's choice.
+    omega_num : int, optional
+        Points of the logarithmic grid. Default 3000.
+    margins : (float, float), optional
+        ``(gain margin dB, phase margin deg)`` required of the loop: the rectangle of gains and
+        phases within them of each critical point ``(-180 + k 360 deg, 0 dB)`` is shaded (a
+        curve through it misses the requirement). Default none.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw into; default a new figure.
+    title : str, optional
+        Axes title. Default none.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Examples
+    --------
+    >>> import flexctl
+    >>> from controllers import design_pd
+    >>> from controllers.analysis.loops import loop_transfer
+    >>> model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    >>> loop = loop_transfer(model, design_pd(model, bandwidth=2.0))
+    >>> fig = plot_nichols({"PD": loop}, natural_frequencies=model.natural_frequencies(
+    ...     hub="free"), margins=(6.0, 30.0))
+    >>> fig.axes[0].get_xlabel()
+    'Phase [deg]'
+    """
+    import control
+    from matplotlib.patches import Rectangle
+
+    named = _systems(systems)
+    if any(not sys.issiso() for sys in named.values()):
+        raise InputValueError("plot_nichols takes SISO loops (break a MIMO loop one axis at a "
+                              "time)")
+    fig, ax = figure_for(ax, (7.0, 5.5))
+    frequencies = _frequencies(natural_frequencies)
+    for label, sys in named.items():
+        response = control.frequency_response(sys, omega_limits=omega_limits,
+                                              omega_num=omega_num)
+        value = np.asarray(response.complex).reshape(-1)
+        with np.errstate(divide="ignore"):
+            gain = 20.0 * np.log10(np.abs(value))
+        # the phase in one window, [-360, 0) deg: an undamped mode turns it by 180 deg at
+        # once, and an unwrapped phase would drift by whole turns across the modes
+        phase = np.mod(np.degrees(np.angle(value)), 360.0) - 360.0
+        jumps = np.flatnonzero(np.abs(np.diff(phase)) > 90.0) + 1     # a resonance: a gap
+        line, = ax.plot(np.insert(phase, jumps, np.nan), np.insert(gain, jumps, np.nan),
+                        label=label)
+        omega = np.asarray(response.omega)
+        for w, text in _mode_labels(frequencies):
+            if omega[0] <= w <= omega[-1]:
+                k = int(np.argmin(np.abs(np.log(omega / w))))
+                ax.plot(phase[k], gain[k], "o", color=line.get_color(), markersize=4)
+                ax.annotate(text, (phase[k], gain[k]), textcoords="offset points",
+                            xytext=(4, 4), fontsize=7, color="0.3")
+    ax.set_xlim(-360.0, 0.0)
+    control.nichols_grid(ax=ax)
+    ax.set_xlabel("Phase [deg]")
+    ax.set_ylabel("Magnitude [dB]")
+    if title:
+        ax.set_title(title)
+    if len(named) > 1:
+        ax.legend(loc="upper left")
+    if margins is not None:
+        gain_db, phase_deg = (float(v) for v in margins)
+        if not (gain_db > 0 and 0 < phase_deg < 180):
+            raise InputValueError(f"margins must be (gain dB > 0, phase deg in (0, 180)); got "
+                                  f"{margins!r}")
+        low, high = ax.get_xlim()
+        for k in range(int(np.floor((low + 180.0) / 360.0)) - 1,
+                       int(np.ceil((high + 180.0) / 360.0)) + 1):
+            centre = -180.0 + 360.0 * k
+            ax.add_patch(Rectangle((centre - phase_deg, -gain_db), 2 * phase_deg, 2 * gain_db,
+                                   color="tab:red", alpha=0.15, linewidth=0))
+        ax.set_xlim(low, high)
     return fig
 
 

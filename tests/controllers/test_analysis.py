@@ -507,6 +507,37 @@ def test_loop_figures_mark_the_flexible_modes(system, lqr_weights):
         plot_bode([loops["PD"]])
 
 
+def test_the_nichols_chart_marks_each_mode_where_the_loop_passes_it(system):
+    import control
+    from matplotlib.patches import Rectangle
+
+    from flexctl.app.plotting_loops import plot_nichols
+
+    model = flexctl.build_model(system, 3)
+    free = model.natural_frequencies(hub="free")
+    loop = loop_transfer(model, design_pd(model, 2.0))
+    fig = plot_nichols({"PD": loop}, natural_frequencies=free, margins=(6.0, 30.0),
+                       omega_limits=(0.1, 300.0))
+    ax = fig.axes[0]
+    assert ax.get_xlim() == (-360.0, 0.0)
+    # each mode's dot is the loop's gain and phase at that frequency, the phase in [-360, 0)
+    dots = [line for line in ax.lines if line.get_marker() == "o"]
+    assert len(dots) == free.size
+    for dot, w in zip(dots, free):
+        response = control.frequency_response(loop, omega_limits=(0.1, 300.0), omega_num=3000)
+        k = int(np.argmin(np.abs(np.log(np.asarray(response.omega) / w))))
+        value = complex(np.asarray(response.complex).reshape(-1)[k])
+        assert dot.get_ydata()[0] == pytest.approx(20 * np.log10(abs(value)))
+        assert dot.get_xdata()[0] == pytest.approx(np.degrees(np.angle(value)) % 360 - 360)
+    zones = [p for p in ax.patches if isinstance(p, Rectangle)]
+    assert zones and all(p.get_width() == 60.0 and p.get_height() == 12.0 for p in zones)
+    assert any(p.get_x() == -210.0 for p in zones)
+    with pytest.raises(ValueError, match="margins"):
+        plot_nichols(loop, margins=(6.0, 200.0))
+    with pytest.raises(ValueError, match="SISO"):
+        plot_nichols(control.ss(-np.eye(2), np.eye(2), np.eye(2), 0))
+
+
 def test_sensors_are_the_models_position_outputs(system):
     model = flexctl.build_model(system, 2)
     a, b = model.linear_matrices()
