@@ -27,7 +27,9 @@ G. Many modes and sample loops (``--loops``), before (``--before DIR``) and this
    ``run_slew`` of ``wheel-slew`` (a sampled LQR with observer and noisy sensors on the
    free-hub structure with a reaction wheel, 1800 samples, and its reference run).
 
-Run: ``python benchmarks/bench_compile.py [--before /path/to/old/checkout]``. Nothing is
+Run: ``python benchmarks/bench_compile.py [--before /path/to/old/checkout]`` (the code the
+runs execute imports the laws from the top-level ``controllers``, where every release has
+them). Nothing is
 asserted; the script prints what it measures (the machine's two cores are shared).
 """
 
@@ -56,8 +58,8 @@ import json, sys, time, warnings
 import numpy as np
 warnings.simplefilter("ignore")
 import flexctl
-from controllers.feedback.pd import design_pd
-from controllers.slew.reference import SlewProfile
+from controllers import design_pd
+from controllers import SlewProfile
 method = sys.argv[1]
 model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=2)
 angles = [float(a) for a in sys.argv[2].split(",")]
@@ -202,7 +204,7 @@ import json, time, warnings
 import numpy as np
 warnings.simplefilter("ignore")
 import flexctl
-from controllers.mpc.nmpc import NMPC
+from controllers import NMPC
 system = flexctl.load_scene("slew-90").system
 plant = flexctl.build_model(system, 4, "first_order")
 design = flexctl.build_model(system, 2, "exact")
@@ -233,7 +235,7 @@ TRAJOPT = r"""
 import json, sys, time, warnings
 warnings.simplefilter("ignore")
 import flexctl
-from controllers.slew.trajopt import SlewProblem, solve_slew
+from controllers import SlewProblem, solve_slew
 scene = flexctl.load_scene(sys.argv[1])
 slew = scene.maneuver
 model = flexctl.build_model(scene.system, scene.model.design_modes, sys.argv[2])
