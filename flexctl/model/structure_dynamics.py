@@ -28,7 +28,7 @@ import numpy as np
 
 from .exact import appendage_terms, choose_rule, symmetric_solve
 
-__all__ = ["StructureFunctions", "structure_functions"]
+__all__ = ["StructureFunctions", "structure_functions", "output_function"]
 
 _E = np.array([[0.0, -1.0], [1.0, 0.0]])        # e_z x
 
@@ -230,6 +230,33 @@ def structure_functions(model) -> StructureFunctions:
                             ["x"], ["y"]))
     functions.update(_prescribed(model, blocks, free))
     return StructureFunctions(rules=rules, **functions)
+
+
+def output_function(model):
+    """The outputs (:attr:`Model.output_names`) of a small-deflection ``model`` as a CasADi
+    function ``x -> y``, built alone: for many modes, the structure's whole set of functions
+    takes seconds (1.7 s at 200 modes) where a run needs only its outputs' matrix. The same
+    expressions as :attr:`StructureFunctions.outputs`.
+
+    Parameters
+    ----------
+    model : Model
+        A model of a small-deflection variant.
+
+    Returns
+    -------
+    casadi.Function
+    """
+    import casadi as ca
+
+    mat, variant, layout = model.matrices, model.variant, model.layout
+    if variant.exact:
+        raise ValueError("output_function: the exact variant's outputs need its quadrature; "
+                         "take structure_functions(model).outputs")
+    x = ca.SX.sym("x", layout.n_states)
+    _, q, rate, q_dot = layout.split(x)
+    tips = _small_blocks(mat, variant, q, q_dot, rate)["tips"]
+    return ca.Function("structure_outputs", [x], [_outputs(model, x, tips)], ["x"], ["y"])
 
 
 def _rules(mat) -> tuple:

@@ -50,7 +50,7 @@ from .exact import EXACT_MAX_MODES
 from .exports import signal_names
 from .layout import StateLayout
 from .parameters import HubBeam
-from .structure_dynamics import structure_functions
+from .structure_dynamics import output_function, structure_functions
 from .variant import VARIANTS, Variant
 
 __all__ = ["Model", "VARIANTS", "SingularMassMatrixError", "EXACT_MAX_MODES", "output_names",
@@ -158,7 +158,7 @@ class Model:
     def matrix_form(self) -> bool:
         """Whether the equations are products with the constant modal matrices (a pinned hub,
         a small-deflection variant, no actuator): the form the integrators take for many
-        modes (:data:`flexctl.sim.compiled.MATRIX_FORM_MODES`)."""
+        modes (:data:`flexctl.model.exports.MATRIX_FORM_MODES`)."""
         return self.HAS_MATRIX_FORM and not self.variant.exact and not self.structure.free
 
     def matrix_terms(self) -> dict:
@@ -576,7 +576,16 @@ class Model:
         if "c_out" not in self._c:
             import casadi as ca
             x = ca.SX.sym("x", self.n_states)
-            jacobian = ca.jacobian(self.functions.outputs(x), x)
+            built = self._c.get("functions")
+            # a small-deflection model's outputs alone: the whole set of functions costs
+            # seconds for many modes
+            if built is not None:
+                outputs = built.outputs
+            elif self.variant.exact:
+                outputs = self.functions.outputs
+            else:
+                outputs = output_function(self)
+            jacobian = ca.jacobian(outputs(x), x)
             c = np.array(ca.Function("c", [x], [jacobian])(np.zeros(self.n_states)))
             c.setflags(write=False)
             self._c["c_out"] = c

@@ -32,7 +32,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from ..model.exports import symbolic_beam_dynamics, symbolic_dynamics
+from ..model.exports import MATRIX_FORM_MODES, symbolic_beam_dynamics, symbolic_dynamics
 from ..model.errors import InputValueError
 from .buffers import InPlace
 from .native_rhs import compiles_prescribed, integration_beam, integration_rhs, native_dae
@@ -315,14 +315,6 @@ def _calls_model(model, hub_motion) -> bool:
     return model.variant.exact and (hub_motion is None or compiles_prescribed(model))
 
 
-#: Modes above which a small-deflection model on a pinned hub enters the integrators in matrix form
-#: (MX: products with its dense modal matrices) rather than written out in scalars (SX, then
-#: compiled). The scalar form's Jacobian, which CVODES's Newton iterations need, is built in
-#: time that grows as the cube of the modes (22 s at 200 modes, for each tolerance) and
-#: compiles slowly; the matrix form's is built at once and evaluated with dense products. On
-#: hub-beam-mass (3 s of a sine torque, second runs) the compiled scalar form took 14 to 22 %
-#: less time at 8 to 16 modes, 7 % less at 24 and 2 % more at 32.
-MATRIX_FORM_MODES = 12
 
 
 def _matrix_form(model) -> bool:
