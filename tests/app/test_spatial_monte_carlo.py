@@ -17,7 +17,7 @@ EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "scenes" / "spatial
 
 @pytest.fixture(scope="module")
 def scene():
-    return load_scene(EXAMPLE, overrides={"simulation.t_final": 12.0, "model.modes": 1})
+    return load_scene(EXAMPLE, overrides={"simulation.t_final": 8.0, "model.modes": 1})
 
 
 def test_a_dispersed_structure_scales_what_it_says(scene):
