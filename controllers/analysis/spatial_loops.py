@@ -225,6 +225,7 @@ def quaternion_disk_margins(law, structure, *, n_modes=4, variant: str = "exact"
     -------
     DiskMargins
     """
+    # checked here too, so that the error names the function called
     skew = check_real("quaternion_disk_margins", "skew", skew, minimum=-1.0, maximum=1.0)
     loop = quaternion_loop(law, structure, n_modes=n_modes, variant=variant, delay=delay)
     return loop_disk_margins(loop, skew=skew)
@@ -310,36 +311,15 @@ def lq_loop(law, plant):
     """
     import control
 
-    from controllers.design.controllable import held
-
     if not isinstance(plant, control.StateSpace) or plant.ninputs != 3 or \
             "ex" not in plant.output_labels:
         raise InputValueError("lq_loop.plant must be a linear plant of linearize_spatial (a "
                               f"python-control StateSpace); got {type(plant).__name__}")
-    if isinstance(law, SpatialLQG):
-        regulator = law.regulator
-        a_d, b_d = held(plant.A, plant.B, law.sample_time)
-        outputs = list(plant.output_labels)
-        c_plant = plant.C[[outputs.index(n) for n in ("ex", "ey", "ez", "wx", "wy", "wz")], :]
-        basis, size = regulator.part.basis, law.a_held.shape[0]
-        from_plant = law.filter_gain @ c_plant
-        from_filter = np.eye(size) - law.filter_gain @ law.measured
-        k_plant = regulator.gain @ basis @ from_plant        # the command is -(these) . state
-        k_filter = regulator.gain @ basis @ from_filter
-        a = np.block([[a_d, np.zeros((a_d.shape[0], size))],
-                      [law.a_held @ from_plant - law.b_held @ k_plant,
-                       law.a_held @ from_filter - law.b_held @ k_filter]])
-        b = np.vstack([b_d, np.zeros((size, 3))])
-        c = np.hstack([k_plant, k_filter])
-        dt = law.sample_time
-    elif isinstance(law, SpatialLQR):
-        c = law.gain @ law.reader(plant)
-        a, b, dt = plant.A, plant.B, 0
-        if law.sample_time is not None:
-            (a, b), dt = held(plant.A, plant.B, law.sample_time), law.sample_time
-    else:
+    if not isinstance(law, (SpatialLQR, SpatialLQG)):
         raise InputValueError(f"lq_loop.law must be a SpatialLQR or SpatialLQG; got "
                               f"{type(law).__name__}")
+    a, b, c = law.broken_loop(plant)
+    dt = law.sample_time or 0
     return control.ss(a, b, c, np.zeros((3, 3)), dt, inputs=["tx", "ty", "tz"],
                       outputs=["ux", "uy", "uz"], name="lq_loop")
 

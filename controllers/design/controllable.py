@@ -178,8 +178,7 @@ def input_part(a, b, *, max_frequency: float = math.inf,
     slow, back = np.eye(a.shape[0]), np.eye(a.shape[0])
     if np.isfinite(max_frequency):
         # a rigid body's poles sit at zero up to rounding: always kept
-        floor = max(max_frequency, 100.0 * math.sqrt(np.finfo(float).eps
-                                                     * float(np.linalg.norm(a, 2))))
+        floor = max(max_frequency, _rigid(a))
 
         def kept(re, im):
             return math.hypot(re, im) <= floor
@@ -231,7 +230,7 @@ def _missed(a, b, tolerance: float) -> tuple:
         directions.append(null @ free)
         dropped += [0.0] * free.shape[1]
     lam, left = scipy.linalg.eig(a, left=True, right=False)
-    rigid = 100.0 * np.sqrt(np.finfo(float).eps * size_a)
+    rigid = _rigid(a)
     seen = np.zeros(lam.size, dtype=bool)
     for k in np.argsort(-lam.imag):       # each cluster of (nearly) equal poles together
         if seen[k] or abs(lam[k]) <= rigid or lam[k].imag < 0:
@@ -244,6 +243,12 @@ def _missed(a, b, tolerance: float) -> tuple:
             directions.append(basis @ free)
             dropped += [float(abs(lam[k]))] * free.shape[1]
     return (np.hstack(directions) if directions else None), dropped
+
+
+def _rigid(a) -> float:
+    """``|lambda|`` below which a pole of ``A`` is a rigid body's zero up to rounding: a
+    double integrator's pair spreads by ``sqrt(eps |A|)``, with a margin of 100."""
+    return 100.0 * math.sqrt(np.finfo(float).eps * max(float(np.linalg.norm(a, 2)), 1e-300))
 
 
 def _left_null(m, tolerance: float) -> np.ndarray:

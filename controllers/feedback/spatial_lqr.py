@@ -39,7 +39,7 @@ from flexctl.model.errors import InputValueError
 from flexctl.model.spatial_dynamics import SPATIAL_VARIANTS, spatial_equations, spatial_modes
 from flexctl.model.spatial_plant import linearize_spatial
 from flexctl.model.spatial_structure import SpatialStructure
-from flexctl.sim.quaternions import conjugate, product, rotation_vector
+from flexctl.sim.quaternions import error_angles
 
 from ..design.controllable import (ControllablePart, design_failure, held, input_part,
                                    state_gain)
@@ -87,11 +87,6 @@ def spatial_weight_matrices(plant, weights: LQRWeights) -> tuple:
         tips = plant.C[[k for k, name in enumerate(outputs) if "_tip_" in name], :]
         q_mat += tips.T @ tips / weights.tip_deflection ** 2
     return 0.5 * (q_mat + q_mat.T), np.eye(3) / weights.torque ** 2
-
-
-def _attitude_error(target, attitude) -> np.ndarray:
-    """The rotation vector of ``target^-1 (x) attitude``, the short way round, rad."""
-    return rotation_vector(product(conjugate(target), np.asarray(attitude, dtype=float)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,8 +155,7 @@ class SpatialLQR:
         error, rate, torque = self.reference.at(t)
         deviation = state.copy()
         deviation[0:3] -= error
-        at = self.state_names.index("wx")
-        deviation[at:at + 3] -= rate
+        deviation[self.rate_at:self.rate_at + 3] -= rate
         return self.limited(-self.gain @ deviation + torque)
 
     #: The loop hands this law the plant's whole state.
@@ -224,12 +218,35 @@ class SpatialLQR:
         -------
         ndarray, shape (N,)
         """
-        plant = self.plant if plant is None else plant
+        a, b, c = self.broken_loop(self.plant if plant is None else plant)
+        poles = np.linalg.eigvals(a - b @ c)
+        return poles if self.sample_time is None else _continuous(poles, self.sample_time)
+
+    def broken_loop(self, plant) -> tuple:
+        """``(A, B, C)`` of the loop around ``plant`` broken at its torque inputs, in negative
+        feedback (``L = C (sI - A)^-1 B``, or ``(zI - A)^-1`` of the plant held over
+        :attr:`sample_time`): what :meth:`loop_poles` closes and
+        :func:`controllers.analysis.spatial_loops.lq_loop` hands python-control.
+
+        Parameters
+        ----------
+        plant : control.StateSpace
+            A plant of :func:`~flexctl.model.spatial_plant.linearize_spatial` at rest.
+
+        Returns
+        -------
+        tuple of ndarray
+        """
         gain = self.gain @ self.reader(plant)
         if self.sample_time is None:
-            return np.linalg.eigvals(plant.A - plant.B @ gain)
+            return plant.A, plant.B, gain
         a_d, b_d = held(plant.A, plant.B, self.sample_time)
-        return _continuous(np.linalg.eigvals(a_d - b_d @ gain), self.sample_time)
+        return a_d, b_d, gain
+
+    @property
+    def rate_at(self) -> int:
+        """Where ``wx wy wz`` start in the design state."""
+        return self.state_names.index("wx", 3)
 
     def limited(self, torque) -> np.ndarray:
         """``torque`` clipped per axis at :attr:`torque_limit`.
@@ -270,7 +287,7 @@ class _StateFeedbackSession:
         law = self.law
         x = np.asarray(state, dtype=float)
         rest = x[3:] if self.rows is None else x[self.rows]
-        design = np.concatenate([_attitude_error(law.target, attitude), rest])
+        design = np.concatenate([error_angles(law.target, attitude), rest])
         return law.command(t, design)
 
 
@@ -334,8 +351,26 @@ class SpatialLQG:
         -------
         ndarray, shape (N + r,)
         """
+        a, b, c = self.broken_loop(self.regulator.plant if plant is None else plant)
+        return _continuous(np.linalg.eigvals(a - b @ c), self.sample_time)
+
+    def broken_loop(self, plant) -> tuple:
+        """``(A, B, C)`` of the held loop around ``plant`` broken at its torque inputs, in
+        negative feedback: the plant held, its readings through the filter (which predicts
+        with the command it gave) to the command. What :meth:`loop_poles` closes and
+        :func:`controllers.analysis.spatial_loops.lq_loop` hands python-control.
+
+        Parameters
+        ----------
+        plant : control.StateSpace
+            A plant of :func:`~flexctl.model.spatial_plant.linearize_spatial` at rest.
+
+        Returns
+        -------
+        tuple of ndarray
+            States: the plant's, then the filter's prediction.
+        """
         regulator = self.regulator
-        plant = regulator.plant if plant is None else plant
         a_d, b_d = held(plant.A, plant.B, self.sample_time)
         outputs = list(plant.output_labels)
         c_plant = plant.C[[outputs.index(name) for name in ("ex", "ey", "ez", "wx", "wy",
@@ -343,12 +378,12 @@ class SpatialLQG:
         basis, size = regulator.part.basis, self.a_held.shape[0]
         from_plant = self.filter_gain @ c_plant                    # estimate: on the plant
         from_filter = np.eye(size) - self.filter_gain @ self.measured  # ... on the prediction
-        u_plant = -regulator.gain @ basis @ from_plant
-        u_filter = -regulator.gain @ basis @ from_filter
-        loop = np.block([[a_d + b_d @ u_plant, b_d @ u_filter],
-                         [self.a_held @ from_plant + self.b_held @ u_plant,
-                          self.a_held @ from_filter + self.b_held @ u_filter]])
-        return _continuous(np.linalg.eigvals(loop), self.sample_time)
+        k_plant = regulator.gain @ basis @ from_plant        # the command is -(these) . state
+        k_filter = regulator.gain @ basis @ from_filter
+        a = np.block([[a_d, np.zeros((a_d.shape[0], size))],
+                      [self.a_held @ from_plant - self.b_held @ k_plant,
+                       self.a_held @ from_filter - self.b_held @ k_filter]])
+        return a, np.vstack([b_d, np.zeros((size, 3))]), np.hstack([k_plant, k_filter])
 
     def start(self) -> "_ObservedSession":
         """A session whose filter starts at the first reading, its modes at rest.
@@ -390,12 +425,12 @@ class _ObservedSession:
 
     def __call__(self, t, attitude, rate) -> np.ndarray:
         law = self.law
-        y = np.concatenate([_attitude_error(law.target, attitude), np.asarray(rate, float)])
+        y = np.concatenate([error_angles(law.target, attitude), np.asarray(rate, float)])
         if self.predicted is None:
             part = law.regulator.part
             start = np.zeros(part.basis.shape[0])
             start[0:3] = y[0:3]
-            start[law.regulator.state_names.index("wx"):][:3] = y[3:6]
+            start[law.regulator.rate_at:][:3] = y[3:6]
             self.predicted = part.projector @ start
         elif self.last is not None and abs(t - self.last - law.sample_time) > \
                 1e-9 * max(1.0, abs(t)):
@@ -405,8 +440,8 @@ class _ObservedSession:
         part = law.regulator.part
         state = part.basis @ estimate
         command = law.regulator.command(t, state)
-        rate_at = law.regulator.state_names.index("wx")
-        turned = _kinematics(state[0:3], state[rate_at:rate_at + 3]) * law.sample_time
+        at = law.regulator.rate_at
+        turned = _kinematics(state[0:3], state[at:at + 3]) * law.sample_time
         self.predicted = (law.a_held @ estimate + law.b_held @ command
                           + part.projector[:, 0:3] @ turned)
         self.last = t
