@@ -30,6 +30,7 @@ that left the estimate 3e-3 rad off).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -243,9 +244,9 @@ class SpatialLQR:
         a_d, b_d = held(plant.A, plant.B, self.sample_time)
         return a_d, b_d, gain
 
-    @property
+    @functools.cached_property
     def rate_at(self) -> int:
-        """Where ``wx wy wz`` start in the design state."""
+        """Where ``wx wy wz`` start in the design state (found once: each step reads it)."""
         return self.state_names.index("wx", 3)
 
     def limited(self, torque) -> np.ndarray:
