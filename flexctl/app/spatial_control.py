@@ -146,7 +146,8 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
         law = _design(kind, controller, structure, target, step)
     except (ValueError, TypeError) as exc:
         message = str(exc)
-        for owner, name in (("slew.duration", "slew_duration"), ("slew.shape", "slew_shape")):
+        for owner, name in (("slew.duration", "slew_duration"), ("slew.shape", "slew_shape"),
+                            ("design_spatial_lqr.n_modes", "design_modes")):
             message = message.replace(owner, f"controller.{name}")
         for owner in ("quaternion_feedback.", "design_spatial_lqr.", "design_spatial_lqg.",
                       "lqr_weights.", "eigenaxis_slew."):

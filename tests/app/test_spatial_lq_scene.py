@@ -74,7 +74,7 @@ def test_an_lqr_scene_with_sensors_is_refused(tmp_path):
     ("hub_angle = 0.05", "hub_angle = -0.05", r"controller\.hub_angle"),
     ("hub_angle = 0.05", 'hub_angle = "small"', r"controller\.hub_angle"),
     ("angle_noise = 1e-4", "angle_noise = 0.0", r"controller\.angle_noise"),
-    ("design_modes = 1", "design_modes = 0", "modes"),
+    ("design_modes = 1", "design_modes = 0", r"controller\.design_modes"),
     ("angle_noise = 1e-4", "angle_noise = 1e-4\nbandwidth = 0.5", r"controller"),
     ("slew_angle = 20.0", "slew_angle = 20.0\nmax_frequency = -3.0",
      r"controller\.max_frequency"),
