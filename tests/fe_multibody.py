@@ -88,7 +88,7 @@ from dataclasses import dataclass
 import numpy as np
 
 # the one-beam reference's mesh and sine torque (it, too, imports nothing from flexctl)
-from fe_reference import _mesh, sine_torque  # noqa: F401  (sine_torque re-exported)
+from fe_reference import _mesh, _midpoint, sine_torque  # noqa: F401  (sine_torque re-exported)
 from scipy.linalg import eigh
 
 __all__ = ["BeamSpec", "MultiSystem", "linear_frequencies", "simulate_multibody",
@@ -424,13 +424,13 @@ class _Multibody:
         """Generalized mass matrix, force without the torque, and the pieces for the Jacobian."""
         beta = self.alpha + q[self.phi_gen]
         om = w[self.phi_gen]
-        c, s = np.cos(beta), np.sin(beta)
+        e = np.exp(1j * beta)
+        c, s = e.real, e.imag
         cm = np.zeros((self.n_phi, self.n_phi))          # A_ab cos(beta_a - beta_b)
         sm = np.zeros((self.n_phi, self.n_phi))          # A_ab sin(beta_a - beta_b)
         for sl in self.blocks:                           # A is block diagonal
-            cb, sb, ab = c[sl], s[sl], self.a[sl, sl]
-            cm[sl, sl] = ab * (np.outer(cb, cb) + np.outer(sb, sb))
-            sm[sl, sl] = ab * (np.outer(sb, cb) - np.outer(cb, sb))
+            both = self.a[sl, sl] * np.outer(e[sl], e[sl].conj())
+            cm[sl, sl], sm[sl, sl] = both.real, both.imag
         gperp = np.vstack([-s, c]) * self.g              # columns g_a u_a^perp
         gu = np.vstack([c, s]) * self.g                  # columns g_a u_a
         m_ext = np.empty((2 + self.n_phi, 2 + self.n_phi))
@@ -556,58 +556,6 @@ class _Arrow:
         return self.inv @ v
 
 
-def _midpoint(problem, q0, w0, t_final, dt, tol, rate_scale, factor):
-    """Fixed-step implicit midpoint rule for ``M(q) w' = f(t, q, w)``, ``q' = w``.
-
-    ``problem(t, q, w, with_jac)`` returns ``(M, f)`` or ``(M, f, Jq, Jw)`` with
-    ``J = d(f - M a)/d(q, w)`` at ``a = M^-1 f``. Each step solves for the midpoint rate
-    ``wm``: ``M(qm) (wm - w) = dt/2 f(tm, qm, wm)``, ``qm = q + dt/2 wm``, by Newton with the
-    iteration matrix ``M - dt/2 (dt/2 Jq + Jw)`` inverted by ``factor`` and reused across
-    iterations and steps (an iteration costs one evaluation of ``M`` and ``f`` and two
-    products, no solve). Then
-    ``q += dt wm``, ``w = 2 wm - w``. Non-dissipative, unconditionally stable, second order.
-    """
-    n_steps = max(1, int(np.ceil(t_final / dt - 1e-9)))
-    dt = t_final / n_steps
-    nq = len(q0)
-    ts = np.linspace(0.0, t_final, n_steps + 1)
-    qs = np.empty((n_steps + 1, nq))
-    ws = np.empty((n_steps + 1, nq))
-    qs[0], ws[0] = q0, w0
-    q, w = np.array(q0, float), np.array(w0, float)
-    inv, age = None, 0
-    n_jac = n_it = 0
-    h = dt / 2.0
-    for i in range(n_steps):
-        tm = ts[i] + h
-        wm = w.copy()
-        age += 1
-        if age > 25:
-            inv = None
-        for it in range(60):
-            qm = q + h * wm
-            if inv is None:
-                m, f, jq, jw = problem(tm, qm, wm, True)
-                inv = factor(m - h * (h * jq + jw))
-                n_jac += 1
-                age = 0
-            else:
-                m, f = problem(tm, qm, wm, False)
-            step = inv.solve(m @ (wm - w) - h * f)
-            wm -= step
-            n_it += 1
-            if np.max(np.abs(step)) <= tol * (np.max(np.abs(wm)) + rate_scale):
-                break
-            if it in (3, 10, 25):
-                inv = None
-        else:
-            raise RuntimeError(f"Newton iteration did not converge at t = {tm:.6g}")
-        q = q + dt * wm
-        w = 2.0 * wm - w
-        qs[i + 1], ws[i + 1] = q, w
-    return ts, qs, ws, n_it, n_jac, dt
-
-
 def clamped_first_frequency(beam: BeamSpec) -> float:
     """First clamped-free frequency of the bare beam, rad/s."""
     return 1.8751041 ** 2 * np.sqrt(beam.bending_stiffness
@@ -677,7 +625,6 @@ def simulate_multibody(system: MultiSystem, t_final: float, *, torque=None, dt=N
     # the links' inertial rates equal the hub rate initially (no deformation rate)
     w0[body.i_theta + 1:] = float(initial_theta_dot)
     it = body.i_theta
-    n = body.n_gen
 
     def factor(z):
         return _Arrow(z, it + 1, body.gen_blocks)

@@ -185,11 +185,9 @@ class _Chain:
 
     def parts(self, phi, w):
         """Mass matrix ``M``, ``C = A cos``, ``S = A sin`` and the force without the torque."""
-        c, s = np.cos(phi), np.sin(phi)
-        cos_d = np.outer(c, c) + np.outer(s, s)            # cos(phi_j - phi_k)
-        sin_d = np.outer(s, c) - np.outer(c, s)            # sin(phi_j - phi_k)
-        cm = self.a * cos_d
-        sm = self.a * sin_d
+        e = np.exp(1j * np.asarray(phi, dtype=float))
+        both = self.a * np.outer(e, e.conj())             # A exp(i (phi_j - phi_k))
+        cm, sm = both.real, both.imag
         force = -sm @ (w * w) - self.k @ phi
         return cm, sm, force
 
@@ -231,54 +229,67 @@ class _Chain:
 # --------------------------------------------------------------------------------------------
 # simulation
 
-def _midpoint(dynamics, y_q, y_w, t_final, dt, tol, rate_scale):
-    """Fixed-step implicit midpoint rule for ``q' = w, w' = a(t, q, w)``.
+class _DenseInverse:
+    """The inverse of a dense iteration matrix, applied as one product."""
 
-    ``dynamics(t, q, w, with_jac)`` returns ``a`` or ``(a, da/dq, da/dw)``. Non-dissipative and
-    unconditionally stable, so the stiff high bending modes are neither resolved nor damped
-    (they are not excited appreciably); second order in ``dt``. Newton on the midpoint rate,
-    converged to ``tol`` relative to ``max|w| + rate_scale``.
+    def __init__(self, z):
+        self.inv = np.linalg.inv(z)
+
+    def solve(self, v):
+        return self.inv @ v
+
+
+def _midpoint(problem, q0, w0, t_final, dt, tol, rate_scale, factor=_DenseInverse):
+    """Fixed-step implicit midpoint rule for ``M(q) w' = f(t, q, w)``, ``q' = w``.
+
+    ``problem(t, q, w, with_jac)`` returns ``(M, f)`` or ``(M, f, Jq, Jw)`` with
+    ``J = d(f - M a)/d(q, w)`` at ``a = M^-1 f``. Each step solves for the midpoint rate
+    ``wm``: ``M(qm) (wm - w) = dt/2 f(tm, qm, wm)``, ``qm = q + dt/2 wm``, by Newton with the
+    iteration matrix ``M - dt/2 (dt/2 Jq + Jw)`` inverted by ``factor`` (an object with
+    ``solve(v)``; default a dense inverse) and reused across
+    iterations and steps (an iteration costs one evaluation of ``M`` and ``f`` and two
+    products, no solve). Then
+    ``q += dt wm``, ``w = 2 wm - w``. Non-dissipative, unconditionally stable, second order.
     """
     n_steps = max(1, int(np.ceil(t_final / dt - 1e-9)))
     dt = t_final / n_steps
-    nq = len(y_q)
+    nq = len(q0)
     ts = np.linspace(0.0, t_final, n_steps + 1)
     qs = np.empty((n_steps + 1, nq))
     ws = np.empty((n_steps + 1, nq))
-    qs[0], ws[0] = y_q, y_w
-    q, w = np.array(y_q, float), np.array(y_w, float)
-    eye = np.eye(nq)
+    qs[0], ws[0] = q0, w0
+    q, w = np.array(q0, float), np.array(w0, float)
+    inv, age = None, 0
     n_jac = n_it = 0
-    lu, age = None, 0
+    h = dt / 2.0
     for i in range(n_steps):
-        tm = ts[i] + dt / 2.0
+        tm = ts[i] + h
         wm = w.copy()
         age += 1
-        if age > 25:                        # the iteration matrix is reused between steps
-            lu = None
-        for it in range(50):
-            qm = q + dt / 2.0 * wm
-            if lu is None:
-                a, jq, jw = dynamics(tm, qm, wm, True)
-                lu = np.linalg.inv(eye - dt / 2.0 * (jq * (dt / 2.0) + jw))
+        if age > 25:
+            inv = None
+        for it in range(60):
+            qm = q + h * wm
+            if inv is None:
+                m, f, jq, jw = problem(tm, qm, wm, True)
+                inv = factor(m - h * (h * jq + jw))
                 n_jac += 1
                 age = 0
             else:
-                a = dynamics(tm, qm, wm, False)
-            res = wm - w - dt / 2.0 * a
-            step = lu @ res
+                m, f = problem(tm, qm, wm, False)
+            step = inv.solve(m @ (wm - w) - h * f)
             wm -= step
             n_it += 1
             if np.max(np.abs(step)) <= tol * (np.max(np.abs(wm)) + rate_scale):
                 break
-            if it in (3, 10, 25):           # slow convergence: refresh the Jacobian
-                lu = None
+            if it in (3, 10, 25):
+                inv = None
         else:
             raise RuntimeError(f"Newton iteration did not converge at t = {tm:.6g}")
         q = q + dt * wm
         w = 2.0 * wm - w
         qs[i + 1], ws[i + 1] = q, w
-    return ts, qs.T, ws.T, n_it, n_jac
+    return ts, qs, ws, n_it, n_jac, dt
 
 
 def simulate_fe(system: FESystem, t_final: float, *, torque=None, hub_motion=None,
@@ -340,20 +351,19 @@ def simulate_fe(system: FESystem, t_final: float, *, torque=None, hub_motion=Non
     if dt is None:
         dt = 2.0 * np.pi / omega1 / 2000.0
 
+    size = len(rel0) if hub_motion is None else len(rel0) - 1
     if hub_motion is None:
         drive = torque if torque is not None else (lambda t: 0.0)
         q0 = rel0 + initial_theta
         w0 = np.full(nq, float(initial_theta_dot))
 
-        def dynamics(t, q, w, with_jac):
+        def balance(t, q, w, with_jac):
             cm, sm, f = chain.parts(q, w)
             f[0] += drive(t)
-            acc = np.linalg.solve(cm, f)
             if not with_jac:
-                return acc
-            g, gw = chain.jac_parts(cm, sm, w, acc)
-            j = np.linalg.solve(cm, np.hstack([g, gw]))
-            return acc, j[:, :nq], j[:, nq:]
+                return cm, f
+            g, gw = chain.jac_parts(cm, sm, w, np.linalg.solve(cm, f))
+            return cm, f, g, gw
 
         def full_state(t, q, w):
             return q, w
@@ -366,23 +376,32 @@ def simulate_fe(system: FESystem, t_final: float, *, torque=None, hub_motion=Non
             th, thd, _ = hub_motion(t)
             return np.concatenate([[th], q]), np.concatenate([[thd], w])
 
-        def dynamics(t, q, w, with_jac):
+        def balance(t, q, w, with_jac):
             th, thd, thdd = hub_motion(t)
             phi = np.concatenate([[th], q])
             om = np.concatenate([[thd], w])
             cm, sm, f = chain.parts(phi, om)
-            acc = np.linalg.solve(cm[1:, 1:], f[1:] - cm[1:, 0] * thdd)
+            mass, force = cm[1:, 1:], f[1:] - cm[1:, 0] * thdd
             if not with_jac:
-                return acc
-            g, gw = chain.jac_parts(cm, sm, om, np.concatenate([[thdd], acc]))
-            j = np.linalg.solve(cm[1:, 1:], np.hstack([g[1:, 1:], gw[1:, 1:]]))
-            return acc, j[:, :n], j[:, n:]
+                return mass, force
+            g, gw = chain.jac_parts(cm, sm, om,
+                                    np.concatenate([[thdd], np.linalg.solve(mass, force)]))
+            return mass, force, g[1:, 1:], gw[1:, 1:]
 
-    size = len(q0)
+    def dynamics(t, q, w, with_jac):
+        """The accelerations, and with ``with_jac`` their derivatives ``(a, da/dq, da/dw)``."""
+        if not with_jac:
+            mass, force = balance(t, q, w, False)
+            return np.linalg.solve(mass, force)
+        mass, force, g, gw = balance(t, q, w, True)
+        j = np.linalg.solve(mass, np.hstack([force[:, None], g, gw]))
+        return j[:, 0], j[:, 1:size + 1], j[:, size + 1:]
+
     start = time.process_time()
     if method == "midpoint":
-        t, q, w, _, _ = _midpoint(dynamics, q0, w0, t_final, dt,
-                                  min(rtol, 1e-8) * 1e-2, omega1)
+        t, qs, ws, _, _, _ = _midpoint(balance, q0, w0, t_final, dt,
+                                       min(rtol, 1e-8) * 1e-2, omega1)
+        q, w = qs.T, ws.T
     else:
         def rhs(t, y):
             return np.concatenate([y[size:], dynamics(t, y[:size], y[size:], False)])
