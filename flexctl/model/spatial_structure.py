@@ -373,6 +373,19 @@ class SpatialStructure(KeywordOnly):
         return inertia + a.polar_density * a.length * np.outer(e1, e1)
 
     @property
+    def first_moment(self) -> np.ndarray:
+        """First mass moment of the whole structure straight and rigid about the hub's centre
+        (the hub's own centre is its centre of mass), hub frame, kg m, shape (3,): the
+        centre of mass is ``first_moment / total_mass``."""
+        moment = np.zeros(3)
+        for a in self.appendages:
+            root, e1, length = a.root_point(self.hub), a.direction, a.length
+            moment = moment + a.linear_density * length * (root + length / 2 * e1)
+            for point in a.masses:
+                moment = moment + point.mass * (root + point.position * e1)
+        return moment
+
+    @property
     def rigid_inertia(self) -> np.ndarray:
         """Inertia tensor of the whole structure straight and rigid about the hub's centre,
         hub frame, kg m^2, shape (3, 3)."""

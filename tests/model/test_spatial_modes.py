@@ -8,6 +8,7 @@ import pytest
 from spatial_craft import CRAFT_TOML
 
 from flexctl.model.errors import InputError, InputValueError
+from flexctl.model.parameters import PointMass
 from flexctl.model.spatial_dynamics import spatial_equations, spatial_modes
 from flexctl.model.spatial_structure import SpatialAppendage, SpatialHub, SpatialStructure
 from flexctl.sim.spatial_fidelity import choose_spatial_modes
@@ -101,3 +102,38 @@ def test_a_scene_takes_a_table_of_modes_or_auto(tmp_path):
         path.write_text(SCENE.format(model=model))
         with pytest.raises(InputError, match=words):
             load_scene(path)
+
+
+def test_the_first_moment_is_the_mass_weighted_position_of_every_point():
+    """``first_moment``: each rod's line mass (midpoint rule on 4000 pieces) and its point
+    masses, positions from the hub's centre; the hub's own mass adds nothing (its centre is
+    the origin)."""
+    wing = SpatialAppendage(name="wing", direction=(0.6, 0.8, 0.0), normal=(0, 0, 1),
+                            root=(0.1, -0.05, 0.02), masses=(PointMass(mass=0.3, position=1.2),),
+                            **SECTION)
+    boom = SpatialAppendage(name="boom", direction=(0, 0, -1), normal=(1, 0, 0),
+                            **{**SECTION, "length": 1.0})
+    structure = SpatialStructure(hub=SpatialHub(inertia=INERTIA, radius=0.06, mass=5.0,
+                                                support="free"), appendages=(wing, boom))
+    expected = np.zeros(3)
+    for a in structure.appendages:
+        root = a.root_point(structure.hub)
+        s = (np.arange(4000) + 0.5) * a.length / 4000
+        expected += a.linear_density * a.length / 4000 * np.sum(
+            root[:, None] + a.direction[:, None] * s[None, :], axis=1)
+        for point in a.masses:
+            expected += point.mass * (root + point.position * a.direction)
+    np.testing.assert_allclose(structure.first_moment, expected, rtol=1e-12, atol=1e-15)
+
+
+def test_auto_chooses_the_counts_of_a_free_hub(tmp_path):
+    """``modes = "auto"`` on a free hub: the rigid motion about the centre of mass."""
+    from flexctl.app.scenes import load_scene
+
+    path = tmp_path / "craft.toml"
+    path.write_text(SCENE.format(model='modes = "auto"').replace(
+        "radius = 0.06", 'radius = 0.06\nsupport = "free"\nmass = 3.0'))
+    scene = load_scene(path)
+    assert scene.structure.hub.free
+    assert scene.mode_choice is not None and 1 <= min(np.atleast_1d(scene.n_modes))
+    assert scene.mode_choice.estimated_error < scene.mode_choice.tolerance
