@@ -163,8 +163,12 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
             raise SceneError(f"sensors.{key} must be a table of the {cls.__name__}'s fields")
         check_table_keys(f"sensors.{key}", table, {f.name for f in fields(cls)})
         parts[key] = construct(cls, key, table, rename=f"sensors.{key}")
-    setup = construct(AttitudeSensors, "sensors", {**parts, "gyro_sample_time": step,
-                                                   "seed": sensors.get("seed", 0)})
+    try:
+        setup = construct(AttitudeSensors, "sensors", {**parts, "gyro_sample_time": step,
+                                                       "seed": sensors.get("seed", 0)})
+    except SceneError as exc:       # the gyro samples at the law's step: the scene's key
+        raise SceneError(str(exc).replace("sensors.gyro_sample_time (", "the gyro's sample "
+                                          "time, controller.sample_time (")) from None
     sigmas = {key: _checked(check_real, "sensors", key, sensors.get(key, default),
                             minimum=0.0, strict=True, maximum=1.0)
               for key, default in (("attitude_sigma", 1e-3), ("bias_sigma", 1e-4))}

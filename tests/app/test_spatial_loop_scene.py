@@ -85,7 +85,8 @@ def test_a_scene_flies_its_loop_and_writes_its_run(tmp_path):
     ("bandwidth = 0.5\n", "", r"controller\.bandwidth is required"),
     ("slew_angle = 20.0\n", "", r"controller needs a target"),
     ("bandwidth = 0.5", "bandwidth = -0.5", r"controller\.bandwidth"),
-    ("sample_time = 1.0\nlatency = 0.2", "sample_time = 0.25\nlatency = 0.2", "whole multiple"),
+    ("sample_time = 1.0\nlatency = 0.2", "sample_time = 0.25\nlatency = 0.2",
+     r"whole multiple of the gyro's sample time, controller\.sample_time"),
     ("latency = 0.2", "latency = 0.25", "whole number of gyro samples"),
     ("angle_random_walk = 3e-5", "angle_random_walk = 3e-5\nnoise = 1", r"sensors\.gyro"),
     ("[simulation]", '[maneuver]\nkind = "sine_torque"\npeak_torque = [0.1, 0, 0]\n'
