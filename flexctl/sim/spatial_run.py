@@ -830,14 +830,21 @@ class SpatialSegments:
     def _jacobian(self, a: float, x) -> np.ndarray:
         """The right-hand side's Jacobian at ``x`` and the torque at ``a``, by forward
         differences (column-major entries)."""
-        n = self.n_states
-        steps = 1.5e-8 * np.maximum(np.abs(x), 1.0)
-        points = np.tile(np.asarray(x, dtype=float)[:, None], (1, n + 1))
-        points[np.arange(n), np.arange(n)] += steps
-        torque = np.tile(np.asarray(self.drive(a), dtype=float)[:, None], (1, n + 1))
-        rates = self.differences(points, torque).full()
-        self.evaluations += n + 1
-        return ((rates[:, :n] - rates[:, n:]) / steps).ravel(order="F")
+        self.evaluations += self.n_states + 1
+        return _difference_jacobian(self.differences, x, self.drive(a)).ravel(order="F")
+
+    def _too_much_work(self, a: float, b: float, x) -> str:
+        """Why CVODES ran out of steps on ``[a, b]``: the fastest eigenvalue of the model at
+        ``a`` and the step it allows."""
+        mapped = self.differences or self.rhs.map(self.n_states + 1)
+        jacobian = _difference_jacobian(mapped, x, self.drive(a))
+        fastest = float(np.max(np.abs(np.linalg.eigvals(jacobian)))) \
+            if np.all(np.isfinite(jacobian)) else math.inf
+        return (f"CVODES took all of its {MAX_STEPS:g} steps before t = {b:g} s: the model's "
+                f"fastest eigenvalue at t = {a:g} s, {fastest:.3g} 1/s (a stiff mode: torsion, "
+                f"a stiff bending plane, a short or very stiff appendage; or a fast wheel "
+                f"lag), holds its steps near {0.33 / fastest:.2g} s; fewer modes per field or a "
+                f"less stiff structure would let it finish")
 
     def advance(self, a: float, b: float, x, wanted) -> np.ndarray:
         """The states at ``wanted``, from ``x`` at ``a``.
@@ -865,7 +872,12 @@ class SpatialSegments:
         p = np.atleast_1d(a if self.line else self.form(a, b))
         if self.newton:
             p = np.concatenate([p, self._jacobian(a, x)])
-        return self._call(self.build(a, b, wanted), x, p)
+        try:
+            return self._call(self.build(a, b, wanted), x, p)
+        except SegmentFailed as exc:
+            if "CV_TOO_MUCH_WORK" in str(exc):
+                raise SegmentFailed(self._too_much_work(a, b, x)) from None
+            raise
 
     def _call(self, integrator, x, p) -> np.ndarray:
         """``integrator`` from ``x`` with parameters ``p``, its steps and evaluations
@@ -897,6 +909,19 @@ class SpatialSegments:
                 return np.full((self.n_states, len(wanted)), np.nan)
             raise SegmentFailed(solution.message)
         return solution.y
+
+
+def _difference_jacobian(mapped, x, torque) -> np.ndarray:
+    """A right-hand side's Jacobian (n, n) at ``x`` under ``torque`` (3,), by forward
+    differences; ``mapped`` is the right-hand side mapped over ``n + 1`` columns."""
+    x = np.asarray(x, dtype=float)
+    n = x.size
+    steps = 1.5e-8 * np.maximum(np.abs(x), 1.0)
+    points = np.tile(x[:, None], (1, n + 1))
+    points[np.arange(n), np.arange(n)] += steps
+    torques = np.tile(np.asarray(torque, dtype=float)[:, None], (1, n + 1))
+    rates = mapped(points, torques).full()
+    return (rates[:, :n] - rates[:, n:]) / steps
 
 
 def quaternion_drift(states) -> float:

@@ -1,6 +1,7 @@
 """Mode counts of a spatial structure: one per appendage (by order or by name), and
 ``modes = "auto"`` (:mod:`flexctl.sim.spatial_fidelity`) against the converged model."""
 
+import re
 import textwrap
 
 import numpy as np
@@ -137,3 +138,27 @@ def test_auto_chooses_the_counts_of_a_free_hub(tmp_path):
     assert scene.structure.hub.free
     assert scene.mode_choice is not None and 1 <= min(np.atleast_1d(scene.n_modes))
     assert scene.mode_choice.estimated_error < scene.mode_choice.tolerance
+
+
+def test_a_run_out_of_steps_names_the_stiff_mode_that_held_them(monkeypatch):
+    """A structure far too stiff for its run (Young's modulus 1e30 Pa) uses CVODES's step
+    budget: the run fails and says which eigenvalue held the steps, and to what."""
+    from flexctl.sim import spatial_run
+
+    monkeypatch.setattr(spatial_run, "MAX_STEPS", 2000)
+    wing = SpatialAppendage(name="wing_a", direction=(0, 1, 0), normal=(0, 0, 1),
+                            **{**SECTION, "youngs_modulus": 1e30})
+    structure = SpatialStructure(hub=SpatialHub(inertia=INERTIA, radius=0.06),
+                                 appendages=(wing,))
+    result = simulate_spatial(structure, 0.05, [0.1, 0.0, 0.0], n_modes=2,
+                              check_accuracy=False)
+    assert result.status == "failed"
+    words = re.search(r"took all of its 2000 steps .* fastest eigenvalue at t = 0 s, "
+                      r"([0-9.e+]+) 1/s .* holds its steps near ([0-9.e+-]+) s", result.message)
+    assert words, result.message
+    fastest = float(words.group(1))
+    # the first clamped bending frequency alone is sqrt(E I / (rho A)) (1.875 / L)^2
+    first = np.sqrt(1e30 * SECTION["second_moment"] / (SECTION["density"] * SECTION["area"])) \
+        * (1.8751 / SECTION["length"]) ** 2
+    assert fastest > first
+    assert float(words.group(2)) == pytest.approx(0.33 / fastest, rel=0.05)
