@@ -841,10 +841,11 @@ class SpatialSegments:
         fastest = float(np.max(np.abs(np.linalg.eigvals(jacobian)))) \
             if np.all(np.isfinite(jacobian)) else math.inf
         return (f"CVODES took all of its {MAX_STEPS:g} steps before t = {b:g} s: the model's "
-                f"fastest eigenvalue at t = {a:g} s, {fastest:.3g} 1/s (a stiff mode: torsion, "
-                f"a stiff bending plane, a short or very stiff appendage; or a fast wheel "
-                f"lag), holds its steps near {0.33 / fastest:.2g} s; fewer modes per field or a "
-                f"less stiff structure would let it finish")
+                f"fastest eigenvalue at t = {a:g} s, {fastest:.3g} 1/s, holds its steps near "
+                f"{0.33 / fastest:.2g} s. Its source is a stiff mode (torsion, a stiff bending "
+                f"plane, a short or very stiff appendage), a fast wheel lag, or a torque that "
+                f"spins the structure up at once; fewer modes per field, a less stiff "
+                f"structure or a smaller torque would let the run finish")
 
     def advance(self, a: float, b: float, x, wanted) -> np.ndarray:
         """The states at ``wanted``, from ``x`` at ``a``.
