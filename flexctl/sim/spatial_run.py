@@ -833,19 +833,33 @@ class SpatialSegments:
         self.evaluations += self.n_states + 1
         return _difference_jacobian(self.differences, x, self.drive(a)).ravel(order="F")
 
-    def _too_much_work(self, a: float, b: float, x) -> str:
-        """Why CVODES ran out of steps on ``[a, b]``: the fastest eigenvalue of the model at
-        ``a`` and the step it allows."""
-        mapped = self.differences or self.rhs.map(self.n_states + 1)
+    def _too_much_work(self, a: float, b: float, x, wanted) -> str:
+        """Why CVODES ran out of steps between two of the output times ``wanted`` on
+        ``[a, b]``: a line's sample interval that bounds every step, or the fastest
+        eigenvalue of the model at ``a`` and the step it allows."""
+        head = (f"CVODES took all of its {MAX_STEPS:g} steps between two output times in "
+                f"[{a:g}, {b:g}] s")
+        gap = float(np.max(np.diff(np.concatenate([[a], np.asarray(wanted, dtype=float)]))))
+        if self.line:
+            interval = float(np.min(np.diff(self.drive.times)))
+            if gap / interval > MAX_STEPS / 2:
+                return (f"{head}: the torque samples' shortest interval, {interval:.3g} s, "
+                        f"bounds every step, and an output interval of {gap:.3g} s needs "
+                        f"{gap / interval:.3g} of them; a shorter output_step would let it "
+                        f"finish")
+        mapped = self.differences if self.differences is not None \
+            else self.rhs.map(self.n_states + 1)
         jacobian = _difference_jacobian(mapped, x, self.drive(a))
         fastest = float(np.max(np.abs(np.linalg.eigvals(jacobian)))) \
             if np.all(np.isfinite(jacobian)) else math.inf
-        return (f"CVODES took all of its {MAX_STEPS:g} steps before t = {b:g} s: the model's "
-                f"fastest eigenvalue at t = {a:g} s, {fastest:.3g} 1/s, holds its steps near "
-                f"{0.33 / fastest:.2g} s. Its source is a stiff mode (torsion, a stiff bending "
-                f"plane, a short or very stiff appendage), a fast wheel lag, or a torque that "
-                f"spins the structure up at once; fewer modes per field, a less stiff "
-                f"structure or a smaller torque would let the run finish")
+        if not fastest > 0:
+            return head
+        return (f"{head}: the model's fastest eigenvalue at t = {a:g} s, {fastest:.3g} 1/s, "
+                f"holds its steps near {0.33 / fastest:.2g} s. Its source is a stiff mode "
+                f"(torsion, a stiff bending plane, a short or very stiff appendage), a fast "
+                f"wheel lag, or a torque that spins the structure up at once; fewer modes per "
+                f"field, a less stiff structure, a smaller torque or a shorter output_step "
+                f"would let the run finish")
 
     def advance(self, a: float, b: float, x, wanted) -> np.ndarray:
         """The states at ``wanted``, from ``x`` at ``a``.
@@ -877,7 +891,7 @@ class SpatialSegments:
             return self._call(self.build(a, b, wanted), x, p)
         except SegmentFailed as exc:
             if "CV_TOO_MUCH_WORK" in str(exc):
-                raise SegmentFailed(self._too_much_work(a, b, x)) from None
+                raise SegmentFailed(self._too_much_work(a, b, x, wanted)) from None
             raise
 
     def _call(self, integrator, x, p) -> np.ndarray:

@@ -153,7 +153,8 @@ def test_a_run_out_of_steps_names_the_stiff_mode_that_held_them(monkeypatch):
     result = simulate_spatial(structure, 0.05, [0.1, 0.0, 0.0], n_modes=2,
                               check_accuracy=False)
     assert result.status == "failed"
-    words = re.search(r"took all of its 2000 steps .* fastest eigenvalue at t = 0 s, "
+    words = re.search(r"took all of its 2000 steps between two output times in \[0, "
+                      r"0\.05\] s: the model's fastest eigenvalue at t = 0 s, "
                       r"([0-9.e+]+) 1/s, holds its steps near ([0-9.e+-]+) s\. Its source is "
                       r"a stiff mode", result.message)
     assert words, result.message
@@ -163,3 +164,20 @@ def test_a_run_out_of_steps_names_the_stiff_mode_that_held_them(monkeypatch):
         * (1.8751 / SECTION["length"]) ** 2
     assert fastest > first
     assert float(words.group(2)) == pytest.approx(0.33 / fastest, rel=0.05)
+
+
+def test_a_line_of_samples_out_of_steps_names_its_sample_interval(monkeypatch):
+    """Samples 1 ms apart bound every step of a line through them: an output interval of 1 s
+    needs 1000 steps, more than a budget of 300, and the failure says so."""
+    from flexctl.sim import spatial_run
+
+    monkeypatch.setattr(spatial_run, "MAX_STEPS", 300)
+    times = np.linspace(0.0, 2.0, 2001)
+    torque = VectorTorque(times, np.outer(np.sin(times), [0.1, 0.0, 0.0]))
+    structure = SpatialStructure(hub=SpatialHub(inertia=INERTIA, radius=0.06), appendages=(
+        SpatialAppendage(name="wing_a", direction=(0, 1, 0), normal=(0, 0, 1), **SECTION),))
+    result = simulate_spatial(structure, 2.0, torque, n_modes=1, output_step=1.0,
+                              check_accuracy=False)
+    assert result.status == "failed"
+    assert "shortest interval, 0.001 s, bounds every step, and an output interval of 1 s " \
+           "needs 1e+03 of them" in result.message, result.message
