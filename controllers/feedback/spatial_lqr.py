@@ -219,9 +219,8 @@ class SpatialLQR:
         -------
         ndarray, shape (N,)
         """
-        a, b, c = self.broken_loop(self.plant if plant is None else plant)
-        poles = np.linalg.eigvals(a - b @ c)
-        return poles if self.sample_time is None else _continuous(poles, self.sample_time)
+        return _closed_poles(self.broken_loop(self.plant if plant is None else plant),
+                             self.sample_time)
 
     def broken_loop(self, plant) -> tuple:
         """``(A, B, C)`` of the loop around ``plant`` broken at its torque inputs, in negative
@@ -352,8 +351,8 @@ class SpatialLQG:
         -------
         ndarray, shape (N + r,)
         """
-        a, b, c = self.broken_loop(self.regulator.plant if plant is None else plant)
-        return _continuous(np.linalg.eigvals(a - b @ c), self.sample_time)
+        return _closed_poles(self.broken_loop(self.regulator.plant if plant is None else plant),
+                             self.sample_time)
 
     def broken_loop(self, plant) -> tuple:
         """``(A, B, C)`` of the held loop around ``plant`` broken at its torque inputs, in
@@ -459,6 +458,14 @@ def _kinematics(e, w) -> np.ndarray:
         factor = (1.0 - 0.5 * angle / np.tan(0.5 * angle)) / (angle * angle)
     cross = np.cross(e, w)
     return 0.5 * cross + factor * np.cross(e, cross)
+
+
+def _closed_poles(loop: tuple, sample_time) -> np.ndarray:
+    """Poles of a broken loop ``(A, B, C)`` closed in negative feedback, 1/s: of ``A - B C``,
+    those of a loop held over ``sample_time`` as ``log(z) / T``."""
+    a, b, c = loop
+    poles = np.linalg.eigvals(a - b @ c)
+    return poles if sample_time is None else _continuous(poles, sample_time)
 
 
 def _continuous(z, sample_time: float) -> np.ndarray:
