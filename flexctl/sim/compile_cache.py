@@ -24,7 +24,8 @@ without compiling again.
   or where compiling fails, the function runs on CasADi's virtual machine as before, and one
   warning line says so, once per process. ``FLEXCTL_COMPILE=0`` turns compiling off.
 - **Progress.** A compile that takes more than :data:`PROGRESS_AFTER` seconds says so on one
-  stderr line, finished with its duration.
+  whole stderr line, written in one call (workers of a sweep that compile at once print
+  whole lines, never parts of each other's); :data:`STATS` adds up the seconds spent.
 - **Trust.** Every file is checked before it is used (:mod:`flexctl.sim.cache_files`): a
   library is mapped only when its bytes match the SHA-256 digest written with it, an index
   only when its sealed digest matches. A file that does not match (truncated, zeroed,
@@ -90,8 +91,8 @@ _SUFFIX = ".so" if sys.platform != "win32" else ".dll"
 
 #: Counts since the process started: ``compiles`` (libraries built), ``loads`` (libraries
 #: loaded from disk), ``hits`` (functions found already loaded), ``fallbacks`` (functions left
-#: on the virtual machine).
-STATS = {"compiles": 0, "loads": 0, "hits": 0, "fallbacks": 0}
+#: on the virtual machine) and ``compile_seconds`` (wall time of the builds).
+STATS = {"compiles": 0, "loads": 0, "hits": 0, "fallbacks": 0, "compile_seconds": 0.0}
 
 _LOADED: dict = {}
 #: The library and C name of each function loaded from the cache, by the function's id (the
@@ -497,16 +498,17 @@ def _build(library: Path, source: str, tool: tuple, label: str, flags: tuple = F
         try:
             _, errors = process.communicate(timeout=PROGRESS_AFTER)
         except subprocess.TimeoutExpired:
-            print(f"flexctl: compiling {label} ({len(source) // 1024} kB of C; once, kept in "
-                  f"{folder}) ...", end="", file=sys.stderr, flush=True)
+            sys.stderr.write(f"flexctl: compiling {label} ({len(source) // 1024} kB of C; "
+                             f"once, kept in {folder})\n")
+            sys.stderr.flush()
             _, errors = process.communicate()
-            print(f" {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
         if process.returncode != 0:
             raise RuntimeError(f"{tool[0]} exited with {process.returncode}: "
                                f"{errors.strip()[-300:]}")
         write_digest(Path(out_path), library)
         os.replace(out_path, library)
         STATS["compiles"] += 1
+        STATS["compile_seconds"] += time.perf_counter() - start
     finally:
         for path in (c_path, out_path):
             with contextlib.suppress(OSError):

@@ -841,3 +841,18 @@ def test_hand_written_loops_are_compiled_with_their_own_flags(fresh, monkeypatch
     assert [c[1:1 + len(compile_cache.FLAGS)] for c in builds] == [
         list(compile_cache.FLAGS), list(compile_cache.LOOP_FLAGS)]
     assert len(list(fresh.rglob(f"t_loops-*{compile_cache._SUFFIX}"))) == 2
+
+
+@needs_compiler
+def test_a_long_compile_says_so_on_one_whole_line(fresh, monkeypatch, capfd):
+    import casadi as ca
+
+    monkeypatch.setattr(compile_cache, "PROGRESS_AFTER", 0.0)
+    spent = compile_cache.STATS["compile_seconds"]
+    x = ca.SX.sym("x", 2)
+    compiled(ca.Function("cc_progress", [x], [ca.cos(x) * x[0]]), label="the test function")
+    err = capfd.readouterr().err
+    lines = [line for line in err.splitlines(keepends=True) if "compiling" in line]
+    assert len(lines) == 1 and lines[0].endswith("\n"), err
+    assert lines[0].startswith("flexctl: compiling the test function (")
+    assert compile_cache.STATS["compile_seconds"] > spent
