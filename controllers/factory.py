@@ -63,11 +63,13 @@ trajopt      optimal slew on the design model, played open loop.
              ``torque_rate_bound`` (N m/s; a number > 0): bound on the torque rate (default:
                none)
              ``tip_bound`` (m; a number > 0): bound on the tip deflection (default: none)
+             ``effort_tolerance`` (default 0.01; a number > 0): largest relative excess of
+               the torque holds' least effort over the converged slew's (fixed duration)
              ``sample_time``: as for pd
 trajopt+lqr  optimal slew with LQR feedback about it (Bryson weights: 5 % of the angle, 3 %
                of the beam length at the tip, the torque bound).
              ``n_intervals``, ``objective``, ``transcription``, ``torque_rate_bound``,
-               ``tip_bound``: as for trajopt
+               ``tip_bound``, ``effort_tolerance``: as for trajopt
              ``sample_time``: as for pd
 bang_bang    rigid time-optimal at the torque bound, or the torque that fits the duration.
              ``sample_time``: as for pd
@@ -86,7 +88,7 @@ nmpc         nonlinear MPC on the design model, run sampled.
              ``reference`` (default "trajopt"; one of "trajopt", "none"): track the optimal
                slew, or regulate to the target
              ``n_intervals``, ``objective``, ``transcription``, ``torque_rate_bound``,
-               ``tip_bound``: as for trajopt
+               ``tip_bound``, ``effort_tolerance``: as for trajopt
              ``estimator`` (default "state"; one of "state", "kalman"): measured state, or
                an extended Kalman filter on hub angle and root moment
              ``angle_noise``, ``moment_noise``, ``process_torque``: as for lqg
@@ -202,6 +204,7 @@ class BuiltController:
         Time at which the commanded slew is meant to be over, s (residual vibration is measured
         after it).
     design_modes : int
+        Modes of the design model, all appendages together.
     info : dict
         E.g. ``solve_time_s``, ``ipopt_status``, ``iterations`` for trajectory optimisation.
     """
@@ -362,17 +365,25 @@ def _hardware(scene, plant: Model, spec: ControllerSpec, built) -> BuiltControll
 
 
 def _design_model(scene, plant: Model) -> Model:
-    """The model the controller is designed on: ``design_modes`` modes (at most the plant's)
-    of the scene's design variant, its input the hub torque (a DC motor's rotor inertia on
-    the hub, as on the plant)."""
-    n_design = scene.model.design_modes
-    if n_design > plant.n_modes:
-        raise SceneError(f"model.design_modes must be <= model.modes = {plant.n_modes}; "
-                         f"got {n_design}")
-    if scene.design_variant == "exact" and n_design > EXACT_MAX_MODES:
-        raise SceneError(f"model.design_modes must be at most {EXACT_MAX_MODES} for the exact "
-                         f"design variant; got {n_design}")
-    return build_model(scene.design_system, n_modes=n_design, variant=scene.design_variant)
+    """The model the controller is designed on: ``design_modes`` modes per appendage (one
+    count for all, or ``{name: modes}``; each at most the plant's) of the scene's design
+    variant, its input the hub torque (a DC motor's rotor inertia on the hub, as on the
+    plant)."""
+    asked = scene.model.design_modes
+    names = plant.structure.names
+    counts = dict(asked) if isinstance(asked, dict) else dict.fromkeys(names, asked)
+    for name, n_plant in zip(names, plant.modes):
+        key = f"model.design_modes{'.' + name if isinstance(asked, dict) else ''}"
+        where = f"model.modes.{name}" if isinstance(scene.model.modes, dict) else (
+            "model.modes" if not scene.model.auto else "model.modes (auto)")
+        if counts[name] > n_plant:
+            raise SceneError(f"{key} must be <= {where} = {n_plant} (the plant's modes"
+                             f"{' of ' + name if name else ''}); got {counts[name]}")
+        if scene.design_variant == "exact" and counts[name] > EXACT_MAX_MODES:
+            raise SceneError(f"{key} must be at most {EXACT_MAX_MODES} for the exact "
+                             f"design variant; got {counts[name]}")
+    n_modes = counts if all(names) else counts[names[0]]
+    return build_model(scene.design_system, n_modes=n_modes, variant=scene.design_variant)
 
 
 def _slew_duration(maneuver: Slew, kind: str, design: Model):
@@ -498,7 +509,7 @@ def _trajectory(spec: ControllerSpec, design: Model, angle, duration, bound,
                     n_intervals=spec.get("n_intervals"), objective=spec.get("objective"),
                     torque_rate_bound=spec.get("torque_rate_bound"),
                     tip_bound=spec.get("tip_bound"), transcription=spec.get("transcription"),
-                    actuator=actuator)
+                    effort_tolerance=spec.get("effort_tolerance"), actuator=actuator)
     start = time.perf_counter()
     try:
         solution = _wrap(solve_slew, design, problem)

@@ -238,6 +238,8 @@ _TRAJOPT = (
             doc="default: by the design model (collocation for exact)"),
     _positive("torque_rate_bound", None, "N m/s", "bound on the torque rate (default: none)"),
     _positive("tip_bound", None, "m", "bound on the tip deflection (default: none)"),
+    _positive("effort_tolerance", 0.01, "", "largest relative excess of the torque holds' "
+              "least effort over the converged slew's (fixed duration)"),
 )
 _SHAPED = "the bang-bang torque shaped at the first hub-free frequency"
 

@@ -488,24 +488,30 @@ class HoldGrid:
         """
         return HoldEffort(n_intervals, self.excess(n_intervals), self.frequencies)
 
-    def passes(self, n_intervals: int) -> bool:
-        """Whether ``n_intervals`` holds keep the excess within :data:`HOLD_EFFORT_TOLERANCE`
-        with every design mode honoured.
+    def passes(self, n_intervals: int, tolerance: float = HOLD_EFFORT_TOLERANCE) -> bool:
+        """Whether ``n_intervals`` holds keep the excess within ``tolerance`` with every
+        design mode honoured.
 
         Parameters
         ----------
         n_intervals : int
             Number of holds ``K`` over the slew (each ``duration / K`` s).
+        tolerance : float, optional
+            Largest relative excess of effort accepted. Default
+            :data:`HOLD_EFFORT_TOLERANCE`.
         """
-        return bool(self.excess(n_intervals, self.n_dof - 1)[0] <= HOLD_EFFORT_TOLERANCE)
+        return bool(self.excess(n_intervals, self.n_dof - 1)[0] <= tolerance)
 
-    def reason(self, n_intervals: int) -> str | None:
+    def reason(self, n_intervals: int, tolerance: float = HOLD_EFFORT_TOLERANCE) -> str | None:
         """Why ``n_intervals`` holds are too coarse for the design modes, or None.
 
         Parameters
         ----------
         n_intervals : int
             Number of holds ``K`` over the slew (each ``duration / K`` s).
+        tolerance : float, optional
+            Largest relative excess of effort accepted. Default
+            :data:`HOLD_EFFORT_TOLERANCE`.
 
         Examples
         --------
@@ -518,13 +524,14 @@ it costs 5.15 % more effort than the converged slew (limit 1 %)
         True
         """
         effort = self.effort(n_intervals)
-        if effort.worst <= HOLD_EFFORT_TOLERANCE:
+        if effort.worst <= tolerance:
             return None
-        if effort.excess[0] > HOLD_EFFORT_TOLERANCE:
+        if effort.excess[0] > tolerance:
             return (f"{n_intervals} holds shape even the rigid-body slew with "
-                    f"{100 * effort.excess[0]:.3g} % more effort than a continuous torque")
-        return _aliasing_reason(effort, effort.culprit(HOLD_EFFORT_TOLERANCE),
-                                self.duration / n_intervals)
+                    f"{100 * effort.excess[0]:.3g} % more effort than a continuous torque "
+                    f"(limit {100 * tolerance:g} %)")
+        return _aliasing_reason(effort, effort.culprit(tolerance),
+                                self.duration / n_intervals, tolerance)
 
 
 def hold_effort_excess(model, duration: float, n_intervals: int,
@@ -568,7 +575,7 @@ def _linearisation_model(model):
     return build_model(model.system, n_modes=model.mode_spec, variant="first_order")
 
 
-def _aliasing_reason(effort: HoldEffort, culprit: int, h: float) -> str:
+def _aliasing_reason(effort: HoldEffort, culprit: int, h: float, tolerance: float) -> str:
     omega = effort.frequencies[culprit - 1]
     if math.isinf(effort.excess[culprit]):
         return f"holds of {h:.3g} s cannot stop design mode {culprit} ({omega:.4g} rad/s)"
@@ -578,4 +585,4 @@ def _aliasing_reason(effort: HoldEffort, culprit: int, h: float) -> str:
     return (f"holds of {h:.3g} s see design mode {culprit} ({omega:.4g} rad/s) at its alias "
             f"{alias:.3g} rad/s, and stopping it costs {100 * effort.excess[culprit]:.3g} % "
             f"more effort than the converged slew{total} (limit "
-            f"{100 * HOLD_EFFORT_TOLERANCE:g} %)")
+            f"{100 * tolerance:g} %)")

@@ -3,10 +3,13 @@
 A slew whose holds cannot reach its true optimum, or whose solve would take minutes, is refused
 in well under a second with a ``ValueError`` that gives the reason and the settings that would
 pass *every* check: the next interval count (``n_intervals``), the most design modes
-(``model.design_modes``), and for the exact variant the first_order design variant.
+(``model.design_modes``), for the exact variant the first_order design variant, and where
+aliasing alone refuses, the effort tolerance that accepts the holds asked for
+(``effort_tolerance``).
 
 - **Aliasing** (fixed duration): holds whose least effort exceeds the converged one by more
-  than :data:`~controllers.design.hold_grid.HOLD_EFFORT_TOLERANCE` (:class:`~.hold_grid.HoldGrid`).
+  than ``SlewProblem.effort_tolerance`` (default
+  :data:`~controllers.design.hold_grid.HOLD_EFFORT_TOLERANCE`; :class:`~.hold_grid.HoldGrid`).
 - **Work** (exact variant): the exact dynamics' derivatives cost about ``n_states ** 3`` per
   evaluation; more than :data:`MAX_EXACT_WORK` per IPOPT iteration is minutes of solving.
 """
@@ -111,7 +114,8 @@ class _Checks:
         resolution = self.resolution_reason(n_intervals)
         if resolution is not None:           # before the hold analysis, which it would upset
             return resolution
-        aliasing = self.holds.reason(n_intervals) if self.holds else None
+        aliasing = self.holds.reason(n_intervals, self.problem.effort_tolerance) \
+            if self.holds else None
         if aliasing is None:
             return self.work_reason(n_intervals)
         n_modes = self.model.n_modes
@@ -122,7 +126,8 @@ class _Checks:
         if self.resolution_reason(n_intervals) is not None \
                 or self.work_reason(n_intervals) is not None:
             return False
-        return self.holds is None or self.holds.passes(n_intervals)
+        return self.holds is None or self.holds.passes(n_intervals,
+                                                       self.problem.effort_tolerance)
 
 
 def _more_intervals(checks: _Checks, n_intervals: int) -> int | None:
@@ -149,6 +154,20 @@ def _fewer_modes(checks: _Checks, n_intervals: int) -> int | None:
         if fewer.least_work() <= MAX_EXACT_WORK and fewer.passes(n_intervals):
             return n_modes
     return None
+
+
+def _accepting_tolerance(checks: _Checks, n_intervals: int) -> float | None:
+    """The effort tolerance, rounded up to two digits, that accepts ``n_intervals`` holds
+    when aliasing alone refuses them (None when another check does too, or the holds cannot
+    reach the target at all)."""
+    if checks.holds is None or checks.resolution_reason(n_intervals) is not None \
+            or checks.work_reason(n_intervals) is not None:
+        return None
+    worst = checks.holds.effort(n_intervals).worst
+    if not math.isfinite(worst):
+        return None
+    digits = 1 - math.floor(math.log10(worst))
+    return math.ceil(worst * 10 ** digits * (1 + 1e-9)) / 10 ** digits
 
 
 def refuse_unsolvable(model, problem, t_rigid: float, longest: float) -> None:
@@ -193,6 +212,11 @@ the converged slew (limit 1 %); use n_intervals = 45 or at most 3 design modes \
     fewer = _fewer_modes(checks, K)
     if fewer is not None:
         remedies.append(f"at most {fewer} design modes (model.design_modes)")
+    tolerance = _accepting_tolerance(checks, K)
+    if tolerance is not None:
+        remedies.append(f"effort_tolerance = {tolerance:.2g} (controller.effort_tolerance: "
+                        f"accepts the holds' {100 * checks.holds.effort(K).worst:.3g} % more "
+                        "effort than the converged slew)")
     if model.variant.exact and checks.work_reason(K) is not None:
         remedies.append("model.design_variant 'first_order' (small deflection, solved in "
                         "seconds)")

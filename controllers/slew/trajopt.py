@@ -53,7 +53,8 @@ for the hub torque ``u`` at the hub rate.
 Before anything is built, :func:`solve_slew` refuses a slew whose holds cannot reach its
 true optimum (:mod:`controllers.design.hold_grid`): fewer holds than terminal conditions, or holds
 that alias a design mode so that stopping it costs more than
-:data:`~controllers.design.hold_grid.HOLD_EFFORT_TOLERANCE` above the converged effort; and a slew
+:attr:`SlewProblem.effort_tolerance` (default
+:data:`~controllers.design.hold_grid.HOLD_EFFORT_TOLERANCE`) above the converged effort; and a slew
 the actuator cannot give (:func:`controllers.design.actuator_limits.refuse_infeasible`).
 """
 
@@ -75,7 +76,7 @@ from flexctl.sim.maneuvers import rigid_slew_duration
 
 from ..design.actuator_limits import (check_design_model, demand, hub_torque_bound,
                                       minimum_duration, refuse_infeasible, speed_bound)
-from ..design.hold_grid import MAX_SUBSTEPS
+from ..design.hold_grid import HOLD_EFFORT_TOLERANCE, MAX_SUBSTEPS
 from ..design.plant_state import DEFAULT_LAYOUT, resized
 from .slew_checks import refuse_unsolvable
 from ..spec import OBJECTIVES, TRANSCRIPTIONS
@@ -208,6 +209,12 @@ class SlewProblem(KeywordOnly):
         each hold's torque at the hub rate at both its ends, the motor's torque-speed line).
         The design model is the structure's (for a motor, with the rotor's reflected inertia:
         ``ActuatedModel.mechanical``). Default none: an ideal hub torque.
+    effort_tolerance : float, optional
+        Largest relative excess of the holds' least effort over the converged
+        (continuous-torque) effort that a fixed-duration slew accepts (> 0; ``0.05`` accepts
+        5 % more effort): holds that alias a design mode beyond it are refused before IPOPT
+        runs (:class:`~controllers.design.hold_grid.HoldGrid`). Default
+        :data:`~controllers.design.hold_grid.HOLD_EFFORT_TOLERANCE` (1 %).
 
     Examples
     --------
@@ -234,6 +241,7 @@ class SlewProblem(KeywordOnly):
     collocation_scheme: str = "radau"
     max_duration: float | None = None
     actuator: ReactionWheel | DCMotor | None = None
+    effort_tolerance: float = HOLD_EFFORT_TOLERANCE
     degree: int = field(default=3, init=False)
 
     def __post_init__(self):
@@ -247,6 +255,7 @@ class SlewProblem(KeywordOnly):
         set_("n_intervals", _integer("n_intervals", self.n_intervals, 2, MAX_INTERVALS))
         for name in ("torque_rate_bound", "tip_bound", "max_duration"):
             set_(name, checked_number(name, getattr(self, name), optional=True))
+        set_("effort_tolerance", checked_number("effort_tolerance", self.effort_tolerance))
         objective = ("time" if self.duration is None else "effort") if self.objective is None \
             else self.objective
         _choice("objective", objective, OBJECTIVES)
@@ -537,7 +546,7 @@ def _refuse_before_solving(model: Model, problem: SlewProblem) -> None:
 
     Too few holds for the terminal conditions, a slew the actuator cannot give, a duration
     below the rigid-body minimum time, and holds whose least effort exceeds the converged one
-    by more than :data:`~controllers.design.hold_grid.HOLD_EFFORT_TOLERANCE` (fixed duration only).
+    by more than :attr:`SlewProblem.effort_tolerance` (fixed duration only).
     """
     n, N, K = model.n_states, model.n_modes, problem.n_intervals
     if K < n:
@@ -704,8 +713,7 @@ def solve_slew(model: Model, problem: SlewProblem, initial_guess=None,
     Before anything is built, a slew that cannot be solved to its optimum is refused
     (``ValueError`` naming the setting and a value that works): fewer holds than terminal
     conditions; holds too coarse for the design modes, whose least effort exceeds the
-    converged (continuous-torque) effort by more than
-    :data:`~controllers.design.hold_grid.HOLD_EFFORT_TOLERANCE`
+    converged (continuous-torque) effort by more than :attr:`SlewProblem.effort_tolerance`
     (:mod:`controllers.design.hold_grid`); or
     an exact design model whose derivatives would take minutes
     (:data:`~controllers.slew.slew_checks.MAX_EXACT_WORK`). Each hold is integrated with the steps

@@ -44,7 +44,8 @@ Format (every table but ``[[masses]]`` and ``[maneuver]`` keys is required as sh
                                          # {wing_a = 4, wing_b = 2} naming each of them
     # tolerance = 1e-2                   # optional: relative tip error for the "auto" choices
                                          # and for the model-validity warning
-    design_modes = 2                     # optional: modes of a controller's design model
+    design_modes = 2                     # optional: modes of a controller's design model,
+                                         # per appendage as for modes (no "auto")
     # design_variant = "exact"           # optional: variant of the design model; default
                                          # exact on an exact plant, else first_order
 
@@ -236,8 +237,10 @@ class ModelSpec:
         ``[[appendages]]`` scene its own (every one named, :func:`parse_scene` checks the
         names); ``"auto"``: as few modes as the scene's manoeuvre needs for a relative tip
         error ``tolerance`` (:func:`flexctl.sim.fidelity.choose_modes`).
-    design_modes : int, optional
-        Modes of the design model (1 to 200). Default 2.
+    design_modes : int or dict, optional
+        Modes of the design model per appendage (1 to 200), in the forms of ``modes`` but
+        ``"auto"``: one int for every appendage, or ``{name: modes}`` for each of a
+        ``[[appendages]]`` scene; each at most the plant's. Default 2.
     design_variant : str, optional
         Variant of the design model. Default None: the exact variant on an exact plant,
         first_order otherwise.
@@ -252,7 +255,7 @@ class ModelSpec:
 
     variant: str = "first_order"
     modes: int | str = 4
-    design_modes: int = 2
+    design_modes: int | dict = 2
     design_variant: str | None = None
     tolerance: float | None = None
     design_stiffness_factor: float = 1.0
@@ -265,10 +268,13 @@ class ModelSpec:
                     or not 0.1 <= value <= 10.0:
                 raise SceneError(f"model.{key} must be a number in [0.1, 10]; got {value!r}")
             object.__setattr__(self, key, float(value))
-        if isinstance(self.design_modes, bool) or not isinstance(self.design_modes, int) \
+        if isinstance(self.design_modes, dict):
+            object.__setattr__(self, "design_modes",
+                               _modes_table(self.design_modes, "design_modes"))
+        elif isinstance(self.design_modes, bool) or not isinstance(self.design_modes, int) \
                 or not 1 <= self.design_modes <= 200:
-            raise SceneError("model.design_modes must be an integer in [1, 200]; got "
-                             f"{self.design_modes!r}")
+            raise SceneError("model.design_modes must be an integer in [1, 200] or a table "
+                             f"{{appendage name = modes}}; got {self.design_modes!r}")
         if self.variant not in VARIANTS + ("auto",):
             raise SceneError(f"model.variant must be one of {', '.join(VARIANTS)} or auto; "
                              f"got {self.variant!r}")
@@ -297,14 +303,14 @@ class ModelSpec:
         return isinstance(self.modes, str) and self.modes == "auto"
 
 
-def _modes_table(table: dict) -> dict:
-    """``model.modes`` given per appendage, ``{name: modes}``, checked (not yet its names)."""
+def _modes_table(table: dict, key: str = "modes") -> dict:
+    """``model.<key>`` given per appendage, ``{name: modes}``, checked (not yet its names)."""
     if not table:
-        raise SceneError("model.modes must give the modes of every appendage, {name = modes}; "
-                         "got an empty table")
+        raise SceneError(f"model.{key} must give the modes of every appendage, "
+                         "{name = modes}; got an empty table")
     for name, n_modes in table.items():
         if isinstance(n_modes, bool) or not isinstance(n_modes, int) or not 1 <= n_modes <= 200:
-            raise SceneError(f"model.modes.{name} must be an integer in [1, 200]; got "
+            raise SceneError(f"model.{key}.{name} must be an integer in [1, 200]; got "
                              f"{n_modes!r}")
     return dict(table)
 
@@ -552,17 +558,19 @@ def _set_dotted(data: dict, path: str, value):
 
 
 def _spread_modes(data: dict, parts: list) -> None:
-    """Before ``model.modes.<name>`` is set on a scene whose modes are one number: that number
-    for every appendage, as the table of which one entry is then set."""
-    if len(parts) != 3 or parts[:2] != ["model", "modes"]:
+    """Before ``model.modes.<name>`` (or ``model.design_modes.<name>``) is set on a scene whose
+    modes are one number: that number for every appendage, as the table of which one entry is
+    then set."""
+    if len(parts) != 3 or parts[0] != "model" or parts[1] not in ("modes", "design_modes"):
         return
+    key = parts[1]
     model, appendages = data.get("model", {}), data.get("appendages")
-    modes = model.get("modes", ModelSpec.modes) if isinstance(model, dict) else None
+    modes = model.get(key, getattr(ModelSpec, key)) if isinstance(model, dict) else None
     if isinstance(modes, bool) or not isinstance(modes, int) or not isinstance(appendages, list):
         return
     names = [a.get("name") if isinstance(a, dict) else None for a in appendages]
     if names and all(isinstance(n, str) for n in names):
-        data["model"] = {**model, "modes": dict.fromkeys(names, modes)}
+        data["model"] = {**model, key: dict.fromkeys(names, modes)}
 
 
 def parse_scene(data: dict, name: str = "scene", base_dir=None) -> Scene:
@@ -749,20 +757,23 @@ def _appendage(where: str, table) -> Appendage:
 
 def _check_modes(model: ModelSpec, system) -> None:
     """A table of modes names exactly the appendages; the exact variant's limit."""
-    if isinstance(model.modes, dict):
-        names = system.names if isinstance(system, Structure) else ("",)
+    names = system.names if isinstance(system, Structure) else ("",)
+    for field_name in ("modes", "design_modes"):
+        table = getattr(model, field_name)
+        if not isinstance(table, dict):
+            continue
         if not all(names):
-            raise SceneError("model.modes may be a table {appendage name = modes} only with "
-                             f"[[appendages]]; got {model.modes!r}")
-        for key in model.modes:
+            raise SceneError(f"model.{field_name} may be a table {{appendage name = modes}} "
+                             f"only with [[appendages]]; got {table!r}")
+        for key in table:
             if key not in names:
-                raise SceneError(f"model.modes.{key} names no appendage; expected "
+                raise SceneError(f"model.{field_name}.{key} names no appendage; expected "
                                  f"{', '.join(names)}")
         for key in names:
-            if key not in model.modes:
-                raise SceneError(f"model.modes.{key} is missing: a table of modes gives every "
-                                 f"appendage ({', '.join(names)}); got "
-                                 f"{', '.join(model.modes)}")
+            if key not in table:
+                raise SceneError(f"model.{field_name}.{key} is missing: a table of modes gives "
+                                 f"every appendage ({', '.join(names)}); got "
+                                 f"{', '.join(table)}")
     if model.variant == "exact" and not model.auto:
         _check_exact_modes(model.modes)
 

@@ -36,7 +36,8 @@ _LQR = {name: (LQRWeights, name) for name in
         ("hub_angle", "hub_rate", "tip_deflection", "modal_energy", "torque")}
 _NOISE = {key: (NoiseLevels, field) for field, key in factory.NOISE_SETTINGS.items()}
 _SLEW_PROBLEM = {name: (SlewProblem, name) for name in
-                 ("n_intervals", "objective", "transcription", "torque_rate_bound", "tip_bound")}
+                 ("n_intervals", "objective", "transcription", "torque_rate_bound", "tip_bound",
+                  "effort_tolerance")}
 _TRACKING = {"reference": (SlewProfile, "shape"), "sample_time": (ZeroOrderHold, "sample_time")}
 
 #: Where each setting of each controller kind goes: (constructor or design function, parameter).

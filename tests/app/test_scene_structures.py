@@ -341,10 +341,14 @@ def test_schema_keys_reach_their_constructors():
     ("model.modes.wing_a", "5", lambda s: s.model.modes == {"wing_a": 5, "wing_b": 3}),
     ("model.modes", "{wing_a = 1, wing_b = 2}",
      lambda s: s.model.modes == {"wing_a": 1, "wing_b": 2}),
+    ("model.design_modes.wing_b", "1",
+     lambda s: s.model.design_modes == {"wing_a": 2, "wing_b": 1}),
+    ("model.design_modes", "{wing_a = 1, wing_b = 3}",
+     lambda s: s.model.design_modes == {"wing_a": 1, "wing_b": 3}),
     ("hub.support", "pinned", lambda s: not s.system.free and s.system.hub.mass == 3.0),
     ("hub.mass", "0", lambda s: s.system.hub.mass == 0.0),
 ], ids=["length", "mass-bracketed", "angle", "radius", "modes-by-name", "modes-table",
-        "support", "hub-mass"])
+        "design-modes-by-name", "design-modes-table", "support", "hub-mass"])
 def test_overrides_reach_the_new_tables(key, value, check):
     scene = load_scene("two-array-free", overrides={key: value})
     assert check(scene)
@@ -359,10 +363,15 @@ def test_overrides_reach_the_new_tables(key, value, check):
     ("appendages.0", "1", r"must index an item of the list"),
     ("model.modes.wing_c", "2", r"model\.modes\.wing_c names no appendage"),
     ("model.modes.wing_a", "0", r"model\.modes\.wing_a must be an integer"),
+    ("model.design_modes.wing_c", "2", r"model\.design_modes\.wing_c names no appendage"),
+    ("model.design_modes", "{wing_a = 2}", r"model\.design_modes\.wing_b is missing"),
+    ("model.design_modes.wing_a", "true", r"model\.design_modes\.wing_a must be an integer"),
+    ("model.design_modes", "{}", r"model\.design_modes must give the modes of every"),
     ("hub.support", "'orbit'", r"hub\.support must be one of"),
     ("appendages.1.name", "wing_a", r"appendages\.1\.name must be unique"),
     ("beam.length", "1", r"either \[beam\]"),
 ], ids=["index", "unknown", "unknown-mass-key", "list-item", "modes-name", "modes-zero",
+        "design-modes-name", "design-modes-missing", "design-modes-bool", "design-modes-empty",
         "support", "duplicate", "beam-too"])
 def test_bad_overrides_of_the_new_tables_are_refused_by_key(key, value, pattern):
     with pytest.raises(SceneError, match=pattern):
@@ -372,6 +381,33 @@ def test_bad_overrides_of_the_new_tables_are_refused_by_key(key, value, pattern)
 def test_modes_by_name_on_the_one_beam_form_are_refused():
     with pytest.raises(SceneError, match=r"model\.modes is a int value, not a table"):
         load_scene("hub-beam-mass", overrides={"model.modes.beam": "2"})
+    with pytest.raises(SceneError, match=r"model\.design_modes may be a table .* only with"):
+        load_scene("hub-beam-mass", overrides={"model.design_modes": "{beam = 2}"})
+
+
+@pytest.mark.parametrize("design_modes, expected", [
+    ("{wing_a = 3, wing_b = 1}", {"wing_a": 3, "wing_b": 1}), ("2", {"wing_a": 2, "wing_b": 2})])
+def test_the_design_model_has_the_design_modes_of_each_appendage(design_modes, expected):
+    from controllers.factory import _design_model
+
+    scene = load_scene("two-array-slew", overrides={"model.variant": "first_order",
+                                                    "model.design_modes": design_modes})
+    design = _design_model(scene, scene.build_model())
+    assert dict(zip(design.structure.names, design.modes)) == expected
+
+
+@pytest.mark.parametrize("design_modes, pattern", [
+    ("4", r"model\.design_modes must be <= model\.modes = 3 \(the plant's modes of wing_a\); "
+          "got 4"),
+    ("{wing_a = 1, wing_b = 4}", r"model\.design_modes\.wing_b must be <= model\.modes = 3"),
+])
+def test_design_modes_beyond_the_plants_are_refused_per_appendage(design_modes, pattern):
+    from controllers.factory import _design_model
+
+    scene = load_scene("two-array-slew", overrides={"model.variant": "first_order",
+                                                    "model.design_modes": design_modes})
+    with pytest.raises(SceneError, match=pattern):
+        _design_model(scene, scene.build_model())
 
 
 # ------------------------------------------------------- models and design models

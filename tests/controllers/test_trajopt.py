@@ -381,7 +381,13 @@ def test_every_grid_cell_is_refused_fast_with_a_remedy_or_let_through(variant, m
             assert elapsed < REFUSAL_BUDGET, cell
             fewer = re.search(r"at most (\d+) design modes \(model\.design_modes\)", message)
             more = re.search(r"use n_intervals = (\d+)", message)
+            tolerance = re.search(r"effort_tolerance = ([0-9.e+-]+) ", message)
             assert fewer or more, cell
+            if tolerance:
+                with pytest.raises(_WouldSolve):
+                    solve_slew(model, dataclasses.replace(slew_90_problem(n_intervals),
+                                                          effort_tolerance=float(
+                                                              tolerance.group(1))))
             if more:
                 with pytest.raises(_WouldSolve):
                     solve_slew(model, slew_90_problem(int(more.group(1))))
@@ -424,6 +430,40 @@ def test_grid_cell_solves_to_its_converged_cost_or_is_refused_fast(variant, n_mo
     # the torques reach the target on the design model's own dynamics, to solver accuracy
     np.testing.assert_allclose(solution.states[:, -1],
                                solution.problem.target_state(model.n_states), atol=BOUNDARY_TOL)
+
+
+def test_the_effort_tolerance_a_refusal_names_lets_the_holds_through(monkeypatch):
+    """Aliasing alone refuses 40 holds for 4 slew-90 modes (5.15 % more effort): the refusal
+    names the effort tolerance that accepts them, and with it the checks let the slew through
+    (the solve, 6.3 % above the converged cost with the torque bound, is the slow test's)."""
+    def would_solve(*args):
+        raise _WouldSolve
+
+    monkeypatch.setattr(trajopt, "transcribe", would_solve)
+    model = slew_90_model("first_order", 4)
+    with pytest.raises(ValueError, match=r"limit 1 %\).*effort_tolerance = 0\.052 ") as info:
+        solve_slew(model, slew_90_problem(40))
+    assert "controller.effort_tolerance" in str(info.value)
+    with pytest.raises(_WouldSolve):
+        solve_slew(model, dataclasses.replace(slew_90_problem(40), effort_tolerance=0.052))
+    with pytest.raises(ValueError, match=r"limit 5 %\)"):
+        solve_slew(model, dataclasses.replace(slew_90_problem(40), effort_tolerance=0.05))
+
+
+@pytest.mark.slow
+def test_a_slew_the_effort_tolerance_accepts_costs_what_the_hold_analysis_says():
+    model = slew_90_model("first_order", 4)
+    accepted = solve_slew(model, dataclasses.replace(slew_90_problem(40),
+                                                     effort_tolerance=0.052))
+    excess = accepted.cost / converged_cost("first_order", 4) - 1.0
+    # the analysis is of the unbounded linear slew; the torque bound adds a little
+    assert 0.0515 - 0.005 < excess < 0.0515 + 0.02, excess
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.1, float("nan"), float("inf"), "0.05", True, None])
+def test_effort_tolerance_is_refused_by_name(bad):
+    with pytest.raises((TypeError, ValueError), match="effort_tolerance"):
+        SlewProblem(angle=1.0, duration=2.0, torque_bound=5.0, effort_tolerance=bad)
 
 
 @pytest.mark.slow
@@ -506,3 +546,21 @@ def test_terminal_constraints_refuse_a_bad_target_by_name(bad):
     model = flexctl.build_model(flexctl.load_scene("slew-90").system, 2, "first_order")
     with pytest.raises((TypeError, ValueError), match="target"):
         terminal_constraints(model, bad)
+
+
+def test_a_scene_sets_the_effort_tolerance_its_refusal_names(monkeypatch):
+    """From the scene as from Python: controller.effort_tolerance reaches the slew's checks."""
+    from controllers import from_spec
+
+    def would_solve(*args):
+        raise _WouldSolve
+
+    monkeypatch.setattr(trajopt, "transcribe", would_solve)
+    settings = {"model.variant": "first_order", "model.design_modes": "4",
+                "controller.kind": "trajopt", "controller.n_intervals": "40"}
+    with pytest.raises(ValueError, match=r"controller\.effort_tolerance") as info:
+        from_spec(flexctl.load_scene("slew-90", overrides=settings))
+    value = re.search(r"effort_tolerance = ([0-9.]+) ", str(info.value)).group(1)
+    with pytest.raises(_WouldSolve):
+        from_spec(flexctl.load_scene("slew-90", overrides={
+            **settings, "controller.effort_tolerance": value}))
