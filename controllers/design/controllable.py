@@ -31,6 +31,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 
 from flexctl.model.errors import InputError, InputValueError
 
@@ -301,6 +302,10 @@ def lqr_on_part(model, spin_rate, q_mat, r_mat, sample_time=None):
 def held(a, b, sample_time: float) -> tuple:
     """``(A_d, B_d)``: ``x' = A x + B u`` with ``u`` held over ``sample_time``.
 
+    The exponential of the block matrix ``[[A, B], [0, 0]] T`` (python-control's ``c2d`` with
+    ``"zoh"`` computes the same, through ``scipy.signal``, whose import alone takes longer
+    than a design).
+
     Parameters
     ----------
     a : array_like, shape (n, n)
@@ -310,12 +315,12 @@ def held(a, b, sample_time: float) -> tuple:
     sample_time : float
         Length of the zero-order hold, s (> 0).
     """
-    import control
-
-    n = a.shape[0]
-    held_sys = control.c2d(control.ss(a, b, np.eye(n), np.zeros((n, b.shape[1]))),
-                           float(sample_time), "zoh")
-    return np.asarray(held_sys.A), np.asarray(held_sys.B)
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    n, m = a.shape[0], b.shape[1]
+    block = np.zeros((n + m, n + m))
+    block[:n, :n], block[:n, n:] = a, b
+    exp = scipy.linalg.expm(block * float(sample_time))
+    return exp[:n, :n], exp[:n, n:]
 
 
 def state_gain(a, b, q_mat, r_mat, sample_time=None) -> np.ndarray:
@@ -338,16 +343,30 @@ def state_gain(a, b, q_mat, r_mat, sample_time=None) -> np.ndarray:
     Raises
     ------
     numpy.linalg.LinAlgError
-        If the solver returns a gain that is not finite.
-    """
-    import control
+        If the solver returns a gain that is not finite, or the Riccati equation has no
+        stabilising solution.
 
-    if sample_time is None:
-        gain = np.asarray(control.lqr(a, b, q_mat, r_mat)[0], dtype=float)
-    else:
-        a_d, b_d = held(a, b, sample_time)
-        gain = np.asarray(control.dlqr(a_d, b_d, q_mat * sample_time,
-                                       np.atleast_2d(r_mat) * sample_time)[0], dtype=float)
+    Notes
+    -----
+    The Riccati equations are solved by SciPy (``solve_continuous_are``,
+    ``solve_discrete_are``), the gains are ``R^-1 B^T X`` and ``(B^T X B + R)^-1 B^T X A``:
+    what ``control.lqr`` and ``control.dlqr`` return, without importing python-control.
+    """
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    q_mat = np.asarray(q_mat, dtype=float)
+    r_mat = np.atleast_2d(np.asarray(r_mat, dtype=float))
+    try:
+        if sample_time is None:
+            x = scipy.linalg.solve_continuous_are(a, b, q_mat, r_mat)
+            gain = np.linalg.solve(r_mat, b.T @ x)
+        else:
+            a_d, b_d = held(a, b, sample_time)
+            q_d, r_d = q_mat * sample_time, r_mat * sample_time
+            x = scipy.linalg.solve_discrete_are(a_d, b_d, q_d, r_d)
+            gain = np.linalg.solve(b_d.T @ x @ b_d + r_d, b_d.T @ x @ a_d)
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise np.linalg.LinAlgError(f"the Riccati equation has no stabilising solution "
+                                    f"({exc})") from None
     if not np.all(np.isfinite(gain)):
         raise np.linalg.LinAlgError("the solver returned a gain that is not finite")
     return gain

@@ -326,12 +326,16 @@ def _flown_loop(plant, controller, spin_rate: float):
             and callable(getattr(controller, "sampled_loop", None))):
         return None
     try:
-        loop = controller.sampled_loop(plant, spin_rate)
+        if callable(getattr(controller, "loop_matrices", None)):
+            a, b, c, dt, _ = controller.loop_matrices(plant, spin_rate)
+        else:
+            loop = controller.sampled_loop(plant, spin_rate)
+            a, b, c, dt = loop.A, loop.B, loop.C, loop.dt
     except (InputTypeError, InputValueError):
         return None
-    matrix = np.asarray(loop.A) - np.asarray(loop.B) @ np.asarray(loop.C)
+    matrix = np.asarray(a) - np.asarray(b) @ np.asarray(c)
     name = f"{type(controller.law).__name__} on its Kalman filter"
-    return loop_stability(plant, matrix, name, spin_rate, float(loop.dt))
+    return loop_stability(plant, matrix, name, spin_rate, float(dt))
 
 
 def loop_stability(plant, matrix, law: str, spin_rate: float = 0.0,

@@ -381,6 +381,21 @@ class Observed:
 
         return observed_loop(model, self, spin_rate)
 
+    def loop_matrices(self, model, spin_rate: float = 0.0):
+        """:meth:`sampled_loop` as arrays
+        (:class:`~controllers.feedback.observed_loop.LoopMatrices`), without python-control.
+
+        Parameters
+        ----------
+        model : flexctl.Model
+            The plant flown, linearised about ``spin_rate``.
+        spin_rate : float, optional
+            Steady hub rate of the linearisation, rad/s. Default 0.
+        """
+        from .observed_loop import observed_loop_matrices
+
+        return observed_loop_matrices(model, self, spin_rate)
+
     def start(self, model, x0) -> "ObservedSession":
         """A fresh session for a run of ``model`` from the plant state ``x0``.
 

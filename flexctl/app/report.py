@@ -460,7 +460,9 @@ def format_summary(summary: dict) -> str:
                           f"({slew['ipopt_status']})")
         if slew.get("errors"):
             lines.append(f"  metric errors: against the loop on the {slew['errors']['reference']}"
-                         " plant (twice the difference) and the run's accuracy check")
+                         " plant (twice the difference, a run of "
+                         f"{slew['errors'].get('reference_wall_time', 0.0):.2g} s) and the "
+                         "run's accuracy check")
         stability = slew.get("loop_stability")
         if stability:
             lines.append(f"  loop on the plant: {stability['message']}")

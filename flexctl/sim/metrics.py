@@ -162,6 +162,8 @@ class MetricErrors:
         Largest tip difference from the reference run, m.
     reference : str
         What the reference run was, e.g. ``"exact, 8 modes"``.
+    reference_wall_time : float
+        Wall time of the reference run, s (what the error estimate cost).
     """
 
     residual_vibration: float
@@ -172,6 +174,7 @@ class MetricErrors:
     model: float
     reference: str
     geometry: float = 0.0
+    reference_wall_time: float = 0.0
 
     def as_dict(self) -> dict:
         """JSON types (an infinite settling-time error becomes None)."""
@@ -238,7 +241,8 @@ def metric_errors(result, reference, angle: float, duration: float,
         final_error=angle_error,
         settling_time=settle if np.isfinite(settle) else math.inf,
         integration=integration, model=float(np.max(difference)), geometry=geometry,
-        reference=f"{reference.model.variant}, {reference.model.n_modes} modes")
+        reference=f"{reference.model.variant}, {reference.model.n_modes} modes",
+        reference_wall_time=float(getattr(reference, "wall_time", 0.0)))
 
 
 def format_metric(value: float, error: float | None, unit: str) -> str:

@@ -29,7 +29,6 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from .background import Beside
 from .compiled import (CHECK_FACTOR, SegmentIntegrator, numeric_rhs, start_check,
@@ -55,6 +54,14 @@ __all__ = ["Trajectory", "CvodesSegments", "EmbeddedSegments", "BdfSegments", "F
 #: reach it ends the run as an integrator failure, with its stiffness named. The 3e4 kg
 #: tip-mass divergence of first_order took 7.5e4.
 FALLBACK_EVALUATIONS = 200_000
+
+
+def _solve_ivp():
+    """``scipy.integrate.solve_ivp``, imported where a run needs it: the compiled methods do
+    not, and ``scipy.integrate`` takes longer to import than a short run."""
+    from scipy.integrate import solve_ivp
+
+    return solve_ivp
 
 
 class AccuracyWarning(RuntimeWarning):
@@ -195,7 +202,7 @@ class _Segments:
         plan, request = self.plan, self.request
         try:
             with np.errstate(over="raise", invalid="raise"):
-                sol = solve_ivp(rhs, (lo, hi), y, method=plan.fallback, t_eval=t_eval,
+                sol = _solve_ivp()(rhs, (lo, hi), y, method=plan.fallback, t_eval=t_eval,
                                 rtol=request.rtol, atol=plan.atol, events=self.stops.events(),
                                 max_step=request.max_step)
         except _BudgetSpent as spent:
@@ -345,7 +352,7 @@ def replay_error(strategy, traj) -> tuple:
             for lo, t_eval in traj.compiled_segments:
                 hi = float(t_eval[-1])
                 drive.segment_end = np.nextafter(hi, lo)
-                sol = solve_ivp(drive.rhs, (lo, hi), y, method=plan.fallback, t_eval=t_eval,
+                sol = _solve_ivp()(drive.rhs, (lo, hi), y, method=plan.fallback, t_eval=t_eval,
                                 rtol=min(CHECK_FACTOR * request.rtol, 0.1),
                                 atol=CHECK_FACTOR * np.asarray(plan.atol),
                                 max_step=request.max_step)

@@ -116,3 +116,45 @@ def test_every_crossing_is_listed_and_the_margins_are_among_them(observed):
     assert ("gain", margins.gain_crossover_frequency, margins.phase_margin) \
         in margins.crossings
     assert "crossings" not in margins.as_dict()
+
+
+def _recursion_gain(ad, c, q, r, p0, samples):
+    """The Kalman covariance recursion, one sample at a time: the gain after ``samples``."""
+    p = np.array(p0, dtype=float)
+    for _ in range(samples):
+        gain = np.linalg.solve(c @ p @ c.T + r, c @ p).T
+        keep = np.eye(p.shape[0]) - gain @ c
+        p = ad @ (keep @ p @ keep.T + gain @ r @ gain.T) @ ad.T + q
+    return np.linalg.solve(c @ p @ c.T + r, c @ p).T
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_doubled_recursion_reaches_the_recursions_limit(seed):
+    """A free hub's translation (a double integrator no torque moves and no sensor reads),
+    the rigid rotation and two undamped modes read by two sensors: the doubled recursion
+    gives the gain of 20 000 samples of the plain one, and zero gain on the translation."""
+    from controllers.feedback.observed_loop import steady_kalman_gain
+
+    rng = np.random.default_rng(seed)
+    a = np.zeros((8, 8))
+    a[0, 1] = a[2, 3] = a[4, 6] = a[5, 7] = 1.0
+    a[6, 4], a[7, 5] = -rng.uniform(1.0, 400.0, 2)
+    ad = scipy.linalg.expm(0.1 * a)
+    c = np.zeros((2, 8))
+    c[0, 2], c[1, 3], c[0, 4], c[1, 7] = 1.0, 1.0, rng.uniform(0.1, 1.0), rng.uniform(0.1, 1.0)
+    b = np.zeros((8, 1))
+    b[3], b[6], b[7] = 1.0, rng.normal(), rng.normal()
+    q, r, p0 = 1e-3 * b @ b.T, np.diag([1e-6, 1e-4]), 1e-3 * np.eye(8)
+    gain = steady_kalman_gain(ad, c, q, r, p0)
+    limit = _recursion_gain(ad, c, q, r, p0, 20_000)
+    np.testing.assert_allclose(gain, limit, rtol=0, atol=1e-8 * np.max(np.abs(limit)))
+    assert np.all(gain[:2] == 0.0)
+
+
+def test_the_loop_matrices_are_the_sampled_loops(wheel_slew, observed):
+    _, plant, _ = wheel_slew
+    law, loop, _ = observed
+    a, b, c, dt, names = law.loop_matrices(plant)
+    assert dt == loop.dt and list(names) == list(loop.state_labels)
+    for mine, theirs in ((a, loop.A), (b, loop.B), (c, loop.C)):
+        np.testing.assert_array_equal(mine, np.asarray(theirs))
