@@ -50,6 +50,7 @@ from .feedback.lqg_sampled import SampledLQG
 from .analysis.robustness import (Dispersion, RobustnessSummary, RobustnessTask, disperse,
                                   robustness_summary, spread_statistics)
 from .feedback.observer import FilterModel
+from .feedback.structural_filters import Filtered, LeadLag, Notch, RollOff
 
 __all__ = [
     "SlewProfile", "minimum_slew_duration",
@@ -70,7 +71,7 @@ __all__ = [
     "LaggedLQR", "MotorVoltage", "check_reference_fits", "design_wheel_lqr",
     "through_actuator", "Observed", "kalman_step", "to_iosys", "SampledLQG",
     "Dispersion", "RobustnessSummary", "RobustnessTask", "disperse", "robustness_summary",
-    "spread_statistics", "FilterModel",
+    "spread_statistics", "FilterModel", "Filtered", "Notch", "RollOff", "LeadLag",
 ]
 
 #: Each module's former path (the flat package of earlier releases) and the module it names now.

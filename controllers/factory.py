@@ -22,6 +22,11 @@ pd           PD on the hub angle about a smooth reference.
                reference slew the loop tracks
              ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
                at this period (default: continuous)
+             ``filters`` (an array of tables, each with kind = "notch" | "roll_off" |
+               "lead_lag"): structural filters on the sampled command (needs sample_time or
+               [sensors]), e.g. [{kind = "notch", frequency = 23.8, depth_db = 20}]; notch:
+               frequency (rad/s), depth_db, width; roll_off: frequency, damping; lead_lag:
+               zero, pole (rad/s)
 lqr          full-state LQR about a smooth reference.
              ``hub_angle`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
                weight: acceptable hub angle error (was ``angle_error``, deprecated)
@@ -33,7 +38,7 @@ lqr          full-state LQR about a smooth reference.
                energy (default: off)
              ``torque`` (N m; default 1; a number in [1e-12, 1e+12]): LQR weight: acceptable
                torque
-             ``reference``, ``sample_time``: as for pd
+             ``reference``, ``sample_time``, ``filters``: as for pd
              ``spin_rate`` (rad/s; default 0; a finite number): hub rate of the
                linearization the gain is designed at
 lqg          LQR on a Kalman-Bucy estimate from hub angle and root moment.
@@ -47,10 +52,11 @@ lqg          LQR on a Kalman-Bucy estimate from hub angle and root moment.
                measurement noise (estimator)
              ``process_torque`` (N m; default 0.1; a number > 0): disturbance torque on the
                hub (estimator)
+             ``filters``: as for pd
 scheduled    LQR gains designed at several spin rates, interpolated at the hub rate.
              ``hub_angle``, ``hub_rate``, ``tip_deflection``, ``modal_energy``, ``torque``:
                as for lqr
-             ``reference``, ``sample_time``: as for pd
+             ``reference``, ``sample_time``, ``filters``: as for pd
              ``spin_rates`` (rad/s; default [0, 1, 2]; an array of numbers >= 0): design
                spin rates, strictly increasing
 trajopt      optimal slew on the design model, played open loop.
@@ -70,7 +76,7 @@ trajopt+lqr  optimal slew with LQR feedback about it (Bryson weights: 5 % of the
                of the beam length at the tip, the torque bound).
              ``n_intervals``, ``objective``, ``transcription``, ``torque_rate_bound``,
                ``tip_bound``, ``effort_tolerance``: as for trajopt
-             ``sample_time``: as for pd
+             ``sample_time``, ``filters``: as for pd
 bang_bang    rigid time-optimal at the torque bound, or the torque that fits the duration.
              ``sample_time``: as for pd
 zv           ZV shaper: the bang-bang torque shaped at the first hub-free frequency.
@@ -117,7 +123,7 @@ from flexctl.model import Model, build_model
 from flexctl.model.errors import InputTypeError
 from flexctl.model.user_warnings import warn_user
 from flexctl.model.variants import EXACT_MAX_MODES
-from flexctl.sim.digital import ZeroOrderHold
+from flexctl.sim.digital import ZeroOrderHold, is_sampled
 from flexctl.sim.maneuvers import Slew
 from flexctl.sim.sensors import DEFAULT_SAMPLE_TIME as DEFAULT_SENSOR_SAMPLE_TIME
 from flexctl.sim.simulation import StaticLaw
@@ -324,7 +330,50 @@ def from_spec(scene, plant: Model | None = None) -> BuiltController:
                       scene.sensors is not None)
     else:
         built = _optimal(spec, design, angle, duration, bound, actuator)
-    return _checked(_hardware(scene, plant, spec, built), plant)
+    return _checked(_filtered(spec, plant, _hardware(scene, plant, spec, built)), plant)
+
+
+def _filter_of(k: int, table: dict):
+    """The structural filter of ``controller.filters[k]``, its errors naming the key."""
+    from .feedback.structural_filters import FILTER_KINDS
+
+    cls = FILTER_KINDS[table["kind"]]
+    params = {key: value for key, value in table.items() if key != "kind"}
+    where = f"controller.filters[{k}]"
+    allowed = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(params) - set(allowed))
+    if unknown:
+        raise SceneError(f"{where}.{unknown[0]} is not a setting of a {table['kind']} filter; "
+                         f"expected {', '.join(allowed)}")
+    try:
+        return cls(**params)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(str(exc).replace(f"{cls.__name__}.", f"{where}.")) from None
+
+
+def _filtered(spec: ControllerSpec, plant: Model, built: BuiltController) -> BuiltController:
+    """``built`` with ``controller.filters`` on its sampled command, when given."""
+    tables = spec.get("filters")
+    if not tables:
+        return built
+    from .feedback.structural_filters import Filtered
+
+    if getattr(plant, "actuator", None) is not None \
+            and getattr(plant.actuator, "kind", "") == "dc_motor":
+        raise SceneError("controller.filters shape a torque command; a DC motor's law "
+                         "commands a voltage")
+    if not is_sampled(built.controller):
+        raise SceneError(f"controller.filters need a sampled loop (the filters are discrete): "
+                         f"set controller.sample_time or add [sensors]; kind {spec.kind!r} "
+                         "runs continuously here")
+    filters = [_filter_of(k, table) for k, table in enumerate(tables)]
+    try:
+        law = Filtered(law=built.controller, filters=filters)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(f"controller.filters: {exc}") from None
+    names = ", ".join(type(f).__name__ for f in filters)
+    return dataclasses.replace(built, controller=law,
+                               info={**built.info, "structural_filters": names})
 
 
 def _checked(built: BuiltController, plant: Model) -> BuiltController:

@@ -47,8 +47,10 @@ TRANSCRIPTIONS = ("multiple_shooting", "collocation")
 MODES = ("rti", "converged")
 QP_SOLVERS = ("qrqp", "osqp", "qpoases", "hpipm")
 TERMINALS = ("lqr", "rest")
+#: Structural filter kinds of a ``filters`` table (:mod:`controllers.feedback.structural_filters`).
+FILTERS = ("notch", "roll_off", "lead_lag")
 
-__all__ = ["CONTROLLER_KEYS", "CONTROLLER_KINDS", "ControllerKind", "ControllerSpec",
+__all__ = ["FILTERS", "CONTROLLER_KEYS", "CONTROLLER_KINDS", "ControllerKind", "ControllerSpec",
            "FORMER_NAMES", "SceneError", "Setting", "current_name", "current_names",
            "settings_table", "refuse_ignored_settings", "OPEN_LOOP_KINDS"]
 
@@ -59,7 +61,9 @@ class SceneError(InputValueError):
 
 
 _TYPE_NAMES = {float: "a number", int: "an integer", bool: "true or false", str: "a string",
-               tuple: "an array of numbers"}
+               tuple: "an array of numbers",
+               list: "an array of tables, each with kind = " + " | ".join(
+                   f'"{k}"' for k in FILTERS)}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -70,8 +74,10 @@ class Setting:
     ----------
     name : str
         Key in the ``[controller]`` table.
-    type : {float, int, bool, str, tuple}
-        ``tuple``: an array of numbers.
+    type : {float, int, bool, str, tuple, list}
+        ``tuple``: an array of numbers; ``list``: an array of structural filter tables, each
+        with a ``kind`` of :data:`FILTERS` (their other keys are checked where the filters
+        are built).
     default : object
         Used when the table does not give the setting; ``None``: off, or chosen by the design
         as ``doc`` says.
@@ -150,6 +156,9 @@ class Setting:
         if self.type is tuple:
             return isinstance(value, (list, tuple)) and len(value) > 0 \
                 and all(self._number_ok(v, Real) for v in value)
+        if self.type is list:
+            return isinstance(value, (list, tuple)) and len(value) > 0 and all(
+                isinstance(v, dict) and v.get("kind") in FILTERS for v in value)
         return self._number_ok(value, Integral if self.type is int else Real)
 
     def _number_ok(self, value, number_type) -> bool:
@@ -222,6 +231,11 @@ _WEIGHTS = (
     _weight("torque", 1.0, "N m", "LQR weight: acceptable torque"),
     _REFERENCE,
 )
+_FILTERS = Setting(name="filters", type=list, default=None,
+                   doc="structural filters on the sampled command (needs sample_time or "
+                   "[sensors]), e.g. [{kind = \"notch\", frequency = 23.8, depth_db = 20}]; "
+                   "notch: frequency (rad/s), depth_db, width; roll_off: frequency, damping; "
+                   "lead_lag: zero, pole (rad/s)")
 _SPIN_RATE = Setting(name="spin_rate", type=float, default=0.0, unit="rad/s",
                      doc="hub rate of the linearization the gain is designed at")
 _NOISE = (
@@ -249,24 +263,24 @@ _KINDS = (
         _positive("damping_ratio", 0.9, "", "closed-loop damping ratio"),
         Setting(name="feedforward", type=bool, default=True,
                 doc="add the rigid-body torque of the reference"),
-        _REFERENCE, _SAMPLE_TIME)),
+        _REFERENCE, _SAMPLE_TIME, _FILTERS)),
     ControllerKind(name="lqr", doc="full-state LQR about a smooth reference",
-                   settings=(*_WEIGHTS, _SPIN_RATE, _SAMPLE_TIME)),
+                   settings=(*_WEIGHTS, _SPIN_RATE, _SAMPLE_TIME, _FILTERS)),
     # no sample_time: the estimator integrates continuously (ZeroOrderHold refuses it)
     ControllerKind(name="lqg", doc="LQR on a Kalman-Bucy estimate from hub angle and root "
-                   "moment", settings=(*_WEIGHTS, _SPIN_RATE, *_NOISE)),
+                   "moment", settings=(*_WEIGHTS, _SPIN_RATE, *_NOISE, _FILTERS)),
     ControllerKind(name="scheduled", doc="LQR gains designed at several spin rates, "
                    "interpolated at the hub rate", settings=(
                        *_WEIGHTS,
                        Setting(name="spin_rates", type=tuple, default=(0.0, 1.0, 2.0),
                                minimum=0.0, unit="rad/s",
                                doc="design spin rates, strictly increasing"),
-                       _SAMPLE_TIME)),
+                       _SAMPLE_TIME, _FILTERS)),
     ControllerKind(name="trajopt", doc="optimal slew on the design model, played open loop",
                    settings=(*_TRAJOPT, _SAMPLE_TIME)),
     ControllerKind(name="trajopt+lqr", doc="optimal slew with LQR feedback about it (Bryson "
                    "weights: 5 % of the angle, 3 % of the beam length at the tip, the torque "
-                   "bound)", settings=(*_TRAJOPT, _SAMPLE_TIME)),
+                   "bound)", settings=(*_TRAJOPT, _SAMPLE_TIME, _FILTERS)),
     ControllerKind(name="bang_bang", doc="rigid time-optimal at the torque bound, or the "
                    "torque that fits the duration", settings=(_SAMPLE_TIME,)),
     ControllerKind(name="zv", doc=f"ZV shaper: {_SHAPED}", settings=(_SAMPLE_TIME,)),

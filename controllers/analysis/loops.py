@@ -68,6 +68,7 @@ from ..feedback.tracking import TrajectoryTracker
 from ..feedback.actuated import LaggedLQR
 from ..feedback.observed_loop import observed_loop
 from ..feedback.observer import Observed
+from ..feedback.structural_filters import Filtered
 from .channels import PlantChannels, plant_channels
 
 __all__ = ["SENSORS", "PlantChannels", "plant_channels", "loop_transfer", "LoopMargins",
@@ -137,7 +138,7 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
     model : flexctl.Model
         The plant, linearised about ``spin_rate`` (``N`` modes; the controller may have been
         designed on fewer).
-    controller : PD, LQR, ScheduledLQR, TrajectoryTracker, LaggedLQR, LQG, Observed or ndarray
+    controller : PD, LQR, ScheduledLQR, TrajectoryTracker, LaggedLQR, LQG, Observed, Filtered or ndarray
         - :class:`~controllers.feedback.pd.PD`: ``u = -kp y - kd y_dot`` on the output ``sensor``;
         - :class:`~controllers.feedback.lqr.LQR`,
           :class:`~controllers.feedback.scheduling.ScheduledLQR` (its
@@ -151,7 +152,10 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
           (``model`` built with ``actuator=wheel``), the wheel's lag in the loop;
         - :class:`~controllers.Observed`: the loop as it flies, sampled, held and late,
           through its Kalman filter: a discrete ``L(z)``
-          (:func:`~controllers.feedback.observed_loop.observed_loop`).
+          (:func:`~controllers.feedback.observed_loop.observed_loop`);
+        - :class:`~controllers.Filtered`: a sampled law's discrete loop with its structural
+          filters on the command, ``F(z) L(z)``
+          (:meth:`~controllers.Filtered.loop_matrices`).
 
         References, feedforward and saturation play no part in the loop.
     spin_rate : float, optional
@@ -198,10 +202,14 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
                           outputs=["return_torque"], name=name)
     if isinstance(controller, Observed):
         return observed_loop(model, controller, spin_rate, state_gain=_state_gain)
+    if isinstance(controller, Filtered):
+        a, b, c, dt, names = controller.loop_matrices(model, spin_rate)
+        return control.ss(a, b, c, np.zeros((1, 1)), dt=dt, states=list(names),
+                          inputs=["torque"], outputs=["return_torque"], name=name)
     if not isinstance(controller, LQG):
         raise InputTypeError("loop_transfer.controller must be a PD, LQR, ScheduledLQR, "
-                             "TrajectoryTracker, LaggedLQR, LQG, Observed or a gain array; "
-                             f"got {type(controller).__name__}")
+                             "TrajectoryTracker, LaggedLQR, LQG, Observed, Filtered or a gain "
+                             f"array; got {type(controller).__name__}")
     compensator = controller.compensator()
     meas = controller.for_plant(model).measurement_matrix
     sensors = control.ss(a, b, meas, np.zeros((meas.shape[0], 1)), states=states, inputs=["torque"],

@@ -385,6 +385,13 @@ class CompiledController:
     n_states = 0
 
     @property
+    def fixed_plant(self) -> bool:
+        """True for a state law: it reads exactly the exported plant's state, so a run's
+        validity estimate (:func:`flexctl.sim.validity.geometric_error`) keeps the plant's
+        modes."""
+        return not self.measures
+
+    @property
     def measures(self) -> bool:
         """True when the law reads the sensors' readings (handed over by the simulation,
         ``simulate(..., sensors=)``), as :class:`controllers.feedback.observer.Observed` does."""

@@ -19,7 +19,7 @@ from flexctl.sim.digital import ZeroOrderHold, is_sampled
 from .precision import check_precision
 from .program import ControllerProgram, ExportRefused, plant_output
 
-__all__ = ["program_for"]
+__all__ = ["program_for", "filtered_program"]
 
 
 def program_for(controller, plant, *, sample_time: float | None = None,
@@ -67,6 +67,7 @@ def _dispatch(controller, plant, sample_time, x0, precision):
     from controllers.feedback.lqg import LQG
     from controllers.mpc.nmpc import NMPC
     from controllers.feedback.observer import Observed
+    from controllers.feedback.structural_filters import Filtered
 
     if isinstance(controller, MotorVoltage):
         return _voltage_program(controller, plant, sample_time, x0, precision)
@@ -88,10 +89,60 @@ def _dispatch(controller, plant, sample_time, x0, precision):
         from .observed_program import observed_program
         inner = program_for(controller.law, plant, initial_state=x0, precision=precision)
         return observed_program(controller, plant, x0, inner)
+    if isinstance(controller, Filtered):
+        _same_rate(controller, sample_time)
+        inner = _dispatch(controller.law, plant, None, x0, precision)
+        return filtered_program(inner, controller.cascade, controller.torque_limit)
     if is_sampled(controller):
         raise ExportRefused(f"export: the sampled controller {type(controller).__name__} has "
                             "no C form (built-in laws only)")
     return _static_program(controller, plant, sample_time or 0.0)
+
+
+def filtered_program(inner: ControllerProgram, cascade, torque_limit=None) -> ControllerProgram:
+    """``inner``'s program with its command passed through structural filters: the memory
+    gains the filters' states (after the law's), the command is the filtered one (bounded by
+    ``torque_limit``, N m, if given).
+
+    Parameters
+    ----------
+    inner : ControllerProgram
+        A sampled law's program, at the filters' sample time.
+    cascade : controllers.feedback.structural_filters.FilterCascade
+        The filters, discretised at that sample time.
+    torque_limit : float, optional
+        Bound on the filtered command, N m.
+    """
+    import casadi as ca
+
+    if inner.n_out != 1 or abs(inner.sample_time - cascade.sample_time) > \
+            1e-12 * cascade.sample_time:
+        raise ExportRefused(f"export: structural filters need a one-input law sampled every "
+                            f"{cascade.sample_time:g} s; got {inner.kind} with {inner.n_out} "
+                            f"commands every {inner.sample_time:g} s")
+    t, v = ca.SX.sym("t"), ca.SX.sym("v", inner.n_in)
+    m_law, x_f = ca.SX.sym("m", inner.n_memory), ca.SX.sym("f", cascade.order)
+    m = ca.vertcat(m_law, x_f)
+
+    def filtered(function):
+        u, m_next = function(t, v, m_law)
+        y = ca.mtimes(ca.DM(cascade.c), x_f) + float(cascade.d[0, 0]) * u
+        if torque_limit is not None:
+            y = ca.fmin(ca.fmax(y, -torque_limit), torque_limit)
+        x_next = ca.mtimes(ca.DM(cascade.a), x_f) + ca.DM(cascade.b) * u
+        return ca.Function(function.name(), [t, v, m], [y, ca.vertcat(m_next, x_next)],
+                           ["t", "v", "m"], ["u", "m_next"])
+
+    names = ", ".join(type(item).__name__ for item in cascade.filters)
+    return ControllerProgram(
+        kind=inner.kind, step=filtered(inner.step),
+        recover=None if inner.recover is None else filtered(inner.recover),
+        input_names=inner.input_names, input_kind=inner.input_kind,
+        output_name=inner.output_name, output_unit=inner.output_unit,
+        memory_init=np.concatenate((inner.memory_init, np.zeros(cascade.order))),
+        sample_time=inner.sample_time, measurement_matrix=inner.measurement_matrix,
+        description=f"{inner.description}, its command through {names}",
+        info={**inner.info, "structural_filters": len(cascade.filters)})
 
 
 def _same_rate(controller, sample_time):

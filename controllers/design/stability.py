@@ -318,12 +318,14 @@ def check_loop(plant, controller, spin_rate: float = 0.0) -> LoopStability:
 
 
 def _flown_loop(plant, controller, spin_rate: float):
-    """The :class:`LoopStability` of a law that reads sensors, by its loop as it flies
-    (``controller.sampled_loop``: sampled, late, through its own Kalman filter); None for
-    another law, or one whose loop has no linear form (an NMPC, a motor's voltage), which
-    is then checked on the true state."""
-    if not (getattr(controller, "measures", False)
-            and callable(getattr(controller, "sampled_loop", None))):
+    """The :class:`LoopStability` of a law that reads sensors or passes its command through
+    structural filters, by its loop as it flies (``controller.loop_matrices``: sampled, late,
+    through its own Kalman filter, with the filters' states); None for another law, or one
+    whose loop has no linear form (an NMPC, a motor's voltage), which is then checked on the
+    true state."""
+    if not (callable(getattr(controller, "loop_matrices", None))
+            or (getattr(controller, "measures", False)
+                and callable(getattr(controller, "sampled_loop", None)))):
         return None
     try:
         if callable(getattr(controller, "loop_matrices", None)):
@@ -334,7 +336,13 @@ def _flown_loop(plant, controller, spin_rate: float):
     except (InputTypeError, InputValueError):
         return None
     matrix = np.asarray(a) - np.asarray(b) @ np.asarray(c)
-    name = f"{type(controller.law).__name__} on its Kalman filter"
+    law = controller.law
+    law = getattr(law, "law", law) if hasattr(controller, "cascade") else law
+    name = type(law).__name__
+    if getattr(controller, "measures", False):
+        name += " on its Kalman filter"
+    if hasattr(controller, "cascade"):
+        name += " with structural filters"
     return loop_stability(plant, matrix, name, spin_rate, float(dt))
 
 

@@ -17,6 +17,7 @@ module                  contents
 ``actuated``            laws through an actuator: wheel-lag LQR, DC-motor voltage, limits
 ``iosys``               the laws as python-control I/O systems for ``control.interconnect``
 ``observed_loop``       an observed law's loop as it flies: sampled, late, through its filter
+``structural_filters``  notch, roll-off and lead-lag filters on a sampled law's command
 ======================  ========================================================================
 
 Builds on :mod:`controllers.design` and :mod:`controllers.slew`.

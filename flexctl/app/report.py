@@ -450,8 +450,10 @@ def format_summary(summary: dict) -> str:
         settle = ("not settled" if settle is None
                   else f"settled (2 %) at {shown.get('settling_time', f'{settle:.3g} s')}")
         residual = shown.get("residual_vibration", f"{slew['residual_vibration']:.3g} m")
-        lines.append(f"  slew by {slew['controller']} (designed on {slew['design_modes']} "
-                     f"modes): {settle}, overshoot {100 * slew['overshoot']:.2g} %, peak torque "
+        filters = (f" through {slew['structural_filters']}"
+                   if slew.get("structural_filters") else "")
+        lines.append(f"  slew by {slew['controller']}{filters} (designed on "
+                     f"{slew['design_modes']} modes): {settle}, overshoot {100 * slew['overshoot']:.2g} %, peak torque "
                      f"{slew['peak_torque']:.3g} N m, residual tip vibration "
                      f"{residual} after {slew['maneuver_end']:.3g} s")
         if "solve_time_s" in slew:

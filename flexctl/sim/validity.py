@@ -92,8 +92,9 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     torque, hub_motion, controller : object or None, optional
         The run's inputs, as for :func:`flexctl.simulate`.
     n_modes : int, optional
-        Modes of the two compared models (at least those a controller was designed on).
-        Default :data:`ESTIMATE_MODES`.
+        Modes of the two compared models (at least those a controller was designed on; the
+        model's own for a controller with ``fixed_plant = True``, which reads exactly the
+        plant's state, such as a compiled law). Default :data:`ESTIMATE_MODES`.
     sensors : Sensors, optional
         What a sampled controller reads, as for :func:`flexctl.simulate` (read noiseless
         here, so that the two runs differ only by their models).
@@ -111,8 +112,10 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     if model.variant.exact:
         return 0.0
     x0 = _checked_initial_state(model, x0)
-    # a controller reads at least the modes it was designed on
-    n_modes = min(max(n_modes, _law_modes(controller)), min(model.modes))
+    # a controller reads at least the modes it was designed on; one compiled for the plant's
+    # state (``fixed_plant``) reads exactly the plant's
+    n_modes = model.mode_spec if getattr(controller, "fixed_plant", False) \
+        else min(max(n_modes, _law_modes(controller)), min(model.modes))
     tips = []
     for variant in (model.variant, "exact"):
         small = rebuild(model, n_modes=n_modes, variant=variant)

@@ -20,6 +20,7 @@ from controllers.mpc.nmpc import NMPC
 from controllers.feedback.pd import design_pd
 from controllers.slew.reference import SlewProfile
 from controllers.feedback.scheduling import design_scheduled_lqr
+from controllers.feedback.structural_filters import Filtered
 from controllers.spec import CONTROLLER_KINDS, FORMER_NAMES
 from controllers.slew.trajopt import SlewProblem
 from flexctl import SceneError, load_scene
@@ -38,7 +39,8 @@ _NOISE = {key: (NoiseLevels, field) for field, key in factory.NOISE_SETTINGS.ite
 _SLEW_PROBLEM = {name: (SlewProblem, name) for name in
                  ("n_intervals", "objective", "transcription", "torque_rate_bound", "tip_bound",
                   "effort_tolerance")}
-_TRACKING = {"reference": (SlewProfile, "shape"), "sample_time": (ZeroOrderHold, "sample_time")}
+_TRACKING = {"reference": (SlewProfile, "shape"), "sample_time": (ZeroOrderHold, "sample_time"),
+             "filters": (Filtered, "filters")}
 
 #: Where each setting of each controller kind goes: (constructor or design function, parameter).
 CONTROLLER_DESTINATIONS = {
@@ -47,10 +49,11 @@ CONTROLLER_DESTINATIONS = {
            "feedforward": (design_pd, "feedforward")},
     "lqr": {**_TRACKING, **_LQR, "spin_rate": (design_lqr, "spin_rate")},
     "lqg": {"reference": (SlewProfile, "shape"), **_LQR, **_NOISE,
-            "spin_rate": (design_lqg, "spin_rate")},
+            "spin_rate": (design_lqg, "spin_rate"), "filters": (Filtered, "filters")},
     "scheduled": {**_TRACKING, **_LQR, "spin_rates": (design_scheduled_lqr, "spin_rates")},
     "trajopt": {**_SLEW_PROBLEM, "sample_time": (ZeroOrderHold, "sample_time")},
-    "trajopt+lqr": {**_SLEW_PROBLEM, "sample_time": (ZeroOrderHold, "sample_time")},
+    "trajopt+lqr": {**_SLEW_PROBLEM, "sample_time": (ZeroOrderHold, "sample_time"),
+                    "filters": (Filtered, "filters")},
     "bang_bang": {"sample_time": (ZeroOrderHold, "sample_time")},
     "zv": {"sample_time": (ZeroOrderHold, "sample_time")},
     "zvd": {"sample_time": (ZeroOrderHold, "sample_time")},

@@ -304,3 +304,22 @@ def test_cli_export_writes_compiles_and_checks(tmp_path, capsys):
         run = subprocess.run([str(out / "flexctl_ctrl_demo"), "0.1"], check=True,
                              capture_output=True, text=True)
         assert run.stdout.count("(code 0)") == 10
+
+
+def test_a_compiled_state_law_runs_where_the_validity_estimate_runs(tmp_path):
+    """The run's validity estimate flies the law on the plant's system again: a compiled law
+    reads exactly the exported plant's state, so the estimate keeps the plant's modes (it
+    asked the law to start on 2 modes and stopped the run with an error)."""
+    from controllers import LQRWeights, design_lqr
+
+    system = flexctl.load_scene("hub-beam-mass").system
+    plant = flexctl.build_model(system, n_modes=4)
+    held = ZeroOrderHold(design_lqr(flexctl.build_model(system, n_modes=1),
+                                    LQRWeights(hub_angle=0.05, torque=1.0)), 0.01)
+    compiled = export_c(held, plant, tmp_path).compile()
+    x0 = plant.layout.join(theta=0.3)
+    runs = [flexctl.simulate(plant, 2.0, controller=c, x0=x0)
+            for c in (held, compiled.controller())]
+    assert all(r.status == "ok" and r.validity is not None for r in runs)
+    assert runs[1].validity.geometric_error > 0.0
+    np.testing.assert_allclose(runs[1].torque, runs[0].torque, rtol=1e-12, atol=1e-12)
