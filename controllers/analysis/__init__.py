@@ -8,6 +8,7 @@ module              contents
 ``dispersion``      dispersed stiffness, point masses, hub inertia, whole or per appendage
 ``robustness``      Monte Carlo of a design flown on dispersed plants, and its spread
 ``spatial_loops``   the three-axis quaternion loop on the flexible spacecraft, its disk margins
+``requirements``    loop requirements as data, verified nominally and over the uncertainty
 ==================  ============================================================================
 
 Builds on the laws (:mod:`controllers.feedback`).

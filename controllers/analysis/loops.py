@@ -69,6 +69,8 @@ from ..feedback.actuated import LaggedLQR
 from ..feedback.observed_loop import observed_loop
 from ..feedback.observer import Observed
 from ..feedback.structural_filters import Filtered
+from ..design.controllable import held
+from flexctl.sim.digital import ZeroOrderHold
 from .channels import PlantChannels, plant_channels
 
 __all__ = ["SENSORS", "PlantChannels", "plant_channels", "loop_transfer", "LoopMargins",
@@ -153,6 +155,8 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
         - :class:`~controllers.Observed`: the loop as it flies, sampled, held and late,
           through its Kalman filter: a discrete ``L(z)``
           (:func:`~controllers.feedback.observed_loop.observed_loop`);
+        - :class:`~flexctl.sim.digital.ZeroOrderHold` of a law with a state gain: the held
+          plant's discrete loop ``K (z I - Phi)^-1 Gamma``;
         - :class:`~controllers.Filtered`: a sampled law's discrete loop with its structural
           filters on the command, ``F(z) L(z)``
           (:meth:`~controllers.Filtered.loop_matrices`).
@@ -202,6 +206,17 @@ def loop_transfer(model, controller, spin_rate: float = 0.0, *, sensor: str | No
                           outputs=["return_torque"], name=name)
     if isinstance(controller, Observed):
         return observed_loop(model, controller, spin_rate, state_gain=_state_gain)
+    if isinstance(controller, ZeroOrderHold):
+        held_gain = _state_gain(model, controller.law, spin_rate, sensor)
+        if held_gain is None:
+            raise InputTypeError("loop_transfer.controller: the law inside the ZeroOrderHold "
+                                 "must be one with a state gain (PD, LQR, ScheduledLQR, "
+                                 "TrajectoryTracker, LaggedLQR or a gain array); got "
+                                 f"{type(controller.law).__name__}")
+        phi, gam = held(a, b, controller.sample_time)
+        return control.ss(phi, gam, held_gain, np.zeros((1, 1)), dt=controller.sample_time,
+                          states=states, inputs=["torque"], outputs=["return_torque"],
+                          name=name)
     if isinstance(controller, Filtered):
         a, b, c, dt, names = controller.loop_matrices(model, spin_rate)
         return control.ss(a, b, c, np.zeros((1, 1)), dt=dt, states=list(names),

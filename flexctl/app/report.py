@@ -49,7 +49,7 @@ from ..sim.maneuvers import Slew, SpinUp, TorqueSamples
 from .markdown import markdown_table
 from .verdict import loop_unstable, summary_verdict
 
-__all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "timeseries_columns", "structure_columns",
+__all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "NICHOLS_PLOT", "timeseries_columns", "structure_columns",
            "summarize",
            "json_safe",
            "write_run", "format_summary", "write_demo_report"]
@@ -57,6 +57,8 @@ __all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "timeseries_columns", "stru
 TIMESERIES = "timeseries.csv"
 SUMMARY = "summary.json"
 RESPONSE_PLOT = "response.png"
+#: The Nichols chart of a scene with ``[requirements]``.
+NICHOLS_PLOT = "nichols.png"
 #: Significant digits written to the CSV file.
 CSV_DIGITS = 12
 
@@ -275,7 +277,11 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         a scene with ``variant = "auto"`` adds ``variant_choice``. ``scene_table`` holds the
         scene's tables after overrides (:attr:`flexctl.Scene.data`), from which
         :func:`flexctl.load_scene` rebuilds the scene. ``actuator`` and ``sensors``: see
-        :func:`_hardware_summary`.
+        :func:`_hardware_summary`. A verification of the scene's ``[requirements]``
+        (``extra["verification"]``) gives ``requirements`` (one entry per requirement:
+        ``name``, ``required``, ``nominal``, ``worst``, ``pass``, ``unit``, ``detail``),
+        ``requirements_passed``, ``requirements_coverage`` and ``flexible_modes`` (each
+        mode's frequency, how it is stabilised, its peak and phase margin).
     """
     model = result.model
     summary = {
@@ -315,7 +321,17 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
     variant_choice = scene.variant_choice()
     if variant_choice is not None:
         summary["variant_choice"] = variant_choice.to_dict()
-    summary.update(extra or {})
+    extra = dict(extra or {})
+    verification = extra.pop("verification", None)
+    summary.update(extra)
+    if verification is not None:
+        summary["requirements"] = verification.as_list()
+        summary["requirements_passed"] = verification.passed
+        summary["requirements_coverage"] = verification.coverage
+        summary["flexible_modes"] = [
+            {"mode": v.mode, "frequency": v.frequency, "stabilised_by": v.kind,
+             "peak_db": v.peak_db, "phase_margin_deg": _finite(v.phase_margin_deg),
+             "exclusion_zone_distance": v.score} for v in verification.modes]
     summary["units"] = {k: v for k, v in _UNITS.items() if k in summary}
     if choice is not None:
         summary["units"]["mode_choice"] = (
@@ -387,11 +403,35 @@ def write_run(scene, result, out_dir, overrides: dict | None = None,
     """
     out = Path(out_dir)
     summary = summarize(scene, result, overrides, extra)
-    with staged_folder(out, names=(TIMESERIES, SUMMARY, RESPONSE_PLOT)) as stage:
+    verification = (extra or {}).get("verification")
+    names = (TIMESERIES, SUMMARY, RESPONSE_PLOT) + ((NICHOLS_PLOT,) if verification else ())
+    with staged_folder(out, names=names) as stage:
         _write_run_files(stage, scene, result, summary, reference)
+        if verification is not None:
+            _write_nichols(stage / NICHOLS_PLOT, scene, verification)
     summary["files"] = {"timeseries": str(out / TIMESERIES), "summary": str(out / SUMMARY),
                         "response_plot": str(out / RESPONSE_PLOT)}
+    if verification is not None:
+        summary["files"]["nichols_plot"] = str(out / NICHOLS_PLOT)
     return summary
+
+
+def _write_nichols(path: Path, scene, verification) -> None:
+    """The Nichols chart of the verified loop, each flexible mode marked, the exclusion zone
+    of the rigid-body margins drawn."""
+    from .plotting_loops import plot_nichols
+
+    req = scene.requirements
+    verdict = "meets every requirement" if verification.passed else "misses a requirement"
+    fig = plot_nichols({"loop": verification.loop},
+                       natural_frequencies=[v.frequency for v in verification.modes],
+                       margins=(req.gain_margin_db, req.phase_margin_deg),
+                       title=f"{scene.name}: the loop as it flies ({verdict})")
+    fig.savefig(path, dpi=100)
+
+
+def _finite(value: float):
+    return float(value) if np.isfinite(value) else None
 
 
 def _write_run_files(out: Path, scene, result, summary: dict, reference) -> None:
@@ -468,6 +508,11 @@ def format_summary(summary: dict) -> str:
         stability = slew.get("loop_stability")
         if stability:
             lines.append(f"  loop on the plant: {stability['message']}")
+    checks = summary.get("requirements")
+    if checks:
+        missed = [c["name"] for c in checks if not c["pass"]]
+        lines.append(f"  requirements: {len(checks) - len(missed)} of {len(checks)} met over "
+                     "the uncertainty" + (f"; missed: {', '.join(missed)}" if missed else ""))
     sampled = summary.get("controller_report")
     if sampled:
         line = (f"  sampled every {1e3 * sampled['sample_time']:.3g} ms "

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..model.errors import InputValueError
 from ..sim.atomic_files import staged_folder
-from .report import RESPONSE_PLOT, SUMMARY, TIMESERIES, write_run
+from .report import NICHOLS_PLOT, RESPONSE_PLOT, SUMMARY, TIMESERIES, write_run
 from .scenes import run_scene, run_slew
 
 __all__ = ["execute", "write_complete"]
@@ -32,6 +32,11 @@ def _run_controlled(scene, progress=None):
     extra = {"slew": slew}
     if result.controller_report is not None:
         extra["controller_report"] = result.controller_report
+    if scene.requirements is not None:
+        from controllers.analysis.requirements import verify_requirements
+
+        extra["verification"] = verify_requirements(result.model, built.controller,
+                                                    scene.requirements)
     return result, extra, built.reference_angle
 
 
@@ -111,7 +116,8 @@ def write_complete(scene, result, out, overrides: dict, extra: dict,
                               f"{scene.name} is planar")
     if animate:
         from .spatial_animation import ANIMATION
-    names = (TIMESERIES, SUMMARY, RESPONSE_PLOT) + ((ANIMATION,) if animate else ())
+    names = (TIMESERIES, SUMMARY, RESPONSE_PLOT) + ((ANIMATION,) if animate else ()) + (
+        (NICHOLS_PLOT,) if (extra or {}).get("verification") is not None else ())
     with staged_folder(out, names=names) as stage:
         if spatial:
             from .spatial_report import write_spatial_run

@@ -203,6 +203,9 @@ _SCHEMA = {
     # checked by their own parsers (flexctl.app.scene_hardware): the keys depend on the kind
     "actuator": None,
     "sensors": None,
+    "requirements": {"gain_margin_db", "phase_margin_deg", "delay_margin", "bandwidth",
+                     "flexible_attenuation_db", "flexible_phase_margin_deg",
+                     "frequency_uncertainty", "damping_range"},
 }
 #: Keys of one [[appendages]] table: its name, mounting, beam fields and [[appendages.masses]]
 #: (whose keys are those of [[masses]]); beside _SCHEMA, whose tables are the one-beam form's.
@@ -392,6 +395,10 @@ class Scene:
         What turns the hub (``[actuator]``); ``None``: an ideal hub torque.
     sensors : Sensors or None
         What the controller reads (``[sensors]``); ``None``: the exact state.
+    requirements : controllers.analysis.requirements.Requirements or None
+        What the loop must meet (``[requirements]``), verified after the run
+        (:func:`~controllers.analysis.requirements.verify_requirements`); slew scenes with a
+        feedback controller only.
     description : str
     data : dict
         The scene's table form (after overrides), as it would be written to TOML.
@@ -405,6 +412,7 @@ class Scene:
     controller: ControllerSpec | None = None
     actuator: object = None
     sensors: object = None
+    requirements: object = None
     description: str = ""
     data: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -622,7 +630,26 @@ def parse_scene(data: dict, name: str = "scene", base_dir=None) -> Scene:
                          "with a [controller] table")
     return Scene(name=name, system=system, model=model, maneuver=maneuver,
                  simulation=simulation, controller=controller, actuator=actuator,
-                 sensors=sensors, description=description, data=data)
+                 sensors=sensors, requirements=_requirements(data, controller),
+                 description=description, data=data)
+
+
+def _requirements(data: dict, controller):
+    """The scene's ``[requirements]``, or None; a feedback controller's loop only."""
+    if "requirements" not in data:
+        return None
+    from controllers.analysis.requirements import Requirements
+    from controllers.spec import OPEN_LOOP_KINDS
+
+    if controller is None or controller.kind in OPEN_LOOP_KINDS + ("nmpc",):
+        raise SceneError("[requirements] are verified on a linear feedback loop: they need a "
+                         "slew with controller.kind pd, lqr, lqg, scheduled or trajopt+lqr "
+                         "(an NMPC's loop has no linear form); got "
+                         f"{getattr(controller, 'kind', None)!r}")
+    table = dict(_table(data, "requirements"))
+    if isinstance(table.get("damping_range"), list):
+        table["damping_range"] = tuple(table["damping_range"])
+    return _construct(Requirements, "requirements", table)
 
 
 def _hardware(data: dict, system, maneuver) -> tuple:

@@ -20,6 +20,7 @@ from controllers.mpc.nmpc import NMPC
 from controllers.feedback.pd import design_pd
 from controllers.slew.reference import SlewProfile
 from controllers.feedback.scheduling import design_scheduled_lqr
+from controllers.analysis.requirements import Requirements
 from controllers.feedback.structural_filters import Filtered
 from controllers.spec import CONTROLLER_KINDS, FORMER_NAMES
 from controllers.slew.trajopt import SlewProblem
@@ -31,7 +32,7 @@ from flexctl.sim.digital import ZeroOrderHold
 
 #: Tables whose keys are the fields of a dataclass of the same names.
 TABLE_CLASSES = {"hub": Hub, "beam": Beam, "masses": PointMass, "model": scenes.ModelSpec,
-                 "simulation": scenes.SimulationSpec}
+                 "simulation": scenes.SimulationSpec, "requirements": Requirements}
 
 _LQR = {name: (LQRWeights, name) for name in
         ("hub_angle", "hub_rate", "tip_deflection", "modal_energy", "torque")}

@@ -1,0 +1,148 @@
+"""Loop requirements verified on the loop as it flies and over the uncertainty.
+
+- The rigid-body phase margin is python-control's at the same crossing.
+- A notch at the second mode turns it from phase-stabilised (its peak above 0 dB) to
+  gain-stabilised (below -6 dB).
+- A roll-off whose lag turns the fourth mode unstable fails the loop's stability and that
+  mode's requirement.
+- No point of a dense Monte Carlo over the uncertainty box is worse than the reported worst
+  case of any requirement.
+"""
+
+import numpy as np
+import pytest
+
+import flexctl
+from controllers import Filtered, LQRWeights, Notch, RollOff, design_lqr, loop_margins
+from controllers.analysis.requirements import (MODE_WINDOW, Requirements, _Search,
+                                               verify_requirements)
+from flexctl.model.errors import InputError
+from flexctl.sim.digital import ZeroOrderHold
+
+SYSTEM = flexctl.load_scene("hub-beam-mass").system
+NOTCH = Notch(frequency=23.8, depth_db=20.0)
+
+
+@pytest.fixture(scope="module")
+def held():
+    design = flexctl.build_model(SYSTEM, n_modes=1)
+    return ZeroOrderHold(design_lqr(design, LQRWeights(hub_angle=0.05, torque=1.0)), 0.01)
+
+
+def _plant(n_modes):
+    return flexctl.build_model(SYSTEM, n_modes=n_modes)
+
+
+def test_the_rigid_phase_margin_is_python_controls(held):
+    report = verify_requirements(_plant(3), Filtered(law=held, filters=[NOTCH]),
+                                 Requirements())
+    flexible = [m.frequency for m in report.modes]
+    rigid = [m for kind, w, m in loop_margins(report.loop).crossings if kind == "gain"
+             and all(abs(w / f - 1.0) > MODE_WINDOW for f in flexible)]
+    check = {c.name: c for c in report.checks}["phase_margin_deg"]
+    assert check.nominal == pytest.approx(min(rigid), abs=1e-3)
+    assert check.passed and report.passed
+
+
+def test_a_notch_turns_the_second_mode_gain_stabilised(held):
+    plant = _plant(3)
+    bare = verify_requirements(plant, held, Requirements())
+    notched = verify_requirements(plant, Filtered(law=held, filters=[NOTCH]), Requirements())
+    assert bare.modes[1].kind == "phase" and bare.modes[1].peak_db > 0.0
+    assert notched.modes[1].kind == "gain" and notched.modes[1].peak_db < -6.0
+    assert [m.kind for m in notched.modes] == ["phase", "gain", "gain"]
+
+
+def test_a_roll_off_that_destabilises_a_mode_fails(held):
+    """Undamped (as check_loop judges it), the roll-off's lag turns mode 4 unstable; with
+    0.1 % damping the same loop is stable."""
+    law = Filtered(law=held, filters=[NOTCH, RollOff(frequency=60.0)])
+    damped = verify_requirements(_plant(4), law, Requirements())
+    assert {c.name: c for c in damped.checks}["closed_loop_stable"].passed
+    report = verify_requirements(_plant(4), law, Requirements(damping_range=(0.0, 0.0)))
+    checks = {c.name: c for c in report.checks}
+    assert not checks["closed_loop_stable"].passed and not report.passed
+    entry = checks["closed_loop_stable"].as_dict()
+    assert set(entry) >= {"name", "required", "nominal", "worst", "pass"}
+    assert entry["pass"] is False
+
+
+@pytest.mark.slow
+def test_no_monte_carlo_point_is_worse_than_the_reported_worst(held):
+    """40 draws over frequency factors 0.8 to 1.2 and damping 0.001 to 0.01 (log-uniform)."""
+    plant = _plant(3)
+    law = Filtered(law=held, filters=[NOTCH])
+    req = Requirements(frequency_uncertainty=0.2)
+    report = verify_requirements(plant, law, req)
+    search = _Search(plant, law, req, 0.0)
+    rng = np.random.default_rng(7)
+    names = [c.name for c in report.checks]
+    worst = {c.name: c.worst for c in report.checks}
+    for _ in range(40):
+        factor = rng.uniform(0.8, 1.2)
+        zeta = float(np.exp(rng.uniform(np.log(1e-3), np.log(1e-2))))
+        figures = search.figures(factor, zeta)
+        for name in names:
+            if name.startswith("flexible mode"):
+                value = figures["scores"][int(name.split()[-1]) - 1]
+            elif name == "closed_loop_stable":
+                value = 1.0 if figures["stable"] else 0.0
+            else:
+                value = figures[name]
+            slack = 1e-6 * (1.0 if np.isinf(worst[name]) else max(1.0, abs(worst[name])))
+            assert not value < worst[name] - slack, (name, factor, zeta, value, worst[name])
+
+
+@pytest.mark.parametrize("make, pattern", [
+    (lambda: Requirements(gain_margin_db=0.0), "requirements.gain_margin_db"),
+    (lambda: Requirements(phase_margin_deg=200.0), "requirements.phase_margin_deg"),
+    (lambda: Requirements(frequency_uncertainty=0.8), "requirements.frequency_uncertainty"),
+    (lambda: Requirements(damping_range=(0.1,)), "requirements.damping_range"),
+    (lambda: Requirements(damping_range=(float("nan"), 0.1)), "requirements.damping_range"),
+    (lambda: Requirements(delay_margin=-1.0), "requirements.delay_margin"),
+    (lambda: Requirements(bandwidth="fast"), "requirements.bandwidth"),
+], ids=["gain", "phase", "uncertainty", "short-range", "nan-damping", "delay", "bandwidth"])
+def test_bad_requirements_are_refused_by_name(make, pattern):
+    with pytest.raises(InputError, match=pattern):
+        make()
+
+
+# ------------------------------------------------------------------ the scene's table
+SCENE = {"model.variant": "first_order", "model.design_variant": "first_order",
+         "model.modes": "3", "controller.kind": "lqr", "controller.sample_time": "0.01",
+         "controller.filters": '[{kind = "notch", frequency = 23.8, depth_db = 20}]',
+         "requirements.gain_margin_db": "6", "requirements.phase_margin_deg": "30",
+         "requirements.damping_range": "[0.001, 0.01]"}
+
+
+@pytest.mark.filterwarnings("ignore::flexctl.sim.validity.ModelValidityWarning")
+def test_a_scene_writes_its_requirements_and_a_nichols_chart(tmp_path):
+    import json
+
+    from flexctl.app.runner import execute, write_complete
+
+    scene = flexctl.load_scene("slew-90", overrides=SCENE)
+    result, extra, reference = execute(scene)
+    summary = write_complete(scene, result, tmp_path / "run", SCENE, extra, reference)
+    written = json.loads((tmp_path / "run" / "summary.json").read_text())
+    entries = written["requirements"]
+    assert [e["name"] for e in entries][:3] == ["closed_loop_stable", "gain_margin_db",
+                                                "phase_margin_deg"]
+    assert all(set(e) >= {"name", "required", "nominal", "worst", "pass"} for e in entries)
+    assert written["requirements_passed"] == all(e["pass"] for e in entries)
+    modes = written["flexible_modes"]
+    assert len(modes) == 3 and {m["stabilised_by"] for m in modes} <= {"gain", "phase"}
+    assert [m["mode"] for m in modes] == [1, 2, 3]
+    assert (tmp_path / "run" / "nichols.png").stat().st_size > 10_000
+    assert summary["files"]["nichols_plot"].endswith("nichols.png")
+    assert flexctl.load_scene(tmp_path / "run" / "summary.json").requirements \
+        == scene.requirements
+
+
+@pytest.mark.parametrize("kind", ["trajopt", "nmpc"])
+def test_requirements_need_a_linear_feedback_loop(kind):
+    from flexctl import SceneError
+
+    with pytest.raises(SceneError, match=r"\[requirements\] are verified on a linear feedback"):
+        flexctl.load_scene("slew-90", overrides={"controller.kind": kind,
+                                                 "requirements.gain_margin_db": "6"})
