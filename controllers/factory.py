@@ -353,7 +353,7 @@ def _filter_of(k: int, table: dict):
 
 def _filtered(spec: ControllerSpec, plant: Model, built: BuiltController) -> BuiltController:
     """``built`` with ``controller.filters`` on its sampled command, when given."""
-    tables = spec.get("filters")
+    tables = spec.get("filters") if "filters" in _kind_settings(spec) else None
     if not tables:
         return built
     from .feedback.structural_filters import Filtered

@@ -58,7 +58,8 @@ from flexctl.model import HubBeam, Structure
 from flexctl.model.checks import KeywordOnly, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 
-__all__ = ["Requirements", "RequirementCheck", "ModeVerdict", "Verification",
+__all__ = ["Requirements", "RequirementCheck", "ModeVerdict", "Verification", "FilterDesign",
+           "design_filters",
            "verify_requirements", "MODE_WINDOW", "FREQUENCY_POINTS", "RIGID_POINTS"]
 
 #: Half-width of the window a flexible mode is judged in, relative to its frequency.
@@ -244,7 +245,13 @@ def _response(loop, w: np.ndarray) -> np.ndarray:
     points = 1j * w if not dt else np.exp(1j * w * float(dt))
     a, b, c, d = (np.asarray(m, dtype=complex) for m in (loop.A, loop.B, loop.C, loop.D))
     eye = np.eye(a.shape[0])
-    return np.array([(c @ np.linalg.solve(p * eye - a, b) + d)[0, 0] for p in points])
+    out = np.empty(points.size, dtype=complex)
+    for start in range(0, points.size, 256):         # batched solves, bounded memory
+        chunk = points[start:start + 256]
+        x = np.linalg.solve(chunk[:, None, None] * eye - a,
+                            np.broadcast_to(b, (chunk.size, *b.shape)))
+        out[start:start + chunk.size] = (c @ x)[:, 0, 0] + d[0, 0]
+    return out
 
 
 def _phase_distance(response) -> np.ndarray:
@@ -479,3 +486,126 @@ def verify_requirements(plant, controller, requirements: Requirements,
                 f"together ({len(search.cache)} loops evaluated)")
     return Verification(tuple(checks), tuple(nominal["modes"]), coverage,
                         search.loop(1.0, zeta0)[1])
+
+
+# ------------------------------------------------------------------ filter design
+@dataclass(frozen=True)
+class FilterDesign:
+    """What :func:`design_filters` found.
+
+    Attributes
+    ----------
+    controller : object
+        The law with the filters placed (a :class:`~controllers.Filtered`), or the law given
+        when it met every requirement as it was.
+    added : tuple
+        The filters placed, in the order they were added.
+    verification : Verification
+        The verification of :attr:`controller`.
+    unmet : tuple of (str, float, float)
+        ``(name, worst, required)`` of each requirement still missed (empty on success).
+    tried : int
+        Candidate designs verified.
+    """
+
+    controller: object
+    added: tuple
+    verification: Verification
+    unmet: tuple
+    tried: int
+
+    @property
+    def met(self) -> bool:
+        """Whether every requirement is met."""
+        return not self.unmet
+
+
+def _merit(verification: Verification) -> float:
+    """The least of each requirement's worst value over its required one (a loop that is
+    unstable somewhere in the uncertainty scores -1)."""
+    ratios = []
+    for check in verification.checks:
+        if check.name == "closed_loop_stable":
+            if not check.passed:
+                return -1.0
+            continue
+        ratios.append(check.worst / check.required if math.isfinite(check.worst) else math.inf)
+    return min(ratios, default=math.inf)
+
+
+def _candidates(omega: float, req: Requirements, sample_time: float):
+    """Notches at ``omega`` (depths and widths that cover the frequency uncertainty) and a
+    roll-off below it, each within the sampled loop's reach."""
+    from ..feedback.structural_filters import NYQUIST_FRACTION, Notch, RollOff
+
+    limit = NYQUIST_FRACTION * math.pi / sample_time
+    width = max(req.frequency_uncertainty, 0.05)
+    found = []
+    if omega < limit:
+        for depth in (req.flexible_attenuation_db + 6.0, req.flexible_attenuation_db + 14.0):
+            for zeta in (width, 2.0 * width):
+                found.append(Notch(frequency=omega, depth_db=depth, width=min(zeta, 1.0)))
+    if 0.5 * omega < limit:
+        found.append(RollOff(frequency=0.5 * omega, damping=0.7))
+    return found
+
+
+def design_filters(plant, controller, requirements: Requirements, *,
+                   max_filters: int = 3, spin_rate: float = 0.0) -> FilterDesign:
+    """Place notch or roll-off filters on a sampled law's command until the loop meets the
+    requirements over the uncertainty, or say which it cannot meet and by how much.
+
+    Greedy: while a flexible mode misses its requirement, the candidates for the worst one
+    (notches at its nominal frequency, of two depths and two widths covering the frequency
+    uncertainty, and a roll-off at half its frequency) are each verified
+    (:func:`verify_requirements`) and the one with the best least ratio of worst value to
+    required value over every requirement is kept, if it improves on the loop without it.
+
+    Parameters
+    ----------
+    plant : flexctl.Model
+        The nominal plant.
+    controller : ZeroOrderHold, Observed or Filtered
+        A sampled law (its filters, if any, kept).
+    requirements : Requirements
+        What the loop must meet.
+    max_filters : int, optional
+        Most filters to add. Default 3.
+    spin_rate : float, optional
+        Steady hub rate of the linearisation, rad/s. Default 0.
+
+    Returns
+    -------
+    FilterDesign
+    """
+    from ..feedback.structural_filters import Filtered
+
+    base = controller.law if isinstance(controller, Filtered) else controller
+    kept = list(controller.filters) if isinstance(controller, Filtered) else []
+    if getattr(base, "sample_time", None) is None:
+        raise InputTypeError("design_filters.controller must be a sampled law (a "
+                             "ZeroOrderHold, Observed or Filtered law); got "
+                             f"{type(controller).__name__}")
+    law = controller
+    report = verify_requirements(plant, law, requirements, spin_rate)
+    tried, added = 1, []
+    while len(added) < max_filters:
+        failing = [c for c in report.checks if c.name.startswith("flexible mode")
+                   and not c.passed]
+        if not failing:
+            break
+        worst = min(failing, key=lambda c: c.worst)
+        mode = report.modes[int(worst.name.split()[-1]) - 1]
+        best = None
+        for candidate in _candidates(mode.frequency, requirements, base.sample_time):
+            trial = Filtered(law=base, filters=[*kept, *added, candidate])
+            result = verify_requirements(plant, trial, requirements, spin_rate)
+            tried += 1
+            if best is None or _merit(result) > _merit(best[1]):
+                best = (candidate, result, trial)
+        if best is None or _merit(best[1]) <= _merit(report):
+            break
+        added.append(best[0])
+        report, law = best[1], best[2]
+    unmet = tuple((c.name, c.worst, c.required) for c in report.checks if not c.passed)
+    return FilterDesign(law, tuple(added), report, unmet, tried)

@@ -234,3 +234,9 @@ def test_bad_filter_tables_are_refused_by_key(overrides, pattern):
 
     with pytest.raises(SceneError, match=pattern):
         _built(**{"controller.filters": NOTCH_TABLE, **overrides})
+
+
+@pytest.mark.parametrize("kind", ["zvd", "bang_bang"])
+def test_kinds_without_a_filters_setting_build_as_before(kind):
+    _, built = _built(**{"controller.kind": kind, "controller.sample_time": None})
+    assert not isinstance(built.controller, Filtered)
