@@ -51,7 +51,8 @@ from .analysis.robustness import (Dispersion, RobustnessSummary, RobustnessTask,
                                   robustness_summary, spread_statistics)
 from .feedback.observer import FilterModel
 from .feedback.structural_filters import Filtered, LeadLag, Notch, RollOff
-from .analysis.requirements import Requirements, Verification, verify_requirements
+from .analysis.requirements import (FilterDesign, Requirements, Verification, design_filters,
+                                    verify_requirements)
 
 __all__ = [
     "SlewProfile", "minimum_slew_duration",
@@ -73,7 +74,7 @@ __all__ = [
     "through_actuator", "Observed", "kalman_step", "to_iosys", "SampledLQG",
     "Dispersion", "RobustnessSummary", "RobustnessTask", "disperse", "robustness_summary",
     "spread_statistics", "FilterModel", "Filtered", "Notch", "RollOff", "LeadLag",
-    "Requirements", "Verification", "verify_requirements",
+    "Requirements", "Verification", "verify_requirements", "FilterDesign", "design_filters",
 ]
 
 #: Each module's former path (the flat package of earlier releases) and the module it names now.

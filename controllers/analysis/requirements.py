@@ -520,17 +520,16 @@ class FilterDesign:
         return not self.unmet
 
 
-def _merit(verification: Verification) -> float:
-    """The least of each requirement's worst value over its required one (a loop that is
-    unstable somewhere in the uncertainty scores -1)."""
-    ratios = []
-    for check in verification.checks:
-        if check.name == "closed_loop_stable":
-            if not check.passed:
-                return -1.0
-            continue
-        ratios.append(check.worst / check.required if math.isfinite(check.worst) else math.inf)
-    return min(ratios, default=math.inf)
+def _shortfall(verification: Verification) -> tuple:
+    """``(unstable, total shortfall, -least ratio)``, smaller is better: whether the loop is
+    unstable somewhere in the uncertainty, the sum over the requirements of how far each
+    worst value falls short of its required one (relative), and the least ratio of worst to
+    required."""
+    ratios = [check.worst / check.required for check in verification.checks
+              if check.name != "closed_loop_stable" and math.isfinite(check.worst)]
+    unstable = any(c.name == "closed_loop_stable" and not c.passed
+                   for c in verification.checks)
+    return (unstable, sum(max(0.0, 1.0 - r) for r in ratios), -min(ratios, default=0.0))
 
 
 def _candidates(omega: float, req: Requirements, sample_time: float):
@@ -550,16 +549,41 @@ def _candidates(omega: float, req: Requirements, sample_time: float):
     return found
 
 
+def _better_filter(plant, base, filters, report, req, spin_rate) -> tuple:
+    """``(tried, filter, verification, law)``: the first failing flexible mode (worst first)
+    whose best candidate lowers the loop's shortfall (:func:`_shortfall`); ``filter`` None
+    when no candidate for any mode does."""
+    from ..feedback.structural_filters import Filtered
+
+    failing = sorted((c for c in report.checks if c.name.startswith("flexible mode")
+                      and not c.passed), key=lambda c: c.worst)
+    tried = 0
+    for check in failing:
+        mode = report.modes[int(check.name.split()[-1]) - 1]
+        best = None
+        for candidate in _candidates(mode.frequency, req, base.sample_time):
+            trial = Filtered(law=base, filters=[*filters, candidate])
+            result = verify_requirements(plant, trial, req, spin_rate)
+            tried += 1
+            if best is None or _shortfall(result) < _shortfall(best[1]):
+                best = (candidate, result, trial)
+        if best is not None and _shortfall(best[1]) < _shortfall(report):
+            return tried, *best
+    return tried, None, None, None
+
+
 def design_filters(plant, controller, requirements: Requirements, *,
                    max_filters: int = 3, spin_rate: float = 0.0) -> FilterDesign:
     """Place notch or roll-off filters on a sampled law's command until the loop meets the
     requirements over the uncertainty, or say which it cannot meet and by how much.
 
-    Greedy: while a flexible mode misses its requirement, the candidates for the worst one
-    (notches at its nominal frequency, of two depths and two widths covering the frequency
-    uncertainty, and a roll-off at half its frequency) are each verified
-    (:func:`verify_requirements`) and the one with the best least ratio of worst value to
-    required value over every requirement is kept, if it improves on the loop without it.
+    Greedy: while flexible modes miss their requirement, the candidates for each (worst
+    first; notches at its nominal frequency, of two depths and two widths covering the
+    frequency uncertainty, and a roll-off at half its frequency) are verified
+    (:func:`verify_requirements`), and the best of the first mode whose best lowers the
+    loop's total shortfall (the sum over the requirements of how far each worst value falls
+    short of its required one, relative; a loop unstable anywhere in the uncertainty ranks
+    last) is kept.
 
     Parameters
     ----------
@@ -590,22 +614,11 @@ def design_filters(plant, controller, requirements: Requirements, *,
     report = verify_requirements(plant, law, requirements, spin_rate)
     tried, added = 1, []
     while len(added) < max_filters:
-        failing = [c for c in report.checks if c.name.startswith("flexible mode")
-                   and not c.passed]
-        if not failing:
+        better = _better_filter(plant, base, [*kept, *added], report, requirements, spin_rate)
+        tried += better[0]
+        if better[1] is None:
             break
-        worst = min(failing, key=lambda c: c.worst)
-        mode = report.modes[int(worst.name.split()[-1]) - 1]
-        best = None
-        for candidate in _candidates(mode.frequency, requirements, base.sample_time):
-            trial = Filtered(law=base, filters=[*kept, *added, candidate])
-            result = verify_requirements(plant, trial, requirements, spin_rate)
-            tried += 1
-            if best is None or _merit(result) > _merit(best[1]):
-                best = (candidate, result, trial)
-        if best is None or _merit(best[1]) <= _merit(report):
-            break
-        added.append(best[0])
-        report, law = best[1], best[2]
+        added.append(better[1])
+        report, law = better[2], better[3]
     unmet = tuple((c.name, c.worst, c.required) for c in report.checks if not c.passed)
     return FilterDesign(law, tuple(added), report, unmet, tried)

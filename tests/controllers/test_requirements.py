@@ -146,3 +146,24 @@ def test_requirements_need_a_linear_feedback_loop(kind):
     with pytest.raises(SceneError, match=r"\[requirements\] are verified on a linear feedback"):
         flexctl.load_scene("slew-90", overrides={"controller.kind": kind,
                                                  "requirements.gain_margin_db": "6"})
+
+
+def test_design_filters_notches_the_modes_it_can_and_names_the_one_it_cannot(held):
+    """Phase margins of 170 deg leave attenuation as the only way for a mode to pass: the
+    second and third modes can be notched to 12 dB below unit gain, the first (inside the
+    loop's bandwidth) cannot, and the design says so with its worst ratio."""
+    from controllers.analysis.requirements import design_filters
+
+    plant = _plant(3)
+    req = Requirements(flexible_attenuation_db=12.0, flexible_phase_margin_deg=170.0)
+    before = {c.name: c for c in verify_requirements(plant, held, req).checks}
+    assert not any(before[f"flexible mode {k}"].passed for k in (1, 2, 3))
+    design = design_filters(plant, held, req)
+    assert not design.met and [name for name, _, _ in design.unmet] == ["flexible mode 1"]
+    after = {c.name: c for c in design.verification.checks}
+    assert after["flexible mode 2"].passed and after["flexible mode 3"].passed
+    assert after["phase_margin_deg"].passed and after["closed_loop_stable"].passed
+    assert all(isinstance(f, Notch) for f in design.added)
+    assert design.controller.filters == design.added
+    again = verify_requirements(plant, design.controller, req)
+    assert [c.worst for c in again.checks] == [c.worst for c in design.verification.checks]
