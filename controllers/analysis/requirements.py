@@ -198,6 +198,8 @@ class ModeVerdict:
         The least, over the window, of ``max(|gain dB| / flexible_attenuation_db, phase
         distance from -180 deg / flexible_phase_margin_deg)``: 1 or more keeps the loop out of
         the exclusion zone about the critical point (module Notes).
+    peak_frequency : float
+        Where the loop's gain peaks in the window, rad/s.
     """
 
     mode: int
@@ -206,6 +208,7 @@ class ModeVerdict:
     peak_db: float
     phase_margin_deg: float
     score: float
+    peak_frequency: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -325,10 +328,11 @@ def _mode_verdict(loop, mode: int, omega: float, req: Requirements) -> ModeVerdi
     crossings, _ = _crossings(w, response)
     score = float(np.min(np.maximum(np.abs(gain_db) / req.flexible_attenuation_db,
                                     distance / req.flexible_phase_margin_deg)))
-    peak_db = float(np.max(gain_db))
+    top = int(np.argmax(gain_db))
+    peak_db = float(gain_db[top])
     kind = "gain" if peak_db <= -req.flexible_attenuation_db else "phase"
     margin = min((m for _, m in crossings), default=math.inf)
-    return ModeVerdict(mode, float(omega), kind, peak_db, margin, score)
+    return ModeVerdict(mode, float(omega), kind, peak_db, margin, score, float(w[top]))
 
 
 # ------------------------------------------------------------------ plants of the uncertainty

@@ -195,7 +195,8 @@ def refuse_unsolvable(model, problem, t_rigid: float, longest: float) -> None:
     flexctl.model.errors.InputValueError: n_intervals = 40 is too coarse for 4 design modes: holds of 0.05 s see design \
 mode 4 (134.6 rad/s) at its alias 8.92 rad/s, and stopping it costs 5.15 % more effort than \
 the converged slew (limit 1 %); use n_intervals = 45 or at most 3 design modes \
-(model.design_modes)
+(model.design_modes) or effort_tolerance = 0.052 (controller.effort_tolerance: accepts the \
+holds' 5.15 % more effort than the converged slew)
     """
     # modes too fast for any grid of holds first: the hold analysis of such a slew is
     # inaccurate in floating point (or overflows), and no other setting helps

@@ -49,7 +49,7 @@ from ..sim.maneuvers import Slew, SpinUp, TorqueSamples
 from .markdown import markdown_table
 from .verdict import loop_unstable, summary_verdict
 
-__all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "NICHOLS_PLOT", "timeseries_columns", "structure_columns",
+__all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "NICHOLS_PLOT", "BODE_PLOT", "timeseries_columns", "structure_columns",
            "summarize",
            "json_safe",
            "write_run", "format_summary", "write_demo_report"]
@@ -57,8 +57,9 @@ __all__ = ["TIMESERIES", "SUMMARY", "RESPONSE_PLOT", "NICHOLS_PLOT", "timeseries
 TIMESERIES = "timeseries.csv"
 SUMMARY = "summary.json"
 RESPONSE_PLOT = "response.png"
-#: The Nichols chart of a scene with ``[requirements]``.
+#: The Nichols chart and the Bode plot of a scene with ``[requirements]``.
 NICHOLS_PLOT = "nichols.png"
+BODE_PLOT = "bode.png"
 #: Significant digits written to the CSV file.
 CSV_DIGITS = 12
 
@@ -330,7 +331,8 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         summary["requirements_coverage"] = verification.coverage
         summary["flexible_modes"] = [
             {"mode": v.mode, "frequency": v.frequency, "stabilised_by": v.kind,
-             "peak_db": v.peak_db, "phase_margin_deg": _finite(v.phase_margin_deg),
+             "peak_db": v.peak_db, "peak_frequency": v.peak_frequency,
+             "phase_margin_deg": _finite(v.phase_margin_deg),
              "exclusion_zone_distance": v.score} for v in verification.modes]
     summary["units"] = {k: v for k, v in _UNITS.items() if k in summary}
     if choice is not None:
@@ -404,16 +406,39 @@ def write_run(scene, result, out_dir, overrides: dict | None = None,
     out = Path(out_dir)
     summary = summarize(scene, result, overrides, extra)
     verification = (extra or {}).get("verification")
-    names = (TIMESERIES, SUMMARY, RESPONSE_PLOT) + ((NICHOLS_PLOT,) if verification else ())
+    names = (TIMESERIES, SUMMARY, RESPONSE_PLOT) + (
+        (NICHOLS_PLOT, BODE_PLOT) if verification else ())
     with staged_folder(out, names=names) as stage:
         _write_run_files(stage, scene, result, summary, reference)
         if verification is not None:
             _write_nichols(stage / NICHOLS_PLOT, scene, verification)
+            _write_bode(stage / BODE_PLOT, scene, verification)
     summary["files"] = {"timeseries": str(out / TIMESERIES), "summary": str(out / SUMMARY),
                         "response_plot": str(out / RESPONSE_PLOT)}
     if verification is not None:
         summary["files"]["nichols_plot"] = str(out / NICHOLS_PLOT)
+        summary["files"]["bode_plot"] = str(out / BODE_PLOT)
     return summary
+
+
+def _write_bode(path: Path, scene, verification) -> None:
+    """The Bode plot of the verified loop: each flexible mode's peak marked with how it is
+    stabilised, the required attenuation drawn."""
+    from .plotting_loops import plot_bode
+
+    req = scene.requirements
+    fig = plot_bode({"loop": verification.loop},
+                    natural_frequencies=[v.frequency for v in verification.modes],
+                    title=f"{scene.name}: each flexible mode's peak and how it is stabilised")
+    ax = fig.axes[0]
+    ax.axhline(10.0 ** (-req.flexible_attenuation_db / 20.0), color="tab:red", linestyle=":",
+               linewidth=1.0, label=f"-{req.flexible_attenuation_db:g} dB")
+    for v in verification.modes:
+        peak = 10.0 ** (v.peak_db / 20.0)
+        ax.plot([v.peak_frequency], [peak], marker="v", color="tab:red", linestyle="none")
+        ax.annotate(f"{v.mode}: {v.kind}", (v.peak_frequency, peak), xytext=(0, 6),
+                    textcoords="offset points", ha="center", fontsize=7)
+    fig.savefig(path, dpi=100)
 
 
 def _write_nichols(path: Path, scene, verification) -> None:

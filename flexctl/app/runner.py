@@ -15,7 +15,7 @@ from pathlib import Path
 
 from ..model.errors import InputValueError
 from ..sim.atomic_files import staged_folder
-from .report import NICHOLS_PLOT, RESPONSE_PLOT, SUMMARY, TIMESERIES, write_run
+from .report import BODE_PLOT, NICHOLS_PLOT, RESPONSE_PLOT, SUMMARY, TIMESERIES, write_run
 from .scenes import run_scene, run_slew
 
 __all__ = ["execute", "write_complete"]
@@ -117,7 +117,7 @@ def write_complete(scene, result, out, overrides: dict, extra: dict,
     if animate:
         from .spatial_animation import ANIMATION
     names = (TIMESERIES, SUMMARY, RESPONSE_PLOT) + ((ANIMATION,) if animate else ()) + (
-        (NICHOLS_PLOT,) if (extra or {}).get("verification") is not None else ())
+        (NICHOLS_PLOT, BODE_PLOT) if (extra or {}).get("verification") is not None else ())
     with staged_folder(out, names=names) as stage:
         if spatial:
             from .spatial_report import write_spatial_run

@@ -134,6 +134,7 @@ def test_a_scene_writes_its_requirements_and_a_nichols_chart(tmp_path):
     assert len(modes) == 3 and {m["stabilised_by"] for m in modes} <= {"gain", "phase"}
     assert [m["mode"] for m in modes] == [1, 2, 3]
     assert (tmp_path / "run" / "nichols.png").stat().st_size > 10_000
+    assert (tmp_path / "run" / "bode.png").stat().st_size > 10_000
     assert summary["files"]["nichols_plot"].endswith("nichols.png")
     assert flexctl.load_scene(tmp_path / "run" / "summary.json").requirements \
         == scene.requirements
