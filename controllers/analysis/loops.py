@@ -73,8 +73,9 @@ from ..design.controllable import held
 from flexctl.sim.digital import ZeroOrderHold
 from .channels import PlantChannels, plant_channels
 
-__all__ = ["SENSORS", "PlantChannels", "plant_channels", "loop_transfer", "LoopMargins",
-           "loop_margins", "PolesVsSpin", "poles_vs_spin", "hidden_poles"]
+__all__ = ["closed_loop_verdict", "SENSORS", "PlantChannels", "plant_channels",
+           "loop_transfer", "LoopMargins", "loop_margins", "PolesVsSpin", "poles_vs_spin",
+           "hidden_poles"]
 
 #: A pole of the open loop still a pole, to this fraction of its magnitude (at least 1/s), of
 #: the loop closed at two gains is a hidden mode's (:func:`hidden_poles`).
@@ -412,10 +413,7 @@ def loop_margins(loop, *, tolerance: float = AXIS_TOLERANCE) -> LoopMargins:
     k_pm = np.argmin(np.abs(pm)) if pm.size else None
     sm, wms = np.asarray(sm, dtype=float), np.asarray(wms, dtype=float)
     k_sm = np.argmin(sm) if sm.size else None
-    poles = _as_rates(control.poles(control.feedback(loop)), loop)
-    stable, abscissa, _ = stability_verdict(
-        poles, _as_rates(hidden_poles(loop), loop),
-        scale=None if loop.isctime() else math.pi / float(loop.dt))
+    stable, abscissa = closed_loop_verdict(loop)
     return LoopMargins(
         gain_margin=float(gm[k_up]) if k_up is not None else math.inf,
         gain_reduction_margin=float(np.max(gm[down])) if down.any() else 0.0,
@@ -442,6 +440,25 @@ def _margin_data(loop):
     nyquist = math.pi / float(loop.dt)
     return control.frd(loop, np.linspace(1e-4 * nyquist, (1.0 - 1e-9) * nyquist,
                                          SAMPLED_GRID))
+
+
+def closed_loop_verdict(loop) -> tuple:
+    """``(stable, spectral abscissa 1/s)`` of ``control.feedback(loop)``: the stability verdict
+    :func:`loop_margins` and :func:`~controllers.check_loop` share
+    (:func:`~controllers.design.stability.stability_verdict`, hidden modes left out).
+
+    Parameters
+    ----------
+    loop : control.LTI
+        A loop transfer of :func:`loop_transfer`, continuous or sampled.
+    """
+    import control
+
+    poles = _as_rates(control.poles(control.feedback(loop)), loop)
+    stable, abscissa, _ = stability_verdict(
+        poles, _as_rates(hidden_poles(loop), loop),
+        scale=None if loop.isctime() else math.pi / float(loop.dt))
+    return stable, abscissa
 
 
 def _as_rates(poles, loop) -> np.ndarray:

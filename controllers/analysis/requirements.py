@@ -15,8 +15,9 @@ Notes
 - **Rigid-body loop.** The rigid-body margins are read at the loop's crossings outside every
   flexible mode's window (+-:data:`MODE_WINDOW`, relative, about the mode's frequency on the
   plant judged), on a logarithmic grid of :data:`RIGID_POINTS` frequencies; the flexible
-  modes are judged inside their windows. The closed loop's stability is
-  :func:`~controllers.check_loop`'s verdict.
+  modes are judged inside their windows. The closed loop's stability is the verdict
+  :func:`~controllers.analysis.loops.loop_margins` and :func:`~controllers.check_loop`
+  share (:func:`~controllers.analysis.loops.closed_loop_verdict`).
 - **A flexible mode** passes when, over its window, the loop stays out of the exclusion zone
   about the critical point of the Nichols chart: gains within ``flexible_attenuation_db`` of
   0 dB with phases within ``flexible_phase_margin_deg`` of -180 deg (mod 360). Its figure
@@ -243,18 +244,22 @@ class Verification:
 
 # ------------------------------------------------------------------ one loop's figures
 def _response(loop, w: np.ndarray) -> np.ndarray:
-    """The loop's complex frequency response at ``w`` (rad/s)."""
+    """The loop's complex frequency response at ``w`` (rad/s): ``C (p I - A)^-1 B + D`` at
+    ``p = j w`` (or ``exp(j w T)``), by back substitution on the complex Schur form of ``A``
+    (``n^2`` operations a point, all points at once)."""
+    import scipy.linalg
+
     dt = loop.dt
     points = 1j * w if not dt else np.exp(1j * w * float(dt))
-    a, b, c, d = (np.asarray(m, dtype=complex) for m in (loop.A, loop.B, loop.C, loop.D))
-    eye = np.eye(a.shape[0])
-    out = np.empty(points.size, dtype=complex)
-    for start in range(0, points.size, 256):         # batched solves, bounded memory
-        chunk = points[start:start + 256]
-        x = np.linalg.solve(chunk[:, None, None] * eye - a,
-                            np.broadcast_to(b, (chunk.size, *b.shape)))
-        out[start:start + chunk.size] = (c @ x)[:, 0, 0] + d[0, 0]
-    return out
+    a = np.asarray(loop.A, dtype=float)
+    t, z = scipy.linalg.schur(a, output="complex")
+    b = z.conj().T @ np.asarray(loop.B, dtype=float)[:, 0]
+    c = np.asarray(loop.C, dtype=float)[0] @ z
+    n = a.shape[0]
+    y = np.zeros((n, points.size), dtype=complex)
+    for i in range(n - 1, -1, -1):
+        y[i] = (b[i] + t[i, i + 1:] @ y[i + 1:]) / (points - t[i, i])
+    return c @ y + float(np.asarray(loop.D)[0, 0])
 
 
 def _phase_distance(response) -> np.ndarray:
@@ -378,11 +383,11 @@ class _Search:
     def figures(self, factor: float, zeta: float) -> dict:
         key = (round(factor, 12), round(zeta, 12))
         if key not in self.cache:
-            from ..design.stability import check_loop
+            from .loops import closed_loop_verdict
 
             model, loop = self.loop(factor, zeta)
             flexible = _flexible_frequencies(model)
-            stable = check_loop(model, self.controller, self.spin).stable
+            stable = closed_loop_verdict(loop)[0]
             figures = _rigid_figures(loop, flexible, stable)
             verdicts = [_mode_verdict(loop, k + 1, omega, self.req)
                         for k, omega in enumerate(flexible)]
