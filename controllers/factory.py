@@ -345,6 +345,10 @@ def _filter_of(k: int, table: dict):
     if unknown:
         raise SceneError(f"{where}.{unknown[0]} is not a setting of a {table['kind']} filter; "
                          f"expected {', '.join(allowed)}")
+    missing = [f.name for f in dataclasses.fields(cls) if f.name not in params
+               and f.default is dataclasses.MISSING]
+    if missing:
+        raise SceneError(f"{where}.{missing[0]} is required for a {table['kind']} filter")
     try:
         return cls(**params)
     except (TypeError, ValueError) as exc:

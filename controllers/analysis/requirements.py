@@ -434,11 +434,15 @@ def verify_requirements(plant, controller, requirements: Requirements,
     """
     from scipy.optimize import minimize_scalar
 
+    from flexctl.model import Model
+
     if not isinstance(requirements, Requirements):
         raise InputTypeError("verify_requirements.requirements must be a Requirements; got "
                              f"{type(requirements).__name__}")
-    if not isinstance(plant.system, (HubBeam, Structure)):
-        raise InputTypeError("verify_requirements.plant must be a planar flexctl Model")
+    if not isinstance(plant, Model) or not isinstance(plant.system, (HubBeam, Structure)):
+        raise InputTypeError("verify_requirements.plant must be a planar flexctl Model; got "
+                             f"{type(plant).__name__}")
+    spin_rate = check_real("verify_requirements", "spin_rate", spin_rate)
     req = requirements
     search = _Search(plant, controller, req, spin_rate)
     own = _beam_damping(plant.system)
@@ -613,6 +617,10 @@ def design_filters(plant, controller, requirements: Requirements, *,
     """
     from ..feedback.structural_filters import Filtered
 
+    from flexctl.model.checks import check_integer
+
+    max_filters = check_integer("design_filters", "max_filters", max_filters, minimum=1,
+                                maximum=10)
     base = controller.law if isinstance(controller, Filtered) else controller
     kept = list(controller.filters) if isinstance(controller, Filtered) else []
     if getattr(base, "sample_time", None) is None:

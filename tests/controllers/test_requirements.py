@@ -168,3 +168,25 @@ def test_design_filters_notches_the_modes_it_can_and_names_the_one_it_cannot(hel
     assert design.controller.filters == design.added
     again = verify_requirements(plant, design.controller, req)
     assert [c.worst for c in again.checks] == [c.worst for c in design.verification.checks]
+
+
+@pytest.mark.parametrize("call, pattern", [
+    (lambda held: verify_requirements("plant", held, Requirements()), "plant must be a planar"),
+    (lambda held: verify_requirements(_plant(2), held, {"gain_margin_db": 6.0}),
+     "requirements must be a Requirements"),
+    (lambda held: verify_requirements(_plant(2), held, Requirements(), spin_rate=float("nan")),
+     "spin_rate"),
+    (lambda held: verify_requirements(_plant(2), object(), Requirements()),
+     "loop_transfer.controller"),
+], ids=["plant", "requirements", "spin", "controller"])
+def test_bad_verification_inputs_are_refused_by_name(held, call, pattern):
+    with pytest.raises(InputError, match=pattern):
+        call(held)
+
+
+@pytest.mark.parametrize("value", [0, -1, "3", True, 2.5, 11])
+def test_design_filters_refuses_a_bad_filter_count(held, value):
+    from controllers.analysis.requirements import design_filters
+
+    with pytest.raises(InputError, match="design_filters.max_filters"):
+        design_filters(_plant(2), held, Requirements(), max_filters=value)

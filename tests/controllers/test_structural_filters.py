@@ -225,10 +225,15 @@ def test_a_scene_puts_its_filters_on_the_sampled_command():
                             '{kind = "roll_off", frequency = -1}]'},
      r"controller\.filters\[1\]\.frequency must be finite and > 0"),
     ({"controller.filters": '[{kind = "comb"}]'}, r"controller\.filters \(kind 'lqr'\) must be"),
+    ({"controller.filters": '[{kind = "notch", depth_db = 20}]'},
+     r"controller\.filters\[0\]\.frequency is required for a notch filter"),
+    ({"controller.filters": '[{kind = "lead_lag", zero = true, pole = 3}]'},
+     r"controller\.filters\[0\]\.zero must be"),
     ({"controller.filters": '[]'}, r"controller\.filters \(kind 'lqr'\) must be"),
     ({"controller.filters": '[{kind = "roll_off", frequency = 400}]'},
      "Nyquist frequency 314.2 rad/s"),
-], ids=["continuous", "unknown-key", "bad-value", "unknown-kind", "empty", "above-nyquist"])
+], ids=["continuous", "unknown-key", "bad-value", "unknown-kind", "missing", "bool", "empty",
+        "above-nyquist"])
 def test_bad_filter_tables_are_refused_by_key(overrides, pattern):
     from controllers.spec import SceneError
 
