@@ -55,9 +55,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexctl.model import HubBeam, Structure
-from flexctl.model.checks import KeywordOnly, check_real
+from flexctl.model import HubBeam, Model, Structure
+from flexctl.model.build import rebuild
+from flexctl.model.checks import KeywordOnly, check_integer, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
+
+from .loops import closed_loop_verdict, loop_transfer
 
 __all__ = ["Requirements", "RequirementCheck", "ModeVerdict", "Verification", "FilterDesign",
            "design_filters",
@@ -286,10 +289,8 @@ def _crossings(w: np.ndarray, response: np.ndarray) -> tuple:
     for j in np.flatnonzero(np.sign(log_gain[1:]) != np.sign(log_gain[:-1])):
         r = log_gain[j] / (log_gain[j] - log_gain[j + 1])
         wc = math.exp(math.log(w[j]) + r * (math.log(w[j + 1]) - math.log(w[j])))
-        gain.append((wc, float(np.min(_phase_distance(response[j:j + 2])) if r in (0, 1)
-                               else _phase_distance(np.array([np.exp(1j * math.pi * (
-                                   2.0 * (turns[j] + r * (turns[j + 1] - turns[j])) - 1.0))
-                               ]))[0])))
+        t = turns[j] + r * (turns[j + 1] - turns[j])
+        gain.append((wc, 360.0 * abs(t - round(t))))       # whole turns are -180 deg
     levels = np.floor(turns)
     for j in np.flatnonzero(levels[1:] != levels[:-1]):
         level = max(levels[j], levels[j + 1])
@@ -363,28 +364,20 @@ class _Search:
     each plant built once."""
 
     def __init__(self, plant, controller, req: Requirements, spin_rate: float):
-        from flexctl.model.build import rebuild
-
         self.plant, self.controller, self.req, self.spin = plant, controller, req, spin_rate
-        self.rebuild = rebuild
         self.cache = {}
         self.base = getattr(plant, "source", plant.system)
         # at rest the exact variant's linearisation is first_order's, which builds at once
         self.variant = "first_order" if plant.variant.exact and spin_rate == 0.0 else None
 
     def loop(self, factor: float, zeta: float):
-        from .loops import loop_transfer
-
         system = _with_beams(self.base, factor ** 2, zeta)
-        model = (self.rebuild(self.plant, system=system) if self.variant is None
-                 else self.rebuild(self.plant, variant=self.variant, system=system))
+        model = rebuild(self.plant, variant=self.variant, system=system)
         return model, loop_transfer(model, self.controller, self.spin)
 
     def figures(self, factor: float, zeta: float) -> dict:
         key = (round(factor, 12), round(zeta, 12))
         if key not in self.cache:
-            from .loops import closed_loop_verdict
-
             model, loop = self.loop(factor, zeta)
             flexible = _flexible_frequencies(model)
             stable = closed_loop_verdict(loop)[0]
@@ -434,8 +427,6 @@ def verify_requirements(plant, controller, requirements: Requirements,
     """
     from scipy.optimize import minimize_scalar
 
-    from flexctl.model import Model
-
     if not isinstance(requirements, Requirements):
         raise InputTypeError("verify_requirements.requirements must be a Requirements; got "
                              f"{type(requirements).__name__}")
@@ -460,9 +451,7 @@ def verify_requirements(plant, controller, requirements: Requirements,
     worst_at = [points[int(np.argmin(table[:, j]))] for j in range(len(names))]
     worst = [float(np.min(table[:, j])) for j in range(len(names))]
     step = 2.0 * u / max(FREQUENCY_POINTS - 1, 1)
-    for j, (f, z) in enumerate(worst_at):
-        if u == 0:
-            break
+    for j, (f, z) in enumerate(worst_at if u > 0 else ()):
         found = minimize_scalar(lambda x: _values(search.figures(x, z), names)[j],
                                 bounds=(max(1.0 - u, f - step), min(1.0 + u, f + step)),
                                 method="bounded", options={"xatol": 1e-3 * step})
@@ -616,8 +605,6 @@ def design_filters(plant, controller, requirements: Requirements, *,
     FilterDesign
     """
     from ..feedback.structural_filters import Filtered
-
-    from flexctl.model.checks import check_integer
 
     max_filters = check_integer("design_filters", "max_filters", max_filters, minimum=1,
                                 maximum=10)

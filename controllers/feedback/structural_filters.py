@@ -324,9 +324,7 @@ class Filtered(KeywordOnly):
             raise InputTypeError("Filtered.law must be a sampled law (a ZeroOrderHold or an "
                                  "Observed law, with a sample_time); got "
                                  f"{type(self.law).__name__}")
-        object.__setattr__(self, "cascade", FilterCascade(tuple(self.filters)
-                                                          if isinstance(self.filters, list)
-                                                          else self.filters, float(step)))
+        object.__setattr__(self, "cascade", FilterCascade(self.filters, float(step)))
         object.__setattr__(self, "filters", self.cascade.filters)
         if self.torque_limit is not None:
             object.__setattr__(self, "torque_limit", _positive("Filtered", "torque_limit",

@@ -332,7 +332,7 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         summary["flexible_modes"] = [
             {"mode": v.mode, "frequency": v.frequency, "stabilised_by": v.kind,
              "peak_db": v.peak_db, "peak_frequency": v.peak_frequency,
-             "phase_margin_deg": _finite(v.phase_margin_deg),
+             "phase_margin_deg": v.phase_margin_deg,
              "exclusion_zone_distance": v.score} for v in verification.modes]
     summary["units"] = {k: v for k, v in _UNITS.items() if k in summary}
     if choice is not None:
@@ -454,9 +454,6 @@ def _write_nichols(path: Path, scene, verification) -> None:
                        title=f"{scene.name}: the loop as it flies ({verdict})")
     fig.savefig(path, dpi=100)
 
-
-def _finite(value: float):
-    return float(value) if np.isfinite(value) else None
 
 
 def _write_run_files(out: Path, scene, result, summary: dict, reference) -> None:
