@@ -38,6 +38,8 @@ __all__ = ["Notch", "RollOff", "LeadLag", "FilterCascade", "Filtered", "FILTER_K
 #: Highest frequency of a filter's pole or zero, as a fraction of the Nyquist frequency
 #: ``pi / T``: above it the matched map folds the filter onto another frequency.
 NYQUIST_FRACTION = 0.9
+#: The frequencies a filter may have, rad/s.
+FREQUENCY_RANGE = (1e-6, 1e9)
 
 
 class _Filter:
@@ -109,6 +111,13 @@ def _positive(owner: str, name: str, value) -> float:
     return check_real(owner, name, value, minimum=0.0, strict=True)
 
 
+def _frequency(owner: str, name: str, value) -> float:
+    """A filter frequency, rad/s, within :data:`FREQUENCY_RANGE` (beyond it the polynomials
+    overflow or the gain match divides by zero)."""
+    low, high = FREQUENCY_RANGE
+    return check_real(owner, name, value, minimum=low, maximum=high)
+
+
 @dataclass(frozen=True, kw_only=True)
 class Notch(_Filter, KeywordOnly):
     """A notch: ``(s^2 + 2 zeta_z w s + w^2) / (s^2 + 2 zeta_p w s + w^2)``.
@@ -129,7 +138,7 @@ class Notch(_Filter, KeywordOnly):
     width: float = 0.3
 
     def __post_init__(self):
-        object.__setattr__(self, "frequency", _positive("Notch", "frequency", self.frequency))
+        object.__setattr__(self, "frequency", _frequency("Notch", "frequency", self.frequency))
         object.__setattr__(self, "depth_db", _positive("Notch", "depth_db", self.depth_db))
         object.__setattr__(self, "width", check_real("Notch", "width", self.width, minimum=0.0,
                                                      maximum=1.0, strict=True))
@@ -157,7 +166,7 @@ class RollOff(_Filter, KeywordOnly):
     damping: float = 0.7
 
     def __post_init__(self):
-        object.__setattr__(self, "frequency", _positive("RollOff", "frequency", self.frequency))
+        object.__setattr__(self, "frequency", _frequency("RollOff", "frequency", self.frequency))
         object.__setattr__(self, "damping", check_real("RollOff", "damping", self.damping,
                                                        minimum=0.0, maximum=2.0, strict=True))
 
@@ -183,8 +192,8 @@ class LeadLag(_Filter, KeywordOnly):
     pole: float
 
     def __post_init__(self):
-        object.__setattr__(self, "zero", _positive("LeadLag", "zero", self.zero))
-        object.__setattr__(self, "pole", _positive("LeadLag", "pole", self.pole))
+        object.__setattr__(self, "zero", _frequency("LeadLag", "zero", self.zero))
+        object.__setattr__(self, "pole", _frequency("LeadLag", "pole", self.pole))
         if self.zero == self.pole:
             raise InputValueError(f"LeadLag.pole must differ from LeadLag.zero (a filter that "
                                   f"does nothing); got {self.pole!r}")
