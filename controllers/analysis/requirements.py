@@ -26,13 +26,22 @@ Notes
   by the required amount is gain-stabilised; one that is not passes only by its phase
   (phase-stabilised). The window is sampled on :data:`WINDOW_POINTS` logarithmic points and
   :data:`PEAK_POINTS` more about the loop's peak in it.
-- **Uncertainty.** Every modal frequency scaled by one factor in
-  ``1 +- frequency_uncertainty`` (Young's modulus of every beam by its square) and every
-  beam's modal damping ratio in ``damping_range``. The worst case of each requirement is
-  searched on a grid of :data:`FREQUENCY_POINTS` frequency factors and the ends and middle of
-  the damping range, then refined by a bounded scalar search on the frequency factor at the
-  worst grid point's damping: the report states this coverage. The frequencies scale
-  together; a mode's frequency on its own is not varied here.
+- **Sampled loops.** A sampled loop sees a mode above the Nyquist frequency at its alias:
+  its window, and the rigid-body loop's exclusion of it, are about the folded frequency.
+- **Uncertainty** (:class:`UncertainPlant`): each coupled mode's frequency scaled by its own
+  factor in ``1 +- frequency_uncertainty`` and its damping ratio anywhere in
+  ``damping_range``, its shape kept (:func:`flexctl.model.modal_uncertainty.with_modes`), on
+  a structure whose beams' Young's modulus, point masses and hub inertia are scaled within
+  ``1 +- stiffness_uncertainty``, ``mass_uncertainty``, ``hub_inertia_uncertainty``. The
+  worst case of each requirement is searched globally, then locally: a grid of
+  :data:`FREQUENCY_POINTS` common frequency factors by the ends and middle of the damping
+  range, the corners of the structure's ranges and :data:`RANDOM_POINTS` random plants;
+  from the worst of these, the structure's ranges at their ends, the requirement's own mode
+  (the first for a rigid-body requirement) on a grid of frequencies by
+  :data:`DAMPING_POINTS` damping ratios refined by a Nelder-Mead search, and sweeps over
+  every other mode's frequency and damping, until a sweep finds nothing worse. The report
+  states this coverage and the plants evaluated; :func:`monte_carlo_requirements` draws
+  random plants of the same ranges to check it (a check that must find no worse case).
 - **Nominal damping.** A plant whose beams have no damping is judged at the lower end of
   ``damping_range`` (an undamped mode's peak is infinite); one with damping, at its own.
 
@@ -60,16 +69,30 @@ from flexctl.model.build import rebuild
 from flexctl.model.checks import KeywordOnly, check_integer, check_real
 from flexctl.model.errors import InputTypeError, InputValueError
 
+from flexctl.model.modal_uncertainty import with_modes
+
+from .dispersion import disperse
 from .loops import closed_loop_verdict, loop_transfer
 
 __all__ = ["Requirements", "RequirementCheck", "ModeVerdict", "Verification", "FilterDesign",
-           "design_filters",
+           "UncertainPlant", "design_filters", "monte_carlo_requirements",
            "verify_requirements", "MODE_WINDOW", "FREQUENCY_POINTS", "RIGID_POINTS"]
 
 #: Half-width of the window a flexible mode is judged in, relative to its frequency.
 MODE_WINDOW = 0.15
 #: Frequency factors of the uncertainty grid (the ends included).
 FREQUENCY_POINTS = 9
+#: Random plants of the search's first stage, and the seed they are drawn with.
+RANDOM_POINTS = 64
+RANDOM_SEED = 20261129
+#: Frequency factors at which every other mode is tried (the ends included).
+OTHER_POINTS = 5
+#: Most sweeps over the other modes (they stop when a sweep finds nothing worse).
+SWEEPS = 3
+#: Damping ratios of a mode's own grid (the ends of the range included).
+DAMPING_POINTS = 4
+#: Most evaluations of a mode's Nelder-Mead refinement over its frequency and damping.
+REFINE_EVALUATIONS = 40
 #: Points of a mode window's frequency grid.
 WINDOW_POINTS = 600
 #: Relative half-width and points of the finer grid about a mode window's peak (a mode with
@@ -100,9 +123,17 @@ class Requirements(KeywordOnly):
     flexible_phase_margin_deg : float, optional
         ... or phase-stabilised with this phase margin, deg (in (0, 180)). Default 30.
     frequency_uncertainty : float, optional
-        Relative uncertainty of every modal frequency, in [0, 0.5]. Default 0.
+        Relative uncertainty of each coupled mode's frequency, on its own, in [0, 0.5].
+        Default 0.
     damping_range : (float, float), optional
-        Modal damping ratios, ``0 <= low <= high < 1``. Default (0.001, 0.01).
+        Each coupled mode's damping ratio, ``0 <= low <= high < 1``. Default (0.001, 0.01).
+    stiffness_uncertainty : float, optional
+        Relative uncertainty of every beam's Young's modulus (all together), in [0, 0.5].
+        Default 0.
+    mass_uncertainty : float, optional
+        Relative uncertainty of every point mass (all together), in [0, 0.5]. Default 0.
+    hub_inertia_uncertainty : float, optional
+        Relative uncertainty of the hub's inertia, in [0, 0.5]. Default 0.
     """
 
     gain_margin_db: float = 6.0
@@ -113,6 +144,9 @@ class Requirements(KeywordOnly):
     flexible_phase_margin_deg: float = 30.0
     frequency_uncertainty: float = 0.0
     damping_range: tuple = (0.001, 0.01)
+    stiffness_uncertainty: float = 0.0
+    mass_uncertainty: float = 0.0
+    hub_inertia_uncertainty: float = 0.0
 
     def __post_init__(self):
         owner = "requirements"
@@ -125,9 +159,9 @@ class Requirements(KeywordOnly):
         for name in ("delay_margin", "bandwidth"):
             put(name, check_real(owner, name, getattr(self, name), minimum=0.0, strict=True,
                                  optional=True))
-        put("frequency_uncertainty", check_real(owner, "frequency_uncertainty",
-                                                self.frequency_uncertainty, minimum=0.0,
-                                                maximum=0.5))
+        for name in ("frequency_uncertainty", "stiffness_uncertainty", "mass_uncertainty",
+                     "hub_inertia_uncertainty"):
+            put(name, check_real(owner, name, getattr(self, name), minimum=0.0, maximum=0.5))
         put("damping_range", _damping_range(self.damping_range))
 
 
@@ -156,8 +190,9 @@ class RequirementCheck:
         The value on the nominal plant and the least over the uncertainty.
     unit : str
     detail : str
-        How the worst case was reached (its frequency factor and damping), and for a flexible
-        mode how it is stabilised.
+        Where the worst case is, and for a flexible mode how it is stabilised.
+    worst_at : UncertainPlant or None
+        The plant of the worst case.
     """
 
     name: str
@@ -166,6 +201,7 @@ class RequirementCheck:
     worst: float
     unit: str
     detail: str = ""
+    worst_at: object = None
 
     @property
     def passed(self) -> bool:
@@ -246,23 +282,28 @@ class Verification:
 
 
 # ------------------------------------------------------------------ one loop's figures
-def _response(loop, w: np.ndarray) -> np.ndarray:
-    """The loop's complex frequency response at ``w`` (rad/s): ``C (p I - A)^-1 B + D`` at
-    ``p = j w`` (or ``exp(j w T)``), by back substitution on the complex Schur form of ``A``
+class _Response:
+    """A loop's complex frequency response ``C (p I - A)^-1 B + D`` at ``p = j w`` (or
+    ``exp(j w T)``), by back substitution on the complex Schur form of ``A``, computed once
     (``n^2`` operations a point, all points at once)."""
-    import scipy.linalg
 
-    dt = loop.dt
-    points = 1j * w if not dt else np.exp(1j * w * float(dt))
-    a = np.asarray(loop.A, dtype=float)
-    t, z = scipy.linalg.schur(a, output="complex")
-    b = z.conj().T @ np.asarray(loop.B, dtype=float)[:, 0]
-    c = np.asarray(loop.C, dtype=float)[0] @ z
-    n = a.shape[0]
-    y = np.zeros((n, points.size), dtype=complex)
-    for i in range(n - 1, -1, -1):
-        y[i] = (b[i] + t[i, i + 1:] @ y[i + 1:]) / (points - t[i, i])
-    return c @ y + float(np.asarray(loop.D)[0, 0])
+    def __init__(self, loop):
+        import scipy.linalg
+
+        self.dt = float(loop.dt) if loop.dt else 0.0
+        a = np.asarray(loop.A, dtype=float)
+        self.t, z = scipy.linalg.schur(a, output="complex")
+        self.b = z.conj().T @ np.asarray(loop.B, dtype=float)[:, 0]
+        self.c = np.asarray(loop.C, dtype=float)[0] @ z
+        self.d = float(np.asarray(loop.D)[0, 0])
+
+    def __call__(self, w: np.ndarray) -> np.ndarray:
+        points = 1j * w if not self.dt else np.exp(1j * w * self.dt)
+        t, n = self.t, self.t.shape[0]
+        y = np.zeros((n, points.size), dtype=complex)
+        for i in range(n - 1, -1, -1):
+            y[i] = (self.b[i] + t[i, i + 1:] @ y[i + 1:]) / (points - t[i, i])
+        return self.c @ y + self.d
 
 
 def _phase_distance(response) -> np.ndarray:
@@ -301,34 +342,48 @@ def _crossings(w: np.ndarray, response: np.ndarray) -> tuple:
     return gain, phase
 
 
-def _rigid_figures(loop, flexible: np.ndarray, stable: bool) -> dict:
+def _alias(omega, dt: float):
+    """Where a sampled loop (period ``dt``, 0 for a continuous one) sees frequencies
+    ``omega`` (rad/s): folded into ``(0, pi / dt]`` (at least 1e-6 of it)."""
+    if not dt:
+        return omega
+    sampling = 2.0 * math.pi / dt
+    folded = np.abs((np.asarray(omega) + 0.5 * sampling) % sampling - 0.5 * sampling)
+    return np.maximum(folded, 1e-6 * 0.5 * sampling)
+
+
+def _rigid_figures(response: _Response, flexible: np.ndarray) -> dict:
     """Gain margin (dB), phase margin (deg), delay margin (s) and bandwidth (rad/s) of the
     rigid-body loop: its crossings outside every flexible mode's window."""
-    top = math.pi / float(loop.dt) if loop.dt else 3.0 * float(np.max(flexible, initial=1.0))
+    top = math.pi / response.dt if response.dt else 3.0 * float(np.max(flexible, initial=1.0))
     low = 1e-3 * float(np.min(flexible, initial=1.0))
     w = np.geomspace(low, top * (1.0 - 1e-9), RIGID_POINTS)
-    gain, phase = _crossings(w, _response(loop, w))
+    gain, phase = _crossings(w, response(w))
+
+    judged = _alias(flexible, response.dt)
 
     def rigid(wc):
-        return not np.any(np.abs(wc / flexible - 1.0) <= MODE_WINDOW)
+        return not np.any(np.abs(wc / judged - 1.0) <= MODE_WINDOW)
 
     gain = [(wc, m) for wc, m in gain if rigid(wc)]
     phase = [(wc, m) for wc, m in phase if rigid(wc)]
-    return {"stable": stable,
-            "gain_margin_db": min((m for _, m in phase), default=math.inf),
+    return {"gain_margin_db": min((m for _, m in phase), default=math.inf),
             "phase_margin_deg": min((m for _, m in gain), default=math.inf),
             "delay_margin": min((math.radians(m) / wc for wc, m in gain), default=math.inf),
             "bandwidth": max((wc for wc, _ in gain), default=0.0)}
 
 
-def _mode_verdict(loop, mode: int, omega: float, req: Requirements) -> ModeVerdict:
-    """How ``loop`` stabilises the mode at ``omega`` (module Notes)."""
-    w = omega * np.geomspace(1.0 - MODE_WINDOW, 1.0 + MODE_WINDOW, WINDOW_POINTS)
-    gain = np.abs(_response(loop, w))
-    k = int(np.argmax(gain))
+def _mode_verdict(loop_response: _Response, mode: int, omega: float,
+                  req: Requirements) -> ModeVerdict:
+    """How the loop of ``loop_response`` stabilises the mode at ``omega`` (module Notes)."""
+    w = _alias(omega, loop_response.dt) * np.geomspace(1.0 - MODE_WINDOW, 1.0 + MODE_WINDOW,
+                                                       WINDOW_POINTS)
+    response = loop_response(w)
+    k = int(np.argmax(np.abs(response)))
     fine = w[k] * np.linspace(1.0 - PEAK_SPAN, 1.0 + PEAK_SPAN, PEAK_POINTS)
-    w = np.sort(np.concatenate((w, fine)))
-    response = _response(loop, w)
+    w = np.concatenate((w, fine))
+    order = np.argsort(w, kind="stable")
+    w, response = w[order], np.concatenate((response, loop_response(fine)))[order]
     gain_db = 20.0 * np.log10(np.maximum(np.abs(response), 1e-300))
     distance = _phase_distance(response)
     crossings, _ = _crossings(w, response)
@@ -342,16 +397,46 @@ def _mode_verdict(loop, mode: int, omega: float, req: Requirements) -> ModeVerdi
 
 
 # ------------------------------------------------------------------ plants of the uncertainty
-def _with_beams(system, scale: float, zeta: float):
-    """``system`` with every beam's Young's modulus times ``scale`` and damping ``zeta``."""
-    def beam(b):
-        return dataclasses.replace(b, youngs_modulus=b.youngs_modulus * scale,
-                                   damping_ratio=zeta)
+@dataclass(frozen=True)
+class UncertainPlant:
+    """One plant of the uncertainty: the nominal structure with its stiffness, point masses
+    and hub inertia scaled, then its coupled modes' frequencies scaled and damping ratios set
+    (:func:`flexctl.model.modal_uncertainty.with_modes`).
 
-    if isinstance(system, HubBeam):
-        return dataclasses.replace(system, beam=beam(system.beam))
-    return dataclasses.replace(system, appendages=tuple(
-        dataclasses.replace(a, beam=beam(a.beam)) for a in system.appendages))
+    Attributes
+    ----------
+    stiffness, point_masses, hub_inertia : float
+        Factors on every beam's Young's modulus, every point mass and the hub's inertia.
+    frequency_factors : tuple of float
+        Factor on each coupled mode's frequency (empty: all 1).
+    damping_ratios : tuple of float or None
+        Each coupled mode's damping ratio; None keeps the plant's own damping.
+    """
+
+    stiffness: float = 1.0
+    point_masses: float = 1.0
+    hub_inertia: float = 1.0
+    frequency_factors: tuple = ()
+    damping_ratios: tuple | None = None
+
+    def describe(self) -> str:
+        """One line: the factors that are not 1 and the damping ratios."""
+        parts = [f"{name.replace('_', ' ')} x{value:.4g}" for name, value in
+                 (("stiffness", self.stiffness), ("point_masses", self.point_masses),
+                  ("hub_inertia", self.hub_inertia)) if value != 1.0]
+        if self.frequency_factors:
+            parts.append("frequency factors " + ", ".join(f"{f:.4g}"
+                                                          for f in self.frequency_factors))
+        if self.damping_ratios is not None:
+            parts.append("damping ratios " + ", ".join(f"{z:.3g}" for z in self.damping_ratios))
+        return "; ".join(parts) or "the nominal plant"
+
+
+def _point(stiffness=1.0, point_masses=1.0, hub_inertia=1.0, factors=(), dampings=None):
+    rounded = lambda values: tuple(round(float(v), 12) for v in values)  # noqa: E731
+    return UncertainPlant(round(float(stiffness), 12), round(float(point_masses), 12),
+                          round(float(hub_inertia), 12), rounded(factors),
+                          None if dampings is None else rounded(dampings))
 
 
 def _beam_damping(system) -> float:
@@ -359,53 +444,232 @@ def _beam_damping(system) -> float:
     return max(b.damping_ratio for b in beams)
 
 
+def _ends(uncertainty: float) -> tuple:
+    return (1.0 - uncertainty, 1.0 + uncertainty) if uncertainty > 0.0 else (1.0,)
+
+
 class _Search:
-    """The figures of the loop on the plant at each (frequency factor, damping) asked for,
-    each plant built once."""
+    """The figures of the loop on each plant of the uncertainty asked for, each evaluated once;
+    a structure (stiffness, masses, inertia) built once."""
 
     def __init__(self, plant, controller, req: Requirements, spin_rate: float):
         self.plant, self.controller, self.req, self.spin = plant, controller, req, spin_rate
-        self.cache = {}
-        self.base = getattr(plant, "source", plant.system)
+        self.cache, self.structures = {}, {}
+        source = getattr(plant, "source", None)
+        self.base = plant.system if source is None else source
         # at rest the exact variant's linearisation is first_order's, which builds at once
         self.variant = "first_order" if plant.variant.exact and spin_rate == 0.0 else None
+        self.n_modes = plant.n_modes
 
-    def loop(self, factor: float, zeta: float):
-        system = _with_beams(self.base, factor ** 2, zeta)
-        model = rebuild(self.plant, variant=self.variant, system=system)
+    def model(self, point: UncertainPlant):
+        """The plant at ``point``."""
+        key = (point.stiffness, point.point_masses, point.hub_inertia)
+        if key not in self.structures:
+            system = None if key == (1.0, 1.0, 1.0) else disperse(
+                self.base, youngs_modulus_scale=key[0], point_mass_scale=key[1],
+                hub_inertia_scale=key[2])
+            self.structures[key] = self.plant if system is None and self.variant is None \
+                else rebuild(self.plant, variant=self.variant, system=system)
+        model = self.structures[key]
+        if not point.frequency_factors and point.damping_ratios is None:
+            return model
+        return with_modes(model, point.frequency_factors or 1.0, point.damping_ratios,
+                          self.spin)
+
+    def loop(self, point: UncertainPlant):
+        model = self.model(point)
         return model, loop_transfer(model, self.controller, self.spin)
 
-    def figures(self, factor: float, zeta: float) -> dict:
-        key = (round(factor, 12), round(zeta, 12))
-        if key not in self.cache:
-            model, loop = self.loop(factor, zeta)
-            flexible = _flexible_frequencies(model)
-            stable = closed_loop_verdict(loop)[0]
-            figures = _rigid_figures(loop, flexible, stable)
-            verdicts = [_mode_verdict(loop, k + 1, omega, self.req)
-                        for k, omega in enumerate(flexible)]
-            figures["modes"] = verdicts
-            figures["scores"] = [v.score for v in verdicts]
-            self.cache[key] = figures
-        return self.cache[key]
+    def _entry(self, point: UncertainPlant) -> dict:
+        if point not in self.cache:
+            model, loop = self.loop(point)
+            self.cache[point] = {"loop": loop, "response": _Response(loop),
+                                 "flexible": _flexible_frequencies(model)}
+        return self.cache[point]
+
+    def verdict(self, point: UncertainPlant, k: int):
+        """Mode ``k``'s (from 0) :class:`ModeVerdict` at ``point``, or None past the plant's
+        flexible modes."""
+        entry = self._entry(point)
+        key = ("mode", k)
+        if key not in entry:
+            flexible = entry["flexible"]
+            entry[key] = None if k >= len(flexible) else \
+                _mode_verdict(entry["response"], k + 1, flexible[k], self.req)
+        return entry[key]
+
+    def value(self, point: UncertainPlant, name: str) -> float:
+        """The figure ``name`` (a requirement's) at ``point``, computed once."""
+        entry = self._entry(point)
+        if name not in entry:
+            if name == "closed_loop_stable":
+                entry[name] = 1.0 if closed_loop_verdict(entry["loop"])[0] else 0.0
+            elif name.startswith("flexible mode "):
+                verdict = self.verdict(point, int(name.split()[-1]) - 1)
+                entry[name] = math.inf if verdict is None else verdict.score
+            else:
+                entry.update(_rigid_figures(entry["response"], entry["flexible"]))
+        return entry[name]
+
+    def modes(self, point: UncertainPlant) -> list:
+        """Every flexible mode's :class:`ModeVerdict` at ``point``."""
+        return [self.verdict(point, k) for k in range(len(self._entry(point)["flexible"]))]
 
 
-def _values(figures: dict, names: list) -> list:
-    out = []
+def _grid(req: Requirements, n_modes: int) -> list:
+    """The search's first plants: every frequency factor (all modes together) by the ends and
+    middle of the damping range, and each corner of the structure's ranges at both ends of the
+    damping range."""
+    u = req.frequency_uncertainty
+    low, high = req.damping_range
+    factors = np.linspace(1.0 - u, 1.0 + u, FREQUENCY_POINTS) if u > 0 else np.array([1.0])
+    dampings = sorted({low, math.sqrt(low * high) if low > 0 else 0.5 * high, high})
+    points = [_point(factors=(f,) * n_modes, dampings=(z,) * n_modes)
+              for f in factors for z in dampings]
+    corners = [(s, m, j) for s in _ends(req.stiffness_uncertainty)
+               for m in _ends(req.mass_uncertainty) for j in _ends(req.hub_inertia_uncertainty)]
+    points += [_point(s, m, j, (1.0,) * n_modes, (z,) * n_modes)
+               for s, m, j in corners if (s, m, j) != (1.0, 1.0, 1.0) for z in (low, high)]
+    return points
+
+
+def _improve(search: _Search, name: str, point: UncertainPlant, candidates) -> tuple:
+    """``(point, value)``: the worst of ``point`` and each candidate plant, in turn."""
+    best = search.value(point, name)
+    for candidate in candidates:
+        value = search.value(candidate, name)
+        if value < best:
+            point, best = candidate, value
+    return point, best
+
+
+def _moved(point: UncertainPlant, k: int, factor=None, zeta=None) -> UncertainPlant:
+    """``point`` with mode ``k``'s frequency factor or damping ratio changed."""
+    factors, dampings = list(point.frequency_factors), list(point.damping_ratios)
+    if factor is not None:
+        factors[k] = factor
+    if zeta is not None:
+        dampings[k] = zeta
+    return _point(point.stiffness, point.point_masses, point.hub_inertia, factors, dampings)
+
+
+def _damping_grid(req: Requirements) -> np.ndarray:
+    low, high = req.damping_range
+    if low > 0.0:
+        return np.geomspace(low, high, DAMPING_POINTS)
+    return np.linspace(low, high, DAMPING_POINTS)
+
+
+def _own_mode(search: _Search, name: str, point: UncertainPlant, k: int) -> tuple:
+    """``(point, value)``: the worst over mode ``k``'s frequency factor and damping ratio,
+    the others as in ``point``: a grid, then a Nelder-Mead search from its worst (the
+    damping on a logarithmic scale when the range starts above 0)."""
+    from scipy.optimize import minimize
+
+    req = search.req
+    u = req.frequency_uncertainty
+    low, high = req.damping_range
+    factors = np.linspace(1.0 - u, 1.0 + u, FREQUENCY_POINTS) if u > 0 else np.array([1.0])
+    point, value = _improve(search, name, point, [_moved(point, k, f, z) for f in factors
+                                                 for z in _damping_grid(req)])
+    if high == low and u == 0.0:
+        return point, value
+    logarithmic = low > 0.0
+
+    def unit(zeta):
+        if high == low:
+            return 0.0
+        return (math.log(zeta / low) / math.log(high / low)) if logarithmic \
+            else (zeta - low) / (high - low)
+
+    def plant(x):
+        f = min(max(x[0], 1.0 - u), 1.0 + u)
+        s = min(max(x[1], 0.0), 1.0)
+        zeta = low * (high / low) ** s if logarithmic else low + s * (high - low)
+        return _moved(point, k, f, zeta)
+
+    start = np.array([point.frequency_factors[k], unit(point.damping_ratios[k])])
+    step = np.array([max(u, 1e-3) / (FREQUENCY_POINTS - 1), 1.0 / (DAMPING_POINTS - 1)])
+    found = minimize(lambda x: search.value(plant(x), name), start, method="Nelder-Mead",
+                     options={"initial_simplex": [start, start + [step[0], 0.0],
+                                                  start + [0.0, step[1]]],
+                              "maxfev": REFINE_EVALUATIONS, "xatol": 1e-4, "fatol": 1e-6})
+    if found.fun < value:
+        point, value = plant(found.x), float(found.fun)
+    return point, value
+
+
+def _coordinate_pass(search: _Search, name: str, start: UncertainPlant, own: int) -> tuple:
+    """``(point, value)``: the worst found from ``start`` (module Notes): the structure's
+    ranges at their ends, the ``own`` mode over its frequency and damping (:func:`_own_mode`),
+    then sweeps of every other mode's frequency (on :data:`OTHER_POINTS` factors) and damping
+    (the ends), one at a time, each followed by the own mode again, until a sweep finds
+    nothing worse (at most :data:`SWEEPS`)."""
+    req = search.req
+    u = req.frequency_uncertainty
+    low, high = req.damping_range
+    point = start
+    for field, uncertainty in (("stiffness", req.stiffness_uncertainty),
+                               ("point_masses", req.mass_uncertainty),
+                               ("hub_inertia", req.hub_inertia_uncertainty)):
+        point, _ = _improve(search, name, point, [dataclasses.replace(point, **{field: v})
+                                                  for v in _ends(uncertainty)])
+    others = np.linspace(1.0 - u, 1.0 + u, OTHER_POINTS) if u > 0 else np.array([1.0])
+    point, value = _own_mode(search, name, point, own)
+    for _ in range(SWEEPS):
+        before = value
+        for k in range(search.n_modes):
+            if k != own:
+                point, _ = _improve(search, name, point, [_moved(point, k, factor=f)
+                                                          for f in others])
+                point, _ = _improve(search, name, point, [_moved(point, k, zeta=z)
+                                                          for z in (low, high)])
+        point, value = _own_mode(search, name, point, own)
+        if not value < before:
+            break
+    return point, value
+
+
+def _draws(req: Requirements, n_modes: int, samples: int, seed: int) -> list:
+    """Random plants of the uncertainty: the structure's factors and every mode's frequency
+    factor uniform in their ranges, every damping ratio log-uniform (uniform when the range
+    starts at 0)."""
+    rng = np.random.default_rng(seed)
+    low, high = req.damping_range
+    u = req.frequency_uncertainty
+    points = []
+    for _ in range(samples):
+        scales = [rng.uniform(1.0 - r, 1.0 + r) for r in
+                  (req.stiffness_uncertainty, req.mass_uncertainty, req.hub_inertia_uncertainty)]
+        dampings = np.exp(rng.uniform(math.log(low), math.log(high), n_modes)) if low > 0 \
+            else rng.uniform(low, high, n_modes)
+        points.append(_point(*scales, rng.uniform(1.0 - u, 1.0 + u, n_modes), dampings))
+    return points
+
+
+def _worst_cases(search: _Search, names: list, nominal: UncertainPlant,
+                 thorough: bool = True) -> tuple:
+    """``(points, values)``: each requirement's worst plant and value (module Notes); not
+    ``thorough``, the first stage's only."""
+    points = _grid(search.req, search.n_modes) + _draws(search.req, search.n_modes,
+                                                        RANDOM_POINTS, RANDOM_SEED)
+    worst_at, worst = [], []
     for name in names:
-        if name.startswith("flexible mode "):
-            k = int(name.split()[-1]) - 1
-            scores = figures["scores"]
-            out.append(scores[k] if k < len(scores) else math.inf)
-        elif name == "closed_loop_stable":
-            out.append(1.0 if figures["stable"] else 0.0)
-        else:
-            out.append(figures[name])
-    return out
+        values = [search.value(p, name) for p in points]
+        point, value = points[int(np.argmin(values))], min(values)
+        own = int(name.split()[-1]) - 1 if name.startswith("flexible mode") else 0
+        if thorough:
+            point, value = _coordinate_pass(search, name, point, own)
+        at_nominal = search.value(nominal, name)
+        if at_nominal <= value:
+            point, value = nominal, at_nominal
+        worst_at.append(point)
+        worst.append(float(value))
+    return worst_at, worst
 
 
 def verify_requirements(plant, controller, requirements: Requirements,
-                        spin_rate: float = 0.0) -> Verification:
+                        spin_rate: float = 0.0, *, thorough: bool = True) -> Verification:
     """Measure each requirement on the loop of ``controller`` on ``plant`` and over the
     uncertainty (module Notes).
 
@@ -420,43 +684,24 @@ def verify_requirements(plant, controller, requirements: Requirements,
         What the loop must meet.
     spin_rate : float, optional
         Steady hub rate of the linearisation, rad/s. Default 0.
+    thorough : bool, optional
+        Search each requirement's worst case locally after the first stage's grid and random
+        plants (module Notes). Default True; False is a quicker screen, no worst case.
 
     Returns
     -------
     Verification
     """
-    from scipy.optimize import minimize_scalar
-
-    if not isinstance(requirements, Requirements):
-        raise InputTypeError("verify_requirements.requirements must be a Requirements; got "
-                             f"{type(requirements).__name__}")
-    if not isinstance(plant, Model) or not isinstance(plant.system, (HubBeam, Structure)):
-        raise InputTypeError("verify_requirements.plant must be a planar flexctl Model; got "
-                             f"{type(plant).__name__}")
-    spin_rate = check_real("verify_requirements", "spin_rate", spin_rate)
-    req = requirements
-    search = _Search(plant, controller, req, spin_rate)
+    search = _checked_search("verify_requirements", plant, controller, requirements, spin_rate)
+    req = search.req
     own = _beam_damping(plant.system)
-    low, high = req.damping_range
-    zeta0 = own if own > 0.0 else low
-    nominal = search.figures(1.0, zeta0)
+    nominal_point = _point() if own > 0.0 else \
+        _point(factors=(1.0,) * search.n_modes, dampings=(req.damping_range[0],) * search.n_modes)
+    modes = search.modes(nominal_point)
     names = ["closed_loop_stable", "gain_margin_db", "phase_margin_deg"]
     names += [n for n in ("delay_margin", "bandwidth") if getattr(req, n) is not None]
-    names += [f"flexible mode {v.mode}" for v in nominal["modes"]]
-    u = req.frequency_uncertainty
-    factors = np.linspace(1.0 - u, 1.0 + u, FREQUENCY_POINTS) if u > 0 else np.array([1.0])
-    dampings = sorted({low, math.sqrt(low * high) if low > 0 else 0.5 * high, high, zeta0})
-    points = [(float(f), float(z)) for f in factors for z in dampings]
-    table = np.array([_values(search.figures(f, z), names) for f, z in points])
-    worst_at = [points[int(np.argmin(table[:, j]))] for j in range(len(names))]
-    worst = [float(np.min(table[:, j])) for j in range(len(names))]
-    step = 2.0 * u / max(FREQUENCY_POINTS - 1, 1)
-    for j, (f, z) in enumerate(worst_at if u > 0 else ()):
-        found = minimize_scalar(lambda x: _values(search.figures(x, z), names)[j],
-                                bounds=(max(1.0 - u, f - step), min(1.0 + u, f + step)),
-                                method="bounded", options={"xatol": 1e-3 * step})
-        if found.fun < worst[j]:
-            worst[j], worst_at[j] = float(found.fun), (float(found.x), z)
+    names += [f"flexible mode {v.mode}" for v in modes]
+    worst_at, worst = _worst_cases(search, names, nominal_point, bool(thorough))
     required = {"closed_loop_stable": 1.0, "gain_margin_db": req.gain_margin_db,
                 "phase_margin_deg": req.phase_margin_deg, "delay_margin": req.delay_margin,
                 "bandwidth": req.bandwidth}
@@ -464,30 +709,100 @@ def verify_requirements(plant, controller, requirements: Requirements,
              "delay_margin": "s", "bandwidth": "rad/s"}
     checks = []
     for j, name in enumerate(names):
-        f, z = worst_at[j]
-        where = f"worst at frequency factor {f:.4g}, damping {z:.3g}"
+        where = f"worst at {worst_at[j].describe()}"
+        value = float(search.value(nominal_point, name))
         if name.startswith("flexible mode"):
-            k = int(name.split()[-1]) - 1
-            v = nominal["modes"][k]
+            v = modes[int(name.split()[-1]) - 1]
             detail = (f"nominal {v.frequency:.4g} rad/s, {v.kind}-stabilised (peak "
                       f"{v.peak_db:.3g} dB, phase margin {v.phase_margin_deg:.3g} deg at its "
                       f"crossings); distance from the exclusion zone (+-"
                       f"{req.flexible_attenuation_db:g} dB, +-"
                       f"{req.flexible_phase_margin_deg:g} deg about -180 deg), 1 at its edge; "
                       f"{where}")
-            checks.append(RequirementCheck(name, 1.0, float(_values(nominal, [name])[0]),
-                                           worst[j], "", detail))
+            checks.append(RequirementCheck(name, 1.0, value, worst[j], "", detail,
+                                           worst_at[j]))
         else:
-            checks.append(RequirementCheck(name, float(required[name]),
-                                           float(_values(nominal, [name])[0]), worst[j],
-                                           units[name], where))
-    coverage = (f"{len(points)} plants: frequency factors {factors[0]:.3g} to "
-                f"{factors[-1]:.3g} ({factors.size} points) by damping ratios "
-                f"{', '.join(f'{z:.3g}' for z in dampings)}, each requirement's worst refined "
-                "by a bounded scalar search on the frequency factor; the frequencies scale "
-                f"together ({len(search.cache)} loops evaluated)")
-    return Verification(tuple(checks), tuple(nominal["modes"]), coverage,
-                        search.loop(1.0, zeta0)[1])
+            checks.append(RequirementCheck(name, float(required[name]), value, worst[j],
+                                           units[name], where, worst_at[j]))
+    coverage = _coverage(search) if thorough else \
+        f"a screen: the first stage only, {len(search.cache)} plants evaluated"
+    return Verification(tuple(checks), tuple(modes), coverage,
+                        search.loop(nominal_point)[1])
+
+
+def _checked_search(owner, plant, controller, requirements, spin_rate) -> _Search:
+    if not isinstance(requirements, Requirements):
+        raise InputTypeError(f"{owner}.requirements must be a Requirements; got "
+                             f"{type(requirements).__name__}")
+    if not isinstance(plant, Model) or not isinstance(plant.system, (HubBeam, Structure)):
+        raise InputTypeError(f"{owner}.plant must be a planar flexctl Model; got "
+                             f"{type(plant).__name__}")
+    spin_rate = check_real(owner, "spin_rate", spin_rate)
+    return _Search(plant, controller, requirements, spin_rate)
+
+
+def _coverage(search: _Search) -> str:
+    req = search.req
+    u = req.frequency_uncertainty
+    low, high = req.damping_range
+    ranges = [f"each of the {search.n_modes} modal frequencies x{1 - u:.3g} to x{1 + u:.3g} "
+              f"on its own, each damping ratio {low:.3g} to {high:.3g}"]
+    ranges += [f"{name} +-{value:.3g}" for name, value in
+               (("stiffness", req.stiffness_uncertainty), ("point masses", req.mass_uncertainty),
+                ("hub inertia", req.hub_inertia_uncertainty)) if value > 0.0]
+    return (f"over {'; '.join(ranges)}: a grid of {FREQUENCY_POINTS if u > 0 else 1} common "
+            "frequency factors by the ends and middle of the damping range and the corners of "
+            "the structure's ranges, then for each requirement from its worst grid plant one "
+            "coordinate at a time (the structure's ends; its own mode, or the first for a "
+            "rigid-body requirement, on the frequency grid and refined by a bounded scalar "
+            "search; every other mode's frequency and damping at their ends), "
+            f"{len(search.cache)} plants evaluated")
+
+
+def monte_carlo_requirements(plant, controller, requirements: Requirements, samples: int = 200,
+                             *, seed: int = 0, spin_rate: float = 0.0) -> dict:
+    """The worst value of each requirement over random plants of the uncertainty: a check of
+    :func:`verify_requirements`' search, which should report no better worst case.
+
+    Each plant draws the structure's factors and every mode's frequency factor uniformly in
+    their ranges, and every mode's damping ratio log-uniformly (uniformly when the range
+    starts at 0).
+
+    Parameters
+    ----------
+    plant : flexctl.Model
+        The nominal plant, as for :func:`verify_requirements`.
+    controller : object
+        The law, as for :func:`verify_requirements`.
+    requirements : Requirements
+        What the loop must meet, and the ranges of the uncertainty.
+    samples : int, optional
+        Plants drawn, 1 to 100000. Default 200.
+    seed : int, optional
+        Seed of NumPy's default generator. Default 0.
+    spin_rate : float, optional
+        Steady hub rate of the linearisation, rad/s. Default 0.
+
+    Returns
+    -------
+    dict
+        ``{name: (worst value, UncertainPlant)}`` for every requirement the verification
+        lists.
+    """
+    search = _checked_search("monte_carlo_requirements", plant, controller, requirements,
+                             spin_rate)
+    samples = check_integer("monte_carlo_requirements", "samples", samples, minimum=1,
+                            maximum=100_000)
+    seed = check_integer("monte_carlo_requirements", "seed", seed, minimum=0)
+    worst = {}
+    for point in _draws(search.req, search.n_modes, samples, seed):
+        names = ["closed_loop_stable", "gain_margin_db", "phase_margin_deg", "delay_margin",
+                 "bandwidth"] + [f"flexible mode {k + 1}" for k in range(len(search.modes(point)))]
+        for name in names:
+            value = search.value(point, name)
+            if name not in worst or value < worst[name][0]:
+                worst[name] = (float(value), point)
+    return worst
 
 
 # ------------------------------------------------------------------ filter design
@@ -552,25 +867,32 @@ def _candidates(omega: float, req: Requirements, sample_time: float):
 
 
 def _better_filter(plant, base, filters, report, req, spin_rate) -> tuple:
-    """``(tried, filter, verification, law)``: the first failing flexible mode (worst first)
-    whose best candidate lowers the loop's shortfall (:func:`_shortfall`); ``filter`` None
-    when no candidate for any mode does."""
+    """``(tried, filter, verification, law)``: for the first failing flexible mode (worst
+    first) that a candidate fixes, the candidate that fixes it, keeps every requirement that
+    passed and leaves the least shortfall (:func:`_shortfall`); candidates are screened on
+    the first stage of the search, the one kept verified in full. ``filter`` None when no
+    candidate fixes any mode."""
     from ..feedback.structural_filters import Filtered
 
     failing = sorted((c for c in report.checks if c.name.startswith("flexible mode")
                       and not c.passed), key=lambda c: c.worst)
+    passed = {c.name for c in report.checks if c.passed}
     tried = 0
     for check in failing:
         mode = report.modes[int(check.name.split()[-1]) - 1]
-        best = None
+        ranked = []
         for candidate in _candidates(mode.frequency, req, base.sample_time):
             trial = Filtered(law=base, filters=[*filters, candidate])
-            result = verify_requirements(plant, trial, req, spin_rate)
+            screen = verify_requirements(plant, trial, req, spin_rate, thorough=False)
             tried += 1
-            if best is None or _shortfall(result) < _shortfall(best[1]):
-                best = (candidate, result, trial)
-        if best is not None and _shortfall(best[1]) < _shortfall(report):
-            return tried, *best
+            kept = {c.name for c in screen.checks if c.passed}
+            if check.name in kept and passed <= kept:
+                ranked.append((_shortfall(screen), len(ranked), candidate, trial))
+        for _, _, candidate, trial in sorted(ranked, key=lambda r: r[:2]):
+            result = verify_requirements(plant, trial, req, spin_rate)
+            kept = {c.name for c in result.checks if c.passed}
+            if check.name in kept and passed <= kept:
+                return tried, candidate, result, trial
     return tried, None, None, None
 
 
@@ -581,11 +903,12 @@ def design_filters(plant, controller, requirements: Requirements, *,
 
     Greedy: while flexible modes miss their requirement, the candidates for each (worst
     first; notches at its nominal frequency, of two depths and two widths covering the
-    frequency uncertainty, and a roll-off at half its frequency) are verified
-    (:func:`verify_requirements`), and the best of the first mode whose best lowers the
-    loop's total shortfall (the sum over the requirements of how far each worst value falls
-    short of its required one, relative; a loop unstable anywhere in the uncertainty ranks
-    last) is kept.
+    frequency uncertainty, and a roll-off at half its frequency) are screened on the first
+    stage of the search (``verify_requirements(..., thorough=False)``), and the first that
+    makes the mode pass and keeps every requirement that passed, by the least total
+    shortfall (the sum over the requirements of how far each worst value falls short of its
+    required one, relative), is verified in full and kept. A mode that no candidate fixes is
+    left, and named in :attr:`FilterDesign.unmet`.
 
     Parameters
     ----------

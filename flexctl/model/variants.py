@@ -851,7 +851,11 @@ class Model:
         damp[hub, hub] = self.structure.hub.friction
         damp[q, q] = self.matrices.C_ff
         load[hub] = 1.0
-        return self.mass_matrix(layout.zeros()), stiff, damp, load
+        # a small-deflection variant's mass matrix at rest is its modal matrices' (the exact
+        # geometry's differs by its quadrature, about 1e-7 relative)
+        mass = self.mass_matrix(layout.zeros()) if self.variant.exact \
+            else self.rest_mass_matrix()
+        return mass, stiff, damp, load
 
     def natural_frequencies(self, spin_rate: float = 0.0, hub: str = "clamped") -> np.ndarray:
         """Undamped natural frequencies, rad/s, ascending, shape (N,).
