@@ -19,6 +19,8 @@ module           contents
 ``build``        ``build_model``: the model of a system
 ``exports``      the model as a python-control system or a CasADi function
 ``reduction``    ``modal_truncation``, ``balanced_truncation``: reduced design models, their error
+``modal_*``      ``modal_uncertainty.with_modes``: each coupled mode's frequency and damping
+                 moved, its shape kept
 ``discrete``     the model held over a sample: a CasADi step ``(x, u) -> x_next``
 ===============  ==============================================================================
 
