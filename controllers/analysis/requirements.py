@@ -850,19 +850,22 @@ def _shortfall(verification: Verification) -> tuple:
 
 
 def _candidates(omega: float, req: Requirements, sample_time: float):
-    """Notches at ``omega`` (depths and widths that cover the frequency uncertainty) and a
-    roll-off below it, each within the sampled loop's reach."""
+    """Notches where the sampled loop sees the mode at ``omega`` (its alias above the Nyquist
+    frequency; depths and widths that cover the frequency uncertainty) and a roll-off below
+    it, each within the sampled loop's reach."""
     from ..feedback.structural_filters import NYQUIST_FRACTION, Notch, RollOff
 
     limit = NYQUIST_FRACTION * math.pi / sample_time
-    width = max(req.frequency_uncertainty, 0.05)
+    seen = float(_alias(omega, sample_time))
+    # the uncertainty is relative to the mode's frequency, not to its alias
+    width = max(req.frequency_uncertainty * omega / seen, 0.05)
     found = []
-    if omega < limit:
+    if seen < limit:
         for depth in (req.flexible_attenuation_db + 6.0, req.flexible_attenuation_db + 14.0):
             for zeta in (width, 2.0 * width):
-                found.append(Notch(frequency=omega, depth_db=depth, width=min(zeta, 1.0)))
-    if 0.5 * omega < limit:
-        found.append(RollOff(frequency=0.5 * omega, damping=0.7))
+                found.append(Notch(frequency=seen, depth_db=depth, width=min(zeta, 1.0)))
+    if 0.5 * seen < limit:
+        found.append(RollOff(frequency=0.5 * seen, damping=0.7))
     return found
 
 

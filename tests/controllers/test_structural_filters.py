@@ -182,6 +182,33 @@ def test_the_exported_c_steps_the_filters_as_python_does(plant, held_lqr, tmp_pa
     np.testing.assert_allclose(runs[1].torque, runs[0].torque, rtol=1e-12, atol=1e-12)
 
 
+def test_to_iosys_flies_the_filtered_law_as_simulate_does(plant, held_lqr):
+    """The filtered held law as a discrete python-control system, on the plant held over the
+    sample (CVODES at 1e-10), flies the torque flexctl.simulate flies, sample for sample;
+    the torque bound included."""
+    import control
+
+    from controllers import to_iosys
+
+    law = Filtered(law=held_lqr, filters=FILTERS[:2], torque_limit=2.0)
+    system = to_iosys(law, plant)
+    assert system.dt == SAMPLE and system.nstates == 4
+    assert system.output_labels == ["torque"] and system.input_labels[0] == "theta"
+    step = plant.discretize(SAMPLE, "cvodes", rtol=1e-10)
+    held_plant = control.nlsys(lambda t, x, u, p: step(x, u[0]).full().ravel(), None,
+                               dt=SAMPLE, states=system.input_labels, inputs=["torque"],
+                               outputs=system.input_labels, name="plant")
+    loop = control.interconnect([held_plant, system], inplist=[], outlist=["torque"])
+    x0 = plant.layout.join(theta=0.3)
+    t = np.arange(201) * SAMPLE
+    theirs = np.ravel(control.input_output_response(
+        loop, t, X0=np.concatenate((x0, np.zeros(4)))).outputs)
+    ours = flexctl.simulate(plant, 2.0, controller=law, x0=x0, rtol=1e-10)
+    at_samples = np.interp(t[:-1] + 0.5 * SAMPLE, ours.t, ours.torque)  # held in between
+    assert np.max(np.abs(theirs[:-1])) == pytest.approx(2.0)
+    np.testing.assert_allclose(theirs[:-1], at_samples, atol=1e-6)
+
+
 # ------------------------------------------------------------------ the scene's form
 NOTCH_TABLE = '[{kind = "notch", frequency = 23.8, depth_db = 20}]'
 SLEW = {"model.variant": "first_order", "model.design_variant": "first_order",

@@ -133,8 +133,13 @@ def test_to_iosys_names_and_refusals(plant):
         to_iosys(lambda t, x: 0.0, model)
     from flexctl.sim.digital import ZeroOrderHold
     pd = from_spec(flexctl.load_scene("slew-90", {"controller.kind": "pd"}), model).controller
-    with pytest.raises(InputValueError, match="sampled"):
-        to_iosys(ZeroOrderHold(pd, 0.01), model)
+    held = to_iosys(ZeroOrderHold(pd, 0.01), model)
+    assert held.dt == 0.01 and held.nstates == 0 and held.output_labels == ["torque"]
+    bus = flexctl.load_scene("bus-slew")
+    bus_plant = bus.build_model()
+    observed = from_spec(bus, bus_plant).controller
+    with pytest.raises(InputValueError, match="sampled law with states of its own"):
+        to_iosys(observed, bus_plant)
     with pytest.raises(InputValueError, match="outputs"):
         model.nonlinear(outputs="all")
 
