@@ -26,6 +26,9 @@ Notes
   by the required amount is gain-stabilised; one that is not passes only by its phase
   (phase-stabilised). The window is sampled on :data:`WINDOW_POINTS` logarithmic points and
   :data:`PEAK_POINTS` more about the loop's peak in it.
+- **Gain stabilisation required.** With ``gain_stabilised_above``, a mode whose nominal
+  frequency is above it is measured by its attenuation alone: ``-peak dB /
+  flexible_attenuation_db``, 1 at the required attenuation.
 - **Sampled loops.** A sampled loop sees a mode above the Nyquist frequency at its alias:
   its window, and the rigid-body loop's exclusion of it, are about the folded frequency.
 - **Uncertainty** (:class:`UncertainPlant`): each coupled mode's frequency scaled by its own
@@ -134,6 +137,10 @@ class Requirements(KeywordOnly):
         Relative uncertainty of every point mass (all together), in [0, 0.5]. Default 0.
     hub_inertia_uncertainty : float, optional
         Relative uncertainty of the hub's inertia, in [0, 0.5]. Default 0.
+    gain_stabilised_above : float, optional
+        A flexible mode whose nominal frequency is above this, rad/s, passes only
+        gain-stabilised (attenuated by ``flexible_attenuation_db``): its phase is not trusted.
+        Default none (every mode may be phase-stabilised).
     """
 
     gain_margin_db: float = 6.0
@@ -147,6 +154,7 @@ class Requirements(KeywordOnly):
     stiffness_uncertainty: float = 0.0
     mass_uncertainty: float = 0.0
     hub_inertia_uncertainty: float = 0.0
+    gain_stabilised_above: float | None = None
 
     def __post_init__(self):
         owner = "requirements"
@@ -156,7 +164,7 @@ class Requirements(KeywordOnly):
         for name in ("phase_margin_deg", "flexible_phase_margin_deg"):
             put(name, check_real(owner, name, getattr(self, name), minimum=0.0, maximum=180.0,
                                  strict=True))
-        for name in ("delay_margin", "bandwidth"):
+        for name in ("delay_margin", "bandwidth", "gain_stabilised_above"):
             put(name, check_real(owner, name, getattr(self, name), minimum=0.0, strict=True,
                                  optional=True))
         for name in ("frequency_uncertainty", "stiffness_uncertainty", "mass_uncertainty",
@@ -460,6 +468,10 @@ class _Search:
         # at rest the exact variant's linearisation is first_order's, which builds at once
         self.variant = "first_order" if plant.variant.exact and spin_rate == 0.0 else None
         self.n_modes = plant.n_modes
+        above = req.gain_stabilised_above
+        self.gain_only = frozenset() if above is None else frozenset(
+            k for k, omega in enumerate(_flexible_frequencies(self.model(_point())))
+            if omega > above)
 
     def model(self, point: UncertainPlant):
         """The plant at ``point``."""
@@ -505,8 +517,11 @@ class _Search:
             if name == "closed_loop_stable":
                 entry[name] = 1.0 if closed_loop_verdict(entry["loop"])[0] else 0.0
             elif name.startswith("flexible mode "):
-                verdict = self.verdict(point, int(name.split()[-1]) - 1)
-                entry[name] = math.inf if verdict is None else verdict.score
+                k = int(name.split()[-1]) - 1
+                verdict = self.verdict(point, k)
+                entry[name] = math.inf if verdict is None else verdict.score \
+                    if k not in self.gain_only \
+                    else -verdict.peak_db / self.req.flexible_attenuation_db
             else:
                 entry.update(_rigid_figures(entry["response"], entry["flexible"]))
         return entry[name]
@@ -712,13 +727,16 @@ def verify_requirements(plant, controller, requirements: Requirements,
         where = f"worst at {worst_at[j].describe()}"
         value = float(search.value(nominal_point, name))
         if name.startswith("flexible mode"):
-            v = modes[int(name.split()[-1]) - 1]
+            k = int(name.split()[-1]) - 1
+            v = modes[k]
+            measure = (f"must be gain-stabilised (above {req.gain_stabilised_above:g} rad/s): "
+                       f"its attenuation over {req.flexible_attenuation_db:g} dB"
+                       if k in search.gain_only else
+                       f"distance from the exclusion zone (+-{req.flexible_attenuation_db:g} "
+                       f"dB, +-{req.flexible_phase_margin_deg:g} deg about -180 deg)")
             detail = (f"nominal {v.frequency:.4g} rad/s, {v.kind}-stabilised (peak "
                       f"{v.peak_db:.3g} dB, phase margin {v.phase_margin_deg:.3g} deg at its "
-                      f"crossings); distance from the exclusion zone (+-"
-                      f"{req.flexible_attenuation_db:g} dB, +-"
-                      f"{req.flexible_phase_margin_deg:g} deg about -180 deg), 1 at its edge; "
-                      f"{where}")
+                      f"crossings); {measure}, 1 at its edge; {where}")
             checks.append(RequirementCheck(name, 1.0, value, worst[j], "", detail,
                                            worst_at[j]))
         else:
@@ -849,10 +867,11 @@ def _shortfall(verification: Verification) -> tuple:
     return (unstable, sum(max(0.0, 1.0 - r) for r in ratios), -min(ratios, default=0.0))
 
 
-def _candidates(omega: float, req: Requirements, sample_time: float):
+def _candidates(omega: float, req: Requirements, sample_time: float, peak_db: float = 0.0):
     """Notches where the sampled loop sees the mode at ``omega`` (its alias above the Nyquist
-    frequency; depths and widths that cover the frequency uncertainty) and a roll-off below
-    it, each within the sampled loop's reach."""
+    frequency; deep enough to bring its peak ``peak_db`` to the required attenuation, and
+    deeper, and wide enough to cover the frequency uncertainty, and wider) and a roll-off
+    below it, each within the sampled loop's reach."""
     from ..feedback.structural_filters import NYQUIST_FRACTION, Notch, RollOff
 
     limit = NYQUIST_FRACTION * math.pi / sample_time
@@ -861,7 +880,8 @@ def _candidates(omega: float, req: Requirements, sample_time: float):
     width = max(req.frequency_uncertainty * omega / seen, 0.05)
     found = []
     if seen < limit:
-        for depth in (req.flexible_attenuation_db + 6.0, req.flexible_attenuation_db + 14.0):
+        least = req.flexible_attenuation_db + max(peak_db, 0.0) + 6.0
+        for depth in (least, least + 10.0):
             for zeta in (width, 2.0 * width):
                 found.append(Notch(frequency=seen, depth_db=depth, width=min(zeta, 1.0)))
     if 0.5 * seen < limit:
@@ -884,7 +904,7 @@ def _better_filter(plant, base, filters, report, req, spin_rate) -> tuple:
     for check in failing:
         mode = report.modes[int(check.name.split()[-1]) - 1]
         ranked = []
-        for candidate in _candidates(mode.frequency, req, base.sample_time):
+        for candidate in _candidates(mode.frequency, req, base.sample_time, mode.peak_db):
             trial = Filtered(law=base, filters=[*filters, candidate])
             screen = verify_requirements(plant, trial, req, spin_rate, thorough=False)
             tried += 1
@@ -905,8 +925,9 @@ def design_filters(plant, controller, requirements: Requirements, *,
     requirements over the uncertainty, or say which it cannot meet and by how much.
 
     Greedy: while flexible modes miss their requirement, the candidates for each (worst
-    first; notches at its nominal frequency, of two depths and two widths covering the
-    frequency uncertainty, and a roll-off at half its frequency) are screened on the first
+    first; notches where the sampled loop sees its nominal frequency, of two depths that bring
+    its peak below the required attenuation and two widths covering the frequency
+    uncertainty, and a roll-off at half that frequency) are screened on the first
     stage of the search (``verify_requirements(..., thorough=False)``), and the first that
     makes the mode pass and keeps every requirement that passed, by the least total
     shortfall (the sum over the requirements of how far each worst value falls short of its

@@ -205,7 +205,8 @@ _SCHEMA = {
     "sensors": None,
     "requirements": {"gain_margin_db", "phase_margin_deg", "delay_margin", "bandwidth",
                      "flexible_attenuation_db", "flexible_phase_margin_deg",
-                     "frequency_uncertainty", "damping_range"},
+                     "frequency_uncertainty", "damping_range", "stiffness_uncertainty",
+                     "mass_uncertainty", "hub_inertia_uncertainty", "gain_stabilised_above"},
 }
 #: Keys of one [[appendages]] table: its name, mounting, beam fields and [[appendages.masses]]
 #: (whose keys are those of [[masses]]); beside _SCHEMA, whose tables are the one-beam form's.
