@@ -840,7 +840,9 @@ class FilterDesign:
     unmet : tuple of (str, float, float)
         ``(name, worst, required)`` of each requirement still missed (empty on success).
     tried : int
-        Candidate designs verified.
+        Candidate designs screened.
+    initial : Verification or None
+        The verification of the law as given.
     """
 
     controller: object
@@ -848,6 +850,7 @@ class FilterDesign:
     verification: Verification
     unmet: tuple
     tried: int
+    initial: object = None
 
     @property
     def met(self) -> bool:
@@ -882,7 +885,7 @@ def _candidates(omega: float, req: Requirements, sample_time: float, peak_db: fl
     if seen < limit:
         least = req.flexible_attenuation_db + max(peak_db, 0.0) + 6.0
         for depth in (least, least + 10.0):
-            for zeta in (width, 2.0 * width):
+            for zeta in (width, 2.0 * width, 3.5 * width, 5.0 * width):
                 found.append(Notch(frequency=seen, depth_db=depth, width=min(zeta, 1.0)))
     if 0.5 * seen < limit:
         found.append(RollOff(frequency=0.5 * seen, damping=0.7))
@@ -926,8 +929,8 @@ def design_filters(plant, controller, requirements: Requirements, *,
 
     Greedy: while flexible modes miss their requirement, the candidates for each (worst
     first; notches where the sampled loop sees its nominal frequency, of two depths that bring
-    its peak below the required attenuation and two widths covering the frequency
-    uncertainty, and a roll-off at half that frequency) are screened on the first
+    its peak below the required attenuation and four widths, from one covering the frequency
+    uncertainty to five times it, and a roll-off at half that frequency) are screened on the first
     stage of the search (``verify_requirements(..., thorough=False)``), and the first that
     makes the mode pass and keeps every requirement that passed, by the least total
     shortfall (the sum over the requirements of how far each worst value falls short of its
@@ -962,7 +965,7 @@ def design_filters(plant, controller, requirements: Requirements, *,
                              "ZeroOrderHold, Observed or Filtered law); got "
                              f"{type(controller).__name__}")
     law = controller
-    report = verify_requirements(plant, law, requirements, spin_rate)
+    report = initial = verify_requirements(plant, law, requirements, spin_rate)
     tried, added = 1, []
     while len(added) < max_filters:
         better = _better_filter(plant, base, [*kept, *added], report, requirements, spin_rate)
@@ -972,4 +975,4 @@ def design_filters(plant, controller, requirements: Requirements, *,
         added.append(better[1])
         report, law = better[2], better[3]
     unmet = tuple((c.name, c.worst, c.required) for c in report.checks if not c.passed)
-    return FilterDesign(law, tuple(added), report, unmet, tried)
+    return FilterDesign(law, tuple(added), report, unmet, tried, initial)
