@@ -91,11 +91,11 @@ RANDOM_SEED = 20261129
 #: Frequency factors at which every other mode is tried (the ends included).
 OTHER_POINTS = 5
 #: Most sweeps over the other modes (they stop when a sweep finds nothing worse).
-SWEEPS = 3
+SWEEPS = 2
 #: Damping ratios of a mode's own grid (the ends of the range included).
 DAMPING_POINTS = 4
 #: Most evaluations of a mode's Nelder-Mead refinement over its frequency and damping.
-REFINE_EVALUATIONS = 40
+REFINE_EVALUATIONS = 24
 #: Points of a mode window's frequency grid.
 WINDOW_POINTS = 600
 #: Relative half-width and points of the finer grid about a mode window's peak (a mode with
@@ -665,9 +665,10 @@ def _draws(req: Requirements, n_modes: int, samples: int, seed: int) -> list:
 def _worst_cases(search: _Search, names: list, nominal: UncertainPlant,
                  thorough: bool = True) -> tuple:
     """``(points, values)``: each requirement's worst plant and value (module Notes); not
-    ``thorough``, the first stage's only."""
-    points = _grid(search.req, search.n_modes) + _draws(search.req, search.n_modes,
-                                                        RANDOM_POINTS, RANDOM_SEED)
+    ``thorough``, the first stage's grid only."""
+    points = _grid(search.req, search.n_modes)
+    if thorough:
+        points += _draws(search.req, search.n_modes, RANDOM_POINTS, RANDOM_SEED)
     worst_at, worst = [], []
     for name in names:
         values = [search.value(p, name) for p in points]
@@ -701,7 +702,8 @@ def verify_requirements(plant, controller, requirements: Requirements,
         Steady hub rate of the linearisation, rad/s. Default 0.
     thorough : bool, optional
         Search each requirement's worst case locally after the first stage's grid and random
-        plants (module Notes). Default True; False is a quicker screen, no worst case.
+        plants (module Notes). Default True; False is a quicker screen on the first stage's
+        grid alone, whose worst cases may be optimistic.
 
     Returns
     -------
@@ -743,7 +745,7 @@ def verify_requirements(plant, controller, requirements: Requirements,
             checks.append(RequirementCheck(name, float(required[name]), value, worst[j],
                                            units[name], where, worst_at[j]))
     coverage = _coverage(search) if thorough else \
-        f"a screen: the first stage only, {len(search.cache)} plants evaluated"
+        f"a screen: the first stage's grid only, {len(search.cache)} plants evaluated"
     return Verification(tuple(checks), tuple(modes), coverage,
                         search.loop(nominal_point)[1])
 
@@ -769,12 +771,13 @@ def _coverage(search: _Search) -> str:
                (("stiffness", req.stiffness_uncertainty), ("point masses", req.mass_uncertainty),
                 ("hub inertia", req.hub_inertia_uncertainty)) if value > 0.0]
     return (f"over {'; '.join(ranges)}: a grid of {FREQUENCY_POINTS if u > 0 else 1} common "
-            "frequency factors by the ends and middle of the damping range and the corners of "
-            "the structure's ranges, then for each requirement from its worst grid plant one "
-            "coordinate at a time (the structure's ends; its own mode, or the first for a "
-            "rigid-body requirement, on the frequency grid and refined by a bounded scalar "
-            "search; every other mode's frequency and damping at their ends), "
-            f"{len(search.cache)} plants evaluated")
+            "frequency factors by the ends and middle of the damping range, the corners of "
+            f"the structure's ranges and {RANDOM_POINTS} random plants, then for each "
+            "requirement from the worst of these one coordinate at a time (the structure's "
+            "ends; its own mode, or the first for a rigid-body requirement, on a grid of "
+            f"{FREQUENCY_POINTS} frequencies by {DAMPING_POINTS} damping ratios refined by a "
+            "Nelder-Mead search; sweeps of every other mode's frequency and damping until one "
+            f"finds nothing worse), {len(search.cache)} plants evaluated")
 
 
 def monte_carlo_requirements(plant, controller, requirements: Requirements, samples: int = 200,

@@ -11,21 +11,23 @@ and every scene to one process pool at once, the longest first (:data:`SECTION_O
 and the report keeps its own order. Sizes are chosen to finish in well under a minute on two
 cores.
 
-==========================  =================================================================
-section                     content
-==========================  =================================================================
-:func:`kane_spinup`         paper 001 Fig. 4: spin-up to 0.5, 2, 4 rad/s, first vs zero_order
-:func:`spacecraft_torque`   paper 001 Fig. 5: 50 N m on a massless hub
-:func:`hub_beam_mass`       paper 000 Figs. 5 to 8: the point mass, sweeps of d/l and R_M
-:func:`slew_comparison`     every controller kind on ``slew-90`` and on ``two-array-slew``
-:func:`structures`          one beam against two arrays, pinned and free hub (its own module)
-:func:`three_axes`          the built-in spatial scenes against their planar counterparts, an
-                            animation (its own module)
-:func:`model_error`         trajopt+lqr against NMPC when the design model is 20 % off
-:func:`large_deflection`    the optimal slew designed on first_order and on exact geometry
-:func:`hardware`            a reaction wheel and a DC motor, exact state and noisy sensors
-                            (its own module)
-==========================  =================================================================
+==============================  =================================================================
+section                         content
+==============================  =================================================================
+:func:`kane_spinup`             paper 001 Fig. 4: spin-up to 0.5, 2, 4 rad/s, first vs zero_order
+:func:`spacecraft_torque`       paper 001 Fig. 5: 50 N m on a massless hub
+:func:`hub_beam_mass`           paper 000 Figs. 5 to 8: the point mass, sweeps of d/l and R_M
+:func:`slew_comparison`         every controller kind on ``slew-90`` and on ``two-array-slew``
+:func:`structures`              one beam against two arrays, pinned and free hub (its own module)
+:func:`three_axes`              the built-in spatial scenes against their planar counterparts, an
+                                animation (its own module)
+:func:`model_error`             trajopt+lqr against NMPC when the design model is 20 % off
+:func:`large_deflection`        the optimal slew designed on first_order and on exact geometry
+:func:`hardware`                a reaction wheel and a DC motor, exact state and noisy sensors
+                                (its own module)
+:func:`requirements_section`    a PD that misses a flexible-mode requirement and its filtered
+                                redesign, on slew-90 and on two-array-slew (its own module)
+==============================  =================================================================
 
 Like the command line, this module sits on top of both packages: it imports
 :mod:`controllers` (inside :func:`slew_comparison`); flexctl's physics never does.
@@ -52,6 +54,7 @@ from .run_cache import remembered
 from .task_fingerprint import task_fingerprint
 from .verdict import summary_verdict
 from .demo_hardware import hardware
+from .demo_requirements import requirements_section
 from .demo_spatial import SPATIAL_SCENES, three_axes
 from .demo_structures import structures
 from .section import Section, save_figure as _save
@@ -582,6 +585,16 @@ def _two_array_comparison(out: Path, executor=None) -> Section:
     return slew_comparison(out, executor, kinds=FREE_HUB_KINDS, scene_name="two-array-slew")
 
 
+def _requirements_slew_90(out: Path, executor=None) -> Section:
+    """:func:`~flexctl.app.demo_requirements.requirements_section` on ``slew-90``."""
+    return requirements_section(out, executor, scenes=("slew-90",))
+
+
+def _requirements_two_arrays(out: Path, executor=None) -> Section:
+    """:func:`~flexctl.app.demo_requirements.requirements_section` on ``two-array-slew``."""
+    return requirements_section(out, executor, scenes=("two-array-slew",))
+
+
 #: The sections, in the report's order: (label, function ``f(out) -> Section``).
 SECTIONS = (("paper 001 Fig. 4", kane_spinup),
             ("paper 001 Fig. 5", spacecraft_torque),
@@ -592,11 +605,15 @@ SECTIONS = (("paper 001 Fig. 4", kane_spinup),
             ("controller comparison, two arrays", _two_array_comparison),
             ("design-model error", model_error),
             ("large deflection", large_deflection),
-            ("actuators and sensors", hardware))
+            ("actuators and sensors", hardware),
+            ("requirements, slew-90", _requirements_slew_90),
+            ("requirements, two arrays", _requirements_two_arrays))
 #: The order in which the sections go to the pool: longest first (CPU seconds of each, measured
 #: one after the other in one process on this project's 2-core machine, in the comments), so
 #: that the short ones and the scenes fill the processes' ends.
 SECTION_ORDER = ("three axes",                           # 60 (two spatial runs)
+                 "requirements, two arrays",             # 55 (verified, filtered, flown)
+                 "requirements, slew-90",                # 40
                  "actuators and sensors",                # 11.4
                  "controller comparison, two arrays",    # 9.3
                  "controller comparison",                # 9.0
