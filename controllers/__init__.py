@@ -51,8 +51,8 @@ from .analysis.robustness import (Dispersion, RobustnessSummary, RobustnessTask,
                                   robustness_summary, spread_statistics)
 from .feedback.observer import FilterModel
 from .feedback.structural_filters import Filtered, LeadLag, Notch, RollOff
-from .analysis.requirements import (FilterDesign, Requirements, Verification, design_filters,
-                                    verify_requirements)
+from .analysis.filter_design import FilterDesign, design_filters
+from .analysis.requirements import Requirements, Verification, verify_requirements
 
 __all__ = [
     "SlewProfile", "minimum_slew_duration",

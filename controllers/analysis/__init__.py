@@ -9,6 +9,7 @@ module              contents
 ``robustness``      Monte Carlo of a design flown on dispersed plants, and its spread
 ``spatial_loops``   the three-axis quaternion loop on the flexible spacecraft, its disk margins
 ``requirements``    loop requirements as data, verified nominally and over the uncertainty
+``filter_design``   structural filters placed until the requirements hold
 ==================  ============================================================================
 
 Builds on the laws (:mod:`controllers.feedback`).

@@ -77,8 +77,8 @@ from flexctl.model.modal_uncertainty import with_modes
 from .dispersion import disperse
 from .loops import closed_loop_verdict, loop_transfer
 
-__all__ = ["Requirements", "RequirementCheck", "ModeVerdict", "Verification", "FilterDesign",
-           "UncertainPlant", "design_filters", "monte_carlo_requirements",
+__all__ = ["Requirements", "RequirementCheck", "ModeVerdict", "Verification",
+           "UncertainPlant", "monte_carlo_requirements", "aliased_frequency",
            "verify_requirements", "MODE_WINDOW", "FREQUENCY_POINTS", "RIGID_POINTS"]
 
 #: Half-width of the window a flexible mode is judged in, relative to its frequency.
@@ -350,9 +350,27 @@ def _crossings(w: np.ndarray, response: np.ndarray) -> tuple:
     return gain, phase
 
 
-def _alias(omega, dt: float):
-    """Where a sampled loop (period ``dt``, 0 for a continuous one) sees frequencies
-    ``omega`` (rad/s): folded into ``(0, pi / dt]`` (at least 1e-6 of it)."""
+def aliased_frequency(omega, dt: float):
+    """Where a sampled loop sees frequencies: folded into ``(0, pi / dt]`` (at least 1e-6 of
+    it).
+
+    Parameters
+    ----------
+    omega : float or ndarray
+        Frequencies, rad/s.
+    dt : float
+        Sample time, s; 0 for a continuous loop (``omega`` returned as given).
+
+    Returns
+    -------
+    float or ndarray
+        rad/s.
+
+    Examples
+    --------
+    >>> float(aliased_frequency(220.35, 0.03))       # 2 pi / 0.03 = 209.4 rad/s
+    10.91...
+    """
     if not dt:
         return omega
     sampling = 2.0 * math.pi / dt
@@ -368,7 +386,7 @@ def _rigid_figures(response: _Response, flexible: np.ndarray) -> dict:
     w = np.geomspace(low, top * (1.0 - 1e-9), RIGID_POINTS)
     gain, phase = _crossings(w, response(w))
 
-    judged = _alias(flexible, response.dt)
+    judged = aliased_frequency(flexible, response.dt)
 
     def rigid(wc):
         return not np.any(np.abs(wc / judged - 1.0) <= MODE_WINDOW)
@@ -384,7 +402,7 @@ def _rigid_figures(response: _Response, flexible: np.ndarray) -> dict:
 def _mode_verdict(loop_response: _Response, mode: int, omega: float,
                   req: Requirements) -> ModeVerdict:
     """How the loop of ``loop_response`` stabilises the mode at ``omega`` (module Notes)."""
-    w = _alias(omega, loop_response.dt) * np.geomspace(1.0 - MODE_WINDOW, 1.0 + MODE_WINDOW,
+    w = aliased_frequency(omega, loop_response.dt) * np.geomspace(1.0 - MODE_WINDOW, 1.0 + MODE_WINDOW,
                                                        WINDOW_POINTS)
     response = loop_response(w)
     k = int(np.argmax(np.abs(response)))
@@ -824,158 +842,3 @@ def monte_carlo_requirements(plant, controller, requirements: Requirements, samp
             if name not in worst or value < worst[name][0]:
                 worst[name] = (float(value), point)
     return worst
-
-
-# ------------------------------------------------------------------ filter design
-@dataclass(frozen=True)
-class FilterDesign:
-    """What :func:`design_filters` found.
-
-    Attributes
-    ----------
-    controller : object
-        The law with the filters placed (a :class:`~controllers.Filtered`), or the law given
-        when it met every requirement as it was.
-    added : tuple
-        The filters placed, in the order they were added.
-    verification : Verification
-        The verification of :attr:`controller`.
-    unmet : tuple of (str, float, float)
-        ``(name, worst, required)`` of each requirement still missed (empty on success).
-    tried : int
-        Candidate designs screened.
-    initial : Verification or None
-        The verification of the law as given.
-    """
-
-    controller: object
-    added: tuple
-    verification: Verification
-    unmet: tuple
-    tried: int
-    initial: object = None
-
-    @property
-    def met(self) -> bool:
-        """Whether every requirement is met."""
-        return not self.unmet
-
-
-def _shortfall(verification: Verification) -> tuple:
-    """``(unstable, total shortfall, -least ratio)``, smaller is better: whether the loop is
-    unstable somewhere in the uncertainty, the sum over the requirements of how far each
-    worst value falls short of its required one (relative), and the least ratio of worst to
-    required."""
-    ratios = [check.worst / check.required for check in verification.checks
-              if check.name != "closed_loop_stable" and math.isfinite(check.worst)]
-    unstable = any(c.name == "closed_loop_stable" and not c.passed
-                   for c in verification.checks)
-    return (unstable, sum(max(0.0, 1.0 - r) for r in ratios), -min(ratios, default=0.0))
-
-
-def _candidates(omega: float, req: Requirements, sample_time: float, peak_db: float = 0.0):
-    """Notches where the sampled loop sees the mode at ``omega`` (its alias above the Nyquist
-    frequency; deep enough to bring its peak ``peak_db`` to the required attenuation, and
-    deeper, and wide enough to cover the frequency uncertainty, and wider) and a roll-off
-    below it, each within the sampled loop's reach."""
-    from ..feedback.structural_filters import NYQUIST_FRACTION, Notch, RollOff
-
-    limit = NYQUIST_FRACTION * math.pi / sample_time
-    seen = float(_alias(omega, sample_time))
-    # the uncertainty is relative to the mode's frequency, not to its alias
-    width = max(req.frequency_uncertainty * omega / seen, 0.05)
-    found = []
-    if seen < limit:
-        least = req.flexible_attenuation_db + max(peak_db, 0.0) + 6.0
-        for depth in (least, least + 10.0):
-            for zeta in (width, 2.0 * width, 3.5 * width, 5.0 * width):
-                found.append(Notch(frequency=seen, depth_db=depth, width=min(zeta, 1.0)))
-    if 0.5 * seen < limit:
-        found.append(RollOff(frequency=0.5 * seen, damping=0.7))
-    return found
-
-
-def _better_filter(plant, base, filters, report, req, spin_rate) -> tuple:
-    """``(tried, filter, verification, law)``: for the first failing flexible mode (worst
-    first) that a candidate fixes, the candidate that fixes it, keeps every requirement that
-    passed and leaves the least shortfall (:func:`_shortfall`); candidates are screened on
-    the first stage of the search, the one kept verified in full. ``filter`` None when no
-    candidate fixes any mode."""
-    from ..feedback.structural_filters import Filtered
-
-    failing = sorted((c for c in report.checks if c.name.startswith("flexible mode")
-                      and not c.passed), key=lambda c: c.worst)
-    passed = {c.name for c in report.checks if c.passed}
-    tried = 0
-    for check in failing:
-        mode = report.modes[int(check.name.split()[-1]) - 1]
-        ranked = []
-        for candidate in _candidates(mode.frequency, req, base.sample_time, mode.peak_db):
-            trial = Filtered(law=base, filters=[*filters, candidate])
-            screen = verify_requirements(plant, trial, req, spin_rate, thorough=False)
-            tried += 1
-            kept = {c.name for c in screen.checks if c.passed}
-            if check.name in kept and passed <= kept:
-                ranked.append((_shortfall(screen), len(ranked), candidate, trial))
-        for _, _, candidate, trial in sorted(ranked, key=lambda r: r[:2]):
-            result = verify_requirements(plant, trial, req, spin_rate)
-            kept = {c.name for c in result.checks if c.passed}
-            if check.name in kept and passed <= kept:
-                return tried, candidate, result, trial
-    return tried, None, None, None
-
-
-def design_filters(plant, controller, requirements: Requirements, *,
-                   max_filters: int = 3, spin_rate: float = 0.0) -> FilterDesign:
-    """Place notch or roll-off filters on a sampled law's command until the loop meets the
-    requirements over the uncertainty, or say which it cannot meet and by how much.
-
-    Greedy: while flexible modes miss their requirement, the candidates for each (worst
-    first; notches where the sampled loop sees its nominal frequency, of two depths that bring
-    its peak below the required attenuation and four widths, from one covering the frequency
-    uncertainty to five times it, and a roll-off at half that frequency) are screened on the first
-    stage of the search (``verify_requirements(..., thorough=False)``), and the first that
-    makes the mode pass and keeps every requirement that passed, by the least total
-    shortfall (the sum over the requirements of how far each worst value falls short of its
-    required one, relative), is verified in full and kept. A mode that no candidate fixes is
-    left, and named in :attr:`FilterDesign.unmet`.
-
-    Parameters
-    ----------
-    plant : flexctl.Model
-        The nominal plant.
-    controller : ZeroOrderHold, Observed or Filtered
-        A sampled law (its filters, if any, kept).
-    requirements : Requirements
-        What the loop must meet.
-    max_filters : int, optional
-        Most filters to add. Default 3.
-    spin_rate : float, optional
-        Steady hub rate of the linearisation, rad/s. Default 0.
-
-    Returns
-    -------
-    FilterDesign
-    """
-    from ..feedback.structural_filters import Filtered
-
-    max_filters = check_integer("design_filters", "max_filters", max_filters, minimum=1,
-                                maximum=10)
-    base = controller.law if isinstance(controller, Filtered) else controller
-    kept = list(controller.filters) if isinstance(controller, Filtered) else []
-    if getattr(base, "sample_time", None) is None:
-        raise InputTypeError("design_filters.controller must be a sampled law (a "
-                             "ZeroOrderHold, Observed or Filtered law); got "
-                             f"{type(controller).__name__}")
-    law = controller
-    report = initial = verify_requirements(plant, law, requirements, spin_rate)
-    tried, added = 1, []
-    while len(added) < max_filters:
-        better = _better_filter(plant, base, [*kept, *added], report, requirements, spin_rate)
-        tried += better[0]
-        if better[1] is None:
-            break
-        added.append(better[1])
-        report, law = better[2], better[3]
-    unmet = tuple((c.name, c.worst, c.required) for c in report.checks if not c.passed)
-    return FilterDesign(law, tuple(added), report, unmet, tried, initial)

@@ -171,7 +171,7 @@ def test_design_filters_notches_the_modes_it_can_and_names_the_one_it_cannot(hel
     """Phase margins of 170 deg leave attenuation as the only way for a mode to pass: the
     second and third modes can be notched to 12 dB below unit gain, the first (inside the
     loop's bandwidth) cannot, and the design says so with its worst ratio."""
-    from controllers.analysis.requirements import design_filters
+    from controllers.analysis.filter_design import design_filters
 
     plant = _plant(3)
     req = Requirements(flexible_attenuation_db=12.0, flexible_phase_margin_deg=170.0)
@@ -204,7 +204,7 @@ def test_bad_verification_inputs_are_refused_by_name(held, call, pattern):
 
 @pytest.mark.parametrize("value", [0, -1, "3", True, 2.5, 11])
 def test_design_filters_refuses_a_bad_filter_count(held, value):
-    from controllers.analysis.requirements import design_filters
+    from controllers.analysis.filter_design import design_filters
 
     with pytest.raises(InputError, match="design_filters.max_filters"):
         design_filters(_plant(2), held, Requirements(), max_filters=value)
