@@ -69,7 +69,7 @@ def coupled_modes(model: Model, spin_rate: float = 0.0) -> tuple:
     reduced : ndarray, shape (N, N)
         ``M_r``, kg.
     """
-    mech = _mechanical(model)
+    mech = _mechanical(model, "coupled_modes")
     mass = mech.rest_mass_matrix()
     n_modes = mech.matrices.n_modes
     n_h = mass.shape[0] - n_modes
@@ -81,9 +81,9 @@ def coupled_modes(model: Model, spin_rate: float = 0.0) -> tuple:
     return lam, vectors, reduced
 
 
-def _mechanical(model) -> Model:
+def _mechanical(model, owner: str = "with_modes") -> Model:
     if not isinstance(model, Model):
-        raise InputTypeError(f"with_modes.model must be a planar flexctl Model; got "
+        raise InputTypeError(f"{owner}.model must be a planar flexctl Model; got "
                              f"{type(model).__name__}")
     return model.mechanical if hasattr(model, "mechanical") else model
 
