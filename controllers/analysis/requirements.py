@@ -544,6 +544,10 @@ class _Search:
                 entry.update(_rigid_figures(entry["response"], entry["flexible"]))
         return entry[name]
 
+    def loop_at(self, point: UncertainPlant):
+        """The loop transfer at ``point``, built once."""
+        return self._entry(point)["loop"]
+
     def modes(self, point: UncertainPlant) -> list:
         """Every flexible mode's :class:`ModeVerdict` at ``point``."""
         return [self.verdict(point, k) for k in range(len(self._entry(point)["flexible"]))]
@@ -765,7 +769,7 @@ def verify_requirements(plant, controller, requirements: Requirements,
     coverage = _coverage(search) if thorough else \
         f"a screen: the first stage's grid only, {len(search.cache)} plants evaluated"
     return Verification(tuple(checks), tuple(modes), coverage,
-                        search.loop(nominal_point)[1])
+                        search.loop_at(nominal_point))
 
 
 def _checked_search(owner, plant, controller, requirements, spin_rate) -> _Search:

@@ -138,7 +138,7 @@ def _sampled_iosys(law, plant, name):
     """A held state law, its structural filters' states its own: a discrete-time system."""
     import control
 
-    from .structural_filters import Filtered
+    from .structural_filters import Filtered, bounded
 
     from flexctl.sim.digital import ZeroOrderHold
 
@@ -161,14 +161,11 @@ def _sampled_iosys(law, plant, name):
         return float(inner.torque(t, np.asarray(u, dtype=float), none))
 
     def updfcn(t, w, u, params):
-        return cascade.a @ np.asarray(w, dtype=float) + cascade.b[:, 0] * command(t, u)
+        return cascade.step(w, command(t, u))[1]
 
     def outfcn(t, w, u, params):
         v = command(t, u)
-        if cascade is None:
-            return np.array([v])
-        y = float((cascade.c @ np.asarray(w, dtype=float))[0] + cascade.d[0, 0] * v)
-        return np.array([y if limit is None else min(max(y, -limit), limit)])
+        return np.array([v if cascade is None else bounded(cascade.step(w, v)[0], limit)])
 
     return control.nlsys(updfcn if order else None, outfcn,
                          inputs=signal_names(plant.state_names),

@@ -254,6 +254,21 @@ class FilterCascade:
         """Number of states of the cascade."""
         return self.a.shape[0]
 
+    def step(self, state: np.ndarray, u: float) -> tuple:
+        """``(y, state_next)``: the filtered command and the filters' next state, for the
+        command ``u`` at a sample.
+
+        Parameters
+        ----------
+        state : ndarray, shape (order,)
+            The filters' state at the sample.
+        u : float
+            The command entering the filters.
+        """
+        state = np.asarray(state, dtype=float)
+        y = float((self.c @ state)[0] + self.d[0, 0] * u)
+        return y, self.a @ state + self.b[:, 0] * u
+
     def response(self, frequencies) -> np.ndarray:
         """The cascade's complex response at ``frequencies`` (rad/s), discrete.
 
@@ -282,6 +297,19 @@ def _canonical(num, den) -> tuple:
     return a, b, c, d
 
 
+def bounded(y: float, limit: float | None) -> float:
+    """``y`` clipped to ``[-limit, limit]`` (as given when ``limit`` is None).
+
+    Parameters
+    ----------
+    y : float
+        A command.
+    limit : float or None
+        Its bound.
+    """
+    return y if limit is None else min(max(y, -limit), limit)
+
+
 @dataclass(frozen=True, eq=False)
 class _FilteredSession:
     inner: object
@@ -290,11 +318,8 @@ class _FilteredSession:
     state: np.ndarray
 
     def step(self, t, x):
-        u = float(self.inner.step(t, x))
-        cas = self.cascade
-        y = float((cas.c @ self.state)[0] + cas.d[0, 0] * u)
-        self.state[:] = cas.a @ self.state + cas.b[:, 0] * u
-        return y if self.limit is None else min(max(y, -self.limit), self.limit)
+        y, self.state[:] = self.cascade.step(self.state, float(self.inner.step(t, x)))
+        return bounded(y, self.limit)
 
     def report(self):
         return self.inner.report()

@@ -13,6 +13,7 @@ and draws the Nichols charts and the tip deflections.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from pathlib import Path
@@ -40,13 +41,10 @@ DEMO_REQUIREMENTS = {"gain_margin_db": 6.0, "phase_margin_deg": 30.0,
 
 def _filter_table(item) -> dict:
     """A filter as the scene's ``controller.filters`` entry."""
-    kind = type(item).__name__
-    if kind == "Notch":
-        return {"kind": "notch", "frequency": item.frequency, "depth_db": item.depth_db,
-                "width": item.width}
-    if kind == "RollOff":
-        return {"kind": "roll_off", "frequency": item.frequency, "damping": item.damping}
-    return {"kind": "lead_lag", "zero": item.zero, "pole": item.pole}
+    from controllers.feedback.structural_filters import FILTER_KINDS
+
+    kind = next(name for name, cls in FILTER_KINDS.items() if isinstance(item, cls))
+    return {"kind": kind, **dataclasses.asdict(item)}
 
 
 def _fly(scene_name: str, controller: dict) -> tuple:
