@@ -148,8 +148,10 @@ def _sampled_iosys(law, plant, name):
     if callable(getattr(inner, "for_plant", None)):
         inner = inner.for_plant(plant)
     if not (callable(getattr(inner, "torque", None)) and getattr(inner, "n_states", 1) == 0):
-        raise InputValueError(f"to_iosys: {type(held).__name__} is a sampled law with states "
-                              "of its own (an estimator); only a held state law (PD, LQR, "
+        what = (f"a ZeroOrderHold of a {type(inner).__name__}, not a flexctl feedback law"
+                if isinstance(held, ZeroOrderHold) else
+                f"{type(held).__name__} is a sampled law with states of its own (an estimator)")
+        raise InputValueError(f"to_iosys: {what}; only a held state law (PD, LQR, "
                               "ScheduledLQR, TrajectoryTracker, LaggedLQR in a ZeroOrderHold), "
                               "with structural filters or not, is wired as a discrete system")
     none, dt = np.zeros(0), float(held.sample_time)
