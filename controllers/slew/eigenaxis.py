@@ -10,6 +10,9 @@ a fixed axis the rotation vector of ``target^-1 (x) q_ref(t)`` is ``(theta(t) - 
 axis`` exactly, so a law that regulates the error from the final ``target`` follows the
 reference by regulating ``x - x_ref(t)``
 (:class:`~controllers.feedback.spatial_lqr.SpatialLQR`).
+
+:func:`eigenaxis_shaper` shapes the profile against the modes a torque about the axis moves
+(input shaping per mode, :mod:`controllers.slew.shaping`).
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from flexctl.sim.quaternions import from_rotation_vector, product
 
 from .reference import check_reference, evaluate_reference
 
-__all__ = ["EigenaxisSlew"]
+__all__ = ["EigenaxisSlew", "eigenaxis_shaper", "eigenaxis_modes"]
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -109,3 +112,100 @@ class EigenaxisSlew(KeywordOnly):
         spin = rate * self.axis
         torque = acceleration * (self.inertia @ self.axis) + np.cross(spin, self.inertia @ spin)
         return (angle - self.final_angle) * self.axis, spin, torque
+
+
+def eigenaxis_shaper(structure, axis, kind: str = "zv", n_shaped: int = 1, n_modes=2):
+    """The input shaper of a slew about ``axis``: one ZV or ZVD shaper per mode that a torque
+    about ``axis`` moves, the ``n_shaped`` lowest, convolved.
+
+    A torque ``tau a`` about the unit axis ``a`` forces the mass-normalised mode ``j`` of the
+    structure at rest by ``phi_j[e] . a`` (its attitude rows): the modes with a force above
+    1e-9 of the largest are the ones the slew moves. Their frequencies and damping ratios are
+    those of the linear plant's poles (:func:`~flexctl.model.spatial_plant.linearize_spatial`
+    at rest), so each appendage's modal damping is counted as the coupled mode carries it.
+    Shape the slew's profile with it (:func:`~controllers.slew.shaping.shape`) before making
+    the :class:`EigenaxisSlew`.
+
+    Parameters
+    ----------
+    structure : SpatialStructure
+        The hub and its appendages.
+    axis : array_like, shape (3,)
+        The slew axis, hub frame.
+    kind : {"zv", "zvd"}, optional
+        The shaper of each mode (:func:`~controllers.slew.shaping.zv_shaper` or
+        :func:`~controllers.slew.shaping.zvd_shaper`). Default ``"zv"``.
+    n_shaped : int, optional
+        How many of the moved modes, from the lowest, are shaped (>= 1). Default 1.
+    n_modes : int, sequence of int or mapping, optional
+        Modes per field of each appendage in the model the modes are taken from (the forms of
+        :func:`~controllers.feedback.spatial_lqr.design_spatial_lqr`). Default 2.
+
+    Returns
+    -------
+    Shaper
+        The convolved impulse train (:func:`eigenaxis_modes` gives the modes it cancels).
+
+    Raises
+    ------
+    InputValueError
+        When fewer than ``n_shaped`` modes move under a torque about ``axis`` in that model.
+    """
+    from .shaping import convolve, zv_shaper, zvd_shaper
+
+    makers = {"zv": zv_shaper, "zvd": zvd_shaper}
+    if kind not in makers:
+        raise InputValueError(f"eigenaxis_shaper.kind must be 'zv' or 'zvd'; got {kind!r:.80}")
+    modes = eigenaxis_modes(structure, axis, n_shaped, n_modes)
+    shaper = None
+    for frequency, damping in modes:
+        one = makers[kind](frequency, damping)
+        shaper = one if shaper is None else convolve(shaper, one)
+    return shaper
+
+
+def eigenaxis_modes(structure, axis, n_shaped: int = 1, n_modes=2) -> tuple:
+    """``(frequency, damping ratio)`` of the ``n_shaped`` lowest modes a torque about
+    ``axis`` moves (rad/s; see :func:`eigenaxis_shaper`).
+
+    Parameters
+    ----------
+    structure : SpatialStructure
+        The hub and its appendages.
+    axis : array_like, shape (3,)
+        The slew axis, hub frame.
+    n_shaped : int, optional
+        How many modes (>= 1). Default 1.
+    n_modes : int, sequence of int or mapping, optional
+        Modes per field of each appendage in the model. Default 2.
+
+    Returns
+    -------
+    tuple of (float, float)
+        By ascending frequency.
+    """
+    from flexctl.model.checks import check_integer
+    from flexctl.model.spatial_plant import linearize_spatial
+    from flexctl.model.spatial_visibility import spatial_modal_visibility
+
+    axis = check_direction("eigenaxis_shaper", "axis", axis)
+    n_shaped = check_integer("eigenaxis_shaper", "n_shaped", n_shaped, minimum=1)
+    report = spatial_modal_visibility(structure, n_modes)
+    rows = [report.coordinates.index(name) for name in ("ex", "ey", "ez")]
+    force = np.abs(report.shapes[rows, :].T @ axis)
+    flexible = report.frequencies > 0.0
+    largest = float(np.max(force[flexible], initial=0.0))
+    moved = [j for j in np.flatnonzero(flexible) if force[j] > 1e-9 * largest]
+    if len(moved) < n_shaped:
+        raise InputValueError(
+            f"eigenaxis_shaper.n_shaped must be at most {len(moved)}: a torque about "
+            f"{np.round(axis, 6).tolist()} moves {len(moved)} modes of the model "
+            f"({', '.join(f'{report.frequencies[j]:.4g}' for j in moved)} rad/s); got "
+            f"{n_shaped} (more modes per field in the model give more)")
+    poles = np.linalg.eigvals(linearize_spatial(structure, n_modes).A)
+    poles = poles[poles.imag > 0.0]
+    out = []
+    for j in moved[:n_shaped]:
+        pole = poles[np.argmin(np.abs(np.abs(poles) - report.frequencies[j]))]
+        out.append((float(abs(pole)), float(max(-pole.real / abs(pole), 0.0))))
+    return tuple(out)

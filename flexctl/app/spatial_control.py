@@ -14,7 +14,10 @@
     (rad/s) and ``tip_deflection`` (m), optional ``design_modes`` (per field, default 2) and
     ``max_frequency`` (rad/s); with ``slew_duration`` (s, and ``slew_shape``, ``"poly7"`` or
     ``"cycloidal"``) it follows an eigenaxis slew of that length
-    (:class:`controllers.slew.eigenaxis.EigenaxisSlew`) instead of a step to the target;
+    (:class:`controllers.slew.eigenaxis.EigenaxisSlew`) instead of a step to the target,
+    shaped against the modes a torque about the axis moves with ``shaper`` (``"zv"`` or
+    ``"zvd"``) and ``shaped_modes`` (how many, from the lowest, default 1; from the model of
+    ``design_modes``: :func:`controllers.slew.eigenaxis.eigenaxis_shaper`);
   - ``"lqg"`` (:func:`controllers.feedback.spatial_lqr.design_spatial_lqg`): those and the
     filter's ``angle_noise`` (rad), ``rate_noise`` (rad/s) and ``process_torque`` (N m); it
     reads the attitude and rate (the attitude filter's, with ``[sensors]``).
@@ -50,7 +53,8 @@ _COMMON_KEYS = {"kind", "sample_time", "slew_axis", "slew_angle", "target", "tor
 _CONTROLLER_KEYS = {
     "quaternion_feedback": _COMMON_KEYS | {"bandwidth", "damping", "integral_time"},
     "lqr": _COMMON_KEYS | {"hub_angle", "hub_rate", "tip_deflection", "torque", "design_modes",
-                           "max_frequency", "slew_duration", "slew_shape"},
+                           "max_frequency", "slew_duration", "slew_shape", "shaper",
+                           "shaped_modes"},
 }
 _CONTROLLER_KEYS["lqg"] = _CONTROLLER_KEYS["lqr"] | {"angle_noise", "rate_noise",
                                                      "process_torque"}
@@ -147,6 +151,8 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
     except (ValueError, TypeError) as exc:
         message = str(exc)
         for owner, name in (("slew.duration", "slew_duration"), ("slew.shape", "slew_shape"),
+                            ("eigenaxis_shaper.kind", "shaper"),
+                            ("eigenaxis_shaper.n_shaped", "shaped_modes"),
                             ("design_spatial_lqr.n_modes", "design_modes")):
             message = message.replace(owner, f"controller.{name}")
         for owner in ("quaternion_feedback.", "design_spatial_lqr.", "design_spatial_lqg.",
@@ -207,9 +213,12 @@ def _design(kind: str, controller: dict, structure, target, step: float):
 def _eigenaxis(controller: dict, structure, target):
     """The eigenaxis slew of ``slew_duration`` (and ``slew_shape``), or None for a step."""
     if "slew_duration" not in controller:
-        if "slew_shape" in controller:
-            raise SceneError("controller.slew_shape needs controller.slew_duration (s)")
+        for key in ("slew_shape", "shaper", "shaped_modes"):
+            if key in controller:
+                raise SceneError(f"controller.{key} needs controller.slew_duration (s)")
         return None
+    if "shaped_modes" in controller and "shaper" not in controller:
+        raise SceneError("controller.shaped_modes needs controller.shaper ('zv' or 'zvd')")
     if "slew_axis" not in controller:
         raise SceneError("controller.slew_duration needs the slew as slew_axis and slew_angle "
                          "(an eigenaxis slew), not a target quaternion")
@@ -221,6 +230,13 @@ def _eigenaxis(controller: dict, structure, target):
         "controller", "slew_axis", controller["slew_axis"])))
     profile = SlewProfile(slew_angle=angle, duration=controller["slew_duration"],
                           shape=controller.get("slew_shape", "poly7"))
+    if "shaper" in controller:
+        from controllers.slew.eigenaxis import eigenaxis_shaper
+        from controllers.slew.shaping import shape
+
+        profile = shape(profile, eigenaxis_shaper(
+            structure, controller["slew_axis"], controller["shaper"],
+            controller.get("shaped_modes", 1), controller.get("design_modes", 2)))
     return EigenaxisSlew(axis=controller["slew_axis"], profile=profile,
                          inertia=structure.rigid_inertia, start=start)
 
