@@ -29,7 +29,7 @@ from flexctl.model.errors import InputValueError
 from flexctl.model.layout import StateLayout
 
 __all__ = ["DEFAULT_LAYOUT", "mode_count", "resized", "design_rows", "hub_state",
-           "casadi_hub_state"]
+           "casadi_hub_state", "spatial_design_plant"]
 
 #: The blocks of a state or gain handed over without a layout: one appendage, pinned hub.
 DEFAULT_LAYOUT = StateLayout.single(1)
@@ -157,3 +157,44 @@ def checked_rigid_inertia(owner: str, model_or_inertia) -> float:
     if isinstance(model_or_inertia, Model):
         return float(model_or_inertia.rigid_inertia)
     return check_real(owner, "inertia", model_or_inertia, minimum=0.0, strict=True)
+
+
+def spatial_design_plant(owner: str, structure, n_modes, variant: str) -> tuple:
+    """The linear plant of a spatial structure at rest that a three-axis design works on, and
+    its state names.
+
+    Parameters
+    ----------
+    owner : str
+        Who asks (named in errors).
+    structure : SpatialStructure
+        The hub and its appendages.
+    n_modes : int, sequence of int or mapping
+        Modes per field (:func:`~flexctl.model.spatial_dynamics.spatial_modes`).
+    variant : str
+        One of :data:`~flexctl.model.spatial_dynamics.SPATIAL_VARIANTS`.
+
+    Returns
+    -------
+    tuple
+        ``(plant, names)``: the :class:`control.StateSpace` of
+        :func:`~flexctl.model.spatial_plant.linearize_spatial` and its state names, ``ex, ey,
+        ez`` then the spatial model's own after the quaternion (a free hub's position and
+        velocity, the modal coordinates, ``wx wy wz``, the modal rates).
+    """
+    from flexctl.model.checks import check_choice, check_instance
+    from flexctl.model.spatial_dynamics import SPATIAL_VARIANTS, spatial_equations, spatial_modes
+    from flexctl.model.spatial_plant import linearize_spatial
+    from flexctl.model.spatial_structure import SpatialStructure
+
+    check_instance(owner, "structure", structure, SpatialStructure)
+    n_modes = spatial_modes(owner, structure, n_modes)
+    variant = check_choice(owner, "variant", variant, SPATIAL_VARIANTS)
+    plant = linearize_spatial(structure, n_modes, variant=variant)
+    layout = spatial_equations(structure, n_modes, variant).layout
+    c = layout.n_coordinates
+    kept = list(range(c - layout.n_elastic, c)) + list(range(c, c + layout.n_speeds))
+    names = ("ex", "ey", "ez", *(layout.state_names[k] for k in kept))
+    if len(names) != plant.nstates:
+        raise AssertionError("the design plant's states and the model's layout disagree")
+    return plant, names

@@ -35,13 +35,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexctl.model.checks import check_array, check_choice, check_instance, check_real
+from flexctl.model.checks import check_array, check_instance, check_real
 from flexctl.model.errors import InputValueError
-from flexctl.model.spatial_dynamics import SPATIAL_VARIANTS, spatial_equations, spatial_modes
-from flexctl.model.spatial_plant import linearize_spatial
-from flexctl.model.spatial_structure import SpatialStructure
 from flexctl.sim.quaternions import error_angles
 
+from ..design.plant_state import spatial_design_plant
 from ..design.controllable import (ControllablePart, design_failure, held, input_part,
                                    state_gain)
 from .lqr import LQRWeights
@@ -117,10 +115,10 @@ class SpatialLQR:
         :func:`~controllers.design.controllable.input_part`).
     note : str
         What the design left out (``""``: nothing).
-    reference : EigenaxisSlew or None
+    reference : EigenaxisSlew, SpatialSlewSolution or None
         A slew to follow to :attr:`target`: the law regulates ``x - x_ref(t)`` (the
-        reference's attitude error and rate) and adds its feedforward torque. None: a step to
-        the target.
+        reference's attitude error and rate; a planned slew's whole design state) and adds its
+        feedforward torque. None: a step to the target.
     """
 
     gain: np.ndarray
@@ -154,6 +152,9 @@ class SpatialLQR:
         if self.reference is None:
             return self.limited(-self.gain @ state)
         error, rate, torque = self.reference.at(t)
+        whole = getattr(self.reference, "state_at", None)
+        if whole is not None:                   # a planned slew: its whole design state
+            return self.limited(-self.gain @ (state - whole(t)) + torque)
         deviation = state.copy()
         deviation[0:3] -= error
         deviation[self.rate_at:self.rate_at + 3] -= rate
@@ -477,17 +478,7 @@ def _continuous(z, sample_time: float) -> np.ndarray:
 
 def _design_plant(structure, n_modes, variant):
     """The design plant at rest and its state names (the spatial model's own)."""
-    check_instance("design_spatial_lqr", "structure", structure, SpatialStructure)
-    n_modes = spatial_modes("design_spatial_lqr", structure, n_modes)
-    variant = check_choice("design_spatial_lqr", "variant", variant, SPATIAL_VARIANTS)
-    plant = linearize_spatial(structure, n_modes, variant=variant)
-    layout = spatial_equations(structure, n_modes, variant).layout
-    c = layout.n_coordinates
-    kept = list(range(c - layout.n_elastic, c)) + list(range(c, c + layout.n_speeds))
-    names = ("ex", "ey", "ez", *(layout.state_names[k] for k in kept))
-    if len(names) != plant.nstates:
-        raise AssertionError("the design plant's states and the model's layout disagree")
-    return plant, names
+    return spatial_design_plant("design_spatial_lqr", structure, n_modes, variant)
 
 
 def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
@@ -521,9 +512,11 @@ def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
         amplify noise). Default: the Nyquist frequency ``pi / sample_time`` of a sampled
         design, else :data:`FREQUENCY_FACTOR` times the rigid loop's bandwidth
         ``sqrt(torque / (hub_angle J_max))`` (``J_max`` the largest principal rigid inertia).
-    reference : EigenaxisSlew, optional
-        A slew about a fixed axis to follow to the target
-        (:class:`~controllers.slew.eigenaxis.EigenaxisSlew`). Default: a step to the target.
+    reference : EigenaxisSlew or SpatialSlewSolution, optional
+        A slew to follow to the target: about a fixed axis
+        (:class:`~controllers.slew.eigenaxis.EigenaxisSlew`), or planned on the flexible
+        structure (:func:`~controllers.slew.spatial_trajopt.solve_spatial_slew`, on the same
+        design modes: the law then follows its whole state). Default: a step to the target.
 
     Returns
     -------
@@ -553,6 +546,12 @@ def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
         torque_limit = check_real("design_spatial_lqr", "torque_limit", torque_limit,
                                   minimum=0.0, strict=True, maximum=1e9)
     plant, names = _design_plant(structure, n_modes, variant)
+    planned = getattr(reference, "state_names", None)
+    if planned is not None and tuple(planned) != tuple(names):
+        raise InputValueError(
+            f"design_spatial_lqr.reference was planned on a design state of {len(planned)} "
+            f"entries, the law's has {len(names)} ({', '.join(names[3:])}): plan the slew "
+            "on the law's structure and n_modes")
     q_mat, r_mat = spatial_weight_matrices(plant, weights)
     a, b = plant.A, plant.B
     if max_frequency is None:
@@ -615,7 +614,7 @@ def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: floa
     max_frequency : float, optional
         Modes faster than this are out of the design and of the filter, rad/s; default the
         Nyquist frequency ``pi / sample_time`` (:func:`design_spatial_lqr`).
-    reference : EigenaxisSlew, optional
+    reference : EigenaxisSlew or SpatialSlewSolution, optional
         A slew to follow (:func:`design_spatial_lqr`); the filter estimates the state from
         the final target and predicts with the whole command.
 
@@ -661,8 +660,10 @@ def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: floa
 def _target(target, reference=None) -> np.ndarray:
     if reference is not None:
         from ..slew.eigenaxis import EigenaxisSlew
+        from ..slew.spatial_trajopt import SpatialSlewSolution
 
-        check_instance("design_spatial_lqr", "reference", reference, EigenaxisSlew)
+        check_instance("design_spatial_lqr", "reference", reference,
+                       (EigenaxisSlew, SpatialSlewSolution))
         end = reference.target
         if target is None:
             target = end

@@ -17,7 +17,12 @@
     (:class:`controllers.slew.eigenaxis.EigenaxisSlew`) instead of a step to the target,
     shaped against the modes a torque about the axis moves with ``shaper`` (``"zv"`` or
     ``"zvd"``) and ``shaped_modes`` (how many, from the lowest, default 1; from the model of
-    ``design_modes``: :func:`controllers.slew.eigenaxis.eigenaxis_shaper`);
+    ``design_modes``: :func:`controllers.slew.eigenaxis.eigenaxis_shaper`); ``slew_shape =
+    "optimal"`` plans the least-effort slew on the design modes within the wheels' (or
+    ``torque_limit``'s) limits instead, in ``slew_intervals`` holds (default: one per
+    sample of the loop;
+    :func:`controllers.slew.spatial_trajopt.solve_spatial_slew`), and the law follows its
+    whole state;
   - ``"lqg"`` (:func:`controllers.feedback.spatial_lqr.design_spatial_lqg`): those and the
     filter's ``angle_noise`` (rad), ``rate_noise`` (rad/s) and ``process_torque`` (N m); it
     reads the attitude and rate (the attitude filter's, with ``[sensors]``).
@@ -54,7 +59,7 @@ _CONTROLLER_KEYS = {
     "quaternion_feedback": _COMMON_KEYS | {"bandwidth", "damping", "integral_time"},
     "lqr": _COMMON_KEYS | {"hub_angle", "hub_rate", "tip_deflection", "torque", "design_modes",
                            "max_frequency", "slew_duration", "slew_shape", "shaper",
-                           "shaped_modes"},
+                           "shaped_modes", "slew_intervals"},
 }
 _CONTROLLER_KEYS["lqg"] = _CONTROLLER_KEYS["lqr"] | {"angle_noise", "rate_noise",
                                                      "process_torque"}
@@ -108,7 +113,8 @@ def _checked(check, *args, **limits):
         raise SceneError(str(exc)) from None
 
 
-def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> SpatialLoop | None:
+def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=None,
+                 wheel_speeds=None) -> SpatialLoop | None:
     """The loop of a spatial scene's ``[controller]`` and ``[sensors]`` tables.
 
     Parameters
@@ -121,6 +127,10 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
         The structure (its rigid inertia sets the gains).
     quaternion : ndarray, shape (4,)
         The initial attitude (the slew's start).
+    wheels : WheelCluster, optional
+        The scene's wheels (their limits bound an optimal slew).
+    wheel_speeds : ndarray, optional
+        Their initial speeds, rad/s.
 
     Returns
     -------
@@ -147,7 +157,7 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
                     minimum=1e-4, maximum=100.0)
     target = _target(controller, quaternion)
     try:
-        law = _design(kind, controller, structure, target, step)
+        law = _design(kind, controller, structure, target, step, (wheels, wheel_speeds))
     except (ValueError, TypeError) as exc:
         message = str(exc)
         for owner, name in (("slew.duration", "slew_duration"), ("slew.shape", "slew_shape"),
@@ -155,8 +165,11 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
                             ("eigenaxis_shaper.n_shaped", "shaped_modes"),
                             ("design_spatial_lqr.n_modes", "design_modes")):
             message = message.replace(owner, f"controller.{name}")
+        for owner, name in (("spatial_slew.duration", "slew_duration"),
+                            ("spatial_slew.n_intervals", "slew_intervals")):
+            message = message.replace(owner, f"controller.{name}")
         for owner in ("quaternion_feedback.", "design_spatial_lqr.", "design_spatial_lqg.",
-                      "lqr_weights.", "eigenaxis_slew."):
+                      "lqr_weights.", "eigenaxis_slew.", "spatial_slew."):
             message = message.replace(owner, "controller.")
         raise SceneError(message) from None
     if not sensors:
@@ -183,8 +196,9 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion) -> Spat
     return loop
 
 
-def _design(kind: str, controller: dict, structure, target, step: float):
-    """The law of a ``[controller]`` table of ``kind``."""
+def _design(kind: str, controller: dict, structure, target, step: float, wheels: tuple):
+    """The law of a ``[controller]`` table of ``kind`` (``wheels``: the cluster and its
+    initial speeds, or Nones)."""
     if kind == "quaternion_feedback":
         from controllers.feedback.quaternion import QuaternionFeedback
 
@@ -202,7 +216,7 @@ def _design(kind: str, controller: dict, structure, target, step: float):
     common = {"n_modes": controller.get("design_modes", 2),
               "torque_limit": controller.get("torque_limit"),
               "max_frequency": controller.get("max_frequency"),
-              "reference": _eigenaxis(controller, structure, target)}
+              "reference": _eigenaxis(controller, structure, target, wheels)}
     if kind == "lqr":
         return design_spatial_lqr(structure, weights, target, sample_time=step, **common)
     noise = {key: controller[key] for key in ("angle_noise", "rate_noise", "process_torque")
@@ -210,10 +224,11 @@ def _design(kind: str, controller: dict, structure, target, step: float):
     return design_spatial_lqg(structure, weights, target, step, **noise, **common)
 
 
-def _eigenaxis(controller: dict, structure, target):
-    """The eigenaxis slew of ``slew_duration`` (and ``slew_shape``), or None for a step."""
+def _eigenaxis(controller: dict, structure, target, wheels: tuple):
+    """The slew of ``slew_duration`` (and ``slew_shape``, shaped or optimal), or None for a
+    step."""
     if "slew_duration" not in controller:
-        for key in ("slew_shape", "shaper", "shaped_modes"):
+        for key in ("slew_shape", "shaper", "shaped_modes", "slew_intervals"):
             if key in controller:
                 raise SceneError(f"controller.{key} needs controller.slew_duration (s)")
         return None
@@ -222,14 +237,23 @@ def _eigenaxis(controller: dict, structure, target):
     if "slew_axis" not in controller:
         raise SceneError("controller.slew_duration needs the slew as slew_axis and slew_angle "
                          "(an eigenaxis slew), not a target quaternion")
-    from controllers.slew.eigenaxis import EigenaxisSlew
-    from controllers.slew.reference import SlewProfile
-
     angle = np.radians(float(controller["slew_angle"]))
     start = product(target, from_rotation_vector(-angle * check_direction(
         "controller", "slew_axis", controller["slew_axis"])))
-    profile = SlewProfile(slew_angle=angle, duration=controller["slew_duration"],
-                          shape=controller.get("slew_shape", "poly7"))
+    from controllers.slew.reference import SHAPES
+
+    shape = controller.get("slew_shape", "poly7")
+    if not isinstance(shape, str) or shape not in (*SHAPES, "optimal"):
+        raise SceneError(f"controller.slew_shape must be one of {', '.join(SHAPES)}, optimal; "
+                         f"got {shape!r:.80}")
+    if shape == "optimal":
+        return _optimal(controller, structure, start, target, wheels)
+    if "slew_intervals" in controller:
+        raise SceneError("controller.slew_intervals is for slew_shape = 'optimal'")
+    from controllers.slew.eigenaxis import EigenaxisSlew
+    from controllers.slew.reference import SlewProfile
+
+    profile = SlewProfile(slew_angle=angle, duration=controller["slew_duration"], shape=shape)
     if "shaper" in controller:
         from controllers.slew.eigenaxis import eigenaxis_shaper
         from controllers.slew.shaping import shape
@@ -239,6 +263,34 @@ def _eigenaxis(controller: dict, structure, target):
             controller.get("shaped_modes", 1), controller.get("design_modes", 2)))
     return EigenaxisSlew(axis=controller["slew_axis"], profile=profile,
                          inertia=structure.rigid_inertia, start=start)
+
+
+def _optimal(controller: dict, structure, start, target, wheels: tuple):
+    """The least-effort slew planned on the design modes within the wheels' limits."""
+    from controllers.slew.spatial_trajopt import SpatialSlewProblem, solve_spatial_slew
+
+    if "shaper" in controller:
+        raise SceneError("controller.shaper shapes a slew_shape of 'poly7' or 'cycloidal'; an "
+                         "optimal slew is planned on the modes themselves")
+    cluster, speeds = wheels
+    limit = controller.get("torque_limit") if cluster is None else None
+    duration = _checked(check_real, "controller", "slew_duration", controller["slew_duration"],
+                        minimum=0.0, strict=True, maximum=1e5)
+    step = float(controller["sample_time"])
+    holds = controller.get("slew_intervals")
+    if holds is None:                       # the plan's holds are the loop's samples
+        holds = int(round(duration / step))
+        if abs(holds * step - duration) > 1e-9 * duration or holds < 2:
+            raise SceneError(
+                f"controller.slew_duration must be a multiple of controller.sample_time "
+                f"({step:g} s), at least two, for slew_shape = 'optimal' (its holds are the "
+                f"loop's samples), or give controller.slew_intervals; got {duration!r}")
+    problem = SpatialSlewProblem(start=start, target=target, duration=duration,
+                                 n_intervals=holds,
+                                 torque_limit=limit, wheels=cluster,
+                                 wheel_speeds=None if cluster is None else speeds)
+    return solve_spatial_slew(structure, problem, n_modes=controller.get("design_modes", 2),
+                              variant="first_order")
 
 
 def _target(controller: dict, quaternion) -> np.ndarray:
