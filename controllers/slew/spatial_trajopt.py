@@ -51,6 +51,7 @@ is the rigid eigenaxis slew (a seventh-order polynomial in angle) run through th
 from __future__ import annotations
 
 import time
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +69,9 @@ __all__ = ["SpatialSlewProblem", "SpatialSlewSolution", "solve_spatial_slew",
 
 #: Most holds of a spatial slew (the NLP grows linearly with them).
 MAX_SPATIAL_INTERVALS = 2000
+
+#: The remainder function of each spatial model's equations (built and compiled once).
+_REMAINDERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 class SpatialSlewError(RuntimeError):
@@ -183,7 +187,7 @@ class _DesignModel:
     maps: tuple            # Phi, [Gamma, Psi], C_w S_x, C_w [S_u, S_r] over a hold
     rate_at: int           # where w starts in x_l
     hold: float
-    rhs: object            # the spatial model's right-hand side (casadi.Function)
+    equations: object      # the spatial model's (SpatialEquations)
     full_rows: np.ndarray  # where x_l sits in the spatial model's state
     n_full: int
     inertia: np.ndarray    # the rigid structure's, for the first guess
@@ -223,7 +227,7 @@ def _design_model(structure, n_modes, variant: str, hold: float) -> _DesignModel
     a_l, b_l = a[3:, 3:], b[3:, :]
     rate_at = names.index("wx", 3) - 3
     return _DesignModel(names=names, a=a_l, b=b_l, maps=_hold_maps(a_l, b_l, rate_at, hold),
-                        rate_at=rate_at, hold=hold, rhs=equations.rhs, full_rows=rows,
+                        rate_at=rate_at, hold=hold, equations=equations, full_rows=rows,
                         n_full=layout.n_states,
                         inertia=np.asarray(structure.rigid_inertia, dtype=float))
 
@@ -257,22 +261,27 @@ def _remainder(model: _DesignModel):
     """``(x_l, torque) ->`` what the spatial model's right-hand side adds to ``A_l x_l + B_l
     torque`` (module Notes), at the identity attitude (the speeds' equations do not depend on
     it); compiled with its derivatives where it can be
-    (:func:`~controllers.design.native_dynamics.with_compiled_derivatives`)."""
+    (:func:`~controllers.design.native_dynamics.with_compiled_derivatives`), built once per
+    model."""
     import casadi as ca
 
     from ..design.native_dynamics import with_compiled_derivatives
 
+    if model.equations in _REMAINDERS:
+        return _REMAINDERS[model.equations]
     n = model.a.shape[0]
     x, torque = ca.SX.sym("x", n), ca.SX.sym("torque", 3)
     full = ca.SX.zeros(model.n_full)
     full[0] = 1.0
     for k, row in enumerate(model.full_rows):
         full[int(row)] = x[k]
-    rate = model.rhs(full, torque)[model.full_rows.tolist()]
+    rate = model.equations.rhs(full, torque)[model.full_rows.tolist()]
     rest = rate - ca.mtimes(ca.DM(model.a), x) - ca.mtimes(ca.DM(model.b), torque)
-    return with_compiled_derivatives(ca.Function("spatial_remainder", [x, torque], [rest],
-                                                 ["x", "torque"], ["remainder"],
-                                                 {"cse": True}))
+    built = with_compiled_derivatives(ca.Function("spatial_remainder", [x, torque], [rest],
+                                                  ["x", "torque"], ["remainder"],
+                                                  {"cse": True}))
+    _REMAINDERS[model.equations] = built
+    return built
 
 
 def _step(model: _DesignModel, wheels) -> _Step:
