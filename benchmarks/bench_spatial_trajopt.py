@@ -55,8 +55,8 @@ def _python_control(structure, problem, holds):
     import control.optimal as opt
     from scipy.optimize import NonlinearConstraint
 
-    model = st._design_model(structure, 1, "first_order", DURATION / holds)
-    step = st._step(model, None)
+    model = st.spatial_hold_model(structure, 1, "first_order", DURATION / holds)
+    step = st.hold_functions(model, None)
     n = model.a.shape[0]
 
     def update(t, x, u, params):

@@ -65,7 +65,8 @@ from flexctl.sim.quaternions import conjugate, error_angles, from_rotation_vecto
 from ..design.plant_state import spatial_design_plant
 
 __all__ = ["SpatialSlewProblem", "SpatialSlewSolution", "solve_spatial_slew",
-           "SpatialSlewError", "MAX_SPATIAL_INTERVALS"]
+           "SpatialSlewError", "MAX_SPATIAL_INTERVALS", "SpatialHoldModel", "HoldFunctions",
+           "spatial_hold_model", "hold_functions"]
 
 #: Most holds of a spatial slew (the NLP grows linearly with them).
 MAX_SPATIAL_INTERVALS = 2000
@@ -178,8 +179,31 @@ class SpatialSlewProblem(KeywordOnly):
 
 
 @dataclass(frozen=True, eq=False)
-class _DesignModel:
-    """The design model's matrices (module Notes), for holds of ``h``."""
+class SpatialHoldModel:
+    """The design model of a spatial structure over holds of :attr:`hold` seconds (module
+    Notes), made by :func:`spatial_hold_model`.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The design state's names: ``ex, ey, ez`` then ``x_l``'s.
+    a, b : ndarray
+        ``A_l`` (n, n) and ``B_l`` (n, 3) of the linear plant at rest.
+    maps : tuple of ndarray
+        ``Phi``, ``[Gamma, Psi]``, ``C_w S_x`` and ``C_w [S_u, S_r]`` over a hold.
+    rate_at : int
+        Where ``wx`` is in ``x_l``.
+    hold : float
+        s.
+    equations : SpatialEquations
+        The spatial model's.
+    full_rows : ndarray of int
+        Where ``x_l`` sits in the spatial model's state.
+    n_full : int
+        The spatial model's state size.
+    inertia : ndarray, shape (3, 3)
+        The rigid structure's inertia, kg m^2.
+    """
 
     names: tuple
     a: np.ndarray          # A_l
@@ -213,9 +237,28 @@ def _hold_maps(model_a, model_b, rate_at: int, h: float) -> tuple:
     return phi, gamma, s_x[rows], s_u[rows]
 
 
-def _design_model(structure, n_modes, variant: str, hold: float) -> _DesignModel:
+def spatial_hold_model(structure, n_modes, variant: str, hold: float) -> SpatialHoldModel:
+    """The design model of ``structure`` over holds of ``hold`` seconds (module Notes).
+
+    Parameters
+    ----------
+    structure : SpatialStructure
+        The hub and its appendages.
+    n_modes : int, sequence of int or mapping
+        Modes per field.
+    variant : {"exact", "first_order", "zero_order"}
+        The spatial model whose right-hand side gives the remainder.
+    hold : float
+        s (> 0).
+
+    Returns
+    -------
+    SpatialHoldModel
+    """
     from flexctl.model.spatial_dynamics import spatial_equations
 
+    hold = check_real("spatial_hold_model", "hold", hold, minimum=0.0, strict=True,
+                      maximum=1e5)
     plant, names = spatial_design_plant("solve_spatial_slew", structure, n_modes, variant)
     a, b = np.asarray(plant.A), np.asarray(plant.B)
     if np.max(np.abs(a[:, 0:3]), initial=0.0) > 1e-9 * max(1.0, np.max(np.abs(a))):
@@ -226,7 +269,7 @@ def _design_model(structure, n_modes, variant: str, hold: float) -> _DesignModel
     rows = np.r_[c - layout.n_elastic:c, c:c + layout.n_speeds]
     a_l, b_l = a[3:, 3:], b[3:, :]
     rate_at = names.index("wx", 3) - 3
-    return _DesignModel(names=names, a=a_l, b=b_l, maps=_hold_maps(a_l, b_l, rate_at, hold),
+    return SpatialHoldModel(names=names, a=a_l, b=b_l, maps=_hold_maps(a_l, b_l, rate_at, hold),
                         rate_at=rate_at, hold=hold, equations=equations, full_rows=rows,
                         n_full=layout.n_states,
                         inertia=np.asarray(structure.rigid_inertia, dtype=float))
@@ -249,15 +292,26 @@ def _qmul(p, q):
 
 
 @dataclass(frozen=True, eq=False)
-class _Step:
-    """The design model's hold as CasADi functions."""
+class HoldFunctions:
+    """A :class:`SpatialHoldModel`'s hold as CasADi functions (:func:`hold_functions`).
+
+    Attributes
+    ----------
+    advance : casadi.Function
+        ``(x_l, q, speeds, tau) -> (x_l, q, speeds)`` one hold later (``tau`` the torque
+        commanded of the cluster, or on the hub without wheels).
+    motor : casadi.Function
+        ``tau ->`` the wheels' motor torques (n_wheels; empty without wheels), N m.
+    held : casadi.Function
+        ``(x_l, speeds, tau) ->`` the hold's input ``[torque on the structure, remainder]``.
+    """
 
     advance: object        # (x_l, q, speeds, tau) -> (x_l+, q+, speeds+)
     motor: object          # tau -> motor torques (n_wheels)
     held: object           # (x_l, speeds, tau) -> the hold's input (torque, remainder)
 
 
-def _remainder(model: _DesignModel):
+def _remainder(model: SpatialHoldModel):
     """``(x_l, torque) ->`` what the spatial model's right-hand side adds to ``A_l x_l + B_l
     torque`` (module Notes), at the identity attitude (the speeds' equations do not depend on
     it); compiled with its derivatives where it can be
@@ -284,7 +338,20 @@ def _remainder(model: _DesignModel):
     return built
 
 
-def _step(model: _DesignModel, wheels) -> _Step:
+def hold_functions(model: SpatialHoldModel, wheels) -> HoldFunctions:
+    """The hold of ``model`` as CasADi functions, with ``wheels`` or a torque on the hub.
+
+    Parameters
+    ----------
+    model : SpatialHoldModel
+        The design model.
+    wheels : WheelCluster or None
+        The wheels the torque is commanded of (pseudo-inverse distribution).
+
+    Returns
+    -------
+    HoldFunctions
+    """
     import casadi as ca
 
     n = model.a.shape[0]
@@ -306,12 +373,12 @@ def _step(model: _DesignModel, wheels) -> _Step:
         w_next = x_next[model.rate_at:model.rate_at + 3]
         outputs[2] = speeds + model.hold * motor / ca.DM(wheels.inertias) \
             - ca.mtimes(ca.DM(wheels.axes).T, w_next - w)
-    return _Step(advance=ca.Function("spatial_hold", [x, q, speeds, tau], outputs),
+    return HoldFunctions(advance=ca.Function("spatial_hold", [x, q, speeds, tau], outputs),
                  motor=ca.Function("motor", [tau], [motor]),
                  held=ca.Function("held", [x, speeds, tau], [held]))
 
 
-def _rigid_guess(problem: SpatialSlewProblem, model: _DesignModel, step: _Step) -> tuple:
+def _rigid_guess(problem: SpatialSlewProblem, model: SpatialHoldModel, step: HoldFunctions) -> tuple:
     """The rigid eigenaxis slew's torques (poly7 in angle) and the design model's response."""
     axis, angle = problem.eigenaxis
     n_int = problem.n_intervals
@@ -395,7 +462,7 @@ class _Transcribed:
     x_scale: np.ndarray
 
 
-def _transcribe(problem: SpatialSlewProblem, model: _DesignModel, step: _Step,
+def _transcribe(problem: SpatialSlewProblem, model: SpatialHoldModel, step: HoldFunctions,
                 guess: tuple) -> _Transcribed:
     import casadi as ca
 
@@ -475,8 +542,8 @@ class SpatialSlewSolution:
     iterations: int
     solve_time: float
     return_status: str
-    model: _DesignModel
-    step: _Step
+    model: SpatialHoldModel
+    step: HoldFunctions
     _maps: dict
 
     def __repr__(self):
@@ -627,9 +694,9 @@ def solve_spatial_slew(structure, problem: SpatialSlewProblem, *, n_modes=2,
     ('Solve_Succeeded', True)
     """
     check_instance("solve_spatial_slew", "problem", problem, SpatialSlewProblem)
-    model = _design_model(structure, n_modes, variant, problem.duration / problem.n_intervals)
+    model = spatial_hold_model(structure, n_modes, variant, problem.duration / problem.n_intervals)
     _refuse_too_short(problem, model.inertia)
-    step = _step(model, problem.wheels)
+    step = hold_functions(model, problem.wheels)
     guess = _rigid_guess(problem, model, step)
     nlp = _transcribe(problem, model, step, guess)
     options = {"print_level": 0, "max_iter": 500, "tol": 1e-8, "mu_init": 1e-3, "sb": "yes",
