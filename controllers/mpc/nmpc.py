@@ -48,6 +48,7 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -154,7 +155,31 @@ def conic_solver(name: str, solver: str, h_sparsity, a_sparsity, options: dict |
     elif solver == "qpoases":
         opts.update(printLevel="none", sparse=False)
     opts.update(options or {})
-    return ca.conic(name, solver, {"h": h_sparsity, "a": a_sparsity}, opts)
+    if solver != "qpoases":
+        return ca.conic(name, solver, {"h": h_sparsity, "a": a_sparsity}, opts)
+    with _quiet_stdout():           # qpOASES prints its banner when it is made
+        return ca.conic(name, solver, {"h": h_sparsity, "a": a_sparsity}, opts)
+
+
+@contextlib.contextmanager
+def _quiet_stdout():
+    """The process's standard output (file descriptor 1) sent to the null device."""
+    import os
+    import sys
+
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError, AttributeError):       # no descriptor 1: nothing to quiet
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+            yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
 
 
 def _default_weights(model: Model, angle: float, torque_limit: float):

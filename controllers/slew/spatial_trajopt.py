@@ -66,7 +66,7 @@ from ..design.plant_state import spatial_design_plant
 
 __all__ = ["SpatialSlewProblem", "SpatialSlewSolution", "solve_spatial_slew",
            "SpatialSlewError", "MAX_SPATIAL_INTERVALS", "SpatialHoldModel", "HoldFunctions",
-           "spatial_hold_model", "hold_functions"]
+           "spatial_hold_model", "hold_functions", "remainder_function"]
 
 #: Most holds of a spatial slew (the NLP grows linearly with them).
 MAX_SPATIAL_INTERVALS = 2000
@@ -311,12 +311,23 @@ class HoldFunctions:
     held: object           # (x_l, speeds, tau) -> the hold's input (torque, remainder)
 
 
-def _remainder(model: SpatialHoldModel):
+def remainder_function(model: SpatialHoldModel):
     """``(x_l, torque) ->`` what the spatial model's right-hand side adds to ``A_l x_l + B_l
     torque`` (module Notes), at the identity attitude (the speeds' equations do not depend on
     it); compiled with its derivatives where it can be
     (:func:`~controllers.design.native_dynamics.with_compiled_derivatives`), built once per
-    model."""
+    model.
+
+    Parameters
+    ----------
+    model : SpatialHoldModel
+        The design model.
+
+    Returns
+    -------
+    casadi.Function
+        Inputs ``x`` (n,) and ``torque`` (3,), output ``remainder`` (n,).
+    """
     import casadi as ca
 
     from ..design.native_dynamics import with_compiled_derivatives
@@ -364,7 +375,7 @@ def hold_functions(model: SpatialHoldModel, wheels) -> HoldFunctions:
         g, j_w = ca.DM(wheels.axes), ca.DM(wheels.inertias)
         torque = tau - ca.cross(w, ca.mtimes(g, j_w * (ca.mtimes(g.T, w) + speeds)))
         motor = -ca.mtimes(ca.DM(np.linalg.pinv(wheels.axes)), tau)
-    held = ca.vertcat(torque, _remainder(model)(x, torque))
+    held = ca.vertcat(torque, remainder_function(model)(x, torque))
     phi, gamma, s_x, s_u = (ca.DM(m) for m in model.maps)
     x_next = ca.mtimes(phi, x) + ca.mtimes(gamma, held)
     q_next = _qmul(q, _exp_quaternion(ca.mtimes(s_x, x) + ca.mtimes(s_u, held)))

@@ -1,0 +1,170 @@
+"""The three-axis NMPC (:mod:`controllers.mpc.spatial_nmpc`): its linearisation is the hold's,
+it slews the two arrays to rest on target through wheels within their limits, and it follows
+a planned slew."""
+
+import numpy as np
+import pytest
+
+from controllers.feedback.lqr import LQRWeights
+from controllers.mpc.spatial_nmpc import (SpatialNMPC, _attitude_errors, _hold_jacobians,
+                                          design_spatial_nmpc)
+from controllers.slew.spatial_trajopt import (SpatialSlewProblem, hold_functions,
+                                              solve_spatial_slew)
+from flexctl import SpatialAppendage, SpatialHub, SpatialStructure
+from flexctl.model.errors import InputError
+from flexctl.model.wheel_cluster import WheelCluster
+from flexctl.sim.quaternions import (conjugate, error_angles, from_rotation_vector, product,
+                                     rotation_vector)
+from flexctl.sim.spatial_loop import simulate_spatial_loop
+
+
+def _wing(name, direction):
+    return SpatialAppendage(name=name, direction=direction, normal=(0, 0, 1), length=1.8,
+                            density=2766.0, area=2.5e-4, youngs_modulus=6.9e10,
+                            second_moment=5.2083e-10, second_moment_lateral=5.2083e-8,
+                            shear_modulus=2.6e10, torsion_constant=1.0e-9,
+                            damping_ratio=0.005)
+
+
+CRAFT = SpatialStructure(hub=SpatialHub(inertia=[[1.3, 0.05, 0.0], [0.05, 1.2, 0.0],
+                                                 [0.0, 0.0, 1.4]], radius=0.06),
+                         appendages=(_wing("wing_a", (0, 1, 0)), _wing("wing_b", (0, -1, 0))))
+TARGET = from_rotation_vector(np.radians(20.0) * np.array([0.6, 0.0, 0.8]))
+WHEELS = WheelCluster.orthogonal(inertia=0.01, torque_limit=0.1, speed_limit=314.16)
+WEIGHTS = LQRWeights(hub_angle=0.05, hub_rate=0.05, tip_deflection=0.005, torque=0.1)
+
+
+class _Recorded:
+    """The NMPC as a state-feedback law whose session is kept for its report."""
+
+    state_feedback = True
+
+    def __init__(self, law):
+        self.law, self.session = law, None
+
+    def start(self, names):
+        self.session = self.law.start(names)
+        return self.session
+
+
+def _fly(law, wheels, t_final=20.0):
+    recorded = _Recorded(law)
+    loop = simulate_spatial_loop(CRAFT, t_final, recorded, sample_time=law.sample_time,
+                                 n_modes=2, variant="exact", wheels=wheels, rtol=1e-8)
+    assert loop.ok
+    return loop.result, recorded.session
+
+
+@pytest.mark.parametrize("wheels", [WHEELS, None], ids=["wheels", "hub torque"])
+def test_the_hold_jacobians_are_the_holds(wheels):
+    """The analytic Jacobians in the local coordinates (the attitude perturbed in its tangent
+    space) against central differences of the hold itself."""
+    law = design_spatial_nmpc(CRAFT, WEIGHTS, TARGET, 0.1, horizon=2, n_modes=1, wheels=wheels,
+                              torque_limit=None if wheels else 0.1)
+    model, count = law.model, 0 if wheels is None else wheels.count
+    advance = hold_functions(model, wheels).advance
+    n = model.a.shape[0]
+    rng = np.random.default_rng(0)
+    x = 1e-3 * rng.normal(size=n)
+    x[model.rate_at:model.rate_at + 3] = [0.05, -0.03, 0.04]
+    q = from_rotation_vector([0.3, -0.2, 0.5])
+    speeds, torques = 50.0 * rng.normal(size=count), 0.05 * rng.normal(size=(3, 2))
+    _, _, _, held, jac = (np.asarray(v) for v in law.predict(x, q, speeds, torques))
+    xs = np.asarray(law.predict(x, q, speeds, torques)[0])
+    ss = np.asarray(law.predict(x, q, speeds, torques)[2])
+    a_all, b_all = _hold_jacobians(law, np.hstack([x[:, None], xs[:, :-1]]),
+                                   np.hstack([speeds[:, None], ss[:, :-1]]), held, jac)
+    nominal = np.asarray(advance(x, q, speeds, torques[:, 0])[1]).ravel()
+
+    def local(dz, du):
+        out = [np.asarray(v).ravel() for v in advance(
+            x + dz[:n], product(q, from_rotation_vector(dz[n:n + 3])), speeds + dz[n + 3:],
+            torques[:, 0] + du)]
+        return np.concatenate([out[0], rotation_vector(product(conjugate(nominal), out[1])),
+                               out[2]])
+
+    m, eps = n + 3 + count, 1e-6
+    for k in range(m):
+        dz = np.zeros(m)
+        dz[k] = eps
+        column = (local(dz, np.zeros(3)) - local(-dz, np.zeros(3))) / (2 * eps)
+        assert np.allclose(a_all[0][:, k], column, atol=1e-7 * max(1.0, np.abs(column).max()))
+    for k in range(3):
+        du = np.zeros(3)
+        du[k] = eps
+        column = (local(np.zeros(m), du) - local(np.zeros(m), -du)) / (2 * eps)
+        assert np.allclose(b_all[0][:, k], column, atol=1e-8 * max(1.0, np.abs(column).max()))
+
+
+def test_attitude_errors_are_the_short_rotation():
+    rng = np.random.default_rng(1)
+    target = from_rotation_vector(rng.normal(size=3))
+    quaternions = np.array([from_rotation_vector(rng.normal(size=3)) for _ in range(5)]
+                           + [target, -target]).T
+    expected = np.array([error_angles(target, q) for q in quaternions.T])
+    assert np.allclose(_attitude_errors(target, quaternions), expected, atol=1e-14)
+
+
+@pytest.fixture(scope="module")
+def step_flight():
+    law = design_spatial_nmpc(CRAFT, WEIGHTS, TARGET, 0.1, horizon=20, n_modes=1, wheels=WHEELS)
+    return law, *_fly(law, WHEELS)
+
+
+def test_it_slews_to_rest_on_target_within_the_wheels_torque(step_flight):
+    law, run, session = step_flight
+    assert isinstance(law, SpatialNMPC) and session.failed_steps == 0
+    assert np.linalg.norm(error_angles(TARGET, run.quaternion[:, -1])) < 1e-4
+    late = run.t > 15.0
+    assert max(np.max(np.abs(tip[:, late])) for tip in run.tips.values()) < 5e-5
+    assert np.max(np.abs(run.wheel_torques)) <= 0.1 * (1 + 1e-9)
+    print(f"median step {1e3 * np.median(session.step_times):.2f} ms")
+
+
+def test_a_speed_limit_is_a_constraint(step_flight):
+    """The free slew's wheels reach some peak speed; with a speed limit below it (its 0.9
+    margin kept in the prediction) the wheels stay below the limit, and the slew still
+    ends on target."""
+    _, free, _ = step_flight
+    peak = float(np.max(np.abs(free.wheel_speeds)))
+    slow = WheelCluster.orthogonal(inertia=0.01, torque_limit=0.1, speed_limit=0.7 * peak)
+    law = design_spatial_nmpc(CRAFT, WEIGHTS, TARGET, 0.1, horizon=20, n_modes=1, wheels=slow)
+    run, session = _fly(law, slow, t_final=30.0)
+    print(f"free peak {peak:.2f} rad/s, limited peak "
+          f"{np.max(np.abs(run.wheel_speeds)):.2f} of {0.7 * peak:.2f}")
+    assert np.max(np.abs(run.wheel_speeds)) <= 0.7 * peak
+    assert np.linalg.norm(error_angles(TARGET, run.quaternion[:, -1])) < 1e-3
+
+
+def test_it_follows_a_planned_slew_to_the_target():
+    """On a 12 s plan within the wheels' limits the NMPC ends the slew on target; the step's
+    NMPC is still turning there."""
+    plan = solve_spatial_slew(CRAFT, SpatialSlewProblem(target=TARGET, duration=12.0,
+                                                        n_intervals=120, wheels=WHEELS),
+                              n_modes=1)
+    law = design_spatial_nmpc(CRAFT, WEIGHTS, None, 0.1, horizon=20, n_modes=1, wheels=WHEELS,
+                              reference=plan)
+    run, session = _fly(law, WHEELS, t_final=14.0)
+    end = int(np.argmin(np.abs(run.t - 12.0)))
+    error = np.linalg.norm(error_angles(TARGET, run.quaternion[:, end]))
+    print(f"pointing at the plan's end {error:.2e} rad")
+    assert error < 1e-4 and session.failed_steps == 0
+
+
+@pytest.mark.parametrize("kwargs, pattern", [
+    ({"sample_time": 0.0}, r"design_spatial_nmpc\.sample_time"),
+    ({"horizon": 1}, r"design_spatial_nmpc\.horizon"),
+    ({"horizon": 2.5}, r"design_spatial_nmpc\.horizon"),
+    ({"qp_solver": "cplex"}, r"design_spatial_nmpc\.qp_solver"),
+    ({"qp_solver": "hpipm"}, r"design_spatial_nmpc\.qp_solver"),
+    ({"speed_margin": 0.0}, r"design_spatial_nmpc\.speed_margin"),
+    ({"wheels": WHEELS, "torque_limit": 0.1}, r"design_spatial_nmpc\.torque_limit bounds"),
+    ({"torque_limit": -1.0}, r"design_spatial_nmpc\.torque_limit"),
+    ({"target": None}, r"design_spatial_nmpc\.target is required"),
+    ({"target": (0, 0, 0, 0)}, r"design_spatial_nmpc\.target must be a non-zero"),
+    ({"n_modes": 0}, r"n_modes"),
+])
+def test_bad_arguments_are_refused_by_name(kwargs, pattern):
+    arguments = {"structure": CRAFT, "weights": WEIGHTS, "target": TARGET, **kwargs}
+    with pytest.raises(InputError, match=pattern):
+        design_spatial_nmpc(**arguments)
