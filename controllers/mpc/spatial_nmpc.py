@@ -189,6 +189,16 @@ class SpatialNMPC:
         Fraction of each wheel's speed limit the prediction may use.
     reference : SpatialSlewSolution or None
     qp_solver : str
+    predict : casadi.Function
+        The rollout and the remainder's Jacobians (:func:`_prediction`).
+    qp : casadi.Function
+        The QP solver.
+    constraint_rows : int
+        Rows of the QP's constraint matrix (the wheels' torques and speeds).
+    model : SpatialHoldModel
+        The prediction model (:func:`~controllers.slew.spatial_trajopt.spatial_hold_model`).
+    fallback : casadi.Function or None
+        OSQP on the same QP, where the first solver fails.
     """
 
     state_names: tuple
@@ -229,7 +239,18 @@ class SpatialNMPC:
 
     def wanted(self, t: float) -> tuple:
         """``(r, v)``: the reference's design state and torque at ``t`` (rest at the target
-        without a reference)."""
+        without a reference).
+
+        Parameters
+        ----------
+        t : float
+            Time, s.
+
+        Returns
+        -------
+        tuple of ndarray
+            Shapes (n + 3,) and (3,).
+        """
         if self.reference is None:
             return np.zeros(len(self.state_names)), np.zeros(3)
         return self.reference.state_at(t), self.reference.at(t)[2]
@@ -237,6 +258,13 @@ class SpatialNMPC:
 
 class SpatialNMPCSession:
     """One flight of a :class:`SpatialNMPC`: ``session(t, attitude, rate, state) -> torque``.
+
+    Parameters
+    ----------
+    law : SpatialNMPC
+        The controller.
+    state_names : sequence of str or None
+        The flown plant's state names (:meth:`SpatialNMPC.start`).
 
     Attributes
     ----------

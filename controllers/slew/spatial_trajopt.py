@@ -76,7 +76,17 @@ _REMAINDERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 class SpatialSlewError(RuntimeError):
-    """IPOPT did not find the slew; ``return_status`` and ``iterations`` say how it ended."""
+    """IPOPT did not find the slew.
+
+    Parameters
+    ----------
+    message : str
+        What happened and what to change.
+    return_status : str
+        IPOPT's.
+    iterations : int
+        IPOPT's iterations.
+    """
 
     def __init__(self, message: str, return_status: str, iterations: int):
         super().__init__(message)
@@ -539,6 +549,12 @@ class SpatialSlewSolution:
         Wall time of the solve (IPOPT and CasADi's functions), s.
     return_status : str
         IPOPT's.
+    model : SpatialHoldModel
+        The design model it was planned on.
+    step : HoldFunctions
+        Its hold.
+    _maps : dict
+        The hold maps of partial holds the reference has used (filled as it is read).
     """
 
     problem: SpatialSlewProblem
