@@ -41,6 +41,7 @@ import numpy as np
 
 from flexctl.model.checks import check_choice, check_integer, check_real
 from flexctl.model.errors import InputValueError
+from flexctl.sim.quaternions import from_rotation_vector, product
 
 from ..design.controllable import held, input_part
 from ..feedback.lqr import LQRWeights
@@ -199,6 +200,8 @@ class SpatialNMPC:
         The prediction model (:func:`~controllers.slew.spatial_trajopt.spatial_hold_model`).
     fallback : casadi.Function or None
         OSQP on the same QP, where the first solver fails.
+    plant : control.StateSpace
+        The design plant at rest (:func:`~flexctl.model.spatial_plant.linearize_spatial`).
     """
 
     state_names: tuple
@@ -218,6 +221,7 @@ class SpatialNMPC:
     constraint_rows: int
     model: object
     fallback: object
+    plant: object
 
     #: The loop hands this law the plant's whole state.
     state_feedback = True
@@ -236,6 +240,52 @@ class SpatialNMPC:
         SpatialNMPCSession
         """
         return SpatialNMPCSession(self, state_names)
+
+    def linear_law(self, step: float = 1e-6):
+        """The NMPC about rest at its target with no constraint active, as the held state
+        feedback it is there: a :class:`~controllers.feedback.spatial_lqr.SpatialLQR` whose
+        gain is the first command's derivative in the design state (central differences of
+        one real-time iteration, each from rest with the wheels at rest). Without active
+        constraints the step's QP has one minimiser, whatever the previous solution, so the
+        law near rest is this gain; its loop and margins are those of the held LQR
+        (:func:`~controllers.analysis.spatial_loops.lq_loop`).
+
+        Parameters
+        ----------
+        step : float, optional
+            The differences' step in each design state, in its own units. Default 1e-6.
+
+        Returns
+        -------
+        SpatialLQR
+        """
+        from ..feedback.spatial_lqr import SpatialLQR
+
+        names = self.state_names
+        count = 0 if self.wheels is None else self.wheels.count
+        gain = np.zeros((3, len(names)))
+        for k in range(len(names)):
+            sides = []
+            for sign in (1.0, -1.0):
+                design = np.zeros(len(names))
+                design[k] = sign * step
+                attitude = product(self.target, from_rotation_vector(design[0:3]))
+                wanted = [self.wanted(np.inf)] * (self.horizon + 1)
+                torques = np.zeros((3, self.horizon))
+                move = _solve(self, design[3:], attitude, np.zeros(count), torques, wanted)
+                if move is None:
+                    raise InputValueError("the NMPC's QP failed about rest at its target: no "
+                                          "linear law to analyse")
+                sides.append(move[0:3])
+            gain[:, k] = -(sides[0] - sides[1]) / (2.0 * step)
+        part = input_part(self.plant.A, self.plant.B, max_frequency=np.pi / self.sample_time)
+        law = SpatialLQR(gain=gain, plant=self.plant, state_names=names, target=self.target,
+                         poles=np.zeros(0), sample_time=self.sample_time,
+                         torque_limit=None, part=part,
+                         note="the NMPC's real-time iteration about rest at the target, no "
+                              "constraint active")
+        object.__setattr__(law, "poles", law.loop_poles())
+        return law
 
     def wanted(self, t: float) -> tuple:
         """``(r, v)``: the reference's design state and torque at ``t`` (rest at the target
@@ -471,7 +521,7 @@ def design_spatial_nmpc(structure, weights: LQRWeights, target=None, sample_time
                        predict=_prediction(model, functions, horizon, count), qp=qp,
                        constraint_rows=rows, model=model,
                        fallback=None if qp_solver == "osqp" else conic_solver(
-                           "spatial_nmpc_qp_fallback", "osqp", *sparsity))
+                           "spatial_nmpc_qp_fallback", "osqp", *sparsity), plant=plant)
 
 
 def _target(owner: str, target, reference, kind) -> np.ndarray:

@@ -27,6 +27,12 @@
     filter's ``angle_noise`` (rad), ``rate_noise`` (rad/s) and ``process_torque`` (N m); it
     reads the attitude and rate (the attitude filter's, with ``[sensors]``).
 
+  - ``"nmpc"`` (:func:`controllers.mpc.spatial_nmpc.design_spatial_nmpc`, on the plant's
+    whole state like the LQR): the LQR's weights, ``design_modes`` (default 1),
+    ``horizon`` (default 20), ``qp_solver`` (``"qpoases"``, ``"qrqp"`` or ``"osqp"``); the
+    wheels' torque and speed limits (or ``torque_limit``) are its constraints; with
+    ``slew_duration`` it follows ``slew_shape = "optimal"``.
+
   The scene's manoeuvre is then ``none``: the law commands the hub torque (of the wheels,
   with an ``[actuator]``).
 - ``[sensors]`` (optional, with a controller): ``[sensors.star_tracker]`` and
@@ -63,9 +69,12 @@ _CONTROLLER_KEYS = {
 }
 _CONTROLLER_KEYS["lqg"] = _CONTROLLER_KEYS["lqr"] | {"angle_noise", "rate_noise",
                                                      "process_torque"}
+_CONTROLLER_KEYS["nmpc"] = (_CONTROLLER_KEYS["lqr"] - {"max_frequency", "shaper", "shaped_modes"}) \
+    | {"horizon", "qp_solver"}
 _REQUIRED = {"quaternion_feedback": ("sample_time", "bandwidth"),
              "lqr": ("sample_time", "hub_angle", "torque"),
-             "lqg": ("sample_time", "hub_angle", "torque")}
+             "lqg": ("sample_time", "hub_angle", "torque"),
+             "nmpc": ("sample_time", "hub_angle", "torque")}
 _SENSOR_KEYS = {"star_tracker", "gyro", "seed", "attitude_sigma", "bias_sigma"}
 
 
@@ -149,8 +158,8 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=
     for key in _REQUIRED[kind]:
         if key not in controller:
             raise SceneError(f"controller.{key} is required for controller.kind = {kind!r}")
-    if kind == "lqr" and sensors:
-        raise SceneError("controller.kind = 'lqr' feeds back the plant's whole state, which "
+    if kind in ("lqr", "nmpc") and sensors:
+        raise SceneError(f"controller.kind = {kind!r} feeds back the plant's whole state, which "
                          "[sensors] do not give; with sensors take kind = 'lqg' (its filter "
                          "estimates the modes from the attitude and rate)")
     step = _checked(check_real, "controller", "sample_time", controller["sample_time"],
@@ -168,8 +177,11 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=
         for owner, name in (("spatial_slew.duration", "slew_duration"),
                             ("spatial_slew.n_intervals", "slew_intervals")):
             message = message.replace(owner, f"controller.{name}")
+        for owner, name in (("design_spatial_nmpc.n_modes", "design_modes"),):
+            message = message.replace(owner, f"controller.{name}")
         for owner in ("quaternion_feedback.", "design_spatial_lqr.", "design_spatial_lqg.",
-                      "lqr_weights.", "eigenaxis_slew.", "spatial_slew."):
+                      "lqr_weights.", "eigenaxis_slew.", "spatial_slew.",
+                      "design_spatial_nmpc."):
             message = message.replace(owner, "controller.")
         raise SceneError(message) from None
     if not sensors:
@@ -213,10 +225,13 @@ def _design(kind: str, controller: dict, structure, target, step: float, wheels:
     weights = LQRWeights(**{key: controller[key] for key in
                             ("hub_angle", "hub_rate", "tip_deflection", "torque")
                             if key in controller})
-    common = {"n_modes": controller.get("design_modes", 2),
+    n_modes = controller.get("design_modes", 1 if kind == "nmpc" else 2)
+    common = {"n_modes": n_modes,
               "torque_limit": controller.get("torque_limit"),
               "max_frequency": controller.get("max_frequency"),
-              "reference": _eigenaxis(controller, structure, target, wheels)}
+              "reference": _eigenaxis(controller, structure, target, wheels, n_modes)}
+    if kind == "nmpc":
+        return _nmpc(controller, structure, target, step, weights, wheels, common["reference"])
     if kind == "lqr":
         return design_spatial_lqr(structure, weights, target, sample_time=step, **common)
     noise = {key: controller[key] for key in ("angle_noise", "rate_noise", "process_torque")
@@ -224,7 +239,23 @@ def _design(kind: str, controller: dict, structure, target, step: float, wheels:
     return design_spatial_lqg(structure, weights, target, step, **noise, **common)
 
 
-def _eigenaxis(controller: dict, structure, target, wheels: tuple):
+def _nmpc(controller: dict, structure, target, step: float, weights, wheels: tuple, reference):
+    """The three-axis NMPC of a ``[controller]`` table (a planned slew as its reference)."""
+    from controllers.mpc.spatial_nmpc import design_spatial_nmpc
+
+    if reference is not None and not hasattr(reference, "state_at"):
+        raise SceneError("controller.kind = 'nmpc' follows slew_shape = 'optimal' (a slew "
+                         "planned on its modes) or steps to the target; got slew_shape = "
+                         f"{controller.get('slew_shape', 'poly7')!r}")
+    cluster = wheels[0]
+    return design_spatial_nmpc(
+        structure, weights, None if reference is not None else target, step,
+        horizon=controller.get("horizon", 20), n_modes=controller.get("design_modes", 1),
+        wheels=cluster, torque_limit=controller.get("torque_limit") if cluster is None
+        else None, reference=reference, qp_solver=controller.get("qp_solver", "qpoases"))
+
+
+def _eigenaxis(controller: dict, structure, target, wheels: tuple, n_modes):
     """The slew of ``slew_duration`` (and ``slew_shape``, shaped or optimal), or None for a
     step."""
     if "slew_duration" not in controller:
@@ -247,7 +278,7 @@ def _eigenaxis(controller: dict, structure, target, wheels: tuple):
         raise SceneError(f"controller.slew_shape must be one of {', '.join(SHAPES)}, optimal; "
                          f"got {shape!r:.80}")
     if shape == "optimal":
-        return _optimal(controller, structure, start, target, wheels)
+        return _optimal(controller, structure, start, target, wheels, n_modes)
     if "slew_intervals" in controller:
         raise SceneError("controller.slew_intervals is for slew_shape = 'optimal'")
     from controllers.slew.eigenaxis import EigenaxisSlew
@@ -260,12 +291,12 @@ def _eigenaxis(controller: dict, structure, target, wheels: tuple):
 
         profile = shape(profile, eigenaxis_shaper(
             structure, controller["slew_axis"], controller["shaper"],
-            controller.get("shaped_modes", 1), controller.get("design_modes", 2)))
+            controller.get("shaped_modes", 1), n_modes))
     return EigenaxisSlew(axis=controller["slew_axis"], profile=profile,
                          inertia=structure.rigid_inertia, start=start)
 
 
-def _optimal(controller: dict, structure, start, target, wheels: tuple):
+def _optimal(controller: dict, structure, start, target, wheels: tuple, n_modes):
     """The least-effort slew planned on the design modes within the wheels' limits."""
     from controllers.slew.spatial_trajopt import SpatialSlewProblem, solve_spatial_slew
 
@@ -289,8 +320,7 @@ def _optimal(controller: dict, structure, start, target, wheels: tuple):
                                  n_intervals=holds,
                                  torque_limit=limit, wheels=cluster,
                                  wheel_speeds=None if cluster is None else speeds)
-    return solve_spatial_slew(structure, problem, n_modes=controller.get("design_modes", 2),
-                              variant="first_order")
+    return solve_spatial_slew(structure, problem, n_modes=n_modes, variant="first_order")
 
 
 def _target(controller: dict, quaternion) -> np.ndarray:

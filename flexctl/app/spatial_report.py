@@ -139,13 +139,17 @@ def _loop_margins(scene: SpatialScene) -> dict:
     structures any delay of a rate feedback eventually destabilises the highest modes of the
     linear plant; the sampled run is the judge of the loop that flies). An LQR's or LQG's are
     the loop as it flies, held at its sample time, its filter in it
-    (:func:`~controllers.analysis.spatial_loops.lq_loop`), with what its design left out."""
+    (:func:`~controllers.analysis.spatial_loops.lq_loop`), with what its design left out; an
+    NMPC's the held gain it is about rest at the target with no constraint active
+    (:meth:`controllers.mpc.spatial_nmpc.SpatialNMPC.linear_law`)."""
     if scene.loop is None:
         return {}
     from controllers.analysis.spatial_loops import (loop_disk_margins, lq_loop,
                                                     quaternion_disk_margins)
 
     law = scene.loop.law
+    if hasattr(law, "linear_law"):              # an NMPC: its gain about rest, no limit active
+        law = law.linear_law()
     if hasattr(law, "loop_poles"):
         from ..model.spatial_plant import linearize_spatial
 

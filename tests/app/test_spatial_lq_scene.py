@@ -198,3 +198,42 @@ def test_an_lqr_follows_an_optimal_slew_planned_within_the_wheels_limits(tmp_pat
     assert found["optimal"][0] < 0.01 * found["poly7"][0]
     assert found["optimal"][1] < 0.5 * found["poly7"][1]
     assert found["optimal"][2] <= 0.1 + 1e-9
+
+
+def _nmpc_scene(extra: str = "", sensors: bool = False) -> str:
+    return _lqr_scene(sensors).replace('kind = "lqr"', 'kind = "nmpc"').replace(
+        "design_modes = 1", "design_modes = 1\n" + extra)
+
+
+def test_an_nmpc_scene_slews_within_the_wheels_and_reports_its_linear_law(tmp_path):
+    """``kind = "nmpc"``: the three-axis NMPC through the scene's wheels; the summary's
+    margins are those of its held gain about rest at the target."""
+    path = tmp_path / "nmpc.toml"
+    path.write_text(_nmpc_scene())
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--set", "simulation.t_final=20",
+                 "--set", "model.modes=2"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    margins = summary["loop_margins"]
+    assert margins["closed_loop_stable"] and margins["held_at"] == 0.1
+    assert "NMPC" in margins["design_note"] and min(margins["gain_margin_db"]) > 6.0
+    assert _final_error(out) < 1e-4
+    rows = np.genfromtxt(out / "timeseries.csv", delimiter=",", names=True)
+    assert max(np.max(np.abs(rows[c])) for c in rows.dtype.names
+               if c.startswith("wheel") and c.endswith("torque")) <= 0.1 + 1e-9
+
+
+@pytest.mark.parametrize("extra, sensors, pattern", [
+    ("", True, r"controller\.kind = 'nmpc' feeds back the plant's whole state"),
+    ("slew_duration = 12.0", False, r"controller\.kind = 'nmpc' follows slew_shape = 'optimal'"),
+    ("horizon = 1", False, r"controller\.horizon"),
+    ('qp_solver = "hpipm"', False, r"controller\.qp_solver"),
+    ("shaper = \"zv\"", False, r"controller\.shaper"),
+    ("max_frequency = 10.0", False, r"controller\.max_frequency"),
+], ids=["with sensors", "an eigenaxis slew", "a horizon of one", "a stage-structured QP solver",
+        "a shaper", "a cut-off"])
+def test_a_bad_nmpc_scene_is_refused_by_its_key(tmp_path, extra, sensors, pattern):
+    path = tmp_path / "nmpc.toml"
+    path.write_text(_nmpc_scene(extra, sensors))
+    with pytest.raises(InputError, match=pattern):
+        load_scene(path)

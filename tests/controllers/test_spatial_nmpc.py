@@ -168,3 +168,26 @@ def test_bad_arguments_are_refused_by_name(kwargs, pattern):
     arguments = {"structure": CRAFT, "weights": WEIGHTS, "target": TARGET, **kwargs}
     with pytest.raises(InputError, match=pattern):
         design_spatial_nmpc(**arguments)
+
+
+def test_its_linear_law_about_rest_is_a_stable_held_state_feedback(step_flight):
+    """About rest at the target the NMPC is a held linear gain: the gain reproduces a step
+    from a small offset (to second order in it), and its loop on the linear plant with two
+    modes per field is stable with disk margins."""
+    from controllers.analysis.spatial_loops import loop_disk_margins, lq_loop
+    from flexctl.model.spatial_plant import linearize_spatial
+
+    law = step_flight[0]
+    linear = law.linear_law()
+    offset = np.zeros(len(law.state_names))
+    offset[0:3] = [1e-6, -2e-6, 5e-7]
+    offset[law.state_names.index("wx")] = 1e-6
+    session = law.start(None)
+    count = law.wheels.count
+    state = np.concatenate([product(law.target, from_rotation_vector(offset[0:3])),
+                            offset[3:], np.zeros(count)])
+    command = session(0.0, state[0:4], offset[law.state_names.index("wx"):][:3], state)
+    assert np.allclose(command, -linear.gain @ offset, rtol=1e-5, atol=1e-13)
+    margins = loop_disk_margins(lq_loop(linear, linearize_spatial(CRAFT, 2)))
+    print(margins.gain_margin_db, margins.phase_margin_deg)
+    assert margins.closed_loop_stable and np.all(margins.gain_margin_db > 6.0)
