@@ -147,10 +147,22 @@ def _hold_jacobians(law, starts, speeds, held, remainder_jacobian) -> tuple:
         a_all[:, n + 3:, at] += g.T[:, 0]
         a_all[:, n + 3:, at + 1] += g.T[:, 1]
         a_all[:, n + 3:, at + 2] += g.T[:, 2]
-        a_all[:, n + 3:, n + 3:] += np.eye(count)
+        a_all[:, n + 3:, n + 3:] += np.eye(count) + model.hold * _null_matrix(law.wheels) \
+            / j_w[:, None]
         b_all[:, n + 3:] = -g.T @ b_all[:, at:at + 3] \
             - model.hold * np.linalg.pinv(g) / j_w[:, None]
     return a_all, b_all
+
+
+def _null_matrix(wheels) -> np.ndarray:
+    """``d u / d Omega`` of the cluster's distribution: ``-k_n P diag(J_w)`` of a
+    ``"null_motion"`` cluster (its null-space torques), else zero; shape (n_w, n_w)."""
+    count = wheels.count
+    if wheels.distribution != "null_motion":
+        return np.zeros((count, count))
+    g = wheels.axes
+    projector = np.eye(count) - np.linalg.pinv(g) @ g
+    return -wheels.null_gain * projector * wheels.inertias[None, :]
 
 
 def _attitude_errors(target, quaternions) -> np.ndarray:
@@ -391,10 +403,12 @@ def _solve(law: SpatialNMPC, x, q, speeds, torques, wanted):
         hessian += mapped.T @ weighted
         gradient += weighted.T @ residuals[j]
         speed_rows[j * count:(j + 1) * count] = sensitivity[n + 3:]
-    return _qp(law, hessian, gradient, torques, speed_rows, ss.T.reshape(-1))
+    return _qp(law, hessian, gradient, torques, speed_rows, speed_starts, ss)
 
 
-def _qp(law: SpatialNMPC, hessian, gradient, torques, speed_rows, speed_now):
+def _qp(law: SpatialNMPC, hessian, gradient, torques, speed_rows, speed_starts, speeds):
+    """The QP of the step (module description), its wheel rows: each hold's motor torques
+    (the distribution at the hold's starting speeds) and the speeds after each hold."""
     horizon = law.horizon
     flat = torques.T.reshape(-1)
     big = np.inf
@@ -404,12 +418,16 @@ def _qp(law: SpatialNMPC, hessian, gradient, torques, speed_rows, speed_now):
         rows, lba, uba = np.zeros((0, 3 * horizon)), np.zeros(0), np.zeros(0)
     else:
         lbx, ubx = np.full(3 * horizon, -big), np.full(3 * horizon, big)
-        share = -np.linalg.pinv(law.wheels.axes)
-        torque_limits = np.array([w.torque_limit for w in law.wheels.wheels])
-        speed_limits = law.speed_margin * np.array([w.speed_limit for w in law.wheels.wheels])
-        motor_now = (share @ torques).T.reshape(-1)
-        rows = np.vstack([np.kron(np.eye(horizon), share), speed_rows])
-        now = np.concatenate([motor_now, speed_now])
+        wheels = law.wheels
+        count = wheels.count
+        share, null = -np.linalg.pinv(wheels.axes), _null_matrix(wheels)
+        torque_limits = np.array([w.torque_limit for w in wheels.wheels])
+        speed_limits = law.speed_margin * np.array([w.speed_limit for w in wheels.wheels])
+        motor_now = (share @ torques + null @ (speed_starts - wheels.null_target[:, None]))
+        motor_rows = np.kron(np.eye(horizon), share)
+        motor_rows[count:] += np.kron(np.eye(horizon - 1), null) @ speed_rows[:-count]
+        rows = np.vstack([motor_rows, speed_rows])
+        now = np.concatenate([motor_now.T.reshape(-1), speeds.T.reshape(-1)])
         bound = np.concatenate([np.tile(torque_limits, horizon),
                                 np.tile(speed_limits, horizon)])
         lba, uba = -bound - now, bound - now

@@ -33,14 +33,14 @@ same model ends 7e-5 rad from its target with 60 holds and 3e-5 rad with 120. Th
 follows the slew corrects them.
 
 **Wheels.** With a :class:`~flexctl.model.wheel_cluster.WheelCluster` the torque is the one
-commanded of the cluster, distributed by its pseudo-inverse (``u = -G^+ tau``, the motor
-torques); the wheel speeds follow ``J_w (g . w_t + Omega_t) = u`` exactly over each hold, and
+commanded of the cluster, distributed by its own law (``u = -G^+ tau``, the motor torques,
+and a ``"null_motion"`` cluster's null-space torques at the speeds of the hold's start, which
+the hub does not feel); the wheel speeds follow ``J_w (g . w_t + Omega_t) = u`` over each
+hold, and
 each wheel's ``|u_k| <= torque_margin * torque_limit``, ``|Omega_k| <= speed_margin *
 speed_limit`` and (with a ``power_limit``) ``|u_k Omega_k| <= power_limit`` are constraints at
-every hold's ends (the margins leave the loop room to correct). A
-``"null_motion"`` cluster adds its null-space torques when flown, which the hub does not feel
-(the speeds then differ from the plan along the null space). Friction, dead band and motor lag
-are disturbances to the loop. Without wheels, ``torque_margin * torque_limit`` bounds each hub axis.
+every hold's ends (the margins leave the loop room to correct). Friction, dead band and motor
+lag are disturbances to the loop. Without wheels, ``torque_margin * torque_limit`` bounds each hub axis.
 
 **NLP.** Multiple shooting in the holds' torques and the states at every hold's end (scaled by
 the rigid guess's excursions), the terminal constraints ``vec(target^* (x) q_N) = 0``,
@@ -311,7 +311,8 @@ class HoldFunctions:
         ``(x_l, q, speeds, tau) -> (x_l, q, speeds)`` one hold later (``tau`` the torque
         commanded of the cluster, or on the hub without wheels).
     motor : casadi.Function
-        ``tau ->`` the wheels' motor torques (n_wheels; empty without wheels), N m.
+        ``(tau, speeds) ->`` the wheels' motor torques (n_wheels; empty without wheels), N m,
+        by the cluster's distribution (its null motion included).
     held : casadi.Function
         ``(x_l, speeds, tau) ->`` the hold's input ``[torque on the structure, remainder]``.
     """
@@ -384,7 +385,7 @@ def hold_functions(model: SpatialHoldModel, wheels) -> HoldFunctions:
     if wheels is not None:
         g, j_w = ca.DM(wheels.axes), ca.DM(wheels.inertias)
         torque = tau - ca.cross(w, ca.mtimes(g, j_w * (ca.mtimes(g.T, w) + speeds)))
-        motor = -ca.mtimes(ca.DM(np.linalg.pinv(wheels.axes)), tau)
+        motor = wheels.motor_commands(tau, speeds)      # the cluster's distribution
     held = ca.vertcat(torque, remainder_function(model)(x, torque))
     phi, gamma, s_x, s_u = (ca.DM(m) for m in model.maps)
     x_next = ca.mtimes(phi, x) + ca.mtimes(gamma, held)
@@ -395,7 +396,7 @@ def hold_functions(model: SpatialHoldModel, wheels) -> HoldFunctions:
         outputs[2] = speeds + model.hold * motor / ca.DM(wheels.inertias) \
             - ca.mtimes(ca.DM(wheels.axes).T, w_next - w)
     return HoldFunctions(advance=ca.Function("spatial_hold", [x, q, speeds, tau], outputs),
-                 motor=ca.Function("motor", [tau], [motor]),
+                 motor=ca.Function("motor", [tau, speeds], [motor]),
                  held=ca.Function("held", [x, speeds, tau], [held]))
 
 
@@ -432,6 +433,18 @@ def _available_torque(problem: SpatialSlewProblem, axis) -> float:
 
 
 def _refuse_too_short(problem: SpatialSlewProblem, inertia) -> None:
+    wheels = problem.wheels
+    if wheels is not None:                  # the null motion's own torque at the start
+        rest = np.asarray(wheels.motor_commands(np.zeros(3), problem.wheel_speeds), float)
+        limits = problem.torque_margin * np.array([w.torque_limit for w in wheels.wheels])
+        if np.any(np.abs(rest) > limits):
+            k = int(np.argmax(np.abs(rest) - limits))
+            raise InputValueError(
+                f"spatial_slew.wheel_speeds: the cluster's null motion asks wheel {k + 1} for "
+                f"{rest[k]:.4g} N m at the start (its speeds {np.round(problem.wheel_speeds, 6).tolist()} "
+                f"against the null target {np.round(wheels.null_target, 6).tolist()}), beyond "
+                f"torque_margin * torque_limit = {limits[k]:.4g} N m before any slew: start the "
+                "wheels nearer their null target or lower the cluster's null_gain")
     axis, angle = problem.eigenaxis
     available = _available_torque(problem, axis)
     if angle == 0.0 or not np.isfinite(available):
@@ -460,7 +473,7 @@ def _limit_constraints(opti, problem, step, torques, speeds) -> None:
             bound = problem.torque_margin * problem.torque_limit
             opti.subject_to(opti.bounded(-bound, torques, bound))
         return
-    motor = step.motor.map(problem.n_intervals)(torques)
+    motor = step.motor.map(problem.n_intervals)(torques, speeds[:, :-1])
     for k, wheel in enumerate(problem.wheels.wheels):
         bound = problem.torque_margin * wheel.torque_limit
         opti.subject_to(opti.bounded(-bound, motor[k, :], bound))
@@ -747,7 +760,7 @@ def solve_spatial_slew(structure, problem: SpatialSlewProblem, *, n_modes=2,
     speeds = motors = None
     if problem.wheels is not None:
         speeds = np.atleast_2d(solved.value(nlp.speeds)).T.reshape(-1, problem.wheels.count)
-        motors = np.asarray(step.motor.map(problem.n_intervals)(torque.T)).T
+        motors = np.asarray(step.motor.map(problem.n_intervals)(torque.T, speeds[:-1].T)).T
     return SpatialSlewSolution(
         problem=problem, state_names=model.names,
         times=np.linspace(0.0, problem.duration, problem.n_intervals + 1), torque=torque,

@@ -31,6 +31,9 @@ CRAFT = SpatialStructure(hub=SpatialHub(inertia=[[1.3, 0.05, 0.0], [0.05, 1.2, 0
                          appendages=(_wing("wing_a", (0, 1, 0)), _wing("wing_b", (0, -1, 0))))
 TARGET = from_rotation_vector(np.radians(20.0) * np.array([0.6, 0.0, 0.8]))
 WHEELS = WheelCluster.orthogonal(inertia=0.01, torque_limit=0.1, speed_limit=314.16)
+PYRAMID = WheelCluster.pyramid(angle=54.7356, distribution="null_motion", null_gain=0.2,
+                               bias_speed=30.0, inertia=0.01, torque_limit=0.1,
+                               speed_limit=314.16)
 WEIGHTS = LQRWeights(hub_angle=0.05, hub_rate=0.05, tip_deflection=0.005, torque=0.1)
 
 
@@ -55,7 +58,8 @@ def _fly(law, wheels, t_final=20.0):
     return loop.result, recorded.session
 
 
-@pytest.mark.parametrize("wheels", [WHEELS, None], ids=["wheels", "hub torque"])
+@pytest.mark.parametrize("wheels", [WHEELS, PYRAMID, None],
+                         ids=["wheels", "a null-motion pyramid", "hub torque"])
 def test_the_hold_jacobians_are_the_holds(wheels):
     """The analytic Jacobians in the local coordinates (the attitude perturbed in its tangent
     space) against central differences of the hold itself."""

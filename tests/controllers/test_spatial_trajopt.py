@@ -184,3 +184,27 @@ def test_a_plan_on_other_modes_is_refused_by_the_law(plan):
     with pytest.raises(InputError, match=r"design_spatial_lqr\.reference was planned on"):
         design_spatial_lqr(CRAFT, LQRWeights(hub_angle=0.05, torque=0.1), None, n_modes=2,
                            sample_time=0.2, reference=plan)
+
+
+def test_a_null_motion_pyramid_is_planned_with_its_null_torques():
+    """A biased pyramid whose distribution adds null-space torques: the plan counts them in
+    each wheel's torque (within the margin), its speeds are those the cluster reaches flown
+    open loop, and wheels started against their null target are refused before IPOPT."""
+    pyramid = WheelCluster.pyramid(angle=54.7356, distribution="null_motion", null_gain=0.2,
+                                   bias_speed=30.0, inertia=0.01, torque_limit=0.1,
+                                   speed_limit=314.16)
+    start = np.array(pyramid.null_target)
+    plan = solve_spatial_slew(CRAFT, SpatialSlewProblem(target=TARGET, duration=12.0,
+                                                        n_intervals=60, wheels=pyramid,
+                                                        wheel_speeds=start), n_modes=1)
+    assert np.max(np.abs(plan.motor_torques)) <= 0.08 * (1 + 1e-6)
+    run = simulate_spatial(CRAFT, 12.0, plan.torque_function(), n_modes=1,
+                           variant="first_order", wheels=pyramid, wheel_speeds=start,
+                           rtol=1e-10, output_step=0.2, check_accuracy=False)
+    drift = np.max(np.abs(run.wheel_speeds.T - plan.wheel_speeds))
+    print(f"plan against flight, wheel speeds: {drift:.2e} rad/s")
+    assert drift < 0.02 * np.max(np.abs(plan.wheel_speeds - start))
+    with pytest.raises(InputError, match=r"null motion asks wheel \d for .* null_gain"):
+        solve_spatial_slew(CRAFT, SpatialSlewProblem(target=TARGET, duration=12.0,
+                                                     wheels=pyramid, wheel_speeds=-start),
+                           n_modes=1)
