@@ -54,13 +54,6 @@ __all__ = ["SpatialNMPC", "SpatialNMPCSession", "design_spatial_nmpc", "SPATIAL_
 SPATIAL_QP_SOLVERS = ("qpoases", "qrqp", "osqp")
 
 
-def _qmul(p, q):
-    import casadi as ca
-
-    pv, qv = p[1:4], q[1:4]
-    return ca.vertcat(p[0] * q[0] - ca.dot(pv, qv), p[0] * qv + q[0] * pv + ca.cross(pv, qv))
-
-
 def _prediction(model, functions, horizon: int, count: int):
     """``(x0, q0, speeds0, U) -> (X, Q, S, H, J)``: the rollout of ``U`` (3, N) from the state
     read (the states after each hold, as columns), each hold's input ``[torque, remainder]``

@@ -21,6 +21,8 @@ section                         content
 :func:`structures`              one beam against two arrays, pinned and free hub (its own module)
 :func:`three_axes`              the built-in spatial scenes against their planar counterparts, an
                                 animation (its own module)
+:func:`three_axis_control`      every three-axis controller kind on ``spatial-pyramid-slew``
+                                (its own module)
 :func:`model_error`             trajopt+lqr against NMPC when the design model is 20 % off
 :func:`large_deflection`        the optimal slew designed on first_order and on exact geometry
 :func:`hardware`                a reaction wheel and a DC motor, exact state and noisy sensors
@@ -56,6 +58,8 @@ from .verdict import summary_verdict
 from .demo_hardware import hardware
 from .demo_requirements import requirements_section
 from .demo_spatial import SPATIAL_SCENES, three_axes
+from .demo_spatial_control import SCENE as CONTROL_SCENE
+from .demo_spatial_control import three_axis_control
 from .demo_structures import structures
 from .section import Section, save_figure as _save
 from .scenes import builtin_scenes, load_scene, run_slew
@@ -602,6 +606,7 @@ SECTIONS = (("paper 001 Fig. 4", kane_spinup),
             ("controller comparison", slew_comparison),
             ("structures", structures),
             ("three axes", three_axes),
+            ("three-axis control", three_axis_control),
             ("controller comparison, two arrays", _two_array_comparison),
             ("design-model error", model_error),
             ("large deflection", large_deflection),
@@ -612,6 +617,7 @@ SECTIONS = (("paper 001 Fig. 4", kane_spinup),
 #: one after the other in one process on this project's 2-core machine, in the comments), so
 #: that the short ones and the scenes fill the processes' ends.
 SECTION_ORDER = ("three axes",                           # 60 (two spatial runs)
+                 "three-axis control",                   # 53 (five loops on the exact rod)
                  "requirements, two arrays",             # 55 (verified, filtered, flown)
                  "requirements, slew-90",                # 40
                  "actuators and sensors",                # 11.4
@@ -832,7 +838,8 @@ def run_demo(out: Path, run_one, *, workers: int = DEMO_WORKERS, progress=print)
 def _demo_into(out: Path, run_one, workers: int, progress) -> list:
     """:func:`run_demo`'s work, every file written into ``out``; return the surprises."""
     # the spatial scenes run in their section, beside their planar counterparts
-    plan = [(name, name, {}, "ok") for name in builtin_scenes() if name not in SPATIAL_SCENES]
+    sectioned = (*SPATIAL_SCENES, CONTROL_SCENE)     # their sections run them
+    plan = [(name, name, {}, "ok") for name in builtin_scenes() if name not in sectioned]
     for extra in DEMO_COMPARISONS:
         after = next((k for k, p in enumerate(plan) if p[1] == extra[1]), len(plan) - 1)
         plan.insert(after + 1, extra)

@@ -293,6 +293,16 @@ def test_demo_writes_report_and_plots(tmp_path, capsys, monkeypatch):
         assert rows[name][4] == "ok"
         assert json.loads((out / name / "summary.json").read_text())["status"] == "ok"
     _assert_hardware_rows(report)
+    # the three-axis control section: every kind flies; the plan-followers end the slew
+    # nearer the target than the eigenaxis LQR, the step law is still turning
+    assert "## Three-axis control: every controller kind on the same slew" in report
+    control = {label: cells for label, cells in rows.items() if "(state)" in label
+               or "(sensors, filter)" in label}
+    assert len(control) == 5 and all(cells[1] == "ok" for cells in control.values())
+    at_end = {label: float(cells[2]) for label, cells in control.items()}
+    assert at_end["LQR, optimal slew (state)"] < 0.3 * at_end["LQR, eigenaxis slew (state)"]
+    assert at_end["NMPC, optimal slew (state)"] < 0.3 * at_end["LQR, eigenaxis slew (state)"]
+    assert at_end["quaternion feedback, step (sensors, filter)"] > 1e-2
     # the three-axis section: its table, figure and animation
     assert "## Three axes: what a planar model misses" in report
     assert (out / "spatial-tilted-slew.gif").read_bytes()[:6] == b"GIF89a"

@@ -13,6 +13,8 @@ BUILTINS = ("hub-beam-mass", "kane-spinup", "slew-90", "slew-90-model-error", "s
             "flexible-link", "bus-slew")
 #: The built-in spatial scenes (a 3 x 3 hub inertia).
 SPATIAL_BUILTINS = ("spatial-tilted-slew", "spatial-spin")
+#: The built-in spatial scene flown by a controller (the demo's three-axis control section).
+LOOP_BUILTINS = ("spatial-pyramid-slew",)
 
 #: MODEL.md section 6, written out independently of the scene files.
 KANE_BEAM = Beam(length=8.0, youngs_modulus=6.8952e10, area=7.2968e-5,
@@ -65,7 +67,7 @@ output_step = 0.05
 
 def test_builtin_scenes_are_listed_with_descriptions():
     scenes = builtin_scenes()
-    assert set(scenes) == set(BUILTINS) | set(SPATIAL_BUILTINS)
+    assert set(scenes) == set(BUILTINS) | set(SPATIAL_BUILTINS) | set(LOOP_BUILTINS)
     for name, description in scenes.items():
         assert isinstance(description, str) and description, name
 
