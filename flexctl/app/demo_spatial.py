@@ -20,7 +20,7 @@ from ..model import build_model
 from ..sim.inputs import SampledTorque
 from ..sim.simulation import simulate
 from .scenes import load_scene
-from .section import Section, save_figure
+from .section import Section, save_figure, save_table
 from .spatial_animation import animate_spatial
 from .spatial_report import run_spatial_scene
 
@@ -119,10 +119,7 @@ def three_axes(out: Path, executor=None) -> Section:
     images.append((f"{SPATIAL_SCENES[0]}: the structure turning and bending", animation))
     header = ["scene", "appendage", "planar: in plane (mm)", "3-D: in plane (mm)",
               "3-D: out of plane (mm)"]
-    table_path = out / "three_axes.csv"
-    from ..sim.atomic_files import write_atomic
-    write_atomic(table_path, ",".join(header) + "\n"
-                 + "".join(",".join(row) + "\n" for row in rows))
+    table_path = save_table(header, rows, out / "three_axes.csv")
     return Section(
         title="Three axes: what a planar model misses",
         paragraphs=(

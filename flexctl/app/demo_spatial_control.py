@@ -20,7 +20,7 @@ import numpy as np
 
 from ..sim.quaternions import error_angles
 from .scenes import load_scene
-from .section import Section, save_figure
+from .section import Section, save_figure, save_table
 from .spatial_report import run_spatial_scene
 from .spatial_scene import parse_spatial_scene
 
@@ -126,11 +126,7 @@ def three_axis_control(out: Path, executor=None) -> Section:
              f"{f['residual']:.2e}", "n/a" if f["error"] is None else f"{f['error']:.1e}",
              f"{f['speed']:.4g}", f"{f['power']:.3g}", f"{f['torque_used']:.4g}"]
             for label, _, f in runs]
-    from ..sim.atomic_files import write_atomic
-
-    table_path = out / "three_axis_control.csv"
-    write_atomic(table_path, ",".join(header) + "\n"
-                 + "".join(",".join(row) + "\n" for row in rows))
+    table_path = save_table(header, rows, out / "three_axis_control.csv")
     return Section(
         title="Three-axis control: every controller kind on the same slew",
         paragraphs=(

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from ..sim.atomic_files import atomic_file
 
-__all__ = ["Section", "save_figure"]
+__all__ = ["Section", "save_figure", "save_table"]
 
 
 @dataclass(frozen=True)
@@ -51,4 +51,22 @@ def save_figure(fig, path: Path) -> Path:
     """
     with atomic_file(path) as partial:
         fig.savefig(partial, dpi=90)
+    return path
+
+
+def save_table(header, rows, path: Path) -> Path:
+    """Write a section's table as CSV at ``path``, whole or not at all; return ``path``.
+
+    Parameters
+    ----------
+    header : sequence of str
+        Column names.
+    rows : sequence of sequence of str
+        Cells, already formatted (no commas in them).
+    path : Path
+        File written.
+    """
+    from ..sim.atomic_files import write_atomic
+
+    write_atomic(path, ",".join(header) + "\n" + "".join(",".join(row) + "\n" for row in rows))
     return path

@@ -10,27 +10,14 @@ from controllers.mpc.spatial_nmpc import (SpatialNMPC, _attitude_errors, _hold_j
                                           design_spatial_nmpc)
 from controllers.slew.spatial_trajopt import (SpatialSlewProblem, hold_functions,
                                               solve_spatial_slew)
-from flexctl import SpatialAppendage, SpatialHub, SpatialStructure
 from flexctl.model.errors import InputError
 from flexctl.model.wheel_cluster import WheelCluster
 from flexctl.sim.quaternions import (conjugate, error_angles, from_rotation_vector, product,
                                      rotation_vector)
 from flexctl.sim.spatial_loop import simulate_spatial_loop
+from tests.controllers.test_spatial_trajopt import CRAFT, TARGET, WHEELS
 
 
-def _wing(name, direction):
-    return SpatialAppendage(name=name, direction=direction, normal=(0, 0, 1), length=1.8,
-                            density=2766.0, area=2.5e-4, youngs_modulus=6.9e10,
-                            second_moment=5.2083e-10, second_moment_lateral=5.2083e-8,
-                            shear_modulus=2.6e10, torsion_constant=1.0e-9,
-                            damping_ratio=0.005)
-
-
-CRAFT = SpatialStructure(hub=SpatialHub(inertia=[[1.3, 0.05, 0.0], [0.05, 1.2, 0.0],
-                                                 [0.0, 0.0, 1.4]], radius=0.06),
-                         appendages=(_wing("wing_a", (0, 1, 0)), _wing("wing_b", (0, -1, 0))))
-TARGET = from_rotation_vector(np.radians(20.0) * np.array([0.6, 0.0, 0.8]))
-WHEELS = WheelCluster.orthogonal(inertia=0.01, torque_limit=0.1, speed_limit=314.16)
 PYRAMID = WheelCluster.pyramid(angle=54.7356, distribution="null_motion", null_gain=0.2,
                                bias_speed=30.0, inertia=0.01, torque_limit=0.1,
                                speed_limit=314.16)
