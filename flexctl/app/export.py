@@ -116,6 +116,17 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
         find_target_compiler
 
     out = Path(out)
+    from controllers.spec import SceneError
+
+    from .spatial_scene import SpatialScene
+
+    if isinstance(scene, SpatialScene):
+        raise SceneError(
+            f"export: {scene.name} is a spatial scene; `flexctl export` writes the laws of "
+            "planar scenes. A three-axis LQR or LQG (without a reference slew) is written "
+            "as C from Python: controllers.codegen.export_c(law, None, folder), the law "
+            "designed by controllers.feedback.spatial_lqr; the quaternion feedback, the "
+            "NMPC and the attitude filter have no C form yet")
     chosen = check_target(target)
     if compile and chosen.embedded:
         find_target_compiler(chosen)            # missing cross tools: before the design

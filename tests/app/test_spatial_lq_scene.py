@@ -242,3 +242,11 @@ def test_a_bad_nmpc_scene_is_refused_by_its_key(tmp_path, extra, sensors, patter
     path.write_text(_nmpc_scene(extra, sensors))
     with pytest.raises(InputError, match=pattern):
         load_scene(path)
+
+
+def test_exporting_a_spatial_scene_says_how_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "c"
+    assert main(["export", str(EXAMPLE), "--out", str(out), "--no-compile"]) != 0
+    error = capsys.readouterr().err
+    assert "spatial-lqg-slew is a spatial scene" in error and "export_c(law, None" in error
+    assert "Traceback" not in error and not out.exists()
