@@ -511,7 +511,7 @@ def design_spatial_nmpc(structure, weights: LQRWeights, target=None, sample_time
         torque_limit = check_real(owner, "torque_limit", torque_limit, minimum=0.0,
                                   strict=True)
     target = _target(owner, target, reference, SpatialSlewSolution)
-    model = spatial_hold_model(structure, n_modes, variant, sample_time)
+    model = spatial_hold_model(structure, n_modes, variant, sample_time, owner)
     if reference is not None and tuple(reference.state_names) != tuple(model.names):
         raise InputValueError(f"{owner}.reference was planned on other modes than n_modes: "
                               "plan it on the NMPC's structure and n_modes")

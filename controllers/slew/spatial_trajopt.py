@@ -59,7 +59,7 @@ from scipy.linalg import expm
 
 from flexctl.model.checks import (KeywordOnly, check_array, check_instance, check_integer,
                                   check_real)
-from flexctl.model.errors import InputValueError
+from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.quaternions import conjugate, error_angles, from_rotation_vector, product
 
 from ..design.plant_state import spatial_design_plant
@@ -257,7 +257,8 @@ def _hold_maps(model_a, model_b, rate_at: int, h: float) -> tuple:
     return phi, gamma, s_x[rows], s_u[rows]
 
 
-def spatial_hold_model(structure, n_modes, variant: str, hold: float) -> SpatialHoldModel:
+def spatial_hold_model(structure, n_modes, variant: str, hold: float,
+                       owner: str = "spatial_hold_model") -> SpatialHoldModel:
     """The design model of ``structure`` over holds of ``hold`` seconds (module Notes).
 
     Parameters
@@ -270,6 +271,8 @@ def spatial_hold_model(structure, n_modes, variant: str, hold: float) -> Spatial
         The spatial model whose right-hand side gives the remainder.
     hold : float
         s (> 0).
+    owner : str, optional
+        Who asks (named in errors). Default ``"spatial_hold_model"``.
 
     Returns
     -------
@@ -277,9 +280,8 @@ def spatial_hold_model(structure, n_modes, variant: str, hold: float) -> Spatial
     """
     from flexctl.model.spatial_dynamics import spatial_equations
 
-    hold = check_real("spatial_hold_model", "hold", hold, minimum=0.0, strict=True,
-                      maximum=1e5)
-    plant, names = spatial_design_plant("solve_spatial_slew", structure, n_modes, variant)
+    hold = check_real(owner, "hold", hold, minimum=0.0, strict=True, maximum=1e5)
+    plant, names = spatial_design_plant(owner, structure, n_modes, variant)
     a, b = np.asarray(plant.A), np.asarray(plant.B)
     if np.max(np.abs(a[:, 0:3]), initial=0.0) > 1e-9 * max(1.0, np.max(np.abs(a))):
         raise AssertionError("the plant at rest depends on its attitude error")
@@ -747,7 +749,11 @@ def solve_spatial_slew(structure, problem: SpatialSlewProblem, *, n_modes=2,
     ('Solve_Succeeded', True)
     """
     check_instance("solve_spatial_slew", "problem", problem, SpatialSlewProblem)
-    model = spatial_hold_model(structure, n_modes, variant, problem.duration / problem.n_intervals)
+    if ipopt_options is not None and not isinstance(ipopt_options, dict):
+        raise InputTypeError("solve_spatial_slew.ipopt_options must be a dict of IPOPT "
+                             f"options; got {type(ipopt_options).__name__}")
+    model = spatial_hold_model(structure, n_modes, variant,
+                               problem.duration / problem.n_intervals, "solve_spatial_slew")
     _refuse_too_short(problem, model.inertia)
     step = hold_functions(model, problem.wheels)
     guess = _rigid_guess(problem, model, step)

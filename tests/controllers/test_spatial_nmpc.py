@@ -154,6 +154,9 @@ def test_it_follows_a_planned_slew_to_the_target():
     ({"target": None}, r"design_spatial_nmpc\.target is required"),
     ({"target": (0, 0, 0, 0)}, r"design_spatial_nmpc\.target must be a non-zero"),
     ({"n_modes": 0}, r"n_modes"),
+    ({"structure": "craft"}, r"design_spatial_nmpc\.structure must be a SpatialStructure"),
+    ({"weights": "heavy"}, r"weights"),
+    ({"reference": "a slew"}, r"design_spatial_nmpc\.reference"),
 ])
 def test_bad_arguments_are_refused_by_name(kwargs, pattern):
     arguments = {"structure": CRAFT, "weights": WEIGHTS, "target": TARGET, **kwargs}

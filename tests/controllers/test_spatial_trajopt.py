@@ -226,3 +226,16 @@ def test_smoothness_softens_the_torque_and_the_lag_it_meets():
     print(found)
     assert found[1.0][0] < 0.3 * found[0.0][0]
     assert found[1.0][2] < 0.5 * found[0.0][2]
+
+
+@pytest.mark.parametrize("kwargs, pattern", [
+    ({"structure": "craft"}, r"solve_spatial_slew\.structure must be a SpatialStructure"),
+    ({"ipopt_options": "fast"}, r"solve_spatial_slew\.ipopt_options must be a dict"),
+    ({"problem": "slew"}, r"solve_spatial_slew\.problem"),
+    ({"variant": "consistent"}, r"solve_spatial_slew\.variant"),
+])
+def test_bad_arguments_to_the_solver_are_refused_by_name(kwargs, pattern):
+    arguments = {"structure": CRAFT, "problem": SpatialSlewProblem(target=TARGET, duration=12.0),
+                 "n_modes": 1, **kwargs}
+    with pytest.raises(InputError, match=pattern):
+        solve_spatial_slew(**arguments)
