@@ -347,6 +347,19 @@ class SpatialNMPCSession:
         self.torques = None
         self.step_times: list = []
         self.failed_steps = 0
+        self._reference: dict = {}
+
+    def _wanted(self, t: float) -> tuple:
+        """:meth:`SpatialNMPC.wanted` at ``t``, kept for the next steps' horizons (which
+        overlap this one's but for one sample)."""
+        key = round(t, 9)
+        if key not in self._reference:
+            if len(self._reference) > 4 * self.law.horizon:
+                oldest = sorted(self._reference)[:len(self._reference) - 2 * self.law.horizon]
+                for old in oldest:
+                    del self._reference[old]
+            self._reference[key] = self.law.wanted(t)
+        return self._reference[key]
 
     def __call__(self, t, attitude, rate, state) -> np.ndarray:
         began = time.perf_counter()
@@ -357,7 +370,7 @@ class SpatialNMPCSession:
         q = q / np.linalg.norm(q)
         t = float(t)
         horizon, step = law.horizon, law.sample_time
-        wanted = [law.wanted(t + j * step) for j in range(horizon + 1)]
+        wanted = [self._wanted(t + j * step) for j in range(horizon + 1)]
         if self.torques is None:
             self.torques = np.array([v for _, v in wanted[:horizon]]).T
         else:
