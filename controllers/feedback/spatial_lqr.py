@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexctl.model.checks import check_array, check_instance, check_real
+from flexctl.model.checks import check_instance, check_quaternion, check_real
 from flexctl.model.errors import InputValueError
 from flexctl.sim.quaternions import error_angles
 
@@ -45,7 +45,7 @@ from ..design.controllable import (ControllablePart, design_failure, held, input
 from .lqr import LQRWeights
 
 __all__ = ["SpatialLQR", "SpatialLQG", "design_spatial_lqr", "design_spatial_lqg",
-           "spatial_weight_matrices", "FREQUENCY_FACTOR", "NOISE_FLOOR"]
+           "spatial_weight_matrices", "reference_target", "FREQUENCY_FACTOR", "NOISE_FLOOR"]
 
 #: Default cut-off of a continuous design's modes, in multiples of the rigid loop's bandwidth.
 FREQUENCY_FACTOR = 100.0
@@ -538,7 +538,7 @@ def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
     ((3, 12), True)
     """
     check_instance("design_spatial_lqr", "weights", weights, LQRWeights)
-    target = _target(target, reference)
+    target = reference_target("design_spatial_lqr", target, reference)
     if sample_time is not None:
         sample_time = check_real("design_spatial_lqr", "sample_time", sample_time,
                                  minimum=1e-6, strict=True, maximum=100.0)
@@ -657,25 +657,42 @@ def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: floa
                       b_held=b_d, measured=measured, estimator_poles=poles)
 
 
-def _target(target, reference=None) -> np.ndarray:
-    if reference is not None:
-        from ..slew.eigenaxis import EigenaxisSlew
-        from ..slew.spatial_trajopt import SpatialSlewSolution
+def reference_target(owner: str, target, reference=None, kinds=None) -> np.ndarray:
+    """The target attitude of a three-axis law: ``target`` (a unit quaternion, hub to
+    inertial, scalar first), or the end of ``reference``, which ``target`` must then equal
+    (either sign) when both are given.
 
-        check_instance("design_spatial_lqr", "reference", reference,
-                       (EigenaxisSlew, SpatialSlewSolution))
+    Parameters
+    ----------
+    owner : str
+        Who takes them (named in errors).
+    target : array_like, shape (4,), or None
+        The target attitude.
+    reference : EigenaxisSlew or SpatialSlewSolution, optional
+        A slew ending at the target.
+    kinds : tuple of type, optional
+        The references ``owner`` follows. Default both kinds.
+
+    Returns
+    -------
+    ndarray, shape (4,)
+    """
+    if reference is not None:
+        if kinds is None:
+            from ..slew.eigenaxis import EigenaxisSlew
+            from ..slew.spatial_trajopt import SpatialSlewSolution
+
+            kinds = (EigenaxisSlew, SpatialSlewSolution)
+        check_instance(owner, "reference", reference, kinds)
         end = reference.target
         if target is None:
-            target = end
-        elif min(np.linalg.norm(_target(target) - end), np.linalg.norm(_target(target) + end)) \
-                > 1e-9:
-            raise InputValueError("design_spatial_lqr.target must be the reference's end "
-                                  "attitude (or None)")
-    value = np.array(check_array("design_spatial_lqr", "target", target, shape=(4,)))
-    largest = float(np.max(np.abs(value)))
-    if not largest > 0:
-        raise InputValueError("design_spatial_lqr.target must be a non-zero quaternion")
-    value /= largest                                # no overflow in the norm
-    value /= np.linalg.norm(value)
-    value.setflags(write=False)
-    return value
+            return end
+        value = check_quaternion(owner, "target", target)
+        if min(np.linalg.norm(value - end), np.linalg.norm(value + end)) > 1e-9:
+            raise InputValueError(f"{owner}.target must be the reference's end attitude (or "
+                                  "None)")
+        return value
+    if target is None:
+        raise InputValueError(f"{owner}.target is required without a reference (a unit "
+                              "quaternion, hub to inertial, scalar first)")
+    return check_quaternion(owner, "target", target)

@@ -41,11 +41,12 @@ import numpy as np
 
 from flexctl.model.checks import check_choice, check_integer, check_real
 from flexctl.model.errors import InputValueError
+from flexctl.model.spatial_rod import cross_matrix
 from flexctl.sim.quaternions import from_rotation_vector, product
 
 from ..design.controllable import held, input_part
 from ..feedback.lqr import LQRWeights
-from ..feedback.spatial_lqr import spatial_weight_matrices
+from ..feedback.spatial_lqr import reference_target, spatial_weight_matrices
 from ..slew.spatial_trajopt import hold_functions, remainder_function, spatial_hold_model
 
 __all__ = ["SpatialNMPC", "SpatialNMPCSession", "design_spatial_nmpc", "SPATIAL_QP_SOLVERS"]
@@ -76,18 +77,10 @@ def _prediction(model, functions, horizon: int, count: int):
     return ca.Function("spatial_prediction", [x0, q0, s0, us], [xs, qs, ss, held, jac])
 
 
-def _cross(v) -> np.ndarray:
-    """``[v x]`` of each row of ``v`` (N, 3): shape (N, 3, 3)."""
-    out = np.zeros(v.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return out
-
-
 def _rotation(theta) -> np.ndarray:
     """The rotation matrices of the rotation vectors ``theta`` (N, 3): (N, 3, 3)."""
     angle = np.linalg.norm(theta, axis=1)
-    k = _cross(theta)
+    k = cross_matrix(theta)
     small = angle < 1e-8
     safe = np.where(small, 1.0, angle)
     a = np.where(small, 1.0 - angle ** 2 / 6, np.sin(safe) / safe)
@@ -116,14 +109,14 @@ def _hold_jacobians(law, starts, speeds, held, remainder_jacobian) -> tuple:
     if count:
         g, j_w = law.wheels.axes, law.wheels.inertias
         momentum = (g @ (j_w[:, None] * (g.T @ starts[at:at + 3] + speeds))).T
-        d_tau_x[:, :, at:at + 3] = _cross(momentum) - _cross(rates) @ (g * j_w) @ g.T
-        d_tau_s[:] = -_cross(rates) @ (g * j_w)
+        d_tau_x[:, :, at:at + 3] = cross_matrix(momentum) - cross_matrix(rates) @ (g * j_w) @ g.T
+        d_tau_s[:] = -cross_matrix(rates) @ (g * j_w)
     r_x, r_tau = jac[:, :, :n], jac[:, :, n:]
     d_held_x = np.concatenate([d_tau_x, r_x + r_tau @ d_tau_x], axis=1)
     d_held_s = np.concatenate([d_tau_s, r_tau @ d_tau_s], axis=1)
     d_held_u = np.concatenate([np.broadcast_to(np.eye(3), (horizon, 3, 3)), r_tau], axis=1)
     theta = (s_x @ starts + s_u @ held).T                                # (N, 3)
-    j_r = np.eye(3) - 0.5 * _cross(theta) + (_cross(theta) @ _cross(theta)) / 6.0
+    j_r = np.eye(3) - 0.5 * cross_matrix(theta) + (cross_matrix(theta) @ cross_matrix(theta)) / 6.0
     m = n + 3 + count
     a_all = np.zeros((horizon, m, m))
     b_all = np.zeros((horizon, m, 3))
@@ -523,7 +516,7 @@ def design_spatial_nmpc(structure, weights: LQRWeights, target=None, sample_time
     if torque_limit is not None:
         torque_limit = check_real(owner, "torque_limit", torque_limit, minimum=0.0,
                                   strict=True)
-    target = _target(owner, target, reference, SpatialSlewSolution)
+    target = reference_target(owner, target, reference, (SpatialSlewSolution,))
     model = spatial_hold_model(structure, n_modes, variant, sample_time, owner)
     if reference is not None and tuple(reference.state_names) != tuple(model.names):
         raise InputValueError(f"{owner}.reference was planned on other modes than n_modes: "
@@ -546,24 +539,3 @@ def design_spatial_nmpc(structure, weights: LQRWeights, target=None, sample_time
                        constraint_rows=rows, model=model,
                        fallback=None if qp_solver == "osqp" else conic_solver(
                            "spatial_nmpc_qp_fallback", "osqp", *sparsity), plant=plant)
-
-
-def _target(owner: str, target, reference, kind) -> np.ndarray:
-    from flexctl.model.checks import check_array, check_instance
-
-    if reference is not None:
-        check_instance(owner, "reference", reference, kind)
-        if target is None:
-            return reference.target
-    if target is None:
-        raise InputValueError(f"{owner}.target is required without a reference (a unit "
-                              "quaternion, hub to inertial, scalar first)")
-    value = np.array(check_array(owner, "target", target, shape=(4,)))
-    if not np.max(np.abs(value)) > 0:
-        raise InputValueError(f"{owner}.target must be a non-zero quaternion")
-    value /= np.max(np.abs(value))
-    value /= np.linalg.norm(value)
-    if reference is not None and min(np.linalg.norm(value - reference.target),
-                                     np.linalg.norm(value + reference.target)) > 1e-9:
-        raise InputValueError(f"{owner}.target must be the reference's end attitude (or None)")
-    return value

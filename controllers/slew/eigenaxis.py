@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from flexctl.model.checks import KeywordOnly, check_array, check_direction
+from flexctl.model.checks import KeywordOnly, check_array, check_direction, check_quaternion
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.quaternions import from_rotation_vector, product
 
@@ -67,13 +67,8 @@ class EigenaxisSlew(KeywordOnly):
             raise InputValueError("eigenaxis_slew.inertia must be positive definite")
         inertia.setflags(write=False)
         object.__setattr__(self, "inertia", inertia)
-        start = np.array(check_array("eigenaxis_slew", "start", self.start, shape=(4,)))
-        if not np.max(np.abs(start)) > 0:
-            raise InputValueError("eigenaxis_slew.start must be a non-zero quaternion")
-        start /= np.max(np.abs(start))
-        start /= np.linalg.norm(start)
-        start.setflags(write=False)
-        object.__setattr__(self, "start", start)
+        object.__setattr__(self, "start", check_quaternion("eigenaxis_slew", "start",
+                                                           self.start))
 
     @property
     def end_time(self) -> float:

@@ -58,7 +58,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from flexctl.model.checks import (KeywordOnly, check_array, check_instance, check_integer,
-                                  check_real)
+                                  check_quaternion, check_real)
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim.quaternions import conjugate, error_angles, from_rotation_vector, product
 
@@ -92,17 +92,6 @@ class SpatialSlewError(RuntimeError):
         super().__init__(message)
         self.return_status = return_status
         self.iterations = iterations
-
-
-def _unit_quaternion(owner: str, name: str, value) -> np.ndarray:
-    q = np.array(check_array(owner, name, value, shape=(4,)))
-    largest = float(np.max(np.abs(q)))
-    if not largest > 0:
-        raise InputValueError(f"{owner}.{name} must be a non-zero quaternion; got {q.tolist()}")
-    q /= largest
-    q /= np.linalg.norm(q)
-    q.setflags(write=False)
-    return q
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -153,8 +142,8 @@ class SpatialSlewProblem(KeywordOnly):
     def __post_init__(self):
         owner = "spatial_slew"
         set_ = object.__setattr__
-        set_(self, "target", _unit_quaternion(owner, "target", self.target))
-        set_(self, "start", _unit_quaternion(owner, "start", self.start))
+        set_(self, "target", check_quaternion(owner, "target", self.target))
+        set_(self, "start", check_quaternion(owner, "start", self.start))
         set_(self, "duration", check_real(owner, "duration", self.duration, minimum=0.0,
                                           strict=True, maximum=1e5))
         set_(self, "n_intervals", check_integer(owner, "n_intervals", self.n_intervals,
@@ -444,7 +433,7 @@ def _available_torque(problem: SpatialSlewProblem, axis) -> float:
     return float("inf")
 
 
-def _refuse_too_short(problem: SpatialSlewProblem, inertia) -> None:
+def _refuse_before_solving(problem: SpatialSlewProblem, inertia) -> None:
     wheels = problem.wheels
     if wheels is not None:                  # the null motion's own torque at the start
         rest = np.asarray(wheels.motor_commands(np.zeros(3), problem.wheel_speeds), float)
@@ -754,7 +743,7 @@ def solve_spatial_slew(structure, problem: SpatialSlewProblem, *, n_modes=2,
                              f"options; got {type(ipopt_options).__name__}")
     model = spatial_hold_model(structure, n_modes, variant,
                                problem.duration / problem.n_intervals, "solve_spatial_slew")
-    _refuse_too_short(problem, model.inertia)
+    _refuse_before_solving(problem, model.inertia)
     step = hold_functions(model, problem.wheels)
     guess = _rigid_guess(problem, model, step)
     nlp = _transcribe(problem, model, step, guess)

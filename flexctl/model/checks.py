@@ -29,7 +29,7 @@ import numpy as np
 from .errors import InputTypeError, InputValueError
 
 __all__ = ["label", "check_real", "check_integer", "check_choice", "check_instance",
-           "check_array", "check_direction", "check_counts", "KeywordOnly"]
+           "check_array", "check_direction", "check_quaternion", "check_counts", "KeywordOnly"]
 
 
 def label(owner: str, name: str) -> str:
@@ -326,6 +326,30 @@ def check_direction(owner: str, name: str, value) -> np.ndarray:
     vector = vector / np.linalg.norm(vector)
     vector.setflags(write=False)
     return vector
+
+
+def check_quaternion(owner: str, name: str, value) -> np.ndarray:
+    """A read-only unit quaternion along ``value`` (scalar first; finite, not zero; scaled by
+    its largest entry first, so that its norm neither overflows nor underflows).
+
+    Parameters
+    ----------
+    owner : str
+        Who takes the input, or ``""``.
+    name : str
+        The input's name.
+    value : array_like, shape (4,)
+        The quaternion, any length.
+    """
+    quaternion = np.array(check_array(owner, name, value, shape=(4,)))
+    largest = float(np.max(np.abs(quaternion)))
+    if not largest > 0:
+        raise InputValueError(f"{label(owner, name)} must be a non-zero quaternion; got "
+                              f"{quaternion.tolist()}")
+    quaternion /= largest
+    quaternion /= np.linalg.norm(quaternion)
+    quaternion.setflags(write=False)
+    return quaternion
 
 
 def _short_repr(value) -> str:

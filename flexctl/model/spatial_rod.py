@@ -39,18 +39,23 @@ def skew(a):
 
 
 def cross_matrix(a) -> np.ndarray:
-    """``[a]x``, the cross-product matrix of a 3-vector (numpy form of :func:`skew`).
+    """``[a]x``, the cross-product matrix of a 3-vector, or of each of a stack of them (numpy
+    form of :func:`skew`).
 
     Parameters
     ----------
-    a : array_like, shape (3,)
-        The vector ``a``: ``[a]x b = a x b``.
+    a : array_like, shape (..., 3)
+        The vectors ``a``: ``[a]x b = a x b``.
 
     Returns
     -------
-    ndarray, shape (3, 3)
+    ndarray, shape (..., 3, 3)
     """
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    a = np.asarray(a, dtype=float)
+    out = np.zeros(a.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -a[..., 2], a[..., 1], -a[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = a[..., 2], -a[..., 1], a[..., 0]
+    return out
 
 
 def _exp(omega):
