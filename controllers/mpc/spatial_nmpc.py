@@ -510,6 +510,11 @@ def design_spatial_nmpc(structure, weights: LQRWeights, target=None, sample_time
     speed_margin = check_real(owner, "speed_margin", speed_margin, minimum=0.0, strict=True,
                               maximum=1.0)
     qp_solver = check_choice(owner, "qp_solver", qp_solver, SPATIAL_QP_SOLVERS)
+    if wheels is not None:
+        from flexctl.model.checks import check_instance
+        from flexctl.model.wheel_cluster import WheelCluster
+
+        check_instance(owner, "wheels", wheels, WheelCluster)
     if wheels is not None and torque_limit is not None:
         raise InputValueError(f"{owner}.torque_limit bounds a hub torque without wheels; with "
                               "wheels their own torque_limit does")

@@ -149,7 +149,7 @@ def eigenaxis_shaper(structure, axis, kind: str = "zv", n_shaped: int = 1, n_mod
     from .shaping import convolve, zv_shaper, zvd_shaper
 
     makers = {"zv": zv_shaper, "zvd": zvd_shaper}
-    if kind not in makers:
+    if not isinstance(kind, str) or kind not in makers:
         raise InputValueError(f"eigenaxis_shaper.kind must be 'zv' or 'zvd'; got {kind!r:.80}")
     modes = eigenaxis_modes(structure, axis, n_shaped, n_modes)
     shaper = None

@@ -73,6 +73,7 @@ def test_the_shaper_cancels_each_mode_it_names(kind, maker):
 
 @pytest.mark.parametrize("kwargs, pattern", [
     ({"kind": "zvdd"}, r"eigenaxis_shaper\.kind must be 'zv' or 'zvd'"),
+    ({"kind": ["zv"]}, r"eigenaxis_shaper\.kind must be 'zv' or 'zvd'"),
     ({"n_shaped": 0}, r"eigenaxis_shaper\.n_shaped must be an integer >= 1"),
     ({"n_shaped": 2.0}, r"eigenaxis_shaper\.n_shaped"),
     ({"n_shaped": 50}, r"eigenaxis_shaper\.n_shaped must be at most \d+: a torque about"),

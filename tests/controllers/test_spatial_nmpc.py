@@ -157,6 +157,8 @@ def test_it_follows_a_planned_slew_to_the_target():
     ({"structure": "craft"}, r"design_spatial_nmpc\.structure must be a SpatialStructure"),
     ({"weights": "heavy"}, r"weights"),
     ({"reference": "a slew"}, r"design_spatial_nmpc\.reference"),
+    ({"wheels": "four"}, r"design_spatial_nmpc\.wheels"),
+    ({"wheels": 3}, r"design_spatial_nmpc\.wheels"),
 ])
 def test_bad_arguments_are_refused_by_name(kwargs, pattern):
     arguments = {"structure": CRAFT, "weights": WEIGHTS, "target": TARGET, **kwargs}
