@@ -186,9 +186,12 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     ----------
     controller : object
         A designed built-in law (see :func:`~controllers.codegen.laws.program_for`), a
-        three-axis :class:`~controllers.feedback.spatial_lqr.SpatialLQR` or
-        :class:`~controllers.feedback.spatial_lqr.SpatialLQG`
-        (:func:`~controllers.codegen.spatial_program.spatial_program`: three torques), or a
+        three-axis :class:`~controllers.feedback.spatial_lqr.SpatialLQR`,
+        :class:`~controllers.feedback.spatial_lqr.SpatialLQG` or
+        :class:`~controllers.feedback.quaternion.QuaternionFeedback`
+        (:func:`~controllers.codegen.spatial_program.spatial_program`: three torques), an
+        attitude filter (:class:`~controllers.feedback.mekf.AttitudeFilter`,
+        :func:`~controllers.codegen.spatial_program.filter_program`: the estimate), or a
         :class:`~controllers.codegen.program.ControllerProgram`.
     plant : flexctl.Model or None
         The plant the law runs on (its state order, sensors and actuator); a three-axis law
@@ -225,16 +228,19 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     if isinstance(directory, bool) or not isinstance(directory, (str, os.PathLike)):
         raise InputTypeError(f"export directory must be a path; got {type(directory).__name__}")
     from flexctl.model import Model
+    from ..feedback.mekf import AttitudeFilter
+    from ..feedback.quaternion import QuaternionFeedback
     from ..feedback.spatial_lqr import SpatialLQG, SpatialLQR
 
     precision = check_precision(precision)
-    if isinstance(controller, (SpatialLQR, SpatialLQG)):
+    if isinstance(controller, (SpatialLQR, SpatialLQG, QuaternionFeedback, AttitudeFilter)):
         if sample_time is not None or initial_state is not None:
-            raise InputValueError("export: a three-axis law keeps its own sample time and "
-                                  "starts its filter from the first reading; give neither "
-                                  "sample_time nor initial_state")
-        from .spatial_program import spatial_program
-        program = spatial_program(controller)
+            raise InputValueError("export: a three-axis law or filter keeps its own sample "
+                                  "time and starts from its own state or the first reading; "
+                                  "give neither sample_time nor initial_state")
+        from .spatial_program import filter_program, spatial_program
+        program = (filter_program(controller) if isinstance(controller, AttitudeFilter)
+                   else spatial_program(controller))
     elif not isinstance(plant, Model):
         raise InputTypeError(f"export plant must be a flexctl Model; got {type(plant).__name__}")
     else:

@@ -18,16 +18,11 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
-
 from ..sim.atomic_files import staged_folder
+from .export_check import SUMMARY_FILE, compiled_check
 
-__all__ = ["export_scene", "format_export", "CHECK_STEPS", "SUMMARY_FILE"]
+__all__ = ["export_scene", "format_export"]
 
-#: Steps of the compiled law checked against its program.
-CHECK_STEPS = 20
-#: What was written and measured, beside the C files.
-SUMMARY_FILE = "export.json"
 
 
 def _sample_time(scene, given):
@@ -43,23 +38,6 @@ def _sample_time(scene, given):
     return None
 
 
-def _check(program, law, plant, seed: int = 0) -> float:
-    """Largest difference, relative to ``max(1, |u|)``, between the compiled law and its
-    program over :data:`CHECK_STEPS` samples of inputs near rest."""
-    rng = np.random.default_rng(seed)
-    reference = program.session()
-    law.init()
-    period = program.sample_time or 0.01
-    worst = 0.0
-    for k in range(CHECK_STEPS):
-        v = 1e-2 * rng.standard_normal(program.n_in)
-        expected = reference.step(k * period, v)
-        got, _ = law.step(k * period, v)
-        worst = max(worst, abs(got - expected) / max(1.0, abs(expected)))
-    law.init()
-    return float(worst)
-
-
 def export_scene(scene, out, *, sample_time: float | None = None, compile: bool = True,
                  cc: str | None = None, precision: str = "double",
                  loop_check: bool = False, target: str = "host") -> dict:
@@ -67,8 +45,9 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
 
     Parameters
     ----------
-    scene : flexctl.Scene
-        A slew scene with a ``[controller]`` table.
+    scene : flexctl.Scene or SpatialScene
+        A slew scene with a ``[controller]`` table; a spatial scene's three-axis law (and its
+        attitude filter) goes to :func:`~flexctl.app.export_spatial.export_spatial_scene`.
     out : str or pathlib.Path
         Directory of the files (created with its parents if missing; files of other names
         in it are kept).
@@ -116,17 +95,14 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
         find_target_compiler
 
     out = Path(out)
-    from controllers.spec import SceneError
-
     from .spatial_scene import SpatialScene
 
     if isinstance(scene, SpatialScene):
-        raise SceneError(
-            f"export: {scene.name} is a spatial scene; `flexctl export` writes the laws of "
-            "planar scenes. A three-axis LQR or LQG (without a reference slew) is written "
-            "as C from Python: controllers.codegen.export_c(law, None, folder), the law "
-            "designed by controllers.feedback.spatial_lqr; the quaternion feedback, the "
-            "NMPC and the attitude filter have no C form yet")
+        from .export_spatial import export_spatial_scene
+
+        return export_spatial_scene(scene, out, sample_time=sample_time, compile=compile,
+                                    cc=cc, precision=precision, loop_check=loop_check,
+                                    target=target)
     chosen = check_target(target)
     if compile and chosen.embedded:
         find_target_compiler(chosen)            # missing cross tools: before the design
@@ -144,7 +120,7 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
                                              float_findings(exported.program)]
         if compile:
             try:
-                summary.update(_compiled_check(exported, plant, cc))
+                summary.update(compiled_check(exported, cc))
                 if chosen.embedded:
                     summary["target_build"] = build_for_target(exported, chosen).as_dict()
                 if loop_check and summary["compiled"]:
@@ -158,32 +134,9 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
     return summary
 
 
-def _compiled_check(exported, plant, cc) -> dict:
-    """The compiled law's sizes, compile time and largest difference from its program; or
-    the ``note`` that no compiler was found."""
-    from controllers.codegen import CompileError, find_compiler
-
-    try:
-        find_compiler(cc)
-    except CompileError as exc:
-        return {"note": f"{exc}: the files are written but not compiled"}
-    law = exported.compile(cc)
-    return {"compiled": True, "struct_bytes": law.struct_bytes, "code_bytes": law.code_bytes,
-            "compile_time_s": law.compile_time_s, "check_steps": CHECK_STEPS,
-            "check_max_difference": _check(exported.program, law, plant)}
-
-
-def format_export(summary: dict) -> str:
-    """The console lines of an export.
-
-    Parameters
-    ----------
-    summary : dict
-        What :func:`export_scene` returns: the scene, the law's sizes and files, and the
-        compiled check or the note why there is none.
-    """
-    lines = [f"{summary['scene']}: {summary['description']}",
-             f"  input: {summary['input']} ({len(summary['input_names'])} entries), output: "
+def _part_lines(summary: dict) -> list:
+    """The lines of one exported program: its interface, sizes, compiled check and build."""
+    lines = [f"  input: {summary['input']} ({len(summary['input_names'])} entries), output: "
              f"{summary['output']}, sample time: {summary['sample_time_s']:g} s",
              f"  precision: {summary['precision']}; memory: {summary['memory_reals']} reals; "
              f"work: {summary['work_reals']} reals, {summary['work_ints']} integers"]
@@ -204,9 +157,31 @@ def format_export(summary: dict) -> str:
                      f"bytes, stack {build['stack_bytes']} bytes per step"
                      + ("; double arithmetic in software" if build["software_double"]
                         else ""))
+    return lines
+
+
+def format_export(summary: dict) -> str:
+    """The console lines of an export.
+
+    Parameters
+    ----------
+    summary : dict
+        What :func:`export_scene` returns: the scene, the law's sizes and files, and the
+        compiled check or the note why there is none.
+    """
+    lines = [f"{summary['scene']}: {summary['description']}", *_part_lines(summary)]
+    if "filter" in summary:
+        part = summary["filter"]
+        lines += [f"  filter: {part['description']}",
+                  *("  " + line for line in _part_lines(part))]
     if "precision_in_the_loop" in summary:
-        from .export_precision import format_comparison
-        lines.append(format_comparison(summary["precision_in_the_loop"]))
+        checks = summary["precision_in_the_loop"]
+        if "max_attitude_difference" in checks.get("double", {}):
+            from .export_spatial import format_spatial_loop_check
+            lines += format_spatial_loop_check(checks)
+        else:
+            from .export_precision import format_comparison
+            lines.append(format_comparison(checks))
     lines.append("  files: " + ", ".join(Path(f).name for f in summary["files"])
                  + f" in {Path(summary['files'][0]).parent}")
     return "\n".join(lines)

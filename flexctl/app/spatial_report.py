@@ -18,11 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..model.errors import InputValueError
 from ..sim.spatial_run import SpatialResult, simulate_spatial
 from .report import CSV_DIGITS, RESPONSE_PLOT, SUMMARY, TIMESERIES, json_safe
 from .spatial_scene import SpatialScene
 
-__all__ = ["run_spatial_scene", "spatial_columns", "write_spatial_run",
+__all__ = ["run_spatial_scene", "fly_spatial_loop", "spatial_columns", "write_spatial_run",
            "format_spatial_summary", "spatial_summary"]
 
 
@@ -41,19 +42,45 @@ def run_spatial_scene(scene: SpatialScene, progress=None) -> SpatialResult:
     SpatialResult
     """
     if scene.loop is not None:
-        from ..sim.spatial_loop import simulate_spatial_loop
-
-        return simulate_spatial_loop(
-            scene.structure, scene.t_final, scene.loop.law, sample_time=scene.loop.sample_time,
-            n_modes=scene.n_modes, variant=scene.variant, wheels=scene.wheels,
-            wheel_speeds=scene.wheel_speeds, angular_velocity=scene.angular_velocity,
-            quaternion=scene.quaternion, sensors=scene.loop.sensors,
-            estimator=scene.loop.estimator(scene.quaternion), rtol=scene.rtol).result
+        return fly_spatial_loop(scene).result
     return simulate_spatial(scene.structure, scene.t_final, scene.maneuver,
                             n_modes=scene.n_modes, angular_velocity=scene.angular_velocity,
                             quaternion=scene.quaternion, rtol=scene.rtol,
                             output_step=scene.output_step, variant=scene.variant,
                             wheels=scene.wheels, wheel_speeds=scene.wheel_speeds)
+
+
+def fly_spatial_loop(scene: SpatialScene, law=None, estimator=None):
+    """Fly a spatial scene's attitude loop (its ``[controller]`` and ``[sensors]``).
+
+    Parameters
+    ----------
+    scene : SpatialScene
+        A spatial scene with a loop.
+    law : object, optional
+        The law flown instead of the scene's (a compiled one, for example), as
+        :func:`~flexctl.sim.spatial_loop.simulate_spatial_loop` takes it.
+    estimator : object, optional
+        The estimator used instead of the scene's attitude filter (with its sensors).
+
+    Returns
+    -------
+    SpatialLoopResult
+    """
+    from ..sim.spatial_loop import simulate_spatial_loop
+
+    loop = scene.loop
+    if loop is None:
+        raise InputValueError(f"{scene.name} has no [controller]: no attitude loop to fly")
+    if estimator is None:
+        estimator = loop.estimator(scene.quaternion)
+    return simulate_spatial_loop(
+        scene.structure, scene.t_final, loop.law if law is None else law,
+        sample_time=loop.sample_time, n_modes=scene.n_modes, variant=scene.variant,
+        wheels=scene.wheels, wheel_speeds=scene.wheel_speeds,
+        angular_velocity=scene.angular_velocity, quaternion=scene.quaternion,
+        sensors=loop.sensors, estimator=estimator if loop.sensors is not None else None,
+        rtol=scene.rtol)
 
 
 def spatial_columns(result: SpatialResult) -> list:

@@ -244,9 +244,52 @@ def test_a_bad_nmpc_scene_is_refused_by_its_key(tmp_path, extra, sensors, patter
         load_scene(path)
 
 
-def test_exporting_a_spatial_scene_says_how_and_writes_nothing(tmp_path, capsys):
+def test_exporting_a_spatial_lqg_scene_writes_its_law_and_refuses_what_it_cannot(tmp_path,
+                                                                                   capsys):
+    """The LQG's C from the scene (its own filter inside: the scene's star tracker and gyro
+    feed it through the attitude filter, written beside it in ``filter/``)."""
     out = tmp_path / "c"
-    assert main(["export", str(EXAMPLE), "--out", str(out), "--no-compile"]) != 0
+    assert main(["export", str(EXAMPLE), "--out", str(out), "--no-compile"]) == 0
+    summary = json.loads((out / "export.json").read_text())
+    assert summary["controller"] == "SpatialLQG" and summary["compiled"] is False
+    assert summary["input_names"] == ["qw", "qx", "qy", "qz", "wx", "wy", "wz"]
+    assert "#define FLEXCTL_NU 3" in (out / "flexctl_ctrl.h").read_text()
+    assert summary["filter"]["input_names"][-1] == "tracked"
+    assert "#define FLEXCTL_NU 7" in (out / "filter" / "flexctl_ctrl.h").read_text()
+    capsys.readouterr()
+    bad = tmp_path / "bad"
+    assert main(["export", str(EXAMPLE), "--out", str(bad), "--no-compile",
+                 "--sample-time", "0.2"]) != 0
     error = capsys.readouterr().err
-    assert "spatial-lqg-slew is a spatial scene" in error and "export_c(law, None" in error
-    assert "Traceback" not in error and not out.exists()
+    assert "keeps its own sample time (0.1 s)" in error and "Traceback" not in error
+    assert not bad.exists()
+    nmpc = tmp_path / "nmpc.toml"
+    nmpc.write_text(_nmpc_scene())
+    assert main(["export", str(nmpc), "--out", str(bad), "--no-compile"]) != 0
+    error = capsys.readouterr().err
+    assert "SpatialNMPC has no C form" in error and not bad.exists()
+
+
+@pytest.mark.slow
+def test_a_spatial_export_flies_its_c_law_and_filter_in_the_scene_loop(tmp_path, capsys):
+    """The built-in pyramid slew (quaternion feedback with integral action through the
+    attitude filter, 0.2 s tracker latency) exported, compiled, checked step by step against
+    its programs and flown for 4 s in the scene's loop in double and in float."""
+    out = tmp_path / "c"
+    assert main(["export", "spatial-pyramid-slew", "--out", str(out), "--loop-check",
+                 "--set", "simulation.t_final=4"]) == 0
+    printed = capsys.readouterr().out
+    assert "in the loop, float: ok" in printed and "filter: multiplicative" in printed
+    summary = json.loads((out / "export.json").read_text())
+    assert summary["controller"] == "QuaternionFeedback" and summary["compiled"]
+    assert summary["check_max_difference"] < 1e-12
+    assert summary["filter"]["check_max_difference"] < 1e-12
+    double, single = (summary["precision_in_the_loop"][p] for p in ("double", "float"))
+    print(double, single)
+    assert double["max_command_difference"] < 1e-9 and double["max_attitude_difference"] < 1e-9
+    assert single["max_command_difference"] < 1e-4 and single["max_attitude_difference"] < 1e-5
+    assert double["final_pointing_error"] == pytest.approx(
+        double["python_final_pointing_error"], rel=1e-6)
+    assert sorted(p.name for p in out.iterdir()) == ["Makefile", "export.json", "filter",
+                                                     "flexctl_ctrl.c", "flexctl_ctrl.h",
+                                                     "main.c"]
