@@ -159,9 +159,10 @@ def checked_rigid_inertia(owner: str, model_or_inertia) -> float:
     return check_real(owner, "inertia", model_or_inertia, minimum=0.0, strict=True)
 
 
-def spatial_design_plant(owner: str, structure, n_modes, variant: str) -> tuple:
-    """The linear plant of a spatial structure at rest that a three-axis design works on, and
-    its state names.
+def spatial_design_plant(owner: str, structure, n_modes, variant: str,
+                         angular_velocity=(0.0, 0.0, 0.0)) -> tuple:
+    """The linear plant of a spatial structure at rest (or about a steady spin) that a
+    three-axis design works on, and its state names.
 
     Parameters
     ----------
@@ -173,6 +174,8 @@ def spatial_design_plant(owner: str, structure, n_modes, variant: str) -> tuple:
         Modes per field (:func:`~flexctl.model.spatial_dynamics.spatial_modes`).
     variant : str
         One of :data:`~flexctl.model.spatial_dynamics.SPATIAL_VARIANTS`.
+    angular_velocity : array_like, shape (3,), optional
+        The steady spin linearised about, hub frame, rad/s. Default zero.
 
     Returns
     -------
@@ -190,7 +193,8 @@ def spatial_design_plant(owner: str, structure, n_modes, variant: str) -> tuple:
     check_instance(owner, "structure", structure, SpatialStructure)
     n_modes = spatial_modes(owner, structure, n_modes)
     variant = check_choice(owner, "variant", variant, SPATIAL_VARIANTS)
-    plant = linearize_spatial(structure, n_modes, variant=variant)
+    plant = linearize_spatial(structure, n_modes, angular_velocity=angular_velocity,
+                              variant=variant)
     layout = spatial_equations(structure, n_modes, variant).layout
     c = layout.n_coordinates
     kept = list(range(c - layout.n_elastic, c)) + list(range(c, c + layout.n_speeds))

@@ -45,7 +45,8 @@ from ..design.controllable import (ControllablePart, design_failure, held, input
 from .lqr import LQRWeights
 
 __all__ = ["SpatialLQR", "SpatialLQG", "design_spatial_lqr", "design_spatial_lqg",
-           "spatial_weight_matrices", "reference_target", "FREQUENCY_FACTOR", "NOISE_FLOOR"]
+           "spatial_weight_matrices", "spatial_lq_gain", "reference_target",
+           "FREQUENCY_FACTOR", "NOISE_FLOOR"]
 
 #: Default cut-off of a continuous design's modes, in multiples of the rigid loop's bandwidth.
 FREQUENCY_FACTOR = 100.0
@@ -481,6 +482,58 @@ def _design_plant(structure, n_modes, variant):
     return spatial_design_plant("design_spatial_lqr", structure, n_modes, variant)
 
 
+def spatial_lq_gain(owner: str, structure, plant, weights: LQRWeights, *,
+                    sample_time: float | None = None,
+                    max_frequency: float | None = None) -> tuple:
+    """The LQR gain of a spatial linear plant on the part its torque moves (module
+    description): what :func:`design_spatial_lqr` solves, at rest or about a steady spin.
+
+    Parameters
+    ----------
+    owner : str
+        Who asks (named in errors).
+    structure : SpatialStructure
+        The structure of ``plant`` (its rigid inertia sets the default cut-off).
+    plant : control.StateSpace
+        :func:`~flexctl.model.spatial_plant.linearize_spatial`'s plant.
+    weights : LQRWeights
+        Bryson weights per axis.
+    sample_time : float, optional
+        The hold, s: the discrete LQR of the held plant. Default: continuous.
+    max_frequency : float, optional
+        Cut-off of the modes designed on, rad/s (as :func:`design_spatial_lqr`'s).
+
+    Returns
+    -------
+    tuple
+        ``(gain, poles, part)``: the gain on the whole plant state (3, n), the closed-loop
+        poles of the part (1/s; a held design's ``log(z) / T``) and the
+        :class:`~controllers.design.controllable.ControllablePart`.
+    """
+    q_mat, r_mat = spatial_weight_matrices(plant, weights)
+    a, b = plant.A, plant.B
+    if max_frequency is None:
+        rigid = np.sqrt(weights.torque / weights.hub_angle
+                        / np.linalg.eigvalsh(structure.rigid_inertia)[-1])
+        max_frequency = (np.pi / sample_time if sample_time is not None
+                         else FREQUENCY_FACTOR * rigid)
+    max_frequency = check_real(owner, "max_frequency", max_frequency, minimum=0.0,
+                               strict=True)
+    part = input_part(a, b, max_frequency=max_frequency)
+    with design_failure("lqr", owner, structure, weights=weights, sample_time=sample_time):
+        q_r = part.basis.T @ q_mat @ part.basis
+        gain_r = state_gain(part.projector @ a @ part.basis, part.projector @ b,
+                            0.5 * (q_r + q_r.T), r_mat, sample_time)
+    gain = gain_r @ part.projector
+    a_r, b_r = part.projector @ a @ part.basis, part.projector @ b
+    if sample_time is None:
+        poles = np.linalg.eigvals(a_r - b_r @ gain_r)
+    else:
+        a_d, b_d = held(a_r, b_r, sample_time)
+        poles = _continuous(np.linalg.eigvals(a_d - b_d @ gain_r), sample_time)
+    return gain, poles, part
+
+
 def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
                        variant: str = "exact", sample_time: float | None = None,
                        torque_limit: float | None = None,
@@ -552,28 +605,8 @@ def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
             f"design_spatial_lqr.reference was planned on a design state of {len(planned)} "
             f"entries, the law's has {len(names)} ({', '.join(names[3:])}): plan the slew "
             "on the law's structure and n_modes")
-    q_mat, r_mat = spatial_weight_matrices(plant, weights)
-    a, b = plant.A, plant.B
-    if max_frequency is None:
-        rigid = np.sqrt(weights.torque / weights.hub_angle
-                        / np.linalg.eigvalsh(structure.rigid_inertia)[-1])
-        max_frequency = (np.pi / sample_time if sample_time is not None
-                         else FREQUENCY_FACTOR * rigid)
-    max_frequency = check_real("design_spatial_lqr", "max_frequency", max_frequency,
-                               minimum=0.0, strict=True)
-    part = input_part(a, b, max_frequency=max_frequency)
-    with design_failure("lqr", "design_spatial_lqr", structure, weights=weights,
-                        sample_time=sample_time):
-        q_r = part.basis.T @ q_mat @ part.basis
-        gain_r = state_gain(part.projector @ a @ part.basis, part.projector @ b,
-                            0.5 * (q_r + q_r.T), r_mat, sample_time)
-    gain = gain_r @ part.projector
-    a_r, b_r = part.projector @ a @ part.basis, part.projector @ b
-    if sample_time is None:
-        poles = np.linalg.eigvals(a_r - b_r @ gain_r)
-    else:
-        a_d, b_d = held(a_r, b_r, sample_time)
-        poles = _continuous(np.linalg.eigvals(a_d - b_d @ gain_r), sample_time)
+    gain, poles, part = spatial_lq_gain("design_spatial_lqr", structure, plant, weights,
+                                        sample_time=sample_time, max_frequency=max_frequency)
     return SpatialLQR(gain=gain, plant=plant, state_names=names, target=target, poles=poles,
                       sample_time=sample_time, torque_limit=torque_limit, part=part,
                       note=part.note, reference=reference)

@@ -4,7 +4,11 @@ sample, its command is held until the next (a zero-order hold, as a flight compu
 :func:`simulate_spatial_loop` integrates the spatial model (with its wheel cluster, when it
 has one: the command is then the torque asked of the wheels) from sample to sample on the
 compiled right-hand side, the command constant over each sample (CVODES's Adams-Moulton
-methods, :class:`~flexctl.sim.spatial_run.SpatialSegments`, one integrator for every sample).
+methods, :class:`~flexctl.sim.spatial_run.SpatialSegments`, one integrator for every sample,
+Newton's iteration on the Jacobian at the sample's start: on the built-in
+``spatial-pyramid-slew`` (three appendages, wheels with a lag, 25 s at 10 Hz, rtol 1e-8) 1.7
+times faster than functional iteration, 214 551 steps against 397 749, its attitude 1.7e-10
+from a run at rtol 1e-10 against 9.0e-11 and its whole state 1.6e-7 against 6.1e-7).
 With ``sensors`` (:class:`~flexctl.sim.attitude_sensors.AttitudeSensors`) the law does not
 read the truth: at each of its samples the gyro reads the rotation over the sample just past
 divided by its length (a rate-integrating gyro: the appendages' vibration is not aliased
@@ -193,7 +197,7 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
     c = layout.n_coordinates
     held = ConstantTorque(np.zeros(3))
     segments = SpatialSegments(machine_function(equations.rhs), layout.n_states, held, rtol,
-                               rtol * 1e-3, line=False)
+                               rtol * 1e-3, line=False, newton=True)
     sensed = _Sensed(sensors, estimator, seed, count) if sensors is not None else None
     times = sample_time * np.arange(count + 1)
     states = np.zeros((layout.n_states, count + 1))
