@@ -187,8 +187,9 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     controller : object
         A designed built-in law (see :func:`~controllers.codegen.laws.program_for`), a
         three-axis :class:`~controllers.feedback.spatial_lqr.SpatialLQR`,
-        :class:`~controllers.feedback.spatial_lqr.SpatialLQG` or
-        :class:`~controllers.feedback.quaternion.QuaternionFeedback`
+        :class:`~controllers.feedback.spatial_lqr.SpatialLQG`,
+        :class:`~controllers.feedback.quaternion.QuaternionFeedback` or
+        :class:`~controllers.feedback.spatial_scheduling.ScheduledSpatialLQR`
         (:func:`~controllers.codegen.spatial_program.spatial_program`: three torques), an
         attitude filter (:class:`~controllers.feedback.mekf.AttitudeFilter`,
         :func:`~controllers.codegen.spatial_program.filter_program`: the estimate), or a
@@ -231,9 +232,11 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     from ..feedback.mekf import AttitudeFilter
     from ..feedback.quaternion import QuaternionFeedback
     from ..feedback.spatial_lqr import SpatialLQG, SpatialLQR
+    from ..feedback.spatial_scheduling import ScheduledSpatialLQR
 
     precision = check_precision(precision)
-    if isinstance(controller, (SpatialLQR, SpatialLQG, QuaternionFeedback, AttitudeFilter)):
+    if isinstance(controller, (SpatialLQR, SpatialLQG, QuaternionFeedback, AttitudeFilter,
+                               ScheduledSpatialLQR)):
         if sample_time is not None or initial_state is not None:
             raise InputValueError("export: a three-axis law or filter keeps its own sample "
                                   "time and starts from its own state or the first reading; "

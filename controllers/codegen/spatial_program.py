@@ -13,6 +13,9 @@ functions, and their compiled C flown in the spatial loop.
   :class:`~controllers.feedback.spatial_lqr.SpatialLQG`'s session does. The caller calls it
   once per sample of the design's hold.
 
+- **Scheduled LQR** (:class:`~controllers.feedback.spatial_scheduling.ScheduledSpatialLQR`).
+  As the LQR, its attitude error from the spinning reference ``q_0 (x) exp(theta(t) a / 2)``
+  and its gains interpolated in ``a . w`` between the design spins (clamped at the ends).
 - **Quaternion feedback.** Input ``v``: the readings ``qw qx qy qz wx wy wz``; memory
   ``[started, t_last, integral (3)]``; the step is
   :class:`~controllers.feedback.quaternion.QuaternionFeedbackSession`'s call (the integral by
@@ -164,6 +167,41 @@ def _lqr_program(law) -> ControllerProgram:
         info={"design_states": len(law.state_names) - 3})
 
 
+def _scheduled_program(law) -> ControllerProgram:
+    import casadi as ca
+
+    names = ("qw", "qx", "qy", "qz") + tuple(law.state_names[3:])
+    t, v, m = ca.SX.sym("t"), ca.SX.sym("v", len(names)), ca.SX.sym("m", 0)
+    angle, rate, acceleration = casadi_evaluate(law.profile, t)
+    axis, inertia = ca.DM(law.spin_axis), ca.DM(law.inertia)
+    start = ca.DM(law.start_attitude)
+    reference = _product(ca, start, _from_rotation_vector(ca, angle * axis))
+    error = _exact_rotation_vector(ca, _product(ca, ca.vertcat(reference[0], -reference[1:4]),
+                                                v[0:4]))
+    at = law.rate_at + 1                                  # the rates in v (after qw..qz)
+    spin = rate * axis
+    design = ca.vertcat(error, v[4:at], v[at:at + 3] - spin, v[at + 3:])
+    # K(a . w): the gains linear between the design spins, the end gains outside
+    measured = ca.dot(axis, v[at:at + 3])
+    rates, gains = law.spin_rates, law.gains
+    gain = ca.DM(gains[0])
+    for k in range(rates.size - 1):
+        weight = ca.fmin(ca.fmax((measured - rates[k]) / (rates[k + 1] - rates[k]), 0.0), 1.0)
+        gain = gain + weight * ca.DM(gains[k + 1] - gains[k])
+    torque = acceleration * ca.mtimes(inertia, axis) + ca.cross(spin, ca.mtimes(inertia, spin))
+    u = _limited(ca, torque - ca.mtimes(gain, design), law.torque_limit)
+    step = ca.Function("step", [t, v, m], [u, ca.SX.zeros(0)], ["t", "v", "m"],
+                       ["u", "m_next"])
+    held = "continuous" if law.sample_time is None else f"held over {law.sample_time:g} s"
+    return ControllerProgram(
+        kind="spatial_lqr", step=step, recover=None, input_names=names, input_kind="state",
+        output_name="torque", output_unit="N m, hub frame", memory_init=np.zeros(0),
+        sample_time=float(law.sample_time or 0.0),
+        description=(f"three-axis LQR scheduled over {rates.size} spins about "
+                     f"{np.round(law.spin_axis, 6).tolist()}, {held}"),
+        info={"design_states": len(law.state_names) - 3, "design_spins": rates.size})
+
+
 def _lqg_program(law) -> ControllerProgram:
     import casadi as ca
 
@@ -227,7 +265,7 @@ def spatial_program(law) -> ControllerProgram:
 
     Parameters
     ----------
-    law : SpatialLQR, SpatialLQG or QuaternionFeedback
+    law : SpatialLQR, SpatialLQG, QuaternionFeedback or ScheduledSpatialLQR
         The designed law.
 
     Returns
@@ -237,9 +275,16 @@ def spatial_program(law) -> ControllerProgram:
     """
     from ..feedback.quaternion import QuaternionFeedback
     from ..feedback.spatial_lqr import SpatialLQG, SpatialLQR
+    from ..feedback.spatial_scheduling import ScheduledSpatialLQR
 
     if isinstance(law, QuaternionFeedback):
         return _quaternion_program(law)
+    if isinstance(law, ScheduledSpatialLQR):
+        if not callable(getattr(law.profile, "casadi_reference", None)):
+            raise ExportRefused(f"export: the scheduled law's spin profile "
+                                f"({type(law.profile).__name__}) has no CasADi form (a "
+                                "SpinUp, a SteadySpin or a SlewProfile has)")
+        return _scheduled_program(law)
     from ..slew.eigenaxis import EigenaxisSlew
 
     regulator = getattr(law, "regulator", law)
@@ -257,8 +302,8 @@ def spatial_program(law) -> ControllerProgram:
         return _lqr_program(law)
     if isinstance(law, SpatialLQG):
         return _lqg_program(law)
-    raise InputTypeError(f"spatial_program takes a SpatialLQR, SpatialLQG or "
-                         f"QuaternionFeedback; got {type(law).__name__}")
+    raise InputTypeError(f"spatial_program takes a SpatialLQR, SpatialLQG, QuaternionFeedback "
+                         f"or ScheduledSpatialLQR; got {type(law).__name__}")
 
 
 def _filter_propagate(ca, state, reading, lag, step, sigma_v2, sigma_u2):

@@ -98,6 +98,21 @@ class SteadySpin(KeywordOnly):
         """
         return 0.0 * np.asarray(t, dtype=float)
 
+    def casadi_reference(self, t):
+        """Angle, rate and acceleration as CasADi expressions of the symbol ``t``.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+
+        Returns
+        -------
+        tuple
+            rad, rad/s, rad/s^2.
+        """
+        return self.spin_rate * t, self.spin_rate + 0.0 * t, 0.0 * t
+
 
 @dataclass(frozen=True, eq=False)
 class ScheduledSpatialLQR:

@@ -174,6 +174,34 @@ class SpinUp(KeywordOnly):
         are ``[spin_rate, ramp_time]`` (compiled runs of spin-ups share one function)."""
         return (), np.array([self.spin_rate, self.ramp_time])
 
+    def casadi_reference(self, t, parameters=None):
+        """Angle, rate and acceleration as CasADi expressions of the symbol ``t`` (the
+        formulas of :meth:`angle`, :meth:`rate`, :meth:`acceleration`): the spin-up as a
+        reference a law follows.
+
+        Parameters
+        ----------
+        t : casadi.SX or casadi.MX
+            Scalar time, s.
+        parameters : casadi.SX or casadi.MX, shape (2, 1), optional
+            ``[spin_rate, ramp_time]`` (rad/s, s) as symbols; None: this spin-up's numbers.
+
+        Returns
+        -------
+        angle, rate, acceleration : casadi.SX or casadi.MX
+            rad, rad/s and rad/s^2.
+        """
+        import casadi as ca
+
+        ws, ts = self.spin_rate, self.ramp_time
+        if parameters is not None:
+            ws, ts = parameters[0], parameters[1]
+        k = 2.0 * np.pi / ts
+        angle = ca.if_else(t < ts, ws / ts * (0.5 * t * t + (ca.cos(k * t) - 1.0) / (k * k)),
+                           ws * (t - 0.5 * ts))
+        rate, acceleration = self.casadi(t, parameters)
+        return angle, rate, acceleration
+
     def casadi(self, t, parameters=None):
         """Rate and acceleration as CasADi expressions of the symbol ``t``; the numbers are
         symbols too when ``parameters`` (laid out as :attr:`casadi_parameters`) is given.

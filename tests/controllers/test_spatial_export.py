@@ -99,7 +99,7 @@ def test_a_three_axis_export_refuses_what_it_cannot_use(tmp_path):
     law = _laws()["lqr"]
     with pytest.raises(InputValueError, match="keeps its own sample time"):
         export_c(law, None, tmp_path / "a", sample_time=0.2)
-    with pytest.raises(InputTypeError, match="SpatialLQR, SpatialLQG or QuaternionFeedback"):
+    with pytest.raises(InputTypeError, match="SpatialLQR, SpatialLQG, QuaternionFeedback or ScheduledSpatialLQR"):
         spatial_program(object())
     with pytest.raises(InputTypeError, match="compiled three-axis law"):
         compiled_spatial_law(object())
