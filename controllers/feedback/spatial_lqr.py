@@ -45,7 +45,7 @@ from ..design.controllable import (ControllablePart, design_failure, held, input
 from .lqr import LQRWeights
 
 __all__ = ["SpatialLQR", "SpatialLQG", "design_spatial_lqr", "design_spatial_lqg",
-           "spatial_weight_matrices", "spatial_lq_gain", "reference_target",
+           "spatial_weight_matrices", "spatial_lq_gain", "fed_back_rows", "reference_target",
            "FREQUENCY_FACTOR", "NOISE_FLOOR"]
 
 #: Default cut-off of a continuous design's modes, in multiples of the rigid loop's bandwidth.
@@ -268,22 +268,43 @@ class SpatialLQR:
         return np.clip(torque, -self.torque_limit, self.torque_limit)
 
 
+def fed_back_rows(names, state_names):
+    """Where a full-state law's ``names`` sit in a flown plant's state.
+
+    Parameters
+    ----------
+    names : sequence of str
+        The plant states the law feeds back.
+    state_names : sequence of str or None
+        The flown plant's state names (None: the design model's own order).
+
+    Returns
+    -------
+    ndarray of int or None
+        The rows, in the order of ``names``; None with ``state_names`` None.
+
+    Raises
+    ------
+    InputValueError
+        If the plant lacks one of them (the message names it).
+    """
+    if state_names is None:
+        return None
+    index = {name: k for k, name in enumerate(state_names)}
+    missing = [name for name in names if name not in index]
+    if missing:
+        raise InputValueError(
+            f"the plant has no state {missing[0]!r} that the law feeds back: fly it on a "
+            "plant with the design's appendages and at least its modes")
+    return np.array([index[name] for name in names], dtype=int)
+
+
 class _StateFeedbackSession:
     """A :class:`SpatialLQR` reading a plant's state by name."""
 
     def __init__(self, law: SpatialLQR, state_names):
         self.law = law
-        names = law.state_names[3:]
-        if state_names is None:
-            self.rows = None
-            return
-        index = {name: k for k, name in enumerate(state_names)}
-        missing = [name for name in names if name not in index]
-        if missing:
-            raise InputValueError(
-                f"the plant has no state {missing[0]!r} that the law feeds back: fly it on a "
-                "plant with the design's appendages and at least its modes")
-        self.rows = np.array([index[name] for name in names], dtype=int)
+        self.rows = fed_back_rows(law.state_names[3:], state_names)
 
     def __call__(self, t, attitude, rate, state) -> np.ndarray:
         law = self.law

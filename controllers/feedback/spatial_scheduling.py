@@ -42,7 +42,7 @@ from ..design.plant_state import spatial_design_plant
 from ..design.stability import LoopStabilityWarning
 from ..slew.reference import check_reference, evaluate_reference
 from .lqr import LQRWeights
-from .spatial_lqr import spatial_lq_gain
+from .spatial_lqr import fed_back_rows, spatial_lq_gain
 
 __all__ = ["ScheduledSpatialLQR", "SteadySpin", "design_scheduled_spatial_lqr",
            "GROWTH_TOLERANCE"]
@@ -264,16 +264,7 @@ class ScheduledSpatialLQR:
         callable
             ``session(t, attitude, rate, state) -> torque`` (N m, hub frame).
         """
-        names = self.state_names[3:]
-        rows = None
-        if state_names is not None:
-            index = {name: k for k, name in enumerate(state_names)}
-            missing = [name for name in names if name not in index]
-            if missing:
-                raise InputValueError(
-                    f"the plant has no state {missing[0]!r} that the law feeds back: fly it "
-                    "on a plant with the design's appendages and at least its modes")
-            rows = np.array([index[name] for name in names], dtype=int)
+        rows = fed_back_rows(self.state_names[3:], state_names)
 
         def session(t, attitude, rate, state):
             x = np.asarray(state, dtype=float)
