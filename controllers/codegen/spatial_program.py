@@ -4,7 +4,11 @@ functions, and their compiled C flown in the spatial loop.
 - **LQR.** Input ``v``: the plant state entries the law reads, by name (``qw qx qy qz``, the
   design's modal coordinates, ``wx wy wz``, a free hub's velocity, the modal rates); no memory.
   The step forms the attitude error (the rotation vector of ``target^-1 (x) q``, the short way
-  round) and commands ``clip(-K x, +-torque_limit)``, three torques in the hub frame.
+  round) and commands ``clip(-K x, +-torque_limit)``, three torques in the hub frame. One
+  following an eigenaxis slew regulates the deviation from it (its profile in CasADi form)
+  and adds its feedforward; one following a planned slew
+  (:class:`~controllers.slew.spatial_trajopt.SpatialSlewSolution`), sampled at the plan's
+  holds, reads the plan's design state and held torque from tables at the holds' ends.
 - **LQG.** Input ``v``: the readings ``qw qx qy qz wx wy wz`` (the attitude, normalised in the
   step, and the rate); memory ``[started, z]``, the filter's prediction on the design part and
   whether it has one. The first step starts the filter from the reading, the structure at
@@ -131,12 +135,31 @@ def _skew(ca, w):
                       ca.horzcat(-w[1], w[0], 0))
 
 
+def _planned(ca, plan, t, state, law):
+    """CasADi: the command following a planned slew at its holds' ends: its design state and
+    held torque tabulated there (linear interpolants, read at the nodes the law samples;
+    after the end, the final state and no torque)."""
+    times = np.asarray(plan.times, dtype=float)
+    nodes = np.array([plan.state_at(t_k) for t_k in times])            # (N + 1, n)
+    torques = np.vstack([plan.torque, np.zeros((1, 3))])               # (N + 1, 3)
+    reference = ca.interpolant("planned_state", "linear", [times],
+                               nodes.T.ravel(order="F"))
+    feedforward = ca.interpolant("planned_torque", "linear", [times],
+                                 torques.T.ravel(order="F"))
+    clamped = ca.fmin(ca.fmax(t, times[0]), times[-1])
+    return _limited(ca, -ca.mtimes(ca.DM(law.gain), state - reference(clamped))
+                    + feedforward(clamped), law.torque_limit)
+
+
 def _regulated(ca, law, t, state):
     """CasADi: :meth:`SpatialLQR.command <controllers.feedback.spatial_lqr.SpatialLQR.command>`
-    of the design state, an eigenaxis slew's reference and feedforward included."""
+    of the design state, an eigenaxis slew's or a planned slew's reference and feedforward
+    included."""
     slew = law.reference
     if slew is None:
         return _limited(ca, -ca.mtimes(ca.DM(law.gain), state), law.torque_limit)
+    if hasattr(slew, "state_at"):
+        return _planned(ca, slew, t, state, law)
     angle, rate, acceleration = casadi_evaluate(slew.profile, t)
     axis, inertia = ca.DM(slew.axis), ca.DM(slew.inertia)
     spin = rate * axis
@@ -151,14 +174,16 @@ def _lqr_program(law) -> ControllerProgram:
     import casadi as ca
 
     names = ("qw", "qx", "qy", "qz") + tuple(law.state_names[3:])
-    t, v, m = ca.SX.sym("t"), ca.SX.sym("v", len(names)), ca.SX.sym("m", 0)
+    kind = ca.MX if hasattr(law.reference, "state_at") else ca.SX     # tables want MX
+    t, v, m = kind.sym("t"), kind.sym("v", len(names)), kind.sym("m", 0)
     state = ca.vertcat(_error(ca, law.target, v[0:4]), v[4:])
     u = _regulated(ca, law, t, state)
-    step = ca.Function("step", [t, v, m], [u, ca.SX.zeros(0)], ["t", "v", "m"],
+    step = ca.Function("step", [t, v, m], [u, kind.zeros(0)], ["t", "v", "m"],
                        ["u", "m_next"])
     held = "continuous" if law.sample_time is None else f"held over {law.sample_time:g} s"
     if law.reference is not None:
-        held += ", following an eigenaxis slew"
+        held += (", following a planned slew" if hasattr(law.reference, "state_at")
+                 else ", following an eigenaxis slew")
     return ControllerProgram(
         kind="spatial_lqr", step=step, recover=None, input_names=names, input_kind="state",
         output_name="torque", output_unit="N m, hub frame", memory_init=np.zeros(0),
@@ -286,14 +311,26 @@ def spatial_program(law) -> ControllerProgram:
                                 "SpinUp, a SteadySpin or a SlewProfile has)")
         return _scheduled_program(law)
     from ..slew.eigenaxis import EigenaxisSlew
+    from ..slew.spatial_trajopt import SpatialSlewSolution
 
     regulator = getattr(law, "regulator", law)
     slew = getattr(regulator, "reference", None)
+    if isinstance(slew, SpatialSlewSolution) and isinstance(law, (SpatialLQR, SpatialLQG)):
+        if isinstance(law, SpatialLQG):
+            raise ExportRefused("export: a three-axis LQG that follows a planned slew is not "
+                                "written as C; the LQR that follows it is")
+        hold = float(slew.model.hold)
+        if regulator.sample_time is None or abs(regulator.sample_time - hold) > 1e-9 * hold:
+            raise ExportRefused(
+                f"export: a law following a planned slew is written as C when it samples at "
+                f"the plan's holds ({hold:g} s; the C reads the plan at their ends); this one "
+                f"samples at {regulator.sample_time!r} s: plan with n_intervals = duration / "
+                "sample_time")
+        return _lqr_program(law)
     if slew is not None and not isinstance(slew, EigenaxisSlew):
-        raise ExportRefused("export: a three-axis law that follows a planned slew "
-                            "(SpatialSlewSolution) is not written as C; follow an "
-                            "EigenaxisSlew, or export the regulator (designed without "
-                            "reference) and feed its state the plan's deviation")
+        raise ExportRefused(f"export: a three-axis law that follows a "
+                            f"{type(slew).__name__} is not written as C; follow an "
+                            "EigenaxisSlew or a planned slew (SpatialSlewSolution)")
     if slew is not None and not callable(getattr(slew.profile, "casadi_reference", None)):
         raise ExportRefused(f"export: the eigenaxis slew's profile "
                             f"({type(slew.profile).__name__}) has no CasADi form (a "

@@ -109,7 +109,7 @@ def test_a_three_axis_export_refuses_what_it_cannot_use(tmp_path):
     from controllers.slew.reference import SlewProfile
 
     planned = dataclasses.replace(law, reference=SimpleNamespace(target=TARGET))
-    with pytest.raises(ExportRefused, match="planned slew"):
+    with pytest.raises(ExportRefused, match="follows a SimpleNamespace"):
         spatial_program(planned)
     slew = _laws()["lqr_slew"].reference
     numeric = dataclasses.replace(slew, profile=SimpleNamespace(

@@ -2,6 +2,8 @@
 it respects its limits, it ends at rest on its target when flown, it rings the arrays less
 than the rigid eigenaxis slew of the same length, and a three-axis LQR follows it."""
 
+import shutil
+
 import numpy as np
 import pytest
 
@@ -150,6 +152,45 @@ def test_an_lqr_follows_the_plan_on_the_exact_plant(plan):
     residual = max(np.max(np.abs(tip[:, late])) for tip in run.tips.values())
     print(f"pointing at the end {error:.2e} rad, residual tip {residual:.2e} m")
     assert error < 1e-4 and residual < 2e-5
+
+
+@pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None,
+                    reason="no C compiler")
+def test_the_lqr_following_the_plan_as_c_commands_and_flies_as_python(plan, tmp_path):
+    """The plan's design state and torque tabulated at its holds' ends in the C: at the
+    law's samples (the holds) the same commands as Python, and the same slew; a law that
+    samples elsewhere, and the LQG, are refused with the reason."""
+    from controllers.codegen import ExportRefused, export_c
+    from controllers.codegen.spatial_program import compiled_spatial_law
+    from controllers.feedback.spatial_lqr import design_spatial_lqg
+
+    weights = LQRWeights(hub_angle=0.05, hub_rate=0.05, tip_deflection=0.005, torque=0.1)
+    law = design_spatial_lqr(CRAFT, weights, None, n_modes=1, sample_time=0.2,
+                             torque_limit=0.1, reference=plan)
+    compiled = export_c(law, None, tmp_path / "c").compile()
+    assert "following a planned slew" in compiled.program.description
+    run = simulate_spatial_loop(CRAFT, 14.0, law, sample_time=0.2, n_modes=1,
+                                variant="first_order", rtol=1e-9).result
+    names = run.equations.layout.state_names
+    python, c_law = law.start(names), compiled_spatial_law(compiled).start(names)
+    c = run.layout.n_coordinates
+    worst = max(np.max(np.abs(python(t, run.states[0:4, k], run.states[c:c + 3, k],
+                                     run.states[:, k])
+                              - c_law(t, run.states[0:4, k], run.states[c:c + 3, k],
+                                      run.states[:, k])))
+                for k, t in enumerate(run.t))
+    assert worst < 1e-12
+    flown = simulate_spatial_loop(CRAFT, 14.0, compiled_spatial_law(compiled),
+                                  sample_time=0.2, n_modes=1, variant="first_order",
+                                  rtol=1e-9).result
+    assert np.max(np.abs(flown.states - run.states)) < 1e-7
+    elsewhere = design_spatial_lqr(CRAFT, weights, None, n_modes=1, sample_time=0.1,
+                                   reference=plan)
+    with pytest.raises(ExportRefused, match=r"samples at the plan's holds \(0.2 s"):
+        export_c(elsewhere, None, tmp_path / "d")
+    observed = design_spatial_lqg(CRAFT, weights, None, 0.2, n_modes=1, reference=plan)
+    with pytest.raises(ExportRefused, match="LQG that follows a planned slew"):
+        export_c(observed, None, tmp_path / "e")
 
 
 @pytest.mark.parametrize("kwargs, pattern", [
