@@ -186,6 +186,7 @@ class ScheduledSpatialLQR:
         -------
         ndarray, shape (3, n)
         """
+        spin = check_real("gain_at", "spin", spin, minimum=-1e4, maximum=1e4)
         rates = self.spin_rates
         if rates.size == 1 or spin <= rates[0]:
             return self.gains[0]
@@ -283,6 +284,7 @@ class ScheduledSpatialLQR:
         -------
         control.StateSpace
         """
+        spin = check_real("plant_at", "spin", spin, minimum=-1e4, maximum=1e4)
         k = np.flatnonzero(self.spin_rates == spin)
         if k.size:
             return self.plants[int(k[0])]
@@ -319,7 +321,10 @@ def _profile(owner: str, profile):
     if isinstance(profile, (int, float, np.floating, np.integer)) \
             and not isinstance(profile, bool):
         return SteadySpin(spin_rate=float(profile))
-    check_reference(owner, profile)
+    try:
+        check_reference(owner, profile)
+    except (TypeError, ValueError) as exc:
+        raise type(exc)(str(exc).replace(f"{owner}.reference", f"{owner}.profile")) from None
     return profile
 
 
@@ -382,7 +387,11 @@ def design_scheduled_spatial_lqr(structure, weights: LQRWeights, spin_axis, spin
     owner = "design_scheduled_spatial_lqr"
     check_instance(owner, "weights", weights, LQRWeights)
     axis = check_direction(owner, "spin_axis", spin_axis)
-    rates = np.array(check_array(owner, "spin_rates", spin_rates), dtype=float).reshape(-1)
+    rates = np.array(check_array(owner, "spin_rates", spin_rates), dtype=float)
+    if rates.ndim > 1:
+        raise InputValueError(f"{owner}.spin_rates must be a sequence of spin rates (rad/s); "
+                              f"got an array of shape {rates.shape}")
+    rates = rates.reshape(-1)
     if rates.size < 1 or rates.size > 50 or np.any(np.diff(rates) <= 0) \
             or np.max(np.abs(rates)) > 1e4:
         raise InputValueError(f"{owner}.spin_rates must be 1 to 50 strictly increasing spin "
@@ -401,6 +410,8 @@ def design_scheduled_spatial_lqr(structure, weights: LQRWeights, spin_axis, spin
             plant, names = spatial_design_plant(owner, structure, n_modes, variant,
                                                 angular_velocity=rate * axis)
         except InputValueError as exc:
+            if "steady turn" not in str(exc):
+                raise
             raise InputValueError(f"{owner}: the design spin {rate:g} rad/s about "
                                   f"{np.round(axis, 6).tolist()}: {exc}") from None
         gain, closed, _ = spatial_lq_gain(owner, structure, plant, weights,

@@ -129,8 +129,16 @@ def test_bad_schedules_are_refused_by_name():
         _design([2.0, 1.0])
     with pytest.raises(InputValueError, match="spin_rates"):
         _design([])
-    with pytest.raises(InputTypeError, match="angle"):
+    with pytest.raises(InputTypeError, match=r"profile must have a callable angle"):
         _design([0.0], profile=object())
+    with pytest.raises(InputTypeError, match=r"profile must have a callable angle"):
+        _design([0.0], profile=True)
+    with pytest.raises(InputValueError, match=r"spin_rates must be a sequence .* shape \(2, 2\)"):
+        _design([[0.0, 1.0], [2.0, 3.0]])
+    with pytest.raises(InputValueError, match="n_modes"):
+        _design([0.0], n_modes=0)
+    with pytest.raises(InputValueError, match="gain_at.spin must be finite"):
+        _design([0.0, 1.0]).gain_at(np.nan)
     with pytest.raises(InputValueError, match="spin_rate"):
         SteadySpin(spin_rate=np.inf)
     with pytest.raises(InputValueError, match="spin_axis"):
