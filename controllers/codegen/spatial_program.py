@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from flexctl.model.checks import check_array, check_quaternion
 from flexctl.model.errors import InputTypeError, InputValueError
 
 from ..slew.reference import casadi_evaluate
@@ -576,10 +577,8 @@ class CompiledAttitudeFilter:
         gyro_reading : array_like, shape (3,)
             The gyro's reading over the sample, rad/s.
         """
-        reading = np.asarray(gyro_reading, dtype=float).reshape(-1)
-        if reading.shape != (3,) or not np.all(np.isfinite(reading)):
-            raise InputValueError(f"compiled filter gyro_reading must be 3 finite numbers "
-                                  f"(rad/s); got {gyro_reading!r:.80}")
+        reading = np.array(check_array("compiled_filter", "gyro_reading", gyro_reading,
+                                       shape=(3,)), dtype=float)
         self._flush()
         self._pending = reading
 
@@ -597,10 +596,7 @@ class CompiledAttitudeFilter:
             If no propagation comes before it (the C filter updates within a gyro sample), or
             the reading is not a non-zero quaternion.
         """
-        q_m = np.asarray(measured, dtype=float).reshape(-1)
-        if q_m.shape != (4,) or not np.all(np.isfinite(q_m)) or not np.linalg.norm(q_m) > 0:
-            raise InputValueError(f"compiled filter measured must be a non-zero quaternion; "
-                                  f"got {measured!r:.80}")
+        q_m = np.array(check_quaternion("compiled_filter", "measured", measured), dtype=float)
         if self._pending is None:
             raise InputValueError("the compiled filter takes a star tracker reading within a "
                                   "gyro sample: propagate first")
