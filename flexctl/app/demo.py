@@ -616,11 +616,11 @@ SECTIONS = (("paper 001 Fig. 4", kane_spinup),
 #: The order in which the sections go to the pool: longest first (CPU seconds of each, measured
 #: one after the other in one process on this project's 2-core machine, in the comments), so
 #: that the short ones and the scenes fill the processes' ends.
-SECTION_ORDER = ("three axes",                           # 60 (two spatial runs)
-                 "three-axis control",                   # 53 (five loops on the exact rod)
-                 "requirements, two arrays",             # 55 (verified, filtered, flown)
-                 "requirements, slew-90",                # 40
-                 "actuators and sensors",                # 11.4
+SECTION_ORDER = ("three-axis control",                   # 38 (five loops on the exact rod)
+                 "requirements, two arrays",             # 27 (verified, filtered, flown)
+                 "three axes",                           # 23 (two spatial runs)
+                 "actuators and sensors",                # 18.5
+                 "requirements, slew-90",                # 17
                  "controller comparison, two arrays",    # 9.3
                  "controller comparison",                # 9.0
                  "design-model error",                   # 4.5
