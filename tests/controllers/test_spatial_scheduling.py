@@ -155,6 +155,7 @@ def test_the_scheduled_law_as_c_commands_and_flies_as_python(tmp_path):
     and the same run."""
     from controllers.codegen import export_c
     from controllers.codegen.spatial_program import compiled_spatial_law
+    from spatial_c_check import largest_command_difference
 
     law = _design([0.0, 5.0, 10.0], SpinUp(spin_rate=10.0, ramp_time=5.0))
     compiled = export_c(law, None, tmp_path / "c").compile()
@@ -162,14 +163,7 @@ def test_the_scheduled_law_as_c_commands_and_flies_as_python(tmp_path):
     run = simulate_spatial_loop(CRAFT, 8.0, law, sample_time=0.05, n_modes=1,
                                 variant="first_order", rtol=1e-9,
                                 angular_velocity=(0.02, -0.01, 0.0)).result
-    names = run.equations.layout.state_names
-    python, c_law = law.start(names), compiled_spatial_law(compiled).start(names)
-    c = run.layout.n_coordinates
-    worst = max(np.max(np.abs(python(t, run.states[0:4, k], run.states[c:c + 3, k],
-                                     run.states[:, k])
-                              - c_law(t, run.states[0:4, k], run.states[c:c + 3, k],
-                                      run.states[:, k])))
-                for k, t in enumerate(run.t))
+    worst = largest_command_difference(law, compiled_spatial_law(compiled), run)
     assert worst < 1e-9 * np.abs(run.torque).max()
     flown = simulate_spatial_loop(CRAFT, 8.0, compiled_spatial_law(compiled), sample_time=0.05,
                                   n_modes=1, variant="first_order", rtol=1e-9,

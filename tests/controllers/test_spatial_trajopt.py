@@ -163,6 +163,7 @@ def test_the_lqr_following_the_plan_as_c_commands_and_flies_as_python(plan, tmp_
     from controllers.codegen import ExportRefused, export_c
     from controllers.codegen.spatial_program import compiled_spatial_law
     from controllers.feedback.spatial_lqr import design_spatial_lqg
+    from spatial_c_check import largest_command_difference
 
     weights = LQRWeights(hub_angle=0.05, hub_rate=0.05, tip_deflection=0.005, torque=0.1)
     law = design_spatial_lqr(CRAFT, weights, None, n_modes=1, sample_time=0.2,
@@ -171,15 +172,7 @@ def test_the_lqr_following_the_plan_as_c_commands_and_flies_as_python(plan, tmp_
     assert "following a planned slew" in compiled.program.description
     run = simulate_spatial_loop(CRAFT, 14.0, law, sample_time=0.2, n_modes=1,
                                 variant="first_order", rtol=1e-9).result
-    names = run.equations.layout.state_names
-    python, c_law = law.start(names), compiled_spatial_law(compiled).start(names)
-    c = run.layout.n_coordinates
-    worst = max(np.max(np.abs(python(t, run.states[0:4, k], run.states[c:c + 3, k],
-                                     run.states[:, k])
-                              - c_law(t, run.states[0:4, k], run.states[c:c + 3, k],
-                                      run.states[:, k])))
-                for k, t in enumerate(run.t))
-    assert worst < 1e-12
+    assert largest_command_difference(law, compiled_spatial_law(compiled), run) < 1e-12
     flown = simulate_spatial_loop(CRAFT, 14.0, compiled_spatial_law(compiled),
                                   sample_time=0.2, n_modes=1, variant="first_order",
                                   rtol=1e-9).result
