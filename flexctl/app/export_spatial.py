@@ -118,14 +118,17 @@ def export_spatial_scene(scene, out, *, sample_time: float | None = None,
     names = [*C_FILES, *(f"{FILTER_FOLDER}/{n}" for n in C_FILES if "filter" in parts)]
     out = Path(out)
     with staged_folder(out, names=(*names, SUMMARY_FILE)) as stage:
-        summaries, exports = {}, {}
+        summaries = {}
         for part, law in parts.items():
             folder = stage if part == "law" else stage / FILTER_FOLDER
             exported = export_c(law, None, folder, precision=precision)
-            exports[part] = exported
             where = out if part == "law" else out / FILTER_FOLDER
             summary = {**exported.describe(), "files": [str(where / n) for n in C_FILES],
                        "compiled": False}
+            if exported.precision == "float":
+                from controllers.codegen.conditioning import float_findings
+                summary["float_conditioning"] = [f.as_dict() for f in
+                                                 float_findings(exported.program)]
             if compile:
                 try:
                     summary.update(compiled_check(exported, cc))

@@ -256,6 +256,14 @@ def test_exporting_a_spatial_lqg_scene_writes_its_law_and_refuses_what_it_cannot
     assert "#define FLEXCTL_NU 3" in (out / "flexctl_ctrl.h").read_text()
     assert summary["filter"]["input_names"][-1] == "tracked"
     assert "#define FLEXCTL_NU 7" in (out / "filter" / "flexctl_ctrl.h").read_text()
+    single = tmp_path / "float"
+    assert main(["export", str(EXAMPLE), "--out", str(single), "--no-compile",
+                 "--precision", "float"]) == 0
+    summary = json.loads((single / "export.json").read_text())
+    assert summary["precision"] == "float" and summary["filter"]["precision"] == "float"
+    assert isinstance(summary["float_conditioning"], list)
+    assert isinstance(summary["filter"]["float_conditioning"], list)
+    assert "float" in (single / "filter" / "flexctl_ctrl.h").read_text()
     capsys.readouterr()
     bad = tmp_path / "bad"
     assert main(["export", str(EXAMPLE), "--out", str(bad), "--no-compile",
