@@ -19,7 +19,7 @@ import json
 from pathlib import Path
 
 from ..sim.atomic_files import staged_folder
-from .export_check import SUMMARY_FILE, compiled_check
+from .export_check import SUMMARY_FILE, compiled_check, float_conditioning
 
 __all__ = ["export_scene", "format_export"]
 
@@ -114,10 +114,7 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
                             precision=precision)
         summary = {"scene": scene.name, "controller": built.kind, **exported.describe(),
                    "files": [str(out / name) for name in C_FILES], "compiled": False}
-        if exported.precision == "float":
-            from controllers.codegen.conditioning import float_findings
-            summary["float_conditioning"] = [f.as_dict() for f in
-                                             float_findings(exported.program)]
+        summary.update(float_conditioning(exported))
         if compile:
             try:
                 summary.update(compiled_check(exported, cc))

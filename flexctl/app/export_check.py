@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["compiled_check", "CHECK_STEPS", "SUMMARY_FILE"]
+__all__ = ["compiled_check", "float_conditioning", "CHECK_STEPS", "SUMMARY_FILE"]
 
 #: Steps of the compiled law checked against its program.
 CHECK_STEPS = 20
@@ -58,3 +58,23 @@ def compiled_check(exported, cc) -> dict:
     return {"compiled": True, "struct_bytes": law.struct_bytes, "code_bytes": law.code_bytes,
             "compile_time_s": law.compile_time_s, "check_steps": CHECK_STEPS,
             "check_max_difference": _check(exported.program, law)}
+
+
+def float_conditioning(exported) -> dict:
+    """``float_conditioning``: the condition numbers checked of a law exported in float
+    (:func:`controllers.codegen.conditioning.float_findings`); nothing in double.
+
+    Parameters
+    ----------
+    exported : CExport
+        The written law.
+
+    Returns
+    -------
+    dict
+    """
+    if exported.precision != "float":
+        return {}
+    from controllers.codegen.conditioning import float_findings
+
+    return {"float_conditioning": [f.as_dict() for f in float_findings(exported.program)]}

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..sim.atomic_files import staged_folder
 from ..sim.quaternions import error_angles
-from .export_check import SUMMARY_FILE, compiled_check
+from .export_check import SUMMARY_FILE, compiled_check, float_conditioning
 
 __all__ = ["export_spatial_scene", "format_spatial_loop_check", "FILTER_FOLDER"]
 
@@ -125,10 +125,7 @@ def export_spatial_scene(scene, out, *, sample_time: float | None = None,
             where = out if part == "law" else out / FILTER_FOLDER
             summary = {**exported.describe(), "files": [str(where / n) for n in C_FILES],
                        "compiled": False}
-            if exported.precision == "float":
-                from controllers.codegen.conditioning import float_findings
-                summary["float_conditioning"] = [f.as_dict() for f in
-                                                 float_findings(exported.program)]
+            summary.update(float_conditioning(exported))
             if compile:
                 try:
                     summary.update(compiled_check(exported, cc))
