@@ -46,6 +46,7 @@ import numpy as np
 
 from flexctl.model.checks import check_array, check_quaternion
 from flexctl.model.errors import InputTypeError, InputValueError
+from flexctl.sim.quaternions import symbolic_product
 
 from ..slew.reference import casadi_evaluate
 from .program import ControllerProgram, ExportRefused
@@ -96,12 +97,6 @@ def _kinematics(ca, e, w):
                         (1.0 - 0.5 * safe / ca.tan(0.5 * safe)) / (safe * safe))
     cross = ca.cross(e, w)
     return 0.5 * cross + factor * ca.cross(e, cross)
-
-
-def _product(ca, p, q):
-    """CasADi: ``p (x) q`` as :func:`flexctl.sim.quaternions.product`."""
-    return ca.vertcat(p[0] * q[0] - ca.dot(p[1:4], q[1:4]),
-                      p[0] * q[1:4] + q[0] * p[1:4] + ca.cross(p[1:4], q[1:4]))
 
 
 def _from_rotation_vector(ca, phi):
@@ -162,9 +157,9 @@ def _regulated(ca, law, t, state):
     if hasattr(slew, "state_at"):
         return _planned(ca, slew, t, state, law)
     angle, rate, acceleration = casadi_evaluate(slew.profile, t)
-    axis, inertia = ca.DM(slew.axis), ca.DM(slew.inertia)
+    axis = ca.DM(slew.axis)
     spin = rate * axis
-    torque = acceleration * ca.mtimes(inertia, axis) + ca.cross(spin, ca.mtimes(inertia, spin))
+    torque = slew.feedforward(angle, rate, acceleration)
     deviation = ca.vertcat(state[0:3] - (angle - slew.final_angle) * axis,
                            state[3:law.rate_at], state[law.rate_at:law.rate_at + 3] - spin,
                            state[law.rate_at + 3:])
@@ -201,9 +196,9 @@ def _scheduled_program(law) -> ControllerProgram:
     angle, rate, acceleration = casadi_evaluate(law.profile, t)
     axis, inertia = ca.DM(law.spin_axis), ca.DM(law.inertia)
     start = ca.DM(law.start_attitude)
-    reference = _product(ca, start, _from_rotation_vector(ca, angle * axis))
-    error = _exact_rotation_vector(ca, _product(ca, ca.vertcat(reference[0], -reference[1:4]),
-                                                v[0:4]))
+    reference = symbolic_product(start, _from_rotation_vector(ca, angle * axis))
+    error = _exact_rotation_vector(ca, symbolic_product(
+        ca.vertcat(reference[0], -reference[1:4]), v[0:4]))
     at = law.rate_at + 1                                  # the rates in v (after qw..qz)
     spin = rate * axis
     design = ca.vertcat(error, v[4:at], v[at:at + 3] - spin, v[at + 3:])
@@ -262,7 +257,7 @@ def _quaternion_program(law) -> ControllerProgram:
     import casadi as ca
 
     t, v, m = ca.SX.sym("t"), ca.SX.sym("v", len(READINGS)), ca.SX.sym("m", 5)
-    dq = _product(ca, ca.vertcat(law.target[0], -ca.DM(law.target[1:])), v[0:4])
+    dq = symbolic_product(ca.vertcat(law.target[0], -ca.DM(law.target[1:])), v[0:4])
     error = 2.0 * dq[1:4] * ca.if_else(dq[0] >= 0, 1.0, -1.0)
     kp, kd, ki = (ca.DM(getattr(law, name)) for name in ("kp", "kd", "ki"))
     feedback = -ca.mtimes(kp, error) - ca.mtimes(kd, v[4:7] - ca.DM(law.target_rate))
@@ -354,7 +349,7 @@ def _filter_propagate(ca, state, reading, lag, step, sigma_v2, sigma_u2):
         history = ca.vertcat(history[_ENTRY:], entry)
         done = ca.fmin(done + 1, lag)
     w = reading - b
-    q = _product(ca, q, _from_rotation_vector(ca, w * step))
+    q = symbolic_product(q, _from_rotation_vector(ca, w * step))
     q = q / ca.norm_2(q)
     phi = ca.SX.eye(6)
     phi[0:3, 0:3] = _rotation_matrix(ca, _from_rotation_vector(ca, -w * step))
@@ -381,11 +376,11 @@ def _filter_update(ca, state, measured, lag, covariance, propagate):
         cov = ca.reshape(history[7:43], 6, 6).T
         readings = [history[k * _ENTRY + 43:(k + 1) * _ENTRY] for k in range(lag)]
         history = ca.SX.zeros(history.numel())
-    residual = _exact_rotation_vector(ca, _product(ca, ca.vertcat(q[0], -q[1:4]),
-                                                   measured / ca.norm_2(measured)))
+    residual = _exact_rotation_vector(ca, symbolic_product(ca.vertcat(q[0], -q[1:4]),
+                                                           measured / ca.norm_2(measured)))
     gain = ca.mtimes(cov[:, 0:3], ca.inv(cov[0:3, 0:3] + ca.DM(covariance)))
     correction = ca.mtimes(gain, residual)
-    q = _product(ca, q, _from_rotation_vector(ca, correction[0:3]))
+    q = symbolic_product(q, _from_rotation_vector(ca, correction[0:3]))
     q = q / ca.norm_2(q)
     b = b + correction[3:6]
     keep = ca.SX.eye(6)

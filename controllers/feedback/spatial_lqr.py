@@ -616,6 +616,7 @@ def design_spatial_lqr(structure, weights: LQRWeights, target, *, n_modes=2,
     if sample_time is not None:
         sample_time = check_real("design_spatial_lqr", "sample_time", sample_time,
                                  minimum=1e-6, strict=True, maximum=100.0)
+        _check_plan_sampling("design_spatial_lqr", reference, sample_time)
     if torque_limit is not None:
         torque_limit = check_real("design_spatial_lqr", "torque_limit", torque_limit,
                                   minimum=0.0, strict=True, maximum=1e9)
@@ -709,6 +710,22 @@ def design_spatial_lqg(structure, weights: LQRWeights, target, sample_time: floa
     poles = _continuous(np.linalg.eigvals(closed), sample_time)
     return SpatialLQG(regulator=regulator, filter_gain=gain, a_held=a_d,
                       b_held=b_d, measured=measured, estimator_poles=poles)
+
+
+def _check_plan_sampling(owner: str, reference, sample_time: float) -> None:
+    """Refuse a held law that follows a planned slew at samples that do not fall on the
+    plan's holds: its feedforward is the torque held over the sample, the plan's only when
+    each sample lies within one hold (a sample across two holds commands neither, and the
+    slew ends off target, its modes ringing)."""
+    hold = getattr(getattr(reference, "model", None), "hold", None)
+    if hold is None or not hasattr(reference, "state_at"):
+        return
+    ratio = float(hold) / sample_time
+    if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio):
+        raise InputValueError(
+            f"{owner}.sample_time must divide the planned slew's hold ({float(hold):g} s) so "
+            f"that each sample lies within one of the plan's holds; got {sample_time:g} s "
+            "(plan with n_intervals = duration / sample_time, or sample at the hold)")
 
 
 def reference_target(owner: str, target, reference=None, kinds=None) -> np.ndarray:

@@ -163,23 +163,27 @@ def conic_solver(name: str, solver: str, h_sparsity, a_sparsity, options: dict |
 
 @contextlib.contextmanager
 def _quiet_stdout():
-    """The process's standard output (file descriptor 1) sent to the null device."""
+    """The process's standard output (file descriptor 1) sent to the null device, and Python's
+    ``sys.stdout`` to a discarded buffer: CasADi writes its plugins' messages through
+    ``sys.stdout``, which is not descriptor 1 under Jupyter or pytest."""
+    import io
     import os
     import sys
 
-    try:
-        sys.stdout.flush()
-        saved = os.dup(1)
-    except (OSError, ValueError, AttributeError):       # no descriptor 1: nothing to quiet
-        yield
-        return
-    try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 1)
+    with contextlib.redirect_stdout(io.StringIO()):
+        try:
+            sys.__stdout__.flush()
+            saved = os.dup(1)
+        except (OSError, ValueError, AttributeError):   # no descriptor 1: nothing more to quiet
             yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
+            return
+        try:
+            with open(os.devnull, "w") as null:
+                os.dup2(null.fileno(), 1)
+                yield
+        finally:
+            os.dup2(saved, 1)
+            os.close(saved)
 
 
 def _default_weights(model: Model, angle: float, torque_limit: float):

@@ -18,18 +18,24 @@ and ``P`` the held LQR's cost to go on the part of the plant the torque moves.
 
 It is solved by a real-time iteration: one Gauss-Newton step per sample, linearised along the
 design model's rollout from the state read with the previous solution shifted by one sample
-(the first sample: the reference's torque). One CasADi call gives the rollout and the compiled
-remainder's Jacobian at every hold; each hold's Jacobians in the local coordinates (the
-attitude perturbed in its tangent space) follow in closed form (:func:`_hold_jacobians`,
-tested against differences of the hold), the prediction is condensed onto the ``3 N``
-torques in numpy, and one dense QP is solved by a CasADi QP solver (qpOASES by default, OSQP
-when it fails). The command is the first torque; the wheels' torque limits hold on it
+(the first sample: the reference's torque). One compiled call gives the rollout and each
+hold's Jacobians in the local coordinates (the attitude perturbed in its tangent space),
+differentiated exactly by CasADi from the hold's expression (:func:`_linearisation`; where
+that expression is too long to compile, one CasADi call gives the rollout and the remainder's
+Jacobians and the hold's follow in closed form, :func:`_hold_jacobians`); the prediction is
+condensed onto the ``3 N`` torques in numpy. When the unconstrained minimiser of the
+condensed QP meets every limit it is the QP's solution (:func:`_unconstrained`, one Cholesky
+factorisation); otherwise one dense QP is solved by a CasADi QP solver (qpOASES by default,
+OSQP when it fails). The command is the first torque; the wheels' torque limits hold on it
 whatever the linearisation, since they are linear in it.
 
-Measured (``python benchmarks/bench_spatial_nmpc.py``): on two damped arrays (one mode per
-field, 18 design states) through three wheels, horizon 20 at 0.1 s, a step's median measured
-4.0 to 5.7 ms (7.9 ms on two modes per field), above the 2 ms aimed at: the Python around the
-QP (condensing, the Jacobians' assembly) takes about half of it.
+Measured (``python benchmarks/bench_spatial_nmpc.py [--modes 2]``, a 20 degree step on two
+damped arrays through three wheels, horizon 20 at 0.1 s, flown on the exact rod; three runs
+each, one after the other, on 2 shared cores): a step's median 1.3 to 2.2 ms with one mode
+per field (18 design states), 1.8 to 2.6 ms with two; the 2 ms aimed at is reached on the
+quieter runs only. On the same recorded steps in one process, the step without the session
+takes 1.5 ms median with the compiled linearisation and 3.8 ms with the closed form (two modes
+per field).
 """
 
 from __future__ import annotations
@@ -42,17 +48,25 @@ import numpy as np
 from flexctl.model.checks import check_choice, check_integer, check_real
 from flexctl.model.errors import InputValueError
 from flexctl.model.spatial_rod import cross_matrix
-from flexctl.sim.quaternions import from_rotation_vector, product
+from flexctl.sim.buffers import InPlace
+from flexctl.sim.quaternions import from_rotation_vector, product, symbolic_product
 
 from ..design.controllable import held, input_part
 from ..feedback.lqr import LQRWeights
 from ..feedback.spatial_lqr import reference_target, spatial_weight_matrices
-from ..slew.spatial_trajopt import hold_functions, remainder_function, spatial_hold_model
+from ..slew.spatial_trajopt import (hold_expressions, hold_functions,
+                                    remainder_expression, remainder_function,
+                                    spatial_hold_model)
 
 __all__ = ["SpatialNMPC", "SpatialNMPCSession", "design_spatial_nmpc", "SPATIAL_QP_SOLVERS"]
 
 #: CasADi QP solvers of the condensed (dense) QP; HPIPM takes only stage-structured QPs.
 SPATIAL_QP_SOLVERS = ("qpoases", "qrqp", "osqp")
+
+#: Longest hold linearisation (CasADi instructions) that the real-time iteration compiles:
+#: the first_order two-array model with 2 modes per field makes 44 000 (a library compiled in
+#: about 3 s, once); the exact one 423 000 (about 85 s), which keeps the closed form.
+MAX_LINEARISATION = 100_000
 
 
 def _prediction(model, functions, horizon: int, count: int):
@@ -75,6 +89,64 @@ def _prediction(model, functions, horizon: int, count: int):
     held = functions.held.map(horizon)(starts[0], starts[1], us)
     jac = jacobian.map(horizon)(starts[0], held[0:3, :])
     return ca.Function("spatial_prediction", [x0, q0, s0, us], [xs, qs, ss, held, jac])
+
+
+def _linearisation(model, wheels, horizon: int):
+    """``(x0, q0, speeds0, U) -> [X, Q, S, A, B]`` (numpy, :class:`~flexctl.sim.buffers.InPlace`): the rollout of ``U`` as
+    :func:`_prediction`'s, and each hold's Jacobians in the local coordinates ``(dx, dtheta,
+    dspeeds)`` (the attitude perturbed as ``q (x) exp(dtheta)`` at both ends) side by side,
+    ``A`` (m, N m) and ``B`` (m, 3 N), differentiated exactly by CasADi from the hold's SX
+    expression (:func:`~controllers.slew.spatial_trajopt.hold_expressions`) and compiled
+    with its numbers lifted (:func:`~flexctl.sim.lifted_constants.lift_constants`: one library
+    per structure's shape, kept across processes). None where the hold's linearisation is
+    longer than :data:`MAX_LINEARISATION` instructions or compiling is off: the step then
+    takes :func:`_prediction` and :func:`_hold_jacobians`."""
+    import casadi as ca
+
+    from flexctl.sim.compile_cache import compiled
+    from flexctl.sim.lifted_constants import lift_constants
+
+    n = model.a.shape[0]
+    count = 0 if wheels is None else wheels.count
+    m = n + 3 + count
+    x, q, s, u = (ca.SX.sym("x", n), ca.SX.sym("q", 4), ca.SX.sym("speeds", count),
+                  ca.SX.sym("torque", 3))
+    dz, du = ca.SX.sym("dz", m), ca.SX.sym("du", 3)
+
+    def remainder(x_l, torque):
+        return remainder_expression(model, x_l, torque)
+
+    nominal = hold_expressions(model, wheels, x, q, s, u, remainder)
+    turn = ca.vertcat(1.0, 0.5 * dz[n:n + 3])     # exp(dtheta / 2) to first order
+    moved = hold_expressions(model, wheels, x + dz[:n], symbolic_product(q, turn),
+                             s + dz[n + 3:], u + du, remainder)
+    inverse = ca.vertcat(nominal[1][0], -nominal[1][1:4])
+    turned = 2.0 * symbolic_product(inverse, moved[1])[1:4]
+    local = ca.vertcat(moved[0], turned, moved[2])
+    zero = ca.DM.zeros(m + 3)
+    jac = [ca.substitute(ca.jacobian(local, v), ca.vertcat(dz, du), zero) for v in (dz, du)]
+    hold = ca.Function("spatial_hold_linearisation", [x, q, s, u], [*nominal[:3], *jac],
+                       {"cse": True})
+    if hold.n_instructions() > MAX_LINEARISATION:
+        return None
+    lifted = lift_constants(hold)
+    if lifted is None:
+        return None
+    inner, constants = lifted
+    built = compiled(inner, label="the NMPC's hold linearisation")
+    if built is inner:                  # compiling is off, impossible or failed
+        return None
+    x0, q0, s0 = ca.MX.sym("x0", n), ca.MX.sym("q0", 4), ca.MX.sym("s0", count)
+    us = ca.MX.sym("U", 3, horizon)
+    values = ca.MX(ca.DM(constants))
+    state, outs = (x0, q0, s0), [[] for _ in range(5)]
+    for j in range(horizon):
+        step = built(*state, us[:, j], values)
+        state = tuple(step[:3])
+        for k in range(5):
+            outs[k].append(step[k])
+    return InPlace(ca.Function("spatial_linearised_rollout", [x0, q0, s0, us],
+                               [ca.densify(ca.horzcat(*o)) for o in outs]))
 
 
 def _rotation(theta) -> np.ndarray:
@@ -200,6 +272,9 @@ class SpatialNMPC:
         OSQP on the same QP, where the first solver fails.
     plant : control.StateSpace
         The design plant at rest (:func:`~flexctl.model.spatial_plant.linearize_spatial`).
+    linearise : InPlace or None
+        The rollout with each hold's exact Jacobians, compiled (:func:`_linearisation`); None
+        where the step takes :attr:`predict` and the closed form of :func:`_hold_jacobians`.
     """
 
     state_names: tuple
@@ -220,6 +295,7 @@ class SpatialNMPC:
     model: object
     fallback: object
     plant: object
+    linearise: object = None
 
     #: The loop hands this law the plant's whole state.
     state_feedback = True
@@ -382,26 +458,35 @@ def _solve(law: SpatialNMPC, x, q, speeds, torques, wanted):
     """The Gauss-Newton step of the torques (3 N), or None when the QP fails."""
     n, horizon, count = x.size, law.horizon, speeds.size
     m = n + 3 + count
-    xs, qs, ss, held, jac = (np.asarray(v) for v in law.predict(x, q, speeds, torques))
-    starts = np.hstack([x[:, None], xs[:, :-1]])
+    if law.linearise is not None:
+        xs, qs, ss, a_side, b_side = law.linearise(x, q, speeds, torques)
+        a_all = a_side.reshape(m, horizon, m).transpose(1, 0, 2)
+        b_all = b_side.reshape(m, horizon, 3).transpose(1, 0, 2)
+    else:
+        xs, qs, ss, held, jac = (np.asarray(v) for v in law.predict(x, q, speeds, torques))
     speed_starts = np.hstack([speeds[:, None], ss[:, :-1]]) if count else np.zeros((0, horizon))
-    a_all, b_all = _hold_jacobians(law, starts, speed_starts, held, jac)
+    if law.linearise is None:
+        starts = np.hstack([x[:, None], xs[:, :-1]])
+        a_all, b_all = _hold_jacobians(law, starts, speed_starts, held, jac)
     # the design state y = (e, x_l) after each hold, less the wanted one
     residuals = np.hstack([_attitude_errors(law.target, qs), xs.T]) \
         - np.array([y for y, _ in wanted[1:]])
     order = np.r_[n:n + 3, 0:n]                           # y's rows in the local coordinates
     sensitivity = np.zeros((m, 3 * horizon))
-    hessian = np.kron(np.eye(horizon), law.r_mat)
+    hessian = np.zeros((3 * horizon, 3 * horizon))
+    diagonal = hessian.reshape(horizon, 3, horizon, 3)
+    diagonal[np.arange(horizon), :, np.arange(horizon), :] = law.r_mat
     gradient = (law.r_mat @ (torques - np.array([v for _, v in wanted[:horizon]]).T)).T.ravel()
     speed_rows = np.zeros((horizon * count, 3 * horizon))
     for j in range(horizon):
-        sensitivity = a_all[j] @ sensitivity
-        sensitivity[:, 3 * j:3 * j + 3] += b_all[j]
-        mapped = sensitivity[order]
+        used = 3 * j + 3                    # torques after hold j do not move its end
+        sensitivity[:, :used] = a_all[j] @ sensitivity[:, :used]
+        sensitivity[:, 3 * j:used] += b_all[j]
+        mapped = sensitivity[order, :used]
         weighted = (law.p_mat if j == horizon - 1 else law.q_mat) @ mapped
-        hessian += mapped.T @ weighted
-        gradient += weighted.T @ residuals[j]
-        speed_rows[j * count:(j + 1) * count] = sensitivity[n + 3:]
+        hessian[:used, :used] += mapped.T @ weighted
+        gradient[:used] += weighted.T @ residuals[j]
+        speed_rows[j * count:(j + 1) * count, :used] = sensitivity[n + 3:, :used]
     return _qp(law, hessian, gradient, torques, speed_rows, speed_starts, ss)
 
 
@@ -423,8 +508,12 @@ def _qp(law: SpatialNMPC, hessian, gradient, torques, speed_rows, speed_starts, 
         torque_limits = np.array([w.torque_limit for w in wheels.wheels])
         speed_limits = law.speed_margin * np.array([w.speed_limit for w in wheels.wheels])
         motor_now = (share @ torques + null @ (speed_starts - wheels.null_target[:, None]))
-        motor_rows = np.kron(np.eye(horizon), share)
-        motor_rows[count:] += np.kron(np.eye(horizon - 1), null) @ speed_rows[:-count]
+        motor_rows = np.zeros((horizon * count, 3 * horizon))
+        blocks = motor_rows.reshape(horizon, count, horizon, 3)
+        blocks[np.arange(horizon), :, np.arange(horizon), :] = share
+        if np.any(null):
+            motor_rows[count:] += (null @ speed_rows[:-count].reshape(horizon - 1, count, -1)
+                                   ).reshape(-1, 3 * horizon)
         rows = np.vstack([motor_rows, speed_rows])
         now = np.concatenate([motor_now.T.reshape(-1), speeds.T.reshape(-1)])
         bound = np.concatenate([np.tile(torque_limits, horizon),
@@ -432,6 +521,9 @@ def _qp(law: SpatialNMPC, hessian, gradient, torques, speed_rows, speed_starts, 
         lba, uba = -bound - now, bound - now
     data = {"h": 0.5 * (hessian + hessian.T), "g": gradient, "a": rows, "lba": lba,
             "uba": uba, "lbx": lbx, "ubx": ubx}
+    free = _unconstrained(data)
+    if free is not None:
+        return free
     solution = law.qp(**data)
     if not law.qp.stats().get("success", True):
         if law.fallback is None:
@@ -442,6 +534,32 @@ def _qp(law: SpatialNMPC, hessian, gradient, torques, speed_rows, speed_starts, 
             return None
     move = np.asarray(solution["x"]).ravel()
     return move if np.all(np.isfinite(move)) else None
+
+
+def _unconstrained(data: dict):
+    """The QP's minimiser when no constraint binds: the Newton step ``-H^-1 g`` (a Cholesky
+    factorisation), if it satisfies every bound and row; else None (the QP solver is needed).
+
+    A convex QP's unconstrained minimiser that is feasible is its minimiser, so this is the
+    QP's solution, not an approximation of it: most samples of a slew have no active limit,
+    and a factorisation of ``3 N`` unknowns is some twenty times quicker than the active-set
+    solver's run."""
+    import scipy.linalg
+
+    try:
+        factor = scipy.linalg.cho_factor(data["h"], check_finite=False)
+    except np.linalg.LinAlgError:
+        return None
+    move = -scipy.linalg.cho_solve(factor, data["g"], check_finite=False)
+    if not np.all(np.isfinite(move)):
+        return None
+    if np.any(move < data["lbx"]) or np.any(move > data["ubx"]):
+        return None
+    if data["a"].shape[0]:
+        value = data["a"] @ move
+        if np.any(value < data["lba"]) or np.any(value > data["uba"]):
+            return None
+    return move
 
 
 def _terminal(plant, q_mat, r_mat, sample_time: float) -> np.ndarray:
@@ -543,4 +661,5 @@ def design_spatial_nmpc(structure, weights: LQRWeights, target=None, sample_time
                        predict=_prediction(model, functions, horizon, count), qp=qp,
                        constraint_rows=rows, model=model,
                        fallback=None if qp_solver == "osqp" else conic_solver(
-                           "spatial_nmpc_qp_fallback", "osqp", *sparsity), plant=plant)
+                           "spatial_nmpc_qp_fallback", "osqp", *sparsity), plant=plant,
+                       linearise=_linearisation(model, wheels, horizon))

@@ -4,8 +4,15 @@
 :class:`~controllers.slew.reference.SlewProfile`, or one shaped against the modes,
 :func:`~controllers.slew.shaping.shape`) into a three-axis reference about the hub-frame
 ``axis`` from the ``start`` attitude: the attitude ``q_ref(t) = start (x) exp(theta(t) axis /
-2)``, the rate ``theta'(t) axis`` and the feedforward torque that turns the rigid structure so
-(``J theta'' axis + theta' axis x J theta' axis``, ``J`` the structure's rigid inertia). About
+2)``, the rate ``w = theta'(t) axis`` and the feedforward torque that turns the rigid structure so.
+A torque on the hub from outside (thrusters, or a scene's hub torque) must also turn the
+rigid body's own momentum: ``J theta'' axis + w x J w`` (``J`` the structure's rigid inertia).
+A torque commanded of reaction wheels is the motors' reaction, and the wheels' momentum turns
+with the hub: the hub and wheels' total angular momentum ``H`` (inertial frame) is conserved,
+and the torque that turns the structure so is ``J theta'' axis + w x H_b(t)``, ``H_b`` the
+total in the reference's hub frame (``momentum``; zero from rest with the wheels at rest, so
+``J theta'' axis`` alone: counting ``w x J w`` there would be counting the wheels' gyroscopic
+torque twice). About
 a fixed axis the rotation vector of ``target^-1 (x) q_ref(t)`` is ``(theta(t) - theta_f)
 axis`` exactly, so a law that regulates the error from the final ``target`` follows the
 reference by regulating ``x - x_ref(t)``
@@ -23,7 +30,7 @@ import numpy as np
 
 from flexctl.model.checks import KeywordOnly, check_array, check_direction, check_quaternion
 from flexctl.model.errors import InputTypeError, InputValueError
-from flexctl.sim.quaternions import from_rotation_vector, product
+from flexctl.sim.quaternions import from_rotation_vector, product, rotation_matrix
 
 from .reference import check_reference, evaluate_reference
 
@@ -47,12 +54,17 @@ class EigenaxisSlew(KeywordOnly):
         ``SpatialStructure.rigid_inertia``), for the feedforward torque.
     start : array_like, shape (4,), optional
         The attitude at the start, hub to inertial, scalar first. Default the identity.
+    momentum : array_like, shape (3,), optional
+        With the torque commanded of reaction wheels: the total angular momentum of the
+        structure and its wheels, inertial frame, N m s (zeros from rest with the wheels at
+        rest). Default None: the torque acts on the hub from outside (module description).
     """
 
     axis: np.ndarray
     profile: object
     inertia: np.ndarray
     start: np.ndarray = (1.0, 0.0, 0.0, 0.0)
+    momentum: np.ndarray | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "axis", check_direction("eigenaxis_slew", "axis", self.axis))
@@ -69,6 +81,11 @@ class EigenaxisSlew(KeywordOnly):
         object.__setattr__(self, "inertia", inertia)
         object.__setattr__(self, "start", check_quaternion("eigenaxis_slew", "start",
                                                            self.start))
+        if self.momentum is not None:
+            momentum = np.array(check_array("eigenaxis_slew", "momentum", self.momentum,
+                                            shape=(3,)))
+            momentum.setflags(write=False)
+            object.__setattr__(self, "momentum", momentum)
 
     @property
     def end_time(self) -> float:
@@ -104,9 +121,44 @@ class EigenaxisSlew(KeywordOnly):
             (rad), the rate (rad/s, hub frame) and the feedforward torque (N m, hub frame).
         """
         angle, rate, acceleration = evaluate_reference(self.profile, float(t))
-        spin = rate * self.axis
-        torque = acceleration * (self.inertia @ self.axis) + np.cross(spin, self.inertia @ spin)
-        return (angle - self.final_angle) * self.axis, spin, torque
+        return ((angle - self.final_angle) * self.axis, rate * self.axis,
+                self.feedforward(angle, rate, acceleration))
+
+    def feedforward(self, angle, rate, acceleration):
+        """The feedforward torque (module description) at the profile's angle, rate and
+        acceleration, numbers or CasADi scalars (a C export's step).
+
+        Parameters
+        ----------
+        angle, rate, acceleration : float or casadi.SX or casadi.MX
+            ``theta``, ``theta'`` and ``theta''`` of the profile: rad, rad/s, rad/s^2.
+
+        Returns
+        -------
+        ndarray or casadi.SX or casadi.MX, shape (3,)
+            N m, hub frame.
+        """
+        symbolic = not all(isinstance(v, (int, float, np.floating, np.integer))
+                           for v in (angle, rate, acceleration))
+        if symbolic:
+            import casadi as lib
+
+            cross, times, axis, inertia = lib.cross, lib.mtimes, lib.DM(self.axis), \
+                lib.DM(self.inertia)
+        else:
+            lib, cross, times, axis, inertia = np, np.cross, np.matmul, self.axis, self.inertia
+        spin = rate * axis
+        if self.momentum is None:
+            held = times(inertia, spin)
+        else:
+            # H in the reference's hub frame: the start's, turned back by theta about the axis
+            start = rotation_matrix(self.start).T @ self.momentum
+            c, s = lib.cos(angle), lib.sin(angle)
+            start_cross = np.cross(self.axis, start)
+            along = float(self.axis @ start) * axis
+            held = c * (start if not symbolic else lib.DM(start)) \
+                - s * (start_cross if not symbolic else lib.DM(start_cross)) + (1 - c) * along
+        return acceleration * times(inertia, axis) + cross(spin, held)
 
 
 def eigenaxis_shaper(structure, axis, kind: str = "zv", n_shaped: int = 1, n_modes=2):

@@ -60,13 +60,15 @@ from scipy.linalg import expm
 from flexctl.model.checks import (KeywordOnly, check_array, check_instance, check_integer,
                                   check_quaternion, check_real)
 from flexctl.model.errors import InputTypeError, InputValueError
-from flexctl.sim.quaternions import conjugate, error_angles, from_rotation_vector, product
+from flexctl.sim.quaternions import (conjugate, error_angles, from_rotation_vector, product,
+                                     symbolic_product)
 
 from ..design.plant_state import spatial_design_plant
 
 __all__ = ["SpatialSlewProblem", "SpatialSlewSolution", "solve_spatial_slew",
            "SpatialSlewError", "MAX_SPATIAL_INTERVALS", "SpatialHoldModel", "HoldFunctions",
-           "spatial_hold_model", "hold_functions", "remainder_function"]
+           "spatial_hold_model", "hold_functions", "hold_expressions", "remainder_function",
+           "remainder_expression"]
 
 #: Most holds of a spatial slew (the NLP grows linearly with them).
 MAX_SPATIAL_INTERVALS = 2000
@@ -294,14 +296,6 @@ def _exp_quaternion(theta):
     return ca.vertcat(ca.cos(half), theta * (0.5 * ca.sin(half) / half))
 
 
-def _qmul(p, q):
-    """``p (x) q`` of CasADi column quaternions."""
-    import casadi as ca
-
-    pv, qv = p[1:4], q[1:4]
-    return ca.vertcat(p[0] * q[0] - ca.dot(pv, qv), p[0] * qv + q[0] * pv + ca.cross(pv, qv))
-
-
 @dataclass(frozen=True, eq=False)
 class HoldFunctions:
     """A :class:`SpatialHoldModel`'s hold as CasADi functions (:func:`hold_functions`).
@@ -323,12 +317,38 @@ class HoldFunctions:
     held: object           # (x_l, speeds, tau) -> the hold's input (torque, remainder)
 
 
+def remainder_expression(model: SpatialHoldModel, x, torque):
+    """What the spatial model's right-hand side adds to ``A_l x_l + B_l torque`` (module
+    Notes), at the identity attitude (the speeds' equations do not depend on it), as a CasADi
+    SX expression of SX symbols ``x`` (n,) and ``torque`` (3,).
+
+    Parameters
+    ----------
+    model : SpatialHoldModel
+        The design model.
+    x : casadi.SX, shape (n,)
+        ``x_l``.
+    torque : casadi.SX, shape (3,)
+        The torque on the structure, N m.
+
+    Returns
+    -------
+    casadi.SX, shape (n,)
+    """
+    import casadi as ca
+
+    full = ca.SX.zeros(model.n_full)
+    full[0] = 1.0
+    for k, row in enumerate(model.full_rows):
+        full[int(row)] = x[k]
+    rate = model.equations.rhs(full, torque)[model.full_rows.tolist()]
+    return rate - ca.mtimes(ca.DM(model.a), x) - ca.mtimes(ca.DM(model.b), torque)
+
+
 def remainder_function(model: SpatialHoldModel):
-    """``(x_l, torque) ->`` what the spatial model's right-hand side adds to ``A_l x_l + B_l
-    torque`` (module Notes), at the identity attitude (the speeds' equations do not depend on
-    it); compiled with its derivatives where it can be
-    (:func:`~controllers.design.native_dynamics.with_compiled_derivatives`), built once per
-    model.
+    """``(x_l, torque) ->`` :func:`remainder_expression`, compiled with its derivatives where
+    it can be (:func:`~controllers.design.native_dynamics.with_compiled_derivatives`), built
+    once per model.
 
     Parameters
     ----------
@@ -348,17 +368,54 @@ def remainder_function(model: SpatialHoldModel):
         return _REMAINDERS[model.equations]
     n = model.a.shape[0]
     x, torque = ca.SX.sym("x", n), ca.SX.sym("torque", 3)
-    full = ca.SX.zeros(model.n_full)
-    full[0] = 1.0
-    for k, row in enumerate(model.full_rows):
-        full[int(row)] = x[k]
-    rate = model.equations.rhs(full, torque)[model.full_rows.tolist()]
-    rest = rate - ca.mtimes(ca.DM(model.a), x) - ca.mtimes(ca.DM(model.b), torque)
+    rest = remainder_expression(model, x, torque)
     built = with_compiled_derivatives(ca.Function("spatial_remainder", [x, torque], [rest],
                                                   ["x", "torque"], ["remainder"],
                                                   {"cse": True}))
     _REMAINDERS[model.equations] = built
     return built
+
+
+def hold_expressions(model: SpatialHoldModel, wheels, x, q, speeds, tau, remainder) -> tuple:
+    """One hold of ``model`` (module Notes) as CasADi expressions of the symbols given.
+
+    Parameters
+    ----------
+    model : SpatialHoldModel
+        The design model.
+    wheels : WheelCluster or None
+        The wheels ``tau`` is commanded of (a torque on the hub without them).
+    x, q, speeds, tau : casadi.SX or casadi.MX
+        ``x_l`` (n,), the attitude (4,), the wheel speeds (n_wheels,) and the torque (3,)
+        at the hold's start.
+    remainder : callable
+        ``(x, torque) ->`` the remainder (:func:`remainder_expression` or
+        :func:`remainder_function`).
+
+    Returns
+    -------
+    tuple
+        ``(x_next, q_next, speeds_next, motor, held)``: the state one hold later, the motor
+        torques of the cluster's distribution and the hold's input ``[torque, remainder]``.
+    """
+    import casadi as ca
+
+    w = x[model.rate_at:model.rate_at + 3]
+    motor, torque = ca.DM(0, 1), tau
+    if wheels is not None:
+        g, j_w = ca.DM(wheels.axes), ca.DM(wheels.inertias)
+        torque = tau - ca.cross(w, ca.mtimes(g, j_w * (ca.mtimes(g.T, w) + speeds)))
+        motor = wheels.motor_commands(tau, speeds)      # the cluster's distribution
+    held = ca.vertcat(torque, remainder(x, torque))
+    phi, gamma, s_x, s_u = (ca.DM(m) for m in model.maps)
+    x_next = ca.mtimes(phi, x) + ca.mtimes(gamma, held)
+    q_next = symbolic_product(q, _exp_quaternion(ca.mtimes(s_x, x) + ca.mtimes(s_u, held)))
+    speeds_next = speeds
+    if wheels is not None:
+        w_next = x_next[model.rate_at:model.rate_at + 3]
+        speeds_next = speeds + model.hold * motor / ca.DM(wheels.inertias) \
+            - ca.mtimes(ca.DM(wheels.axes).T, w_next - w)
+    return x_next, q_next, speeds_next, motor, held
 
 
 def hold_functions(model: SpatialHoldModel, wheels) -> HoldFunctions:
@@ -381,24 +438,12 @@ def hold_functions(model: SpatialHoldModel, wheels) -> HoldFunctions:
     x, q, tau = ca.MX.sym("x", n), ca.MX.sym("q", 4), ca.MX.sym("tau", 3)
     count = 0 if wheels is None else wheels.count
     speeds = ca.MX.sym("speeds", count)
-    w = x[model.rate_at:model.rate_at + 3]
-    motor, torque = ca.MX(0, 1), tau
-    if wheels is not None:
-        g, j_w = ca.DM(wheels.axes), ca.DM(wheels.inertias)
-        torque = tau - ca.cross(w, ca.mtimes(g, j_w * (ca.mtimes(g.T, w) + speeds)))
-        motor = wheels.motor_commands(tau, speeds)      # the cluster's distribution
-    held = ca.vertcat(torque, remainder_function(model)(x, torque))
-    phi, gamma, s_x, s_u = (ca.DM(m) for m in model.maps)
-    x_next = ca.mtimes(phi, x) + ca.mtimes(gamma, held)
-    q_next = _qmul(q, _exp_quaternion(ca.mtimes(s_x, x) + ca.mtimes(s_u, held)))
-    outputs = [x_next, q_next, speeds]
-    if wheels is not None:
-        w_next = x_next[model.rate_at:model.rate_at + 3]
-        outputs[2] = speeds + model.hold * motor / ca.DM(wheels.inertias) \
-            - ca.mtimes(ca.DM(wheels.axes).T, w_next - w)
-    return HoldFunctions(advance=ca.Function("spatial_hold", [x, q, speeds, tau], outputs),
-                 motor=ca.Function("motor", [tau, speeds], [motor]),
-                 held=ca.Function("held", [x, speeds, tau], [held]))
+    x_next, q_next, speeds_next, motor, held = hold_expressions(
+        model, wheels, x, q, speeds, tau, remainder_function(model))
+    return HoldFunctions(advance=ca.Function("spatial_hold", [x, q, speeds, tau],
+                                             [x_next, q_next, speeds_next]),
+                         motor=ca.Function("motor", [tau, speeds], [motor]),
+                         held=ca.Function("held", [x, speeds, tau], [held]))
 
 
 def _rigid_guess(problem: SpatialSlewProblem, model: SpatialHoldModel, step: HoldFunctions) -> tuple:
@@ -517,7 +562,7 @@ def _transcribe(problem: SpatialSlewProblem, model: SpatialHoldModel, step: Hold
         opti.subject_to(speeds[:, 1:] == nxt[2])
         opti.subject_to(speeds[:, 0] == ca.DM(problem.wheel_speeds))
     opti.subject_to(x_var[:, -1] == 0)
-    miss = _qmul(ca.DM(conjugate(problem.target)), qs[:, -1])
+    miss = symbolic_product(ca.DM(conjugate(problem.target)), qs[:, -1])
     opti.subject_to(miss[1:4] == 0)
     _limit_constraints(opti, problem, step, torques, speeds)
     jumps = ca.horzcat(u_var[:, 0], ca.diff(u_var, 1, 1), -u_var[:, -1])

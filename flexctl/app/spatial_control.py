@@ -123,7 +123,7 @@ def _checked(check, *args, **limits):
 
 
 def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=None,
-                 wheel_speeds=None) -> SpatialLoop | None:
+                 wheel_speeds=None, angular_velocity=None) -> SpatialLoop | None:
     """The loop of a spatial scene's ``[controller]`` and ``[sensors]`` tables.
 
     Parameters
@@ -140,6 +140,9 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=
         The scene's wheels (their limits bound an optimal slew).
     wheel_speeds : ndarray, optional
         Their initial speeds, rad/s.
+    angular_velocity : ndarray, shape (3,), optional
+        The initial angular velocity, rad/s, hub frame (with the wheels' speeds, the
+        momentum an eigenaxis slew's feedforward turns). Default at rest.
 
     Returns
     -------
@@ -166,7 +169,9 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=
                     minimum=1e-4, maximum=100.0)
     target = _target(controller, quaternion)
     try:
-        law = _design(kind, controller, structure, target, step, (wheels, wheel_speeds))
+        law = _design(kind, controller, structure, target, step,
+                      (wheels, wheel_speeds, _momentum(structure, quaternion, wheels,
+                                                       wheel_speeds, angular_velocity)))
     except (ValueError, TypeError) as exc:
         message = str(exc)
         for owner, name in (("slew.duration", "slew_duration"), ("slew.shape", "slew_shape"),
@@ -209,9 +214,23 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=
     return loop
 
 
+def _momentum(structure, quaternion, cluster, speeds, angular_velocity):
+    """The rigid structure and its wheels' angular momentum at the start, inertial frame,
+    N m s (what an eigenaxis slew through the wheels turns); None without wheels."""
+    if cluster is None:
+        return None
+    from flexctl.sim.quaternions import rotation_matrix
+
+    spin = np.zeros(3) if angular_velocity is None else np.asarray(angular_velocity, float)
+    speeds = np.zeros(cluster.count) if speeds is None else np.asarray(speeds, float)
+    g = cluster.axes
+    body = structure.rigid_inertia @ spin + g @ (cluster.inertias * (g.T @ spin + speeds))
+    return rotation_matrix(quaternion) @ body
+
+
 def _design(kind: str, controller: dict, structure, target, step: float, wheels: tuple):
-    """The law of a ``[controller]`` table of ``kind`` (``wheels``: the cluster and its
-    initial speeds, or Nones)."""
+    """The law of a ``[controller]`` table of ``kind`` (``wheels``: the cluster, its initial
+    speeds and the momentum at the start, or Nones)."""
     if kind == "quaternion_feedback":
         from controllers.feedback.quaternion import QuaternionFeedback
 
@@ -296,7 +315,7 @@ def _eigenaxis(controller: dict, structure, target, wheels: tuple, n_modes):
             structure, controller["slew_axis"], controller["shaper"],
             controller.get("shaped_modes", 1), n_modes))
     return EigenaxisSlew(axis=controller["slew_axis"], profile=profile,
-                         inertia=structure.rigid_inertia, start=start)
+                         inertia=structure.rigid_inertia, start=start, momentum=wheels[2])
 
 
 def _optimal(controller: dict, structure, start, target, wheels: tuple, n_modes):
@@ -306,7 +325,7 @@ def _optimal(controller: dict, structure, start, target, wheels: tuple, n_modes)
     if "shaper" in controller:
         raise SceneError("controller.shaper shapes a slew_shape of 'poly7' or 'cycloidal'; an "
                          "optimal slew is planned on the modes themselves")
-    cluster, speeds = wheels
+    cluster, speeds = wheels[:2]
     limit = controller.get("torque_limit") if cluster is None else None
     duration = _checked(check_real, "controller", "slew_duration", controller["slew_duration"],
                         minimum=0.0, strict=True, maximum=1e5)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["product", "conjugate", "from_rotation_vector", "rotation_vector", "rotation_matrix",
+__all__ = ["product", "symbolic_product", "conjugate", "from_rotation_vector", "rotation_vector", "rotation_matrix",
            "error_angles"]
 
 
@@ -37,6 +37,24 @@ def product(p, q) -> np.ndarray:
     pw, pv = p[0], np.asarray(p[1:], dtype=float)
     qw, qv = q[0], np.asarray(q[1:], dtype=float)
     return np.concatenate([[pw * qw - pv @ qv], pw * qv + qw * pv + np.cross(pv, qv)])
+
+
+def symbolic_product(p, q):
+    """:func:`product` of CasADi column quaternions (SX, MX or DM), scalar first.
+
+    Parameters
+    ----------
+    p, q : casadi.SX, casadi.MX or casadi.DM, shape (4, 1)
+        Quaternions.
+
+    Returns
+    -------
+    Same type, shape (4, 1)
+    """
+    import casadi as ca
+
+    pv, qv = p[1:4], q[1:4]
+    return ca.vertcat(p[0] * q[0] - ca.dot(pv, qv), p[0] * qv + q[0] * pv + ca.cross(pv, qv))
 
 
 def conjugate(q) -> np.ndarray:

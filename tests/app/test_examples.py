@@ -29,7 +29,8 @@ pytestmark = pytest.mark.xdist_group("notebooks")
 CELL_TIMEOUT = 240
 #: Notebooks that take more than about 10 s (marked slow; CI still runs them).
 SLOW = {"06_slew_controllers", "07_speed_vs_error", "08_large_deflection", "12_c_export",
-        "13_three_axes", "14_three_axis_control", "15_loop_requirements"}
+        "13_three_axes", "14_three_axis_control", "15_loop_requirements",
+        "16_three_axis_planning"}
 
 
 def _cells(notebook):

@@ -85,3 +85,34 @@ def test_bad_arguments_are_refused_by_name(kwargs, pattern):
     arguments = {"structure": CRAFT, "axis": (1, 0, 0), **kwargs}
     with pytest.raises(InputError, match=pattern):
         eigenaxis_shaper(**arguments)
+
+
+@pytest.mark.parametrize("through_wheels", [True, False], ids=["wheels", "hub torque"])
+def test_the_feedforward_turns_the_rigid_craft_to_the_target(through_wheels):
+    """Flown open loop on the craft, the feedforward alone ends the slew on target: through
+    wheels from rest (zero momentum: ``J alpha``, their gyroscopic torque turns the hub's
+    momentum) and as a torque on the hub (``J alpha + w x J w``). The other form misses by
+    the gyroscopic torque counted twice or left out."""
+    from controllers.slew.eigenaxis import EigenaxisSlew
+    from controllers.slew.reference import SlewProfile
+    from flexctl import VectorTorque, simulate_spatial
+    from flexctl.model.wheel_cluster import WheelCluster
+    from flexctl.sim.quaternions import error_angles
+
+    rigid = CRAFT
+    wheels = WheelCluster.orthogonal(inertia=0.01, torque_limit=10.0, speed_limit=1e4) \
+        if through_wheels else None
+    axis = np.array([0.6, 0.0, 0.8])
+    misses = {}
+    for momentum in (np.zeros(3), None):
+        slew = EigenaxisSlew(axis=axis, profile=SlewProfile(slew_angle=1.0, duration=8.0),
+                             inertia=rigid.rigid_inertia, momentum=momentum)
+        times = np.linspace(0.0, 8.0, 4001)
+        torque = VectorTorque(times, np.array([slew.at(t)[2] for t in times]))
+        run = simulate_spatial(rigid, 8.0, torque, n_modes=1, wheels=wheels, rtol=1e-9)
+        assert run.ok
+        misses[momentum is None] = np.linalg.norm(error_angles(slew.target,
+                                                               run.quaternion[:, -1]))
+    right, wrong = misses[not through_wheels], misses[through_wheels]
+    print(f"through wheels {through_wheels}: miss {right:.2e} rad, other form {wrong:.2e} rad")
+    assert wrong > 5 * right

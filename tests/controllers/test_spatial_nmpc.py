@@ -87,6 +87,70 @@ def test_the_hold_jacobians_are_the_holds(wheels):
         assert np.allclose(b_all[0][:, k], column, atol=1e-8 * max(1.0, np.abs(column).max()))
 
 
+@pytest.mark.parametrize("wheels", [PYRAMID, None], ids=["a null-motion pyramid", "hub torque"])
+def test_the_compiled_linearisation_is_the_holds(wheels):
+    """The compiled rollout's states are the hold's (``predict``), its Jacobians central
+    differences of the hold (exact, where the closed form keeps second order in the hold's
+    rotation), over a horizon of 3 from a tumbling state."""
+    law = design_spatial_nmpc(CRAFT, WEIGHTS, TARGET, 0.1, horizon=3, n_modes=1, wheels=wheels,
+                              torque_limit=None if wheels else 0.1)
+    if law.linearise is None:
+        pytest.skip("no C compiler: the NMPC takes the closed form")
+    model, count = law.model, 0 if wheels is None else wheels.count
+    advance = hold_functions(model, wheels).advance
+    n, m = model.a.shape[0], model.a.shape[0] + 3 + count
+    rng = np.random.default_rng(2)
+    x = 1e-3 * rng.normal(size=n)
+    x[model.rate_at:model.rate_at + 3] = [0.2, -0.1, 0.15]
+    q = from_rotation_vector([0.3, -0.2, 0.5])
+    speeds, torques = 50.0 * rng.normal(size=count), 0.05 * rng.normal(size=(3, 3))
+    xs, qs, ss, a_side, b_side = law.linearise(x, q, speeds, torques)
+    expected = [np.asarray(v) for v in law.predict(x, q, speeds, torques)[:3]]
+    for got, want in zip((xs, qs, ss), expected):
+        assert np.allclose(got, want, rtol=1e-12, atol=1e-14)
+    # the second hold, from the first one's end
+    start = (xs[:, 0], qs[:, 0], ss[:, 0])
+    nominal = np.asarray(advance(*start, torques[:, 1])[1]).ravel()
+
+    def local(dz, du):
+        out = [np.asarray(v).ravel() for v in advance(
+            start[0] + dz[:n], product(start[1], from_rotation_vector(dz[n:n + 3])),
+            start[2] + dz[n + 3:], torques[:, 1] + du)]
+        return np.concatenate([out[0], rotation_vector(product(conjugate(nominal), out[1])),
+                               out[2]])
+
+    a_one, b_one, eps = a_side[:, m:2 * m], b_side[:, 3:6], 1e-6
+    for k in range(m + 3):
+        dz, du = np.zeros(m), np.zeros(3)
+        (dz if k < m else du)[k % m if k < m else k - m] = eps
+        column = (local(dz, du) - local(-dz, -du)) / (2 * eps)
+        got = a_one[:, k] if k < m else b_one[:, k - m]
+        assert np.allclose(got, column, atol=2e-8 * max(1.0, np.abs(column).max()))
+
+
+def test_the_unconstrained_step_is_the_qps_solution():
+    """Where the Newton step satisfies every row it is returned without the QP solver, and it
+    is the QP solver's minimiser; where it violates one, None (the QP solver decides)."""
+    import casadi as ca
+
+    from controllers.mpc.nmpc import conic_solver
+    from controllers.mpc.spatial_nmpc import _unconstrained
+
+    rng = np.random.default_rng(3)
+    root = rng.normal(size=(6, 6))
+    hessian = root @ root.T + 6 * np.eye(6)
+    gradient, rows = rng.normal(size=6), rng.normal(size=(4, 6))
+    free = -np.linalg.solve(hessian, gradient)
+    loose = {"h": hessian, "g": gradient, "a": rows, "lba": rows @ free - 1.0,
+             "uba": rows @ free + 1.0, "lbx": np.full(6, -np.inf), "ubx": np.full(6, np.inf)}
+    qp = conic_solver("test_qp", "qpoases", ca.Sparsity.dense(6, 6), ca.Sparsity.dense(4, 6))
+    assert np.allclose(_unconstrained(loose), free, rtol=1e-12)
+    assert np.allclose(np.asarray(qp(**loose)["x"]).ravel(), free, atol=1e-9)
+    tight = dict(loose, uba=rows @ free - 1e-3)
+    assert _unconstrained(tight) is None
+    assert _unconstrained(dict(loose, ubx=free - 1e-3)) is None
+
+
 def test_attitude_errors_are_the_short_rotation():
     rng = np.random.default_rng(1)
     target = from_rotation_vector(rng.normal(size=3))

@@ -273,3 +273,16 @@ def test_bad_arguments_to_the_solver_are_refused_by_name(kwargs, pattern):
                  "n_modes": 1, **kwargs}
     with pytest.raises(InputError, match=pattern):
         solve_spatial_slew(**arguments)
+
+
+@pytest.mark.parametrize("sample_time", [0.3, 0.15, 0.07])
+def test_a_law_sampling_across_the_plans_holds_is_refused(plan, sample_time):
+    """A held law's feedforward is the plan's only when each sample lies within one hold
+    (0.2 s here): 0.1 s and 0.2 s are accepted, samples across holds refused by name."""
+    weights = LQRWeights(hub_angle=0.05, torque=0.1)
+    for fine in (0.1, 0.2):
+        design_spatial_lqr(CRAFT, weights, None, n_modes=1, sample_time=fine, reference=plan)
+    with pytest.raises(InputError, match=r"design_spatial_lqr\.sample_time must divide the "
+                                         r"planned slew's hold \(0.2 s\)"):
+        design_spatial_lqr(CRAFT, weights, None, n_modes=1, sample_time=sample_time,
+                           reference=plan)
