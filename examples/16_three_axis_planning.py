@@ -264,9 +264,10 @@ plt.show()
 # Within the plan's margins no constraint of the NMPC is active, and it flies as the LQR does;
 # its constraints matter when a disturbance or a plan too tight pushes the wheels to their
 # limits. The LQR that follows the eigenaxis slew ends it some 5 mrad off and rings the arrays:
-# its reference is the rigid slew's, with the arrays straight and still all the way, which the
-# slew's own torque does not leave them; the loops that follow the plan, whose reference is
-# the flexible craft's, have almost nothing to correct.
+# the rigid slew's feedforward already asks nearly all of one wheel's torque, so the
+# corrections the loop adds for the arrays' bending meet the torque limit and are clipped.
+# The loops that follow the plan, which leaves a fifth of each wheel's torque to them and
+# whose reference is the flexible craft's, have almost nothing to correct.
 #
 # ## 3. Gain scheduling over a spin
 #
