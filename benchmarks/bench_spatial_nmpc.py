@@ -31,17 +31,6 @@ from flexctl.sim.quaternions import error_angles, from_rotation_vector  # noqa: 
 from flexctl.sim.spatial_loop import simulate_spatial_loop  # noqa: E402
 
 
-class _Kept:
-    state_feedback = True
-
-    def __init__(self, law):
-        self.law, self.session = law, None
-
-    def start(self, names):
-        self.session = self.law.start(names)
-        return self.session
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--modes", type=int, default=1)
@@ -62,19 +51,18 @@ def main(argv=None) -> int:
                               horizon=args.horizon, n_modes=args.modes, wheels=scene.wheels,
                               reference=plan)
     design = time.perf_counter() - began
-    kept = _Kept(law)
     began = time.perf_counter()
-    loop = simulate_spatial_loop(scene.structure, 20.0, kept, sample_time=0.1, n_modes=2,
+    loop = simulate_spatial_loop(scene.structure, 20.0, law, sample_time=0.1, n_modes=2,
                                  variant="exact", wheels=scene.wheels, rtol=1e-8)
     flight = time.perf_counter() - began
-    run, steps = loop.result, 1e3 * np.array(kept.session.step_times)
+    run, steps = loop.result, 1e3 * np.array(loop.session.step_times)
     end = int(np.argmin(np.abs(run.t - 12.0)))
     late = run.t > 12.0
     print(f"modes per field {args.modes}, horizon {args.horizon}, "
           f"{'planned 12 s slew' if plan else 'step'}; design {design:.2f} s, flight "
           f"{flight:.1f} s ({loop.ok and 'ok'})")
     print(f"step median {np.median(steps):.2f} ms, largest {steps.max():.2f} ms, "
-          f"failed {kept.session.failed_steps} of {steps.size}")
+          f"failed {loop.session.failed_steps} of {steps.size}")
     print(f"pointing at 12 s {np.linalg.norm(error_angles(target, run.quaternion[:, end])):.2e} "
           f"rad, at 20 s {np.linalg.norm(error_angles(target, run.quaternion[:, -1])):.2e} rad; "
           f"residual tip after 12 s "

@@ -195,22 +195,9 @@ plt.show()
 
 
 # %%
-class Kept:
-    """The NMPC as the loop flies it, its session kept to read its step times after."""
-
-    state_feedback = True
-
-    def __init__(self, law):
-        self.law, self.session = law, None
-
-    def start(self, state_names):
-        self.session = self.law.start(state_names)
-        return self.session
-
-
 weights = LQRWeights(hub_angle=0.05, hub_rate=0.05, tip_deflection=0.005, torque=0.1)
-nmpc = Kept(design_spatial_nmpc(craft, weights, None, HOLD, horizon=20, n_modes=N_MODES,
-                                wheels=wheels, reference=plan))
+nmpc = design_spatial_nmpc(craft, weights, None, HOLD, horizon=20, n_modes=N_MODES,
+                           wheels=wheels, reference=plan)
 laws = {
     "LQR, eigenaxis": design_spatial_lqr(craft, weights, None, n_modes=N_MODES,
                                          sample_time=HOLD, torque_limit=TORQUE_LIMIT,
@@ -219,10 +206,12 @@ laws = {
                                     torque_limit=TORQUE_LIMIT, reference=plan),
     "NMPC, plan": nmpc,
 }
-loops = {name: simulate_spatial_loop(craft, DURATION + AFTER, law, sample_time=HOLD,
-                                     n_modes=N_MODES, wheels=wheels, rtol=1e-8).result
-         for name, law in laws.items()}
-steps = 1e3 * np.array(nmpc.session.step_times)
+flights = {name: simulate_spatial_loop(craft, DURATION + AFTER, law, sample_time=HOLD,
+                                       n_modes=N_MODES, wheels=wheels, rtol=1e-8)
+           for name, law in laws.items()}
+loops = {name: flight.result for name, flight in flights.items()}
+session = flights["NMPC, plan"].session          # the NMPC's session: its time per step
+steps = 1e3 * np.array(session.step_times)
 print(f"{'':16s}{'at 9 s (mrad)':>15s}{'at 13 s (mrad)':>16s}{'residual (um)':>15s}"
       f"{'fastest wheel (rad/s)':>23s}{'largest wheel torque (N m)':>28s}")
 for name, run in loops.items():
@@ -230,8 +219,8 @@ for name, run in loops.items():
           f"{1e6 * residual(run):15.4f}{np.max(np.abs(run.wheel_speeds)):23.1f}"
           f"{np.max(np.abs(run.wheel_torques)):28.4f}")
 print(f"NMPC: median step {np.median(steps):.1f} ms, slowest {np.max(steps):.1f} ms, "
-      f"{nmpc.session.failed_steps} failed QPs")
-assert all(run.ok for run in loops.values()) and nmpc.session.failed_steps == 0
+      f"{session.failed_steps} failed QPs")
+assert all(run.ok for run in loops.values()) and session.failed_steps == 0
 eigenaxis_loop = loops["LQR, eigenaxis"]
 for name in ("LQR, plan", "NMPC, plan"):
     run = loops[name]

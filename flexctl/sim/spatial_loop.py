@@ -62,12 +62,16 @@ class SpatialLoopResult:
         Its gyro bias estimate, rad/s, shape (3, P).
     sample_time : float
         s.
+    session : object
+        What the loop called at each sample: the law's session (``law.start(...)``, e.g. an
+        NMPC's, with its ``step_times`` and ``failed_steps``), or the law itself.
     """
 
     result: SpatialResult
     attitude_estimates: np.ndarray | None
     bias_estimates: np.ndarray | None
     sample_time: float
+    session: object = None
 
     @property
     def ok(self) -> bool:
@@ -242,4 +246,4 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
                              attitude_estimates=None if sensed is None
                              else sensed.estimates[:, :done],
                              bias_estimates=None if sensed is None else sensed.biases[:, :done],
-                             sample_time=sample_time)
+                             sample_time=sample_time, session=session)

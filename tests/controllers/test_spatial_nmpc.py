@@ -24,25 +24,11 @@ PYRAMID = WheelCluster.pyramid(angle=54.7356, distribution="null_motion", null_g
 WEIGHTS = LQRWeights(hub_angle=0.05, hub_rate=0.05, tip_deflection=0.005, torque=0.1)
 
 
-class _Recorded:
-    """The NMPC as a state-feedback law whose session is kept for its report."""
-
-    state_feedback = True
-
-    def __init__(self, law):
-        self.law, self.session = law, None
-
-    def start(self, names):
-        self.session = self.law.start(names)
-        return self.session
-
-
 def _fly(law, wheels, t_final=20.0):
-    recorded = _Recorded(law)
-    loop = simulate_spatial_loop(CRAFT, t_final, recorded, sample_time=law.sample_time,
+    loop = simulate_spatial_loop(CRAFT, t_final, law, sample_time=law.sample_time,
                                  n_modes=2, variant="exact", wheels=wheels, rtol=1e-8)
     assert loop.ok
-    return loop.result, recorded.session
+    return loop.result, loop.session
 
 
 @pytest.mark.parametrize("wheels", [WHEELS, PYRAMID, None],
