@@ -234,9 +234,18 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     from ..feedback.spatial_lqr import SpatialLQG, SpatialLQR
     from ..feedback.spatial_scheduling import ScheduledSpatialLQR
 
+    from ..mpc.spatial_nmpc import SpatialNMPC
+
     precision = check_precision(precision)
-    if isinstance(controller, (SpatialLQR, SpatialLQG, QuaternionFeedback, AttitudeFilter,
-                               ScheduledSpatialLQR)):
+    if isinstance(controller, SpatialNMPC):
+        if sample_time is not None or initial_state is not None:
+            raise InputValueError("export: a three-axis NMPC keeps its own sample time and "
+                                  "starts from the first state it reads; give neither "
+                                  "sample_time nor initial_state")
+        from .spatial_nmpc_program import spatial_nmpc_program
+        program = spatial_nmpc_program(controller, precision)
+    elif isinstance(controller, (SpatialLQR, SpatialLQG, QuaternionFeedback, AttitudeFilter,
+                                 ScheduledSpatialLQR)):
         if sample_time is not None or initial_state is not None:
             raise InputValueError("export: a three-axis law or filter keeps its own sample "
                                   "time and starts from its own state or the first reading; "

@@ -53,7 +53,7 @@ from .program import ControllerProgram, ExportRefused
 
 __all__ = ["spatial_program", "compiled_spatial_law", "filter_program",
            "compiled_attitude_filter", "CompiledAttitudeFilter", "FILTER_INPUTS",
-           "FILTER_OUTPUTS", "MAX_FILTER_LAG"]
+           "FILTER_OUTPUTS", "MAX_FILTER_LAG", "attitude_error"]
 
 READINGS = ("qw", "qx", "qy", "qz", "wx", "wy", "wz")
 #: The filter program's input: the gyro reading, the star tracker reading, whether it is new.
@@ -76,8 +76,23 @@ def _rotation_vector(ca, q):
     return factor * v
 
 
-def _error(ca, target, q):
-    """CasADi: the attitude error ``target^-1 (x) q`` as a rotation vector."""
+def attitude_error(ca, target, q):
+    """CasADi: the attitude error ``target^-1 (x) q`` as a rotation vector, the short way round.
+
+    Parameters
+    ----------
+    ca : module
+        ``casadi``.
+    target : array_like, shape (4,)
+        The target attitude, scalar first.
+    q : casadi.SX or casadi.MX, shape (4, 1)
+        The attitude.
+
+    Returns
+    -------
+    casadi.SX or casadi.MX, shape (3, 1)
+        rad.
+    """
     t0, tv = float(target[0]), ca.DM(-np.asarray(target[1:], dtype=float))
     qv = q[1:4]
     scalar = t0 * q[0] - ca.dot(tv, qv)
@@ -172,7 +187,7 @@ def _lqr_program(law) -> ControllerProgram:
     names = ("qw", "qx", "qy", "qz") + tuple(law.state_names[3:])
     kind = ca.MX if hasattr(law.reference, "state_at") else ca.SX     # tables want MX
     t, v, m = kind.sym("t"), kind.sym("v", len(names)), kind.sym("m", 0)
-    state = ca.vertcat(_error(ca, law.target, v[0:4]), v[4:])
+    state = ca.vertcat(attitude_error(ca, law.target, v[0:4]), v[4:])
     u = _regulated(ca, law, t, state)
     step = ca.Function("step", [t, v, m], [u, kind.zeros(0)], ["t", "v", "m"],
                        ["u", "m_next"])
@@ -230,7 +245,7 @@ def _lqg_program(law) -> ControllerProgram:
     size = part.basis.shape[1]
     rate_at = regulator.state_names.index("wx")
     t, v, m = ca.SX.sym("t"), ca.SX.sym("v", len(READINGS)), ca.SX.sym("m", 1 + size)
-    y = ca.vertcat(_error(ca, regulator.target, v[0:4]), v[4:7])
+    y = ca.vertcat(attitude_error(ca, regulator.target, v[0:4]), v[4:7])
     start = ca.SX.zeros(part.basis.shape[0])
     start[0:3] = y[0:3]
     start[rate_at:rate_at + 3] = y[3:6]
@@ -524,7 +539,7 @@ def compiled_spatial_law(compiled):
         quaternion feedback's the attitude and rate.
     """
     kind = getattr(getattr(compiled, "program", None), "kind", None)
-    if kind == "spatial_lqr":
+    if kind in ("spatial_lqr", "spatial_nmpc"):
         return _CompiledStateLaw(compiled)
     if kind in ("spatial_lqg", "quaternion_feedback"):
         return _CompiledReadingLaw(compiled)

@@ -58,7 +58,8 @@ from ..slew.spatial_trajopt import (hold_expressions, hold_functions,
                                     remainder_expression, remainder_function,
                                     spatial_hold_model)
 
-__all__ = ["SpatialNMPC", "SpatialNMPCSession", "design_spatial_nmpc", "SPATIAL_QP_SOLVERS"]
+__all__ = ["SpatialNMPC", "SpatialNMPCSession", "design_spatial_nmpc", "SPATIAL_QP_SOLVERS",
+           "hold_linearisation", "null_matrix", "MAX_LINEARISATION"]
 
 #: CasADi QP solvers of the condensed (dense) QP; HPIPM takes only stage-structured QPs.
 SPATIAL_QP_SOLVERS = ("qpoases", "qrqp", "osqp")
@@ -91,20 +92,25 @@ def _prediction(model, functions, horizon: int, count: int):
     return ca.Function("spatial_prediction", [x0, q0, s0, us], [xs, qs, ss, held, jac])
 
 
-def _linearisation(model, wheels, horizon: int):
-    """``(x0, q0, speeds0, U) -> [X, Q, S, A, B]`` (numpy, :class:`~flexctl.sim.buffers.InPlace`): the rollout of ``U`` as
-    :func:`_prediction`'s, and each hold's Jacobians in the local coordinates ``(dx, dtheta,
-    dspeeds)`` (the attitude perturbed as ``q (x) exp(dtheta)`` at both ends) side by side,
-    ``A`` (m, N m) and ``B`` (m, 3 N), differentiated exactly by CasADi from the hold's SX
-    expression (:func:`~controllers.slew.spatial_trajopt.hold_expressions`) and compiled
-    with its numbers lifted (:func:`~flexctl.sim.lifted_constants.lift_constants`: one library
-    per structure's shape, kept across processes). None where the hold's linearisation is
-    longer than :data:`MAX_LINEARISATION` instructions or compiling is off: the step then
-    takes :func:`_prediction` and :func:`_hold_jacobians`."""
-    import casadi as ca
+def hold_linearisation(model, wheels):
+    """One hold of the design model and its exact Jacobians, as an SX function: ``(x, q,
+    speeds, torque) -> (x+, q+, speeds+, A, B)``, ``A`` (m, m) and ``B`` (m, 3) in the local
+    coordinates ``(dx, dtheta, dspeeds)`` (the attitude perturbed as ``q (x) exp(dtheta)`` at
+    both ends), differentiated by CasADi from the hold's expression
+    (:func:`~controllers.slew.spatial_trajopt.hold_expressions`).
 
-    from flexctl.sim.compile_cache import compiled
-    from flexctl.sim.lifted_constants import lift_constants
+    Parameters
+    ----------
+    model : SpatialHoldModel
+        The design model (:attr:`SpatialNMPC.model`).
+    wheels : WheelCluster or None
+        The wheels the torque is commanded of.
+
+    Returns
+    -------
+    casadi.Function
+    """
+    import casadi as ca
 
     n = model.a.shape[0]
     count = 0 if wheels is None else wheels.count
@@ -125,8 +131,26 @@ def _linearisation(model, wheels, horizon: int):
     local = ca.vertcat(moved[0], turned, moved[2])
     zero = ca.DM.zeros(m + 3)
     jac = [ca.substitute(ca.jacobian(local, v), ca.vertcat(dz, du), zero) for v in (dz, du)]
-    hold = ca.Function("spatial_hold_linearisation", [x, q, s, u], [*nominal[:3], *jac],
+    return ca.Function("spatial_hold_linearisation", [x, q, s, u], [*nominal[:3], *jac],
                        {"cse": True})
+
+
+def _linearisation(model, wheels, horizon: int):
+    """``(x0, q0, speeds0, U) -> [X, Q, S, A, B]`` (numpy, :class:`~flexctl.sim.buffers.InPlace`):
+    the rollout of ``U`` as :func:`_prediction`'s, and each hold's Jacobians
+    (:func:`hold_linearisation`) side by side, ``A`` (m, N m) and ``B`` (m, 3 N), compiled with
+    the numbers lifted (:func:`~flexctl.sim.lifted_constants.lift_constants`: one library per
+    structure's shape, kept across processes). None where the hold's linearisation is longer
+    than :data:`MAX_LINEARISATION` instructions or compiling is off: the step then takes
+    :func:`_prediction` and :func:`_hold_jacobians`."""
+    import casadi as ca
+
+    from flexctl.sim.compile_cache import compiled
+    from flexctl.sim.lifted_constants import lift_constants
+
+    n = model.a.shape[0]
+    count = 0 if wheels is None else wheels.count
+    hold = hold_linearisation(model, wheels)
     if hold.n_instructions() > MAX_LINEARISATION:
         return None
     lifted = lift_constants(hold)
@@ -205,16 +229,26 @@ def _hold_jacobians(law, starts, speeds, held, remainder_jacobian) -> tuple:
         a_all[:, n + 3:, at] += g.T[:, 0]
         a_all[:, n + 3:, at + 1] += g.T[:, 1]
         a_all[:, n + 3:, at + 2] += g.T[:, 2]
-        a_all[:, n + 3:, n + 3:] += np.eye(count) + model.hold * _null_matrix(law.wheels) \
+        a_all[:, n + 3:, n + 3:] += np.eye(count) + model.hold * null_matrix(law.wheels) \
             / j_w[:, None]
         b_all[:, n + 3:] = -g.T @ b_all[:, at:at + 3] \
             - model.hold * np.linalg.pinv(g) / j_w[:, None]
     return a_all, b_all
 
 
-def _null_matrix(wheels) -> np.ndarray:
+def null_matrix(wheels) -> np.ndarray:
     """``d u / d Omega`` of the cluster's distribution: ``-k_n P diag(J_w)`` of a
-    ``"null_motion"`` cluster (its null-space torques), else zero; shape (n_w, n_w)."""
+    ``"null_motion"`` cluster (its null-space torques), else zero.
+
+    Parameters
+    ----------
+    wheels : WheelCluster
+        The cluster.
+
+    Returns
+    -------
+    ndarray, shape (n_w, n_w)
+    """
     count = wheels.count
     if wheels.distribution != "null_motion":
         return np.zeros((count, count))
@@ -504,7 +538,7 @@ def _qp(law: SpatialNMPC, hessian, gradient, torques, speed_rows, speed_starts, 
         lbx, ubx = np.full(3 * horizon, -big), np.full(3 * horizon, big)
         wheels = law.wheels
         count = wheels.count
-        share, null = -np.linalg.pinv(wheels.axes), _null_matrix(wheels)
+        share, null = -np.linalg.pinv(wheels.axes), null_matrix(wheels)
         torque_limits = np.array([w.torque_limit for w in wheels.wheels])
         speed_limits = law.speed_margin * np.array([w.speed_limit for w in wheels.wheels])
         motor_now = (share @ torques + null @ (speed_starts - wheels.null_target[:, None]))

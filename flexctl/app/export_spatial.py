@@ -37,9 +37,9 @@ def _refuse(scene, sample_time):
         raise SceneError(f"export: {scene.name}'s three-axis law keeps its own sample time "
                          f"({scene.loop.sample_time:g} s); give no --sample-time")
     kind = type(scene.loop.law).__name__
-    if kind not in ("QuaternionFeedback", "SpatialLQR", "SpatialLQG"):
+    if kind not in ("QuaternionFeedback", "SpatialLQR", "SpatialLQG", "SpatialNMPC"):
         raise SceneError(f"export: {scene.name}'s {kind} has no C form; the quaternion "
-                         "feedback, the LQR and the LQG of a spatial scene have")
+                         "feedback, the LQR, the LQG and the NMPC of a spatial scene have")
 
 
 def _pointing(scene, result) -> float:

@@ -271,11 +271,13 @@ def test_exporting_a_spatial_lqg_scene_writes_its_law_and_refuses_what_it_cannot
     error = capsys.readouterr().err
     assert "keeps its own sample time (0.1 s)" in error and "Traceback" not in error
     assert not bad.exists()
-    nmpc = tmp_path / "nmpc.toml"
+    nmpc, written = tmp_path / "nmpc.toml", tmp_path / "nmpc"
     nmpc.write_text(_nmpc_scene())
-    assert main(["export", str(nmpc), "--out", str(bad), "--no-compile"]) != 0
-    error = capsys.readouterr().err
-    assert "SpatialNMPC has no C form" in error and not bad.exists()
+    assert main(["export", str(nmpc), "--out", str(written), "--no-compile"]) == 0
+    summary = json.loads((written / "export.json").read_text())
+    assert summary["controller"] == "SpatialNMPC" and "qrqp" in summary["description"]
+    assert summary["input_names"][:4] == ["qw", "qx", "qy", "qz"]
+    assert summary["input_names"][-1] == "wheel3.speed"
 
 
 @pytest.mark.slow

@@ -2,6 +2,8 @@
 it slews the two arrays to rest on target through wheels within their limits, and it follows
 a planned slew."""
 
+import shutil
+
 import numpy as np
 import pytest
 
@@ -237,3 +239,44 @@ def test_its_linear_law_about_rest_is_a_stable_held_state_feedback(step_flight):
     margins = loop_disk_margins(lq_loop(linear, linearize_spatial(CRAFT, 2)))
     print(margins.gain_margin_db, margins.phase_margin_deg)
     assert margins.closed_loop_stable and np.all(margins.gain_margin_db > 6.0)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None,
+                    reason="no C compiler")
+@pytest.mark.parametrize("planned", [False, True], ids=["step", "planned slew"])
+def test_the_nmpc_as_c_commands_and_flies_as_python(planned, tmp_path):
+    """The real-time iteration written as C (qrqp): fed the inputs the Python law read at each
+    sample of its run, the same commands (a null-motion pyramid, its torque limit reached on
+    the step; the wheels following a plan at its holds), and the same flight; following a plan
+    at samples other than its holds is refused with the reason."""
+    from controllers.codegen import ExportRefused, export_c
+    from controllers.codegen.spatial_program import compiled_spatial_law
+    from spatial_c_check import largest_command_difference
+
+    wheels, plan, step = PYRAMID, None, 0.1
+    if planned:
+        wheels, step = WHEELS, 0.2
+        plan = solve_spatial_slew(CRAFT, SpatialSlewProblem(
+            target=TARGET, duration=12.0, n_intervals=60, wheels=WHEELS), n_modes=1)
+        elsewhere = design_spatial_nmpc(CRAFT, WEIGHTS, None, 0.1, horizon=5, n_modes=1,
+                                        wheels=WHEELS, reference=plan)
+        with pytest.raises(ExportRefused, match=r"samples at the plan's holds \(0.2 s"):
+            export_c(elsewhere, None, tmp_path / "elsewhere")
+    law = design_spatial_nmpc(CRAFT, WEIGHTS, None if planned else TARGET, step, horizon=5,
+                              n_modes=1, wheels=wheels, reference=plan)
+    compiled = export_c(law, None, tmp_path / "c").compile()
+    assert compiled.program.kind == "spatial_nmpc"
+    loop = simulate_spatial_loop(CRAFT, 8.0, law, sample_time=step, n_modes=1,
+                                 variant="first_order", wheels=wheels, rtol=1e-9)
+    assert loop.ok and loop.session.failed_steps == 0
+    peak = float(np.max(np.abs(loop.result.wheel_torques)))
+    assert planned or peak >= 0.1 * (1 - 1e-9)          # the step saturates a wheel
+    difference = largest_command_difference(law, compiled_spatial_law(compiled), loop.result)
+    flown = simulate_spatial_loop(CRAFT, 8.0, compiled_spatial_law(compiled), sample_time=step,
+                                  n_modes=1, variant="first_order", wheels=wheels,
+                                  rtol=1e-9).result
+    print(f"commands within {difference:.1e} N m, states within "
+          f"{np.max(np.abs(flown.states - loop.result.states)):.1e}")
+    assert difference < 1e-9
+    assert np.max(np.abs(flown.states - loop.result.states)) < 1e-7
