@@ -8,7 +8,8 @@ functions, and their compiled C flown in the spatial loop.
   following an eigenaxis slew regulates the deviation from it (its profile in CasADi form)
   and adds its feedforward; one following a planned slew
   (:class:`~controllers.slew.spatial_trajopt.SpatialSlewSolution`), sampled at the plan's
-  holds, reads the plan's design state and held torque from tables at the holds' ends.
+  holds, reads the plan's design state and held torque from tables at the holds' ends (an
+  LQG following one likewise).
 - **LQG.** Input ``v``: the readings ``qw qx qy qz wx wy wz`` (the attitude, normalised in the
   step, and the rate); memory ``[started, z]``, the filter's prediction on the design part and
   whether it has one. The first step starts the filter from the reading, the structure at
@@ -244,11 +245,11 @@ def _lqg_program(law) -> ControllerProgram:
     regulator, part = law.regulator, law.regulator.part
     size = part.basis.shape[1]
     rate_at = regulator.state_names.index("wx")
-    t, v, m = ca.SX.sym("t"), ca.SX.sym("v", len(READINGS)), ca.SX.sym("m", 1 + size)
+    kind = ca.MX if hasattr(regulator.reference, "state_at") else ca.SX   # tables want MX
+    t, v, m = kind.sym("t"), kind.sym("v", len(READINGS)), kind.sym("m", 1 + size)
     y = ca.vertcat(attitude_error(ca, regulator.target, v[0:4]), v[4:7])
-    start = ca.SX.zeros(part.basis.shape[0])
-    start[0:3] = y[0:3]
-    start[rate_at:rate_at + 3] = y[3:6]
+    rows = part.basis.shape[0]
+    start = ca.vertcat(y[0:3], kind.zeros(rate_at - 3), y[3:6], kind.zeros(rows - rate_at - 3))
     predicted = ca.if_else(m[0] > 0.5, m[1:], ca.mtimes(ca.DM(part.projector), start))
     estimate = predicted + ca.mtimes(ca.DM(law.filter_gain),
                                      y - ca.mtimes(ca.DM(law.measured), predicted))
@@ -264,7 +265,8 @@ def _lqg_program(law) -> ControllerProgram:
         input_kind="measurement", output_name="torque", output_unit="N m, hub frame",
         memory_init=np.zeros(1 + size), sample_time=float(law.sample_time),
         description=(f"three-axis LQG, its filter on {size} states of the design part, "
-                     f"{law.sample_time:g} s"),
+                     f"{law.sample_time:g} s"
+                     + (", following a planned slew" if kind is ca.MX else "")),
         info={"estimate_states": size})
 
 
@@ -327,9 +329,6 @@ def spatial_program(law) -> ControllerProgram:
     regulator = getattr(law, "regulator", law)
     slew = getattr(regulator, "reference", None)
     if isinstance(slew, SpatialSlewSolution) and isinstance(law, (SpatialLQR, SpatialLQG)):
-        if isinstance(law, SpatialLQG):
-            raise ExportRefused("export: a three-axis LQG that follows a planned slew is not "
-                                "written as C; the LQR that follows it is")
         hold = float(slew.model.hold)
         if regulator.sample_time is None or abs(regulator.sample_time - hold) > 1e-9 * hold:
             raise ExportRefused(
@@ -337,7 +336,7 @@ def spatial_program(law) -> ControllerProgram:
                 f"the plan's holds ({hold:g} s; the C reads the plan at their ends); this one "
                 f"samples at {regulator.sample_time!r} s: plan with n_intervals = duration / "
                 "sample_time")
-        return _lqr_program(law)
+        return _lqg_program(law) if isinstance(law, SpatialLQG) else _lqr_program(law)
     if slew is not None and not isinstance(slew, EigenaxisSlew):
         raise ExportRefused(f"export: a three-axis law that follows a "
                             f"{type(slew).__name__} is not written as C; follow an "

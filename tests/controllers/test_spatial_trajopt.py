@@ -158,8 +158,8 @@ def test_an_lqr_follows_the_plan_on_the_exact_plant(plan):
                     reason="no C compiler")
 def test_the_lqr_following_the_plan_as_c_commands_and_flies_as_python(plan, tmp_path):
     """The plan's design state and torque tabulated at its holds' ends in the C: at the
-    law's samples (the holds) the same commands as Python, and the same slew; a law that
-    samples elsewhere, and the LQG, are refused with the reason."""
+    law's samples (the holds) the same commands as Python, and the same slew, for the LQR
+    and the LQG; a law that samples elsewhere is refused with the reason."""
     from controllers.codegen import ExportRefused, export_c
     from controllers.codegen.spatial_program import compiled_spatial_law
     from controllers.feedback.spatial_lqr import design_spatial_lqg
@@ -182,8 +182,15 @@ def test_the_lqr_following_the_plan_as_c_commands_and_flies_as_python(plan, tmp_
     with pytest.raises(ExportRefused, match=r"samples at the plan's holds \(0.2 s"):
         export_c(elsewhere, None, tmp_path / "d")
     observed = design_spatial_lqg(CRAFT, weights, None, 0.2, n_modes=1, reference=plan)
-    with pytest.raises(ExportRefused, match="LQG that follows a planned slew"):
-        export_c(observed, None, tmp_path / "e")
+    compiled = export_c(observed, None, tmp_path / "e").compile()
+    assert "following a planned slew" in compiled.program.description
+    run = simulate_spatial_loop(CRAFT, 14.0, observed, sample_time=0.2, n_modes=1,
+                                variant="first_order", rtol=1e-9).result
+    assert largest_command_difference(observed, compiled_spatial_law(compiled), run) < 1e-12
+    flown = simulate_spatial_loop(CRAFT, 14.0, compiled_spatial_law(compiled),
+                                  sample_time=0.2, n_modes=1, variant="first_order",
+                                  rtol=1e-9).result
+    assert np.max(np.abs(flown.states - run.states)) < 1e-7
 
 
 @pytest.mark.parametrize("kwargs, pattern", [
