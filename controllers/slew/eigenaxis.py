@@ -138,14 +138,15 @@ class EigenaxisSlew(KeywordOnly):
         ndarray or casadi.SX or casadi.MX, shape (3,)
             N m, hub frame.
         """
-        symbolic = not all(isinstance(v, (int, float, np.floating, np.integer))
-                           for v in (angle, rate, acceleration))
+        symbolic = any(type(v).__module__.startswith("casadi")
+                       for v in (angle, rate, acceleration))
         if symbolic:
             import casadi as lib
 
             cross, times, axis, inertia = lib.cross, lib.mtimes, lib.DM(self.axis), \
                 lib.DM(self.inertia)
         else:
+            angle, rate, acceleration = (float(v) for v in (angle, rate, acceleration))
             lib, cross, times, axis, inertia = np, np.cross, np.matmul, self.axis, self.inertia
         spin = rate * axis
         if self.momentum is None:

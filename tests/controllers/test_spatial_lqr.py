@@ -338,6 +338,11 @@ def test_an_eigenaxis_slew_refuses_what_is_no_slew(tmp_path):
         EigenaxisSlew(axis=(0, 0, 1), profile=None, inertia=np.eye(3))
     with pytest.raises(InputTypeError, match="angle"):
         EigenaxisSlew(axis=(0, 0, 1), profile=object(), inertia=np.eye(3))
+    with pytest.raises(InputValueError, match=r"eigenaxis_slew\.momentum must be finite"):
+        EigenaxisSlew(axis=(0, 0, 1), profile=profile, inertia=np.eye(3),
+                      momentum=(np.nan, 0.0, 0.0))
+    with pytest.raises(InputValueError, match=r"eigenaxis_slew\.momentum must have shape"):
+        EigenaxisSlew(axis=(0, 0, 1), profile=profile, inertia=np.eye(3), momentum=(1.0, 2.0))
     slew = _eigenaxis()
     with pytest.raises(InputValueError, match="reference's end"):
         design_spatial_lqr(_craft(), WEIGHTS, (1.0, 0.0, 0.0, 0.0), reference=slew)
