@@ -176,8 +176,9 @@ def _link(export, target, main: str, folder: Path) -> Path:
     (folder / "pil.ld").write_text(_LINKER_SCRIPT, encoding="utf-8")
     (folder / "pil_main.c").write_text(main, encoding="utf-8")
     elf = folder / "pil.elf"
-    run_tool([find_target_compiler(target), *flags, f"-I{export.directory}", "pil_main.c",
-              "-nostartfiles", "-T", "pil.ld", "--specs=nano.specs", "--specs=nosys.specs",
+    run_tool([find_target_compiler(target), *flags, f"-I{Path(export.directory).resolve()}",
+              "pil_main.c", "-nostartfiles", "-T", "pil.ld", "--specs=nano.specs",
+              "--specs=nosys.specs",
               "-lm", "-o", elf], folder)
     return elf
 

@@ -260,7 +260,7 @@ def build_for_target(export, target="cortex-m4", cc: str | None = None) -> Targe
     flags = target_flags(target, export.precision)
     with tempfile.TemporaryDirectory(prefix="flexctl-target-") as build:
         obj = Path(build, "law.o")
-        run_tool([compiler, *flags, "-c", export.source, "-o", obj], build)
+        run_tool([compiler, *flags, "-c", Path(export.source).resolve(), "-o", obj], build)
         sections = _sections(run_tool([_tool(target, "size"), "-A", obj], build))
         external = tuple(sorted(line.split()[-1] for line in run_tool(
             [_tool(target, "nm"), "-u", obj], build).splitlines() if line.strip()))
@@ -303,7 +303,7 @@ def _struct_bytes(export, target, compiler, flags, build) -> int:
                      encoding="utf-8")
     obj = Path(build, "probe.o")
     run_tool([compiler, *[f for f in flags if not f.startswith(("-fstack", "-fcallgraph"))],
-          f"-I{export.directory}", "-c", probe, "-o", obj], build)
+          f"-I{Path(export.directory).resolve()}", "-c", probe, "-o", obj], build)
     for line in run_tool([_tool(target, "nm"), "-S", obj], build).splitlines():
         if line.endswith("flexctl_struct_probe"):
             return int(line.split()[1], 16)

@@ -7,6 +7,7 @@ the processor in the loop, ``qemu-system-arm``; each test says which is missing 
 import json
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -71,6 +72,18 @@ def test_freestanding_build_sizes_and_stack(sampled_lqr, target, precision, tmp_
     assert not {"malloc", "calloc", "realloc", "free"} & set(build.library_calls)
     # double on the M4's single-precision FPU runs in software, nowhere else
     assert build.software_double == (precision == "double" and target == "cortex-m4")
+
+
+@needs_cross
+def test_an_export_in_a_relative_folder_builds_for_the_target(sampled_lqr, tmp_path,
+                                                              monkeypatch):
+    """The cross build runs in a folder of its own: an export written to a relative path
+    (``flexctl export ... --out out``) is found from there."""
+    _, plant, law, _, _ = sampled_lqr
+    monkeypatch.chdir(tmp_path)
+    exported = export_c(law, plant, "relative")
+    assert not Path(exported.source).is_absolute()
+    assert build_for_target(exported, "cortex-m7").code_bytes > 0
 
 
 @needs_cross
