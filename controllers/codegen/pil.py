@@ -79,7 +79,8 @@ class PILRun:
     ----------
     target, board, precision : str
     commands : ndarray, shape (K,)
-        The step's command at each sample, in the law's output unit.
+        The step's command at each sample, in the law's output unit (its first entry, for a
+        law of several: :attr:`outputs`).
     codes : ndarray of int, shape (K,)
         Its return codes.
     instructions : ndarray of int, shape (K,)
@@ -88,6 +89,8 @@ class PILRun:
         The calibration: timer ticks per instruction.
     clock_hz : float
         The clock of :attr:`time_estimate_s`.
+    outputs : ndarray, shape (K, n_out)
+        Every entry of the command at each sample (a three-axis law's three torques).
     """
 
     target: str
@@ -98,6 +101,7 @@ class PILRun:
     instructions: np.ndarray
     ticks_per_instruction: float
     clock_hz: float
+    outputs: np.ndarray = None
 
     @property
     def time_estimate_s(self) -> np.ndarray:
@@ -164,7 +168,7 @@ def run_on_target(export, times, inputs, target: str = "cortex-m4",
         elf = _link(export, chosen, _program(export, times, inputs), Path(build))
         output = _emulate(qemu, chosen.board, elf)
     return _parse(output, chosen, export.precision, times.size,
-                  clock_hz or CLOCKS[chosen.name])
+                  clock_hz or CLOCKS[chosen.name], export.program.n_out)
 
 
 def _link(export, target, main: str, folder: Path) -> Path:
@@ -402,29 +406,42 @@ def _emulate(qemu: str, board: str, elf: Path) -> str:
     return done.stderr + done.stdout        # QEMU writes semihosting's output to stderr
 
 
-def _parse(output: str, target, precision: str, steps: int, clock_hz: float) -> PILRun:
-    calibration, rows = None, []
+def _real_bits(rows, precision) -> np.ndarray:
+    """The reals of ``rows``' low and high words (columns 0 and 1)."""
+    rows = np.asarray(rows, dtype=np.uint64).reshape(-1, 2)
+    if precision == "float":
+        return rows[:, 0].astype(np.uint32).view(np.float32).astype(float)
+    return (rows[:, 0] | (rows[:, 1] << np.uint64(32))).view(np.float64).copy()
+
+
+def _parse(output: str, target, precision: str, steps: int, clock_hz: float,
+           n_out: int = 1) -> PILRun:
+    calibration, rows, more = None, [], []
     for line in output.splitlines():
         parts = line.split()
         if parts[:1] == ["C"]:
             calibration = [int(p, 16) for p in parts[1:]]
         elif parts[:1] == ["S"]:
             rows.append([int(p, 16) for p in parts[1:]])
-    if calibration is None or len(rows) != steps:
+        elif parts[:1] == ["U"]:
+            more.append([int(p, 16) for p in parts[1:]])
+    if calibration is None or len(rows) != steps or len(more) != steps * (n_out - 1):
         raise EmulationError(f"the program under {EMULATOR} printed {len(rows)} of {steps} "
                              f"steps{'' if calibration else ' and no calibration'}: "
                              f"{output.strip()[-500:]!r}")
     empty, loop = calibration[:2]
     per_instruction = (loop - empty) / (2 * CALIBRATION_LOOPS)
     rows = np.array(rows, dtype=np.uint64)          # k, code, low bits, high bits, ticks
-    if precision == "float":
-        commands = rows[:, 2].astype(np.uint32).view(np.float32).astype(float)
-    else:
-        commands = (rows[:, 2] | (rows[:, 3] << np.uint64(32))).view(np.float64)
+    outputs = np.empty((steps, n_out))
+    outputs[:, 0] = _real_bits(rows[:, 2:4], precision)
+    if n_out > 1:                                   # k, output, low bits, high bits, 0
+        more = np.array(more, dtype=np.uint64)
+        outputs[more[:, 0].astype(int), more[:, 1].astype(int)] = _real_bits(more[:, 2:4],
+                                                                             precision)
     instructions = np.rint((rows[:, 4].astype(float) - empty) / per_instruction).astype(int)
-    return PILRun(target.name, target.board, precision, commands.copy(),
+    return PILRun(target.name, target.board, precision, outputs[:, 0].copy(),
                   rows[:, 1].astype(int), instructions, float(per_instruction),
-                  float(clock_hz))
+                  float(clock_hz), outputs)
 
 
 def _reals(values, precision) -> str:
@@ -449,18 +466,22 @@ def _program(export, times, inputs) -> str:
 
         int main(void) {{
           uint32_t start, ticks, bits[2] = {{0u, 0u}};
-          int k, code;
-          flexctl_real u = 0;
+          int k, i, code;
+          flexctl_real u[FLEXCTL_NU] = {{0}};
           timer_start();
           pil_calibrate({CALIBRATION_LOOPS}u);
           if (flexctl_ctrl_init(&pil_ctrl) != FLEXCTL_OK) return 1;
           for (k = 0; k < PIL_STEPS; ++k) {{
             start = TIMER_VALUE;
             code = flexctl_ctrl_step(&pil_ctrl, pil_times[k],
-                                     &pil_inputs[k * FLEXCTL_N_INPUT], &u);
+                                     &pil_inputs[k * FLEXCTL_N_INPUT], u);
             ticks = start - TIMER_VALUE;
-            memcpy(bits, &u, sizeof u);
+            memcpy(bits, &u[0], sizeof u[0]);
             put_row('S', (uint32_t)k, (uint32_t)code, bits[0], bits[1], ticks);
+            for (i = 1; i < FLEXCTL_NU; ++i) {{
+              memcpy(bits, &u[i], sizeof u[i]);
+              put_row('U', (uint32_t)k, (uint32_t)i, bits[0], bits[1], 0u);
+            }}
           }}
           return 0;
         }}

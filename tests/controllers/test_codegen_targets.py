@@ -158,6 +158,43 @@ def test_processor_in_the_loop_matches_host_and_python(sampled_lqr, target, prec
 
 @needs_cross
 @needs_qemu
+@needs_host
+def test_processor_in_the_loop_reads_every_torque_of_a_three_axis_law(tmp_path):
+    """A law of three outputs (a three-axis LQR) under QEMU: each sample's three torques,
+    those of the host build of the same C, in float."""
+    from controllers.codegen.pil import run_on_target
+    from controllers.feedback.lqr import LQRWeights
+    from controllers.feedback.spatial_lqr import design_spatial_lqr
+    from flexctl import SpatialAppendage, SpatialHub, SpatialStructure
+    from flexctl.sim.quaternions import from_rotation_vector
+    from flexctl.sim.spatial_loop import simulate_spatial_loop
+
+    rod = SpatialAppendage(name="wing", direction=(0.0, 1.0, 0.0), normal=(0.0, 0.0, 1.0),
+                           length=1.0, density=2700.0, area=2e-4, youngs_modulus=7e10,
+                           second_moment=1e-9, second_moment_lateral=5e-8,
+                           shear_modulus=2.6e10, torsion_constant=2e-9)
+    craft = SpatialStructure(hub=SpatialHub(inertia=np.diag([1.2, 1.0, 1.4]), radius=0.05),
+                             appendages=(rod,))
+    target = from_rotation_vector([0.1, -0.05, 0.2])
+    law = design_spatial_lqr(craft, LQRWeights(hub_angle=0.05, torque=0.1), target,
+                             n_modes=1, sample_time=0.1, torque_limit=0.2)
+    run = simulate_spatial_loop(craft, 2.0, law, sample_time=0.1, n_modes=1,
+                                variant="first_order").result
+    exported = export_c(law, None, tmp_path, precision="float")
+    names = list(run.equations.layout.state_names)
+    inputs = run.states[[names.index(n) for n in exported.program.input_names]].T
+    emulated = run_on_target(exported, run.t, inputs, "cortex-m4")
+    assert emulated.outputs.shape == (run.t.size, 3)
+    host = exported.compile()
+    on_host = np.array([host.step(t, v)[0] for t, v in zip(run.t, inputs)])
+    np.testing.assert_allclose(emulated.outputs, on_host, rtol=0,
+                               atol=8 * EPSILON["float"] * 0.2)
+    assert np.max(np.abs(on_host)) > 0.01
+    assert np.array_equal(emulated.commands, emulated.outputs[:, 0])
+
+
+@needs_cross
+@needs_qemu
 def test_processor_in_the_loop_refuses_bad_input(sampled_lqr, tmp_path):
     from controllers.codegen.pil import run_on_target
 
