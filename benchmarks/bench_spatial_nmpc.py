@@ -4,8 +4,7 @@ Case: the two damped arrays of ``examples/scenes/spatial-lqg-slew.toml`` through
 orthogonal wheels, a 20 degree step about (0.6, 0, 0.8) (or a planned 12 s slew with
 ``--planned``), the NMPC at 0.1 s with a horizon of 20 on ``--modes`` modes per field, flown on
 the exact rod with two modes per field for 20 s. Prints the median and largest step (wall time
-of the session's call), the QP's share, the failed steps, the pointing error and the residual
-vibration.
+of the session's call), the failed steps, the pointing error and the residual vibration.
 
 Run: ``python benchmarks/bench_spatial_nmpc.py [--modes 1] [--planned]``.
 """
