@@ -152,11 +152,16 @@ def spatial_nmpc_program(law, precision: str = "double") -> ControllerProgram:
     """
     import casadi as ca
 
-    from controllers.mpc.nmpc import conic_solver
-    from controllers.mpc.spatial_nmpc import hold_linearisation
+    from flexctl.model.checks import check_instance
 
+    from controllers.mpc.nmpc import conic_solver
+    from controllers.mpc.spatial_nmpc import SpatialNMPC, hold_linearisation
+
+    from .precision import check_precision
     from .spatial_program import attitude_error
 
+    check_instance("spatial_nmpc_program", "law", law, SpatialNMPC)
+    precision = check_precision(precision)
     tables = _tables(law)
     model, horizon = law.model, law.horizon
     n = model.a.shape[0]
