@@ -24,3 +24,14 @@ def largest_command_difference(law, c_law, run) -> float:
             args += (run.states[:, k],)
         worst = max(worst, float(np.max(np.abs(python(*args) - compiled(*args)))))
     return worst
+
+
+def flown_as_python(law, c_law, fly) -> tuple:
+    """``(commands, states, run)``: the largest command difference (N m) of the two laws on
+    the inputs of the Python law's run, the largest state difference between the runs each
+    law flies, and the Python run; ``fly(law)`` flies a law and returns its
+    :class:`~flexctl.sim.spatial_run.SpatialResult`."""
+    run = fly(law)
+    flown = fly(c_law)
+    return (largest_command_difference(law, c_law, run),
+            float(np.max(np.abs(flown.states - run.states))), run)
