@@ -122,14 +122,18 @@ class _Sensed:
         self.past = []                             # true attitudes, for the tracker's latency
         self.estimates, self.biases = np.zeros((4, count + 1)), np.zeros((3, count + 1))
 
-    def read(self, k: int, t: float, attitude, rate, sample_time: float) -> tuple:
-        """The estimated attitude and rate at sample ``k``."""
+    def read(self, k: int, t: float, attitude, rate, sample_time: float, torque) -> tuple:
+        """The estimated attitude and rate at sample ``k`` (``torque``: the command held over
+        the sample just past, for an estimator that ``takes_torque``)."""
         estimator, past = self.estimator, self.past
         past.append(attitude)
         if k:                  # the rotation over the last sample, as a rate-integrating gyro
             turned = rotation_vector(product(conjugate(past[k - 1]), attitude))
             gyro = self.readings.gyro(turned / sample_time)
-            estimator.propagate(gyro)
+            if getattr(estimator, "takes_torque", False):
+                estimator.propagate(gyro, torque)
+            else:
+                estimator.propagate(gyro)
         else:
             gyro = self.readings.gyro(rate)
         if k and k % self.every == 0 and k >= self.lag and \
@@ -174,7 +178,10 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
         the true attitude and rate.
     estimator : object, optional
         With ``sensors``: ``propagate(gyro_reading)``, ``update(star_tracker_reading)``,
-        ``attitude`` and ``bias`` (an :class:`controllers.feedback.mekf.AttitudeFilter`).
+        ``attitude`` and ``bias`` (an :class:`controllers.feedback.mekf.AttitudeFilter`); one
+        that ``takes_torque`` (a :class:`controllers.feedback.flexible_mekf.FlexibleAttitudeFilter`)
+        gets ``propagate(gyro_reading, torque)``, the command held over the sample, which is
+        the torque on the structure only without wheels.
     seed : int, optional
         Seed of the sensors' noise (default theirs).
     rtol : float, optional
@@ -196,6 +203,11 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
         raise InputValueError("a state-feedback law reads the plant's whole state, which no "
                               "sensor gives: fly it without sensors, or an observed law "
                               "(for example an LQG) with them")
+    if wheels is not None and getattr(estimator, "takes_torque", False):
+        raise InputValueError("an estimator driven by the torque on the structure "
+                              "(takes_torque) flies without wheels: through wheels the "
+                              "structure feels their gyroscopic torque beside the command, "
+                              "which its model does not carry")
     session = (law.start(layout.state_names) if full_state
                else law.start() if hasattr(law, "start") else law)
     c = layout.n_coordinates
@@ -215,7 +227,7 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
         states[:, k] = x
         done = k + 1
         if sensed is not None:
-            attitude, rate = sensed.read(k, t, attitude, rate, sample_time)
+            attitude, rate = sensed.read(k, t, attitude, rate, sample_time, held.value)
         held.value = _command(session, t, attitude, rate, x if full_state else None)
         commands[:, k] = held.value
         if k == count:

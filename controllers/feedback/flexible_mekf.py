@@ -1,0 +1,246 @@
+"""The attitude filter with the appendages' modes in it: a multiplicative extended Kalman filter
+of the attitude, the gyro bias and the design model's flexible state, driven by the torque.
+
+:class:`FlexibleAttitudeFilter` is :class:`~controllers.feedback.mekf.AttitudeFilter` with the
+structure's dynamics inside: where that filter integrates the gyro's reading (the gyro is its
+model), this one predicts the hub's rotation and the appendages' modes from the torque on the
+structure through the linear flexible spacecraft at rest, and reads the gyro as a measurement
+of the rotation over each sample. It estimates the modal coordinates and rates the gyro and
+the star tracker see through the hub's motion, for a law or a monitor that wants them.
+
+Notes
+-----
+State: the attitude ``q`` (multiplicative error ``dtheta``, as the attitude filter's), the gyro
+bias ``b`` and ``x_l`` (the design state of
+:func:`~controllers.slew.spatial_trajopt.spatial_hold_model` after the attitude error: the
+modal coordinates, the hub rate ``w``, the modal rates). Over a gyro sample ``T`` with the
+torque ``u`` held on the structure (the design model's at rest, integrated exactly)::
+
+    x_l <- Phi x_l + Gamma (u + w_u)          phi = S_x x_l + S_u (u + w_u)
+    q   <- q (x) exp(phi / 2)                 (the rotation over the sample)
+    z_g  = phi / T + b + v                    (the gyro's reading over the sample)
+
+``w_u`` a torque disturbance held over the sample (standard deviation ``torque_sigma`` per
+axis, what the design model leaves out: friction, the nonlinear remainder) and ``v`` the
+gyro's rate noise (``angle_random_walk^2 / T``); the bias follows the attitude filter's random
+walk. The reading depends on the state at the sample's start and on the same ``w_u`` as the
+prediction: each sample is one step of the Kalman predictor with correlated noise (the gain
+``(F P H^T + G Q D^T) S^-1``), the error state ``(dtheta, db, dx_l)`` with ``F = [[R(phi)^T,
+0, J_r(phi) S_x], [0, I, 0], [0, 0, Phi]]``, ``H = [0, I, S_x / T]``, ``G = [J_r(phi) S_u; 0;
+Gamma]`` and ``D = S_u / T``. A star tracker reading updates as in the attitude filter (``H =
+[I, 0, 0]``), a late one replayed from the stored samples. Rotation increments are taken as
+commuting within a sample and the model is the one at rest: slow slews, where the modes are
+small.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from flexctl.model.checks import check_array, check_real
+from flexctl.model.errors import InputValueError
+from flexctl.model.spatial_rod import cross_matrix
+from flexctl.sim.quaternions import error_angles, from_rotation_vector, product, rotation_matrix
+
+from ..design.controllable import input_part
+from .mekf import AttitudeFilter
+
+__all__ = ["FlexibleAttitudeFilter"]
+
+
+def _right_jacobian(phi) -> np.ndarray:
+    """``J_r(phi)``: ``exp(phi + d) = exp(phi) exp(J_r(phi) d)`` to first order in ``d``."""
+    angle = float(np.linalg.norm(phi))
+    k = cross_matrix(phi)
+    if angle < 1e-6:
+        return np.eye(3) - 0.5 * k + k @ k / 6.0
+    return (np.eye(3) - (1 - np.cos(angle)) / angle ** 2 * k
+            + (angle - np.sin(angle)) / angle ** 3 * (k @ k))
+
+
+class FlexibleAttitudeFilter(AttitudeFilter):
+    """The attitude filter with the design model's modes (module Notes).
+
+    Parameters
+    ----------
+    sensors : AttitudeSensors
+        The sensors it reads (as :class:`~controllers.feedback.mekf.AttitudeFilter`'s).
+    structure : SpatialStructure
+        The structure whose linear model at rest it carries.
+    attitude : array_like, shape (4,)
+        Initial attitude estimate, hub to inertial, scalar first.
+    attitude_sigma : float
+        Its standard deviation about each axis, rad (> 0).
+    n_modes : int, sequence of int or mapping, optional
+        Modes per field of the design model. Default 1.
+    variant : {"first_order", "zero_order", "exact"}, optional
+        The spatial model linearised at rest. Default ``"first_order"``.
+    bias, bias_sigma : optional
+        As the attitude filter's.
+    rate_sigma : float, optional
+        Standard deviation of the initial hub rate estimate (zero), rad/s (> 0). Default 1e-3.
+    mode_sigma : float, optional
+        Standard deviation of the initial modal coordinates and rates (zero), in their units
+        (> 0). Default 1e-3.
+    torque_sigma : float, optional
+        Standard deviation of the disturbance torque held over each sample, N m per axis
+        (> 0). Default 1e-4.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The flexible state's names (``x_l``'s).
+    model : SpatialHoldModel
+        The design model over one gyro sample.
+    """
+
+    #: The loop hands :meth:`propagate` the torque held over the sample.
+    takes_torque = True
+
+    def __init__(self, sensors, structure, attitude, attitude_sigma: float, *, n_modes=1,
+                 variant: str = "first_order", bias=(0.0, 0.0, 0.0), bias_sigma: float = 1e-4,
+                 rate_sigma: float = 1e-3, mode_sigma: float = 1e-3,
+                 torque_sigma: float = 1e-4):
+        from ..slew.spatial_trajopt import remainder_function, spatial_hold_model
+
+        super().__init__(sensors, attitude, attitude_sigma, bias, bias_sigma)
+        owner = "flexible_mekf"
+        sigmas = {name: check_real(owner, name, value, minimum=0.0, strict=True, maximum=1e6)
+                  for name, value in (("rate_sigma", rate_sigma), ("mode_sigma", mode_sigma),
+                                      ("torque_sigma", torque_sigma))}
+        self.model = spatial_hold_model(structure, n_modes, variant, self.step, owner)
+        self.names = tuple(self.model.names[3:])
+        # the part of x_l the torque moves below the gyro's Nyquist frequency: z = P x_l,
+        # x_l = T z (the faster and the unreachable modes are left to the model's error)
+        self.part = input_part(self.model.a, self.model.b, max_frequency=np.pi / self.step)
+        basis, projector = self.part.basis, self.part.projector
+        n = basis.shape[1]
+        at = self.model.rate_at
+        self.x = np.zeros(n)
+        scale = np.full(len(self.names), sigmas["mode_sigma"])
+        scale[at:at + 3] = sigmas["rate_sigma"]
+        spread = np.sqrt(np.diag(projector @ np.diag(scale ** 2) @ projector.T))
+        covariance = np.zeros((6 + n, 6 + n))
+        covariance[:6, :6] = self.P
+        covariance[6:, 6:] = np.diag(spread ** 2)
+        self.P = covariance
+        self.torque_variance = sigmas["torque_sigma"] ** 2
+        phi, gamma, s_x, s_u = self.model.maps
+        self.phi, self.gamma = projector @ phi @ basis, projector @ gamma[:, :3]
+        self.s_x, self.s_u = s_x @ basis, s_u[:, :3]
+        self.gamma_r, self.s_r = projector @ gamma[:, 3:], s_u[:, 3:]
+        self.remainder = remainder_function(self.model)
+        self.history = deque(maxlen=self.lag + 1)   # (q, b, x, P, reading, torque)
+
+    @property
+    def flexible_state(self) -> np.ndarray:
+        """Estimated ``x_l`` (:attr:`names`; the left-out modes' part zero), shape (n,)."""
+        return self.part.basis @ self.x
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Covariance of ``(dtheta, db, dz)``, ``z = P x_l`` the filtered part (``part``),
+        shape (6 + r, 6 + r)."""
+        return self.P.copy()
+
+    def propagate(self, gyro_reading, torque=(0.0, 0.0, 0.0)) -> None:
+        """Take the gyro's reading over the sample just past, with the torque held on the
+        structure over it, and advance one sample.
+
+        Parameters
+        ----------
+        gyro_reading : array_like, shape (3,)
+            The gyro's reading, rad/s.
+        torque : array_like, shape (3,), optional
+            The torque on the structure over the sample, N m, hub frame. Default zero.
+        """
+        reading = np.array(check_array("flexible_mekf", "gyro_reading", gyro_reading,
+                                       shape=(3,)))
+        u = np.array(check_array("flexible_mekf", "torque", torque, shape=(3,)))
+        self.history.append((self.q.copy(), self.b.copy(), self.x.copy(), self.P.copy(),
+                             reading, u))
+        self._predict(reading, u)
+
+    def _predict(self, reading, u) -> None:
+        t, n = self.step, self.x.size
+        # the model's nonlinear remainder (gyroscopic torques, Coriolis, stiffening) held over
+        # the sample at the estimate, as the design model's hold; its derivatives left out of
+        # the covariance (small where the rates are)
+        rest = np.asarray(self.remainder(self.part.basis @ self.x, u)).ravel()
+        turned = self.s_x @ self.x + self.s_u @ u + self.s_r @ rest
+        j_r = _right_jacobian(turned)
+        f = np.eye(6 + n)
+        f[:3, :3] = rotation_matrix(from_rotation_vector(-turned))
+        f[:3, 6:] = j_r @ self.s_x
+        f[6:, 6:] = self.phi
+        g = np.zeros((6 + n, 3))
+        g[:3] = j_r @ self.s_u
+        g[6:] = self.gamma
+        h = np.zeros((3, 6 + n))
+        h[:, 3:6] = np.eye(3)
+        h[:, 6:] = self.s_x / t
+        d = self.s_u / t
+        q_w = self.torque_variance * np.eye(3)
+        s_u2 = self.sigma_u2
+        walk = np.zeros((6 + n, 6 + n))
+        walk[3:6, 3:6] = s_u2 * t * np.eye(3)
+        innovation_cov = h @ self.P @ h.T + d @ q_w @ d.T + self.sigma_v ** 2 / t * np.eye(3)
+        cross = f @ self.P @ h.T + g @ q_w @ d.T
+        gain = np.linalg.solve(innovation_cov, cross.T).T
+        innovation = reading - (turned / t + self.b)
+        # the nominal prediction, then the correction in the error state at the sample's end
+        self.q = product(self.q, from_rotation_vector(turned))
+        self.x = self.phi @ self.x + self.gamma @ u + self.gamma_r @ rest
+        correction = gain @ innovation
+        self.q = product(self.q, from_rotation_vector(correction[:3]))
+        self.q /= np.linalg.norm(self.q)
+        self.b = self.b + correction[3:6]
+        self.x = self.x + correction[6:]
+        self.P = f @ self.P @ f.T + g @ q_w @ g.T + walk - gain @ innovation_cov @ gain.T
+        self.P = 0.5 * (self.P + self.P.T)
+
+    def update(self, measured) -> np.ndarray:
+        """Take a star tracker reading (taken ``latency`` s ago, when reported now).
+
+        Parameters
+        ----------
+        measured : array_like, shape (4,)
+            The reading, hub to inertial, scalar first.
+
+        Returns
+        -------
+        ndarray, shape (3,)
+            The residual, rad (before the update).
+        """
+        q_m = np.array(check_array("flexible_mekf", "measured", measured, shape=(4,)))
+        if not np.linalg.norm(q_m) > 0:
+            raise InputValueError("flexible_mekf.measured must be a non-zero quaternion")
+        replay = []
+        if self.lag:
+            if len(self.history) < self.lag:
+                raise InputValueError(
+                    f"a star tracker reading {self.lag} gyro samples old came before the filter "
+                    f"had propagated that many ({len(self.history)})")
+            entries = list(self.history)[-self.lag:]
+            self.q, self.b, self.x, self.P = (v.copy() for v in entries[0][:4])
+            replay = [e[4:] for e in entries]
+        residual = error_angles(self.q, q_m / np.linalg.norm(q_m))
+        size = self.P.shape[0]
+        h = np.zeros((3, size))
+        h[:, :3] = np.eye(3)
+        gain = self.P @ h.T @ np.linalg.inv(h @ self.P @ h.T + self.R)
+        correction = gain @ residual
+        self.q = product(self.q, from_rotation_vector(correction[:3]))
+        self.q /= np.linalg.norm(self.q)
+        self.b = self.b + correction[3:6]
+        self.x = self.x + correction[6:]
+        keep = np.eye(size) - gain @ h
+        self.P = keep @ self.P @ keep.T + gain @ self.R @ gain.T
+        if replay:
+            kept = list(self.history)[:-self.lag]
+            self.history = deque(kept, maxlen=self.lag + 1)
+            for reading, torque in replay:
+                self.propagate(reading, torque)
+        return residual

@@ -1,0 +1,148 @@
+"""The attitude filter with the appendages' modes (:mod:`controllers.feedback.flexible_mekf`):
+consistent over Monte Carlo runs where the structure moves as its model says, tracking the
+arrays' modes, and flying in the sampled loop."""
+
+import numpy as np
+import pytest
+
+from controllers.feedback.flexible_mekf import FlexibleAttitudeFilter
+from flexctl import SpatialAppendage, SpatialHub, SpatialStructure, VectorTorque, simulate_spatial
+from flexctl.model.errors import InputError
+from flexctl.sim.attitude_sensors import AttitudeSensors, Gyro, StarTracker
+from flexctl.sim.quaternions import conjugate, error_angles, product, rotation_vector
+
+
+def _array(name, direction):
+    return SpatialAppendage(name=name, direction=direction, normal=(0.0, 0.0, 1.0), length=1.8,
+                            density=2766.0, area=2.5e-4, youngs_modulus=6.9e10,
+                            second_moment=5.2083e-10, second_moment_lateral=5.2083e-8,
+                            shear_modulus=2.6e10, torsion_constant=1.0e-9, damping_ratio=0.005)
+
+
+CRAFT = SpatialStructure(hub=SpatialHub(inertia=[[1.30, 0.05, 0.0], [0.05, 1.20, 0.0],
+                                                 [0.0, 0.0, 1.40]], radius=0.06),
+                         appendages=(_array("wing_a", (0.0, 1.0, 0.0)),
+                                     _array("wing_b", (0.0, -1.0, 0.0))))
+STEP, SIGMA = 0.1, 1e-4
+SENSORS = AttitudeSensors(star_tracker=StarTracker(cross_noise=2e-5, boresight_noise=1e-4,
+                                                   sample_time=0.5),
+                          gyro=Gyro(angle_random_walk=3e-5, rate_random_walk=1e-6),
+                          gyro_sample_time=STEP)
+
+
+def _filtered(seed, t_final=20.0):
+    """A run under a known torque plus a disturbance held over each gyro sample (the filter's
+    model of it), read by the sensors and filtered: per sample after the first, the
+    estimation errors of the attitude and of the filtered modal part and the filter's
+    covariance of them; the out-of-plane bending of ``wing_a``, its estimate and the
+    estimate's standard deviation."""
+    times = np.arange(0.0, t_final + STEP / 2, STEP)
+    known = np.array([0.01 * np.sin(0.7 * times), 0.008 * np.cos(1.3 * times),
+                      0.006 * np.sin(0.4 * times + 1.0)]).T
+    disturbance = SIGMA * np.random.default_rng(100 + seed).standard_normal(known.shape)
+    run = simulate_spatial(CRAFT, t_final, VectorTorque(times, known + disturbance,
+                                                        interpolation="hold"),
+                           n_modes=1, variant="first_order", rtol=1e-10, output_step=STEP)
+    assert run.ok
+    readings = SENSORS.start(seed)
+    estimator = FlexibleAttitudeFilter(SENSORS, CRAFT, run.quaternion[:, 0], 1e-3,
+                                       torque_sigma=SIGMA)
+    rows, part = estimator.model.full_rows, estimator.part
+    bending = estimator.names.index("wing_a.qn1")
+    errors, covariances, tracked = [], [], []
+    for k in range(1, run.t.size):
+        turned = rotation_vector(product(conjugate(run.quaternion[:, k - 1]),
+                                         run.quaternion[:, k]))
+        estimator.propagate(readings.gyro(turned / STEP), known[k - 1])
+        if k % SENSORS.tracker_every == 0:
+            estimator.update(readings.star_tracker(run.quaternion[:, k]))
+        modal = part.projector @ run.states[rows, k]
+        errors.append(np.concatenate([error_angles(estimator.attitude, run.quaternion[:, k]),
+                                      modal - estimator.x]))
+        keep = np.r_[0:3, 6:estimator.P.shape[0]]
+        covariances.append(estimator.covariance[np.ix_(keep, keep)])
+        spread = part.basis @ estimator.P[6:, 6:] @ part.basis.T
+        tracked.append((run.states[rows, k][bending], estimator.flexible_state[bending],
+                        np.sqrt(spread[bending, bending])))
+    return np.array(errors), np.array(covariances), np.array(tracked)
+
+
+@pytest.mark.slow
+def test_it_is_consistent_over_monte_carlo_runs():
+    """The normalised estimation error squared of the attitude and the filtered modal part,
+    averaged over 8 runs, within its two-sided 95 % chi-square bounds at most samples after
+    the first 5 s, and its mean within 15 % of the dimension."""
+    from scipy.stats import chi2
+
+    runs = [_filtered(seed) for seed in range(8)]
+    nees = np.array([[e @ np.linalg.solve(p, e) for e, p in zip(errors, covariances)]
+                     for errors, covariances, _ in runs])
+    late = nees[:, 50:]
+    dof, count = runs[0][0].shape[1], len(runs)
+    low, high = chi2.ppf([0.025, 0.975], dof * count) / count
+    average = late.mean(axis=0)
+    inside = float(np.mean((average >= low) & (average <= high)))
+    print(f"dimension {dof}, mean NEES {late.mean():.2f}, bounds [{low:.2f}, {high:.2f}], "
+          f"{100 * inside:.0f} % of samples inside")
+    assert abs(late.mean() / dof - 1.0) < 0.15
+    assert inside > 0.85
+
+
+def test_it_tracks_the_arrays_modes():
+    """The modes the gyro and the star tracker see through the hub: after the first 5 s the
+    estimate of the arrays' out-of-plane bending follows the truth to a fraction of its
+    motion, its error within its own standard deviations (the attitude filter has none)."""
+    tracked = _filtered(0)[2][50:]
+    truth, estimate, sigma = tracked.T
+    error = estimate - truth
+    print(f"wing_a.qn1: rms {np.sqrt(np.mean(truth ** 2)):.3e}, error rms "
+          f"{np.sqrt(np.mean(error ** 2)):.3e}, sigma {sigma.mean():.3e}")
+    assert np.sqrt(np.mean(error ** 2)) < 0.15 * np.sqrt(np.mean(truth ** 2))
+    assert np.max(np.abs(error) / sigma) < 5.0
+
+
+def test_bad_arguments_are_refused_by_name():
+    with pytest.raises(InputError, match=r"flexible_mekf\.torque_sigma"):
+        FlexibleAttitudeFilter(SENSORS, CRAFT, (1, 0, 0, 0), 1e-3, torque_sigma=0.0)
+    with pytest.raises(InputError, match=r"flexible_mekf\.mode_sigma"):
+        FlexibleAttitudeFilter(SENSORS, CRAFT, (1, 0, 0, 0), 1e-3, mode_sigma=np.nan)
+    estimator = FlexibleAttitudeFilter(SENSORS, CRAFT, (1, 0, 0, 0), 1e-3)
+    with pytest.raises(InputError, match=r"flexible_mekf\.torque"):
+        estimator.propagate(np.zeros(3), (0.0, np.inf, 0.0))
+    with pytest.raises(InputError, match=r"flexible_mekf\.gyro_reading"):
+        estimator.propagate(np.zeros(2))
+
+
+def test_it_flies_in_the_loop_and_not_through_wheels():
+    """Handed the command held over each sample, the filter flies an LQG's slew as the
+    attitude filter does (the same pointing to its noise); through wheels (whose gyroscopic
+    torque its model lacks) it is refused."""
+    from controllers.feedback.lqr import LQRWeights
+    from controllers.feedback.mekf import AttitudeFilter
+    from controllers.feedback.spatial_lqr import design_spatial_lqg
+    from flexctl.model.wheel_cluster import WheelCluster
+    from flexctl.sim.quaternions import from_rotation_vector
+    from flexctl.sim.spatial_loop import simulate_spatial_loop
+
+    target = from_rotation_vector([0.05, -0.03, 0.08])
+    law = design_spatial_lqg(CRAFT, LQRWeights(hub_angle=0.05, hub_rate=0.05,
+                                               tip_deflection=0.005, torque=0.1),
+                             target, STEP, n_modes=1, variant="first_order", torque_limit=0.1)
+    pointing = {}
+    for name, estimator in (
+            ("attitude filter", AttitudeFilter(SENSORS, (1, 0, 0, 0), 1e-3)),
+            ("with the modes", FlexibleAttitudeFilter(SENSORS, CRAFT, (1, 0, 0, 0), 1e-3))):
+        loop = simulate_spatial_loop(CRAFT, 15.0, law, n_modes=1, variant="first_order",
+                                     sensors=SENSORS, estimator=estimator, seed=4)
+        assert loop.ok
+        pointing[name] = float(np.linalg.norm(error_angles(target,
+                                                           loop.result.quaternion[:, -1])))
+    print(pointing)
+    assert pointing["with the modes"] < 2.0 * pointing["attitude filter"] + 1e-5
+    with pytest.raises(InputError, match="flies without wheels"):
+        simulate_spatial_loop(CRAFT, 1.0, law, n_modes=1, variant="first_order",
+                              sensors=SENSORS, seed=4,
+                              estimator=FlexibleAttitudeFilter(SENSORS, CRAFT, (1, 0, 0, 0),
+                                                               1e-3),
+                              wheels=WheelCluster.orthogonal(inertia=0.01, torque_limit=0.1,
+                                                             speed_limit=300.0))
