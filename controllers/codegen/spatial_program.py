@@ -434,6 +434,10 @@ def filter_program(estimator) -> ControllerProgram:
     if not isinstance(estimator, AttitudeFilter):
         raise InputTypeError(f"filter_program takes an AttitudeFilter; got "
                              f"{type(estimator).__name__}")
+    if getattr(estimator, "takes_torque", False):
+        raise ExportRefused(f"export: the {type(estimator).__name__} (the attitude filter "
+                            "with the modes, driven by the torque) has no C form; the "
+                            "attitude filter has")
     lag = estimator.lag
     if lag > MAX_FILTER_LAG:
         raise ExportRefused(f"export: the star tracker's latency spans {lag} gyro samples, "

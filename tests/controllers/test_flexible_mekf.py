@@ -146,3 +146,11 @@ def test_it_flies_in_the_loop_and_not_through_wheels():
                                                                1e-3),
                               wheels=WheelCluster.orthogonal(inertia=0.01, torque_limit=0.1,
                                                              speed_limit=300.0))
+
+
+def test_it_has_no_c_form_and_the_export_says_so(tmp_path):
+    from controllers.codegen import ExportRefused, export_c
+
+    with pytest.raises(ExportRefused, match="has no C form"):
+        export_c(FlexibleAttitudeFilter(SENSORS, CRAFT, (1, 0, 0, 0), 1e-3), None,
+                 tmp_path / "c")
