@@ -41,7 +41,9 @@
   uncertainty ``attitude_sigma`` (rad, default 1e-3) and ``bias_sigma`` (rad/s, default
   1e-4). The gyro reads at the controller's sample time; the law reads the filter
   (:class:`controllers.feedback.mekf.AttitudeFilter`), which starts at the scene's initial
-  attitude.
+  attitude; ``filter = "modes"`` (a scene without wheels) takes the one with the arrays'
+  modes in it (:class:`controllers.feedback.flexible_mekf.FlexibleAttitudeFilter`, 1 mode
+  per field, first_order), which has no C form.
 
 The loop's outputs are at its samples (``simulation.output_step`` does not apply).
 """
@@ -75,7 +77,9 @@ _REQUIRED = {"quaternion_feedback": ("sample_time", "bandwidth"),
              "lqr": ("sample_time", "hub_angle", "torque"),
              "lqg": ("sample_time", "hub_angle", "torque"),
              "nmpc": ("sample_time", "hub_angle", "torque")}
-_SENSOR_KEYS = {"star_tracker", "gyro", "seed", "attitude_sigma", "bias_sigma"}
+_SENSOR_KEYS = {"star_tracker", "gyro", "seed", "attitude_sigma", "bias_sigma", "filter"}
+#: ``[sensors] filter``: the attitude filter, or the one with the arrays' modes in it.
+FILTERS = ("attitude", "modes")
 
 
 @dataclass(frozen=True)
@@ -90,6 +94,10 @@ class SpatialLoop:
     sensors : AttitudeSensors or None
     attitude_sigma, bias_sigma : float
         The filter's initial uncertainty (rad, rad/s).
+    modes : SpatialStructure or None
+        With ``[sensors] filter = "modes"``: the structure whose modes the filter carries
+        (:class:`~controllers.feedback.flexible_mekf.FlexibleAttitudeFilter`, 1 mode per field,
+        first_order); None: the attitude filter.
     """
 
     law: object
@@ -97,6 +105,7 @@ class SpatialLoop:
     sensors: AttitudeSensors | None
     attitude_sigma: float = 1e-3
     bias_sigma: float = 1e-4
+    modes: object = None
 
     def estimator(self, attitude):
         """The attitude filter of a run from ``attitude`` (None without sensors).
@@ -108,6 +117,11 @@ class SpatialLoop:
         """
         if self.sensors is None:
             return None
+        if self.modes is not None:
+            from controllers.feedback.flexible_mekf import FlexibleAttitudeFilter
+
+            return FlexibleAttitudeFilter(self.sensors, self.modes, attitude,
+                                          self.attitude_sigma, bias_sigma=self.bias_sigma)
         from controllers.feedback.mekf import AttitudeFilter
 
         return AttitudeFilter(self.sensors, attitude=attitude,
@@ -209,7 +223,16 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=
     sigmas = {key: _checked(check_real, "sensors", key, sensors.get(key, default),
                             minimum=0.0, strict=True, maximum=1.0)
               for key, default in (("attitude_sigma", 1e-3), ("bias_sigma", 1e-4))}
-    loop = SpatialLoop(law=law, sample_time=step, sensors=setup, **sigmas)
+    choice = sensors.get("filter", "attitude")
+    if not isinstance(choice, str) or choice not in FILTERS:
+        raise SceneError(f"sensors.filter must be one of {', '.join(FILTERS)}; got "
+                         f"{choice!r:.80}")
+    if choice == "modes" and wheels is not None:
+        raise SceneError("sensors.filter = 'modes' is for a scene without wheels: its model "
+                         "is driven by the torque on the structure, and the wheels add their "
+                         "gyroscopic torque to the command")
+    loop = SpatialLoop(law=law, sample_time=step, sensors=setup, **sigmas,
+                       modes=structure if choice == "modes" else None)
     _checked(loop.estimator, quaternion)
     return loop
 

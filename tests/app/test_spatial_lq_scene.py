@@ -303,3 +303,30 @@ def test_a_spatial_export_flies_its_c_law_and_filter_in_the_scene_loop(tmp_path,
     assert sorted(p.name for p in out.iterdir()) == ["Makefile", "export.json", "filter",
                                                      "flexctl_ctrl.c", "flexctl_ctrl.h",
                                                      "main.c"]
+
+def _modes_filter_scene(wheels: bool, choice: str = "modes") -> str:
+    text = SCENE.replace("[sensors]\n", f'[sensors]\nfilter = "{choice}"\n')
+    return text if wheels else text[:text.index("[actuator]")] + text[text.index("[controller]"):]
+
+
+def test_a_scene_flies_the_filter_with_the_modes_without_wheels(tmp_path):
+    """``[sensors] filter = "modes"``: the LQG reads the attitude filter with the arrays'
+    modes, handed the hub torque; refused through wheels and for another filter, by key."""
+    path = tmp_path / "modes.toml"
+    path.write_text(_modes_filter_scene(wheels=False))
+    from controllers.feedback.flexible_mekf import FlexibleAttitudeFilter
+
+    scene = load_scene(path)
+    assert isinstance(scene.loop.estimator(scene.quaternion), FlexibleAttitudeFilter)
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--out", str(out), "--set", "simulation.t_final=20",
+                 "--set", "model.modes=1"]) == 0
+    assert json.loads((out / "summary.json").read_text())["status"] == "ok"
+    assert _final_error(out) < 1e-3
+    for wheels, choice, pattern in ((True, "modes", r"sensors\.filter = 'modes' is for a "
+                                                    r"scene without wheels"),
+                                    (False, "kalman", r"sensors\.filter must be one of "
+                                                      r"attitude, modes")):
+        path.write_text(_modes_filter_scene(wheels, choice))
+        with pytest.raises(InputError, match=pattern):
+            load_scene(path)
