@@ -47,7 +47,7 @@ from flexctl.sim.quaternions import error_angles, from_rotation_vector, product,
 from ..design.controllable import input_part
 from .mekf import AttitudeFilter
 
-__all__ = ["FlexibleAttitudeFilter"]
+__all__ = ["FlexibleAttitudeFilter", "EstimatedStateLaw"]
 
 
 def _right_jacobian(phi) -> np.ndarray:
@@ -244,3 +244,54 @@ class FlexibleAttitudeFilter(AttitudeFilter):
             for reading, torque in replay:
                 self.propagate(reading, torque)
         return residual
+
+
+class EstimatedStateLaw:
+    """A three-axis state-feedback law flown on a :class:`FlexibleAttitudeFilter`'s estimate:
+    the design state is the attitude error of the filter's attitude and the filter's flexible
+    state (its modal coordinates, hub rate and modal rates; the modes it leaves out at zero).
+
+    Fly it in :func:`~flexctl.sim.spatial_loop.simulate_spatial_loop` with the same filter
+    as the loop's ``estimator``: the loop updates the filter at each sample before the law
+    reads it.
+
+    Parameters
+    ----------
+    law : SpatialLQR
+        The law (``command(t, design_state)``), designed on the filter's structure, modes and
+        variant (its ``state_names`` after the attitude error are the filter's ``names``).
+    estimator : FlexibleAttitudeFilter
+        The filter it reads.
+    """
+
+    #: The loop hands this law the attitude and the rate it reads (not the plant's state).
+    state_feedback = False
+
+    def __init__(self, law, estimator):
+        from flexctl.model.errors import InputTypeError
+
+        if not callable(getattr(law, "command", None)) or not hasattr(law, "state_names"):
+            raise InputTypeError(f"estimated_state_law.law must be a three-axis state-feedback "
+                                 f"law (a SpatialLQR); got {type(law).__name__}")
+        if not isinstance(estimator, FlexibleAttitudeFilter):
+            raise InputTypeError(f"estimated_state_law.estimator must be a "
+                                 f"FlexibleAttitudeFilter; got {type(estimator).__name__}")
+        if tuple(law.state_names[3:]) != tuple(estimator.names):
+            raise InputValueError("estimated_state_law: the law's design state is not the "
+                                  "filter's (design both on the same structure, modes and "
+                                  "variant)")
+        self.law, self.estimator = law, estimator
+
+    def start(self) -> "EstimatedStateLaw":
+        """The law itself: it keeps no state of its own (the filter does).
+
+        Returns
+        -------
+        EstimatedStateLaw
+        """
+        return self
+
+    def __call__(self, t, attitude, rate) -> np.ndarray:
+        state = np.concatenate([error_angles(self.law.target, attitude),
+                                self.estimator.flexible_state])
+        return self.law.command(t, state)

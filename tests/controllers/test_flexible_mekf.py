@@ -5,7 +5,7 @@ arrays' modes, and flying in the sampled loop."""
 import numpy as np
 import pytest
 
-from controllers.feedback.flexible_mekf import FlexibleAttitudeFilter
+from controllers.feedback.flexible_mekf import EstimatedStateLaw, FlexibleAttitudeFilter
 from flexctl import SpatialAppendage, SpatialHub, SpatialStructure, VectorTorque, simulate_spatial
 from flexctl.model.errors import InputError
 from flexctl.sim.attitude_sensors import AttitudeSensors, Gyro, StarTracker
@@ -115,8 +115,10 @@ def test_bad_arguments_are_refused_by_name():
 
 def test_it_flies_in_the_loop_and_not_through_wheels():
     """Handed the command held over each sample, the filter flies an LQG's slew as the
-    attitude filter does (the same pointing to its noise); through wheels (whose gyroscopic
-    torque its model lacks) it is refused."""
+    attitude filter does (the same pointing to its noise); the LQG's regulator reading the
+    filter's modal estimates (``EstimatedStateLaw``) ends the slew closer and the arrays
+    stiller than the LQG; through wheels (whose gyroscopic torque its model lacks) the filter
+    is refused."""
     from controllers.feedback.lqr import LQRWeights
     from controllers.feedback.mekf import AttitudeFilter
     from controllers.feedback.spatial_lqr import design_spatial_lqg
@@ -139,6 +141,26 @@ def test_it_flies_in_the_loop_and_not_through_wheels():
                                                            loop.result.quaternion[:, -1])))
     print(pointing)
     assert pointing["with the modes"] < 2.0 * pointing["attitude filter"] + 1e-5
+    # the LQG's regulator on the filter's modal estimates instead of its own filter's
+    regulated = {}
+    estimator = FlexibleAttitudeFilter(SENSORS, CRAFT, (1, 0, 0, 0), 1e-3)
+    for name, flown, reading in (
+            ("lqg", law, AttitudeFilter(SENSORS, (1, 0, 0, 0), 1e-3)),
+            ("lqr on the filter", EstimatedStateLaw(law.regulator, estimator), estimator)):
+        run = simulate_spatial_loop(CRAFT, 15.0, flown, n_modes=1, variant="first_order",
+                                    sensors=SENSORS, estimator=reading, seed=4).result
+        late = run.t > 10.0
+        regulated[name] = (float(np.linalg.norm(error_angles(target, run.quaternion[:, -1]))),
+                           max(float(np.max(np.abs(tip[:, late]))) for tip in run.tips.values()))
+    print(regulated)
+    assert regulated["lqr on the filter"][0] < regulated["lqg"][0]
+    assert regulated["lqr on the filter"][1] < regulated["lqg"][1]
+    with pytest.raises(InputError, match="the law's design state is not the filter's"):
+        EstimatedStateLaw(design_spatial_lqg(CRAFT, LQRWeights(hub_angle=0.05, torque=0.1),
+                                             target, STEP, n_modes=2,
+                                             variant="first_order").regulator, estimator)
+    with pytest.raises(InputError, match=r"estimated_state_law\.estimator"):
+        EstimatedStateLaw(law.regulator, AttitudeFilter(SENSORS, (1, 0, 0, 0), 1e-3))
     with pytest.raises(InputError, match="flies without wheels"):
         simulate_spatial_loop(CRAFT, 1.0, law, n_modes=1, variant="first_order",
                               sensors=SENSORS, seed=4,
