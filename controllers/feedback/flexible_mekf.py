@@ -201,49 +201,18 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         self.P = f @ self.P @ f.T + g @ q_w @ g.T + walk - gain @ innovation_cov @ gain.T
         self.P = 0.5 * (self.P + self.P.T)
 
-    def update(self, measured) -> np.ndarray:
-        """Take a star tracker reading (taken ``latency`` s ago, when reported now).
+    _owner = "flexible_mekf"
 
-        Parameters
-        ----------
-        measured : array_like, shape (4,)
-            The reading, hub to inertial, scalar first.
+    def _restore(self, entry) -> None:
+        self.q, self.b, self.x, self.P = (v.copy() for v in entry[:4])
 
-        Returns
-        -------
-        ndarray, shape (3,)
-            The residual, rad (before the update).
-        """
-        q_m = np.array(check_array("flexible_mekf", "measured", measured, shape=(4,)))
-        if not np.linalg.norm(q_m) > 0:
-            raise InputValueError("flexible_mekf.measured must be a non-zero quaternion")
-        replay = []
-        if self.lag:
-            if len(self.history) < self.lag:
-                raise InputValueError(
-                    f"a star tracker reading {self.lag} gyro samples old came before the filter "
-                    f"had propagated that many ({len(self.history)})")
-            entries = list(self.history)[-self.lag:]
-            self.q, self.b, self.x, self.P = (v.copy() for v in entries[0][:4])
-            replay = [e[4:] for e in entries]
-        residual = error_angles(self.q, q_m / np.linalg.norm(q_m))
-        size = self.P.shape[0]
-        h = np.zeros((3, size))
-        h[:, :3] = np.eye(3)
-        gain = self.P @ h.T @ np.linalg.inv(h @ self.P @ h.T + self.R)
-        correction = gain @ residual
-        self.q = product(self.q, from_rotation_vector(correction[:3]))
-        self.q /= np.linalg.norm(self.q)
-        self.b = self.b + correction[3:6]
+    @staticmethod
+    def _replayed(entry) -> tuple:
+        return tuple(entry[4:])
+
+    def _correct(self, correction) -> None:
+        super()._correct(correction)
         self.x = self.x + correction[6:]
-        keep = np.eye(size) - gain @ h
-        self.P = keep @ self.P @ keep.T + gain @ self.R @ gain.T
-        if replay:
-            kept = list(self.history)[:-self.lag]
-            self.history = deque(kept, maxlen=self.lag + 1)
-            for reading, torque in replay:
-                self.propagate(reading, torque)
-        return residual
 
 
 class EstimatedStateLaw:

@@ -159,9 +159,10 @@ class AttitudeFilter:
         ndarray, shape (3,)
             The residual, rad (before the update).
         """
-        q_m = np.array(check_array("mekf", "measured", measured, shape=(4,)))
+        owner = self._owner
+        q_m = np.array(check_array(owner, "measured", measured, shape=(4,)))
         if not np.linalg.norm(q_m) > 0:
-            raise InputValueError("mekf.measured must be a non-zero quaternion")
+            raise InputValueError(f"{owner}.measured must be a non-zero quaternion")
         replay = []
         if self.lag:
             if len(self.history) < self.lag:
@@ -169,21 +170,37 @@ class AttitudeFilter:
                     f"a star tracker reading {self.lag} gyro samples old came before the filter "
                     f"had propagated that many ({len(self.history)})")
             entries = list(self.history)[-self.lag:]
-            self.q, self.b, self.P = (entries[0][0].copy(), entries[0][1].copy(),
-                                      entries[0][2].copy())
-            replay = [e[3] for e in entries]
+            self._restore(entries[0])
+            replay = [self._replayed(entry) for entry in entries]
         residual = error_angles(self.q, q_m / np.linalg.norm(q_m))
-        h = np.hstack([np.eye(3), np.zeros((3, 3))])
+        size = self.P.shape[0]
+        h = np.zeros((3, size))
+        h[:, :3] = np.eye(3)
         gain = self.P @ h.T @ np.linalg.inv(h @ self.P @ h.T + self.R)
-        correction = gain @ residual
-        self.q = product(self.q, from_rotation_vector(correction[:3]))
-        self.q /= np.linalg.norm(self.q)
-        self.b = self.b + correction[3:]
-        keep = np.eye(6) - gain @ h
+        self._correct(gain @ residual)
+        keep = np.eye(size) - gain @ h
         self.P = keep @ self.P @ keep.T + gain @ self.R @ gain.T
         if replay:
             kept = list(self.history)[:-self.lag]
             self.history = deque(kept, maxlen=self.lag + 1)
-            for reading in replay:
-                self.propagate(reading)
+            for arguments in replay:
+                self.propagate(*arguments)
         return residual
+
+    #: Who the errors of :meth:`update` name.
+    _owner = "mekf"
+
+    def _restore(self, entry) -> None:
+        """Go back to a stored sample's estimate."""
+        self.q, self.b, self.P = (v.copy() for v in entry[:3])
+
+    @staticmethod
+    def _replayed(entry) -> tuple:
+        """What :meth:`propagate` takes again for a stored sample."""
+        return (entry[3],)
+
+    def _correct(self, correction) -> None:
+        """Move the estimate by an error-state correction ``(dtheta, db, ...)``."""
+        self.q = product(self.q, from_rotation_vector(correction[:3]))
+        self.q /= np.linalg.norm(self.q)
+        self.b = self.b + correction[3:6]
