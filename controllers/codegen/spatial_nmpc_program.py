@@ -101,8 +101,6 @@ def _condensed(ca, law, a_all, b_all, residuals, shifted, wanted_torques):
 def _limits(ca, law, shifted, speed_rows, speed_starts, speeds):
     """The QP's rows and bounds as the session's ``_qp`` forms them: ``(a, lba, uba, lbx,
     ubx)``."""
-    from controllers.mpc.spatial_nmpc import null_matrix
-
     horizon = law.horizon
     flat = ca.vec(shifted)
     if law.wheels is None:
@@ -111,9 +109,9 @@ def _limits(ca, law, shifted, speed_rows, speed_starts, speeds):
                 limit - flat)
     wheels = law.wheels
     count = wheels.count
-    share, null = -np.linalg.pinv(wheels.axes), null_matrix(wheels)
-    torque_limits = np.array([w.torque_limit for w in wheels.wheels])
-    speed_limits = law.speed_margin * np.array([w.speed_limit for w in wheels.wheels])
+    limits = law.wheel_rows
+    share, null = limits.share, limits.null
+    torque_limits, speed_limits = limits.torque_limits, limits.speed_limits
     motor_now = ca.mtimes(ca.DM(share), shifted) + ca.mtimes(
         ca.DM(null), speed_starts - ca.DM(wheels.null_target))
     motor_rows = ca.MX(ca.DM(np.kron(np.eye(horizon), share)))

@@ -132,6 +132,16 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         self.s_x, self.s_u = s_x @ basis, s_u[:, :3]
         self.gamma_r, self.s_r = projector @ gamma[:, 3:], s_u[:, 3:]
         self.remainder = remainder_function(self.model)
+        # what each sample's step does not change: the gyro's H and its noise covariance
+        # (rate noise plus the disturbance's share), D Q, and the bias's random walk
+        t = self.step
+        self._h = np.zeros((3, 6 + n))
+        self._h[:, 3:6] = np.eye(3)
+        self._h[:, 6:] = self.s_x / t
+        self._d_q = self.torque_variance * self.s_u.T / t          # (D Q)^T, shape (3, 3)
+        self._reading_noise = self.s_u @ self._d_q / t + self.sigma_v ** 2 / t * np.eye(3)
+        self._walk = np.zeros((6 + n, 6 + n))
+        self._walk[3:6, 3:6] = self.sigma_u2 * t * np.eye(3)
         self.history = deque(maxlen=self.lag + 1)   # (q, b, x, P, reading, torque)
 
     @property
@@ -178,16 +188,9 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         g = np.zeros((6 + n, 3))
         g[:3] = j_r @ self.s_u
         g[6:] = self.gamma
-        h = np.zeros((3, 6 + n))
-        h[:, 3:6] = np.eye(3)
-        h[:, 6:] = self.s_x / t
-        d = self.s_u / t
-        q_w = self.torque_variance * np.eye(3)
-        s_u2 = self.sigma_u2
-        walk = np.zeros((6 + n, 6 + n))
-        walk[3:6, 3:6] = s_u2 * t * np.eye(3)
-        innovation_cov = h @ self.P @ h.T + d @ q_w @ d.T + self.sigma_v ** 2 / t * np.eye(3)
-        cross = f @ self.P @ h.T + g @ q_w @ d.T
+        h = self._h
+        innovation_cov = h @ self.P @ h.T + self._reading_noise
+        cross = f @ self.P @ h.T + g @ self._d_q
         gain = np.linalg.solve(innovation_cov, cross.T).T
         innovation = reading - (turned / t + self.b)
         # the nominal prediction, then the correction in the error state at the sample's end
@@ -198,7 +201,8 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         self.q /= np.linalg.norm(self.q)
         self.b = self.b + correction[3:6]
         self.x = self.x + correction[6:]
-        self.P = f @ self.P @ f.T + g @ q_w @ g.T + walk - gain @ innovation_cov @ gain.T
+        self.P = f @ self.P @ f.T + self.torque_variance * g @ g.T + self._walk \
+            - gain @ innovation_cov @ gain.T
         self.P = 0.5 * (self.P + self.P.T)
 
     _owner = "flexible_mekf"

@@ -59,7 +59,8 @@ from ..slew.spatial_trajopt import (hold_expressions, hold_functions,
                                     spatial_hold_model)
 
 __all__ = ["SpatialNMPC", "SpatialNMPCSession", "design_spatial_nmpc", "SPATIAL_QP_SOLVERS",
-           "hold_linearisation", "null_matrix", "MAX_LINEARISATION"]
+           "hold_linearisation", "null_matrix", "MAX_LINEARISATION", "WheelRows",
+           "wheel_rows"]
 
 #: CasADi QP solvers of the condensed (dense) QP; HPIPM takes only stage-structured QPs.
 SPATIAL_QP_SOLVERS = ("qpoases", "qrqp", "osqp")
@@ -229,10 +230,10 @@ def _hold_jacobians(law, starts, speeds, held, remainder_jacobian) -> tuple:
         a_all[:, n + 3:, at] += g.T[:, 0]
         a_all[:, n + 3:, at + 1] += g.T[:, 1]
         a_all[:, n + 3:, at + 2] += g.T[:, 2]
-        a_all[:, n + 3:, n + 3:] += np.eye(count) + model.hold * null_matrix(law.wheels) \
+        a_all[:, n + 3:, n + 3:] += np.eye(count) + model.hold * law.wheel_rows.null \
             / j_w[:, None]
         b_all[:, n + 3:] = -g.T @ b_all[:, at:at + 3] \
-            - model.hold * np.linalg.pinv(g) / j_w[:, None]
+            + model.hold * law.wheel_rows.share / j_w[:, None]
     return a_all, b_all
 
 
@@ -255,6 +256,49 @@ def null_matrix(wheels) -> np.ndarray:
     g = wheels.axes
     projector = np.eye(count) - np.linalg.pinv(g) @ g
     return -wheels.null_gain * projector * wheels.inertias[None, :]
+
+
+@dataclass(frozen=True, eq=False)
+class WheelRows:
+    """What the NMPC's QP needs of its wheel cluster, made once per design
+    (:func:`wheel_rows`).
+
+    Attributes
+    ----------
+    share : ndarray, shape (n_w, 3)
+        ``-G^+``: each wheel's motor torque per commanded hub torque.
+    null : ndarray, shape (n_w, n_w)
+        :func:`null_matrix` of the cluster.
+    torque_limits : ndarray, shape (n_w,)
+        Each wheel's motor torque limit, N m.
+    speed_limits : ndarray, shape (n_w,)
+        Each wheel's speed limit times the NMPC's ``speed_margin``, rad/s.
+    """
+
+    share: np.ndarray
+    null: np.ndarray
+    torque_limits: np.ndarray
+    speed_limits: np.ndarray
+
+
+def wheel_rows(wheels, speed_margin: float) -> WheelRows:
+    """The :class:`WheelRows` of ``wheels`` with ``speed_margin``.
+
+    Parameters
+    ----------
+    wheels : WheelCluster
+        The cluster.
+    speed_margin : float
+        Fraction of each wheel's speed limit the prediction may use.
+
+    Returns
+    -------
+    WheelRows
+    """
+    return WheelRows(share=-np.linalg.pinv(wheels.axes), null=null_matrix(wheels),
+                     torque_limits=np.array([w.torque_limit for w in wheels.wheels]),
+                     speed_limits=speed_margin * np.array([w.speed_limit
+                                                           for w in wheels.wheels]))
 
 
 def _attitude_errors(target, quaternions) -> np.ndarray:
@@ -306,6 +350,8 @@ class SpatialNMPC:
         OSQP on the same QP, where the first solver fails.
     plant : control.StateSpace
         The design plant at rest (:func:`~flexctl.model.spatial_plant.linearize_spatial`).
+    wheel_rows : WheelRows or None
+        The wheels' distribution and limits in the QP (None without wheels).
     linearise : InPlace or None
         The rollout with each hold's exact Jacobians, compiled (:func:`_linearisation`); None
         where the step takes :attr:`predict` and the closed form of :func:`_hold_jacobians`.
@@ -330,6 +376,7 @@ class SpatialNMPC:
     fallback: object
     plant: object
     linearise: object = None
+    wheel_rows: object = None
 
     #: The loop hands this law the plant's whole state.
     state_feedback = True
@@ -538,9 +585,9 @@ def _qp(law: SpatialNMPC, hessian, gradient, torques, speed_rows, speed_starts, 
         lbx, ubx = np.full(3 * horizon, -big), np.full(3 * horizon, big)
         wheels = law.wheels
         count = wheels.count
-        share, null = -np.linalg.pinv(wheels.axes), null_matrix(wheels)
-        torque_limits = np.array([w.torque_limit for w in wheels.wheels])
-        speed_limits = law.speed_margin * np.array([w.speed_limit for w in wheels.wheels])
+        limits = law.wheel_rows
+        share, null = limits.share, limits.null
+        torque_limits, speed_limits = limits.torque_limits, limits.speed_limits
         motor_now = (share @ torques + null @ (speed_starts - wheels.null_target[:, None]))
         motor_rows = np.zeros((horizon * count, 3 * horizon))
         blocks = motor_rows.reshape(horizon, count, horizon, 3)
@@ -696,4 +743,5 @@ def design_spatial_nmpc(structure, weights: LQRWeights, target=None, sample_time
                        constraint_rows=rows, model=model,
                        fallback=None if qp_solver == "osqp" else conic_solver(
                            "spatial_nmpc_qp_fallback", "osqp", *sparsity), plant=plant,
-                       linearise=_linearisation(model, wheels, horizon))
+                       linearise=_linearisation(model, wheels, horizon),
+                       wheel_rows=None if wheels is None else wheel_rows(wheels, speed_margin))

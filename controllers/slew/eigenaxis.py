@@ -143,11 +143,11 @@ class EigenaxisSlew(KeywordOnly):
         if symbolic:
             import casadi as lib
 
-            cross, times, axis, inertia = lib.cross, lib.mtimes, lib.DM(self.axis), \
-                lib.DM(self.inertia)
+            cross, times, array = lib.cross, lib.mtimes, lib.DM
         else:
             angle, rate, acceleration = (float(v) for v in (angle, rate, acceleration))
-            lib, cross, times, axis, inertia = np, np.cross, np.matmul, self.axis, self.inertia
+            lib, cross, times, array = np, np.cross, np.matmul, np.asarray
+        axis, inertia = array(self.axis), array(self.inertia)
         spin = rate * axis
         if self.momentum is None:
             held = times(inertia, spin)
@@ -155,10 +155,8 @@ class EigenaxisSlew(KeywordOnly):
             # H in the reference's hub frame: the start's, turned back by theta about the axis
             start = rotation_matrix(self.start).T @ self.momentum
             c, s = lib.cos(angle), lib.sin(angle)
-            start_cross = np.cross(self.axis, start)
-            along = float(self.axis @ start) * axis
-            held = c * (start if not symbolic else lib.DM(start)) \
-                - s * (start_cross if not symbolic else lib.DM(start_cross)) + (1 - c) * along
+            held = c * array(start) - s * array(np.cross(self.axis, start)) \
+                + (1 - c) * float(self.axis @ start) * axis
         return acceleration * times(inertia, axis) + cross(spin, held)
 
 
