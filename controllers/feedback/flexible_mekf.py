@@ -166,12 +166,12 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         torque : array_like, shape (3,), optional
             The torque on the structure over the sample, N m, hub frame. Default zero.
         """
-        reading = np.array(check_array("flexible_mekf", "gyro_reading", gyro_reading,
-                                       shape=(3,)))
+        reading = self._gyro_reading(gyro_reading)
         u = np.array(check_array("flexible_mekf", "torque", torque, shape=(3,)))
         self.history.append((self.q.copy(), self.b.copy(), self.x.copy(), self.P.copy(),
                              reading, u))
         self._predict(reading, u)
+        self._check_finite(reading)
 
     def _predict(self, reading, u) -> None:
         t, n = self.step, self.x.size

@@ -126,9 +126,27 @@ class AttitudeFilter:
         gyro_reading : array_like, shape (3,)
             The gyro's reading over the sample, rad/s.
         """
-        reading = np.array(check_array("mekf", "gyro_reading", gyro_reading, shape=(3,)))
+        reading = self._gyro_reading(gyro_reading)
         self.history.append((self.q.copy(), self.b.copy(), self.P.copy(), reading))
         self._advance(reading)
+        self._check_finite(reading)
+
+    def _gyro_reading(self, gyro_reading) -> np.ndarray:
+        """A gyro reading checked: three finite rates of at most ``MAX_SPIN`` rad/s."""
+        from flexctl.sim.spatial_run import MAX_SPIN
+
+        reading = np.array(check_array(self._owner, "gyro_reading", gyro_reading, shape=(3,)))
+        if np.max(np.abs(reading)) > MAX_SPIN:
+            raise InputValueError(f"{self._owner}.gyro_reading must be at most {MAX_SPIN:g} "
+                                  f"rad/s in magnitude; got {reading.tolist()}")
+        return reading
+
+    def _check_finite(self, reading) -> None:
+        """Refuse to go on from an estimate that left the finite numbers."""
+        if not (np.all(np.isfinite(self.q)) and np.all(np.isfinite(self.P))):
+            raise InputValueError(f"{self._owner}: the estimate left the finite numbers after "
+                                  f"the gyro reading {np.asarray(reading).tolist()} (a reading "
+                                  "or an input far outside the model's range)")
 
     def _advance(self, reading) -> None:
         t = self.step

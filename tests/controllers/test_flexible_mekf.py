@@ -111,6 +111,14 @@ def test_bad_arguments_are_refused_by_name():
         estimator.propagate(np.zeros(3), (0.0, np.inf, 0.0))
     with pytest.raises(InputError, match=r"flexible_mekf\.gyro_reading"):
         estimator.propagate(np.zeros(2))
+    with pytest.raises(InputError, match=r"flexible_mekf\.gyro_reading must be at most"):
+        estimator.propagate((1e300, 0.0, 0.0))
+    with pytest.raises(InputError, match="the estimate left the finite numbers"):
+        estimator.propagate(np.zeros(3), (1e300, 0.0, 0.0))
+    from controllers.feedback.mekf import AttitudeFilter
+
+    with pytest.raises(InputError, match=r"mekf\.gyro_reading must be at most"):
+        AttitudeFilter(SENSORS, (1, 0, 0, 0), 1e-3).propagate((2e3, 0.0, 0.0))
 
 
 def test_it_flies_in_the_loop_and_not_through_wheels():
