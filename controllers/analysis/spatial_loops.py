@@ -47,6 +47,7 @@ from flexctl.model.spatial_structure import SpatialStructure
 
 from ..feedback.quaternion import QuaternionFeedback
 from ..feedback.spatial_lqr import SpatialLQG, SpatialLQR
+from ..feedback.spatial_scheduling import ScheduledSpatialLQR
 
 __all__ = ["quaternion_loop", "quaternion_disk_margins", "loop_disk_margins", "lq_loop",
            "DiskMargins", "PADE_ORDER",
@@ -289,19 +290,23 @@ def loop_disk_margins(loop, *, skew: float = 0.0) -> DiskMargins:
                        spectral_abscissa=abscissa, skew=skew)
 
 
-def lq_loop(law, plant):
+def lq_loop(law, plant, spin: float | None = None):
     """The loop of a three-axis LQR or LQG around a linear plant, broken at the plant's
     torque inputs: ``L = K Pi (sI - A)^-1 B`` of a continuous LQR, its held form ``(zI -
     A_d)^-1`` of a sampled one, and for an LQG the plant held, its readings through the
-    filter (which predicts with the command it gave) to the command.
+    filter (which predicts with the command it gave) to the command; of a scheduled LQR, the
+    gain interpolated at ``spin`` around the plant linearised about that spin.
 
     Parameters
     ----------
-    law : SpatialLQR or SpatialLQG
+    law : SpatialLQR, SpatialLQG or ScheduledSpatialLQR
         The designed law (its saturation is not in a linear loop).
     plant : control.StateSpace
-        A plant of :func:`~flexctl.model.spatial_plant.linearize_spatial` at rest of the
-        law's structure, with at least the design's modes.
+        A plant of :func:`~flexctl.model.spatial_plant.linearize_spatial` of the law's
+        structure, with at least the design's modes: at rest, or for a scheduled LQR about
+        the spin ``spin`` about its axis.
+    spin : float, optional
+        A scheduled LQR's spin rate (rad/s); required for it, refused for the others.
 
     Returns
     -------
@@ -315,10 +320,19 @@ def lq_loop(law, plant):
             "ex" not in plant.output_labels:
         raise InputValueError("lq_loop.plant must be a linear plant of linearize_spatial (a "
                               f"python-control StateSpace); got {type(plant).__name__}")
-    if not isinstance(law, (SpatialLQR, SpatialLQG)):
-        raise InputValueError(f"lq_loop.law must be a SpatialLQR or SpatialLQG; got "
-                              f"{type(law).__name__}")
-    a, b, c = law.broken_loop(plant)
+    if isinstance(law, ScheduledSpatialLQR):
+        if spin is None:
+            raise InputValueError("lq_loop.spin is required for a ScheduledSpatialLQR: the "
+                                  "spin rate (rad/s) its gain is interpolated at")
+        a, b, c = law.broken_loop(plant, spin)
+    elif isinstance(law, (SpatialLQR, SpatialLQG)):
+        if spin is not None:
+            raise InputValueError(f"lq_loop.spin is for a ScheduledSpatialLQR; a "
+                                  f"{type(law).__name__} is designed at rest")
+        a, b, c = law.broken_loop(plant)
+    else:
+        raise InputValueError(f"lq_loop.law must be a SpatialLQR, SpatialLQG or "
+                              f"ScheduledSpatialLQR; got {type(law).__name__}")
     dt = law.sample_time or 0
     return control.ss(a, b, c, np.zeros((3, 3)), dt, inputs=["tx", "ty", "tz"],
                       outputs=["ux", "uy", "uz"], name="lq_loop")

@@ -45,7 +45,8 @@ from ..design.controllable import (ControllablePart, design_failure, held, input
 from .lqr import LQRWeights
 
 __all__ = ["SpatialLQR", "SpatialLQG", "design_spatial_lqr", "design_spatial_lqg",
-           "spatial_weight_matrices", "spatial_lq_gain", "fed_back_rows", "reference_target",
+           "spatial_weight_matrices", "spatial_lq_gain", "fed_back_rows", "state_reader",
+           "reference_target",
            "FREQUENCY_FACTOR", "NOISE_FLOOR"]
 
 #: Default cut-off of a continuous design's modes, in multiples of the rigid loop's bandwidth.
@@ -181,7 +182,8 @@ class SpatialLQR:
         return _StateFeedbackSession(self, state_names)
 
     def reader(self, plant) -> np.ndarray:
-        """``Pi`` (n, N): the design state ``x = Pi x_plant`` read from the state of ``plant``.
+        """``Pi`` (n, N): the design state ``x = Pi x_plant`` read from the state of ``plant``
+        (:func:`state_reader`).
 
         Parameters
         ----------
@@ -193,18 +195,7 @@ class SpatialLQR:
         -------
         ndarray
         """
-        from flexctl.model.exports import signal_names
-
-        index = {name: k for k, name in enumerate(plant.state_labels)}
-        names = signal_names(list(self.state_names))
-        missing = [name for name in names if name not in index]
-        if missing:
-            raise InputValueError(f"the plant has no state {missing[0]!r} that the law reads: "
-                                  "give a plant of the design's structure with at least its "
-                                  "modes")
-        reader = np.zeros((len(names), plant.nstates))
-        reader[np.arange(len(names)), [index[name] for name in names]] = 1.0
-        return reader
+        return state_reader(self.state_names, plant)
 
     def loop_poles(self, plant=None) -> np.ndarray:
         """Poles of the loop this law closes around a linear plant, 1/s: continuous, or for a
@@ -266,6 +257,40 @@ class SpatialLQR:
         if self.torque_limit is None:
             return torque
         return np.clip(torque, -self.torque_limit, self.torque_limit)
+
+
+def state_reader(state_names, plant) -> np.ndarray:
+    """``Pi`` (n, N): a design state named ``state_names`` read from the state of ``plant``.
+
+    Parameters
+    ----------
+    state_names : sequence of str
+        The design state's names (the attitude error ``ex, ey, ez`` then the model's own).
+    plant : control.StateSpace
+        A plant of :func:`~flexctl.model.spatial_plant.linearize_spatial` of the same
+        structure, with at least the design's modes.
+
+    Returns
+    -------
+    ndarray
+
+    Raises
+    ------
+    InputValueError
+        If the plant lacks a state the design reads (the message names it).
+    """
+    from flexctl.model.exports import signal_names
+
+    index = {name: k for k, name in enumerate(plant.state_labels)}
+    names = signal_names(list(state_names))
+    missing = [name for name in names if name not in index]
+    if missing:
+        raise InputValueError(f"the plant has no state {missing[0]!r} that the law reads: "
+                              "give a plant of the design's structure with at least its "
+                              "modes")
+    reader = np.zeros((len(names), plant.nstates))
+    reader[np.arange(len(names)), [index[name] for name in names]] = 1.0
+    return reader
 
 
 def fed_back_rows(names, state_names):

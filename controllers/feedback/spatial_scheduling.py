@@ -42,7 +42,7 @@ from ..design.plant_state import spatial_design_plant
 from ..design.stability import LoopStabilityWarning
 from ..slew.reference import check_reference, evaluate_reference
 from .lqr import LQRWeights
-from .spatial_lqr import fed_back_rows, spatial_lq_gain
+from .spatial_lqr import fed_back_rows, spatial_lq_gain, state_reader
 
 __all__ = ["ScheduledSpatialLQR", "SteadySpin", "design_scheduled_spatial_lqr",
            "GROWTH_TOLERANCE"]
@@ -291,6 +291,31 @@ class ScheduledSpatialLQR:
         plant, _ = spatial_design_plant("loop_poles", self.structure, self.n_modes,
                                         self.variant, angular_velocity=spin * self.spin_axis)
         return plant
+
+    def broken_loop(self, plant, spin: float) -> tuple:
+        """``(A, B, C)`` of the loop the gain ``K(spin)`` closes around ``plant``, broken at
+        its torque inputs, in negative feedback (``L = C (sI - A)^-1 B``, or ``(zI - A)^-1``
+        of the plant held over :attr:`sample_time`): what
+        :func:`controllers.analysis.spatial_loops.lq_loop` hands python-control.
+
+        Parameters
+        ----------
+        plant : control.StateSpace
+            A plant of :func:`~flexctl.model.spatial_plant.linearize_spatial` of the
+            structure linearised about the spin ``spin`` about :attr:`spin_axis`, with at
+            least the design's modes (those beyond it are neither read nor fed back).
+        spin : float
+            The spin rate, rad/s, the gain is interpolated at.
+
+        Returns
+        -------
+        tuple of ndarray
+        """
+        gain = self.gain_at(float(spin)) @ state_reader(self.state_names, plant)
+        if self.sample_time is None:
+            return plant.A, plant.B, gain
+        a_d, b_d = held(plant.A, plant.B, self.sample_time)
+        return a_d, b_d, gain
 
     def loop_poles(self, spin: float) -> np.ndarray:
         """Poles of the loop the interpolated gain ``K(spin)`` closes around the design model

@@ -37,13 +37,18 @@ def _refuse(scene, sample_time):
         raise SceneError(f"export: {scene.name}'s three-axis law keeps its own sample time "
                          f"({scene.loop.sample_time:g} s); give no --sample-time")
     kind = type(scene.loop.law).__name__
-    if kind not in ("QuaternionFeedback", "SpatialLQR", "SpatialLQG", "SpatialNMPC"):
+    if kind not in ("QuaternionFeedback", "SpatialLQR", "SpatialLQG", "SpatialNMPC",
+                    "ScheduledSpatialLQR"):
         raise SceneError(f"export: {scene.name}'s {kind} has no C form; the quaternion "
-                         "feedback, the LQR, the LQG and the NMPC of a spatial scene have")
+                         "feedback, the LQR, the LQG, the NMPC and the scheduled LQR of a "
+                         "spatial scene have")
 
 
 def _pointing(scene, result) -> float:
-    return float(np.linalg.norm(error_angles(scene.loop.law.target, result.quaternion[:, -1])))
+    from .spatial_control import pointing_target
+
+    return float(np.linalg.norm(error_angles(pointing_target(scene.loop.law, result.t[-1]),
+                                             result.quaternion[:, -1])))
 
 
 def _loop_differences(scene, compiled: dict, precision: str, python) -> dict:

@@ -32,6 +32,16 @@
     ``horizon`` (default 20), ``qp_solver`` (``"qpoases"``, ``"qrqp"`` or ``"osqp"``); the
     wheels' torque and speed limits (or ``torque_limit``) are its constraints; with
     ``slew_duration`` it follows ``slew_shape = "optimal"``.
+  - ``"scheduled_lqr"``
+    (:func:`controllers.feedback.spatial_scheduling.design_scheduled_spatial_lqr`, on the
+    plant's whole state): a spin about ``spin_axis`` (hub frame, a principal axis across or
+    along every appendage) from the scene's initial attitude, to ``spin_rate`` (rad/s) over
+    ``ramp_time`` (s; a :class:`~flexctl.sim.maneuvers.SpinUp`) or, without ``ramp_time``, a
+    steady spin at ``spin_rate`` (start the scene spinning: ``initial.angular_velocity``);
+    one LQR per design spin of ``spin_rates`` (rad/s, increasing, 1 to 50) on the scene's
+    model variant, scheduled on the measured spin; the LQR's weights, ``design_modes``
+    (default 2), ``max_frequency``; no target (``slew_axis``, ``slew_angle`` and ``target``
+    are refused).
 
   The scene's manoeuvre is then ``none``: the law commands the hub torque (of the wheels,
   with an ``[actuator]``).
@@ -60,7 +70,7 @@ from ..sim.attitude_sensors import AttitudeSensors, Gyro, StarTracker
 from ..sim.quaternions import from_rotation_vector, product
 from .scene_tables import check_table_keys, construct
 
-__all__ = ["SpatialLoop", "spatial_loop"]
+__all__ = ["SpatialLoop", "spatial_loop", "pointing_target"]
 
 _COMMON_KEYS = {"kind", "sample_time", "slew_axis", "slew_angle", "target", "torque_limit"}
 _CONTROLLER_KEYS = {
@@ -73,10 +83,18 @@ _CONTROLLER_KEYS["lqg"] = _CONTROLLER_KEYS["lqr"] | {"angle_noise", "rate_noise"
                                                      "process_torque"}
 _CONTROLLER_KEYS["nmpc"] = (_CONTROLLER_KEYS["lqr"] - {"max_frequency", "shaper", "shaped_modes"}) \
     | {"horizon", "qp_solver"}
+_CONTROLLER_KEYS["scheduled_lqr"] = {"kind", "sample_time", "torque_limit", "hub_angle",
+                                     "hub_rate", "tip_deflection", "torque", "design_modes",
+                                     "max_frequency", "spin_axis", "spin_rates", "spin_rate",
+                                     "ramp_time"}
+#: The kinds that feed back the plant's whole state (no ``[sensors]``).
+_FULL_STATE = ("lqr", "nmpc", "scheduled_lqr")
 _REQUIRED = {"quaternion_feedback": ("sample_time", "bandwidth"),
              "lqr": ("sample_time", "hub_angle", "torque"),
              "lqg": ("sample_time", "hub_angle", "torque"),
-             "nmpc": ("sample_time", "hub_angle", "torque")}
+             "nmpc": ("sample_time", "hub_angle", "torque"),
+             "scheduled_lqr": ("sample_time", "hub_angle", "torque", "spin_axis",
+                               "spin_rates", "spin_rate")}
 _SENSOR_KEYS = {"star_tracker", "gyro", "seed", "attitude_sigma", "bias_sigma", "filter"}
 #: ``[sensors] filter``: the attitude filter, or the one with the arrays' modes in it.
 FILTERS = ("attitude", "modes")
@@ -88,7 +106,7 @@ class SpatialLoop:
 
     Attributes
     ----------
-    law : QuaternionFeedback, SpatialLQR or SpatialLQG
+    law : QuaternionFeedback, SpatialLQR, SpatialLQG, SpatialNMPC or ScheduledSpatialLQR
     sample_time : float
         s.
     sensors : AttitudeSensors or None
@@ -137,7 +155,8 @@ def _checked(check, *args, **limits):
 
 
 def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=None,
-                 wheel_speeds=None, angular_velocity=None) -> SpatialLoop | None:
+                 wheel_speeds=None, angular_velocity=None,
+                 variant: str = "exact") -> SpatialLoop | None:
     """The loop of a spatial scene's ``[controller]`` and ``[sensors]`` tables.
 
     Parameters
@@ -157,6 +176,9 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=
     angular_velocity : ndarray, shape (3,), optional
         The initial angular velocity, rad/s, hub frame (with the wheels' speeds, the
         momentum an eigenaxis slew's feedforward turns). Default at rest.
+    variant : str, optional
+        The scene's model variant (a scheduled LQR's designs linearise it). Default
+        ``"exact"``.
 
     Returns
     -------
@@ -175,35 +197,23 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=
     for key in _REQUIRED[kind]:
         if key not in controller:
             raise SceneError(f"controller.{key} is required for controller.kind = {kind!r}")
-    if kind in ("lqr", "nmpc") and sensors:
+    if kind in _FULL_STATE and sensors:
         raise SceneError(f"controller.kind = {kind!r} feeds back the plant's whole state, which "
                          "[sensors] do not give; with sensors take kind = 'lqg' (its filter "
                          "estimates the modes from the attitude and rate)")
     step = _checked(check_real, "controller", "sample_time", controller["sample_time"],
                     minimum=1e-4, maximum=100.0)
-    target = _target(controller, quaternion)
     try:
-        law = _design(kind, controller, structure, target, step,
-                      (wheels, wheel_speeds, _momentum(structure, quaternion, wheels,
-                                                       wheel_speeds, angular_velocity)))
+        if kind == "scheduled_lqr":
+            law = _scheduled(controller, structure, quaternion, step, variant)
+        else:
+            law = _design(kind, controller, structure, _target(controller, quaternion), step,
+                          (wheels, wheel_speeds, _momentum(structure, quaternion, wheels,
+                                                           wheel_speeds, angular_velocity)))
+    except SceneError:
+        raise
     except (ValueError, TypeError) as exc:
-        message = str(exc)
-        for owner, name in (("slew.duration", "slew_duration"), ("slew.shape", "slew_shape"),
-                            ("eigenaxis_shaper.kind", "shaper"),
-                            ("eigenaxis_shaper.n_shaped", "shaped_modes"),
-                            ("design_spatial_lqr.n_modes", "design_modes")):
-            message = message.replace(owner, f"controller.{name}")
-        for owner, name in (("spatial_slew.duration", "slew_duration"),
-                            ("spatial_slew.n_intervals", "slew_intervals"),
-                            ("spatial_slew.smoothness", "slew_smoothness")):
-            message = message.replace(owner, f"controller.{name}")
-        for owner, name in (("design_spatial_nmpc.n_modes", "design_modes"),):
-            message = message.replace(owner, f"controller.{name}")
-        for owner in ("quaternion_feedback.", "design_spatial_lqr.", "design_spatial_lqg.",
-                      "lqr_weights.", "eigenaxis_slew.", "spatial_slew.",
-                      "design_spatial_nmpc."):
-            message = message.replace(owner, "controller.")
-        raise SceneError(message) from None
+        raise SceneError(_scene_message(str(exc))) from None
     if not sensors:
         return SpatialLoop(law=law, sample_time=step, sensors=None)
     check_table_keys("sensors", sensors, _SENSOR_KEYS)
@@ -235,6 +245,76 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=
                        modes=structure if choice == "modes" else None)
     _checked(loop.estimator, quaternion)
     return loop
+
+
+def _scene_message(message: str) -> str:
+    """A design's error message with its parameters named as the ``[controller]`` keys."""
+    for owner, name in (("slew.duration", "slew_duration"), ("slew.shape", "slew_shape"),
+                        ("eigenaxis_shaper.kind", "shaper"),
+                        ("eigenaxis_shaper.n_shaped", "shaped_modes"),
+                        ("design_spatial_lqr.n_modes", "design_modes"),
+                        ("spatial_slew.duration", "slew_duration"),
+                        ("spatial_slew.n_intervals", "slew_intervals"),
+                        ("spatial_slew.smoothness", "slew_smoothness"),
+                        ("design_spatial_nmpc.n_modes", "design_modes"),
+                        ("design_scheduled_spatial_lqr.n_modes", "design_modes"),
+                        ("maneuver.spin_rate", "spin_rate"),
+                        ("maneuver.ramp_time", "ramp_time"),
+                        ("steady_spin.spin_rate", "spin_rate"),
+                        ("design_scheduled_spatial_lqr: the design spin",
+                         "spin_axis, spin_rates: the design spin")):
+        message = message.replace(owner, f"controller.{name}")
+    for owner in ("quaternion_feedback.", "design_spatial_lqr.", "design_spatial_lqg.",
+                  "lqr_weights.", "eigenaxis_slew.", "spatial_slew.", "design_spatial_nmpc.",
+                  "design_scheduled_spatial_lqr."):
+        message = message.replace(owner, "controller.")
+    return message
+
+
+def _scheduled(controller: dict, structure, quaternion, step: float, variant: str):
+    """The scheduled LQR of a ``[controller]`` table: a spin-up (or a steady spin) about
+    its axis from the initial attitude."""
+    from controllers.feedback.lqr import LQRWeights
+    from controllers.feedback.spatial_scheduling import design_scheduled_spatial_lqr
+    from ..sim.maneuvers import SpinUp
+
+    weights = LQRWeights(**{key: controller[key] for key in
+                            ("hub_angle", "hub_rate", "tip_deflection", "torque")
+                            if key in controller})
+    rate = _checked(check_real, "controller", "spin_rate", controller["spin_rate"],
+                    minimum=-1e4, maximum=1e4)
+    profile = (SpinUp(spin_rate=rate, ramp_time=controller["ramp_time"])
+               if "ramp_time" in controller else rate)
+    rates = controller["spin_rates"]
+    if not isinstance(rates, (list, tuple)):
+        raise SceneError(f"controller.spin_rates must be a list of design spin rates (rad/s); "
+                         f"got {rates!r:.80}")
+    return design_scheduled_spatial_lqr(
+        structure, weights, controller["spin_axis"], rates, profile, start=quaternion,
+        n_modes=controller.get("design_modes", 2), variant=variant, sample_time=step,
+        torque_limit=controller.get("torque_limit"),
+        max_frequency=controller.get("max_frequency"))
+
+
+def pointing_target(law, t: float) -> np.ndarray:
+    """The attitude a spatial scene's law points at, at time ``t``: its target, or a
+    scheduled LQR's spin reference then.
+
+    Parameters
+    ----------
+    law : object
+        The scene's law.
+    t : float
+        Time, s.
+
+    Returns
+    -------
+    ndarray, shape (4,)
+        Hub to inertial, scalar first.
+    """
+    if hasattr(law, "reference_at"):
+        return law.reference_at(t)[0]
+    return law.target
 
 
 def _momentum(structure, quaternion, cluster, speeds, angular_velocity):

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..model.checks import check_integer, check_real
 from ..model.errors import InputTypeError
+from .spatial_control import pointing_target
 from .spatial_scene import SpatialScene
 from .sweep import SweepResult, sweep
 
@@ -121,7 +122,7 @@ class SpatialLoopTask:
         tips = np.array([np.linalg.norm(v, axis=0) for v in result.tips.values()])
         out = {"status": result.status,
                "pointing_error": float(np.linalg.norm(error_angles(
-                   loop.law.target, result.states[0:4, -1]))),
+                   pointing_target(loop.law, result.t[-1]), result.states[0:4, -1]))),
                "residual_vibration": float(np.max(tips[:, late])),
                "torque_used": float(np.sum(np.abs(result.torque[:, :-1])
                                            * np.diff(result.t)))}

@@ -177,6 +177,8 @@ def _loop_margins(scene: SpatialScene) -> dict:
     law = scene.loop.law
     if hasattr(law, "linear_law"):              # an NMPC: its gain about rest, no limit active
         law = law.linear_law()
+    if hasattr(law, "spin_rates"):
+        return {"loop_margins": _scheduled_margins(scene, law)}
     if hasattr(law, "loop_poles"):
         from ..model.spatial_plant import linearize_spatial
 
@@ -186,14 +188,39 @@ def _loop_margins(scene: SpatialScene) -> dict:
     else:
         margins = quaternion_disk_margins(law, scene.structure, n_modes=scene.n_modes)
         extra = {"held_at": None}
+    return {"loop_margins": {**_margin_fields(margins), **extra}}
+
+
+def _margin_fields(margins) -> dict:
+    """A :class:`~controllers.analysis.spatial_loops.DiskMargins` as summary fields."""
     multiloop = margins.multiloop
-    return {"loop_margins": {
-        "closed_loop_stable": margins.closed_loop_stable,
-        "spectral_abscissa": margins.spectral_abscissa,
-        "disk_margin": margins.disk_margin.tolist(),
-        "gain_margin_db": margins.gain_margin_db.tolist(),
-        "phase_margin_deg": margins.phase_margin_deg.tolist(),
-        "multiloop": None if multiloop is None else list(multiloop), **extra}}
+    return {"closed_loop_stable": margins.closed_loop_stable,
+            "spectral_abscissa": margins.spectral_abscissa,
+            "disk_margin": margins.disk_margin.tolist(),
+            "gain_margin_db": margins.gain_margin_db.tolist(),
+            "phase_margin_deg": margins.phase_margin_deg.tolist(),
+            "multiloop": None if multiloop is None else list(multiloop)}
+
+
+def _scheduled_margins(scene: SpatialScene, law) -> dict:
+    """A scheduled LQR's disk margins at each design spin, about that spin on the plant with
+    every mode of the run: the worst (an unstable one first, then the smallest disk) with
+    each spin's stability and smallest disk."""
+    from controllers.analysis.spatial_loops import loop_disk_margins, lq_loop
+
+    from ..model.spatial_plant import linearize_spatial
+
+    spins = []
+    for rate in law.spin_rates:
+        plant = linearize_spatial(scene.structure, scene.n_modes,
+                                  angular_velocity=rate * law.spin_axis, variant=law.variant)
+        spins.append((float(rate), loop_disk_margins(lq_loop(law, plant, spin=rate))))
+    rate, worst = min(spins, key=lambda item: (item[1].closed_loop_stable,
+                                               float(np.min(item[1].disk_margin))))
+    return {**_margin_fields(worst), "held_at": law.sample_time, "at_spin": rate,
+            "per_spin": [{"spin": r, "closed_loop_stable": m.closed_loop_stable,
+                          "spectral_abscissa": m.spectral_abscissa,
+                          "disk_margin": float(np.min(m.disk_margin))} for r, m in spins]}
 
 
 def _wheel_summary(result: SpatialResult) -> dict:
@@ -320,11 +347,14 @@ def format_spatial_summary(summary: dict) -> str:
     if margins:
         held = margins.get("held_at")
         law = "continuous law" if held is None else f"law held at {held:g} s"
+        about = ("the target" if "at_spin" not in margins else
+                 f"the spin at {margins['at_spin']:g} rad/s (the worst of "
+                 f"{len(margins['per_spin'])} design spins)")
         if not margins["closed_loop_stable"]:
-            lines.append(f"  {law} about the target UNSTABLE on the linear plant (spectral "
+            lines.append(f"  {law} about {about} UNSTABLE on the linear plant (spectral "
                          f"abscissa {margins['spectral_abscissa']:.3g} 1/s)")
         else:
-            lines.append(f"  disk margins of the {law} about the target (x, y, z): gain "
+            lines.append(f"  disk margins of the {law} about {about} (x, y, z): gain "
                          + ", ".join(f"{g:.3g}" for g in margins["gain_margin_db"])
                          + " dB, phase " + ", ".join(f"{p:.3g}" for p in
                                                     margins["phase_margin_deg"]) + " deg"

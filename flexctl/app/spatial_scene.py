@@ -274,7 +274,8 @@ def parse_spatial_scene(data: dict, name: str = "scene", base_dir=None) -> Spati
 
     loop = spatial_loop(_table(data, "controller", required=False),
                         _table(data, "sensors", required=False), structure,
-                        quaternion / np.linalg.norm(quaternion), wheels, wheel_speeds, spin)
+                        quaternion / np.linalg.norm(quaternion), wheels, wheel_speeds, spin,
+                        variant)
     if loop is not None and maneuver is not None:
         raise SceneError("a spatial scene with a [controller] takes maneuver.kind = 'none' "
                          "(the law commands the torque)")
