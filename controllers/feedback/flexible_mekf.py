@@ -31,6 +31,16 @@ Gamma]`` and ``D = S_u / T``. A star tracker reading updates as in the attitude 
 [I, 0, 0]``), a late one replayed from the stored samples. Rotation increments are taken as
 commuting within a sample and the model is the one at rest: slow slews, where the modes are
 small.
+
+**Through reaction wheels** (:mod:`flexctl.model.wheel_cluster`) the structure feels the
+motors' reaction and the wheels' gyroscopic torque ``-w x H`` (``H = G h`` the rotors' axial
+momentum, hub frame). The loop hands the filter the motors' torque on the structure averaged
+over the sample, ``u = -G (h_end - h_start) / T`` (exact by the rotor equation, whatever the
+lag, friction and limits did: ``h_k = J_k (g_k . w + Omega_k)`` from the tachometers' speeds
+and the gyro's rate), and ``H`` at the sample's start; the filter adds ``[H]x w`` to the torque
+from its own rate estimate, held over the sample like the rest: ``Phi``, ``S_x`` and ``H``
+above become ``Phi + Gamma C``, ``S_x + S_u C`` and their reading, ``C = [H]x E_w`` (``E_w``
+the rate rows of ``x_l``).
 """
 
 from __future__ import annotations
@@ -142,7 +152,7 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         self._reading_noise = self.s_u @ self._d_q / t + self.sigma_v ** 2 / t * np.eye(3)
         self._walk = np.zeros((6 + n, 6 + n))
         self._walk[3:6, 3:6] = self.sigma_u2 * t * np.eye(3)
-        self.history = deque(maxlen=self.lag + 1)   # (q, b, x, P, reading, torque)
+        self.history = deque(maxlen=self.lag + 1)   # (q, b, x, P, reading, torque, H)
 
     @property
     def flexible_state(self) -> np.ndarray:
@@ -155,7 +165,7 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         shape (6 + r, 6 + r)."""
         return self.P.copy()
 
-    def propagate(self, gyro_reading, torque=(0.0, 0.0, 0.0)) -> None:
+    def propagate(self, gyro_reading, torque=(0.0, 0.0, 0.0), wheel_momentum=None) -> None:
         """Take the gyro's reading over the sample just past, with the torque held on the
         structure over it, and advance one sample.
 
@@ -164,38 +174,54 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         gyro_reading : array_like, shape (3,)
             The gyro's reading, rad/s.
         torque : array_like, shape (3,), optional
-            The torque on the structure over the sample, N m, hub frame. Default zero.
+            The torque on the structure over the sample, N m, hub frame, besides the wheels'
+            gyroscopic torque (through wheels: the motors' reaction averaged over the
+            sample, module Notes). Default zero.
+        wheel_momentum : array_like, shape (3,), optional
+            The wheels' axial momentum ``G h`` at the sample's start, N m s, hub frame (its
+            gyroscopic torque ``-w x G h`` is added from the estimated rate). Default none.
         """
+        owner = "flexible_mekf"
         reading = self._gyro_reading(gyro_reading)
-        u = np.array(check_array("flexible_mekf", "torque", torque, shape=(3,)))
+        u = np.array(check_array(owner, "torque", torque, shape=(3,)))
+        momentum = None if wheel_momentum is None else np.array(check_array(
+            owner, "wheel_momentum", wheel_momentum, shape=(3,)))
         self.history.append((self.q.copy(), self.b.copy(), self.x.copy(), self.P.copy(),
-                             reading, u))
-        self._predict(reading, u)
+                             reading, u, momentum))
+        with np.errstate(all="ignore"):      # a blown-up estimate is reported just below
+            self._predict(reading, u, momentum)
         self._check_finite(reading)
 
-    def _predict(self, reading, u) -> None:
+    def _predict(self, reading, u, momentum=None) -> None:
         t, n = self.step, self.x.size
+        phi, s_x, h = self.phi, self.s_x, self._h
+        if momentum is not None:     # the wheels' -w x H = [H]x w, w from the estimate
+            at = self.model.rate_at
+            coupling = cross_matrix(momentum) @ self.part.basis[at:at + 3]
+            phi = phi + self.gamma @ coupling
+            s_x = s_x + self.s_u @ coupling
+            h = h.copy()
+            h[:, 6:] = s_x / t
         # the model's nonlinear remainder (gyroscopic torques, Coriolis, stiffening) held over
         # the sample at the estimate, as the design model's hold; its derivatives left out of
         # the covariance (small where the rates are)
         rest = np.asarray(self.remainder(self.part.basis @ self.x, u)).ravel()
-        turned = self.s_x @ self.x + self.s_u @ u + self.s_r @ rest
+        turned = s_x @ self.x + self.s_u @ u + self.s_r @ rest
         j_r = _right_jacobian(turned)
         f = np.eye(6 + n)
         f[:3, :3] = rotation_matrix(from_rotation_vector(-turned))
-        f[:3, 6:] = j_r @ self.s_x
-        f[6:, 6:] = self.phi
+        f[:3, 6:] = j_r @ s_x
+        f[6:, 6:] = phi
         g = np.zeros((6 + n, 3))
         g[:3] = j_r @ self.s_u
         g[6:] = self.gamma
-        h = self._h
         innovation_cov = h @ self.P @ h.T + self._reading_noise
         cross = f @ self.P @ h.T + g @ self._d_q
         gain = np.linalg.solve(innovation_cov, cross.T).T
         innovation = reading - (turned / t + self.b)
         # the nominal prediction, then the correction in the error state at the sample's end
         self.q = product(self.q, from_rotation_vector(turned))
-        self.x = self.phi @ self.x + self.gamma @ u + self.gamma_r @ rest
+        self.x = phi @ self.x + self.gamma @ u + self.gamma_r @ rest
         correction = gain @ innovation
         self.q = product(self.q, from_rotation_vector(correction[:3]))
         self.q /= np.linalg.norm(self.q)

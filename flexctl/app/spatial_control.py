@@ -51,9 +51,9 @@
   uncertainty ``attitude_sigma`` (rad, default 1e-3) and ``bias_sigma`` (rad/s, default
   1e-4). The gyro reads at the controller's sample time; the law reads the filter
   (:class:`controllers.feedback.mekf.AttitudeFilter`), which starts at the scene's initial
-  attitude; ``filter = "modes"`` (a scene without wheels) takes the one with the arrays'
-  modes in it (:class:`controllers.feedback.flexible_mekf.FlexibleAttitudeFilter`, 1 mode
-  per field, first_order), which has no C form.
+  attitude; ``filter = "modes"`` takes the one with the arrays' modes in it
+  (:class:`controllers.feedback.flexible_mekf.FlexibleAttitudeFilter`, 1 mode per field,
+  first_order; through wheels it reads their speeds), which has no C form.
 
 The loop's outputs are at its samples (``simulation.output_step`` does not apply).
 """
@@ -237,10 +237,6 @@ def spatial_loop(controller: dict, sensors: dict, structure, quaternion, wheels=
     if not isinstance(choice, str) or choice not in FILTERS:
         raise SceneError(f"sensors.filter must be one of {', '.join(FILTERS)}; got "
                          f"{choice!r:.80}")
-    if choice == "modes" and wheels is not None:
-        raise SceneError("sensors.filter = 'modes' is for a scene without wheels: its model "
-                         "is driven by the torque on the structure, and the wheels add their "
-                         "gyroscopic torque to the command")
     loop = SpatialLoop(law=law, sample_time=step, sensors=setup, **sigmas,
                        modes=structure if choice == "modes" else None)
     _checked(loop.estimator, quaternion)

@@ -115,32 +115,48 @@ def _timing(t_final, sample_time, sensors, estimator) -> tuple:
 class _Sensed:
     """What the law reads through the sensors and the estimator, sample by sample."""
 
-    def __init__(self, sensors, estimator, seed, count: int):
+    def __init__(self, sensors, estimator, seed, count: int, wheels=None):
         self.sensors, self.estimator = sensors, estimator
         self.readings = sensors.start(seed)
         self.every, self.lag = sensors.tracker_every, getattr(estimator, "lag", 0)
         self.past = []                             # true attitudes, for the tracker's latency
         self.estimates, self.biases = np.zeros((4, count + 1)), np.zeros((3, count + 1))
+        self.takes_torque = bool(getattr(estimator, "takes_torque", False))
+        self.wheels = wheels if self.takes_torque else None
+        self.momentum = None                # the rotors' axial momenta at the last sample
 
-    def read(self, k: int, t: float, attitude, rate, sample_time: float, torque) -> tuple:
+    def read(self, k: int, t: float, attitude, rate, sample_time: float, torque,
+             speeds=None) -> tuple:
         """The estimated attitude and rate at sample ``k`` (``torque``: the command held over
-        the sample just past, for an estimator that ``takes_torque``)."""
+        the sample just past, for an estimator that ``takes_torque``; ``speeds``: the wheels'
+        speeds, rad/s, as their tachometers read them, with wheels)."""
         estimator, past = self.estimator, self.past
         past.append(attitude)
         if k:                  # the rotation over the last sample, as a rate-integrating gyro
             turned = rotation_vector(product(conjugate(past[k - 1]), attitude))
             gyro = self.readings.gyro(turned / sample_time)
-            if getattr(estimator, "takes_torque", False):
+            if self.wheels is not None:
+                start, h = self.momentum, self._rotors(gyro - estimator.bias, speeds)
+                axes = self.wheels.axes
+                estimator.propagate(gyro, -axes @ (h - start) / sample_time, axes @ start)
+            elif self.takes_torque:
                 estimator.propagate(gyro, torque)
             else:
                 estimator.propagate(gyro)
         else:
             gyro = self.readings.gyro(rate)
+        if self.wheels is not None:
+            self.momentum = self._rotors(gyro - estimator.bias, speeds)
         if k and k % self.every == 0 and k >= self.lag and \
                 self.sensors.star_tracker.available(t):
             estimator.update(self.readings.star_tracker(past[k - self.lag]))
         self.estimates[:, k], self.biases[:, k] = estimator.attitude, estimator.bias
         return estimator.attitude, gyro - estimator.bias
+
+    def _rotors(self, rate, speeds) -> np.ndarray:
+        """The rotors' axial momenta ``J_k (g_k . w + Omega_k)``, N m s, from a measured hub
+        rate and the wheels' speeds."""
+        return self.wheels.inertias * (self.wheels.axes.T @ rate + speeds)
 
 
 def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float | None = None,
@@ -180,8 +196,12 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
         With ``sensors``: ``propagate(gyro_reading)``, ``update(star_tracker_reading)``,
         ``attitude`` and ``bias`` (an :class:`controllers.feedback.mekf.AttitudeFilter`); one
         that ``takes_torque`` (a :class:`controllers.feedback.flexible_mekf.FlexibleAttitudeFilter`)
-        gets ``propagate(gyro_reading, torque)``, the command held over the sample, which is
-        the torque on the structure only without wheels.
+        gets ``propagate(gyro_reading, torque)``, the command held over the sample; through
+        wheels ``propagate(gyro_reading, torque, wheel_momentum)``: the motors' torque on the
+        structure averaged over the sample, ``-G (h_end - h_start) / T``, and the wheels'
+        momentum ``G h_start`` (hub frame), from the rotors' momenta ``h_k = J_k (g_k . w +
+        Omega_k)`` of the wheels' speeds (their tachometers) and the gyro's rate less the
+        estimated bias.
     seed : int, optional
         Seed of the sensors' noise (default theirs).
     rtol : float, optional
@@ -203,18 +223,17 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
         raise InputValueError("a state-feedback law reads the plant's whole state, which no "
                               "sensor gives: fly it without sensors, or an observed law "
                               "(for example an LQG) with them")
-    if wheels is not None and getattr(estimator, "takes_torque", False):
-        raise InputValueError("an estimator driven by the torque on the structure "
-                              "(takes_torque) flies without wheels: through wheels the "
-                              "structure feels their gyroscopic torque beside the command, "
-                              "which its model does not carry")
     session = (law.start(layout.state_names) if full_state
                else law.start() if hasattr(law, "start") else law)
     c = layout.n_coordinates
     held = ConstantTorque(np.zeros(3))
     segments = SpatialSegments(machine_function(equations.rhs), layout.n_states, held, rtol,
                                rtol * 1e-3, line=False, newton=True)
-    sensed = _Sensed(sensors, estimator, seed, count) if sensors is not None else None
+    sensed = (_Sensed(sensors, estimator, seed, count, equations.cluster)
+              if sensors is not None else None)
+    speeds = (None if equations.cluster is None else
+              slice(layout.n_states - len(layout.wheels),
+                    layout.n_states - len(layout.wheels) + equations.cluster.count))
     times = sample_time * np.arange(count + 1)
     states = np.zeros((layout.n_states, count + 1))
     commands = np.zeros((3, count + 1))
@@ -227,7 +246,8 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
         states[:, k] = x
         done = k + 1
         if sensed is not None:
-            attitude, rate = sensed.read(k, t, attitude, rate, sample_time, held.value)
+            attitude, rate = sensed.read(k, t, attitude, rate, sample_time, held.value,
+                                         None if speeds is None else x[speeds])
         held.value = _command(session, t, attitude, rate, x if full_state else None)
         commands[:, k] = held.value
         if k == count:

@@ -109,6 +109,10 @@ def test_bad_arguments_are_refused_by_name():
     estimator = FlexibleAttitudeFilter(SENSORS, CRAFT, (1, 0, 0, 0), 1e-3)
     with pytest.raises(InputError, match=r"flexible_mekf\.torque"):
         estimator.propagate(np.zeros(3), (0.0, np.inf, 0.0))
+    with pytest.raises(InputError, match=r"flexible_mekf\.wheel_momentum"):
+        estimator.propagate(np.zeros(3), np.zeros(3), (0.0, np.nan, 0.0))
+    with pytest.raises(InputError, match=r"flexible_mekf\.wheel_momentum"):
+        estimator.propagate(np.zeros(3), np.zeros(3), np.zeros(4))
     with pytest.raises(InputError, match=r"flexible_mekf\.gyro_reading"):
         estimator.propagate(np.zeros(2))
     with pytest.raises(InputError, match=r"flexible_mekf\.gyro_reading must be at most"):
@@ -121,16 +125,14 @@ def test_bad_arguments_are_refused_by_name():
         AttitudeFilter(SENSORS, (1, 0, 0, 0), 1e-3).propagate((2e3, 0.0, 0.0))
 
 
-def test_it_flies_in_the_loop_and_not_through_wheels():
+def test_it_flies_in_the_loop():
     """Handed the command held over each sample, the filter flies an LQG's slew as the
     attitude filter does (the same pointing to its noise); the LQG's regulator reading the
     filter's modal estimates (``EstimatedStateLaw``) ends the slew closer and the arrays
-    stiller than the LQG; through wheels (whose gyroscopic torque its model lacks) the filter
-    is refused."""
+    stiller than the LQG."""
     from controllers.feedback.lqr import LQRWeights
     from controllers.feedback.mekf import AttitudeFilter
     from controllers.feedback.spatial_lqr import design_spatial_lqg
-    from flexctl.model.wheel_cluster import WheelCluster
     from flexctl.sim.quaternions import from_rotation_vector
     from flexctl.sim.spatial_loop import simulate_spatial_loop
 
@@ -169,13 +171,72 @@ def test_it_flies_in_the_loop_and_not_through_wheels():
                                              variant="first_order").regulator, estimator)
     with pytest.raises(InputError, match=r"estimated_state_law\.estimator"):
         EstimatedStateLaw(law.regulator, AttitudeFilter(SENSORS, (1, 0, 0, 0), 1e-3))
-    with pytest.raises(InputError, match="flies without wheels"):
-        simulate_spatial_loop(CRAFT, 1.0, law, n_modes=1, variant="first_order",
-                              sensors=SENSORS, seed=4,
-                              estimator=FlexibleAttitudeFilter(SENSORS, CRAFT, (1, 0, 0, 0),
-                                                               1e-3),
-                              wheels=WheelCluster.orthogonal(inertia=0.01, torque_limit=0.1,
-                                                             speed_limit=300.0))
+
+
+class _Recorded(FlexibleAttitudeFilter):
+    """The filter recording its estimate after each sample; with ``momentum_known`` False it
+    is not told the wheels' momentum (their gyroscopic torque left out of its model)."""
+
+    momentum_known = True
+
+    def __init__(self, *args, **options):
+        super().__init__(*args, **options)
+        self.log = []
+
+    def propagate(self, gyro_reading, torque=(0.0, 0.0, 0.0), wheel_momentum=None):
+        super().propagate(gyro_reading, torque,
+                          wheel_momentum if self.momentum_known else None)
+        self.log.append((self.q.copy(), self.x.copy(), self.P.copy()))
+
+
+def test_through_wheels_it_reads_their_speeds_and_stays_consistent():
+    """Through a pyramid of four biased wheels (1 to 1.5 N m s each, with a motor lag and
+    friction) the loop hands the filter the motors' torque from the wheels' speeds and their
+    momentum, whose gyroscopic torque the filter adds from its rate estimate: flying the LQG's
+    slew, its normalised estimation error squared of the attitude and the filtered modes
+    stays near its dimension after 5 s (measured 5.7 of 8) and its modal estimate follows the
+    truth (error rms 13 % of the motion's); told nothing of the momentum, the same filter is
+    inconsistent (measured 226) and the slew ends farther (8.3e-4 rad against 1.3e-4)."""
+    from controllers.feedback.lqr import LQRWeights
+    from controllers.feedback.spatial_lqr import design_spatial_lqg
+    from flexctl.model.wheel_cluster import WheelCluster
+    from flexctl.sim.quaternions import from_rotation_vector
+    from flexctl.sim.spatial_loop import simulate_spatial_loop
+
+    target = from_rotation_vector([0.05, -0.03, 0.08])
+    law = design_spatial_lqg(CRAFT, LQRWeights(hub_angle=0.05, hub_rate=0.05,
+                                               tip_deflection=0.005, torque=0.1),
+                             target, STEP, n_modes=1, variant="first_order", torque_limit=0.1)
+    wheels = WheelCluster.pyramid(angle=54.7356, inertia=0.01, torque_limit=0.1,
+                                  speed_limit=300.0, coulomb_friction=1e-3,
+                                  viscous_friction=1e-5, time_constant=0.02)
+    measured = {}
+    for known in (True, False):
+        estimator = _Recorded(SENSORS, CRAFT, (1, 0, 0, 0), 1e-3)
+        estimator.momentum_known = known
+        run = simulate_spatial_loop(CRAFT, 20.0, law, n_modes=1, variant="first_order",
+                                    sensors=SENSORS, estimator=estimator, seed=4,
+                                    wheels=wheels,
+                                    wheel_speeds=(150.0, -100.0, 120.0, -80.0)).result
+        assert run.ok
+        rows, part = estimator.model.full_rows, estimator.part
+        bending = estimator.names.index("wing_a.qn1")
+        nees, errors, truth = [], [], []
+        for k in range(51, run.t.size):
+            q, x, covariance = estimator.log[k - 1]
+            error = np.concatenate([error_angles(q, run.quaternion[:, k]),
+                                    part.projector @ run.states[rows, k] - x])
+            keep = np.r_[0:3, 6:covariance.shape[0]]
+            nees.append(error @ np.linalg.solve(covariance[np.ix_(keep, keep)], error))
+            errors.append((part.basis @ x)[bending] - run.states[rows, k][bending])
+            truth.append(run.states[rows, k][bending])
+        measured[known] = (float(np.mean(nees)) / error.size,
+                           float(np.sqrt(np.mean(np.square(errors)) / np.mean(np.square(truth)))),
+                           float(np.linalg.norm(error_angles(target, run.quaternion[:, -1]))))
+    print(measured)
+    nees, modal, pointing = measured[True]
+    assert 0.4 < nees < 1.6 and modal < 0.25
+    assert measured[False][0] > 10.0 and measured[False][2] > 3.0 * pointing
 
 
 def test_it_has_no_c_form_and_the_export_says_so(tmp_path):
