@@ -192,7 +192,7 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
         :class:`~controllers.feedback.spatial_scheduling.ScheduledSpatialLQR`
         (:func:`~controllers.codegen.spatial_program.spatial_program`: three torques), an
         attitude filter (:class:`~controllers.feedback.mekf.AttitudeFilter`,
-        :func:`~controllers.codegen.spatial_program.filter_program`: the estimate), or a
+        :func:`~controllers.codegen.filter_program.filter_program`: the estimate), or a
         :class:`~controllers.codegen.program.ControllerProgram`.
     plant : flexctl.Model or None
         The plant the law runs on (its state order, sensors and actuator); a three-axis law
@@ -250,7 +250,8 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
             raise InputValueError("export: a three-axis law or filter keeps its own sample "
                                   "time and starts from its own state or the first reading; "
                                   "give neither sample_time nor initial_state")
-        from .spatial_program import filter_program, spatial_program
+        from .filter_program import filter_program
+        from .spatial_program import spatial_program
         program = (filter_program(controller) if isinstance(controller, AttitudeFilter)
                    else spatial_program(controller))
     elif not isinstance(plant, Model):

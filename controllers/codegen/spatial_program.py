@@ -25,44 +25,26 @@ functions, and their compiled C flown in the spatial loop.
   ``[started, t_last, integral (3)]``; the step is
   :class:`~controllers.feedback.quaternion.QuaternionFeedbackSession`'s call (the integral by
   the rectangle rule between calls, held while the command saturates).
-- **The attitude filter** (:class:`~controllers.feedback.mekf.AttitudeFilter`,
-  :func:`filter_program`). Input ``v``: the gyro's reading over the sample just past
-  ``gx gy gz`` (rad/s), the star tracker's ``sw sx sy sz`` and ``tracked`` (1 when that
-  reading is new at this sample, else 0); memory: the estimate ``q, b``, its covariance ``P``
-  (6 x 6, by rows), the propagations done (up to the latency's) and, per gyro sample of the
-  tracker's latency, the estimate before it and its reading (the filter's history). The step
-  propagates with the gyro reading and then, with ``tracked``, updates with the tracker's
-  reading (going back ``latency`` and propagating again, as the filter does); its output is
-  the estimate ``qw qx qy qz bx by bz`` (the rate a law reads is the gyro's reading less the
-  bias).
-
 :func:`compiled_spatial_law` turns a compiled export of a law back into a law for
-:func:`flexctl.sim.spatial_loop.simulate_spatial_loop`, :func:`compiled_attitude_filter` a
-compiled filter into its estimator: this is how the C is checked against Python in the loop.
+:func:`flexctl.sim.spatial_loop.simulate_spatial_loop` (the attitude filters' programs are
+:mod:`controllers.codegen.filter_program`'s): this is how the C is checked against Python in
+the loop.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from flexctl.model.checks import check_array, check_quaternion
 from flexctl.model.errors import InputTypeError, InputValueError
-from flexctl.sim.quaternions import symbolic_product
+from flexctl.sim.quaternions import (symbolic_from_rotation_vector, symbolic_product,
+                                     symbolic_rotation_vector)
 
 from ..slew.reference import casadi_evaluate
 from .program import ControllerProgram, ExportRefused
 
-__all__ = ["spatial_program", "compiled_spatial_law", "filter_program",
-           "compiled_attitude_filter", "CompiledAttitudeFilter", "FILTER_INPUTS",
-           "FILTER_OUTPUTS", "MAX_FILTER_LAG", "attitude_error"]
+__all__ = ["spatial_program", "compiled_spatial_law", "attitude_error"]
 
 READINGS = ("qw", "qx", "qy", "qz", "wx", "wy", "wz")
-#: The filter program's input: the gyro reading, the star tracker reading, whether it is new.
-FILTER_INPUTS = ("gx", "gy", "gz", "sw", "sx", "sy", "sz", "tracked")
-#: The filter program's output: the estimated attitude and gyro bias.
-FILTER_OUTPUTS = ("qw", "qx", "qy", "qz", "bx", "by", "bz")
-#: Most gyro samples of star tracker latency a filter program replays (its code grows with it).
-MAX_FILTER_LAG = 20
 
 
 def _rotation_vector(ca, q):
@@ -113,38 +95,6 @@ def _kinematics(ca, e, w):
                         (1.0 - 0.5 * safe / ca.tan(0.5 * safe)) / (safe * safe))
     cross = ca.cross(e, w)
     return 0.5 * cross + factor * ca.cross(e, cross)
-
-
-def _from_rotation_vector(ca, phi):
-    """CasADi: :func:`flexctl.sim.quaternions.from_rotation_vector`, its series included."""
-    angle = ca.norm_2(phi)
-    half = 0.5 * angle
-    scale = ca.if_else(angle > 1e-4, ca.sin(half) / ca.fmax(angle, 1e-300),
-                       0.5 - angle * angle / 48.0)
-    return ca.vertcat(ca.cos(half), scale * phi)
-
-
-def _exact_rotation_vector(ca, q):
-    """CasADi: :func:`flexctl.sim.quaternions.rotation_vector` (no normalisation)."""
-    sign = ca.if_else(q[0] < 0, -1.0, 1.0)
-    w, v = sign * q[0], sign * q[1:4]
-    s = ca.norm_2(v)
-    return ca.if_else(s < 1e-12, 2.0 * v, 2.0 * ca.atan2(s, w) * v / ca.fmax(s, 1e-300))
-
-
-def _rotation_matrix(ca, q):
-    """CasADi: :func:`flexctl.sim.quaternions.rotation_matrix`."""
-    q = q / ca.norm_2(q)
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return ca.vertcat(
-        ca.horzcat(1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
-        ca.horzcat(2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
-        ca.horzcat(2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
-
-
-def _skew(ca, w):
-    return ca.vertcat(ca.horzcat(0, -w[2], w[1]), ca.horzcat(w[2], 0, -w[0]),
-                      ca.horzcat(-w[1], w[0], 0))
 
 
 def _planned(ca, plan, t, state, law):
@@ -212,8 +162,8 @@ def _scheduled_program(law) -> ControllerProgram:
     angle, rate, acceleration = casadi_evaluate(law.profile, t)
     axis, inertia = ca.DM(law.spin_axis), ca.DM(law.inertia)
     start = ca.DM(law.start_attitude)
-    reference = symbolic_product(start, _from_rotation_vector(ca, angle * axis))
-    error = _exact_rotation_vector(ca, symbolic_product(
+    reference = symbolic_product(start, symbolic_from_rotation_vector(angle * axis))
+    error = symbolic_rotation_vector(symbolic_product(
         ca.vertcat(reference[0], -reference[1:4]), v[0:4]))
     at = law.rate_at + 1                                  # the rates in v (after qw..qz)
     spin = rate * axis
@@ -353,133 +303,6 @@ def spatial_program(law) -> ControllerProgram:
                          f"or ScheduledSpatialLQR; got {type(law).__name__}")
 
 
-def _filter_propagate(ca, state, reading, lag, step, sigma_v2, sigma_u2):
-    """CasADi: one propagation of the filter's ``state = (q, b, P, done, history)`` with a
-    gyro reading, as :meth:`AttitudeFilter.propagate
-    <controllers.feedback.mekf.AttitudeFilter.propagate>` (the history shifted by one)."""
-    q, b, cov, done, history = state
-    if lag:
-        entry = ca.vertcat(q, b, ca.reshape(cov.T, 36, 1), reading)
-        history = ca.vertcat(history[_ENTRY:], entry)
-        done = ca.fmin(done + 1, lag)
-    w = reading - b
-    q = symbolic_product(q, _from_rotation_vector(ca, w * step))
-    q = q / ca.norm_2(q)
-    phi = ca.SX.eye(6)
-    phi[0:3, 0:3] = _rotation_matrix(ca, _from_rotation_vector(ca, -w * step))
-    phi[0:3, 3:6] = -step * ca.SX.eye(3) + 0.5 * step * step * _skew(ca, w)
-    noise = np.zeros((6, 6))
-    noise[:3, :3] = (sigma_v2 * step + sigma_u2 * step ** 3 / 3) * np.eye(3)
-    noise[:3, 3:] = noise[3:, :3] = -sigma_u2 * step * step / 2 * np.eye(3)
-    noise[3:, 3:] = sigma_u2 * step * np.eye(3)
-    cov = ca.mtimes([phi, cov, phi.T]) + ca.DM(noise)
-    cov = 0.5 * (cov + cov.T)
-    return q, b, cov, done, history
-
-
-_ENTRY = 4 + 3 + 36 + 3          # one history entry: q, b, P (by rows), the gyro reading
-
-
-def _filter_update(ca, state, measured, lag, covariance, propagate):
-    """CasADi: a star tracker update of ``state``, as :meth:`AttitudeFilter.update
-    <controllers.feedback.mekf.AttitudeFilter.update>` (back ``lag`` samples and forward)."""
-    q, b, cov, done, history = state
-    readings = []
-    if lag:
-        q, b = history[0:4], history[4:7]
-        cov = ca.reshape(history[7:43], 6, 6).T
-        readings = [history[k * _ENTRY + 43:(k + 1) * _ENTRY] for k in range(lag)]
-        history = ca.SX.zeros(history.numel())
-    residual = _exact_rotation_vector(ca, symbolic_product(ca.vertcat(q[0], -q[1:4]),
-                                                           measured / ca.norm_2(measured)))
-    gain = ca.mtimes(cov[:, 0:3], ca.inv(cov[0:3, 0:3] + ca.DM(covariance)))
-    correction = ca.mtimes(gain, residual)
-    q = symbolic_product(q, _from_rotation_vector(ca, correction[0:3]))
-    q = q / ca.norm_2(q)
-    b = b + correction[3:6]
-    keep = ca.SX.eye(6)
-    keep[:, 0:3] -= gain
-    cov = ca.mtimes([keep, cov, keep.T]) + ca.mtimes([gain, ca.DM(covariance), gain.T])
-    state = (q, b, cov, 0.0 if lag else done, history)
-    for reading in readings:
-        state = propagate(state, reading)
-    return state
-
-
-def filter_program(estimator) -> ControllerProgram:
-    """The :class:`~controllers.codegen.program.ControllerProgram` of an attitude filter: one
-    gyro sample per step (module description).
-
-    Parameters
-    ----------
-    estimator : AttitudeFilter
-        The filter, in the state it starts from (its estimate and covariance; a filter that
-        has propagated already is refused).
-
-    Returns
-    -------
-    ControllerProgram
-        ``kind = "mekf"``; input :data:`FILTER_INPUTS`, output :data:`FILTER_OUTPUTS`.
-
-    Raises
-    ------
-    ExportRefused
-        If the tracker's latency spans more than :data:`MAX_FILTER_LAG` gyro samples, or the
-        filter has a history.
-    """
-    import casadi as ca
-
-    from ..feedback.mekf import AttitudeFilter
-
-    if not isinstance(estimator, AttitudeFilter):
-        raise InputTypeError(f"filter_program takes an AttitudeFilter; got "
-                             f"{type(estimator).__name__}")
-    if getattr(estimator, "takes_torque", False):
-        raise ExportRefused(f"export: the {type(estimator).__name__} (the attitude filter "
-                            "with the modes, driven by the torque) has no C form; the "
-                            "attitude filter has")
-    lag = estimator.lag
-    if lag > MAX_FILTER_LAG:
-        raise ExportRefused(f"export: the star tracker's latency spans {lag} gyro samples, "
-                            f"more than {MAX_FILTER_LAG}: the filter's C replays each of them "
-                            "at an update")
-    if len(estimator.history):
-        raise ExportRefused("export: the filter has propagated already; export it as it "
-                            "starts (a new AttitudeFilter)")
-    step_time = float(estimator.step)
-    sigma_v2, sigma_u2 = float(estimator.sigma_v) ** 2, float(estimator.sigma_u2)
-    covariance = np.asarray(estimator.R, dtype=float)
-
-    def propagate(state, reading):
-        return _filter_propagate(ca, state, reading, lag, step_time, sigma_v2, sigma_u2)
-
-    size = 4 + 3 + 36 + 1 + lag * _ENTRY
-    t, v, m = ca.SX.sym("t"), ca.SX.sym("v", len(FILTER_INPUTS)), ca.SX.sym("m", size)
-    start = (m[0:4], m[4:7], ca.reshape(m[7:43], 6, 6).T, m[43], m[44:])
-    moved = propagate(start, v[0:3])
-    updated = _filter_update(ca, moved, v[3:7], lag, covariance, propagate)
-    ready = v[7] > 0.5
-    if lag:
-        ready = ca.logic_and(ready, moved[3] >= lag - 0.5)
-    q, b, cov, done, history = (ca.if_else(ready, new, old)
-                                for new, old in zip(updated, moved))
-    m_next = ca.vertcat(q, b, ca.reshape(cov.T, 36, 1), done, history)
-    step = ca.Function("step", [t, v, m], [ca.vertcat(q, b), m_next], ["t", "v", "m"],
-                       ["u", "m_next"])
-    memory = np.zeros(size)
-    memory[0:4], memory[4:7] = estimator.q, estimator.b
-    memory[7:43] = np.asarray(estimator.P, dtype=float).reshape(-1)
-    return ControllerProgram(
-        kind="mekf", step=step, recover=None, input_names=FILTER_INPUTS,
-        input_kind="measurement", output_name="estimate",
-        output_unit="attitude (scalar first) and gyro bias (rad/s)", memory_init=memory,
-        sample_time=step_time,
-        description=(f"multiplicative extended Kalman filter of attitude and gyro bias, "
-                     f"one gyro sample ({step_time:g} s) per step, star tracker latency "
-                     f"{lag} samples"),
-        info={"latency_samples": lag})
-
-
 class _CompiledStateLaw:
     """A compiled LQR as a state-feedback law of the spatial loop."""
 
@@ -548,102 +371,3 @@ def compiled_spatial_law(compiled):
         return _CompiledReadingLaw(compiled)
     raise InputTypeError(f"compiled_spatial_law takes a compiled three-axis law; got "
                          f"{kind or type(compiled).__name__}")
-
-
-class CompiledAttitudeFilter:
-    """A compiled :func:`filter_program` as the estimator of
-    :func:`flexctl.sim.spatial_loop.simulate_spatial_loop` (``propagate``, ``update``,
-    ``attitude``, ``bias``, ``lag``): made by :func:`compiled_attitude_filter`.
-
-    A step of the C filter is one gyro sample with its tracker reading, if any: a
-    :meth:`propagate` is held until the estimate is read or an :meth:`update` joins it, so an
-    update always follows a propagation.
-
-    Parameters
-    ----------
-    compiled : CompiledLaw
-        The compiled filter, started here (``flexctl_ctrl_init``).
-    """
-
-    def __init__(self, compiled):
-        self.compiled = compiled
-        self.lag = int(compiled.program.info.get("latency_samples", 0))
-        self._estimate = np.array(compiled.program.memory_init[0:7], dtype=float)
-        self._pending = None
-        compiled.init()
-
-    def _run(self, reading, measured) -> None:
-        v = np.concatenate([reading, np.zeros(4) if measured is None else measured,
-                            [0.0 if measured is None else 1.0]])
-        self._estimate = np.array(_checked(self.compiled, 0.0, v), dtype=float)
-        self._pending = None
-
-    def _flush(self) -> None:
-        if self._pending is not None:
-            self._run(self._pending, None)
-
-    def propagate(self, gyro_reading) -> None:
-        """Advance by one gyro sample (held until the estimate is read or an update joins it).
-
-        Parameters
-        ----------
-        gyro_reading : array_like, shape (3,)
-            The gyro's reading over the sample, rad/s.
-        """
-        reading = np.array(check_array("compiled_filter", "gyro_reading", gyro_reading,
-                                       shape=(3,)), dtype=float)
-        self._flush()
-        self._pending = reading
-
-    def update(self, measured) -> None:
-        """Take a star tracker reading with the gyro sample just propagated.
-
-        Parameters
-        ----------
-        measured : array_like, shape (4,)
-            The reading, hub to inertial, scalar first.
-
-        Raises
-        ------
-        InputValueError
-            If no propagation comes before it (the C filter updates within a gyro sample), or
-            the reading is not a non-zero quaternion.
-        """
-        q_m = np.array(check_quaternion("compiled_filter", "measured", measured), dtype=float)
-        if self._pending is None:
-            raise InputValueError("the compiled filter takes a star tracker reading within a "
-                                  "gyro sample: propagate first")
-        self._run(self._pending, q_m)
-
-    @property
-    def attitude(self) -> np.ndarray:
-        """Estimated attitude, hub to inertial, scalar first, shape (4,)."""
-        self._flush()
-        return self._estimate[0:4].copy()
-
-    @property
-    def bias(self) -> np.ndarray:
-        """Estimated gyro bias, rad/s, shape (3,)."""
-        self._flush()
-        return self._estimate[4:7].copy()
-
-
-def compiled_attitude_filter(compiled) -> CompiledAttitudeFilter:
-    """A compiled attitude filter (:meth:`controllers.codegen.export.CExport.compile` of a
-    :func:`filter_program`) as the estimator of
-    :func:`flexctl.sim.spatial_loop.simulate_spatial_loop`.
-
-    Parameters
-    ----------
-    compiled : CompiledLaw
-        The compiled export.
-
-    Returns
-    -------
-    CompiledAttitudeFilter
-    """
-    kind = getattr(getattr(compiled, "program", None), "kind", None)
-    if kind != "mekf":
-        raise InputTypeError(f"compiled_attitude_filter takes a compiled attitude filter; got "
-                             f"{kind or type(compiled).__name__}")
-    return CompiledAttitudeFilter(compiled)

@@ -104,6 +104,19 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         The flexible state's names (``x_l``'s).
     model : SpatialHoldModel
         The design model over one gyro sample.
+    part : ControllablePart
+        The part of ``x_l`` the filter carries (``z = P x_l``, ``x_l = T z``).
+    phi, gamma, s_x, s_u, gamma_r, s_r : ndarray
+        ``Phi``, ``Gamma``, ``S_x`` and ``S_u`` (module Notes) on that part, and the
+        remainder's columns of the hold.
+    reading_noise : ndarray, shape (3, 3)
+        The gyro reading's noise covariance (its rate noise and the disturbance's share).
+    disturbance_cross : ndarray, shape (3, 3)
+        ``(D Q)^T``: the disturbance's covariance with the reading.
+    bias_walk : ndarray
+        The bias's random walk over a sample, on the error state.
+    torque_variance : float
+        ``torque_sigma^2``, N^2 m^2.
     """
 
     #: The loop hands :meth:`propagate` the torque held over the sample.
@@ -148,10 +161,10 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         self._h = np.zeros((3, 6 + n))
         self._h[:, 3:6] = np.eye(3)
         self._h[:, 6:] = self.s_x / t
-        self._d_q = self.torque_variance * self.s_u.T / t          # (D Q)^T, shape (3, 3)
-        self._reading_noise = self.s_u @ self._d_q / t + self.sigma_v ** 2 / t * np.eye(3)
-        self._walk = np.zeros((6 + n, 6 + n))
-        self._walk[3:6, 3:6] = self.sigma_u2 * t * np.eye(3)
+        self.disturbance_cross = self.torque_variance * self.s_u.T / t          # (D Q)^T, shape (3, 3)
+        self.reading_noise = self.s_u @ self.disturbance_cross / t + self.sigma_v ** 2 / t * np.eye(3)
+        self.bias_walk = np.zeros((6 + n, 6 + n))
+        self.bias_walk[3:6, 3:6] = self.sigma_u2 * t * np.eye(3)
         self.history = deque(maxlen=self.lag + 1)   # (q, b, x, P, reading, torque, H)
 
     @property
@@ -215,8 +228,8 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         g = np.zeros((6 + n, 3))
         g[:3] = j_r @ self.s_u
         g[6:] = self.gamma
-        innovation_cov = h @ self.P @ h.T + self._reading_noise
-        cross = f @ self.P @ h.T + g @ self._d_q
+        innovation_cov = h @ self.P @ h.T + self.reading_noise
+        cross = f @ self.P @ h.T + g @ self.disturbance_cross
         gain = np.linalg.solve(innovation_cov, cross.T).T
         innovation = reading - (turned / t + self.b)
         # the nominal prediction, then the correction in the error state at the sample's end
@@ -227,7 +240,7 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         self.q /= np.linalg.norm(self.q)
         self.b = self.b + correction[3:6]
         self.x = self.x + correction[6:]
-        self.P = f @ self.P @ f.T + self.torque_variance * g @ g.T + self._walk \
+        self.P = f @ self.P @ f.T + self.torque_variance * g @ g.T + self.bias_walk \
             - gain @ innovation_cov @ gain.T
         self.P = 0.5 * (self.P + self.P.T)
 

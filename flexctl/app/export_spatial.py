@@ -3,7 +3,7 @@
 The law of the scene's ``[controller]`` (quaternion feedback, an LQR or an LQG, following an
 eigenaxis slew or not; :func:`controllers.codegen.spatial_program.spatial_program`) is
 written in the export folder as a planar scene's law is; with ``[sensors]``, the attitude
-filter the law reads through (:func:`controllers.codegen.spatial_program.filter_program`) in
+filter the law reads through (:func:`controllers.codegen.filter_program.filter_program`) in
 its subfolder ``filter/``. Each is compiled and checked against its program, built for the
 target, and with ``loop_check`` both are flown compiled, in double and in float, in the scene's
 loop on its own plant against the Python law and filter: ``precision_in_the_loop`` gives the
@@ -53,8 +53,8 @@ def _pointing(scene, result) -> float:
 
 def _loop_differences(scene, compiled: dict, precision: str, python) -> dict:
     """The scene's loop flown with the compiled law and filter against Python's run."""
-    from controllers.codegen.spatial_program import (compiled_attitude_filter,
-                                                     compiled_spatial_law)
+    from controllers.codegen.filter_program import compiled_attitude_filter
+    from controllers.codegen.spatial_program import compiled_spatial_law
 
     from .spatial_report import fly_spatial_loop
 

@@ -53,7 +53,7 @@
   (:class:`controllers.feedback.mekf.AttitudeFilter`), which starts at the scene's initial
   attitude; ``filter = "modes"`` takes the one with the arrays' modes in it
   (:class:`controllers.feedback.flexible_mekf.FlexibleAttitudeFilter`, 1 mode per field,
-  first_order; through wheels it reads their speeds), which has no C form.
+  first_order; through wheels it reads their speeds); both export as C.
 
 The loop's outputs are at its samples (``simulation.output_step`` does not apply).
 """

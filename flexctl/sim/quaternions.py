@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["product", "symbolic_product", "conjugate", "from_rotation_vector", "rotation_vector", "rotation_matrix",
-           "error_angles"]
+__all__ = ["product", "symbolic_product", "conjugate", "from_rotation_vector", "rotation_vector",
+           "rotation_matrix", "error_angles", "symbolic_from_rotation_vector",
+           "symbolic_rotation_vector", "symbolic_rotation_matrix"]
 
 
 def product(p, q) -> np.ndarray:
@@ -55,6 +56,73 @@ def symbolic_product(p, q):
 
     pv, qv = p[1:4], q[1:4]
     return ca.vertcat(p[0] * q[0] - ca.dot(pv, qv), p[0] * qv + q[0] * pv + ca.cross(pv, qv))
+
+
+def symbolic_from_rotation_vector(phi):
+    """:func:`from_rotation_vector` of a CasADi column vector, its series included.
+
+    Parameters
+    ----------
+    phi : casadi.SX or casadi.MX, shape (3, 1)
+        Rotation vector, rad.
+
+    Returns
+    -------
+    Same type, shape (4, 1)
+        Scalar first.
+    """
+    import casadi as ca
+
+    angle = ca.norm_2(phi)
+    half = 0.5 * angle
+    scale = ca.if_else(angle > 1e-4, ca.sin(half) / ca.fmax(angle, 1e-300),
+                       0.5 - angle * angle / 48.0)
+    return ca.vertcat(ca.cos(half), scale * phi)
+
+
+def symbolic_rotation_vector(q):
+    """:func:`rotation_vector` of a CasADi column quaternion (not normalised), the short way
+    round.
+
+    Parameters
+    ----------
+    q : casadi.SX or casadi.MX, shape (4, 1)
+        Unit quaternion, scalar first.
+
+    Returns
+    -------
+    Same type, shape (3, 1)
+        rad.
+    """
+    import casadi as ca
+
+    sign = ca.if_else(q[0] < 0, -1.0, 1.0)
+    w, v = sign * q[0], sign * q[1:4]
+    s = ca.norm_2(v)
+    return ca.if_else(s < 1e-12, 2.0 * v, 2.0 * ca.atan2(s, w) * v / ca.fmax(s, 1e-300))
+
+
+def symbolic_rotation_matrix(q):
+    """:func:`rotation_matrix` of a CasADi column quaternion (normalised here).
+
+    Parameters
+    ----------
+    q : casadi.SX or casadi.MX, shape (4, 1)
+        Quaternion, scalar first.
+
+    Returns
+    -------
+    Same type, shape (3, 3)
+        Hub to inertial.
+    """
+    import casadi as ca
+
+    q = q / ca.norm_2(q)
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return ca.vertcat(
+        ca.horzcat(1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        ca.horzcat(2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        ca.horzcat(2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
 
 
 def conjugate(q) -> np.ndarray:

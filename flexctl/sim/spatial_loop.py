@@ -136,17 +136,19 @@ class _Sensed:
             turned = rotation_vector(product(conjugate(past[k - 1]), attitude))
             gyro = self.readings.gyro(turned / sample_time)
             if self.wheels is not None:
-                start, h = self.momentum, self._rotors(gyro - estimator.bias, speeds)
+                start, self.momentum = self.momentum, self._rotors(gyro - estimator.bias,
+                                                                   speeds)
                 axes = self.wheels.axes
-                estimator.propagate(gyro, -axes @ (h - start) / sample_time, axes @ start)
+                estimator.propagate(gyro, -axes @ (self.momentum - start) / sample_time,
+                                    axes @ start)
             elif self.takes_torque:
                 estimator.propagate(gyro, torque)
             else:
                 estimator.propagate(gyro)
         else:
             gyro = self.readings.gyro(rate)
-        if self.wheels is not None:
-            self.momentum = self._rotors(gyro - estimator.bias, speeds)
+            if self.wheels is not None:
+                self.momentum = self._rotors(gyro - estimator.bias, speeds)
         if k and k % self.every == 0 and k >= self.lag and \
                 self.sensors.star_tracker.available(t):
             estimator.update(self.readings.star_tracker(past[k - self.lag]))

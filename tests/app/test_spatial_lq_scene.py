@@ -40,7 +40,12 @@ def test_the_lqg_example_slews_through_its_sensors_and_filters(tmp_path):
     assert verdict["multiloop"][0] <= min(verdict["disk_margin"]) * (1 + 1e-6)
     error = _final_error(out)
     print(f"final pointing error {error:.1e} rad")
-    assert error < 1e-3                      # the sensors' noise, not the law, sets the floor
+    assert error < 1e-3
+    written = tmp_path / "c"                 # its filter as C beside the law
+    assert main(["export", str(path), "--out", str(written), "--no-compile"]) == 0
+    summary = json.loads((written / "export.json").read_text())
+    assert "modal states of the structure" in summary["filter"]["description"]
+    assert summary["filter"]["input_names"][3:9] == ["tx", "ty", "tz", "hx", "hy", "hz"]                      # the sensors' noise, not the law, sets the floor
 
 
 def _lqr_scene(sensors: bool) -> str:
@@ -331,7 +336,7 @@ def test_a_scene_flies_the_filter_with_the_modes_without_wheels(tmp_path):
 def test_a_scene_flies_the_filter_with_the_modes_through_wheels(tmp_path):
     """The example's LQG through its three wheels, reading the filter with the modes (which
     reads the wheels' speeds): the slew ends as the attitude filter's does, to the sensors'
-    noise."""
+    noise; the export writes that filter as C."""
     path = tmp_path / "modes.toml"
     path.write_text(_modes_filter_scene(wheels=True))
     out = tmp_path / "out"
@@ -341,3 +346,8 @@ def test_a_scene_flies_the_filter_with_the_modes_through_wheels(tmp_path):
     error = _final_error(out)
     print(f"final pointing error {error:.1e} rad")
     assert error < 1e-3
+    written = tmp_path / "c"                 # its filter as C beside the law
+    assert main(["export", str(path), "--out", str(written), "--no-compile"]) == 0
+    summary = json.loads((written / "export.json").read_text())
+    assert "modal states of the structure" in summary["filter"]["description"]
+    assert summary["filter"]["input_names"][3:9] == ["tx", "ty", "tz", "hx", "hy", "hz"]

@@ -173,7 +173,7 @@ def test_the_c_attitude_filter_estimates_as_python_in_double_and_in_float(tmp_pa
     """The filter as C, fed by the loop's sensors (the tracker 0.2 s late: two gyro samples
     replayed at each update): the same estimates as the Python filter sample by sample; in
     float within 1e-6 rad and 1e-7 rad/s."""
-    from controllers.codegen.spatial_program import compiled_attitude_filter, filter_program
+    from controllers.codegen.filter_program import compiled_attitude_filter, filter_program
 
     law = _quaternion_law()
     run = _sensed_loop(law)
@@ -198,8 +198,8 @@ def test_the_c_attitude_filter_estimates_as_python_in_double_and_in_float(tmp_pa
 
 def test_a_filter_export_refuses_what_it_cannot_write(tmp_path):
     from controllers.codegen.program import ExportRefused
-    from controllers.codegen.spatial_program import (MAX_FILTER_LAG, compiled_attitude_filter,
-                                                     filter_program)
+    from controllers.codegen.filter_program import (MAX_FILTER_LAG, compiled_attitude_filter,
+                                                    filter_program)
 
     with pytest.raises(InputTypeError, match="AttitudeFilter"):
         filter_program(object())
