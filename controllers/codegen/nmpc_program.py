@@ -56,7 +56,7 @@ def hermite_rows(t, grid, coef):
     Parameters
     ----------
     t : CasADi scalar
-        Time, s.
+        Time, s (MX: the hold found by a binary search, SX: by a chain of ``if_else``).
     grid : ndarray, shape (K+1,)
         The solution's grid times, s (``SlewSolution.t``).
     coef : ndarray, shape (K, 4, n)
@@ -68,16 +68,38 @@ def hermite_rows(t, grid, coef):
 
     k_holds, _, n = coef.shape
     table = np.column_stack((grid[:-1], grid[1:], coef.reshape(k_holds, 4 * n)))
-    row = piecewise_constant(t, grid[1:-1], table)
+    row = (_looked_up(t, grid, table) if isinstance(t, ca.MX)
+           else piecewise_constant(t, grid[1:-1], table))
     s = ca.fmin(ca.fmax((t - row[0]) / (row[1] - row[0]), 0.0), 1.0)
     c = [row[2 + j * n:2 + (j + 1) * n] for j in range(4)]
     return c[0] + s * (c[1] + s * (c[2] + s * c[3]))
+
+
+def _looked_up(t, grid, table):
+    """MX: the row of ``table`` (K, m) of the hold ``grid[k] <= t < grid[k + 1]`` of ``grid``
+    (K + 1 ascending times; the first and last holds extend to infinity), found by binary
+    searches (CasADi's linear interpolants: ``t`` to its fractional hold index, then that
+    index, floored, to its row, read exactly at a node) instead of a chain over every hold."""
+    import casadi as ca
+
+    k_holds = table.shape[0]
+    if k_holds == 1:
+        return ca.DM(table[0])
+    index = ca.interpolant("hold_index", "linear", [grid], np.arange(k_holds + 1.0))
+    rows = ca.interpolant("hold_row", "linear", [np.arange(float(k_holds))],
+                          table.T.ravel(order="F"))
+    clamped = ca.fmin(ca.fmax(t, grid[0]), grid[-1])
+    k = ca.fmin(ca.floor(index(clamped)), k_holds - 1.0)
+    return rows(k)
 
 
 def _impulse_at(t, edges, impulse):
     """``np.interp(t, edges, impulse)`` (clamped at both ends)."""
     import casadi as ca
 
+    if isinstance(t, ca.MX):
+        line = ca.interpolant("impulse", "linear", [edges], impulse)
+        return line(ca.fmin(ca.fmax(t, edges[0]), edges[-1]))
     from flexctl.sim.compiled import piecewise_constant
 
     table = np.column_stack((edges[:-1], edges[1:], impulse[:-1], impulse[1:]))
@@ -101,7 +123,7 @@ def _reference(mpc, t):
     grid, coef = np.asarray(solution.t, dtype=float), np.asarray(solution._hermite)
     edges, values = mpc._reference_holds()
     impulse = np.concatenate(([0.0], np.cumsum(values * np.diff(edges))))
-    time = ca.SX.sym("t")
+    time = ca.MX.sym("t")
     held = (_impulse_at(time + step, edges, impulse) - _impulse_at(time, edges, impulse)) / step
     at = ca.Function("nmpc_reference", [time],
                      [ca.vertcat(hermite_rows(time, grid, coef), held)])
