@@ -307,8 +307,11 @@ def _attitude_errors(target, quaternions) -> np.ndarray:
     w0, v0 = target[0], -np.asarray(target[1:])
     qw, qv = quaternions[0], quaternions[1:].T
     scalar = w0 * qw - qv @ v0
-    vector = w0 * qv + qw[:, None] * v0[None, :] + np.cross(v0[None, :], qv)
-    size = np.linalg.norm(vector, axis=1)
+    cross = np.column_stack((v0[1] * qv[:, 2] - v0[2] * qv[:, 1],    # v0 x qv, per row
+                             v0[2] * qv[:, 0] - v0[0] * qv[:, 2],
+                             v0[0] * qv[:, 1] - v0[1] * qv[:, 0]))
+    vector = w0 * qv + qw[:, None] * v0[None, :] + cross
+    size = np.sqrt(np.einsum("ij,ij->i", vector, vector))
     angle = 2.0 * np.arctan2(size, np.abs(scalar)) * np.where(scalar < 0, -1.0, 1.0)
     scale = np.where(size > 1e-300, angle / np.maximum(size, 1e-300), 2.0)
     return vector * scale[:, None]
