@@ -187,7 +187,9 @@ class TargetBuild:
         Functions the law needs from the C library (and, for double on a single-precision
         FPU, the compiler's software double arithmetic, ``__aeabi_d*``).
     software_double : bool
-        Double arithmetic runs in software (``__aeabi_d*`` calls).
+        Double arithmetic runs in software (``__aeabi_d*`` calls other than the conversions
+        between double and 64-bit integers, which the Cortex-M floating-point units do not
+        make).
     """
 
     target: str
@@ -272,7 +274,14 @@ def build_for_target(export, target="cortex-m4", cc: str | None = None) -> Targe
         code_bytes=sections["text"], constant_bytes=sections["rodata"],
         static_ram_bytes=sections["data"] + sections["bss"], struct_bytes=struct,
         stack_bytes=stack, stack_path=path, library_calls=external,
-        software_double=any(name.startswith("__aeabi_d") for name in external))
+        software_double=any(name.startswith("__aeabi_d") and name not in _WIDE_CONVERSIONS
+                            for name in external))
+
+
+#: The run-time helpers that convert between double and 64-bit integers (CasADi's index type,
+#: in its table look-ups): no floating-point unit converts those, so they appear with
+#: hardware double too; they are not double arithmetic in software.
+_WIDE_CONVERSIONS = ("__aeabi_d2lz", "__aeabi_d2ulz", "__aeabi_l2d", "__aeabi_ul2d")
 
 
 def _sections(table: str) -> dict:
