@@ -492,7 +492,6 @@ class NMPC:
             Sample times, s.
         """
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        layout = self.model.layout
         if self.reference is None:
             r = np.repeat(self.model.rest_state(self.target)[:, None], t.size, axis=1)
             return r, np.zeros(t.size)
