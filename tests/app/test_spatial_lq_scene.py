@@ -40,12 +40,7 @@ def test_the_lqg_example_slews_through_its_sensors_and_filters(tmp_path):
     assert verdict["multiloop"][0] <= min(verdict["disk_margin"]) * (1 + 1e-6)
     error = _final_error(out)
     print(f"final pointing error {error:.1e} rad")
-    assert error < 1e-3
-    written = tmp_path / "c"                 # its filter as C beside the law
-    assert main(["export", str(path), "--out", str(written), "--no-compile"]) == 0
-    summary = json.loads((written / "export.json").read_text())
-    assert "modal states of the structure" in summary["filter"]["description"]
-    assert summary["filter"]["input_names"][3:9] == ["tx", "ty", "tz", "hx", "hy", "hz"]                      # the sensors' noise, not the law, sets the floor
+    assert error < 1e-3                      # the sensors' noise, not the law, sets the floor
 
 
 def _lqr_scene(sensors: bool) -> str:

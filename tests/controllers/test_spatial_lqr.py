@@ -258,8 +258,10 @@ def test_the_held_loop_is_the_one_the_law_closes(kind):
                                                       rel=1e-6)
     assert margins.closed_loop_stable and np.all(margins.gain_margin_db > 6.0)
     assert np.all(margins.frequency < np.pi / 0.1)
-    with pytest.raises(InputValueError, match="SpatialLQR or SpatialLQG"):
+    with pytest.raises(InputValueError, match="SpatialLQR, SpatialLQG or ScheduledSpatialLQR"):
         lq_loop(object(), truth)
+    with pytest.raises(InputValueError, match=r"lq_loop\.spin is for a ScheduledSpatialLQR"):
+        lq_loop(law, truth, spin=1.0)
 
 
 # ------------------------------------------------------------------ eigenaxis slews

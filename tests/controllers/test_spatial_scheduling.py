@@ -97,6 +97,22 @@ def test_the_design_at_rest_loses_the_spinning_loop_that_the_schedule_holds():
     assert tips["rest"] > 30 * tips["scheduled"]
 
 
+def test_the_broken_loop_at_a_spin_closes_the_loop_the_schedule_holds_there():
+    """``lq_loop(law, plant, spin=...)``: the held loop the gain interpolated at the spin
+    closes around the plant linearised about it, the poles of :meth:`loop_poles`; the spin
+    is required."""
+    from controllers.analysis.spatial_loops import loop_disk_margins, lq_loop
+
+    law = _design([0.0, 4.0, 8.0])
+    for spin in (4.0, 6.0):
+        margins = loop_disk_margins(lq_loop(law, law.plant_at(spin), spin=spin))
+        assert margins.spectral_abscissa == pytest.approx(
+            np.max(law.loop_poles(spin).real), abs=1e-9)
+        assert margins.closed_loop_stable and np.all(margins.disk_margin > 0.3)
+    with pytest.raises(InputValueError, match=r"lq_loop\.spin is required"):
+        lq_loop(law, law.plant_at(4.0))
+
+
 def test_a_schedule_too_sparse_where_the_plant_changes_fast_says_where():
     """About x (the intermediate principal axis: the rigid spin is unstable on its own), with
     two modes per field, the gain interpolated halfway between 10 and 15 rad/s loses the loop
