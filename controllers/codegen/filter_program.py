@@ -95,9 +95,14 @@ class _Layout:
         """``(q, b, z, P, done, history)`` of the memory."""
         return (*self.estimate(ca, memory), memory[self.state], memory[self.state + 1:])
 
+    def packed(self, ca, q, b, z, cov) -> object:
+        """The estimate ``(q, b, z, P)`` as one column (``P`` by rows)."""
+        return ca.vertcat(q, b, z, ca.reshape(cov.T, self.size ** 2, 1))
+
     def joined(self, ca, state) -> object:
-        q, b, z, cov, done, history = state
-        return ca.vertcat(q, b, z, ca.reshape(cov.T, self.size ** 2, 1), done, history)
+        """The memory of ``(q, b, z, P, done, history)``."""
+        *estimate, done, history = state
+        return ca.vertcat(self.packed(ca, *estimate), done, history)
 
     def initial(self, estimator) -> np.ndarray:
         memory = np.zeros(self.total)
@@ -112,7 +117,7 @@ def _remembered(ca, state, inputs, layout: _Layout) -> tuple:
     q, b, z, cov, done, history = state
     if not layout.lag:
         return state
-    entry = ca.vertcat(q, b, z, ca.reshape(cov.T, layout.size ** 2, 1), inputs)
+    entry = ca.vertcat(layout.packed(ca, q, b, z, cov), inputs)
     return (q, b, z, cov, ca.fmin(done + 1, layout.lag),
             ca.vertcat(history[layout.entry:], entry))
 

@@ -161,8 +161,9 @@ class FlexibleAttitudeFilter(AttitudeFilter):
         self._h = np.zeros((3, 6 + n))
         self._h[:, 3:6] = np.eye(3)
         self._h[:, 6:] = self.s_x / t
-        self.disturbance_cross = self.torque_variance * self.s_u.T / t          # (D Q)^T, shape (3, 3)
-        self.reading_noise = self.s_u @ self.disturbance_cross / t + self.sigma_v ** 2 / t * np.eye(3)
+        self.disturbance_cross = self.torque_variance * self.s_u.T / t    # (D Q)^T, (3, 3)
+        self.reading_noise = (self.s_u @ self.disturbance_cross / t
+                              + self.sigma_v ** 2 / t * np.eye(3))
         self.bias_walk = np.zeros((6 + n, 6 + n))
         self.bias_walk[3:6, 3:6] = self.sigma_u2 * t * np.eye(3)
         self.history = deque(maxlen=self.lag + 1)   # (q, b, x, P, reading, torque, H)

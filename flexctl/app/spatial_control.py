@@ -267,16 +267,23 @@ def _scene_message(message: str) -> str:
     return message
 
 
+def _weights(controller: dict):
+    """The Bryson weights of a ``[controller]`` table (an LQR's, LQG's, NMPC's or scheduled
+    LQR's)."""
+    from controllers.feedback.lqr import LQRWeights
+
+    return LQRWeights(**{key: controller[key] for key in
+                         ("hub_angle", "hub_rate", "tip_deflection", "torque")
+                         if key in controller})
+
+
 def _scheduled(controller: dict, structure, quaternion, step: float, variant: str):
     """The scheduled LQR of a ``[controller]`` table: a spin-up (or a steady spin) about
     its axis from the initial attitude."""
-    from controllers.feedback.lqr import LQRWeights
     from controllers.feedback.spatial_scheduling import design_scheduled_spatial_lqr
     from ..sim.maneuvers import SpinUp
 
-    weights = LQRWeights(**{key: controller[key] for key in
-                            ("hub_angle", "hub_rate", "tip_deflection", "torque")
-                            if key in controller})
+    weights = _weights(controller)
     rate = _checked(check_real, "controller", "spin_rate", controller["spin_rate"],
                     minimum=-1e4, maximum=1e4)
     profile = (SpinUp(spin_rate=rate, ramp_time=controller["ramp_time"])
@@ -338,12 +345,9 @@ def _design(kind: str, controller: dict, structure, target, step: float, wheels:
             damping=controller.get("damping", 0.7),
             integral_time=controller.get("integral_time"),
             torque_limit=controller.get("torque_limit"))
-    from controllers.feedback.lqr import LQRWeights
     from controllers.feedback.spatial_lqr import design_spatial_lqg, design_spatial_lqr
 
-    weights = LQRWeights(**{key: controller[key] for key in
-                            ("hub_angle", "hub_rate", "tip_deflection", "torque")
-                            if key in controller})
+    weights = _weights(controller)
     n_modes = controller.get("design_modes", 1 if kind == "nmpc" else 2)
     common = {"n_modes": n_modes,
               "torque_limit": controller.get("torque_limit"),

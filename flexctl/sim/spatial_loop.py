@@ -123,6 +123,8 @@ class _Sensed:
         self.estimates, self.biases = np.zeros((4, count + 1)), np.zeros((3, count + 1))
         self.takes_torque = bool(getattr(estimator, "takes_torque", False))
         self.wheels = wheels if self.takes_torque else None
+        if self.wheels is not None:         # G and the rotors' inertias, read at every sample
+            self.axes, self.inertias = self.wheels.axes, self.wheels.inertias
         self.momentum = None                # the rotors' axial momenta at the last sample
 
     def read(self, k: int, t: float, attitude, rate, sample_time: float, torque,
@@ -138,9 +140,8 @@ class _Sensed:
             if self.wheels is not None:
                 start, self.momentum = self.momentum, self._rotors(gyro - estimator.bias,
                                                                    speeds)
-                axes = self.wheels.axes
-                estimator.propagate(gyro, -axes @ (self.momentum - start) / sample_time,
-                                    axes @ start)
+                estimator.propagate(gyro, -self.axes @ (self.momentum - start) / sample_time,
+                                    self.axes @ start)
             elif self.takes_torque:
                 estimator.propagate(gyro, torque)
             else:
@@ -158,7 +159,7 @@ class _Sensed:
     def _rotors(self, rate, speeds) -> np.ndarray:
         """The rotors' axial momenta ``J_k (g_k . w + Omega_k)``, N m s, from a measured hub
         rate and the wheels' speeds."""
-        return self.wheels.inertias * (self.wheels.axes.T @ rate + speeds)
+        return self.inertias * (self.axes.T @ rate + speeds)
 
 
 def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float | None = None,
