@@ -17,9 +17,10 @@
 # # 1. Modelling: the cantilever basis and its mode shapes
 #
 # flexctl describes the beam's deflection in the hub frame as a sum of clamped-free
-# (cantilever) mode shapes, `y(x, t) = sum_i phi_i(x) q_i(t)` (MODEL.md section 3).
-# This notebook draws the basis, checks it against the closed forms, and shows what a point
-# mass does to the lowest frequency of the paper-000 hub-beam-mass system.
+# (cantilever) mode shapes, `y(x, t) = sum_i phi_i(x) q_i(t)`
+# ({ref}`section 3 of the model <sec-modes>`). This notebook draws the basis, checks it against
+# the closed forms, and shows what a point mass does to the lowest frequency of the
+# hub-beam-mass system ({ref}`paper 000 <paper-000>`).
 #
 # Every number asserted below comes from a closed form or a published value, not from
 # flexctl itself.
@@ -39,7 +40,8 @@ from flexctl.app.plotting import plot_mode_shapes
 # ## The Kane beam (paper 001, section 3.1)
 #
 # An 8 m aluminium beam. Its clamped frequencies are `omega_i = z_i^2 sqrt(EI / (rhoA l^4))`
-# with `z_i` the roots of `cos z cosh z + 1 = 0`; paper 001 quotes 2.91 and 18.24 rad/s.
+# with `z_i` the roots of `cos z cosh z + 1 = 0`; the flexible-spacecraft paper
+# ({ref}`paper 001 <paper-001>`) quotes 2.91 and 18.24 rad/s.
 
 # %%
 kane = flexctl.load_scene("kane-spinup").system
@@ -56,10 +58,10 @@ print("roots z_i      :", roots.round(7))
 print("closed form    :", closed_form.round(3), "rad/s")
 print("flexctl (clamp):", computed.round(3), "rad/s")
 
-# %%
+# %% tags=["remove-cell"]
 assert np.allclose(cantilever_roots(5), roots, rtol=1e-9)
 assert np.allclose(computed, closed_form, rtol=1e-6), "clamped frequencies off the closed form"
-# Paper 001 reads 2.91 and 18.24 rad/s; MODEL.md 2.911, 18.24, 51.08.
+# Paper 001 reads 2.91 and 18.24 rad/s; the theory page, section 7: 2.911, 18.24, 51.08.
 assert np.allclose(computed[:3], [2.911, 18.24, 51.08], rtol=1e-3)
 
 # %%
@@ -85,6 +87,8 @@ gram = (phi * w) @ phi.T                     # integral over xi in [0, 1] = (1/l
 tips = mode_shapes(n_check, np.array([1.0]))[:, 0]
 print(f"largest orthonormality error over {n_check} modes: "
       f"{np.abs(gram - np.eye(n_check)).max():.2e}")
+
+# %% tags=["remove-cell"]
 assert np.abs(gram - np.eye(n_check)).max() < 1e-10
 assert np.allclose(tips, 2.0 * (-1.0) ** np.arange(n_check), atol=1e-9)
 
@@ -103,6 +107,8 @@ without = flexctl.build_model(bare, n_modes=6)
 print("clamped, no mass  :", without.natural_frequencies()[:3].round(3), "rad/s")
 print("clamped, 0.085 kg :", with_mass.natural_frequencies()[:3].round(3), "rad/s")
 print("hub free, 0.085 kg:", with_mass.natural_frequencies(hub="free")[:3].round(3), "rad/s")
+
+# %% tags=["remove-cell"]
 assert with_mass.natural_frequencies()[0] < without.natural_frequencies()[0]
 
 # %%
@@ -132,9 +138,9 @@ for n in (2, 4, 8, 16):
     w1 = flexctl.build_model(tip_mass, n_modes=n).natural_frequencies()[0]
     errors[n] = (w1 - exact) / exact
     print(f"{n:2d} modes: first clamped frequency {w1:.6f} rad/s, error {errors[n]:+.2e}")
-print(f"exact: {exact:.6f} rad/s (MODEL.md: 1.7325)")
+print(f"exact: {exact:.6f} rad/s (the theory page, section 7: 1.7325)")
 
-# %%
+# %% tags=["remove-cell"]
 assert abs(exact - 1.7325) < 5e-4
 # Rayleigh-Ritz approaches from above, and the error falls as modes are added.
 assert all(e > 0 for e in errors.values())

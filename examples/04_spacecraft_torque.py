@@ -16,11 +16,12 @@
 # %% [markdown]
 # # 4. A flexible spacecraft under 50 N m (paper 001, Fig. 5)
 #
-# Paper 001 section 3.2: a massless hub (`J_h = 0, b = 0`) carrying a 5 m aluminium beam is
-# driven by one period of sine torque, `T_h = 50 sin(pi t)` N m for `t <= 2 s`. The paper's
-# first-order model gives a peak tip deflection of 0.42 m and, once the torque is off, a
-# continuing oscillation of about 0.07 m; "the first-order approximate coupling model of
-# general papers" (flexctl's `consistent` variant) diverges early under the same conditions.
+# The flexible-spacecraft paper ({ref}`paper 001 <paper-001>`), section 3.2: a massless hub
+# (`J_h = 0, b = 0`) carrying a 5 m aluminium beam is driven by one period of sine torque,
+# `T_h = 50 sin(pi t)` N m for `t <= 2 s`. The paper's first-order model gives a peak tip
+# deflection of 0.42 m and, once the torque is off, a continuing oscillation of about 0.07 m;
+# "the first-order approximate coupling model of general papers" (flexctl's `consistent`
+# variant) diverges early under the same conditions.
 
 # %%
 # %matplotlib inline
@@ -62,7 +63,7 @@ print(f"residual, total          {residual:.4f} m")
 print(f"residual, q_1 part       {residual_first_mode:.4f} m   (paper 001: about 0.07 m)")
 print(f"hub-free frequencies     {free_frequencies[:2].round(2)} rad/s")
 
-# %%
+# %% tags=["remove-cell"]
 TOLERANCE = 0.03        # the papers' figures were read off plots: a few percent
 assert result.status == "ok"
 assert abs(peak - 0.42) < TOLERANCE * 0.42
@@ -82,6 +83,8 @@ for n in (2, 4, 8):
     run = flexctl.simulate(flexctl.build_model(scene.system, n_modes=n), 20.0, torque=torque)
     by_modes[n] = response_amplitudes(run, torque.duration)
     print(f"{n} modes: peak {by_modes[n][0]:.4f} m, residual {by_modes[n][1]:.4f} m")
+
+# %% tags=["remove-cell"]
 assert abs(by_modes[2][0] / by_modes[8][0] - 1) < 0.02
 assert abs(by_modes[4][0] / by_modes[8][0] - 1) < 0.005
 assert abs(by_modes[2][1] / by_modes[8][1] - 1) < 0.05
@@ -89,10 +92,10 @@ assert abs(by_modes[2][1] / by_modes[8][1] - 1) < 0.05
 # %% [markdown]
 # ## The consistent model breaks down
 #
-# The energy-consistent variant adds the second-order hub inertia `q^T D q` (MODEL.md
-# section 4). With a massless hub the deflection drives the effective hub inertia to zero
-# within a fraction of a second; the mass matrix turns singular and flexctl stops the run
-# and says why (MODEL.md: at about 0.26 s).
+# The energy-consistent variant adds the second-order hub inertia `q^T D q`
+# ({ref}`section 4 of the model <variants>`). With a massless hub the deflection drives the
+# effective hub inertia to zero within a fraction of a second; the mass matrix turns singular
+# and flexctl stops the run and says why (at about 0.26 s, as that section says).
 
 # %%
 consistent = flexctl.simulate(flexctl.build_model(scene.system, variant="consistent"), 20.0,
@@ -103,6 +106,6 @@ fig = plot_tip_deflections({"first_order": result, "consistent": consistent},
 fig.axes[0].set_xlim(0.0, 4.0)
 fig
 
-# %%
+# %% tags=["remove-cell"]
 assert consistent.status == "singular"
 assert abs(consistent.t[-1] - 0.26) < 0.02

@@ -83,7 +83,7 @@ axes[0].legend()
 fig.tight_layout()
 plt.show()
 
-# %%
+# %% tags=["remove-cell"]
 for label, (ratio, difference, estimate) in rows.items():
     assert 0.5 * difference <= estimate <= 2.0 * difference, label
 assert rows["Kane spin-up to 10 rad/s"][1] < 0.01      # about 0.5 %: first_order is fine
@@ -100,6 +100,8 @@ gentle = flexctl.load_scene("hub-beam-mass", overrides={"model.variant": "auto",
 fast = flexctl.load_scene("slew-90", overrides={"model.variant": "auto"})
 print(gentle.variant_choice().explanation)
 print(fast.variant_choice().explanation)
+
+# %% tags=["remove-cell"]
 assert gentle.variant == "first_order" and fast.variant == "exact"
 
 # %% [markdown]
@@ -140,6 +142,6 @@ bars.set_ylabel("residual vibration (mm)")
 fig.tight_layout()
 plt.show()
 
-# %%
+# %% tags=["remove-cell"]
 assert residual["exact"] < 5e-4
 assert residual["first_order"] > 20 * residual["exact"]

@@ -73,7 +73,7 @@ fig = plot_pole_zero({"hub angle": channels.hub_angle, "tip angle": channels.tip
                      title="slew-90 plant: poles (x) and zeros (o)")
 fig
 
-# %%
+# %% tags=["remove-cell"]
 assert np.allclose(zero_frequencies, channels.clamped_frequencies, rtol=1e-6)
 assert np.all(zero_frequencies < free) and np.all(free[:-1] < zero_frequencies[1:])
 assert np.max(tip_zeros.real) > 1.0
@@ -128,7 +128,7 @@ fig = plot_bode({"PD on hub angle": hub_loop, "PD on tip angle": tip_loop},
                 title="Collocated and tip feedback, same gains")
 fig
 
-# %%
+# %% tags=["remove-cell"]
 hub_margins = loop_margins(hub_loop)
 assert max(collocated) < 0.0 and min(tip) > 0.0
 assert hub_margins.closed_loop_stable and hub_margins.gain_margin == np.inf
@@ -189,7 +189,7 @@ fig = plot_bode(loops, natural_frequencies=free, omega_limits=(0.1, 1000.0),
                 title="slew-90 loops on the 6-mode plant, broken at the torque")
 fig
 
-# %%
+# %% tags=["remove-cell"]
 lqr_design, lqg_design = margins["lqr", "design"], margins["lqg", "design"]
 assert lqr_design.closed_loop_stable and lqr_design.gain_margin == np.inf
 assert abs(lqr_design.phase_margin) >= 60.0 and lqr_design.gain_reduction_margin <= 0.5
@@ -229,10 +229,12 @@ fig
 
 # %%
 first = table.natural_frequencies[:, 0]
-upper_zeros = np.sort(np.where(table.hub_angle_zeros.imag > 0,
-                               table.hub_angle_zeros.imag, np.inf), axis=1)[:, :4]
 print(f"first mode {first[0]:.2f} rad/s at rest, {first[-1]:.2f} rad/s at 12 rad/s")
 print("largest closed-loop real part:", table.closed_loop_poles.real.max(axis=1)[[0, 12, 24]])
+
+# %% tags=["remove-cell"]
+upper_zeros = np.sort(np.where(table.hub_angle_zeros.imag > 0,
+                               table.hub_angle_zeros.imag, np.inf), axis=1)[:, :4]
 assert np.all(np.diff(table.natural_frequencies, axis=0) > 0)
 assert np.all(upper_zeros < table.natural_frequencies)               # still interlaced
 assert np.all(table.natural_frequencies[:, :-1] < upper_zeros[:, 1:])
@@ -284,6 +286,8 @@ stiffness = lqg_study.column("youngs_modulus_scale")
 stable = lqg_study.column("closed_loop_stable").astype(bool)
 print(f"LQG: unstable for {np.sum(~stable)} of 60 samples, all with Young's modulus "
       f"at most {stiffness[~stable].max():.3f} x nominal")
+
+# %% tags=["remove-cell"]
 assert summaries["pd"].stable_fraction == 1.0 and summaries["pd"].worst_gain_margin == np.inf
 assert summaries["lqr"].stable_fraction == 1.0 and summaries["lqr"].worst_phase_margin > 60.0
 assert 0.0 < summaries["lqg"].stable_fraction < 1.0

@@ -104,6 +104,9 @@ margins = {"quaternion": loop_disk_margins(quaternion_loop(laws["quaternion"], c
            "LQG": loop_disk_margins(lq_loop(laws["LQG"], plant))}
 for name, m in margins.items():
     print(f"{name}:\n{m}")
+
+# %% tags=["remove-cell"]
+for name, m in margins.items():
     assert m.closed_loop_stable and np.all(m.gain_margin_db > 6.0)
     assert np.all(m.phase_margin_deg > 30.0)
 
@@ -142,6 +145,8 @@ print(f"{'':12s}" + "".join(f"{k:>22s}" for k in table["LQR"]))
 for name in laws:
     print(f"{name:12s}" + "".join(f"{v:12.4g} (+-{abs(v - errors[name][k]):7.1g})"
                                    for k, v in table[name].items()))
+
+# %% tags=["remove-cell"]
 assert all(run.ok for run in runs.values())
 assert table["LQR"]["residual (um)"] < table["quaternion"]["residual (um)"]
 assert all(t["pointing (mrad)"] < 0.5 for t in table.values())
@@ -178,6 +183,8 @@ flown = fly(compiled_spatial_law(compiled))
 difference = np.max(np.abs(flown.states - runs["LQG"].states))
 print(f"C against Python in the loop: largest state difference {difference:.2g}, "
       f"the C struct {compiled.struct_bytes} bytes")
+
+# %% tags=["remove-cell"]
 assert difference < 1e-5
 
 # %% [markdown]
@@ -197,4 +204,6 @@ for row in sweep_table.rows:
     print(f"stiffness {row['stiffness']:.3f}, inertia {row['inertia']:.3f}: {row['status']}, "
           f"pointing {1e3 * row['pointing_error']:.3f} mrad, residual "
           f"{1e6 * row['residual_vibration']:.2f} um")
+
+# %% tags=["remove-cell"]
 assert not sweep_table.failed and all(r["status"] == "ok" for r in sweep_table.rows)

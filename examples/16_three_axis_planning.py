@@ -119,6 +119,8 @@ print(f"largest motor torque: plan {np.max(np.abs(plan.motor_torques)):.4f} N m,
       f"eigenaxis slew {np.max(np.abs(rigid_motors)):.4f} N m (limit {TORQUE_LIMIT} N m)")
 print(f"fastest wheel in the plan {np.max(np.abs(plan.wheel_speeds)):.1f} rad/s "
       f"(limit {SPEED_LIMIT} rad/s), peak power {plan.peak_power:.2f} W")
+
+# %% tags=["remove-cell"]
 assert plan.return_status == "Solve_Succeeded"
 assert np.max(np.abs(plan.motor_torques)) <= 0.8 * TORQUE_LIMIT * (1 + 1e-6)
 assert np.max(np.abs(plan.wheel_speeds)) <= 0.9 * SPEED_LIMIT
@@ -150,6 +152,8 @@ for name, run in open_loop.items():
     peak = max(np.max(np.linalg.norm(tip, axis=0)) for tip in run.tips.values())
     print(f"{name:24s}{1e3 * pointing(run, DURATION):18.4f}{1e6 * residual(run):16.3f}"
           f"{1e3 * peak:16.3f}{np.max(np.abs(run.wheel_speeds)):24.1f}")
+
+# %% tags=["remove-cell"]
 assert all(run.ok for run in open_loop.values())
 assert residual(open_loop["plan"]) < 0.2 * residual(open_loop["eigenaxis"])
 assert pointing(open_loop["eigenaxis, hub-torque form"], DURATION) > \
@@ -220,6 +224,8 @@ for name, run in loops.items():
           f"{np.max(np.abs(run.wheel_torques)):28.4f}")
 print(f"NMPC: median step {np.median(steps):.1f} ms, slowest {np.max(steps):.1f} ms, "
       f"{session.failed_steps} failed QPs")
+
+# %% tags=["remove-cell"]
 assert all(run.ok for run in loops.values()) and session.failed_steps == 0
 eigenaxis_loop = loops["LQR, eigenaxis"]
 for name in ("LQR, plan", "NMPC, plan"):
@@ -303,6 +309,8 @@ print(f"designed at rest, at {SPIN:g} rad/s: a pole at {growing.real:.4f} "
 capacity = np.abs(wheels.axes[2]) @ (wheels.inertias * SPEED_LIMIT)
 print(f"angular momentum at {SPIN:g} rad/s: {craft.rigid_inertia[2, 2] * SPIN:.0f} N m s; "
       f"the wheels store at most {capacity:.1f} N m s about z")
+
+# %% tags=["remove-cell"]
 assert rest_pole > 0.05                                    # a pole grows at 20 rad/s
 assert np.max(growth["designed at rest"][sweep <= 10.0]) < 0.0
 assert np.max(growth["scheduled"]) < GROWTH_TOLERANCE
@@ -342,6 +350,8 @@ for name, run in spin_runs.items():
 flown_growth = np.log(windows["designed at rest"][1] / windows["designed at rest"][0]) / 15.0
 print(f"designed at rest: the error grows at {flown_growth:.3f} 1/s, its loop's pole at "
       f"{rest_pole:.3f} 1/s")
+
+# %% tags=["remove-cell"]
 assert all(run.ok for run in spin_runs.values())
 assert all(abs(run.states[run.layout.n_coordinates + 2, -1] - SPIN) < 1e-3 * SPIN
            for run in spin_runs.values())

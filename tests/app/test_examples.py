@@ -69,6 +69,22 @@ def test_notebook_asserts_its_numbers_and_has_no_stored_outputs(script):
     assert all(not cell.get("outputs") for cell in code)
 
 
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.stem)
+def test_notebook_checks_are_hidden_from_readers(script):
+    # the site leaves out the cells tagged remove-cell: the notebook's own checks, which
+    # show nothing a reader needs (no plot, no print)
+    notebook = jupytext.read(script.with_suffix(".ipynb"))
+    for cell in notebook.cells:
+        if cell.cell_type != "code":
+            continue
+        hidden = "remove-cell" in cell.metadata.get("tags", ())
+        if re.search(r"^\s*assert ", cell.source, re.M):
+            assert hidden, f"{script.name}: a cell with an assert is not tagged remove-cell"
+        if hidden:
+            assert not re.search(r"\b(plt|print|display|fig|ax)\b\s*[.(]", cell.source), (
+                f"{script.name}: a hidden cell shows something:\n{cell.source}")
+
+
 def test_site_lists_every_notebook():
     listing = (ROOT / "docs" / "examples" / "index.md").read_text()
     for script in SCRIPTS:
