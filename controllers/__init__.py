@@ -19,7 +19,7 @@ subpackage or module    contents
 Each part imports only the ones listed before it, and ``spec`` (``tests/test_architecture.py``). Every
 public name is importable from ``controllers`` itself; the modules' former flat paths
 (``controllers.lqr``, ``controllers.trajopt``, ...) name the same modules
-(:data:`FORMER_PATHS`).
+(``FORMER_PATHS``).
 
 The package depends on :mod:`flexctl.model` and :mod:`flexctl.sim` (models and the simulation
 protocol); only the application layer :mod:`flexctl.app` imports it.

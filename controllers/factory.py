@@ -8,98 +8,98 @@ first_order otherwise) and returns it ready for :func:`flexctl.simulate`.
 
 Settings (all optional) per ``kind``, from the registry :data:`controllers.spec.CONTROLLER_KINDS`
 (``tests/controllers/test_controller_registry.py`` checks that this table is
-:func:`controllers.spec.settings_table`):
+:func:`controllers.spec.settings_table`)::
 
-===========  ===============================================================================
-kind         settings
-===========  ===============================================================================
-pd           PD on the hub angle about a smooth reference.
-             ``bandwidth`` (rad/s; default 2; a number > 0): closed-loop bandwidth
-             ``damping_ratio`` (default 0.9; a number > 0): closed-loop damping ratio
-             ``feedforward`` (default true; true or false): add the rigid-body torque of the
-               reference
-             ``reference`` (default "poly7"; one of "poly7", "cycloidal"): shape of the
-               reference slew the loop tracks
-             ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
-               at this period (default: continuous)
-             ``filters`` (an array of tables, each with kind = "notch" | "roll_off" |
-               "lead_lag"): structural filters on the sampled command (needs sample_time or
-               [sensors]), e.g. [{kind = "notch", frequency = 23.8, depth_db = 20}]; notch:
-               frequency (rad/s), depth_db, width; roll_off: frequency, damping; lead_lag:
-               zero, pole (rad/s)
-lqr          full-state LQR about a smooth reference.
-             ``hub_angle`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
-               weight: acceptable hub angle error (was ``angle_error``, deprecated)
-             ``hub_rate`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
-               acceptable hub rate error (was ``rate_error``, deprecated)
-             ``tip_deflection`` (m; default 0.01; a number in [1e-12, 1e+12]): LQR weight:
-               acceptable tip deflection
-             ``modal_energy`` (J; a number in [1e-12, 1e+12]): LQR weight: acceptable modal
-               energy (default: off)
-             ``torque`` (N m; default 1; a number in [1e-12, 1e+12]): LQR weight: acceptable
-               torque
-             ``reference``, ``sample_time``, ``filters``: as for pd
-             ``spin_rate`` (rad/s; default 0; a finite number): hub rate of the
-               linearization the gain is designed at
-lqg          LQR on a Kalman-Bucy estimate from hub angle and root moment.
-             ``hub_angle``, ``hub_rate``, ``tip_deflection``, ``modal_energy``, ``torque``:
-               as for lqr
-             ``reference``: as for pd
-             ``spin_rate``: as for lqr
-             ``angle_noise`` (rad; default 0.001; a number > 0): hub angle measurement noise
-               (estimator)
-             ``moment_noise`` (N m; default 0.1; a number > 0): root bending moment
-               measurement noise (estimator)
-             ``process_torque`` (N m; default 0.1; a number > 0): disturbance torque on the
-               hub (estimator)
-             ``filters``: as for pd
-scheduled    LQR gains designed at several spin rates, interpolated at the hub rate.
-             ``hub_angle``, ``hub_rate``, ``tip_deflection``, ``modal_energy``, ``torque``:
-               as for lqr
-             ``reference``, ``sample_time``, ``filters``: as for pd
-             ``spin_rates`` (rad/s; default [0, 1, 2]; an array of numbers >= 0): design
-               spin rates, strictly increasing
-trajopt      optimal slew on the design model, played open loop.
-             ``n_intervals`` (default 40; an integer >= 2): control intervals of the
-               transcription (was ``intervals``, deprecated)
-             ``objective`` (one of "effort", "time"): default: effort, or time when
-               maneuver.duration is free
-             ``transcription`` (one of "multiple_shooting", "collocation"): default: by the
-               design model (collocation for exact)
-             ``torque_rate_bound`` (N m/s; a number > 0): bound on the torque rate (default:
-               none)
-             ``tip_bound`` (m; a number > 0): bound on the tip deflection (default: none)
-             ``effort_tolerance`` (default 0.01; a number > 0): largest relative excess of
-               the torque holds' least effort over the converged slew's (fixed duration)
-             ``sample_time``: as for pd
-trajopt+lqr  optimal slew with LQR feedback about it (Bryson weights: 5 % of the angle, 3 %
-               of the beam length at the tip, the torque bound).
-             ``n_intervals``, ``objective``, ``transcription``, ``torque_rate_bound``,
-               ``tip_bound``, ``effort_tolerance``: as for trajopt
-             ``sample_time``, ``filters``: as for pd
-bang_bang    rigid time-optimal at the torque bound, or the torque that fits the duration.
-             ``sample_time``: as for pd
-zv           ZV shaper: the bang-bang torque shaped at the first hub-free frequency.
-             ``sample_time``: as for pd
-zvd          ZVD shaper: the bang-bang torque shaped at the first hub-free frequency.
-             ``sample_time``: as for pd
-nmpc         nonlinear MPC on the design model, run sampled.
-             ``horizon`` (samples; default 20; an integer in [2, 500]): prediction horizon
-             ``mode`` (default "rti"; one of "rti", "converged"): real-time iteration or
-               solved to convergence (IPOPT)
-             ``qp_solver`` (default "qrqp"; one of "qrqp", "osqp", "qpoases", "hpipm"):
-               CasADi QP solver of the real-time iteration
-             ``terminal`` (default "lqr"; one of "lqr", "rest"): terminal cost (LQR) or
-               terminal rest constraint
-             ``reference`` (default "trajopt"; one of "trajopt", "none"): track the optimal
-               slew, or regulate to the target
-             ``n_intervals``, ``objective``, ``transcription``, ``torque_rate_bound``,
-               ``tip_bound``, ``effort_tolerance``: as for trajopt
-             ``estimator`` (default "state"; one of "state", "kalman"): measured state, or
-               an extended Kalman filter on hub angle and root moment
-             ``angle_noise``, ``moment_noise``, ``process_torque``: as for lqg
-             ``sample_time`` (s; default 0.02; a number > 0): sample period
-===========  ===============================================================================
+    ===========  ===============================================================================
+    kind         settings
+    ===========  ===============================================================================
+    pd           PD on the hub angle about a smooth reference.
+                 ``bandwidth`` (rad/s; default 2; a number > 0): closed-loop bandwidth
+                 ``damping_ratio`` (default 0.9; a number > 0): closed-loop damping ratio
+                 ``feedforward`` (default true; true or false): add the rigid-body torque of the
+                   reference
+                 ``reference`` (default "poly7"; one of "poly7", "cycloidal"): shape of the
+                   reference slew the loop tracks
+                 ``sample_time`` (s; a number > 0): run the law sampled with a zero-order hold
+                   at this period (default: continuous)
+                 ``filters`` (an array of tables, each with kind = "notch" | "roll_off" |
+                   "lead_lag"): structural filters on the sampled command (needs sample_time or
+                   [sensors]), e.g. [{kind = "notch", frequency = 23.8, depth_db = 20}]; notch:
+                   frequency (rad/s), depth_db, width; roll_off: frequency, damping; lead_lag:
+                   zero, pole (rad/s)
+    lqr          full-state LQR about a smooth reference.
+                 ``hub_angle`` (rad; default 0.05; a number in [1e-12, 1e+12]): LQR (Bryson)
+                   weight: acceptable hub angle error (was ``angle_error``, deprecated)
+                 ``hub_rate`` (rad/s; default 0.02; a number in [1e-12, 1e+12]): LQR weight:
+                   acceptable hub rate error (was ``rate_error``, deprecated)
+                 ``tip_deflection`` (m; default 0.01; a number in [1e-12, 1e+12]): LQR weight:
+                   acceptable tip deflection
+                 ``modal_energy`` (J; a number in [1e-12, 1e+12]): LQR weight: acceptable modal
+                   energy (default: off)
+                 ``torque`` (N m; default 1; a number in [1e-12, 1e+12]): LQR weight: acceptable
+                   torque
+                 ``reference``, ``sample_time``, ``filters``: as for pd
+                 ``spin_rate`` (rad/s; default 0; a finite number): hub rate of the
+                   linearization the gain is designed at
+    lqg          LQR on a Kalman-Bucy estimate from hub angle and root moment.
+                 ``hub_angle``, ``hub_rate``, ``tip_deflection``, ``modal_energy``, ``torque``:
+                   as for lqr
+                 ``reference``: as for pd
+                 ``spin_rate``: as for lqr
+                 ``angle_noise`` (rad; default 0.001; a number > 0): hub angle measurement noise
+                   (estimator)
+                 ``moment_noise`` (N m; default 0.1; a number > 0): root bending moment
+                   measurement noise (estimator)
+                 ``process_torque`` (N m; default 0.1; a number > 0): disturbance torque on the
+                   hub (estimator)
+                 ``filters``: as for pd
+    scheduled    LQR gains designed at several spin rates, interpolated at the hub rate.
+                 ``hub_angle``, ``hub_rate``, ``tip_deflection``, ``modal_energy``, ``torque``:
+                   as for lqr
+                 ``reference``, ``sample_time``, ``filters``: as for pd
+                 ``spin_rates`` (rad/s; default [0, 1, 2]; an array of numbers >= 0): design
+                   spin rates, strictly increasing
+    trajopt      optimal slew on the design model, played open loop.
+                 ``n_intervals`` (default 40; an integer >= 2): control intervals of the
+                   transcription (was ``intervals``, deprecated)
+                 ``objective`` (one of "effort", "time"): default: effort, or time when
+                   maneuver.duration is free
+                 ``transcription`` (one of "multiple_shooting", "collocation"): default: by the
+                   design model (collocation for exact)
+                 ``torque_rate_bound`` (N m/s; a number > 0): bound on the torque rate (default:
+                   none)
+                 ``tip_bound`` (m; a number > 0): bound on the tip deflection (default: none)
+                 ``effort_tolerance`` (default 0.01; a number > 0): largest relative excess of
+                   the torque holds' least effort over the converged slew's (fixed duration)
+                 ``sample_time``: as for pd
+    trajopt+lqr  optimal slew with LQR feedback about it (Bryson weights: 5 % of the angle, 3 %
+                   of the beam length at the tip, the torque bound).
+                 ``n_intervals``, ``objective``, ``transcription``, ``torque_rate_bound``,
+                   ``tip_bound``, ``effort_tolerance``: as for trajopt
+                 ``sample_time``, ``filters``: as for pd
+    bang_bang    rigid time-optimal at the torque bound, or the torque that fits the duration.
+                 ``sample_time``: as for pd
+    zv           ZV shaper: the bang-bang torque shaped at the first hub-free frequency.
+                 ``sample_time``: as for pd
+    zvd          ZVD shaper: the bang-bang torque shaped at the first hub-free frequency.
+                 ``sample_time``: as for pd
+    nmpc         nonlinear MPC on the design model, run sampled.
+                 ``horizon`` (samples; default 20; an integer in [2, 500]): prediction horizon
+                 ``mode`` (default "rti"; one of "rti", "converged"): real-time iteration or
+                   solved to convergence (IPOPT)
+                 ``qp_solver`` (default "qrqp"; one of "qrqp", "osqp", "qpoases", "hpipm"):
+                   CasADi QP solver of the real-time iteration
+                 ``terminal`` (default "lqr"; one of "lqr", "rest"): terminal cost (LQR) or
+                   terminal rest constraint
+                 ``reference`` (default "trajopt"; one of "trajopt", "none"): track the optimal
+                   slew, or regulate to the target
+                 ``n_intervals``, ``objective``, ``transcription``, ``torque_rate_bound``,
+                   ``tip_bound``, ``effort_tolerance``: as for trajopt
+                 ``estimator`` (default "state"; one of "state", "kalman"): measured state, or
+                   an extended Kalman filter on hub angle and root moment
+                 ``angle_noise``, ``moment_noise``, ``process_torque``: as for lqg
+                 ``sample_time`` (s; default 0.02; a number > 0): sample period
+    ===========  ===============================================================================
 
 ``sample_time`` runs the law with a zero-order hold (:class:`flexctl.sim.digital.ZeroOrderHold`);
 LQG does not take it, since its estimator integrates continuously.
@@ -276,9 +276,9 @@ def _noise(spec: ControllerSpec) -> NoiseLevels:
     return _wrap(NoiseLevels, **{field: spec.get(key) for field, key in NOISE_SETTINGS.items()})
 
 
-#: Kinds that track a smooth reference slew with feedback (:func:`_feedback`).
+#: Kinds that track a smooth reference slew with feedback (``_feedback``).
 _FEEDBACK_KINDS = ("pd", "lqr", "lqg", "scheduled")
-#: Kinds that play the rigid bang-bang torque, shaped or not (:func:`_open_loop`).
+#: Kinds that play the rigid bang-bang torque, shaped or not (``_open_loop``).
 _OPEN_LOOP_KINDS = ("bang_bang", "zv", "zvd")
 #: Kinds that take a free duration as a minimum-time problem of their own.
 _OWN_DURATION_KINDS = ("trajopt", "trajopt+lqr") + _OPEN_LOOP_KINDS
@@ -441,7 +441,7 @@ def _design_model(scene, plant: Model) -> Model:
 
 def _slew_duration(maneuver: Slew, kind: str, design: Model):
     """The slew's duration, s: the manoeuvre's; for a free one, None for the kinds that find
-    their own (:data:`_OWN_DURATION_KINDS`), else the rigid minimum time at the torque bound."""
+    their own (``_OWN_DURATION_KINDS``), else the rigid minimum time at the torque bound."""
     duration = maneuver.duration
     if duration is None:
         if maneuver.torque_bound is None:
@@ -495,7 +495,7 @@ def _kind_settings(spec: ControllerSpec) -> set:
 def _feedback(spec: ControllerSpec, design: Model, plant: Model, angle, duration,
               bound, kind: str, sample_time: float | None = None) -> BuiltController:
     """PD, LQR, LQG or scheduled LQR on the design model about the reference slew
-    (:func:`_reference`); ``kind`` the law designed."""
+    (``_reference``); ``kind`` the law designed."""
     profile, duration, info = _reference(spec, design, angle, duration, bound)
     actuator = getattr(plant, "actuator", None)
     info.update(_wrap(check_reference_fits, actuator, design.rigid_inertia, profile))

@@ -1,14 +1,14 @@
 """Sphinx configuration of the flexctl documentation.
 
 Built offline and strictly: ``python -m sphinx -W --keep-going -b html docs docs/_build/html``.
-No extension downloads anything at build time (no intersphinx), MathJax is served from the
-site itself (``sphinx-mathjax-offline``), and the example notebooks are rendered, never
-executed: the executed copies that ``tests/app/test_examples.py`` writes to ``examples/_executed``
-are used when present, the notebooks without outputs otherwise.
+No extension downloads anything at build time (intersphinx reads the inventories in
+``docs/inventories``), MathJax is served from the
+site itself (``sphinx-mathjax-offline``), and the example notebooks are shown with their
+outputs: the executed copies in ``examples/_executed`` (written by ``tests/app/test_examples.py``
+or by the first build, which executes the notebooks that have none; docs/_ext/notebook_pages.py).
 """
 
 import os
-import shutil
 import sys
 from pathlib import Path
 
@@ -34,19 +34,43 @@ extensions = [
     "numpydoc",
     "myst_nb",
     "cli_help",
+    "api_links",
+    "notebook_pages",
     "matplotlib.sphinxext.plot_directive",
+    "sphinx.ext.intersphinx",
+    "sphinx.ext.viewcode",
+    "sphinx_copybutton",
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 templates_path = ["_templates"]
 exclude_patterns = ["_build", "_templates", "Thumbs.db", ".DS_Store", "**.ipynb_checkpoints"]
 root_doc = "index"
-nitpicky = False
+# Every cross-reference must resolve (with -W a missing one fails the build): to the project's
+# own pages (docs/_ext/api_links.py joins a defining module's name to the documented one) or,
+# through the inventories kept in docs/inventories (refreshed by
+# ``python docs/inventories/refresh.py``), to Python's, NumPy's, SciPy's, Matplotlib's,
+# python-control's and CasADi's documentation. Nothing is downloaded at build time.
+nitpicky = True
+INVENTORIES = DOCS / "inventories"
+intersphinx_mapping = {
+    name: (url, str(INVENTORIES / f"{name}.inv")) for name, url in {
+        "python": "https://docs.python.org/3/",
+        "numpy": "https://numpy.org/doc/stable/",
+        "scipy": "https://docs.scipy.org/doc/scipy/reference/",
+        "matplotlib": "https://matplotlib.org/stable/",
+        "control": "https://python-control.readthedocs.io/en/latest/",
+        "casadi": "https://web.casadi.org/python-api/",
+    }.items()}
 
 # -- HTML ---------------------------------------------------------------------------------------
 html_theme = "furo"
 html_title = f"flexctl {release}"
-html_static_path = []
+html_static_path = ["_static"]
+# the "copy" button of code blocks leaves out prompts and output lines
+copybutton_prompt_text = r">>> |\.\.\. |\$ "
+copybutton_prompt_is_regexp = True
+copybutton_only_copy_prompt_lines = False
 
 # -- API reference ------------------------------------------------------------------------------
 autosummary_generate = True
@@ -58,7 +82,51 @@ autosummary_imported_members = True
 autodoc_typehints = "none"
 numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
-numpydoc_xref_param_type = False
+# The types of Parameters and Returns are links where they name a class: the project's own
+# classes (by their name or full path) and the few other projects' types its API takes and
+# returns; other words of a type ("of", "shape (n,)") stay text.
+numpydoc_xref_param_type = True
+numpydoc_xref_ignore = "all"
+
+
+def _type_aliases():
+    import importlib
+    import inspect
+    import pkgutil
+
+    short, aliases = {}, {}
+    for package in ("flexctl", "controllers"):
+        root = importlib.import_module(package)
+        for info in [None] + list(pkgutil.walk_packages(root.__path__, package + ".")):
+            name = package if info is None else info.name
+            if name.rpartition(".")[2].startswith("_"):
+                continue
+            module = importlib.import_module(name)
+            for attribute, value in vars(module).items():
+                if (inspect.isclass(value) and not attribute.startswith("_")
+                        and value.__module__ == name):
+                    aliases[f"{name}.{attribute}"] = f"{name}.{attribute}"
+                    short.setdefault(attribute, set()).add(f"{name}.{attribute}")
+    aliases.update({attribute: paths.pop() for attribute, paths in short.items()
+                    if len(paths) == 1})
+    others = {
+        "control.StateSpace": ["StateSpace"], "control.TransferFunction": ["TransferFunction"],
+        "control.NonlinearIOSystem": ["NonlinearIOSystem"],
+        "control.TimeResponseData": ["TimeResponseData"],
+        "control.InterconnectedSystem": [], "control.FrequencyResponseData": [],
+        "casadi.Function": [], "casadi.MX": [], "casadi.SX": [], "casadi.DM": [],
+        "casadi.Opti": [],
+        "matplotlib.figure.Figure": ["Figure"], "matplotlib.axes.Axes": ["Axes"],
+        "pathlib.Path": ["Path"], "numpy.random.Generator": [],
+        "scipy.integrate.OdeSolver": [], "scipy.interpolate.PPoly": [],
+    }
+    for full, names in others.items():
+        for name in [full] + names:
+            aliases.setdefault(name, full)
+    return aliases
+
+
+numpydoc_xref_aliases = _type_aliases()
 add_module_names = True
 
 # -- Docstring validation -----------------------------------------------------------------------
@@ -103,26 +171,3 @@ plot_formats = [("png", 100)]
 # and run under pytest's --doctest-modules.
 doctest_test_doctest_blocks = ""
 doctest_global_setup = "import os\nos.environ.setdefault('MPLBACKEND', 'Agg')"
-
-EXAMPLES = ROOT / "examples"
-EXECUTED = EXAMPLES / "_executed"
-RENDERED = DOCS / "examples" / "notebooks"
-
-
-def copy_notebooks():
-    """Put each example notebook into the site, its executed copy when there is one."""
-    RENDERED.mkdir(parents=True, exist_ok=True)
-    for stale in RENDERED.glob("*.ipynb"):
-        stale.unlink()
-    executed = 0
-    for notebook in sorted(EXAMPLES.glob("[0-9][0-9]_*.ipynb")):
-        copy = EXECUTED / notebook.name
-        if copy.is_file() and copy.stat().st_mtime >= notebook.stat().st_mtime:
-            shutil.copyfile(copy, RENDERED / notebook.name)
-            executed += 1
-        else:
-            shutil.copyfile(notebook, RENDERED / notebook.name)
-    return executed
-
-
-EXECUTED_NOTEBOOKS = copy_notebooks()

@@ -28,6 +28,7 @@
 # 4. the generated Makefile and its demo program.
 
 # %%
+import os
 import shutil
 import subprocess
 import tempfile
@@ -59,6 +60,8 @@ print(f"{built.kind} on {built.design_modes} design modes, manoeuvre ends at "
 directory = tempfile.mkdtemp()
 exported = export_c(built.controller, plant, directory)
 for key, value in exported.describe().items():
+    if key == "files":          # the files' names (they are in a temporary folder)
+        value = [os.path.basename(name) for name in value]
     print(f"{key:16s} {value}")
 
 # %% [markdown]

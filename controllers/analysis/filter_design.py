@@ -101,7 +101,7 @@ def _candidates(omega: float, req: Requirements, sample_time: float, peak_db: fl
 def _better_filter(plant, base, filters, report, req, spin_rate) -> tuple:
     """``(tried, filter, verification, law)``: for the first failing flexible mode (worst
     first) that a candidate fixes, the candidate that fixes it, keeps every requirement that
-    passed and leaves the least shortfall (:func:`_shortfall`); candidates are screened on
+    passed and leaves the least shortfall (``_shortfall``); candidates are screened on
     the first stage of the search, the one kept verified in full. ``filter`` None when no
     candidate fixes any mode."""
     from ..feedback.structural_filters import Filtered

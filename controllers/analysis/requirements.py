@@ -25,7 +25,7 @@ Notes
   phase distance / flexible_phase_margin_deg)``: it passes at 1 or more. A mode attenuated
   by the required amount is gain-stabilised; one that is not passes only by its phase
   (phase-stabilised). The window is sampled on :data:`WINDOW_POINTS` logarithmic points and
-  :data:`PEAK_POINTS` more about the loop's peak in it.
+  ``PEAK_POINTS`` more about the loop's peak in it.
 - **Gain stabilisation required.** With ``gain_stabilised_above``, a mode whose nominal
   frequency is above it is measured by its attenuation alone: ``-peak dB /
   flexible_attenuation_db``, 1 at the required attenuation.
@@ -638,7 +638,7 @@ def _own_mode(search: _Search, name: str, point: UncertainPlant, k: int) -> tupl
 
 def _coordinate_pass(search: _Search, name: str, start: UncertainPlant, own: int) -> tuple:
     """``(point, value)``: the worst found from ``start`` (module Notes): the structure's
-    ranges at their ends, the ``own`` mode over its frequency and damping (:func:`_own_mode`),
+    ranges at their ends, the ``own`` mode over its frequency and damping (``_own_mode``),
     then sweeps of every other mode's frequency (on :data:`OTHER_POINTS` factors) and damping
     (the ends), one at a time, each followed by the own mode again, until a sweep finds
     nothing worse (at most :data:`SWEEPS`)."""

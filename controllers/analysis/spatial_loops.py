@@ -21,7 +21,7 @@ each input.
 - **all loops at once** (multi-loop, independent perturbations of the three inputs at once):
   python-control's :func:`control.disk_margins` on the MIMO loop, whose structured singular
   value bound comes from SLICOT's AB13MD through slycot (on :data:`MULTILOOP_POINTS` of the
-  grid's frequencies and the :data:`MULTILOOP_PEAKS` where single loops come closest); None
+  grid's frequencies and the ``MULTILOOP_PEAKS`` where single loops come closest); None
   where slycot is missing.
 
 :func:`lq_loop` is the loop of a three-axis LQR or LQG

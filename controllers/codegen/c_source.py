@@ -1,8 +1,8 @@
 """The C99 source, header, example ``main`` and Makefile of a :class:`ControllerProgram`.
 
 The source holds CasADi's code for the program's step (and recover) functions and a thin
-wrapper with the flexctl interface (see :data:`INTERFACE` and the header it writes): an opaque
-struct the caller allocates (:c:func:`flexctl_ctrl_size` bytes, aligned for ``double``), which
+wrapper with the flexctl interface (see ``INTERFACE`` and the header it writes): an opaque
+struct the caller allocates (``flexctl_ctrl_size()`` bytes, aligned for ``double``), which
 holds the law's memory and every work array at a size fixed when the code was written. No
 function allocates memory, nothing at file scope is mutable, and the math library is the only
 dependency.

@@ -208,10 +208,10 @@ def export_c(controller, plant, directory, *, sample_time: float | None = None,
     precision : {"double", "float"}, optional
         The C type of every real: the interface, the memory, the constants and the
         arithmetic, the QP's included (:mod:`~controllers.codegen.precision`). In float the
-        law's conditioning is checked first (:func:`~controllers.codegen.conditioning.
-        check_float`): refused where single precision breaks it, a
-        :class:`~controllers.codegen.conditioning.PrecisionWarning` where it loses much of
-        its accuracy. A ``ControllerProgram`` given as ``controller`` keeps the QP
+        law's conditioning is checked first
+        (:func:`~controllers.codegen.conditioning.check_float`): refused where single precision
+        breaks it, a :class:`~controllers.codegen.conditioning.PrecisionWarning` where it loses
+        much of its accuracy. A ``ControllerProgram`` given as ``controller`` keeps the QP
         tolerances it was built with. Default ``"double"``.
 
     Returns

@@ -10,7 +10,7 @@ active-set solver whose code CasADi generates):
    Hermite cubics and the mean of its held torque over each sample);
 3. the warm start: the previous plan shifted one sample, its last hold repeated (the first
    step: the reference, or the state held);
-4. condense (the compiled pieces of :meth:`controllers.mpc.nmpc.NMPC._condensed`), solve the QP,
+4. condense (the compiled pieces of ``controllers.mpc.nmpc.NMPC._condensed``), solve the QP,
    expand;
 5. the first torque, clipped to the torque limit and, after the first step, to the torque-rate
    limit.
@@ -154,7 +154,7 @@ def _first_guess(mpc, built, x_design):
 
 def _shifted(w, n, hold):
     """The plan moved one sample on, its last hold repeated (the plan itself when that is
-    not finite), as :meth:`~controllers.mpc.nmpc.NMPCSession._shift`."""
+    not finite), as ``_shift``."""
     import casadi as ca
 
     width = n + 1
@@ -164,7 +164,7 @@ def _shifted(w, n, hold):
 
 
 class _Filter:
-    """The extended Kalman filter of :class:`controllers.mpc.nmpc._ExtendedKalman` in CasADi."""
+    """The extended Kalman filter of ``controllers.mpc.nmpc._ExtendedKalman`` in CasADi."""
 
     def __init__(self, mpc, plant, x0_design):
         import casadi as ca

@@ -207,7 +207,7 @@ class EmulatedLaw:
     Attributes
     ----------
     instructions : list of int
-        Instructions of each step taken (timer ticks over :data:`ICOUNT_TICKS`).
+        Instructions of each step taken (timer ticks over ``ICOUNT_TICKS``).
     """
 
     def __init__(self, export, target: str = "cortex-m4"):
@@ -278,8 +278,8 @@ class EmulatedLaw:
         return float(u), code
 
     def controller(self, measure=None):
-        """This law as a flexctl controller (:class:`~controllers.codegen.export.
-        CompiledController`).
+        """This law as a flexctl controller
+        (:class:`~controllers.codegen.export.CompiledController`).
 
         Parameters
         ----------

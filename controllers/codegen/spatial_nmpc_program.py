@@ -74,7 +74,7 @@ def _wanted(ca, law, tables, t):
 
 
 def _condensed(ca, law, a_all, b_all, residuals, shifted, wanted_torques):
-    """The session's condensing (:func:`controllers.mpc.spatial_nmpc._solve`) in CasADi:
+    """The session's condensing (``controllers.mpc.spatial_nmpc._solve``) in CasADi:
     the Hessian and gradient in the ``3 N`` torque moves and the speeds' rows."""
     n = law.model.a.shape[0]
     count = 0 if law.wheels is None else law.wheels.count

@@ -25,6 +25,7 @@ functions, and their compiled C flown in the spatial loop.
   ``[started, t_last, integral (3)]``; the step is
   :class:`~controllers.feedback.quaternion.QuaternionFeedbackSession`'s call (the integral by
   the rectangle rule between calls, held while the command saturates).
+
 :func:`compiled_spatial_law` turns a compiled export of a law back into a law for
 :func:`flexctl.sim.spatial_loop.simulate_spatial_loop` (the attitude filters' programs are
 :mod:`controllers.codegen.filter_program`'s): this is how the C is checked against Python in

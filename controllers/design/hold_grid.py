@@ -517,9 +517,9 @@ class HoldGrid:
         --------
         >>> import flexctl
         >>> model = flexctl.build_model(flexctl.load_scene("slew-90").system, n_modes=4)
-        >>> print(HoldGrid(model, 2.0).reason(40))
-        holds of 0.05 s see design mode 4 (134.6 rad/s) at its alias 8.92 rad/s, and stopping \
-it costs 5.15 % more effort than the converged slew (limit 1 %)
+        >>> print(HoldGrid(model, 2.0).reason(40))  # doctest: +NORMALIZE_WHITESPACE
+        holds of 0.05 s see design mode 4 (134.6 rad/s) at its alias 8.92 rad/s, and stopping
+        it costs 5.15 % more effort than the converged slew (limit 1 %)
         >>> HoldGrid(model, 2.0).reason(60) is None
         True
         """

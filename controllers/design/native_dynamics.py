@@ -69,7 +69,7 @@ def with_compiled_derivatives(function, max_library: int = MAX_LIBRARY):
     """An SX ``function`` as an MX function of the same inputs and outputs that calls its
     compiled form, whose value, Jacobian and second derivatives run as machine code; or
     ``function`` itself where compiling is off or impossible, it is longer than
-    :data:`MAX_INSTRUCTIONS` or not SX, or its library would be longer than ``max_library``
+    ``MAX_INSTRUCTIONS`` or not SX, or its library would be longer than ``max_library``
     instructions.
 
     Its numbers are lifted into an input (:func:`~flexctl.sim.lifted_constants.lift_constants`),

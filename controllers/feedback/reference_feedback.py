@@ -155,7 +155,7 @@ class ReferenceFeedback:
         return hub_state(x)
 
     def _casadi_hub_state(self, x) -> tuple:
-        """:meth:`_hub_state` of a CasADi plant state."""
+        """``_hub_state`` of a CasADi plant state."""
         plant = self.plant_layout
         if plant is not None and plant.n_states == x.numel():
             return plant.hub_angle(x), plant.hub_rate(x)
@@ -207,7 +207,7 @@ class ReferenceFeedback:
         return saturate(feedback, self.torque_limit)
 
     def _casadi_apply(self, feedback, acceleration, inertia=None, limit=None):
-        """:meth:`_apply` on CasADi expressions; ``inertia`` and ``limit`` replace the
+        """``_apply`` on CasADi expressions; ``inertia`` and ``limit`` replace the
         settings' numbers (e.g. by parameter symbols) where given, and are ignored where the
         setting is off."""
         if self.feedforward_inertia is not None:

@@ -1,7 +1,7 @@
 """Nonlinear model predictive control of a slew, by real-time iteration or to convergence.
 
 At every sample ``t_k = k T`` the controller solves, on a design model with few modes (any
-variant, the geometrically exact one included),
+variant, the geometrically exact one included)::
 
     min   sum_{j<N} |x_j - r_j|_Q^2 + R (u_j - v_j)^2  +  |x_N - r_N|_P^2
     s.t.  x_0 = x(t_k),  x_{j+1} = F(x_j, u_j)             (RK4 over the hold, multiple shooting)
@@ -135,7 +135,7 @@ def conic_solver(name: str, solver: str, h_sparsity, a_sparsity, options: dict |
     name : str
         Name of the CasADi function.
     solver : str
-        CasADi conic plugin, e.g. ``"qrqp"``, ``"osqp"`` or ``"qpoases"`` (:data:`QP_SOLVERS`).
+        CasADi conic plugin, e.g. ``"qrqp"``, ``"osqp"`` or ``"qpoases"`` (``QP_SOLVERS``).
     h_sparsity : casadi.Sparsity
         Sparsity of the QP's Hessian, shape (N, N) for ``N`` torque steps.
     a_sparsity : casadi.Sparsity
@@ -245,7 +245,7 @@ def _stages(v, n: int, big_n: int) -> tuple:
 
 def _state_steps(pieces: dict, xs, us, x_meas) -> tuple:
     """``e_j, G_j`` (``j = 0..N``) of the state steps ``dx_j = e_j + G_j du`` about the guess
-    ``xs, us``, from every stage's ``F`` and ``A, B`` (:meth:`NMPC._condensed`), with the
+    ``xs, us``, from every stage's ``F`` and ``A, B`` (``NMPC._condensed``), with the
     stages' ``A_j`` and ``B_j``."""
     import casadi as ca
 
@@ -343,9 +343,9 @@ class NMPC:
         Per sample one real-time iteration (one SQP step from the warm start, default) or
         the problem solved to convergence by IPOPT.
     qp_solver : str
-        QP solver of the real-time iteration (:data:`QP_SOLVERS`). Default ``"qrqp"``.
+        QP solver of the real-time iteration (``QP_SOLVERS``). Default ``"qrqp"``.
     state_weights : array_like, shape (n,), optional
-        Diagonal of ``Q``. Default Bryson's rule (:func:`_default_weights`).
+        Diagonal of ``Q``. Default Bryson's rule (``_default_weights``).
     torque_weight : float, optional
         ``R``, 1/(N m)^2. Default ``1 / torque_limit^2``.
     substeps : int, optional
@@ -657,9 +657,9 @@ class NMPC:
         ``d_j = F(x_j, u_j) - x_{j+1}`` and the measured start give the state steps as affine
         functions of the torque steps, ``dx_0 = x(t_k) - x_0``,
         ``dx_{j+1} = A_j dx_j + B_j du_j + d_j``, i.e. ``dx_j = e_j + G_j du``: the QP has the
-        ``N`` torque steps only (dense ``N x N``, see :meth:`NMPCSession._rti`). One compiled
+        ``N`` torque steps only (dense ``N x N``, see ``NMPCSession._rti``). One compiled
         call gives every stage's ``F`` (``forward``), one its ``A, B`` (``linear``, of
-        :attr:`NMPC.linearisation_model`); the condensing is :meth:`_condensing`. With
+        :attr:`NMPC.linearisation_model`); the condensing is ``_condensing``. With
         ``compiled`` false they stay CasADi expressions (for C code generation).
         """
         import casadi as ca

@@ -3,7 +3,7 @@ torque and speed limits as constraints.
 
 At every sample ``t_k`` the controller predicts ``N`` holds of the design model of
 :mod:`controllers.slew.spatial_trajopt` (the linear plant at rest integrated exactly, the model's
-nonlinear remainder held, the attitude a quaternion, the wheels' speeds) and solves
+nonlinear remainder held, the attitude a quaternion, the wheels' speeds) and solves::
 
     min   sum_{1<=j<N} |y_j - r_j|_Q^2 + |y_N - r_N|_P^2 + sum_{j<N} |u_j - v_j|_R^2
     s.t.  z_0 = z(t_k),  z_{j+1} = F(z_j, u_j),
@@ -20,11 +20,11 @@ It is solved by a real-time iteration: one Gauss-Newton step per sample, lineari
 design model's rollout from the state read with the previous solution shifted by one sample
 (the first sample: the reference's torque). One compiled call gives the rollout and each
 hold's Jacobians in the local coordinates (the attitude perturbed in its tangent space),
-differentiated exactly by CasADi from the hold's expression (:func:`_linearisation`; where
+differentiated exactly by CasADi from the hold's expression (``_linearisation``; where
 that expression is too long to compile, one CasADi call gives the rollout and the remainder's
-Jacobians and the hold's follow in closed form, :func:`_hold_jacobians`); the prediction is
+Jacobians and the hold's follow in closed form, ``_hold_jacobians``); the prediction is
 condensed onto the ``3 N`` torques in numpy. When the unconstrained minimiser of the
-condensed QP meets every limit it is the QP's solution (:func:`_unconstrained`, one Cholesky
+condensed QP meets every limit it is the QP's solution (``_unconstrained``, one Cholesky
 factorisation); otherwise one dense QP is solved by a CasADi QP solver (qpOASES by default,
 OSQP when it fails). The command is the first torque; the wheels' torque limits hold on it
 whatever the linearisation, since they are linear in it.
@@ -138,12 +138,12 @@ def hold_linearisation(model, wheels):
 
 def _linearisation(model, wheels, horizon: int):
     """``(x0, q0, speeds0, U) -> [X, Q, S, A, B]`` (numpy, :class:`~flexctl.sim.buffers.InPlace`):
-    the rollout of ``U`` as :func:`_prediction`'s, and each hold's Jacobians
+    the rollout of ``U`` as ``_prediction``'s, and each hold's Jacobians
     (:func:`hold_linearisation`) side by side, ``A`` (m, N m) and ``B`` (m, 3 N), compiled with
     the numbers lifted (:func:`~flexctl.sim.lifted_constants.lift_constants`: one library per
     structure's shape, kept across processes). None where the hold's linearisation is longer
     than :data:`MAX_LINEARISATION` instructions or compiling is off: the step then takes
-    :func:`_prediction` and :func:`_hold_jacobians`."""
+    ``_prediction`` and ``_hold_jacobians``."""
     import casadi as ca
 
     from flexctl.sim.compile_cache import compiled
@@ -342,7 +342,7 @@ class SpatialNMPC:
     reference : SpatialSlewSolution or None
     qp_solver : str
     predict : casadi.Function
-        The rollout and the remainder's Jacobians (:func:`_prediction`).
+        The rollout and the remainder's Jacobians (``_prediction``).
     qp : casadi.Function
         The QP solver.
     constraint_rows : int
@@ -356,8 +356,8 @@ class SpatialNMPC:
     wheel_rows : WheelRows or None
         The wheels' distribution and limits in the QP (None without wheels).
     linearise : InPlace or None
-        The rollout with each hold's exact Jacobians, compiled (:func:`_linearisation`); None
-        where the step takes :attr:`predict` and the closed form of :func:`_hold_jacobians`.
+        The rollout with each hold's exact Jacobians, compiled (``_linearisation``); None
+        where the step takes :attr:`predict` and the closed form of ``_hold_jacobians``.
     """
 
     state_names: tuple

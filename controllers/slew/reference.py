@@ -188,7 +188,7 @@ class SlewProfile(KeywordOnly):
                 self.slew_angle / self.duration ** 2 * dds)
 
     def _terms(self, t) -> tuple:
-        """``s``, ``s'`` and ``s''`` at times ``t`` (:func:`_shape_terms` on arrays)."""
+        """``s``, ``s'`` and ``s''`` at times ``t`` (``_shape_terms`` on arrays)."""
         return _shape_terms(self.shape, self._tau(t), np.sin, np.cos)
 
     def angle(self, t):
@@ -346,7 +346,7 @@ def _structure_key(source):
 def reference_parameters(reference) -> tuple:
     """``(structure, values)`` of a reference inside a compiled law: its own
     ``casadi_parameters`` where it offers them (its numbers then enter as parameters), else
-    the reference itself as structure (:func:`_structure_key`) and no numbers.
+    the reference itself as structure (``_structure_key``) and no numbers.
 
     Parameters
     ----------

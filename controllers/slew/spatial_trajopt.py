@@ -205,7 +205,7 @@ class SpatialHoldModel:
     rate_at : int
         Where ``wx`` is in ``x_l``.
     hold : float
-        s.
+        Length of each hold, s.
     equations : SpatialEquations
         The spatial model's.
     full_rows : ndarray of int
@@ -261,7 +261,7 @@ def spatial_hold_model(structure, n_modes, variant: str, hold: float,
     variant : {"exact", "first_order", "zero_order"}
         The spatial model whose right-hand side gives the remainder.
     hold : float
-        s (> 0).
+        Length of each hold, s (> 0).
     owner : str, optional
         Who asks (named in errors). Default ``"spatial_hold_model"``.
 

@@ -97,7 +97,7 @@ _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
 
 class TrajectoryOptimizationError(RuntimeError):
-    """IPOPT failed to solve a slew problem; :attr:`return_status` holds its status.
+    """IPOPT failed to solve a slew problem; ``return_status`` holds its status.
 
     Parameters
     ----------

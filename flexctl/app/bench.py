@@ -294,7 +294,7 @@ class _TimeUp(Exception):
 
 class _Deadline:
     """A manoeuvre whose torque or hub rate, evaluated by SciPy runs at every step, raises
-    :class:`_TimeUp` after ``deadline``; the rest (CasADi form included) is passed through."""
+    ``_TimeUp`` after ``deadline``; the rest (CasADi form included) is passed through."""
 
     def __init__(self, inner, deadline: float):
         self._inner, self._deadline = inner, deadline
@@ -414,7 +414,7 @@ def _tight_runs(tight, scene_name: str, config: BenchConfig) -> tuple:
     """The references and the runs at the reference tolerance.
 
     ``tight(variant, n)`` runs ``n`` modes of ``variant`` at the reference tolerance and
-    returns :func:`_run`'s triple.
+    returns ``_run``'s triple.
 
     Returns
     -------

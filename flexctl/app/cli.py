@@ -362,7 +362,7 @@ def _warning_line(message, category) -> str:
 
 class _OneLineWarnings:
     """Every warning shown outside a held run (the demo's figures and sweeps, their worker
-    processes forked from this one) as one :func:`_warning_line`, each text once."""
+    processes forked from this one) as one ``_warning_line``, each text once."""
 
     def __init__(self):
         self.seen = set()
@@ -398,7 +398,7 @@ def _load_and_run(source, overrides: dict, out_dir: Path | None,
                   animate: bool = False) -> dict:
     """Load, simulate and write one scene: the shared step of ``run`` and ``demo``.
 
-    Returns the summary of :func:`flexctl.app.report.write_run`; raises :class:`_InputError`
+    Returns the summary of :func:`flexctl.app.report.write_run`; raises ``_InputError``
     on bad input, with nothing else written to stdout or stderr.
     """
     held = _HeldOutput()
@@ -459,7 +459,7 @@ def _flight_options(export) -> None:
 
 def _cmd_export(args) -> int:
     """``flexctl export``: the design, the compile cache and IPOPT are held like a run's
-    (:class:`_HeldOutput`), so that a failure leaves its one error line alone on stderr."""
+    (``_HeldOutput``), so that a failure leaves its one error line alone on stderr."""
     from controllers.codegen import CompileError
 
     from .export import export_scene, format_export

@@ -297,7 +297,7 @@ def _draw_figs_5_to_8(task, fig5, fig7, by_position, by_mass):
 
 def _point_mass_table(at_02, at_08, loaded, bare) -> list:
     """Rows of the section's table: Fig. 7's amplitudes against the paper's, and Fig. 5's
-    comparison of the two mass positions (amplitudes as :func:`_amplitudes`)."""
+    comparison of the two mass positions (amplitudes as ``_amplitudes``)."""
     paper_with, paper_without = PAPER_VALUES["hub_beam_mass"]["with"], \
         PAPER_VALUES["hub_beam_mass"]["without"]
     rows = [("Fig. 7, with mass: peak (m)", loaded["peak_amplitude"], paper_with[0]),
@@ -317,7 +317,7 @@ def _point_mass_table(at_02, at_08, loaded, bare) -> list:
 
 def _point_mass_sweep_text(by_position, by_mass, bare, points: int) -> str:
     """The paragraph on the sweeps of Figs. 6 and 8, against the beam without mass
-    (``bare``, amplitudes as :func:`_amplitudes`)."""
+    (``bare``, amplitudes as ``_amplitudes``)."""
     position = by_position.column("mass_position_ratio")
     low = position <= 0.3 + 1e-9
     change = max(np.max(np.abs(by_position.column(c)[low] / bare[c] - 1))
@@ -673,7 +673,7 @@ def sections(out: Path, workers: int, surprises: list, progress=print, *,
 
 def _submit_sections(pool, out: Path) -> dict:
     """Every section on ``pool``, longest first (:data:`SECTION_ORDER`): label -> its
-    pending result (:func:`_submit`)."""
+    pending result (``_submit``)."""
     return {label: _submit(pool, remembered_section, label, out) for label in SECTION_ORDER}
 
 
@@ -731,7 +731,7 @@ def _section_outcome(label: str, pending, surprises: list, progress, start=None)
 
 
 def _finished(pending: dict):
-    """The keys of ``pending`` (results of :func:`_submit`) as their work finishes."""
+    """The keys of ``pending`` (results of ``_submit``) as their work finishes."""
     from concurrent.futures import as_completed
 
     futures = {value: key for key, value in pending.items()
@@ -792,7 +792,7 @@ class _Done:
 
 def _submit(pool, function, *args):
     """``function(*args)`` on ``pool`` (a future), or here and now when ``pool`` is None (a
-    :class:`_Done`); either gives its result, or raises its exception, from ``result()``."""
+    ``_Done``); either gives its result, or raises its exception, from ``result()``."""
     if pool is None:
         return _Done(function, *args)
     return pool.submit(function, *args)

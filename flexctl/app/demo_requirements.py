@@ -66,10 +66,11 @@ def requirements_case(scene_name: str) -> dict:
     Returns
     -------
     dict
-        ``scene``, ``first`` and ``filtered`` (:class:`~controllers.analysis.requirements.
-        Verification`), ``design`` (:class:`~controllers.analysis.requirements.FilterDesign`),
-        ``design_seconds``, and per law (``"first"``, ``"filtered"``) its run's ``status``,
-        ``residual`` (m), ``t`` and ``tip`` (m).
+        ``scene``, ``first`` and ``filtered``
+        (:class:`~controllers.analysis.requirements.Verification`), ``design``
+        (``FilterDesign``), ``design_seconds``, and per
+        law (``"first"``, ``"filtered"``) its run's ``status``, ``residual`` (m), ``t`` and
+        ``tip`` (m).
     """
     from controllers import design_filters, from_spec
 

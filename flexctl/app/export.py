@@ -64,12 +64,13 @@ def export_scene(scene, out, *, sample_time: float | None = None, compile: bool 
         ``"double"``.
     loop_check : bool, optional
         Also fly the slew with the law compiled in double and in float and record the
-        differences (``precision_in_the_loop``, :func:`~flexctl.app.export_precision.
-        compare_precisions`). Default False.
+        differences (``precision_in_the_loop``,
+        :func:`~flexctl.app.export_precision.compare_precisions`). Default False.
     target : {"host", "cortex-m4", "cortex-m7"}, optional
-        Also build the law for this processor (:func:`controllers.codegen.targets.
-        build_for_target`) and record its sizes and stack (``target_build``); the host's
-        compiler still checks it against the program. Default ``"host"``.
+        Also build the law for this processor
+        (:func:`controllers.codegen.targets.build_for_target`) and record its sizes and stack
+        (``target_build``); the host's compiler still checks it against the program. Default
+        ``"host"``.
 
     Returns
     -------

@@ -440,7 +440,7 @@ def plot_tip_deflections(results, ax=None, title: str | None = None,
 
 #: Metrics drawn as bars by :func:`plot_controller_comparison`: (key, label, log scale
 #: allowed). A metric that may be log-scaled is, only when its values span a decade or more
-#: (:data:`_LOG_SPAN`).
+#: (``_LOG_SPAN``).
 _COMPARISON_BARS = (("residual_vibration", "residual tip vibration (m)", True),
                     ("settling_time", "2 % settling time (s)", False),
                     ("peak_torque", "peak torque (N m)", False))
@@ -555,7 +555,7 @@ def _draw_metric_bars(ax, metrics, key: str, axis_label: str, log: bool, colours
                       t_end: float) -> None:
     """One metric of every run as horizontal bars, in the order of ``colours``; a run that
     never settled gets a hatched settling-time bar up to ``t_end`` (s). With ``log``, the axis
-    is logarithmic only when the bars span a factor of :data:`_LOG_SPAN` or more."""
+    is logarithmic only when the bars span a factor of ``_LOG_SPAN`` or more."""
     labels = list(colours)
     positions = np.arange(len(labels))
     values = np.array([_metric(metrics[label], key) for label in labels])
@@ -575,7 +575,7 @@ def _draw_metric_bars(ax, metrics, key: str, axis_label: str, log: bool, colours
 
 def _set_value_scale(ax, values, log: bool) -> None:
     """The bars' value axis: log when allowed, every finite value is positive and they span
-    :data:`_LOG_SPAN` or more; otherwise linear from zero. Few ticks, labelled without
+    ``_LOG_SPAN`` or more; otherwise linear from zero. Few ticks, labelled without
     overlap (decades only on a log axis, a common power of ten on a linear one)."""
     from matplotlib.ticker import LogLocator, MaxNLocator, NullFormatter, ScalarFormatter
 

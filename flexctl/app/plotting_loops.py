@@ -284,7 +284,7 @@ def plot_pole_zero(systems, *, natural_frequencies=None, ax=None, xlim=None, yli
 
 def plot_poles_vs_spin(table, *, which: str = "closed_loop", ax=None, cmap: str = "viridis",
                        title: str | None = None):
-    """Poles in the complex plane, coloured by spin rate (:class:`PolesVsSpin`).
+    """Poles in the complex plane, coloured by spin rate (``PolesVsSpin``).
 
     Parameters
     ----------

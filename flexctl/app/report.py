@@ -278,7 +278,7 @@ def summarize(scene, result, overrides: dict | None = None, extra: dict | None =
         a scene with ``variant = "auto"`` adds ``variant_choice``. ``scene_table`` holds the
         scene's tables after overrides (:attr:`flexctl.Scene.data`), from which
         :func:`flexctl.load_scene` rebuilds the scene. ``actuator`` and ``sensors``: see
-        :func:`_hardware_summary`. A verification of the scene's ``[requirements]``
+        ``_hardware_summary``. A verification of the scene's ``[requirements]``
         (``extra["verification"]``) gives ``requirements`` (one entry per requirement:
         ``name``, ``required``, ``nominal``, ``worst``, ``pass``, ``unit``, ``detail``),
         ``requirements_passed``, ``requirements_coverage`` and ``flexible_modes`` (each

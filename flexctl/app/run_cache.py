@@ -217,7 +217,7 @@ def _reanchored(value, old: Path, new: Path):
 
 
 def _encoded(item):
-    """``item`` as JSON-able data that :func:`_decoded` turns back; TypeError for a kind that
+    """``item`` as JSON-able data that ``_decoded`` turns back; TypeError for a kind that
     is not kept."""
     if item is None or isinstance(item, (bool, int, float, str)):
         return item
@@ -239,7 +239,7 @@ def _encoded(item):
 
 
 def _decoded(item):
-    """The value :func:`_encoded` wrote."""
+    """The value ``_encoded`` wrote."""
     if isinstance(item, list):
         return [_decoded(v) for v in item]
     if not isinstance(item, dict):

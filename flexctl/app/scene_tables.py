@@ -20,12 +20,12 @@ from controllers.spec import SceneError
 __all__ = ["construct", "parameter_doc", "read_table_file", "table_of", "check_table_keys"]
 
 
-def construct(cls, key: str, kwargs: dict, rename: str | None = None):
-    """``cls(**kwargs)``, its error a :class:`SceneError` under the scene key ``key``.
+def construct(table, key: str, kwargs: dict, rename: str | None = None):
+    """``table(**kwargs)``, its error a :class:`SceneError` under the scene key ``key``.
 
     Parameters
     ----------
-    cls : type or callable
+    table : type or callable
         The table's dataclass (``Hub``, ``Beam``, ...); a required key it lacks is reported
         with its meaning (:func:`parameter_doc`). Any other callable is called as it is.
     key : str
@@ -35,15 +35,15 @@ def construct(cls, key: str, kwargs: dict, rename: str | None = None):
     rename : str, optional
         Key that every ``key.`` in a message becomes (an appendage's beam).
     """
-    if dataclasses.is_dataclass(cls):
-        for f in dataclasses.fields(cls):
+    if dataclasses.is_dataclass(table):
+        for f in dataclasses.fields(table):
             if f.init and f.name not in kwargs and f.default is dataclasses.MISSING \
                     and f.default_factory is dataclasses.MISSING:
-                meaning = parameter_doc(cls, f.name)
+                meaning = parameter_doc(table, f.name)
                 raise SceneError(f"{rename or key}.{f.name} is required"
                                  + (f": {meaning}" if meaning else ""))
     try:
-        return cls(**kwargs)
+        return table(**kwargs)
     except SceneError:
         raise
     except (ValueError, TypeError) as exc:
@@ -57,13 +57,13 @@ def construct(cls, key: str, kwargs: dict, rename: str | None = None):
         raise SceneError(f"{key}.{msg}") from None
 
 
-def parameter_doc(cls, name: str) -> str:
-    """The first sentence of parameter ``name`` in ``cls``'s numpydoc Parameters, as plain
+def parameter_doc(table, name: str) -> str:
+    """The first sentence of parameter ``name`` in ``table``'s numpydoc Parameters, as plain
     text (no reST markup; a capitalised first word in lower case); ``""`` when undocumented.
 
     Parameters
     ----------
-    cls : type
+    table : type
         A class with a numpydoc docstring (a scene table's dataclass).
     name : str
         The parameter.
@@ -74,7 +74,7 @@ def parameter_doc(cls, name: str) -> str:
     >>> parameter_doc(Beam, "length")
     'length l, m (> 0)'
     """
-    doc = inspect.getdoc(cls) or ""
+    doc = inspect.getdoc(table) or ""
     entry = re.search(rf"^{re.escape(name)} :[^\n]*\n((?:[ \t]+\S[^\n]*(?:\n|$))+)", doc,
                       re.MULTILINE)
     if entry is None:

@@ -670,7 +670,7 @@ def _hardware(data: dict, system, maneuver) -> tuple:
 
 
 def _check_keys(data: dict) -> None:
-    """Every key of the scene's tables (but [[appendages]], see :func:`_appendage`) known."""
+    """Every key of the scene's tables (but [[appendages]], see ``_appendage``) known."""
     for key in data:
         if key not in _TOP_LEVEL:
             raise SceneError(f"unknown scene key {key!r}; expected one of "
@@ -1004,10 +1004,10 @@ def run_slew(scene: Scene, controller_factory=None, *, progress=None,
     progress : bool or callable, optional
         As for :func:`flexctl.simulate` (the closed-loop run).
     error_estimate : bool, optional
-        Give each metric its error (``metrics.errors``, :func:`flexctl.sim.metrics.
-        metric_errors`): the same closed loop is run again on the plant with
-        :data:`REFERENCE_EXTRA_MODES` more modes per appendage and exact geometry (mode
-        truncation and geometry), and the run's accuracy check adds the integration error.
+        Give each metric its error (``metrics.errors``,
+        :func:`flexctl.sim.metrics.metric_errors`): the same closed loop is run again on the
+        plant with :data:`REFERENCE_EXTRA_MODES` more modes per appendage and exact geometry
+        (mode truncation and geometry), and the run's accuracy check adds the integration error.
         Default True; False saves that run.
 
     Returns
@@ -1051,7 +1051,7 @@ def _reference_plant(plant: Model, validity) -> Model:
 
 def _metric_errors(scene: Scene, plant: Model, built, result):
     """:func:`~flexctl.sim.metrics.metric_errors` of a slew run, from its closed loop on
-    :func:`_reference_plant`; None when that run does not finish."""
+    ``_reference_plant``; None when that run does not finish."""
     import warnings
 
     from ..sim.metrics import metric_errors

@@ -243,7 +243,7 @@ def _checksum(values) -> str:
 
 @functools.lru_cache(maxsize=1)
 def _schema_objects() -> dict:
-    """``{(type, name): sql}`` of the tables and indexes :data:`_SCHEMA` creates."""
+    """``{(type, name): sql}`` of the tables and indexes ``_SCHEMA`` creates."""
     with contextlib.closing(sqlite3.connect(":memory:")) as db:
         db.executescript(_SCHEMA)
         return _objects(db)

@@ -16,7 +16,7 @@ States (:class:`~flexctl.model.layout.StateLayout`, block ``"actuator"`` last)::
 reaction wheel: ``wheel_speed`` (rad/s, relative to the hub), ``wheel_torque`` (N m, the motor
 torque on the hub after its lag); DC motor: none. Input: ``torque_command`` (N m) or
 ``voltage`` (V). Outputs: the structure's, then the actuator's states. The structure the
-equations integrate (:attr:`system`) is the one given, with a DC motor's reflected rotor
+equations integrate (``system``) is the one given, with a DC motor's reflected rotor
 inertia added to the hub.
 """
 
@@ -55,7 +55,7 @@ class ActuatedModel(Model):
     variant : Variant
         ``"first_order"``, ``"zero_order"``, ``"consistent"`` or ``"exact"``.
     matrices : StructureMatrices
-        The modal matrices of :attr:`system` at rest.
+        The modal matrices of ``system`` at rest.
     actuator : ReactionWheel or DCMotor
         What turns the hub (:mod:`flexctl.model.actuators`).
     source : Structure

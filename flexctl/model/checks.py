@@ -359,16 +359,16 @@ def _short_repr(value) -> str:
     return short.repr(value)
 
 
-def keyword_form(cls) -> str:
-    """``Name(required=..., optional=default, ...)``: how to call the dataclass ``cls``
+def keyword_form(record) -> str:
+    """``Name(required=..., optional=default, ...)``: how to call the dataclass ``record``
     (a default made by a factory shows as ``...`` too).
 
     Parameters
     ----------
-    cls : type
+    record : type
         A dataclass; its ``init`` fields without a leading underscore are shown, in order.
     """
-    fields = [f for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
-    return f"{cls.__name__}(" + ", ".join(
+    fields = [f for f in dataclasses.fields(record) if f.init and not f.name.startswith("_")]
+    return f"{record.__name__}(" + ", ".join(
         f"{f.name}={'...' if f.default is dataclasses.MISSING else _short_repr(f.default)}"
         for f in fields) + ")"

@@ -189,7 +189,7 @@ def _probes(model) -> list:
 
 
 def _richardson(model, hold, finer, dt) -> float:
-    """The step's error relative to the largest state entry, largest over :func:`_probes`."""
+    """The step's error relative to the largest state entry, largest over ``_probes``."""
     worst = 0.0
     for x, u in _probes(model):
         coarse = np.array(hold(x, u, dt), dtype=float).ravel()

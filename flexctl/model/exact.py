@@ -14,7 +14,7 @@ acceleration of every beam point and point mass,
 
 with ``J(s) = dp/dq`` (2 x N). Bending energy ``EI/2 int psi_s^2 = 1/2 q^T K_ff q`` is exact on
 these modes. The result is ``M(q) [theta_tt; q_tt] = [T_h - c_h theta_t - b_theta;
--K_ff q - C_ff q_t - b_q]``, with
+-K_ff q - C_ff q_t - b_q]``, with::
 
     M_theta_theta = J_h + int rhoA |p|^2 + sum_k m_k |p_k|^2
     M_theta_q     = int rhoA (p_x J_y - p_y J_x) + sum_k ...
@@ -141,8 +141,8 @@ class PanelRule:
     part, whose integral from the centre is odd, and its odd part, whose integral is even:
     each half is a matrix of half the size, on the pair sums ``E`` and differences ``O``
     (:meth:`integrate`), about half the operations of the full matrix. Vectorized (MX)
-    expressions take the whole-matrix form instead (:attr:`local`, :attr:`panel_sums`,
-    :attr:`before`): one sparse product each, where the pairs' gathers would add operations.
+    expressions take the whole-matrix form instead (``local``, ``panel_sums``,
+    ``before``): one sparse product each, where the pairs' gathers would add operations.
 
     Attributes
     ----------
@@ -353,7 +353,7 @@ class PanelRule:
 
 @lru_cache(maxsize=64)
 def _local_unit(points: int) -> np.ndarray:
-    """:func:`_local` on a panel of half-width 1 (read-only)."""
+    """``_local`` on a panel of half-width 1 (read-only)."""
     leg = np.polynomial.legendre
     local = leg.legvander(leg.leggauss(points)[0], points) @ _integrated(points)
     local.setflags(write=False)
@@ -611,8 +611,8 @@ def choose_rule(system: HubBeam, matrices) -> Quadrature:
     """The quadrature of fewest operations that resolves the exact model on its modes.
 
     Candidates (:data:`POINT_CANDIDATES` points per panel times :data:`PANEL_CANDIDATES`
-    panels) are tried in the order of their operation count (:func:`_operations`); the first
-    whose accelerations at each test state (:func:`_test_states`) agree with those of
+    panels) are tried in the order of their operation count (``_operations``); the first
+    whose accelerations at each test state (``_test_states``) agree with those of
     :func:`reference_rule` within :data:`PANEL_TOLERANCE` (relative to the largest) is taken.
     A candidate with no more points per panel and no more panels than one that failed is
     skipped: it is no more accurate. The choice is kept per system and mode count (the

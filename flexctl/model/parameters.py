@@ -1,7 +1,7 @@
 """Physical parameters of a hub-beam-mass system.
 
 Frozen, keyword-friendly dataclasses validated on construction. SI units throughout.
-Derive variants with :func:`dataclasses.replace`, which re-runs the validation.
+Derive variants with ``dataclasses.replace``, which re-runs the validation.
 
 Examples
 --------

@@ -478,7 +478,7 @@ def _first_order(layout: SpatialLayout, x, terms: _Terms) -> tuple:
     ``M1``'s modal columns are the straight structure's mass matrix (numbers): its hub
     columns gain the terms linear in the deflections (the deformed structure's inertia about
     the hub), the products of two deflections (``q q_tt``) drop. The solve eliminates the
-    constant modal block (:func:`_hub_schur_solve`)."""
+    constant modal block (``_hub_schur_solve``)."""
     import casadi as ca
 
     n_u, h = layout.n_speeds, layout.n_speeds - layout.n_elastic

@@ -63,7 +63,7 @@ class InPlace:
         return self._evaluate(args, False)[0]
 
     def call_with_stats(self, *args) -> tuple:
-        """``(results, stats)``: :meth:`__call__` and the function's statistics of that call
+        """``(results, stats)``: ``__call__`` and the function's statistics of that call
         (an integrator's steps and evaluations).
 
         Parameters

@@ -21,7 +21,7 @@ last time.
 Each segment is integrated in its own time ``tau = (t - t_0) / h`` in [0, 1], with ``t_0``,
 ``h`` and the last input time as parameters, so one right-hand side and one integrator per
 pattern of output times serve every segment; both are kept (:data:`RHS_CACHE_SIZE`,
-:data:`INTEGRATOR_CACHE_SIZE`) for later runs with the same model and inputs, when those are
+``INTEGRATOR_CACHE_SIZE``) for later runs with the same model and inputs, when those are
 immutable (frozen dataclasses, as the built-in ones are).
 """
 
@@ -122,7 +122,7 @@ def _parametric(source) -> bool:
 
 
 def _parameter_values(source) -> np.ndarray:
-    """The numbers of a parametric input (:func:`_parametric`), else none."""
+    """The numbers of a parametric input (``_parametric``), else none."""
     if not _parametric(source):
         return np.zeros(0)
     return np.asarray(source.casadi_parameters[1], dtype=float).reshape(-1)
@@ -323,7 +323,7 @@ def _matrix_form(model) -> bool:
 
 
 def _drive_symbols(model, scale, inputs, n_numbers) -> tuple:
-    """SX symbols ``ys``, ``tau``, ``p`` of :func:`_rhs_function`, the state ``y = ys * scale``
+    """SX symbols ``ys``, ``tau``, ``p`` of ``_rhs_function``, the state ``y = ys * scale``
     and the drive's terms at ``t = min(t_0 + tau h, t_last)``: ``[rate, acceleration]`` of a
     hub motion, or ``[u]`` and, with controller states, ``[u, dz/dt]``."""
     import casadi as ca
@@ -340,7 +340,7 @@ def _drive_symbols(model, scale, inputs, n_numbers) -> tuple:
 
 
 def _model_dynamics(model, y, terms, prescribed: bool, inline: bool):
-    """``dy/dt`` from the drive's ``terms`` (:func:`_drive_symbols`): the model inlined into
+    """``dy/dt`` from the drive's ``terms`` (``_drive_symbols``): the model inlined into
     scalar expressions, or called (:mod:`flexctl.sim.native_rhs`)."""
     import casadi as ca
 
@@ -370,7 +370,7 @@ def _immutable(source) -> bool:
 def input_key(model, inputs, scale):
     """Cache key of a right-hand side, or None when an input may change after use.
 
-    Inputs count by identity, except parametric ones (:func:`_parametric`), which count by
+    Inputs count by identity, except parametric ones (``_parametric``), which count by
     their class and structure: inputs that differ only in numbers share one right-hand side
     and its integrators.
 

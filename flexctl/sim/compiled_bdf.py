@@ -145,7 +145,7 @@ def _functions(model, inputs, n_numbers: int) -> dict | None:
 
 def _library(model, inputs, n_numbers: int, family: str = "bdf"):
     """``(external, pieces)`` of the compiled integrator of ``family`` (``"bdf"`` or
-    ``"adams"``) for this drive (``pieces`` from :func:`_functions`), or None."""
+    ``"adams"``) for this drive (``pieces`` from ``_functions``), or None."""
     import casadi as ca
 
     pieces = _functions(model, inputs, n_numbers)
@@ -220,7 +220,7 @@ def bdf_available(model, torque=None, hub_motion=None, controller=None,
 
 
 def _built(model, inputs, family: str = "bdf"):
-    """:func:`_library` of the drive, kept by model and inputs; None where compiling is off,
+    """``_library`` of the drive, kept by model and inputs; None where compiling is off,
     there is no compiler, the model is the consistent variant or the drive has no form."""
     if family not in FAMILIES:
         raise InputValueError(f"family must be one of {sorted(FAMILIES)}; got {family!r}"[:300])

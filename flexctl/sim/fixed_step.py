@@ -58,7 +58,7 @@ END_INSIDE = 1e-9
 #: Compile the loops to machine code (:mod:`flexctl.sim.compile_cache`, kept across runs and
 #: processes) where a compiler is present: about 6 times faster per step than CasADi's virtual
 #: machine, once the 0.2 to 0.5 s compile is paid, once. The exact variant, whose quadrature
-#: takes seconds to compile, compiles its step alone (:func:`_exact_step`).
+#: takes seconds to compile, compiles its step alone (``_exact_step``).
 USE_JIT = True
 #: Steps per call of a compiled loop, largest first: a segment takes the largest that fits,
 #: then smaller ones, the last padded with steps of length 0 (which change nothing) where
@@ -119,7 +119,7 @@ def step_function(model, torque, hub_motion, controller, n_numbers: int, scheme=
     (plant and controller states, or ``[q, q_dot]`` under a prescribed hub motion), time
     carried with the state, and the derivative at the step's start for dense output; and
     ``rate(y, t, c) -> f`` alone. The exact model's step is compiled on its own
-    (:func:`_exact_step`). The last stage sees a held input from inside the step (at
+    (``_exact_step``). The last stage sees a held input from inside the step (at
     ``t + h (1 - END_INSIDE)``), never the value it jumps to at the step's end.
 
     Parameters
@@ -166,7 +166,7 @@ def step_function(model, torque, hub_motion, controller, n_numbers: int, scheme=
 
 
 def lifted_core(model, hub_motion):
-    """:func:`_exact_core` with its numbers lifted (``(function, numbers)``,
+    """``_exact_core`` with its numbers lifted (``(function, numbers)``,
     :func:`~flexctl.sim.lifted_constants.lift_constants`), kept with the model: a sampled loop
     builds a step for each count of steps per sample. None where there is no core or it is
     too long to compile.
@@ -238,18 +238,18 @@ class _ChunkRuns(dict):
 
 
 def _chunk_runs(step, model) -> dict:
-    """The compiled loops of ``step`` (:class:`_ChunkRuns`), built on first use."""
+    """The compiled loops of ``step`` (``_ChunkRuns``), built on first use."""
     return _ChunkRuns(step, model)
 
 
 def run_steps(runs: dict, yt, h: float, count: int, numbers) -> tuple:
     """``count`` RK4 steps of length ``h`` from ``yt = [y; t]`` by the loops of
-    :func:`_chunk_runs`: ``(Y, F)`` of shapes (m + 1, count) and (m, count).
+    ``_chunk_runs``: ``(Y, F)`` of shapes (m + 1, count) and (m, count).
 
     Parameters
     ----------
     runs : dict
-        The compiled loops of :func:`_chunk_runs`, by number of steps (:data:`CHUNKS`).
+        The compiled loops of ``_chunk_runs``, by number of steps (:data:`CHUNKS`).
     yt : ndarray, shape (m + 1,)
         The drive's state, then the time, s.
     h : float
@@ -458,7 +458,7 @@ class _RK4Runner:
                              f"than the limit {MAX_STEPS}")
 
     def runs(self) -> dict:
-        """The compiled loops of :func:`_chunk_runs`."""
+        """The compiled loops of ``_chunk_runs``."""
         key = None if self.base_key is None else ("rk4-runs", self.base_key)
         return cached_build(STEP_CACHE, STEP_CACHE_SIZE, key, (self.model, *self.inputs),
                        lambda: _chunk_runs(self.step, self.model))

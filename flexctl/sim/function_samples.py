@@ -87,7 +87,7 @@ MAX_EVALUATIONS = 200_000
 #: the validity estimate's runs) is sampled once and its compiled integrators are reused.
 CACHE_SIZE = 16
 _CACHE: OrderedDict = OrderedDict()
-#: The values of the last functions sampled, by identity (:func:`_known_values`).
+#: The values of the last functions sampled, by identity (``_known_values``).
 _VALUES: OrderedDict = OrderedDict()
 
 _FIT = np.array([0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0])

@@ -338,7 +338,7 @@ class SampledTorque:
     samples that do not cover the run, ``times[0] <= 0`` and ``times[-1] >= t_final`` (a
     shortfall of rounding size, at most ``1e-9 t_final``, is allowed and holds the last value).
 
-    The numpy form (:meth:`__call__`) is exactly the CasADi form, bit for bit: the same lookup
+    The numpy form (``__call__``) is exactly the CasADi form, bit for bit: the same lookup
     and the same arithmetic for ``"hold"`` and ``"linear"``, the CasADi function itself for
     ``"spline"``.
 

@@ -96,7 +96,7 @@ def lift_constants(function, max_instructions: int | None = None):
 
 
 #: Lifted functions made or read in this process, by fingerprint of the function lifted
-#: (the oldest dropped beyond :data:`_LIFTED_SIZE`).
+#: (the oldest dropped beyond ``_LIFTED_SIZE``).
 _LIFTED: dict = {}
 _LIFTED_SIZE = 64
 _LIFTED_LOCK = threading.Lock()

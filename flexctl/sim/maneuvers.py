@@ -36,7 +36,7 @@ from .inputs import SampledTorque
 __all__ = ["SpinUp", "SineTorque", "Slew", "TorqueSamples", "TORQUE_SAMPLE_INTERPOLATIONS",
            "MAX_TORQUE_SAMPLES", "RIGID_PEAK_ACCELERATION", "rigid_slew_duration"]
 
-#: Peak |acceleration| of each unit rest-to-rest profile (angle 1 rad, duration 1 s), rad/s^2:
+#: Peak ``|acceleration|`` of each unit rest-to-rest profile (angle 1 rad, duration 1 s), rad/s^2:
 #: bang-bang ``4``, cycloidal (one period of sine torque) ``2 pi``, 7th-order polynomial
 #: ``84 sqrt(5) / 25`` (about 7.51).
 RIGID_PEAK_ACCELERATION = {"bang_bang": 4.0, "cycloidal": 2.0 * math.pi,
@@ -366,7 +366,7 @@ class TorqueSamples(KeywordOnly):
     0.2 s for :class:`~flexctl.sim.inputs.SampledTorque`, which bounds the step on a uniform
     grid instead).
 
-    :meth:`casadi` is :meth:`__call__` exactly, bit for bit: inside the sampled range both are
+    :meth:`casadi` is ``__call__`` exactly, bit for bit: inside the sampled range both are
     :class:`~flexctl.sim.inputs.SampledTorque`'s lookup (``O(log K)`` in CasADi through
     interpolants, a handful of instructions whatever ``K``, for SX and MX), outside it 0 or
     the last value.

@@ -81,7 +81,7 @@ PAIR_WORK = 6e7
 #: the exact model's, whose right-hand side costs far more than the integrator's own work
 #: (see :func:`choose_continuous` for the measurements).
 BDF_REPLACES = {"exact": ("cvodes", "RK45")}
-#: Largest ``atol`` accepted, in multiples of each state's physical size (:func:`state_scale`):
+#: Largest ``atol`` accepted, in multiples of each state's physical size (``state_scale``):
 #: a tenth of the shortest beam's length for a coordinate, 0.1 rad for the hub angle.
 ATOL_LIMIT = 100.0
 #: Loosest tolerance at which a continuous ``method="auto"`` run takes the compiled
@@ -425,7 +425,7 @@ def run_request(model, t_final, torque=None, hub_motion=None, controller=None, x
     x0 : array_like, shape (n,), optional
         Initial plant state; default rest at zero.
     rtol : float, optional
-        Relative tolerance; default :data:`DEFAULT_RTOL` (:data:`RK4_RTOL` for ``"rk4"``).
+        Relative tolerance; default :data:`DEFAULT_RTOL` (``RK4_RTOL`` for ``"rk4"``).
     atol : float or array_like, optional
         Absolute tolerance, one or one per state; kept as given (checked by the plan).
     method : str, optional

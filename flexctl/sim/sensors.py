@@ -478,7 +478,7 @@ class SensorSession:
 
     def read(self, x, xdot=None) -> np.ndarray:
         """One reading of every sensor from the (already delayed) true state ``x`` (n,),
-        advancing the noise by one sample; shape (m,), in :attr:`names` order.
+        advancing the noise by one sample; shape (m,), in ``names`` order.
 
         Parameters
         ----------

@@ -143,10 +143,11 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         Read by a sampled controller with ``measures = True`` (:class:`controllers.Observed`)
         at its samples (:mod:`flexctl.sim.sensors`); kept in ``result.measurements``.
     check_validity : bool, optional
-        Assess the model's range (``result.validity``, :func:`~flexctl.sim.validity.
-        assess_run`: past a tip of 2 % of the length, by running the same inputs on two
-        small models; a controller that records or counts sees those runs too) and warn
-        when a small-deflection variant left it, as a scene run does. Default True.
+        Assess the model's range (``result.validity``,
+        :func:`~flexctl.sim.validity.assess_run`: past a tip of 2 % of the length, by running
+        the same inputs on two small models; a controller that records or counts sees those runs
+        too) and warn when a small-deflection variant left it, as a scene run does. Default
+        True.
 
     Returns
     -------

@@ -208,7 +208,7 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
     seed : int, optional
         Seed of the sensors' noise (default theirs).
     rtol : float, optional
-        Relative tolerance of the integration. Default :data:`DEFAULT_RTOL`.
+        Relative tolerance of the integration. Default ``DEFAULT_RTOL``.
 
     Returns
     -------

@@ -70,7 +70,7 @@ def _worst_appendage(model: Model, q) -> str:
 
 
 class StopReason(Enum):
-    """Why a run ended; :attr:`status` is the ``SimulationResult.status`` it gives."""
+    """Why a run ended; ``status`` is the ``SimulationResult.status`` it gives."""
 
     REACHED_END = "reached t_final"
     TIP_PAST_LENGTH = "the modal tip passed the beam length (small-deflection variants)"

@@ -145,7 +145,7 @@ class _BudgetSpent(Exception):
 
 
 class _Budgeted:
-    """A right-hand side that raises :class:`_BudgetSpent` past ``budget`` evaluations."""
+    """A right-hand side that raises ``_BudgetSpent`` past ``budget`` evaluations."""
 
     def __init__(self, rhs, budget: int):
         self.rhs, self.left = rhs, int(budget)

@@ -6,8 +6,8 @@ key numbers (the papers' amplitudes and trends) in their own cells, so executing
 what keeps the examples correct.
 """
 
-import os
 import re
+import sys
 from pathlib import Path
 
 import pytest
@@ -17,11 +17,11 @@ nbclient = pytest.importorskip("nbclient")
 nbformat = pytest.importorskip("nbformat")
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "docs" / "_ext"))
+import notebook_pages  # noqa: E402
+
 EXAMPLES = ROOT / "examples"
 SCRIPTS = sorted(EXAMPLES.glob("[0-9][0-9]_*.py"))
-#: Where each executed notebook is saved with its outputs (git-ignored): the documentation site
-#: renders these copies, so it shows the plots without executing anything itself.
-EXECUTED = EXAMPLES / "_executed"
 #: With pytest-xdist, the notebooks run on one worker, before the site that renders them
 #: (``--dist loadgroup``; tests/app/test_site.py is in the same group).
 pytestmark = pytest.mark.xdist_group("notebooks")
@@ -92,23 +92,15 @@ def test_site_lists_every_notebook():
 
 
 @pytest.mark.parametrize("script", [_param(s) for s in SCRIPTS])
-def test_notebook_executes(script, monkeypatch):
-    # The kernel inherits this environment: no display (Jupyter's inline backend, so that
-    # plt.show() stores each figure in the executed copy as it would in Jupyter), and the
-    # package from this checkout.
-    monkeypatch.setenv("MPLBACKEND", "module://matplotlib_inline.backend_inline")
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(
-        [str(ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
-    notebook = jupytext.read(script.with_suffix(".ipynb"))
-    client = nbclient.NotebookClient(notebook, timeout=CELL_TIMEOUT, kernel_name="python3",
-                                     resources={"metadata": {"path": str(EXAMPLES)}})
-    client.execute()       # raises CellExecutionError, with the cell, on a failed assert
+def test_notebook_executes(script):
+    # executed as the site's build executes it (docs/_ext/notebook_pages.py): the package
+    # of this checkout, Jupyter's inline backend, warnings printed as one line
+    notebook = notebook_pages.execute(script.with_suffix(".ipynb"), timeout=CELL_TIMEOUT)
     errors = [out for cell in notebook.cells if cell.cell_type == "code"
               for out in cell.get("outputs", []) if out.get("output_type") == "error"]
     assert not errors
-    EXECUTED.mkdir(exist_ok=True)
-    # written whole, then moved into place: the site's build may read it at any moment
-    target = EXECUTED / script.with_suffix(".ipynb").name
-    partial = target.with_suffix(f".{os.getpid()}.partial")
-    nbformat.write(notebook, partial)
-    os.replace(partial, target)
+    figures = [out for cell in notebook.cells for out in cell.get("outputs", [])
+               if "image/png" in out.get("data", {})]
+    assert figures, f"{script.name} draws no figure for its page"
+    # the site renders this copy (its digest names the notebook it was made from)
+    notebook_pages.save_executed(notebook, script.with_suffix(".ipynb").name)
