@@ -36,6 +36,7 @@ extensions = [
     "cli_help",
     "api_links",
     "notebook_pages",
+    "name_breaks",
     "matplotlib.sphinxext.plot_directive",
     "sphinx.ext.intersphinx",
     "sphinx.ext.viewcode",
@@ -67,6 +68,7 @@ intersphinx_mapping = {
 html_theme = "furo"
 html_title = f"flexctl {release}"
 html_static_path = ["_static"]
+html_css_files = ["flexctl.css"]      # the gallery's grid, the sidebar's name breaks
 # the "copy" button of code blocks leaves out prompts and output lines
 copybutton_prompt_text = r">>> |\.\.\. |\$ "
 copybutton_prompt_is_regexp = True

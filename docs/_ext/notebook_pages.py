@@ -207,5 +207,4 @@ def setup(app):
 
     app.add_directive("notebook-gallery", NotebookGallery)
     app.connect("builder-inited", prepare)
-    app.add_css_file("notebook_gallery.css")
     return {"parallel_read_safe": True, "parallel_write_safe": True}

@@ -249,6 +249,15 @@ def test_api_pages_link_their_source(html):
     assert _local(html / "api" / "generated" / "flexctl.Model.html", source[0]).is_file()
 
 
+def test_long_names_in_the_sidebar_break_at_dots(html):
+    text = (html / "api" / "generated" / "flexctl.Model.html").read_text(encoding="utf-8")
+    sidebar = text[text.index('class="sidebar-tree"'):]
+    names = re.findall(r'<a class="reference[^"]*"[^>]*>([^<\s]*(?:<wbr>[^<\s]*)+)</a>', sidebar)
+    assert names, "no long name of the sidebar has a break"
+    whole = re.findall(r'<a class="reference[^"]*"[^>]*>([^<\s]{24,})</a>', sidebar)
+    assert not whole, whole[:5]
+
+
 def test_code_blocks_have_a_copy_button(html):
     page = _page(html / "getting_started.html")
     assert any("clipboard" in src or "copybutton" in src for src in page.scripts), page.scripts
