@@ -1,10 +1,10 @@
 """Gain scheduling on the spin rate: LQR gains designed at several steady spins, interpolated.
 
-The beam stiffness of a spinning hub is ``K_ff - Omega^2 D`` (MODEL.md section 4), so the plant
-linearised about a steady spin changes with ``Omega``. :func:`design_scheduled_lqr` solves one
-LQR per design spin rate with :func:`controllers.feedback.lqr.design_lqr`; :class:`ScheduledLQR`
-then
-interpolates the gains linearly in the measured hub rate.
+The beam stiffness of a spinning hub is ``K_ff - Omega^2 D`` (:ref:`section 4 of the model
+<variants>`), so the plant linearised about a steady spin changes with ``Omega``.
+:func:`design_scheduled_lqr` solves one LQR per design spin rate with
+:func:`controllers.feedback.lqr.design_lqr`; :class:`ScheduledLQR` then interpolates the gains
+linearly in the measured hub rate.
 
 Notes
 -----

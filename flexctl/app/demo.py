@@ -71,7 +71,7 @@ __all__ = ["Section", "kane_spinup", "spacecraft_torque", "hub_beam_mass", "slew
            "PAPER_VALUES", "SWEEP_POINTS", "DEMO_COMPARISONS", "DEMO_INTRO", "DEMO_WORKERS",
            "DEMO_FREQUENCY_NOTE"]
 
-#: Published values (MODEL.md section 6), m.
+#: Published values (the theory page, section 7), m.
 PAPER_VALUES = {
     "kane_peak_w2": {"first_order": 0.28, "zero_order": 0.34},
     "spacecraft": {"peak": 0.42, "residual": 0.07},

@@ -1,4 +1,5 @@
-"""Geometrically exact kinematics of the hub-beam-mass system (MODEL.md section 7).
+"""Geometrically exact kinematics of the hub-beam-mass system (:ref:`section 4.5 of the model
+<sec-exact>`).
 
 The beam is inextensible and described by its slope angle in the hub frame,
 ``psi(s, t) = sum_i q_i phi_i'(s)`` on the same cantilever modes as the other variants, so that

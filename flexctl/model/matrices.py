@@ -1,4 +1,4 @@
-"""Modal matrices of the hub-beam-mass system (MODEL.md section 3).
+"""Modal matrices of the hub-beam-mass system (:ref:`section 3 of the model <sec-modes>`).
 
 Every integral is piecewise smooth: the tension ``n(x)`` steps at each point mass. The beam is
 cut at the mass positions and each piece is integrated with its own Gauss-Legendre rule, with

@@ -1,6 +1,6 @@
 """Cantilever (clamped-free) modes of a uniform Euler-Bernoulli beam.
 
-The mode shapes are those of MODEL.md section 3,
+The mode shapes are those of :ref:`section 3 of the model <sec-modes>`,
 
     phi_i(xi) = cosh(z_i xi) - cos(z_i xi) - s_i (sinh(z_i xi) - sin(z_i xi)),
 

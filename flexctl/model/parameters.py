@@ -267,7 +267,8 @@ class HubBeam(KeywordOnly):
 
     @property
     def rigid_inertia(self) -> float:
-        """Inertia ``J_0`` of the undeformed system about O, kg m^2 (MODEL.md section 2)."""
+        """Inertia ``J_0`` of the undeformed system about O, kg m^2 (:ref:`section 2 of the
+        model <sec-continuous>`)."""
         b, l = self.hub.radius, self.beam.length
         # ((b + l)^3 - b^3) / 3 without the cancellation that lost digits for b >> l
         return (self.hub.inertia + self.beam.linear_density * l * (b * b + b * l + l * l / 3.0)

@@ -1,4 +1,5 @@
-"""Equations of motion of a spatial structure (MODEL.md section 8), as CasADi expressions.
+"""Equations of motion of a spatial structure (:doc:`the spatial model </guide/spatial>`), as
+CasADi expressions.
 
 Coordinates and speeds (:class:`SpatialLayout`): the hub's attitude quaternion ``q`` (hub to
 inertial, scalar first), for a free hub its centre's position ``r`` (inertial frame), and per
@@ -41,13 +42,14 @@ the products of two deflections (``q q_tt``, ``q_t^2``) drop. ``first_order`` ke
 kinematics to second order (exactly what ``r1`` needs: the foreshortening whose tension,
 driven by the whole angular velocity and acceleration and a free hub's acceleration, stiffens
 both bending planes), ``zero_order`` truncates positions and section rotations to first order
-(no foreshortening: the centrifugal softening stays, the stiffening goes, MODEL.md section 4).
-For a structure moving in one plane they are MODEL.md section 4's first_order and zero_order
-(on the exact model's quadrature); linearised about the straight structure in a steady turn,
-first_order is the exact model. Where the hub accelerates, the modal accelerations of the
-straight structure are not small, and the dropped ``q q_tt`` products are first order in
-``q`` there: the twist of a bent rod, whose inertia is small, feels them most. Their tips,
-energy and momentum are those of their kinematics (the tips to second and to first order).
+(no foreshortening: the centrifugal softening stays, the stiffening goes, :ref:`section 4 of the
+model <variants>`). For a structure moving in one plane they are :ref:`section 4 <variants>`'s
+first_order and zero_order (on the exact model's quadrature); linearised about the straight
+structure in a steady turn, first_order is the exact model. Where the hub accelerates, the modal
+accelerations of the straight structure are not small, and the dropped ``q q_tt`` products are
+first order in ``q`` there: the twist of a bent rod, whose inertia is small, feels them most.
+Their tips, energy and momentum are those of their kinematics (the tips to second and to first
+order).
 
 Quaternion kinematics ``q_t = 1/2 q (0, w) + QUATERNION_GAIN (1 - |q|^2) q`` keep ``|q| = 1``
 an attracting invariant (the added term is zero on it), so that the norm does not drift.

@@ -4,7 +4,7 @@ A :class:`SpatialStructure` is a rigid :class:`SpatialHub` (a full inertia tenso
 centre, pinned or floating free) carrying :class:`SpatialAppendage` objects: each an
 inextensible rod clamped at a root point of the hub, along its ``direction``, whose section is
 most flexible along its ``normal``, with two bending stiffnesses, torsion and point masses
-(``docs/theory`` and MODEL.md section 8). The planar :class:`~flexctl.model.Structure` is the
+(:doc:`the spatial model </guide/spatial>`). The planar :class:`~flexctl.model.Structure` is the
 case of a diagonal inertia with motion about one axis; :meth:`SpatialStructure.from_planar`
 turns one into the other.
 

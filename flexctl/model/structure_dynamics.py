@@ -12,11 +12,12 @@ derives them::
                                                         [ b_q                              ]
 
 with ``S(q)`` the first moment of the appendages about the hub centre (hub axes) and ``S_q`` its
-Jacobian. The pinned-hub blocks ``J, M_tq, M_qq, b_theta, b_q`` are MODEL.md's, appendage by
-appendage: for first_order, zero_order and consistent the modal matrices
-(:mod:`flexctl.model.structure_matrices`) with ``S = S_0 + N q``; for exact each appendage's
-geometry (:func:`flexctl.model.exact.appendage_terms`) rotated by its mounting angle. A pinned hub
-drops the ``a`` row and column. The inertial hub acceleration is ``R(theta) a``.
+Jacobian. The pinned-hub blocks ``J, M_tq, M_qq, b_theta, b_q`` are those of :ref:`the model
+<sec-continuous>`, appendage by appendage: for first_order, zero_order and consistent the modal
+matrices (:mod:`flexctl.model.structure_matrices`) with ``S = S_0 + N q``; for exact each
+appendage's geometry (:func:`flexctl.model.exact.appendage_terms`) rotated by its mounting
+angle. A pinned hub drops the ``a`` row and column. The inertial hub acceleration is ``R(theta)
+a``.
 """
 
 from __future__ import annotations

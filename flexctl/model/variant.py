@@ -1,5 +1,6 @@
-"""The model variants as small objects: each says which terms it contributes (MODEL.md
-sections 4 and 7), and code asks it about those terms instead of comparing its name.
+"""The model variants as small objects: each says which terms it contributes (:ref:`sections 4
+<variants>` and :ref:`4.5 <sec-exact>` of the model), and code asks it about those terms instead
+of comparing its name.
 
 ============  ===============================  ==================  ============================
 variant       beam stiffness at spin rate w    hub inertia         geometry
@@ -98,8 +99,8 @@ class Variant(str):
     @property
     def exact(self) -> bool:
         """Whether positions and velocities are geometrically exact (the slope-angle beam of
-        MODEL.md section 7, its mass matrix ``M(q)`` by quadrature): the variant for large
-        deflection, with a regular mass matrix for a massless hub."""
+        :ref:`section 4.5 of the model <sec-exact>`, its mass matrix ``M(q)`` by quadrature):
+        the variant for large deflection, with a regular mass matrix for a massless hub."""
         return _TERMS[self][2]
 
     @property

@@ -4,12 +4,12 @@ on cantilever modes, for one beam or several appendages on a pinned or free hub.
 One :class:`Model` serves every structure: a :class:`~flexctl.model.parameters.HubBeam` is
 the one-appendage :class:`~flexctl.model.structure.Structure`. Its equations are one set of
 CasADi functions (:mod:`flexctl.model.structure_dynamics`), to which each variant
-(:class:`~flexctl.model.variant.Variant`) contributes its terms (MODEL.md sections 4 and 7):
-the spin softens the beam by ``D = M_ff - K_g`` with dynamic stiffening and by ``M_ff``
-without (zero_order), consistent adds ``q^T D q`` to the hub inertia, and exact is
-geometrically exact (:mod:`flexctl.model.exact`: the modes describe the slope angle of an
-inextensible beam, the mass matrix ``M(q)`` depends on the deflection). The numpy methods
-evaluate those functions at one state or at a batch of states; the exports
+(:class:`~flexctl.model.variant.Variant`) contributes its terms (:ref:`sections 4 <variants>`
+and :ref:`4.5 <sec-exact>` of the model): the spin softens the beam by ``D = M_ff - K_g`` with
+dynamic stiffening and by ``M_ff`` without (zero_order), consistent adds ``q^T D q`` to the hub
+inertia, and exact is geometrically exact (:mod:`flexctl.model.exact`: the modes describe the
+slope angle of an inextensible beam, the mass matrix ``M(q)`` depends on the deflection). The
+numpy methods evaluate those functions at one state or at a batch of states; the exports
 (:mod:`flexctl.model.exports`) and the simulation's compiled paths are derived from them.
 
 Notes

@@ -42,18 +42,18 @@ class EnergyBalance:
     """Mechanical energy of a small-deflection run against the work done on it.
 
     The residual ``r(t) = E(t) - E(0) - W(t) + L(t)``, with ``E`` :meth:`Model.energy` (the
-    consistent model's energy, MODEL.md section 4), ``W`` the work of the hub torque
-    ``int T theta_t dt`` and ``L`` the energy taken by hub friction and beam damping, all from
-    the output samples (trapezoidal rule). consistent conserves ``E``; first_order and
+    consistent model's energy, :ref:`section 4 of the model <variants>`), ``W`` the work of the
+    hub torque ``int T theta_t dt`` and ``L`` the energy taken by hub friction and beam damping,
+    all from the output samples (trapezoidal rule). consistent conserves ``E``; first_order and
     zero_order leave the second-order inertia ``s = q^T D q`` out of the hub equation, so that
     ``dE/dt = T theta_t - dL/dt + theta_t d(theta_t s)/dt`` (first_order; zero_order adds
     ``theta_t^2 d(q^T K_g q / 2)/dt`` for the stiffening it drops). The last terms, integrated
     along the samples, are the energy the model's neglected terms create (``neglected``): it
-    matters once ``s`` is not small against the effective hub inertia
-    ``J_0 - m_tf^T M_ff^-1 m_tf``. The balance is violated when both ``r`` and ``neglected``
-    pass :data:`ENERGY_TOLERANCE` of the run's energy scale: a residual that the
-    neglected terms do not produce is the output samples' quadrature (e.g. a loop faster than
-    the output step), not the model.
+    matters once ``s`` is not small against the effective hub inertia ``J_0 - m_tf^T M_ff^-1
+    m_tf``. The balance is violated when both ``r`` and ``neglected`` pass
+    :data:`ENERGY_TOLERANCE` of the run's energy scale: a residual that the neglected terms do
+    not produce is the output samples' quadrature (e.g. a loop faster than the output step), not
+    the model.
 
     Attributes
     ----------

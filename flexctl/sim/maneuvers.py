@@ -1,5 +1,5 @@
-"""Reference manoeuvres of MODEL.md section 5 (spin-up, one-period sine torque), a slew goal and
-a torque history given as samples.
+"""Reference manoeuvres of :ref:`section 6 of the model <sec-manoeuvres>` (spin-up, one-period
+sine torque), a slew goal and a torque history given as samples.
 
 Each manoeuvre is a frozen dataclass that evaluates exactly at any time (no sampling) and lists
 its ``breakpoints``: the times where it is not smooth, at which the integrator restarts.

@@ -1,4 +1,5 @@
-"""Simulation of a spatial structure: a hub turning about any axis (MODEL.md section 8).
+"""Simulation of a spatial structure: a hub turning about any axis (:doc:`the spatial model
+</guide/spatial>`).
 
 :func:`simulate_spatial` integrates a spatial model
 (:func:`~flexctl.model.spatial_dynamics.spatial_equations`: the exact rod by default, or its

@@ -170,7 +170,8 @@ def singular_message(model: Model, t_end: float, state) -> str:
             f"second-order inertia q^T D q reached {j_eff - j_rest:.4g} kg m^2 at a tip "
             f"deflection of {100 * ratio:.3g} % of the length{_worst_appendage(model, q)}; in the "
             f"consistent model the deflection lowers the hub inertia, and {cause}; the exact "
-            "variant's mass matrix stays positive definite (MODEL.md section 7)")
+            "variant's mass matrix stays positive definite (the documentation's theory page, "
+            "section 4.5)")
 
 
 class StopConditions:

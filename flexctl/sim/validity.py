@@ -1,9 +1,9 @@
 """Is the model valid for this run? Deflection, geometric model error, and the variant to use.
 
 first_order, zero_order and consistent are small-deflection models: their error against a
-geometrically exact beam grows with the tip deflection relative to the length (MODEL.md
-section 7). This module measures that error for a run without paying for the exact model on
-every mode:
+geometrically exact beam grows with the tip deflection relative to the length (:ref:`section 4.5
+of the model <sec-exact>`). This module measures that error for a run without paying for the
+exact model on every mode:
 
 * :func:`geometric_error` runs the run's variant and the exact variant, both on
   :data:`ESTIMATE_MODES` modes, under the run's own inputs (torque, hub motion or controller)
