@@ -54,15 +54,11 @@ root_doc = "index"
 # python-control's and CasADi's documentation. Nothing is downloaded at build time.
 nitpicky = True
 INVENTORIES = DOCS / "inventories"
-intersphinx_mapping = {
-    name: (url, str(INVENTORIES / f"{name}.inv")) for name, url in {
-        "python": "https://docs.python.org/3/",
-        "numpy": "https://numpy.org/doc/stable/",
-        "scipy": "https://docs.scipy.org/doc/scipy/reference/",
-        "matplotlib": "https://matplotlib.org/stable/",
-        "control": "https://python-control.readthedocs.io/en/latest/",
-        "casadi": "https://web.casadi.org/python-api/",
-    }.items()}
+sys.path.insert(0, str(INVENTORIES))
+from refresh import PROJECTS  # noqa: E402  (each project's documentation root)
+
+intersphinx_mapping = {name: (url, str(INVENTORIES / f"{name}.inv"))
+                       for name, url in PROJECTS.items()}
 
 # -- HTML ---------------------------------------------------------------------------------------
 html_theme = "furo"

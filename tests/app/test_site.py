@@ -270,6 +270,14 @@ def test_build_is_nitpicky():
     assert re.search(r"^nitpicky = True$", conf, re.M)
 
 
+def test_theory_numbers_its_sections_and_equations(html):
+    text = (html / "theory" / "model.html").read_text(encoding="utf-8")
+    numbers = re.findall(r'<span class="eqno">\((\d+)\)', text)
+    assert len(numbers) >= 15 and numbers == [str(i + 1) for i in range(len(numbers))]
+    for section in range(1, 9):
+        assert re.search(rf"<h2>{section}\. ", text), section
+
+
 def test_theory_cites_the_papers(html):
     text = (html / "theory" / "model.html").read_text(encoding="utf-8")
     assert text.count("Journal of Beijing Institute of") >= 2
