@@ -8,8 +8,12 @@ Sphinx's Python domain cannot find is imported, and when the object it names is 
 under another name the reference points there. Relative names (``layout`` in a method of
 ``Model``) are looked up from the class and the module the reference is written in.
 
-A class's bases that the API does not document (private helpers such as ``KeywordOnly``) are
-left out of its "Bases" line, so that every name the site shows as a link is one.
+The targets it adds: a record class's fields, listed in its numpydoc "Attributes" section,
+become attribute entries of the class (:func:`attribute_targets`), and ``.. module-index::``
+(the API's Modules page) describes every module with the members that no other API page
+documents, its constants with their values. A class's bases that the API does not document
+(private helpers such as ``KeywordOnly``) are left out of its "Bases" line, so that every name
+the site shows as a link is one.
 
 Everything else stays unresolved, and the nitpicky build (``-n -W``) fails on it.
 """
@@ -21,10 +25,9 @@ import pkgutil
 import re
 from pathlib import Path
 
-from sphinx.pycode import ModuleAnalyzer
 from sphinx.errors import PycodeError
+from sphinx.pycode import ModuleAnalyzer
 from sphinx.util.docutils import SphinxDirective
-
 from sphinx.util.nodes import make_refnode
 
 _ROLES = {"class": ("class", "exception", "data", "attribute"),
@@ -134,6 +137,8 @@ def _candidates(target, node):
 
 
 def missing_reference(app, env, node, contnode):
+    """Sphinx's ``missing-reference`` event: the reference node to where the object named by
+    ``node`` is documented, or None (the reference stays unresolved)."""
     if node.get("refdomain") != "py":
         return None
     domain = env.get_domain("py")
