@@ -88,18 +88,13 @@ numpydoc_xref_ignore = "all"
 
 
 def _type_aliases():
-    import importlib
     import inspect
-    import pkgutil
+
+    from api_links import project_modules
 
     short, aliases = {}, {}
     for package in ("flexctl", "controllers"):
-        root = importlib.import_module(package)
-        for info in [None] + list(pkgutil.walk_packages(root.__path__, package + ".")):
-            name = package if info is None else info.name
-            if name.rpartition(".")[2].startswith("_"):
-                continue
-            module = importlib.import_module(name)
+        for name, module in project_modules(package):
             for attribute, value in vars(module).items():
                 if (inspect.isclass(value) and not attribute.startswith("_")
                         and value.__module__ == name):

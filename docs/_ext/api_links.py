@@ -214,8 +214,7 @@ def process_bases(app, name, obj, options, bases):
 def _is_private(base):
     if base.__name__.startswith("_"):
         return True
-    for package in ("flexctl", "flexctl.model", "flexctl.sim", "controllers",
-                    "controllers.codegen", "flexctl.app"):
+    for package in _PUBLIC_PACKAGES + ("flexctl.app",):
         exported = getattr(importlib.import_module(package), "__all__", ())
         if base.__name__ in exported and getattr(
                 importlib.import_module(package), base.__name__, None) is base:
@@ -296,14 +295,9 @@ class ModuleIndex(SphinxDirective):
         public = _public_objects(pages)
         lines = []
         for package in self.arguments[0].split():
-            root = importlib.import_module(package)
-            names = [package] + sorted(
-                info.name for info in pkgutil.walk_packages(root.__path__, package + ".")
-                if not info.name.rpartition(".")[2].startswith("_"))
-            for name in names:
+            for name, module in project_modules(package):
                 if name in _PUBLIC_PACKAGES:
                     continue                  # described on its own API page
-                module = importlib.import_module(name)
                 shown = [attribute for attribute, value in vars(module).items()
                          if id(value) in public or f"{name}.{attribute}" in public
                          or _imported_here(value, name)]
@@ -313,6 +307,16 @@ class ModuleIndex(SphinxDirective):
                     lines.append(f"   :exclude-members: {', '.join(sorted(shown))}")
                 lines.append("")
         return self.parse_text_to_nodes("\n".join(lines), allow_section_headings=True)
+
+
+def project_modules(package):
+    """``(name, module)`` of a package and of each of its modules whose name has no leading
+    underscore, the package first, then sorted by name."""
+    root = importlib.import_module(package)
+    names = [package] + sorted(
+        info.name for info in pkgutil.walk_packages(root.__path__, package + ".")
+        if not info.name.rpartition(".")[2].startswith("_"))
+    return [(name, importlib.import_module(name)) for name in names]
 
 
 def _imported_here(value, module):
@@ -337,7 +341,7 @@ def _public_objects(pages):
                 full = f"{module}.{line.strip()}"
                 found.add(full)
                 value = _imported(full)
-                if value is not None and not isinstance(value, (int, float, str, bool, tuple)):
+                if _has_identity(value):
                     found.add(id(value))
     return found
 

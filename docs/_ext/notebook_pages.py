@@ -172,8 +172,9 @@ def prepare(app):
                 png.write_bytes(picture)
 
 
-def gallery_nodes():
-    """The gallery's nodes: per notebook a card with its linked thumbnail and title."""
+def gallery_nodes(docname):
+    """The gallery's nodes on page ``docname``: per notebook a card with its linked thumbnail
+    and title."""
     from docutils import nodes
     from sphinx.addnodes import pending_xref
 
@@ -186,7 +187,7 @@ def gallery_nodes():
         card += nodes.reference("", "", image, refuri=f"notebooks/{stem}.html")
         link = pending_xref("", nodes.inline(heading, heading), refdomain="std",
                             reftype="doc", reftarget=f"notebooks/{stem}", refexplicit=True,
-                            refwarn=True)
+                            refwarn=True, refdoc=docname)
         card += nodes.paragraph("", "", link)
         gallery += card
     return gallery
@@ -199,11 +200,7 @@ def setup(app):
         """``.. notebook-gallery::``: the example notebooks as linked thumbnails."""
 
         def run(self):
-            gallery = gallery_nodes()
-            for card in gallery.children:
-                for xref in card.findall(lambda node: node.tagname == "pending_xref"):
-                    xref["refdoc"] = self.env.docname
-            return [gallery]
+            return [gallery_nodes(self.env.docname)]
 
     app.add_directive("notebook-gallery", NotebookGallery)
     app.connect("builder-inited", prepare)
