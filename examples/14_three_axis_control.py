@@ -178,7 +178,8 @@ plt.show()
 # tolerance.
 
 # %%
-compiled = export_c(laws["LQG"], None, tempfile.mkdtemp(prefix="lqg-c-")).compile()
+build = tempfile.TemporaryDirectory(prefix="lqg-c-")  # removed when the kernel stops
+compiled = export_c(laws["LQG"], None, build.name).compile()
 flown = fly(compiled_spatial_law(compiled))
 difference = np.max(np.abs(flown.states - runs["LQG"].states))
 print(f"C against Python in the loop: largest state difference {difference:.2g}, "

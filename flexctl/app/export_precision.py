@@ -70,12 +70,12 @@ def compare_precisions(scene, *, sample_time: float | None = None, cc: str | Non
     angle = scene.maneuver.angle
     runs = {}
     for precision in ("double", "float"):
-        folder = tempfile.mkdtemp(prefix=f"flexctl-{precision}-")
-        law = export_c(built.controller, plant, folder, sample_time=sample_time,
-                       precision=precision).compile(cc)
-        compiled = dataclasses.replace(built, controller=law.controller())
-        result, _, metrics = run_slew(scene, lambda s, p, c=compiled: c,
-                                      error_estimate=False)
+        with tempfile.TemporaryDirectory(prefix=f"flexctl-{precision}-") as folder:
+            law = export_c(built.controller, plant, folder, sample_time=sample_time,
+                           precision=precision).compile(cc)
+            compiled = dataclasses.replace(built, controller=law.controller())
+            result, _, metrics = run_slew(scene, lambda s, p, c=compiled: c,
+                                          error_estimate=False)
         runs[precision] = (result, metrics)
     out = {"plant_variant": plant.variant.name if hasattr(plant.variant, "name")
            else str(plant.variant), "plant_modes": plant.n_modes}
