@@ -15,7 +15,8 @@ __all__ = ["plot_speed_error"]
 
 _METHOD_COLOURS = {"cvodes": "tab:blue", "DOP853": "tab:orange", "LSODA": "tab:green",
                    "RK45": "tab:red", "RK23": "tab:purple", "Radau": "tab:brown",
-                   "BDF": "tab:pink", "rk4": "tab:olive", "auto": "tab:gray"}
+                   "BDF": "tab:pink", "rk4": "tab:olive", "dop853": "tab:cyan",
+                   "auto": "tab:gray"}
 _VARIANT_MARKERS = {"first_order": "o", "zero_order": "s", "consistent": "^", "exact": "D"}
 
 

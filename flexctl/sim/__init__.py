@@ -18,8 +18,8 @@ module                  contents
 ``compiled``            the CasADi/CVODES integration of a symbolic drive
 ``fixed_step``          compiled fixed-step RK4 with a step-doubling error estimate (``rk4``)
 ``digital``             sampled controllers: ``ZeroOrderHold``, the ``SampledController`` protocol
-``embedded_rk``         compiled Dormand-Prince steps (``RK45``): sample to sample, and continuous
-                        runs with dense output
+``embedded_rk``         compiled Dormand-Prince steps: 5(4) (``RK45``) sample to sample, 5(4)
+                        and 8(5,3) (``dop853``) over continuous runs with dense output
 ``sensors``             noisy, quantised, late sensor readings (``Sensors``)
 ``energy``              energy balance of small-deflection runs (``energy_balance``)
 ``validity``            geometric model error of a run, the variant a manoeuvre needs

@@ -73,6 +73,12 @@ DENSE_OUTPUT = (-12715105075 / 11282082432, 0.0, 87487479700 / 32700410799,
 #: tolerances the error control keeps the steps about this short anyway (``omega h`` of 0.49
 #: on slew-90's 6-mode plant at rtol 1e-6).
 PAIR_OMEGA_H = 0.5
+#: Longest step of a continuous run by Dormand-Prince 8(5,3), in radians of its fastest pole:
+#: its stability function stays within the unit circle on the imaginary axis up to
+#: ``|h lambda| = 5.96`` (and damps past 2: 0.99997 at 2, 0.9985 at 3, 0.83 at 5), where
+#: 5(4)'s leaves it at 0.997, so the run takes at most 2.5 and its accuracy check, replayed
+#: with twice the longest step, 5.
+DOP853_OMEGA_H = 2.5
 #: Step attempts per compiled call of a continuous run (:class:`EmbeddedRun`): the calls'
 #: Python overhead is paid once for this many steps; the attempts left once a segment is done
 #: change nothing.
@@ -172,6 +178,109 @@ class _DormandPrince:
     def __call__(self, f, t, y, h, extra):
         _, y5, norm = _dopri5_step(f, t, y, h, *extra)
         return y5, norm
+
+
+def _dop853_tableau() -> dict:
+    """Dormand and Prince's 8(5,3) pair (Hairer, Norsett and Wanner's DOP853; the
+    coefficients of SciPy's ``DOP853``): twelve stages, the derivative at the step's end, and
+    three more for the continuous extension of order 7."""
+    from scipy.integrate._ivp import dop853_coefficients as dop853
+
+    return {"a": dop853.A, "b": dop853.B, "c": dop853.C, "e3": dop853.E3, "e5": dop853.E5,
+            "d": dop853.D, "stages": dop853.N_STAGES}
+
+
+class PairScheme:
+    """An embedded Runge-Kutta pair as compiled continuous runs use it
+    (:class:`EmbeddedRun`): one attempted step as CasADi expressions, the exponent of its step
+    control and its continuous extension.
+
+    Parameters
+    ----------
+    name : {"dopri5", "dop853"}
+        Dormand-Prince 5(4) (SciPy's ``RK45``) or 8(5,3) (SciPy's ``DOP853``).
+
+    Attributes
+    ----------
+    evaluations : int
+        Right-hand side evaluations of one attempt, its continuous extension included.
+    dense_rows : int
+        Vectors of the continuous extension per step (the start state first).
+    exponent : float
+        ``-1 / (q + 1)``, ``q`` the order of the error estimate: the step control's
+        ``h_new = h * SAFETY * norm ** exponent``.
+    omega_h : float
+        Longest step of a run, in radians of its fastest pole (:data:`PAIR_OMEGA_H` for
+        Dormand-Prince 5(4), :data:`DOP853_OMEGA_H` for 8(5,3)).
+    """
+
+    def __init__(self, name: str):
+        if name not in ("dopri5", "dop853"):
+            raise InputValueError(f"PairScheme name must be 'dopri5' or 'dop853'; got {name!r}")
+        self.name = name
+        self.label = "Dormand-Prince 5(4)" if name == "dopri5" else "Dormand-Prince 8(5,3)"
+        self.evaluations = 7 if name == "dopri5" else 16
+        self.dense_rows = 5 if name == "dopri5" else 8
+        self.exponent = -0.2 if name == "dopri5" else -0.125
+        self.omega_h = PAIR_OMEGA_H if name == "dopri5" else DOP853_OMEGA_H
+
+    def attempt(self, f, t, y, h, atol, rtol) -> tuple:
+        """``(y_new, norm, dense)`` of one step of length ``h`` from ``y`` at ``t``: the
+        solution, the weighted RMS norm of its error estimate (CVODES's weights, ``atol +
+        rtol max(|y|, |y_new|)``) and the rows of its continuous extension (``dense_rows``
+        vectors stacked), all CasADi expressions."""
+        import casadi as ca
+
+        if self.name == "dopri5":
+            ks, y5, norm = _dopri5_step(f, t, y, h, atol, rtol)
+            dy = y5 - y
+            spline = h * ks[0] - dy
+            dense = ca.vertcat(y, dy, spline, dy - h * ks[6] - spline,
+                               h * sum(d * k for d, k in zip(DENSE_OUTPUT, ks) if d != 0.0))
+            return y5, norm, dense
+        tab = _dop853_tableau()
+        n_stages = tab["stages"]
+
+        def stages(count, ks):
+            for row in range(len(ks), count):
+                stage = y
+                for a, k in zip(tab["a"][row][:row], ks):
+                    if a != 0.0:
+                        stage = stage + h * float(a) * k
+                node = float(tab["c"][row])
+                ks.append(f(t + h * (node if node < 1.0 else 1.0 - END_INSIDE), stage))
+            return ks
+
+        ks = stages(n_stages, [])
+        y_new = y + h * sum(float(b) * k for b, k in zip(tab["b"], ks) if b != 0.0)
+        # the derivative at the step's end: the error estimate's last stage and the
+        # continuous extension's
+        ks.append(f(t + h * (1.0 - END_INSIDE), y_new))
+        weight = atol + rtol * ca.fmax(ca.fabs(y), ca.fabs(y_new))
+        err5 = sum(float(e) * k for e, k in zip(tab["e5"], ks) if e != 0.0) / weight
+        err3 = sum(float(e) * k for e, k in zip(tab["e3"], ks) if e != 0.0) / weight
+        n5, n3 = ca.sumsqr(err5), ca.sumsqr(err3)
+        denominator = n5 + 0.01 * n3
+        norm = ca.if_else(denominator > 0.0,
+                          ca.fabs(h) * n5 / ca.sqrt(ca.fmax(denominator, 1e-300) * y.numel()),
+                          0.0)
+        ks = stages(tab["a"].shape[0], ks)
+        dy = y_new - y
+        rows = [y, dy, h * ks[0] - dy, 2.0 * dy - h * (ks[n_stages] + ks[0])]
+        rows += [h * sum(float(d) * k for d, k in zip(tab["d"][i], ks) if d != 0.0)
+                 for i in range(tab["d"].shape[0])]
+        return y_new, norm, ca.vertcat(*rows)
+
+    def interpolate(self, p, theta):
+        """States at the fractions ``theta`` (shape (K, 1)) of their steps, from the steps'
+        continuous extensions ``p`` (shape (K, dense_rows, m)): shape (K, m)."""
+        if self.name == "dopri5":
+            return p[:, 0] + theta * (p[:, 1] + (1.0 - theta) * (
+                p[:, 2] + theta * (p[:, 3] + (1.0 - theta) * p[:, 4])))
+        value = p[:, 7]
+        for k, row in enumerate((6, 5, 4, 3, 2, 1)):
+            value = p[:, row] + (1.0 - theta if k % 2 else theta) * value
+        return p[:, 0] + theta * value
 
 
 class EmbeddedHold:
@@ -321,7 +430,8 @@ def choose_hold(model, sample_time: float, spin_frequency: float = 0.0) -> tuple
     return ("cvodes" if stiff else "RK45"), omega
 
 
-def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
+def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS,
+                   scheme: PairScheme | None = None):
     """``(run, lifted numbers or None)``: the compiled ``run(s, t_end, h_max, c, atol, rtol[,
     numbers]) -> (s_end, info, dense)`` (``numbers``: the model's numbers, lifted out of its
     code, :func:`~flexctl.sim.lifted_constants.lift_constants`) of ``attempts`` Dormand-Prince
@@ -366,39 +476,37 @@ def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS):
     # the last step of a segment ends on it (and is not left a sliver)
     last = left <= 1.1 * h_try
     step = ca.if_else(last, left, h_try)
-    ks, y5, norm = _dopri5_step(f, t, y, step, atol, rtol)
+    scheme = scheme or PairScheme("dopri5")
+    y5, norm, dense = scheme.attempt(f, t, y, step, atol, rtol)
     accepted = ca.logic_and(norm <= 1.0, live)            # a NaN norm never is
-    change = SAFETY * norm ** -0.2
+    change = SAFETY * norm ** scheme.exponent
     grown = ca.fmin(GROWTH, change) * step
     h_next = ca.if_else(live, ca.if_else(accepted, ca.if_else(last, ca.fmax(h, grown), grown),
                                          ca.fmax(SHRINK, change) * step), h)
     t_next = ca.if_else(accepted, ca.if_else(last, t_end, t + step), t)
-    dy = y5 - y
-    spline = step * ks[0] - dy
-    dense = ca.vertcat(y, dy, spline, dy - step * ks[6] - spline,
-                       step * sum(d * k for d, k in zip(DENSE_OUTPUT, ks) if d != 0.0))
     args = [s, t_end, h_max, c, atol, rtol] + ([] if numbers is None else [numbers])
-    attempt = ca.Function("flexctl_dopri5_attempt", args,
+    name = f"flexctl_{scheme.name}"
+    attempt = ca.Function(f"{name}_attempt", args,
                           [ca.vertcat(t_next, h_next, ca.if_else(accepted, y5, y)),
                            ca.vertcat(accepted, t, step, norm), dense])
     # an attempt after the segment's end is skipped: the state passes through, unchanged
     idle_args = [ca.MX.sym(attempt.name_in(k), attempt.sparsity_in(k))
                  for k in range(attempt.n_in())]
-    idle = ca.Function("flexctl_dopri5_idle", idle_args,
+    idle = ca.Function(f"{name}_idle", idle_args,
                        [idle_args[0], ca.vertcat(0.0, idle_args[0][0], 0.0, 0.0),
-                        ca.MX.zeros(5 * ny)])
-    switch = ca.Function.conditional("flexctl_dopri5_switch", [attempt], idle)
+                        ca.MX.zeros(scheme.dense_rows * ny)])
+    switch = ca.Function.conditional(f"{name}_switch", [attempt], idle)
     call = [ca.MX.sym(attempt.name_in(k), attempt.sparsity_in(k))
             for k in range(attempt.n_in())]
-    body = ca.Function("flexctl_dopri5_body", call,
+    body = ca.Function(f"{name}_body", call,
                        switch(call[0][0] >= call[1], *call))
-    chain = body.mapaccum("flexctl_dopri5_chain", attempts, [0], [0])
+    chain = body.mapaccum(f"{name}_chain", attempts, [0], [0])
     # MX arguments keep the chain a loop over one body in the generated code
     call = [ca.MX.sym(body.name_in(k), body.sparsity_in(k)) for k in range(body.n_in())]
     ends, info, dense_all = chain(*call)
-    run = ca.Function(f"flexctl_dopri5_run{attempts}", call,
+    run = ca.Function(f"{name}_run{attempts}", call,
                       [ends[:, -1], info, dense_all])
-    label = f"the {model.variant} model's Dormand-Prince steps"
+    label = f"the {model.variant} model's {scheme.label} steps"
     return (compiled(run, label=label) if fixed_step.USE_JIT else run), values
 
 
@@ -500,16 +608,22 @@ class EmbeddedRun(CompiledRun):
     """
 
     def __init__(self, model, torque=None, hub_motion=None, controller=None, *, scale,
-                 rtol: float, max_steps: int, h_first: float, max_step: float | None = None):
+                 rtol: float, max_steps: int, h_first: float, max_step: float | None = None,
+                 scheme: str = "dopri5"):
         inputs = (torque, hub_motion, controller)
         m, scale, rtol, self.max_steps, self.h, max_step = checked_run_arguments(
             "EmbeddedRun", model, inputs, scale, rtol, max_steps, h_first, max_step)
+        if scheme not in ("dopri5", "dop853"):
+            raise InputValueError(f"EmbeddedRun scheme must be 'dopri5' or 'dop853'; got "
+                                  f"{scheme!r}")
+        self.scheme = pair = PairScheme(scheme)
         numbers = input_numbers(inputs)
         key = input_key(model, inputs, np.array([1.0]))
         run, model_numbers = cached_build(STEP_CACHE, STEP_CACHE_SIZE,
-                                     None if key is None else ("dopri5-run", key),
+                                     None if key is None else (f"{scheme}-run", key),
                                      (model, *inputs),
-                                     lambda: _attempt_chain(model, inputs, numbers.size))
+                                     lambda: _attempt_chain(model, inputs, numbers.size,
+                                                            scheme=pair))
         self._run, self._size = InPlace(run), m
         # the buffers keep every input but the carry and the segment's end, set per call
         fixed = [max_step, numbers, rtol * scale, rtol]
@@ -519,7 +633,7 @@ class EmbeddedRun(CompiledRun):
             self._run.args[k][:] = value
 
     def _segment(self, run, lo, t_out, y, stop):
-        m, attempts = self._size, 0
+        m, attempts, pair = self._size, 0, self.scheme
         # the carry: time, step size, then the drive's state
         carry, end = run.args[0], float(t_out[-1])
         run.args[1][0] = end
@@ -539,14 +653,12 @@ class EmbeddedRun(CompiledRun):
             reached = int(np.searchsorted(t_out, t_now, side="right"))
             if reached > done:
                 starts, lengths = info[taken, 1], info[taken, 2]
-                parts = dense.reshape(-1, 5, m)[taken]
+                parts = dense.reshape(-1, pair.dense_rows, m)[taken]
                 which = np.searchsorted(starts, t_out[done:reached], side="right") - 1
                 theta = ((t_out[done:reached] - starts[which]) / lengths[which])[:, None]
-                p = parts[which]
-                out[:, done:reached] = (p[:, 0] + theta * (p[:, 1] + (1.0 - theta) * (
-                    p[:, 2] + theta * (p[:, 3] + (1.0 - theta) * p[:, 4])))).T
+                out[:, done:reached] = pair.interpolate(parts[which], theta).T
                 if stop is not None and stop(out[:, done:reached]) is not None:
-                    return out[:, :reached], 7 * attempts
+                    return out[:, :reached], pair.evaluations * attempts
                 done = reached
             h = float(final[1])
             carry[:] = final
@@ -556,4 +668,4 @@ class EmbeddedRun(CompiledRun):
                 raise RuntimeError(f"step size {h:.3g} s at t = {t_now:.6g} s")
         out[:, -1] = carry[2:]
         self.h = float(carry[1])
-        return out, 7 * attempts
+        return out, pair.evaluations * attempts

@@ -35,17 +35,20 @@ from ..model.errors import InputTypeError, InputValueError
 __all__ = ["RunRequest", "IntegrationPlan", "run_request", "plan_integration", "state_scale",
            "StiffnessWarning", "ManyModesWarning", "MANY_MODES", "METHODS", "SAMPLED_METHODS",
            "plan_sampled", "choose_continuous", "choose_multistep", "actuator_frequency",
-           "ADAMS_DAMPING", "ADAMS_PHASE", "BDF_REPLACES",
+           "ADAMS_DAMPING", "ADAMS_PHASE", "BDF_REPLACES", "PAIRS",
            "ADAMS_TOLERANCE", "ATOL_LIMIT"]
 
 #: Integration methods: "auto" (resolved by :func:`plan_integration` when every input has a
 #: CasADi form, else DOP853), "cvodes" (compiled, :mod:`flexctl.sim.compiled`), "rk4"
-#: (compiled fixed step, :mod:`flexctl.sim.fixed_step`) and the ``scipy.integrate.solve_ivp``
+#: (compiled fixed step, :mod:`flexctl.sim.fixed_step`), "dop853" (compiled Dormand-Prince
+#: 8(5,3) steps, :mod:`flexctl.sim.embedded_rk`; SciPy's "DOP853" where an input has no
+#: CasADi form) and the ``scipy.integrate.solve_ivp``
 #: methods ("RK45" and "BDF" compiled where the inputs have a CasADi form:
 #: :mod:`flexctl.sim.embedded_rk`, :mod:`flexctl.sim.compiled_bdf`), and "Adams" (the compiled
 #: Adams-Moulton methods of :mod:`flexctl.sim.compiled_bdf`; CVODES's where it cannot be
 #: compiled).
-METHODS = ("auto", "cvodes", "rk4", "Adams", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+METHODS = ("auto", "cvodes", "rk4", "dop853", "Adams", "DOP853", "RK45", "RK23", "Radau", "BDF",
+           "LSODA")
 #: The methods of a sampled controller's loop: "auto" (resolved for each run by
 #: :func:`flexctl.sim.embedded_rk.choose_hold`: the compiled Dormand-Prince pair, the scheme
 #: of SciPy's "RK45", for a plant that is not stiff over a sample; CVODES otherwise),
@@ -65,7 +68,7 @@ DEFAULT_OUTPUT_POINTS = 2000
 #: frequency ``omega``: half the extent of its stability region along the imaginary axis
 #: (where ``|R(iy)| <= 1 + 1e-3``: DOP853 5.96, RK45 1.34, RK23 1.73), the margin that error
 #: control keeps in practice.
-EXPLICIT_STABILITY_LIMITS = {"DOP853": 3.0, "RK45": 0.67, "RK23": 0.87}
+EXPLICIT_STABILITY_LIMITS = {"DOP853": 3.0, "dop853": 3.0, "RK45": 0.67, "RK23": 0.87}
 #: An explicit method predicted to need more steps than this (about 5 s of DOP853 at ~40 us a
 #: right-hand side) is not used when the compiled implicit path can take the run.
 EXPLICIT_STEP_LIMIT = 10_000
@@ -80,7 +83,13 @@ PAIR_WORK = 6e7
 #: by the compiled BDF (:mod:`flexctl.sim.compiled_bdf`) where it can have it, per variant:
 #: the exact model's, whose right-hand side costs far more than the integrator's own work
 #: (see :func:`choose_continuous` for the measurements).
-BDF_REPLACES = {"exact": ("cvodes", "RK45")}
+BDF_REPLACES = {"exact": ("cvodes", "dop853")}
+#: The explicit pairs that run compiled (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`) when
+#: every input has a CasADi form and :func:`choose_continuous` does not take CVODES:
+#: Dormand-Prince 5(4) (``"RK45"``, SciPy's name, whose ``solve_ivp`` scheme it is) and 8(5,3)
+#: (``"dop853"``; ``"DOP853"`` is SciPy's ``solve_ivp`` of the same scheme, which calls the
+#: inputs from Python at every stage).
+PAIRS = ("RK45", "dop853")
 #: Largest ``atol`` accepted, in multiples of each state's physical size (``state_scale``):
 #: a tenth of the shortest beam's length for a coordinate, 0.1 rad for the hub angle.
 ATOL_LIMIT = 100.0
@@ -309,7 +318,7 @@ def _resolve_method(method, symbolic, controller, untraced) -> str:
         raise InputValueError(f"method {method!r}: a sampled controller (sample_time "
                               f"{controller.sample_time!r} s) runs on the compiled path; use "
                               "method 'auto', 'cvodes', 'RK45' or 'rk4'")
-    if method in ("cvodes", "rk4", "Adams") and not symbolic:
+    if method in ("cvodes", "rk4", "Adams", "dop853") and not symbolic:
         raise InputValueError(f"method {method!r} needs inputs with a CasADi form (the built-in "
                               "manoeuvres, torque samples, controllers with casadi_torque); "
                               "got a Python callable"
@@ -586,8 +595,9 @@ class IntegrationPlan:
     @property
     def fallback(self) -> str:
         """The SciPy method that locates a stop: DOP853 behind CVODES, the compiled
-        fixed-step RK4 and the compiled multistep methods, else the method."""
-        return "DOP853" if self.method in ("cvodes", "Adams", "rk4") or (
+        fixed-step RK4, the compiled 8(5,3) pair and the compiled multistep methods, else the
+        method."""
+        return "DOP853" if self.method in ("cvodes", "Adams", "rk4", "dop853") or (
             self.method == "BDF" and self.compiled) else self.method
 
     @property
@@ -789,9 +799,10 @@ def choose_multistep(model: Model, omega_plant: float, loop_frequency: float = 0
 
 def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
     """The method of a continuous ``method="auto"`` run whose inputs have a CasADi form:
-    ``"RK45"`` (compiled Dormand-Prince steps, :class:`~flexctl.sim.embedded_rk.EmbeddedRun`)
-    or ``"cvodes"``.
+    ``"dop853"`` (compiled Dormand-Prince 8(5,3) steps,
+    :class:`~flexctl.sim.embedded_rk.EmbeddedRun`) or ``"cvodes"``.
 
+    The rule was measured on Dormand-Prince 5(4) (``"RK45"``, the pair of the table below).
     On these undamped models the pair's steps are held to ``omega_max h`` of about 0.5 on the
     fastest pole ``omega_max`` (rad/s), by its error control and by its bound
     (:data:`~flexctl.sim.embedded_rk.PAIR_OMEGA_H`), so a run takes some
@@ -825,6 +836,25 @@ def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
     hub-beam-mass 6 modes over 20 s 28 / 21, 20 modes over 2 s 118 / 107; spacecraft-torque
     222 / 66. The rule's choices stand.
 
+    Where the rule takes a pair, it takes 8(5,3): its stability function keeps within the
+    unit circle on the imaginary axis up to ``|h lambda|`` of 5.96 where 5(4)'s leaves it
+    at 1, so its steps may be five times as long
+    (:data:`~flexctl.sim.embedded_rk.DOP853_OMEGA_H`) for 16 evaluations a step (its
+    continuous extension included) against 7. With the
+    accuracy check, best of 4 (ms, rtol 1e-4 / 1e-6 / 1e-8; 5(4) then 8(5,3); every error
+    within its estimate):
+
+    ========================================  ===============  ===============
+    run                                       5(4)             8(5,3)
+    ========================================  ===============  ===============
+    slew-90 PD, first_order, 6 modes, 6 s     15 / 21 / 26     16 / 22 / 20
+    hub-beam-mass, 6 modes, 20 s              24 / 29 / 28     23 / 15 / 22
+    hub-beam-mass, 12 modes, 20 s             193 / 189 / 189  111 / 84 / 83
+    hub-beam-mass, 20 modes, 2 s              134 / 130 / 141  69 / 70 / 93
+    spacecraft-torque, 6 modes, 20 s          88 / 106 / 189   51 / 82 / 91
+    Kane spin-up, first_order, 4 modes, 30 s  12 / 10 / 10     5.6 / 5.5 / 5.7
+    ========================================  ===============  ===============
+
     Parameters
     ----------
     model : Model
@@ -846,7 +876,7 @@ def choose_continuous(model: Model, t_final: float, omega_max: float) -> str:
         return "cvodes"
     instructions = rhs_instructions(model)
     cheap = instructions <= PAIR_INSTRUCTIONS and steps * instructions <= PAIR_WORK
-    return "RK45" if cheap else "cvodes"
+    return "dop853" if cheap else "cvodes"
 
 
 def rhs_instructions(model: Model) -> float:
@@ -924,9 +954,9 @@ def plan_integration(request: RunRequest, drive, stacklevel: int = 3) -> Integra
             f"method 'Adams' at rtol {rtol:g} or an atol beyond {seen:g} of the states' sizes: "
             "its error control (and its check's, at 10 times the tolerance) may not see an "
             "undamped mode that Adams-Moulton's steps amplify; method 'auto' takes BDF there")
-    elif request.method == "RK45" and request.symbolic and \
-            choose_continuous(model, t_final, fastest) == "RK45":
-        method, note = "RK45", ""          # the compiled pair, within its work
+    elif request.method in PAIRS and request.symbolic and \
+            choose_continuous(model, t_final, fastest) != "cvodes":
+        method, note = request.method, ""          # the compiled pair, within its work
     else:
         method, note = stiffness_guard(model, t_final, request.method, request.symbolic,
                                        request.prescribed, loop, actuator)

@@ -32,13 +32,15 @@ Methods
 for lightly damped oscillations and BDF where poles decay fast
 (:func:`flexctl.sim.request.choose_multistep`); every such run
 is repeated at 10 times the tolerance to estimate its integration error, and redone with
-A-stable BDF2 if the two disagree grossly. ``"RK45"`` with inputs that have a CasADi form is
-compiled Dormand-Prince 5(4) stepping (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`), its
-outputs read from the pair's continuous extension and its error estimated by a replay at 10
-times the tolerance. ``"BDF"`` with such inputs is a compiled variable-order BDF and
+A-stable BDF2 if the two disagree grossly. ``"dop853"`` is compiled Dormand-Prince 8(5,3)
+stepping (:class:`~flexctl.sim.embedded_rk.EmbeddedRun`; the scheme of SciPy's ``"DOP853"``,
+which calls the inputs from Python), its outputs read from the pair's continuous extension of
+order 7 and its error estimated by a replay at 10 times the tolerance; it needs inputs with a
+CasADi form. ``"RK45"`` with such inputs is the same for Dormand-Prince 5(4). ``"BDF"`` with
+such inputs is a compiled variable-order BDF and
 ``"Adams"`` compiled Adams-Moulton methods of orders 1 to 12
 (:class:`~flexctl.sim.compiled_bdf.BdfRun`; CVODES's Adams-Moulton where nothing can be
-compiled), checked the same way. ``"auto"`` takes the pair where it costs less than CVODES (a
+compiled), checked the same way. ``"auto"`` takes ``"dop853"`` where it costs less than CVODES (a
 cheap right-hand side, a fastest pole that leaves few steps:
 :func:`flexctl.sim.request.choose_continuous`), else CVODES, for the exact model in place of
 either the compiled Adams-Moulton methods where CVODES would take Adams and the tolerance lets
@@ -118,9 +120,9 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         Absolute tolerance, one or one per state; default ``rtol`` times each state's
         physical scale (:func:`~flexctl.sim.request.state_scale`), at most 100 times it.
     method : str, optional
-        ``"auto"`` (default), ``"cvodes"``, ``"rk4"``, ``"Adams"`` or a ``solve_ivp`` method
-        (``"DOP853"``, ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``, ``"LSODA"``); see
-        the module's Methods.
+        ``"auto"`` (default), ``"cvodes"``, ``"rk4"``, ``"dop853"``, ``"Adams"`` or a
+        ``solve_ivp`` method (``"DOP853"``, ``"RK45"``, ``"RK23"``, ``"Radau"``, ``"BDF"``,
+        ``"LSODA"``); see the module's Methods.
     output_step : float, optional
         Spacing of the output times, s. Default: ``t_final / 2000``.
     max_step : float, optional
@@ -129,7 +131,7 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
         interval) bounds it too.
     check_accuracy : bool, optional
         Repeat the run at 10 times the tolerance for ``result.integration_error``: beside the
-        run for ``"cvodes"``, ``"Adams"``, compiled ``"RK45"`` and ``"BDF"``
+        run for ``"cvodes"``, ``"Adams"``, ``"dop853"``, compiled ``"RK45"`` and ``"BDF"``
         (:func:`flexctl.sim.compiled.verify_accuracy`,
         :func:`flexctl.sim.strategies.check_embedded_accuracy`), after it for SciPy's methods
         (:func:`flexctl.sim.strategies.replay_error`); ``"rk4"`` is its own step-doubling

@@ -34,7 +34,7 @@ from .background import Beside
 from .compiled import (CHECK_FACTOR, SegmentIntegrator, numeric_rhs, start_check,
                        verify_accuracy)
 from .compiled_bdf import BdfRun
-from .embedded_rk import PAIR_OMEGA_H, EmbeddedRun
+from .embedded_rk import DOP853_OMEGA_H, PAIR_OMEGA_H, EmbeddedRun
 from .fixed_step import MAX_HALVINGS, RK4_FIRST_OMEGA_H, RK4_OMEGA_H, integrate_fixed_step
 from .inputs import jacobian_frequency
 from .progress import Progress
@@ -497,7 +497,9 @@ def _embedded_run(request, plan, rtol: float, looser: bool = False) -> EmbeddedR
     ``looser``: the accuracy check's replay, whose longest step is twice the run's, so that a
     run whose steps are all bound is not replayed step for step."""
     omega = max(plan.fastest_pole, request.spin_frequency)
-    bound = min(PAIR_OMEGA_H / omega if omega > 0.0 else math.inf,
+    scheme = "dop853" if plan.method == "dop853" else "dopri5"
+    cap = DOP853_OMEGA_H if scheme == "dop853" else PAIR_OMEGA_H
+    bound = min(cap / omega if omega > 0.0 else math.inf,
                 math.inf if plan.cvodes_step is None else plan.cvodes_step)
     if looser:
         bound *= 2.0
@@ -505,7 +507,7 @@ def _embedded_run(request, plan, rtol: float, looser: bool = False) -> EmbeddedR
                        scale=plan.scale, rtol=rtol, max_steps=plan.cvodes_steps,
                        h_first=min(1.0 / omega if omega > 0.0 else math.inf, request.step,
                                    bound),
-                       max_step=bound)
+                       max_step=bound, scheme=scheme)
 
 
 def _bdf_run(request, plan, rtol: float) -> BdfRun:
@@ -901,7 +903,7 @@ def strategy_for(plan, symbolic: bool = False):
         Every input has a CasADi form. Default False.
     """
     method = plan.method
-    if method == "RK45" and symbolic:
+    if method in ("RK45", "dop853") and symbolic:
         return EmbeddedSegments
     if method in ("Adams", "BDF") and plan.compiled:
         return BdfSegments

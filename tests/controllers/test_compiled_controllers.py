@@ -34,7 +34,7 @@ SLEW = np.pi / 2
 T_FINAL = 4.0
 
 #: The compiled paths a run with CasADi inputs may take under method="auto".
-COMPILED = ("cvodes", "RK45")
+COMPILED = ("cvodes", "RK45", "dop853")
 
 
 @pytest.fixture(scope="module")

@@ -49,7 +49,7 @@ def test_first_order_keeps_its_choice_and_agrees_when_asked(exact):
     model = flexctl.build_model(exact[0].system, 2)
     tight = flexctl.simulate(model, 4.0, TORQUE, rtol=1e-12, method="cvodes",
                              check_validity=False)
-    assert flexctl.simulate(model, 4.0, TORQUE, check_validity=False).method == "RK45"
+    assert flexctl.simulate(model, 4.0, TORQUE, check_validity=False).method == "dop853"
     run = flexctl.simulate(model, 4.0, TORQUE, rtol=1e-8, method="BDF", check_validity=False)
     assert run.method == "BDF"
     assert _error(run, tight) <= run.integration_error <= 2e-6 * tight.peak_tip_deflection
@@ -363,7 +363,7 @@ def test_the_model_right_hand_side_reaches_c_as_a_function_pointer(exact, family
     assert np.allclose(states[:, -1], expected, rtol=0, atol=1e-5)
 
 
-@pytest.mark.parametrize("method, uncompiled", [("auto", "RK45"), ("Adams", "cvodes"),
+@pytest.mark.parametrize("method, uncompiled", [("auto", "dop853"), ("Adams", "cvodes"),
                                                 ("BDF", "BDF")])
 def test_the_plan_compiles_nothing_and_a_library_that_cannot_be_built_is_replaced(
         exact, monkeypatch, method, uncompiled):

@@ -35,7 +35,7 @@ T_FINAL = 3.0
 INTERPOLATIONS = ("hold", "linear", "spline")
 
 #: The compiled paths a run with CasADi inputs may take under method="auto".
-COMPILED = ("cvodes", "RK45")
+COMPILED = ("cvodes", "RK45", "dop853")
 
 
 @pytest.fixture(scope="module")
