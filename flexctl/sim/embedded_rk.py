@@ -1,4 +1,5 @@
-"""Sample-to-sample integration by an embedded Runge-Kutta pair (Dormand-Prince 5(4)).
+"""Integration by embedded Runge-Kutta pairs: Dormand-Prince 5(4) from sample to sample, and
+5(4) or 8(5,3) over continuous runs.
 
 A sampled loop integrates the plant over one sample at a time under a held torque. CVODES
 starts every sample again from BDF order 1 and a step far below the one the plant allows: on
@@ -19,11 +20,18 @@ exactly at the output times inside a sample (an output grid point, a sensor's re
 pole of the held plant (the largest eigenvalue of its linearisation at rest) allows a sample
 in a few steps within the pair's stability region, CVODES for a stiff plant (many modes, a
 fast actuator) whose explicit steps would be stability-bound.
+
+A continuous run (:class:`EmbeddedRun`) makes :data:`ATTEMPTS` steps of a pair per compiled
+call, accepted or rejected inside it, and reads its output times from the pair's continuous
+extension: Dormand-Prince 5(4) (``method="RK45"``) or 8(5,3) (``method="dop853"``, the
+scheme of Hairer's DOP853 and SciPy's ``DOP853``, which ``method="auto"`` takes), each a
+:class:`PairScheme`.
 """
 
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,7 +40,7 @@ from .compiled import (CHECK_FACTOR, cached_build, input_key, drive_size, input_
                        is_symbolic)
 from .compile_cache import compiled
 from .lifted_constants import lift_constants
-from .buffers import InPlace
+from .buffers import InPlace, borrow, give_back
 from . import fixed_step
 from .fixed_step import (END_INSIDE, STEP_CACHE, STEP_CACHE_SIZE, drive_symbols, jit_compiled,
                          step_function)
@@ -228,7 +236,23 @@ class PairScheme:
         """``(y_new, norm, dense)`` of one step of length ``h`` from ``y`` at ``t``: the
         solution, the weighted RMS norm of its error estimate (CVODES's weights, ``atol +
         rtol max(|y|, |y_new|)``) and the rows of its continuous extension (``dense_rows``
-        vectors stacked), all CasADi expressions."""
+        vectors stacked), all CasADi expressions.
+
+        Parameters
+        ----------
+        f : callable
+            ``f(time, state)``, the derivative as a CasADi expression (shape (m, 1)).
+        t : casadi.SX or casadi.MX or float
+            Start of the step, s.
+        y : casadi.SX or casadi.MX, shape (m, 1)
+            State at ``t``.
+        h : casadi.SX or casadi.MX or float
+            Length of the step, s.
+        atol : casadi.SX or casadi.MX or float or array_like
+            Absolute tolerance, one or one per state.
+        rtol : casadi.SX or casadi.MX or float
+            Relative tolerance.
+        """
         import casadi as ca
 
         if self.name == "dopri5":
@@ -272,8 +296,16 @@ class PairScheme:
         return y_new, norm, ca.vertcat(*rows)
 
     def interpolate(self, p, theta):
-        """States at the fractions ``theta`` (shape (K, 1)) of their steps, from the steps'
-        continuous extensions ``p`` (shape (K, dense_rows, m)): shape (K, m)."""
+        """States at fractions of their steps from the steps' continuous extensions: shape
+        (K, m).
+
+        Parameters
+        ----------
+        p : ndarray, shape (K, dense_rows, m)
+            Each output's step: the ``dense`` rows of :meth:`attempt`.
+        theta : ndarray, shape (K, 1)
+            Each output's fraction of its step, in [0, 1].
+        """
         if self.name == "dopri5":
             return p[:, 0] + theta * (p[:, 1] + (1.0 - theta) * (
                 p[:, 2] + theta * (p[:, 3] + (1.0 - theta) * p[:, 4])))
@@ -570,15 +602,28 @@ class CompiledRun:
         index of the first that ends the run, or None): the states end after that call's,
         fewer than ``K``, rather than integrating a run that has ended."""
         run = self._run
+        if run is None:
+            raise RuntimeError(f"{type(self).__name__} was released: its buffers serve "
+                               "another run")
         with run._lock:        # its buffers are this run's: written and read here directly
             return self._segment(run, float(lo), np.asarray(t_out, dtype=float),
                                  np.asarray(y, dtype=float), stop)
 
+    def release(self) -> None:
+        """Give the buffers back for the next run of the same compiled function
+        (:func:`~flexctl.sim.buffers.give_back`; also done when this run is let go); the
+        run is not called after."""
+        release = getattr(self, "_release", None)
+        if release is not None:
+            release()
+            self._run = None
+
 
 class EmbeddedRun(CompiledRun):
-    """A continuous run's segments by Dormand-Prince 5(4) steps with error control, the step
-    size carried from segment to segment, :data:`ATTEMPTS` attempts per compiled call and the
-    output times read from the continuous extension (:data:`DENSE_OUTPUT`).
+    """A continuous run's segments by Dormand-Prince 5(4) or 8(5,3) steps with error control
+    (:class:`PairScheme`), the step size carried from segment to segment, :data:`ATTEMPTS`
+    attempts per compiled call and the output times read from the pair's continuous
+    extension.
 
     Parameters
     ----------
@@ -598,6 +643,8 @@ class EmbeddedRun(CompiledRun):
         The first step tried, s.
     max_step : float, optional
         Longest step, s (an input's own bound). Default: none.
+    scheme : {"dopri5", "dop853"}, optional
+        The pair (:class:`PairScheme`): Dormand-Prince 5(4), the default, or 8(5,3).
 
     Notes
     -----
@@ -624,7 +671,10 @@ class EmbeddedRun(CompiledRun):
                                      (model, *inputs),
                                      lambda: _attempt_chain(model, inputs, numbers.size,
                                                             scheme=pair))
-        self._run, self._size = InPlace(run), m
+        self._run, self._size = borrow(run), m
+        # the buffers go back to the pool when this run is let go (a replay beside the run
+        # holds it until it ends)
+        self._release = weakref.finalize(self, give_back, self._run)
         # the buffers keep every input but the carry and the segment's end, set per call
         fixed = [max_step, numbers, rtol * scale, rtol]
         if model_numbers is not None:

@@ -156,6 +156,8 @@ def _integrate(request) -> tuple:
         if check is not None:
             check.abandon()
         raise
+    finally:
+        strategy.release()
     if check is not None and traj.reason is StopReason.REACHED_END and \
             len(traj.compiled_segments) == len(plan.drive_cuts) - 1:
         strategy.finish_check(traj, check)

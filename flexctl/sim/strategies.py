@@ -165,6 +165,13 @@ class _Segments:
         self.request, self.plan, self.drive, self.stops = request, plan, drive, stops
         self.start = time.perf_counter()
 
+    def release(self) -> None:
+        """Give back the compiled steps' buffers once the run has ended (a no-op but for the
+        compiled pairs and multistep methods)."""
+        steps = getattr(self, "_steps", None)
+        if steps is not None and hasattr(steps, "release"):
+            steps.release()
+
     def run(self) -> Trajectory:
         """Integrate every segment until the end or a stop."""
         drive = self.drive
@@ -639,16 +646,20 @@ def _embedded_replay(steps, segments, y0, stop, cancelled):
         return 0 if cancelled.is_set() else stop(states)
 
     states, evaluations, y = [], 0, y0
-    for lo, t_out in segments:
-        try:
-            part, n_eval = steps(lo, t_out, y, stop=ended)
-        except RuntimeError:
-            return None
-        if part.shape[1] < len(t_out):
-            return None
-        states.append(part)
-        evaluations += n_eval
-        y = part[:, -1]
+    try:
+        for lo, t_out in segments:
+            try:
+                part, n_eval = steps(lo, t_out, y, stop=ended)
+            except RuntimeError:
+                return None
+            if part.shape[1] < len(t_out):
+                return None
+            states.append(part)
+            evaluations += n_eval
+            y = part[:, -1]
+    finally:
+        # the replay's steps are its own
+        steps.release()
     return np.concatenate(states, axis=1), evaluations
 
 
