@@ -98,8 +98,8 @@ def flexctl_tip(model, t_final, torque, method="auto", check_accuracy=True,
         result = simulate(model, t_final, torque=torque(), rtol=rtol, output_step=OUTPUT_STEP,
                           method=method, check_accuracy=check_accuracy,
                           check_validity=check_validity)
-        # "auto" takes a compiled method (CVODES, the Dormand-Prince pair, BDF or Adams)
-        compiled = ("cvodes", "RK45", "BDF", "Adams", "rk4")
+        # "auto" takes a compiled method (CVODES, a Dormand-Prince pair, BDF or Adams)
+        compiled = ("cvodes", "dop853", "RK45", "BDF", "Adams", "rk4")
         assert result.ok and result.method in ((method,) if method != "auto" else compiled), \
             f"{result.method}: {result.message}"
         return result.tip_deflection

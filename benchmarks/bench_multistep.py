@@ -6,9 +6,9 @@ place of each integration method on ``method="auto"``'s paths.
    (the rule replaced for that run), and prints the best of 5 wall times and each run's
    largest tip error against a run at rtol 1e-11, relative to the peak.
 2. The same cases with ``method="auto"`` (the method it took is printed) against each
-   compiled method asked for by name: ``"cvodes"``, the compiled Dormand-Prince pair
-   (``"RK45"``), the compiled multistep methods (``"Adams"``, ``"BDF"``) and the fixed-step
-   ``"rk4"``, at the same tolerance with the accuracy check, best of 3 (ms), each with its
+   compiled method asked for by name: ``"cvodes"``, the compiled Dormand-Prince pairs
+   (``"dop853"``, ``"RK45"``), the compiled multistep methods (``"Adams"``, ``"BDF"``) and
+   the fixed-step ``"rk4"``, at the same tolerance with the accuracy check, best of 3 (ms), each with its
    error as above. A method earns its place on a default path where ``auto`` takes it and it
    is the fastest of those within the tolerance.
 
@@ -71,7 +71,7 @@ def run(model, t_final, options, rtol, family=None):
         request.choose_multistep = chosen
 
 
-PLACE_METHODS = ("auto", "cvodes", "RK45", "Adams", "BDF", "rk4")
+PLACE_METHODS = ("auto", "cvodes", "dop853", "RK45", "Adams", "BDF", "rk4")
 PLACE_REPEATS = 3
 
 

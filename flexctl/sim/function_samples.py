@@ -23,10 +23,13 @@ The sampling (:func:`sample_function`):
   seen on the start intervals (not below :data:`TOLERANCE_FLOOR` of it, the rounding of the
   function's own arithmetic).
 
-The error of the sampling in the response is measured, not assumed: the run is repeated on
-the function sampled at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance and
-the largest tip difference is added to the run's ``integration_error``
-(:func:`flexctl.sim.runs.run_once`); the cubic's error falls as the fourth power of the
+The error of the sampling in the response is measured, not assumed: the run's accuracy
+check, its replay at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the tolerance, runs on
+the function sampled at that many times the tolerance too, so that its difference from the
+run (the run's ``integration_error``) counts the sampling's error with the integration's;
+where the check cannot take another torque (a sampled loop, SciPy's methods, ``"rk4"``) the
+run is repeated on the looser sampling and the largest tip difference is added
+(:func:`flexctl.sim.runs.run_once`). The cubic's error falls as the fourth power of the
 interval, so the looser sampling's difference bounds the run's.
 
 The limits, as for tracing: the function must be pure (the torque a function of ``t`` alone;

@@ -51,31 +51,49 @@ def run_once(model, t_final: float, torque=None, hub_motion=None, controller=Non
         With ``validity`` None (:func:`flexctl.simulate` adds it).
     """
     request = run_request(model, t_final, torque, hub_motion, controller, x0, **options)
-    result = _simulate_sampled(request) if request.sampled else _simulate_continuous(request)
+    looser = _looser_sampling(request)
+    if request.sampled:
+        result, merged = _simulate_sampled(request), False
+    else:
+        result, merged = _simulate_continuous(request, looser)
     if not request.input_note:
         return result
     message = f"{result.message} ({request.input_note})"
-    if isinstance(request.torque, SampledFunction):
+    if merged:
+        message = (f"{message} (integration_error includes the sampling's: the accuracy check "
+                   f"ran on the function sampled at {CHECK_FACTOR:g} times the tolerance)")
+    elif isinstance(request.torque, SampledFunction):
         error, note = _sampling_error(request, result, (model, t_final, hub_motion, controller,
-                                                         x0), options)
+                                                         x0), options, looser)
         result = replace(result, integration_error=error)
         message = f"{message} ({note})" if note else message
     return replace(result, message=message)
 
 
-def _sampling_error(request, result, arguments, options) -> tuple:
-    """``(integration_error, note)`` of a run on a sampled torque function: the run's own
-    estimate plus the largest tip difference from the same run on the function sampled at
-    :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the run's sampling tolerance (the sampling's error in
-    the response, conservative: the looser sampling's), or None with the reason where that
-    run cannot be compared."""
+def _looser_sampling(request):
+    """The run's sampled torque function sampled again at
+    :data:`~flexctl.sim.compiled.CHECK_FACTOR` times its tolerance (the accuracy check's
+    torque, so that the check counts the sampling's error with the integration's), or None:
+    no check, no sampled function, or one the looser sampling could not make."""
+    if not request.check_accuracy or not isinstance(request.torque, SampledFunction):
+        return None
+    samples = request.torque
+    looser, _ = sample_function(samples.function, request.t_final,
+                                CHECK_FACTOR * samples.tolerance, reuse=True)
+    return looser
+
+
+def _sampling_error(request, result, arguments, options, looser) -> tuple:
+    """``(integration_error, note)`` of a run on a sampled torque function whose accuracy
+    check could not take the looser sampling (a sampled loop, SciPy's methods, ``"rk4"``):
+    the run's own estimate plus the largest tip difference from the same run on ``looser``,
+    the function sampled at :data:`~flexctl.sim.compiled.CHECK_FACTOR` times the run's
+    sampling tolerance (the sampling's error in the response, conservative: the looser
+    sampling's), or None with the reason where that run cannot be compared."""
     error = result.integration_error
     if not request.check_accuracy or error is None or result.status != "ok":
         return error, ""
     model, t_final, hub_motion, controller, x0 = arguments
-    samples = request.torque
-    looser, _ = sample_function(samples.function, t_final, CHECK_FACTOR * samples.tolerance,
-                                reuse=True)
     rerun = None if looser is None else run_once(
         model, t_final, looser, hub_motion, controller, x0,
         **dict(options, check_accuracy=False, progress=None))
@@ -125,15 +143,20 @@ def run_states(model, t_final: float, torque=None, hub_motion=None, controller=N
     return True, states
 
 
-def _simulate_continuous(request) -> SimulationResult:
-    """:func:`run_once` with a continuous drive: its strategy, stops and accuracy check."""
-    plan, stops, drive, start, traj = _integrate(request)
-    return assemble_result(request, plan, drive, stops, traj, time.perf_counter() - start)
+def _simulate_continuous(request, check_torque=None) -> tuple:
+    """:func:`run_once` with a continuous drive: its strategy, stops and accuracy check, the
+    check on ``check_torque`` where it is given and the strategy's check can take it.
+    ``(result, whether the check took check_torque and gave the run's estimate)``."""
+    plan, stops, drive, start, traj = _integrate(request, check_torque)
+    result = assemble_result(request, plan, drive, stops, traj, time.perf_counter() - start)
+    return result, traj.check_torque_taken and result.integration_error is not None
 
 
-def _integrate(request) -> tuple:
+def _integrate(request, check_torque=None) -> tuple:
     """``(plan, stops, drive, start time, trajectory)`` of a continuous drive's run: its
-    strategy, stops and accuracy check."""
+    strategy, stops and accuracy check (on ``check_torque`` in place of the run's torque
+    where given and where the strategy's check runs beside the run:
+    ``trajectory.check_torque_taken``)."""
     model, hub_motion = request.model, request.hub_motion
     drive = (PrescribedDrive(model, hub_motion, request.x_init) if request.prescribed
              else TorqueDrive(model, request.torque, request.controller, request.x_init))
@@ -148,6 +171,9 @@ def _integrate(request) -> tuple:
         plan = plan.without_compiled()
         strategy = strategy_for(plan, request.symbolic)(request, plan, drive, stops)
     start = time.perf_counter()
+    taken = check_torque is not None and strategy.checks_beside and request.check_accuracy
+    if taken:
+        strategy.check_request = replace(request, torque=check_torque)
     # the check needs only the plan: it runs beside the run, on a spare core if there is one
     check = strategy.start_check() if request.check_accuracy else None
     try:
@@ -168,6 +194,7 @@ def _integrate(request) -> tuple:
             # does not describe that run, and no estimate is better than a wrong one
             traj.accuracy_note = ("accuracy check not run: the compiled integrator failed on "
                                   "a segment, which SciPy integrated instead")
+    traj.check_torque_taken = taken
     return plan, stops, drive, start, traj
 
 

@@ -94,6 +94,9 @@ class Trajectory:
         Estimated largest tip-deflection error, m; None where no check ran.
     accuracy_note : str
         What the accuracy check found and did; empty when nothing.
+    check_torque_taken : bool
+        The accuracy check ran on a torque of its own (a sampled function sampled more
+        loosely, :func:`flexctl.sim.runs.run_once`).
     """
 
     ts: list
@@ -105,6 +108,7 @@ class Trajectory:
     compiled_segments: list = field(default_factory=list)
     integration_error: float | None = None
     accuracy_note: str = ""
+    check_torque_taken: bool = False
 
     def add(self, t, y):
         """Append samples ``t`` (K,) and ``y`` (m, K).
@@ -159,10 +163,18 @@ class _Budgeted:
 
 class _Segments:
     """The segment loop shared by the error-controlled strategies: each segment between two
-    cuts is integrated onto the output times inside it, restarting at every cut."""
+    cuts is integrated onto the output times inside it, restarting at every cut.
+
+    ``check_request`` is the request the accuracy check integrates: the run's, or where
+    ``checks_beside`` (a replay started beside the run with inputs of its own) the run's with
+    another torque set by the caller before :meth:`start_check`."""
+
+    #: The accuracy check is a replay started by :meth:`start_check` from ``check_request``.
+    checks_beside = False
 
     def __init__(self, request, plan, drive, stops):
         self.request, self.plan, self.drive, self.stops = request, plan, drive, stops
+        self.check_request = request
         self.start = time.perf_counter()
 
     def release(self) -> None:
@@ -418,8 +430,10 @@ class CvodesSegments(_Segments):
             raise FloatingPointError("the state derivative is not finite")
         return dy
 
+    checks_beside = True
+
     def start_check(self):
-        return start_accuracy_check(self.request, self.plan, self.drive)
+        return start_accuracy_check(self.check_request, self.plan, self.drive)
 
     def finish_check(self, traj, check) -> None:
         """Complete ``traj`` (reached its end) with the result of :meth:`start_check`
@@ -561,7 +575,7 @@ class EmbeddedSegments(CvodesSegments):
         self._steps = _embedded_run(request, plan, request.rtol)
 
     def start_check(self):
-        return start_embedded_check(self.request, self.plan, self.drive, self.stops)
+        return start_embedded_check(self.check_request, self.plan, self.drive, self.stops)
 
     def finish_check(self, traj, check) -> None:
         """Complete ``traj`` (reached its end) with the replay started by :meth:`start_check`
@@ -633,7 +647,7 @@ class BdfSegments(EmbeddedSegments):
         # a replay at the run's own tolerance would be the run, and its difference nothing
         rtol = self.request.rtol
         check = CHECK_FACTOR * rtol if CHECK_FACTOR * rtol <= 0.5 else rtol / CHECK_FACTOR
-        steps = _bdf_run(self.request, self.plan, check)
+        steps = _bdf_run(self.check_request, self.plan, check)
         return Beside(_embedded_replay, steps, planned_segments(self.plan, self.request.grid),
                       self.drive.y_init, self.stops.first_bad, cancelled=threading.Event())
 

@@ -231,3 +231,23 @@ def test_a_replay_ends_when_cancelled_or_past_a_stop(slew):
     assert _embedded_replay(steps(), segments, x0, lambda states: 0, cancelled) is None
     cancelled.set()
     assert _embedded_replay(steps(), segments, x0, lambda states: None, cancelled) is None
+
+
+@pytest.mark.parametrize("rtol, taken", [(1e-4, "RK45"), (1e-6, "dop853")])
+def test_auto_takes_the_pair_whose_estimate_holds_past_a_corner(rtol, taken):
+    # a torque with a corner at t = 2 s that no breakpoint declares: past rtol 1e-6 the
+    # 8(5,3) pair's error stalls near the tolerance and its check falls short of it, so
+    # "auto" keeps 5(4) there (flexctl.sim.request.DOP853_RTOL)
+    from flexctl.sim.request import DOP853_RTOL
+
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=4)
+
+    def torque(t):
+        return np.where(t <= 2.0, 2.0 * np.sin(np.pi * t), 0.0)
+    tight = flexctl.simulate(model, 20.0, torque=torque, rtol=1e-12, method="cvodes",
+                             output_step=0.01, check_validity=False)
+    run = flexctl.simulate(model, 20.0, torque=torque, rtol=rtol, output_step=0.01,
+                           check_validity=False)
+    assert run.method == taken and (rtol <= DOP853_RTOL) == (taken == "dop853")
+    actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
+    assert actual <= run.integration_error

@@ -123,7 +123,8 @@ def test_simulate_runs_a_sampled_function_compiled_and_its_estimate_holds(model,
     run = simulate(model, 6.0, torque=function, check_validity=False)
     assert run.status == "ok" and run.method != "DOP853"
     assert "could not be traced" in run.message and "cubic pieces" in run.message
-    assert "integration_error includes the sampling's" in run.message
+    # the replay beside the run took the looser sampling: no third run
+    assert "the accuracy check ran on the function sampled at 10 times" in run.message
     reference = simulate(model, 6.0, torque=function, method="DOP853", rtol=1e-12,
                          check_validity=False)
     error = np.max(np.abs(run.tip_deflection - reference.tip_deflection))
@@ -175,3 +176,16 @@ def test_the_sampled_function_is_the_run_input_type():
     samples, _ = sample_function(branching_push, 3.0, 1e-8)
     assert isinstance(samples, SampledFunction) and not samples.state_dependent
     assert "cubic pieces" in repr(samples)
+
+
+def test_a_check_that_cannot_take_the_looser_sampling_reruns_on_it(model):
+    # the fixed step's step doubling integrates the run's own torque: the sampling's error
+    # comes from a run on the looser sampling, added to the estimate
+    run = simulate(model, 2.0, torque=branching_push, method="rk4", rtol=1e-4,
+                   check_validity=False)
+    assert run.status == "ok" and run.method == "rk4"
+    assert "integration_error includes the sampling's," in run.message
+    reference = simulate(model, 2.0, torque=branching_push, method="DOP853", rtol=1e-12,
+                         check_validity=False)
+    assert np.max(np.abs(run.tip_deflection - reference.tip_deflection)) <= \
+        run.integration_error
