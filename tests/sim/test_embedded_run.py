@@ -251,3 +251,21 @@ def test_auto_takes_the_pair_whose_estimate_holds_past_a_corner(rtol, taken):
     assert run.method == taken and (rtol <= DOP853_RTOL) == (taken == "dop853")
     actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
     assert actual <= run.integration_error
+
+
+def test_the_compiled_pair_refuses_what_it_cannot_take():
+    from flexctl.sim.digital import ZeroOrderHold
+
+    model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+
+    def torque(t):
+        return 0.1 if t < 0.5 else 0.0
+    torque.has_casadi_form = False
+    with pytest.raises(ValueError, match="method 'dop853' needs inputs with a CasADi form"):
+        flexctl.simulate(model, 1.0, torque=torque, method="dop853")
+    law = ZeroOrderHold(PD(kp=12.0, kd=8.0, torque_limit=6.0), sample_time=0.01)
+    with pytest.raises(ValueError, match="a sampled controller .* use method 'auto'"):
+        flexctl.simulate(model, 1.0, controller=law, method="dop853")
+    # SciPy's name keeps SciPy's integrator, calling the torque from Python
+    run = flexctl.simulate(model, 1.0, torque=torque, method="DOP853", check_validity=False)
+    assert run.ok and run.method == "DOP853"
