@@ -400,6 +400,6 @@ def assemble_result(request, plan, drive, stops, traj, wall: float) -> Simulatio
             message = f"{message} ({note})"
     return SimulationResult.from_states(
         model, t_all, states, torque, status=traj.reason.status, message=message,
-        wall_time=wall, n_evaluations=int(traj.n_eval), method=plan.method, rtol=request.rtol,
+        wall_time=wall, n_evaluations=int(traj.n_eval), method=plan.method, rtol=plan.rtol,
         controller_states=z_all, integration_error=traj.integration_error,
         stop_reason=traj.reason, energy_balance=balance)

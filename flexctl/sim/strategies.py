@@ -222,7 +222,7 @@ class _Segments:
         try:
             with np.errstate(over="raise", invalid="raise"):
                 sol = _solve_ivp()(rhs, (lo, hi), y, method=plan.fallback, t_eval=t_eval,
-                                rtol=request.rtol, atol=plan.atol, events=self.stops.events(),
+                                rtol=plan.rtol, atol=plan.atol, events=self.stops.events(),
                                 max_step=request.max_step)
         except _BudgetSpent as spent:
             traj.stop(StopReason.INTEGRATOR_FAILED, self._budget_message(lo, spent))
@@ -572,7 +572,7 @@ class EmbeddedSegments(CvodesSegments):
 
     def __init__(self, request, plan, drive, stops):
         super().__init__(request, plan, drive, stops)
-        self._steps = _embedded_run(request, plan, request.rtol)
+        self._steps = _embedded_run(request, plan, plan.rtol)
 
     def start_check(self):
         return start_embedded_check(self.check_request, self.plan, self.drive, self.stops)
@@ -638,14 +638,14 @@ class BdfSegments(EmbeddedSegments):
 
     def __init__(self, request, plan, drive, stops):
         CvodesSegments.__init__(self, request, plan, drive, stops)
-        self._steps = _bdf_run(request, plan, request.rtol)
+        self._steps = _bdf_run(request, plan, plan.rtol)
 
     def start_check(self):
         import threading
 
         # at a tolerance so loose that ten times it is no tolerance, the replay is tighter:
         # a replay at the run's own tolerance would be the run, and its difference nothing
-        rtol = self.request.rtol
+        rtol = self.plan.rtol
         check = CHECK_FACTOR * rtol if CHECK_FACTOR * rtol <= 0.5 else rtol / CHECK_FACTOR
         steps = _bdf_run(self.check_request, self.plan, check)
         return Beside(_embedded_replay, steps, planned_segments(self.plan, self.request.grid),
@@ -703,7 +703,7 @@ def start_embedded_check(request, plan, drive, stops):
     """
     import threading
 
-    steps = _embedded_run(request, plan, min(CHECK_FACTOR * request.rtol, 1.0), looser=True)
+    steps = _embedded_run(request, plan, min(CHECK_FACTOR * plan.rtol, 1.0), looser=True)
     return Beside(_embedded_replay, steps, planned_segments(plan, request.grid),
                   drive.y_init, stops.first_bad, cancelled=threading.Event())
 

@@ -233,11 +233,11 @@ def test_a_replay_ends_when_cancelled_or_past_a_stop(slew):
     assert _embedded_replay(steps(), segments, x0, lambda states: None, cancelled) is None
 
 
-@pytest.mark.parametrize("rtol, taken", [(1e-4, "RK45"), (1e-6, "dop853")])
-def test_auto_takes_the_pair_whose_estimate_holds_past_a_corner(rtol, taken):
+@pytest.mark.parametrize("rtol", [1e-4, 1e-6])
+def test_auto_runs_the_pair_where_its_estimate_holds_past_a_corner(rtol):
     # a torque with a corner at t = 2 s that no breakpoint declares: past rtol 1e-6 the
     # 8(5,3) pair's error stalls near the tolerance and its check falls short of it, so
-    # "auto" keeps 5(4) there (flexctl.sim.request.DOP853_RTOL)
+    # "auto" runs it at 1e-6 (flexctl.sim.request.DOP853_RTOL) and says so
     from flexctl.sim.request import DOP853_RTOL
 
     model = flexctl.build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=4)
@@ -248,9 +248,14 @@ def test_auto_takes_the_pair_whose_estimate_holds_past_a_corner(rtol, taken):
                              output_step=0.01, check_validity=False)
     run = flexctl.simulate(model, 20.0, torque=torque, rtol=rtol, output_step=0.01,
                            check_validity=False)
-    assert run.method == taken and (rtol <= DOP853_RTOL) == (taken == "dop853")
+    assert run.method == "dop853" and run.rtol == min(rtol, DOP853_RTOL)
+    assert ("tightened to 1e-06" in run.message) == (rtol > DOP853_RTOL)
     actual = np.max(np.abs(run.tip_deflection - tight.tip_deflection))
     assert actual <= run.integration_error
+    # asked for by name, the pair runs at the tolerance given
+    named = flexctl.simulate(model, 20.0, torque=torque, rtol=rtol, output_step=0.01,
+                             method="dop853", check_validity=False)
+    assert named.rtol == rtol and "tightened" not in named.message
 
 
 def test_the_compiled_pair_refuses_what_it_cannot_take():
