@@ -48,8 +48,9 @@ from .native_rhs import MAX_INSTRUCTIONS
 from ..model.checks import check_array, check_instance, check_integer, check_real
 from ..model.errors import InputValueError
 
-__all__ = ["EmbeddedHold", "EmbeddedRun", "CompiledRun", "checked_run_arguments", "choose_hold",
-           "DORMAND_PRINCE", "DENSE_OUTPUT", "STIFF_SAMPLE", "SAFETY", "ATTEMPTS", "PAIR_OMEGA_H"]
+__all__ = ["EmbeddedHold", "EmbeddedRun", "CompiledRun", "PairScheme", "checked_run_arguments",
+           "choose_hold", "DORMAND_PRINCE", "DENSE_OUTPUT", "STIFF_SAMPLE", "SAFETY", "ATTEMPTS",
+           "PAIR_OMEGA_H", "DOP853_OMEGA_H"]
 
 #: The Dormand-Prince 5(4) tableau: nodes ``c``, stages ``a``, fifth-order weights ``b`` (also
 #: the last stage's row) and the error weights ``e = b - b_hat`` (``b_hat`` of fourth order).

@@ -40,8 +40,8 @@ CasADi form. ``"RK45"`` with such inputs is the same for Dormand-Prince 5(4). ``
 such inputs is a compiled variable-order BDF and
 ``"Adams"`` compiled Adams-Moulton methods of orders 1 to 12
 (:class:`~flexctl.sim.compiled_bdf.BdfRun`; CVODES's Adams-Moulton where nothing can be
-compiled), checked the same way. ``"auto"`` takes ``"dop853"`` (``"RK45"`` past an ``rtol``
-of :data:`~flexctl.sim.request.DOP853_RTOL`) where it costs less than CVODES (a
+compiled), checked the same way. ``"auto"`` takes ``"dop853"`` (at an ``rtol`` no looser than
+:data:`~flexctl.sim.request.DOP853_RTOL`) where it costs less than CVODES (a
 cheap right-hand side, a fastest pole that leaves few steps:
 :func:`flexctl.sim.request.choose_continuous`), else CVODES, for the exact model in place of
 either the compiled Adams-Moulton methods where CVODES would take Adams and the tolerance lets
