@@ -171,7 +171,7 @@ def _integrate(request, check_torque=None) -> tuple:
         plan = plan.without_compiled()
         strategy = strategy_for(plan, request.symbolic)(request, plan, drive, stops)
     start = time.perf_counter()
-    taken = check_torque is not None and strategy.checks_beside and request.check_accuracy
+    taken = check_torque is not None and strategy.checks_beside
     if taken:
         strategy.check_request = replace(request, torque=check_torque)
     # the check needs only the plan: it runs beside the run, on a spare core if there is one

@@ -181,7 +181,7 @@ class _Segments:
         """Give back the compiled steps' buffers once the run has ended (a no-op but for the
         compiled pairs and multistep methods)."""
         steps = getattr(self, "_steps", None)
-        if steps is not None and hasattr(steps, "release"):
+        if steps is not None:
             steps.release()
 
     def run(self) -> Trajectory:
