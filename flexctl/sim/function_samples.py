@@ -69,7 +69,8 @@ from ..model.checks import check_real
 from ..model.errors import InputTypeError
 from .inputs import input_value, lookup_grid
 
-__all__ = ["SampledFunction", "sample_function", "sampled_for_run", "START_INTERVALS",
+__all__ = ["SampledFunction", "sample_function", "sampled_for_run", "recorded_sampling",
+           "START_INTERVALS",
            "SAMPLE_FRACTION", "TOLERANCE_FLOOR", "JUMP_FRACTION", "MAX_EVALUATIONS"]
 
 #: Equal intervals the run starts with.
@@ -404,3 +405,33 @@ def sampled_for_run(function, t_final: float, rtol: float, factor: float = 1.0):
     while len(_CACHE) > CACHE_SIZE:
         _CACHE.popitem(last=False)
     return made
+
+
+def recorded_sampling(function, t_final: float):
+    """The last sampling :func:`sampled_for_run` made of ``function`` for a run ending at
+    ``t_final``, or ``function`` itself when there is none (not a function, traced, never
+    sampled, or forgotten).
+
+    A run's input as recorded, for computations whose result does not depend on the
+    sampling's small error to first order, such as the difference of two models' responses
+    to the same input (the validity estimate: :func:`flexctl.sim.validity.geometric_error`),
+    so that they do not call the function again.
+
+    Parameters
+    ----------
+    function : object
+        A run's ``torque``.
+    t_final : float
+        End of the run, s.
+
+    Returns
+    -------
+    SampledFunction or object
+    """
+    if not callable(function) or isinstance(function, SampledFunction):
+        return function
+    key = (id(function), float(t_final))
+    for (ident, end, _), made in reversed(_CACHE.items()):
+        if (ident, end) == key and made[0] is not None and made[0].function is function:
+            return made[0]
+    return function

@@ -44,6 +44,7 @@ from ..model.variant import Variant
 from .fidelity import DEFAULT_TOLERANCE, maneuver_input, check_tolerance, is_prescribed
 from .compile_cache import CompileCacheWarning
 from .energy import ENERGY_TOLERANCE, ModelValidityWarning
+from .function_samples import recorded_sampling
 from .inputs import as_vector
 from .runs import run_once, run_states
 
@@ -90,7 +91,9 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     t_final : float
         Horizon, s.
     torque, hub_motion, controller : object or None, optional
-        The run's inputs, as for :func:`flexctl.simulate`.
+        The run's inputs, as for :func:`flexctl.simulate`. A torque function that a run
+        ending at ``t_final`` sampled (it could not be traced) is taken as sampled
+        (:func:`~flexctl.sim.function_samples.recorded_sampling`), not called again.
     n_modes : int, optional
         Modes of the two compared models (at least those a controller was designed on; the
         model's own for a controller with ``fixed_plant = True``, which reads exactly the
@@ -112,6 +115,9 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     if model.variant.exact:
         return 0.0
     x0 = _checked_initial_state(model, x0)
+    # a torque function sampled for the run is replayed as sampled: its small error is common
+    # to the two models' responses, whose difference is the estimate
+    torque = recorded_sampling(torque, t_final)
     # a controller reads at least the modes it was designed on; one compiled for the plant's
     # state (``fixed_plant``) reads exactly the plant's
     n_modes = model.mode_spec if getattr(controller, "fixed_plant", False) \

@@ -10,7 +10,9 @@ import pytest
 from flexctl import build_model, load_scene, simulate
 from flexctl.model.errors import InputTypeError, InputValueError
 from flexctl.sim import function_samples
-from flexctl.sim.function_samples import JUMP_FRACTION, SampledFunction, sample_function
+from flexctl.sim.function_samples import (JUMP_FRACTION, SampledFunction, recorded_sampling,
+                                          sample_function)
+from flexctl.sim.validity import geometric_error
 
 
 def branching_push(t):
@@ -155,6 +157,34 @@ def test_a_run_with_its_checks_asks_the_function_once_per_time(model):
     run = simulate(model, 20.0, torque=counted, rtol=1e-5)
     assert run.status == "ok" and run.integration_error is not None
     assert len(asked) == len(set(asked))
+
+
+def test_the_validity_estimate_replays_the_run_sampling(model):
+    """The estimate's two runs take the run's sampled torque, not the function: the same
+    calls with the estimate as without it, and the estimate of the traced function's."""
+    calls = []
+
+    def counted(t):
+        calls.append(t)
+        return branching_push(t)
+
+    def fresh(t):                  # another function object: sampled anew
+        return branching_push(t)
+
+    without = simulate(model, 6.0, torque=counted, rtol=1e-6, check_validity=False)
+    asked = len(calls)
+    calls.clear()
+    run = simulate(model, 6.0, torque=lambda t: counted(t), rtol=1e-6)
+    assert without.status == run.status == "ok" and asked > 100
+    assert len(calls) == asked, "the validity estimate called the function again"
+    traced = geometric_error(model, 6.0, torque=lambda t: np.where(
+        t <= 2.0, 2.0 * np.sin(np.pi * t), 0.0))
+    assert traced > 1e-5
+    assert run.validity.geometric_error == pytest.approx(traced, rel=1e-3)
+    # a function never sampled is called by the estimate (nothing recorded to replay)
+    assert recorded_sampling(fresh, 6.0) is fresh
+    assert isinstance(recorded_sampling(counted, 6.0), SampledFunction)
+    assert recorded_sampling(counted, 5.0) is counted
 
 
 def test_a_state_feedback_function_is_called_at_every_step_and_says_so(model):
