@@ -37,6 +37,7 @@ extensions = [
     "api_links",
     "notebook_pages",
     "name_breaks",
+    "nav_cache",
     "matplotlib.sphinxext.plot_directive",
     "sphinx.ext.intersphinx",
     "sphinx.ext.viewcode",
