@@ -45,7 +45,14 @@ python-control's fastest method, with the checks / without): case C on 4 modes 1
 its accuracy check the looser sampling and its runs kept their buffers), on 2 modes 7.5 /
 20.2; case B 29.3 / 34.2 on 4 modes, 24.9 / 30.2 on 2. On 2 modes python-control's runs are
 short (0.33 s) and flexctl's fixed costs (the sampling's 1 100 calls of the function, the
-validity estimate's two runs) weigh more.
+validity estimate's two runs) weigh more. Since the validity estimate replays the run's
+sampling (``function_samples.recorded_sampling``), two runs of ``--cases branching --modes 4
+2``: case C on 4 modes 17.4 / 34.5 (55.8 / 28.2 ms against LSODA's 0.972 s) and 16.7 / 32.4
+(37.3 / 19.3 ms against LSODA's 0.625 s), on 2 modes 12.9 / 31.4 (36.8 / 15.1 ms against
+0.473 s): python-control's fastest time moved as much as flexctl's from one process to the
+next. With the checks on, the validity estimate's two runs on 2 modes (first_order on the
+8(5,3) pair, exact on the compiled BDF: some 10 and 6 ms, 3 to 4 ms of each fixed) cost
+about as much as the run.
 
 Run: ``python benchmarks/bench_inputs.py`` (some 10 to 30 minutes, python-control dominates;
 ``--modes 2`` for one model, ``--methods RK45`` for python-control's default only).
