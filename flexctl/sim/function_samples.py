@@ -422,15 +422,16 @@ def recorded_sampling(function, t_final: float):
     function : object
         A run's ``torque``.
     t_final : float
-        End of the run, s.
+        End of the run, s (> 0, finite).
 
     Returns
     -------
     SampledFunction or object
     """
+    t_final = check_real("recorded_sampling", "t_final", t_final, minimum=0.0, strict=True)
     if not callable(function) or isinstance(function, SampledFunction):
         return function
-    key = (id(function), float(t_final))
+    key = (id(function), t_final)
     for (ident, end, _), made in reversed(_CACHE.items()):
         if (ident, end) == key and made[0] is not None and made[0].function is function:
             return made[0]

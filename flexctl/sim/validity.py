@@ -38,6 +38,7 @@ import numpy as np
 
 from ..model import build_model
 from ..model.build import rebuild
+from ..model.checks import check_real
 from ..model.errors import InputValueError
 from ..model.user_warnings import warn_user
 from ..model.variant import Variant
@@ -112,6 +113,7 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         ``max_t |tip_variant - tip_exact| / max_t |tip_exact|`` on ``n_modes`` modes; 0 for the
         exact variant; ``inf`` when one of the two runs stops early.
     """
+    t_final = check_real("geometric_error", "t_final", t_final, minimum=0.0, strict=True)
     if model.variant.exact:
         return 0.0
     x0 = _checked_initial_state(model, x0)

@@ -89,6 +89,14 @@ def test_bad_tolerance_is_refused():
             assess(result, tolerance=bad)
 
 
+@pytest.mark.parametrize("variant", ["first_order", "exact"])
+def test_a_bad_horizon_of_the_estimate_is_refused_by_name(variant):
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, 2, variant=variant)
+    for bad in (0.0, -1.0, float("nan"), float("inf"), "2", True, None):
+        with pytest.raises((TypeError, ValueError), match=r"geometric_error\.t_final"):
+            geometric_error(model, bad, torque=lambda t: 0.1)
+
+
 def test_auto_variant_picks_exact_only_for_large_deflection():
     """A gentle torque stays first_order; a fast slew (28 % deflection) needs exact."""
     system = flexctl.load_scene("hub-beam-mass").system
