@@ -70,8 +70,8 @@ from ..model.errors import InputTypeError
 from .inputs import input_value, lookup_grid
 
 __all__ = ["SampledFunction", "sample_function", "sampled_for_run", "recorded_sampling",
-           "START_INTERVALS",
-           "SAMPLE_FRACTION", "TOLERANCE_FLOOR", "JUMP_FRACTION", "MAX_EVALUATIONS"]
+           "START_INTERVALS", "SAMPLE_FRACTION", "TOLERANCE_FLOOR", "JUMP_FRACTION",
+           "MAX_EVALUATIONS"]
 
 #: Equal intervals the run starts with.
 START_INTERVALS = 256
