@@ -150,14 +150,24 @@ def _local(page_path, url):
     return (page_path.parent / unquote(parts.path)).resolve()
 
 
-def test_every_internal_link_image_and_script_resolves(html):
-    broken = []
-    for path in html.rglob("*.html"):
-        page = _page(path)
+@pytest.fixture(scope="session")
+def pages(html):
+    """Every page of the site, parsed once: ``{path: _Page}``."""
+    return {path: _page(path) for path in sorted(html.rglob("*.html"))}
+
+
+def test_every_internal_link_image_and_script_resolves(pages, html):
+    broken, found = [], {}
+    for path, page in pages.items():
         for url in page.links + page.images + page.scripts:
-            target = _local(path, url)
-            if target is not None and not target.exists():
+            # the pages of a folder share most links (the navigation tree): each resolved once
+            key = (path.parent, url)
+            if key not in found:
+                target = _local(path, url)
+                found[key] = target is None or target.exists()
+            if not found[key]:
                 broken.append(f"{path.relative_to(html)} -> {url}")
+    assert len(pages) > 100 and found
     assert not broken, "\n".join(broken[:20])
 
 
@@ -234,11 +244,10 @@ def test_gallery_shows_a_thumbnail_per_notebook(html):
         assert any(link.endswith(f"notebooks/{notebook.stem}.html") for link in page.links)
 
 
-def test_references_are_links_to_other_projects(html):
+def test_references_are_links_to_other_projects(pages):
     # intersphinx from the inventories in docs/inventories: no download at build time
-    links = set()
-    for path in html.rglob("*.html"):
-        links.update(link for link in _page(path).links if link.startswith("https://"))
+    links = {link for page in pages.values() for link in page.links
+             if link.startswith("https://")}
     for site in ("https://docs.python.org/3/", "https://numpy.org/doc/stable/",
                  "https://docs.scipy.org/doc/scipy/", "https://matplotlib.org/stable/",
                  "https://python-control.readthedocs.io/", "https://web.casadi.org/python-api/"):
