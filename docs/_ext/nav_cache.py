@@ -27,9 +27,9 @@ FURO_CALL = {"collapse": False, "titles_only": True, "maxdepth": -1, "includehid
 NOBODY = "flexctl-navigation-of-this-folder"
 _TAG = re.compile(r"<(/?)(ul|li|a)\b[^>]*>")
 _CLASS = re.compile(r'class="([^"]*)"')
-#: The rendered tree of each folder, for the build under way.
+#: The rendered tree of each folder, and the pages seen, for the build under way.
 _TREES: dict = {}
-_PAGES: list = []
+_SEEN = {"pages": 0}
 
 
 def setup(app):
@@ -41,7 +41,7 @@ def setup(app):
 
 def _reset(app):
     _TREES.clear()
-    _PAGES.clear()
+    _SEEN["pages"] = 0
 
 
 def _check_every() -> int:
@@ -54,9 +54,9 @@ def _page_context(app, pagename, templatename, context, doctree):
     builder = app.builder
     if sphinx_tree is None or not hasattr(builder, "_get_local_toctree"):
         return
-    _PAGES.append(pagename)
+    _SEEN["pages"] += 1
     check = _check_every()
-    checked = check and len(_PAGES) % check == 1 % check
+    checked = check and _SEEN["pages"] % check == 1 % check
 
     def toctree(**kwargs):
         if kwargs != FURO_CALL:

@@ -388,20 +388,18 @@ def sampled_for_run(function, t_final: float, rtol: float, factor: float = 1.0):
         Why it could not be sampled; empty when it was.
     """
     relative = factor * max(SAMPLE_FRACTION * float(rtol), TOLERANCE_FLOOR)
-    key = (id(function), float(t_final))
-    for (ident, end, made_at), made in reversed(_CACHE.items()):
-        # one made at this tolerance or a tighter one serves (the validity estimate's runs),
-        # found before the function is called again
-        if (ident, end) == key and made_at <= relative and made[0] is not None \
-                and made[0].function is function:
-            _CACHE.move_to_end((ident, end, made_at))
-            return made
+    # one made at this tolerance or a tighter one serves, found before the function is
+    # called again
+    found = _remembered(function, float(t_final), relative)
+    if found is not None:
+        _CACHE.move_to_end(found)
+        return _CACHE[found]
     values = _known_values(function)
     size, reason = _torque_size(function, t_final, values)
     if size is None:
         return None, reason
     made = _sampled(function, t_final, relative * size, values)
-    _CACHE[(*key, relative)] = made
+    _CACHE[(id(function), float(t_final), relative)] = made
     while len(_CACHE) > CACHE_SIZE:
         _CACHE.popitem(last=False)
     return made
@@ -431,8 +429,16 @@ def recorded_sampling(function, t_final: float):
     t_final = check_real("recorded_sampling", "t_final", t_final, minimum=0.0, strict=True)
     if not callable(function) or isinstance(function, SampledFunction):
         return function
-    key = (id(function), t_final)
-    for (ident, end, _), made in reversed(_CACHE.items()):
-        if (ident, end) == key and made[0] is not None and made[0].function is function:
-            return made[0]
-    return function
+    found = _remembered(function, t_final)
+    return function if found is None else _CACHE[found][0]
+
+
+def _remembered(function, t_final: float, loosest: float = float("inf")):
+    """The key in ``_CACHE`` of the last sampling of ``function`` for a run ending at
+    ``t_final`` made at a relative tolerance of at most ``loosest``, or None."""
+    for key, made in reversed(_CACHE.items()):
+        ident, end, made_at = key
+        if (ident, end) == (id(function), t_final) and made_at <= loosest \
+                and made[0] is not None and made[0].function is function:
+            return key
+    return None
