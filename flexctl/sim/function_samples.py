@@ -94,6 +94,8 @@ _CACHE: OrderedDict = OrderedDict()
 #: The values of the last functions sampled, by identity (``_known_values``).
 _VALUES: OrderedDict = OrderedDict()
 
+#: The types of value taken as they are (others go through :func:`input_value`).
+_FLOATS = frozenset((float, np.float64))
 _FIT = np.array([0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0])
 _CHECK = np.array([1.0 / 6.0, 0.5, 5.0 / 6.0])
 #: Power-basis coefficients in ``u = (t - a) / h`` from the values at ``_FIT``.
@@ -213,29 +215,69 @@ class _Unsampled(Exception):
 
 
 class _Values:
-    """The function's values, each time asked once; a bad value or an exception ends the
-    sampling."""
+    """The function's values, each time asked once; a bad value, an exception or more than
+    :data:`MAX_EVALUATIONS` calls end the sampling.
+
+    The start intervals' points are kept as an array (:meth:`start_points`, the same for
+    every sampling of one run length), the halves' points by their times (:meth:`many`).
+    """
 
     def __init__(self, function):
-        self.function, self.known = function, {}
+        self.function, self.known, self.calls, self.start = function, {}, 0, None
 
-    def __call__(self, t: float) -> float:
-        value = self.known.get(t)
-        if value is None:
-            if len(self.known) >= MAX_EVALUATIONS:
-                raise _Unsampled(f"it needed more than {MAX_EVALUATIONS} calls")
-            try:
-                value = input_value("torque", self.function(t), t)
-            except Exception as exc:        # noqa: BLE001 - any failure keeps SciPy's path
-                raise _Unsampled(f"calling it at t = {t:.6g} s raised {type(exc).__name__}: "
-                                 f"{exc}"[:300]) from None
-            self.known[t] = value
-        return value
+    def _call(self, times: list) -> np.ndarray:
+        """The function's values at ``times`` (a list), called in that order."""
+        if self.calls + len(times) > MAX_EVALUATIONS:
+            raise _Unsampled(f"it needed more than {MAX_EVALUATIONS} calls")
+        function, got = self.function, []
+        try:
+            for t in times:
+                got.append(function(t))
+        except Exception as exc:                # noqa: BLE001 - any failure keeps SciPy's path
+            raise _Unsampled(_raised(times[len(got)], exc)) from None
+        finally:
+            self.calls += len(got)
+        if not (_FLOATS.issuperset(map(type, got)) and np.all(np.isfinite(got))):
+            # a value to convert, or one that is bad
+            got = [self._checked(value, t) for t, value in zip(times, got)]
+        return np.array(got, dtype=float)
+
+    def start_points(self, knots: np.ndarray) -> np.ndarray:
+        """The values at the seven points (:data:`_POINTS`) of each start interval between
+        ``knots``, shape (I, 7)."""
+        if self.start is not None and np.array_equal(self.start[0], knots):
+            return self.start[1]
+        starts, ends = knots[:-1], knots[1:]
+        inner = starts[:, None] + _POINTS[1:-1] * (ends - starts)[:, None]
+        got = self._call(np.concatenate([knots, inner.reshape(-1)]).tolist())
+        at_ends, inner = got[:knots.size], got[knots.size:].reshape(-1, 5)
+        points = np.column_stack([at_ends[:-1], inner, at_ends[1:]])
+        self.start = (knots.copy(), points)
+        return points
 
     def many(self, times: np.ndarray) -> np.ndarray:
-        """The values at ``times`` (any shape), an array of that shape."""
-        flat = times.reshape(-1)
-        return np.array([self(float(t)) for t in flat]).reshape(times.shape)
+        """The values at ``times`` (any shape), an array of that shape (the function called
+        once at each time not asked before, in increasing time)."""
+        flat = times.reshape(-1).tolist()
+        known = self.known
+        new = sorted(set(flat).difference(known))
+        if new:
+            known.update(zip(new, self._call(new).tolist()))
+        return np.fromiter(map(known.__getitem__, flat), dtype=float,
+                           count=len(flat)).reshape(times.shape)
+
+    @staticmethod
+    def _checked(value, t: float) -> float:
+        """``value`` as a finite float, or :class:`_Unsampled` with the reason."""
+        try:
+            return input_value("torque", value, t)
+        except Exception as exc:                # noqa: BLE001 - any failure keeps SciPy's path
+            raise _Unsampled(_raised(t, exc)) from None
+
+
+def _raised(t: float, exc: Exception) -> str:
+    """Why a sampling ended: the call at ``t`` raised ``exc`` (or its value did)."""
+    return f"calling it at t = {t:.6g} s raised {type(exc).__name__}: {exc}"[:300]
 
 
 def _start_knots(function, t_final: float) -> np.ndarray:
@@ -253,45 +295,69 @@ def _start_knots(function, t_final: float) -> np.ndarray:
 _AT_CHECKS = np.vander(_CHECK, 4, increasing=True)
 
 
-def _pieces(values, starts: np.ndarray, ends: np.ndarray):
-    """``(coefficients, miss)`` of the cubics through the function on the intervals
-    ``[starts, ends]``: their power coefficients in ``u``, shape (I, 4), and each one's
-    largest difference from the function at the checks, shape (I,)."""
-    h = (ends - starts)[:, None]
-    fit_times = starts[:, None] + _FIT * h
-    fit_times[:, 0], fit_times[:, -1] = starts, ends
-    fit = values.many(fit_times)
-    coefficients = fit @ _FROM_VALUES.T
-    check = values.many(starts[:, None] + _CHECK * h)
-    return coefficients, np.max(np.abs(coefficients @ _AT_CHECKS.T - check), axis=1)
+#: The seven points of an interval looked at, in ``u = (t - a) / h``: the fit's at rows
+#: :data:`_FIT_ROWS` (``0, 1/3, 2/3, 1``) and the check's at :data:`_CHECK_ROWS` (``1/6, 1/2,
+#: 5/6``). A half's fit points are four of its parent's (every other row of its half), its
+#: checks the three new ones between them.
+_POINTS = np.arange(7.0) / 6.0
+_FIT_ROWS = [0, 2, 4, 6]
+_CHECK_ROWS = [1, 3, 5]
+#: The new points of the left and right halves, in the parent's ``u``.
+_HALF_CHECKS = np.array([[1.0, 3.0, 5.0], [7.0, 9.0, 11.0]]) / 12.0
+#: The cubic's power coefficients from an interval's seven values (shape (7, 4)), and its
+#: differences from the values at the checks (shape (7, 3)).
+_COEFFICIENTS = np.zeros((7, 4))
+_COEFFICIENTS[_FIT_ROWS] = _FROM_VALUES.T
+_CHECK_MISS = _COEFFICIENTS @ _AT_CHECKS.T
+_CHECK_MISS[_CHECK_ROWS, np.arange(3)] -= 1.0
+
+
+def _halves(values, starts: np.ndarray, ends: np.ndarray, points: np.ndarray) -> tuple:
+    """``(starts, ends, points)`` of the two halves of each interval: their fit values are
+    the parent's, their checks three new calls each."""
+    h = ends - starts
+    middles = starts + 0.5 * h
+    fresh = values.many(starts[:, None, None] + _HALF_CHECKS * h[:, None, None])
+    halves = np.empty((2,) + points.shape)
+    halves[0][:, _FIT_ROWS], halves[1][:, _FIT_ROWS] = points[:, :4], points[:, 3:]
+    halves[0][:, _CHECK_ROWS], halves[1][:, _CHECK_ROWS] = fresh[:, 0], fresh[:, 1]
+    return (np.concatenate([starts, middles]), np.concatenate([middles, ends]),
+            halves.reshape(-1, 7))
 
 
 def _refine(values, knots: np.ndarray, tolerance: float, shortest: float):
     """The accepted intervals' starts and coefficients, left to right, and the jumps: the
     intervals are halved level by level until their cubics pass."""
     starts, ends = knots[:-1].copy(), knots[1:].copy()
-    kept_starts, kept, jumps = [], [], []
-    while starts.size:
-        coefficients, miss = _pieces(values, starts, ends)
-        passed = ~(miss > tolerance)
-        kept_starts.append(starts[passed])
-        kept.append(coefficients[passed])
-        starts, ends = starts[~passed], ends[~passed]
+    points = values.start_points(knots)
+    kept_starts, kept_points, jumps, held = [], [], [], []
+    while True:
+        # each cubic's largest difference from the function at its checks
+        failed = np.max(np.abs(points @ _CHECK_MISS), axis=1) > tolerance
+        if not np.all(failed):
+            kept_starts.append(starts[~failed])
+            kept_points.append(points[~failed])
+        if not np.any(failed):
+            break
+        starts, ends, points = starts[failed], ends[failed], points[failed]
         middles = starts + 0.5 * (ends - starts)
         # a miss on an interval too short to halve: a jump inside it, placed at its start,
         # the interval holding the value at its end
         jump = (ends - starts <= shortest) | ~((starts < middles) & (middles < ends))
         if np.any(jump):
-            held = np.zeros((int(np.sum(jump)), 4))
-            held[:, 0] = values.many(ends[jump][:, None])[:, 0]
-            kept_starts.append(starts[jump])
-            kept.append(held)
             jumps.extend(starts[jump].tolist())
-        starts, ends, middles = starts[~jump], ends[~jump], middles[~jump]
-        starts, ends = np.concatenate([starts, middles]), np.concatenate([middles, ends])
-    order = np.argsort(np.concatenate(kept_starts), kind="stable")
-    return (np.concatenate(kept_starts)[order], np.concatenate(kept)[order],
-            tuple(sorted(jumps)))
+            held.extend(points[jump, -1].tolist())
+            starts, ends, points = starts[~jump], ends[~jump], points[~jump]
+            if not starts.size:
+                break
+        starts, ends, points = _halves(values, starts, ends, points)
+    coefficients = np.concatenate(kept_points) @ _COEFFICIENTS if kept_points \
+        else np.zeros((0, 4))
+    constant = np.zeros((len(held), 4))
+    constant[:, 0] = held
+    order = np.argsort(np.concatenate(kept_starts + [np.array(jumps)]), kind="stable")
+    return (np.concatenate(kept_starts + [np.array(jumps)])[order],
+            np.concatenate([coefficients, constant])[order], tuple(sorted(jumps)))
 
 
 def sample_function(function, t_final: float, tolerance: float, *, reuse: bool = False):
@@ -329,7 +395,7 @@ def sample_function(function, t_final: float, tolerance: float, *, reuse: bool =
 def _sampled(function, t_final: float, tolerance: float, values: "_Values") -> tuple:
     """:func:`sample_function` with the function's values asked of ``values`` (which may
     know some already: the calls counted are the new ones)."""
-    known = len(values.known)
+    calls = values.calls
     try:
         knots = _start_knots(function, t_final)
         starts, coefficients, jumps = _refine(values, knots, tolerance,
@@ -338,7 +404,7 @@ def _sampled(function, t_final: float, tolerance: float, values: "_Values") -> t
         return None, str(exc)
     return SampledFunction(function=function, knots=np.append(starts, t_final),
                            coefficients=coefficients, jumps=jumps, tolerance=tolerance,
-                           evaluations=len(values.known) - known), ""
+                           evaluations=values.calls - calls), ""
 
 
 def _known_values(function) -> _Values:
@@ -356,11 +422,11 @@ def _known_values(function) -> _Values:
 
 
 def _torque_size(function, t_final: float, values: _Values):
-    """The largest ``|function|`` on the start intervals' points, N m (None if it fails)."""
+    """The largest ``|function|`` at the start intervals' ends and first checks, N m (None
+    if it fails)."""
     try:
-        knots = _start_knots(function, t_final)
-        points = np.concatenate([knots, knots[:-1] + np.diff(knots) / 6.0])
-        return max(abs(values(float(t))) for t in points), ""
+        points = values.start_points(_start_knots(function, t_final))
+        return float(max(np.max(np.abs(points[:, :2])), abs(points[-1, -1]))), ""
     except _Unsampled as exc:
         return None, str(exc)
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import inspect
 import math
+import weakref
 from collections import OrderedDict
 from dataclasses import KW_ONLY, dataclass
 from functools import cached_property
@@ -193,6 +194,31 @@ def input_value(name: str, value, t: float, unit: str = "N m") -> float:
     return value
 
 
+#: The signatures read, by the function's identity: ``{id: (weak reference, parameters)}``.
+_SIGNATURES: dict = {}
+_SIGNATURES_KEPT = 64
+
+
+def _parameters(func):
+    """The parameters of ``func``'s signature, a tuple, or None when it cannot be read; kept
+    while the function object lives (a run reads its inputs' signatures several times)."""
+    entry = _SIGNATURES.get(id(func))
+    if entry is not None and entry[0]() is func:
+        return entry[1]
+    try:
+        params = tuple(inspect.signature(func).parameters.values())
+    except (TypeError, ValueError):
+        params = None
+    try:
+        reference = weakref.ref(func)
+    except TypeError:                   # not weakly referable: read again next time
+        return params
+    if len(_SIGNATURES) >= _SIGNATURES_KEPT:
+        _SIGNATURES.clear()
+    _SIGNATURES[id(func)] = (reference, params)
+    return params
+
+
 def required_positional(func) -> int | None:
     """Number of arguments ``func`` needs, or None when its signature cannot be read (-1
     when it needs a keyword-only argument).
@@ -202,9 +228,8 @@ def required_positional(func) -> int | None:
     func : callable
         A torque, hub motion or controller function.
     """
-    try:
-        params = inspect.signature(func).parameters.values()
-    except (TypeError, ValueError):
+    params = _parameters(func)
+    if params is None:
         return None
     if any(p.kind is p.KEYWORD_ONLY and p.default is p.empty for p in params):
         return -1
@@ -242,9 +267,8 @@ def time_function(func, name: str):
 
 def _takes_no_time(func) -> bool:
     """True when ``func`` can take no positional argument at all (``lambda: 1.0``)."""
-    try:
-        params = inspect.signature(func).parameters.values()
-    except (TypeError, ValueError):
+    params = _parameters(func)
+    if params is None:
         return False
     return not any(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD, p.VAR_POSITIONAL)
                    for p in params)
@@ -521,15 +545,16 @@ def lookup_grid(times) -> tuple:
     -------
     grid, index : ndarray, shape (G,)
     """
-    grid, index = [float(times[0])], [0.0]
-    for k, t_k in enumerate(np.asarray(times, dtype=float)[1:].tolist(), start=1):
-        before = float(np.nextafter(t_k, -np.inf))
-        if before > grid[-1]:
-            grid.append(before)
-            index.append(k - 1.0)
-        grid.append(t_k)
-        index.append(float(k))
-    return np.array(grid), np.array(index)
+    times = np.asarray(times, dtype=float).reshape(-1)
+    after = times[1:]
+    before = np.nextafter(after, -np.inf)
+    k = np.arange(1.0, times.size)
+    # each time after the first: its predecessor where a float lies between the two times
+    # (index k - 1), then the time itself (index k)
+    kept = np.column_stack([before > times[:-1], np.ones(after.size, dtype=bool)]).ravel()
+    grid = np.column_stack([before, after]).ravel()[kept]
+    index = np.column_stack([k - 1.0, k]).ravel()[kept]
+    return np.concatenate([times[:1], grid]), np.concatenate([[0.0], index])
 
 
 def interval_index(times, inside):

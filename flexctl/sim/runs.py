@@ -8,11 +8,14 @@ continuous drive through its strategy, stops and accuracy check, or a sampled co
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import replace
 
 import numpy as np
 
+from ..model.errors import InputValueError
+from .background import Beside
 from .compiled import CHECK_FACTOR
 from .compiled_bdf import NoCompiledIntegrator
 from .function_samples import SampledFunction, sample_function
@@ -21,9 +24,10 @@ from .drives import PrescribedDrive, TorqueDrive
 from .request import check_atol, plan_integration, plan_sampled, run_request, state_scale
 from .result import SimulationResult, output_samples, assemble_result, audit_energy
 from .stops import StopConditions, StopReason, tip_rows
-from .strategies import rk4_accuracy_note, strategy_for
+from .strategies import (Trajectory, replay_steps, planned_segments, rk4_accuracy_note,
+                         strategy_for)
 
-__all__ = ["run_once", "run_states"]
+__all__ = ["run_once", "run_states", "start_states_run"]
 
 
 def run_once(model, t_final: float, torque=None, hub_motion=None, controller=None, x0=None,
@@ -130,17 +134,91 @@ def run_states(model, t_final: float, torque=None, hub_motion=None, controller=N
     ok : bool
     states : ndarray, shape (n, P), or None
     """
-    request = run_request(model, t_final, torque, hub_motion, controller, x0, **options)
+    return _states_of(run_request(model, t_final, torque, hub_motion, controller, x0,
+                                  **options))
+
+
+def _states_of(request) -> tuple:
+    """:func:`run_states` of a checked request."""
     if request.sampled:
         run = _simulate_sampled(request)
         return (True, run.states) if run.status == "ok" else (False, None)
     _, _, drive, _, traj = _integrate(request)
+    return _plant_states(request, drive, traj)
+
+
+def _plant_states(request, drive, traj) -> tuple:
+    """``(ok, plant states on the output grid)`` of a trajectory (``(False, None)`` when it
+    stopped early or holds a state that is not finite)."""
     if traj.reason is not StopReason.REACHED_END:
         return False, None
     states = np.asarray(drive.plant_state(*output_samples(request.grid, traj)), dtype=float)
     if not np.all(np.isfinite(states)):
         return False, None
     return True, states
+
+
+def start_states_run(model, t_final: float, torque=None, hub_motion=None, controller=None,
+                     x0=None, **options) -> Beside:
+    """:func:`run_states`, started beside the caller on a spare core where its integration is
+    compiled (:class:`~flexctl.sim.background.Beside`).
+
+    The run is checked and its integrator built here, in the caller's thread (CasADi's
+    symbolic work is not thread-safe); only the compiled steps run beside, letting go of
+    Python's lock. Where the beside integration fails or passes a stopping condition, or the
+    run is not one of compiled steps (a sampled controller, CVODES, SciPy), ``result()``
+    makes the run as :func:`run_states` does, in the caller's thread: the result is the same
+    either way.
+
+    Parameters
+    ----------
+    model, t_final, torque, hub_motion, controller, x0, **options
+        As for :func:`run_states`; ``check_accuracy`` must be False (the run has no
+        accuracy check).
+
+    Returns
+    -------
+    Beside
+        Its ``result()`` is :func:`run_states`'s ``(ok, states)``; ``abandon()`` stops the
+        steps beside within a compiled call.
+    """
+    request = run_request(model, t_final, torque, hub_motion, controller, x0, **options)
+    if request.check_accuracy:
+        raise InputValueError("start_states_run makes runs without an accuracy check; got "
+                              "check_accuracy=True")
+    if request.sampled:
+        return Beside(_states_of, request, beside=False)
+    plan, stops, drive, strategy = _strategy(request)
+    steps = strategy.compiled_steps
+    if steps is None:
+        return Beside(_states_of, request, beside=False)
+    # one event: abandoning the run abandons its steps beside
+    segments, cancelled = planned_segments(plan, request.grid), threading.Event()
+    replay = Beside(_replay_states, steps, segments, drive.y_init, stops.first_bad,
+                    cancelled=cancelled)
+    return Beside(_states_after, request, drive, segments, replay, beside=False,
+                  cancelled=cancelled)
+
+
+def _replay_states(steps, segments, y0, stop, cancelled):
+    """The compiled steps' states over ``segments`` (:func:`replay_steps`), with their
+    output times."""
+    done = replay_steps(steps, segments, y0, stop, cancelled)
+    return None if done is None else done[0]
+
+
+def _states_after(request, drive, segments, replay, cancelled) -> tuple:
+    """:func:`run_states`'s result from the states of the steps started beside, or from the
+    run made again where they failed or stopped (which names and locates the stop)."""
+    states = replay.result()
+    if cancelled.is_set():
+        return False, None
+    if states is None:
+        return _states_of(request)
+    traj = Trajectory(ts=[np.array([0.0]), *(t_out for _, t_out in segments)],
+                      ys=[drive.y_init[:, None], states])
+    traj.reason = StopReason.REACHED_END
+    return _plant_states(request, drive, traj)
 
 
 def _simulate_continuous(request, check_torque=None) -> tuple:
@@ -157,19 +235,7 @@ def _integrate(request, check_torque=None) -> tuple:
     strategy, stops and accuracy check (on ``check_torque`` in place of the run's torque
     where given and where the strategy's check runs beside the run:
     ``trajectory.check_torque_taken``)."""
-    model, hub_motion = request.model, request.hub_motion
-    drive = (PrescribedDrive(model, hub_motion, request.x_init) if request.prescribed
-             else TorqueDrive(model, request.torque, request.controller, request.x_init))
-    singular = model.variant.quadratic_inertia and not request.prescribed
-    stops, plan = StopConditions(model, drive.layout, singular), plan_integration(request, drive)
-    drive.check_inputs()
-    try:
-        strategy = strategy_for(plan, request.symbolic)(request, plan, drive, stops)
-    except NoCompiledIntegrator:
-        # the plan's compiled multistep method is built here, when the run starts: a drive
-        # too large to compile takes the plan's method without it
-        plan = plan.without_compiled()
-        strategy = strategy_for(plan, request.symbolic)(request, plan, drive, stops)
+    plan, stops, drive, strategy = _strategy(request)
     start = time.perf_counter()
     taken = check_torque is not None and strategy.checks_beside
     if taken:
@@ -196,6 +262,24 @@ def _integrate(request, check_torque=None) -> tuple:
                                   "a segment, which SciPy integrated instead")
     traj.check_torque_taken = taken
     return plan, stops, drive, start, traj
+
+
+def _strategy(request) -> tuple:
+    """``(plan, stops, drive, strategy)`` of a continuous drive's run, its integrators built."""
+    model, hub_motion = request.model, request.hub_motion
+    drive = (PrescribedDrive(model, hub_motion, request.x_init) if request.prescribed
+             else TorqueDrive(model, request.torque, request.controller, request.x_init))
+    singular = model.variant.quadratic_inertia and not request.prescribed
+    stops, plan = StopConditions(model, drive.layout, singular), plan_integration(request, drive)
+    drive.check_inputs()
+    try:
+        strategy = strategy_for(plan, request.symbolic)(request, plan, drive, stops)
+    except NoCompiledIntegrator:
+        # the plan's compiled multistep method is built here, when the run starts: a drive
+        # too large to compile takes the plan's method without it
+        plan = plan.without_compiled()
+        strategy = strategy_for(plan, request.symbolic)(request, plan, drive, stops)
+    return plan, stops, drive, strategy
 
 
 def _simulate_sampled(request) -> SimulationResult:

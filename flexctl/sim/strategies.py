@@ -47,7 +47,7 @@ __all__ = ["Trajectory", "CvodesSegments", "EmbeddedSegments", "BdfSegments", "F
            "strategy_for",
            "check_run_accuracy", "start_accuracy_check", "planned_segments",
            "rk4_accuracy_note", "AccuracyWarning", "FALLBACK_EVALUATIONS",
-           "check_embedded_accuracy", "start_embedded_check", "replay_error"]
+           "check_embedded_accuracy", "start_embedded_check", "replay_error", "replay_steps"]
 
 #: Where a compiled segment fails, SciPy locates the stop with at most this many evaluations
 #: of the right-hand side (1 to 5 s of DOP853 steps); a state so stiff that they do not
@@ -177,10 +177,17 @@ class _Segments:
         self.check_request = request
         self.start = time.perf_counter()
 
+    @property
+    def compiled_steps(self):
+        """The compiled steps that integrate every segment (``steps(lo, t_out, y, stop)``,
+        an :class:`~flexctl.sim.embedded_rk.EmbeddedRun` or
+        :class:`~flexctl.sim.compiled_bdf.BdfRun`), or None for the other strategies."""
+        return getattr(self, "_steps", None)
+
     def release(self) -> None:
         """Give back the compiled steps' buffers once the run has ended (a no-op but for the
         compiled pairs and multistep methods)."""
-        steps = getattr(self, "_steps", None)
+        steps = self.compiled_steps
         if steps is not None:
             steps.release()
 
@@ -648,14 +655,36 @@ class BdfSegments(EmbeddedSegments):
         rtol = self.plan.rtol
         check = CHECK_FACTOR * rtol if CHECK_FACTOR * rtol <= 0.5 else rtol / CHECK_FACTOR
         steps = _bdf_run(self.check_request, self.plan, check)
-        return Beside(_embedded_replay, steps, planned_segments(self.plan, self.request.grid),
+        return Beside(replay_steps, steps, planned_segments(self.plan, self.request.grid),
                       self.drive.y_init, self.stops.first_bad, cancelled=threading.Event())
 
 
-def _embedded_replay(steps, segments, y0, stop, cancelled):
-    """The states of ``steps`` (an :class:`EmbeddedRun`) over ``segments`` from ``y0``, and
-    its evaluations; None when it fails, passes a stop (``stop(states)``, as the run's) or is
-    cancelled (looked at after every compiled call)."""
+def replay_steps(steps, segments, y0, stop, cancelled):
+    """The states of compiled steps over a run's segments, and their evaluations: the run's
+    integration alone, safe to start on another thread (the steps are built, and let go of
+    Python's lock while they integrate).
+
+    Parameters
+    ----------
+    steps : EmbeddedRun or BdfRun
+        The compiled steps, ``steps(lo, t_out, y, stop) -> (states, evaluations)``; released
+        at the end (they are the replay's own).
+    segments : list of (float, ndarray)
+        ``(t_start, t_out)`` per segment (:func:`planned_segments`).
+    y0 : ndarray, shape (m,)
+        The integrated state at the first segment's start.
+    stop : callable
+        ``stop(states) -> int or None``, the run's stopping conditions (the first bad
+        column, as :meth:`StopConditions.first_bad`).
+    cancelled : threading.Event
+        Looked at after every compiled call: once set, the replay ends.
+
+    Returns
+    -------
+    tuple of (ndarray, int) or None
+        ``(states (m, K), evaluations)`` at every segment's output times, or None when a step
+        fails, a state passes a stop or the replay is cancelled.
+    """
     def ended(states):
         return 0 if cancelled.is_set() else stop(states)
 
@@ -704,7 +733,7 @@ def start_embedded_check(request, plan, drive, stops):
     import threading
 
     steps = _embedded_run(request, plan, min(CHECK_FACTOR * plan.rtol, 1.0), looser=True)
-    return Beside(_embedded_replay, steps, planned_segments(plan, request.grid),
+    return Beside(replay_steps, steps, planned_segments(plan, request.grid),
                   drive.y_init, stops.first_bad, cancelled=threading.Event())
 
 

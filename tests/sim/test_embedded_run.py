@@ -215,7 +215,7 @@ def test_a_diverging_run_stops_where_it_passes_the_length(slew):
 
 def test_a_replay_ends_when_cancelled_or_past_a_stop(slew):
     # an abandoned accuracy check must not integrate on beside the next run
-    from flexctl.sim.strategies import _embedded_replay
+    from flexctl.sim.strategies import replay_steps
 
     model, x0, law, _ = slew
     scale = state_scale(model, model.layout)
@@ -225,12 +225,12 @@ def test_a_replay_ends_when_cancelled_or_past_a_stop(slew):
     def steps():
         return EmbeddedRun(model, controller=law, scale=scale, rtol=1e-6, max_steps=1000,
                            h_first=1e-3)
-    whole = _embedded_replay(steps(), segments, x0, lambda states: None, cancelled)
+    whole = replay_steps(steps(), segments, x0, lambda states: None, cancelled)
     assert whole is not None and whole[0].shape == (model.n_states, 8)
     # past a stop (here the first sample), the replay gives no states
-    assert _embedded_replay(steps(), segments, x0, lambda states: 0, cancelled) is None
+    assert replay_steps(steps(), segments, x0, lambda states: 0, cancelled) is None
     cancelled.set()
-    assert _embedded_replay(steps(), segments, x0, lambda states: None, cancelled) is None
+    assert replay_steps(steps(), segments, x0, lambda states: None, cancelled) is None
 
 
 @pytest.mark.parametrize("rtol", [1e-4, 1e-6])

@@ -8,6 +8,7 @@ import pytest
 
 import flexctl
 from flexctl import SineTorque, SpinUp, build_model, simulate
+from flexctl.model.errors import InputValueError
 from flexctl.sim.validity import (ModelValidityWarning, assess, choose_variant,
                                   geometric_error)
 
@@ -137,9 +138,10 @@ def test_closed_loop_slew_on_first_order_reports_and_warns(kind):
 
 
 def test_estimate_runs_equal_full_runs():
-    # the estimate keeps only its runs' states (run_states): the same tips as whole runs
+    # the estimate keeps only its runs' states (run_states): the same tips as whole runs, and
+    # the same states again when the compiled steps run beside the caller (start_states_run)
     from controllers import PD
-    from flexctl.sim.runs import run_once, run_states
+    from flexctl.sim.runs import run_once, run_states, start_states_run
     from flexctl.sim.validity import ESTIMATE_RTOL
 
     system = flexctl.load_scene("slew-90").system
@@ -155,16 +157,45 @@ def test_estimate_runs_equal_full_runs():
                                 check_accuracy=False)
         assert full.ok and ok
         assert np.array_equal(states, full.states)
+        beside = start_states_run(small, 6.0, controller=pd, x0=x_small, rtol=ESTIMATE_RTOL,
+                                  check_accuracy=False)
+        ok_beside, states_beside = beside.result()
+        assert ok_beside and np.array_equal(states_beside, full.states)
         tips.append(small.tip_deflections(states))
     expected = np.max(np.abs(tips[0] - tips[1])) / np.max(np.abs(tips[1]))
     assert expected > 1e-4                          # a slew with a geometric error to find
 
 
-def test_estimate_run_that_stops_gives_no_states():
-    from flexctl.sim.runs import run_states
+@pytest.mark.parametrize("variant", ["first_order", "exact"])
+def test_estimate_run_that_stops_gives_no_states(variant):
+    from flexctl.sim.runs import run_states, start_states_run
 
-    model = build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2,
+                        variant=variant)
+    push = SineTorque(peak_torque=1e5, duration=2.0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ok, states = run_states(model, 4.0, torque=SineTorque(peak_torque=1e5, duration=2.0))
+        ok, states = run_states(model, 4.0, torque=push)
+        # the steps beside pass a stop: the run is made again here, which stops as well
+        ok_beside, states_beside = start_states_run(model, 4.0, torque=push,
+                                                    check_accuracy=False).result()
     assert not ok and states is None
+    assert not ok_beside and states_beside is None
+
+
+def test_start_states_run_has_no_accuracy_check():
+    from flexctl.sim.runs import start_states_run
+
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    with pytest.raises(InputValueError, match="check_accuracy"):
+        start_states_run(model, 1.0, torque=SineTorque(peak_torque=1.0, duration=1.0))
+
+
+def test_abandoned_states_run_ends_without_states():
+    from flexctl.sim.runs import start_states_run
+
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    run = start_states_run(model, 20.0, torque=SineTorque(peak_torque=1.0, duration=1.0),
+                           check_accuracy=False)
+    run.abandon()
+    assert run.result() == (False, None)
