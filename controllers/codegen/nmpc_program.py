@@ -75,16 +75,53 @@ def hermite_rows(t, grid, coef):
     return c[0] + s * (c[1] + s * (c[2] + s * c[3]))
 
 
-def _looked_up(t, grid, table):
-    """MX: the row of ``table`` (K, m) of the hold ``grid[k] <= t < grid[k + 1]`` of ``grid``
-    (K + 1 ascending times; the first and last holds extend to infinity), found by binary
-    searches (CasADi's linear interpolants: ``t`` to its fractional hold index, then that
-    index, floored, to its row, read exactly at a node) instead of a chain over every hold."""
+#: Most buckets per hold of :func:`_hold_index`'s table (a grid whose shortest hold is much
+#: shorter than its mean is searched instead).
+BUCKETS_PER_HOLD = 4
+
+
+def _hold_index(t, grid):
+    """MX: the hold ``k`` of ``grid`` (K + 1 ascending times) with ``grid[k] <= t <
+    grid[k + 1]`` (the first and last holds extend to infinity), as a float, in a number of
+    operations that does not grow with K; None where the grid's holds are too uneven.
+
+    ``t`` falls in one of equal buckets no longer than the shortest hold; a table gives the
+    hold one before the one at the bucket's start, and three comparisons with the grid's
+    times (exact, so that a time on a node is in the hold it starts) step on from there: a
+    bucket holds at most one node, and the bucket found may be one off by rounding."""
     import casadi as ca
 
-    k_holds = table.shape[0]
+    k_holds = grid.size - 1
+    length = float(np.min(np.diff(grid)))
+    buckets = int(np.ceil((grid[-1] - grid[0]) / length)) + 1
+    if buckets > BUCKETS_PER_HOLD * k_holds:
+        return None
+    starts = grid[0] + length * np.arange(buckets)
+    first = np.clip(np.searchsorted(grid, starts, side="right") - 2, 0, k_holds - 1)
+    bucket = ca.fmin(ca.fmax(ca.floor((t - grid[0]) / length), 0.0), buckets - 1.0)
+    k0 = ca.MX(ca.DM(first.astype(float)))[bucket]
+    # past the last node: its time again, so that the count stops at the last hold
+    nodes = ca.MX(ca.DM(np.concatenate([grid, np.full(3, grid[-1])])))
+    k = k0
+    for step in (1.0, 2.0, 3.0):
+        k = k + (t >= nodes[k0 + step])
+    return ca.fmin(k, k_holds - 1.0)
+
+
+def _looked_up(t, grid, table):
+    """MX: the row of ``table`` (K, m) of the hold ``grid[k] <= t < grid[k + 1]`` of ``grid``
+    (K + 1 ascending times; the first and last holds extend to infinity): its index by
+    :func:`_hold_index`, its row read from the table at that index; on an uneven grid by
+    binary searches (CasADi's linear interpolants: ``t`` to its fractional hold index, then
+    that index, floored, to its row, read exactly at a node)."""
+    import casadi as ca
+
+    k_holds, m = table.shape
     if k_holds == 1:
         return ca.DM(table[0])
+    k = _hold_index(t, grid)
+    if k is not None:
+        return ca.MX(ca.DM(table.ravel()))[k * m + ca.DM(np.arange(float(m)))]
     index = ca.interpolant("hold_index", "linear", [grid], np.arange(k_holds + 1.0))
     rows = ca.interpolant("hold_row", "linear", [np.arange(float(k_holds))],
                           table.T.ravel(order="F"))
@@ -98,8 +135,14 @@ def _impulse_at(t, edges, impulse):
     import casadi as ca
 
     if isinstance(t, ca.MX):
-        line = ca.interpolant("impulse", "linear", [edges], impulse)
-        return line(ca.fmin(ca.fmax(t, edges[0]), edges[-1]))
+        clamped = ca.fmin(ca.fmax(t, edges[0]), edges[-1])
+        k = _hold_index(clamped, edges) if edges.size > 2 else ca.MX(0.0)
+        if k is None:
+            line = ca.interpolant("impulse", "linear", [edges], impulse)
+            return line(clamped)
+        at, values = ca.MX(ca.DM(edges)), ca.MX(ca.DM(impulse))
+        start, low = at[k], values[k]
+        return low + (values[k + 1.0] - low) * (clamped - start) / (at[k + 1.0] - start)
     from flexctl.sim.compiled import piecewise_constant
 
     table = np.column_stack((edges[:-1], edges[1:], impulse[:-1], impulse[1:]))

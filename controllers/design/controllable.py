@@ -323,6 +323,11 @@ def held(a, b, sample_time: float) -> tuple:
     return exp[:n, :n], exp[:n, n:]
 
 
+#: The closed loop of :func:`state_gain` is stable when its poles' real parts (continuous)
+#: or moduli minus one (sampled) are below minus this, relative to the largest pole.
+STABILITY_MARGIN = 1e-12
+
+
 def state_gain(a, b, q_mat, r_mat, sample_time=None) -> np.ndarray:
     """The LQR gain of ``(A, B)``, shape (1, n): continuous, or discrete for the plant held
     over ``sample_time`` with the weights ``Q T`` and ``R T``.
@@ -344,7 +349,8 @@ def state_gain(a, b, q_mat, r_mat, sample_time=None) -> np.ndarray:
     ------
     numpy.linalg.LinAlgError
         If the solver returns a gain that is not finite, or the Riccati equation has no
-        stabilising solution.
+        stabilising solution (the solver fails, or the closed loop of its gain is not
+        stable: :data:`STABILITY_MARGIN`).
 
     Notes
     -----
@@ -369,6 +375,19 @@ def state_gain(a, b, q_mat, r_mat, sample_time=None) -> np.ndarray:
                                     f"({exc})") from None
     if not np.all(np.isfinite(gain)):
         raise np.linalg.LinAlgError("the solver returned a gain that is not finite")
+    # a solver may return a solution that is not the stabilising one (SciPy 1.17 returns
+    # X = 0 for Q = 0, where a rigid mode the cost does not see has none): the closed loop
+    # must be stable, with a margin of rounding
+    closed = a - b @ gain if sample_time is None else a_d - b_d @ gain
+    poles = np.linalg.eigvals(closed)
+    margin = STABILITY_MARGIN * max(1.0, float(np.max(np.abs(poles))))
+    worst = (float(np.max(poles.real)) if sample_time is None
+             else float(np.max(np.abs(poles))) - 1.0)
+    if not worst < -margin:
+        kind = "real part" if sample_time is None else "modulus minus 1"
+        raise np.linalg.LinAlgError(f"the Riccati equation has no stabilising solution (the "
+                                    f"solver's gain leaves a closed-loop pole with {kind} "
+                                    f"{worst:.3g})")
     return gain
 
 

@@ -243,16 +243,58 @@ def _stages(v, n: int, big_n: int) -> tuple:
             [v[input_index(n, j)] for j in range(big_n)])
 
 
-def _state_steps(pieces: dict, xs, us, x_meas) -> tuple:
-    """``e_j, G_j`` (``j = 0..N``) of the state steps ``dx_j = e_j + G_j du`` about the guess
-    ``xs, us``, from every stage's ``F`` and ``A, B`` (``NMPC._condensed``), with the
-    stages' ``A_j`` and ``B_j``."""
+#: Columns of ``G_j`` one call of the condensing's product ``A_j G_j`` takes
+#: (:func:`_kernels`; the last block of a stage padded with zeros).
+PRODUCT_COLUMNS = 4
+
+
+def _kernels(a_sparsity, n: int, q) -> dict:
+    """The products the condensing makes at every stage, as scalar (SX) functions that are
+    called rather than written out at each call (``never_inline``): one piece of C each, so
+    that the condensing's C stays short, while each is the product's own operations (the
+    structural zeros of ``A_j``, of ``a_sparsity``, left out).
+
+    ``product(A_j, M) -> A_j M`` of :data:`PRODUCT_COLUMNS` columns; ``ahead(W, A_j) ->
+    Q + A_j' W A_j``, of a symmetric ``W`` (its lower triangle computed, the upper mirrored).
+    """
     import casadi as ca
 
-    n, big_n = xs[0].numel(), us.numel()
-    states = ca.horzcat(*xs[:-1])
-    f = pieces["forward"](states, us.T)
-    a_all, b_all = pieces["linear"](states, us.T)
+    a, block = ca.SX.sym("a", a_sparsity), ca.SX.sym("m", n, PRODUCT_COLUMNS)
+    weight = ca.SX.sym("w", n, n)
+    pulled = ca.mtimes(weight, a)
+    rows = [[None] * n for _ in range(n)]
+    for i in range(n):
+        for j in range(i + 1):
+            rows[i][j] = rows[j][i] = ca.dot(a[:, i], pulled[:, j]) + float(q[i, j])
+    options = {"never_inline": True}
+    return {"product": ca.Function("nmpc_a_times", [a, block], [ca.mtimes(a, block)],
+                                   options),
+            "ahead": ca.Function("nmpc_cost_to_go", [weight, a],
+                                 [ca.vertcat(*[ca.horzcat(*row) for row in rows])], options)}
+
+
+def _times_blocks(product, a, moved):
+    """``A moved`` by calls of ``product`` on blocks of :data:`PRODUCT_COLUMNS` columns."""
+    import casadi as ca
+
+    n, width = moved.size1(), moved.size2()
+    parts = []
+    for start in range(0, width, PRODUCT_COLUMNS):
+        part = moved[:, start:min(start + PRODUCT_COLUMNS, width)]
+        if part.size2() < PRODUCT_COLUMNS:
+            part = ca.horzcat(part, ca.MX.zeros(n, PRODUCT_COLUMNS - part.size2()))
+        parts.append(product(a, part))
+    return ca.horzcat(*parts)[:, :width]
+
+
+def _state_steps(f, a_all, b_all, xs, x_meas, kernels) -> tuple:
+    """``e_j, G_j`` (``j = 0..N``) of the state steps ``dx_j = e_j + G_j du`` about the guess
+    ``xs``, from every stage's ``F`` (``f``, shape (n, N)) and ``A, B`` (``a_all``, (n, n N),
+    and ``b_all``, (n, N): ``NMPC._condensed``), with the stages' ``A_j`` and ``B_j``; the
+    products ``A_j G_j`` by ``kernels["product"]`` (:func:`_kernels`)."""
+    import casadi as ca
+
+    n, big_n = xs[0].numel(), f.size2()
     e = [x_meas - xs[0]]
     # G_j moves with the first j torque steps only: its other columns are structural zeros,
     # which the products below (and their C) skip
@@ -261,19 +303,20 @@ def _state_steps(pieces: dict, xs, us, x_meas) -> tuple:
     b_list = [b_all[:, j] for j in range(big_n)]
     for j in range(big_n):
         e.append(ca.mtimes(a_list[j], e[j]) + f[:, j] - xs[j + 1])
-        moved = b_list[j] if moved is None else ca.horzcat(ca.mtimes(a_list[j], moved),
-                                                            b_list[j])
+        moved = b_list[j] if moved is None else ca.horzcat(
+            _times_blocks(kernels["product"], a_list[j], moved), b_list[j])
         g_mats.append(moved if j == big_n - 1 else ca.horzcat(moved, ca.MX(n, big_n - j - 1)))
     return e, g_mats, a_list, b_list
 
 
-def _condensed_cost(pieces: dict, g_mats, stages: tuple, base, us, rv) -> tuple:
+def _condensed_cost(pieces: dict, g_mats, stages: tuple, base, us, rv, kernels) -> tuple:
     """Hessian ``H`` and gradient ``g`` of the Gauss-Newton cost in the torque steps, from
     ``G_j``, the stages' ``(A_j, B_j)`` and the residuals ``x_j + e_j - r_j`` (``base``) at
     ``du = 0``, by the backward recursion of the cost-to-go (``O(N^2 n)`` rather than
     ``O(N^3 n)``): ``W_N = P``, ``W_j = Q + A_j' W_{j+1} A_j``; ``v_N = P b_N``, ``v_j = Q b_j +
     A_j' v_{j+1}``; then ``H_kk = B_k' W_{k+1} B_k + r``, ``H_ik = (W_{i+1} B_i)' G_{i+1}[:, k]``
-    (``i > k``) and ``g_k = B_k' v_{k+1} + r (u_k - r_k)``."""
+    (``i > k``) and ``g_k = B_k' v_{k+1} + r (u_k - r_k)``; ``W_j`` by ``kernels["ahead"]``
+    (:func:`_kernels`)."""
     import casadi as ca
 
     a_list, b_list = stages
@@ -288,28 +331,31 @@ def _condensed_cost(pieces: dict, g_mats, stages: tuple, base, us, rv) -> tuple:
         below = ca.mtimes(pulled.T, g_mats[k + 1][:, :k]) if k else None
         rows[k] = diagonal if below is None else ca.horzcat(below, diagonal)
         if k:
-            weight = q + ca.mtimes([a_list[k].T, weight, a_list[k]])
+            weight = kernels["ahead"](weight, a_list[k])
             value = ca.mtimes(q, base[k]) + ca.mtimes(a_list[k].T, value)
     lower = ca.vertcat(*[ca.horzcat(row, ca.MX(1, big_n - k - 1)) if k < big_n - 1 else row
                          for k, row in enumerate(rows)])
-    hessian = lower + lower.T - ca.diag(ca.diag(lower))
+    # exactly symmetric: each entry below the diagonal is also the one above it
+    hessian = lower + ca.tril(lower, False).T
     return hessian, ca.vertcat(*gradient) + r * (us - rv)
 
 
-def _expansion(w, n: int, big_n: int):
+def _expansion(w, n: int, big_n: int, g_sparsity):
     """``expand(w, e, G, du) -> w + dw``: the step ``x_j + e_j + G_j du`` and
-    ``u_j + du_j``, in the order of ``w``."""
+    ``u_j + du_j``, in the order of ``w``; ``G`` (the ``G_j`` stacked) has ``g_sparsity``
+    (``G_j``'s columns past ``j`` are zero), and the function is in scalars (SX), each
+    product of a zero left out."""
     import casadi as ca
 
     du = ca.MX.sym("du", big_n)
     e_in = ca.MX.sym("e", (big_n + 1) * n)
-    g_in = ca.MX.sym("G", (big_n + 1) * n, big_n)
+    g_in = ca.MX.sym("G", g_sparsity)
     dx = e_in + ca.mtimes(g_in, du)
     parts = []
     for j in range(big_n):
         parts += [dx[j * n:(j + 1) * n], du[j]]
     parts.append(dx[big_n * n:])
-    return ca.Function("nmpc_expand", [w, e_in, g_in, du], [w + ca.vertcat(*parts)])
+    return ca.Function("nmpc_expand", [w, e_in, g_in, du], [w + ca.vertcat(*parts)]).expand()
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -657,8 +703,8 @@ class NMPC:
         ``d_j = F(x_j, u_j) - x_{j+1}`` and the measured start give the state steps as affine
         functions of the torque steps, ``dx_0 = x(t_k) - x_0``,
         ``dx_{j+1} = A_j dx_j + B_j du_j + d_j``, i.e. ``dx_j = e_j + G_j du``: the QP has the
-        ``N`` torque steps only (dense ``N x N``, see ``NMPCSession._rti``). One compiled
-        call gives every stage's ``F`` (``forward``), one its ``A, B`` (``linear``, of
+        ``N`` torque steps only (dense ``N x N``, see ``NMPCSession._rti``). One mapped
+        function gives every stage's ``F`` and its ``A, B`` (``stages``; the Jacobians of
         :attr:`NMPC.linearisation_model`); the condensing is ``_condensing``. With
         ``compiled`` false they stay CasADi expressions (for C code generation).
         """
@@ -670,7 +716,9 @@ class NMPC:
             lin_model, self.sample_time, self.substeps)
         x, u = ca.SX.sym("x", n), ca.SX.sym("u")
         f = lin_hold(x, u)
-        stage = ca.Function("nmpc_stage", [x, u], [ca.jacobian(f, x), ca.jacobian(f, u)])
+        # a stage's F and its A, B in one function: the Jacobians' forward sweep is F's own
+        stage = ca.Function("nmpc_stage", [x, u], [f if lin_model is self.model else hold(x, u),
+                                                   ca.jacobian(f, x), ca.jacobian(f, u)])
         rows = 0
         if self.torque_rate_limit is not None:
             rows += big_n
@@ -681,15 +729,13 @@ class NMPC:
             rows += n
         # the condensing calls the symbolic pieces (a compiled one cannot be generated into
         # another's C); each is compiled afterwards, on its own
-        pieces = {"forward": hold.map(big_n), "linear": stage.map(big_n), "hold_one": hold,
+        pieces = {"stages": stage.map(big_n), "hold_one": hold,
                   "q": q_diag, "r": r, "p": p_mat, "rows": rows,
                   "h_sparsity": ca.Sparsity.dense(big_n, big_n),
                   "a_sparsity": ca.Sparsity.dense(rows, big_n)}
         pieces.update(self._condensing(pieces, compiled))
         if compiled:
-            for name, model in (("forward", self.model), ("linear", lin_model),
-                                ("hold_one", self.model)):
-                pieces[name] = jit_compiled(pieces[name], model, any_variant=True)
+            pieces["hold_one"] = jit_compiled(hold, self.model, any_variant=True)
         return pieces
 
     def _condensing(self, pieces, compiled: bool = True) -> dict:
@@ -702,23 +748,45 @@ class NMPC:
         n, big_n = self.model.n_states, self.horizon
         w = ca.MX.sym("w", (big_n + 1) * n + big_n)
         par = ca.MX.sym("p", n + 1 + (big_n + 1) * n + big_n)
+        # with the stages' sparsity: the structural zeros of A_j (the hub angle's column,
+        # which the dynamics do not depend on) drop out of the algebra below
+        f, a_all, b_all = (ca.MX.sym(name, pieces["stages"].sparsity_out(k))
+                           for k, name in enumerate("FAB"))
         xs, us = _stages(w, n, big_n)
         us = ca.vertcat(*us)
         x_meas, u_prev, refs = _parameters(par, n)
         rx, rv = _stages(refs, n, big_n)
-        e, g_mats, a_list, b_list = _state_steps(pieces, xs, us, x_meas)
+        # the algebra in scalars (SX), in two functions (the state steps, then the QP's
+        # matrices): the structural zeros (of A_j, of G_j's later columns) and the common
+        # terms drop out, some 40 % of the instructions of the same algebra on matrices, and
+        # neither function is so long that compiling it takes long
+        kernels = _kernels(a_all[:, :n].sparsity(), n, np.diag(pieces["q"]))
+        e, g_mats, a_list, b_list = _state_steps(f, a_all, b_all, xs, x_meas, kernels)
+        e_all, g_all = ca.vertcat(*e), ca.vertcat(*g_mats)
+        steps = ca.Function("nmpc_state_steps", [w, par, f, a_all, b_all],
+                            [e_all, g_all]).expand()
+        e_in, g_in = ca.MX.sym("e", e_all.sparsity()), ca.MX.sym("G", g_all.sparsity())
+        e, g_mats = ca.vertsplit(e_in, n), ca.vertsplit(g_in, n)
         base = [xs[j] + e[j] - rx[j] for j in range(big_n + 1)]
         hessian, gradient = _condensed_cost(pieces, g_mats, (a_list, b_list), base, us,
-                                            ca.vertcat(*rv))
+                                            ca.vertcat(*rv), kernels)
         a_qp, lba, uba = self._condensed_constraints(g_mats, e, xs, us, u_prev, base)
-        condense = ca.Function(
-            "nmpc_condense", [w, par],
-            [ca.densify(0.5 * (hessian + hessian.T)), gradient, ca.densify(a_qp), lba, uba,
-             -self.hub_torque_limit - us, self.hub_torque_limit - us, ca.vertcat(*e),
-             ca.densify(ca.vertcat(*g_mats))])
+        matrices = ca.Function(
+            "nmpc_qp_matrices", [w, par, a_all, b_all, e_in, g_in],
+            [ca.densify(hessian), gradient, ca.densify(a_qp), lba, uba,
+             -self.hub_torque_limit - us, self.hub_torque_limit - us]).expand()
+        # the stages' F and A, B: one mapped (looped) function
+        w_in, par_in = ca.MX.sym("w", w.sparsity()), ca.MX.sym("p", par.sparsity())
+        xs_in, us_in = _stages(w_in, n, big_n)
+        states, torques = ca.horzcat(*xs_in[:-1]), ca.horzcat(*us_in)
+        f_all, a_in, b_in = pieces["stages"](states, torques)
+        e_out, g_out = steps(w_in, par_in, f_all, a_in, b_in)
+        condense = ca.Function("nmpc_condense", [w_in, par_in], [
+            *matrices(w_in, par_in, a_in, b_in, e_out, g_out), e_out, g_out])
         if compiled and big_n >= JIT_CONDENSE_FROM:
             condense = jit_compiled(condense, self.model, any_variant=True)
-        return {"condense": condense, "expand": _expansion(w, n, big_n)}
+        return {"condense": condense,
+                "expand": _expansion(w, n, big_n, g_all.sparsity())}
 
     def _condensed_constraints(self, g_mats, e, xs, us, u_prev, base) -> tuple:
         """``(A, lba, uba)`` of the QP's ``lba <= A du <= uba``: the torque-rate, tip,
