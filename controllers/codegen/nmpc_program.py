@@ -44,10 +44,12 @@ def _check(mpc, plant):
 
 
 def _all_finite(v):
+    """MX: 1 when every entry of ``v`` is finite, else 0: the sum of the magnitudes is below
+    infinity (an infinite entry makes it infinite, a NaN makes it NaN; entries so large that
+    their sum overflows count as not finite too)."""
     import casadi as ca
 
-    ok = ca.logic_and(v == v, ca.fabs(v) < ca.inf)
-    return ca.sum1(ok) >= v.numel()
+    return ca.sum1(ca.fabs(v)) < ca.inf
 
 
 def hermite_rows(t, grid, coef):
@@ -203,7 +205,8 @@ def _shifted(w, n, hold):
     width = n + 1
     last_x, last_u = w[w.numel() - n:], w[w.numel() - n - 1]
     shifted = ca.vertcat(w[width:], last_u, hold(last_x, last_u))
-    return ca.if_else(_all_finite(shifted), shifted, w)
+    # short-circuit: the plan copied once, rather than both selected entry by entry
+    return ca.if_else(_all_finite(shifted), shifted, w, True)
 
 
 class _Filter:
@@ -304,7 +307,7 @@ def nmpc_program(mpc, plant, x0, precision: str = "double") -> ControllerProgram
     par = ca.vertcat(x_design, u_prev, _reference(mpc, t))
     # the first plan holds the state read (an EKF's: the state it starts from)
     start = x_design if ekf is None else ca.DM(ekf.init[:n])
-    guess = ca.if_else(started, _shifted(w, n, hold), _first_guess(mpc, built, start))
+    guess = ca.if_else(started, _shifted(w, n, hold), _first_guess(mpc, built, start), True)
     guess = ca.vertcat(x_design, guess[n:])
     h, g, a, lba, uba, lbx, ubx, affine, gains = pieces["condense"](guess, par)
     solution = qp(h=h, g=g, a=a, lba=lba, uba=uba, lbx=lbx, ubx=ubx)

@@ -201,8 +201,8 @@ def start_states_run(model, t_final: float, torque=None, hub_motion=None, contro
 
 
 def _replay_states(steps, segments, y0, stop, cancelled):
-    """The compiled steps' states over ``segments`` (:func:`replay_steps`), with their
-    output times."""
+    """The compiled steps' states at every segment's output times (:func:`replay_steps`), or
+    None where they failed, stopped or were abandoned."""
     done = replay_steps(steps, segments, y0, stop, cancelled)
     return None if done is None else done[0]
 
