@@ -77,7 +77,7 @@ def hermite_rows(t, grid, coef):
     return c[0] + s * (c[1] + s * (c[2] + s * c[3]))
 
 
-#: Most buckets per hold of :func:`_hold_index`'s table (a grid whose shortest hold is much
+#: Most buckets per hold of ``_hold_index``'s table (a grid whose shortest hold is much
 #: shorter than its mean is searched instead).
 BUCKETS_PER_HOLD = 4
 
@@ -206,7 +206,21 @@ def _shifted(w, n, hold):
     last_x, last_u = w[w.numel() - n:], w[w.numel() - n - 1]
     shifted = ca.vertcat(w[width:], last_u, hold(last_x, last_u))
     # short-circuit: the plan copied once, rather than both selected entry by entry
-    return ca.if_else(_all_finite(shifted), shifted, w, True)
+    return _pick(_all_finite(shifted), shifted, w)
+
+
+def _pick(condition, first, second):
+    """MX: ``first`` where ``condition`` is 1, else ``second`` (of one shape), by a switch
+    between two functions of both: one copy, rather than an entry-by-entry selection of
+    both (``if_else``) or the chosen one's dependencies computed again in its branch (a
+    short-circuit ``if_else``)."""
+    import casadi as ca
+
+    a, b = ca.MX.sym("a", first.sparsity()), ca.MX.sym("b", second.sparsity())
+    switch = ca.Function.conditional(
+        "nmpc_pick", [ca.Function("nmpc_pick_second", [a, b], [b])],
+        ca.Function("nmpc_pick_first", [a, b], [a]))
+    return switch(condition, first, second)
 
 
 class _Filter:

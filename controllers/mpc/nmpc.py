@@ -244,7 +244,7 @@ def _stages(v, n: int, big_n: int) -> tuple:
 
 
 #: Columns of ``G_j`` one call of the condensing's product ``A_j G_j`` takes
-#: (:func:`_kernels`; the last block of a stage padded with zeros).
+#: (``_kernels``; the last block of a stage padded with zeros).
 PRODUCT_COLUMNS = 4
 
 

@@ -51,12 +51,24 @@ def clean_warnings(text):
     return _WARNING.sub(lambda m: f"{m.group(1)}: {m.group(2)}\n", text)
 
 
+#: The note of a compile into the persistent cache (``flexctl.sim.compile_cache``): about the
+#: state of the build machine's cache, not the example.
+_COMPILING = re.compile(r"^flexctl: compiling [^\n]*\n?", re.M)
+
+
 def clean(notebook):
-    """Clean the outputs of an executed notebook in place (see :func:`clean_warnings`)."""
+    """Clean the outputs of an executed notebook in place (see :func:`clean_warnings`); the
+    notes of compiles into the build machine's cache are left out."""
     for cell in notebook.cells:
+        outputs = []
         for output in cell.get("outputs", ()):
             if output.get("output_type") == "stream" and output.get("name") == "stderr":
-                output["text"] = clean_warnings(output["text"])
+                output["text"] = clean_warnings(_COMPILING.sub("", output["text"]))
+                if not output["text"]:
+                    continue
+            outputs.append(output)
+        if "outputs" in cell:
+            cell["outputs"] = outputs
     return notebook
 
 

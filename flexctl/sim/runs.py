@@ -172,9 +172,17 @@ def start_states_run(model, t_final: float, torque=None, hub_motion=None, contro
 
     Parameters
     ----------
-    model, t_final, torque, hub_motion, controller, x0, **options
-        As for :func:`run_states`; ``check_accuracy`` must be False (the run has no
-        accuracy check).
+    model : Model
+        The model to simulate.
+    t_final : float
+        End time, s.
+    torque, hub_motion, controller : object, optional
+        The run's inputs, as :func:`flexctl.simulate` takes them.
+    x0 : array_like, shape (n,), optional
+        Initial plant state; default rest at zero.
+    **options
+        As for :func:`run_once`; ``check_accuracy`` must be False (the run has no accuracy
+        check).
 
     Returns
     -------
