@@ -52,7 +52,14 @@ sampling (``function_samples.recorded_sampling``), two runs of ``--cases branchi
 0.473 s): python-control's fastest time moved as much as flexctl's from one process to the
 next. With the checks on, the validity estimate's two runs on 2 modes (first_order on the
 8(5,3) pair, exact on the compiled BDF: some 10 and 6 ms, 3 to 4 ms of each fixed) cost
-about as much as the run.
+about as much as the run. Case C on 4 modes, one run of ``--cases branching --modes 4``
+before and two of ``--modes 4 2`` after the estimate's exact run was started beside the
+variant's (``runs.start_states_run``) and the sampling's and a run's fixed costs were cut:
+before 20.0 / 39.4 (15.6 / 7.9 ms against LSODA's 0.311 s); after 23.2 / 46.5 (13.7 / 6.8 ms
+against 0.317 s) and 21.9 / 45.1 (14.3 / 7.0 ms against 0.314 s). On 2 modes 18.0 / 42.7
+(9.7 / 4.1 ms against 0.175 s) and 16.8 / 40.7 (10.3 / 4.3 ms against 0.173 s): there
+python-control's run is short and the estimate's two runs, each about as long as the run
+itself, keep the ratio with the checks under 20.
 
 Run: ``python benchmarks/bench_inputs.py`` (some 10 to 30 minutes, python-control dominates;
 ``--modes 2`` for one model, ``--methods RK45`` for python-control's default only).
