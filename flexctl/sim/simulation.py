@@ -171,4 +171,5 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     if not check_validity:
         return result
     return dataclasses.replace(result, validity=assess_run(
-        result, torque=torque, hub_motion=hub_motion, controller=controller, sensors=sensors))
+        result, torque=torque, hub_motion=hub_motion, controller=controller, sensors=sensors,
+        output_step=output_step))

@@ -82,7 +82,8 @@ def quiet_estimate():
 
 
 def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, controller=None,
-                    n_modes: int = ESTIMATE_MODES, sensors=None, x0=None) -> float:
+                    n_modes: int = ESTIMATE_MODES, sensors=None, x0=None, run=None,
+                    output_step=None) -> float:
     """Estimated relative tip error of ``model``'s variant against exact geometry.
 
     Parameters
@@ -106,6 +107,15 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         The run's initial plant state (``model``'s layout; default rest): each compared
         model starts from its states of the same names (the modes beyond ``n_modes`` left
         out).
+    run : SimulationResult, optional
+        The finished run being assessed (of ``model``, to ``t_final``, from ``x0``, with
+        these inputs). Where it is itself the estimate's run of the variant (its model is
+        the variant on the compared modes, it reached its end at ``rtol`` at most
+        :data:`ESTIMATE_RTOL`, and no sensors are read), its states stand for that run and
+        only the exact model is run, on its output grid.
+    output_step : float, optional
+        The run's output spacing, s, as given to :func:`flexctl.simulate` (default: its
+        default); used with ``run``.
 
     Returns
     -------
@@ -124,12 +134,21 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     # state (``fixed_plant``) reads exactly the plant's
     n_modes = model.mode_spec if getattr(controller, "fixed_plant", False) \
         else min(max(n_modes, _law_modes(controller)), min(model.modes))
+    # the run itself is the variant's run where it is one on the compared modes, at least as
+    # accurate and not read through sensors (whose noise the estimate leaves out)
+    same = (run is not None and sensors is None and getattr(run, "status", None) == "ok"
+            and float(getattr(run, "rtol", np.inf)) <= ESTIMATE_RTOL
+            and _same_model(rebuild(model, n_modes=n_modes, variant=model.variant), model))
+    grid = {"output_step": output_step} if same else {}
     runs = []
     # the exact run's compiled steps integrate on a spare core while the variant's run is
     # made here (start_states_run: the same states as run_states)
     try:
         for variant in ("exact", model.variant):
             small = rebuild(model, n_modes=n_modes, variant=variant)
+            if same and variant is model.variant:
+                runs.append((small, None))
+                continue
             on_small = controller
             if callable(getattr(controller, "for_plant", None)):     # sensors set for a plant
                 on_small = controller.for_plant(small)
@@ -140,21 +159,40 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
                      "x0": _initial_state_of(small, model, x0)}
             with quiet_estimate():
                 runs.append((small, start_states_run(small, t_final, rtol=ESTIMATE_RTOL,
-                                                     check_accuracy=False, **drive)))
+                                                     check_accuracy=False, **grid, **drive)))
         tips = []
-        for small, run in reversed(runs):
-            with quiet_estimate():
-                ok, states = run.result()
+        for small, started in reversed(runs):
+            if started is None:
+                ok, states = True, run.states
+            else:
+                with quiet_estimate():
+                    ok, states = started.result()
             if not ok:
                 return float("inf")
             tips.append(np.atleast_2d(small.tip_deflections(states)))
     finally:
-        for _, run in runs:
-            run.abandon()
+        for _, started in runs:
+            if started is not None:
+                started.abandon()
+    if tips[0].shape != tips[1].shape:
+        # the run's grid is not the one asked for the exact run: both runs made
+        return geometric_error(model, t_final, torque=torque, hub_motion=hub_motion,
+                               controller=controller, n_modes=n_modes, sensors=sensors, x0=x0)
     # each appendage relative to its peak, but not below DEFLECTION_FLOOR of its length: a
     # deflection of 1e-38 m has no geometric error, only the integrators' rounding
     peak = np.maximum(np.max(np.abs(tips[1]), axis=1), DEFLECTION_FLOOR * model.lengths)
     return float(np.max(np.max(np.abs(tips[0] - tips[1]), axis=1) / peak))
+
+
+def _same_model(one, other) -> bool:
+    """Whether two models are the same plant: of one kind, variant, modes, system and
+    actuator (:func:`~flexctl.model.build.rebuild` may give an equal one, not the same
+    object)."""
+    return one is other or (
+        type(one) is type(other) and one.variant == other.variant
+        and one.mode_spec == other.mode_spec and one.n_states == other.n_states
+        and one.system == other.system
+        and getattr(one, "actuator", None) == getattr(other, "actuator", None))
 
 
 def _checked_initial_state(model, x0):
@@ -271,7 +309,8 @@ def _finite_or_none(value):
 
 
 def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors=None,
-               tolerance: float = DEFAULT_TOLERANCE, warn: bool = True) -> ModelValidity:
+               tolerance: float = DEFAULT_TOLERANCE, warn: bool = True,
+               output_step=None) -> ModelValidity:
     """:func:`assess`, with the estimate's runs made only where they can matter.
 
     A small-deflection run whose tip stays under :data:`SCREEN_DEFLECTION` of the length is
@@ -290,6 +329,8 @@ def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors
     warn : bool, optional
         Issue a :class:`ModelValidityWarning` when the estimate is above ``tolerance`` or the
         run's energy balance is violated. Default True.
+    output_step : float, optional
+        The run's output spacing, s, as given to :func:`flexctl.simulate` (:func:`assess`).
 
     Returns
     -------
@@ -300,7 +341,7 @@ def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors
     ratio = float(result.deflection_ratio) if np.isfinite(result.deflection_ratio) else np.inf
     if not model.variant.exact and ratio > SCREEN_DEFLECTION:
         return assess(result, torque=torque, hub_motion=hub_motion, controller=controller,
-                      sensors=sensors, tolerance=tolerance, warn=warn)
+                      sensors=sensors, tolerance=tolerance, warn=warn, output_step=output_step)
     t_end = float(result.t[-1]) if result.t.size else 0.0
     validity = ModelValidity(variant=model.variant, deflection_ratio=ratio,
                              geometric_error=0.0 if model.variant.exact
@@ -314,7 +355,8 @@ def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors
 
 
 def assess(result, *, torque=None, hub_motion=None, controller=None, sensors=None,
-           tolerance: float = DEFAULT_TOLERANCE, warn: bool = True) -> ModelValidity:
+           tolerance: float = DEFAULT_TOLERANCE, warn: bool = True,
+           output_step=None) -> ModelValidity:
     """The :class:`ModelValidity` of a finished run, warning when the model was out of range.
 
     Parameters
@@ -330,13 +372,18 @@ def assess(result, *, torque=None, hub_motion=None, controller=None, sensors=Non
     warn : bool, optional
         Issue a :class:`ModelValidityWarning` when the estimate is above ``tolerance`` or the
         run's energy balance is violated. Default True.
+    output_step : float, optional
+        The run's output spacing, s, as given to :func:`flexctl.simulate` (default: its
+        default): where the run is itself the estimate's run of its variant, its states are
+        taken for it (:func:`geometric_error`'s ``run``).
     """
     check_tolerance(tolerance)
     model = result.model
     t_end = float(result.t[-1]) if result.t.size else 0.0
     x0 = result.states[:, 0] if np.ndim(result.states) == 2 and result.t.size else None
     error = (geometric_error(model, t_end, torque=torque, hub_motion=hub_motion,
-                             controller=controller, sensors=sensors, x0=x0)
+                             controller=controller, sensors=sensors, x0=x0, run=result,
+                             output_step=output_step)
              if t_end > 0 else 0.0)
     validity = ModelValidity(variant=model.variant,
                              deflection_ratio=result.deflection_ratio,

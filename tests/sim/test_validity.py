@@ -199,3 +199,32 @@ def test_abandoned_states_run_ends_without_states():
                            check_accuracy=False)
     run.abandon()
     assert run.result() == (False, None)
+
+
+def test_the_run_stands_for_the_estimates_run_of_its_variant(monkeypatch):
+    # a first_order run on the estimate's two modes, at ESTIMATE_RTOL, is the estimate's
+    # first_order run: only the exact model is run, on the run's grid, and the estimate is
+    # the one both runs give
+    import flexctl.sim.validity as validity
+
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    push = SineTorque(peak_torque=2.0, duration=2.0)
+    started = []
+    real = validity.start_states_run
+
+    def counted(small, *args, **kwargs):
+        started.append((str(small.variant), kwargs.get("output_step")))
+        return real(small, *args, **kwargs)
+
+    monkeypatch.setattr(validity, "start_states_run", counted)
+    result = simulate(model, 8.0, torque=push, rtol=1e-6, output_step=0.01)
+    assert result.validity.geometric_error > 1e-4 and not result.validity.screened
+    assert started == [("exact", 0.01)]
+    started.clear()
+    both = validity.geometric_error(model, 8.0, torque=push, x0=result.states[:, 0])
+    assert [variant for variant, _ in started] == ["exact", "first_order"]
+    assert result.validity.geometric_error == pytest.approx(both, rel=1e-3)
+    # a looser run is not the estimate's: both models are run
+    started.clear()
+    simulate(model, 8.0, torque=push, rtol=1e-4, method="RK45", output_step=0.01)
+    assert [variant for variant, _ in started] == ["exact", "first_order"]
