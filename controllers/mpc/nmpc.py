@@ -740,9 +740,9 @@ class NMPC:
 
     def _condensing(self, pieces, compiled: bool = True) -> dict:
         """``condense(w, p) -> (H, g, A, lba, uba, lbx, ubx, e, G)`` and
-        ``expand(w, e, G, du) -> w + dw`` as CasADi matrix expressions (MX: one operation per
-        block, not per scalar), so that a step hands CasADi matrices from the linearisation to
-        the QP solver and back without converting them to numpy."""
+        ``expand(w, e, G, du) -> w + dw`` as CasADi functions, so that a step hands CasADi
+        matrices from the linearisation to the QP solver and back without converting them to
+        numpy: the stages' mapped function, then the algebra in scalars (SX)."""
         import casadi as ca
 
         n, big_n = self.model.n_states, self.horizon
@@ -758,8 +758,8 @@ class NMPC:
         rx, rv = _stages(refs, n, big_n)
         # the algebra in scalars (SX), in two functions (the state steps, then the QP's
         # matrices): the structural zeros (of A_j, of G_j's later columns) and the common
-        # terms drop out, some 40 % of the instructions of the same algebra on matrices, and
-        # neither function is so long that compiling it takes long
+        # terms drop out, and the products of every stage are called (_kernels), so that the
+        # C stays short enough to compile in seconds
         kernels = _kernels(a_all[:, :n].sparsity(), n, np.diag(pieces["q"]))
         e, g_mats, a_list, b_list = _state_steps(f, a_all, b_all, xs, x_meas, kernels)
         e_all, g_all = ca.vertcat(*e), ca.vertcat(*g_mats)
@@ -776,13 +776,10 @@ class NMPC:
             [ca.densify(hessian), gradient, ca.densify(a_qp), lba, uba,
              -self.hub_torque_limit - us, self.hub_torque_limit - us]).expand()
         # the stages' F and A, B: one mapped (looped) function
-        w_in, par_in = ca.MX.sym("w", w.sparsity()), ca.MX.sym("p", par.sparsity())
-        xs_in, us_in = _stages(w_in, n, big_n)
-        states, torques = ca.horzcat(*xs_in[:-1]), ca.horzcat(*us_in)
-        f_all, a_in, b_in = pieces["stages"](states, torques)
-        e_out, g_out = steps(w_in, par_in, f_all, a_in, b_in)
-        condense = ca.Function("nmpc_condense", [w_in, par_in], [
-            *matrices(w_in, par_in, a_in, b_in, e_out, g_out), e_out, g_out])
+        f_all, a_in, b_in = pieces["stages"](ca.horzcat(*xs[:-1]), us.T)
+        e_out, g_out = steps(w, par, f_all, a_in, b_in)
+        condense = ca.Function("nmpc_condense", [w, par], [
+            *matrices(w, par, a_in, b_in, e_out, g_out), e_out, g_out])
         if compiled and big_n >= JIT_CONDENSE_FROM:
             condense = jit_compiled(condense, self.model, any_variant=True)
         return {"condense": condense,

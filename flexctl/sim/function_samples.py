@@ -355,9 +355,9 @@ def _refine(values, knots: np.ndarray, tolerance: float, shortest: float):
         else np.zeros((0, 4))
     constant = np.zeros((len(held), 4))
     constant[:, 0] = held
-    order = np.argsort(np.concatenate(kept_starts + [np.array(jumps)]), kind="stable")
-    return (np.concatenate(kept_starts + [np.array(jumps)])[order],
-            np.concatenate([coefficients, constant])[order], tuple(sorted(jumps)))
+    starts = np.concatenate(kept_starts + [np.array(jumps)])
+    order = np.argsort(starts, kind="stable")
+    return starts[order], np.concatenate([coefficients, constant])[order], tuple(sorted(jumps))
 
 
 def sample_function(function, t_final: float, tolerance: float, *, reuse: bool = False):

@@ -136,17 +136,18 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         else min(max(n_modes, _law_modes(controller)), min(model.modes))
     # the run itself is the variant's run where it is one on the compared modes, at least as
     # accurate and not read through sensors (whose noise the estimate leaves out)
+    compared = [rebuild(model, n_modes=n_modes, variant=variant)
+                for variant in ("exact", model.variant)]
     same = (run is not None and sensors is None and getattr(run, "status", None) == "ok"
             and float(getattr(run, "rtol", np.inf)) <= ESTIMATE_RTOL
-            and _same_model(rebuild(model, n_modes=n_modes, variant=model.variant), model))
+            and _same_model(compared[1], model))
     grid = {"output_step": output_step} if same else {}
     runs = []
     # the exact run's compiled steps integrate on a spare core while the variant's run is
     # made here (start_states_run: the same states as run_states)
     try:
-        for variant in ("exact", model.variant):
-            small = rebuild(model, n_modes=n_modes, variant=variant)
-            if same and variant is model.variant:
+        for small in compared:
+            if same and small is compared[1]:
                 runs.append((small, None))
                 continue
             on_small = controller
