@@ -47,6 +47,7 @@ from .compile_cache import CompileCacheWarning
 from .energy import ENERGY_TOLERANCE, ModelValidityWarning
 from .function_samples import recorded_sampling
 from .inputs import as_vector
+from .request import DEFAULT_OUTPUT_POINTS
 from .runs import run_once, start_states_run
 
 __all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "assess", "assess_run",
@@ -115,7 +116,9 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         only the exact model is run, on its output grid.
     output_step : float, optional
         The run's output spacing, s, as given to :func:`flexctl.simulate` (default: its
-        default); used with ``run``.
+        default); used with ``run``, whose states stand for the variant's run only on a grid
+        at least as fine as the estimate's own (``t_final / DEFAULT_OUTPUT_POINTS``, of
+        ``flexctl.sim.request``).
 
     Returns
     -------
@@ -138,8 +141,14 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     # accurate and not read through sensors (whose noise the estimate leaves out)
     compared = [rebuild(model, n_modes=n_modes, variant=variant)
                 for variant in ("exact", model.variant)]
+    if output_step is not None:
+        output_step = check_real("geometric_error", "output_step", output_step, minimum=0.0,
+                                 strict=True)
+    # ... and on a grid at least as fine as the estimate's own (a coarse grid would miss the
+    # largest difference)
     same = (run is not None and sensors is None and getattr(run, "status", None) == "ok"
             and float(getattr(run, "rtol", np.inf)) <= ESTIMATE_RTOL
+            and (output_step is None or output_step <= t_final / DEFAULT_OUTPUT_POINTS)
             and _same_model(compared[1], model))
     grid = {"output_step": output_step} if same else {}
     runs = []

@@ -217,14 +217,20 @@ def test_the_run_stands_for_the_estimates_run_of_its_variant(monkeypatch):
         return real(small, *args, **kwargs)
 
     monkeypatch.setattr(validity, "start_states_run", counted)
-    result = simulate(model, 8.0, torque=push, rtol=1e-6, output_step=0.01)
+    result = simulate(model, 8.0, torque=push, rtol=1e-6, output_step=0.002)
     assert result.validity.geometric_error > 1e-4 and not result.validity.screened
-    assert started == [("exact", 0.01)]
+    assert started == [("exact", 0.002)]
     started.clear()
     both = validity.geometric_error(model, 8.0, torque=push, x0=result.states[:, 0])
     assert [variant for variant, _ in started] == ["exact", "first_order"]
     assert result.validity.geometric_error == pytest.approx(both, rel=1e-3)
     # a looser run is not the estimate's: both models are run
     started.clear()
-    simulate(model, 8.0, torque=push, rtol=1e-4, method="RK45", output_step=0.01)
+    simulate(model, 8.0, torque=push, rtol=1e-4, method="RK45", output_step=0.002)
     assert [variant for variant, _ in started] == ["exact", "first_order"]
+    # nor is a run on a grid coarser than the estimate's own (t_final / 2000), which could
+    # miss the largest difference: both models are run on the estimate's grid
+    started.clear()
+    coarse = simulate(model, 8.0, torque=push, rtol=1e-6, output_step=4.0)
+    assert started == [("exact", None), ("first_order", None)]
+    assert coarse.validity.geometric_error == pytest.approx(both, rel=1e-6)
