@@ -108,7 +108,8 @@ from ..model.checks import check_real
 from ..model.parameters import Beam, Hub, HubBeam, PointMass
 from ..model.structure import MAX_ANGLE, MAX_APPENDAGES, Appendage, Structure
 from ..sim.simulation import METHODS, MIN_T_FINAL, SimulationResult, simulate
-from ..sim.validity import VariantChoice, assess_run, choose_variant
+from ..sim.runs import run_once
+from ..sim.validity import EstimateBeside, VariantChoice, assess_run, choose_variant
 from .scene_hardware import parse_actuator, parse_sensors
 from .scene_tables import construct as _construct
 from .scene_tables import read_table_file
@@ -977,11 +978,17 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None, *,
         drive = {"controller": through_actuator(OpenLoop(scene.maneuver), model)}
     else:
         drive = {"torque": scene.maneuver}
-    # assessed below with the scene's own tolerance
-    result = simulate(model, sim.t_final, rtol=sim.rtol, method=sim.method,
-                      output_step=sim.output_step, progress=progress, check_validity=False,
-                      **drive)
-    validity = assess_run(result, tolerance=scene.model.tolerance, **drive)
+    # simulate's run, assessed with the scene's own tolerance (the estimate's runs started
+    # while the run integrates, as simulate starts them)
+    started = EstimateBeside(model, output_step=sim.output_step, **drive)
+    try:
+        result = run_once(model, sim.t_final, rtol=sim.rtol, method=sim.method,
+                          output_step=sim.output_step, progress=progress, alongside=started,
+                          **drive)
+        validity = assess_run(result, tolerance=scene.model.tolerance,
+                              output_step=sim.output_step, started=started, **drive)
+    finally:
+        started.abandon()
     return dataclasses.replace(result, validity=validity)
 
 

@@ -18,6 +18,8 @@ True
 
 from __future__ import annotations
 
+import functools
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -31,6 +33,18 @@ _OURS = tuple(str(Path(__file__).resolve().parents[2] / name) for name in
 
 
 def _ours(filename: str) -> bool:
+    if os.path.isabs(filename):
+        return _ours_absolute(filename)
+    try:
+        path = str(Path(filename).resolve())
+    except (OSError, ValueError):
+        return False
+    return path.startswith(_OURS)
+
+
+@functools.lru_cache(maxsize=1024)
+def _ours_absolute(filename: str) -> bool:
+    """:func:`_ours` of an absolute file name (resolved once: a frame's file does not move)."""
     try:
         path = str(Path(filename).resolve())
     except (OSError, ValueError):

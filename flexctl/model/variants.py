@@ -762,7 +762,7 @@ class Model:
             return self._batch(self.functions.energy, x)[0]
         mat = self.matrices
         _, q, w, qd = self.split(self._check_state(x))
-        qf = lambda a, m, b: np.einsum("i...,ij,j...->...", a, m, b)  # noqa: E731
+        qf = lambda a, m, b: np.einsum("i...,i...->...", a, m @ b)  # noqa: E731
         return (0.5 * w ** 2 * (mat.J0 + qf(q, mat.D, q)) + w * (mat.m_tf @ qd)
                 + 0.5 * qf(qd, mat.M_ff, qd) + 0.5 * qf(q, mat.K_ff, q))
 

@@ -140,7 +140,7 @@ def _neglected_energy(model: Model, rate, q, inertia) -> np.ndarray:
         return np.zeros(rate.size)
     steps = 0.5 * (rate[1:] + rate[:-1]) * np.diff(rate * inertia)
     if not model.variant.dynamic_stiffening:
-        stiffening = 0.5 * np.einsum("ip,ij,jp->p", q, model.matrices.K_g, q)
+        stiffening = 0.5 * np.einsum("ip,ip->p", q, model.matrices.K_g @ q)
         steps = steps + 0.5 * (rate[1:] ** 2 + rate[:-1] ** 2) * np.diff(stiffening)
     return np.concatenate(([0.0], np.cumsum(steps)))
 
@@ -180,10 +180,10 @@ def energy_balance(model: Model, t, states, torque) -> EnergyBalance | None:
     power = np.asarray(torque, dtype=float) * w
     work = _running_integral(power, t)
     lost = _running_integral(model.system.hub.friction * w ** 2
-                              + np.einsum("ip,ij,jp->p", qd, mat.C_ff, qd), t)
+                              + np.einsum("ip,ip->p", qd, mat.C_ff @ qd), t)
     residual = energy - energy[0] - work + lost
     k = int(np.argmax(np.abs(residual)))
-    inertia = np.einsum("ip,ij,jp->p", q, mat.D, q)
+    inertia = np.einsum("ip,ip->p", q, mat.D @ q)
     neglected = _neglected_energy(model, w, q, inertia)
     apps = model.structure.appendages
     return EnergyBalance(

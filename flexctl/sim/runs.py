@@ -31,7 +31,7 @@ __all__ = ["run_once", "run_states", "start_states_run"]
 
 
 def run_once(model, t_final: float, torque=None, hub_motion=None, controller=None, x0=None,
-             **options) -> SimulationResult:
+             *, alongside=None, **options) -> SimulationResult:
     """:func:`flexctl.simulate` without ``check_validity`` (``options``: its keywords).
 
     Parameters
@@ -44,6 +44,11 @@ def run_once(model, t_final: float, torque=None, hub_motion=None, controller=Non
         The run's inputs, as :func:`flexctl.simulate` takes them.
     x0 : array_like, shape (n,), optional
         Initial plant state; default rest at zero.
+    alongside : callable, optional
+        ``alongside(request, plan)``, called once with the run's checked request and
+        integration plan (``flexctl.sim.request``) when its integrators are built and its
+        accuracy check started, before its steps: work to start beside the run (the
+        validity estimate's runs). Not called for a sampled controller's run.
     **options
         The keywords of :func:`flexctl.simulate` (``rtol``, ``atol``, ``method``,
         ``output_step``, ``max_step``, ``check_accuracy``, ``progress``, ``sensors``), but
@@ -59,7 +64,7 @@ def run_once(model, t_final: float, torque=None, hub_motion=None, controller=Non
     if request.sampled:
         result, merged = _simulate_sampled(request), False
     else:
-        result, merged = _simulate_continuous(request, looser)
+        result, merged = _simulate_continuous(request, looser, alongside)
     if not request.input_note:
         return result
     message = f"{result.message} ({request.input_note})"
@@ -161,7 +166,8 @@ def _plant_states(request, drive, traj) -> tuple:
 def start_states_run(model, t_final: float, torque=None, hub_motion=None, controller=None,
                      x0=None, **options) -> Beside:
     """:func:`run_states`, started beside the caller on a spare core where its integration is
-    compiled (:class:`~flexctl.sim.background.Beside`).
+    compiled (:class:`~flexctl.sim.background.Beside`; queued for the first core given back
+    where none is spare now).
 
     The run is checked and its integrator built here, in the caller's thread (CasADi's
     symbolic work is not thread-safe); only the compiled steps run beside, letting go of
@@ -203,7 +209,7 @@ def start_states_run(model, t_final: float, torque=None, hub_motion=None, contro
     # one event: abandoning the run abandons its steps beside
     segments, cancelled = planned_segments(plan, request.grid), threading.Event()
     replay = Beside(_replay_states, steps, segments, drive.y_init, stops.first_bad,
-                    cancelled=cancelled)
+                    cancelled=cancelled, queue=True)
     return Beside(_states_after, request, drive, segments, replay, beside=False,
                   cancelled=cancelled)
 
@@ -229,20 +235,22 @@ def _states_after(request, drive, segments, replay, cancelled) -> tuple:
     return _plant_states(request, drive, traj)
 
 
-def _simulate_continuous(request, check_torque=None) -> tuple:
+def _simulate_continuous(request, check_torque=None, alongside=None) -> tuple:
     """:func:`run_once` with a continuous drive: its strategy, stops and accuracy check, the
-    check on ``check_torque`` where it is given and the strategy's check can take it.
-    ``(result, whether the check took check_torque and gave the run's estimate)``."""
-    plan, stops, drive, start, traj = _integrate(request, check_torque)
+    check on ``check_torque`` where it is given and the strategy's check can take it, and
+    ``alongside`` (:func:`run_once`'s) started before the steps. ``(result, whether the check
+    took check_torque and gave the run's estimate)``."""
+    plan, stops, drive, start, traj = _integrate(request, check_torque, alongside)
     result = assemble_result(request, plan, drive, stops, traj, time.perf_counter() - start)
     return result, traj.check_torque_taken and result.integration_error is not None
 
 
-def _integrate(request, check_torque=None) -> tuple:
+def _integrate(request, check_torque=None, alongside=None) -> tuple:
     """``(plan, stops, drive, start time, trajectory)`` of a continuous drive's run: its
     strategy, stops and accuracy check (on ``check_torque`` in place of the run's torque
     where given and where the strategy's check runs beside the run:
-    ``trajectory.check_torque_taken``)."""
+    ``trajectory.check_torque_taken``); ``alongside(request, plan)`` called after the check
+    started, before the steps."""
     plan, stops, drive, strategy = _strategy(request)
     start = time.perf_counter()
     taken = check_torque is not None and strategy.checks_beside
@@ -251,6 +259,8 @@ def _integrate(request, check_torque=None) -> tuple:
     # the check needs only the plan: it runs beside the run, on a spare core if there is one
     check = strategy.start_check() if request.check_accuracy else None
     try:
+        if alongside is not None:
+            alongside(request, plan)
         traj = strategy.run()
     except BaseException:
         if check is not None:

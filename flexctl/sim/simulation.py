@@ -78,7 +78,7 @@ from .result import SimulationResult
 from .runs import run_once
 from .stops import StopReason
 from .strategies import FALLBACK_EVALUATIONS, AccuracyWarning
-from .validity import assess_run
+from .validity import EstimateBeside, assess_run
 from ..model import Model
 
 __all__ = ["simulate", "SimulationResult", "Controller", "StaticLaw", "StopReason",
@@ -165,11 +165,20 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     >>> result.status, round(result.peak_tip_deflection, 2)
     ('ok', 0.42)
     """
-    result = run_once(model, t_final, torque, hub_motion, controller, x0, rtol=rtol,
-                      atol=atol, method=method, output_step=output_step, max_step=max_step,
-                      check_accuracy=check_accuracy, progress=progress, sensors=sensors)
-    if not check_validity:
-        return result
-    return dataclasses.replace(result, validity=assess_run(
-        result, torque=torque, hub_motion=hub_motion, controller=controller, sensors=sensors,
-        output_step=output_step))
+    # the estimate's runs start while the run integrates (queued beside it for a spare core)
+    started = (EstimateBeside(model, torque=torque, hub_motion=hub_motion,
+                              controller=controller, sensors=sensors, output_step=output_step)
+               if check_validity else None)
+    try:
+        result = run_once(model, t_final, torque, hub_motion, controller, x0, rtol=rtol,
+                          atol=atol, method=method, output_step=output_step,
+                          max_step=max_step, check_accuracy=check_accuracy,
+                          progress=progress, sensors=sensors, alongside=started)
+        if not check_validity:
+            return result
+        return dataclasses.replace(result, validity=assess_run(
+            result, torque=torque, hub_motion=hub_motion, controller=controller,
+            sensors=sensors, output_step=output_step, started=started))
+    finally:
+        if started is not None:
+            started.abandon()

@@ -50,8 +50,9 @@ from .inputs import as_vector
 from .request import DEFAULT_OUTPUT_POINTS
 from .runs import run_once, start_states_run
 
-__all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "assess", "assess_run",
-           "choose_variant", "geometric_error", "ESTIMATE_MODES", "SCREEN_DEFLECTION"]
+__all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "EstimateBeside", "assess",
+           "assess_run", "choose_variant", "geometric_error", "ESTIMATE_MODES",
+           "SCREEN_DEFLECTION"]
 
 #: Modes of the two models compared by :func:`geometric_error`.
 ESTIMATE_MODES = 2
@@ -130,68 +131,177 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
     if model.variant.exact:
         return 0.0
     x0 = _checked_initial_state(model, x0)
-    # a torque function sampled for the run is replayed as sampled: its small error is common
-    # to the two models' responses, whose difference is the estimate
-    torque = recorded_sampling(torque, t_final)
-    # a controller reads at least the modes it was designed on; one compiled for the plant's
-    # state (``fixed_plant``) reads exactly the plant's
-    n_modes = model.mode_spec if getattr(controller, "fixed_plant", False) \
-        else min(max(n_modes, _law_modes(controller)), min(model.modes))
-    # the run itself is the variant's run where it is one on the compared modes, at least as
-    # accurate and not read through sensors (whose noise the estimate leaves out)
-    compared = [rebuild(model, n_modes=n_modes, variant=variant)
-                for variant in ("exact", model.variant)]
     if output_step is not None:
         output_step = check_real("geometric_error", "output_step", output_step, minimum=0.0,
                                  strict=True)
-    # ... and on a grid at least as fine as the estimate's own (a coarse grid would miss the
-    # largest difference)
-    same = (run is not None and sensors is None and getattr(run, "status", None) == "ok"
-            and float(getattr(run, "rtol", np.inf)) <= ESTIMATE_RTOL
-            and (output_step is None or output_step <= t_final / DEFAULT_OUTPUT_POINTS)
-            and _same_model(compared[1], model))
-    grid = {"output_step": output_step} if same else {}
-    runs = []
-    # the exact run's compiled steps integrate on a spare core while the variant's run is
-    # made here (start_states_run: the same states as run_states)
-    try:
-        for small in compared:
-            if same and small is compared[1]:
-                runs.append((small, None))
-                continue
-            on_small = controller
-            if callable(getattr(controller, "for_plant", None)):     # sensors set for a plant
-                on_small = controller.for_plant(small)
-            # with noiseless readings: a quantised, noisy loop's vibration is not repeatable
-            # from one model to the other, while the model error is the manoeuvre's
-            drive = {"torque": torque, "hub_motion": hub_motion, "controller": on_small,
-                     "sensors": None if sensors is None else sensors.noiseless(),
-                     "x0": _initial_state_of(small, model, x0)}
-            with quiet_estimate():
-                runs.append((small, start_states_run(small, t_final, rtol=ESTIMATE_RTOL,
-                                                     check_accuracy=False, **grid, **drive)))
-        tips = []
-        for small, started in reversed(runs):
-            if started is None:
-                ok, states = True, run.states
-            else:
+    # the run itself is the variant's run where it reached its end (and is one on the
+    # compared modes, at least as accurate and not read through sensors: _Estimate)
+    run_rtol = (float(getattr(run, "rtol", np.inf))
+                if run is not None and getattr(run, "status", None) == "ok" else None)
+    estimate = _Estimate(model, t_final, torque, hub_motion, controller, n_modes, sensors, x0,
+                         output_step, run_rtol)
+    return estimate.error(run)
+
+
+class _Estimate:
+    """The two runs of :func:`geometric_error`, started (``start_states_run``: the exact
+    run's compiled steps on a spare core, or queued for one, while the caller goes on), and
+    the estimate from them (:meth:`error`).
+
+    Where ``run_rtol`` is given (the rtol of a run of ``model`` that reached ``t_final``:
+    :func:`geometric_error`'s ``run``), that run stands for the variant's where it is the
+    variant on the compared modes, at least as accurate as the estimate's runs and not read
+    through sensors, and on a grid at least as fine as the estimate's own (``output_step``);
+    ``same`` says so.
+    """
+
+    def __init__(self, model, t_final, torque, hub_motion, controller, n_modes, sensors, x0,
+                 output_step, run_rtol):
+        self.model, self.t_final, self.x0 = model, t_final, x0
+        self.inputs = (torque, hub_motion, controller, sensors)
+        # a torque function sampled for the run is replayed as sampled: its small error is
+        # common to the two models' responses, whose difference is the estimate
+        torque = recorded_sampling(torque, t_final)
+        # a controller reads at least the modes it was designed on; one compiled for the
+        # plant's state (``fixed_plant``) reads exactly the plant's
+        self.n_modes = n_modes = (
+            model.mode_spec if getattr(controller, "fixed_plant", False)
+            else min(max(n_modes, _law_modes(controller)), min(model.modes)))
+        compared = [rebuild(model, n_modes=n_modes, variant=variant)
+                    for variant in ("exact", model.variant)]
+        # ... and on a grid at least as fine as the estimate's own (a coarse grid would miss
+        # the largest difference)
+        self.same = (run_rtol is not None and sensors is None and run_rtol <= ESTIMATE_RTOL
+                     and (output_step is None
+                          or output_step <= t_final / DEFAULT_OUTPUT_POINTS)
+                     and _same_model(compared[1], model))
+        grid = {"output_step": output_step} if self.same else {}
+        self.runs = []
+        try:
+            for small in compared:
+                if self.same and small is compared[1]:
+                    self.runs.append((small, None))
+                    continue
+                on_small = controller
+                if callable(getattr(controller, "for_plant", None)):  # sensors set for a plant
+                    on_small = controller.for_plant(small)
+                # with noiseless readings: a quantised, noisy loop's vibration is not
+                # repeatable from one model to the other, while the model error is the
+                # manoeuvre's
+                drive = {"torque": torque, "hub_motion": hub_motion, "controller": on_small,
+                         "sensors": None if sensors is None else sensors.noiseless(),
+                         "x0": _initial_state_of(small, model, x0)}
                 with quiet_estimate():
-                    ok, states = started.result()
-            if not ok:
-                return float("inf")
-            tips.append(np.atleast_2d(small.tip_deflections(states)))
-    finally:
-        for _, started in runs:
+                    self.runs.append((small, start_states_run(
+                        small, t_final, rtol=ESTIMATE_RTOL, check_accuracy=False, **grid,
+                        **drive)))
+        except BaseException:
+            self.abandon()
+            raise
+
+    def error(self, run=None) -> float:
+        """:func:`geometric_error` from the started runs (``run``'s states standing for the
+        variant's where ``same``)."""
+        try:
+            tips = []
+            for small, started in reversed(self.runs):
+                if started is None:
+                    ok, states = True, run.states
+                else:
+                    with quiet_estimate():
+                        ok, states = started.result()
+                if not ok:
+                    return float("inf")
+                tips.append(np.atleast_2d(small.tip_deflections(states)))
+        finally:
+            self.abandon()
+        if tips[0].shape != tips[1].shape:
+            # the run's grid is not the one asked for the exact run: both runs made
+            torque, hub_motion, controller, sensors = self.inputs
+            return _Estimate(self.model, self.t_final, torque, hub_motion, controller,
+                             self.n_modes, sensors, self.x0, None, None).error()
+        # each appendage relative to its peak, but not below DEFLECTION_FLOOR of its length:
+        # a deflection of 1e-38 m has no geometric error, only the integrators' rounding
+        peak = np.maximum(np.max(np.abs(tips[1]), axis=1),
+                          DEFLECTION_FLOOR * self.model.lengths)
+        return float(np.max(np.max(np.abs(tips[0] - tips[1]), axis=1) / peak))
+
+    def abandon(self) -> None:
+        """Give up the runs not yet asked for."""
+        for _, started in self.runs:
             if started is not None:
                 started.abandon()
-    if tips[0].shape != tips[1].shape:
-        # the run's grid is not the one asked for the exact run: both runs made
-        return geometric_error(model, t_final, torque=torque, hub_motion=hub_motion,
-                               controller=controller, n_modes=n_modes, sensors=sensors, x0=x0)
-    # each appendage relative to its peak, but not below DEFLECTION_FLOOR of its length: a
-    # deflection of 1e-38 m has no geometric error, only the integrators' rounding
-    peak = np.maximum(np.max(np.abs(tips[1]), axis=1), DEFLECTION_FLOOR * model.lengths)
-    return float(np.max(np.max(np.abs(tips[0] - tips[1]), axis=1) / peak))
+
+
+class EstimateBeside:
+    """The validity estimate's runs for one run of :func:`flexctl.simulate`, started while that
+    run integrates (its :func:`~flexctl.sim.runs.run_once` ``alongside``).
+
+    Called with the run's checked request and plan, once its accuracy check has started, it
+    starts the runs :func:`geometric_error` will need for the run (queued for a spare core,
+    behind the check): the exact model's, and the variant's unless the run stands for it,
+    judged by the run's plan. :func:`assess_run` then takes them where they are the ones it
+    would make (the run reached its end from the same state) and otherwise makes its own; a
+    run screened as small gives them up (:meth:`abandon`). Work that cannot start (a model
+    the estimate cannot build) is left to the assessment, which says why.
+
+    Parameters
+    ----------
+    model : Model
+        The run's model.
+    torque, hub_motion, controller, sensors : object or None, optional
+        The run's inputs, as :func:`flexctl.simulate` takes them.
+    output_step : float or None, optional
+        The run's output spacing, s, as given to :func:`flexctl.simulate`.
+    """
+
+    def __init__(self, model, *, torque=None, hub_motion=None, controller=None, sensors=None,
+                 output_step=None):
+        self.model, self.output_step = model, output_step
+        self.inputs = (torque, hub_motion, controller, sensors)
+        self.estimate, self.t_final, self.x0 = None, None, None
+
+    def __call__(self, request, plan) -> None:
+        if self.model.variant.exact or self.estimate is not None:
+            return
+        torque, hub_motion, controller, sensors = self.inputs
+        try:
+            self.estimate = _Estimate(self.model, request.t_final, torque, hub_motion,
+                                      controller, ESTIMATE_MODES, sensors, request.x_init,
+                                      self.output_step, float(plan.rtol))
+        except Exception:                     # noqa: BLE001 - the assessment says why
+            self.estimate = None
+            return
+        self.t_final, self.x0 = request.t_final, request.x_init
+
+    def take(self, result, t_end: float, x0):
+        """The started estimate where it is the one :func:`geometric_error` makes for
+        ``result``, else None (its runs given up); taken once.
+
+        Parameters
+        ----------
+        result : SimulationResult
+            The finished run.
+        t_end : float
+            Where it ended, s.
+        x0 : ndarray, shape (n,) or None
+            Its initial state.
+        """
+        estimate, self.estimate = self.estimate, None
+        if estimate is None:
+            return None
+        if (t_end == self.t_final and x0 is not None and np.array_equal(x0, self.x0)
+                and (not estimate.same or (result.status == "ok" and result.model is self.model
+                                           and float(result.rtol) <= ESTIMATE_RTOL))):
+            return estimate
+        estimate.abandon()
+        return None
+
+    def abandon(self) -> None:
+        """Give up the started runs (a run screened as small needs none)."""
+        if self.estimate is not None:
+            self.estimate.abandon()
+            self.estimate = None
 
 
 def _same_model(one, other) -> bool:
@@ -320,7 +430,7 @@ def _finite_or_none(value):
 
 def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors=None,
                tolerance: float = DEFAULT_TOLERANCE, warn: bool = True,
-               output_step=None) -> ModelValidity:
+               output_step=None, started=None) -> ModelValidity:
     """:func:`assess`, with the estimate's runs made only where they can matter.
 
     A small-deflection run whose tip stays under :data:`SCREEN_DEFLECTION` of the length is
@@ -341,6 +451,9 @@ def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors
         run's energy balance is violated. Default True.
     output_step : float, optional
         The run's output spacing, s, as given to :func:`flexctl.simulate` (:func:`assess`).
+    started : EstimateBeside, optional
+        The estimate's runs, started while the run integrated (as :func:`flexctl.simulate`
+        starts them): taken where they are the ones the estimate needs, given up otherwise.
 
     Returns
     -------
@@ -350,8 +463,11 @@ def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors
     model = result.model
     ratio = float(result.deflection_ratio) if np.isfinite(result.deflection_ratio) else np.inf
     if not model.variant.exact and ratio > SCREEN_DEFLECTION:
-        return assess(result, torque=torque, hub_motion=hub_motion, controller=controller,
-                      sensors=sensors, tolerance=tolerance, warn=warn, output_step=output_step)
+        return _assess(result, torque=torque, hub_motion=hub_motion, controller=controller,
+                       sensors=sensors, tolerance=tolerance, warn=warn,
+                       output_step=output_step, started=started)
+    if started is not None:
+        started.abandon()
     t_end = float(result.t[-1]) if result.t.size else 0.0
     validity = ModelValidity(variant=model.variant, deflection_ratio=ratio,
                              geometric_error=0.0 if model.variant.exact
@@ -387,14 +503,26 @@ def assess(result, *, torque=None, hub_motion=None, controller=None, sensors=Non
         default): where the run is itself the estimate's run of its variant, its states are
         taken for it (:func:`geometric_error`'s ``run``).
     """
+    return _assess(result, torque=torque, hub_motion=hub_motion, controller=controller,
+                   sensors=sensors, tolerance=tolerance, warn=warn, output_step=output_step)
+
+
+def _assess(result, *, torque, hub_motion, controller, sensors, tolerance, warn, output_step,
+            started=None) -> ModelValidity:
+    """:func:`assess`, on the estimate's runs ``started`` beside the run where they are the
+    ones it needs (:class:`EstimateBeside`)."""
     check_tolerance(tolerance)
     model = result.model
     t_end = float(result.t[-1]) if result.t.size else 0.0
     x0 = result.states[:, 0] if np.ndim(result.states) == 2 and result.t.size else None
-    error = (geometric_error(model, t_end, torque=torque, hub_motion=hub_motion,
-                             controller=controller, sensors=sensors, x0=x0, run=result,
-                             output_step=output_step)
-             if t_end > 0 else 0.0)
+    estimate = None if started is None else started.take(result, t_end, x0)
+    if estimate is not None:
+        error = estimate.error(result)
+    else:
+        error = (geometric_error(model, t_end, torque=torque, hub_motion=hub_motion,
+                                 controller=controller, sensors=sensors, x0=x0, run=result,
+                                 output_step=output_step)
+                 if t_end > 0 else 0.0)
     validity = ModelValidity(variant=model.variant,
                              deflection_ratio=result.deflection_ratio,
                              geometric_error=error, tolerance=float(tolerance),

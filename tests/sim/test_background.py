@@ -86,6 +86,67 @@ def test_with_every_spare_core_taken_a_call_waits_for_result(beside):
     assert ran == [2]
 
 
+def test_a_queued_call_runs_on_the_core_given_back(beside):
+    gate, ran, order = threading.Event(), threading.Event(), []
+
+    def second():
+        order.append("second")
+        ran.set()
+        return threading.current_thread().name
+    blocker = Beside(lambda: (gate.wait(10.0), order.append("first")))
+    queued = Beside(second, queue=True)
+    assert blocker.started and not queued.started and order == []
+    gate.set()
+    assert ran.wait(10.0)                                  # not asked for: it ran beside
+    assert queued.started and queued.result().startswith("flexctl-beside")
+    assert order == ["first", "second"]
+    later = Beside(order.append, "third")                  # the core was given back
+    assert later.started
+    later.result()
+
+
+def test_a_queued_call_asked_for_first_runs_in_the_callers_thread(beside):
+    gate, ran = threading.Event(), []
+    blocker = Beside(gate.wait, 10.0)
+    queued = Beside(lambda: (ran.append(1), threading.current_thread().name)[1], queue=True)
+    assert queued.result() == threading.current_thread().name
+    gate.set()
+    blocker.result()
+    assert ran == [1]                           # once: the pool thread did not run it again
+    assert Beside(sum, [2]).result() == 2       # and gave its core back
+
+
+def test_an_abandoned_queued_call_never_runs(beside):
+    gate, ran = threading.Event(), []
+    blocker = Beside(gate.wait, 10.0)
+    queued = Beside(ran.append, 1, queue=True, cancelled=threading.Event())
+    queued.abandon()
+    assert queued.cancelled.is_set()
+    gate.set()
+    blocker.result()
+    after = Beside(ran.append, 2)               # runs after the blocker's thread is done
+    after.result()
+    assert ran == [2]
+
+
+def test_queued_calls_run_in_order_and_raise_to_their_caller(beside):
+    gate, ran = threading.Event(), threading.Event()
+    blocker = Beside(gate.wait, 10.0)
+    order = []
+
+    def fails():
+        order.append("fails")
+        raise RuntimeError("queued call failed")
+    first = Beside(fails, queue=True)
+    second = Beside(lambda: (order.append("second"), ran.set()), queue=True)
+    gate.set()
+    assert ran.wait(10.0)
+    second.result()
+    with pytest.raises(RuntimeError, match="queued call failed"):
+        first.result()
+    assert order == ["fails", "second"]
+
+
 def test_abandoned_call_does_not_hold_up_exit(tmp_path):
     # a call still running when the interpreter ends is not waited for
     import subprocess

@@ -234,3 +234,107 @@ def test_the_run_stands_for_the_estimates_run_of_its_variant(monkeypatch):
     coarse = simulate(model, 8.0, torque=push, rtol=1e-6, output_step=4.0)
     assert started == [("exact", None), ("first_order", None)]
     assert coarse.validity.geometric_error == pytest.approx(both, rel=1e-6)
+
+
+def _started_runs(monkeypatch):
+    """The (variant, output_step) of every estimate run started, and where: inside the run
+    (``alongside``: before its steps) or after it."""
+    import flexctl.sim.runs as runs
+    import flexctl.sim.validity as validity
+
+    started, state = [], {"in_run": False}
+    real_start, real_integrate = validity.start_states_run, runs._integrate
+
+    def counted(small, *args, **kwargs):
+        started.append((str(small.variant), kwargs.get("output_step"), state["in_run"]))
+        return real_start(small, *args, **kwargs)
+
+    def integrate(*args, **kwargs):
+        state["in_run"] = True
+        try:
+            return real_integrate(*args, **kwargs)
+        finally:
+            state["in_run"] = False
+    monkeypatch.setattr(validity, "start_states_run", counted)
+    monkeypatch.setattr(runs, "_integrate", integrate)
+    return started
+
+
+@pytest.mark.parametrize("background", [True, False])
+@pytest.mark.parametrize("n_modes, rtol, method", [(2, 1e-6, "auto"), (4, 1e-6, "auto"),
+                                                   (2, 1e-4, "auto"), (2, 1e-4, "RK45")])
+def test_estimate_started_beside_the_run_equals_the_one_made_after_it(monkeypatch, background,
+                                                                      n_modes, rtol, method):
+    # simulate starts the estimate's runs while the run integrates (queued for a spare core
+    # behind the accuracy check); the estimate is the one assess makes after the run, bit for
+    # bit, with the work beside or not
+    from flexctl.sim import background as beside
+
+    monkeypatch.setattr(beside, "ENABLED", background)
+    monkeypatch.setattr(beside, "spare_cores", lambda: 1)
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=n_modes)
+    push = SineTorque(peak_torque=2.0, duration=2.0)
+    started = _started_runs(monkeypatch)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ModelValidityWarning)
+        result = simulate(model, 8.0, torque=push, rtol=rtol, method=method)
+        # the runs were started before the run's steps, the variant's only where the run
+        # does not stand for it (on the estimate's modes, at the estimate's tolerance: auto
+        # runs the 8(5,3) pair at 1e-6 at least)
+        same = n_modes == 2 and result.rtol <= 1e-6
+        assert same == (n_modes == 2 and method == "auto")
+        assert [(v, inside) for v, _, inside in started] == (
+            [("exact", True)] if same else [("exact", True), ("first_order", True)])
+        after = assess(result, torque=push)
+    assert not result.validity.screened
+    assert result.validity.geometric_error == after.geometric_error
+    assert after.geometric_error > 1e-4
+
+
+def test_estimate_started_beside_a_run_is_given_up_where_it_is_not_needed(monkeypatch):
+    # a small deflection is screened: the runs started beside it are given up, not waited for
+    import flexctl.sim.validity as validity
+
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    given_up = []
+    real = validity.EstimateBeside.abandon
+
+    def abandon(self):
+        given_up.append(self.estimate is not None)
+        real(self)
+    monkeypatch.setattr(validity.EstimateBeside, "abandon", abandon)
+    started = _started_runs(monkeypatch)
+    small = simulate(model, 4.0, torque=SineTorque(peak_torque=0.01, duration=2.0))
+    assert small.validity.screened and small.validity.deflection_ratio < 0.02
+    assert started and all(inside for _, _, inside in started)
+    assert given_up[0] is True                 # the screen gave up the started runs
+    # a run that stops early: its estimate is made for the part it ran (not the runs started
+    # for the whole horizon), and it is the estimate assess gives
+    started.clear()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        stopped = simulate(model, 8.0, torque=SineTorque(peak_torque=60.0, duration=2.0))
+        assert stopped.status != "ok" and stopped.t[-1] < 8.0
+        # the exact run started inside the run, then both models' runs after it
+        assert [(v, inside) for v, _, inside in started] == [
+            ("exact", True), ("exact", False), ("first_order", False)]
+        after = assess(stopped, torque=SineTorque(peak_torque=60.0, duration=2.0))
+    assert stopped.validity.geometric_error == after.geometric_error
+
+
+def test_an_estimate_that_cannot_start_beside_the_run_is_made_after_it(monkeypatch):
+    # work beside the run that fails to start leaves the estimate to the assessment
+    import flexctl.sim.validity as validity
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("estimate could not start")
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, n_modes=2)
+    push = SineTorque(peak_torque=2.0, duration=2.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ModelValidityWarning)
+        expected = simulate(model, 8.0, torque=push).validity.geometric_error
+        monkeypatch.setattr(validity, "_Estimate", broken)
+        with pytest.raises(RuntimeError, match="estimate could not start"):
+            simulate(model, 8.0, torque=push)      # the assessment's own attempt says why
+        monkeypatch.undo()
+        assert simulate(model, 8.0, torque=push).validity.geometric_error == expected
