@@ -40,6 +40,7 @@ from .stops import tip_rows
 from .compiled import (CHECK_FACTOR, SegmentIntegrator, cached_build, input_key, input_numbers,
                        is_symbolic, min_step_fraction)
 from .buffers import InPlace
+from .step_chain import step_chain
 from .fixed_step import STEP_CACHE, STEP_CACHE_SIZE, jit_compiled, step_function
 from .embedded_rk import EmbeddedHold, HeldTorque
 from .inputs import input_value, output_grid, time_function
@@ -398,10 +399,10 @@ class _RK4Hold:
 
         n_numbers = self.torque_numbers.size + 1
         step = step_function(self.model, self.torque, None, HeldTorque(0.0), n_numbers)[0]
-        chain = step.mapaccum("flexctl_rk4_hold", count)
+        chain = step_chain(step, count, "flexctl_rk4_hold")
         yt, h = ca.MX.sym("yt", step.size1_in(0)), ca.MX.sym("h")
         c = ca.MX.sym("c", n_numbers)
-        ys = chain(yt, ca.repmat(h, 1, count), ca.repmat(c, 1, count))[0]
+        ys = chain(yt, h, c)[0]
         return InPlace(jit_compiled(ca.Function("flexctl_rk4_hold_end", [yt, h, c],
                                          [ca.densify(ys[:, -1])]), self.model))
 

@@ -41,6 +41,7 @@ from .compiled import (CHECK_FACTOR, cached_build, input_key, drive_size, input_
 from .compile_cache import compiled
 from .lifted_constants import lift_constants
 from .buffers import InPlace, borrow, give_back
+from .step_chain import step_chain
 from . import fixed_step
 from .fixed_step import (END_INSIDE, STEP_CACHE, STEP_CACHE_SIZE, drive_symbols, jit_compiled,
                          step_function)
@@ -533,8 +534,8 @@ def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS,
             for k in range(attempt.n_in())]
     body = ca.Function(f"{name}_body", call,
                        switch(call[0][0] >= call[1], *call))
-    chain = body.mapaccum(f"{name}_chain", attempts, [0], [0])
-    # MX arguments keep the chain a loop over one body in the generated code
+    # the input numbers and the model's are passed by reference to every attempt
+    chain = step_chain(body, attempts, f"{name}_chain")
     call = [ca.MX.sym(body.name_in(k), body.sparsity_in(k)) for k in range(body.n_in())]
     ends, info, dense_all = chain(*call)
     run = ca.Function(f"{name}_run{attempts}", call,

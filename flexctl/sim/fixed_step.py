@@ -28,6 +28,7 @@ from .compiled import (cached_build, closed_loop_dynamics, input_key, split_numb
 from .buffers import InPlace
 from .compile_cache import compiled
 from .lifted_constants import lift_constants
+from .step_chain import step_chain
 from .native_rhs import MAX_INSTRUCTIONS
 from ..model.exports import symbolic_beam_dynamics
 from ..model.discrete import rk4_step
@@ -228,10 +229,10 @@ class _ChunkRuns(dict):
     def __missing__(self, k: int):
         import casadi as ca
 
-        chain = self.step.mapaccum(f"flexctl_rk4_chain{k}", k)
+        chain = step_chain(self.step, k, f"flexctl_rk4_chain{k}", stacked=[1])
         yt, hs = ca.MX.sym("yt", self.step.size1_in(0)), ca.MX.sym("h", 1, k)
         c = ca.MX.sym("c", self.step.size1_in(2))
-        ys, fs = chain(yt, hs, ca.repmat(c, 1, k))
+        ys, fs = chain(yt, hs, c)
         self[k] = InPlace(jit_compiled(ca.Function(f"flexctl_rk4_run{k}", [yt, hs, c],
                                             [ca.densify(ys), ca.densify(fs)]), self.model))
         return self[k]

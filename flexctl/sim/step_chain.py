@@ -1,0 +1,96 @@
+"""A loop of ``count`` calls of a step function whose constant inputs are shared by every call.
+
+CasADi's ``Function.mapaccum`` maps every input that is not accumulated: called with one
+column where it expects ``count``, it copies that column ``count`` times before the loop
+starts (``repmat`` in the generated code). For a step function whose inputs carry a sampled
+input's table or a model's lifted numbers (thousands of numbers), that copy costs more than
+the steps themselves. :func:`step_chain` builds the same loop (nested calls in base 10, so that
+the generated code holds each level's body once) with the constant inputs passed by reference
+to every call.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+__all__ = ["step_chain"]
+
+#: Calls per level of the nested loop (as CasADi's ``mapaccum``).
+BASE = 10
+
+
+def step_chain(step, count: int, name: str, stacked: Sequence[int] = ()):
+    """``count`` calls of ``step`` in sequence, its first output fed to its first input.
+
+    Parameters
+    ----------
+    step : casadi.Function
+        ``step(x, a_1, ..., a_m) -> (x_next, o_1, ..., o_n)``: the first output has the first
+        input's shape; every input and output a column vector.
+    count : int
+        Number of calls (>= 1).
+    name : str
+        Name of the returned function.
+    stacked : sequence of int, optional
+        Indices (>= 1) of the inputs that differ from call to call: the returned function
+        takes them as ``count`` columns, one per call. Every other input after the first is
+        the same for every call and is taken once.
+
+    Returns
+    -------
+    casadi.Function
+        ``chain(x, a_1, ..., a_m) -> (X, O_1, ..., O_n)``, its inputs and outputs named as
+        ``step``'s; ``X`` and each ``O_k`` hold one column per call, in order (``X[:, -1]`` is
+        the state after the last call).
+
+    Raises
+    ------
+    ValueError
+        If ``count`` is not a positive integer, or an index of ``stacked`` is not an input
+        after the first.
+    """
+    import casadi as ca
+
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise ValueError(f"count must be a positive integer, got {count!r}")
+    stacked = frozenset(stacked)
+    if not stacked <= set(range(1, step.n_in())):
+        raise ValueError(f"stacked must index inputs 1..{step.n_in() - 1} of {step.name()}, "
+                         f"got {sorted(stacked)}")
+    # the loop's pieces: `count` in base 10 -> that many calls of each level
+    calls, level, size, left = [], step, 1, count
+    while True:
+        calls += [(level, size)] * (left % BASE)
+        left //= BASE
+        if not left:
+            break
+        level = _repeat(level, size, BASE, stacked, f"{step.name()}_x{size * BASE}")
+        size *= BASE
+    return _sequence(step, calls, stacked, name)
+
+
+def _repeat(level, size: int, times: int, stacked, name: str):
+    """``times`` calls of ``level`` (which makes ``size`` calls of the step) as one function."""
+    return _sequence(level, [(level, size)] * times, stacked, name, size)
+
+
+def _sequence(f, calls, stacked, name: str, size: int = 1):
+    """One function calling ``calls`` (each ``(function, its number of steps)``) in order, with
+    the argument signature of ``f`` (whose stacked inputs span ``size`` steps) widened to
+    every step of the sequence."""
+    import casadi as ca
+
+    total = sum(n for _, n in calls)
+    args = [ca.MX.sym(f.name_in(k), f.size1_in(k), total * f.size2_in(k) // size
+                      if k in stacked else f.size2_in(k)) for k in range(f.n_in())]
+    x, outputs, done = args[0], [[] for _ in range(f.n_out())], 0
+    for g, n in calls:
+        call = [x] + [args[k][:, done:done + n] if k in stacked else args[k]
+                      for k in range(1, f.n_in())]
+        result = g(*call)
+        for k, value in enumerate(result):
+            outputs[k].append(value)
+        x = result[0][:, -1]
+        done += n
+    return ca.Function(name, args, [ca.horzcat(*o) for o in outputs],
+                       f.name_in(), f.name_out())
