@@ -49,7 +49,6 @@ def step_chain(step, count: int, name: str, stacked: Sequence[int] = ()):
         If ``count`` is not a positive integer, or an index of ``stacked`` is not an input
         after the first.
     """
-    import casadi as ca
 
     if isinstance(count, bool) or not isinstance(count, int) or count < 1:
         raise ValueError(f"count must be a positive integer, got {count!r}")
