@@ -62,7 +62,11 @@ python-control's run is short and the estimate's two runs were each about as lon
 itself. Since a run that is itself the estimate's run of its variant stands for it (2 modes,
 rtol tightened to 1e-6 on the 8(5,3) pair: only the exact model is run), one more run: 4
 modes 21.4 / 46.8 (14.7 / 6.7 ms against 0.314 s), 2 modes 19.9 / 41.3 (8.7 / 4.2 ms against
-0.173 s).
+0.173 s). With the validity estimate's runs started while the run integrates (queued
+behind the accuracy check for the spare core) and the step loops no longer copying the
+sampled torque's table for every step attempt (``step_chain``), one run of ``--cases
+branching --modes 4 2 --methods LSODA``: 4 modes 27.1 / 62.2 (11.6 / 5.0 ms against LSODA's
+0.313 s), 2 modes 26.6 / 56.5 (6.4 / 3.0 ms against 0.172 s).
 
 Run: ``python benchmarks/bench_inputs.py`` (some 10 to 30 minutes, python-control dominates;
 ``--modes 2`` for one model, ``--methods RK45`` for python-control's default only).
