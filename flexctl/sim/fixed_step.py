@@ -1,8 +1,8 @@
 """Compiled fixed-step integration (classical RK4) with a step-doubling error estimate.
 
 For "fast, and 1 % is enough" (sweeps, Monte Carlo, design loops): the whole run is one
-CasADi ``mapaccum`` of an RK4 step, evaluated in one call, with no step-size control to pay
-for. The step is chosen from the fastest retained mode (and the closed loop's fastest pole),
+compiled loop of an RK4 step (:func:`~flexctl.sim.step_chain.step_chain`), evaluated in one
+call, with no step-size control to pay for. The step is chosen from the fastest retained mode (and the closed loop's fastest pole),
 ``omega_max h <= RK4_OMEGA_H``, well inside RK4's stability interval on the imaginary axis
 (``2 sqrt 2``); every output time and every breakpoint of the inputs is a step boundary.
 

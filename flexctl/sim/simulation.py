@@ -67,6 +67,7 @@ per method family (:mod:`~flexctl.sim.strategies`), the stopping conditions
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 
 import numpy as np
@@ -80,6 +81,7 @@ from .stops import StopReason
 from .strategies import FALLBACK_EVALUATIONS, AccuracyWarning
 from .validity import EstimateBeside, assess_run
 from ..model import Model
+from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["simulate", "SimulationResult", "Controller", "StaticLaw", "StopReason",
            "StiffnessWarning", "AccuracyWarning", "ModelValidityWarning", "EnergyBalance",
@@ -165,10 +167,14 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     >>> result.status, round(result.peak_tip_deflection, 2)
     ('ok', 0.42)
     """
-    # the estimate's runs start while the run integrates (queued beside it for a spare core)
-    started = (EstimateBeside(model, torque=torque, hub_motion=hub_motion,
-                              controller=controller, sensors=sensors, output_step=output_step)
-               if check_validity else None)
+    # the estimate's runs start while the run integrates (queued beside it for a spare core);
+    # a bad argument is left to run_once, which names it as simulate's
+    started = None
+    if check_validity:
+        with contextlib.suppress(InputTypeError, InputValueError):
+            started = EstimateBeside(model, torque=torque, hub_motion=hub_motion,
+                                     controller=controller, sensors=sensors,
+                                     output_step=output_step)
     try:
         result = run_once(model, t_final, torque, hub_motion, controller, x0, rtol=rtol,
                           atol=atol, method=method, output_step=output_step,

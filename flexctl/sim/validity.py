@@ -36,9 +36,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..model import build_model
+from ..model import Model, build_model
 from ..model.build import rebuild
-from ..model.checks import check_real
+from ..model.checks import check_instance, check_real
 from ..model.errors import InputValueError
 from ..model.user_warnings import warn_user
 from ..model.variant import Variant
@@ -128,6 +128,7 @@ def geometric_error(model, t_final: float, *, torque=None, hub_motion=None, cont
         exact variant; ``inf`` when one of the two runs stops early.
     """
     t_final = check_real("geometric_error", "t_final", t_final, minimum=0.0, strict=True)
+    check_instance("geometric_error", "model", model, Model, "flexctl Model")
     if model.variant.exact:
         return 0.0
     x0 = _checked_initial_state(model, x0)
@@ -257,7 +258,9 @@ class EstimateBeside:
 
     def __init__(self, model, *, torque=None, hub_motion=None, controller=None, sensors=None,
                  output_step=None):
-        self.model, self.output_step = model, output_step
+        self.model = check_instance("EstimateBeside", "model", model, Model, "flexctl Model")
+        self.output_step = output_step if output_step is None else check_real(
+            "EstimateBeside", "output_step", output_step, minimum=0.0, strict=True)
         self.inputs = (torque, hub_motion, controller, sensors)
         self.estimate, self.t_final, self.x0 = None, None, None
 

@@ -9,8 +9,8 @@ import pytest
 import flexctl
 from flexctl import SineTorque, SpinUp, build_model, simulate
 from flexctl.model.errors import InputValueError
-from flexctl.sim.validity import (ModelValidityWarning, assess, choose_variant,
-                                  geometric_error)
+from flexctl.sim.validity import (EstimateBeside, ModelValidityWarning, assess,
+                                  choose_variant, geometric_error)
 
 #: The estimate on 2 modes against the difference of the 6-mode models.
 TRACKING_FACTOR = 2.0
@@ -88,6 +88,24 @@ def test_bad_tolerance_is_refused():
     for bad in (0.0, 1.0, -1e-3, float("nan"), "0.01", True):
         with pytest.raises(ValueError, match="tolerance"):
             assess(result, tolerance=bad)
+
+
+@pytest.mark.parametrize("bad", [None, "hub-beam-mass", 3.0, object()])
+def test_the_estimate_refuses_what_is_not_a_model_by_name(bad):
+    for make, owner in ((lambda: geometric_error(bad, 1.0), "geometric_error"),
+                        (lambda: EstimateBeside(bad), "EstimateBeside")):
+        with pytest.raises(TypeError, match=rf"{owner}\.model must be a flexctl Model"):
+            make()
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf"), "0.01", True])
+def test_a_bad_output_step_is_named_as_the_callers(bad):
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, 2)
+    with pytest.raises((TypeError, ValueError), match=r"EstimateBeside\.output_step"):
+        EstimateBeside(model, output_step=bad)
+    # simulate starts the estimate's runs itself: its own argument is what the error names
+    with pytest.raises((TypeError, ValueError), match=r"^output_step must be"):
+        simulate(model, 1.0, torque=lambda t: 0.1, output_step=bad)
 
 
 @pytest.mark.parametrize("variant", ["first_order", "exact"])
