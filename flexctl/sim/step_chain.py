@@ -11,6 +11,7 @@ to every call.
 
 from __future__ import annotations
 
+import numbers
 from typing import Sequence
 
 __all__ = ["step_chain"]
@@ -49,9 +50,9 @@ def step_chain(step, count: int, name: str, stacked: Sequence[int] = ()):
         If ``count`` is not a positive integer, or an index of ``stacked`` is not an input
         after the first.
     """
-
-    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+    if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 1:
         raise ValueError(f"count must be a positive integer, got {count!r}")
+    count = int(count)
     stacked = frozenset(stacked)
     if not stacked <= set(range(1, step.n_in())):
         raise ValueError(f"stacked must index inputs 1..{step.n_in() - 1} of {step.name()}, "

@@ -15,7 +15,7 @@ def _step():
                        ["x", "h", "c"], ["x_next", "o"])
 
 
-@pytest.mark.parametrize("count", [1, 7, 10, 13, 100, 128, 250])
+@pytest.mark.parametrize("count", [1, 7, 10, 13, 100, 128, 250, np.int64(12)])
 def test_chain_equals_mapaccum_step_by_step(count):
     step, rng = _step(), np.random.default_rng(count)
     x0, hs, c = rng.random(3), rng.uniform(0.01, 0.02, (1, count)), rng.random(40)
