@@ -95,7 +95,7 @@ from pathlib import Path
 
 # the controller kinds and their settings belong to the controllers package
 from controllers.spec import FORMER_NAMES
-from controllers.spec import (CONTROLLER_KEYS, ControllerSpec, SceneError, current_name,
+from controllers.spec import (ControllerSpec, SceneError, current_name,
                               current_names)
 
 from ..sim.fidelity import DEFAULT_TOLERANCE, ModeChoice, choose_modes
@@ -108,8 +108,7 @@ from ..model.checks import check_real
 from ..model.parameters import Beam, Hub, HubBeam, PointMass
 from ..model.structure import MAX_ANGLE, MAX_APPENDAGES, Appendage, Structure
 from ..sim.simulation import METHODS, MIN_T_FINAL, SimulationResult, simulate
-from ..sim.runs import run_once
-from ..sim.validity import EstimateBeside, VariantChoice, assess_run, choose_variant
+from ..sim.validity import VariantChoice, choose_variant, run_assessed
 from .scene_hardware import parse_actuator, parse_sensors
 from .scene_tables import construct as _construct
 from .scene_tables import read_table_file
@@ -978,18 +977,10 @@ def run_scene(scene: Scene, controller=None, model: Model | None = None, *,
         drive = {"controller": through_actuator(OpenLoop(scene.maneuver), model)}
     else:
         drive = {"torque": scene.maneuver}
-    # simulate's run, assessed with the scene's own tolerance (the estimate's runs started
-    # while the run integrates, as simulate starts them)
-    started = EstimateBeside(model, output_step=sim.output_step, **drive)
-    try:
-        result = run_once(model, sim.t_final, rtol=sim.rtol, method=sim.method,
-                          output_step=sim.output_step, progress=progress, alongside=started,
-                          **drive)
-        validity = assess_run(result, tolerance=scene.model.tolerance,
-                              output_step=sim.output_step, started=started, **drive)
-    finally:
-        started.abandon()
-    return dataclasses.replace(result, validity=validity)
+    # simulate's run, assessed with the scene's own tolerance
+    return run_assessed(model, sim.t_final, rtol=sim.rtol, method=sim.method,
+                        output_step=sim.output_step, progress=progress,
+                        tolerance=scene.model.tolerance, **drive)
 
 
 #: Modes added to each appendage of the plant for the reference run of the metrics' errors.

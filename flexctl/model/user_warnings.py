@@ -33,8 +33,12 @@ _OURS = tuple(str(Path(__file__).resolve().parents[2] / name) for name in
 
 
 def _ours(filename: str) -> bool:
-    if os.path.isabs(filename):
-        return _ours_absolute(filename)
+    """Whether ``filename`` lies in flexctl or controllers (an absolute name resolved once:
+    a frame's file does not move; a relative one each time, as it follows the directory)."""
+    return (_ours_absolute if os.path.isabs(filename) else _resolved_ours)(filename)
+
+
+def _resolved_ours(filename: str) -> bool:
     try:
         path = str(Path(filename).resolve())
     except (OSError, ValueError):
@@ -42,14 +46,7 @@ def _ours(filename: str) -> bool:
     return path.startswith(_OURS)
 
 
-@functools.lru_cache(maxsize=1024)
-def _ours_absolute(filename: str) -> bool:
-    """:func:`_ours` of an absolute file name (resolved once: a frame's file does not move)."""
-    try:
-        path = str(Path(filename).resolve())
-    except (OSError, ValueError):
-        return False
-    return path.startswith(_OURS)
+_ours_absolute = functools.lru_cache(maxsize=1024)(_resolved_ours)
 
 
 def user_stacklevel(depth: int = 1) -> int:

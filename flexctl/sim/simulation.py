@@ -67,8 +67,6 @@ per method family (:mod:`~flexctl.sim.strategies`), the stopping conditions
 
 from __future__ import annotations
 
-import contextlib
-import dataclasses
 
 import numpy as np
 
@@ -76,12 +74,10 @@ from .drives import Controller, StaticLaw
 from .energy import EnergyBalance, ModelValidityWarning, energy_balance
 from .request import LOOP_LIMIT, METHODS, MIN_T_FINAL, StiffnessWarning
 from .result import SimulationResult
-from .runs import run_once
 from .stops import StopReason
 from .strategies import FALLBACK_EVALUATIONS, AccuracyWarning
-from .validity import EstimateBeside, assess_run
+from .validity import run_assessed
 from ..model import Model
-from ..model.errors import InputTypeError, InputValueError
 
 __all__ = ["simulate", "SimulationResult", "Controller", "StaticLaw", "StopReason",
            "StiffnessWarning", "AccuracyWarning", "ModelValidityWarning", "EnergyBalance",
@@ -167,24 +163,8 @@ def simulate(model: Model, t_final: float, torque=None, hub_motion=None, control
     >>> result.status, round(result.peak_tip_deflection, 2)
     ('ok', 0.42)
     """
-    # the estimate's runs start while the run integrates (queued beside it for a spare core);
-    # a bad argument is left to run_once, which names it as simulate's
-    started = None
-    if check_validity:
-        with contextlib.suppress(InputTypeError, InputValueError):
-            started = EstimateBeside(model, torque=torque, hub_motion=hub_motion,
-                                     controller=controller, sensors=sensors,
-                                     output_step=output_step)
-    try:
-        result = run_once(model, t_final, torque, hub_motion, controller, x0, rtol=rtol,
-                          atol=atol, method=method, output_step=output_step,
-                          max_step=max_step, check_accuracy=check_accuracy,
-                          progress=progress, sensors=sensors, alongside=started)
-        if not check_validity:
-            return result
-        return dataclasses.replace(result, validity=assess_run(
-            result, torque=torque, hub_motion=hub_motion, controller=controller,
-            sensors=sensors, output_step=output_step, started=started))
-    finally:
-        if started is not None:
-            started.abandon()
+    # the estimate's runs start while the run integrates (queued beside it for a spare core)
+    return run_assessed(model, t_final, torque, hub_motion, controller, x0,
+                        check_validity=check_validity, rtol=rtol, atol=atol, method=method,
+                        output_step=output_step, max_step=max_step,
+                        check_accuracy=check_accuracy, progress=progress, sensors=sensors)

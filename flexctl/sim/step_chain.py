@@ -64,14 +64,11 @@ def step_chain(step, count: int, name: str, stacked: Sequence[int] = ()):
         left //= BASE
         if not left:
             break
-        level = _repeat(level, size, BASE, stacked, f"{step.name()}_x{size * BASE}")
+        # ten calls of the level below as one function
+        level = _sequence(level, [(level, size)] * BASE, stacked,
+                          f"{step.name()}_x{size * BASE}", size)
         size *= BASE
     return _sequence(step, calls, stacked, name)
-
-
-def _repeat(level, size: int, times: int, stacked, name: str):
-    """``times`` calls of ``level`` (which makes ``size`` calls of the step) as one function."""
-    return _sequence(level, [(level, size)] * times, stacked, name, size)
 
 
 def _sequence(f, calls, stacked, name: str, size: int = 1):

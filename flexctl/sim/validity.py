@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -39,7 +39,7 @@ import numpy as np
 from ..model import Model, build_model
 from ..model.build import rebuild
 from ..model.checks import check_instance, check_real
-from ..model.errors import InputValueError
+from ..model.errors import InputTypeError, InputValueError
 from ..model.user_warnings import warn_user
 from ..model.variant import Variant
 from .fidelity import DEFAULT_TOLERANCE, maneuver_input, check_tolerance, is_prescribed
@@ -51,7 +51,7 @@ from .request import DEFAULT_OUTPUT_POINTS
 from .runs import run_once, start_states_run
 
 __all__ = ["ModelValidity", "VariantChoice", "ModelValidityWarning", "EstimateBeside", "assess",
-           "assess_run", "choose_variant", "geometric_error", "ESTIMATE_MODES",
+           "assess_run", "run_assessed", "choose_variant", "geometric_error", "ESTIMATE_MODES",
            "SCREEN_DEFLECTION"]
 
 #: Modes of the two models compared by :func:`geometric_error`.
@@ -481,6 +481,59 @@ def assess_run(result, *, torque=None, hub_motion=None, controller=None, sensors
     if warn and not validity.valid:
         warn_user(validity.message, ModelValidityWarning)
     return validity
+
+
+def run_assessed(model, t_final: float, torque=None, hub_motion=None, controller=None,
+                 x0=None, *, tolerance: float = DEFAULT_TOLERANCE, check_validity: bool = True,
+                 **options):
+    """:func:`~flexctl.sim.runs.run_once`, its validity assessed (:func:`assess_run`) on the
+    estimate's runs started while it integrates (:class:`EstimateBeside`): the run of
+    :func:`flexctl.simulate`, at any ``tolerance``.
+
+    Parameters
+    ----------
+    model : Model
+        The model to simulate.
+    t_final : float
+        End time, s.
+    torque, hub_motion, controller : object, optional
+        The run's inputs, as :func:`flexctl.simulate` takes them.
+    x0 : array_like, shape (n,), optional
+        Initial plant state; default rest at zero.
+    tolerance : float, optional
+        Largest acceptable geometric error, relative to the peak tip deflection (default
+        :data:`~flexctl.sim.fidelity.DEFAULT_TOLERANCE`).
+    check_validity : bool, optional
+        Assess the run (default True); False: ``validity`` stays None.
+    **options
+        The other keywords of :func:`flexctl.simulate` (``rtol``, ``atol``, ``method``,
+        ``output_step``, ``max_step``, ``check_accuracy``, ``progress``, ``sensors``).
+
+    Returns
+    -------
+    SimulationResult
+        The run, with its ``validity``.
+    """
+    # a bad argument is left to run_once, which names it as the run's
+    started = None
+    if check_validity:
+        check_tolerance(tolerance)          # before the run, not after it
+        with contextlib.suppress(InputTypeError, InputValueError):
+            started = EstimateBeside(model, torque=torque, hub_motion=hub_motion,
+                                     controller=controller, sensors=options.get("sensors"),
+                                     output_step=options.get("output_step"))
+    try:
+        result = run_once(model, t_final, torque, hub_motion, controller, x0,
+                          alongside=started, **options)
+        if not check_validity:
+            return result
+        return replace(result, validity=assess_run(
+            result, torque=torque, hub_motion=hub_motion, controller=controller,
+            sensors=options.get("sensors"), tolerance=tolerance,
+            output_step=options.get("output_step"), started=started))
+    finally:
+        if started is not None:
+            started.abandon()
 
 
 def assess(result, *, torque=None, hub_motion=None, controller=None, sensors=None,
