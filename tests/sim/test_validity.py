@@ -356,3 +356,30 @@ def test_an_estimate_that_cannot_start_beside_the_run_is_made_after_it(monkeypat
             simulate(model, 8.0, torque=push)      # the assessment's own attempt says why
         monkeypatch.undo()
         assert simulate(model, 8.0, torque=push).validity.geometric_error == expected
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.1, 1.0, float("nan"), float("inf"), "0.01"])
+def test_run_assessed_refuses_a_bad_tolerance_before_it_runs(bad, monkeypatch):
+    from flexctl.sim import validity
+
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, 2)
+    runs = []
+    monkeypatch.setattr(validity, "run_once", lambda *a, **k: runs.append(a))
+    with pytest.raises(ValueError, match="tolerance must be a relative error"):
+        validity.run_assessed(model, 1.0, torque=lambda t: 0.1, tolerance=bad)
+    assert runs == []
+
+
+def test_run_assessed_judges_the_run_by_the_tolerance_it_is_given():
+    from flexctl.sim.validity import run_assessed
+
+    model = build_model(flexctl.load_scene("hub-beam-mass").system, 2)
+    push = SineTorque(peak_torque=2.0, duration=2.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ModelValidityWarning)
+        strict = run_assessed(model, 6.0, torque=push, tolerance=1e-4)
+        loose = run_assessed(model, 6.0, torque=push, tolerance=0.5)
+    # the same run and estimate, judged against two tolerances
+    assert strict.validity.geometric_error == loose.validity.geometric_error > 1e-4
+    assert strict.validity.tolerance == 1e-4 and loose.validity.tolerance == 0.5
+    assert not strict.validity.valid and loose.validity.valid
