@@ -46,17 +46,34 @@ def step_chain(step, count: int, name: str, stacked: Sequence[int] = ()):
 
     Raises
     ------
+    TypeError
+        If ``step`` is not a CasADi function.
     ValueError
-        If ``count`` is not a positive integer, or an index of ``stacked`` is not an input
-        after the first.
+        If ``name`` is not a valid function name, ``count`` is not a positive integer, an
+        index of ``stacked`` is not an input after the first, or the first output's shape is
+        not the first input's.
     """
+    import casadi as ca
+
+    if not isinstance(step, ca.Function):
+        raise TypeError(f"step must be a casadi.Function, got {type(step).__name__}")
+    if not isinstance(name, str) or not ca.Function.check_name(name):
+        raise ValueError(f"name must be a valid CasADi function name, got {name!r}")
     if isinstance(count, bool) or not isinstance(count, numbers.Integral) or count < 1:
         raise ValueError(f"count must be a positive integer, got {count!r}")
     count = int(count)
-    stacked = frozenset(stacked)
-    if not stacked <= set(range(1, step.n_in())):
+    if step.n_out() < 1 or step.sparsity_out(0).shape != step.sparsity_in(0).shape:
+        raise ValueError(f"{step.name()}'s first output must have its first input's shape "
+                         f"{step.sparsity_in(0).shape}, got "
+                         f"{step.sparsity_out(0).shape if step.n_out() else 'no output'}")
+    given = stacked
+    try:
+        stacked = frozenset(stacked)
+    except TypeError:
+        stacked = None
+    if stacked is None or not stacked <= set(range(1, step.n_in())):
         raise ValueError(f"stacked must index inputs 1..{step.n_in() - 1} of {step.name()}, "
-                         f"got {sorted(stacked)}")
+                         f"got {given!r}")
     # the loop's pieces: `count` in base 10 -> that many calls of each level
     calls, level, size, left = [], step, 1, count
     while True:
@@ -84,7 +101,7 @@ def _sequence(f, calls, stacked, name: str, size: int = 1):
     for g, n in calls:
         call = [x] + [args[k][:, done:done + n] if k in stacked else args[k]
                       for k in range(1, f.n_in())]
-        result = g(*call)
+        result = g.call(call)                # a list, of one output too
         for k, value in enumerate(result):
             outputs[k].append(value)
         x = result[0][:, -1]

@@ -46,7 +46,30 @@ def test_count_must_be_a_positive_integer(count):
         step_chain(_step(), count, "bad")
 
 
-@pytest.mark.parametrize("stacked", [[0], [3], [-1]])
+@pytest.mark.parametrize("stacked", [[0], [3], [-1], [1.5], ["h"], 1, None])
 def test_stacked_must_index_an_input_after_the_state(stacked):
     with pytest.raises(ValueError, match="stacked must index inputs 1..2 of toy_step"):
         step_chain(_step(), 4, "bad", stacked=stacked)
+
+
+def test_a_step_of_one_output_loops_too():
+    x, h = ca.MX.sym("x"), ca.MX.sym("h")
+    decay = ca.Function("decay", [x, h], [x * (1.0 - h)])
+    states = np.array(step_chain(decay, 25, "decays")(1.0, 0.1)).ravel()
+    np.testing.assert_allclose(states, 0.9 ** np.arange(1, 26), rtol=1e-14)
+
+
+def test_the_state_must_come_back_in_its_own_shape():
+    x, h = ca.MX.sym("x", 2), ca.MX.sym("h")
+    bad = ca.Function("bad", [x, h], [ca.sum1(x) * h])
+    with pytest.raises(ValueError, match=r"bad's first output must have its first input's "
+                                         r"shape \(2, 1\), got \(1, 1\)"):
+        step_chain(bad, 3, "bad_chain")
+
+
+@pytest.mark.parametrize("step, name, error", [
+    ("toy_step", "ok", TypeError), (None, "ok", TypeError),
+    (_step, "has space", ValueError), (_step, 7, ValueError), (_step, "", ValueError)])
+def test_the_step_and_the_name_are_checked(step, name, error):
+    with pytest.raises(error, match="step must be a casadi.Function|name must be a valid"):
+        step_chain(step() if callable(step) else step, 3, name)
