@@ -51,6 +51,7 @@ from ..model.spatial_dynamics import (SPATIAL_VARIANTS, SpatialEquations, spatia
                                       spatial_modes)
 from ..model.spatial_structure import SpatialStructure
 from .background import Beside
+from .exponential import ExponentialSegments
 from .spatial_plane import motion_plane, plane_motion
 
 __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
@@ -77,6 +78,16 @@ MAX_SAMPLES = 2_000_000
 #: Integrate a motion that stays in one plane on the equations restricted to that plane
 #: (:mod:`flexctl.sim.spatial_plane`); False integrates the whole model (to compare).
 PLANE_MOTION = True
+#: Whether a stiff run of the whole model (:data:`STIFF_SPACING`) without wheels, under a
+#: torque with a segment form, takes exponential steps (:mod:`flexctl.sim.exponential`);
+#: False: CVODES's Adams-Moulton methods for every run.
+EXPONENTIAL = True
+#: The exponential steps are taken where the fastest mode of the model at the start (the
+#: largest eigenvalue of the rate's Jacobian) turns at least this many radians over the median
+#: interval between output times and breakpoints: Adams-Moulton would then take some 30 or
+#: more steps an interval, held by that mode (``h omega = 0.33``), where the exponential steps
+#: need only what their accuracy asks.
+STIFF_SPACING = 10.0
 
 
 @dataclass(frozen=True)
@@ -616,11 +627,41 @@ class _Plan:
             if PLANE_MOTION and equations.cluster is None else None
         self.plane = None if axis is None else plane_motion(equations, axis)
         self.rhs = machine_function(equations.rhs if self.plane is None else self.plane.rhs)
+        layout = equations.layout
+        start = 4 + (3 if layout.free else 0)
+        coordinates = np.arange(start, start + layout.n_elastic)
+        self.modal = (coordinates, coordinates + layout.n_coordinates - start + 3
+                      + (3 if layout.free else 0))
         self.x0 = np.asarray(x0, dtype=float) if self.plane is None \
             else self.plane.restrict(x0)
+        self.jacobian = None
+        if EXPONENTIAL and self.plane is None and equations.cluster is None \
+                and hasattr(drive, "segment_form"):
+            self.jacobian = self._stiff(drive, breakpoints)
+
+    def _stiff(self, drive, breakpoints):
+        """The Jacobian of the rate at the start where the exponential steps are taken (the
+        fastest mode turns more than :data:`STIFF_SPACING` radians over the median interval
+        between two output times or breakpoints), else None."""
+        from .exponential import central_jacobian
+
+        n = self.x0.size
+        jacobian = central_jacobian(self.rhs.map(2 * n), self.x0, drive(0.0))
+        if not np.all(np.isfinite(jacobian)):
+            return None
+        ends = np.concatenate([self.times, self.edges, breakpoints if not self.line else
+                               drive.times])
+        ends = np.unique(ends[(ends >= 0.0) & (ends <= self.times[-1])])
+        spacing = float(np.median(np.diff(ends))) if ends.size > 1 else float(self.times[-1])
+        fastest = float(np.max(np.abs(np.linalg.eigvals(jacobian))))
+        return jacobian if fastest * spacing >= STIFF_SPACING else None
 
     def integration(self, rtol: float, atol: float) -> "_Integration":
         """The integration at tolerances ``rtol``, ``atol``, its integrators built."""
+        if self.jacobian is not None:
+            return _Integration(self, ExponentialSegments(
+                self.rhs, self.x0.size, self.drive, rtol, atol, self.line, self.modal,
+                jacobian=self.jacobian))
         return _Integration(self, SpatialSegments(self.rhs, self.x0.size, self.drive, rtol, atol,
                                             self.line, newton=self.plane is not None))
 
@@ -840,14 +881,9 @@ class SpatialSegments:
         eigenvalue of the model at ``a`` and the step it allows."""
         head = (f"CVODES took all of its {MAX_STEPS:g} steps between two output times in "
                 f"[{a:g}, {b:g}] s")
-        gap = float(np.max(np.diff(np.concatenate([[a], np.asarray(wanted, dtype=float)]))))
-        if self.line:
-            interval = float(np.min(np.diff(self.drive.times)))
-            if gap / interval > MAX_STEPS / 2:
-                return (f"{head}: the torque samples' shortest interval, {interval:.3g} s, "
-                        f"bounds every step, and an output interval of {gap:.3g} s needs "
-                        f"{gap / interval:.3g} of them; a shorter output_step would let it "
-                        f"finish")
+        bound = sample_bound(self.drive, a, wanted) if self.line else None
+        if bound is not None:
+            return f"{head}: {bound}"
         mapped = self.differences if self.differences is not None \
             else self.rhs.map(self.n_states + 1)
         jacobian = _difference_jacobian(mapped, x, self.drive(a))
@@ -925,6 +961,32 @@ class SpatialSegments:
                 return np.full((self.n_states, len(wanted)), np.nan)
             raise SegmentFailed(solution.message)
         return solution.y
+
+
+def sample_bound(drive: VectorTorque, a: float, wanted):
+    """Why a line through torque samples runs out of steps between two output times, if its
+    samples are the reason (every step ends at or before the next sample), else None.
+
+    Parameters
+    ----------
+    drive : VectorTorque
+        The line's samples.
+    a : float
+        The segment's start, s.
+    wanted : array_like
+        Its output times, s.
+
+    Returns
+    -------
+    str or None
+    """
+    gap = float(np.max(np.diff(np.concatenate([[a], np.asarray(wanted, dtype=float)]))))
+    interval = float(np.min(np.diff(drive.times)))
+    if gap / interval > MAX_STEPS / 2:
+        return (f"the torque samples' shortest interval, {interval:.3g} s, bounds every step, "
+                f"and an output interval of {gap:.3g} s needs {gap / interval:.3g} of them; a "
+                f"shorter output_step would let it finish")
+    return None
 
 
 def _difference_jacobian(mapped, x, torque) -> np.ndarray:

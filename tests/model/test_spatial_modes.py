@@ -1,6 +1,7 @@
 """Mode counts of a spatial structure: one per appendage (by order or by name), and
 ``modes = "auto"`` (:mod:`flexctl.sim.spatial_fidelity`) against the converged model."""
 
+import math
 import re
 import textwrap
 
@@ -142,10 +143,12 @@ def test_auto_chooses_the_counts_of_a_free_hub(tmp_path):
 
 def test_a_run_out_of_steps_names_the_stiff_mode_that_held_them(monkeypatch):
     """A structure far too stiff for its run (Young's modulus 1e30 Pa) uses CVODES's step
-    budget: the run fails and says which eigenvalue held the steps, and to what."""
+    budget: the run fails and says which eigenvalue held the steps, and to what (on Adams-Moulton;
+    the exponential steps' failure, below)."""
     from flexctl.sim import spatial_run
 
     monkeypatch.setattr(spatial_run, "MAX_STEPS", 2000)
+    monkeypatch.setattr(spatial_run, "EXPONENTIAL", False)
     wing = SpatialAppendage(name="wing_a", direction=(0, 1, 0), normal=(0, 0, 1),
                             **{**SECTION, "youngs_modulus": 1e30})
     structure = SpatialStructure(hub=SpatialHub(inertia=INERTIA, radius=0.06),
@@ -166,12 +169,37 @@ def test_a_run_out_of_steps_names_the_stiff_mode_that_held_them(monkeypatch):
     assert float(words.group(2)) == pytest.approx(0.33 / fastest, rel=0.05)
 
 
-def test_a_line_of_samples_out_of_steps_names_its_sample_interval(monkeypatch):
+def test_exponential_steps_out_of_budget_say_what_held_them(monkeypatch):
+    """The same structure on exponential steps (the default for a stiff run): the Jacobian's
+    finite differences cannot resolve a stiffness of 1e30 Pa, whose remainder the error control
+    then holds to steps near 1e-8 s; the run fails and says so, with what would let it finish."""
+    from flexctl.sim import spatial_run
+
+    monkeypatch.setattr(spatial_run, "MAX_STEPS", 2000)
+    wing = SpatialAppendage(name="wing_a", direction=(0, 1, 0), normal=(0, 0, 1),
+                            **{**SECTION, "youngs_modulus": 1e30})
+    structure = SpatialStructure(hub=SpatialHub(inertia=INERTIA, radius=0.06),
+                                 appendages=(wing,))
+    result = simulate_spatial(structure, 0.05, [0.1, 0.0, 0.0], n_modes=2,
+                              check_accuracy=False)
+    assert result.status == "failed"
+    words = re.search(r"the exponential steps took more than 2000 steps between two output "
+                      r"times in \[0, 0\.05\] s: the error control held them near "
+                      r"([0-9.e+-]+) s; a looser rtol", result.message)
+    assert words, result.message
+    assert float(words.group(1)) < 1e-6
+
+
+@pytest.mark.parametrize("exponential", [True, False])
+def test_a_line_of_samples_out_of_steps_names_its_sample_interval(monkeypatch, exponential):
     """Samples 1 ms apart bound every step of a line through them: an output interval of 1 s
-    needs 1000 steps, more than a budget of 300, and the failure says so."""
+    needs 1000 steps, more than a budget of 300, and the failure says so, on either
+    integrator (:data:`~flexctl.sim.spatial_run.STIFF_SPACING` set so that the exponential
+    steps take the run, or not)."""
     from flexctl.sim import spatial_run
 
     monkeypatch.setattr(spatial_run, "MAX_STEPS", 300)
+    monkeypatch.setattr(spatial_run, "STIFF_SPACING", 0.0 if exponential else math.inf)
     times = np.linspace(0.0, 2.0, 2001)
     torque = VectorTorque(times, np.outer(np.sin(times), [0.1, 0.0, 0.0]))
     structure = SpatialStructure(hub=SpatialHub(inertia=INERTIA, radius=0.06), appendages=(

@@ -109,4 +109,6 @@ def test_a_run_in_the_plane_is_the_whole_models(monkeypatch, form):
         error = np.max(np.abs(plane.tips[name] - tips), axis=1) / peaks
         assert np.all(error < 1e-6), (name, error)
     assert plane.integration_error < 1e-6
-    np.testing.assert_allclose(plane.quaternion, whole.quaternion, rtol=0, atol=1e-9)
+    # the whole model's stiff run takes exponential steps, whose error at rtol 1e-9 leaves the
+    # attitude within 3e-9 of a run at rtol 1e-13 (the restriction's within 3e-10)
+    np.testing.assert_allclose(plane.quaternion, whole.quaternion, rtol=0, atol=1e-8)

@@ -1,0 +1,498 @@
+"""Exponential Runge-Kutta integration of a spatial model: its linear part integrated exactly,
+the rest by Krogstad's fourth-order scheme.
+
+A spatial structure's torsion and stiff-plane bending modes reach thousands of rad/s
+(``examples/scenes/spatial-two-arrays.toml``'s arrays on 4 modes per field: 3 609 rad/s) while
+a slew and the modes it moves live below 100 rad/s. An explicit or Adams method is held to
+steps of a fraction of the fastest period however little those modes move
+(``benchmarks/bench_spatial.py`` (b): 102 655 Adams-Moulton steps for 10 s). Written as
+
+``x_t = L x + N(x, t)``
+
+with ``L`` the Jacobian of the rate at a recent state, the linear flow ``exp(h L)`` carries
+every mode, fast or slow, exactly, and only the remainder ``N`` (the torque, the gyroscopic
+and centrifugal terms, the change of the mass matrix with the deflection) is integrated by
+quadrature: the steps are set by how fast ``N`` changes, not by the fastest mode.
+
+- **The scheme** (Krogstad 2005, "Generalized integrating factor methods for stiff PDEs"),
+  with ``phi_k`` the functions of :func:`phi_functions` and ``N_u = N(x, t)``::
+
+      a  = e(h/2) x + h/2 phi_1(hL/2) N_u
+      b  = e(h/2) x + h/2 phi_1(hL/2) N_u + h phi_2(hL/2) (N_a - N_u)
+      c  = e(h) x + h phi_1(hL) N_u + 2 h phi_2(hL) (N_b - N_u)
+      x+ = e(h) x + h [(phi_1 - 3 phi_2 + 4 phi_3) N_u + (2 phi_2 - 4 phi_3) (N_a + N_b)
+                       + (4 phi_3 - phi_2) N_c]
+
+  (``N_a = N(a, t + h/2)``, ``N_b = N(b, t + h/2)``, ``N_c = N(c, t + h)``): of order four,
+  exact for a linear model under a torque linear in time.
+- **Its error estimate** is the difference from the third-order solution on the same nodes
+  that takes ``N_b`` for ``N_a`` and the rate at the new state ``N_+`` for ``N_c``,
+  ``h [(2 phi_2 - 4 phi_3) (N_a - N_b) + (4 phi_3 - phi_2) (N_c - N_+)]``; ``N_+`` is the next
+  step's ``N_u`` (first same as last: four evaluations a step). Its weighted RMS norm (the
+  weights of CVODES, ``atol + rtol max(|x|, |x+|)``) must be at most 1, and the next step is
+  ``h min(5, max(0.2, 0.9 e^(-1/4)))``.
+- **Steps** end on every output time and every breakpoint of the torque (each sample of a
+  line), so a step never crosses a kink: the interval between two such times is cut into equal
+  steps, and a run of steps of one length (every interval of a uniform grid) is one compiled
+  call of up to :data:`CHAIN` steps (:func:`~flexctl.sim.step_chain.step_chain`; a rejected
+  step ends the call's work). The coefficient matrices of each step length are computed once
+  per Jacobian.
+- **The Jacobian** (forward differences of the compiled rate, ``n + 1`` evaluations) is taken
+  at the run's start and again every :data:`REFRESH` steps, so that ``L`` follows the hub's
+  rate (gyroscopic coupling) and the attitude; any ``L`` gives the same order, the one at hand
+  only the longest steps.
+
+Measured on ``benchmarks/bench_spatial.py`` (b) (the two arrays, 4 modes per field, exact rod,
+rtol 1e-8): see that file.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..model.checks import check_array
+
+__all__ = ["phi_functions", "central_jacobian", "ExponentialSegments", "CHAIN", "REFRESH",
+           "EXPONENT"]
+
+#: Steps of one length per compiled call.
+CHAIN = 128
+#: Accepted steps between two Jacobians of the rate.
+REFRESH = 256
+#: Step-size control: safety factor, and the largest and smallest change of a step.
+SAFETY, GROWTH, SHRINK = 0.9, 5.0, 0.2
+#: The step control's exponent, ``-1 / 3``: the error estimate is that of a second-order
+#: solution, ``O(h^3)``.
+EXPONENT = -1.0 / 3.0
+#: A step shorter than this fraction of the time reached (or of 1 s) ends the run.
+MIN_STEP = 1e-12
+#: Relative distance below which a sample of a line and an output time are one breakpoint.
+MERGE = 1e-9
+#: Coefficient sets (one per step length) kept per Jacobian.
+CACHE_SIZE = 32
+#: Largest 1-norm of the scaled matrix whose Taylor series :func:`phi_functions` sums.
+TAYLOR_NORM = 0.25
+#: Terms of that series: the first left out is below ``0.25^18 / 18!``, 1e-27.
+TAYLOR_TERMS = 18
+
+
+def phi_functions(matrix, order: int = 3) -> tuple:
+    """``exp(A)`` and the functions ``phi_k(A) = sum_j A^j / (j + k)!`` for ``k = 1 ..
+    order``: the coefficients of exponential integrators (``phi_0 = exp``, ``phi_k(0) = I /
+    k!``, ``phi_k(A) A = phi_(k-1)(A) - I / (k-1)!``).
+
+    Computed by scaling and doubling: the Taylor series of each ``phi_k(A / 2^s)``, with
+    ``||A / 2^s||_1 <= 1/4``, then ``s`` times ``exp(2A) = exp(A)^2`` and
+    ``phi_k(2A) = 2^-k [exp(A) phi_k(A) + sum_(j=1..k) phi_j(A) / (k-j)!]``: ``order + 1``
+    matrix products a doubling, where the exponential of the block matrix that holds them
+    all (``(order + 1) n`` square) costs ``(order + 1)^3`` times more.
+
+    Parameters
+    ----------
+    matrix : array_like, shape (n, n)
+        ``A``: finite, square.
+    order : int, optional
+        Highest ``k`` (1 to 6). Default 3.
+
+    Returns
+    -------
+    tuple of ndarray, each shape (n, n)
+        ``(exp(A), phi_1(A), ..., phi_order(A))``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        If ``matrix`` is not a finite square array of numbers, or ``order`` is not an integer
+        from 1 to 6.
+
+    Examples
+    --------
+    >>> e, phi1 = phi_functions([[0.0, 1.0], [0.0, 0.0]], order=1)
+    >>> e.tolist(), phi1.tolist()
+    ([[1.0, 1.0], [0.0, 1.0]], [[1.0, 0.5], [0.0, 1.0]])
+    """
+    a = check_array("phi_functions", "matrix", matrix, shape=(None, None))
+    if a.shape[0] != a.shape[1]:
+        raise ValueError(f"phi_functions: matrix must be square; got shape {a.shape}")
+    if isinstance(order, bool) or not isinstance(order, (int, np.integer)) \
+            or not 1 <= order <= 6:
+        raise ValueError(f"phi_functions: order must be an integer from 1 to 6; got {order!r}")
+    n, order = a.shape[0], int(order)
+    norm = float(np.max(np.sum(np.abs(a), axis=0), initial=0.0))
+    if norm > 1e300:
+        raise ValueError(f"phi_functions: matrix's 1-norm, {norm:.3g}, is too large for its "
+                         "exponential")
+    doublings = max(0, math.ceil(math.log2(norm / TAYLOR_NORM))) if norm > 0.0 else 0
+    x = a / 2.0 ** doublings
+    powers = [np.eye(n)]
+    for _ in range(TAYLOR_TERMS):
+        powers.append(powers[-1] @ x)
+    funcs = []
+    for k in range(order + 1):
+        total = np.zeros((n, n))
+        for j in range(TAYLOR_TERMS, -1, -1):      # the smallest terms first
+            total += powers[j] / math.factorial(j + k)
+        funcs.append(total)
+    for _ in range(doublings):
+        funcs = _doubled(funcs)
+    return tuple(funcs)
+
+
+def central_jacobian(mapped, x, torque) -> np.ndarray:
+    """A right-hand side's Jacobian (n, n) at ``x`` under ``torque`` by central differences
+    (steps of ``6e-6 max(|x_i|, 1)``: an error near ``eps^(2/3)`` of the entries).
+
+    Parameters
+    ----------
+    mapped : casadi.Function
+        The right-hand side ``(x, torque) -> x_t`` mapped over ``2 n`` columns.
+    x : array_like, shape (n,)
+        The state.
+    torque : array_like, shape (3,)
+        The hub torque, N m.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+    """
+    x = np.asarray(x, dtype=float)
+    n = x.size
+
+    steps = 6e-6 * np.maximum(np.abs(x), 1.0)
+    points = np.tile(x[:, None], (1, 2 * n))
+    points[np.arange(n), np.arange(n)] += steps
+    points[np.arange(n), n + np.arange(n)] -= steps
+    torques = np.tile(np.asarray(torque, dtype=float)[:, None], (1, 2 * n))
+    rates = mapped(points, torques).full()
+    return (rates[:, :n] - rates[:, n:]) / (2.0 * steps)
+
+
+def _doubled(funcs: list) -> list:
+    """``[exp(2A), phi_1(2A), ...]`` from ``[exp(A), phi_1(A), ...]``."""
+    e = funcs[0]
+    out = [e @ e]
+    for k in range(1, len(funcs)):
+        value = e @ funcs[k]
+        for j in range(1, k + 1):
+            value = value + funcs[j] / math.factorial(k - j)
+        out.append(value / 2.0 ** k)
+    return out
+
+
+def _coefficients(jacobian: np.ndarray, h: float) -> list:
+    """The step's matrices for length ``h`` (s): ``[[e(h/2); e(h)] (2n, n),
+    [h/2 phi_1(hL/2); h phi_1(hL); h (phi_1 - 3 phi_2 + 4 phi_3)] (3n, n), h phi_2(hL/2),
+    2 h phi_2(hL), h (2 phi_2 - 4 phi_3), h (4 phi_3 - phi_2)]``, each in column-major order
+    as one vector."""
+    half = phi_functions(0.5 * h * jacobian, 3)
+    e, p1, p2, p3 = _doubled(list(half))
+    blocks = [np.vstack([half[0], e]),
+              np.vstack([0.5 * h * half[1], h * p1, h * (p1 - 3.0 * p2 + 4.0 * p3)]),
+              h * half[2], 2.0 * h * p2, h * (2.0 * p2 - 4.0 * p3), h * (4.0 * p3 - p2)]
+    return [block.ravel(order="F") for block in blocks]
+
+
+def _torque_expression(form, tau):
+    """The torque of an 11-number form (``form[0:3] + form[3:6] tau + form[6:9]
+    sin(form[9] (form[10] + tau))``) at the step's time ``tau``."""
+    import casadi as ca
+
+    return form[0:3] + form[3:6] * tau + form[6:9] * ca.sin(form[9] * (form[10] + tau))
+
+
+def _chain(rhs, n: int):
+    """``chain(carry, form (12, CHAIN), atol, rtol, h, L, coefficients...) -> (carries (2n+1,
+    CHAIN), errors (1, CHAIN))``: up to :data:`CHAIN` steps of one length ``h``, the carry
+    ``[x; N(x); stopped]``; a rejected step sets ``stopped`` and leaves the state, and the
+    steps after it, and those whose ``form[11]`` is 0, pass it through."""
+    import casadi as ca
+
+    from .step_chain import step_chain
+
+    carry, form = ca.MX.sym("carry", 2 * n + 1), ca.MX.sym("form", 12)
+    atol, rtol = ca.MX.sym("atol", n), ca.MX.sym("rtol")
+    jac = ca.MX.sym("L", n * n)
+    sizes = (2 * n * n, 3 * n * n, n * n, n * n, n * n, n * n)
+    blocks = [ca.MX.sym(f"c{k}", size) for k, size in enumerate(sizes)]
+    h = ca.MX.sym("h")
+    shared = [atol, rtol, h, jac] + blocks
+    matrix = ca.reshape(jac, n, n)
+    ex, en, p2h, p2, f2, f3 = (ca.reshape(block, rows, n) for block, rows in
+                               zip(blocks, (2 * n, 3 * n, n, n, n, n)))
+    x, nu = carry[0:n], carry[n:2 * n]
+
+    def remainder(state, tau):
+        return rhs(state, _torque_expression(form, tau)) - ca.mtimes(matrix, state)
+
+    exps, terms = ca.mtimes(ex, x), ca.mtimes(en, nu)
+    half, whole = exps[0:n], exps[n:2 * n]
+    na = remainder(half + terms[0:n], 0.5 * h)
+    nb = remainder(half + terms[0:n] + ca.mtimes(p2h, na - nu), 0.5 * h)
+    nc = remainder(whole + terms[n:2 * n] + ca.mtimes(p2, nb - nu), h)
+    new = whole + terms[2 * n:3 * n] + ca.mtimes(f2, na + nb) + ca.mtimes(f3, nc)
+    nn = remainder(new, h)
+    # the difference from the second-order solution on the same nodes
+    error = ca.mtimes(f2, na + nb - nu - nc)
+    weight = atol + rtol * ca.fmax(ca.fabs(x), ca.fabs(new))
+    norm = ca.sqrt(ca.sumsqr(error / weight) / n)
+    accepted = norm <= 1.0                         # a NaN norm never is
+    out = ca.if_else(accepted, ca.vertcat(new, nn, 0.0), ca.vertcat(x, nu, 1.0))
+    step = ca.Function("flexctl_exponential_step", [carry, form] + shared, [out, norm])
+    idle_args = [ca.MX.sym(step.name_in(k), step.sparsity_in(k)) for k in range(step.n_in())]
+    idle = ca.Function("flexctl_exponential_idle", idle_args, [idle_args[0], ca.MX(0.0)])
+    switch = ca.Function.conditional("flexctl_exponential_switch", [step], idle)
+    args = [ca.MX.sym(step.name_in(k), step.sparsity_in(k)) for k in range(step.n_in())]
+    # a step after a rejected one, or past the run's steps (form[11] = 0), is skipped
+    skip = ca.logic_or(args[0][2 * n] > 0.5, args[1][11] < 0.5)
+    body = ca.Function("flexctl_exponential_body", args, switch(skip, *args))
+    return step_chain(body, CHAIN, "flexctl_exponential_chain", stacked=(1,))
+
+
+class ExponentialSegments:
+    """Krogstad's exponential fourth-order steps with error control (module docstring) from
+    breakpoint to breakpoint: the interface of :class:`~flexctl.sim.spatial_run.SpatialSegments`
+    (``form``, ``count``, ``build``, ``advance``, ``steps``, ``evaluations``) for a torque with
+    a segment form.
+
+    Parameters
+    ----------
+    rhs : casadi.Function
+        ``(x, torque) -> x_t``.
+    n_states : int
+        Length of ``x``.
+    drive : callable
+        The torque, ``t -> (3,)``, with ``segment_form(a, b)`` (its 11 parameters on a
+        segment with no breakpoint inside).
+    rtol, atol : float
+        Relative and absolute tolerance of each step's error (weighted RMS norm).
+    line : bool
+        A line through many samples, integrated in one segment: its samples are then
+        breakpoints of the steps.
+    differences : casadi.Function, optional
+        ``rhs`` mapped over ``n_states + 1`` columns (the Jacobian's differences). Default
+        built here.
+    """
+
+    def __init__(self, rhs, n_states: int, drive, rtol: float, atol: float, line: bool,
+                 modal=(), jacobian=None):
+        self.rhs, self.n, self.drive = rhs, int(n_states), drive
+        self.rtol, self.line = float(rtol), bool(line)
+        self.atol = np.full(self.n, float(atol))
+        self.modal = (np.asarray(modal[0], dtype=int), np.asarray(modal[1], dtype=int)) \
+            if len(modal) else (np.zeros(0, dtype=int), np.zeros(0, dtype=int))
+        self.weights = None
+        self.form = getattr(drive, "segment_form", None)
+        self.steps = self.evaluations = 0
+        # built here, in the caller's thread (CasADi's symbolic work is not thread-safe)
+        self.differences = rhs.map(2 * self.n)
+        self.chain = None
+        self.jacobian, self.since, self.cache = None, 0, {}
+        self.h = None
+        if jacobian is not None:
+            self._take(np.array(jacobian, dtype=float))
+            self.evaluations += 2 * self.n
+
+    def count(self, pieces) -> int:
+        """Integrators the run needs built ahead (one compiled chain for every segment).
+
+        Parameters
+        ----------
+        pieces : list of tuple
+            ``(a, b, wanted)`` each: a segment's ends (s) and its output times.
+        """
+        return 1
+
+    def build(self, a: float, b: float, wanted):
+        """The compiled chain of steps, built once (every segment shares it).
+
+        Parameters
+        ----------
+        a, b : float
+            The segment's ends, s.
+        wanted : array_like
+            Output times in ``(a, b]``, s.
+        """
+        if self.chain is None:
+            self.chain = _chain(self.rhs, self.n)
+        return self.chain
+
+    def _remainder(self, x, t) -> np.ndarray:
+        self.evaluations += 1
+        return self.rhs(x, self.drive(t)).full().ravel() - self.jacobian @ x
+
+    def _refresh(self, x, t) -> None:
+        from .spatial_run import SegmentFailed
+
+        jacobian = central_jacobian(self.differences, x, self.drive(t))
+        self.evaluations += 2 * self.n
+        if not np.all(np.isfinite(jacobian)):
+            raise SegmentFailed(f"the rate's Jacobian at t = {t:g} s is not finite: the "
+                                f"state has left the model's domain")
+        self._take(jacobian)
+
+    def _take(self, jacobian: np.ndarray) -> None:
+        self.jacobian, self.since, self.cache = jacobian, 0, {}
+        if self.weights is None:
+            # each modal rate's error in its mode's displacement units: divided by the mode's
+            # frequency, the root of its stiffness over its mass at the run's start
+            coordinates, rates = self.modal
+            stiffness = -jacobian[rates, coordinates]
+            self.weights = self.atol.copy()
+            self.weights[rates] *= np.sqrt(np.maximum(stiffness, 1.0))
+
+    def _coefficients(self, key: float) -> list:
+        if key not in self.cache:
+            if len(self.cache) >= CACHE_SIZE:
+                self.cache.pop(next(iter(self.cache)))
+            self.cache[key] = _coefficients(self.jacobian, key)
+        return self.cache[key]
+
+    def _events(self, a: float, b: float, wanted) -> np.ndarray:
+        """The ends of the steps' intervals on ``(a, b]``: the output times and, for a line,
+        its samples (a sample within :data:`MERGE` of an output time or of ``a`` is that
+        time: the steps never leave a sliver)."""
+        events = np.asarray(wanted, dtype=float)
+        if not self.line:
+            return events
+        samples = self.drive.times
+        samples = samples[(samples > a) & (samples < b)]
+        ends = np.concatenate([[a], events])
+        near = np.searchsorted(ends, samples)
+        gap = np.minimum(np.abs(samples - ends[np.maximum(near - 1, 0)]),
+                         np.abs(ends[np.minimum(near, ends.size - 1)] - samples))
+        keep = gap > MERGE * np.maximum(1.0, np.abs(samples))
+        return np.union1d(events, samples[keep])
+
+    def _forms(self, a: float, b: float, starts: np.ndarray, gaps: np.ndarray,
+               lows: np.ndarray) -> np.ndarray:
+        """(11, K): each step's torque form in its own time; ``starts`` the steps' starts,
+        ``gaps`` their intervals' indices, ``lows`` the intervals' starts."""
+        if self.line:
+            bases = {g: self.form(lows[g], lows[g + 1]) for g in np.unique(gaps)}
+            base = np.column_stack([bases[g] for g in gaps])
+            offset = starts - lows[gaps]
+        else:
+            base = np.repeat(self.form(a, b)[:, None], starts.size, axis=1)
+            offset = starts - a
+        forms = base.copy()
+        forms[0:3] += base[3:6] * offset
+        forms[10] += offset
+        return forms
+
+    def advance(self, a: float, b: float, x, wanted) -> np.ndarray:
+        """The states at ``wanted``, from ``x`` at ``a``.
+
+        Parameters
+        ----------
+        a, b : float
+            The segment's ends, s.
+        x : ndarray, shape (n_states,)
+            The state at ``a``.
+        wanted : array_like
+            Output times in ``(a, b]``, ascending, ending at ``b``, s.
+
+        Returns
+        -------
+        ndarray, shape (n_states, len(wanted))
+            NaN from the first time the state could not be kept finite.
+
+        Raises
+        ------
+        SegmentFailed
+            When the integration cannot go on (the message says why).
+        """
+        from .spatial_run import MAX_STEPS, SegmentFailed, sample_bound
+
+        n, chain = self.n, self.build(a, b, wanted)
+        wanted = np.asarray(wanted, dtype=float)
+        events = self._events(a, b, wanted)
+        lows = np.concatenate([[a], events])
+        out = np.full((n, wanted.size), np.nan)
+        y = np.array(x, dtype=float)
+        if self.jacobian is None or self.since >= REFRESH:
+            self._refresh(y, a)
+        nu = self._remainder(y, a)
+        if self.h is None:
+            self.h = (b - a) / 10.0 if wanted.size < 10 else float(np.min(np.diff(lows)))
+        gap, t, taken = 0, float(a), 0          # the interval, the time, steps since an output
+        carry = np.zeros(2 * n + 1)
+        while gap < events.size:
+            if self.since >= REFRESH:
+                self._refresh(y, t)
+                nu = self._remainder(y, t)
+            # a run of steps of one length: the rest of this interval, then whole intervals
+            # that the same length divides
+            end = events[gap]
+            count = max(1, math.ceil((end - t) / self.h - 1e-9))
+            # to 12 digits, so that the intervals of a uniform grid share their coefficients
+            h = float(f"{(end - t) / count:.12g}")
+            if not h >= MIN_STEP * max(1.0, abs(t)):
+                raise SegmentFailed(f"step size {h:.3g} s at t = {t:.6g} s: the error control "
+                                    f"found no step short enough")
+            starts, owners = [t + h * np.arange(min(count, CHAIN))], [gap]
+            size = starts[0].size
+            ends = {}                     # step index -> the interval it ends
+            if size == count:
+                ends[size - 1] = gap
+                following = gap + 1
+                while size < CHAIN and following < events.size:
+                    length = events[following] - events[following - 1]
+                    fits = max(1, round(length / h))
+                    if abs(length / fits - h) > 1e-9 * h or size + fits > CHAIN:
+                        break
+                    starts.append(events[following - 1] + h * np.arange(fits))
+                    owners.append(following)
+                    size += fits
+                    ends[size - 1] = following
+                    following += 1
+            start_times = np.concatenate(starts)
+            intervals = np.concatenate([np.full(s.size, g) for s, g in zip(starts, owners)])
+            forms = np.zeros((12, CHAIN))
+            forms[0:11, :size] = self._forms(a, b, start_times, intervals, lows)
+            forms[11, :size] = 1.0
+            carry[0:n], carry[n:2 * n], carry[2 * n] = y, nu, 0.0
+            states, norms = chain(carry, forms, self.weights, self.rtol, h,
+                                  self.jacobian.ravel(order="F"), *self._coefficients(h))
+            states, norms = states.full(), norms.full().ravel()
+            stopped = states[2 * n, :size] > 0.5
+            accepted = int(np.argmax(stopped)) if np.any(stopped) else size
+            attempted = min(accepted + 1, size)
+            self.steps += attempted
+            self.evaluations += 4 * attempted
+            self.since += accepted
+            taken += accepted
+            if accepted:
+                y, nu = states[0:n, accepted - 1].copy(), states[n:2 * n, accepted - 1].copy()
+                finished = [k for k in ends if k < accepted]
+                for k in finished:
+                    index = int(np.searchsorted(wanted, events[ends[k]]))
+                    if index < wanted.size and wanted[index] == events[ends[k]]:
+                        out[:, index] = states[0:n, k]
+                        taken = 0
+                if finished:
+                    gap = max(ends[k] for k in finished) + 1
+                last = accepted - 1
+                t = float(events[ends[last]]) if last in ends \
+                    else float(start_times[last] + h)
+            if accepted < size:
+                norm = float(norms[accepted])
+                if not math.isfinite(norm):
+                    if h <= MIN_STEP * max(1.0, abs(t)) * 1e3:
+                        return out            # NaN from here on: the caller reports it
+                    self.h = SHRINK * h
+                else:
+                    self.h = h * max(SHRINK, SAFETY * norm ** EXPONENT)
+            else:
+                worst = float(np.max(norms[:size]))
+                self.h = h * (GROWTH if worst == 0.0 else min(GROWTH, SAFETY * worst ** EXPONENT))
+            if taken > MAX_STEPS:
+                head = (f"the exponential steps took more than {MAX_STEPS:g} steps between two "
+                        f"output times in [{a:g}, {b:g}] s")
+                bound = sample_bound(self.drive, a, wanted) if self.line else None
+                raise SegmentFailed(f"{head}: {bound}" if bound is not None else (
+                    f"{head}: the error control held them near {h:.2g} s; a looser rtol or "
+                    f"atol, fewer modes per field or a shorter output_step would let it "
+                    f"finish"))
+        return out
