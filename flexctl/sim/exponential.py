@@ -1,11 +1,11 @@
-"""Exponential Runge-Kutta integration of a spatial model: its linear part integrated exactly,
-the rest by Krogstad's fourth-order scheme.
+"""Exponential Runge-Kutta integration of a stiff spatial model: its linear part integrated
+exactly, the rest by Krogstad's fourth-order scheme.
 
 A spatial structure's torsion and stiff-plane bending modes reach thousands of rad/s
 (``examples/scenes/spatial-two-arrays.toml``'s arrays on 4 modes per field: 3 609 rad/s) while
-a slew and the modes it moves live below 100 rad/s. An explicit or Adams method is held to
-steps of a fraction of the fastest period however little those modes move
-(``benchmarks/bench_spatial.py`` (b): 102 655 Adams-Moulton steps for 10 s). Written as
+a slew and the modes it moves live below 100 rad/s. Adams-Moulton with functional iteration is
+held to steps of a fraction of the fastest period however little those modes move
+(``benchmarks/bench_spatial.py`` (b): 102 655 steps for 10 s). Written as
 
 ``x_t = L x + N(x, t)``
 
@@ -14,36 +14,51 @@ every mode, fast or slow, exactly, and only the remainder ``N`` (the torque, the
 and centrifugal terms, the change of the mass matrix with the deflection) is integrated by
 quadrature: the steps are set by how fast ``N`` changes, not by the fastest mode.
 
-- **The scheme** (Krogstad 2005, "Generalized integrating factor methods for stiff PDEs"),
-  with ``phi_k`` the functions of :func:`phi_functions` and ``N_u = N(x, t)``::
+- **The scheme** (Krogstad 2005, "Generalized integrating factor methods for stiff PDEs",
+  J. Comput. Phys. 203), with ``phi_k`` the functions of :func:`phi_functions`,
+  ``e(s) = exp(s L)`` and ``N_u = N(x, t)``::
 
       a  = e(h/2) x + h/2 phi_1(hL/2) N_u
-      b  = e(h/2) x + h/2 phi_1(hL/2) N_u + h phi_2(hL/2) (N_a - N_u)
+      b  = a + h phi_2(hL/2) (N_a - N_u)
       c  = e(h) x + h phi_1(hL) N_u + 2 h phi_2(hL) (N_b - N_u)
       x+ = e(h) x + h [(phi_1 - 3 phi_2 + 4 phi_3) N_u + (2 phi_2 - 4 phi_3) (N_a + N_b)
                        + (4 phi_3 - phi_2) N_c]
 
-  (``N_a = N(a, t + h/2)``, ``N_b = N(b, t + h/2)``, ``N_c = N(c, t + h)``): of order four,
-  exact for a linear model under a torque linear in time.
-- **Its error estimate** is the difference from the third-order solution on the same nodes
-  that takes ``N_b`` for ``N_a`` and the rate at the new state ``N_+`` for ``N_c``,
-  ``h [(2 phi_2 - 4 phi_3) (N_a - N_b) + (4 phi_3 - phi_2) (N_c - N_+)]``; ``N_+`` is the next
-  step's ``N_u`` (first same as last: four evaluations a step). Its weighted RMS norm (the
-  weights of CVODES, ``atol + rtol max(|x|, |x+|)``) must be at most 1, and the next step is
-  ``h min(5, max(0.2, 0.9 e^(-1/4)))``.
+  (``N_a = N(a, t + h/2)``, ``N_b = N(b, t + h/2)``, ``N_c = N(c, t + h)``, ``phi_k`` at
+  ``hL`` where not written): of order four, exact for a linear model under a torque linear in
+  time. The rate at ``x+`` is the next step's ``N_u``: four evaluations a step.
+- **Its error estimate** is the difference from the second-order solution on the same nodes,
+  ``e(h) x + h [(phi_1 - phi_2) N_u + phi_2 N_c]``: ``h (2 phi_2 - 4 phi_3) (N_a + N_b - N_u
+  - N_c)``, of order ``h^3``, so the next step is ``h min(5, max(0.2, 0.9 e^(-1/3)))``. The
+  embedded third-order solutions of the same stages (``N_b`` for ``N_a``, the new rate for
+  ``N_c``; or Cox and Matthews' third-order scheme) were measured first and left: their
+  difference from the fourth-order solution came 1e4 to 1e5 times below its true local error
+  on the free-hub test of ``tests/model/test_spatial_planar.py`` and on the two arrays (the
+  error of ``a``, a first-order stage, is common to them all), and step doubling, which
+  estimates it well, costs 11 evaluations for two steps.
+- **The weights** of the error's RMS norm are CVODES's, ``atol + rtol max(|x|, |x+|)``, but
+  for each modal rate: its ``atol`` is multiplied by the mode's frequency (the root of the
+  rate's Jacobian's stiffness entry at the run's start, at least 1 rad/s), so that a rate's
+  error is weighed as the displacement it makes over a radian of its mode, an energy norm.
+  With CVODES's plain weights, a 3 609 rad/s torsion mode's rate, moving 1e-9 rad/s, held the
+  two arrays' slew to 62 000 evaluations (the tips' error 5e-8); weighed so, 18 800 (4e-7,
+  against Adams-Moulton's 6.6e-7 from 194 000).
 - **Steps** end on every output time and every breakpoint of the torque (each sample of a
   line), so a step never crosses a kink: the interval between two such times is cut into equal
-  steps, and a run of steps of one length (every interval of a uniform grid) is one compiled
-  call of up to :data:`CHAIN` steps (:func:`~flexctl.sim.step_chain.step_chain`; a rejected
-  step ends the call's work). The coefficient matrices of each step length are computed once
-  per Jacobian.
-- **The Jacobian** (forward differences of the compiled rate, ``n + 1`` evaluations) is taken
-  at the run's start and again every :data:`REFRESH` steps, so that ``L`` follows the hub's
-  rate (gyroscopic coupling) and the attitude; any ``L`` gives the same order, the one at hand
-  only the longest steps.
+  steps, and a run of steps of one length (every interval of a uniform grid) is one call of
+  up to :data:`CHAIN` steps (:func:`~flexctl.sim.step_chain.step_chain` on CasADi's virtual
+  machine; the right-hand side is the compiled one; a rejected step ends the call's work). The
+  coefficient matrices of each step length are computed once per Jacobian.
+- **The Jacobian** (central differences of the compiled rate, ``2 n`` evaluations) is taken at
+  the run's start and again every :data:`REFRESH` steps, so that ``L`` follows the hub's rate
+  (gyroscopic coupling) and the attitude; any ``L`` gives the same order, the one at hand only
+  the longest steps.
 
-Measured on ``benchmarks/bench_spatial.py`` (b) (the two arrays, 4 modes per field, exact rod,
-rtol 1e-8): see that file.
+:class:`~flexctl.sim.spatial_run.SpatialSegments` (Adams-Moulton) stays the integrator of a
+model that is not stiff on the run's grid (:data:`~flexctl.sim.spatial_run.STIFF_SPACING`),
+of the equations restricted to a plane, of structures with reaction wheels (whose speed
+limit switches the motor torque off within a band: exponential steps passed the rated speed by
+0.4 %, ``tests/model/test_wheel_cluster.py``) and of sampled loops.
 """
 
 from __future__ import annotations
@@ -54,8 +69,8 @@ import numpy as np
 
 from ..model.checks import check_array
 
-__all__ = ["phi_functions", "central_jacobian", "ExponentialSegments", "CHAIN", "REFRESH",
-           "EXPONENT"]
+__all__ = ["phi_functions", "central_jacobian", "sample_bound", "ExponentialSegments",
+           "SegmentFailed", "CHAIN", "REFRESH", "EXPONENT"]
 
 #: Steps of one length per compiled call.
 CHAIN = 128
@@ -138,6 +153,38 @@ def phi_functions(matrix, order: int = 3) -> tuple:
     for _ in range(doublings):
         funcs = _doubled(funcs)
     return tuple(funcs)
+
+
+class SegmentFailed(Exception):
+    """An integration that could not continue (the message says why)."""
+
+
+def sample_bound(times, a: float, wanted, max_steps: int):
+    """Why a run along a line through samples, each step ending at or before the next sample,
+    runs out of steps between two output times, if the samples are the reason, else None.
+
+    Parameters
+    ----------
+    times : array_like, shape (K,)
+        The samples' times, s (ascending).
+    a : float
+        The segment's start, s.
+    wanted : array_like
+        Its output times, s.
+    max_steps : int
+        The step budget between two output times.
+
+    Returns
+    -------
+    str or None
+    """
+    gap = float(np.max(np.diff(np.concatenate([[a], np.asarray(wanted, dtype=float)]))))
+    interval = float(np.min(np.diff(times)))
+    if gap / interval > max_steps / 2:
+        return (f"the torque samples' shortest interval, {interval:.3g} s, bounds every step, "
+                f"and an output interval of {gap:.3g} s needs {gap / interval:.3g} of them; a "
+                f"shorter output_step would let it finish")
+    return None
 
 
 def central_jacobian(mapped, x, torque) -> np.ndarray:
@@ -264,21 +311,27 @@ class ExponentialSegments:
         Length of ``x``.
     drive : callable
         The torque, ``t -> (3,)``, with ``segment_form(a, b)`` (its 11 parameters on a
-        segment with no breakpoint inside).
+        segment with no breakpoint inside) and, for a line, ``times``.
     rtol, atol : float
         Relative and absolute tolerance of each step's error (weighted RMS norm).
     line : bool
         A line through many samples, integrated in one segment: its samples are then
         breakpoints of the steps.
-    differences : casadi.Function, optional
-        ``rhs`` mapped over ``n_states + 1`` columns (the Jacobian's differences). Default
-        built here.
+    max_steps : int
+        Most steps between two output times.
+    modal : tuple of ndarray, optional
+        ``(coordinates, rates)``: the indices of the modal coordinates and of their rates, in
+        the same order (their rates' ``atol`` is scaled by each mode's frequency). Default
+        none.
+    jacobian : ndarray, shape (n_states, n_states), optional
+        The rate's Jacobian at the run's start (by :func:`central_jacobian`), where the
+        caller has it. Default: taken at the first segment.
     """
 
     def __init__(self, rhs, n_states: int, drive, rtol: float, atol: float, line: bool,
-                 modal=(), jacobian=None):
+                 max_steps: int, modal=(), jacobian=None):
         self.rhs, self.n, self.drive = rhs, int(n_states), drive
-        self.rtol, self.line = float(rtol), bool(line)
+        self.rtol, self.line, self.max_steps = float(rtol), bool(line), int(max_steps)
         self.atol = np.full(self.n, float(atol))
         self.modal = (np.asarray(modal[0], dtype=int), np.asarray(modal[1], dtype=int)) \
             if len(modal) else (np.zeros(0, dtype=int), np.zeros(0, dtype=int))
@@ -305,7 +358,7 @@ class ExponentialSegments:
         return 1
 
     def build(self, a: float, b: float, wanted):
-        """The compiled chain of steps, built once (every segment shares it).
+        """The chain of steps, built once (every segment shares it).
 
         Parameters
         ----------
@@ -323,8 +376,6 @@ class ExponentialSegments:
         return self.rhs(x, self.drive(t)).full().ravel() - self.jacobian @ x
 
     def _refresh(self, x, t) -> None:
-        from .spatial_run import SegmentFailed
-
         jacobian = central_jacobian(self.differences, x, self.drive(t))
         self.evaluations += 2 * self.n
         if not np.all(np.isfinite(jacobian)):
@@ -367,8 +418,9 @@ class ExponentialSegments:
 
     def _forms(self, a: float, b: float, starts: np.ndarray, gaps: np.ndarray,
                lows: np.ndarray) -> np.ndarray:
-        """(11, K): each step's torque form in its own time; ``starts`` the steps' starts,
-        ``gaps`` their intervals' indices, ``lows`` the intervals' starts."""
+        """(12, CHAIN): each step's torque form in its own time (``starts`` the steps'
+        starts, ``gaps`` their intervals' indices, ``lows`` the intervals' starts), and 1
+        for the steps to take."""
         if self.line:
             bases = {g: self.form(lows[g], lows[g + 1]) for g in np.unique(gaps)}
             base = np.column_stack([bases[g] for g in gaps])
@@ -376,10 +428,58 @@ class ExponentialSegments:
         else:
             base = np.repeat(self.form(a, b)[:, None], starts.size, axis=1)
             offset = starts - a
-        forms = base.copy()
-        forms[0:3] += base[3:6] * offset
-        forms[10] += offset
+        forms = np.zeros((12, CHAIN))
+        forms[0:11, :starts.size] = base
+        forms[0:3, :starts.size] += base[3:6] * offset
+        forms[10, :starts.size] += offset
+        forms[11, :starts.size] = 1.0
         return forms
+
+    def _plan(self, events: np.ndarray, gap: int, t: float) -> tuple:
+        """The next call's steps, all of one length: the rest of interval ``gap`` from ``t``,
+        then the whole intervals after it that the same length divides (at most
+        :data:`CHAIN`). ``(h, starts, intervals, ends)``: the length (s), each step's start
+        and interval, and ``{step index: the interval it ends}``."""
+        end = events[gap]
+        count = max(1, math.ceil((end - t) / self.h - 1e-9))
+        # to 12 digits, so that the intervals of a uniform grid share their coefficients
+        h = float(f"{(end - t) / count:.12g}")
+        if not h >= MIN_STEP * max(1.0, abs(t)):
+            raise SegmentFailed(f"step size {h:.3g} s at t = {t:.6g} s: the error control "
+                                f"found no step short enough")
+        starts, owners = [t + h * np.arange(min(count, CHAIN))], [gap]
+        size, ends = starts[0].size, {}
+        if size == count:
+            ends[size - 1] = gap
+            following = gap + 1
+            while size < CHAIN and following < events.size:
+                length = events[following] - events[following - 1]
+                fits = max(1, round(length / h))
+                if abs(length / fits - h) > 1e-9 * h or size + fits > CHAIN:
+                    break
+                starts.append(events[following - 1] + h * np.arange(fits))
+                owners.append(following)
+                size += fits
+                ends[size - 1] = following
+                following += 1
+        intervals = np.concatenate([np.full(s.size, g) for s, g in zip(starts, owners)])
+        return h, np.concatenate(starts), intervals, ends
+
+    def _control(self, h: float, norms: np.ndarray, accepted: int, size: int, t: float) -> bool:
+        """The next step length from the call's error norms; False where a state could not be
+        kept finite at the shortest step (the run ends there)."""
+        if accepted < size:
+            norm = float(norms[accepted])
+            if not math.isfinite(norm):
+                if h <= MIN_STEP * max(1.0, abs(t)) * 1e3:
+                    return False
+                self.h = SHRINK * h
+            else:
+                self.h = h * max(SHRINK, SAFETY * norm ** EXPONENT)
+        else:
+            worst = float(np.max(norms[:size]))
+            self.h = h * (GROWTH if worst == 0.0 else min(GROWTH, SAFETY * worst ** EXPONENT))
+        return True
 
     def advance(self, a: float, b: float, x, wanted) -> np.ndarray:
         """The states at ``wanted``, from ``x`` at ``a``.
@@ -403,8 +503,6 @@ class ExponentialSegments:
         SegmentFailed
             When the integration cannot go on (the message says why).
         """
-        from .spatial_run import MAX_STEPS, SegmentFailed, sample_bound
-
         n, chain = self.n, self.build(a, b, wanted)
         wanted = np.asarray(wanted, dtype=float)
         events = self._events(a, b, wanted)
@@ -422,77 +520,41 @@ class ExponentialSegments:
             if self.since >= REFRESH:
                 self._refresh(y, t)
                 nu = self._remainder(y, t)
-            # a run of steps of one length: the rest of this interval, then whole intervals
-            # that the same length divides
-            end = events[gap]
-            count = max(1, math.ceil((end - t) / self.h - 1e-9))
-            # to 12 digits, so that the intervals of a uniform grid share their coefficients
-            h = float(f"{(end - t) / count:.12g}")
-            if not h >= MIN_STEP * max(1.0, abs(t)):
-                raise SegmentFailed(f"step size {h:.3g} s at t = {t:.6g} s: the error control "
-                                    f"found no step short enough")
-            starts, owners = [t + h * np.arange(min(count, CHAIN))], [gap]
-            size = starts[0].size
-            ends = {}                     # step index -> the interval it ends
-            if size == count:
-                ends[size - 1] = gap
-                following = gap + 1
-                while size < CHAIN and following < events.size:
-                    length = events[following] - events[following - 1]
-                    fits = max(1, round(length / h))
-                    if abs(length / fits - h) > 1e-9 * h or size + fits > CHAIN:
-                        break
-                    starts.append(events[following - 1] + h * np.arange(fits))
-                    owners.append(following)
-                    size += fits
-                    ends[size - 1] = following
-                    following += 1
-            start_times = np.concatenate(starts)
-            intervals = np.concatenate([np.full(s.size, g) for s, g in zip(starts, owners)])
-            forms = np.zeros((12, CHAIN))
-            forms[0:11, :size] = self._forms(a, b, start_times, intervals, lows)
-            forms[11, :size] = 1.0
+            h, starts, intervals, ends = self._plan(events, gap, t)
+            size = starts.size
             carry[0:n], carry[n:2 * n], carry[2 * n] = y, nu, 0.0
-            states, norms = chain(carry, forms, self.weights, self.rtol, h,
-                                  self.jacobian.ravel(order="F"), *self._coefficients(h))
+            states, norms = chain(carry, self._forms(a, b, starts, intervals, lows),
+                                  self.weights, self.rtol, h, self.jacobian.ravel(order="F"),
+                                  *self._coefficients(h))
             states, norms = states.full(), norms.full().ravel()
             stopped = states[2 * n, :size] > 0.5
             accepted = int(np.argmax(stopped)) if np.any(stopped) else size
-            attempted = min(accepted + 1, size)
-            self.steps += attempted
-            self.evaluations += 4 * attempted
+            self.steps += min(accepted + 1, size)
+            self.evaluations += 4 * min(accepted + 1, size)
             self.since += accepted
             taken += accepted
             if accepted:
                 y, nu = states[0:n, accepted - 1].copy(), states[n:2 * n, accepted - 1].copy()
-                finished = [k for k in ends if k < accepted]
-                for k in finished:
+                for k in (k for k in ends if k < accepted):
                     index = int(np.searchsorted(wanted, events[ends[k]]))
                     if index < wanted.size and wanted[index] == events[ends[k]]:
-                        out[:, index] = states[0:n, k]
-                        taken = 0
-                if finished:
-                    gap = max(ends[k] for k in finished) + 1
+                        out[:, index], taken = states[0:n, k], 0
+                    gap = max(gap, ends[k] + 1)
                 last = accepted - 1
-                t = float(events[ends[last]]) if last in ends \
-                    else float(start_times[last] + h)
-            if accepted < size:
-                norm = float(norms[accepted])
-                if not math.isfinite(norm):
-                    if h <= MIN_STEP * max(1.0, abs(t)) * 1e3:
-                        return out            # NaN from here on: the caller reports it
-                    self.h = SHRINK * h
-                else:
-                    self.h = h * max(SHRINK, SAFETY * norm ** EXPONENT)
-            else:
-                worst = float(np.max(norms[:size]))
-                self.h = h * (GROWTH if worst == 0.0 else min(GROWTH, SAFETY * worst ** EXPONENT))
-            if taken > MAX_STEPS:
-                head = (f"the exponential steps took more than {MAX_STEPS:g} steps between two "
-                        f"output times in [{a:g}, {b:g}] s")
-                bound = sample_bound(self.drive, a, wanted) if self.line else None
-                raise SegmentFailed(f"{head}: {bound}" if bound is not None else (
-                    f"{head}: the error control held them near {h:.2g} s; a looser rtol or "
-                    f"atol, fewer modes per field or a shorter output_step would let it "
-                    f"finish"))
+                t = float(events[ends[last]]) if last in ends else float(starts[last] + h)
+            if not self._control(h, norms, accepted, size, t):
+                return out                    # NaN from here on: the caller reports it
+            if taken > self.max_steps:
+                raise SegmentFailed(self._budget(a, b, wanted, h))
         return out
+
+    def _budget(self, a: float, b: float, wanted, h: float) -> str:
+        """Why the steps between two output times ran past the budget."""
+        head = (f"the exponential steps took more than {self.max_steps:g} steps between two "
+                f"output times in [{a:g}, {b:g}] s")
+        bound = sample_bound(self.drive.times, a, wanted, self.max_steps) if self.line \
+            else None
+        if bound is not None:
+            return f"{head}: {bound}"
+        return (f"{head}: the error control held them near {h:.2g} s; a looser rtol or atol, "
+                f"fewer modes per field or a shorter output_step would let it finish")

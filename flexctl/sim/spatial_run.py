@@ -51,7 +51,7 @@ from ..model.spatial_dynamics import (SPATIAL_VARIANTS, SpatialEquations, spatia
                                       spatial_modes)
 from ..model.spatial_structure import SpatialStructure
 from .background import Beside
-from .exponential import ExponentialSegments
+from .exponential import ExponentialSegments, SegmentFailed, central_jacobian, sample_bound
 from .spatial_plane import motion_plane, plane_motion
 
 __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
@@ -643,8 +643,6 @@ class _Plan:
         """The Jacobian of the rate at the start where the exponential steps are taken (the
         fastest mode turns more than :data:`STIFF_SPACING` radians over the median interval
         between two output times or breakpoints), else None."""
-        from .exponential import central_jacobian
-
         n = self.x0.size
         jacobian = central_jacobian(self.rhs.map(2 * n), self.x0, drive(0.0))
         if not np.all(np.isfinite(jacobian)):
@@ -660,8 +658,8 @@ class _Plan:
         """The integration at tolerances ``rtol``, ``atol``, its integrators built."""
         if self.jacobian is not None:
             return _Integration(self, ExponentialSegments(
-                self.rhs, self.x0.size, self.drive, rtol, atol, self.line, self.modal,
-                jacobian=self.jacobian))
+                self.rhs, self.x0.size, self.drive, rtol, atol, self.line, MAX_STEPS,
+                self.modal, jacobian=self.jacobian))
         return _Integration(self, SpatialSegments(self.rhs, self.x0.size, self.drive, rtol, atol,
                                             self.line, newton=self.plane is not None))
 
@@ -733,10 +731,6 @@ class _Integration:
 
     def _whole(self, states) -> np.ndarray:
         return states if self.plan.plane is None else self.plan.plane.embed(states)
-
-
-class SegmentFailed(Exception):
-    """An integration that could not continue."""
 
 
 class SpatialSegments:
@@ -881,7 +875,7 @@ class SpatialSegments:
         eigenvalue of the model at ``a`` and the step it allows."""
         head = (f"CVODES took all of its {MAX_STEPS:g} steps between two output times in "
                 f"[{a:g}, {b:g}] s")
-        bound = sample_bound(self.drive, a, wanted) if self.line else None
+        bound = sample_bound(self.drive.times, a, wanted, MAX_STEPS) if self.line else None
         if bound is not None:
             return f"{head}: {bound}"
         mapped = self.differences if self.differences is not None \
@@ -961,32 +955,6 @@ class SpatialSegments:
                 return np.full((self.n_states, len(wanted)), np.nan)
             raise SegmentFailed(solution.message)
         return solution.y
-
-
-def sample_bound(drive: VectorTorque, a: float, wanted):
-    """Why a line through torque samples runs out of steps between two output times, if its
-    samples are the reason (every step ends at or before the next sample), else None.
-
-    Parameters
-    ----------
-    drive : VectorTorque
-        The line's samples.
-    a : float
-        The segment's start, s.
-    wanted : array_like
-        Its output times, s.
-
-    Returns
-    -------
-    str or None
-    """
-    gap = float(np.max(np.diff(np.concatenate([[a], np.asarray(wanted, dtype=float)]))))
-    interval = float(np.min(np.diff(drive.times)))
-    if gap / interval > MAX_STEPS / 2:
-        return (f"the torque samples' shortest interval, {interval:.3g} s, bounds every step, "
-                f"and an output interval of {gap:.3g} s needs {gap / interval:.3g} of them; a "
-                f"shorter output_step would let it finish")
-    return None
 
 
 def _difference_jacobian(mapped, x, torque) -> np.ndarray:
