@@ -11,11 +11,13 @@ model on the same modes, and a two-array structure slewed about a tilted axis.
     inertia; 4 modes per field: 27 speeds, torsion and lateral modes up to 3.6e3 rad/s)
     slewed about the tilted axis (0.6, 0, 0.8) by one period of a 0.5 N m sine over 6 s given
     as 1001 torque samples (0.01 s apart, interpolated linearly, as a scene's
-    ``torque_samples``), 10 s simulated. Printed: the wall time of the run with and without
-    its accuracy check, its integration steps and right-hand-side evaluations, its error
-    estimate, and its tip error against a reference run at rtol 1e-11 (each tip component
-    relative to its own peak, the largest: the definition of ``integration_error``).
-    Target: under 1 s.
+    ``torque_samples``), 10 s simulated, on the exact rod and its first_order expansion, each
+    on the exponential steps that such a stiff run now takes (:mod:`flexctl.sim.exponential`)
+    and on Adams-Moulton (``spatial_run.EXPONENTIAL = False``). Printed: the wall time of the
+    run with and without its accuracy check, its integration steps and right-hand-side
+    evaluations, its error estimate, and its tip error against a reference run at rtol 1e-11
+    (each tip component relative to its own peak, the largest: the definition of
+    ``integration_error``). Target: under 1 s.
 
 Every wall time excludes the one-time work: the spatial equations' construction and the
 compiling of their right-hand side (some 25 s for (b), kept in the compile cache) happen in
@@ -37,10 +39,20 @@ processor times are printed too; ratios repeat within some 20 %):
   this machine did not have), estimate 7.1e-7, error 6.6e-7. The target of (a) is missed by
   1.75 times, that of (b) by some 20 times.
 
-Why (b) costs what it does: Adams-Moulton with functional iteration is held to
+Measured for (b) with the exponential steps (rtol 1e-8, the run alone, the best of 2):
+
+- exact: 1.35 s wall (4 329 steps, 18 759 evaluations of some 60 us), error 4.0e-7 (its
+  estimate 4.1e-7); with its check 2.54 s wall. Adams-Moulton: 10.65 s (102 655 steps,
+  193 939 evaluations), error 6.4e-7 (estimate 7.0e-7). 7.9 times faster, as accurate; the
+  target is missed by 1.35 times: the evaluations alone take 1.1 s.
+- first_order: **0.67 s** wall (5 621 steps, 24 482 evaluations), error 3.1e-9 (estimate
+  2.4e-9); with its check 1.48 s. Adams-Moulton: 2.36 s (100 502 steps), error 6.3e-7.
+
+Why Adams-Moulton costs what it does on (b): with functional iteration it is held to
 ``h omega = 0.33`` on the fastest mode (3 609 rad/s, the fourth torsion mode) by the
 iteration's convergence: the same 108 000 to 113 000 steps at rtol 1e-4, 1e-6, 1e-8 and
-1e-11, at 66 to 117 us an evaluation (134 000 operations). What was measured and not kept:
+1e-11, at 66 to 117 us an evaluation (134 000 operations). What was measured on it before the
+exponential steps, and not kept:
 
 - CVODES's BDF with Newton's iterations on CasADi's Jacobian (finite differences of the
   compiled right-hand side): 69 301 steps, 84 304 evaluations and 7 771 Jacobians, 2 to 4
@@ -49,32 +61,25 @@ iteration's convergence: the same 108 000 to 113 000 steps at rtol 1e-4, 1e-6, 1
   5.1e-6; with a Jacobian held over the run: 70 335 steps, 1.6 times less processor time.
 - Adams-Moulton with Newton's iterations: 42 178 steps, 50 801 evaluations, but 4 402
   Jacobians of 56 evaluations (slower); with a Jacobian held over the run 39 000 to 44 000
-  steps, 2.7 to 3.3 times less processor time, but an error of 1.2e-6 to 1.55e-6 (the steps,
-  2.6 times longer, are then set by accuracy).
-- A check at 10 times the tolerance: no fewer steps (stability-bound).
+  steps, 2.7 to 3.3 times less processor time, but an error of 1.2e-6 to 1.55e-6.
 - SciPy's Radau on the compiled right-hand side with a finite-difference Jacobian: 32 942,
-  78 153 and 142 581 evaluations at rtol 1e-6, 1e-7 and 1e-8 (tips 3.4e-5, 1.6e-6 and 3.6e-7
-  from the reference): the torque's kinks every 0.01 s excite the fast modes, which an
-  accurate implicit method then resolves too. SciPy's RK45: 283 514 evaluations at rtol 1e-8
-  and 283 700 at 1e-6 (stability-bound); DOP853: 119 993.
-- The expansions of the same run, rtol 1e-8: first_order 5.6 s (101 259 steps, 188 087
-  evaluations of some 30 us, tips 6.1e-7 from its reference), zero_order 2.5 s (106 766
-  steps): the same steps, held by the same modes.
-- Newton's iterations with a Jacobian held over the run (again, on the line integrator):
-  44 885 steps, 52 850 evaluations, tips 1.1e-6 from the reference; CVODES's statistics put
-  6.6 s in the evaluations (some 125 us each through the wrapper that carries the Jacobian,
-  against 74 to 79 us for the compiled right-hand side mapped over 2 000 states). Where
-  functional iteration is held by a much faster mode (three rods on a free hub whose 1 m
-  boom's torsion reaches 4.6e4 rad/s, 0.6 s simulated) Newton's iterations
-  took 2.7 times fewer steps and 3.5 times less time, their tips 5e-9 of the peaks from
-  functional iteration's; on the built-in tilted slew 1.4 times fewer steps, but an error
-  estimate of 8.1e-7 against 2.5e-9.
+  78 153 and 142 581 evaluations at rtol 1e-6, 1e-7 and 1e-8; SciPy's RK45: 283 514
+  evaluations at rtol 1e-8 (stability-bound); DOP853: 119 993.
 - ``-O1`` or ``-O2`` for the right-hand side: 67.8 and 68.9 us an evaluation against 66.2 at
   ``-Og`` (best of 6), compiled in 48 and 79 s against 36 s.
 - Fewer quadrature nodes per rod: 2 panels of 7 or 6 points instead of 9 take 24 % and 35 %
   fewer operations, tips 1.7e-8 and 8.2e-8 of their peaks from 4 panels of 9 (the rule used:
   1.7e-8), but the rule is the planar exact model's, so that a motion in one plane is that
   model's to round-off (``tests/model/test_spatial_model.py``): kept.
+
+On the exponential steps, measured and not kept: the error estimate of the embedded
+third-order solution (6 560 steps, error 7e-8 on (b), but 3.8e-5 on a free-hub rod at rtol
+1e-8 where Adams-Moulton gave 1.1e-6: it missed the true local error by 1e4 to 1e5); step
+doubling (11 evaluations for two steps; with the modal rates weighed by their frequency
+1.17 s but an error of 1.5e-5, by its square root 1.85 s and 6.7e-7); CVODES's plain weights
+(24 375 steps, 106 158 evaluations, 8.0 s, error 3.7e-8: a torsion mode's rate, moving some
+1e-9 rad/s, held the steps); the Jacobian every 64, 128 or 1 024 steps instead of 256
+(4 187, 4 280 and 4 798 steps: the same time).
 
 (c) Three-axis slews through wheels, sensors and filters at 10 Hz: the 60 s slew of
     ``examples/scenes/spatial-lqg-slew.toml`` (two damped arrays, exact model on 2 modes per

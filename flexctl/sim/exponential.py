@@ -40,9 +40,9 @@ quadrature: the steps are set by how fast ``N`` changes, not by the fastest mode
   for each modal rate: its ``atol`` is multiplied by the mode's frequency (the root of the
   rate's Jacobian's stiffness entry at the run's start, at least 1 rad/s), so that a rate's
   error is weighed as the displacement it makes over a radian of its mode, an energy norm.
-  With CVODES's plain weights, a 3 609 rad/s torsion mode's rate, moving 1e-9 rad/s, held the
-  two arrays' slew to 62 000 evaluations (the tips' error 5e-8); weighed so, 18 800 (4e-7,
-  against Adams-Moulton's 6.6e-7 from 194 000).
+  With CVODES's plain weights, the torsion modes' rates, moving some 1e-9 rad/s, held the two
+  arrays' slew to 106 000 evaluations (the tips' error 3.7e-8); weighed so, 18 800 (4.0e-7,
+  against Adams-Moulton's 6.4e-7 from 194 000).
 - **Steps** end on every output time and every breakpoint of the torque (each sample of a
   line), so a step never crosses a kink: the interval between two such times is cut into equal
   steps, and a run of steps of one length (every interval of a uniform grid) is one call of
@@ -67,7 +67,8 @@ import math
 
 import numpy as np
 
-from ..model.checks import check_array
+from ..model.checks import check_array, check_integer, check_real
+from ..model.errors import InputValueError
 
 __all__ = ["phi_functions", "central_jacobian", "sample_bound", "ExponentialSegments",
            "SegmentFailed", "CHAIN", "REFRESH", "EXPONENT"]
@@ -203,10 +204,22 @@ def central_jacobian(mapped, x, torque) -> np.ndarray:
     Returns
     -------
     ndarray, shape (n, n)
-    """
-    x = np.asarray(x, dtype=float)
-    n = x.size
 
+    Raises
+    ------
+    TypeError, ValueError
+        If ``x`` or ``torque`` is not a finite vector of its size, or ``mapped`` not such a
+        function.
+    """
+    import casadi as ca
+
+    x = check_array("central_jacobian", "x", x, shape=(None,))
+    torque = check_array("central_jacobian", "torque", torque, shape=(3,))
+    n = x.size
+    if not isinstance(mapped, ca.Function) or mapped.n_in() != 2 \
+            or mapped.size_in(0) != (n, 2 * n):
+        raise ValueError(f"central_jacobian: mapped must be a casadi.Function of (x, torque) "
+                         f"over {2 * n} columns of {n} states; got {mapped!r:.80}")
     steps = 6e-6 * np.maximum(np.abs(x), 1.0)
     points = np.tile(x[:, None], (1, 2 * n))
     points[np.arange(n), np.arange(n)] += steps
@@ -330,11 +343,22 @@ class ExponentialSegments:
 
     def __init__(self, rhs, n_states: int, drive, rtol: float, atol: float, line: bool,
                  max_steps: int, modal=(), jacobian=None):
-        self.rhs, self.n, self.drive = rhs, int(n_states), drive
-        self.rtol, self.line, self.max_steps = float(rtol), bool(line), int(max_steps)
-        self.atol = np.full(self.n, float(atol))
+        owner = "ExponentialSegments"
+        self.n = check_integer(owner, "n_states", n_states, minimum=1)
+        self.rhs, self.drive = rhs, drive
+        self.rtol = check_real(owner, "rtol", rtol, minimum=0.0, strict=True, maximum=1.0)
+        self.atol = np.full(self.n, check_real(owner, "atol", atol, minimum=0.0, strict=True))
+        self.line = bool(line)
+        self.max_steps = check_integer(owner, "max_steps", max_steps, minimum=1)
+        if not callable(getattr(drive, "segment_form", None)):
+            raise InputValueError(f"{owner} drive must have a segment_form(a, b); got "
+                                  f"{type(drive).__name__}")
         self.modal = (np.asarray(modal[0], dtype=int), np.asarray(modal[1], dtype=int)) \
             if len(modal) else (np.zeros(0, dtype=int), np.zeros(0, dtype=int))
+        if self.modal[0].shape != self.modal[1].shape or np.any(
+                (np.concatenate(self.modal) < 0) | (np.concatenate(self.modal) >= self.n)):
+            raise InputValueError(f"{owner} modal must be two index arrays of one length "
+                                  f"within the {self.n} states")
         self.weights = None
         self.form = getattr(drive, "segment_form", None)
         self.steps = self.evaluations = 0

@@ -12,8 +12,13 @@ persistent compile cache where a compiler is found.
   on the compiled right-hand side, from breakpoint to breakpoint: every sample of a
   :class:`VectorTorque` is one (a kink of a line, a jump of a hold), so no step crosses it; a
   line through more than :data:`THROUGH_SAMPLES` samples runs in one integration, its steps
-  bounded by the sample interval. A torque given as a Python function runs on SciPy's
-  ``DOP853``. The error per step is below ``rtol`` relative and ``atol`` absolute.
+  bounded by the sample interval. A stiff run (:data:`STIFF_SPACING`: a torsion or stiff-plane
+  bending mode that turns ten radians or more between output times) takes exponential steps
+  instead (:mod:`flexctl.sim.exponential`: the linear part integrated exactly, the steps set
+  by the slew rather than by the fastest mode; ``benchmarks/bench_spatial.py`` (b)). A torque
+  given as a Python function runs on SciPy's ``DOP853``. The error per step is below ``rtol``
+  relative and ``atol`` absolute (on the exponential steps, a modal rate's ``atol`` times its
+  mode's frequency).
 - **Motion in one plane.** A run that cannot leave a plane (:mod:`flexctl.sim.spatial_plane`:
   appendages in the plane, the hub turning about its normal, a principal axis of extreme
   inertia, under a torque along it) integrates the equations restricted to the plane, some
@@ -427,7 +432,8 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
     rtol : float, optional
         Relative tolerance, in ``[1e-13, 1e-2]``. Default :data:`DEFAULT_RTOL`.
     atol : float, optional
-        Absolute tolerance. Default ``rtol * 1e-3``.
+        Absolute tolerance. Default ``rtol * 1e-3``. On exponential steps a modal rate's is
+        this times its mode's frequency (:mod:`flexctl.sim.exponential`).
     output_step : float, optional
         Spacing of the output samples, s. Default ``t_final / 1000``.
     check_accuracy : bool, optional

@@ -260,3 +260,29 @@ def test_runs_that_are_not_stiff_or_carry_wheels_stay_on_adams_moulton():
     finally:
         spatial_run.EXPONENTIAL = saved
     assert x0.size == equations.layout.n_states
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"rtol": 0.0}, "rtol"), ({"rtol": float("nan")}, "rtol"), ({"atol": -1.0}, "atol"),
+    ({"n_states": 0}, "n_states"), ({"n_states": 2.5}, "n_states"),
+    ({"max_steps": 0}, "max_steps"), ({"drive": lambda t: np.zeros(3)}, "segment_form"),
+    ({"modal": (np.array([0, 1]), np.array([2]))}, "modal"),
+    ({"modal": (np.array([0, 9]), np.array([2, 3]))}, "modal"),
+])
+def test_exponential_segments_refuse_bad_arguments_by_name(change, words):
+    arguments = {"rhs": _linear_rhs(), "n_states": 4, "drive": ConstantTorque(np.zeros(3)),
+                 "rtol": 1e-6, "atol": 1e-9, "line": False, "max_steps": 100,
+                 "modal": (np.array([0, 1]), np.array([2, 3]))}
+    with pytest.raises((TypeError, ValueError), match=words):
+        ExponentialSegments(**{**arguments, **change})
+
+
+@pytest.mark.parametrize("x, torque, mapped_columns, words", [
+    ([0.0, np.nan, 0.0, 0.0], [0.0, 0.0, 0.0], 8, "x"),
+    ([0.0, 0.0, 0.0, 0.0], [0.0, 0.0], 8, "torque"),
+    ([0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 5, "mapped"),
+    ("four", [0.0, 0.0, 0.0], 8, "x"),
+])
+def test_central_jacobian_refuses_bad_arguments_by_name(x, torque, mapped_columns, words):
+    with pytest.raises((TypeError, ValueError), match=words):
+        central_jacobian(_linear_rhs().map(mapped_columns), x, torque)
