@@ -141,14 +141,12 @@ def test_auto_chooses_the_counts_of_a_free_hub(tmp_path):
     assert scene.mode_choice.estimated_error < scene.mode_choice.tolerance
 
 
-def test_a_run_out_of_steps_names_the_stiff_mode_that_held_them(monkeypatch):
-    """A structure far too stiff for its run (Young's modulus 1e30 Pa) uses CVODES's step
-    budget: the run fails and says which eigenvalue held the steps, and to what (on Adams-Moulton;
-    the exponential steps' failure, below)."""
+def _too_stiff(monkeypatch):
+    """A 0.05 s run of a wing of Young's modulus 1e30 Pa on a step budget of 2 000: it
+    fails."""
     from flexctl.sim import spatial_run
 
     monkeypatch.setattr(spatial_run, "MAX_STEPS", 2000)
-    monkeypatch.setattr(spatial_run, "EXPONENTIAL", False)
     wing = SpatialAppendage(name="wing_a", direction=(0, 1, 0), normal=(0, 0, 1),
                             **{**SECTION, "youngs_modulus": 1e30})
     structure = SpatialStructure(hub=SpatialHub(inertia=INERTIA, radius=0.06),
@@ -156,6 +154,17 @@ def test_a_run_out_of_steps_names_the_stiff_mode_that_held_them(monkeypatch):
     result = simulate_spatial(structure, 0.05, [0.1, 0.0, 0.0], n_modes=2,
                               check_accuracy=False)
     assert result.status == "failed"
+    return result
+
+
+def test_a_run_out_of_steps_names_the_stiff_mode_that_held_them(monkeypatch):
+    """A structure far too stiff for its run (Young's modulus 1e30 Pa) uses CVODES's step
+    budget: the run fails and says which eigenvalue held the steps, and to what (on Adams-Moulton;
+    the exponential steps' failure, below)."""
+    from flexctl.sim import spatial_run
+
+    monkeypatch.setattr(spatial_run, "EXPONENTIAL", False)
+    result = _too_stiff(monkeypatch)
     words = re.search(r"took all of its 2000 steps between two output times in \[0, "
                       r"0\.05\] s: the model's fastest eigenvalue at t = 0 s, "
                       r"([0-9.e+]+) 1/s, holds its steps near ([0-9.e+-]+) s\. Its source is "
@@ -173,16 +182,7 @@ def test_exponential_steps_out_of_budget_say_what_held_them(monkeypatch):
     """The same structure on exponential steps (the default for a stiff run): the Jacobian's
     finite differences cannot resolve a stiffness of 1e30 Pa, whose remainder the error control
     then holds to steps near 1e-8 s; the run fails and says so, with what would let it finish."""
-    from flexctl.sim import spatial_run
-
-    monkeypatch.setattr(spatial_run, "MAX_STEPS", 2000)
-    wing = SpatialAppendage(name="wing_a", direction=(0, 1, 0), normal=(0, 0, 1),
-                            **{**SECTION, "youngs_modulus": 1e30})
-    structure = SpatialStructure(hub=SpatialHub(inertia=INERTIA, radius=0.06),
-                                 appendages=(wing,))
-    result = simulate_spatial(structure, 0.05, [0.1, 0.0, 0.0], n_modes=2,
-                              check_accuracy=False)
-    assert result.status == "failed"
+    result = _too_stiff(monkeypatch)
     words = re.search(r"the exponential steps took more than 2000 steps between two output "
                       r"times in \[0, 0\.05\] s: the error control held them near "
                       r"([0-9.e+-]+) s; a looser rtol", result.message)
