@@ -56,7 +56,8 @@ from ..model.spatial_dynamics import (SPATIAL_VARIANTS, SpatialEquations, spatia
                                       spatial_modes)
 from ..model.spatial_structure import SpatialStructure
 from .background import Beside
-from .exponential import ExponentialSegments, SegmentFailed, central_jacobian, sample_bound
+from .exponential import (Abandoned, ExponentialSegments, SegmentFailed, central_jacobian,
+                          sample_bound)
 from .spatial_plane import motion_plane, plane_motion
 
 __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
@@ -657,17 +658,21 @@ class _Plan:
                                drive.times])
         ends = np.unique(ends[(ends >= 0.0) & (ends <= self.times[-1])])
         spacing = float(np.median(np.diff(ends))) if ends.size > 1 else float(self.times[-1])
-        fastest = float(np.max(np.abs(np.linalg.eigvals(jacobian))))
-        return jacobian if fastest * spacing >= STIFF_SPACING else None
+        self.fastest = float(np.max(np.abs(np.linalg.eigvals(jacobian))))
+        return jacobian if self.fastest * spacing >= STIFF_SPACING else None
 
     def integration(self, rtol: float, atol: float) -> "_Integration":
         """The integration at tolerances ``rtol``, ``atol``, its integrators built."""
-        if self.jacobian is not None:
-            return _Integration(self, ExponentialSegments(
-                self.rhs, self.x0.size, self.drive, rtol, atol, self.line, MAX_STEPS,
-                self.modal, jacobian=self.jacobian))
-        return _Integration(self, SpatialSegments(self.rhs, self.x0.size, self.drive, rtol, atol,
-                                            self.line, newton=self.plane is not None))
+        adams = SpatialSegments(self.rhs, self.x0.size, self.drive, rtol, atol, self.line,
+                                newton=self.plane is not None)
+        if self.jacobian is None:
+            return _Integration(self, adams)
+        # the exponential steps give a segment up to Adams-Moulton where they are held below
+        # a radian of the fastest mode (Adams-Moulton's steps are 0.33 radian at most, of
+        # some 2 evaluations, theirs of 4)
+        return _Integration(self, ExponentialSegments(
+            self.rhs, self.x0.size, self.drive, rtol, atol, self.line, MAX_STEPS, self.modal,
+            jacobian=self.jacobian, floor=1.0 / self.fastest), fallback=adams)
 
 
 #: Integrators built ahead of a run at most (more distinct segments are built as they come,
@@ -679,8 +684,9 @@ class _Integration:
     """One integration over the plan's output times; called (in any thread), it gives
     ``(status, states (n, P'), message, drift)`` (whole states) or, cancelled, None."""
 
-    def __init__(self, plan: _Plan, segments: "SpatialSegments"):
-        self.plan, self.segments = plan, segments
+    def __init__(self, plan: _Plan, segments, fallback=None):
+        self.plan, self.segments, self.fallback = plan, segments, fallback
+        self.spent = (0, 0)            # steps and evaluations of abandoned exponential steps
         self.pieces = []
         times = plan.times
         for a, b in zip(plan.edges[:-1], plan.edges[1:]):
@@ -693,17 +699,28 @@ class _Integration:
             <= MAX_INTEGRATORS
         if self.ready:
             for a, b, _, wanted in self.pieces:
-                segments.build(a, b, wanted)
+                for built in (segments, fallback):
+                    if built is not None:
+                        built.build(a, b, wanted)
 
     @property
     def steps(self) -> int:
         """Steps taken (0 on SciPy's path)."""
-        return self.segments.steps
+        return self.segments.steps + self.spent[0]
 
     @property
     def evaluations(self) -> int:
         """Right-hand-side evaluations."""
-        return self.segments.evaluations
+        return self.segments.evaluations + self.spent[1]
+
+    def _advance(self, a, b, x, wanted):
+        try:
+            return self.segments.advance(a, b, x, wanted)
+        except Abandoned:
+            # the rest of the run on Adams-Moulton, from this segment's start
+            self.spent = (self.segments.steps, self.segments.evaluations)
+            self.segments, self.fallback = self.fallback, None
+            return self.segments.advance(a, b, x, wanted)
 
     def __call__(self, cancelled=None):
         plan = self.plan
@@ -715,7 +732,7 @@ class _Integration:
             if cancelled is not None and cancelled.is_set():
                 return None
             try:
-                values = self.segments.advance(a, b, x, wanted)
+                values = self._advance(a, b, x, wanted)
             except SegmentFailed as exc:
                 whole = self._whole(states[:, :done])
                 return "failed", whole, f"the integration failed at t = {a:g} s: {exc}", \

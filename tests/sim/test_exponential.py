@@ -286,3 +286,20 @@ def test_exponential_segments_refuse_bad_arguments_by_name(change, words):
 def test_central_jacobian_refuses_bad_arguments_by_name(x, torque, mapped_columns, words):
     with pytest.raises((TypeError, ValueError), match=words):
         central_jacobian(_linear_rhs().map(mapped_columns), x, torque)
+
+
+def test_a_spin_up_that_holds_the_exponential_steps_goes_on_adams_moulton(monkeypatch):
+    """1000 N m on the two arrays spins the hub to 67 rad/s in 0.2 s: the exponential steps'
+    error estimate holds them below a radian of the fastest mode, so the run gives the segment
+    to Adams-Moulton (from its start) and ends as Adams-Moulton alone does, to its error."""
+    from flexctl.sim.spatial_run import simulate_spatial
+
+    arrays = _two_arrays()
+    given = simulate_spatial(arrays, 0.2, [1e3, 0.0, 0.0], n_modes=3, output_step=0.02)
+    monkeypatch.setattr(spatial_run, "EXPONENTIAL", False)
+    adams = simulate_spatial(arrays, 0.2, [1e3, 0.0, 0.0], n_modes=3, output_step=0.02)
+    assert given.status == adams.status == "ok"
+    assert given.n_steps > adams.n_steps            # the abandoned steps are counted
+    assert _tip_error(given, adams) < 10 * max(given.integration_error,
+                                               adams.integration_error)
+    np.testing.assert_allclose(given.angular_velocity, adams.angular_velocity, rtol=1e-6)
