@@ -678,6 +678,8 @@ class _Plan:
 #: Integrators built ahead of a run at most (more distinct segments are built as they come,
 #: and the accuracy check then runs after the run).
 MAX_INTEGRATORS = 256
+#: Adams-Moulton integrators built ahead as a fallback of exponential steps at most.
+FALLBACKS_AHEAD = 4
 
 
 class _Integration:
@@ -687,6 +689,7 @@ class _Integration:
     def __init__(self, plan: _Plan, segments, fallback=None):
         self.plan, self.segments, self.fallback = plan, segments, fallback
         self.spent = (0, 0)            # steps and evaluations of abandoned exponential steps
+        self.creator = threading.get_ident()
         self.pieces = []
         times = plan.times
         for a, b in zip(plan.edges[:-1], plan.edges[1:]):
@@ -697,11 +700,16 @@ class _Integration:
         self.ready = segments.form is not None and \
             segments.count([(a, b, wanted) for a, b, _, wanted in self.pieces]) \
             <= MAX_INTEGRATORS
+        pieces = [(a, b, wanted) for a, b, _, wanted in self.pieces]
+        # the fallback is built ahead only where it is cheap (a line: one integrator); else
+        # as it is needed, in this thread
+        self.fallback_built = self.ready and fallback is not None \
+            and fallback.count(pieces) <= FALLBACKS_AHEAD
         if self.ready:
-            for a, b, _, wanted in self.pieces:
-                for built in (segments, fallback):
-                    if built is not None:
-                        built.build(a, b, wanted)
+            for a, b, wanted in pieces:
+                segments.build(a, b, wanted)
+                if self.fallback_built:
+                    fallback.build(a, b, wanted)
 
     @property
     def steps(self) -> int:
@@ -717,9 +725,12 @@ class _Integration:
         try:
             return self.segments.advance(a, b, x, wanted)
         except Abandoned:
-            # the rest of the run on Adams-Moulton, from this segment's start
-            self.spent = (self.segments.steps, self.segments.evaluations)
-            self.segments, self.fallback = self.fallback, None
+            if self.fallback_built or threading.get_ident() == self.creator:
+                # the rest of the run on Adams-Moulton, from this segment's start
+                self.spent = (self.segments.steps, self.segments.evaluations)
+                self.segments, self.fallback = self.fallback, None
+            else:        # beside the run, where no integrator may be built: go on as it was
+                self.segments.floor = 0.0
             return self.segments.advance(a, b, x, wanted)
 
     def __call__(self, cancelled=None):
