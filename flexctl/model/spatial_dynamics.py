@@ -166,6 +166,15 @@ class SpatialLayout:
         return slice(start, start + n)
 
     @property
+    def modal_indices(self) -> tuple:
+        """``(coordinates, rates)``: the state indices of every modal coordinate and of its
+        rate, in the same order (ndarrays of ``M`` integers)."""
+        start = 4 + (3 if self.free else 0)
+        coordinates = np.arange(start, start + self.n_elastic)
+        return coordinates, coordinates + self.n_coordinates + 3 + (3 if self.free else 0) \
+            - start
+
+    @property
     def state_names(self) -> tuple:
         """Name of every state: ``qw qx qy qz``, ``hub_x hub_y hub_z`` (free),
         ``<name>.qn1 ...``, ``wx wy wz``, ``hub_vx hub_vy hub_vz`` (free, hub frame),

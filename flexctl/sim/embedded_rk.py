@@ -41,7 +41,7 @@ from .compiled import (CHECK_FACTOR, cached_build, input_key, drive_size, input_
 from .compile_cache import compiled
 from .lifted_constants import lift_constants
 from .buffers import InPlace, borrow, give_back
-from .step_chain import step_chain
+from .step_chain import skippable, step_chain
 from . import fixed_step
 from .fixed_step import (END_INSIDE, STEP_CACHE, STEP_CACHE_SIZE, drive_symbols, jit_compiled,
                          step_function)
@@ -524,16 +524,9 @@ def _attempt_chain(model, inputs, n_numbers: int, attempts: int = ATTEMPTS,
                           [ca.vertcat(t_next, h_next, ca.if_else(accepted, y5, y)),
                            ca.vertcat(accepted, t, step, norm), dense])
     # an attempt after the segment's end is skipped: the state passes through, unchanged
-    idle_args = [ca.MX.sym(attempt.name_in(k), attempt.sparsity_in(k))
-                 for k in range(attempt.n_in())]
-    idle = ca.Function(f"{name}_idle", idle_args,
-                       [idle_args[0], ca.vertcat(0.0, idle_args[0][0], 0.0, 0.0),
-                        ca.MX.zeros(scheme.dense_rows * ny)])
-    switch = ca.Function.conditional(f"{name}_switch", [attempt], idle)
-    call = [ca.MX.sym(attempt.name_in(k), attempt.sparsity_in(k))
-            for k in range(attempt.n_in())]
-    body = ca.Function(f"{name}_body", call,
-                       switch(call[0][0] >= call[1], *call))
+    body = skippable(attempt, lambda s, t_end, *rest: s[0] >= t_end,
+                     lambda s, *rest: [s, ca.vertcat(0.0, s[0], 0.0, 0.0),
+                                       ca.MX.zeros(scheme.dense_rows * ny)], name)
     # the input numbers and the model's are passed by reference to every attempt
     chain = step_chain(body, attempts, f"{name}_chain")
     call = [ca.MX.sym(body.name_in(k), body.sparsity_in(k)) for k in range(body.n_in())]

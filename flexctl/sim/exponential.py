@@ -77,7 +77,7 @@ import numpy as np
 from ..model.checks import check_array, check_integer, check_real
 from ..model.errors import InputValueError
 
-__all__ = ["phi_functions", "central_jacobian", "sample_bound", "ExponentialSegments",
+__all__ = ["phi_functions", "central_jacobian", "sample_bound", "segment_torque", "ExponentialSegments",
            "SegmentFailed", "Abandoned", "CHAIN", "REFRESH", "EXPONENT"]
 
 #: Steps of one length per compiled call.
@@ -268,9 +268,17 @@ def _coefficients(jacobian: np.ndarray, h: float) -> list:
     return [block.ravel(order="F") for block in blocks]
 
 
-def _torque_expression(form, tau):
-    """The torque of an 11-number form (``form[0:3] + form[3:6] tau + form[6:9]
-    sin(form[9] (form[10] + tau))``) at the step's time ``tau``."""
+def segment_torque(form, tau):
+    """The torque of an 11-number segment form, ``form[0:3] + form[3:6] tau + form[6:9]
+    sin(form[9] (form[10] + tau))``, N m (CasADi).
+
+    Parameters
+    ----------
+    form : casadi.MX or casadi.SX, shape (11,) or longer
+        The form's numbers (those after the eleventh are not read).
+    tau : casadi.MX or casadi.SX or float
+        Time from the segment's (or step's) start, s.
+    """
     import casadi as ca
 
     return form[0:3] + form[3:6] * tau + form[6:9] * ca.sin(form[9] * (form[10] + tau))
@@ -283,7 +291,7 @@ def _chain(rhs, n: int):
     steps after it, and those whose ``form[11]`` is 0, pass it through."""
     import casadi as ca
 
-    from .step_chain import step_chain
+    from .step_chain import skippable, step_chain
 
     carry, form = ca.MX.sym("carry", 2 * n + 1), ca.MX.sym("form", 12)
     atol, rtol = ca.MX.sym("atol", n), ca.MX.sym("rtol")
@@ -298,7 +306,7 @@ def _chain(rhs, n: int):
     x, nu = carry[0:n], carry[n:2 * n]
 
     def remainder(state, tau):
-        return rhs(state, _torque_expression(form, tau)) - ca.mtimes(matrix, state)
+        return rhs(state, segment_torque(form, tau)) - ca.mtimes(matrix, state)
 
     exps, terms = ca.mtimes(ex, x), ca.mtimes(en, nu)
     half, whole = exps[0:n], exps[n:2 * n]
@@ -314,13 +322,10 @@ def _chain(rhs, n: int):
     accepted = norm <= 1.0                         # a NaN norm never is
     out = ca.if_else(accepted, ca.vertcat(new, nn, 0.0), ca.vertcat(x, nu, 1.0))
     step = ca.Function("flexctl_exponential_step", [carry, form] + shared, [out, norm])
-    idle_args = [ca.MX.sym(step.name_in(k), step.sparsity_in(k)) for k in range(step.n_in())]
-    idle = ca.Function("flexctl_exponential_idle", idle_args, [idle_args[0], ca.MX(0.0)])
-    switch = ca.Function.conditional("flexctl_exponential_switch", [step], idle)
-    args = [ca.MX.sym(step.name_in(k), step.sparsity_in(k)) for k in range(step.n_in())]
     # a step after a rejected one, or past the run's steps (form[11] = 0), is skipped
-    skip = ca.logic_or(args[0][2 * n] > 0.5, args[1][11] < 0.5)
-    body = ca.Function("flexctl_exponential_body", args, switch(skip, *args))
+    body = skippable(step, lambda carry, form, *rest: ca.logic_or(carry[2 * n] > 0.5,
+                                                                  form[11] < 0.5),
+                     lambda carry, *rest: [carry, ca.MX(0.0)], "flexctl_exponential")
     return step_chain(body, CHAIN, "flexctl_exponential_chain", stacked=(1,))
 
 

@@ -57,7 +57,7 @@ from ..model.spatial_dynamics import (SPATIAL_VARIANTS, SpatialEquations, spatia
 from ..model.spatial_structure import SpatialStructure
 from .background import Beside
 from .exponential import (Abandoned, ExponentialSegments, SegmentFailed, central_jacobian,
-                          sample_bound)
+                          sample_bound, segment_torque)
 from .spatial_plane import motion_plane, plane_motion
 
 __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
@@ -634,11 +634,7 @@ class _Plan:
             if PLANE_MOTION and equations.cluster is None else None
         self.plane = None if axis is None else plane_motion(equations, axis)
         self.rhs = machine_function(equations.rhs if self.plane is None else self.plane.rhs)
-        layout = equations.layout
-        start = 4 + (3 if layout.free else 0)
-        coordinates = np.arange(start, start + layout.n_elastic)
-        self.modal = (coordinates, coordinates + layout.n_coordinates - start + 3
-                      + (3 if layout.free else 0))
+        self.modal = equations.layout.modal_indices
         self.x0 = np.asarray(x0, dtype=float) if self.plane is None \
             else self.plane.restrict(x0)
         self.jacobian = None
@@ -872,7 +868,7 @@ class SpatialSegments:
         import casadi as ca
 
         state, t, p = ca.MX.sym("x", self.n_states), ca.MX.sym("t"), ca.MX.sym("p", 11)
-        torque = p[0:3] + p[3:6] * t + p[6:9] * ca.sin(p[9] * (p[10] + t))
+        torque = segment_torque(p, t)
         ode, p = self._ode(state, torque, p)
         return ca.integrator("spatial", "cvodes", {"x": state, "t": t, "p": p, "ode": ode},
                              0.0, list(grid), self._options())

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numbers
 from typing import Sequence
 
-__all__ = ["step_chain"]
+__all__ = ["step_chain", "skippable"]
 
 #: Calls per level of the nested loop (as CasADi's ``mapaccum``).
 BASE = 10
@@ -108,3 +108,38 @@ def _sequence(f, calls, stacked, name: str, size: int = 1):
         done += n
     return ca.Function(name, args, [ca.horzcat(*o) for o in outputs],
                        f.name_in(), f.name_out())
+
+
+def skippable(step, skip, idle, name: str):
+    """``step`` where ``skip`` is false, else ``idle``, the skipped branch never evaluated
+    (CasADi's ``Function.conditional``): the body of a chain whose last calls may have nothing
+    left to do.
+
+    Parameters
+    ----------
+    step : casadi.Function
+        The step, every input and output a column vector.
+    skip : callable
+        ``skip(*inputs)``: an MX expression, nonzero where the step is skipped.
+    idle : callable
+        ``idle(*inputs)``: the list of outputs of a skipped step (MX expressions of the
+        step's shapes; its first, the state passed through).
+    name : str
+        Prefix of the functions built: ``<name>_idle``, ``<name>_switch`` and
+        ``<name>_body`` (returned).
+
+    Returns
+    -------
+    casadi.Function
+        ``<name>_body``, with ``step``'s inputs and outputs.
+    """
+    import casadi as ca
+
+    def inputs():
+        return [ca.MX.sym(step.name_in(k), step.sparsity_in(k)) for k in range(step.n_in())]
+
+    symbols = inputs()
+    switch = ca.Function.conditional(f"{name}_switch", [step],
+                                     ca.Function(f"{name}_idle", symbols, idle(*symbols)))
+    symbols = inputs()
+    return ca.Function(f"{name}_body", symbols, switch(skip(*symbols), *symbols))
