@@ -127,6 +127,19 @@ class SpatialSine:
             return np.zeros(3)
         return np.asarray(self.peak_torque) * math.sin(2 * math.pi * t / self.duration)
 
+    def at(self, times) -> np.ndarray:
+        """The torque at each of ``times``, N m, shape (3, P): as ``self(t)`` for each.
+
+        Parameters
+        ----------
+        times : ndarray, shape (P,)
+            Times, s.
+        """
+        times = np.asarray(times, dtype=float)
+        inside = (times >= 0.0) & (times <= self.duration)
+        wave = np.where(inside, np.sin(2 * math.pi * times / self.duration), 0.0)
+        return np.outer(np.asarray(self.peak_torque), wave)
+
     @property
     def breakpoints(self) -> np.ndarray:
         """The end of the period, s."""

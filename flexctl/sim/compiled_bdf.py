@@ -59,7 +59,7 @@ from .native_rhs import MAX_DAE_INSTRUCTIONS, MAX_INSTRUCTIONS
 from ..model.errors import InputValueError
 
 __all__ = ["BdfRun", "bdf_available", "bdf_possible", "NoCompiledIntegrator", "OUTPUTS",
-           "CALL_STEPS", "NEWTON_TOLERANCE", "STATUS", "FAMILIES"]
+           "CALL_STEPS", "assembled", "NEWTON_TOLERANCE", "STATUS", "FAMILIES"]
 
 #: Output times per compiled call (the states handed back after each, for a run's stops).
 OUTPUTS = 128
@@ -146,11 +146,35 @@ def _functions(model, inputs, n_numbers: int) -> dict | None:
 def _library(model, inputs, n_numbers: int, family: str = "bdf"):
     """``(external, pieces)`` of the compiled integrator of ``family`` (``"bdf"`` or
     ``"adams"``) for this drive (``pieces`` from ``_functions``), or None."""
-    import casadi as ca
-
     pieces = _functions(model, inputs, n_numbers)
     if pieces is None:
         return None
+    return assembled(pieces, n_numbers, family,
+                     f"the {model.variant} model's {FAMILIES[family]} integrator")
+
+
+def assembled(pieces: dict, n_numbers: int, family: str, label: str):
+    """``(external, pieces)``: the integrator library of ``family`` around a drive's
+    ``pieces`` (as ``_functions`` gives them), from the compile cache, or None where it
+    cannot be compiled.
+
+    Parameters
+    ----------
+    pieces : dict
+        ``F`` (the drive's rate, or with a core its own part ``(t, y, c) -> pre``), ``J``
+        (its Newton Jacobian, or None: by differences, in C), ``f_values``, ``j_values``
+        (their lifted numbers), ``defines`` (of the C template; ``BDF_CORE`` and the core's
+        work sizes where a compiled right-hand side is called through its address),
+        ``address`` and ``keep`` (that right-hand side's entry point).
+    n_numbers : int
+        Length of the input ``c`` (the inputs' numbers).
+    family : {"bdf", "adams"}
+        The formulas (:data:`FAMILIES`).
+    label : str
+        What to call the library in a progress line.
+    """
+    import casadi as ca
+
     generator = ca.CodeGenerator("flexctl_bdf.c", {"with_header": False})
     generator.add(pieces["F"])
     if pieces["J"] is not None:
@@ -168,9 +192,7 @@ def _library(model, inputs, n_numbers: int, family: str = "bdf"):
     source = (generator.dump() + "\n"
               + "".join(f"#define {k} {v}\n" for k, v in defines.items())
               + _TEMPLATE.read_text(encoding="utf-8"))
-    external = compiled_source("flexctl_bdf", source,
-                               label=f"the {model.variant} model's {FAMILIES[family]} "
-                                     f"integrator", loops=True)
+    external = compiled_source("flexctl_bdf", source, label=label, loops=True)
     if external is None:
         return None
     return external, pieces
@@ -307,12 +329,16 @@ class BdfRun(CompiledRun):
             raise NoCompiledIntegrator("BdfRun: this drive has no compiled integrator (compiling "
                                   "off, no C compiler, the consistent variant, or a drive too "
                                   "large to compile); use CVODES")
+        self._start(built, m, self.rtol * scale, input_numbers(inputs))
+
+    def _start(self, built, m: int, atol, numbers) -> None:
+        """This run's buffers on the library ``built`` (``(external, pieces)``), ``m``
+        states, their absolute tolerances ``atol`` and the inputs' ``numbers``."""
         external, pieces = built
         self._run, self._size = _Entry(external, pieces["address"]), m
         self._keep = pieces["keep"]
-        numbers = input_numbers(inputs)
         args = self._run.args
-        args[4][:] = self.rtol * scale
+        args[4][:] = atol
         args[5][:numbers.size] = numbers
         args[6][:pieces["f_values"].size] = pieces["f_values"]
         args[7][:pieces["j_values"].size] = pieces["j_values"]
@@ -329,13 +355,14 @@ class BdfRun(CompiledRun):
         out, done, evaluations = np.empty((m, t_out.size)), 0, 0
         stats = {"steps": 0, "evaluations": 0, "jacobians": 0, "factorisations": 0,
                  "rejected": 0}
-        left = float(self.max_steps) * t_out.size
+        since = 0.0                     # steps since an output was last reached
         while done < t_out.size:
             chunk = t_out[done:done + OUTPUTS]
             times[:chunk.size] = chunk
             times[chunk.size:] = chunk[-1]
             settings[:] = (chunk.size, self.rtol, self.h, self.max_step,
-                           min(CALL_STEPS, left), end, NEWTON_TOLERANCE, lo)
+                           min(CALL_STEPS, self.max_steps - since), end, NEWTON_TOLERANCE,
+                           lo)
             run.evaluate()
             carry[:] = run.results[0]
             info = run.results[2]
@@ -345,7 +372,7 @@ class BdfRun(CompiledRun):
                            ("factorisations", 5), ("rejected", 7)):
                 stats[key] += int(info[k])
             evaluations += int(info[3])
-            left -= info[2]
+            since = 0.0 if reached else since + info[2]
             out[:, done:done + reached] = states[:, :reached]
             # asked after every call, also one that reached no output (a cancelled replay
             # ends within a call)
@@ -356,7 +383,7 @@ class BdfRun(CompiledRun):
                     return out[:, :done + reached], evaluations
             done += reached
             status = int(info[0])
-            if status == 1 and left > 0.0:
+            if status == 1 and since < self.max_steps:
                 continue                # this call's share of the budget: the next goes on
             if status != 0:
                 self.last_stats = stats

@@ -57,11 +57,16 @@ class PlaneMotion:
     rhs : casadi.Function
         ``(x_plane, torque (3)) -> x_plane_t``: the whole model's rate at the in-plane
         state, the torque's component along ``a`` applied, restricted to the plane.
+    tips : casadi.Function
+        ``x_plane -> tips (3, n_appendages)``: the whole model's tip displacements
+        (:attr:`~flexctl.model.spatial_dynamics.SpatialEquations.tips`) at the in-plane
+        state (a third of their operations on two panels of 2 modes).
     """
 
     axis: np.ndarray
     embedding: np.ndarray
     rhs: object
+    tips: object
 
     @property
     def n_states(self) -> int:
@@ -221,8 +226,10 @@ def _cached(equations: SpatialEquations, axis: tuple) -> PlaneMotion:
     rate = ca.mtimes(ca.DM(embedding.T), equations.rhs(whole, along))
     rhs = ca.Function("spatial_plane_rhs", [x, torque], [rate], ["x", "torque"], ["x_dot"],
                       {"cse": True})
+    tips = ca.Function("spatial_plane_tips", [x], [equations.tips(whole)], ["x"], ["tips"],
+                       {"cse": True})
     embedding.setflags(write=False)
-    return PlaneMotion(axis=a, embedding=embedding, rhs=rhs)
+    return PlaneMotion(axis=a, embedding=embedding, rhs=rhs, tips=tips)
 
 
 def plane_motion(equations: SpatialEquations, axis) -> PlaneMotion:

@@ -22,11 +22,13 @@ persistent compile cache where a compiler is found.
 - **Motion in one plane.** A run that cannot leave a plane (:mod:`flexctl.sim.spatial_plane`:
   appendages in the plane, the hub turning about its normal, a principal axis of extreme
   inertia, under a torque along it) integrates the equations restricted to the plane, some
-  8 times cheaper to evaluate, with Newton's iterations on the Jacobian at each segment's
-  start (half the evaluations of functional iteration there); its states are the whole
-  model's, the out-of-plane ones zero. :data:`PLANE_MOTION` False integrates the whole model
-  instead (``benchmarks/bench_spatial.py`` (a): 3.5 times the planar exact model's time
-  against 10 to 34 times).
+  8 times cheaper to evaluate; its states are the whole model's, the out-of-plane ones
+  zero. Under a torque of segments (a sine, steps, a hold, a few samples) they run on the
+  compiled Adams-Moulton methods of the planar models (:mod:`flexctl.sim.spatial_adams`:
+  Newton's iterations, no interface cost per step), else on CVODES's with Newton's
+  iterations on the Jacobian at each segment's start. :data:`PLANE_MOTION` False integrates
+  the whole model instead (``benchmarks/bench_spatial.py`` (a): 1.4 to 1.7 times the planar
+  exact model's time at the same tolerances).
 - **Its error.** With ``check_accuracy`` (default) the run is repeated at a tenth of the
   tolerances and :attr:`SpatialResult.integration_error` is the largest difference of any tip
   component, relative to that component's peak (the largest over the appendages). The
@@ -46,7 +48,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field
-from functools import cached_property, lru_cache
+from functools import cached_property, lru_cache, partial
 
 import numpy as np
 
@@ -56,8 +58,10 @@ from ..model.spatial_dynamics import (SPATIAL_VARIANTS, SpatialEquations, spatia
                                       spatial_modes)
 from ..model.spatial_structure import SpatialStructure
 from .background import Beside
+from .compile_cache import compiling_enabled
 from .exponential import (Abandoned, ExponentialSegments, SegmentFailed, central_jacobian,
                           sample_bound, segment_torque)
+from .spatial_adams import CompiledAdams, adams_library
 from .spatial_plane import motion_plane, plane_motion
 
 __all__ = ["VectorTorque", "SpatialResult", "simulate_spatial", "initial_state",
@@ -154,6 +158,20 @@ class VectorTorque:
             k = int(np.searchsorted(self.times, t, side="right")) - 1
             return np.array(self.values[max(k, 0)])
         return np.array([np.interp(t, self.times, self.values[:, j]) for j in range(3)])
+
+    def at(self, times) -> np.ndarray:
+        """The torque at each of ``times``, N m, shape (3, P): as ``self(t)`` for each.
+
+        Parameters
+        ----------
+        times : ndarray, shape (P,)
+            Times, s.
+        """
+        times = np.asarray(times, dtype=float)
+        if self.interpolation == "hold" or self.times.size == 1:
+            k = np.searchsorted(self.times, times, side="right") - 1
+            return np.array(self.values[np.maximum(k, 0)].T)
+        return np.array([np.interp(times, self.times, self.values[:, j]) for j in range(3)])
 
     def segment_form(self, a: float, b: float) -> np.ndarray:
         """The torque on ``[a, b]`` (no sample inside), as the 11 numbers of
@@ -390,6 +408,16 @@ class ConstantTorque:
         """
         return self.value
 
+    def at(self, times) -> np.ndarray:
+        """The torque at each of ``times``, N m, shape (3, P).
+
+        Parameters
+        ----------
+        times : ndarray, shape (P,)
+            Times, s.
+        """
+        return np.repeat(np.asarray(self.value, dtype=float)[:, None], len(times), axis=1)
+
     def segment_form(self, a, b):
         """The 11 parameters of the torque on ``[a, b]`` (:class:`SpatialSegments`).
 
@@ -486,11 +514,12 @@ def simulate_spatial(structure: SpatialStructure, t_final: float, torque=None, *
         if status == "ok":
             fine_run = check.result()
             if fine_run is not None and fine_run[0] == "ok":
-                error = _tip_error(equations, states, fine_run[1])
+                error = _tip_error(plan, states, fine_run[1])
         else:
             check.abandon()
-    torque_history = np.column_stack([drive(t) for t in times[:states.shape[1]]]) \
-        if states.shape[1] else np.zeros((3, 0))
+    reached = times[:states.shape[1]]
+    torque_history = drive.at(reached) if hasattr(drive, "at") \
+        else np.array([drive(t) for t in reached], dtype=float).reshape(-1, 3).T
     if states.shape[1]:
         states = states.copy()
         states[0:4] /= np.linalg.norm(states[0:4], axis=0)
@@ -596,23 +625,55 @@ def machine_function(function):
     import casadi as ca
 
     from .compile_cache import compiled
+
+    native, values = _native(function)
+    if native is not None:
+        args = [ca.MX.sym(function.name_in(k), function.sparsity_in(k))
+                for k in range(function.n_in())]
+        return ca.Function(f"{function.name()}_native", args,
+                           native.call(args + [ca.DM(values)]), function.name_in(),
+                           function.name_out())
+    return compiled(function, options=_NATIVE_OPTIONS)
+
+
+#: finite differences only stand in for derivatives CasADi asks for when it builds an
+#: integrator; CVODES's functional iteration (Adams) never evaluates them
+_NATIVE_OPTIONS = {"enable_fd": True}
+
+
+@lru_cache(maxsize=32)
+def _native(function) -> tuple:
+    """``(native, values)``: ``function`` with its numbers lifted into a last input
+    (:func:`~flexctl.sim.lifted_constants.lift_constants`: one library for every structure
+    of the same shape, a Monte Carlo's dispersed stiffness or another array length) as
+    loaded from the compile cache, and those numbers; ``(None, None)`` where compiling is
+    off, impossible or failed."""
+    from .compile_cache import compiled
     from .lifted_constants import lift_constants
 
-    # finite differences only stand in for derivatives CasADi asks for when it builds an
-    # integrator; CVODES's functional iteration (Adams) never evaluates them
-    options = {"enable_fd": True}
     lifted = lift_constants(function)
     if lifted is not None:
-        # the structure's numbers as an input: one library for every structure of the same
-        # shape (a Monte Carlo's dispersed stiffness, another array length)
-        built = compiled(lifted[0], options=options, label=function.name())
-        if built is not lifted[0]:            # else compiling is off, impossible or failed
-            args = [ca.MX.sym(function.name_in(k), function.sparsity_in(k))
-                    for k in range(function.n_in())]
-            return ca.Function(f"{function.name()}_native", args,
-                               built.call(args + [ca.DM(lifted[1])]), function.name_in(),
-                               function.name_out())
-    return compiled(function, options=options)
+        built = compiled(lifted[0], options=_NATIVE_OPTIONS, label=function.name())
+        if built is not lifted[0]:
+            return built, np.asarray(lifted[1], dtype=float).ravel()
+    return None, None
+
+
+@lru_cache(maxsize=32)
+def _mapped(function, count: int, numbers: bool = False):
+    """``function.map(count)``, kept (for calls in the thread that plans a run); with
+    ``numbers`` its last input (lifted numbers) the same for every column."""
+    if numbers:
+        return function.map(count, [False] * (function.n_in() - 1) + [True], [False])
+    return function.map(count)
+
+
+@lru_cache(maxsize=32)
+def _adams_library(function):
+    """:func:`~flexctl.sim.spatial_adams.adams_library` of ``function``'s compiled form, or
+    None."""
+    native, values = _native(function)
+    return None if native is None else adams_library(native, values)
 
 
 class _Plan:
@@ -621,7 +682,7 @@ class _Plan:
     :mod:`flexctl.sim.spatial_plane`), the initial state and the segments."""
 
     def __init__(self, equations: SpatialEquations, x0, times, drive, breakpoints):
-        self.times, self.drive = times, drive
+        self.equations, self.times, self.drive = equations, times, drive
         t_final = times[-1]
         self.line = (isinstance(drive, VectorTorque) and drive.interpolation == "linear"
                      and drive.times.size > THROUGH_SAMPLES)
@@ -638,6 +699,18 @@ class _Plan:
         self.x0 = np.asarray(x0, dtype=float) if self.plane is None \
             else self.plane.restrict(x0)
         self.jacobian = None
+        # the plane's compiled Adams-Moulton steps (a torque of segments)
+        self.library = _adams_library(self.plane.rhs) if self.plane is not None \
+            and not self.line and hasattr(drive, "segment_form") and compiling_enabled() \
+            else None
+        if self.library is not None:
+            # the first step a hundredth of a radian of the fastest mode
+            jacobian = _difference_jacobian(_mapped(self.rhs, self.x0.size + 1), self.x0,
+                                            drive(0.0))
+            fastest = float(np.max(np.abs(np.linalg.eigvals(jacobian)))) \
+                if np.all(np.isfinite(jacobian)) else 0.0
+            self.h_first = float(min(0.01 / fastest if fastest > 0.0 else math.inf,
+                                     times[1] - times[0] if times.size > 1 else times[-1]))
         if EXPONENTIAL and self.plane is None and equations.cluster is None \
                 and hasattr(drive, "segment_form"):
             self.jacobian = self._stiff(drive, breakpoints)
@@ -660,7 +733,12 @@ class _Plan:
     def integration(self, rtol: float, atol: float) -> "_Integration":
         """The integration at tolerances ``rtol``, ``atol``, its integrators built."""
         adams = SpatialSegments(self.rhs, self.x0.size, self.drive, rtol, atol, self.line,
-                                newton=self.plane is not None)
+                                newton=self.plane is not None and self.library is None)
+        if self.library is not None:
+            return _Integration(self, CompiledAdams(
+                self.library, self.x0.size, self.drive, rtol, atol, MAX_STEPS, self.h_first,
+                explain=partial(adams.too_much_work,
+                                integrator="the compiled Adams-Moulton integrator")))
         if self.jacobian is None:
             return _Integration(self, adams)
         # the exponential steps give a segment up to Adams-Moulton where they are held below
@@ -899,12 +977,24 @@ class SpatialSegments:
         self.evaluations += self.n_states + 1
         return _difference_jacobian(self.differences, x, self.drive(a)).ravel(order="F")
 
-    def _too_much_work(self, a: float, b: float, x, wanted) -> str:
-        """Why CVODES ran out of steps between two of the output times ``wanted`` on
+    def too_much_work(self, a: float, b: float, x, wanted, integrator: str = "CVODES") -> str:
+        """Why an integrator ran out of steps between two of the output times ``wanted`` on
         ``[a, b]``: a line's sample interval that bounds every step, or the fastest
-        eigenvalue of the model at ``a`` and the step it allows."""
-        head = (f"CVODES took all of its {MAX_STEPS:g} steps between two output times in "
-                f"[{a:g}, {b:g}] s")
+        eigenvalue of the model at ``a`` and the step it allows.
+
+        Parameters
+        ----------
+        a, b : float
+            The segment's ends, s.
+        x : ndarray, shape (n_states,)
+            The state at ``a``.
+        wanted : array_like
+            The segment's output times, s.
+        integrator : str, optional
+            Its name in the message. Default ``"CVODES"``.
+        """
+        head = (f"{integrator} took all of its {MAX_STEPS:g} steps between two output times "
+                f"in [{a:g}, {b:g}] s")
         bound = sample_bound(self.drive.times, a, wanted, MAX_STEPS) if self.line else None
         if bound is not None:
             return f"{head}: {bound}"
@@ -952,7 +1042,7 @@ class SpatialSegments:
             return self._call(self.build(a, b, wanted), x, p)
         except SegmentFailed as exc:
             if "CV_TOO_MUCH_WORK" in str(exc):
-                raise SegmentFailed(self._too_much_work(a, b, x, wanted)) from None
+                raise SegmentFailed(self.too_much_work(a, b, x, wanted)) from None
             raise
 
     def _call(self, integrator, x, p) -> np.ndarray:
@@ -1013,11 +1103,18 @@ def quaternion_drift(states) -> float:
     return float(np.max(np.abs(np.linalg.norm(states[0:4], axis=0) - 1.0)))
 
 
-def _tip_error(equations: SpatialEquations, coarse, fine) -> float:
+def _tip_error(plan: _Plan, coarse, fine) -> float:
     """Largest tip difference, relative to each component's peak (at least 1e-12 m)."""
     count = min(coarse.shape[1], fine.shape[1])
-    both = machine_function(equations.tips).map(2 * count)(
-        np.hstack([coarse[:, :count], fine[:, :count]])).full()
+    both = np.hstack([coarse[:, :count], fine[:, :count]])
+    tips = plan.equations.tips
+    if plan.plane is not None:
+        tips, both = plan.plane.tips, plan.plane.embedding.T @ both
+    native, values = _native(tips)
+    if native is not None:       # the compiled function, its numbers the same for every column
+        both = _mapped(native, 2 * count, True)(both, values).full()
+    else:
+        both = machine_function(tips).map(2 * count)(both).full()
     half = both.shape[1] // 2
     a, b = both[:, :half], both[:, half:]
     peaks = np.maximum(np.max(np.abs(b.reshape(3, -1, count, order="F")), axis=2), 1e-12)

@@ -157,6 +157,26 @@ def test_a_step_budget_and_a_non_finite_state_fail_the_segment(exact, family):
         run(0.0, np.array([0.5, 1.0]), bad)
 
 
+@pytest.mark.parametrize("family", ["bdf", "adams"])
+def test_the_step_budget_holds_between_two_output_times(exact, family):
+    """As CVODES's ``max_num_steps``: the budget is that of each output interval, not shared
+    by the outputs (many later outputs do not lend their steps to a long first interval)."""
+    model, _ = exact
+    scale = state_scale(model, model.layout)
+    times = np.concatenate([[2.0], 2.0 + 1e-3 * np.arange(1, 200)])
+    counted = BdfRun(model, TORQUE, scale=scale, rtol=1e-8, max_steps=10**5, h_first=1e-3,
+                     family=family)
+    counted(0.0, times, np.zeros(model.n_states))
+    first = counted.last_stats["steps"]
+    assert first > 100
+    # a budget below the first interval's steps fails though the outputs' sum exceeds them
+    tight = BdfRun(model, TORQUE, scale=scale, rtol=1e-8, max_steps=first // 4, h_first=1e-3,
+                   family=family)
+    assert (first // 4) * times.size > first
+    with pytest.raises(RuntimeError, match="budget"):
+        tight(0.0, times, np.zeros(model.n_states))
+
+
 def test_without_compiling_the_exact_model_keeps_its_other_methods(exact, monkeypatch):
     model, tight = exact
     monkeypatch.setenv("FLEXCTL_COMPILE", "0")

@@ -12,7 +12,8 @@ from flexctl.model.parameters import Beam, Hub, PointMass
 from flexctl.model.spatial_dynamics import spatial_equations
 from flexctl.model.spatial_structure import SpatialHub, SpatialStructure
 from flexctl.model.structure import Appendage, Structure
-from flexctl.sim import spatial_run
+from flexctl.sim import compile_cache, spatial_run
+from flexctl.sim.spatial_adams import CompiledAdams
 from flexctl.sim.spatial_plane import motion_plane, plane_motion
 from flexctl.sim.spatial_run import VectorTorque, initial_state, simulate_spatial
 
@@ -112,3 +113,50 @@ def test_a_run_in_the_plane_is_the_whole_models(monkeypatch, form):
     # the whole model's stiff run takes exponential steps, whose error at rtol 1e-9 leaves the
     # attitude within 3e-9 of a run at rtol 1e-13 (the restriction's within 3e-10)
     np.testing.assert_allclose(plane.quaternion, whole.quaternion, rtol=0, atol=1e-8)
+
+
+@pytest.mark.skipif(compile_cache.compiler() is None, reason="no C compiler")
+def test_a_run_in_the_plane_takes_compiled_adams_moulton_steps(monkeypatch):
+    """Under a torque of segments the restriction is integrated by the compiled
+    Adams-Moulton methods (:mod:`flexctl.sim.spatial_adams`), a line through many samples
+    and a run without compiling by CVODES: the same run within their errors."""
+    structure = SpatialStructure.from_planar(_planar())
+    equations = spatial_equations(structure, 2)
+    x0 = initial_state(equations, angular_velocity=(0.0, 0.0, 0.2))
+    times = np.linspace(0.0, 1.5, 151)
+    torque = SpatialSine(np.array([0.0, 0.0, -0.8]), 1.0)
+    plan = spatial_run._Plan(equations, x0, times, torque, torque.breakpoints)
+    assert isinstance(plan.integration(1e-9, 1e-12).segments, CompiledAdams)
+    line = VectorTorque(np.linspace(0.0, 1.5, 41), np.outer(np.linspace(0, 1, 41), [0, 0, 1]))
+    plan = spatial_run._Plan(equations, x0, times, line, np.zeros(0))
+    assert isinstance(plan.integration(1e-9, 1e-12).segments, spatial_run.SpatialSegments)
+    runs = {}
+    for compiling in ("1", "0"):
+        monkeypatch.setenv("FLEXCTL_COMPILE", compiling)
+        runs[compiling] = simulate_spatial(structure, 1.5, torque, n_modes=2,
+                                           angular_velocity=(0.0, 0.0, 0.2),
+                                           output_step=0.01, rtol=1e-9)
+    compiled, cvodes = runs["1"], runs["0"]
+    assert compiled.status == cvodes.status == "ok"
+    for name, tips in cvodes.tips.items():
+        peaks = np.maximum(np.max(np.abs(tips), axis=1), 1e-12)
+        error = np.max(np.abs(compiled.tips[name] - tips), axis=1) / peaks
+        assert np.all(error < 1e-6), (name, error)
+    assert 0.0 < compiled.integration_error < 1e-6
+    np.testing.assert_allclose(compiled.quaternion, cvodes.quaternion, rtol=0, atol=1e-8)
+
+
+def test_the_compiled_steps_name_a_spent_budget_and_a_blow_up(monkeypatch):
+    """A step budget spent between two outputs is named with the model's fastest eigenvalue;
+    a torque no step can follow fails the run with a message, never a NaN."""
+    structure = SpatialStructure.from_planar(_planar())
+    monkeypatch.setattr(spatial_run, "MAX_STEPS", 50)
+    run = simulate_spatial(structure, 1.0, _sine(), n_modes=3, output_step=0.5)
+    assert run.status == "failed"
+    assert "took all of its 50 steps" in run.message and "fastest eigenvalue" in run.message
+    monkeypatch.setattr(spatial_run, "MAX_STEPS", 2_000_000)
+    run = simulate_spatial(structure, 1.0, _sine((0.0, 0.0, 1e150)), n_modes=2,
+                           output_step=0.01)
+    assert run.status in ("failed", "diverged") and "t = 0 s" in run.message
+    assert np.all(np.isfinite(run.states))
+    assert run.integration_error is None
