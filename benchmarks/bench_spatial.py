@@ -6,7 +6,10 @@ model on the same modes, and a two-array structure slewed about a tilted axis.
     model (``flexctl.simulate``) and the same structure as a spatial one
     (``SpatialStructure.from_planar``, torque about the hub's z axis) at the same modes per
     field, tolerance and output grid, both with their accuracy checks. Printed: the wall
-    times and their ratio (target: the spatial run within 2 times the planar one).
+    times and their ratio (target: the spatial run within 2 times the planar one), the planar
+    run at its own default ``atol`` (each state's physical size times rtol: 1.8e-3 m for a
+    modal coordinate, that times the first clamped frequency for a rate) and at the spatial
+    model's (``rtol * 1e-3`` for every state), the like-for-like comparison.
 (b) The two arrays of ``examples/scenes/spatial-two-arrays.toml`` (its hub, with products of
     inertia; 4 modes per field: 27 speeds, torsion and lateral modes up to 3.6e3 rad/s)
     slewed about the tilted axis (0.6, 0, 0.8) by one period of a 0.5 N m sine over 6 s given
@@ -38,6 +41,16 @@ processor times are printed too; ratios repeat within some 20 %):
   alone, 1.96 times that with the check (it runs beside the run only on a free core, which
   this machine did not have), estimate 7.1e-7, error 6.6e-7. The target of (a) is missed by
   1.75 times, that of (b) by some 20 times.
+
+Measured for (a) with the restriction on the compiled Adams-Moulton steps
+(:mod:`flexctl.sim.spatial_adams`), its tips taken on the plane for the check (best of 3):
+2 modes, 8 ms against the planar model's 5 ms at its own ``atol`` and 6 ms at the same
+(ratios 1.66 and 1.38); 4 modes, 39 ms against 16 and 23 ms (ratios 2.49 and 1.66). At the
+same tolerances the target is met: the runs alone take as many evaluations (4 modes: 5 414
+and 5 433), each of the restriction's 1.4 times the planar one's (4.7 against 3.3 us; 17 142
+operations against 11 165: rotations in three dimensions along the rod). At its own ``atol``,
+1.8 times the spatial one for a modal coordinate and 14 times for a modal rate, the planar
+run alone takes 3 374. Before, on CVODES: 27 ms and 90 to 127 ms (ratios 6 and 5 to 9).
 
 Measured for (b) with the exponential steps (rtol 1e-8, the run alone, the best of 2):
 
@@ -187,7 +200,8 @@ def planar_rows():
                 f"{result.n_evaluations:6d} |")
         print(row + f" {difference:9.2e}")
     print("  (ratio, same: the spatial run's wall time to the planar run's at its own and at the "
-          "same atol; tip diff: wing_a's deflection in the plane from the planar model's, "
+          "same atol; evals: the planar model's count its check's too, the spatial model's the "
+          "run's alone; tip diff: wing_a's deflection in the plane from the planar model's, "
           "relative to its peak)")
 
 
