@@ -134,6 +134,115 @@ def rod_shapes(length: float, n_modes: int, nodes: tuple) -> dict:
             "twist_rate": np.sqrt(2.0) * np.cos(np.outer(s, beta)) * beta}
 
 
+def chain_step(rotation, delta, rate, accel, step, step_t, step_tt, step_jac) -> tuple:
+    """One node of :meth:`Rod.chain`'s recursion: the product ``R_j = R_(j-1) E_j``,
+    ``E_j = exp([Omega_j]x)``, the variations ``delta_j = E_j^T delta_(j-1) + T(Omega_j)
+    dOmega_j / deta``, ``d_j = E^T d_(j-1) + T Omega_t`` and its rate at ``u_t = 0``
+    (``E_t^T = -[turn]x E^T``) (CasADi).
+
+    Parameters
+    ----------
+    rotation : casadi.SX, shape (3, 3)
+        ``R_(j-1)``.
+    delta : casadi.SX, shape (3, M)
+        ``delta_(j-1)``.
+    rate, accel : casadi.SX, shape (3, 1)
+        ``d_(j-1)`` and its rate.
+    step, step_t, step_tt : casadi.SX, shape (3, 1)
+        ``Omega_j`` (the integrated curvature over the node's interval) and its first and
+        second rates at ``u_t = 0``.
+    step_jac : casadi.SX, shape (3, M)
+        ``dOmega_j / deta``.
+
+    Returns
+    -------
+    tuple
+        ``(R_j, delta_j, d_j, d_t_j)``.
+    """
+    import casadi as ca
+
+    factor = _exp(step)
+    right, right_t = _right_jacobian_and_rate()(step, step_t)
+    turn = ca.mtimes(right, step_t)                # E^-1 E_t = [turn]x
+    carried = ca.mtimes(factor.T, rate)
+    accel = -ca.cross(turn, carried) + ca.mtimes(factor.T, accel) \
+        + ca.mtimes(right_t, step_t) + ca.mtimes(right, step_tt)
+    return (ca.mtimes(rotation, factor), ca.mtimes(factor.T, delta) + ca.mtimes(right, step_jac),
+            carried + turn, accel)
+
+
+def section_motion(frame, rotation, delta, d, d_t) -> tuple:
+    """One section's tangent and spin in the hub frame, their variations and rates, from its
+    rotation ``R`` (relative to the root frame) and ``delta``, ``d``, ``d_t``
+    (:meth:`Rod.chain`): ``R e1`` varies by ``R (delta x e1)``, its rate is ``R (d x e1)``,
+    its acceleration at ``u_t = 0`` ``R (d x (d x e1) + d_t x e1)``; the section's angular
+    velocity relative to the root frame is ``R d`` and its rate ``R d_t`` (CasADi).
+
+    Parameters
+    ----------
+    frame : casadi.DM or SX, shape (3, 3)
+        The root frame in the hub frame.
+    rotation : casadi.SX, shape (3, 3)
+        ``R``.
+    delta : casadi.SX, shape (3, M)
+        ``R^-1 dR / deta = [delta]x``, column by column.
+    d, d_t : casadi.SX, shape (3, 1)
+        ``delta eta_t`` and its rate at ``u_t = 0``.
+
+    Returns
+    -------
+    tuple
+        ``(tangent (3,), tangent_jac (3, M), tangent_rate (3,), tangent_accel (3,),
+        spin_jac (3, M), spin (3,), spin_rate (3,))``, hub frame.
+    """
+    import casadi as ca
+
+    hub_r = ca.mtimes(frame, rotation)                                # section in hub frame
+    # delta x e1 = (0, delta_3, -delta_2)
+    local = ca.cross(d, ca.vertcat(0, d[2], -d[1])) + ca.vertcat(0, d_t[2], -d_t[1])
+    return (hub_r[:, 0],
+            ca.mtimes(hub_r[:, 1], delta[2, :]) - ca.mtimes(hub_r[:, 2], delta[1, :]),
+            hub_r[:, 1] * d[2] - hub_r[:, 2] * d[1], ca.mtimes(hub_r, local),
+            ca.mtimes(hub_r, delta), ca.mtimes(hub_r, d), ca.mtimes(hub_r, d_t))
+
+
+@lru_cache(maxsize=16)
+def shared_chain_step(n_coordinates: int):
+    """:func:`chain_step` as one CasADi function kept as a call (``never_inline``): its
+    machine code once, however many nodes call it.
+
+    Parameters
+    ----------
+    n_coordinates : int
+        ``M``, the rod's modal coordinates.
+    """
+    import casadi as ca
+
+    args = [ca.SX.sym("rotation", 3, 3), ca.SX.sym("delta", 3, n_coordinates),
+            ca.SX.sym("rate", 3), ca.SX.sym("accel", 3), ca.SX.sym("step", 3),
+            ca.SX.sym("step_t", 3), ca.SX.sym("step_tt", 3),
+            ca.SX.sym("step_jac", 3, n_coordinates)]
+    return ca.Function(f"rod_chain_step_{n_coordinates}", args, list(chain_step(*args)),
+                       {"never_inline": True, "cse": True})
+
+
+@lru_cache(maxsize=16)
+def shared_section(n_coordinates: int):
+    """:func:`section_motion` as one CasADi function kept as a call (``never_inline``).
+
+    Parameters
+    ----------
+    n_coordinates : int
+        ``M``, the rod's modal coordinates.
+    """
+    import casadi as ca
+
+    args = [ca.SX.sym("frame", 3, 3), ca.SX.sym("rotation", 3, 3),
+            ca.SX.sym("delta", 3, n_coordinates), ca.SX.sym("d", 3), ca.SX.sym("d_t", 3)]
+    return ca.Function(f"rod_section_{n_coordinates}", args, list(section_motion(*args)),
+                       {"never_inline": True, "cse": True})
+
+
 @dataclass(frozen=True, eq=False)
 class Rod:
     """One appendage's exact kinematics on its quadrature: node rotations, positions.
@@ -148,12 +257,17 @@ class Rod:
         Modes per field ``N``.
     root : ndarray, shape (3,)
         The rod's root point in the hub frame, m.
+    shared : bool, optional
+        Each node's recursion and section as calls of one function
+        (:func:`shared_chain_step`, :func:`shared_section`) rather than written out: the
+        same values in a fraction of the machine code. Default False.
     """
 
     appendage: SpatialAppendage
     rule: object
     n_modes: int
     root: np.ndarray
+    shared: bool = False
 
     def chain(self, eta, eta_t):
         """The section rotations ``R_j`` (relative to the root frame) at every node, with
@@ -196,6 +310,7 @@ class Rod:
             ca.mtimes(ca.DM(shapes["twist_rate"]), eta_t[2 * n_modes:]),
             -ca.mtimes(ca.DM(shapes["curvature"]), eta_t[0:n_modes]),
             ca.mtimes(ca.DM(shapes["curvature"]), eta_t[n_modes:2 * n_modes])).T
+        advance = shared_chain_step(int(eta.shape[0])) if self.shared else chain_step
         rotation = ca.SX.eye(3)
         delta = ca.SX.zeros(3, eta.shape[0])
         rate, accel = ca.SX.zeros(3, 1), ca.SX.zeros(3, 1)
@@ -208,16 +323,8 @@ class Rod:
                 ca.cross(curvature_t[:, j - 1], curvature[:, j])
                 + ca.cross(curvature[:, j - 1], curvature_t[:, j]))
             step_tt = 2 * h2 * ca.cross(curvature_t[:, j - 1], curvature_t[:, j])
-            factor = _exp(step)
-            right, right_t = _right_jacobian_and_rate()(step, step_t)
-            turn = ca.mtimes(right, step_t)                # E^-1 E_t = [turn]x
-            rotation = ca.mtimes(rotation, factor)
-            delta = ca.mtimes(factor.T, delta) + ca.mtimes(right, ca.jacobian(step, eta))
-            # d_j = E^T d_(j-1) + T step_t and its rate at u_t = 0 (E_t^T = -[turn]x E^T)
-            carried = ca.mtimes(factor.T, rate)
-            accel = -ca.cross(turn, carried) + ca.mtimes(factor.T, accel) \
-                + ca.mtimes(right_t, step_t) + ca.mtimes(right, step_tt)
-            rate = carried + turn
+            rotation, delta, rate, accel = advance(rotation, delta, rate, accel, step, step_t,
+                                                   step_tt, ca.jacobian(step, eta))
             rotations.append(rotation)
             deltas.append(delta)
             rates.append(rate)
@@ -249,7 +356,7 @@ class Rod:
         return ca.mtimes(ca.sparsify(ca.DM(local)), values) \
             + ca.mtimes(ca.sparsify(ca.DM(before)), sums)
 
-    def motion(self, eta, eta_t) -> dict:
+    def motion(self, eta, eta_t, frame=None, root=None) -> dict:
         """Positions and their derivatives of every node and point mass, and the sections'
         rotations with theirs, for the appendage's modal coordinates ``eta`` ``[qn; ql; qt]``
         and rates ``eta_t`` (CasADi).
@@ -267,6 +374,10 @@ class Rod:
             per unit of the mode shape).
         eta_t : casadi.SX, shape (3N,)
             Their rates.
+        frame, root : casadi.SX, optional
+            The root frame (3, 3) and root point (3,) in the hub frame as symbols (one
+            function for every appendage of the same rod, :mod:`flexctl.model.spatial_dynamics`).
+            Default the appendage's numbers.
 
         Returns
         -------
@@ -281,24 +392,17 @@ class Rod:
         import casadi as ca
 
         rotations, deltas, rates, accelerations = self.chain(eta, eta_t)
-        frame = ca.DM(self.appendage.frame)
+        frame = ca.DM(self.appendage.frame) if frame is None else frame
         tangent, tangent_jac, tangent_rate, tangent_accel = [], [], [], []
         spin_jac, spin, spin_rate = [], [], []
-        for j, (r, delta, d) in enumerate(zip(rotations, deltas, rates)):
-            d_t = accelerations[j]
-            hub_r = ca.mtimes(frame, r)                                  # section in hub frame
-            tangent.append(hub_r[:, 0])
-            # delta x e1 = (0, delta_3, -delta_2)
-            tangent_jac.append(ca.mtimes(hub_r[:, 1], delta[2, :])
-                               - ca.mtimes(hub_r[:, 2], delta[1, :]))     # (3, N)
-            tangent_rate.append(hub_r[:, 1] * d[2] - hub_r[:, 2] * d[1])
-            local = ca.cross(d, ca.vertcat(0, d[2], -d[1])) + ca.vertcat(0, d_t[2], -d_t[1])
-            tangent_accel.append(ca.mtimes(hub_r, local))
-            spin_jac.append(ca.mtimes(hub_r, delta))
-            spin.append(ca.mtimes(hub_r, d))
-            spin_rate.append(ca.mtimes(hub_r, d_t))
+        section = shared_section(int(eta.shape[0])) if self.shared else section_motion
+        for r, delta, d, d_t in zip(rotations, deltas, rates, accelerations):
+            parts = section(frame, r, delta, d, d_t)
+            for kept, part in zip((tangent, tangent_jac, tangent_rate, tangent_accel, spin_jac,
+                                   spin, spin_rate), parts):
+                kept.append(part)
         tangents = ca.horzcat(*tangent)                                  # (3, n)
-        root = ca.DM(self.root)
+        root = ca.DM(self.root) if root is None else root
         points = self.integrate(tangents.T).T
         points = points + ca.repmat(root, 1, points.shape[1])
         jac = [self.integrate(ca.vertcat(*[t[c, :] for t in tangent_jac])) for c in range(3)]

@@ -41,7 +41,8 @@ def lift_constants(function, max_instructions: int | None = None):
     Parameters
     ----------
     function : casadi.Function
-        An SX function without calls to other functions.
+        An SX function; the functions it calls (``never_inline``) are lifted too and stay
+        calls, their constants in the same last input.
     max_instructions : int, optional
         Return None for a larger function (too slow to lift and compile).
 
@@ -49,7 +50,8 @@ def lift_constants(function, max_instructions: int | None = None):
     -------
     (casadi.Function, ndarray) or None
         The lifted function (named ``<name>_lifted``) and the constants ``c`` it takes, or
-        None when ``function`` is not an SX function, calls others or is too large.
+        None when ``function`` is not an SX function, calls one that cannot be lifted or is
+        too large.
 
     Examples
     --------
@@ -220,13 +222,15 @@ def _mtime(path: Path) -> float:
 
 
 def _lift(function):
-    """:func:`lift_constants`' work: ``(lifted, constants)`` or None (a call inside)."""
+    """:func:`lift_constants`' work: ``(lifted, constants)`` or None (a call that cannot be
+    lifted inside)."""
     import casadi as ca
     import numpy as np
 
     inputs = function.sx_in()
     outputs = [ca.SX.zeros(function.sparsity_out(k)) for k in range(function.n_out())]
     work, values, symbols = [None] * function.sz_w(), [], []
+    calls, callees = None, {}
     for k in range(function.n_instructions()):
         op = function.instruction_id(k)
         out, arg = function.instruction_output(k), function.instruction_input(k)
@@ -239,7 +243,11 @@ def _lift(function):
         elif op == ca.OP_OUTPUT:
             outputs[out[0]].nz[out[1]] = work[arg[0]]
         elif op == ca.OP_CALL:
-            return None
+            calls = function.instructions_sx() if calls is None else calls
+            callee = _lifted_callee(calls[k].which_function(), callees, symbols, values)
+            if callee is None:
+                return None
+            _call(callee, work, arg, out)
         elif len(arg) > 1 and arg[1] >= 0:
             work[out[0]] = ca.SX.binary(op, work[arg[0]], work[arg[1]])
         else:
@@ -247,3 +255,46 @@ def _lift(function):
     lifted = ca.Function(f"{function.name()}_lifted", [*inputs, ca.vertcat(*symbols)],
                          outputs, [*function.name_in(), "constants"], function.name_out())
     return lifted, np.array(values, dtype=float)
+
+
+def _lifted_callee(callee, callees: dict, symbols: list, values: list):
+    """``(function, constant symbols)``: a called function (``never_inline``) lifted, kept as a
+    call, its constants appended to the caller's (once per callee, ``callees``), or None
+    where it cannot be lifted."""
+    import casadi as ca
+
+    key = callee.serialize()
+    if key not in callees:
+        lifted = lift_constants(callee)
+        if lifted is None:
+            return None
+        function, numbers = lifted
+        args = function.sx_in()
+        kept = ca.Function(function.name(), args, function(*args), function.name_in(),
+                           function.name_out(), {"never_inline": True})
+        own = [ca.SX.sym(f"c{len(values) + i}") for i in range(numbers.size)]
+        symbols.extend(own)
+        values.extend(float(v) for v in numbers)
+        callees[key] = (kept, ca.vertcat(*own) if own else ca.SX(0, 1))
+    return callees[key]
+
+
+def _call(callee: tuple, work: list, arg, out) -> None:
+    """The call of a lifted ``callee`` (``(function, constant symbols)``) on the work
+    entries ``arg`` (every input's nonzeros in turn), its outputs' nonzeros into ``out``'s."""
+    import casadi as ca
+
+    function, constants = callee
+    args, position = [], 0
+    for i in range(function.n_in() - 1):
+        count = function.nnz_in(i)
+        entries = [work[j] if j >= 0 else ca.SX(0) for j in arg[position:position + count]]
+        args.append(ca.SX(function.sparsity_in(i), ca.vertcat(*entries) if entries
+                          else ca.SX(0, 1)))
+        position += count
+    results, position = function(*args, constants), 0
+    for i, result in enumerate(results if isinstance(results, (list, tuple)) else [results]):
+        for j in range(function.nnz_out(i)):
+            if out[position + j] >= 0:
+                work[out[position + j]] = result.nz[j]
+        position += function.nnz_out(i)

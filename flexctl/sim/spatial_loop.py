@@ -230,8 +230,8 @@ def simulate_spatial_loop(structure, t_final: float, law, *, sample_time: float 
                else law.start() if hasattr(law, "start") else law)
     c = layout.n_coordinates
     held = ConstantTorque(np.zeros(3))
-    segments = SpatialSegments(machine_function(equations.rhs), layout.n_states, held, rtol,
-                               rtol * 1e-3, line=False, newton=True)
+    segments = SpatialSegments(machine_function(equations.integration_rhs), layout.n_states,
+                               held, rtol, rtol * 1e-3, line=False, newton=True)
     sensed = (_Sensed(sensors, estimator, seed, count, equations.cluster)
               if sensors is not None else None)
     speeds = (None if equations.cluster is None else

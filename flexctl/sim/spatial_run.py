@@ -694,7 +694,8 @@ class _Plan:
         axis = motion_plane(equations, x0, drive, self.edges) \
             if PLANE_MOTION and equations.cluster is None else None
         self.plane = None if axis is None else plane_motion(equations, axis)
-        self.rhs = machine_function(equations.rhs if self.plane is None else self.plane.rhs)
+        self.rhs = machine_function(equations.integration_rhs if self.plane is None
+                                    else self.plane.rhs)
         self.modal = equations.layout.modal_indices
         self.x0 = np.asarray(x0, dtype=float) if self.plane is None \
             else self.plane.restrict(x0)
