@@ -9,8 +9,9 @@ methods of orders 1 to 12, Newton's iterations on a Jacobian taken by forward di
 at each segment's start and where the iterations fail) calls the model's compiled
 right-hand side through its address, driven by a torque of the segment form
 ``p[0:3] + p[3:6] t + p[6:9] sin(p[9] (p[10] + t))``
-(:func:`~flexctl.sim.exponential.segment_torque`): one library for every model of the same
-size, compiled once into the persistent cache.
+(:func:`~flexctl.sim.exponential.segment_torque`): the library holds the integrator and the
+torque, not the model (0.22 s to compile for two panels on 4 modes), once for every
+right-hand side of the same sizes, kept in the persistent cache.
 
 :class:`CompiledAdams` has the interface of :class:`~flexctl.sim.spatial_run.SpatialSegments`
 (``count``, ``build``, ``advance``, ``steps``, ``evaluations``, ``form``) for a torque with a
