@@ -45,6 +45,7 @@ compiler, a drive small enough to compile).
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -330,6 +331,37 @@ class BdfRun(CompiledRun):
                                   "off, no C compiler, the consistent variant, or a drive too "
                                   "large to compile); use CVODES")
         self._start(built, m, self.rtol * scale, input_numbers(inputs))
+
+    @classmethod
+    def on_library(cls, built, n_states: int, atol, numbers, *, rtol: float, max_steps: int,
+                   h_first: float, family: str = "adams") -> "BdfRun":
+        """A run on a library assembled elsewhere (:func:`assembled`: a spatial model's right-
+        hand side, :mod:`flexctl.sim.spatial_adams`), its arguments checked by its caller.
+
+        Parameters
+        ----------
+        built : tuple
+            ``(external, pieces)``, as :func:`assembled` gives them.
+        n_states : int
+            States integrated.
+        atol : ndarray, shape (n_states,)
+            Absolute tolerance of each state.
+        numbers : ndarray
+            The library's input ``c`` (the drive's numbers; its size the library's).
+        rtol : float
+            Relative tolerance.
+        max_steps : int
+            Most step attempts between two output times.
+        h_first : float
+            The first step tried, s.
+        family : {"bdf", "adams"}, optional
+            The library's formulas. Default ``"adams"``.
+        """
+        run = cls.__new__(cls)
+        run.rtol, run.max_steps, run.h, run.max_step = rtol, max_steps, h_first, math.inf
+        run.family = family
+        run._start(built, n_states, atol, np.asarray(numbers, dtype=float))
+        return run
 
     def _start(self, built, m: int, atol, numbers) -> None:
         """This run's buffers on the library ``built`` (``(external, pieces)``), ``m``

@@ -77,8 +77,8 @@ import numpy as np
 from ..model.checks import check_array, check_integer, check_real
 from ..model.errors import InputValueError
 
-__all__ = ["phi_functions", "central_jacobian", "sample_bound", "segment_torque", "ExponentialSegments",
-           "SegmentFailed", "Abandoned", "CHAIN", "REFRESH", "EXPONENT"]
+__all__ = ["phi_functions", "central_jacobian", "sample_bound", "segment_torque",
+           "ExponentialSegments", "SegmentFailed", "Abandoned", "CHAIN", "REFRESH", "EXPONENT"]
 
 #: Steps of one length per compiled call.
 CHAIN = 128

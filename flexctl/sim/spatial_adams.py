@@ -21,7 +21,6 @@ CVODES and SciPy.
 
 from __future__ import annotations
 
-import math
 import threading
 
 import numpy as np
@@ -74,18 +73,6 @@ def adams_library(native, values):
                      f"the spatial Adams-Moulton integrator ({n} states)")
 
 
-class _Run(BdfRun):
-    """:class:`~flexctl.sim.compiled_bdf.BdfRun`'s calls on a spatial library: the torque's
-    numbers set per segment in ``numbers``."""
-
-    def __init__(self, built, n_states: int, rtol: float, atol: float, max_steps: int,
-                 h_first: float):
-        self.rtol, self.max_steps, self.h, self.max_step = rtol, max_steps, h_first, math.inf
-        self.family = "adams"
-        self._start(built, n_states, np.full(n_states, atol), np.zeros(SEGMENT_NUMBERS))
-        self.numbers = self._run.args[5]
-
-
 class CompiledAdams:
     """A spatial run's segments by compiled Adams-Moulton steps (LSODE's, orders 1 to 12,
     Newton's iterations), each segment from order 1, the step carried from segment to
@@ -113,7 +100,10 @@ class CompiledAdams:
     def __init__(self, built, n_states: int, drive, rtol: float, atol: float,
                  max_steps: int, h_first: float, explain=None):
         self.drive, self.form, self.explain = drive, drive.segment_form, explain
-        self.run = _Run(built, n_states, rtol, atol, max_steps, h_first)
+        self.run = BdfRun.on_library(built, n_states, np.full(n_states, atol),
+                                     np.zeros(SEGMENT_NUMBERS), rtol=rtol,
+                                     max_steps=max_steps, h_first=h_first)
+        self.numbers = self.run._run.args[5]        # the segment's torque, set per segment
         self.n_states, self.max_steps = n_states, max_steps
         self.steps = self.evaluations = 0
         self.creator = threading.get_ident()
@@ -163,8 +153,8 @@ class CompiledAdams:
             When the steps cannot go on (the message says why).
         """
         run = self.run
-        run.numbers[0:11] = np.asarray(self.form(a, b), dtype=float)
-        run.numbers[11] = a
+        self.numbers[0:11] = np.asarray(self.form(a, b), dtype=float)
+        self.numbers[11] = a
         try:
             states, _ = run(a, np.asarray(wanted, dtype=float), x)
         except RuntimeError as exc:

@@ -706,11 +706,9 @@ class _Plan:
             else None
         if self.library is not None:
             # the first step a hundredth of a radian of the fastest mode
-            jacobian = _difference_jacobian(_mapped(self.rhs, self.x0.size + 1), self.x0,
-                                            drive(0.0))
-            fastest = float(np.max(np.abs(np.linalg.eigvals(jacobian)))) \
-                if np.all(np.isfinite(jacobian)) else 0.0
-            self.h_first = float(min(0.01 / fastest if fastest > 0.0 else math.inf,
+            fastest = _spectral_radius(_difference_jacobian(
+                _mapped(self.rhs, self.x0.size + 1), self.x0, drive(0.0)))
+            self.h_first = float(min(0.01 / fastest if 0.0 < fastest < math.inf else math.inf,
                                      times[1] - times[0] if times.size > 1 else times[-1]))
         if EXPONENTIAL and self.plane is None and equations.cluster is None \
                 and hasattr(drive, "segment_form"):
@@ -720,15 +718,14 @@ class _Plan:
         """The Jacobian of the rate at the start where the exponential steps are taken (the
         fastest mode turns more than :data:`STIFF_SPACING` radians over the median interval
         between two output times or breakpoints), else None."""
-        n = self.x0.size
-        jacobian = central_jacobian(self.rhs.map(2 * n), self.x0, drive(0.0))
-        if not np.all(np.isfinite(jacobian)):
+        jacobian = central_jacobian(_mapped(self.rhs, 2 * self.x0.size), self.x0, drive(0.0))
+        self.fastest = _spectral_radius(jacobian)
+        if not math.isfinite(self.fastest):
             return None
         ends = np.concatenate([self.times, self.edges, breakpoints if not self.line else
                                drive.times])
         ends = np.unique(ends[(ends >= 0.0) & (ends <= self.times[-1])])
         spacing = float(np.median(np.diff(ends))) if ends.size > 1 else float(self.times[-1])
-        self.fastest = float(np.max(np.abs(np.linalg.eigvals(jacobian))))
         return jacobian if self.fastest * spacing >= STIFF_SPACING else None
 
     def integration(self, rtol: float, atol: float) -> "_Integration":
@@ -1001,9 +998,7 @@ class SpatialSegments:
             return f"{head}: {bound}"
         mapped = self.differences if self.differences is not None \
             else self.rhs.map(self.n_states + 1)
-        jacobian = _difference_jacobian(mapped, x, self.drive(a))
-        fastest = float(np.max(np.abs(np.linalg.eigvals(jacobian)))) \
-            if np.all(np.isfinite(jacobian)) else math.inf
+        fastest = _spectral_radius(_difference_jacobian(mapped, x, self.drive(a)))
         if not fastest > 0:
             return head
         return (f"{head}: the model's fastest eigenvalue at t = {a:g} s, {fastest:.3g} 1/s, "
@@ -1089,6 +1084,14 @@ def _difference_jacobian(mapped, x, torque) -> np.ndarray:
     torques = np.tile(np.asarray(torque, dtype=float)[:, None], (1, n + 1))
     rates = mapped(points, torques).full()
     return (rates[:, :n] - rates[:, n:]) / steps
+
+
+def _spectral_radius(jacobian: np.ndarray) -> float:
+    """The largest eigenvalue's modulus of a rate's Jacobian, 1/s (``inf`` where an entry is
+    not finite)."""
+    if not np.all(np.isfinite(jacobian)):
+        return math.inf
+    return float(np.max(np.abs(np.linalg.eigvals(jacobian))))
 
 
 def quaternion_drift(states) -> float:
