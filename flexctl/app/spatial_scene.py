@@ -132,10 +132,12 @@ class SpatialSine:
 
         Parameters
         ----------
-        times : ndarray, shape (P,)
-            Times, s.
+        times : array_like, shape (P,)
+            Times, s: finite.
         """
-        times = np.asarray(times, dtype=float)
+        from ..model.checks import check_array
+
+        times = check_array("SpatialSine.at", "times", times, shape=(None,))
         inside = (times >= 0.0) & (times <= self.duration)
         wave = np.where(inside, np.sin(2 * math.pi * times / self.duration), 0.0)
         return np.outer(np.asarray(self.peak_torque), wave)

@@ -164,10 +164,10 @@ class VectorTorque:
 
         Parameters
         ----------
-        times : ndarray, shape (P,)
-            Times, s.
+        times : array_like, shape (P,)
+            Times, s: finite.
         """
-        times = np.asarray(times, dtype=float)
+        times = check_array("VectorTorque.at", "times", times, shape=(None,))
         if self.interpolation == "hold" or self.times.size == 1:
             k = np.searchsorted(self.times, times, side="right") - 1
             return np.array(self.values[np.maximum(k, 0)].T)
@@ -413,10 +413,11 @@ class ConstantTorque:
 
         Parameters
         ----------
-        times : ndarray, shape (P,)
-            Times, s.
+        times : array_like, shape (P,)
+            Times, s: finite.
         """
-        return np.repeat(np.asarray(self.value, dtype=float)[:, None], len(times), axis=1)
+        times = check_array("ConstantTorque.at", "times", times, shape=(None,))
+        return np.repeat(np.asarray(self.value, dtype=float)[:, None], times.size, axis=1)
 
     def segment_form(self, a, b):
         """The 11 parameters of the torque on ``[a, b]`` (:class:`SpatialSegments`).

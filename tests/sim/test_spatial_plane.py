@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from flexctl.app.spatial_scene import SpatialSine
+from flexctl.model.errors import InputError
 from flexctl.model.parameters import Beam, Hub, PointMass
 from flexctl.model.spatial_dynamics import spatial_equations
 from flexctl.model.spatial_structure import SpatialHub, SpatialStructure
@@ -160,3 +161,21 @@ def test_the_compiled_steps_name_a_spent_budget_and_a_blow_up(monkeypatch):
     assert run.status in ("failed", "diverged") and "t = 0 s" in run.message
     assert np.all(np.isfinite(run.states))
     assert run.integration_error is None
+
+
+@pytest.mark.parametrize("torque", [
+    VectorTorque([0.0, 0.3, 0.6], [[0.0, 0.0, 0.1], [0.2, 0.0, -0.1], [0.0, 0.3, 0.2]]),
+    VectorTorque([0.0, 0.3, 0.6], [[0.0, 0.0, 0.1], [0.2, 0.0, -0.1], [0.0, 0.3, 0.2]],
+                 "hold"),
+    SpatialSine(np.array([0.1, -0.2, 0.3]), 0.5),
+    spatial_run.ConstantTorque(np.array([0.1, 0.0, -0.4]))])
+def test_a_torque_history_is_its_values_at_each_time(torque):
+    """``at(times)`` (a run's torque history at once) is the torque at each time, before,
+    between, on and after the samples; times that are not finite are refused by name."""
+    times = np.array([-1.0, 0.0, 0.1, 0.3, 0.45, 0.5, 0.6, 2.0])
+    np.testing.assert_allclose(torque.at(times), np.column_stack([torque(t) for t in times]),
+                               rtol=0, atol=1e-15)
+    assert torque.at(np.zeros(0)).shape == (3, 0)
+    for bad in (np.array([0.1, np.nan]), [np.inf], "soon"):
+        with pytest.raises(InputError, match="times"):
+            torque.at(bad)
