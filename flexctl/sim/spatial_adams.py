@@ -28,6 +28,8 @@ import numpy as np
 from .compiled_bdf import STATUS, BdfRun, assembled
 from .compile_cache import compiling_enabled, entry_point
 from .exponential import SegmentFailed, segment_torque
+from ..model.checks import check_integer, check_real
+from ..model.errors import InputValueError
 
 __all__ = ["CompiledAdams", "adams_library", "SEGMENT_NUMBERS"]
 
@@ -99,6 +101,19 @@ class CompiledAdams:
 
     def __init__(self, built, n_states: int, drive, rtol: float, atol: float,
                  max_steps: int, h_first: float, explain=None):
+        owner = "CompiledAdams"
+        if not callable(getattr(drive, "segment_form", None)):
+            raise InputValueError(f"{owner} drive must have a segment_form(a, b); got "
+                                  f"{type(drive).__name__}")
+        external = built[0] if isinstance(built, tuple) and len(built) == 2 else None
+        n_states = check_integer(owner, "n_states", n_states, minimum=1)
+        if not hasattr(external, "nnz_in") or external.nnz_in(1) != n_states:
+            raise InputValueError(f"{owner} built must be adams_library's (external, pieces) "
+                                  f"for n_states = {n_states} states; got {built!r:.80}")
+        rtol = check_real(owner, "rtol", rtol, minimum=0.0, strict=True, maximum=1.0)
+        atol = check_real(owner, "atol", atol, minimum=0.0, strict=True)
+        max_steps = check_integer(owner, "max_steps", max_steps, minimum=1)
+        h_first = check_real(owner, "h_first", h_first, minimum=0.0, strict=True)
         self.drive, self.form, self.explain = drive, drive.segment_form, explain
         self.run = BdfRun.on_library(built, n_states, np.full(n_states, atol),
                                      np.zeros(SEGMENT_NUMBERS), rtol=rtol,

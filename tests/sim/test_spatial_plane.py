@@ -179,3 +179,22 @@ def test_a_torque_history_is_its_values_at_each_time(torque):
     for bad in (np.array([0.1, np.nan]), [np.inf], "soon"):
         with pytest.raises(InputError, match="times"):
             torque.at(bad)
+
+
+@pytest.mark.skipif(compile_cache.compiler() is None, reason="no C compiler")
+@pytest.mark.parametrize("name, value", [
+    ("rtol", 0.0), ("rtol", float("nan")), ("rtol", 2.0), ("atol", -1.0),
+    ("atol", float("inf")), ("max_steps", 0), ("max_steps", 2.5), ("h_first", 0.0),
+    ("h_first", float("nan")), ("n_states", 0), ("n_states", 14), ("built", None),
+    ("built", (1, 2)), ("drive", lambda t: np.zeros(3))])
+def test_compiled_adams_refuses_bad_arguments_by_name(name, value):
+    equations = spatial_equations(SpatialStructure.from_planar(_planar()), 2)
+    x0 = initial_state(equations, angular_velocity=(0.0, 0.0, 0.2))
+    plan = spatial_run._Plan(equations, x0, np.linspace(0.0, 1.0, 11), _sine(),
+                             _sine().breakpoints)
+    good = dict(built=plan.library, n_states=plan.x0.size, drive=_sine(), rtol=1e-8,
+                atol=1e-11, max_steps=100, h_first=1e-3)
+    assert good["n_states"] == 13
+    CompiledAdams(**good)
+    with pytest.raises(InputError, match=name if name != "drive" else "segment_form"):
+        CompiledAdams(**{**good, name: value})
