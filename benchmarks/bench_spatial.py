@@ -45,7 +45,9 @@ processor times are printed too; ratios repeat within some 20 %):
 Measured for (a) with the restriction on the compiled Adams-Moulton steps
 (:mod:`flexctl.sim.spatial_adams`), its tips taken on the plane for the check (best of 3):
 2 modes, 8 ms against the planar model's 5 ms at its own ``atol`` and 6 ms at the same
-(ratios 1.66 and 1.38); 4 modes, 39 ms against 16 and 23 ms (ratios 2.49 and 1.66). At the
+(ratios 1.66 and 1.38); 4 modes, 39 ms against 16 and 23 ms (ratios 2.49 and 1.66); another
+run of the benchmark: 9 ms against 4 and 5 (2.02 and 1.85), 38 ms against 14 and 22 (2.62 and
+1.76): on 2 modes the fixed costs of a run (its plan, the check's tips) weigh. At the
 same tolerances the target is met: the runs alone take as many evaluations (4 modes: 5 414
 and 5 433), each of the restriction's 1.4 times the planar one's (4.7 against 3.3 us; 17 142
 operations against 11 165: rotations in three dimensions along the rod). At its own ``atol``,

@@ -27,7 +27,7 @@ persistent compile cache where a compiler is found.
   compiled Adams-Moulton methods of the planar models (:mod:`flexctl.sim.spatial_adams`:
   Newton's iterations, no interface cost per step), else on CVODES's with Newton's
   iterations on the Jacobian at each segment's start. :data:`PLANE_MOTION` False integrates
-  the whole model instead (``benchmarks/bench_spatial.py`` (a): 1.4 to 1.7 times the planar
+  the whole model instead (``benchmarks/bench_spatial.py`` (a): 1.4 to 1.9 times the planar
   exact model's time at the same tolerances).
 - **Its error.** With ``check_accuracy`` (default) the run is repeated at a tenth of the
   tolerances and :attr:`SpatialResult.integration_error` is the largest difference of any tip
